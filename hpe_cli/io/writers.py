@@ -1,0 +1,144 @@
+"""Atomic table writers (Parquet or CSV by extension), streaming by batches.
+
+Output goes to a temporary file next to the target and is renamed into place
+only when everything succeeded, so a failure never leaves a half-written file.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+from ..errors import HpeError
+
+TABLE_SUFFIXES = (".parquet", ".pq", ".csv")
+
+
+def table_format(path) -> str:
+    s = Path(path).suffix.lower()
+    if s in (".parquet", ".pq"):
+        return "parquet"
+    if s == ".csv":
+        return "csv"
+    raise HpeError(f"{path}: expected an output ending in .parquet or .csv, got {s or 'no extension'!r}")
+
+
+def check_output(path, overwrite: bool) -> Path:
+    """Refuse to clobber an existing file without ``overwrite``; check the folder exists."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise HpeError(f"{path}: already exists (use --overwrite to replace it)")
+    if not path.parent.exists():
+        raise HpeError(f"{path}: folder {path.parent} does not exist")
+    return path
+
+
+def system_metadata(system) -> dict:
+    """Parquet key-value metadata describing the labels' rotation system."""
+    return {"hpe:system": system.name, "hpe:system_definition": system.to_json()}
+
+
+class AtomicFile:
+    """Context manager giving a temporary path that is renamed to ``path`` on success."""
+
+    def __init__(self, path, overwrite: bool = False):
+        self.path = check_output(path, overwrite)
+        self.tmp = None
+
+    def __enter__(self) -> Path:
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
+        os.close(fd)
+        self.tmp = Path(tmp)
+        return self.tmp
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            os.replace(self.tmp, self.path)
+        else:
+            self.tmp.unlink(missing_ok=True)
+        return False
+
+
+class TableWriter:
+    """Write pyarrow record batches to Parquet or CSV atomically.
+
+    The schema is taken from the first batch; later batches are cast to it.
+    """
+
+    def __init__(self, path, overwrite: bool = False, metadata: dict | None = None):
+        self.fmt = table_format(path)
+        self._atomic = AtomicFile(path, overwrite)
+        self.metadata = {k: (v if isinstance(v, str) else json.dumps(v)) for k, v in (metadata or {}).items()}
+        self._writer = None
+        self.rows = 0
+
+    @property
+    def path(self) -> Path:
+        return self._atomic.path
+
+    def __enter__(self):
+        self._tmp = self._atomic.__enter__()
+        return self
+
+    def write(self, batch) -> None:
+        import pyarrow as pa
+
+        if isinstance(batch, dict):
+            batch = pa.RecordBatch.from_pydict(batch)
+        elif not isinstance(batch, (pa.RecordBatch, pa.Table)):  # a pandas DataFrame
+            batch = pa.Table.from_pandas(batch, preserve_index=False)
+        if self._writer is None:
+            schema = batch.schema
+            if self.metadata and self.fmt == "parquet":
+                schema = schema.with_metadata({**(schema.metadata or {}), **self.metadata})
+            self._schema = schema
+            self._writer = self._open(schema)
+        if batch.schema != self._schema:
+            batch = batch.cast(self._schema) if isinstance(batch, pa.Table) else pa.Table.from_batches([batch]).cast(self._schema)
+        self._writer.write(batch)
+        self.rows += batch.num_rows
+
+    def _open(self, schema):
+        if self.fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            return pq.ParquetWriter(self._tmp, schema, compression="snappy")
+        import pyarrow.csv as pcsv
+
+        return pcsv.CSVWriter(self._tmp, schema)
+
+    def __exit__(self, exc_type, exc, tb):
+        try:
+            if self._writer is not None:
+                self._writer.close()
+            elif exc_type is None:
+                raise HpeError(f"{self.path}: nothing to write (no rows and no schema)")
+        except BaseException:
+            self._atomic.__exit__(RuntimeError, None, None)
+            raise
+        return self._atomic.__exit__(exc_type, exc, tb)
+
+
+def write_table(table, path, overwrite: bool = False, metadata: dict | None = None) -> Path:
+    """Write one table (pyarrow Table, dict of arrays or pandas DataFrame) atomically."""
+    with TableWriter(path, overwrite, metadata) as w:
+        w.write(table)
+    return w.path
+
+
+def write_json(obj, path, overwrite: bool = False) -> Path:
+    """Write JSON atomically."""
+    with AtomicFile(path, overwrite) as tmp:
+        tmp.write_text(json.dumps(obj, indent=2, default=_json_default), encoding="utf-8")
+    return Path(path)
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

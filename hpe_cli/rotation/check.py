@@ -1,0 +1,48 @@
+"""Validation of rotation matrices. Nothing here "fixes" its input."""
+from __future__ import annotations
+
+import numpy as np
+
+#: default tolerance on ||R R^T - I||_F and |det R - 1|: float32 storage gives ~1e-7
+ROTATION_TOL = 1e-5
+
+
+def rotation_error(R) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormality error ``||R R^T - I||_F`` and ``det(R)`` per row."""
+    R = np.asarray(R, dtype=np.float64)
+    g = np.matmul(R, np.swapaxes(R, -1, -2)) - np.eye(3)
+    return np.sqrt(np.einsum("...ij,...ij->...", g, g)), np.linalg.det(R)
+
+
+def rotation_mask(R, tol: float = ROTATION_TOL) -> np.ndarray:
+    """True where ``R`` is finite, orthonormal within ``tol`` and has det +1."""
+    R = np.asarray(R, dtype=np.float64)
+    finite = np.isfinite(R).all(axis=(-1, -2))
+    safe = np.where(finite[..., None, None], R, np.eye(3))
+    err, det = rotation_error(safe)
+    return finite & (err <= tol) & (np.abs(det - 1.0) <= tol)
+
+
+def rotation_reasons(R, tol: float = ROTATION_TOL) -> np.ndarray:
+    """Per-row reason strings: '' for a rotation, else why not (object array)."""
+    R = np.asarray(R, dtype=np.float64)
+    finite = np.isfinite(R).all(axis=(-1, -2))
+    safe = np.where(finite[..., None, None], R, np.eye(3))
+    err, det = rotation_error(safe)
+    out = np.full(R.shape[:-2], "", dtype=object)
+    out[(err > tol)] = "not a rotation: not orthonormal"
+    out[(err <= tol) & (np.abs(det - 1.0) > tol)] = "not a rotation: determinant is not +1 (a reflection)"
+    out[~finite] = "non-finite matrix entry"
+    return out
+
+
+def check_rotation(R, tol: float = ROTATION_TOL) -> np.ndarray:
+    """Return ``R`` as float64 ``(..., 3, 3)`` or raise ``ValueError`` naming the first bad row."""
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape[-2:] != (3, 3):
+        raise ValueError(f"expected matrices of shape (..., 3, 3), got {R.shape}")
+    reasons = rotation_reasons(R, tol).reshape(-1)
+    bad = np.flatnonzero(reasons != "")
+    if bad.size:
+        raise ValueError(f"row {bad[0]}: {reasons[bad[0]]} ({bad.size} bad rows in all)")
+    return R

@@ -1,0 +1,56 @@
+"""Conversion between rotation systems through the canonical 300W-LP matrix."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .distances import frobenius
+from .systems import RotationSystem, get_system
+
+
+@dataclass
+class Conversion:
+    """Labels of N rotations in one system.
+
+    Attributes
+    ----------
+    primary, secondary : ndarray (N, 3)
+        ``(pitch, yaw, roll)`` in degrees, both in ``(-180, 180]``.
+    matrix : ndarray (N, 3, 3)
+        The system's stored matrix.
+    gimbal_lock : ndarray of bool (N,)
+    roundtrip_err : ndarray (N,)
+        Frobenius distance between the input rotation and the one rebuilt from
+        ``primary`` (a few 1e-16 normally; up to ``gimbal_tol`` near the lock).
+    canonical : ndarray (N, 3, 3)
+        The canonical 300W-LP matrix ``A``.
+    """
+
+    primary: np.ndarray
+    secondary: np.ndarray
+    matrix: np.ndarray
+    gimbal_lock: np.ndarray
+    roundtrip_err: np.ndarray
+    canonical: np.ndarray
+
+
+def canonical_to_labels(A, target) -> Conversion:
+    """Express canonical matrices ``A`` (N, 3, 3) in ``target`` (name, path or system)."""
+    target = get_system(target)
+    A = np.asarray(A, dtype=np.float64)
+    R = target.from_canonical(A)
+    p1, p2, locked, _ = target.to_angles(R)
+    rebuilt = target.to_canonical(target.from_angles(p1))
+    return Conversion(p1, p2, R, locked, frobenius(A, rebuilt), A)
+
+
+def convert_matrices(R, source, target) -> Conversion:
+    """Convert stored matrices of ``source`` into labels of ``target``."""
+    return canonical_to_labels(get_system(source).to_canonical(R), target)
+
+
+def convert_angles(pyr_deg, source, target) -> Conversion:
+    """Convert ``(pitch, yaw, roll)`` degrees of ``source`` into labels of ``target``."""
+    source: RotationSystem = get_system(source)
+    return canonical_to_labels(source.to_canonical(source.from_angles(pyr_deg)), target)

@@ -1,0 +1,157 @@
+"""Euler angles <-> matrices for all 12 axis sequences, both solutions, batched.
+
+Conventions
+-----------
+Every function here works with **right-handed, active, intrinsic** sequences in
+radians: ``seq="xyz"`` with angles ``(a, b, c)`` means ``Rx(a) @ Ry(b) @ Rz(c)``.
+An extrinsic sequence is the reversed intrinsic one (``extrinsic_to_intrinsic``),
+and a left-handed turn is a negated angle; :mod:`hpe_cli.rotation.systems`
+applies both so that these kernels stay small.
+
+Both solutions
+--------------
+Away from gimbal lock every rotation has exactly two triples. For Tait-Bryan
+sequences (three distinct axes) they are ``(a, b, c)`` with ``|b| <= pi/2`` and
+``(a + pi, pi - b, c + pi)``; for proper Euler sequences (``"zxz"`` ...) they
+are ``(a, b, c)`` with ``0 <= b <= pi`` and ``(a + pi, -b, c + pi)``. All angles
+are returned wrapped to ``(-pi, pi]``.
+
+Gimbal lock
+-----------
+The lock is where the middle turn aligns the first and the last axes
+(``cos b = 0`` for Tait-Bryan, ``sin b = 0`` for proper Euler). There, only
+``a + sigma * c`` is observable. ``lock_distance`` returns ``|cos b|`` (or
+``|sin b|``); rows with ``lock_distance < SPLIT_EPS`` are decomposed by setting
+``a = sigma * c`` (each half of the observable sum), as the method paper does,
+because the ordinary formula divides noise by noise there. Rows between
+``SPLIT_EPS`` and the system's ``gimbal_tol`` are still decomposed exactly (the
+atan2 form stays accurate in float64) but callers flag them as locked.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .elemental import axis_rotation
+
+#: below this |cos b| the ordinary atan2 formulas lose all precision in float64
+SPLIT_EPS = 1e-12
+
+_AXIS = {"x": 0, "y": 1, "z": 2}
+
+
+def parse_seq(seq: str) -> tuple[int, int, int]:
+    """Return the axis indices of a 3-letter sequence such as ``"xyz"``.
+
+    Raises ``ValueError`` for anything that is not a valid Euler sequence.
+    """
+    s = seq.lower()
+    if len(s) != 3 or any(ch not in _AXIS for ch in s) or s[0] == s[1] or s[1] == s[2]:
+        raise ValueError(f"expected an Euler sequence such as 'xyz' or 'zxz', got {seq!r}")
+    return _AXIS[s[0]], _AXIS[s[1]], _AXIS[s[2]]
+
+
+def is_proper(seq: str) -> bool:
+    """True for proper Euler sequences (first axis == last axis)."""
+    i, _, k = parse_seq(seq)
+    return i == k
+
+
+def extrinsic_to_intrinsic(seq: str, angles):
+    """Rewrite an extrinsic sequence as the equivalent intrinsic one.
+
+    Extrinsic ``seq`` with angles ``(a, b, c)`` equals intrinsic ``seq[::-1]``
+    with angles ``(c, b, a)``.
+    """
+    return seq[::-1], np.asarray(angles)[..., ::-1]
+
+
+def wrap_pi(x):
+    """Wrap radians into ``(-pi, pi]``."""
+    return x - 2 * np.pi * np.ceil((x - np.pi) / (2 * np.pi))
+
+
+def wrap_180(x):
+    """Wrap degrees into ``(-180, 180]``."""
+    return x - 360.0 * np.ceil((x - 180.0) / 360.0)
+
+
+def euler_to_matrix(angles, seq: str) -> np.ndarray:
+    """Intrinsic right-handed Euler angles (radians, ``(..., 3)``) to matrices ``(..., 3, 3)``."""
+    i, j, k = parse_seq(seq)
+    angles = np.asarray(angles, dtype=np.float64)
+    if angles.shape[-1:] != (3,):
+        raise ValueError(f"expected angles of shape (..., 3), got {angles.shape}")
+    r = axis_rotation(i, angles[..., 0])
+    r = np.matmul(r, axis_rotation(j, angles[..., 1]))
+    return np.matmul(r, axis_rotation(k, angles[..., 2]))
+
+
+def _parity(i: int, j: int, k: int) -> float:
+    return 1.0 if (j - i) % 3 == 1 else -1.0
+
+
+def lock_distance(R, seq: str) -> np.ndarray:
+    """``|cos b|`` (Tait-Bryan) or ``|sin b|`` (proper Euler): 0 at gimbal lock."""
+    R = np.asarray(R, dtype=np.float64)
+    i, j, k = parse_seq(seq)
+    if i == k:
+        m = 3 - i - j
+        return np.hypot(R[..., i, j], R[..., i, m])
+    return np.hypot(R[..., i, i], R[..., i, j])
+
+
+def matrix_to_euler(R, seq: str):
+    """Both intrinsic Euler solutions of rotation matrices.
+
+    Parameters
+    ----------
+    R : array_like, shape (..., 3, 3)
+        Rotation matrices (not validated here; see ``check_rotation``).
+    seq : str
+        Intrinsic right-handed axis sequence, e.g. ``"xyz"`` or ``"zxz"``.
+
+    Returns
+    -------
+    sol1, sol2 : ndarray, shape (..., 3)
+        Radians in ``(-pi, pi]``. ``sol1`` has ``|b| <= pi/2`` (Tait-Bryan) or
+        ``b in [0, pi]`` (proper Euler); ``sol2`` is the other triple.
+    lock : ndarray, shape (...)
+        ``lock_distance`` of each row (0 at gimbal lock).
+    """
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape[-2:] != (3, 3):
+        raise ValueError(f"expected matrices of shape (..., 3, 3), got {R.shape}")
+    i, j, k = parse_seq(seq)
+    proper = i == k
+    if proper:
+        m = 3 - i - j
+        e = _parity(i, j, m)
+        lock = np.hypot(R[..., i, j], R[..., i, m])
+        b = np.arctan2(lock, R[..., i, i])
+        a = np.arctan2(R[..., j, i], -e * R[..., m, i])
+        c = np.arctan2(R[..., i, j], e * R[..., i, m])
+    else:
+        e = _parity(i, j, k)
+        lock = np.hypot(R[..., i, i], R[..., i, j])
+        b = np.arctan2(e * R[..., i, k], lock)
+        a = np.arctan2(-e * R[..., j, k], R[..., k, k])
+        c = np.arctan2(-e * R[..., i, j], R[..., i, i])
+    sol1 = np.stack([a, b, c], axis=-1)
+    locked = lock < SPLIT_EPS
+    if np.any(locked):
+        sol1[locked] = _split_locked(R[locked], b[locked], i, j, k)
+    sol2 = sol1.copy()
+    sol2[..., 0] += np.pi
+    sol2[..., 2] += np.pi
+    sol2[..., 1] = -sol1[..., 1] if proper else np.pi - sol1[..., 1]
+    return wrap_pi(sol1), wrap_pi(sol2), lock
+
+
+def _split_locked(R, b, i, j, k):
+    """At the lock only ``a + sigma*c`` is observable: give each turn half of it."""
+    Rj = axis_rotation(j, b)
+    M = np.matmul(R, np.swapaxes(Rj, -1, -2))  # = R_i(a + sigma c)
+    j1, k1 = (i + 1) % 3, (i + 2) % 3
+    total = np.arctan2(M[..., k1, j1], M[..., j1, j1])
+    sigma = np.sign(Rj[..., i, k])  # R_j(b) maps axis k onto sigma * axis i
+    return np.stack([total / 2, b, sigma * total / 2], axis=-1)
