@@ -51,10 +51,10 @@ def verbosity_options(f):
 
 
 def progress(total=None, desc: str = "", quiet: bool = False, unit: str = "rows"):
-    """A tqdm bar on stderr (disabled by ``--quiet`` or when stderr is not a terminal-like stream)."""
+    """A tqdm bar on stderr; off with ``--quiet``, and when stderr is not a terminal (logs, CI)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, disable=quiet, file=sys.stderr,
+    return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, disable=True if quiet else None, file=sys.stderr,
                 dynamic_ncols=True, leave=False)
 
 

@@ -13,15 +13,17 @@ def frobenius(R1, R2) -> np.ndarray:
 def geodesic_deg(R1, R2) -> np.ndarray:
     """Angle of ``R1.T @ R2`` in degrees, in [0, 180].
 
-    Uses ``2 * atan2(||R1 - R2||_F, ||R1 + R2||_F)``, which equals
-    ``acos((trace(R1.T R2) - 1) / 2)`` but stays accurate near 0 and 180 degrees.
+    Computed as ``atan2(sin, cos)`` of ``M = R1.T @ R2`` (``sin`` from the
+    skew part, ``cos = (trace(M) - 1) / 2``), which equals the usual clamped
+    ``acos`` but stays accurate near 0 and near 180 degrees.
     """
-    R1 = np.asarray(R1, dtype=np.float64)
-    R2 = np.asarray(R2, dtype=np.float64)
-    dm, dp = R1 - R2, R1 + R2
-    num = np.sqrt(np.einsum("...ij,...ij->...", dm, dm))
-    den = np.sqrt(np.einsum("...ij,...ij->...", dp, dp))
-    return np.rad2deg(2.0 * np.arctan2(num, den))
+    M = np.matmul(np.swapaxes(np.asarray(R1, dtype=np.float64), -1, -2), np.asarray(R2, dtype=np.float64))
+    sx = M[..., 2, 1] - M[..., 1, 2]
+    sy = M[..., 0, 2] - M[..., 2, 0]
+    sz = M[..., 1, 0] - M[..., 0, 1]
+    sin = 0.5 * np.sqrt(sx * sx + sy * sy + sz * sz)
+    cos = 0.5 * (M[..., 0, 0] + M[..., 1, 1] + M[..., 2, 2] - 1.0)
+    return np.rad2deg(np.arctan2(sin, cos))
 
 
 def angle_diff_deg(a, b) -> np.ndarray:

@@ -21,11 +21,17 @@ Gimbal lock
 The lock is where the middle turn aligns the first and the last axes
 (``cos b = 0`` for Tait-Bryan, ``sin b = 0`` for proper Euler). There, only
 ``a + sigma * c`` is observable. ``lock_distance`` returns ``|cos b|`` (or
-``|sin b|``); rows with ``lock_distance < SPLIT_EPS`` are decomposed by setting
-``a = sigma * c`` (each half of the observable sum), as the method paper does,
-because the ordinary formula divides noise by noise there. Rows between
-``SPLIT_EPS`` and the system's ``gimbal_tol`` are still decomposed exactly (the
-atan2 form stays accurate in float64) but callers flag them as locked.
+``|sin b|``). Near the lock the textbook atan2 formulas get ``a`` and ``c``
+each from entries of size ``cos b``, so their sum carries an error of about
+``eps / cos b`` and the rebuilt matrix drifts (1e-7 at 1e-9 degrees from the
+lock). Rows with ``lock_distance < REFINE_BELOW`` therefore take ``b`` and
+``c`` from the formulas and solve ``a`` from the residual
+``R @ Rk(c).T @ Rj(b).T``, which absorbs the error of ``c``: the rebuild stays
+at machine precision all the way to the lock. Rows with
+``lock_distance < SPLIT_EPS`` are at the lock for all numerical purposes and
+are decomposed with ``a = sigma * c`` (each half of the observable sum), as
+the method paper does. Callers flag rows inside their own, larger,
+``gimbal_tol`` as locked.
 """
 from __future__ import annotations
 
@@ -35,6 +41,8 @@ from .elemental import axis_rotation
 
 #: below this |cos b| the ordinary atan2 formulas lose all precision in float64
 SPLIT_EPS = 1e-12
+#: below this |cos b| the first angle is solved from the residual (within ~2.9 deg of the lock)
+REFINE_BELOW = 0.05
 
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
@@ -65,14 +73,22 @@ def extrinsic_to_intrinsic(seq: str, angles):
     return seq[::-1], np.asarray(angles)[..., ::-1]
 
 
+def _wrap(x, half):
+    x = np.asarray(x, dtype=np.float64)
+    w = x - 2 * half * np.ceil((x - half) / (2 * half))
+    # the subtraction can round one ulp past either end; fold those back
+    w = np.where(w > half, w - 2 * half, w)
+    return np.where(w <= -half, w + 2 * half, w)
+
+
 def wrap_pi(x):
     """Wrap radians into ``(-pi, pi]``."""
-    return x - 2 * np.pi * np.ceil((x - np.pi) / (2 * np.pi))
+    return _wrap(x, np.pi)
 
 
 def wrap_180(x):
     """Wrap degrees into ``(-180, 180]``."""
-    return x - 360.0 * np.ceil((x - 180.0) / 360.0)
+    return _wrap(x, 180.0)
 
 
 def euler_to_matrix(angles, seq: str) -> np.ndarray:
@@ -137,6 +153,9 @@ def matrix_to_euler(R, seq: str):
         a = np.arctan2(-e * R[..., j, k], R[..., k, k])
         c = np.arctan2(-e * R[..., i, j], R[..., i, i])
     sol1 = np.stack([a, b, c], axis=-1)
+    near = lock < REFINE_BELOW
+    if np.any(near):
+        sol1[near, 0] = _first_from_residual(R[near], b[near], c[near], i, j, k)
     locked = lock < SPLIT_EPS
     if np.any(locked):
         sol1[locked] = _split_locked(R[locked], b[locked], i, j, k)
@@ -147,11 +166,20 @@ def matrix_to_euler(R, seq: str):
     return wrap_pi(sol1), wrap_pi(sol2), lock
 
 
+def _angle_about(M, i):
+    """Angle of a rotation about axis ``i`` (as built by ``axis_rotation``)."""
+    j1, k1 = (i + 1) % 3, (i + 2) % 3
+    return np.arctan2(M[..., k1, j1], M[..., j1, j1])
+
+
+def _first_from_residual(R, b, c, i, j, k):
+    tail = np.matmul(axis_rotation(j, b), axis_rotation(k, c))
+    return _angle_about(np.matmul(R, np.swapaxes(tail, -1, -2)), i)
+
+
 def _split_locked(R, b, i, j, k):
     """At the lock only ``a + sigma*c`` is observable: give each turn half of it."""
     Rj = axis_rotation(j, b)
-    M = np.matmul(R, np.swapaxes(Rj, -1, -2))  # = R_i(a + sigma c)
-    j1, k1 = (i + 1) % 3, (i + 2) % 3
-    total = np.arctan2(M[..., k1, j1], M[..., j1, j1])
+    total = _angle_about(np.matmul(R, np.swapaxes(Rj, -1, -2)), i)  # R = R_i(a + sigma c) R_j(b)
     sigma = np.sign(Rj[..., i, k])  # R_j(b) maps axis k onto sigma * axis i
     return np.stack([total / 2, b, sigma * total / 2], axis=-1)

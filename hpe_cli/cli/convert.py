@@ -1,0 +1,54 @@
+"""``hpe convert``: labels from one rotation system to another."""
+from __future__ import annotations
+
+import click
+
+from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, rejects_option,
+                      verbosity_options)
+
+
+@click.command(context_settings={"help_option_names": ["-h", "--help"]})
+@click.argument("input", type=click.Path(exists=True))
+@output_option()
+@click.option("--from", "source", type=SYSTEM, required=True, help="System of INPUT: built-in name or .toml file.")
+@click.option("--to", "target", type=SYSTEM, required=True, help="System to write: built-in name or .toml file.")
+@click.option("--radians", is_flag=True, help="INPUT angle columns are in radians (output is always degrees).")
+@rejects_option
+@overwrite_option
+@batch_option
+@verbosity_options
+def convert(input, output, source, target, radians, rejects, overwrite, batch_size, verbose, quiet):
+    """Convert head-pose labels between rotation systems.
+
+    INPUT is a .parquet or .csv table with angle columns pitch,yaw,roll
+    (degrees) or, when it has none, matrix columns r00..r22 (row-major, the
+    source system's stored matrix); or a folder of 300W-LP/AFLW2000 .mat files
+    (read from Pose_Para, with a `file` column).
+
+    OUTPUT (.parquet or .csv) keeps every other input column, then
+    pitch,yaw,roll (primary solution), pitch_2,yaw_2,roll_2 (the other one),
+    r00..r22 (target matrix), gimbal_lock and roundtrip_err (Frobenius
+    distance between the input rotation and the one rebuilt from the output
+    angles). Parquet metadata records the target system's definition.
+
+    \b
+    Examples:
+      hpe convert labels.csv -o labels_6d.parquet --from 300w_lp --to 6drepnet
+      hpe convert AFLW2000/ -o aflw_scipy.csv --from 300w_lp --to scipy_zyx
+      hpe convert preds.parquet -o fixed.parquet --from my_system.toml --to 300w_lp --rejects bad.csv
+      hpe convert rad.csv -o deg.csv --from 3ddfa_v2 --to 300w_lp --radians
+    """
+    bar = progress(desc="convert", quiet=quiet)
+    try:
+        from ..pipelines.convert import run_convert
+
+        s = run_convert(input, output, source, target, radians=radians, rejects_path=rejects, overwrite=overwrite,
+                        batch_size=batch_size, progress=bar)
+    finally:
+        bar.close()
+    lines = [f"{s.written} of {s.rows} rows converted from {source.name} to {target.name} -> {output}",
+             f"gimbal-locked rows: {s.gimbal_lock}; max round-trip error: {s.max_roundtrip_err:.3g}"]
+    if s.rejects:
+        lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in sorted(s.rejects.items(), key=lambda x: -x[1]))
+                     + f" -> {rejects}")
+    echo_summary(lines, quiet)

@@ -1,0 +1,187 @@
+"""Per-row checks of head-pose labels (pure numpy, vectorised over rows).
+
+Every check answers one yes/no question per row. The names are the keys of
+``hpe audit``'s JSON report and the boolean columns of its ``-o`` table:
+
+``non_finite``
+    A label value is missing, non-numeric, NaN or infinite. Such rows get no
+    other check (except ``duplicates``).
+``not_rotation``
+    Matrix input only: the nine finite entries are not a proper rotation
+    (``||R R^T - I||_F`` or ``|det R - 1|`` above ``ROTATION_TOL``). Disjoint
+    from ``non_finite``; such rows get no angle checks.
+``gimbal_lock``
+    Numerically locked: the system's ``lock_distance`` (``|cos b|`` of the
+    middle turn ``b``, or ``|sin b|`` for proper Euler systems) is below
+    ``system.gimbal_tol`` (1e-4 by default, 0.0057 deg). Only ``p + r`` or
+    ``p - r`` can be recovered from such a label.
+``near_gimbal``
+    The middle turn is within ``near_tol_deg`` (1 deg by default) of its lock,
+    i.e. ``lock_distance < sin(near_tol_deg)``, where splitting the other two
+    angles amplifies label noise by ``1 / lock_distance``. **It includes the
+    gimbal-locked rows**; ``near_gimbal & ~gimbal_lock`` are the rows close to,
+    but not at, the lock. 300W-LP's HELEN_2375918801_1_14 label
+    (-16.0909, -89.99858, -6.8545) is both.
+``non_canonical``
+    Angle input only: the triple is a valid rotation but not the system's
+    primary solution (e.g. yaw 120 in ``300w_lp``, whose primary solution of
+    that rotation has yaw 60 and pitch and roll moved by 180). The input is
+    wrapped to (-180, 180] before the comparison, so 270 vs -90 is *not*
+    non-canonical (it is ``out_of_range``). Not evaluated at gimbal lock, where
+    the split of ``p +- r`` is a convention, not a solution.
+``out_of_range``
+    An angle outside (-180, 180] or outside the system's declared ``ranges``.
+    For matrix input the primary angles are tested (e.g. a ``whenet`` rotation
+    with no solution of |pitch| < 90 and |roll| < 90).
+``duplicates``
+    The row's key (its label values plus its id columns) equals the key of an
+    earlier row; the first occurrence is not flagged. See
+    :func:`duplicate_first`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .check import ROTATION_TOL, rotation_mask
+from .euler import wrap_180
+from .systems import RotationSystem, get_system
+
+#: the check names, in report order
+CHECKS = ("gimbal_lock", "near_gimbal", "non_canonical", "out_of_range", "non_finite", "not_rotation", "duplicates")
+
+#: default ``near_gimbal`` tolerance, degrees from the lock
+NEAR_GIMBAL_DEG = 1.0
+
+#: two triples closer than this (degrees, per angle, wrapped) are the same solution;
+#: the two solutions of one rotation differ by at least 2x the distance from the lock
+CANONICAL_TOL_DEG = 1e-6
+
+
+def _empty(n: int) -> dict:
+    return {name: np.zeros(n, dtype=bool) for name in CHECKS}
+
+
+def _range_mask(pyr, system: RotationSystem) -> np.ndarray:
+    """True where an angle is outside (-180, 180] or the system's declared range."""
+    outside = ((pyr <= -180.0) | (pyr > 180.0)).any(axis=-1)
+    return outside | ~system.in_range(pyr)
+
+
+def audit_angles(pyr_deg, system, near_tol_deg: float = NEAR_GIMBAL_DEG,
+                 canonical_tol_deg: float = CANONICAL_TOL_DEG) -> dict:
+    """Check angle labels.
+
+    Parameters
+    ----------
+    pyr_deg : array_like, shape (N, 3)
+        ``(pitch, yaw, roll)`` in degrees, any real values (NaN allowed).
+    system : str or RotationSystem
+        The labels' rotation system.
+    near_tol_deg : float, optional
+        ``near_gimbal`` tolerance in degrees, >= 0.
+    canonical_tol_deg : float, optional
+        Largest per-angle difference (degrees) still counted as the primary solution.
+
+    Returns
+    -------
+    dict
+        ``name -> bool array (N,)`` for every name in :data:`CHECKS`
+        (``not_rotation`` and ``duplicates`` are all False here), plus
+        ``lock_distance`` (N,) float (NaN for non-finite rows).
+    """
+    system = get_system(system)
+    pyr = np.asarray(pyr_deg, dtype=np.float64).reshape(-1, 3)
+    n = len(pyr)
+    out = _empty(n)
+    finite = np.isfinite(pyr).all(axis=1)
+    out["non_finite"] = ~finite
+    lock_all = np.full(n, np.nan)
+    ok = np.flatnonzero(finite)
+    if ok.size:
+        p = pyr[ok]
+        primary, _, locked, lock = system.to_angles(system.from_angles(p))
+        near = locked | (lock < np.sin(np.deg2rad(near_tol_deg)))
+        d = np.abs(wrap_180(p) - primary)
+        d = np.minimum(d, 360.0 - d).max(axis=1)
+        out["gimbal_lock"][ok] = locked
+        out["near_gimbal"][ok] = near
+        out["non_canonical"][ok] = ~locked & (d > canonical_tol_deg)
+        out["out_of_range"][ok] = _range_mask(p, system)
+        lock_all[ok] = lock
+    out["lock_distance"] = lock_all
+    return out
+
+
+def audit_matrices(R, system, near_tol_deg: float = NEAR_GIMBAL_DEG, rotation_tol: float = ROTATION_TOL) -> dict:
+    """Check matrix labels (the system's stored matrices).
+
+    Parameters
+    ----------
+    R : array_like, shape (N, 3, 3)
+        Stored matrices (NaN allowed).
+    system : str or RotationSystem
+    near_tol_deg : float, optional
+        ``near_gimbal`` tolerance in degrees, >= 0.
+    rotation_tol : float, optional
+        Tolerance of the rotation test (see :func:`~hpe_cli.rotation.rotation_mask`).
+
+    Returns
+    -------
+    dict
+        As :func:`audit_angles` (``non_canonical`` is all False: a matrix has
+        no choice of solution), plus ``primary`` (N, 3): the primary angles
+        in degrees, NaN where the row is not a finite rotation.
+    """
+    system = get_system(system)
+    R = np.asarray(R, dtype=np.float64).reshape(-1, 3, 3)
+    n = len(R)
+    out = _empty(n)
+    finite = np.isfinite(R).all(axis=(1, 2))
+    rot = rotation_mask(R, rotation_tol)
+    out["non_finite"] = ~finite
+    out["not_rotation"] = finite & ~rot
+    lock_all = np.full(n, np.nan)
+    prim_all = np.full((n, 3), np.nan)
+    ok = np.flatnonzero(rot)
+    if ok.size:
+        primary, _, locked, lock = system.to_angles(R[ok])
+        out["gimbal_lock"][ok] = locked
+        out["near_gimbal"][ok] = locked | (lock < np.sin(np.deg2rad(near_tol_deg)))
+        out["out_of_range"][ok] = _range_mask(primary, system)
+        lock_all[ok] = lock
+        prim_all[ok] = primary
+    out["lock_distance"] = lock_all
+    out["primary"] = prim_all
+    return out
+
+
+def duplicate_first(keys) -> np.ndarray:
+    """Index of the first row with the same key, for every row.
+
+    Parameters
+    ----------
+    keys : array_like, shape (N,) or (N, K)
+        One key per row (e.g. 64-bit hashes, two per row to make collisions
+        negligible). Rows are equal when all ``K`` values are equal.
+
+    Returns
+    -------
+    ndarray of int64 (N,)
+        ``first[i] == i`` for the first occurrence of a key, else the index
+        of that first occurrence; ``first != arange(N)`` is the duplicates mask.
+    """
+    k = np.asarray(keys)
+    if k.ndim == 1:
+        k = k[:, None]
+    n = k.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    # lexsort is stable, so within a run of equal keys the original order is kept
+    order = np.lexsort(k.T[::-1])
+    ks = k[order]
+    new = np.ones(n, dtype=bool)
+    new[1:] = (ks[1:] != ks[:-1]).any(axis=1)
+    group_start = np.maximum.accumulate(np.where(new, np.arange(n), 0))
+    first = np.empty(n, dtype=np.int64)
+    first[order] = order[group_start]
+    return first

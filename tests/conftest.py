@@ -1,0 +1,28 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import settings
+
+settings.register_profile("hpe", max_examples=60, deadline=None)
+settings.load_profile("hpe")
+
+REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+
+
+@pytest.fixture
+def realdata():
+    if not REALDATA.exists():
+        pytest.skip("../shared/realdata is not available")
+    return REALDATA
+
+
+def canonical_A(pyr_deg):
+    """SPEC §2's expanded 300W-LP matrix, written out independently of the package."""
+    p, y, r = np.deg2rad(np.asarray(pyr_deg, dtype=float)).T
+    cp, sp, cy, sy, cr, sr = np.cos(p), np.sin(p), np.cos(y), np.sin(y), np.cos(r), np.sin(r)
+    return np.stack([
+        np.stack([cy * cr, cy * sr, -sy], -1),
+        np.stack([-cp * sr + sp * sy * cr, cp * cr + sp * sy * sr, sp * cy], -1),
+        np.stack([sp * sr + cp * sy * cr, -sp * cr + cp * sy * sr, cp * cy], -1),
+    ], -2)
