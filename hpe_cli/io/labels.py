@@ -51,6 +51,36 @@ def numeric_column(batch, name):
     return values, reasons
 
 
+def batch_label_columns(batch, mode: str, radians: bool = False):
+    """Label columns of one batch as contiguous 1-D float64 arrays.
+
+    Returns
+    -------
+    columns : list of ndarray
+        ``[pitch, yaw, roll]`` in degrees, or the nine ``r00..r22`` entries.
+    reasons : ndarray of object (n,)
+        ``''`` for a usable row, else the first reason it is not (missing,
+        non-numeric, non-finite; for matrices also "not a rotation").
+    """
+    names = ANGLE_COLS if mode == "angles" else MATRIX_COLS
+    cols, reasons = [], np.full(batch.num_rows, "", dtype=object)
+    for name in names:
+        v, r = numeric_column(batch, name)
+        cols.append(np.rad2deg(v) if (radians and mode == "angles") else v)
+        if (r != "").any():
+            reasons = np.where(reasons == "", r, reasons)
+    if mode == "matrix":
+        from ..rotation.check import rotation_reasons
+
+        ok = reasons == ""
+        R = np.stack(cols, axis=-1).reshape(-1, 3, 3)
+        rr = rotation_reasons(R[ok] if not ok.all() else R)
+        if (rr != "").any():
+            sub = reasons[ok]
+            reasons[ok] = np.where(sub == "", rr, sub)
+    return cols, reasons
+
+
 def batch_labels(batch, mode: str, radians: bool = False):
     """Label values of one batch.
 
@@ -61,21 +91,6 @@ def batch_labels(batch, mode: str, radians: bool = False):
     reasons : ndarray of object (n,)
         ``''`` for a usable row, else the first reason it is not.
     """
-    names = ANGLE_COLS if mode == "angles" else MATRIX_COLS
-    cols, reasons = [], np.full(batch.num_rows, "", dtype=object)
-    for name in names:
-        v, r = numeric_column(batch, name)
-        cols.append(v)
-        reasons = np.where(reasons == "", r, reasons)
+    cols, reasons = batch_label_columns(batch, mode, radians)
     values = np.stack(cols, axis=-1)
-    if mode == "angles":
-        return (np.rad2deg(values) if radians else values), reasons
-    values = values.reshape(-1, 3, 3)
-    ok = reasons == ""
-    if ok.any():
-        from ..rotation.check import rotation_reasons
-
-        rr = rotation_reasons(values[ok])
-        sub = reasons[ok]
-        reasons[ok] = np.where(sub == "", rr, sub)
-    return values, reasons
+    return (values if mode == "angles" else values.reshape(-1, 3, 3)), reasons

@@ -103,7 +103,11 @@ class TableWriter:
         if self.fmt == "parquet":
             import pyarrow.parquet as pq
 
-            return pq.ParquetWriter(self._tmp, schema, compression="snappy")
+            import pyarrow as pa
+
+            # dictionary pages only pay off for repeated values; continuous floats never repeat
+            dict_cols = [f.name for f in schema if not pa.types.is_floating(f.type)]
+            return pq.ParquetWriter(self._tmp, schema, compression="snappy", use_dictionary=dict_cols)
         import pyarrow.csv as pcsv
 
         return pcsv.CSVWriter(self._tmp, schema)

@@ -176,11 +176,16 @@ def duplicate_first(keys) -> np.ndarray:
     n = k.shape[0]
     if n == 0:
         return np.zeros(0, dtype=np.int64)
-    # lexsort is stable, so within a run of equal keys the original order is kept
-    order = np.lexsort(k.T[::-1])
+    # fast path: a stable sort on the first column groups equal keys whenever rows
+    # that share the first value share the whole key (always, for hashes in practice)
+    order = np.argsort(k[:, 0], kind="stable")
     ks = k[order]
     new = np.ones(n, dtype=bool)
-    new[1:] = (ks[1:] != ks[:-1]).any(axis=1)
+    new[1:] = ks[1:, 0] != ks[:-1, 0]
+    if k.shape[1] > 1 and (~new[1:] & (ks[1:, 1:] != ks[:-1, 1:]).any(axis=1)).any():
+        order = np.lexsort(k.T[::-1])  # exact: sort on every column
+        ks = k[order]
+        new[1:] = (ks[1:] != ks[:-1]).any(axis=1)
     group_start = np.maximum.accumulate(np.where(new, np.arange(n), 0))
     first = np.empty(n, dtype=np.int64)
     first[order] = order[group_start]

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .distances import frobenius
+from . import soa
 from .systems import RotationSystem, get_system
 
 
@@ -39,10 +39,24 @@ def canonical_to_labels(A, target) -> Conversion:
     """Express canonical matrices ``A`` (N, 3, 3) in ``target`` (name, path or system)."""
     target = get_system(target)
     A = np.asarray(A, dtype=np.float64)
-    R = target.from_canonical(A)
-    p1, p2, locked, _ = target.to_angles(R)
-    rebuilt = target.to_canonical(target.from_angles(p1))
-    return Conversion(p1, p2, R, locked, frobenius(A, rebuilt), A)
+    n = A.shape[0]
+    cols = soa_labels(soa.from_array(A), target, n)
+    return Conversion(np.stack(cols["primary"], -1), np.stack(cols["secondary"], -1),
+                      soa.to_array(cols["matrix"], n), cols["gimbal_lock"], cols["roundtrip_err"], A)
+
+
+def soa_labels(A, target: RotationSystem, n: int) -> dict:
+    """Labels of a nested-list canonical matrix ``A``: the columns behind :class:`Conversion`.
+
+    Returns a dict with ``primary``/``secondary`` (lists of 3 arrays, degrees),
+    ``matrix`` (nested list, target's stored matrix), ``gimbal_lock`` and
+    ``roundtrip_err`` (1-D arrays).
+    """
+    R = target.soa_from_canonical(A)
+    p1, p2, locked, _ = target.soa_to_angles(R)
+    rebuilt = target.soa_to_canonical(target.soa_from_angles(*p1))
+    return {"primary": p1, "secondary": p2, "matrix": R, "gimbal_lock": locked,
+            "roundtrip_err": soa.frobenius(A, rebuilt) * np.ones(n)}
 
 
 def convert_matrices(R, source, target) -> Conversion:

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import soa
 from .elemental import axis_rotation
 
 #: below this |cos b| the ordinary atan2 formulas lose all precision in float64
@@ -93,13 +94,18 @@ def wrap_180(x):
 
 def euler_to_matrix(angles, seq: str) -> np.ndarray:
     """Intrinsic right-handed Euler angles (radians, ``(..., 3)``) to matrices ``(..., 3, 3)``."""
-    i, j, k = parse_seq(seq)
     angles = np.asarray(angles, dtype=np.float64)
     if angles.shape[-1:] != (3,):
         raise ValueError(f"expected angles of shape (..., 3), got {angles.shape}")
-    r = axis_rotation(i, angles[..., 0])
-    r = np.matmul(r, axis_rotation(j, angles[..., 1]))
-    return np.matmul(r, axis_rotation(k, angles[..., 2]))
+    flat = angles.reshape(-1, 3)
+    X = euler_to_soa(flat[:, 0], flat[:, 1], flat[:, 2], seq)
+    return soa.to_array(X, flat.shape[0]).reshape(angles.shape[:-1] + (3, 3))
+
+
+def euler_to_soa(a, b, c, seq: str):
+    """Like :func:`euler_to_matrix` for three 1-D angle arrays, as a nested-list matrix."""
+    i, j, k = parse_seq(seq)
+    return soa.mul(soa.mul(soa.elemental(i, a), soa.elemental(j, b)), soa.elemental(k, c))
 
 
 def _parity(i: int, j: int, k: int) -> float:
@@ -137,33 +143,58 @@ def matrix_to_euler(R, seq: str):
     R = np.asarray(R, dtype=np.float64)
     if R.shape[-2:] != (3, 3):
         raise ValueError(f"expected matrices of shape (..., 3, 3), got {R.shape}")
+    shape = R.shape[:-2]
+    a, b, c, lock = soa_to_euler(soa.from_array(R.reshape(-1, 3, 3)), seq)
+    a2, b2, c2 = second_solution(a, b, c, seq)
+    sol1 = wrap_pi(np.stack([a, b, c], axis=-1).reshape(shape + (3,)))  # atan2(-0.0, -1) is -pi
+    sol2 = wrap_pi(np.stack([a2, b2, c2], axis=-1).reshape(shape + (3,)))
+    return sol1, sol2, lock.reshape(shape)
+
+
+def second_solution(a, b, c, seq: str):
+    """The other triple of ``(a, b, c)`` (radians, each in ``(-pi, pi]``)."""
+    i, _, k = parse_seq(seq)
+    a2 = np.where(a > 0, a - np.pi, a + np.pi)
+    c2 = np.where(c > 0, c - np.pi, c + np.pi)
+    if i == k:
+        b2 = np.where(b >= np.pi, b, -b)  # b in [0, pi]; -pi is written pi
+    else:
+        b2 = np.where(b >= 0, np.pi - b, -np.pi - b)
+    return a2, b2, c2
+
+
+def soa_to_euler(X, seq: str):
+    """Solution 1 ``(a, b, c, lock)`` of a nested-list matrix (see :func:`matrix_to_euler`)."""
     i, j, k = parse_seq(seq)
-    proper = i == k
-    if proper:
+    n = next(np.shape(v)[0] for row in X for v in row if not isinstance(v, float))
+    X = [[np.broadcast_to(v, (n,)) if isinstance(v, float) else v for v in row] for row in X]
+    if i == k:
         m = 3 - i - j
         e = _parity(i, j, m)
-        lock = np.hypot(R[..., i, j], R[..., i, m])
-        b = np.arctan2(lock, R[..., i, i])
-        a = np.arctan2(R[..., j, i], -e * R[..., m, i])
-        c = np.arctan2(R[..., i, j], e * R[..., i, m])
+        lock = np.sqrt(X[i][j] * X[i][j] + X[i][m] * X[i][m])  # entries <= 1: no overflow, unlike hypot's cost
+        b = np.arctan2(lock, X[i][i])
+        a = np.arctan2(X[j][i], -e * X[m][i])
+        c = np.arctan2(X[i][j], e * X[i][m])
     else:
         e = _parity(i, j, k)
-        lock = np.hypot(R[..., i, i], R[..., i, j])
-        b = np.arctan2(e * R[..., i, k], lock)
-        a = np.arctan2(-e * R[..., j, k], R[..., k, k])
-        c = np.arctan2(-e * R[..., i, j], R[..., i, i])
-    sol1 = np.stack([a, b, c], axis=-1)
+        lock = np.sqrt(X[i][i] * X[i][i] + X[i][j] * X[i][j])
+        if e > 0:
+            b = np.arctan2(X[i][k], lock)
+            a = np.arctan2(-X[j][k], X[k][k])
+            c = np.arctan2(-X[i][j], X[i][i])
+        else:
+            b = np.arctan2(-X[i][k], lock)
+            a = np.arctan2(X[j][k], X[k][k])
+            c = np.arctan2(X[i][j], X[i][i])
     near = lock < REFINE_BELOW
-    if np.any(near):
-        sol1[near, 0] = _first_from_residual(R[near], b[near], c[near], i, j, k)
-    locked = lock < SPLIT_EPS
-    if np.any(locked):
-        sol1[locked] = _split_locked(R[locked], b[locked], i, j, k)
-    sol2 = sol1.copy()
-    sol2[..., 0] += np.pi
-    sol2[..., 2] += np.pi
-    sol2[..., 1] = -sol1[..., 1] if proper else np.pi - sol1[..., 1]
-    return wrap_pi(sol1), wrap_pi(sol2), lock
+    if near.any():
+        R = soa.to_array([[v[near] for v in row] for row in X], int(near.sum()))
+        a[near] = _first_from_residual(R, b[near], c[near], i, j, k)
+        locked = lock < SPLIT_EPS
+        if locked.any():
+            sub = locked[near]
+            a[locked], c[locked] = _split_locked(R[sub], b[locked], i, j, k)
+    return a, b, c, lock
 
 
 def _angle_about(M, i):
@@ -182,4 +213,4 @@ def _split_locked(R, b, i, j, k):
     Rj = axis_rotation(j, b)
     total = _angle_about(np.matmul(R, np.swapaxes(Rj, -1, -2)), i)  # R = R_i(a + sigma c) R_j(b)
     sigma = np.sign(Rj[..., i, k])  # R_j(b) maps axis k onto sigma * axis i
-    return np.stack([total / 2, b, sigma * total / 2], axis=-1)
+    return total / 2, sigma * total / 2

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from . import euler as _euler
+from . import soa as _soa
 
 ROLES = ("pitch", "yaw", "roll")
 SELECTIONS = ("tait_bryan", "proper", "whenet")
@@ -32,6 +33,8 @@ SELECTIONS = ("tait_bryan", "proper", "whenet")
 #: 0.0057 deg. Closer than that, float32-stored labels (Pose_Para, most datasets)
 #: split pitch from roll with errors above ~0.05 deg.
 GIMBAL_TOL = 1e-4
+
+_DEG = 180.0 / np.pi
 
 _CANONICAL_WORDS = {
     (0, 1): "subject's left (image right)",
@@ -144,9 +147,9 @@ class RotationSystem:
     def from_angles(self, pyr_deg) -> np.ndarray:
         """Stored matrices ``(N, 3, 3)`` from angles ``(N, 3)`` in role order, degrees."""
         pyr = np.asarray(pyr_deg, dtype=np.float64)
-        turns = self._intrinsic_turns()
-        ang = np.stack([np.deg2rad(pyr[..., ROLES.index(t.angle)]) * t.sign() for t in turns], axis=-1)
-        return _euler.euler_to_matrix(ang, self.intrinsic_axes)
+        flat = pyr.reshape(-1, 3)
+        X = self.soa_from_angles(flat[:, 0], flat[:, 1], flat[:, 2])
+        return _soa.to_array(X, flat.shape[0]).reshape(pyr.shape[:-1] + (3, 3))
 
     def to_angles(self, R):
         """Both solutions of stored matrices, in role order and degrees.
@@ -161,35 +164,84 @@ class RotationSystem:
         lock : ndarray (N,)
             ``lock_distance`` (|cos| or |sin| of the middle turn).
         """
-        s1, s2, lock = _euler.matrix_to_euler(R, self.intrinsic_axes)
-        turns = self._intrinsic_turns()
-        perm = [next(n for n, t in enumerate(turns) if t.angle == role) for role in ROLES]
-        signs = np.array([turns[n].sign() for n in perm])
-        p1 = _euler.wrap_180(np.rad2deg(s1[..., perm]) * signs)
-        p2 = _euler.wrap_180(np.rad2deg(s2[..., perm]) * signs)
-        if self.selection == "whenet":
-            ok1 = (np.abs(p1[..., 0]) < 90) & (np.abs(p1[..., 2]) < 90)
-            ok2 = (np.abs(p2[..., 0]) < 90) & (np.abs(p2[..., 2]) < 90)
-            swap = ~ok1 & ok2
-            p1, p2 = np.where(swap[..., None], p2, p1), np.where(swap[..., None], p1, p2)
-        return p1, p2, lock < self.gimbal_tol, lock
+        R = np.asarray(R, dtype=np.float64)
+        shape = R.shape[:-2]
+        p1, p2, locked, lock = self.soa_to_angles(_soa.from_array(R.reshape(-1, 3, 3)))
+        return (np.stack(p1, -1).reshape(shape + (3,)), np.stack(p2, -1).reshape(shape + (3,)),
+                locked.reshape(shape), lock.reshape(shape))
 
     def to_canonical(self, R_stored) -> np.ndarray:
         """Map stored matrices to the canonical 300W-LP matrix ``A``."""
         R = np.asarray(R_stored, dtype=np.float64)
         if self.storage == "transposed":
             R = np.swapaxes(R, -1, -2)
-        B = self.B
-        if np.array_equal(B, np.eye(3)):
-            return R
-        return B.T @ R @ B
+        return R if self._identity_frame else np.einsum("ji,...jk,kl->...il", self.B, R, self.B)
 
     def from_canonical(self, A) -> np.ndarray:
         """Map canonical matrices ``A`` to this system's stored matrices."""
         A = np.asarray(A, dtype=np.float64)
-        B = self.B
-        R = A if np.array_equal(B, np.eye(3)) else B @ A @ B.T
+        R = A if self._identity_frame else np.einsum("ij,...jk,lk->...il", self.B, A, self.B)
         return np.swapaxes(R, -1, -2) if self.storage == "transposed" else R
+
+    # nested-list (structure of arrays) forms of the same four maps, for hot paths
+    @property
+    def _identity_frame(self) -> bool:
+        return np.array_equal(self.B, np.eye(3))
+
+    def soa_from_angles(self, pitch, yaw, roll):
+        """Stored matrix as a nested list, from 1-D angle arrays in degrees."""
+        by_role = {"pitch": pitch, "yaw": yaw, "roll": roll}
+        turns = self._intrinsic_turns()
+        rad = [np.asarray(by_role[t.angle], dtype=np.float64) * (t.sign() * (np.pi / 180.0)) for t in turns]
+        return _euler.euler_to_soa(rad[0], rad[1], rad[2], self.intrinsic_axes)
+
+    def soa_to_angles(self, X):
+        """``(primary, secondary, locked, lock)`` with the angle triples as lists ``[pitch, yaw, roll]``."""
+        seq = self.intrinsic_axes
+        a, b, c, lock = _euler.soa_to_euler(X, seq)
+        turns = self._intrinsic_turns()
+        proper = seq[0] == seq[2]
+        first = {}
+        for n, (t, v) in enumerate(zip(turns, (a, b, c))):
+            d = v * (_DEG if t.hand == "right" else -_DEG)
+            d[d <= -180.0] += 360.0  # atan2(-0.0, -1) and left hands give -180; keep (-180, 180]
+            first[t.angle] = (d, n == 1)
+        p1, p2 = [], []
+        for role in ROLES:
+            d, middle = first[role]
+            p1.append(d)
+            if not middle:  # the first and last turns move by 180 degrees
+                d2 = d + 180.0
+                d2[d > 0] -= 360.0
+            elif proper:
+                d2 = -d
+            else:  # the middle Tait-Bryan turn goes to 180 - b
+                d2 = 180.0 - d
+                d2[d < 0] -= 360.0
+            d2[d2 <= -180.0] += 360.0  # tiny |d| rounds d - 180 to exactly -180
+            p2.append(d2)
+        if self.selection == "whenet":
+            ok1 = (np.abs(p1[0]) < 90) & (np.abs(p1[2]) < 90)
+            ok2 = (np.abs(p2[0]) < 90) & (np.abs(p2[2]) < 90)
+            swap = ~ok1 & ok2
+            if swap.any():
+                p1, p2 = [np.where(swap, y, x) for x, y in zip(p1, p2)], [np.where(swap, x, y) for x, y in zip(p1, p2)]
+        return p1, p2, lock < self.gimbal_tol, lock
+
+    def soa_to_canonical(self, X):
+        if self.storage == "transposed":
+            X = _soa.transpose(X)
+        if self._identity_frame:
+            return X
+        B = _soa.constant(self.B)
+        return _soa.mul(_soa.mul(_soa.transpose(B), X), B)
+
+    def soa_from_canonical(self, A):
+        X = A
+        if not self._identity_frame:
+            B = _soa.constant(self.B)
+            X = _soa.mul(_soa.mul(B, A), _soa.transpose(B))
+        return _soa.transpose(X) if self.storage == "transposed" else X
 
     def in_range(self, pyr_deg) -> np.ndarray:
         """Boolean mask: every angle inside the declared range (inclusive)."""

@@ -1,0 +1,35 @@
+"""hpe systems: every system with its four parts, in words and as data."""
+import json
+
+from click.testing import CliRunner
+
+from hpe_cli.cli.main import cli
+
+BUILTINS = {"300w_lp", "whenet", "6drepnet", "3ddfa_v2", "scipy_zyx", "opencv"}
+
+
+def test_text_listing():
+    res = CliRunner().invoke(cli, ["systems"])
+    assert res.exit_code == 0
+    for name in BUILTINS:
+        assert name in res.output
+    for part in ("frame", "axes", "range", "order"):
+        assert f"  {part}" in res.output
+
+
+def test_json_listing_and_extra_file(tmp_path):
+    f = tmp_path / "mine.toml"
+    f.write_text('name = "mine"\n' + "".join(f'[[turns]]\nangle = "{r}"\naxis = "{a}"\n'
+                                             for r, a in [("yaw", "z"), ("pitch", "y"), ("roll", "x")]))
+    res = CliRunner().invoke(cli, ["systems", "--json", str(f)])
+    assert res.exit_code == 0
+    data = {d["name"]: d for d in json.loads(res.output)}
+    assert BUILTINS | {"mine"} <= set(data)
+    d = data["6drepnet"]
+    assert d["storage"] == "transposed" and d["sequence"] == "extrinsic" and len(d["turns"]) == 3
+    assert set(d["in_words"]) >= {"frame", "axes", "range", "order"}
+
+
+def test_top_level_help_fast_and_lists_commands():
+    res = CliRunner().invoke(cli, ["--help"])
+    assert res.exit_code == 0 and "convert" in res.output and "systems" in res.output and "Examples" in res.output
