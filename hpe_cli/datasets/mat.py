@@ -44,7 +44,9 @@ def read_mat(path) -> dict:
         pt2d = np.asarray(pt2d, dtype=np.float64)
         if pt2d.ndim != 2 or pt2d.shape[0] != 2:
             raise HpeError(f"{path}: pt2d has shape {pt2d.shape}, expected (2, N)")
-        pt2d = np.where((pt2d[0] == -1) & (pt2d[1] == -1), np.nan, pt2d)
+        # AFLW2000-3D marks an invisible point with x = -1; its y is then a filler
+        # (452 in PRNet's copies, 2 px below a 450-px image), not -1
+        pt2d = np.where((pt2d[0] == -1) | (pt2d[1] == -1), np.nan, pt2d)
     pt3d = m.get("pt3d_68")
     if pt3d is not None:
         pt3d = np.asarray(pt3d, dtype=np.float64)

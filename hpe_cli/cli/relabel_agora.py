@@ -1,0 +1,119 @@
+"""``hpe relabel-agora``: head-pose labels from AGORA ground-truth dataframes."""
+from __future__ import annotations
+
+import click
+
+from .options import SYSTEM, echo_summary, output_option, overwrite_option, progress, rejects_option, verbosity_options
+
+FORMATS = ("table", "coco", "whenet")
+
+
+def _image_size(ctx, param, value):
+    try:
+        w, h = (int(v) for v in str(value).lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"expected WIDTHxHEIGHT such as 3840x2160, got {value!r}") from None
+    if w <= 0 or h <= 0:
+        raise click.BadParameter(f"expected a positive WIDTHxHEIGHT, got {value!r}")
+    return (w, h)
+
+
+def _non_negative(ctx, param, value):
+    if value is None:
+        return None
+    if value != value or value < 0:  # NaN or negative
+        raise click.BadParameter(f"expected a number >= 0 or inf, got {value}")
+    return value
+
+
+def _format_from_suffix(path) -> str:
+    s = str(path).lower()
+    if s.endswith(".json"):
+        return "coco"
+    if s.endswith(".txt"):
+        return "whenet"
+    return "table"
+
+
+@click.command(context_settings={"help_option_names": ["-h", "--help"]})
+@click.argument("dataframes", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@output_option(help="Output: a .parquet/.csv table, or with --format coco a .json, with --format whenet a .txt.")
+@click.option("--system", "system", type=SYSTEM, default=None,
+              help="Rotation system of the labels: built-in name or .toml file "
+                   "[default: 300w_lp; whenet for --format coco/whenet, which store DirectMHP's/WHENet's angles].")
+@click.option("--format", "fmt", type=click.Choice(FORMATS), default=None,
+              help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
+                   "[default: from OUTPUT's extension].")
+@click.option("--image-size", default="3840x2160", show_default=True, callback=_image_size, metavar="WxH",
+              help="Size of the images the labels are for. AGORA renders 3840x2160 and ships 1280x720 copies; "
+                   "camK (and so the boxes and 2-D points) is rescaled from the size the dataframe was built for "
+                   "(read from camK's principal point, which AGORA puts at the image centre).")
+@click.option("--preset", type=click.Choice(["directmhp", "whenet"]), default="directmhp", show_default=True,
+              help="Helmet radius and box rule: directmhp (radius 18, aspect < 1.5, each side < 70% of the "
+                   "image) or whenet (radius 22, aspect <= 2).")
+@click.option("--max-rmse", type=float, default=None, callback=_non_negative, metavar="X",
+              help="Reject faces whose fit RMSE is above X metres (AGORA's joints are in metres). "
+                   "'inf' labels every fit, as DirectMHP did. [default: 0.02]")
+@click.option("--max-occlusion", type=float, default=90.0, show_default=True, callback=_non_negative,
+              metavar="PCT", help="Label only people with occlusion < PCT percent (DirectMHP: 90).")
+@click.option("--legacy-whenet", is_flag=True,
+              help="Label with DirectMHP's chain, which is WHENet's (compound, Z-Y-X decomposition, "
+                   "select_euler, negation), and drop what it drops; adds legacy_pitch/yaw/roll columns.")
+@rejects_option
+@overwrite_option
+@verbosity_options
+def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse, max_occlusion, legacy_whenet,
+                  rejects, overwrite, verbose, quiet):
+    """Relabel AGORA: one head-pose label per person, from SMPL-X face joints.
+
+    DATAFRAMES are AGORA ground-truth dataframes (*_withjv.pkl, pandas
+    pickles). Loading a pickle RUNS CODE stored in it: only pass files you
+    trust (AGORA's own downloads). Each needs the columns imgPath, isValid,
+    occlusion, and either DirectMHP's cam_j3d, camR, camT, camK or AGORA's
+    gt_joints_3d (then the joints are read in the camera frame and the
+    intrinsics are rebuilt by AGORA's rule: 36 x 20.25 mm sensor, focal length
+    by scene); a missing column is an error naming the file and the column.
+
+    For each person with occlusion < --max-occlusion and isValid, WHENet's
+    58-point reference head is fitted to the 13 face joints DirectMHP pairs
+    with it (SMPL-X joints 76-126 are the iBUG points 17-67); fits with RMSE
+    above --max-rmse are rejected. The label is the corrected
+    A = E @ camR @ R_head (E = diag(1, -1, -1)), the 300W-LP matrix of the
+    head as the camera sees it, written in --system; the box is DirectMHP's
+    helmet; the 51 face joints are projected to 2-D.
+
+    The table has source, row, person, image (imgPath), bbox_x/y/w/h (pixels),
+    the columns of `hpe convert` (pitch, yaw, roll, pitch_2.., r00..r22,
+    gimbal_lock, roundtrip_err), fit_rmse (m), n_pairs, scale (m per
+    reference-head unit), occlusion, image_width, image_height and
+    lm0_x..lm50_y. --format coco writes DirectMHP's COCO JSON (euler_angles
+    [pitch, yaw, roll], face2d_pts, bbox [x, y, w, h]); --format whenet
+    writes WHENet's annotation.txt lines (image,yaw,pitch,roll). Both store
+    whenet-system angles. Every person not labelled (occluded, invalid, too
+    few points, bad fit, behind camera, outside image, box rejected, dropped
+    by the legacy rule) is listed by --rejects with its reason and counted in
+    the summary.
+
+    \b
+    Examples:
+      hpe relabel-agora validation_*_withjv.pkl -o agora_val.parquet
+      hpe relabel-agora train_0_withjv.pkl -o train.json --format coco --image-size 1280x720
+      hpe relabel-agora val_0_withjv.pkl -o annotation.txt --legacy-whenet --max-rmse inf
+      hpe relabel-agora val_0_withjv.pkl -o labels.csv --system 6drepnet --rejects rejects.csv
+    """
+    from ..pipelines import agora as job
+
+    fmt = fmt or _format_from_suffix(output)
+    if fmt != "table" and system is not None and system.name != "whenet":
+        raise click.UsageError(f"--format {fmt} stores DirectMHP/WHENet angles, which are in the whenet system; "
+                               f"got --system {system.name} (use --format table for other systems)")
+    system = system or SYSTEM.convert("whenet" if fmt != "table" else "300w_lp", None, None)
+    cfg = job.Config(system=system, image_size=image_size,
+                     max_rmse=job.DEFAULT_MAX_RMSE if max_rmse is None else max_rmse,
+                     max_occlusion=max_occlusion, legacy=legacy_whenet, preset=preset)
+    bar = progress(total=len(dataframes), desc="relabel-agora", quiet=quiet, unit="files")
+    try:
+        stats = job.write_outputs(list(dataframes), cfg, output, fmt, rejects, overwrite, bar)
+    finally:
+        bar.close()
+    echo_summary(stats.summary(cfg, output, rejects, verbose), quiet)

@@ -1,0 +1,263 @@
+"""BIWI Kinect Head Pose files (SPEC §8).
+
+Files of sequence ``NN`` (01..24):
+
+- ``hpdb/NN/frame_XXXXX_pose.txt``: three rows of a 3x3 rotation ``R``, a
+  blank line, then the head centre ``c`` in mm (depth camera frame).
+- ``db_annotations/NN/frame_XXXXX_pose.bin``: six little-endian float32
+  values, the centre (mm), then pitch, yaw, roll in degrees.
+- ``hpdb/NN/rgb.cal`` / ``depth.cal``: intrinsics K (3x3), distortion (4),
+  extrinsics R (3x3) and t (mm), image width and height.
+
+Convention (the ``biwi`` built-in system, ``configs/systems/biwi.toml``)
+------------------------------------------------------------------------
+The depth camera frame is OpenCV's: x to the image right, y down, z forward
+(the centre of frame 01/00003, (51.9, 38.3, 881.8) mm, projects through
+``depth.cal`` onto the subject's face). ``R`` is active: it turns the head
+model, whose frontal pose is ``R = I`` (model x = subject's left, y = down,
+z = into the head), into the camera frame. Hence, with ``F = diag(1, -1, -1)``,
+
+    R = F @ A @ F        A = F @ R @ F   (A: 300W-LP matrix, SPEC §2)
+
+and the ``.bin`` angles are the right-handed Z-Y-X split of the same ``R``:
+
+    R = Rz(roll) @ Ry(yaw) @ Rx(pitch)
+
+that is pitch = atan2(R21, R22), yaw = asin(-R20), roll = atan2(R10, R00).
+For small turns yaw and roll have the 300W-LP signs (positive yaw turns the
+nose to the image left, positive roll tilts the head top to the image right)
+and BIWI's pitch has the opposite sign (positive = nose down). For large turns
+the split order matters: over the 15677 official frames the ``.bin`` angles
+(pitch negated) differ from the 300W-LP angles of the same matrix by a median
+of 1 degree but by up to 83 (pitch), 48 (yaw) and 77 (roll) degrees, so they
+must be converted, never reused. Hopenet's BIWI reader (transpose, then negate
+yaw and roll) returns exactly the 300W-LP angles of ``A``.
+
+Evidence: ``pose.txt`` and ``.bin`` overlap on no frame (sequence 01's
+``.bin`` starts at frame 4). The Z-Y-X split of frame 3's matrix, (-7.71, 3.05,
+-1.99), is closer to the ``.bin`` of frames 4-10, mean (-7.72, 3.45, -2.50),
+sd (0.11, 0.18, 0.15), than the X-Y-Z split (-7.61, 3.29, -1.57) and far from
+any reading of ``R.T``; the tests check this. The yaw sign was also checked by
+eye on frames 01/166 (yaw -1.4) and 01/175 (yaw +6.6): the nose moves to the
+image left.
+"""
+from __future__ import annotations
+
+import re
+import tarfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import HpeError
+
+#: the rotation system of BIWI's matrices and ``.bin`` angles
+BIWI_SYSTEM = "biwi"
+#: largest ||R R^T - I||_F accepted from a pose.txt (its 6 printed digits give ~1e-6)
+POSE_TXT_TOL = 1e-4
+
+_NAME = re.compile(r"(?:^|/)(\d+)/frame_(\d+)_pose\.(txt|bin)$")
+CENTRE_COLS = ["center_x", "center_y", "center_z"]
+
+
+def _numbers(path, text: str, expected: int, what: str) -> np.ndarray:
+    try:
+        v = np.array(text.split(), dtype=np.float64)
+    except ValueError:
+        raise HpeError(f"{path}: expected {expected} numbers ({what}), found a non-number") from None
+    if v.size != expected:
+        raise HpeError(f"{path}: expected {expected} numbers ({what}), got {v.size}")
+    if not np.isfinite(v).all():
+        raise HpeError(f"{path}: expected finite numbers ({what}), got {v[~np.isfinite(v)][0]}")
+    return v
+
+
+def nearest_rotation(M) -> np.ndarray:
+    """Closest proper rotation (Frobenius norm) to each ``(..., 3, 3)`` matrix, by SVD."""
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=np.float64))
+    d = np.sign(np.linalg.det(U @ Vt))
+    U[..., :, 2] *= d[..., None]
+    return U @ Vt
+
+
+def read_pose_txt(path):
+    """Read one ``frame_XXXXX_pose.txt``.
+
+    Returns
+    -------
+    R : ndarray (3, 3)
+        BIWI rotation (system ``biwi``), projected onto the nearest rotation
+        (the file's 6 digits leave ~1e-6 of non-orthogonality).
+    centre : ndarray (3,)
+        Head centre in mm, depth camera frame (x right, y down, z forward).
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise HpeError(f"{path}: cannot read BIWI pose file ({exc.__class__.__name__})") from None
+    v = _numbers(path, text, 12, "3x3 rotation then centre")
+    M = v[:9].reshape(3, 3)
+    err = np.linalg.norm(M @ M.T - np.eye(3))
+    if err > POSE_TXT_TOL or np.linalg.det(M) < 0:
+        raise HpeError(f"{path}: expected a rotation matrix, got ||R R^T - I|| = {err:.3g}, "
+                       f"det = {np.linalg.det(M):.4g}")
+    return nearest_rotation(M), v[9:]
+
+
+def _decode_bin(path, data: bytes) -> np.ndarray:
+    if len(data) != 24:
+        raise HpeError(f"{path}: expected 24 bytes (6 float32), got {len(data)}")
+    v = np.frombuffer(data, dtype="<f4").astype(np.float64)
+    if not np.isfinite(v).all():
+        raise HpeError(f"{path}: expected finite values, got {v.tolist()}")
+    return v
+
+
+def read_pose_bin(path) -> np.ndarray:
+    """Read one ``frame_XXXXX_pose.bin``: ``[cx, cy, cz (mm), pitch, yaw, roll (deg, biwi system)]``."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise HpeError(f"{path}: cannot read BIWI annotation ({exc.__class__.__name__})") from None
+    return _decode_bin(path, data)
+
+
+def read_calibration(path) -> dict:
+    """Read ``rgb.cal`` or ``depth.cal``.
+
+    Returns
+    -------
+    dict
+        ``K`` (3, 3) pixels, ``dist`` (4,), ``R`` (3, 3) and ``t`` (3,) mm
+        (the camera's extrinsics as stored; ``depth.cal`` has R = I, t = 0),
+        ``size`` (width, height) pixels.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise HpeError(f"{path}: cannot read BIWI calibration ({exc.__class__.__name__})") from None
+    v = _numbers(path, text, 27, "K 3x3, 4 distortion, R 3x3, t 3, width height")
+    return {"K": v[:9].reshape(3, 3), "dist": v[9:13], "R": v[13:22].reshape(3, 3), "t": v[22:25],
+            "size": (int(v[25]), int(v[26]))}
+
+
+def _parse_name(name: str):
+    m = _NAME.search(name.replace("\\", "/"))
+    if m is None:
+        return None
+    return m.group(1), int(m.group(2)), m.group(3)
+
+
+def labels_table(files, sequences, frames, centres, R=None, angles=None, system=BIWI_SYSTEM):
+    """Assemble the label table from stacked arrays (matrices or ``.bin`` angles).
+
+    Columns: ``file, sequence, frame``, the conversion columns of ``system``
+    (``pitch, yaw, roll`` degrees, ``pitch_2..roll_2``, ``r00..r22``,
+    ``gimbal_lock, roundtrip_err``), then ``center_x, center_y, center_z`` (mm).
+    """
+    import pandas as pd
+
+    from ..io.layout import conversion_columns
+    from ..rotation import canonical_to_labels, get_system
+
+    biwi = get_system(BIWI_SYSTEM)
+    stored = np.asarray(R, dtype=np.float64) if R is not None else biwi.from_angles(angles)
+    conv = canonical_to_labels(biwi.to_canonical(stored.reshape(-1, 3, 3)), system)
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    cols = {"file": list(files), "sequence": list(sequences), "frame": np.asarray(frames, dtype=np.int64)}
+    cols.update(conversion_columns(conv))
+    cols.update({c: centres[:, n] for n, c in enumerate(CENTRE_COLS)})
+    return pd.DataFrame(cols)
+
+
+def read_biwi(path, system=BIWI_SYSTEM, kind: str = "auto"):
+    """Read BIWI pose files into the label table.
+
+    Parameters
+    ----------
+    path : str or Path
+        A folder searched recursively for ``NN/frame_XXXXX_pose.txt`` /
+        ``.bin`` (``hpdb/``, ``db_annotations/`` or one sequence folder), a
+        single pose file, or ``db_annotations.tgz`` (read without extracting).
+    system : str or RotationSystem
+        System of the output labels: ``biwi`` (the ``.bin`` angles; default)
+        or any other, e.g. ``300w_lp``.
+    kind : {"auto", "txt", "bin"}
+        Which files of a folder to read; ``auto`` takes ``pose.txt`` when the
+        folder has any, else ``.bin``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        See :func:`labels_table`; sorted by sequence then frame; ``file`` is
+        relative to ``path``.
+    """
+    path = Path(path)
+    if path.is_file() and path.name.endswith((".tgz", ".tar.gz", ".tar")):
+        return read_biwi_tgz(path, system)
+    if path.is_file():
+        files, base = [path], path.parent
+    elif path.is_dir():
+        base = path
+        txt = sorted(path.rglob("frame_*_pose.txt"))
+        binf = sorted(path.rglob("frame_*_pose.bin"))
+        if kind == "txt" or (kind == "auto" and txt):
+            files = txt
+        else:
+            files = binf
+    else:
+        raise HpeError(f"{path}: no such file or folder")
+    recs = []
+    for f in files:
+        parsed = _parse_name(f.resolve().as_posix())  # the sequence is the parent folder's name
+        if parsed is None:
+            raise HpeError(f"{f}: expected a name like NN/frame_XXXXX_pose.txt or .bin")
+        recs.append((f, *parsed))
+    if not recs:
+        raise HpeError(f"{path}: no BIWI frame_XXXXX_pose.txt or .bin files found")
+    recs.sort(key=lambda r: (r[1], r[2]))
+    kinds = {r[3] for r in recs}
+    if len(kinds) > 1:
+        raise HpeError(f"{path}: expected one kind of pose file, got both .txt and .bin (use kind=)")
+    names = [r[0].relative_to(base).as_posix() for r in recs]
+    seqs = [r[1] for r in recs]
+    frames = [r[2] for r in recs]
+    if kinds == {"txt"}:
+        pairs = [read_pose_txt(r[0]) for r in recs]
+        return labels_table(names, seqs, frames, np.stack([p[1] for p in pairs]),
+                            R=np.stack([p[0] for p in pairs]), system=system)
+    vals = np.stack([read_pose_bin(r[0]) for r in recs])
+    return labels_table(names, seqs, frames, vals[:, :3], angles=vals[:, 3:], system=system)
+
+
+def read_biwi_tgz(path, system=BIWI_SYSTEM):
+    """Read the official ``db_annotations.tgz`` (``NN/frame_XXXXX_pose.bin`` members) without extracting it.
+
+    Members that are not pose files are skipped; ``file`` is the member name.
+    """
+    path = Path(path)
+    names, seqs, frames, vals = [], [], [], []
+    try:
+        with tarfile.open(path, "r:*") as tf:
+            for m in tf:
+                if not m.isfile():
+                    continue
+                parsed = _parse_name(m.name)
+                if parsed is None or parsed[2] != "bin":
+                    continue
+                fh = tf.extractfile(m)
+                vals.append(_decode_bin(f"{path}:{m.name}", fh.read()))
+                names.append(m.name)
+                seqs.append(parsed[0])
+                frames.append(parsed[1])
+    except (tarfile.TarError, OSError, EOFError) as exc:
+        raise HpeError(f"{path}: not a readable tar archive ({' '.join(str(exc).split())[:120]})") from None
+    if not vals:
+        raise HpeError(f"{path}: no NN/frame_XXXXX_pose.bin members found")
+    order = sorted(range(len(names)), key=lambda k: (seqs[k], frames[k]))
+    v = np.stack(vals)[order]
+    return labels_table([names[k] for k in order], [seqs[k] for k in order], [frames[k] for k in order],
+                        v[:, :3], angles=v[:, 3:], system=system)

@@ -1,0 +1,263 @@
+"""AGORA relabelling (DirectMHP's method, corrected; SPEC §7).
+
+For every person of every ``*_withjv.pkl`` dataframe: skip the occluded
+(``occlusion >= 90``) and the invalid, fit WHENet's reference head to the 13
+face joints DirectMHP pairs with it (one batched similarity fit), gate on the
+fit residual, label ``A = E @ camR @ R_head`` in any rotation system, and
+box the head with DirectMHP's helmet (radius 18, aspect < 1.5, each side < 70%
+of the image). Every person that gets no label is a reject with a reason.
+Everything is vectorised over the people of a dataframe; dataframes are
+processed one at a time so memory stays bounded by the largest one.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..datasets import agora as ag
+from ..errors import HpeError
+from ..geometry.reference import agora_pairs
+from .relabel import fit_faces, relabel_views
+
+#: default fit-quality gate in the landmarks' unit (metres for AGORA): 2 cm, the Panoptic gate
+DEFAULT_MAX_RMSE = 0.02
+#: DirectMHP keeps people with occlusion < 90 (percent)
+DEFAULT_MAX_OCCLUSION = 90.0
+LEGACY_COLS = ["legacy_pitch", "legacy_yaw", "legacy_roll"]
+REASON_ORDER = ("occluded", "invalid", "too few confident points", "bad fit", "behind camera", "outside image",
+                "box rejected", "dropped by legacy rule")
+
+
+@dataclass
+class Config:
+    """What to compute (everything but I/O)."""
+
+    system: object = "300w_lp"
+    image_size: tuple = ag.AGORA_SIZE
+    max_rmse: float | None = DEFAULT_MAX_RMSE
+    max_occlusion: float = DEFAULT_MAX_OCCLUSION
+    legacy: bool = False
+    preset: str = "directmhp"
+
+
+def relabel_people(people: ag.AgoraPeople, cfg: Config) -> dict:
+    """Label every person of one dataframe.
+
+    Returns
+    -------
+    dict
+        ``table``: output columns of the labelled people (dataframe order);
+        ``rejects``: reject columns (one row per person not labelled, with
+        ``reason`` and ``detail``); ``fit_rmse``: RMSE of the fitted faces;
+        ``legacy_considered``: people that reached WHENet's rule.
+    """
+    from ..io import conversion_columns, landmark_cols
+
+    n = len(people)
+    W, H = (int(v) for v in cfg.image_size)
+    K, factor = ag.intrinsics_for_size(people, W, H)
+    fit = fit_faces(people.face3d, None, agora_pairs(), max_rmse=cfg.max_rmse)
+    occ = people.occlusion
+    with np.errstate(invalid="ignore"):
+        occluded = ~(occ < cfg.max_occlusion)  # NaN (unknown) counts as occluded
+    invalid = ~people.valid & ~occluded
+    fit["reason"][invalid] = "invalid"
+    fit["detail"][invalid] = "isValid is False"
+    fit["reason"][occluded] = "occluded"
+    fit["detail"][occluded] = [f"occlusion {o:g}% not < {cfg.max_occlusion:g}%" for o in occ[occluded]]
+    cam = {"K": K, "dist": np.zeros((n, 5)), "R": people.cam_R, "t": people.cam_t,
+           "width": np.full(n, float(W)), "height": np.full(n, float(H))}
+    # rows without a fit carry NaN through the projection; their reason is already set
+    with np.errstate(invalid="ignore", divide="ignore"):
+        v = relabel_views(fit, np.arange(n), cam, cfg.system, preset=cfg.preset, legacy=cfg.legacy,
+                          landmarks=people.face3d)
+    ok = v["ok"]
+    source = people.source.name
+    table = {
+        "source": np.full(int(ok.sum()), source, dtype=object),
+        "row": people.row[ok],
+        "person": people.person[ok],
+        "image": people.image[ok],
+    }
+    bbox = v["bbox"][ok]
+    for k, col in enumerate(("bbox_x", "bbox_y", "bbox_w", "bbox_h")):
+        table[col] = bbox[:, k]
+    table.update(conversion_columns(v["conversion"]))
+    table["fit_rmse"] = fit["rmse"][ok]
+    table["n_pairs"] = fit["n_pairs"][ok]
+    table["scale"] = fit["scale"][ok]
+    if cfg.legacy:
+        for k, col in enumerate(LEGACY_COLS):
+            table[col] = v["legacy_pyr"][ok, k]
+    table["occlusion"] = occ[ok]
+    table["image_width"] = np.full(int(ok.sum()), W, dtype=np.int64)
+    table["image_height"] = np.full(int(ok.sum()), H, dtype=np.int64)
+    lm = v["lm2d"][ok].reshape(int(ok.sum()), 2 * ag.FACE_COUNT)
+    for k, col in enumerate(landmark_cols(ag.FACE_COUNT)):
+        table[col] = lm[:, k]
+    bad = ~ok
+    rejects = {
+        "source": np.full(int(bad.sum()), source, dtype=object),
+        "row": people.row[bad], "person": people.person[bad], "image": people.image[bad],
+        "reason": v["reason"][bad], "detail": v["detail"][bad],
+        "occlusion": occ[bad], "isValid": people.valid[bad],
+        "fit_rmse": fit["rmse"][bad], "n_pairs": fit["n_pairs"][bad], "scale": fit["scale"][bad],
+    }
+    considered = int(np.isin(v["reason"], ("", "dropped by legacy rule")).sum()) if cfg.legacy else 0
+    fitted = np.isfinite(fit["rmse"]) & ~occluded & ~invalid
+    return {"table": table, "rejects": rejects, "fit_rmse": fit["rmse"][fitted], "legacy_considered": considered,
+            "people": n, "images": people.images, "frame": people.frame, "k_scale": factor}
+
+
+class Stats:
+    """Counts for the end-of-run summary; every person is accounted for."""
+
+    def __init__(self):
+        self.files = self.images = self.people = self.labelled = 0
+        self.legacy_considered = self.out_of_range = self.gimbal = 0
+        self.reasons: Counter = Counter()
+        self.rmse: list = []
+        self.per_file: list = []
+
+    def add(self, path, res: dict, system) -> None:
+        t = res["table"]
+        self.files += 1
+        self.images += res["images"]
+        self.people += res["people"]
+        self.labelled += len(t["row"])
+        self.reasons.update(res["rejects"]["reason"].tolist())
+        self.rmse.append(res["fit_rmse"])
+        self.legacy_considered += res["legacy_considered"]
+        if len(t["row"]):
+            pyr = np.stack([t["pitch"], t["yaw"], t["roll"]], axis=1)
+            self.out_of_range += int((~system.in_range(pyr)).sum())
+            self.gimbal += int(np.sum(t["gimbal_lock"]))
+        ks = np.unique(np.round(res["k_scale"], 6), axis=0) if len(res["k_scale"]) else np.zeros((0, 2))
+        scaled = "" if res["frame"] == "camera" or not len(ks) or np.allclose(ks, 1.0) else \
+            f"; camK rescaled by {', '.join(f'{a:g}' for a in np.unique(ks[:, 0]))}"
+        frame = "camera frame (gt_joints_3d, AGORA's intrinsics)" if res["frame"] == "camera" else \
+            "body frame (cam_j3d, camR, camT, camK)"
+        self.per_file.append(f"{path}: {res['images']} images, {res['people']} people, {len(t['row'])} labelled; "
+                             f"{frame}{scaled}")
+
+    def summary(self, cfg: Config, output, rejects_path, verbose: int = 0) -> list:
+        sysname = getattr(cfg.system, "name", cfg.system)
+        lines = list(self.per_file) if verbose else []
+        lines.append(f"{self.people} people in {self.images} images from {self.files} dataframe"
+                     f"{'s' if self.files != 1 else ''} (image size {cfg.image_size[0]}x{cfg.image_size[1]})")
+        rmse = np.concatenate(self.rmse) if self.rmse else np.zeros(0)
+        if rmse.size:
+            q = np.quantile(rmse, [0.5, 0.95])
+            gate = "off" if cfg.max_rmse is None or not np.isfinite(cfg.max_rmse) else f"{cfg.max_rmse:g}"
+            lines.append(f"fit RMSE (m) of {rmse.size} fitted faces: median {q[0]:.4f}, p95 {q[1]:.4f}, "
+                         f"max {rmse.max():.4f} (--max-rmse {gate})")
+        pct = 100.0 * self.labelled / self.people if self.people else 0.0
+        lines.append(f"labelled {self.labelled} of {self.people} people ({pct:.1f}%) in {sysname} -> {output}")
+        rej = sum(self.reasons.values())
+        if rej:
+            order = {r: k for k, r in enumerate(REASON_ORDER)}
+            parts = "; ".join(f"{self.reasons[r]} {r}" for r in sorted(self.reasons, key=lambda r: order.get(r, 99)))
+            lines.append(f"not labelled {rej}: {parts}" + (f" -> {rejects_path}" if rejects_path else ""))
+        if cfg.legacy:
+            d = self.reasons["dropped by legacy rule"]
+            share = 100.0 * d / self.legacy_considered if self.legacy_considered else 0.0
+            lines.append(f"WHENet's legacy rule dropped {d} of {self.legacy_considered} people ({share:.1f}%)")
+        if self.out_of_range:
+            lines.append(f"{self.out_of_range} labels lie outside {sysname}'s declared range "
+                         "(for whenet: no triple with |pitch| < 90 and |roll| < 90; DirectMHP would drop them)")
+        if self.gimbal:
+            lines.append(f"{self.gimbal} labels are within the gimbal-lock tolerance (see gimbal_lock)")
+        return lines
+
+
+def _arrow(cols: dict, schema=None):
+    import pyarrow as pa
+
+    arrays, names = [], []
+    for k, v in cols.items():
+        v = np.asarray(v)
+        arrays.append(pa.array(v.tolist() if v.dtype == object else v,
+                               type=pa.string() if v.dtype == object else None))
+        names.append(k)
+    t = pa.Table.from_arrays(arrays, names=names)
+    return t.cast(schema) if schema is not None else t
+
+
+def _reject_schema():
+    import pyarrow as pa
+
+    return pa.schema([("source", pa.string()), ("row", pa.int64()), ("person", pa.int64()), ("image", pa.string()),
+                      ("reason", pa.string()), ("detail", pa.string()), ("occlusion", pa.float64()),
+                      ("isValid", pa.bool_()), ("fit_rmse", pa.float64()), ("n_pairs", pa.int64()),
+                      ("scale", pa.float64())])
+
+
+def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=None, overwrite: bool = False,
+                  bar=None) -> Stats:
+    """Relabel every dataframe of ``paths`` and write the outputs atomically.
+
+    ``fmt`` is ``table`` (Parquet/CSV, streamed one dataframe at a time),
+    ``coco`` (:func:`hpe_cli.io.coco.write_coco`) or ``whenet``
+    (:func:`hpe_cli.io.whenet_txt.write_whenet`). Outputs are checked before
+    any work, and nothing is left behind on failure.
+    """
+    import json
+    from contextlib import ExitStack
+
+    from ..io import TableWriter, check_output, system_metadata
+    from ..rotation import get_system
+
+    system = get_system(cfg.system)
+    cfg.system = system
+    stats = Stats()
+    about = {"source": "agora", "dataframes": [str(p) for p in paths], "preset": cfg.preset,
+             "image_size": list(cfg.image_size), "max_occlusion": cfg.max_occlusion,
+             "max_rmse_m": cfg.max_rmse if cfg.max_rmse is not None and np.isfinite(cfg.max_rmse) else None,
+             "legacy_whenet": cfg.legacy, "label": "A = E @ camR @ R_head, E = diag(1, -1, -1)"}
+    meta = {**system_metadata(system), "hpe:relabel": json.dumps(about)}
+    collected = []
+    rschema = _reject_schema()
+    with ExitStack() as stack:
+        if fmt == "table":
+            out = stack.enter_context(TableWriter(output, overwrite, meta))
+        else:
+            check_output(output, overwrite)
+            out = None
+        rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
+        for path in paths:
+            people = ag.read_agora(path)
+            res = relabel_people(people, cfg)
+            del people
+            stats.add(path, res, system)
+            t = _arrow(res["table"])
+            if out is not None:
+                out.write(t)
+            else:
+                collected.append(t)
+            if rej is not None:
+                rej.write(_arrow(res["rejects"], rschema))
+            if bar is not None:
+                bar.update(1)
+        if fmt != "table":
+            import pyarrow as pa
+
+            frame = pa.concat_tables(collected).to_pandas()
+            if fmt == "coco":
+                from ..io.coco import write_coco
+
+                write_coco(frame, output, overwrite=overwrite, info={
+                    "description": "AGORA head-pose labels (hpe relabel-agora)", "hpe:system": system.name,
+                    "hpe:relabel": about})
+            elif fmt == "whenet":
+                from ..io.whenet_txt import write_whenet
+
+                write_whenet(frame, output, overwrite=overwrite)
+            else:
+                raise HpeError(f"expected --format table, coco or whenet, got {fmt!r}")
+    return stats
+
+
+__all__ = ["Config", "Stats", "relabel_people", "write_outputs", "DEFAULT_MAX_RMSE", "DEFAULT_MAX_OCCLUSION",
+           "LEGACY_COLS", "REASON_ORDER"]
