@@ -177,3 +177,16 @@ def test_streams_batches_and_input_untouched(tmp_path, labels):
 def test_help_has_examples():
     res = CliRunner().invoke(cli, ["convert", "--help"])
     assert res.exit_code == 0 and "Examples:" in res.output and "hpe convert" in res.output
+
+
+def test_biwi_archive_and_pose_txt(tmp_path, realdata):
+    out = tmp_path / "biwi.parquet"
+    res = run(realdata / "biwi" / "db_annotations.tgz", "-o", out, "--from", "biwi", "--to", "300w_lp", "-q")
+    assert res.exit_code == 0, res.output
+    got = pd.read_parquet(out)
+    assert len(got) == 15677 and got["roundtrip_err"].max() < 1e-13
+    out2 = tmp_path / "f3.csv"
+    assert run(realdata / "biwi" / "hpdb", "-o", out2, "--from", "biwi", "--to", "300w_lp", "-q").exit_code == 0
+    row = pd.read_csv(out2).iloc[0]
+    # PROVENANCE §4: Hopenet's reader (R.T, negated yaw/roll) gives (+7.61, 3.29, -1.57) for frame 3
+    assert np.allclose(row[["pitch", "yaw", "roll"]].to_numpy(float), [7.61, 3.29, -1.57], atol=0.01)

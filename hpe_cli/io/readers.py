@@ -40,18 +40,19 @@ def _one_line(exc) -> str:
 def open_table(path, batch_size: int = DEFAULT_BATCH) -> TableSource:
     """Open a label table for streaming.
 
-    ``path`` may be ``.parquet``/``.pq``, ``.csv``, or a folder of ``.mat`` files
-    (read from ``Pose_Para``, see :func:`hpe_cli.datasets.mat.read_mat_dir`).
+    ``path`` may be ``.parquet``/``.pq``, ``.csv``, a folder of ``.mat`` files
+    (read from ``Pose_Para``, see :func:`hpe_cli.datasets.mat.read_mat_dir`), or
+    BIWI pose files (a folder, one file, or ``db_annotations.tgz``; angles in
+    the ``biwi`` system).
     """
     import pyarrow as pa
 
     path = Path(path)
     if not path.exists():
         raise HpeError(f"{path}: no such file or folder")
-    if path.is_dir():
-        from ..datasets.mat import read_mat_dir
-
-        table = pa.Table.from_pandas(read_mat_dir(path), preserve_index=False)
+    dataset = _read_dataset(path)
+    if dataset is not None:
+        table = pa.Table.from_pandas(dataset, preserve_index=False)
         return TableSource(path, table.schema, table.num_rows, lambda: iter(table.to_batches(batch_size)))
     suffix = path.suffix.lower()
     if path.stat().st_size == 0:
@@ -68,14 +69,37 @@ def open_table(path, batch_size: int = DEFAULT_BATCH) -> TableSource:
 
             reader = pcsv.open_csv(path, read_options=pcsv.ReadOptions(block_size=1 << 24))
             return TableSource(path, reader.schema, None, lambda: iter(reader))
-        if suffix == ".mat":
-            from ..datasets.mat import read_mat_dir
-
-            table = pa.Table.from_pandas(read_mat_dir(path), preserve_index=False)
-            return TableSource(path, table.schema, table.num_rows, lambda: iter(table.to_batches(batch_size)))
     except (pa.ArrowInvalid, OSError) as exc:
         raise HpeError(f"{path}: cannot read: {_one_line(exc)}") from None
     raise HpeError(f"{path}: expected a .parquet, .csv or .mat file or a folder of .mat files, got {suffix or 'no extension'!r}")
+
+
+def _read_dataset(path: Path):
+    """A dataset folder or archive as a pandas label table, or None for plain tables.
+
+    ``.mat`` files (300W-LP/AFLW2000, angles in degrees in the ``300w_lp``
+    system) or BIWI pose files / ``db_annotations.tgz`` (angles in the
+    ``biwi`` system, see :mod:`hpe_cli.datasets.biwi`).
+    """
+    name = path.name.lower()
+    if path.is_file() and name.endswith(".mat"):
+        from ..datasets.mat import read_mat_dir
+
+        return read_mat_dir(path)
+    is_biwi_file = path.is_file() and (name.endswith((".tgz", ".tar.gz")) or
+                                       (name.startswith("frame_") and name.endswith(("_pose.txt", "_pose.bin"))))
+    if path.is_dir() and any(path.glob("*.mat")):
+        from ..datasets.mat import read_mat_dir
+
+        return read_mat_dir(path)
+    if is_biwi_file or (path.is_dir() and next(path.rglob("frame_*_pose.*"), None) is not None):
+        from ..datasets.biwi import read_biwi
+
+        table = read_biwi(path)
+        return table[["file", "sequence", "frame", "pitch", "yaw", "roll", "center_x", "center_y", "center_z"]]
+    if path.is_dir():
+        raise HpeError(f"{path}: no .mat files or BIWI frame_XXXXX_pose.txt/.bin files found")
+    return None
 
 
 def read_table(path):
