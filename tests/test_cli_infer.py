@@ -1,0 +1,167 @@
+"""``hpe infer`` end to end: code, decoders, tables, landmarks, and the system file it writes."""
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+from scipy.spatial.transform import Rotation
+
+from conftest import canonical_A
+from hpe_cli.cli.main import cli
+
+FIX = Path(__file__).resolve().parent / "fixtures" / "conventions"
+MATRIX_COLS = [f"r{i}{j}" for i in range(3) for j in range(3)]
+
+
+def run(*args):
+    return CliRunner().invoke(cli, ["infer", *map(str, args)])
+
+
+def report(tmp_path, *args, code=0):
+    out = tmp_path / "report.json"
+    res = run(*args, "--json", out, "--overwrite")
+    assert res.exit_code == code, res.output
+    return json.loads(out.read_text()), res
+
+
+def test_help_has_examples():
+    res = run("--help")
+    assert res.exit_code == 0 and "Examples:" in res.output and "hpe infer --callable" in res.output
+
+
+@pytest.mark.parametrize("args, best", [
+    ([f"--callable={FIX}/sixdrepnet.py:get_R", "--args", "pitch,yaw,roll"], "6drepnet"),
+    ([f"--callable={FIX}/lp300w.py:pose_matrix"], "300w_lp"),
+    ([f"--callable={FIX}/scipy_style.py:euler_zyx", "--args", "yaw,pitch,roll", "--units", "deg"], "scipy_zyx"),
+    ([f"--decoder={FIX}/tddfa_v2.py:matrix2angle", "--args", "yaw,pitch,roll"], "3ddfa_v2"),
+    ([f"--decoder={FIX}/lp300w.py:full_range_from_matrix", "--args", "yaw,pitch,roll", "--units", "deg"], "whenet"),
+])
+def test_builtins_are_named(tmp_path, args, best):
+    rep, res = report(tmp_path, *args)
+    assert rep["best"] == best and rep["fit"] == "exact" and rep["max_error"] < 1e-12
+    assert f"best: {best}" in res.output
+    assert {"frame", "axes", "order"} <= set(rep["definition"]) and rep["runners_up"]
+
+
+def test_custom_system_file_reproduces_the_callable_through_convert(tmp_path):
+    sys_path = tmp_path / "made_up.toml"
+    rep, res = report(tmp_path, "--callable", f"{FIX}/made_up.py:made_up", "--args", "roll,pitch,yaw", "--units",
+                      "deg", "-o", sys_path, "--name", "made_up")
+    assert rep["best"] == "custom" and sys_path.exists()
+    pyr = np.random.default_rng(0).uniform(-180, 180, (40, 3))
+    pd.DataFrame(pyr, columns=["pitch", "yaw", "roll"]).to_csv(tmp_path / "in.csv", index=False)
+    out = tmp_path / "out.csv"
+    res = CliRunner().invoke(cli, ["convert", str(tmp_path / "in.csv"), "-o", str(out), "--from", str(sys_path),
+                                   "--to", str(sys_path)])
+    assert res.exit_code == 0, res.output
+    got = pd.read_csv(out)[MATRIX_COLS].to_numpy().reshape(-1, 3, 3)
+    sys.path.insert(0, str(FIX))
+    from made_up import made_up
+
+    assert np.abs(got - made_up(pyr[:, 2], pyr[:, 0], pyr[:, 1])).max() < 1e-9
+
+
+def test_custom_frame_and_storage_options(tmp_path):
+    sys_path = tmp_path / "s.toml"
+    run("--callable", f"{FIX}/made_up.py:made_up", "--args", "roll,pitch,yaw", "--units", "deg", "-o", sys_path,
+        "--frame", "opencv", "--storage", "transposed", "-q")
+    text = sys_path.read_text()
+    assert 'storage = "transposed"' in text and "[0, -1, 0]" in text
+
+
+def test_module_path_and_refuse_overwrite(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(FIX))
+    out = tmp_path / "s.toml"
+    out.write_text("keep")
+    res = run("--callable", "lp300w:pose_matrix", "-o", out)
+    assert res.exit_code == 1 and "already exists" in res.output and out.read_text() == "keep"
+    res = run("--callable", "lp300w:pose_matrix", "-o", out, "--overwrite")
+    assert res.exit_code == 0 and 'name = "300w_lp"' in out.read_text()
+
+
+def test_synergynet_no_exact_fit(tmp_path):
+    out = tmp_path / "s.toml"
+    rep, res = report(tmp_path, "--decoder", f"{FIX}/synergynet.py:matrix2angle_corr", "--args", "yaw,pitch,roll",
+                      "-o", out, code=1)
+    assert rep["fit"] == "none" and rep["best"] == "none" and not out.exists()
+    assert "no exact fit" in res.output and "breaks when" in res.output
+    assert "Error:" in res.output and "nothing written" in res.output
+    assert "300w_lp" in rep["best_partial"]["builtins"]
+
+
+def test_wrong_units_hint(tmp_path):
+    rep, _ = report(tmp_path, "--callable", f"{FIX}/made_up.py:made_up", "--args", "roll,pitch,yaw", code=1)
+    assert rep["fit"] == "none" and "--units deg" in rep["hint"]
+
+
+@pytest.mark.parametrize("args, code, text", [
+    ([], 2, "exactly one of"),
+    (["--callable", "x.py:f", "--decoder", "y.py:g"], 2, "exactly one of"),
+    (["--callable", f"{FIX}/lp300w.py:pose_matrix", "--args", "pitch,yaw"], 2, "three roles"),
+    (["--callable", f"{FIX}/lp300w.py:nothing"], 1, "has no attribute"),
+    (["--callable", f"{FIX}/missing.py:f"], 1, "no such file"),
+    (["--callable", f"{FIX}/broken.py:NOT_CALLABLE"], 1, "expected a callable"),
+    (["--callable", f"{FIX}/broken.py:scaled"], 1, "not orthonormal"),
+    (["--callable", f"{FIX}/broken.py:raises"], 1, "model weights not found"),
+    (["--callable", "no_such_module_xyz:f"], 1, "import failed"),
+    (["--callable", f"{FIX}/lp300w.py:pose_matrix", "-o", "x.json"], 2, ".toml"),
+])
+def test_usage_and_user_errors(args, code, text):
+    res = run(*args)
+    assert res.exit_code == code and text in res.output, res.output
+    assert "Traceback" not in res.output
+
+
+def test_table_with_matrices(tmp_path):
+    pyr = np.random.default_rng(2).uniform(-90, 90, (100, 3))
+    R = Rotation.from_euler("ZYX", pyr[:, [1, 0, 2]], degrees=True).as_matrix()  # SciPy yaw, pitch, roll
+    df = pd.DataFrame(np.c_[pyr, R.reshape(-1, 9)], columns=["p", "y", "r", *[f"m{k}" for k in range(9)]])
+    df.to_csv(tmp_path / "t.csv", index=False)
+    rep, _ = report(tmp_path, tmp_path / "t.csv", "--angles", "yaw=y,pitch=p,roll=r",
+                    "--matrix", ",".join(f"m{k}" for k in range(9)))
+    assert rep["best"] == "scipy_zyx" and rep["mode"] == "table"
+    rad = pd.DataFrame(np.c_[np.deg2rad(pyr), canonical_A(pyr).reshape(-1, 9)],
+                       columns=["pitch", "yaw", "roll", *MATRIX_COLS])
+    rad.to_parquet(tmp_path / "t.parquet")
+    rep, _ = report(tmp_path, tmp_path / "t.parquet", "--units", "rad", "--matrix", "r00..r22")
+    assert rep["best"] == "300w_lp"
+
+
+def test_table_missing_columns(tmp_path):
+    pd.DataFrame({"pitch": [1.0], "yaw": [2.0], "roll": [3.0]}).to_csv(tmp_path / "t.csv", index=False)
+    res = run(tmp_path / "t.csv")
+    assert res.exit_code == 1 and "neither matrix columns" in res.output
+    res = run(tmp_path / "t.csv", "--matrix", "q00..q22")
+    assert res.exit_code == 1 and "missing column(s) q00" in res.output
+
+
+def test_landmark_table_in_image_frame(tmp_path):
+    from hpe_cli.geometry.template import reference_template
+
+    rng = np.random.default_rng(4)
+    pyr = np.c_[rng.uniform(-40, 40, 30), rng.uniform(-80, 80, 30), rng.uniform(-30, 30, 30)]
+    pts = 90 * np.einsum("nij,pj->npi", canonical_A(pyr), reference_template()) + rng.normal(0, 0.5, (30, 68, 3))
+    pts[..., 1] = 450 - pts[..., 1]  # image rows go down
+    cols = {f"lm3d{i}_{a}": pts[:, i, k] for i in range(68) for k, a in enumerate("xyz")}
+    df = pd.DataFrame({"pitch": pyr[:, 0], "yaw": pyr[:, 1], "roll": pyr[:, 2], **cols})
+    df.to_parquet(tmp_path / "faces.parquet")
+    rep, res = report(tmp_path, tmp_path / "faces.parquet")
+    assert rep["best"] == "300w_lp" and rep["fit"] == "clear" and rep["rms_residual_deg"] < 1.5
+    # read in a wrong frame the faces are mirrored: the template cannot fit them, whatever the residuals say
+    for wrong in ("canonical", "opencv"):
+        rep, res = report(tmp_path, tmp_path / "faces.parquet", "--landmark-frame", wrong, code=1)
+        assert rep["fit"] == "poor" and "fits the landmarks poorly" in res.output and "no system explains" in res.output
+
+
+def test_aflw2000_landmarks(tmp_path, realdata):
+    sys_path = tmp_path / "aflw.toml"
+    rep, res = report(tmp_path, realdata / "aflw2000_prnet", "-o", sys_path)
+    assert rep["best"] == "300w_lp" and rep["fit"] == "clear" and rep["mode"] == "landmarks"
+    assert len(rep["per_face"]) == 16 and all(f["id"].endswith(".mat") for f in rep["per_face"])
+    assert "best: 300w_lp" in res.output and 'name = "300w_lp"' in sys_path.read_text()
+    by = {r: h["rms_residual_deg"] for h in rep["hypotheses"] for r in h["readings"]}
+    assert by["3ddfa_v2"] > 10 * by["300w_lp"]
+    assert by["6drepnet (stored matrix read as active)"] > 10 * by["300w_lp"]
