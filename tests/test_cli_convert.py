@@ -190,3 +190,15 @@ def test_biwi_archive_and_pose_txt(tmp_path, realdata):
     row = pd.read_csv(out2).iloc[0]
     # PROVENANCE §4: Hopenet's reader (R.T, negated yaw/roll) gives (+7.61, 3.29, -1.57) for frame 3
     assert np.allclose(row[["pitch", "yaw", "roll"]].to_numpy(float), [7.61, 3.29, -1.57], atol=0.01)
+
+
+def test_output_has_normal_permissions(tmp_path, labels):
+    import os
+    import stat
+
+    path, _ = labels
+    out = tmp_path / "o.csv"
+    assert run(path, "-o", out, "--from", "300w_lp", "--to", "whenet", "-q").exit_code == 0
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o666 & ~umask
