@@ -1,0 +1,309 @@
+"""CMU Panoptic Studio readers: calibration and ``hdFace3d`` frames (SPEC §6).
+
+Pure functions returning numpy arrays; they never print. Unknown JSON fields
+are ignored, so face files of version 0.5 and 0.7 (which adds ``univTime``
+and ``fpsType``) both parse. Problems in a file raise
+:class:`~hpe_cli.errors.HpeError` naming the file and the record.
+
+Layout of a sequence folder ``<seq>/``::
+
+    calibration_<seq>.json
+    hdFace3d/faceRecon3D_hd%08d.json
+    hdImgs/<cam>/<cam>_%08d.jpg          (images, optional)
+"""
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import HpeError
+
+FACE_DIR = "hdFace3d"
+FACE_RE = re.compile(r"^faceRecon3D_hd(\d+)\.json$")
+N_FACE70 = 70
+CAMERA_TYPES = ("hd", "vga", "kinect-color")
+#: image folder of each camera type in Panoptic's layout
+IMAGE_DIRS = {"hd": "hdImgs", "vga": "vgaImgs", "kinect-color": "kinectImgs"}
+
+
+@dataclass
+class Cameras:
+    """C calibrated cameras, as arrays.
+
+    Attributes
+    ----------
+    names : ndarray of str (C,)
+        ``"00_08"`` ...
+    types : ndarray of str (C,)
+        ``"hd"``, ``"vga"`` or ``"kinect-color"``.
+    panel, node : ndarray of int (C,)
+    width, height : ndarray of int (C,)
+        ``resolution`` in pixels.
+    K : ndarray (C, 3, 3)
+    dist : ndarray (C, 5)
+        ``k1, k2, p1, p2, k3`` (OpenCV); missing trailing values are 0.
+    R : ndarray (C, 3, 3)
+        World -> camera rotation (``R @ X + t``; OpenCV camera frame).
+    t : ndarray (C, 3)
+        World -> camera translation, cm.
+    source : str
+        The calibration file.
+    """
+
+    names: np.ndarray
+    types: np.ndarray
+    panel: np.ndarray
+    node: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+    K: np.ndarray
+    dist: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    source: str = ""
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def take(self, idx) -> "Cameras":
+        idx = np.asarray(idx, dtype=np.intp)
+        return Cameras(*(getattr(self, f)[idx] for f in
+                         ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")),
+                       source=self.source)
+
+    def select(self, spec="hd") -> "Cameras":
+        """Cameras by type (``hd``, ``vga``, ``kinect-color``, ``all``) or by names.
+
+        ``spec`` is a type, a list of names, or a comma-separated string of
+        them (``"00_00,00_08"``); order follows ``spec`` for names.
+        """
+        items = [s.strip() for s in (spec.split(",") if isinstance(spec, str) else spec) if str(s).strip()]
+        if not items:
+            raise HpeError(f"{self.source}: expected camera names or a camera type, got nothing")
+        chosen: list = []
+        index = {n: i for i, n in enumerate(self.names)}
+        for item in items:
+            if item == "all":
+                chosen += list(range(len(self)))
+            elif item in CAMERA_TYPES:
+                chosen += [i for i, t in enumerate(self.types) if t == item]
+            elif item in index:
+                chosen.append(index[item])
+            else:
+                known = ", ".join(list(self.names[:4]) + ["..."]) if len(self) > 4 else ", ".join(self.names)
+                raise HpeError(f"{self.source}: expected a camera name ({known}) or a type "
+                               f"({', '.join(CAMERA_TYPES)}, all), got {item!r}")
+        chosen = list(dict.fromkeys(chosen))
+        if not chosen:
+            raise HpeError(f"{self.source}: no camera matches {spec!r}")
+        return self.take(chosen)
+
+
+def read_calibration(path, cameras="all") -> Cameras:
+    """Read ``calibration_<seq>.json``.
+
+    Parameters
+    ----------
+    path : str or Path
+    cameras : str or list
+        Passed to :meth:`Cameras.select` (``"all"`` keeps every camera).
+
+    Returns
+    -------
+    Cameras
+    """
+    path = Path(path)
+    data = _load_json(path)
+    cams = data.get("cameras") if isinstance(data, dict) else None
+    if not isinstance(cams, list):
+        raise HpeError(f"{path}: expected an object with a 'cameras' list, got "
+                       f"{type(data).__name__ if not isinstance(data, dict) else 'keys ' + ', '.join(data)}")
+    cols = {k: [] for k in ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")}
+    for i, cam in enumerate(cams):
+        where = f"{path}: camera {i}"
+        try:
+            name = str(cam["name"])
+            where = f"{path}: camera {i} ({name})"
+            K = _matrix(cam["K"], (3, 3), where, "K")
+            R = _matrix(cam["R"], (3, 3), where, "R")
+            t = _matrix(cam["t"], (3,), where, "t")
+            d = np.asarray(cam.get("distCoef", [0.0] * 5), dtype=np.float64).reshape(-1)
+            res = cam.get("resolution")
+            if d.size not in (4, 5, 8, 12, 14):
+                raise HpeError(f"{where}: expected 5 distCoef values (k1, k2, p1, p2, k3), got {d.size}")
+            if d.size > 5 and np.any(d[5:] != 0):
+                raise HpeError(f"{where}: only the 5-coefficient OpenCV model is supported, got {d.size} "
+                               "non-zero coefficients")
+            d = np.concatenate([d, np.zeros(5)])[:5]
+            if res is None or len(res) != 2:
+                raise HpeError(f"{where}: expected resolution [width, height], got {res!r}")
+            w, h = int(res[0]), int(res[1])
+        except KeyError as exc:
+            raise HpeError(f"{where}: missing key {exc.args[0]!r}") from None
+        except (TypeError, ValueError) as exc:
+            raise HpeError(f"{where}: bad value ({exc})") from None
+        if not (np.isfinite(K).all() and np.isfinite(R).all() and np.isfinite(t).all() and np.isfinite(d).all()):
+            raise HpeError(f"{where}: expected finite K, R, t and distCoef, got NaN or inf")
+        if np.abs(R @ R.T - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
+            raise HpeError(f"{where}: expected R to be a rotation (orthonormal, det +1)")
+        cols["names"].append(name)
+        cols["types"].append(str(cam.get("type", "")))
+        cols["panel"].append(int(cam.get("panel", -1)))
+        cols["node"].append(int(cam.get("node", -1)))
+        cols["width"].append(w)
+        cols["height"].append(h)
+        cols["K"].append(K)
+        cols["dist"].append(d)
+        cols["R"].append(R)
+        cols["t"].append(t)
+    if not cols["names"]:
+        raise HpeError(f"{path}: the calibration lists no cameras")
+    out = Cameras(
+        names=np.asarray(cols["names"], dtype=object), types=np.asarray(cols["types"], dtype=object),
+        panel=np.asarray(cols["panel"], dtype=np.int64), node=np.asarray(cols["node"], dtype=np.int64),
+        width=np.asarray(cols["width"], dtype=np.int64), height=np.asarray(cols["height"], dtype=np.int64),
+        K=np.stack(cols["K"]), dist=np.stack(cols["dist"]), R=np.stack(cols["R"]), t=np.stack(cols["t"]),
+        source=str(path))
+    return out if cameras == "all" else out.select(cameras)
+
+
+def face_frames(seq_dir) -> dict:
+    """Face files of a sequence by frame number: ``{frame: Path}``, sorted.
+
+    ``seq_dir`` is the sequence folder (with ``hdFace3d/``) or the
+    ``hdFace3d`` folder itself. Frame numbers come from the file names, so
+    gaps are allowed; other files are ignored.
+    """
+    seq_dir = Path(seq_dir)
+    face_dir = seq_dir / FACE_DIR if (seq_dir / FACE_DIR).is_dir() else seq_dir
+    frames = {}
+    if face_dir.is_dir():
+        for p in face_dir.iterdir():
+            m = FACE_RE.match(p.name)
+            if m and p.is_file():
+                frames[int(m.group(1))] = p
+    if not frames and face_dir == seq_dir and seq_dir.name != FACE_DIR:
+        raise HpeError(f"{seq_dir}: no {FACE_DIR}/ folder")
+    return dict(sorted(frames.items()))
+
+
+def read_face_frame(path) -> dict:
+    """Read one ``faceRecon3D_hd%08d.json``.
+
+    Returns
+    -------
+    dict
+        ``frame`` (int, from the file name, or -1), ``version``, ``univTime``
+        (float or NaN), ``person_id`` (P,) int, ``landmarks`` (P, 70, 3)
+        world cm (NaN where the file has null/NaN), ``score`` (P, 70)
+        ``averageScore``, ``reproj_error`` (P, 70) ``averageReproError``
+        (NaN when absent).
+    """
+    path = Path(path)
+    data = _load_json(path)
+    m = FACE_RE.match(path.name)
+    if not isinstance(data, dict) or not isinstance(data.get("people"), list):
+        raise HpeError(f"{path}: expected an object with a 'people' list")
+    people = data["people"]
+    n = len(people)
+    ids = np.empty(n, dtype=np.int64)
+    lm = np.empty((n, N_FACE70, 3))
+    score = np.empty((n, N_FACE70))
+    rep = np.full((n, N_FACE70), np.nan)
+    for i, person in enumerate(people):
+        where = f"{path}: person {i}"
+        try:
+            ids[i] = int(person["id"])
+            where = f"{path}: person {i} (id {ids[i]})"
+            face = person["face70"]
+            lm[i] = _floats(face["landmarks"], 3 * N_FACE70, where, "landmarks").reshape(N_FACE70, 3)
+            score[i] = _floats(face["averageScore"], N_FACE70, where, "averageScore")
+            if face.get("averageReproError") is not None:
+                rep[i] = _floats(face["averageReproError"], N_FACE70, where, "averageReproError")
+        except KeyError as exc:
+            raise HpeError(f"{where}: missing key {exc.args[0]!r}") from None
+        except (TypeError, ValueError) as exc:
+            raise HpeError(f"{where}: bad value ({exc})") from None
+    if len(set(ids.tolist())) != n:
+        raise HpeError(f"{path}: person ids repeat ({ids.tolist()})")
+    t = data.get("univTime")
+    return {"frame": int(m.group(1)) if m else -1, "version": data.get("version"),
+            "univTime": float(t) if isinstance(t, (int, float)) else float("nan"),
+            "person_id": ids, "landmarks": lm, "score": score, "reproj_error": rep}
+
+
+def read_face_frames(paths: dict) -> dict:
+    """Read several frames (``{frame: path}``) into flat per-face arrays.
+
+    Returns
+    -------
+    dict
+        ``frame`` (N,) int, ``person_id`` (N,) int, ``landmarks`` (N, 70, 3),
+        ``score`` (N, 70), one row per person per frame, in frame order.
+    """
+    parts = []
+    for frame, p in paths.items():
+        f = read_face_frame(p)
+        parts.append((np.full(len(f["person_id"]), int(frame), dtype=np.int64), f))
+    if not parts:
+        return {"frame": np.zeros(0, np.int64), "person_id": np.zeros(0, np.int64),
+                "landmarks": np.zeros((0, N_FACE70, 3)), "score": np.zeros((0, N_FACE70))}
+    return {"frame": np.concatenate([fr for fr, _ in parts]),
+            "person_id": np.concatenate([f["person_id"] for _, f in parts]),
+            "landmarks": np.concatenate([f["landmarks"] for _, f in parts]),
+            "score": np.concatenate([f["score"] for _, f in parts])}
+
+
+def image_path(camera: str, frame: int, camera_type: str = "hd") -> str:
+    """Panoptic's image path, e.g. ``hdImgs/00_08/00_08_00006577.jpg``."""
+    return f"{IMAGE_DIRS.get(camera_type, 'hdImgs')}/{camera}/{camera}_{int(frame):08d}.jpg"
+
+
+def find_calibration(seq_dir) -> Path:
+    """``<seq_dir>/calibration_<seq>.json``, or the only ``calibration_*.json`` there."""
+    seq_dir = Path(seq_dir)
+    own = seq_dir / f"calibration_{seq_dir.resolve().name}.json"
+    if own.is_file():
+        return own
+    found = sorted(seq_dir.glob("calibration_*.json"))
+    if len(found) == 1:
+        return found[0]
+    if not found:
+        raise HpeError(f"{seq_dir}: no calibration_<seq>.json (use --calibration FILE)")
+    raise HpeError(f"{seq_dir}: several calibration files ({', '.join(p.name for p in found)}); "
+                   "choose one with --calibration FILE")
+
+
+# ----------------------------------------------------------------- helpers
+def _load_json(path: Path):
+    try:
+        with open(path, "rb") as fh:
+            return json.loads(fh.read())
+    except FileNotFoundError:
+        raise HpeError(f"{path}: no such file") from None
+    except json.JSONDecodeError as exc:
+        raise HpeError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); "
+                       "truncated file?") from None
+    except UnicodeDecodeError as exc:
+        raise HpeError(f"{path}: not valid JSON text ({exc.reason})") from None
+    except OSError as exc:
+        raise HpeError(f"{path}: cannot read ({exc.strerror or exc})") from None
+
+
+def _matrix(value, shape, where, key) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64)
+    if a.size != int(np.prod(shape)):
+        raise HpeError(f"{where}: expected {key} with {int(np.prod(shape))} values {shape}, got shape {a.shape}")
+    return a.reshape(shape)
+
+
+def _floats(value, n, where, key) -> np.ndarray:
+    if not isinstance(value, list):
+        raise HpeError(f"{where}: expected {key} to be a list of {n} numbers, got {type(value).__name__}")
+    if len(value) != n:
+        raise HpeError(f"{where}: expected {n} {key} values, got {len(value)}")
+    return np.asarray(value, dtype=np.float64)  # null becomes NaN

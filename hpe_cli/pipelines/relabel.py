@@ -1,0 +1,244 @@
+"""The relabelling core shared by Panoptic and AGORA (SPEC §6, §7): pure numpy.
+
+From 3-D face landmarks to labels, in three vectorised steps:
+
+1. :func:`fit_faces`: fit WHENet's reference head to each face's confident
+   landmark pairs (one batched similarity fit), and gate on pair count and
+   fit residual.
+2. :func:`label_matrices`: the corrected label of a face seen by a camera,
+   ``A = E @ cam_R @ R_head`` (the 300W-LP matrix, SPEC §6 step 4).
+3. :func:`relabel_views`: for every (face, camera) view, the label in any
+   rotation system, the helmet box, the projected 2-D landmarks, WHENet's
+   legacy chain if asked for, and the reason when a view is rejected.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry.helmet import helmet_boxes
+from ..geometry.projection import project_points
+from ..geometry.reference import confidence_min, min_pairs, reference_head
+from ..geometry.similarity import fit_similarity
+
+#: camera frame (OpenCV: x right, y down, z forward) -> canonical 300W-LP frame (y up, z to the camera)
+E = np.diag([1.0, -1.0, -1.0])
+
+#: default fit-quality gate, world units (cm on Panoptic). On the 160906_pizza1
+#: sample, the 54 fits with a consistent landmark set have RMSE 0.57-1.31 cm
+#: (median 0.78); the three above 2 cm have a broken landmark set (frame 6577
+#: person 2: six pairs at score 0, eye line 98 deg from the label; frame 3476
+#: person 4: nose points 15 cm off; frame 6328 person 2: eye line 11 deg off).
+DEFAULT_MAX_RMSE = 2.0
+
+#: views per block when projecting landmarks
+VIEW_BLOCK = 256
+
+REASONS = ("too few confident points", "bad fit", "behind camera", "outside image", "box rejected",
+           "dropped by legacy rule")
+
+
+def label_matrices(R_head, cam_R) -> np.ndarray:
+    """Corrected 300W-LP label matrices ``A = E @ cam_R @ R_head``.
+
+    Parameters
+    ----------
+    R_head : array_like, shape (N, 3, 3)
+        Reference head -> world rotation of each face.
+    cam_R : array_like, shape (3, 3) or (N, 3, 3)
+        World -> camera rotation (OpenCV camera frame).
+
+    Returns
+    -------
+    ndarray, shape (N, 3, 3)
+        The face as the camera sees it, in the canonical frame (x: image
+        right, y: up, z: towards the camera); a proper rotation.
+    """
+    return E @ np.asarray(cam_R, dtype=np.float64) @ np.asarray(R_head, dtype=np.float64)
+
+
+def legacy_whenet_labels(R_head, cam_R):
+    """WHENet's own label chain, exactly as ``prepare_images.py`` computes it.
+
+    ``compound = cam_R @ R_head @ E``; its Z-Y-X decomposition
+    (``inverse_rotate_zyx``: both solutions, gimbal branch when
+    ``|compound[0, 2]| > 0.9999999``); ``select_euler`` (yaw above 180 wrapped,
+    the first solution with ``|pitch| < 90`` and ``|roll| < 90``, else drop);
+    then ``yaw = -yaw`` and ``roll = -roll``.
+
+    Parameters
+    ----------
+    R_head : array_like, shape (N, 3, 3)
+    cam_R : array_like, shape (3, 3) or (N, 3, 3)
+
+    Returns
+    -------
+    pyr : ndarray, shape (N, 3)
+        ``(pitch, yaw, roll)`` in degrees; NaN where dropped.
+    kept : ndarray of bool, shape (N,)
+        False where WHENet drops the row (its ``status`` is False).
+
+    Notes
+    -----
+    On every kept row the result is one of the two 300W-LP triples of
+    :func:`label_matrices` (the one ``select_euler`` wants), because
+    ``E @ compound @ E = A`` and conjugating by ``E = Rx(180)`` negates yaw and
+    roll. The intermediate ``compound`` read as a 300W-LP rotation is wrong.
+    """
+    M = np.asarray(cam_R, dtype=np.float64) @ np.asarray(R_head, dtype=np.float64) @ E
+    m02 = M[..., 0, 2]
+    lock = np.abs(m02) > 0.9999999
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y0 = np.arcsin(np.clip(-m02, -1.0, 1.0))
+        y1 = np.pi - y0
+        c0, c1 = np.cos(y0), np.cos(y1)
+        x0 = np.arctan2(M[..., 1, 2] / c0, M[..., 2, 2] / c0)
+        x1 = np.arctan2(M[..., 1, 2] / c1, M[..., 2, 2] / c1)
+        z0 = np.arctan2(M[..., 0, 1] / c0, M[..., 0, 0] / c0)
+        z1 = np.arctan2(M[..., 0, 1] / c1, M[..., 0, 0] / c1)
+    # gimbal branch: z = 0, y = -/+ 90, x from the first column; both sets equal
+    pos = m02 > 0
+    xl = np.where(pos, np.arctan2(-M[..., 1, 0], -M[..., 2, 0]), np.arctan2(M[..., 1, 0], M[..., 2, 0]))
+    yl = np.where(pos, -np.pi / 2, np.pi / 2)
+    s1 = np.rad2deg(np.stack([np.where(lock, xl, x0), np.where(lock, yl, y0), np.where(lock, 0.0, z0)], -1))
+    s2 = np.rad2deg(np.stack([np.where(lock, xl, x1), np.where(lock, yl, y1), np.where(lock, 0.0, z1)], -1))
+    for s in (s1, s2):
+        s[..., 1] = np.where(s[..., 1] > 180.0, s[..., 1] - 360.0, s[..., 1])
+    ok1 = (np.abs(s1[..., 2]) < 90) & (np.abs(s1[..., 0]) < 90)
+    ok2 = (np.abs(s2[..., 2]) < 90) & (np.abs(s2[..., 0]) < 90)
+    pyr = np.where(ok1[..., None], s1, np.where(ok2[..., None], s2, np.nan))
+    pyr[..., 1] = -pyr[..., 1]
+    pyr[..., 2] = -pyr[..., 2]
+    return pyr, ok1 | ok2
+
+
+def fit_faces(points, confidence=None, pairs=None, *, conf_min: float | None = None,
+              min_pair_count: int | None = None, max_rmse: float | None = DEFAULT_MAX_RMSE) -> dict:
+    """Fit WHENet's reference head to many faces and gate the fits.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, L, 3)
+        3-D landmarks in world units (NaN marks a missing point).
+    confidence : array_like, shape (N, L), optional
+        Per-landmark confidence; a pair is used when ``> conf_min``.
+    pairs : (array of int, array of int)
+        (landmark indices, reference-head indices). Required.
+    conf_min : float, default 0.1 (WHENet)
+    min_pair_count : int, default 7 (WHENet)
+    max_rmse : float or None
+        Reject fits whose RMSE (world units) is above this; None or inf
+        disables the gate (WHENet's behaviour).
+
+    Returns
+    -------
+    dict
+        The :func:`~hpe_cli.geometry.similarity.fit_similarity` keys
+        (``scale, R, t, rmse, n_pairs``), plus ``ok`` (N,) bool,
+        ``reason`` (N,) object (``''``, ``"too few confident points"`` or
+        ``"bad fit"``) and ``detail`` (N,) object.
+    """
+    if pairs is None:
+        raise ValueError("expected pairs=(landmark indices, reference-head indices)")
+    src_idx, head_idx = (np.asarray(p, dtype=np.intp) for p in pairs)
+    conf_min = confidence_min() if conf_min is None else float(conf_min)
+    min_pair_count = min_pairs() if min_pair_count is None else int(min_pair_count)
+    points = np.asarray(points, dtype=np.float64)
+    n = points.shape[0]
+    dst = points[:, src_idx]
+    mask = np.isfinite(dst).all(-1)
+    if confidence is not None:
+        with np.errstate(invalid="ignore"):
+            mask &= np.asarray(confidence, dtype=np.float64)[:, src_idx] > conf_min
+    src = np.broadcast_to(reference_head()[head_idx], dst.shape)
+    count = mask.sum(1)
+    enough = count >= min_pair_count
+    fit = fit_similarity(src, dst, mask & enough[:, None])
+    fit["n_pairs"] = count.astype(np.int64)
+    reason = np.full(n, "", dtype=object)
+    detail = np.full(n, "", dtype=object)
+    fitted = np.isfinite(fit["rmse"])
+    if max_rmse is not None and np.isfinite(max_rmse):
+        bad = fitted & (fit["rmse"] > max_rmse)
+        reason[bad] = "bad fit"
+        detail[bad] = [f"rmse {r:.3g} > {max_rmse:g}" for r in fit["rmse"][bad]]
+    few = ~enough | ~fitted
+    reason[few] = "too few confident points"
+    detail[few] = [f"{c} of {len(src_idx)} pairs usable, need {max(min_pair_count, 3)}" for c in count[few]]
+    fit["ok"] = reason == ""
+    fit["reason"] = reason
+    fit["detail"] = detail
+    return fit
+
+
+def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy: bool = False,
+                  landmarks=None) -> dict:
+    """Labels, boxes and 2-D landmarks of (face, camera) views.
+
+    Parameters
+    ----------
+    fit : dict
+        :func:`fit_faces` output for N faces.
+    face : array_like of int, shape (V,)
+        The face (row of ``fit``) each view shows.
+    cam : dict
+        Per-view camera arrays: ``K`` (V, 3, 3), ``dist`` (V, 5), ``R`` (V, 3, 3),
+        ``t`` (V, 3), ``width`` (V,), ``height`` (V,).
+    system : str or RotationSystem
+        Target rotation system of the labels.
+    preset : {"whenet", "directmhp"}
+        Helmet radius and box rule.
+    legacy : bool
+        Label with WHENet's chain (:func:`legacy_whenet_labels`) and drop
+        what it drops; otherwise the corrected formula.
+    landmarks : array_like, shape (N, L, 3), optional
+        3-D landmarks to project into each view.
+
+    Returns
+    -------
+    dict
+        ``ok`` (V,) bool; ``reason``, ``detail`` (V,) object; ``A`` (V, 3, 3)
+        canonical label matrices; ``conversion`` (a
+        :class:`~hpe_cli.rotation.Conversion` of the ok views, in ``system``);
+        ``bbox`` (V, 4); ``legacy_pyr`` (V, 3) (legacy only, NaN where
+        dropped); ``lm2d`` (V, L, 2) when ``landmarks`` is given.
+    """
+    from ..rotation import canonical_to_labels, get_system
+
+    face = np.asarray(face, dtype=np.intp)
+    Rh = fit["R"][face]
+    box = helmet_boxes(fit["scale"][face], Rh, fit["t"][face], cam["K"], cam["dist"], cam["R"], cam["t"],
+                       cam["width"], cam["height"], preset=preset)
+    reason = fit["reason"][face].copy()
+    detail = fit["detail"][face].copy()
+    face_ok = reason == ""
+    take = face_ok & ~box["ok"]
+    reason[take] = box["reason"][take]
+    detail[take] = box["detail"][take]
+    A = label_matrices(Rh, cam["R"])
+    out = {"bbox": box["bbox"], "A": A}
+    if legacy:
+        pyr, kept = legacy_whenet_labels(Rh, cam["R"])
+        drop = (reason == "") & ~kept & np.isfinite(A).all((1, 2))
+        reason[drop] = "dropped by legacy rule"
+        detail[drop] = "no triple with |pitch| < 90 and |roll| < 90"
+        out["legacy_pyr"] = pyr
+    ok = reason == ""
+    if legacy:
+        # the label is rebuilt from WHENet's own angles (equal to A to ~1e-13)
+        A_ok = get_system("300w_lp").from_angles(out["legacy_pyr"][ok])
+    else:
+        A_ok = A[ok]
+    out["conversion"] = canonical_to_labels(A_ok, system)
+    if landmarks is not None:
+        landmarks = np.asarray(landmarks, dtype=np.float64)
+        uv = np.empty((len(face), landmarks.shape[1], 2))
+        # blocks of views keep the temporaries small enough to stay in cache
+        for s in range(0, len(face), VIEW_BLOCK):
+            sl = slice(s, s + VIEW_BLOCK)
+            b_uv, z = project_points(landmarks[face[sl]], cam["K"][sl, None], cam["dist"][sl, None],
+                                     cam["R"][sl, None], cam["t"][sl, None])
+            b_uv[z <= 0] = np.nan
+            uv[sl] = b_uv
+        out["lm2d"] = uv
+    out.update(ok=ok, reason=reason, detail=detail)
+    return out
