@@ -25,12 +25,14 @@ def table_format(path) -> str:
 
 
 def check_output(path, overwrite: bool) -> Path:
-    """Refuse to clobber an existing file without ``overwrite``; check the folder exists."""
+    """Refuse to clobber an existing file without ``overwrite``, or to write where a folder is."""
     path = Path(path)
+    if path.is_dir():
+        raise HpeError(f"{path}: is a folder, expected a file name")
     if path.exists() and not overwrite:
         raise HpeError(f"{path}: already exists (use --overwrite to replace it)")
-    if not path.parent.exists():
-        raise HpeError(f"{path}: folder {path.parent} does not exist")
+    if path.parent.exists() and not path.parent.is_dir():
+        raise HpeError(f"{path}: {path.parent} is not a folder")
     return path
 
 
@@ -47,6 +49,10 @@ class AtomicFile:
         self.tmp = None
 
     def __enter__(self) -> Path:
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise HpeError(f"{self.path}: cannot create folder {self.path.parent} ({exc.strerror})") from None
         fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
         os.close(fd)
         self.tmp = Path(tmp)
