@@ -63,3 +63,13 @@ def echo_summary(lines, quiet: bool = False) -> None:
     if not quiet:
         for line in lines:
             click.echo(line, err=True)
+
+
+def format_from_suffix(path) -> str:
+    """Relabel output format implied by OUTPUT's name: .json -> coco, .txt -> whenet, else a table."""
+    s = str(path).lower()
+    if s.endswith(".json"):
+        return "coco"
+    if s.endswith(".txt"):
+        return "whenet"
+    return "table"

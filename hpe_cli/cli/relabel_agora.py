@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import click
 
-from .options import SYSTEM, echo_summary, output_option, overwrite_option, progress, rejects_option, verbosity_options
+from .options import (SYSTEM, echo_summary, format_from_suffix, output_option, overwrite_option, progress, rejects_option,
+                      verbosity_options)
 
 FORMATS = ("table", "coco", "whenet")
 
@@ -26,13 +27,6 @@ def _non_negative(ctx, param, value):
     return value
 
 
-def _format_from_suffix(path) -> str:
-    s = str(path).lower()
-    if s.endswith(".json"):
-        return "coco"
-    if s.endswith(".txt"):
-        return "whenet"
-    return "table"
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
@@ -103,7 +97,7 @@ def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse,
     """
     from ..pipelines import agora as job
 
-    fmt = fmt or _format_from_suffix(output)
+    fmt = fmt or format_from_suffix(output)
     if fmt != "table" and system is not None and system.name != "whenet":
         raise click.UsageError(f"--format {fmt} stores DirectMHP/WHENet angles, which are in the whenet system; "
                                f"got --system {system.name} (use --format table for other systems)")

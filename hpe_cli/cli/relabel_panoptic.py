@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, echo_summary, output_option, overwrite_option, progress, rejects_option,
+from .options import (SYSTEM, format_from_suffix, echo_summary, output_option, overwrite_option, progress, rejects_option,
                       verbosity_options)
 
 FORMATS = ("table", "coco", "whenet")
@@ -82,7 +82,7 @@ def relabel_panoptic(seq_dir, output, calibration, system, preset, fmt, cameras,
     from ..pipelines import panoptic as job
     from ..pipelines.relabel import DEFAULT_MAX_RMSE
 
-    fmt = fmt or _format_from_suffix(output)
+    fmt = fmt or format_from_suffix(output)
     if fmt != "table" and system is not None and system.name != "whenet":
         raise click.UsageError(f"--format {fmt} stores WHENet/DirectMHP angles, which are in the whenet system; "
                                f"got --system {system.name} (use --format table for other systems)")
@@ -105,12 +105,3 @@ def relabel_panoptic(seq_dir, output, calibration, system, preset, fmt, cameras,
     finally:
         bar.close()
     echo_summary(stats.summary(plan, cfg, output, rejects), quiet)
-
-
-def _format_from_suffix(path) -> str:
-    s = str(path).lower()
-    if s.endswith(".json"):
-        return "coco"
-    if s.endswith(".txt"):
-        return "whenet"
-    return "table"

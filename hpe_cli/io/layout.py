@@ -42,3 +42,17 @@ def conversion_columns(conv) -> dict:
 def matrices_from_columns(cols: dict) -> np.ndarray:
     """Stack ``r00..r22`` arrays into ``(N, 3, 3)``."""
     return np.stack([np.asarray(cols[c], dtype=np.float64) for c in MATRIX_COLS], axis=-1).reshape(-1, 3, 3)
+
+
+def arrow_table(cols: dict, schema=None):
+    """A pyarrow Table from name -> array (numpy, list or Arrow); object arrays become strings."""
+    import pyarrow as pa
+
+    arrays = []
+    for v in cols.values():
+        if not isinstance(v, (pa.Array, pa.ChunkedArray)):
+            v = np.asarray(v)
+            v = pa.array(v, type=pa.string()) if v.dtype == object else pa.array(v)
+        arrays.append(v)
+    t = pa.Table.from_arrays(arrays, names=list(cols))
+    return t.cast(schema) if schema is not None else t

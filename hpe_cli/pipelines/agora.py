@@ -172,17 +172,6 @@ class Stats:
         return lines
 
 
-def _arrow(cols: dict, schema=None):
-    import pyarrow as pa
-
-    arrays, names = [], []
-    for k, v in cols.items():
-        v = np.asarray(v)
-        arrays.append(pa.array(v.tolist() if v.dtype == object else v,
-                               type=pa.string() if v.dtype == object else None))
-        names.append(k)
-    t = pa.Table.from_arrays(arrays, names=names)
-    return t.cast(schema) if schema is not None else t
 
 
 def _reject_schema():
@@ -206,7 +195,7 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
     import json
     from contextlib import ExitStack
 
-    from ..io import TableWriter, check_output, system_metadata
+    from ..io import TableWriter, arrow_table, check_output, system_metadata
     from ..rotation import get_system
 
     system = get_system(cfg.system)
@@ -231,13 +220,13 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
             res = relabel_people(people, cfg)
             del people
             stats.add(path, res, system)
-            t = _arrow(res["table"])
+            t = arrow_table(res["table"])
             if out is not None:
                 out.write(t)
             else:
                 collected.append(t)
             if rej is not None:
-                rej.write(_arrow(res["rejects"], rschema))
+                rej.write(arrow_table(res["rejects"], rschema))
             if bar is not None:
                 bar.update(1)
         if fmt != "table":

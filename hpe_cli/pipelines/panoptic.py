@@ -322,42 +322,8 @@ class Stats:
         return lines
 
 
-def _arrow(cols: dict, schema=None):
-    import pyarrow as pa
-
-    arrays, names = [], []
-    for k, v in cols.items():
-        if not isinstance(v, (pa.Array, pa.ChunkedArray)):
-            v = np.asarray(v)
-            v = pa.array(v, type=pa.string()) if v.dtype == object else pa.array(v)
-        arrays.append(v)
-        names.append(k)
-    t = pa.Table.from_arrays(arrays, names=names)
-    return t.cast(schema) if schema is not None else t
 
 
-class _Writer:
-    """``TableWriter`` whose Parquet files dictionary-encode text columns only.
-
-    Dictionary encoding is attempted for every column by default; on the
-    ~160 float columns of a relabel table that costs 4x the rest of the write
-    and gains nothing (floats rarely repeat).
-    """
-
-    def __new__(cls, path, overwrite=False, metadata=None):
-        from ..io import TableWriter
-
-        class _TextDictWriter(TableWriter):
-            def _open(self, schema):
-                if self.fmt != "parquet":
-                    return super()._open(schema)
-                import pyarrow as pa
-                import pyarrow.parquet as pq
-
-                text = [f.name for f in schema if pa.types.is_string(f.type) or pa.types.is_large_string(f.type)]
-                return pq.ParquetWriter(self._tmp, schema, compression="snappy", use_dictionary=text or False)
-
-        return _TextDictWriter(path, overwrite, metadata)
 
 
 def _reject_schema():
@@ -379,7 +345,7 @@ def write_outputs(p: Plan, cfg: Config, output, fmt: str = "table", rejects_path
     import json
     from contextlib import ExitStack
 
-    from ..io import check_output, system_metadata
+    from ..io import TableWriter, arrow_table, check_output, system_metadata
     from ..rotation import get_system
 
     system = get_system(cfg.system)
@@ -393,20 +359,20 @@ def write_outputs(p: Plan, cfg: Config, output, fmt: str = "table", rejects_path
     rschema = _reject_schema()
     with ExitStack() as stack:
         if fmt == "table":
-            out = stack.enter_context(_Writer(output, overwrite, meta))
+            out = stack.enter_context(TableWriter(output, overwrite, meta))
         else:
             check_output(output, overwrite)
             out = None
-        rej = stack.enter_context(_Writer(rejects_path, overwrite)) if rejects_path else None
+        rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
         for res in run(p, cfg, workers):
             stats.add(res, cfg)
-            t = _arrow(res["table"])
+            t = arrow_table(res["table"])
             if out is not None:
                 out.write(t)
             else:
                 collected.append(t)
             if rej is not None:
-                rej.write(_arrow(res["rejects"], rschema))
+                rej.write(arrow_table(res["rejects"], rschema))
             if bar is not None:
                 bar.update(res["frames"])
         if fmt != "table":

@@ -359,9 +359,13 @@ def load_system(path) -> RotationSystem:
 
 
 def _builtin_dir():
+    """``configs/systems``: package data when installed, the repository folder in a source tree."""
     from importlib.resources import files
 
-    return files("hpe_cli.configs") / "systems"
+    try:
+        return files("hpe_cli.configs") / "systems"
+    except ModuleNotFoundError:  # hpe_cli imported from a checkout (e.g. `python -m pytest` in the repo)
+        return Path(__file__).resolve().parents[2] / "configs" / "systems"
 
 
 _CACHE: dict = {}
