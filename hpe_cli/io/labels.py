@@ -25,30 +25,51 @@ def label_mode(columns, path="input") -> str:
 
 def numeric_column(batch, name):
     """Column as float64 plus a per-row reason ('' when usable)."""
+    values, bad, reasons = _numeric(batch, name)
+    if reasons is None:
+        reasons = np.full(len(values), "", dtype=object)
+    return values, reasons
+
+
+def _numeric(batch, name):
+    """``(values, bad_mask, reasons_or_None)``; ``reasons`` is built only when a row is bad.
+
+    Object arrays of reasons are slow to build and compare, and almost every
+    row of a real table is fine, so the common path never touches them.
+    """
     import pyarrow as pa
     import pyarrow.compute as pc
 
     col = batch.column(batch.schema.get_field_index(name))
-    reasons = np.full(len(col), "", dtype=object)
-    if pa.types.is_integer(col.type) or pa.types.is_floating(col.type) or pa.types.is_boolean(col.type) \
-            or pa.types.is_decimal(col.type) or pa.types.is_null(col.type):
-        values = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False)
-        values = np.asarray(values, dtype=np.float64)
-        null = np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool) if col.null_count else None
+    numeric = (pa.types.is_integer(col.type) or pa.types.is_floating(col.type) or pa.types.is_boolean(col.type)
+               or pa.types.is_decimal(col.type) or pa.types.is_null(col.type))
+    if numeric:
+        if col.null_count == 0 and pa.types.is_float64(col.type):
+            values = col.to_numpy()
+        else:
+            values = np.asarray(pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False), dtype=np.float64)
+        bad = ~np.isfinite(values)
+        if not bad.any():
+            return values, bad, None
+        null = np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool) if col.null_count else \
+            np.zeros(len(values), dtype=bool)
+        non_numeric = np.zeros(len(values), dtype=bool)
     else:
         import pandas as pd
 
         raw = col.to_pandas()
         values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
         null = raw.isna().to_numpy()
-        bad = np.isnan(values) & ~null
-        reasons[bad] = f"non-numeric value in {name}"
-    if null is not None and null.any():
-        values = np.where(null, np.nan, values)
-        reasons[null & (reasons == "")] = f"missing value in {name}"
-    nonfinite = ~np.isfinite(values) & (reasons == "")
-    reasons[nonfinite] = f"non-finite value in {name}"
-    return values, reasons
+        non_numeric = np.isnan(values) & ~null
+        bad = ~np.isfinite(values)
+        if not bad.any():
+            return values, bad, None
+    values = np.where(null, np.nan, values)
+    reasons = np.full(len(values), "", dtype=object)
+    reasons[bad] = f"non-finite value in {name}"
+    reasons[null] = f"missing value in {name}"
+    reasons[non_numeric] = f"non-numeric value in {name}"
+    return values, bad, reasons
 
 
 def batch_label_columns(batch, mode: str, radians: bool = False):
@@ -62,23 +83,43 @@ def batch_label_columns(batch, mode: str, radians: bool = False):
         ``''`` for a usable row, else the first reason it is not (missing,
         non-numeric, non-finite; for matrices also "not a rotation").
     """
+    cols, ok, reasons = label_columns_fast(batch, mode, radians)
+    if reasons is None:
+        reasons = np.full(batch.num_rows, "", dtype=object)
+    return cols, reasons
+
+
+def label_columns_fast(batch, mode: str, radians: bool = False):
+    """Like :func:`batch_label_columns`, returning ``(columns, ok_mask, reasons_or_None)``.
+
+    ``reasons`` is None when every row is usable, which saves building and
+    comparing an object array on the hot path.
+    """
     names = ANGLE_COLS if mode == "angles" else MATRIX_COLS
-    cols, reasons = [], np.full(batch.num_rows, "", dtype=object)
+    cols, reasons = [], None
+    ok = np.ones(batch.num_rows, dtype=bool)
     for name in names:
-        v, r = numeric_column(batch, name)
-        cols.append(np.rad2deg(v) if (radians and mode == "angles") else v)
-        if (r != "").any():
-            reasons = np.where(reasons == "", r, reasons)
+        v, bad, r = _numeric(batch, name)
+        cols.append(v * (180.0 / np.pi) if (radians and mode == "angles") else v)
+        if r is not None:
+            if reasons is None:
+                reasons = np.full(batch.num_rows, "", dtype=object)
+            first = bad & ok
+            reasons[first] = r[first]
+            ok &= ~bad
     if mode == "matrix":
         from ..rotation.check import rotation_reasons
 
-        ok = reasons == ""
         R = np.stack(cols, axis=-1).reshape(-1, 3, 3)
-        rr = rotation_reasons(R[ok] if not ok.all() else R)
-        if (rr != "").any():
-            sub = reasons[ok]
-            reasons[ok] = np.where(sub == "", rr, sub)
-    return cols, reasons
+        rr = rotation_reasons(R if ok.all() else R[ok])
+        not_rot = rr != ""
+        if not_rot.any():
+            if reasons is None:
+                reasons = np.full(batch.num_rows, "", dtype=object)
+            idx = np.flatnonzero(ok)[not_rot]
+            reasons[idx] = rr[not_rot]
+            ok[idx] = False
+    return cols, ok, reasons
 
 
 def batch_labels(batch, mode: str, radians: bool = False):

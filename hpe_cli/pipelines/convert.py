@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import HpeError
-from ..io import LABEL_COLS, Rejects, TableWriter, batch_label_columns, label_mode, open_table, system_metadata
+from ..io import LABEL_COLS, Rejects, TableWriter, label_columns_fast, label_mode, open_table, system_metadata
 from ..rotation import soa
 from ..rotation.convert import soa_labels
 
@@ -26,14 +26,14 @@ def convert_batch(batch, mode, source, target, radians=False):
 
     Returns ``(out_batch, reasons, labels)``: the converted rows (input columns
     that the conversion does not replace, then ``LABEL_COLS``), the per-row
-    reject reason ('' for converted rows) and the label dict of
+    reject reason ('' for converted rows; None when every row converted) and
+    the label dict of
     :func:`~hpe_cli.rotation.convert.soa_labels`.
     """
     import pyarrow as pa
 
-    cols, reasons = batch_label_columns(batch, mode, radians)
-    ok = reasons == ""
-    if not ok.all():
+    cols, ok, reasons = label_columns_fast(batch, mode, radians)
+    if reasons is not None:
         cols = [c[ok] for c in cols]
     n = int(ok.sum())
     if mode == "angles":
@@ -73,8 +73,8 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
 
     def finish(batch, future, writer):
         out, reasons, labels = future.result()
-        bad = np.flatnonzero(reasons != "")
-        if bad.size:
+        bad = np.flatnonzero(reasons != "") if reasons is not None else ()
+        if len(bad):
             if rejects.path is None:
                 raise HpeError(f"{src.path}: row {summary.rows + bad[0]}: {reasons[bad[0]]} "
                                f"({bad.size} bad rows in this batch; use --rejects FILE to set them aside)")
