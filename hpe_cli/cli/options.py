@@ -73,3 +73,12 @@ def format_from_suffix(path) -> str:
     if s.endswith(".txt"):
         return "whenet"
     return "table"
+
+
+def non_negative_or_inf(ctx, param, value):
+    """Click callback: a threshold that must be >= 0 (``inf`` turns it off)."""
+    if value is None:
+        return None
+    if value != value or value < 0:  # NaN or negative
+        raise click.BadParameter(f"expected a number >= 0 or inf, got {value}")
+    return value

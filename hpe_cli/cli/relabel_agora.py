@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, echo_summary, format_from_suffix, output_option, overwrite_option, progress, rejects_option,
+from .options import (SYSTEM, non_negative_or_inf, echo_summary, format_from_suffix, output_option, overwrite_option, progress, rejects_option,
                       verbosity_options)
 
 FORMATS = ("table", "coco", "whenet")
@@ -17,16 +17,6 @@ def _image_size(ctx, param, value):
     if w <= 0 or h <= 0:
         raise click.BadParameter(f"expected a positive WIDTHxHEIGHT, got {value!r}")
     return (w, h)
-
-
-def _non_negative(ctx, param, value):
-    if value is None:
-        return None
-    if value != value or value < 0:  # NaN or negative
-        raise click.BadParameter(f"expected a number >= 0 or inf, got {value}")
-    return value
-
-
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
@@ -45,10 +35,10 @@ def _non_negative(ctx, param, value):
 @click.option("--preset", type=click.Choice(["directmhp", "whenet"]), default="directmhp", show_default=True,
               help="Helmet radius and box rule: directmhp (radius 18, aspect < 1.5, each side < 70% of the "
                    "image) or whenet (radius 22, aspect <= 2).")
-@click.option("--max-rmse", type=float, default=None, callback=_non_negative, metavar="X",
+@click.option("--max-rmse", type=float, default=None, callback=non_negative_or_inf, metavar="X",
               help="Reject faces whose fit RMSE is above X metres (AGORA's joints are in metres). "
                    "'inf' labels every fit, as DirectMHP did. [default: 0.02]")
-@click.option("--max-occlusion", type=float, default=90.0, show_default=True, callback=_non_negative,
+@click.option("--max-occlusion", type=float, default=90.0, show_default=True, callback=non_negative_or_inf,
               metavar="PCT", help="Label only people with occlusion < PCT percent (DirectMHP: 90).")
 @click.option("--legacy-whenet", is_flag=True,
               help="Label with DirectMHP's chain, which is WHENet's (compound, Z-Y-X decomposition, "

@@ -3,18 +3,10 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, format_from_suffix, echo_summary, output_option, overwrite_option, progress, rejects_option,
+from .options import (SYSTEM, non_negative_or_inf, format_from_suffix, echo_summary, output_option, overwrite_option, progress, rejects_option,
                       verbosity_options)
 
 FORMATS = ("table", "coco", "whenet")
-
-
-def _max_rmse(ctx, param, value):
-    if value is None:
-        return None
-    if value != value or value < 0:  # NaN or negative
-        raise click.BadParameter(f"expected a number >= 0 or inf, got {value}")
-    return value
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
@@ -39,7 +31,7 @@ def _max_rmse(ctx, param, value):
               help="Only frames A <= frame < B (either side may be empty).")
 @click.option("--workers", type=click.IntRange(1), default=1, show_default=True,
               help="Worker processes (chunks of 64 frames each).")
-@click.option("--max-rmse", type=float, default=None, callback=_max_rmse, metavar="X",
+@click.option("--max-rmse", type=float, default=None, callback=non_negative_or_inf, metavar="X",
               help="Reject faces whose fit RMSE is above X (cm). 'inf' labels every fit, as WHENet did. "
                    "[default: 2.0: consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones "
                    "to 2.8-6.7 cm]")

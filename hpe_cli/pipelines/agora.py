@@ -19,7 +19,7 @@ import numpy as np
 from ..datasets import agora as ag
 from ..errors import HpeError
 from ..geometry.reference import agora_pairs
-from .relabel import fit_faces, relabel_views
+from .relabel import fit_faces, relabel_views, summary_tail
 
 #: default fit-quality gate in the landmarks' unit (metres for AGORA): 2 cm, the Panoptic gate
 DEFAULT_MAX_RMSE = 0.02
@@ -160,15 +160,8 @@ class Stats:
             order = {r: k for k, r in enumerate(REASON_ORDER)}
             parts = "; ".join(f"{self.reasons[r]} {r}" for r in sorted(self.reasons, key=lambda r: order.get(r, 99)))
             lines.append(f"not labelled {rej}: {parts}" + (f" -> {rejects_path}" if rejects_path else ""))
-        if cfg.legacy:
-            d = self.reasons["dropped by legacy rule"]
-            share = 100.0 * d / self.legacy_considered if self.legacy_considered else 0.0
-            lines.append(f"WHENet's legacy rule dropped {d} of {self.legacy_considered} people ({share:.1f}%)")
-        if self.out_of_range:
-            lines.append(f"{self.out_of_range} labels lie outside {sysname}'s declared range "
-                         "(for whenet: no triple with |pitch| < 90 and |roll| < 90; DirectMHP would drop them)")
-        if self.gimbal:
-            lines.append(f"{self.gimbal} labels are within the gimbal-lock tolerance (see gimbal_lock)")
+        lines += summary_tail(cfg.legacy, self.reasons["dropped by legacy rule"], self.legacy_considered,
+                              self.out_of_range, self.gimbal, sysname, "people", "DirectMHP")
         return lines
 
 

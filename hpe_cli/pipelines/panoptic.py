@@ -17,7 +17,7 @@ import numpy as np
 from ..datasets import panoptic as pan
 from ..errors import HpeError
 from ..geometry.reference import panoptic_pairs
-from .relabel import DEFAULT_MAX_RMSE, REASONS, fit_faces, relabel_views
+from .relabel import DEFAULT_MAX_RMSE, REASONS, fit_faces, relabel_views, summary_tail
 
 CHUNK_FRAMES = 64
 LEGACY_COLS = ["legacy_pitch", "legacy_yaw", "legacy_roll"]
@@ -310,15 +310,8 @@ class Stats:
         if rej:
             parts = "; ".join(f"{n} {r}" for r, n in sorted(self.view_reasons.items(), key=lambda x: -x[1]))
             lines.append(f"rejected {rej} views: {parts}" + (f" -> {rejects_path}" if rejects_path else ""))
-        if cfg.legacy:
-            d = self.view_reasons["dropped by legacy rule"]
-            share = 100.0 * d / self.legacy_considered if self.legacy_considered else 0.0
-            lines.append(f"WHENet's legacy rule dropped {d} of {self.legacy_considered} views ({share:.1f}%)")
-        if self.out_of_range:
-            lines.append(f"{self.out_of_range} labels lie outside {sysname}'s declared range "
-                         "(for whenet: no triple with |pitch| < 90 and |roll| < 90; WHENet would drop them)")
-        if self.gimbal:
-            lines.append(f"{self.gimbal} labels are within the gimbal-lock tolerance (see gimbal_lock)")
+        lines += summary_tail(cfg.legacy, self.view_reasons["dropped by legacy rule"], self.legacy_considered,
+                              self.out_of_range, self.gimbal, sysname, "views", "WHENet")
         return lines
 
 

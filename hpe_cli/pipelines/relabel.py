@@ -242,3 +242,18 @@ def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy
         out["lm2d"] = uv
     out.update(ok=ok, reason=reason, detail=detail)
     return out
+
+
+def summary_tail(legacy: bool, dropped: int, considered: int, out_of_range: int, gimbal: int, sysname: str,
+                 unit: str, dropper: str) -> list:
+    """The closing summary lines shared by the relabel pipelines (legacy share, range, lock)."""
+    lines = []
+    if legacy:
+        share = 100.0 * dropped / considered if considered else 0.0
+        lines.append(f"WHENet's legacy rule dropped {dropped} of {considered} {unit} ({share:.1f}%)")
+    if out_of_range:
+        lines.append(f"{out_of_range} labels lie outside {sysname}'s declared range "
+                     f"(for whenet: no triple with |pitch| < 90 and |roll| < 90; {dropper} would drop them)")
+    if gimbal:
+        lines.append(f"{gimbal} labels are within the gimbal-lock tolerance (see gimbal_lock)")
+    return lines
