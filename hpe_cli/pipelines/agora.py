@@ -19,13 +19,12 @@ import numpy as np
 from ..datasets import agora as ag
 from ..errors import HpeError
 from ..geometry.reference import agora_pairs
-from .relabel import fit_faces, relabel_views, summary_tail
+from .relabel import LEGACY_COLS, fit_faces, relabel_views, summary_tail, view_label_columns
 
 #: default fit-quality gate in the landmarks' unit (metres for AGORA): 2 cm, the Panoptic gate
 DEFAULT_MAX_RMSE = 0.02
 #: DirectMHP keeps people with occlusion < 90 (percent)
 DEFAULT_MAX_OCCLUSION = 90.0
-LEGACY_COLS = ["legacy_pitch", "legacy_yaw", "legacy_roll"]
 REASON_ORDER = ("occluded", "invalid", "too few confident points", "bad fit", "behind camera", "outside image",
                 "box rejected", "dropped by legacy rule")
 
@@ -53,7 +52,6 @@ def relabel_people(people: ag.AgoraPeople, cfg: Config) -> dict:
         ``reason`` and ``detail``); ``fit_rmse``: RMSE of the fitted faces;
         ``legacy_considered``: people that reached WHENet's rule.
     """
-    from ..io import conversion_columns, landmark_cols
 
     n = len(people)
     W, H = (int(v) for v in cfg.image_size)
@@ -81,22 +79,10 @@ def relabel_people(people: ag.AgoraPeople, cfg: Config) -> dict:
         "person": people.person[ok],
         "image": people.image[ok],
     }
-    bbox = v["bbox"][ok]
-    for k, col in enumerate(("bbox_x", "bbox_y", "bbox_w", "bbox_h")):
-        table[col] = bbox[:, k]
-    table.update(conversion_columns(v["conversion"]))
-    table["fit_rmse"] = fit["rmse"][ok]
-    table["n_pairs"] = fit["n_pairs"][ok]
-    table["scale"] = fit["scale"][ok]
-    if cfg.legacy:
-        for k, col in enumerate(LEGACY_COLS):
-            table[col] = v["legacy_pyr"][ok, k]
+    table.update(view_label_columns(v, fit, np.flatnonzero(ok), cfg.legacy))
     table["occlusion"] = occ[ok]
     table["image_width"] = np.full(int(ok.sum()), W, dtype=np.int64)
     table["image_height"] = np.full(int(ok.sum()), H, dtype=np.int64)
-    lm = v["lm2d"][ok].reshape(int(ok.sum()), 2 * ag.FACE_COUNT)
-    for k, col in enumerate(landmark_cols(ag.FACE_COUNT)):
-        table[col] = lm[:, k]
     bad = ~ok
     rejects = {
         "source": np.full(int(bad.sum()), source, dtype=object),

@@ -17,10 +17,9 @@ import numpy as np
 from ..datasets import panoptic as pan
 from ..errors import HpeError
 from ..geometry.reference import panoptic_pairs
-from .relabel import DEFAULT_MAX_RMSE, REASONS, fit_faces, relabel_views, summary_tail
+from .relabel import DEFAULT_MAX_RMSE, LEGACY_COLS, REASONS, fit_faces, relabel_views, summary_tail, view_label_columns
 
 CHUNK_FRAMES = 64
-LEGACY_COLS = ["legacy_pitch", "legacy_yaw", "legacy_roll"]
 REJECT_COLS = ["sequence", "frame", "person_id", "camera", "reason", "detail", "fit_rmse", "n_pairs", "scale"]
 
 
@@ -123,7 +122,6 @@ def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config) ->
         ``faces`` (int), ``fit_rmse`` (faces,) of fitted faces, ``face_reasons``
         (list of face-level reasons), ``legacy_considered`` (int).
     """
-    from ..io import conversion_columns, landmark_cols
 
     data = pan.read_face_frames(paths)
     n = len(data["frame"])
@@ -147,24 +145,9 @@ def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config) ->
         "person_id": data["person_id"][fo],
         "image": _image_paths(cams, co, frames),
     }
-    bbox = v["bbox"][ok]
-    for k, col in enumerate(("bbox_x", "bbox_y", "bbox_w", "bbox_h")):
-        table[col] = bbox[:, k]
-    table.update(conversion_columns(v["conversion"]))
-    table["fit_rmse"] = fit["rmse"][fo]
-    table["n_pairs"] = fit["n_pairs"][fo]
-    table["scale"] = fit["scale"][fo]
-    if cfg.legacy:
-        for k, col in enumerate(LEGACY_COLS):
-            table[col] = v["legacy_pyr"][ok, k]
+    table.update(view_label_columns(v, fit, fo, cfg.legacy))
     table["image_width"] = cams.width[co]
     table["image_height"] = cams.height[co]
-    if cfg.landmarks:
-        # one contiguous row per output column (strided columns cost a copy each in Arrow)
-        lm2d = v["lm2d"][ok]
-        lm = np.ascontiguousarray(lm2d.reshape(len(fo), lm2d.shape[1] * 2).T)
-        for k, col in enumerate(landmark_cols(lm.shape[0] // 2)):
-            table[col] = lm[k]
     bad = ~ok
     fb = face[bad]
     rejects = {

@@ -244,6 +244,38 @@ def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy
     return out
 
 
+LEGACY_COLS = ["legacy_pitch", "legacy_yaw", "legacy_roll"]
+
+
+def view_label_columns(views: dict, fit: dict, fit_index, legacy: bool) -> dict:
+    """The label columns of the kept views, in the relabel output layout.
+
+    ``views`` is :func:`relabel_views`' result, ``fit`` the fits, and
+    ``fit_index`` the index into ``fit`` of each kept view's face. Returns
+    ``bbox_*``, the conversion columns, ``fit_rmse, n_pairs, scale``, the
+    legacy angles when ``legacy``, and ``lm{i}_x, lm{i}_y`` when ``views``
+    holds projected landmarks.
+    """
+    from ..io import BBOX_COLS, conversion_columns, landmark_cols
+
+    ok = views["ok"]
+    bbox = views["bbox"][ok]
+    cols = {col: bbox[:, k] for k, col in enumerate(BBOX_COLS)}
+    cols.update(conversion_columns(views["conversion"]))
+    for key, col in (("rmse", "fit_rmse"), ("n_pairs", "n_pairs"), ("scale", "scale")):
+        cols[col] = fit[key][fit_index]
+    if legacy:
+        for k, col in enumerate(LEGACY_COLS):
+            cols[col] = views["legacy_pyr"][ok, k]
+    if "lm2d" in views:
+        # one contiguous row per output column (strided columns cost a copy each in Arrow)
+        lm2d = views["lm2d"][ok]
+        lm = np.ascontiguousarray(lm2d.reshape(len(lm2d), lm2d.shape[1] * 2).T)
+        for k, col in enumerate(landmark_cols(lm.shape[0] // 2)):
+            cols[col] = lm[k]
+    return cols
+
+
 def summary_tail(legacy: bool, dropped: int, considered: int, out_of_range: int, gimbal: int, sysname: str,
                  unit: str, dropper: str) -> list:
     """The closing summary lines shared by the relabel pipelines (legacy share, range, lock)."""
