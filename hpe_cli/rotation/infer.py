@@ -360,7 +360,6 @@ def as_builder(func, roles=ROLES, units: str = "radians", packed: bool = False):
     """
     cols = [_ROLE[r] for r in roles]
     conv = np.deg2rad if units == "radians" else (lambda a: a)
-    state = {"vectorised": None}
 
     def call(args):
         return func(np.stack(args)) if packed else func(*args)
@@ -392,26 +391,10 @@ def as_builder(func, roles=ROLES, units: str = "radians", packed: bool = False):
         return None
 
     def build(pyr_deg):
-        pyr = np.asarray(pyr_deg, dtype=np.float64).reshape(-1, 3)
-        if state["vectorised"] is None:
-            m = vectorised(pyr) if len(pyr) > 3 else None
-            if m is not None:
-                try:
-                    ok = np.allclose(per_sample(pyr[:2]), m[:2], rtol=0, atol=1e-9)
-                except CallError:
-                    ok = True  # only the vectorised form works
-                if ok:
-                    state["vectorised"] = True
-                    return m
-            state["vectorised"] = False
-            return per_sample(pyr)
-        if state["vectorised"]:
-            m = vectorised(pyr)
-            if m is not None:
-                return m
-        return per_sample(pyr)
+        return dispatch(np.asarray(pyr_deg, dtype=np.float64).reshape(-1, 3))
 
-    build.state = state
+    dispatch = _prefer_vectorised(vectorised, per_sample, atol=1e-9, equal_nan=False)
+    build.state = dispatch.state
     return build
 
 
@@ -422,7 +405,6 @@ def as_decoder(func, roles=ROLES, units: str = "radians"):
     """
     cols = [_ROLE[r] for r in roles]
     conv = np.rad2deg if units == "radians" else (lambda a: a)
-    state = {"vectorised": None}
 
     def reorder(vals):
         out = np.empty_like(vals)
@@ -453,27 +435,43 @@ def as_decoder(func, roles=ROLES, units: str = "radians"):
         return reorder(v) if v.shape == (n, 3) else None
 
     def decode(R):
-        R = np.asarray(R, dtype=np.float64).reshape(-1, 3, 3)
+        return dispatch(np.asarray(R, dtype=np.float64).reshape(-1, 3, 3))
+
+    dispatch = _prefer_vectorised(vectorised, per_sample, atol=1e-7, equal_nan=True)
+    decode.state = dispatch.state
+    return decode
+
+
+def _prefer_vectorised(vectorised, per_sample, atol: float, equal_nan: bool):
+    """Call user code on whole arrays when it gives the per-sample answers, else row by row.
+
+    The first call with more than 3 rows decides: the vectorised result is
+    kept if it equals the per-sample result on two rows (or if only the
+    vectorised form works), and the choice is remembered in ``.state``.
+    """
+    state = {"vectorised": None}
+
+    def run(x):
         if state["vectorised"] is None:
-            d = vectorised(R) if len(R) > 3 else None
-            if d is not None:
+            out = vectorised(x) if len(x) > 3 else None
+            if out is not None:
                 try:
-                    ok = np.allclose(per_sample(R[:2]), d[:2], rtol=0, atol=1e-7, equal_nan=True)
+                    ok = np.allclose(per_sample(x[:2]), out[:2], rtol=0, atol=atol, equal_nan=equal_nan)
                 except CallError:
-                    ok = True
+                    ok = True  # only the vectorised form works
                 if ok:
                     state["vectorised"] = True
-                    return d
+                    return out
             state["vectorised"] = False
-            return per_sample(R)
+            return per_sample(x)
         if state["vectorised"]:
-            d = vectorised(R)
-            if d is not None:
-                return d
-        return per_sample(R)
+            out = vectorised(x)
+            if out is not None:
+                return out
+        return per_sample(x)
 
-    decode.state = state
-    return decode
+    run.state = state
+    return run
 
 
 # --------------------------------------------------------------------------- reports
