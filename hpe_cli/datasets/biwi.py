@@ -92,10 +92,7 @@ def read_pose_txt(path):
         Head centre in mm, depth camera frame (x right, y down, z forward).
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="ascii")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise HpeError(f"{path}: cannot read BIWI pose file ({exc.__class__.__name__})") from None
+    text = _read_text(path, "BIWI pose file")
     v = _numbers(path, text, 12, "3x3 rotation then centre")
     M = v[:9].reshape(3, 3)
     err = np.linalg.norm(M @ M.T - np.eye(3))
@@ -103,6 +100,13 @@ def read_pose_txt(path):
         raise HpeError(f"{path}: expected a rotation matrix, got ||R R^T - I|| = {err:.3g}, "
                        f"det = {np.linalg.det(M):.4g}")
     return nearest_rotation(M), v[9:]
+
+
+def _read_text(path: Path, what: str) -> str:
+    try:
+        return path.read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise HpeError(f"{path}: cannot read {what} ({exc.__class__.__name__})") from None
 
 
 def _decode_bin(path, data: bytes) -> np.ndarray:
@@ -135,10 +139,7 @@ def read_calibration(path) -> dict:
         ``size`` (width, height) pixels.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="ascii")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise HpeError(f"{path}: cannot read BIWI calibration ({exc.__class__.__name__})") from None
+    text = _read_text(path, "BIWI calibration")
     v = _numbers(path, text, 27, "K 3x3, 4 distortion, R 3x3, t 3, width height")
     return {"K": v[:9].reshape(3, 3), "dist": v[9:13], "R": v[13:22].reshape(3, 3), "t": v[22:25],
             "size": (int(v[25]), int(v[26]))}
