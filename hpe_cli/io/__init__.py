@@ -1,7 +1,7 @@
 """Thin I/O: the label table layout, streaming readers, atomic writers, rejects."""
-from .layout import (ANGLE2_COLS, arrow_table, ANGLE_COLS, BBOX_COLS, LABEL_COLS, MATRIX_COLS, conversion_columns,
-                     landmark_cols, landmark_count, matrices_from_columns)
-from .labels import batch_label_columns, batch_labels, label_columns_fast, label_mode, numeric_column
+from .layout import (ANGLE2_COLS, ANGLE_COLS, arrow_table, BBOX_COLS, LABEL_COLS, MATRIX_COLS, conversion_columns,
+                     landmark_cols, landmark_count)
+from .labels import batch_labels, label_columns_fast, label_mode, numeric_column
 from .readers import TableSource, open_table, read_table
 from .rejects import Rejects
 from .writers import AtomicFile, TableWriter, check_output, system_metadata, table_format, write_json, write_table

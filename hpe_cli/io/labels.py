@@ -72,28 +72,20 @@ def _numeric(batch, name):
     return values, bad, reasons
 
 
-def batch_label_columns(batch, mode: str, radians: bool = False):
+def label_columns_fast(batch, mode: str, radians: bool = False):
     """Label columns of one batch as contiguous 1-D float64 arrays.
 
     Returns
     -------
     columns : list of ndarray
         ``[pitch, yaw, roll]`` in degrees, or the nine ``r00..r22`` entries.
-    reasons : ndarray of object (n,)
+    ok : ndarray of bool (n,)
+        Usable rows.
+    reasons : ndarray of object (n,) or None
         ``''`` for a usable row, else the first reason it is not (missing,
-        non-numeric, non-finite; for matrices also "not a rotation").
-    """
-    cols, ok, reasons = label_columns_fast(batch, mode, radians)
-    if reasons is None:
-        reasons = np.full(batch.num_rows, "", dtype=object)
-    return cols, reasons
-
-
-def label_columns_fast(batch, mode: str, radians: bool = False):
-    """Like :func:`batch_label_columns`, returning ``(columns, ok_mask, reasons_or_None)``.
-
-    ``reasons`` is None when every row is usable, which saves building and
-    comparing an object array on the hot path.
+        non-numeric, non-finite; for matrices also "not a rotation"). None
+        when every row is usable: the hot path then never builds or compares
+        an object array.
     """
     names = ANGLE_COLS if mode == "angles" else MATRIX_COLS
     cols, reasons = [], None
@@ -132,6 +124,8 @@ def batch_labels(batch, mode: str, radians: bool = False):
     reasons : ndarray of object (n,)
         ``''`` for a usable row, else the first reason it is not.
     """
-    cols, reasons = batch_label_columns(batch, mode, radians)
+    cols, _, reasons = label_columns_fast(batch, mode, radians)
+    if reasons is None:
+        reasons = np.full(batch.num_rows, "", dtype=object)
     values = np.stack(cols, axis=-1)
     return (values if mode == "angles" else values.reshape(-1, 3, 3)), reasons

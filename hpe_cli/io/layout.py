@@ -39,9 +39,6 @@ def conversion_columns(conv) -> dict:
     return out
 
 
-def matrices_from_columns(cols: dict) -> np.ndarray:
-    """Stack ``r00..r22`` arrays into ``(N, 3, 3)``."""
-    return np.stack([np.asarray(cols[c], dtype=np.float64) for c in MATRIX_COLS], axis=-1).reshape(-1, 3, 3)
 
 
 def arrow_table(cols: dict, schema=None):

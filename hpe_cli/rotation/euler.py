@@ -4,7 +4,7 @@ Conventions
 -----------
 Every function here works with **right-handed, active, intrinsic** sequences in
 radians: ``seq="xyz"`` with angles ``(a, b, c)`` means ``Rx(a) @ Ry(b) @ Rz(c)``.
-An extrinsic sequence is the reversed intrinsic one (``extrinsic_to_intrinsic``),
+An extrinsic sequence is the reversed intrinsic one (with the angles reversed),
 and a left-handed turn is a negated angle; :mod:`hpe_cli.rotation.systems`
 applies both so that these kernels stay small.
 
@@ -59,19 +59,8 @@ def parse_seq(seq: str) -> tuple[int, int, int]:
     return _AXIS[s[0]], _AXIS[s[1]], _AXIS[s[2]]
 
 
-def is_proper(seq: str) -> bool:
-    """True for proper Euler sequences (first axis == last axis)."""
-    i, _, k = parse_seq(seq)
-    return i == k
 
 
-def extrinsic_to_intrinsic(seq: str, angles):
-    """Rewrite an extrinsic sequence as the equivalent intrinsic one.
-
-    Extrinsic ``seq`` with angles ``(a, b, c)`` equals intrinsic ``seq[::-1]``
-    with angles ``(c, b, a)``.
-    """
-    return seq[::-1], np.asarray(angles)[..., ::-1]
 
 
 def _wrap(x, half):
