@@ -14,24 +14,26 @@ def rotation_error(R) -> tuple[np.ndarray, np.ndarray]:
     return np.sqrt(np.einsum("...ij,...ij->...", g, g)), np.linalg.det(R)
 
 
-def rotation_mask(R, tol: float = ROTATION_TOL) -> np.ndarray:
-    """True where ``R`` is finite, orthonormal within ``tol`` and has det +1."""
+def _screen(R, tol):
+    """``(finite, orthonormal, proper)`` masks; non-finite rows are screened as the identity."""
     R = np.asarray(R, dtype=np.float64)
     finite = np.isfinite(R).all(axis=(-1, -2))
-    safe = np.where(finite[..., None, None], R, np.eye(3))
-    err, det = rotation_error(safe)
-    return finite & (err <= tol) & (np.abs(det - 1.0) <= tol)
+    err, det = rotation_error(np.where(finite[..., None, None], R, np.eye(3)))
+    return finite, err <= tol, np.abs(det - 1.0) <= tol
+
+
+def rotation_mask(R, tol: float = ROTATION_TOL) -> np.ndarray:
+    """True where ``R`` is finite, orthonormal within ``tol`` and has det +1."""
+    finite, ortho, proper = _screen(R, tol)
+    return finite & ortho & proper
 
 
 def rotation_reasons(R, tol: float = ROTATION_TOL) -> np.ndarray:
     """Per-row reason strings: '' for a rotation, else why not (object array)."""
-    R = np.asarray(R, dtype=np.float64)
-    finite = np.isfinite(R).all(axis=(-1, -2))
-    safe = np.where(finite[..., None, None], R, np.eye(3))
-    err, det = rotation_error(safe)
-    out = np.full(R.shape[:-2], "", dtype=object)
-    out[(err > tol)] = "not a rotation: not orthonormal"
-    out[(err <= tol) & (np.abs(det - 1.0) > tol)] = "not a rotation: determinant is not +1 (a reflection)"
+    finite, ortho, proper = _screen(R, tol)
+    out = np.full(finite.shape, "", dtype=object)
+    out[~ortho] = "not a rotation: not orthonormal"
+    out[ortho & ~proper] = "not a rotation: determinant is not +1 (a reflection)"
     out[~finite] = "non-finite matrix entry"
     return out
 

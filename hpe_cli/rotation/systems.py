@@ -172,16 +172,17 @@ class RotationSystem:
 
     def to_canonical(self, R_stored) -> np.ndarray:
         """Map stored matrices to the canonical 300W-LP matrix ``A``."""
-        R = np.asarray(R_stored, dtype=np.float64)
-        if self.storage == "transposed":
-            R = np.swapaxes(R, -1, -2)
-        return R if self._identity_frame else np.einsum("ji,...jk,kl->...il", self.B, R, self.B)
+        return self._map_array(R_stored, self.soa_to_canonical)
 
     def from_canonical(self, A) -> np.ndarray:
         """Map canonical matrices ``A`` to this system's stored matrices."""
-        A = np.asarray(A, dtype=np.float64)
-        R = A if self._identity_frame else np.einsum("ij,...jk,lk->...il", self.B, A, self.B)
-        return np.swapaxes(R, -1, -2) if self.storage == "transposed" else R
+        return self._map_array(A, self.soa_from_canonical)
+
+    @staticmethod
+    def _map_array(R, soa_map):
+        R = np.asarray(R, dtype=np.float64)
+        flat = R.reshape(-1, 3, 3)
+        return _soa.to_array(soa_map(_soa.from_array(flat)), flat.shape[0]).reshape(R.shape)
 
     # nested-list (structure of arrays) forms of the same four maps, for hot paths
     @property
