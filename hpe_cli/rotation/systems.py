@@ -363,10 +363,10 @@ def _builtin_dir():
     """``configs/systems``: package data when installed, the repository folder in a source tree."""
     from importlib.resources import files
 
-    try:
-        return files("hpe_cli.configs") / "systems"
-    except ModuleNotFoundError:  # hpe_cli imported from a checkout (e.g. `python -m pytest` in the repo)
-        return Path(__file__).resolve().parents[2] / "configs" / "systems"
+    source_tree = Path(__file__).resolve().parents[2] / "configs" / "systems"
+    if source_tree.is_dir():  # hpe_cli imported from a checkout: its own configs, not an installed copy's
+        return source_tree
+    return files("hpe_cli.configs") / "systems"
 
 
 _CACHE: dict = {}
