@@ -72,7 +72,7 @@ class HpeGroup(click.Group):
             os.dup2(devnull, 1)
             ctx.exit(1)
         except Exception as exc:
-            msg = _message(exc)
+            msg = _message(exc, txn)
             if msg is None:  # a bug: never show a traceback unless asked to
                 if os.environ.get("HPE_DEBUG"):
                     raise
@@ -82,7 +82,7 @@ class HpeGroup(click.Group):
             ctx.exit(1)
 
 
-def _message(exc) -> str | None:
+def _message(exc, txn=None) -> str | None:
     """The one-line message of an error a user can provoke, or None for a bug."""
     from ..errors import HpeError
     from ..io.transaction import os_reason
@@ -95,9 +95,22 @@ def _message(exc) -> str | None:
     if isinstance(exc, OSError):
         name = exc.filename if exc.filename is not None else None
         return f"{name}: {os_reason(exc)}" if name is not None else os_reason(exc)
+    if isinstance(exc, UnicodeEncodeError) and "surrogate" in str(exc):
+        bad = [p for p in (txn.paths() if txn is not None else []) if not _utf8(p)]
+        if bad:
+            return f"{bad[0]}: file name is not valid UTF-8, which this reader cannot open (rename the file)"
+        return "a file name is not valid UTF-8, which this reader cannot open (rename the file)"
     if isinstance(exc, UnicodeError):
         return f"text is not valid UTF-8 ({exc.reason})" if hasattr(exc, "reason") else str(exc)
     return None
+
+
+def _utf8(path) -> bool:
+    try:
+        str(path).encode("utf-8")
+        return True
+    except UnicodeEncodeError:
+        return False
 
 
 def _error(msg: str) -> None:

@@ -85,6 +85,10 @@ def relabel_panoptic(seq_dir, output, calibration, system, preset, fmt, cameras,
         raise click.BadParameter(str(exc), param_hint="--frames") from None
     max_rmse = DEFAULT_MAX_RMSE if max_rmse is None else max_rmse
     plan = job.plan(seq_dir, calibration, cameras, every, frames)
+    from ..io.transaction import note_input
+
+    for path in [plan.calibration, *plan.frames.values()]:  # no output may replace a file the run reads
+        note_input(path)
     cfg = job.Config(system=system, preset=preset, max_rmse=max_rmse, legacy=legacy_whenet)
     if verbose:
         echo_summary([f"calibration: {plan.calibration} ({len(plan.cameras)} cameras: "

@@ -181,6 +181,10 @@ class OutputTransaction:
             if inp.same(item):
                 raise HpeError(_collision(item, inp, "input"))
 
+    def paths(self) -> list:
+        """Every input and output path of the run, as given (for error messages)."""
+        return [i.shown for i in self._inputs + self._outputs] + [os.fspath(s.target) for s in self._staged]
+
     def after_commit(self, func) -> None:
         """Call ``func()`` once everything is committed (e.g. print the summary)."""
         self._after.append(func)

@@ -220,7 +220,7 @@ def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, c
     tiles, captions = [], []
     for name, rel, src_img, rows in plan:
         if src_img is not None:
-            img = cv2.imread(str(src_img), cv2.IMREAD_COLOR)
+            img = _read_image(src_img)
             if img is None:
                 if rejects.path is None or rejects.strict:
                     raise HpeError(f"{src_img}: not a readable image (row {rows[0]}; use --rejects FILE to skip it)")
@@ -278,6 +278,18 @@ def check_output_exists(path, overwrite):
 
     if path.exists() and not overwrite:
         raise HpeError(f"{path}: already exists (use --overwrite to replace it)")
+
+
+def _read_image(path):
+    """BGR image or None; read as bytes first (OpenCV's own file functions cannot take non-UTF-8 names)."""
+    import cv2
+    import numpy as np
+
+    try:
+        data = np.fromfile(path, dtype=np.uint8)
+    except OSError:
+        return None
+    return cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
 
 
 def _write_image(img, staged, shown):
