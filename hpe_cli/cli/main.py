@@ -58,6 +58,11 @@ class HpeGroup(click.Group):
                 with txn.activate(run=True):
                     return super().invoke(ctx)
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
+            if signals.fired() is not None:
+                exc = signals.fired()
+                signals.stop_children()
+                _error(f"interrupted ({exc.name})")
+                ctx.exit(128 + exc.signum)
             raise
         except signals.Interrupted as exc:
             signals.stop_children()
@@ -72,6 +77,11 @@ class HpeGroup(click.Group):
             os.dup2(devnull, 1)
             ctx.exit(1)
         except Exception as exc:
+            if signals.fired() is not None:  # e.g. a worker pool broken by the signal: report the signal
+                stop = signals.fired()
+                signals.stop_children()
+                _error(f"interrupted ({stop.name})")
+                ctx.exit(128 + stop.signum)
             msg = _message(exc, txn)
             if msg is None:  # a bug: never show a traceback unless asked to
                 if os.environ.get("HPE_DEBUG"):
