@@ -110,9 +110,21 @@ def _message(exc, txn=None) -> str | None:
         if bad:
             return f"{bad[0]}: file name is not valid UTF-8, which this reader cannot open (rename the file)"
         return "a file name is not valid UTF-8, which this reader cannot open (rename the file)"
+    inputs = txn.input_paths() if txn is not None else []
+    if isinstance(exc, UnicodeDecodeError):
+        where = f"{inputs[0]}: " if len(inputs) == 1 else ""
+        return f"{where}text is not valid UTF-8 (byte {exc.start}: {exc.reason})"
     if isinstance(exc, UnicodeError):
         return f"text is not valid UTF-8 ({exc.reason})" if hasattr(exc, "reason") else str(exc)
+    if len(inputs) == 1 and type(exc).__module__.split(".")[0] in _READER_MODULES:
+        # a reader library's own error while the run read its one input: name that file
+        return f"{inputs[0]}: cannot read: {' '.join(str(exc).split())[:200]}"
     return None
+
+
+#: libraries whose errors, in a run with one input, come from reading that input
+_READER_MODULES = {"pyarrow", "pandas", "scipy", "json", "orjson", "pickle", "_pickle", "tarfile", "zipfile", "gzip",
+                   "zlib", "h5py", "numpy"}
 
 
 def _utf8(path) -> bool:

@@ -221,6 +221,10 @@ class OutputTransaction:
             if inp.same(item):
                 raise HpeError(_collision(item, inp, "input"))
 
+    def input_paths(self) -> list:
+        """The run's inputs, as given."""
+        return [i.shown for i in self._inputs]
+
     def paths(self) -> list:
         """Every input and output path of the run, as given (for error messages)."""
         return [i.shown for i in self._inputs + self._outputs] + [os.fspath(s.target) for s in self._staged]

@@ -22,11 +22,11 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
     import os
     import sys
 
+    from ..cli.infer import _load_callable
     from ..rotation import infer as inf
 
+    conn.send(("ready",))  # hpe itself is loaded: the time limit starts now
     try:
-        from ..cli.infer import _load_callable
-
         func = _load_callable(spec)
         if builder:
             rep = inf.infer_builder(inf.as_builder(func, roles, units, packed), n=samples or 64, **kw)
@@ -76,7 +76,14 @@ def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: b
     proc.start()
     send.close()
     try:
-        got = recv.poll(timeout)
+        # the child first loads Python, numpy and hpe (not the user's time), then says "ready"
+        ready = recv.poll(max(120.0, timeout))
+        if ready:
+            try:
+                recv.recv()
+            except (EOFError, OSError):
+                ready = False
+        got = recv.poll(timeout) if ready else True
         msg = None
         if got:
             try:

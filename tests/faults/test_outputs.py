@@ -21,16 +21,37 @@ def _valid(case):
 
 
 @pytest.mark.parametrize("cmd", COMMANDS)
-def test_valid_run_writes_every_output_and_no_temp(case_factory, cmd):
+def test_valid_run_writes_every_output_with_the_umask_mode(case_factory, cmd):
     case = case_factory(cmd)
     before = {str(p): p.read_bytes() for p in case.inputs}
-    _valid(case)
+    old = os.umask(0o027)
+    try:
+        _valid(case)
+    finally:
+        os.umask(old)
     for opt, p in case.outputs.items():
         if opt == "--rejects" and not p.exists():
             continue  # no rows rejected
         assert p.exists(), opt
+        if p.is_file():
+            assert stat.S_IMODE(p.stat().st_mode) == 0o640, p
     assert not temp_files(case.tmp)
     assert {str(p): p.read_bytes() for p in case.inputs} == before
+
+
+def test_audit_plots_are_part_of_the_run(case_factory):
+    """--plots files are staged with the run: a failing later output leaves no plot and no folder."""
+    case = case_factory("audit")
+    plots = case.tmp / "plots"
+    blocker = case.tmp / "blocker"
+    blocker.write_text("x")
+    snap = tree(case.tmp)
+    check_failed(run(*case.args(**{"--json": blocker / "r.json"}), "--plots", plots), blocker)
+    assert tree(case.tmp) == snap
+    line = check_failed(run(*case.args(), "--plots", case.inputs[0], "--overwrite"), case.inputs[0], codes=(1, 2))
+    assert tree(case.tmp) == snap, line
+    res = run(*case.args(), "--plots", plots)
+    assert res.exit_code == 0 and (plots / "index.html").exists() and not temp_files(case.tmp), res.output
 
 
 def _refused(case, outputs, names, overwrite=True):
@@ -90,19 +111,6 @@ def test_existing_output_kept_without_overwrite_and_mode_kept_with_it(case_facto
     assert out.read_bytes() != b"precious"
     assert stat.S_IMODE(out.stat().st_mode) == 0o600
     assert not temp_files(case.tmp)
-
-
-@pytest.mark.parametrize("cmd", COMMANDS)
-def test_new_outputs_get_the_umask_mode(case_factory, cmd):
-    case = case_factory(cmd)
-    old = os.umask(0o027)
-    try:
-        _valid(case)
-    finally:
-        os.umask(old)
-    for p in case.outputs.values():
-        if p.is_file():
-            assert stat.S_IMODE(p.stat().st_mode) == 0o640, p
 
 
 @pytest.mark.parametrize("cmd", COMMANDS)
