@@ -378,7 +378,7 @@ class RotationSystem:
     # nested-list (structure of arrays) forms of the same four maps, for hot paths
     @property
     def _identity_frame(self) -> bool:
-        return np.array_equal(self.B, np.eye(3))
+        return np.array_equal(self.B, np.eye(3)) and np.array_equal(self.M, np.eye(3))
 
     def soa_from_angles(self, pitch, yaw, roll):
         """Stored matrix as a nested list, from 1-D angle arrays in degrees."""
@@ -424,18 +424,18 @@ class RotationSystem:
         return p1, p2, lock < self.gimbal_tol, lock
 
     def soa_to_canonical(self, X):
+        """``A = B.T @ R_active @ M`` (``R_active`` is the stored matrix, transposed if stored so)."""
         if self.storage == "transposed":
             X = _soa.transpose(X)
         if self._identity_frame:
             return X
-        B = _soa.constant(self.B)
-        return _soa.mul(_soa.mul(_soa.transpose(B), X), B)
+        return _soa.mul(_soa.mul(_soa.constant(self.B.T), X), _soa.constant(self.M))
 
     def soa_from_canonical(self, A):
+        """``R_active = B @ A @ M.T``, then transposed if the system stores the inverse."""
         X = A
         if not self._identity_frame:
-            B = _soa.constant(self.B)
-            X = _soa.mul(_soa.mul(B, A), _soa.transpose(B))
+            X = _soa.mul(_soa.mul(_soa.constant(self.B), A), _soa.constant(self.M.T))
         return _soa.transpose(X) if self.storage == "transposed" else X
 
     def in_range(self, pyr_deg) -> np.ndarray:
