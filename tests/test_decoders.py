@@ -113,4 +113,4 @@ def test_decoder_errors():
     es = summarise_errors(decoder_errors("synergynet", small))
     assert es["geodesic_deg"]["max"] > 1  # SynergyNet's yaw is wrong when two angles are non-zero
     ed = summarise_errors(decoder_errors("directmhp", A))
-    assert ed["not_decoded"] >= 1 and ed["d_yaw"]["max"] < 1e-6
+    assert ed["not_decoded"] >= 1 and ed["geodesic_deg"]["max"] < 0.01  # its lock split costs 1e-3 deg
