@@ -537,8 +537,10 @@ class RotationSystem:
         lines += ["frame = " + mat(self.frame)]
         if self.model_frame is not None:
             lines += ["model_frame = " + mat(self.model_frame)]
+        if self.angle_frame == "system":
+            lines.append(f'sequence = "{self.sequence}"')
         lines += [
-            f'sequence = "{self.sequence}"', f'storage = "{self.storage}"',
+            f'storage = "{self.storage}"',
             "order = [" + ", ".join(f'"{o}"' for o in self.order) + "]",
             f'units = "{self.units}"', f'selection = "{self.selection}"', f"gimbal_tol = {self.gimbal_tol!r}",
             f'storage_kind = "{self.storage_kind}"',
