@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, rejects_option,
+from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
                       verbosity_options)
 
 
@@ -16,11 +16,11 @@ from .options import (SYSTEM, batch_option, echo_summary, output_option, overwri
 @click.option("--decoder", type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]), default=None,
               help="Also write what this published decoder prints for each rotation (decoder_pitch, decoder_yaw, "
                    "decoder_roll, decoder_ok), beside the exact angles. `hpe audit --decoder` measures the gap.")
-@rejects_option
+@rejects_options
 @overwrite_option
 @batch_option
 @verbosity_options
-def convert(input, output, source, target, radians, decoder, rejects, overwrite, batch_size, verbose, quiet):
+def convert(input, output, source, target, radians, decoder, rejects, strict, overwrite, batch_size, verbose, quiet):
     """Convert head-pose labels between rotation systems.
 
     INPUT is a .parquet or .csv table with the source system's own value
@@ -56,7 +56,7 @@ def convert(input, output, source, target, radians, decoder, rejects, overwrite,
         from ..pipelines.convert import run_convert
 
         s = run_convert(input, output, source, target, radians=radians, rejects_path=rejects, overwrite=overwrite,
-                        batch_size=batch_size, progress=bar, decoder=decoder)
+                        batch_size=batch_size, progress=bar, strict=strict, decoder=decoder)
     finally:
         bar.close()
     lines = [f"{s.written} of {s.rows} rows converted from {source.name} to {target.name} -> {output}",
