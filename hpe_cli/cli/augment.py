@@ -5,6 +5,8 @@ from pathlib import Path
 
 import click
 
+from ..io.columns import column_options
+
 from .options import (batch_option, echo_summary, output_option, overwrite_option, progress, rejects_option,
                       system_option, verbosity_options)
 
@@ -51,6 +53,7 @@ AGREE_TOL = 1e-3
 @overwrite_option
 @batch_option
 @verbosity_options
+@column_options
 def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line, scheme, box_from, clip, images_dir,
             out_images, image_column, interpolation, border, jpeg_quality, rejects, overwrite, batch_size, verbose,
             quiet):

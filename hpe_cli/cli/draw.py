@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from ..io.columns import column_options
+
 from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_option, verbosity_options
 
 #: 300W-LP/AFLW2000 Pose_Para: line length = this many Basel-Face-Model units times ``scale``.
@@ -56,6 +58,7 @@ def _canvas_size(ctx, param, value):
 @rejects_option
 @overwrite_option
 @verbosity_options
+@column_options
 def draw(input, outdir, images, system, style, canvas, radians, use, length, thickness, tdy_origin, annotate,
          grid, grid_cols, tile, limit, rejects, overwrite, verbose, quiet):
     """Draw head poses onto their images.
