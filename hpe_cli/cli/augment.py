@@ -280,6 +280,9 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     path = Path(input)
     check_output(output, overwrite)
     src = open_table(path, batch_size)
+    from ..io.columns import label_system
+
+    in_system = label_system(src, system)  # .mat Pose_Para is always 300w_lp; output is in --system
     columns = src.columns
     mode = label_mode(columns, path)  # angles when present, else r00..r22
     cross_check = mode == "angles" and all(c in columns for c in MATRIX_COLS)
@@ -313,7 +316,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                 n = batch.num_rows
                 values, reasons = batch_labels(batch, mode)
                 if mode == "angles":
-                    R = system.from_angles(np.where(np.isfinite(values), values, 0.0))
+                    R = in_system.from_angles(np.where(np.isfinite(values), values, 0.0))
                     if cross_check:  # a table with both must agree, or which one is the label?
                         R_in, r_in = batch_labels(batch, "matrix")
                         reasons = np.where(reasons == "", r_in, reasons)
@@ -338,7 +341,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                                  for i, c in enumerate(batch.schema.names)},
                                 reasons[drop])
                 kb = batch.filter(pa.array(keep)) if not keep.all() else batch
-                A2 = augment_canonical(system.to_canonical(R[keep]), M)
+                A2 = augment_canonical(in_system.to_canonical(R[keep]), M)
                 new = conversion_columns(canonical_to_labels(A2, system))
                 lm_new = None
                 if n_lm:

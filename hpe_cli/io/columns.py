@@ -488,6 +488,23 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
     raise AssertionError(fmt)
 
 
+def label_system(src, requested):
+    """The system to read ``src``'s labels in: the dataset's own for dataset readers, else ``requested``.
+
+    ``.mat`` files always hold ``300w_lp`` angles (``Pose_Para``), BIWI files
+    ``biwi``, DAD-3DHeads ``dad3dheads``; a command's ``--system`` then names
+    the system its *output* (or captions) use, and the labels are converted.
+    """
+    if getattr(src, "dataset", False) and src.system:
+        from ..rotation.systems import get_system
+
+        try:
+            return get_system(src.system)
+        except Exception:  # a dataset system not built in yet (dad3dheads before its TOML lands)
+            return requested
+    return requested
+
+
 # ------------------------------------------------------------------------------------------- click
 def _split_names(ctx, param, value):
     if value is None:

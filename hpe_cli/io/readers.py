@@ -21,6 +21,9 @@ class TableSource:
     #: rotation system the reader's labels are in ("300w_lp" for .mat, "biwi", "dad3dheads", a Parquet
     #: file's hpe:system metadata), or None when the file does not say
     system: str | None = None
+    #: True when a dataset reader (.mat, 300W-LP, BIWI, DAD-3DHeads) produced the labels: their system is
+    #: fixed by the dataset, whatever a command's --system says
+    dataset: bool = False
 
     @property
     def columns(self) -> list:
@@ -80,7 +83,8 @@ def _open_core(path, batch_size: int = DEFAULT_BATCH) -> TableSource:
     if dataset is not None:
         system = dataset.attrs.get("system")
         table = pa.Table.from_pandas(dataset, preserve_index=False)
-        return TableSource(path, table.schema, table.num_rows, lambda: iter(table.to_batches(batch_size)), system)
+        return TableSource(path, table.schema, table.num_rows, lambda: iter(table.to_batches(batch_size)), system,
+                           dataset=system is not None)
     suffix = path.suffix.lower()
     if path.stat().st_size == 0:
         raise HpeError(f"{path}: empty file")
