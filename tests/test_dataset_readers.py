@@ -175,7 +175,7 @@ def aflw430(tmp_path):
 @pytest.mark.parametrize("system", ["3ddfa_v2", "scipy_zyx", "biwi"])
 def test_draw_mat_reads_pose_para_as_300w_lp(aflw430, tmp_path, system):
     """image00430 looks up 34 deg: the nose points up whatever --system says (it only names the captions)."""
-    from hpe_cli.cli.draw import _read_all
+    from hpe_cli.pipelines.draw import _read_all
     from hpe_cli.rotation.systems import get_system
 
     src = open_table(aflw430)

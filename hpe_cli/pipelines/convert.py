@@ -52,12 +52,13 @@ def convert_batch(batch, mode, source, target, radians=False):
 
 
 def run_convert(input_path, output, source, target, *, radians=False, rejects_path=None, overwrite=False,
-                batch_size=262_144, progress=None, workers=None) -> ConvertSummary:
+                batch_size=262_144, progress=None, workers=None, strict=False) -> ConvertSummary:
     """Convert every row of ``input_path`` from ``source`` to ``target`` into ``output``.
 
-    Bad rows go to ``rejects_path`` when given; otherwise the first one aborts
-    the job with an error naming the file, the row and the reason, and no
-    output is left behind. Batches are converted on ``workers`` threads
+    Bad rows go to ``rejects_path`` when given; otherwise (or with
+    ``strict``) any bad row makes the job fail at the end with an error naming
+    the file, how many rows, the first one and its reason, and nothing is
+    written (see :func:`hpe_cli.io.rejects.rejects_rule`). Batches are converted on ``workers`` threads
     (numpy and Arrow release the GIL) while this thread reads and writes in
     order; at most ``workers + 1`` batches are in flight, so memory stays flat.
     """
@@ -66,7 +67,8 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
 
     src = open_table(input_path, batch_size)
     mode = label_mode(src.columns, src.path)
-    rejects = Rejects(rejects_path, overwrite)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
+    csv_lines = src.path.suffix.lower() == ".csv"  # header = line 1
     summary = ConvertSummary()
     meta = {**system_metadata(target), "hpe:source_system": source.name, "hpe:input": str(src.path)}
     workers = workers or min(2, os.cpu_count() or 1)
@@ -75,12 +77,11 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
         out, reasons, labels = future.result()
         bad = np.flatnonzero(reasons != "") if reasons is not None else ()
         if len(bad):
-            if rejects.path is None:
-                raise HpeError(f"{src.path}: row {summary.rows + bad[0]}: {reasons[bad[0]]} "
-                               f"({bad.size} bad rows in this batch; use --rejects FILE to set them aside)")
             cols = {"row": summary.rows + bad}
-            cols.update({n: batch.column(n).take(bad).to_numpy(zero_copy_only=False) for n in batch.schema.names})
-            rejects.add(cols, reasons[bad])
+            if rejects.path is not None:
+                cols.update({n: batch.column(n).take(bad).to_numpy(zero_copy_only=False)
+                             for n in batch.schema.names})
+            rejects.add(cols, reasons[bad], lines=summary.rows + bad + 2 if csv_lines else None)
         summary.rows += batch.num_rows
         if out.num_rows or writer.rows == 0:
             writer.write(out)
@@ -105,6 +106,6 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
                 fut.cancel()
         if summary.rows == 0:
             raise HpeError(f"{src.path}: empty table (no rows)")
-        rejects.write()
+        rejects.finish()
     summary.rejects = dict(rejects.counts)
     return summary
