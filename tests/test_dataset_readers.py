@@ -211,3 +211,14 @@ def test_augment_rotate0_mat_gives_target_system_angles(aflw430, tmp_path):
     got = t.to_canonical(t.from_angles(f[["pitch", "yaw", "roll"]].to_numpy()))
     np.testing.assert_allclose(got, A, atol=1e-9)
     assert not np.allclose(f[["pitch", "yaw", "roll"]].to_numpy()[0], pose, atol=1.0)  # it did convert
+
+
+def test_w300lp_streams_in_chunks_same_table(w300_root):
+    from hpe_cli.datasets.w300lp import open_w300lp, read_w300lp
+
+    src = open_w300lp(w300_root, chunk=1)
+    batches = list(src.batches())
+    assert len(batches) == 3 and src.num_rows == 3 and src.dataset
+    f = pa.Table.from_batches(batches, schema=src.schema).to_pandas()
+    full = read_w300lp(w300_root)
+    pd.testing.assert_frame_equal(f[full.columns], full, check_dtype=False)

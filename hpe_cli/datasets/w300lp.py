@@ -102,18 +102,71 @@ def read_pts(path, fileobj=None) -> dict:
     return out
 
 
-def _entries_from_root(root: Path):
-    """(subset, flipped, relative name, opener) for every .mat of a root folder, sorted."""
-    out = []
-    for d in sorted(p for p in root.iterdir() if p.is_dir()):
-        sub = _subset_of(d.name)
-        if sub is None:
-            continue
-        for f in sorted(d.glob("*.mat")):
-            out.append((sub[0], sub[1], f"{d.name}/{f.name}", f))
-    if not out:
-        raise HpeError(f"{root}: no .mat files in {', '.join(SUBSETS)} or their _Flip folders")
-    return out
+class _Source:
+    """The .mat entries of a root folder or a zip, and a way to open each (zip kept open while iterating)."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.zip = self.path.is_file()
+        self.rows, self.pts = [], {}
+        if self.zip:
+            try:
+                with zipfile.ZipFile(self.path) as z:
+                    names = [n for n in z.namelist() if not n.endswith("/")]
+            except (zipfile.BadZipFile, OSError) as exc:
+                raise HpeError(f"{self.path}: not a readable zip archive ({exc})") from None
+            for n in sorted(names):
+                p = PurePosixPath(n)
+                if p.suffix.lower() != ".mat":
+                    continue
+                parts = p.parts
+                if len(parts) >= 3 and parts[-3] == "landmarks" and p.stem.endswith("_pts"):
+                    self.pts[(parts[-2], p.stem[:-4])] = n
+                    continue
+                sub = _subset_of(parts[-2]) if len(parts) >= 2 else None
+                if sub is not None:
+                    self.rows.append((sub[0], sub[1], f"{parts[-2]}/{p.name}", n))
+        else:
+            for d in sorted(p for p in self.path.iterdir() if p.is_dir()):
+                sub = _subset_of(d.name)
+                if sub is None:
+                    continue
+                for f in sorted(d.glob("*.mat")):
+                    self.rows.append((sub[0], sub[1], f"{d.name}/{f.name}", f))
+            lm_root = self.path / "landmarks"
+            if lm_root.is_dir():
+                for s in SUBSETS:
+                    for f in sorted((lm_root / s).glob("*_pts.mat")) if (lm_root / s).is_dir() else []:
+                        self.pts[(s, f.stem[:-4])] = f
+        if not self.rows:
+            raise HpeError(f"{self.path}: no .mat files in {', '.join(SUBSETS)} or their _Flip folders")
+
+    def read(self, rows, landmarks: bool):
+        """(poses, pt2d, landmark dicts) of ``rows``."""
+        z = zipfile.ZipFile(self.path) if self.zip else None
+        try:
+            poses, p2, lms = [], [], []
+            for sub, flipped, rel, member in rows:
+                if z is not None:
+                    where = f"{self.path}:{member}"
+                    try:
+                        rec = read_mat(where, io.BytesIO(z.read(member)))
+                    except (zipfile.BadZipFile, OSError, RuntimeError) as exc:
+                        raise HpeError(f"{where}: cannot read the member ({exc})") from None
+                else:
+                    rec = read_mat(member)
+                poses.append(rec["pose"])
+                p2.append(rec["pt2d"])
+                lm = None
+                key = (sub, PurePosixPath(str(member)).stem)
+                if landmarks and not flipped and key in self.pts:
+                    src = self.pts[key]
+                    lm = read_pts(f"{self.path}:{src}", io.BytesIO(z.read(src))) if z is not None else read_pts(src)
+                lms.append(lm)
+            return poses, p2, lms
+        finally:
+            if z is not None:
+                z.close()
 
 
 def _table(rows, poses, lms, path, pt2d_rows=None):
@@ -179,63 +232,51 @@ def read_w300lp(path, landmarks: bool = True, pt2d: bool = False):
         file's ``pt2d`` as ``pt2d{i}_x/y`` (from the original image, see the
         module notes). ``attrs["system"] == "300w_lp"``.
     """
-    path = Path(path)
-    if path.is_file():
-        return _read_zip(path, landmarks, pt2d)
-    rows = _entries_from_root(path)
-    poses, lms, p2 = [], [], []
-    lm_root = path / "landmarks"
-    for sub, flipped, rel, f in rows:
-        rec = read_mat(f)
-        poses.append(rec["pose"])
-        p2.append(rec["pt2d"])
-        lm = None
-        if landmarks and not flipped:
-            cand = lm_root / sub / f"{f.stem}_pts.mat"
-            if cand.is_file():
-                lm = read_pts(cand)
-        lms.append(lm)
-    return _table(rows, poses, lms, path, p2 if pt2d else None)
+    src = _Source(path)
+    poses, p2, lms = src.read(src.rows, landmarks)
+    return _table(src.rows, poses, lms, path, p2 if pt2d else None)
 
 
-def _read_zip(path: Path, landmarks: bool, pt2d: bool):
-    try:
-        z = zipfile.ZipFile(path)
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise HpeError(f"{path}: not a readable zip archive ({exc})") from None
-    with z:
-        names = [n for n in z.namelist() if not n.endswith("/")]
-        pts = {}
-        rows = []
-        for n in sorted(names):
-            p = PurePosixPath(n)
-            if p.suffix.lower() != ".mat":
-                continue
-            parts = p.parts
-            if len(parts) >= 3 and parts[-3] == "landmarks" and p.stem.endswith("_pts"):
-                pts[(parts[-2], p.stem[:-4])] = n
-                continue
-            if len(parts) < 2:
-                continue
-            sub = _subset_of(parts[-2])
-            if sub is None:
-                continue
-            rows.append((sub[0], sub[1], f"{parts[-2]}/{p.name}", n))
-        if not rows:
-            raise HpeError(f"{path}: no .mat members in {', '.join(SUBSETS)} or their _Flip folders")
-        poses, lms, p2 = [], [], []
-        for sub, flipped, rel, member in rows:
-            where = f"{path}:{member}"
-            try:
-                data = z.read(member)
-            except (zipfile.BadZipFile, OSError, RuntimeError) as exc:
-                raise HpeError(f"{where}: cannot read the member ({exc})") from None
-            rec = read_mat(where, io.BytesIO(data))
-            poses.append(rec["pose"])
-            p2.append(rec["pt2d"])
-            lm = None
-            key = (sub, PurePosixPath(member).stem)
-            if landmarks and not flipped and key in pts:
-                lm = read_pts(f"{path}:{pts[key]}", io.BytesIO(z.read(pts[key])))
-            lms.append(lm)
-    return _table(rows, poses, lms, path, p2 if pt2d else None)
+def open_w300lp(path, batch_size: int = 262_144, landmarks: bool = True, chunk: int = 2048):
+    """Stream 300W-LP (root or zip) as a :class:`~hpe_cli.io.readers.TableSource`, ``chunk`` files at a time.
+
+    The columns are those of :func:`read_w300lp` (without ``pt2d``); the
+    landmark columns are present when the dataset has any landmark file.
+    Memory is flat in the number of files.
+    """
+    import pyarrow as pa
+
+    from ..io.readers import TableSource
+
+    src = _Source(path)
+    chunk = max(1, min(int(chunk), int(batch_size)))
+    dims3 = 0
+    if landmarks and src.pts:
+        key = next(iter(src.pts))
+        s0 = src.pts[key]
+        if src.zip:
+            with zipfile.ZipFile(src.path) as z:
+                first = read_pts(f"{src.path}:{s0}", io.BytesIO(z.read(s0)))
+        else:
+            first = read_pts(s0)
+        dims3 = 0 if first["pts_3d"] is None else first["pts_3d"].shape[1]
+    probe = _table(src.rows[:0], [], [], path)
+    names = list(probe.columns)
+    if landmarks and src.pts:
+        names += [f"lm{i}_{a}" for i in range(68) for a in "xy"]
+        names += [f"lm3d{i}_{a}" for i in range(68) for a in "xyz"[:dims3]]
+    fields = [pa.field(n, pa.string()) if n in ("file", "image", "subset", "identity") else
+              pa.field(n, pa.bool_()) if n == "flipped" else pa.field(n, pa.int64()) if n == "k" else
+              pa.field(n, pa.float64()) for n in names]
+    schema = pa.schema(fields, metadata={b"hpe:system": SYSTEM.encode()})
+
+    def batches():
+        for start in range(0, len(src.rows), chunk):
+            rows = src.rows[start:start + chunk]
+            poses, _, lms = src.read(rows, landmarks)
+            f = _table(rows, poses, lms, path)
+            cols = [pa.array(f[n].to_numpy(), type=fd.type) if n in f.columns else
+                    pa.array(np.full(len(f), np.nan), type=fd.type) for n, fd in zip(names, fields)]
+            yield pa.RecordBatch.from_arrays(cols, schema=schema)
+
+    return TableSource(Path(path), schema, len(src.rows), batches, SYSTEM, dataset=True)

@@ -80,6 +80,8 @@ def _open_core(path, batch_size: int = DEFAULT_BATCH) -> TableSource:
     if not path.exists():
         raise HpeError(f"{path}: no such file or folder")
     dataset = _read_dataset(path)
+    if isinstance(dataset, TableSource):  # a dataset reader that streams
+        return dataset
     if dataset is not None:
         system = dataset.attrs.get("system")
         table = pa.Table.from_pandas(dataset, preserve_index=False)
@@ -123,10 +125,10 @@ def _read_dataset(path: Path):
 
         return read_mat_dir(path)
     if path.is_file() and name.endswith(".zip"):
-        from ..datasets.w300lp import is_w300lp_zip, read_w300lp
+        from ..datasets.w300lp import is_w300lp_zip, open_w300lp
 
         if is_w300lp_zip(path):
-            return read_w300lp(path)
+            return open_w300lp(path)
         raise HpeError(f"{path}: expected a 300W-LP zip with AFW/HELEN/IBUG/LFPW .mat members")
     is_biwi_file = path.is_file() and (name.endswith((".tgz", ".tar.gz")) or
                                        (name.startswith("frame_") and name.endswith(("_pose.txt", "_pose.bin"))))
@@ -135,10 +137,10 @@ def _read_dataset(path: Path):
 
         return read_mat_dir(path)
     if path.is_dir():
-        from ..datasets.w300lp import is_w300lp_root, read_w300lp
+        from ..datasets.w300lp import is_w300lp_root, open_w300lp
 
         if is_w300lp_root(path):
-            return read_w300lp(path)
+            return open_w300lp(path)
     from ..datasets.dad3dheads import is_dad3dheads, read_dad3dheads
 
     if is_dad3dheads(path):
