@@ -5,7 +5,7 @@ from pathlib import Path
 
 import click
 
-from ..io.columns import column_options
+from .table_options import column_options
 
 from .options import (batch_option, echo_summary, output_option, overwrite_option, progress, rejects_option,
                       system_option, verbosity_options)

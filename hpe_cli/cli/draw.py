@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from ..io.columns import column_options
+from .table_options import column_options
 
 from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_options, verbosity_options
 
