@@ -1,0 +1,288 @@
+"""``hpe evaluate``: read predictions and ground truth, join them, score them, write the outputs.
+
+Both tables are streamed batch by batch; each batch's labels go straight to
+canonical matrices (nine float64 columns per side) and only those, the key
+columns and the ``--by`` column stay in memory. The join is a pandas merge
+on the key columns; every metric is computed on whole columns.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import HpeError
+
+#: key columns tried in order when --key is not given
+DEFAULT_KEYS = ("image", "file")
+
+
+@dataclass
+class Side:
+    """One input table, read: canonical matrices, usability, keys."""
+
+    path: object
+    system: object
+    mode: str
+    canonical: np.ndarray  # (9, N) row-major canonical entries
+    ok: np.ndarray  # (N,) bool
+    reasons: np.ndarray | None  # (N,) object, '' when usable; None when every row is usable
+    keys: object  # pandas DataFrame of the key columns (or None)
+    by: np.ndarray | None
+    columns: list
+
+    @property
+    def n(self) -> int:
+        return self.canonical.shape[1]
+
+
+def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None, role="input"):
+    """Stream one table into a :class:`Side`."""
+    import pyarrow as pa
+
+    from ..io import ANGLE_COLS, MATRIX_COLS, label_columns_fast, label_mode, open_table
+    from ..rotation import soa
+
+    src = open_table(path, batch_size)
+    columns = src.columns
+    mode = label_mode(columns, src.path) if use == "auto" else use
+    need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
+    missing = [c for c in need if c not in columns]
+    if missing:
+        raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
+    keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else [])) if c in columns]
+    parts, oks, reasons, key_parts = [], [], [], []
+    any_bad = False
+    for batch in src.batches():
+        cols, ok, rs = label_columns_fast(batch, mode, radians)
+        n = batch.num_rows
+        if mode == "angles":
+            X = system.soa_to_canonical(system.soa_from_angles(*cols))
+        else:
+            X = system.soa_to_canonical([[cols[3 * i + j] for j in range(3)] for i in range(3)])
+        parts.append(np.stack(soa.columns(X, n)))
+        oks.append(ok)
+        if rs is not None:
+            any_bad = True
+        reasons.append(rs if rs is not None else n)
+        if keep:
+            key_parts.append(batch.select(keep))
+        if progress is not None:
+            progress.update(n)
+    canonical = np.concatenate(parts, axis=1) if parts else np.zeros((9, 0))
+    ok = np.concatenate(oks) if oks else np.zeros(0, dtype=bool)
+    rs_all = None
+    if any_bad:
+        rs_all = np.concatenate([r if isinstance(r, np.ndarray) else np.full(r, "", dtype=object) for r in reasons])
+    frame = None
+    if keep:
+        table = pa.Table.from_batches(key_parts, schema=pa.schema([src.schema.field(c) for c in keep])) \
+            if key_parts else pa.schema([src.schema.field(c) for c in keep]).empty_table()
+        frame = table.to_pandas()
+    by_values = frame[by].to_numpy() if (by and frame is not None and by in frame) else None
+    return Side(src.path, system, mode, canonical, ok, rs_all, frame, by_values, columns)
+
+
+def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path):
+    if keys:
+        for side_cols, p in ((gt_cols, gt_path), (pred_cols, pred_path)):
+            bad = [k for k in keys if k not in side_cols]
+            if bad:
+                raise HpeError(f"{p}: --key column(s) {', '.join(bad)} not in the table; "
+                               f"found: {', '.join(side_cols[:20])}")
+        return list(keys)
+    for k in DEFAULT_KEYS:
+        if k in pred_cols and k in gt_cols:
+            return [k]
+    return []
+
+
+def _check_unique(frame, keys, path):
+    dup = frame.duplicated(subset=keys, keep=False)
+    if dup.any():
+        idx = np.flatnonzero(dup.to_numpy())
+        first = frame.iloc[idx[0]]
+        same = [int(i) for i in idx if (frame.iloc[i][keys] == first[keys]).all()][:2]
+        what = ", ".join(f"{k}={first[k]!r}" for k in keys)
+        raise HpeError(f"{path}: row {same[0] + 1}: duplicate key {what} (again at row {same[1] + 1}); "
+                       f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
+
+
+def join(pred: Side, gt: Side, keys):
+    """Index arrays ``(gt_idx, pred_idx)`` (pred_idx -1 where missing) and the unmatched prediction rows."""
+    import pandas as pd
+
+    if not keys:
+        if pred.n != gt.n:
+            raise HpeError(f"{pred.path}: {pred.n} rows but {gt.path} has {gt.n}: without a shared 'image' or "
+                           "'file' column rows are paired by order, which needs equal counts; give --key COLUMN")
+        idx = np.arange(gt.n)
+        return idx, idx.copy(), np.zeros(0, dtype=np.int64)
+    g = gt.keys[keys].copy()
+    p = pred.keys[keys].copy()
+    for k in keys:  # a key read as numbers on one side and text on the other: compare as text
+        if g[k].dtype != p[k].dtype:
+            g[k] = g[k].astype(str)
+            p[k] = p[k].astype(str)
+    _check_unique(g, keys, gt.path)
+    _check_unique(p, keys, pred.path)
+    g["__g"] = np.arange(len(g))
+    p["__p"] = np.arange(len(p))
+    m = g.merge(p, on=keys, how="left", sort=False)
+    pidx = m["__p"].to_numpy(dtype=np.float64, na_value=np.nan)
+    gidx = m["__g"].to_numpy()
+    matched = np.zeros(len(p), dtype=bool)
+    found = ~np.isnan(pidx)
+    matched[pidx[found].astype(np.int64)] = True
+    pidx = np.where(found, pidx, -1).astype(np.int64)
+    return gidx, pidx, np.flatnonzero(~matched)
+
+
+def _reasons(side: Side, idx):
+    if side.reasons is None:
+        return np.full(len(idx), "", dtype=object)
+    return side.reasons[idx]
+
+
+def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, keys=(), protocols=None,
+                 align="none", by=None, yaw_bins=None, report=None, plots=None, rejects=None, use_pred="auto",
+                 use_gt="auto", radians=False, overwrite=False, batch_size=262_144, progress=None) -> dict:
+    """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report."""
+    import pandas as pd
+
+    from ..io import Rejects, check_output, write_json
+    from ..metrics.evaluate import check_protocols, evaluate_canonical
+    from ..metrics.protocols import PROTOCOLS
+
+    try:
+        protocols = check_protocols(protocols or None)
+    except ValueError as exc:
+        raise HpeError(str(exc)) from None
+    for p in (report if report != "-" else None, output):
+        if p:
+            check_output(p, overwrite)
+    if output:
+        from ..io import table_format
+
+        table_format(output)
+    if plots:
+        from ..io.eval_plots import check_plot_outputs
+
+        check_plot_outputs(plots, overwrite)
+    rej = Rejects(rejects, overwrite)
+
+    from ..io import open_table
+
+    pcols = open_table(pred_path, batch_size).columns
+    gcols = open_table(gt_path, batch_size).columns
+    keys = _choose_keys(list(keys or ()), pcols, gcols, pred_path, gt_path)
+    if by and by not in gcols and by not in pcols:
+        raise HpeError(f"{gt_path}: --by column {by!r} is in neither table; found: {', '.join(gcols[:20])}")
+    gt = read_side(gt_path, gt_system, use_gt, keys, by, radians, batch_size, progress, "gt")
+    pred = read_side(pred_path, pred_system, use_pred, keys, by if by not in gcols else None, radians,
+                     batch_size, progress, "pred")
+    gidx, pidx, unmatched = join(pred, gt, keys)
+
+    missing = pidx < 0
+    g_ok = gt.ok[gidx]
+    p_ok = np.where(missing, False, pred.ok[np.maximum(pidx, 0)])
+    valid = ~missing & g_ok & p_ok
+    invalid = ~missing & ~valid
+
+    def key_cols(side, rows):
+        if keys:
+            return {k: side.keys[k].to_numpy()[rows] for k in keys}
+        return {"row": rows + 1}
+
+    if missing.any():
+        rows = gidx[missing]
+        rej.add({**key_cols(gt, rows), "side": np.full(len(rows), "gt", dtype=object), "row": rows + 1},
+                np.full(len(rows), "missing: no prediction for this ground-truth row", dtype=object))
+    if invalid.any():
+        rows = gidx[invalid]
+        prow = pidx[invalid]
+        gr = _reasons(gt, rows)
+        pr = _reasons(pred, prow)
+        why = np.where(~gt.ok[rows], "invalid: gt " + gr, "invalid: prediction " + pr)
+        rej.add({**key_cols(gt, rows), "side": np.where(~gt.ok[rows], "gt", "pred").astype(object),
+                 "row": np.where(~gt.ok[rows], rows, prow) + 1}, why.astype(object))
+    if len(unmatched):
+        rej.add({**key_cols(pred, unmatched), "side": np.full(len(unmatched), "pred", dtype=object),
+                 "row": unmatched + 1},
+                np.full(len(unmatched), "unmatched: prediction with no ground-truth row", dtype=object))
+
+    gv, pv = gidx[valid], pidx[valid]
+    P = [[pred.canonical[3 * i + j][pv] for j in range(3)] for i in range(3)]
+    G = [[gt.canonical[3 * i + j][gv] for j in range(3)] for i in range(3)]
+    by_values = None
+    if by:
+        by_values = gt.by[gv] if gt.by is not None else pred.by[pv]
+    part, rows = evaluate_canonical(P, G, gt_system=gt_system, protocols=protocols, align=align, by=by_values,
+                                    by_name=by or "by", yaw_bins=yaw_bins)
+    result = {"n": {"gt": gt.n, "pred": pred.n, "pairs": int(valid.sum()), "missing": int(missing.sum()),
+                    "invalid": int(invalid.sum()), "unmatched_pred": int(len(unmatched))},
+              "systems": {"pred": pred_system.name, "gt": gt_system.name}}
+    result.update(part)
+    result["inputs"] = {"pred": str(pred.path), "gt": str(gt.path), "key": keys or "row order",
+                        "columns": {"pred": pred.mode, "gt": gt.mode}}
+    result["notes"] = [f"{name}: {note}" for name in protocols for note in PROTOCOLS[name].notes]
+    if rej.counts:
+        result["rejects"] = dict(rej.counts)
+
+    if output:
+        _write_rows(output, rows, {k: v[valid] for k, v in key_cols(gt, gidx).items()},
+                    by, by_values, gt_system, pred_system, overwrite, batch_size)
+    rej.write()
+    if plots:
+        from ..io.eval_plots import write_eval_plots
+
+        write_eval_plots(plots, rows, result, gt_system, overwrite=overwrite)
+    if report == "-":
+        import json
+
+        import click
+
+        click.echo(json.dumps(result, indent=2, default=_json_default))
+    elif report:
+        write_json(result, report, overwrite=overwrite)
+    return result
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _write_rows(output, rows, keycols, by, by_values, gt_system, pred_system, overwrite, batch_size):
+    """One row per valid pair: keys, both labels in the GT system, per-angle errors, geodesic, maev."""
+    import pyarrow as pa
+
+    from ..io import TableWriter, system_metadata
+
+    cols = dict(keycols)
+    if by and by not in cols:
+        cols[by] = by_values
+    for k, a in enumerate(("pitch", "yaw", "roll")):
+        cols[f"gt_{a}"] = rows.gt_angles[:, k]
+    for k, a in enumerate(("pitch", "yaw", "roll")):
+        cols[f"pred_{a}"] = rows.pred_angles[:, k]
+    for k, a in enumerate(("pitch", "yaw", "roll")):
+        cols[f"err_{a}"] = rows.mae_wrapped[:, k]
+    cols["geodesic"] = rows.geodesic
+    for k, a in enumerate(("left", "down", "front")):
+        cols[f"maev_{a}"] = rows.maev[:, k]
+    cols["frobenius"] = rows.frobenius
+    meta = {**system_metadata(gt_system), "hpe:evaluate_pred_system": pred_system.name,
+            "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution); err_* are "
+                                 "wrapped |pred - gt| in [0, 180]; geodesic and maev_* in degrees"}
+    n = rows.n
+    arrays = {k: (pa.array(v) if not isinstance(v, pa.Array) else v) for k, v in cols.items()}
+    table = pa.table(arrays)
+    with TableWriter(output, overwrite, meta) as w:
+        if n == 0:
+            w.write(table)
+        for start in range(0, n, batch_size):
+            w.write(table.slice(start, batch_size))
