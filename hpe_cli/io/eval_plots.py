@@ -82,7 +82,8 @@ def write_eval_plots(folder, rows, report: dict, gt_system, overwrite: bool = Fa
     for k, (name, err) in enumerate(series):
         ax = fig.add_subplot(2, 2, k + 1)
         if n:
-            ax.scatter(yaw[pick], err[pick], s=3, alpha=0.3, color="#3b6ea8", linewidths=0)
+            ax.scatter(yaw[pick], err[pick], s=(3 if len(pick) > 2000 else 14), alpha=(0.3 if len(pick) > 2000 else 0.7),
+                       color="#3b6ea8", linewidths=0)
             c, m = _bin_medians(yaw, err, edges)
             ax.plot(c, m, color="#c0392b", linewidth=1.5, label="median per 5-degree bin")
             ax.legend(fontsize=8, loc="upper left")
