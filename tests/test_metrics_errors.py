@@ -141,3 +141,14 @@ def test_api_counts_invalid_rows_and_rejects_bad_shapes():
         evaluate(P[:4], G, pred_system="300w_lp", gt_system="300w_lp")
     with pytest.raises(ValueError, match="unknown protocol"):
         evaluate(P, G, pred_system="300w_lp", gt_system="300w_lp", protocols=["nope"])
+
+
+def test_rotvec_matches_cv2_rodrigues_up_to_180():
+    import cv2
+
+    R = _random(1000, 40)
+    ax = np.array([0.3, -0.5, 0.81]) / np.linalg.norm([0.3, -0.5, 0.81])
+    near = Rotation.from_rotvec(np.outer([np.pi - 1e-9, -(np.pi - 1e-5), np.pi / 2, 1e-3], ax)).as_matrix()
+    R = np.concatenate([R, near])
+    oracle = np.array([cv2.Rodrigues(r)[0].ravel() for r in R]) * 180 / np.pi
+    np.testing.assert_allclose(re_.rotvec_deg(R), oracle, atol=1e-6)

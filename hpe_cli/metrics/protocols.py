@@ -132,9 +132,12 @@ def _sixdrepnet_euler(R) -> np.ndarray:
 
 def _sixdrepnet_min(pred, gt) -> np.ndarray:
     """min(|gt - p|, |p + 360 - gt|, |p - 360 - gt|, |p + 180 - gt|, |p - 180 - gt|) per angle."""
-    d = pred - gt
-    return np.minimum.reduce([np.abs(d), np.abs(d + 360.0), np.abs(d - 360.0), np.abs(d + 180.0),
-                              np.abs(d - 180.0)])
+    # min(|d + c|, |d - c|) = ||d| - c| exactly (c >= 0), so three terms give the five
+    a = np.abs(pred - gt)
+    out = np.abs(a - 180.0)
+    np.minimum(out, a, out=out)
+    np.minimum(out, np.abs(a - 360.0), out=out)
+    return out
 
 
 # ---------------------------------------------------------------------------- protocols
@@ -269,10 +272,8 @@ def img2pose(pair: PosePair) -> ProtocolRows:
     degrees are skipped. The numbers are rotation-vector components, not
     Euler angles: the report labels them ``rotvec_x/y/z``.
     """
-    from scipy.spatial.transform import Rotation
-
-    rp = Rotation.from_matrix(pair.array("opencv", "pred")).as_rotvec() * _DEG
-    rg = Rotation.from_matrix(pair.array("opencv", "gt")).as_rotvec() * _DEG
+    rp = re_.rotvec_deg(pair.stored("opencv", "pred"))
+    rg = re_.rotvec_deg(pair.stored("opencv", "gt"))
     g300, _ = pair.angles("300w_lp", "gt")
     return ProtocolRows(re_.abs_error(rp, rg), _within_99(g300), angle_labels=("rotvec_x", "rotvec_y", "rotvec_z"))
 

@@ -147,3 +147,48 @@ def best_of_two_error(pred1, pred2, gt) -> tuple[np.ndarray, np.ndarray]:
     second = e2.mean(axis=-1) < e1.mean(axis=-1)
     e = np.where(second[..., None], e2, e1)
     return np.minimum(e, 360.0 - e), second
+
+
+def rotvec_deg(R) -> np.ndarray:
+    """Rotation vectors (axis times angle, degrees) of rotations, batched; the log map ``cv2.Rodrigues`` computes.
+
+    Rows with ``cos(theta) >= 0`` take the axis from the skew part
+    (``(R - R.T) / 2 = sin(theta) [a]_x``); rows past 90 degrees from the
+    symmetric part (``(R + R.T) / 2 - cos(theta) I = (1 - cos(theta)) a a.T``),
+    which stays accurate up to 180 degrees, with the sign of ``a`` taken
+    from the skew part.
+
+    Parameters
+    ----------
+    R : ndarray (N, 3, 3) or nested list
+
+    Returns
+    -------
+    ndarray (N, 3)
+        Angle in [0, 180] degrees times the unit axis.
+    """
+    R = as_nested(R)
+    sx = 0.5 * (R[2][1] - R[1][2])
+    sy = 0.5 * (R[0][2] - R[2][0])
+    sz = 0.5 * (R[1][0] - R[0][1])
+    cos = 0.5 * (R[0][0] + R[1][1] + R[2][2] - 1.0)
+    sin = np.sqrt(sx * sx + sy * sy + sz * sz)
+    theta = np.arctan2(sin, cos)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.where(sin > 1e-300, theta / sin, 1.0)
+    out = np.stack(np.broadcast_arrays(sx * k, sy * k, sz * k), -1)
+    far = np.flatnonzero(cos < 0.0)
+    if far.size:
+        c = cos[far]
+        Rf = [[np.broadcast_to(R[i][j], cos.shape)[far] for j in range(3)] for i in range(3)]
+        d0, d1, d2 = Rf[0][0] - c, Rf[1][1] - c, Rf[2][2] - c  # (1 - cos) a_i^2
+        o01 = 0.5 * (Rf[0][1] + Rf[1][0])  # (1 - cos) a_i a_j
+        o02 = 0.5 * (Rf[0][2] + Rf[2][0])
+        o12 = 0.5 * (Rf[1][2] + Rf[2][1])
+        kk = np.argmax(np.stack([d0, d1, d2]), axis=0)  # the largest |a_k|: divide by it
+        col = [np.choose(kk, [d0, o01, o02]), np.choose(kk, [o01, d1, o12]), np.choose(kk, [o02, o12, d2])]
+        scale = 1.0 / np.sqrt(np.maximum(np.choose(kk, [d0, d1, d2]), 1e-300) * (1.0 - c))
+        dot = col[0] * sx[far] + col[1] * sy[far] + col[2] * sz[far]
+        f = np.where(dot < 0, -scale, scale) * theta[far]
+        out[far] = np.stack([col[0] * f, col[1] * f, col[2] * f], -1)
+    return out * _DEG

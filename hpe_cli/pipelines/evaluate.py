@@ -2,8 +2,8 @@
 
 Both tables are streamed batch by batch; each batch's labels go straight to
 canonical matrices (nine float64 columns per side) and only those, the key
-columns and the ``--by`` column stay in memory. The join is a pandas merge
-on the key columns; every metric is computed on whole columns.
+columns and the ``--by`` column stay in memory. The join encodes the key columns
+with Arrow (dictionary encoding) and pairs rows by numpy indexing; every metric is computed on whole columns.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ class Side:
     canonical: np.ndarray  # (9, N) row-major canonical entries
     ok: np.ndarray  # (N,) bool
     reasons: np.ndarray | None  # (N,) object, '' when usable; None when every row is usable
-    keys: object  # pandas DataFrame of the key columns (or None)
+    keys: object  # pyarrow Table of the key (and --by) columns, or None
     by: np.ndarray | None
     columns: list
 
@@ -74,13 +74,12 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     rs_all = None
     if any_bad:
         rs_all = np.concatenate([r if isinstance(r, np.ndarray) else np.full(r, "", dtype=object) for r in reasons])
-    frame = None
+    table = None
     if keep:
         table = pa.Table.from_batches(key_parts, schema=pa.schema([src.schema.field(c) for c in keep])) \
             if key_parts else pa.schema([src.schema.field(c) for c in keep]).empty_table()
-        frame = table.to_pandas()
-    by_values = frame[by].to_numpy() if (by and frame is not None and by in frame) else None
-    return Side(src.path, system, mode, canonical, ok, rs_all, frame, by_values, columns)
+    by_values = table.column(by).to_numpy() if (by and table is not None and by in table.column_names) else None
+    return Side(src.path, system, mode, canonical, ok, rs_all, table, by_values, columns)
 
 
 def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path):
@@ -97,45 +96,57 @@ def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path):
     return []
 
 
-def _check_unique(frame, keys, path):
-    dup = frame.duplicated(subset=keys, keep=False)
+def _key_codes(gt_keys, pred_keys, keys):
+    """One int64 code per row of each side; equal codes iff all key columns are equal (Arrow hashing)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    n_g = gt_keys.num_rows
+    code = None
+    for k in keys:
+        a = gt_keys.column(k).combine_chunks()
+        b = pred_keys.column(k).combine_chunks()
+        if a.type != b.type:  # a key read as numbers on one side and text on the other: compare as text
+            a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
+        enc = pa.concat_arrays([a, b]).dictionary_encode(null_encoding="encode")
+        c = enc.indices.to_numpy(zero_copy_only=False).astype(np.int64)
+        m = len(enc.dictionary)
+        if code is None:
+            code = c
+        else:
+            code = code * m + c
+            code = np.unique(code, return_inverse=True)[1].astype(np.int64).reshape(-1)
+    return code[:n_g], code[n_g:]
+
+
+def _check_unique(codes, table, keys, path):
+    counts = np.bincount(codes)
+    dup = counts[codes] > 1
     if dup.any():
-        idx = np.flatnonzero(dup.to_numpy())
-        first = frame.iloc[idx[0]]
-        same = [int(i) for i in idx if (frame.iloc[i][keys] == first[keys]).all()][:2]
-        what = ", ".join(f"{k}={first[k]!r}" for k in keys)
-        raise HpeError(f"{path}: row {same[0] + 1}: duplicate key {what} (again at row {same[1] + 1}); "
+        first = int(np.flatnonzero(dup)[0])
+        again = int(np.flatnonzero(codes == codes[first])[1])
+        what = ", ".join(f"{k}={table.column(k)[first].as_py()!r}" for k in keys)
+        raise HpeError(f"{path}: row {first + 1}: duplicate key {what} (again at row {again + 1}); "
                        f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
 
 
 def join(pred: Side, gt: Side, keys):
     """Index arrays ``(gt_idx, pred_idx)`` (pred_idx -1 where missing) and the unmatched prediction rows."""
-    import pandas as pd
-
     if not keys:
         if pred.n != gt.n:
             raise HpeError(f"{pred.path}: {pred.n} rows but {gt.path} has {gt.n}: without a shared 'image' or "
                            "'file' column rows are paired by order, which needs equal counts; give --key COLUMN")
         idx = np.arange(gt.n)
         return idx, idx.copy(), np.zeros(0, dtype=np.int64)
-    g = gt.keys[keys].copy()
-    p = pred.keys[keys].copy()
-    for k in keys:  # a key read as numbers on one side and text on the other: compare as text
-        if g[k].dtype != p[k].dtype:
-            g[k] = g[k].astype(str)
-            p[k] = p[k].astype(str)
-    _check_unique(g, keys, gt.path)
-    _check_unique(p, keys, pred.path)
-    g["__g"] = np.arange(len(g))
-    p["__p"] = np.arange(len(p))
-    m = g.merge(p, on=keys, how="left", sort=False)
-    pidx = m["__p"].to_numpy(dtype=np.float64, na_value=np.nan)
-    gidx = m["__g"].to_numpy()
-    matched = np.zeros(len(p), dtype=bool)
-    found = ~np.isnan(pidx)
-    matched[pidx[found].astype(np.int64)] = True
-    pidx = np.where(found, pidx, -1).astype(np.int64)
-    return gidx, pidx, np.flatnonzero(~matched)
+    cg, cp = _key_codes(gt.keys, pred.keys, keys)
+    _check_unique(cg, gt.keys, keys, gt.path)
+    _check_unique(cp, pred.keys, keys, pred.path)
+    m = int(max(cg.max(initial=-1), cp.max(initial=-1))) + 1
+    pred_pos = np.full(m, -1, dtype=np.int64)
+    pred_pos[cp] = np.arange(len(cp))
+    gt_has = np.zeros(m, dtype=bool)
+    gt_has[cg] = True
+    return np.arange(len(cg)), pred_pos[cg], np.flatnonzero(~gt_has[cp])
 
 
 def _reasons(side: Side, idx):
@@ -148,8 +159,6 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
                  align="none", by=None, yaw_bins=None, report=None, plots=None, rejects=None, use_pred="auto",
                  use_gt="auto", radians=False, overwrite=False, batch_size=262_144, progress=None) -> dict:
     """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report."""
-    import pandas as pd
-
     from ..io import Rejects, check_output, write_json
     from ..metrics.evaluate import check_protocols, evaluate_canonical
     from ..metrics.protocols import PROTOCOLS
@@ -189,9 +198,10 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     valid = ~missing & g_ok & p_ok
     invalid = ~missing & ~valid
 
-    def key_cols(side, rows):
+    def key_cols(side, rows, arrow=False):
         if keys:
-            return {k: side.keys[k].to_numpy()[rows] for k in keys}
+            return {k: (side.keys.column(k).take(rows) if arrow else
+                        side.keys.column(k).take(rows).to_numpy(zero_copy_only=False)) for k in keys}
         return {"row": rows + 1}
 
     if missing.any():
@@ -230,7 +240,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         result["rejects"] = dict(rej.counts)
 
     if output:
-        _write_rows(output, rows, {k: v[valid] for k, v in key_cols(gt, gidx).items()},
+        _write_rows(output, rows, key_cols(gt, gidx[valid], arrow=True),
                     by, by_values, gt_system, pred_system, overwrite, batch_size)
     rej.write()
     if plots:
@@ -279,7 +289,7 @@ def _write_rows(output, rows, keycols, by, by_values, gt_system, pred_system, ov
             "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution); err_* are "
                                  "wrapped |pred - gt| in [0, 180]; geodesic and maev_* in degrees"}
     n = rows.n
-    arrays = {k: (pa.array(v) if not isinstance(v, pa.Array) else v) for k, v in cols.items()}
+    arrays = {k: (v if isinstance(v, (pa.Array, pa.ChunkedArray)) else pa.array(v)) for k, v in cols.items()}
     table = pa.table(arrays)
     with TableWriter(output, overwrite, meta) as w:
         if n == 0:
