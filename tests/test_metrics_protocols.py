@@ -21,6 +21,7 @@ from hpe_cli.metrics.protocols import PROTOCOLS
 from hpe_cli.rotation.systems import get_system
 
 F = np.diag([1.0, -1.0, -1.0])
+pytestmark = pytest.mark.filterwarnings("ignore:Gimbal lock detected")
 
 
 def _synthetic():
