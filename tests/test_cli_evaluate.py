@@ -131,6 +131,16 @@ def test_missing_invalid_unmatched_counted_and_rejected(tmp_path):
     assert by_image["img003.jpg"].startswith("missing")
     assert by_image["img005.jpg"].startswith("invalid: prediction") and "pitch" in by_image["img005.jpg"]
     assert by_image["extra.jpg"].startswith("unmatched")
+    # file lines: header = line 1, so GT row img003 (index 3) is line 5
+    assert dict(zip(rj["image"], rj["line"]))["img003.jpg"] == 5
+    # without --rejects (or with --strict) any set-aside row is an error and nothing is written
+    out = tmp_path / "e.parquet"
+    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", out, "--protocol", "hopenet")
+    assert r.exit_code == 1 and "--rejects" in r.output and not out.exists()
+    assert len(r.output.strip().splitlines()) == 1
+    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", out, "--rejects",
+            tmp_path / "r2.csv", "--strict")
+    assert r.exit_code == 1 and not out.exists()
 
 
 def test_matrix_columns_non_rotation_is_invalid(tmp_path):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import click
 
 from .options import SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, \
-    rejects_option, verbosity_options
+    rejects_options, verbosity_options
 
 _PROTOCOL_NAMES = ("hopenet", "fsanet", "6drepnet", "6drepnet360", "directmhp", "whenet", "opal23",
                    "headposeplus", "img2pose", "dad3dheads")
@@ -38,7 +38,7 @@ def _split_keys(ctx, param, value):
               help="Write the report as JSON; '-' prints it (the table then goes to stderr).")
 @click.option("--plots", type=click.Path(file_okay=False),
               help="Folder for error-vs-yaw, geodesic CDF and error histogram PNGs plus index.html.")
-@rejects_option
+@rejects_options
 @click.option("--columns", "use", type=click.Choice(["auto", "angles", "matrix"]), default="auto",
               show_default=True, help="Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).")
 @click.option("--pred-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for PRED.")
@@ -48,7 +48,7 @@ def _split_keys(ctx, param, value):
 @batch_option
 @verbosity_options
 def evaluate(pred, gt, output, pred_system, gt_system, keys, protocols, align, by, yaw_bins, report, plots, rejects,
-             use, pred_columns, gt_columns, radians, overwrite, batch_size, verbose, quiet):
+             use, pred_columns, gt_columns, radians, overwrite, batch_size, verbose, quiet, strict):
     """Score predictions PRED against ground truth GT, each in its own system.
 
     PRED and GT are any tables hpe reads (.parquet, .csv, a folder of .mat
@@ -56,8 +56,10 @@ def evaluate(pred, gt, output, pred_system, gt_system, keys, protocols, align, b
     Every rotation is brought to one frame through its matrix, so the two
     sides may use different conventions. Rows are joined on --key; a GT row
     without a prediction is 'missing', a row that is not a rotation (NaN, not
-    orthonormal, det -1) is 'invalid': both are counted and written to
-    --rejects with their reason. Duplicate keys are an error.
+    orthonormal, det -1) is 'invalid', a prediction without a GT row is
+    'unmatched': all are counted and written to --rejects with their file,
+    line and reason (without --rejects any of them is an error, exit 1, as
+    in every hpe command). Duplicate keys are an error.
 
     \b
     Metrics (every run; degrees):
@@ -105,7 +107,8 @@ def evaluate(pred, gt, output, pred_system, gt_system, keys, protocols, align, b
         result = run_evaluate(pred, gt, pred_system=pred_system, gt_system=gt_system, output=output, keys=keys,
                               protocols=protos, align=align, by=by, yaw_bins=yaw_bins, report=report, plots=plots,
                               rejects=rejects, use_pred=pred_columns or use, use_gt=gt_columns or use,
-                              radians=radians, overwrite=overwrite, batch_size=batch_size, progress=bar)
+                              radians=radians, overwrite=overwrite, batch_size=batch_size, progress=bar,
+                              strict=strict)
     finally:
         bar.close()
     if not quiet:

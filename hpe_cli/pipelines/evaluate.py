@@ -30,6 +30,8 @@ class Side:
     keys: object  # pyarrow Table of the key (and --by) columns, or None
     by: np.ndarray | None
     columns: list
+    lines: np.ndarray  # (N,) 1-based file line of each row (header = line 1)
+    unreadable: list  # rows the reader could not parse: (line, reason)
 
     @property
     def n(self) -> int:
@@ -41,9 +43,10 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     import pyarrow as pa
 
     from ..io import ANGLE_COLS, MATRIX_COLS, label_columns_fast, label_mode, open_table
+    from ..io.readers import LINE_COL
     from ..rotation import soa
 
-    src = open_table(path, batch_size)
+    src = open_table(path, batch_size, with_lines=True)
     columns = src.columns
     mode = label_mode(columns, src.path) if use == "auto" else use
     need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
@@ -51,9 +54,11 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     if missing:
         raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
     keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else [])) if c in columns]
-    parts, oks, reasons, key_parts = [], [], [], []
+    parts, oks, reasons, key_parts, lines, unreadable = [], [], [], [], [], []
     any_bad = False
-    for batch in src.batches():
+    for batch, bad_rows in src.batches_with_rejects():
+        unreadable += [(r.line, r.reason) for r in bad_rows]
+        lines.append(batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64))
         cols, ok, rs = label_columns_fast(batch, mode, radians)
         n = batch.num_rows
         if mode == "angles":
@@ -79,7 +84,8 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
         table = pa.Table.from_batches(key_parts, schema=pa.schema([src.schema.field(c) for c in keep])) \
             if key_parts else pa.schema([src.schema.field(c) for c in keep]).empty_table()
     by_values = table.column(by).to_numpy() if (by and table is not None and by in table.column_names) else None
-    return Side(src.path, system, mode, canonical, ok, rs_all, table, by_values, columns)
+    line_arr = np.concatenate(lines) if lines else np.zeros(0, dtype=np.int64)
+    return Side(src.path, system, mode, canonical, ok, rs_all, table, by_values, columns, line_arr, unreadable)
 
 
 def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path):
@@ -157,7 +163,8 @@ def _reasons(side: Side, idx):
 
 def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, keys=(), protocols=None,
                  align="none", by=None, yaw_bins=None, report=None, plots=None, rejects=None, use_pred="auto",
-                 use_gt="auto", radians=False, overwrite=False, batch_size=262_144, progress=None) -> dict:
+                 use_gt="auto", radians=False, overwrite=False, batch_size=262_144, progress=None,
+                 strict=False) -> dict:
     """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report."""
     from ..io import Rejects, check_output, write_json
     from ..metrics.evaluate import check_protocols, evaluate_canonical
@@ -178,7 +185,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         from ..io.eval_plots import check_plot_outputs
 
         check_plot_outputs(plots, overwrite)
-    rej = Rejects(rejects, overwrite)
+    rej = Rejects(rejects, overwrite, strict=strict, source=gt_path)
 
     from ..io import open_table
 
@@ -204,22 +211,30 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
                         side.keys.column(k).take(rows).to_numpy(zero_copy_only=False)) for k in keys}
         return {"row": rows + 1}
 
+    for side, name in ((gt, "gt"), (pred, "pred")):
+        if side.unreadable:
+            ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
+            rej.add({"side": np.full(len(ln), name, dtype=object), "input": np.full(len(ln), str(side.path),
+                                                                                    dtype=object), "line": ln},
+                    np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln)
     if missing.any():
         rows = gidx[missing]
-        rej.add({**key_cols(gt, rows), "side": np.full(len(rows), "gt", dtype=object), "row": rows + 1},
+        rej.add({**key_cols(gt, rows), "side": np.full(len(rows), "gt", dtype=object),
+                 "input": np.full(len(rows), str(gt.path), dtype=object), "line": gt.lines[rows]},
                 np.full(len(rows), "missing: no prediction for this ground-truth row", dtype=object))
     if invalid.any():
         rows = gidx[invalid]
         prow = pidx[invalid]
-        gr = _reasons(gt, rows)
-        pr = _reasons(pred, prow)
-        why = np.where(~gt.ok[rows], "invalid: gt " + gr, "invalid: prediction " + pr)
-        rej.add({**key_cols(gt, rows), "side": np.where(~gt.ok[rows], "gt", "pred").astype(object),
-                 "row": np.where(~gt.ok[rows], rows, prow) + 1}, why.astype(object))
+        gt_bad = ~gt.ok[rows]
+        why = np.where(gt_bad, "invalid: gt " + _reasons(gt, rows), "invalid: prediction " + _reasons(pred, prow))
+        rej.add({**key_cols(gt, rows), "side": np.where(gt_bad, "gt", "pred").astype(object),
+                 "input": np.where(gt_bad, str(gt.path), str(pred.path)).astype(object),
+                 "line": np.where(gt_bad, gt.lines[rows], pred.lines[prow])}, why.astype(object))
     if len(unmatched):
         rej.add({**key_cols(pred, unmatched), "side": np.full(len(unmatched), "pred", dtype=object),
-                 "row": unmatched + 1},
+                 "input": np.full(len(unmatched), str(pred.path), dtype=object), "line": pred.lines[unmatched]},
                 np.full(len(unmatched), "unmatched: prediction with no ground-truth row", dtype=object))
+    rej.check()  # without --rejects (or with --strict) any set-aside row is an error: nothing is written
 
     gv, pv = gidx[valid], pidx[valid]
     P = [[pred.canonical[3 * i + j][pv] for j in range(3)] for i in range(3)]
