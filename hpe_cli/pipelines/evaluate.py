@@ -301,7 +301,8 @@ def _write_rows(output, rows, keycols, by, by_values, gt_system, pred_system, ov
         cols[f"maev_{a}"] = rows.maev[:, k]
     cols["frobenius"] = rows.frobenius
     meta = {**system_metadata(gt_system), "hpe:evaluate_pred_system": pred_system.name,
-            "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution); err_* are "
+            "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution; pred after "
+                                 "--align); err_* are "
                                  "wrapped |pred - gt| in [0, 180]; geodesic and maev_* in degrees"}
     n = rows.n
     arrays = {k: (v if isinstance(v, (pa.Array, pa.ChunkedArray)) else pa.array(v)) for k, v in cols.items()}
