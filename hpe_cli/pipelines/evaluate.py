@@ -35,7 +35,7 @@ class Side:
 
     @property
     def n(self) -> int:
-        return self.canonical.shape[1]
+        return len(self.ok)
 
 
 def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None, role="input"):
@@ -239,6 +239,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     gv, pv = gidx[valid], pidx[valid]
     P = [[pred.canonical[3 * i + j][pv] for j in range(3)] for i in range(3)]
     G = [[gt.canonical[3 * i + j][gv] for j in range(3)] for i in range(3)]
+    pred.canonical = gt.canonical = None  # the pairs hold their own copies now
     by_values = None
     if by:
         by_values = gt.by[gv] if gt.by is not None else pred.by[pv]
