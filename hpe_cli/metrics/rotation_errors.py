@@ -10,8 +10,10 @@ Identities used (and tested):
 * ``geodesic``: the angle of ``P @ G.T``; equal to the angle of ``G.T @ P``.
 * ``frobenius``: ``||I - P @ G.T||_F = ||G - P||_F = 2*sqrt(2)*sin(theta/2)``.
 * ``maev``: the angle between column ``j`` of ``P`` and of ``G`` (the head's
-  left, up and front axes in camera coordinates; TriNet's "MAEV",
-  6DRepNet360's "VMAE" Vec1..Vec3).
+  left, up/down and front axes in camera coordinates): TriNet's vector errors
+  (chuzcjoe/TriNet ``computeMAE.py``, ``W300_Get_MAE_NPY``: ``acos(clip(gt_v . pred_v))``
+  for the left, bottom and front column vectors) and 6DRepNet360's "VMAE"
+  Vec1..Vec3 (``sixdrepnet360/test.py``).
 """
 from __future__ import annotations
 
