@@ -19,6 +19,7 @@ COMMANDS = {
     "draw": "hpe_cli.cli.draw:draw",
     "augment": "hpe_cli.cli.augment:augment",
     "infer": "hpe_cli.cli.infer:infer",
+    "export": "hpe_cli.cli.export:export",
 }
 
 
