@@ -793,6 +793,11 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
                                f"({'; '.join(f'{r}: {k}' for r, k in c.items())})")
             exported = _exported_frame(rows, done, ang, conv, rel, pbox, osz, W, H, lm)
             notes_extra = layout.finish(exported, final_root)
+            if not layout.full_frames:
+                # every crop's box in the source frame's pixels (exclusive ends) and its written size
+                exported[["split", "file", "source", "image", "bbox_x", "bbox_y", "bbox_w", "bbox_h", "crop_x0",
+                          "crop_y0", "crop_x1", "crop_y1", "out_w", "out_h", "image_width", "image_height"]].to_csv(
+                    stage / "crops.csv", index=False)
             if layout.name == "hf":
                 kinds = sorted(set(rows["kind"].iloc[done].tolist()))
                 layout.write_card(exported, system, notes, {k: LICENCES.get(k, LICENCES["table"]) for k in kinds},

@@ -131,7 +131,8 @@ class HFLayout(Layout):
                 y += [f"  - name: {name}", f"    dtype: {f['dtype']}"]
         y += ["  splits:"]
         for split, n in counts.items():
-            y += [f"  - name: {split}", f"    num_examples: {int(n)}"]
+            nbytes = sum(f.stat().st_size for f in (self.root / "data").glob(f"{split}-*.parquet"))
+            y += [f"  - name: {split}", f"    num_bytes: {nbytes}", f"    num_examples: {int(n)}"]
         y += ["---", "", "# Head-pose crops exported by `hpe export --layout hf`", ""]
         d = system.describe()
         y += ["## Labels", "",

@@ -13,8 +13,10 @@ and builds ``get_R(pitch, yaw, roll)``, and crops loosely around ``min/max`` of 
 holds ``Pose_Para`` (1 x 7: pitch, yaw, roll in radians, then tdx, tdy, tdz, scale, NaN where the source has
 none) and ``pt2d`` (2 x K, **only the visible points**, in the written image's pixels: an invisible AFLW2000
 point stored as -1 would pull the loader's min/max box to the image corner). The written image is a crop
-around the landmarks wide enough for the loader's loosest crop (k = 0.4: 0.24 w at the sides, 0.8 h above,
-0.24 h below): margins 0.5 w at the sides, 0.9 h above and 0.35 h below the visible landmarks. Hopenet and
+around the landmarks wide enough for the loaders' loosest crops (which grow ``x_max``/``y_max`` from the
+already-moved ``x_min``/``y_min``): training, k = 0.4: 0.24 w left, 0.30 w right, 0.8 h above, 0.43 h below;
+AFLW2000 test, k = 0.2: 0.4 w left, 0.56 w right, 0.4 h above, 0.17 h below. The margins are 0.5 w left,
+0.65 w right, 0.9 h above and 0.5 h below the visible landmarks. Hopenet and
 6DRepNet keep only labels within ±99° (their bins run from -99 to 102); labels outside are rejects.
 """
 from __future__ import annotations
@@ -26,7 +28,7 @@ from .base import Layout, abs_over
 
 RULE_99 = "outside ±99° (the 6DRepNet/Hopenet filter)"
 #: landmark-box margins of the ``mat`` form's crop (fractions of the landmark box: left, top, right, bottom)
-MAT_MARGINS = (0.5, 0.9, 0.5, 0.35)
+MAT_MARGINS = (0.5, 0.9, 0.65, 0.5)
 
 
 class SixDRepNetLayout(Layout):
