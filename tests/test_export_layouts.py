@@ -53,7 +53,7 @@ def lookup(t):
     return {(c, int(p), int(f)): k for k, (c, p, f) in enumerate(zip(t["camera"], t["person_id"], t["frame"]))}
 
 
-def check_crop_holds_head(out_dir, t, split="train", tol=0.9):
+def check_crop_holds_head(out_dir, t, split="train", tol=0.9, sized=False):
     """Physical check: the table's projected 2-D landmarks fall inside each recorded crop box."""
     crops = pd.read_csv(out_dir / "crops.csv")
     idx = lookup(t)
@@ -67,6 +67,8 @@ def check_crop_holds_head(out_dir, t, split="train", tol=0.9):
         assert inside[ok].mean() >= tol
         img = cv2.imread(str(out_dir / split / c["file"]))
         assert img is not None and img.shape[1] == c.out_w and img.shape[0] == c.out_h
+        if not sized:
+            assert (c.out_w, c.out_h) == (c.crop_x1 - c.crop_x0, c.crop_y1 - c.crop_y0)
 
 
 def get_R_6drepnet(pitch, yaw, roll):
@@ -122,14 +124,16 @@ def test_6drepnet_crops_matrices(pizza, tmp_path):
     assert run("export", path, "-o", out, "--layout", "6drepnet", "--images", PIZZA, "-q").exit_code == 0
     idx = lookup(t)
     A = table_A(t)
-    lines = (out / "train" / "list.txt").read_text().splitlines()
+    # DirectMHP's gen_dataset_full_AGORA_CMU.py list: "<name>.jpg pitch yaw roll", 256 x 256 crops
+    lines = (out / "files_train.txt").read_text().splitlines()
     assert lines
     for line in lines:
         name, p, y, r = line.split(" ")
-        assert (out / "train" / name).is_file()
+        assert cv2.imread(str(out / "train" / name)).shape == (256, 256, 3)
+        assert abs(float(p)) < 90 and abs(float(r)) < 90  # the whenet (COCO euler_angles) solution
         G = get_R_6drepnet(*np.deg2rad([float(p), float(y), float(r)]))
         np.testing.assert_allclose(G, A[idx[key_of_crop(name)]].T, atol=1e-9)  # 6DRepNet's matrix is A^T
-    check_crop_holds_head(out, t)
+    check_crop_holds_head(out, t, sized=True)
 
 
 @pytest.mark.skipif(not AFLW.exists(), reason="no AFLW2000 sample")

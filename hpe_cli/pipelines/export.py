@@ -680,7 +680,7 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
     pbox = pixel_boxes(cbox)
     cw, ch = pbox[:, 2] - pbox[:, 0], pbox[:, 3] - pbox[:, 1]
     if size is not None:
-        if square or layout.default_square:
+        if square or layout.stretch:
             osz = np.stack([np.full(n, size), np.full(n, size)], 1)
         else:
             osz = np.stack([np.full(n, size), np.maximum(1, np.round(size * ch / np.maximum(cw, 1)))], 1)

@@ -65,6 +65,8 @@ class Layout:
         return the raw crop (uint8, H x W x 3, BGR).
     default_size : int or None
         Crop side the trainer expects (``--size`` overrides).
+    stretch : bool
+        Resize every crop to ``size x size`` even when the box is not square (the trainer's own script does).
     """
 
     name = ""
@@ -73,6 +75,7 @@ class Layout:
     pixels = "file"
     default_size = None
     default_square = False
+    stretch = False
     needs_landmarks = False
 
     def __init__(self, system=None, form=None, **options):

@@ -1,9 +1,13 @@
 """6DRepNet layouts, in its two forms.
 
-``--form crops`` (crop-based sets such as CMU Panoptic or AGORA, as DirectMHP's ``exps/sixdrepnet`` trains
-6DRepNet on them): head crops ``<split>/<name>.jpg`` and a list ``<split>/list.txt`` of lines
-``<name>.jpg pitch yaw roll`` (degrees, the 300W-LP angles that 6DRepNet's ``get_R(pitch, yaw, roll) =
-Rz(roll) Ry(yaw) Rx(pitch)`` turns into its matrix, which is Aᵀ).
+``--form crops`` (crop-based full-range sets such as CMU Panoptic or AGORA), followed from hnuzhy/DirectMHP
+``exps/gen_dataset_full_AGORA_CMU.py``, the script DirectMHP's README uses to train 6DRepNet full-range on
+CMU/AGORA: each head box is cut from its frame and resized to ``img_size`` x ``img_size`` (256; the box is
+stretched, not padded to a square, unless ``--square``) and saved as ``<data_dir>/<name>.jpg``; the list file
+``files_<split>.txt`` (next to the split folder) has one line ``<name>.jpg pitch yaw roll`` per crop, the
+angles being the COCO ``euler_angles`` (degrees, the ``whenet`` system, full range). 6DRepNet's ``get_R(pitch,
+yaw, roll) = Rz(roll) Ry(yaw) Rx(pitch)`` of those angles is Aᵀ. Train with ``--data_dir OUT/<split>
+--filename_list OUT/files_<split>.txt``. hpe writes the angles with full precision (DirectMHP: ``%.4f``).
 
 ``--form mat`` (300W-LP/AFLW2000-style sets), followed from thohemp/6DRepNet ``sixdrepnet/datasets.py``
 (``Pose_300W_LP`` and ``AFLW2000``) and its ``utils.get_ypr_from_mat``/``get_pt2d_from_mat``: for each name
@@ -40,6 +44,10 @@ class SixDRepNetLayout(Layout):
         if self.form not in ("crops", "mat"):
             raise ValueError(f"expected --form crops or mat, got {self.form!r}")
         self.needs_landmarks = self.form == "mat"
+        if self.form == "crops":  # DirectMHP's full-range 6DRepNet data: COCO euler_angles, 256 x 256 crops
+            self.system = "whenet"
+            self.default_size = 256
+            self.stretch = True
 
     def label_reasons(self, angles):
         if self.form == "mat":
@@ -59,7 +67,7 @@ class SixDRepNetLayout(Layout):
             for split, part in exported.groupby("split", sort=True):
                 ang = part[["pitch", "yaw", "roll"]].to_numpy(dtype=np.float64).tolist()
                 lines = [f"{f} {p!r} {y!r} {r!r}\n" for f, (p, y, r) in zip(part["file"].tolist(), ang)]
-                with open(self.split_dir(split) / "list.txt", "w", encoding="utf-8", newline="") as fh:
+                with open(self.root / f"files_{split}.txt", "w", encoding="utf-8", newline="") as fh:
                     fh.writelines(lines)
             return []
         import scipy.io
