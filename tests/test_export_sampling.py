@@ -73,8 +73,15 @@ def test_splits_deterministic_and_group_disjoint():
             parse_split(bad)
 
 
+def test_splits_four_equal_groups():
+    # 4 groups of 10 rows with 0.75/0.25: three groups train, one val (midpoints 5, 15, 25 < 30 <= 35)
+    groups = np.repeat(["c0", "c1", "c2", "c3"], 10)
+    s = assign_splits(groups, ["train", "val"], np.array([0.75, 0.25]), seed=0)
+    assert (s == "train").sum() == 30 and (s == "val").sum() == 10
+
+
 def test_splits_hand_case():
-    # groups sorted by hash fill train up to 50% of rows; every row of a group goes where the group starts
+    # groups laid end to end in hash order; a group goes where its midpoint falls (train: the first 3 of 6 rows)
     names, fr = ["train", "val"], np.array([0.5, 0.5])
     groups = np.array(["a"] * 3 + ["b"] * 1 + ["c"] * 2)
     s = assign_splits(groups, names, fr, seed=0)
@@ -83,7 +90,8 @@ def test_splits_hand_case():
     order = np.argsort(group_hash(["a", "b", "c"], 0))
     counts = np.array([3, 1, 2])[order]
     before = np.cumsum(counts) - counts
-    expect = {g: ("train" if b < 3 else "val") for g, b in zip(np.array(["a", "b", "c"])[order], before)}
+    mid = before + counts / 2
+    expect = {g: ("train" if m < 3 else "val") for g, m in zip(np.array(["a", "b", "c"])[order], mid)}
     assert s.tolist() == [expect[g] for g in groups]
 
 

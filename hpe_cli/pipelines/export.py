@@ -40,6 +40,7 @@ LICENCES = {
     "table": "a label table: check the licence of the dataset it came from.",
 }
 NO_VIDEO = "no image (hdImgs missing; video source not available)"
+NO_FILES = "no image (neither hdImgs/<cam>/<cam>_<frame>.jpg nor hdVideos/hd_<cam>.mp4 found)"
 
 
 # ----------------------------------------------------------------------------------------------- options
@@ -169,8 +170,12 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
     system = _table_system(src.schema, input_system)
     kind = _kind_of_table(src.schema)
     n_lm = landmark_count(cols)
-    keep = [c for c in ["image", "sequence", "camera", "frame", "person_id", "subject", "image_width",
+    keep = [c for c in ["image", "sequence", "camera", "frame", "person_id", "person", "subject", "image_width",
                         "image_height"] + BBOX_COLS if c in cols]
+    if kind == "table" and "source" in cols:  # relabel-agora writes its source per row
+        first = next(iter(src.batches()), None)
+        if first is not None and first.num_rows and "agora" in str(first.column("source")[0]).lower():
+            kind = "agora"
     keep += [f"lm{i}_{a}" for i in range(n_lm) for a in "xy"]
     parts = []
     header = 1 if path.suffix.lower() == ".csv" else 0
@@ -201,6 +206,8 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
         raise HpeError(f"{path}: no rows")
     frame = pd.concat(parts, ignore_index=True)
     n = len(frame)
+    if "person_id" not in frame.columns and "person" in frame.columns:
+        frame["person_id"] = frame.pop("person")
     frame["source"], frame["kind"], frame["input"] = source, kind, str(path)
     frame["root"] = str(images_root) if images_root else str(path.parent)
     for c, default in (("sequence", ""), ("camera", ""), ("frame", -1), ("person_id", -1),
@@ -289,14 +296,15 @@ def group_hash(values, seed: int) -> np.ndarray:
 def assign_splits(groups, names, fractions, seed: int = 0) -> np.ndarray:
     """Split rows by group: groups in hash order fill the splits by row count; one group, one split.
 
-    Deterministic for a given ``seed`` and independent of row order.
+    Groups are laid end to end in the order of their hash; a group goes to the split whose share of the rows
+    holds the group's midpoint. Deterministic for a given ``seed`` and independent of row order.
     """
     groups = np.asarray(groups).astype(str)
     uniq, inv, counts = np.unique(groups, return_inverse=True, return_counts=True)
     order = np.argsort(group_hash(uniq.tolist(), seed), kind="stable")
     before = np.cumsum(counts[order]) - counts[order]  # rows in earlier groups
     edges = np.cumsum(fractions)[:-1] * groups.size
-    which = np.searchsorted(edges, before, side="right")
+    which = np.searchsorted(edges, before + counts[order] / 2, side="right")
     split_of_group = np.empty(uniq.size, dtype=object)
     split_of_group[order] = np.asarray(names, dtype=object)[which]
     return split_of_group[inv.reshape(-1)]
@@ -490,6 +498,8 @@ def _work(task):
             from ..datasets.panoptic_video import VideoFrames
         except ImportError:
             return [(it[0], NO_VIDEO, -1, -1, None) for items in groups.values() for it in items]
+        if src is None:
+            return [(it[0], NO_FILES, -1, -1, None) for items in groups.values() for it in items]
         try:
             for fr, img, reason in VideoFrames(src).read(sorted(groups)):
                 items = groups.get(fr, [])
@@ -717,10 +727,11 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
                 t = task_of.get(vkey)
                 if t is None:
                     base = Path(roots[i])
-                    video = base / "hdVideos" / f"hd_{cams[i]}.mp4"
-                    if not video.is_file() and seqs[i]:
-                        video = base / seqs[i] / "hdVideos" / f"hd_{cams[i]}.mp4"
-                    t = task_of[vkey] = ["video", str(video), {}]
+                    cands = [base / "hdVideos" / f"hd_{cams[i]}.mp4"]
+                    if seqs[i]:
+                        cands.append(base / seqs[i] / "hdVideos" / f"hd_{cams[i]}.mp4")
+                    video = next((str(v) for v in cands if v.is_file()), None)
+                    t = task_of[vkey] = ["video", video, {}]
                     tasks.append(t)
                 task_of[key] = t
             else:
