@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, rejects_option,
+from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
                       verbosity_options)
 
 
@@ -13,11 +13,11 @@ from .options import (SYSTEM, batch_option, echo_summary, output_option, overwri
 @click.option("--from", "source", type=SYSTEM, required=True, help="System of INPUT: built-in name or .toml file.")
 @click.option("--to", "target", type=SYSTEM, required=True, help="System to write: built-in name or .toml file.")
 @click.option("--radians", is_flag=True, help="INPUT angle columns are in radians (output is always degrees).")
-@rejects_option
+@rejects_options
 @overwrite_option
 @batch_option
 @verbosity_options
-def convert(input, output, source, target, radians, rejects, overwrite, batch_size, verbose, quiet):
+def convert(input, output, source, target, radians, rejects, strict, overwrite, batch_size, verbose, quiet):
     """Convert head-pose labels between rotation systems.
 
     INPUT is a .parquet or .csv table with angle columns pitch,yaw,roll
@@ -43,7 +43,7 @@ def convert(input, output, source, target, radians, rejects, overwrite, batch_si
         from ..pipelines.convert import run_convert
 
         s = run_convert(input, output, source, target, radians=radians, rejects_path=rejects, overwrite=overwrite,
-                        batch_size=batch_size, progress=bar)
+                        batch_size=batch_size, progress=bar, strict=strict)
     finally:
         bar.close()
     lines = [f"{s.written} of {s.rows} rows converted from {source.name} to {target.name} -> {output}",
