@@ -62,7 +62,7 @@ def test_existing_output_needs_overwrite(tmp_path):
     r = run("export", path, "-o", out, "--layout", "whenet", "--overwrite", "-q")
     assert r.exit_code == 0, r.output
     assert not (out / "keep.txt").exists() and (out / "train" / "annotation.txt").is_file()
-    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".o.")]  # no staging left behind
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staging left behind
 
 
 def test_bad_images_are_rejects(tmp_path):
@@ -88,6 +88,10 @@ def test_bad_images_are_rejects(tmp_path):
     lines = (out / "train" / "annotation.txt").read_text().splitlines()
     assert len(lines) + len(rej) == len(t)
     assert "rejected 6" in r.output and "unreadable image" in r.output
+    # without --rejects, bad input is an error and nothing is written
+    r = run("export", path, "-o", tmp_path / "o2", "--layout", "whenet")
+    assert r.exit_code == 1 and "row 4: no image (file not found)" in r.output and "--rejects" in r.output
+    assert not (tmp_path / "o2").exists()
 
 
 def test_everything_rejected_writes_nothing(tmp_path):
@@ -102,8 +106,10 @@ def test_everything_rejected_writes_nothing(tmp_path):
     assert not (tmp_path / "o").exists() and not (tmp_path / "r.csv").exists()
     for p in tmp_path / "img", :
         (p / "f0.jpg").unlink()
-    r = run("export", path, "-o", tmp_path / "o", "--layout", "hf")
+    r = run("export", path, "-o", tmp_path / "o", "--layout", "hf", "--rejects", tmp_path / "r.csv")
     assert r.exit_code == 0  # hf keeps any rotation: only the missing image is rejected
+    r = run("export", path, "-o", tmp_path / "o3", "--layout", "hf", "--rejects", tmp_path / "r3.csv", "--strict")
+    assert r.exit_code == 1 and "--strict" in r.output and not (tmp_path / "o3").exists()
 
 
 def test_bad_table_is_one_line(tmp_path):

@@ -27,6 +27,11 @@ def run(*args):
     return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
 
 
+def export(path, out, *args):
+    """``hpe export`` on the pizza table; its frames without a JPEG in the sample are rejects."""
+    return run("export", path, "-o", out, "--images", PIZZA, "--rejects", Path(str(out) + "_rejects.csv"), *args)
+
+
 @pytest.fixture(scope="module")
 def pizza(tmp_path_factory):
     """relabel-panoptic on the real pizza1 sample, restricted to the 4 cameras with real images."""
@@ -109,8 +114,8 @@ def test_whenet_layout_read_back(pizza, tmp_path):
 def test_whenet_workers_give_the_same_files(pizza, tmp_path):
     path, t = pizza
     a, b = tmp_path / "a", tmp_path / "b"
-    assert run("export", path, "-o", a, "--layout", "whenet", "--images", PIZZA, "-q").exit_code == 0
-    assert run("export", path, "-o", b, "--layout", "whenet", "--images", PIZZA, "--workers", "2", "-q").exit_code == 0
+    assert export(path, a, "--layout", "whenet", "-q").exit_code == 0
+    assert export(path, b, "--layout", "whenet", "--workers", "2", "-q").exit_code == 0
     assert (a / "train" / "annotation.txt").read_text() == (b / "train" / "annotation.txt").read_text()
     for line in (a / "train" / "annotation.txt").read_text().splitlines()[:5]:
         name = line.split(",")[0]
@@ -121,7 +126,7 @@ def test_whenet_workers_give_the_same_files(pizza, tmp_path):
 def test_6drepnet_crops_matrices(pizza, tmp_path):
     path, t = pizza
     out = tmp_path / "s"
-    assert run("export", path, "-o", out, "--layout", "6drepnet", "--images", PIZZA, "-q").exit_code == 0
+    assert export(path, out, "--layout", "6drepnet", "-q").exit_code == 0
     idx = lookup(t)
     A = table_A(t)
     # DirectMHP's gen_dataset_full_AGORA_CMU.py list: "<name>.jpg pitch yaw roll", 256 x 256 crops
@@ -241,7 +246,7 @@ def test_directmhp_drop_images_with_rejects(pizza, tmp_path):
 def test_fsanet_npz(pizza, tmp_path):
     path, t = pizza
     out = tmp_path / "f"
-    assert run("export", path, "-o", out, "--layout", "fsanet", "--images", PIZZA, "-q").exit_code == 0
+    assert export(path, out, "--layout", "fsanet", "-q").exit_code == 0
     d = np.load(out / "train.npz")  # FSA-Net's loaders: np.load(path)['image'], ['pose']
     img, pose = d["image"], d["pose"]
     assert img.dtype == np.uint8 and img.shape[1:] == (64, 64, 3) and pose.shape == (img.shape[0], 3)
@@ -270,8 +275,8 @@ def test_hf_parquet_image_feature(pizza, tmp_path):
 
     path, t = pizza
     out = tmp_path / "h"
-    r = run("export", path, "-o", out, "--layout", "hf", "--images", PIZZA, "--system", "6drepnet",
-            "--split", "camera:0.5,0.5", "--min-change", "1", "-q")
+    r = export(path, out, "--layout", "hf", "--system", "6drepnet", "--split", "camera:0.5,0.5", "--min-change", "1",
+               "-q")
     assert r.exit_code == 0, r.output
     card = (out / "README.md").read_text()
     assert card.startswith("---\n") and "dtype: image" in card and "6drepnet" in card and "min-change" in card

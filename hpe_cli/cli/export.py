@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_option, verbosity_options
+from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_options, verbosity_options
 
 LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 
@@ -48,24 +48,27 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @click.option("--drop-images-with-rejects", is_flag=True,
               help="Drop a whole image when any head in it is rejected (DirectMHP's rule).")
 @click.option("--workers", type=click.IntRange(1), default=1, show_default=True, help="Worker processes.")
-@rejects_option
+@rejects_options
 @overwrite_option
 @verbosity_options
 def export(labels, output, layout, form, images, system, input_system, crop_scale, square, size, quality,
            pad_value, min_inside, split, split_file, min_change, balance, seed, drop_images_with_rejects, workers,
-           rejects, overwrite, verbose, quiet):
+           rejects, strict, overwrite, verbose, quiet):
     """Export labels as a training-ready dataset in a trainer's own layout.
 
     LABELS: tables with an image reference and a head box (hpe relabel-panoptic/relabel-agora output, or any
     .parquet/.csv with image, bbox_x/y/w/h and labels), or 300W-LP/AFLW2000 .mat folders (box from the
     visible landmarks, with 6DRepNet's AFLW2000 margin). Several inputs are merged (a source column tells
     them apart). Labels go to each layout's system through the rotation matrices; every label not exported
-    is in --rejects with its reason. OUT_DIR is written in a staging folder and renamed at the end.
+    is in --rejects with its reason. Bad input (unusable rows, missing or unreadable images, boxes outside the
+    frame) needs --rejects FILE, else nothing is written; the layout's own rules, the sampling and the split
+    file only remove labels (counted in the summary; --strict makes any removal an error). OUT_DIR is
+    written in a staging folder and committed at the end.
 
     \b
     Examples:
-      hpe export pizza.parquet -o out/whenet --layout whenet --images SEQ --split sequence:0.8,0.2
-      hpe export pizza.parquet -o out/dmhp --layout directmhp --images SEQ --drop-images-with-rejects
+      hpe export pizza.parquet -o out/whenet --layout whenet --images SEQ --rejects rej.csv
+      hpe export a.parquet b.parquet -o out/dmhp --layout directmhp --drop-images-with-rejects --rejects rej.csv
       hpe export AFLW2000/ -o out/aflw --layout 6drepnet --form mat
       hpe export AFLW2000/ 300W_LP/AFW -o out/fsa --layout fsanet --split identity:0.9,0.1
       hpe export pizza.parquet -o out/hf --layout hf --system 6drepnet --min-change 5 --balance yaw:10:500
@@ -83,7 +86,7 @@ def export(labels, output, layout, form, images, system, input_system, crop_scal
                          crop_scale=crop_scale, square=square, size=size, quality=quality, pad_value=pad_value,
                          min_inside=min_inside, split=split, split_file=split_file, min_change=min_change,
                          balance=balance, seed=seed, drop_images_with_rejects=drop_images_with_rejects,
-                         workers=workers, overwrite=overwrite, rejects=rejects, quiet=quiet)
+                         workers=workers, overwrite=overwrite, rejects=rejects, strict=strict, quiet=quiet)
     s = run_export(list(labels), output, opts,
                    progress=lambda total: progress(total, desc="export", quiet=quiet, unit="crops"))
     lines = [f"exported {s['exported']} of {s['labels']} labels ({s['layout']}, {s['system']}) -> {s['output']}",

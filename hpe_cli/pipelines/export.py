@@ -13,8 +13,6 @@ import hashlib
 import json
 import os
 import re
-import shutil
-import tempfile
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,6 +64,7 @@ class ExportOptions:
     workers: int = 1
     overwrite: bool = False
     rejects: str | None = None
+    strict: bool = False
     quiet: bool = True
     sampling_notes: list = field(default_factory=list)
 
@@ -543,43 +542,47 @@ class _SizeOnly:
 # ----------------------------------------------------------------------------------------------- staging
 @contextmanager
 def staged_dir(path, overwrite: bool):
-    """A temporary folder next to ``path`` that replaces it only if the block succeeds.
+    """A temporary folder that becomes ``path`` when the run commits (``hpe_cli.io.transaction.staged_dir``).
 
-    Uses ``hpe_cli.io.transaction.staged_dir`` when present; otherwise stages here.
+    An export replaces a whole dataset: with ``overwrite``, files of an earlier export that this one did not
+    write are removed after the commit (a stale shard or split folder would otherwise be read with the new
+    ones).
     """
-    try:
-        from ..io.transaction import staged_dir as shared
-    except ImportError:
-        shared = None
-    if shared is not None:
-        with shared(path, overwrite) as d:
-            yield Path(d)
-        return
+    from ..io.transaction import current
+    from ..io.transaction import staged_dir as shared
+
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise HpeError(f"{path}: already exists (use --overwrite to replace it)")
     if path.exists() and not path.is_dir():
         raise HpeError(f"{path}: exists and is not a folder")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
-    except OSError as exc:
-        raise HpeError(f"{path}: cannot create a staging folder next to it ({exc.strerror or exc})") from None
-    try:
+    if path.exists() and not overwrite:
+        raise HpeError(f"{path}: already exists (use --overwrite to replace it)")
+    with shared(path, overwrite) as tmp:
+        tmp = Path(tmp)
         yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    old = None
-    if path.exists():
-        old = path.parent / f".{path.name}.old-{os.getpid()}"
-        os.replace(path, old)
-    os.replace(tmp, path)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, 0o777 & ~umask)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+        if path.is_dir():
+            keep = {p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file()}
+            txn = current()
+
+            def prune():
+                for p in sorted(path.rglob("*"), key=lambda q: len(q.parts), reverse=True):
+                    rel = p.relative_to(path)
+                    if p.is_file() or p.is_symlink():
+                        if rel not in keep:
+                            p.unlink(missing_ok=True)
+                    elif p.is_dir() and not any(p.iterdir()):
+                        p.rmdir()
+
+            if txn is not None:
+                txn.after_commit(prune)
+
+
+CHOICE_PREFIXES = ("WHENet rule", "DirectMHP normalisation", "outside ±99", "min-change", "balance",
+                   "image dropped", "no 2-D landmarks")
+
+
+def is_choice(reason: str) -> bool:
+    """A reject made by a rule the user chose (layout, sampling, split file), not by bad input."""
+    return reason.startswith(CHOICE_PREFIXES) or reason.endswith("not listed in --split-file")
 
 
 # ----------------------------------------------------------------------------------------------- the job
@@ -842,6 +845,20 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
                          "sequence": sub["sequence"].to_numpy(), "camera": sub["camera"].to_numpy(),
                          "frame": sub["frame"].to_numpy(), "person_id": sub["person_id"].to_numpy(),
                          "split": rows["split"].to_numpy()[rej].astype(str)}, reasons[rej])
+        # bad input (unusable rows, missing/unreadable images, boxes outside the frame) follows the rule of every
+        # command: without --rejects (or with --strict) it is an error and nothing is written; the layout's own
+        # rules, the sampling and the split file are choices, always counted in the summary
+        bad = np.flatnonzero((reasons != "") & ~np.array([is_choice(r) for r in reasons], dtype=bool))
+        if bad.size:
+            from ..io.rejects import rejects_rule
+
+            k = int(bad[0])
+            first = f"{rows['input'].iat[k]}: row {rows['row'].iat[k]}: {reasons[k]}"
+            rejects_rule(int(bad.size), first, has_file=rejects.path is not None, strict=opts.strict)
+        if opts.strict and (reasons != "").any():
+            k = int(np.flatnonzero(reasons != "")[0])
+            raise HpeError(f"{rows['input'].iat[k]}: row {rows['row'].iat[k]}: {reasons[k]}; "
+                           f"{int((reasons != '').sum())} label(s) not exported and --strict given: nothing written")
         rejects.write()
     summary["output"] = str(output)
     return summary
