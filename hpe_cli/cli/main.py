@@ -21,6 +21,7 @@ COMMANDS = {
     "infer": "hpe_cli.cli.infer:infer",
     "biwi": "hpe_cli.cli.biwi:biwi",
     "evaluate": "hpe_cli.cli.evaluate:evaluate",
+    "export": "hpe_cli.cli.export:export",
 }
 
 
