@@ -64,7 +64,7 @@ def ray_rotation(centre) -> tuple:
         Q[:, 2, 2] = z
     back = np.isclose(z, -1.0, atol=1e-12) & np.isfinite(z)
     Q[back] = np.diag([1.0, -1.0, -1.0])
-    angle = np.rad2deg(np.arccos(np.clip(z, -1.0, 1.0)))
+    angle = np.rad2deg(np.arctan2(np.hypot(x, y), z))
     return Q, angle
 
 
