@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, non_negative_or_inf, format_from_suffix, echo_summary, output_option, overwrite_option, progress, rejects_option,
+from .options import (SYSTEM, non_negative_or_inf, format_from_suffix, echo_summary, output_option, overwrite_option, progress, rejects_options,
                       verbosity_options)
 
 FORMATS = ("table", "coco", "whenet")
@@ -55,12 +55,12 @@ FORMATS = ("table", "coco", "whenet")
 @click.option("--legacy-whenet", is_flag=True,
               help="Label with WHENet's own chain (compound, Z-Y-X decomposition, select_euler, negation) "
                    "and drop what it drops; adds legacy_pitch/yaw/roll columns.")
-@rejects_option
+@rejects_options
 @overwrite_option
 @verbosity_options
 def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras, every, frame_range, min_change,
                      all_views, label_frame, no_landmarks, workers, scheduler, resume, max_rmse, legacy_whenet,
-                     rejects, overwrite, verbose, quiet):
+                     rejects, strict, overwrite, verbose, quiet):
     """Relabel CMU Panoptic sequences: one head-pose label per face per camera.
 
     Each SEQ_DIR holds calibration_<seq>.json and hdFace3d/faceRecon3D_hd*.json
@@ -122,6 +122,12 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
                                   resume=resume, per_sequence=per_seq)
     finally:
         bar.close()
+    if strict:  # any face/view not labelled fails the run (nothing is committed)
+        from ..io.rejects import rejects_rule
+
+        first = next(iter(stats.face_reasons or stats.view_reasons), None)
+        rejects_rule(sum(stats.view_reasons.values()) + sum(stats.face_reasons.values()), first, has_file=True,
+                     strict=True)
     lines = []
     for plan, st in zip(plans, per_seq):
         lines += st.summary(plan, cfg, output, rejects)
