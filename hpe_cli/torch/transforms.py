@@ -322,7 +322,7 @@ class PermuteLandmarks(v2.Transform):
     def transform(self, inpt, params):
         if not isinstance(inpt, tv_tensors.KeyPoints) or inpt.ndim < 2:
             return inpt
-        perm = torch.as_tensor(_perm_for(self.scheme, inpt.shape[-2]), device=inpt.device)
+        perm = torch.tensor(_perm_for(self.scheme, inpt.shape[-2]), dtype=torch.long, device=inpt.device)
         return tv_tensors.wrap(_raw(inpt).index_select(-2, perm), like=inpt)
 
 
