@@ -42,7 +42,7 @@ _LAZY = {
 __all__ = ["get_system", "systems", "convert", "read_labels", "write_labels", "audit", "evaluate",
            "augment_sample", "augment_batch", "draw_axes", "geodesic", "LabelTable", *_LAZY]
 
-STORAGE_KINDS = ("angles", "matrix", "rotvec", "quaternion")
+STORAGE_KINDS = ("angles", "matrix", "rotvec", "quaternion", "6d")
 
 
 def __getattr__(name):
@@ -116,31 +116,24 @@ def systems() -> dict:
 
 
 # -------------------------------------------------------------------------------------------- convert
-def _storage_to_matrix(values, storage: str, quaternion_order: str):
-    """Rotation vectors (radians) or quaternions to matrices (N, 3, 3).
-
-    ``hpe_cli.rotation.storage`` (rotvec_to_matrix, quaternion_to_matrix) is used
-    when present; until then SciPy's ``Rotation`` does the same maths.
-    """
+def _storage_to_matrix(values, storage: str, quaternion_order: str, sixd_columns=(0, 1)):
+    """Rotation vectors (radians), quaternions or 6-D vectors to matrices (N, 3, 3) (:mod:`hpe_cli.rotation.storage`)."""
     import numpy as np
 
-    try:
-        from .rotation import storage as _st
-    except ImportError:
-        _st = None
-    if _st is not None and hasattr(_st, "rotvec_to_matrix") and hasattr(_st, "quaternion_to_matrix"):
-        if storage == "rotvec":
-            return np.asarray(_st.rotvec_to_matrix(values), dtype=np.float64)
-        return np.asarray(_st.quaternion_to_matrix(values, order=quaternion_order), dtype=np.float64)
-    from scipy.spatial.transform import Rotation
+    from .rotation import storage as st
 
     if storage == "rotvec":
-        return Rotation.from_rotvec(values).as_matrix()
-    q = values if quaternion_order == "xyzw" else values[:, [1, 2, 3, 0]]
-    return Rotation.from_quat(q).as_matrix()
+        return st.rotvec_to_matrix(values)
+    if storage == "quaternion":
+        norm = np.linalg.norm(values, axis=-1)
+        if not (np.abs(norm - 1.0) <= 1e-3).all():
+            row = int(np.flatnonzero(~(np.abs(norm - 1.0) <= 1e-3))[0])
+            raise ValueError(f"row {row + 1}: expected a unit quaternion, got norm {norm[row]:.6g}")
+        return st.quaternion_to_matrix(values, order=quaternion_order)
+    return st.sixd_to_matrix(values, sixd_columns)
 
 
-def convert(values, src, dst, storage: str | None = None, *, quaternion_order: str = "wxyz"):
+def convert(values, src, dst, storage: str | None = None, *, quaternion_order: str | None = None):
     """Express rotations given in system ``src`` as labels of system ``dst``.
 
     Parameters
@@ -149,15 +142,18 @@ def convert(values, src, dst, storage: str | None = None, *, quaternion_order: s
         ``angles``: shape (N, 3) or (3,), ``(pitch, yaw, roll)`` in degrees, any real values;
         ``matrix``: shape (N, 3, 3) or (3, 3), ``src``'s stored matrices;
         ``rotvec``: shape (N, 3), rotation vectors of ``src``'s stored matrix, radians;
-        ``quaternion``: shape (N, 4), unit quaternions of ``src``'s stored matrix.
+        ``quaternion``: shape (N, 4), unit quaternions of ``src``'s stored matrix;
+        ``6d``: shape (N, 6), two columns of ``src``'s stored matrix (``src.sixd_columns``,
+        default columns 0 and 1 as 6DRepNet), re-orthonormalised by Gram-Schmidt.
     src, dst : str, path or RotationSystem
         Source and target systems (see :func:`get_system`).
-    storage : {"angles", "matrix", "rotvec", "quaternion"}, optional
+    storage : {"angles", "matrix", "rotvec", "quaternion", "6d"}, optional
         How ``values`` are given. Default: ``matrix`` for (N, 3, 3), ``quaternion``
-        for (N, 4) or (4,), else ``angles``. Rotation vectors must be asked for, and so
-        must a single (3, 3) input (one matrix or three angle rows).
-    quaternion_order : {"wxyz", "xyzw"}
-        Component order of quaternions (SciPy uses ``xyzw``).
+        for (N, 4) or (4,), ``6d`` for (N, 6), else ``angles``. Rotation vectors must
+        be asked for, and so must a single (3, 3) input (one matrix or three angle rows).
+    quaternion_order : {"wxyz", "xyzw"}, optional
+        Component order of quaternions (SciPy uses ``xyzw``); default ``src.quaternion_order``
+        (``wxyz`` unless the system says otherwise).
 
     Returns
     -------
@@ -192,12 +188,15 @@ def convert(values, src, dst, storage: str | None = None, *, quaternion_order: s
         if v.shape == (3, 3):
             raise ValueError("a (3, 3) input is three angle rows or one matrix: pass storage='angles' or "
                              "storage='matrix'")
-        storage = "matrix" if v.ndim == 3 else "quaternion" if v.shape[-1:] == (4,) else "angles"
+        storage = ("matrix" if v.ndim == 3 else "quaternion" if v.shape[-1:] == (4,) else
+                   "6d" if v.shape[-1:] == (6,) else "angles")
     if storage not in STORAGE_KINDS:
         raise ValueError(f"expected storage in {', '.join(STORAGE_KINDS)}, got {storage!r}")
+    if quaternion_order is None:
+        quaternion_order = getattr(source, "quaternion_order", "wxyz")
     if quaternion_order not in ("wxyz", "xyzw"):
         raise ValueError(f"expected quaternion_order 'wxyz' or 'xyzw', got {quaternion_order!r}")
-    width = {"angles": (3,), "matrix": (3, 3), "rotvec": (3,), "quaternion": (4,)}[storage]
+    width = {"angles": (3,), "matrix": (3, 3), "rotvec": (3,), "quaternion": (4,), "6d": (6,)}[storage]
     if v.shape[-len(width):] != width or v.ndim > len(width) + 1:
         raise ValueError(f"expected {storage} values of shape (N, {', '.join(map(str, width))}), got {v.shape}")
     v = v.reshape((-1,) + width)
@@ -206,7 +205,7 @@ def convert(values, src, dst, storage: str | None = None, *, quaternion_order: s
     elif storage == "matrix":
         R = v
     else:
-        R = _storage_to_matrix(v, storage, quaternion_order)
+        R = _storage_to_matrix(v, storage, quaternion_order, getattr(source, "sixd_columns", (0, 1)))
     return canonical_to_labels(source.to_canonical(R), target)
 
 
@@ -239,7 +238,14 @@ def _system_from_schema(schema, path):
     if "hpe:system_definition" in meta:
         import json
 
-        return system_from_dict(json.loads(meta["hpe:system_definition"]), f"{path}: hpe:system_definition")
+        d = json.loads(meta["hpe:system_definition"])
+        # RotationSystem.to_dict() also writes derived fields that the TOML layout does not take
+        if d.pop("angle_frame", "system") == "canonical":
+            d.pop("turns", None)
+            d.pop("sequence", None)
+        for key in [k for k, v in d.items() if v is None]:
+            del d[key]
+        return system_from_dict(d, f"{path}: hpe:system_definition")
     if "hpe:system" in meta:
         return get_system(meta["hpe:system"])
     return None

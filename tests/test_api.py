@@ -62,6 +62,13 @@ def test_convert_every_storage_kind_against_scipy():
                                 (rot.as_quat(), "quaternion", {"quaternion_order": "xyzw"})]:
         c = hpe.convert(values, "300w_lp", "scipy_zyx", storage=storage, **kw)
         assert np.abs(c.matrix - ref.matrix).max() < 1e-12
+    # 6-D: 6DRepNet's network output for the 300W-LP label (20, -50, 15) (the example in 6drepnet_6d.toml)
+    d6 = [0.620885153, 0.166365675, 0.766044443, -0.496285454, 0.839862101, 0.21984631]
+    c6 = hpe.convert([d6], "6drepnet_6d", "300w_lp")
+    assert np.abs(c6.primary - [[20, -50, 15]]).max() < 1e-6
+    assert np.abs(hpe.convert(np.array(d6) * 3.0, "6drepnet_6d", "300w_lp", storage="6d").primary - c6.primary).max() < 1e-9
+    with pytest.raises(ValueError, match="unit quaternion"):
+        hpe.convert([[2.0, 0, 0, 0]], "300w_lp", "biwi")
     one = hpe.convert(pyr[0], "300w_lp", "scipy_zyx")
     assert one.primary.shape == (1, 3) and np.allclose(one.primary, ref.primary[:1])
 
@@ -77,12 +84,15 @@ def test_convert_errors():
 
 def test_read_and_write_labels(tmp_path, realdata):
     df = {"file": ["a.jpg", "b.jpg"], "pitch": [1.0, 2.0], "yaw": [3.0, 4.0], "roll": [5.0, 6.0]}
-    custom = hpe.get_system("6drepnet").to_dict() | {"name": "my_system"}
-    from hpe_cli.rotation import system_from_dict
+    import dataclasses
 
-    p = hpe.write_labels(df, tmp_path / "l.parquet", system=system_from_dict(custom))
+    custom = dataclasses.replace(hpe.get_system("6drepnet"), name="my_system")
+    p = hpe.write_labels(df, tmp_path / "l.parquet", system=custom)
     table, system = hpe.read_labels(p)
-    assert system.name == "my_system" and system.turns == hpe.get_system("6drepnet").turns
+    assert system == custom  # the whole definition comes back, not just the name
+    for name, builtin in hpe.systems().items():  # every built-in system survives the metadata round trip
+        hpe.write_labels(df, tmp_path / f"{name}.parquet", system=builtin)
+        assert hpe.read_labels(tmp_path / f"{name}.parquet").system == builtin
     assert table["file"].tolist() == ["a.jpg", "b.jpg"] and table["roll"].tolist() == [5.0, 6.0]
     with pytest.raises(HpeError, match="already exists"):
         hpe.write_labels(df, p)

@@ -123,3 +123,70 @@ def test_mat_folder_real_aflw2000():
     # the crop is the landmark box + 10 %: the landmarks now sit inside the image with a margin
     h, w = s["image"].shape[-2:]
     assert lm[:, 0].min() > 0.05 * w and lm[:, 0].max() < 0.95 * w and lm[:, 1].min() > 0.05 * h
+
+
+def test_hf_export_folder_shards_landmark_lists_and_card(tmp_path):
+    """The hpe export --layout hf form: data/<split>-NNNNN-of-MMMMM.parquet, {bytes, path} images, a card naming the system."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    names = _images(tmp_path, n=5)
+    df = _table(names)
+    (tmp_path / "hf" / "data").mkdir(parents=True)
+    img_type = pa.struct([pa.field("bytes", pa.binary()), pa.field("path", pa.string())])
+    for shard, rows in enumerate([[0, 1, 2], [3, 4]]):
+        part = df.loc[rows]
+        cols = {"image": pa.array([{"bytes": (tmp_path / names[k]).read_bytes(), "path": names[k]} for k in rows],
+                                  img_type)}
+        for c in ["pitch", "yaw", "roll", "bbox_x", "bbox_y", "bbox_w", "bbox_h"]:
+            cols[c] = pa.array(part[c].to_numpy(float))
+        for a in "xy":
+            cols[f"landmarks_{a}"] = pa.array(list(part[[f"lm{i}_{a}" for i in range(5)]].to_numpy(float)),
+                                              pa.list_(pa.float64()))
+        pq.write_table(pa.table(cols), tmp_path / "hf" / "data" / f"train-{shard:05d}-of-00002.parquet")
+    (tmp_path / "hf" / "README.md").write_text("---\n---\n`pitch`, `yaw`, `roll` (degrees) and the matrix "
+                                               "`r00..r22` are in the rotation system `6drepnet`:\n")
+    ds = HeadPoseDataset(tmp_path / "hf", system="6drepnet")
+    assert ds.label_system.name == "6drepnet" and len(ds) == 5
+    for k in (4, 1, 3):
+        s = ds[k]
+        img = cv2.imread(str(tmp_path / names[k]))[:, :, ::-1]
+        assert np.array_equal(s["image"].permute(1, 2, 0).numpy(), img)
+        assert np.allclose(s["angles"].numpy(), df.loc[k, ["pitch", "yaw", "roll"]].to_numpy(float), atol=1e-4)
+        lm = df.loc[k, [f"lm{i}_{a}" for i in range(5) for a in "xy"]].to_numpy(float).reshape(5, 2)
+        assert np.allclose(s["landmarks"].numpy(), lm, atol=1e-5)
+
+
+@pytest.mark.skipif(not AFLW.is_dir(), reason="realdata not available")
+def test_6drepnet_mat_list_and_crops_list(tmp_path):
+    """6DRepNet's Pose_300W_LP reads <data_dir>/<name>.jpg and .mat for each line of the file list."""
+    import shutil
+
+    from hpe_cli.datasets.mat import read_mat
+
+    split = tmp_path / "train"
+    split.mkdir()
+    names = ["image00050", "image00081", "image00251"]
+    for n in names:
+        shutil.copy(AFLW / f"{n}.mat", split)
+        shutil.copy(AFLW / f"{n}.jpg", split)
+    (split / "files.txt").write_text("".join(n + "\n" for n in names))
+    ds = HeadPoseDataset(split / "files.txt", crop=0.0)
+    assert ds.label_system.name == "300w_lp" and len(ds) == 3
+    s = ds[1]
+    rec = read_mat(AFLW / "image00081.mat")
+    assert np.allclose(s["angles"].double().numpy(), rec["pose"][:3], atol=1e-4)
+    vis = rec["pt2d"][:, np.isfinite(rec["pt2d"]).all(0)]
+    assert abs(s["image"].shape[-1] - (np.ceil(vis[0].max()) - np.floor(vis[0].min()))) <= 1  # cropped to pt2d
+    # crops form: files_<split>.txt with '<name>.jpg pitch yaw roll' (whenet system), images in <split>/
+    (tmp_path / "files_train.txt").write_text("image00050.jpg 10.5 120.0 -3.0\nimage00081.jpg 0 -170 5\n")
+    ds = HeadPoseDataset(tmp_path / "files_train.txt", system="300w_lp")
+    assert ds.label_system.name == "whenet" and len(ds) == 2
+    s = ds[0]
+    assert tuple(s["image"].shape) == (3, 450, 450)
+    w = get_system("whenet")
+    R = get_system("300w_lp").from_canonical(w.to_canonical(w.from_angles([[10.5, 120.0, -3.0]])))[0]
+    assert np.abs(s["matrix"].double().numpy() - R).max() < 1e-6
+    (tmp_path / "bad.txt").write_text("a.jpg 1 2 x\n")
+    with pytest.raises(HpeError, match=r"bad.txt: row 1: expected '<name>.jpg pitch yaw roll'"):
+        HeadPoseDataset(tmp_path / "bad.txt")

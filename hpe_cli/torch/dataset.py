@@ -27,10 +27,13 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         An ``hpe`` label table (``.parquet``/``.csv`` with ``pitch, yaw, roll`` degrees
         or ``r00..r22``, optional ``bbox_x, bbox_y, bbox_w, bbox_h`` and ``lm{i}_x, lm{i}_y``),
         a folder (or file) of 300W-LP/AFLW2000 ``.mat`` files (``Pose_Para``,
-        ``pt2d``, ``pt3d_68``) with the images next to them -- which is also what the
-        ``6drepnet`` export layout (list file + ``.jpg``/``.mat`` pairs) contains --, or a
-        Parquet file whose image column holds encoded bytes (``{"bytes", "path"}``
-        structs, as the Hugging Face ``datasets`` Image feature stores them).
+        ``pt2d``, ``pt3d_68``) with the images next to them, a 6DRepNet file list
+        (``hpe export --layout 6drepnet``: ``<split>/files.txt`` naming ``.jpg``/``.mat``
+        pairs, or ``files_<split>.txt`` with ``<name>.jpg pitch yaw roll`` lines in the
+        ``whenet`` system), a Parquet file whose image column holds encoded bytes
+        (``{"bytes", "path"}`` structs, as the Hugging Face ``datasets`` Image feature
+        stores them), or an ``hpe export --layout hf`` folder (``data/*.parquet`` shards,
+        ``landmarks_x/y`` list columns, the system named in its ``README.md`` card).
     images : str or path, optional
         Root of relative image paths (default: the folder of ``labels``).
     system : str, path or RotationSystem
@@ -104,7 +107,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         self._image_refs = None
         col = next((c for c in IMAGE_COLUMNS if c in table.columns), None)
         if parquet is not None and col is not None and parquet[1] == col:
-            self._parquet = parquet  # (path, column, row-group offsets)
+            self._parquet = parquet  # (files, column, global row-group offsets, (file, local group) per group)
         elif col is not None:
             self._image_refs = np.asarray(table[col].astype(str))
         else:
@@ -141,18 +144,22 @@ class HeadPoseDataset(torch.utils.data.Dataset):
     def _image_bytes(self, i):
         import pyarrow.parquet as pq
 
-        path, column, offsets = self._parquet
+        files, column, offsets, groups = self._parquet
         if self._pf is None:  # opened lazily, once per worker process
-            self._pf = pq.ParquetFile(path)
-        g = int(np.searchsorted(offsets, i, side="right") - 1)
+            self._pf = {}
+        g = int(np.searchsorted(offsets, i, side="right") - 1)  # global row group
+        f, local = groups[g]
+        path = files[f]
         if self._rg_cache[0] != g:
-            self._rg_cache = (g, self._pf.read_row_group(g, columns=[column]).column(0))
+            if f not in self._pf:
+                self._pf[f] = pq.ParquetFile(path)
+            self._rg_cache = (g, self._pf[f].read_row_group(local, columns=[column]).column(0))
         value = self._rg_cache[1][i - int(offsets[g])].as_py()
         if isinstance(value, dict):
             value = value.get("bytes")
         if value is None:
             raise HpeError(f"{path}: row {i + 1}: no image bytes in column {column!r}")
-        return np.frombuffer(value, dtype=np.uint8), f"{path}: row {i + 1}"
+        return np.frombuffer(value, dtype=np.uint8), f"{path}: row {i - int(offsets[g]) + 1} of row group {local}"
 
     def _read_image(self, i):
         """The image as a uint8 (3, H, W) RGB tensor (decoded with OpenCV)."""
@@ -232,32 +239,123 @@ def _load_table(labels, landmarks):
     path = Path(labels)
     if not path.exists():
         raise HpeError(f"{path}: no such file or folder")
+    if path.is_file() and path.suffix.lower() == ".txt":
+        return _read_list_file(path) + (None,)
+    if path.is_dir() and not any(path.glob("*.mat")) and (path / "data").is_dir() and \
+            any((path / "data").glob("*.parquet")):
+        return _read_parquet(sorted((path / "data").glob("*.parquet")), path)
     if (path.is_dir() and any(path.glob("*.mat"))) or path.suffix.lower() == ".mat":
         from ..datasets.mat import read_mat_dir
 
         table = read_mat_dir(path, landmarks=True)
         return table, get_system("300w_lp"), str(path), None
     if path.suffix.lower() in (".parquet", ".pq"):
-        import pyarrow.parquet as pq
+        return _read_parquet([path], path)
+    from .. import read_labels
 
-        from .. import _system_from_schema
+    table, found = read_labels(path)
+    return table, found, str(path), None
 
+
+def _read_parquet(files, source):
+    """Parquet shard(s) with labels; an image column of encoded bytes is read lazily per row."""
+    import re
+
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    from .. import _system_from_schema
+
+    tables, offsets, groups, found, col, binary = [], [0], [], None, None, False
+    for f, path in enumerate(files):
         pf = pq.ParquetFile(path)
         schema = pf.schema_arrow
         col = next((c for c in IMAGE_COLUMNS if c in schema.names), None)
         binary = col is not None and _is_image_bytes(schema.field(col).type)
         names = [c for c in schema.names if not (binary and c == col)]
-        table = pf.read(columns=names).to_pandas()
-        parquet = None
+        part = pf.read(columns=names).to_pandas()
         if binary:
-            sizes = [pf.metadata.row_group(g).num_rows for g in range(pf.metadata.num_row_groups)]
-            parquet = (str(path), col, np.concatenate([[0], np.cumsum(sizes)]))
-            table[col] = ""  # placeholder: bytes are read lazily
-        return table, _system_from_schema(schema, path), str(path), parquet
-    from .. import read_labels
+            part[col] = ""  # placeholder: bytes are read lazily
+        tables.append(part)
+        for g in range(pf.metadata.num_row_groups):
+            groups.append((f, g))
+            offsets.append(offsets[-1] + pf.metadata.row_group(g).num_rows)
+        found = found or _system_from_schema(schema, path)
+    table = pd.concat(tables, ignore_index=True)
+    if "landmarks_x" in table.columns and "landmarks_y" in table.columns and "lm0_x" not in table.columns:
+        lens = table["landmarks_x"].map(len)
+        if len(table) and (lens == lens.iloc[0]).all():  # hf export: one list column per coordinate
+            xs = np.stack(table["landmarks_x"].map(np.asarray).to_list())
+            ys = np.stack(table["landmarks_y"].map(np.asarray).to_list())
+            extra = {f"lm{k}_{a}": v[:, k] for k in range(xs.shape[1]) for a, v in (("x", xs), ("y", ys))}
+            table = pd.concat([table, pd.DataFrame(extra)], axis=1)
+    card = Path(source) / "README.md" if Path(source).is_dir() else None
+    if found is None and card is not None and card.exists():  # hpe export --layout hf names it in the card
+        m = re.search(r"in the rotation system `([^`]+)`", card.read_text(encoding="utf-8"))
+        if m:
+            found = get_system(m.group(1))
+    parquet = ([str(f) for f in files], col, np.asarray(offsets), groups) if binary else None
+    return table, found, str(source), parquet
 
-    table, found = read_labels(path)
-    return table, found, str(path), None
+
+def _read_list_file(path):
+    """6DRepNet file lists (``hpe export --layout 6drepnet``), followed from thohemp/6DRepNet ``sixdrepnet/datasets.py``.
+
+    - ``<split>/files.txt`` (``--form mat``): one name per line, no extension; ``<name>.mat`` holds
+      ``Pose_Para`` (radians, the ``300w_lp`` system) and ``pt2d`` (visible points only), ``<name>.jpg`` the image.
+    - ``files_<split>.txt`` (``--form crops``, DirectMHP's ``gen_dataset_full_AGORA_CMU.py``): ``<name>.jpg pitch
+      yaw roll`` per line, degrees in the ``whenet`` system, images in the folder ``<split>/`` next to the list.
+    """
+    import pandas as pd
+
+    from ..datasets.mat import read_mat
+
+    path = path.resolve()
+    lines = [ln.split() for ln in path.read_text(encoding="utf-8").splitlines()]
+    rows = [(n + 1, ln) for n, ln in enumerate(lines) if ln]
+    if not rows:
+        raise HpeError(f"{path}: empty file list")
+    widths = {len(ln) for _, ln in rows}
+    if widths == {4}:
+        try:
+            ang = np.array([[float(v) for v in ln[1:]] for _, ln in rows])
+        except ValueError:
+            n, ln = next((n, ln) for n, ln in rows if not _floats(ln[1:]))
+            raise HpeError(f"{path}: row {n}: expected '<name>.jpg pitch yaw roll', got {' '.join(ln)!r}") from None
+        split = path.stem[len("files_"):] if path.stem.startswith("files_") else ""
+        base = path.parent / split if split and (path.parent / split).is_dir() else path.parent
+        table = pd.DataFrame({"file": [str(base / ln[0]) for _, ln in rows],
+                              "pitch": ang[:, 0], "yaw": ang[:, 1], "roll": ang[:, 2]})
+        return table, get_system("whenet"), str(path)
+    if widths != {1}:
+        n, ln = next((n, ln) for n, ln in rows if len(ln) != len(rows[0][1]))
+        raise HpeError(f"{path}: row {n}: expected one name per line (mat form) or '<name>.jpg pitch yaw roll' "
+                       f"(crops form), got {' '.join(ln)!r}")
+    recs, names = [], []
+    for n, ln in rows:
+        mat = path.parent / (ln[0] + ".mat")
+        if not mat.exists():
+            raise HpeError(f"{path}: row {n}: {mat} does not exist")
+        recs.append(read_mat(mat))
+        names.append(str(path.parent / ln[0]))
+    table = pd.DataFrame(np.stack([r["pose"][:3] for r in recs]), columns=["pitch", "yaw", "roll"])
+    table.insert(0, "file", names)
+    from ..geometry.augment import box_of_points
+
+    boxes = np.full((len(recs), 4), np.nan)
+    for k, r in enumerate(recs):  # visible points only, so their number varies: a box per file
+        if r["pt2d"] is not None and r["pt2d"].size:
+            boxes[k] = box_of_points(r["pt2d"].T)[0]
+    table[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]] = boxes
+    return table, get_system("300w_lp"), str(path)
+
+
+def _floats(tokens) -> bool:
+    try:
+        [float(t) for t in tokens]
+        return True
+    except ValueError:
+        return False
 
 
 def _is_image_bytes(t) -> bool:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 
 from ..rotation import euler as _euler
@@ -97,17 +98,29 @@ def to_matrix(angles, system) -> torch.Tensor:
         rad = angles[..., idx[t.angle]] * (t.sign() * math.pi / 180.0)
         E = elemental(ax, rad)
         R = E if R is None else R @ E
+    if getattr(system, "angle_frame", "system") == "canonical":  # the turns build the canonical matrix
+        R = from_canonical(R, system)
     return R
 
 
-def _frame(system, like):
-    return torch.as_tensor(system.B, dtype=like.dtype, device=like.device)
+def _const(M, like):
+    return torch.as_tensor(np.asarray(M, dtype=np.float64), dtype=like.dtype, device=like.device)
+
+
+def _identity(system) -> bool:
+    return bool(system._identity_frame)
+
+
+def _model(system):
+    return getattr(system, "M", system.B)
 
 
 def to_canonical(R, system) -> torch.Tensor:
     """The canonical 300W-LP matrices ``A`` of stored matrices ``R`` (..., 3, 3).
 
-    ``A = B^T R_active B`` with ``R_active`` = ``R`` (active storage) or ``R^T`` (transposed).
+    ``A = B^T R_active M`` with ``R_active`` = ``R`` (active storage) or ``R^T``
+    (transposed), ``B`` the system's frame and ``M`` its head-model frame (``B``
+    unless the system names a ``model_frame``).
 
     Examples
     --------
@@ -122,10 +135,9 @@ def to_canonical(R, system) -> torch.Tensor:
     R = _check_float(R, "R")
     if system.storage == "transposed":
         R = R.mT
-    if system._identity_frame:
+    if _identity(system):
         return R
-    B = _frame(system, R)
-    return B.mT @ R @ B
+    return _const(system.B.T, R) @ R @ _const(_model(system), R)
 
 
 def from_canonical(A, system) -> torch.Tensor:
@@ -141,9 +153,8 @@ def from_canonical(A, system) -> torch.Tensor:
     system = get_system(system)
     A = _check_float(A, "A")
     X = A
-    if not system._identity_frame:
-        B = _frame(system, A)
-        X = B @ A @ B.mT
+    if not _identity(system):
+        X = _const(system.B, A) @ A @ _const(_model(system).T, A)
     return X.mT if system.storage == "transposed" else X
 
 
@@ -231,6 +242,8 @@ def from_matrix(R, system, gimbal_tol: float | None = None):
     R = _check_float(R, "R")
     if R.shape[-2:] != (3, 3):
         raise ValueError(f"expected matrices of shape (..., 3, 3), got {tuple(R.shape)}")
+    if getattr(system, "angle_frame", "system") == "canonical":  # the turns decompose the canonical matrix
+        R = to_canonical(R, system)
     seq_idx, turns = _intrinsic(system)
     a, b, c, lock = _euler_solution1(R, seq_idx)
     proper = seq_idx[0] == seq_idx[2]
