@@ -718,6 +718,8 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
             yield stats, _read_part(stem + ".labels.arrow"), _read_part(stem + ".rejects.arrow")
 
     with ExitStack() as stack:
+        if parts is not None and not resume:  # without --resume a failed or interrupted run leaves no parts
+            stack.callback(shutil.rmtree, parts, True)
         if fmt == "table":
             out = stack.enter_context(TableWriter(output, overwrite, meta))
         else:
