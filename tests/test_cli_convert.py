@@ -104,7 +104,7 @@ def test_rejects_file_and_fail_without_it(tmp_path):
     out = tmp_path / "o.parquet"
     res = run(src, "-o", out, "--from", "300w_lp", "--to", "whenet")
     assert res.exit_code == 1
-    assert res.output.strip().count("\n") == 0 and "bad.csv: row 3: non-numeric value in yaw" in res.output
+    assert res.output.strip().count("\n") == 0 and "bad.csv: line 3: non-numeric value in yaw; 3 row(s)" in res.output
     assert "Traceback" not in res.output and not out.exists()
     assert not list(tmp_path.glob(".*tmp"))
     rej = tmp_path / "rej.csv"
@@ -121,7 +121,7 @@ def test_not_rotation_matrix(tmp_path):
     src = tmp_path / "m.csv"
     pd.DataFrame(m, columns=MATRIX_COLS).to_csv(src, index=False)
     res = run(src, "-o", tmp_path / "o.csv", "--from", "opencv", "--to", "300w_lp")
-    assert res.exit_code == 1 and "row 3: not a rotation" in res.output
+    assert res.exit_code == 1 and "line 3: not a rotation" in res.output
     res = run(src, "-o", tmp_path / "o.csv", "--from", "opencv", "--to", "300w_lp", "--rejects", tmp_path / "r.csv")
     assert res.exit_code == 0
     assert pd.read_csv(tmp_path / "r.csv")["row"].tolist() == [3, 4]

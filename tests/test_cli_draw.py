@@ -59,7 +59,7 @@ def test_bbox_centre_relative_names_and_inputs_untouched(tmp_path):
     res = run(t, "-o", out, "--images", root)
     assert res.exit_code == 1 and "--overwrite" in res.output
     res = run(t, "-o", root, "--images", root, "--overwrite")
-    assert res.exit_code == 1 and "input image" in res.output
+    assert res.exit_code == 1 and "must differ from --images" in res.output
     assert (root / "sub" / "a.png").read_bytes() == before
 
 

@@ -89,6 +89,16 @@ def _load_callable(spec: str):
     return obj
 
 
+def _code_file(spec: str):
+    """The ``.py`` file of ``FILE.py:FUNC``, or None for ``module.path:FUNC``."""
+    from pathlib import Path
+
+    target = spec.rpartition(":")[0]
+    if target and (target.endswith(".py") or Path(target).is_file()):
+        return Path(target)
+    return None
+
+
 def _read_data(path, units):
     from pathlib import Path
 
@@ -222,10 +232,12 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write the full report.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
               help="Write the matched system as a .toml file (for `hpe convert --from`).")
+@click.option("--timeout", type=click.FloatRange(min=0, min_open=True), default=60.0, show_default=True,
+              help="Seconds the code of --callable/--decoder may run (it runs in a separate process).")
 @overwrite_option
 @verbosity_options
 def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, landmarks3d, landmark_frame, tol,
-          samples, seed, name, frame_of, storage, json_path, output, overwrite, verbose, quiet):
+          samples, seed, name, frame_of, storage, json_path, output, overwrite, verbose, quiet, timeout):
     """Find which rotation system a function or a dataset uses.
 
     With --callable, call the function on well-spread angles and find the
@@ -275,20 +287,20 @@ def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, lan
         check_output(json_path, overwrite)
     frame = frame_of.frame if frame_of is not None else None
 
+    system_toml = system_name = None
     if builder or decoder:
+        from ..io.transaction import note_input
+        from ..pipelines.infer_code import run_code_inference
+
         spec = builder or decoder
         roles = _roles(args_, "--args")
-        func = _load_callable(spec)
+        code_file = _code_file(spec)
+        if code_file is not None:
+            note_input(code_file)  # -o/--json may never be the user's own code
         u = "degrees" if units == "deg" else "radians"
-        kw = dict(roles=roles, units=u, tol=tol or inf.CODE_TOL, seed=seed, source=spec, name=name, frame=frame,
-                  storage=storage)
-        try:
-            if builder:
-                rep = inf.infer_builder(inf.as_builder(func, roles, u, packed), n=samples or 64, **kw)
-            else:
-                rep = inf.infer_decoder(inf.as_decoder(func, roles, u), n=samples or 256, **kw)
-        except inf.CallError as exc:
-            raise HpeError(f"{spec}: {exc}") from None
+        rep, system_toml, system_name = run_code_inference(
+            spec, builder=bool(builder), roles=roles, units=u, packed=packed, samples=samples, timeout=timeout,
+            tol=tol or inf.CODE_TOL, seed=seed, source=spec, name=name, frame=frame, storage=storage)
         if rep["fit"] != "exact" and units is None:
             rep["hint"] = "no fit with the default --units rad; try --units deg"
     else:
@@ -312,12 +324,20 @@ def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, lan
         except ValueError as exc:
             raise HpeError(f"{data}: {exc}") from None
 
+    if "_system" in rep:
+        system = rep["_system"]
+        system_toml, system_name = system.to_toml(), system.name
     report = inf.report_json(rep)
     if json_path is not None:
         write_json(report, json_path, overwrite)
     _print_report(report, quiet)
     ok = rep["fit"] in ("exact", "clear")
     if not ok:
+        from ..io.transaction import current
+
+        txn = current()
+        if txn is not None:  # the report explains the failure: keep it (nothing is written with -o)
+            txn.commit()
         what = f"{spec}" if (builder or decoder) else str(data)
         if rep["mode"] == "landmarks":
             raise HpeError(f"{what}: no system explains the landmarks clearly ({rep['fit']}: best {rep['best']}, "
@@ -328,6 +348,8 @@ def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, lan
                        + ("; nothing written to " + output if output else ""))
     if output is not None:
         with AtomicFile(output, overwrite) as tmp:
-            tmp.write_text(rep["_system"].to_toml(), encoding="utf-8")
+            tmp.write_text(system_toml, encoding="utf-8")
         if not quiet:
-            click.echo(f"wrote {output} (system {rep['_system'].name})")
+            from .options import echo_summary
+
+            echo_summary([f"wrote {output} (system {system_name})"])

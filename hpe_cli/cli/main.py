@@ -23,7 +23,12 @@ COMMANDS = {
 
 
 class HpeGroup(click.Group):
-    """Lazy subcommands; failures become one line on stderr and exit code 1."""
+    """Lazy subcommands, each run inside one output transaction; failures become one line on stderr.
+
+    Exit codes: 0 success, 1 a failure the user can act on (bad input, OS error,
+    rejected rows), 2 usage, 128+N on signal N (SIGINT, SIGTERM, SIGHUP), after
+    removing every staged output and stopping worker processes.
+    """
 
     def list_commands(self, ctx):
         return [n for n, target in COMMANDS.items() if importlib.util.find_spec(target.split(":")[0])]
@@ -35,32 +40,70 @@ class HpeGroup(click.Group):
         module, attr = target.split(":")
         if importlib.util.find_spec(module) is None:
             return None
-        return getattr(importlib.import_module(module), attr)
+        from .options import mark_paths
+
+        return mark_paths(getattr(importlib.import_module(module), attr))
 
     def invoke(self, ctx):
-        from ..errors import HpeError
-        from ..rotation.systems import SystemError_
+        import warnings
 
+        from ..io.transaction import OutputTransaction
+        from . import signals
+
+        txn = OutputTransaction()
         try:
-            return super().invoke(ctx)
+            with warnings.catch_warnings(), signals.handled():
+                if not os.environ.get("HPE_DEBUG"):
+                    warnings.simplefilter("ignore")  # numpy/pandas warnings name internal paths
+                with txn.activate(run=True):
+                    return super().invoke(ctx)
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
             raise
-        except (HpeError, SystemError_) as exc:
-            click.echo(f"Error: {exc}", err=True)
-            ctx.exit(1)
+        except signals.Interrupted as exc:
+            signals.stop_children()
+            _error(f"interrupted ({exc.name})")
+            ctx.exit(128 + exc.signum)
+        except KeyboardInterrupt:
+            signals.stop_children()
+            _error("interrupted (SIGINT)")
+            ctx.exit(130)
         except BrokenPipeError:  # e.g. `hpe systems | head`: the reader left, nothing to report
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, 1)
             ctx.exit(1)
-        except KeyboardInterrupt:
-            click.echo("Error: interrupted", err=True)
-            ctx.exit(130)
-        except Exception as exc:  # never show a traceback unless asked to
-            if os.environ.get("HPE_DEBUG"):
-                raise
-            click.echo(f"Error: unexpected {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
-                       "(set HPE_DEBUG=1 for a traceback)", err=True)
+        except Exception as exc:
+            msg = _message(exc)
+            if msg is None:  # a bug: never show a traceback unless asked to
+                if os.environ.get("HPE_DEBUG"):
+                    raise
+                msg = (f"internal error {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
+                       "(please report it; set HPE_DEBUG=1 for a traceback)")
+            _error(msg)
             ctx.exit(1)
+
+
+def _message(exc) -> str | None:
+    """The one-line message of an error a user can provoke, or None for a bug."""
+    from ..errors import HpeError
+    from ..io.transaction import os_reason
+    from ..rotation.systems import SystemError_
+
+    if isinstance(exc, (HpeError, SystemError_)):
+        return str(exc)
+    if isinstance(exc, MemoryError):
+        return "out of memory (try a smaller --batch-size)"
+    if isinstance(exc, OSError):
+        name = exc.filename if exc.filename is not None else None
+        return f"{name}: {os_reason(exc)}" if name is not None else os_reason(exc)
+    if isinstance(exc, UnicodeError):
+        return f"text is not valid UTF-8 ({exc.reason})" if hasattr(exc, "reason") else str(exc)
+    return None
+
+
+def _error(msg: str) -> None:
+    from ..io.transaction import printable
+
+    click.echo(f"Error: {printable(' '.join(str(msg).split()))}", err=True)
 
 
 @click.group(cls=HpeGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -81,3 +124,12 @@ def cli():
       hpe relabel-panoptic sample_data/panoptic -o labels.parquet
       hpe audit labels.parquet --system 300w_lp --json report.json
     """
+
+
+def main():
+    """Entry point (``python -m hpe_cli``)."""
+    cli()
+
+
+if __name__ == "__main__":
+    main()

@@ -28,8 +28,67 @@ class SystemType(click.ParamType):
 SYSTEM = SystemType()
 
 
+class InputPath(click.Path):
+    """A path the run reads: declared to the run's output transaction, so no output may resolve to it."""
+
+    def convert(self, value, param, ctx):
+        value = super().convert(value, param, ctx)
+        from ..io.transaction import current
+
+        txn = current()
+        if txn is not None:
+            txn.add_input(value, _label(param))  # a collision is an HpeError: one line, exit 1
+        return value
+
+
+class OutputPath(click.Path):
+    """A path the run writes: declared to the run's output transaction (no collision with inputs/outputs)."""
+
+    def convert(self, value, param, ctx):
+        value = super().convert(value, param, ctx)
+        from ..io.transaction import current
+
+        txn = current()
+        if txn is not None:
+            txn.add_output(value, _label(param))  # a collision is an HpeError: one line, exit 1
+        return value
+
+
+def _label(param) -> str:
+    if param is None:
+        return ""
+    if param.param_type_name == "argument":
+        return (param.human_readable_name or "").upper()
+    longs = [o for o in param.opts if o.startswith("--")]
+    return (longs or param.opts or [""])[0]
+
+
+def _as(cls, t: click.Path) -> click.Path:
+    new = cls.__new__(cls)
+    new.__dict__.update(t.__dict__)
+    return new
+
+
+def mark_paths(command):
+    """Declare every path parameter of ``command`` as an input or an output of its run.
+
+    Explicit :class:`InputPath`/:class:`OutputPath` types are kept; any other
+    ``click.Path`` is an input when it must exist (``exists=True``) and an output
+    otherwise. Done once per command object (the group calls it for every command).
+    """
+    if getattr(command, "_hpe_paths_marked", False):
+        return command
+    for p in getattr(command, "params", ()):
+        t = p.type
+        if isinstance(t, (InputPath, OutputPath)) or not isinstance(t, click.Path):
+            continue
+        p.type = _as(InputPath if t.exists else OutputPath, t)
+    command._hpe_paths_marked = True
+    return command
+
+
 def output_option(required: bool = True, help: str = "Output table (.parquet or .csv)."):
-    return click.option("-o", "--output", type=click.Path(dir_okay=False), required=required, help=help)
+    return click.option("-o", "--output", type=OutputPath(dir_okay=False), required=required, help=help)
 
 
 def system_option(default: str | None = "300w_lp", help: str = "Rotation system of the labels: a built-in name "
@@ -38,8 +97,16 @@ def system_option(default: str | None = "300w_lp", help: str = "Rotation system 
 
 
 overwrite_option = click.option("--overwrite", is_flag=True, help="Replace OUTPUT if it exists.")
-rejects_option = click.option("--rejects", type=click.Path(dir_okay=False),
-                              help="Write rows that could not be used here, with a 'reason' column.")
+rejects_option = click.option("--rejects", type=OutputPath(dir_okay=False),
+                              help="Write rows that could not be used here, with a 'reason' column (without "
+                                   "it, any such row makes the command exit 1 and write nothing).")
+strict_option = click.option("--strict", is_flag=True,
+                             help="Exit 1 and write nothing if any row is rejected (even with --rejects).")
+
+
+def rejects_options(f):
+    """``--rejects FILE`` and ``--strict``: every command that sets rows aside has both."""
+    return rejects_option(strict_option(f))
 batch_option = click.option("--batch-size", type=click.IntRange(1), default=262_144, show_default=True,
                             help="Rows per streamed batch.")
 
@@ -59,10 +126,22 @@ def progress(total=None, desc: str = "", quiet: bool = False, unit: str = "rows"
 
 
 def echo_summary(lines, quiet: bool = False) -> None:
-    """Print summary lines to stderr unless ``--quiet``."""
-    if not quiet:
+    """Print summary lines to stderr unless ``--quiet``; inside a run, once its outputs are committed."""
+    if quiet:
+        return
+    from ..io.transaction import current, printable
+
+    lines = [printable(line) for line in lines]
+
+    def show():
         for line in lines:
             click.echo(line, err=True)
+
+    txn = current()
+    if txn is None:
+        show()
+    else:
+        txn.after_commit(show)
 
 
 def format_from_suffix(path) -> str:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, non_negative_or_inf, echo_summary, format_from_suffix, output_option, overwrite_option, progress, rejects_option,
+from .options import (SYSTEM, non_negative_or_inf, echo_summary, format_from_suffix, output_option, overwrite_option, progress, rejects_options,
                       verbosity_options)
 
 FORMATS = ("table", "coco", "whenet")
@@ -43,11 +43,11 @@ def _image_size(ctx, param, value):
 @click.option("--legacy-whenet", is_flag=True,
               help="Label with DirectMHP's chain, which is WHENet's (compound, Z-Y-X decomposition, "
                    "select_euler, negation), and drop what it drops; adds legacy_pitch/yaw/roll columns.")
-@rejects_option
+@rejects_options
 @overwrite_option
 @verbosity_options
 def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse, max_occlusion, legacy_whenet,
-                  rejects, overwrite, verbose, quiet):
+                  rejects, strict, overwrite, verbose, quiet):
     """Relabel AGORA: one head-pose label per person, from SMPL-X face joints.
 
     DATAFRAMES are AGORA ground-truth dataframes (*_withjv.pkl, pandas
@@ -100,4 +100,10 @@ def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse,
         stats = job.write_outputs(list(dataframes), cfg, output, fmt, rejects, overwrite, bar)
     finally:
         bar.close()
+    if strict:  # any face/view not labelled fails the run (nothing is committed)
+        from ..io.rejects import rejects_rule
+
+        first = next(iter(getattr(stats, "reasons", None) or getattr(stats, "face_reasons", None) or
+                          getattr(stats, "view_reasons", {})), None)
+        rejects_rule(sum(stats.reasons.values()), first, has_file=True, strict=True)
     echo_summary(stats.summary(cfg, output, rejects, verbose), quiet)

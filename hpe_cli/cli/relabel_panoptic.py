@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, non_negative_or_inf, format_from_suffix, echo_summary, output_option, overwrite_option, progress, rejects_option,
+from .options import (SYSTEM, non_negative_or_inf, format_from_suffix, echo_summary, output_option, overwrite_option, progress, rejects_options,
                       verbosity_options)
 
 FORMATS = ("table", "coco", "whenet")
@@ -38,11 +38,11 @@ FORMATS = ("table", "coco", "whenet")
 @click.option("--legacy-whenet", is_flag=True,
               help="Label with WHENet's own chain (compound, Z-Y-X decomposition, select_euler, negation) "
                    "and drop what it drops; adds legacy_pitch/yaw/roll columns.")
-@rejects_option
+@rejects_options
 @overwrite_option
 @verbosity_options
 def relabel_panoptic(seq_dir, output, calibration, system, preset, fmt, cameras, every, frame_range, workers,
-                     max_rmse, legacy_whenet, rejects, overwrite, verbose, quiet):
+                     max_rmse, legacy_whenet, rejects, strict, overwrite, verbose, quiet):
     """Relabel a CMU Panoptic sequence: one head-pose label per face per camera.
 
     SEQ_DIR holds calibration_<seq>.json and hdFace3d/faceRecon3D_hd*.json
@@ -96,4 +96,11 @@ def relabel_panoptic(seq_dir, output, calibration, system, preset, fmt, cameras,
         stats = job.write_outputs(plan, cfg, output, fmt, rejects, overwrite, workers, bar)
     finally:
         bar.close()
+    if strict:  # any face/view not labelled fails the run (nothing is committed)
+        from ..io.rejects import rejects_rule
+
+        first = next(iter(getattr(stats, "reasons", None) or getattr(stats, "face_reasons", None) or
+                          getattr(stats, "view_reasons", {})), None)
+        rejects_rule(sum(stats.view_reasons.values()) + sum(stats.face_reasons.values()), first, has_file=True,
+                     strict=True)
     echo_summary(stats.summary(plan, cfg, output, rejects), quiet)

@@ -1,8 +1,9 @@
 """Audit plots: angle histograms, a yaw-pitch coverage map and an HTML page.
 
 Histograms are accumulated batch by batch (:class:`AngleHistograms`), so a
-table of any length is plotted in constant memory. Every file is written
-atomically (a temporary file renamed into place).
+table of any length is plotted in constant memory. Every file is staged in
+the run's output transaction (committed with the run's other outputs, or
+alone when there is none).
 """
 from __future__ import annotations
 
@@ -89,7 +90,6 @@ def write_plots(hist: AngleHistograms, folder, system, summary: dict, title: str
     if folder.exists():
         for p in paths.values():
             check_output(p, overwrite)
-    folder.mkdir(exist_ok=True)
     for role in ("yaw", "pitch", "roll"):
         fig = Figure(figsize=(7, 3.2))
         ax = fig.add_subplot(1, 1, 1)

@@ -5,29 +5,69 @@ from collections import Counter
 
 import numpy as np
 
+from ..errors import HpeError
 from .writers import check_output, write_table
+
+
+def rejects_rule(count: int, first: str | None, *, has_file: bool, strict: bool, source=None) -> None:
+    """The rule every command applies once its rows are processed (before anything is committed).
+
+    Without a rejects file (``has_file=False``) or with ``strict``, any
+    rejected row is an error: one line naming how many rows were set aside
+    and the first one (``first``: ``"line N: reason"``), so the command exits 1
+    and its output transaction writes nothing.
+    """
+    if not count:
+        return
+    where = f"{source}: " if source is not None else ""
+    head = f"{where}{first}; " if first else where
+    if strict:
+        raise HpeError(f"{head}{count} row(s) rejected and --strict given: nothing written")
+    if not has_file:
+        raise HpeError(f"{head}{count} row(s) cannot be used: nothing written "
+                       "(use --rejects FILE to set them aside and write the rest)")
 
 
 class Rejects:
     """Collect rejected rows (as column dicts) and write them once, atomically.
 
     ``path=None`` still counts reasons, so a summary can always be printed.
+    :meth:`finish` applies :func:`rejects_rule`: with rejected rows and no
+    ``path`` (or ``strict``), it raises instead of writing, naming
+    ``source`` and the first rejected row.
     """
 
-    def __init__(self, path=None, overwrite: bool = False):
+    def __init__(self, path=None, overwrite: bool = False, strict: bool = False, source=None):
         self.path = check_output(path, overwrite) if path else None
         self.overwrite = overwrite
+        self.strict = strict
+        self.source = source
+        self.first_where: str | None = None
         self._parts: list = []
         self.counts: Counter = Counter()
 
     def __len__(self) -> int:
         return sum(self.counts.values())
 
-    def add(self, columns: dict, reasons) -> None:
-        """Add rows: ``columns`` maps name -> 1-D array, ``reasons`` is one string per row."""
+    def add(self, columns: dict, reasons, lines=None) -> None:
+        """Add rows: ``columns`` maps name -> 1-D array, ``reasons`` is one string per row.
+
+        ``lines`` (optional): 1-based file line of each row (header = line 1),
+        used to name the first rejected row; otherwise ``columns['line']`` or
+        ``columns['row']`` is.
+        """
         reasons = np.asarray(reasons, dtype=object)
         if reasons.size == 0:
             return
+        if self.first_where is None:
+            if lines is not None:
+                self.first_where = f"line {int(np.asarray(lines)[0])}: {reasons[0]}"
+            elif "line" in columns:
+                self.first_where = f"line {int(np.asarray(columns['line'])[0])}: {reasons[0]}"
+            elif "row" in columns:
+                self.first_where = f"row {int(np.asarray(columns['row'])[0])}: {reasons[0]}"
+            else:
+                self.first_where = str(reasons[0])
         self.counts.update(reasons.tolist())
         if self.path is not None:
             self._parts.append({**{k: np.asarray(v) for k, v in columns.items()}, "reason": reasons})
@@ -35,7 +75,18 @@ class Rejects:
     def first(self) -> str | None:
         return next(iter(self.counts), None)
 
+    def check(self) -> None:
+        """Apply :func:`rejects_rule` (raise if rows were rejected without a file, or with ``strict``)."""
+        rejects_rule(len(self), self.first_where, has_file=self.path is not None, strict=self.strict,
+                     source=self.source)
+
+    def finish(self):
+        """The end of a command: apply the rule (:meth:`check`), then :meth:`write`."""
+        self.check()
+        return self.write()
+
     def write(self):
+        """Stage the rejects file (None without a path)."""
         if self.path is None:
             return None
         import pandas as pd

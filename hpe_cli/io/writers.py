@@ -6,8 +6,6 @@ only when everything succeeded, so a failure never leaves a half-written file.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 from ..errors import HpeError
@@ -42,32 +40,52 @@ def system_metadata(system) -> dict:
 
 
 class AtomicFile:
-    """Context manager giving a temporary path that is renamed to ``path`` on success."""
+    """Context manager giving a temporary path whose content becomes ``path``.
+
+    Inside a run (an active :class:`~hpe_cli.io.transaction.OutputTransaction`)
+    the file is staged and committed with the run's other outputs; alone, it is
+    committed when the block ends. On an error the temporary file is removed,
+    and an OS error while writing it names ``path`` and the reason.
+    """
 
     def __init__(self, path, overwrite: bool = False):
         self.path = check_output(path, overwrite)
+        self.overwrite = overwrite
         self.tmp = None
 
     def __enter__(self) -> Path:
-        try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise HpeError(f"{self.path}: cannot create folder {self.path.parent} ({exc.strerror})") from None
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
-        os.close(fd)
-        self.tmp = Path(tmp)
+        from .transaction import OutputTransaction, current
+
+        txn = current()
+        self._own = txn is None
+        self._txn = OutputTransaction() if self._own else txn
+        self.tmp = self._txn.stage_file(self.path, self.overwrite)
         return self.tmp
 
     def __exit__(self, exc_type, exc, tb):
-        if exc_type is None:
-            # mkstemp makes the file 0600; give it the mode a plain open() would have
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(self.tmp, 0o666 & ~umask)
-            os.replace(self.tmp, self.path)
-        else:
-            self.tmp.unlink(missing_ok=True)
+        if exc_type is not None:
+            if self._own:
+                self._txn.abort()
+            else:
+                self._txn.discard(self.tmp)
+            if isinstance(exc, OSError) and _mentions(exc, self.tmp):
+                raise HpeError(f"{self.path}: cannot write: {_reason(exc)}") from None
+            return False
+        if self._own:
+            self._txn.commit()
         return False
+
+
+def _mentions(exc, tmp) -> bool:
+    name = Path(tmp).name
+    return name in str(getattr(exc, "filename", "") or "") or name in str(exc) or \
+        getattr(exc, "filename", None) is None
+
+
+def _reason(exc) -> str:
+    from .transaction import os_reason
+
+    return os_reason(exc)
 
 
 class TableWriter:
@@ -103,10 +121,16 @@ class TableWriter:
             if self.metadata and self.fmt == "parquet":
                 schema = schema.with_metadata({**(schema.metadata or {}), **self.metadata})
             self._schema = schema
-            self._writer = self._open(schema)
+            try:
+                self._writer = self._open(schema)
+            except OSError as exc:
+                raise HpeError(f"{self.path}: cannot write: {_reason(exc)}") from None
         if batch.schema != self._schema:
             batch = batch.cast(self._schema) if isinstance(batch, pa.Table) else pa.Table.from_batches([batch]).cast(self._schema)
-        self._writer.write(batch)
+        try:
+            self._writer.write(batch)
+        except OSError as exc:
+            raise HpeError(f"{self.path}: cannot write: {_reason(exc)}") from None
         self.rows += batch.num_rows
 
     def _open(self, schema):
@@ -118,20 +142,34 @@ class TableWriter:
             # continuous floats neither repeat (dictionary pages) nor compress (snappy finds
             # nothing in float64 mantissas): both cost write time for no gain
             floats = {f.name for f in schema if pa.types.is_floating(f.type)}
-            return pq.ParquetWriter(self._tmp, schema, use_dictionary=[n for n in schema.names if n not in floats],
+            return pq.ParquetWriter(self._where(), schema, use_dictionary=[n for n in schema.names if n not in floats],
                                     compression={n: ("none" if n in floats else "snappy") for n in schema.names})
         import pyarrow.csv as pcsv
 
-        return pcsv.CSVWriter(self._tmp, schema)
+        return pcsv.CSVWriter(self._where(), schema)
+
+    def _where(self):
+        """The temporary path, or an open file when the path is not valid UTF-8 (Arrow needs UTF-8 names)."""
+        try:
+            str(self._tmp).encode("utf-8")
+            return str(self._tmp)
+        except UnicodeEncodeError:
+            self._file = open(self._tmp, "wb")
+            return self._file
 
     def __exit__(self, exc_type, exc, tb):
         try:
             if self._writer is not None:
-                self._writer.close()
+                try:
+                    self._writer.close()
+                    if getattr(self, "_file", None) is not None:
+                        self._file.close()
+                except OSError as e:
+                    raise HpeError(f"{self.path}: cannot write: {_reason(e)}") from None
             elif exc_type is None:
                 raise HpeError(f"{self.path}: nothing to write (no rows and no schema)")
-        except BaseException:
-            self._atomic.__exit__(RuntimeError, None, None)
+        except BaseException as e:
+            self._atomic.__exit__(type(e), e, None)
             raise
         return self._atomic.__exit__(exc_type, exc, tb)
 

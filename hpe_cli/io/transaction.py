@@ -1,0 +1,481 @@
+"""The output transaction: all outputs of one run are committed together, or none is.
+
+Every writer (:class:`~hpe_cli.io.writers.AtomicFile`, ``TableWriter``,
+``write_table``, ``write_json``, ``Rejects.write``, the audit plots, and folders
+from :func:`staged_dir`) stages its output as a temporary file or folder named
+``.hpe-<8 hex>.tmp`` next to the target. The run's transaction (opened by the
+``hpe`` group around every command, or by :func:`ensure_transaction` in library
+code) commits all staged outputs at the end of the run, or removes them all on
+an error, ``sys.exit``, or a signal.
+
+Rules enforced here, for every command:
+
+- an output that resolves (``os.path.realpath``, or the same inode when the
+  file exists) to an input of the run, or to another output of the same run,
+  is refused, with or without ``--overwrite``;
+- a new file is created without overwriting atomically (``os.link`` of the
+  staged file, which fails if the name exists), so two concurrent runs cannot
+  both create one output;
+- an overwritten file keeps its permission bits; a new file gets the mode a
+  plain ``open()`` would give it (the umask applies; the umask is never set);
+- errors name the user's path and the reason (permission denied, read-only
+  file system, disk full, name too long), never a temporary name.
+
+Without a transaction, each writer commits its own output atomically.
+"""
+from __future__ import annotations
+
+import contextvars
+import errno
+import os
+import re
+import secrets
+import shutil
+import stat
+from contextlib import contextmanager
+from pathlib import Path
+
+from ..errors import HpeError
+
+__all__ = ["OutputTransaction", "current", "ensure_transaction", "staged_dir", "note_input", "os_reason",
+           "printable", "TEMP_PREFIX"]
+
+TEMP_PREFIX = ".hpe-"
+_current: contextvars.ContextVar = contextvars.ContextVar("hpe_output_transaction", default=None)
+#: the run's transaction, also visible from worker threads (which do not inherit context variables)
+_run = None
+
+_REASONS = {
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+    errno.EROFS: "read-only file system",
+    errno.ENOSPC: "disk full (no space left on device)",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EFBIG: "file too large (file size limit reached)",
+    errno.ENAMETOOLONG: "file name too long",
+    errno.EISDIR: "is a folder",
+    errno.ENOTDIR: "a parent of it is not a folder",
+    errno.ENOENT: "no such file or folder",
+    errno.EEXIST: "already exists",
+    errno.EIO: "input/output error",
+    errno.ELOOP: "too many levels of symbolic links",
+    errno.EILSEQ: "file name is not valid in this file system's encoding",
+}
+
+
+def os_reason(exc: BaseException) -> str:
+    """Short reason of an OS error (also pyarrow's, whose message carries ``[errno N]``)."""
+    code = getattr(exc, "errno", None)
+    if not code:
+        m = re.search(r"errno[ =]?(\d+)", str(exc), re.IGNORECASE)
+        code = int(m.group(1)) if m else None
+    if code in _REASONS:
+        return _REASONS[code]
+    if code:
+        return os.strerror(code).lower()
+    if isinstance(exc, UnicodeError):
+        return "file name is not valid UTF-8"
+    text = " ".join(str(exc).split())
+    return re.sub(r"\S*" + re.escape(TEMP_PREFIX) + r"[0-9a-f]{8}\.tmp\S*", "", text)[:200] or type(exc).__name__
+
+
+def printable(text) -> str:
+    """``text`` with undecodable file-name bytes (surrogate escapes) shown as ``\\xNN``."""
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    text = str(text)
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+def _real(path) -> str:
+    return os.path.realpath(os.fspath(path))
+
+
+def _key(path):
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return (st.st_dev, st.st_ino)
+
+
+def _temp_in(folder: Path) -> Path:
+    return folder / f"{TEMP_PREFIX}{secrets.token_hex(4)}.tmp"
+
+
+def _name_max(folder: Path) -> int:
+    try:
+        return os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return 255
+
+
+class _Item:
+    """One path of the run: an input, a declared output or a staged output."""
+
+    __slots__ = ("shown", "real", "key", "label")
+
+    def __init__(self, path, label: str = ""):
+        self.label = label
+        self.shown = os.fspath(path)
+        self.real = _real(path)
+        self.key = _key(path)
+
+    def same(self, other: "_Item") -> bool:
+        return self.real == other.real or (self.key is not None and self.key == other.key)
+
+
+class _Staged:
+    __slots__ = ("target", "tmp", "overwrite", "is_dir", "item")
+
+    def __init__(self, target: Path, tmp: Path, overwrite: bool, is_dir: bool):
+        self.target, self.tmp, self.overwrite, self.is_dir = target, tmp, overwrite, is_dir
+        self.item = _Item(target)
+
+
+class OutputTransaction:
+    """All outputs of one run: staged next to their targets, committed together or removed.
+
+    Use :meth:`activate` (a context manager) to make it the current transaction:
+    writers then stage into it; it commits when the block ends normally and
+    aborts (removes everything staged) on any exception, ``SystemExit`` and
+    ``KeyboardInterrupt`` included.
+    """
+
+    def __init__(self):
+        self._inputs: list = []
+        self._outputs: list = []  # declared outputs (command-line parameters)
+        self._staged: list = []
+        self._made_dirs: list = []  # folders created for outputs, removed on abort if still empty
+        self._after: list = []
+        self.state = "open"
+
+    # ------------------------------------------------------------- declarations
+    def add_input(self, path, label: str = "") -> None:
+        """Declare an input of the run (``label``: its option name): no output may resolve to it."""
+        if path is None or os.fspath(path) == "-":
+            return
+        item = _Item(path, label)
+        for out in self._outputs + [s.item for s in self._staged]:
+            if out.same(item):
+                raise HpeError(_collision(out, item, "input"))
+        self._inputs.append(item)
+
+    def add_output(self, path, label: str = "") -> None:
+        """Declare an output of the run: it may be neither an input nor another declared output."""
+        if path is None or os.fspath(path) == "-":
+            return
+        item = _Item(path, label)
+        self._check_inputs(item)
+        for out in self._outputs:
+            if out.same(item):
+                raise HpeError(_collision(item, out, "output"))
+        self._outputs.append(item)
+
+    def _check_inputs(self, item: _Item) -> None:
+        for inp in self._inputs:
+            if inp.same(item):
+                raise HpeError(_collision(item, inp, "input"))
+
+    def after_commit(self, func) -> None:
+        """Call ``func()`` once everything is committed (e.g. print the summary)."""
+        self._after.append(func)
+
+    # ------------------------------------------------------------------ staging
+    def _prepare(self, path, overwrite: bool, is_dir: bool) -> tuple:
+        if self.state != "open":
+            raise HpeError(f"{path}: the run's outputs are already {self.state}")
+        path = Path(path)
+        item = _Item(path)
+        self._check_inputs(item)
+        for s in self._staged:
+            if s.item.same(item):
+                raise HpeError(_collision(item, s.item, "output"))
+        if path.is_dir() and not is_dir:
+            raise HpeError(f"{path}: is a folder, expected a file name")
+        if path.exists() and not path.is_dir() and is_dir:
+            raise HpeError(f"{path}: is a file, expected a folder")
+        if path.exists() and not overwrite and not is_dir:
+            raise HpeError(f"{path}: already exists (use --overwrite to replace it)")
+        parent = path.parent
+        self._make_parents(path, parent)
+        if len(os.fsencode(path.name)) > _name_max(parent):
+            raise HpeError(f"{path}: file name too long")
+        return path, parent
+
+    def _make_parents(self, path: Path, parent: Path) -> None:
+        missing = []
+        p = parent
+        while not p.exists():
+            if p.is_symlink():  # a dangling link
+                raise HpeError(f"{path}: folder {p} is a broken symbolic link")
+            missing.append(p)
+            if p.parent == p:
+                break
+            p = p.parent
+        if p.exists() and not p.is_dir():
+            raise HpeError(f"{path}: {p} is not a folder")
+        for d in reversed(missing):
+            try:
+                d.mkdir()
+            except FileExistsError:
+                continue
+            except OSError as exc:
+                raise HpeError(f"{path}: cannot create folder {d}: {os_reason(exc)}") from None
+            self._made_dirs.append(d)
+
+    def stage_file(self, path, overwrite: bool = False) -> Path:
+        """Reserve ``path`` as an output; return the temporary file to write instead."""
+        path, parent = self._prepare(path, overwrite, is_dir=False)
+        for _ in range(16):
+            tmp = _temp_in(parent)
+            try:
+                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
+            except FileExistsError:
+                continue
+            except OSError as exc:
+                raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
+            os.close(fd)
+            self._staged.append(_Staged(path, tmp, overwrite, False))
+            return tmp
+        raise HpeError(f"{path}: cannot create a temporary file in {parent}")
+
+    def stage_dir(self, path, overwrite: bool = False) -> Path:
+        """Reserve folder ``path`` as an output; return the temporary folder to fill instead.
+
+        At commit its files are moved into ``path`` (created if missing); an
+        existing file there is replaced only with ``overwrite``.
+        """
+        path, parent = self._prepare(path, overwrite, is_dir=True)
+        for _ in range(16):
+            tmp = _temp_in(parent)
+            try:
+                os.mkdir(tmp, 0o777)
+            except FileExistsError:
+                continue
+            except OSError as exc:
+                raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
+            self._staged.append(_Staged(path, tmp, overwrite, True))
+            return tmp
+        raise HpeError(f"{path}: cannot create a temporary folder in {parent}")
+
+    def discard(self, tmp) -> None:
+        """Forget a staged output and remove its temporary file or folder."""
+        for s in list(self._staged):
+            if s.tmp == Path(tmp):
+                self._staged.remove(s)
+                _remove(s.tmp)
+
+    def target_of(self, tmp) -> Path | None:
+        for s in self._staged:
+            if s.tmp == Path(tmp):
+                return s.target
+        return None
+
+    # ------------------------------------------------------------ commit/abort
+    def _dir_plan(self, s: _Staged) -> list:
+        """(tmp file, target file) pairs of a staged folder, after checking each target."""
+        pairs = []
+        for root, dirs, files in os.walk(s.tmp):
+            dirs.sort()
+            for f in sorted(files):
+                src = Path(root) / f
+                dst = s.target / src.relative_to(s.tmp)
+                item = _Item(dst)
+                self._check_inputs(item)
+                if dst.is_dir():
+                    raise HpeError(f"{dst}: is a folder, expected a file name")
+                if dst.exists() and not s.overwrite:
+                    raise HpeError(f"{dst}: already exists (use --overwrite to replace it)")
+                pairs.append((src, dst))
+        return pairs
+
+    def commit(self) -> None:
+        """Move every staged output into place; on any failure undo what was moved and remove the rest."""
+        if self.state != "open":
+            return
+        self.state = "committing"
+        undo: list = []
+        backups: list = []
+        try:
+            plans = []
+            for s in self._staged:
+                if s.is_dir:
+                    plans.append((s, self._dir_plan(s)))
+                else:
+                    self._check_inputs(s.item)
+                    if s.target.exists() and not s.overwrite:
+                        raise HpeError(f"{s.target}: already exists (another run created it meanwhile; "
+                                       "use --overwrite to replace it)")
+                    plans.append((s, [(s.tmp, s.target)]))
+            for s, pairs in plans:
+                if s.is_dir:
+                    self._make_parents(s.target / "x", s.target)
+                for src, dst in pairs:
+                    if s.is_dir:
+                        self._make_parents(dst, dst.parent)
+                    _place(src, dst, s.overwrite, undo, backups)
+        except BaseException as exc:
+            for action in reversed(undo):
+                try:
+                    action()
+                except OSError:
+                    pass
+            self.state = "open"
+            self.abort()
+            if isinstance(exc, OSError):
+                raise HpeError(f"{getattr(exc, 'hpe_target', '')}: cannot write: {os_reason(exc)}") from None
+            raise
+        for b in backups:
+            _remove(b)
+        for s in self._staged:
+            if s.is_dir:
+                _remove(s.tmp)
+        self._staged.clear()
+        self._made_dirs.clear()
+        self.state = "committed"
+        for func in self._after:
+            func()
+
+    def abort(self) -> None:
+        """Remove everything staged and every folder created for it (if still empty)."""
+        if self.state in ("aborted", "committed"):
+            return
+        self.state = "aborted"
+        for s in self._staged:
+            _remove(s.tmp)
+        self._staged.clear()
+        for d in reversed(self._made_dirs):
+            try:
+                d.rmdir()
+            except OSError:
+                pass
+        self._made_dirs.clear()
+
+    # ------------------------------------------------------------------ scope
+    @contextmanager
+    def activate(self, run: bool = False):
+        """Make this the current transaction; commit at the end, abort on any exception."""
+        global _run
+        token = _current.set(self)
+        previous = _run
+        if run:
+            _run = self
+        try:
+            yield self
+            self.commit()
+        except BaseException:
+            self.abort()
+            raise
+        finally:
+            _current.reset(token)
+            if run:
+                _run = previous
+
+
+def _collision(out: _Item, other: _Item, kind: str) -> str:
+    what = out.label or "the output"
+    against = f"{other.label} {other.shown}" if other.label else f"the {kind} {other.shown}"
+    return (f"{out.shown}: {what} must differ from {against} (the same file after links); "
+            "refusing to write it, with or without --overwrite")
+
+
+def _remove(p: Path) -> None:
+    try:
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink()
+    except FileNotFoundError:
+        pass
+    except OSError:
+        pass
+
+
+_NO_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK, errno.ENOSYS, errno.EXDEV}
+
+
+def _place(src: Path, dst: Path, overwrite: bool, undo: list, backups: list) -> None:
+    """Move ``src`` to ``dst``: atomically create it, or replace it keeping its mode."""
+    try:
+        if overwrite and dst.exists():
+            mode = stat.S_IMODE(os.stat(dst).st_mode)
+            os.chmod(src, mode)
+            bak = _temp_in(dst.parent)
+            try:
+                os.link(dst, bak)
+                backups.append(bak)
+                undo.append(lambda: os.replace(bak, dst))
+            except OSError:
+                pass
+            os.replace(src, dst)
+            return
+        try:
+            os.link(src, dst)  # fails if dst exists, whoever created it
+        except FileExistsError:
+            raise HpeError(f"{dst}: already exists (another run created it meanwhile; "
+                           "use --overwrite to replace it)") from None
+        except OSError as exc:
+            if exc.errno not in _NO_LINKS:
+                raise
+            # no hard links here: claim the name atomically, then move the file onto it
+            fd = os.open(dst, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            os.close(fd)
+            undo.append(lambda: os.unlink(dst))
+            os.replace(src, dst)
+            return
+        undo.append(lambda: os.unlink(dst))
+        os.unlink(src)
+    except FileExistsError:
+        raise HpeError(f"{dst}: already exists (another run created it meanwhile; "
+                       "use --overwrite to replace it)") from None
+    except OSError as exc:
+        exc.hpe_target = dst
+        raise
+
+
+def current() -> OutputTransaction | None:
+    """The transaction outputs are staged into now (None in plain library use)."""
+    txn = _current.get()
+    if txn is None:
+        txn = _run
+    return txn if txn is not None and txn.state == "open" else None
+
+
+@contextmanager
+def ensure_transaction():
+    """Join the current transaction, or open one committed when this block ends."""
+    txn = current()
+    if txn is not None:
+        yield txn
+        return
+    txn = OutputTransaction()
+    with txn.activate():
+        yield txn
+
+
+def note_input(path) -> None:
+    """Declare ``path`` an input of the current run (no-op without a transaction)."""
+    txn = current()
+    if txn is not None:
+        txn.add_input(path)
+
+
+@contextmanager
+def staged_dir(path, overwrite: bool = False):
+    """A temporary folder whose files are moved into folder ``path`` when the run commits.
+
+    Without a current transaction the folder is committed when the block ends.
+    Nothing appears in ``path`` before the commit; on failure nothing does.
+    """
+    with ensure_transaction() as txn:
+        tmp = txn.stage_dir(path, overwrite)
+        try:
+            yield tmp
+        except BaseException:
+            txn.discard(tmp)
+            raise

@@ -1,0 +1,111 @@
+"""``hpe infer --callable/--decoder``: run the user's code in a child process with a time limit.
+
+The user's module is imported and called in a fresh interpreter
+(``multiprocessing`` with the ``spawn`` start method), so nothing it does can
+end, hang or change ``hpe`` itself: a hang past ``timeout`` seconds, a
+``sys.exit(n)``, an ``os._exit``, a crash (signal) or an exception becomes one
+:class:`~hpe_cli.errors.HpeError` line, and the command exits 1. The child
+sends back the JSON report and, for an exact fit, the matched system as TOML
+(the same objects the in-process search gives).
+"""
+from __future__ import annotations
+
+import signal
+
+from ..errors import HpeError
+
+DEFAULT_TIMEOUT = 60.0
+
+
+def _child(conn, spec, builder, roles, units, packed, samples, kw):
+    """Runs in the child: load, search, send ``("ok", report, toml, name)`` or ``("error", message)``."""
+    import os
+    import sys
+
+    from ..rotation import infer as inf
+
+    try:
+        from ..cli.infer import _load_callable
+
+        func = _load_callable(spec)
+        if builder:
+            rep = inf.infer_builder(inf.as_builder(func, roles, units, packed), n=samples or 64, **kw)
+        else:
+            rep = inf.infer_decoder(inf.as_decoder(func, roles, units), n=samples or 256, **kw)
+        system = rep.get("_system")
+        msg = ("ok", inf.report_json(rep), system.to_toml() if system is not None else None,
+               system.name if system is not None else None)
+    except HpeError as exc:
+        msg = ("error", str(exc))
+    except inf.CallError as exc:
+        msg = ("error", f"{spec}: {exc}")
+    except SystemExit as exc:
+        msg = ("error", f"{spec}: the code called sys.exit({exc.code!r})")
+    except BaseException as exc:  # noqa: BLE001 - the user's code may raise anything
+        msg = ("error", f"{spec}: raised {type(exc).__name__}: {' '.join(str(exc).split())[:200]}")
+    try:
+        conn.send(msg)
+    except Exception as exc:  # noqa: BLE001 - e.g. an unpicklable value in the report
+        conn.send(("error", f"{spec}: cannot return the result ({type(exc).__name__})"))
+    conn.close()
+    sys.stdout.flush()
+    os._exit(0)  # skip the user's atexit handlers and non-daemon threads
+
+
+def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: bool = False, samples=None,
+                       timeout: float = DEFAULT_TIMEOUT, **kw) -> tuple:
+    """Run the search on ``spec`` (``FILE.py:FUNC`` or ``module:FUNC``) in a child process.
+
+    Returns ``(report, system_toml, system_name)``: the JSON report of
+    :func:`hpe_cli.rotation.infer.infer_builder` (``builder=True``) or
+    :func:`~hpe_cli.rotation.infer.infer_decoder`, and the matched system as
+    TOML text and name (None when nothing fits exactly).
+
+    Raises
+    ------
+    HpeError
+        The code could not be loaded, raised, exited, crashed, or ran longer
+        than ``timeout`` seconds.
+    """
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(send, spec, builder, roles, units, packed, samples, kw), daemon=True,
+                       name="hpe-infer-user-code")
+    proc.start()
+    send.close()
+    try:
+        got = recv.poll(timeout)
+        msg = None
+        if got:
+            try:
+                msg = recv.recv()
+            except (EOFError, OSError):
+                msg = None
+        if msg is None:
+            if proc.is_alive() and not got:
+                proc.terminate()
+                proc.join(2)
+                if proc.is_alive():
+                    proc.kill()
+                raise HpeError(f"{spec}: no answer within --timeout {timeout:g} s (the code hangs or is too slow)")
+            proc.join(5)
+            code = proc.exitcode
+            if code is not None and code < 0:
+                try:
+                    name = signal.Signals(-code).name
+                except ValueError:
+                    name = f"signal {-code}"
+                raise HpeError(f"{spec}: the code crashed ({name})")
+            raise HpeError(f"{spec}: the code ended the process (exit status {code}) before returning")
+        if msg[0] == "error":
+            raise HpeError(msg[1])
+        return msg[1], msg[2], msg[3]
+    finally:
+        recv.close()
+        if proc.is_alive():
+            proc.join(2)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(1)
