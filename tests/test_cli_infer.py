@@ -165,3 +165,31 @@ def test_aflw2000_landmarks(tmp_path, realdata):
     by = {r: h["rms_residual_deg"] for h in rep["hypotheses"] for r in h["readings"]}
     assert by["3ddfa_v2"] > 10 * by["300w_lp"]
     assert by["6drepnet (stored matrix read as active)"] > 10 * by["300w_lp"]
+
+
+PKG = Path(__file__).resolve().parent / "fixtures" / "packages"
+
+
+def test_file_inside_folder_with_relative_import(tmp_path):
+    """3DDFA_V2's utils/pose.py layout: `from .functions import` in a folder without __init__.py."""
+    rep, res = report(tmp_path, "--decoder", f"{PKG}/tddfa_repo/utils/pose.py:matrix2angle",
+                      "--args", "yaw,pitch,roll")
+    assert rep["best"] == "3ddfa_v2", res.output
+
+
+def test_module_with_path_root(tmp_path):
+    rep, res = report(tmp_path, "--decoder", "utils.pose:matrix2angle", "--path", f"{PKG}/tddfa_repo",
+                      "--args", "yaw,pitch,roll")
+    assert rep["best"] == "3ddfa_v2", res.output
+
+
+def test_file_deep_in_package_imported_as_package_module(tmp_path):
+    rep, res = report(tmp_path, "--callable", f"{PKG}/pkg_repo/headpose/geometry/build.py:get_R")
+    assert rep["best"] == "6drepnet", res.output
+    assert "biwi" in rep["reproduced_by"]  # BIWI's Rz Ry Rx is the same function (TriNet's BIWI vectors too)
+
+
+def test_lists_every_builtin_reproducing_the_function(tmp_path):
+    rep, res = report(tmp_path, "--callable", f"{PKG}/pkg_repo/headpose/geometry/build.py:hopenet_like")
+    assert rep["best"] == "300w_lp" and "whenet" in rep["also_matches"]["names"]
+    assert "also reproduced by built-in" in res.output and "whenet" in res.output

@@ -27,7 +27,7 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
     try:
         from ..cli.infer import _load_callable
 
-        func = _load_callable(spec)
+        func = _load_callable(spec, kw.pop("import_path", None))
         if builder:
             rep = inf.infer_builder(inf.as_builder(func, roles, units, packed), n=samples or 64, **kw)
         else:

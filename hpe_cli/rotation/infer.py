@@ -303,10 +303,25 @@ def score(err, tol: float, locks=None, index=None) -> Scores:
 
 # --------------------------------------------------------------------------- built-in names
 def builtin_names_by_candidate() -> dict:
-    """Candidate index -> built-in names whose stored matrix function it is."""
+    """Candidate index -> every built-in whose stored matrix function (angles -> stored matrix) it is.
+
+    Found by probing ``from_angles`` so that systems with improper frames or
+    another storage kind (whose stored matrix may still be an Euler product,
+    e.g. img2pose's ``F A F`` equals the opencv function) are listed too.
+    """
+    return dict(_builtin_names_by_candidate())
+
+
+@lru_cache(maxsize=1)
+def _builtin_names_by_candidate():
+    probe = spread_angles(16, seed=11)
+    cm = candidate_matrices(probe)
     out: dict = {}
     for name, s in builtin_systems().items():
-        out.setdefault(_index()[candidate_of(s).key()], []).append(name)
+        g = s.from_angles(probe)
+        hit = np.flatnonzero(frobenius(cm, g[None]).max(1) < 1e-9)
+        for h in hit[:1]:
+            out.setdefault(int(h), []).append(name)
     return out
 
 
@@ -328,7 +343,8 @@ def _rank_builtins(names, order=None, units=None, selection=None) -> list:
 
     def key(n):
         s = systems[n]
-        return (selection is not None and s.selection != selection,
+        return (s.storage_kind != "angles" or s.angle_frame != "system",  # systems that store angles first
+                selection is not None and s.selection != selection,
                 order is not None and tuple(s.order) != tuple(order),
                 units is not None and s.units != units,
                 PRIORITY.index(n) if n in PRIORITY else len(PRIORITY), n)
@@ -611,6 +627,7 @@ def _result(mode: str, sc: Scores, *, roles, units, source, tol, n, name, frame,
         best = "custom"
     report.update(best=best, max_error=entry["max_error"], matched=entry, definition=system.describe(),
                   system=system.to_dict(), runners_up=_runners_up(sc, stored, best_pos))
+    report["reproduced_by"] = names
     if len(names) > 1:
         report["also_matches"] = {"names": names[1:], "note": "same matrix from the same angles; these differ only "
                                   "in what the code cannot reveal (frame, storage, solution rule, storage order)"}
