@@ -34,12 +34,15 @@ _SEEDS = (0x9E3779B97F4A7C15, 0xD1B54A32D192ED03)
 @click.option("--examples", type=click.IntRange(0), default=5, show_default=True,
               help="Example rows per check in the JSON report.")
 @click.option("--strict", is_flag=True, help="Exit with status 1 when any row is flagged.")
+@click.option("--decoder", type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]), default=None,
+              help="Also report how far this published decoder's printed angles are from each rotation "
+                   "(max/mean geodesic and per-angle, JSON key 'decoder').")
 @overwrite_option
 @batch_option
 @verbosity_options
 @click.pass_context
 def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, radians, use, keys, examples,
-          strict, overwrite, batch_size, verbose, quiet):
+          strict, decoder, overwrite, batch_size, verbose, quiet):
     """Check every row of a label table and count what looks wrong.
 
     INPUT is a .parquet or .csv table with angle columns pitch,yaw,roll
@@ -73,12 +76,14 @@ def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, r
       hpe audit AFLW2000/ --json - --plots audit_plots/
       hpe audit preds.csv --system 6drepnet --columns matrix -o flagged.parquet --only-flagged
       hpe audit labels.csv --system whenet --gimbal-tol 2 --strict
+      hpe audit AFLW2000/ --decoder synergynet --json -
+      hpe audit img2pose_preds.csv --system img2pose --json report.json
     """
     bar = progress(desc="audit", quiet=quiet)
     try:
         result = run_audit(input, system, report=report, plots=plots, output=output, only_flagged=only_flagged,
                            near_tol_deg=gimbal_tol, radians=radians, use=use, keys=keys, n_examples=examples,
-                           overwrite=overwrite, batch_size=batch_size, progress=bar)
+                           overwrite=overwrite, batch_size=batch_size, progress=bar, decoder=decoder)
     finally:
         bar.close()
     from ..rotation.audit import CHECKS
@@ -90,6 +95,12 @@ def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, r
     for c in CHECKS:
         if verbose and result["examples"].get(c):
             lines.append(f"  e.g. {c}: rows " + ", ".join(str(e["row"]) for e in result["examples"][c]))
+    if "decoder" in result:
+        d = result["decoder"]
+        lines.append(f"  decoder {d['decoder']} vs {d['reference_system']}: geodesic max {d['geodesic_deg']['max']:.3g} "
+                     f"mean {d['geodesic_deg']['mean']:.3g} deg; |d_yaw| max {d['d_yaw']['max']:.3g}, |d_pitch| max "
+                     f"{d['d_pitch']['max']:.3g}, |d_roll| max {d['d_roll']['max']:.3g} deg; "
+                     f"{d['rows_off_by_more_than_0.01deg']} rows off by > 0.01 deg; {d['not_decoded']} not decoded")
     outs = [str(p) for p in (report if report != "-" else None, output, plots) if p]
     if outs:
         lines.append("  wrote " + ", ".join(outs))
@@ -164,12 +175,13 @@ def _read_labels(batch, use, radians):
 
 def run_audit(input_path, system, *, report=None, plots=None, output=None, only_flagged=False,
               near_tol_deg=1.0, radians=False, use="auto", keys=(), n_examples=5, overwrite=False,
-              batch_size=262_144, progress=None) -> dict:
+              batch_size=262_144, progress=None, decoder=None) -> dict:
     """Audit ``input_path`` and write the requested outputs; return the report dict."""
     import numpy as np
 
     from ..errors import HpeError
     from ..io import ANGLE_COLS, MATRIX_COLS, check_output, label_mode, open_table, write_json
+    from ..io.labels import label_values
     from ..io.plots import AngleHistograms, plot_files, write_plots
     from ..rotation.audit import CHECKS, audit_angles, audit_matrices, duplicate_first
 
@@ -189,8 +201,16 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
 
     src = open_table(input_path, batch_size)
     columns = src.columns
-    mode = label_mode(columns, src.path) if use == "auto" else use
+    mode = label_mode(columns, src.path, system) if use == "auto" else use
     need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
+    if use == "auto" and (system.storage_kind != "angles" or system.columns) and \
+            all(c in columns for c in system.value_columns):
+        need = system.value_columns  # the system's own columns (rotvec, quaternion, 6-D, named angles)
+    tally = None
+    if decoder:
+        from ..rotation.decoders import DecoderTally
+
+        tally = DecoderTally(decoder)
     missing = [c for c in need if c not in columns]
     if missing:
         raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
@@ -211,13 +231,15 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     examples = {c: [] for c in CHECKS}
     rows = 0
     for batch in src.batches():
-        values = _read_labels(batch, mode, radians)
-        res = audit_angles(values, system, near_tol_deg) if mode == "angles" \
+        values = label_values(batch, system, mode, radians)
+        if tally is not None:
+            tally.add(system.to_canonical(system.from_angles(values) if values.ndim == 2 else values))
+        res = audit_angles(values, system, near_tol_deg) if values.ndim == 2 \
             else audit_matrices(values, system, near_tol_deg)
         flags.append(np.stack([res[c] for c in CHECKS[:-1]], axis=1))
         hashes.append(_key_hashes(batch, values, key_cols))
         if hist is not None:
-            hist.add(values if mode == "angles" else res["primary"])
+            hist.add(values if values.ndim == 2 else res["primary"])
         for c in CHECKS[:-1]:
             want = n_examples - len(examples[c])
             if want > 0:
@@ -244,6 +266,8 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
               "details": {"flagged": int(any_flag.sum()),
                           "near_gimbal_not_locked": int((flag_arr[:, 1] & ~flag_arr[:, 0]).sum())},
               "examples": examples}
+    if tally is not None:
+        result["decoder"] = tally.result()
 
     if output:
         _write_flagged(input_path, output, flag_arr, any_flag, only_flagged, overwrite, batch_size, system)

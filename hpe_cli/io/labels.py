@@ -268,3 +268,37 @@ def rotation_value_columns(system, X, n: int) -> dict:
         return {c: np.asarray(v * f, dtype=np.float64) for c, v in zip(system.value_columns, p1)}
     values = system.matrix_to_values(soa.to_array(X, n)) if n else np.zeros((0, len(system.value_columns)))
     return {c: np.ascontiguousarray(values[:, k]) for k, c in enumerate(system.value_columns)}
+
+
+def label_values(batch, system, mode: str, radians: bool = False):
+    """Label values for checks that look at angles or matrices as read (``hpe audit``).
+
+    ``(n, 3)`` angles in degrees (role order) when the table holds angles
+    (hpe's ``pitch, yaw, roll`` or the system's declared angle columns), else
+    ``(n, 3, 3)`` stored matrices (any other storage kind is turned into its
+    matrix). Unusable entries are NaN (for stored values: the whole row).
+    """
+    from ..rotation.systems import get_system
+
+    system = get_system(system)
+    names = batch.schema.names
+    if mode == "angles":
+        native = _native(system, names) and system.storage_kind == "angles"
+        cols = system.value_columns if native else ANGLE_COLS
+        values = np.stack([numeric_column(batch, c)[0] for c in cols], axis=-1)
+        rad = (system.value_units == "radians") if native else radians
+        return np.rad2deg(values) if rad else values
+    if mode == "matrix" and not (_native(system, names) and system.storage_kind == "matrix"):
+        return np.stack([numeric_column(batch, c)[0] for c in MATRIX_COLS], axis=-1).reshape(-1, 3, 3)
+    cols = system.value_columns
+    values = np.stack([numeric_column(batch, c)[0] for c in cols], axis=-1)
+    R = np.full((len(values), 3, 3), np.nan)
+    ok = np.isfinite(values).all(axis=1)
+    if ok.any():
+        Rk, reasons = system.values_to_matrix(values[ok]) if mode != "matrix" else (values[ok].reshape(-1, 3, 3), None)
+        good = np.ones(len(Rk), dtype=bool) if reasons is None else reasons == ""
+        if mode == "matrix":  # let audit's own checks see a non-rotation as it is
+            good[:] = True
+        idx = np.flatnonzero(ok)[good]
+        R[idx] = Rk[good]
+    return R
