@@ -278,8 +278,10 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     check_output(output, overwrite)
     src = open_table(path, batch_size)
     columns = src.columns
-    mode = label_mode(columns, path)  # angles when present, else r00..r22
-    cross_check = mode == "angles" and all(c in columns for c in MATRIX_COLS)
+    mode = label_mode(columns, path, system)  # the system's own columns, else angles, else r00..r22
+    stored_kind = mode not in ("angles", "matrix") or (system.columns and all(c in columns for c in
+                                                                               system.value_columns))
+    cross_check = mode == "angles" and not stored_kind and all(c in columns for c in MATRIX_COLS)
     n_lm, perm, lm_text = _plan_landmarks(path, columns, scheme, op)
     lm_names = landmark_cols(n_lm)
     box_present = [c for c in BBOX_COLS if c in columns]
@@ -308,8 +310,16 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         with TableWriter(output, overwrite, meta) as writer:
             for batch in _batches_or_empty(src):
                 n = batch.num_rows
-                values, reasons = batch_labels(batch, mode)
-                if mode == "angles":
+                if stored_kind:  # rotation vectors, quaternions, 6-D, named columns: read as matrices
+                    from ..io import batch_rotations
+                    from ..rotation import soa as _soa
+
+                    X, _, reasons = batch_rotations(batch, system, mode)
+                    values = _soa.to_array(X, n)
+                    reasons = reasons if reasons is not None else np.full(n, "", dtype=object)
+                else:
+                    values, reasons = batch_labels(batch, mode)
+                if mode == "angles" and not stored_kind:
                     R = system.from_angles(np.where(np.isfinite(values), values, 0.0))
                     if cross_check:  # a table with both must agree, or which one is the label?
                         R_in, r_in = batch_labels(batch, "matrix")
