@@ -253,6 +253,25 @@ def batch_rotations(batch, system, mode: str, radians: bool = False):
     if mode != system.storage_kind or not native:
         raise HpeError(f"{mode} columns {', '.join(system.value_columns)} not found for system {system.name}")
     cols, ok, reasons = _value_columns(batch, system.value_columns)
+    if system.storage_kind in ("rotvec", "quaternion"):  # column kernels: no (n, 3, 3) stack on the hot path
+        from ..rotation import storage as st
+
+        if system.storage_kind == "quaternion":
+            c = cols if system.quaternion_order == "wxyz" else [cols[3], cols[0], cols[1], cols[2]]
+            norm = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3])
+            bad = ok & ~(np.abs(norm - 1.0) <= 1e-3)
+            if bad.any():
+                if reasons is None:
+                    reasons = np.full(n, "", dtype=object)
+                reasons[bad] = "not a unit quaternion (norm differs from 1 by more than 1e-3)"
+                ok = ok & ~bad
+            if not ok.all():
+                c = [np.where(ok, v, d) for v, d in zip(c, (1.0, 0.0, 0.0, 0.0))]
+            X = st.quaternion_to_soa(*c)
+        else:
+            c = cols if ok.all() else [np.where(ok, v, 0.0) for v in cols]
+            X = st.rotvec_to_soa(*c)
+        return X, ok, reasons
     values = np.stack(cols, axis=-1)
     idx = np.flatnonzero(ok)
     R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
