@@ -193,3 +193,23 @@ def test_lists_every_builtin_reproducing_the_function(tmp_path):
     rep, res = report(tmp_path, "--callable", f"{PKG}/pkg_repo/headpose/geometry/build.py:hopenet_like")
     assert rep["best"] == "300w_lp" and "whenet" in rep["also_matches"]["names"]
     assert "also reproduced by built-in" in res.output and "whenet" in res.output
+
+
+@pytest.mark.parametrize("func, kind, order, storage, same", [
+    ("to_rotvec", "rotvec", None, "active", "img2pose"),
+    ("to_quat_inverse", "quaternion", "xyzw", "transposed", None),
+    ("to_6d", "6d", [0, 1], "active", "6drepnet_6d"),
+])
+def test_decoder_returning_stored_values(tmp_path, func, kind, order, storage, same):
+    out = tmp_path / "found.toml"
+    rep, res = report(tmp_path, "--decoder", f"{FIX}/stored_values.py:{func}", "--returns", "stored", "-o", out)
+    assert rep["fit"] == "exact" and rep["storage_form"]["kind"] == kind and rep["best"] == "custom", res.output
+    assert (same in rep["reproduced_by"]) if same else rep["reproduced_by"] == []
+    assert rep["system"]["storage"] == storage
+    text = out.read_text()
+    assert f'storage_kind = "{kind}"' in text
+
+
+def test_decoder_returning_unknown_width(tmp_path):
+    rep, res = report(tmp_path, "--decoder", f"{FIX}/stored_values.py:five_numbers", "--returns", "stored", code=1)
+    assert rep["fit"] == "none" and "no storage form returns 5 numbers" in res.output

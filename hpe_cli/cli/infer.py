@@ -258,6 +258,9 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
 @click.option("--callable", "builder", metavar="FILE.py:FUNC",
               help="A function angles -> 3x3 matrix (a file path or a module path, then :FUNC).")
 @click.option("--decoder", metavar="FILE.py:FUNC", help="A function 3x3 matrix -> three angles.")
+@click.option("--returns", type=click.Choice(["angles", "stored"]), default="angles", show_default=True,
+              help="--decoder returns three angles, or stored values (a rotation vector, quaternion, 6-D vector "
+                   "or 9 matrix entries): then find which storage form and whether of the matrix or its transpose.")
 @click.option("--args", "args_", default="pitch,yaw,roll", show_default=True,
               help="Role of each positional argument (--callable) or returned angle (--decoder).")
 @click.option("--packed", is_flag=True, help="--callable takes one sequence of the three angles.")
@@ -291,7 +294,7 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
               help="Seconds the code of --callable/--decoder may run (it runs in a separate process).")
 @overwrite_option
 @verbosity_options
-def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, landmarks3d, landmark_frame, tol,
+def infer(data, builder, decoder, returns, args_, packed, units, angles, matrix_cols, landmarks3d, landmark_frame, tol,
           samples, seed, name, frame_of, storage, json_path, output, overwrite, verbose, quiet, timeout,
           import_path):
     """Find which rotation system a function or a dataset uses.
@@ -321,6 +324,7 @@ def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, lan
       hpe infer --callable sixdrepnet.py:get_R --args pitch,yaw,roll
       hpe infer --decoder 3DDFA_V2/utils/pose.py:matrix2angle --args yaw,pitch,roll --json report.json
       hpe infer --decoder utils.pose:matrix2angle --path 3DDFA_V2 --args yaw,pitch,roll
+      hpe infer --decoder mycode.py:to_rotvec --returns stored -o mine.toml
       hpe infer --callable mylib.pose:euler_to_matrix --args roll,pitch,yaw --units deg -o mine.toml
       hpe infer labels.parquet --angles pitch,yaw,roll --matrix r00..r22
       hpe infer AFLW2000/ --landmarks3d lm3d --json aflw_system.json
@@ -334,6 +338,8 @@ def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, lan
     modes = sum(x is not None for x in (data, builder, decoder))
     if modes != 1:
         raise click.UsageError("give exactly one of DATA, --callable FILE.py:FUNC or --decoder FILE.py:FUNC")
+    if returns != "angles" and decoder is None:
+        raise click.UsageError("--returns stored applies to --decoder only")
     if packed and builder is None:
         raise click.UsageError("--packed applies to --callable only")
     if output is not None:
@@ -358,8 +364,8 @@ def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, lan
         rep, system_toml, system_name = run_code_inference(
             spec, builder=bool(builder), roles=roles, units=u, packed=packed, samples=samples, timeout=timeout,
             tol=tol or inf.CODE_TOL, seed=seed, source=spec, name=name, frame=frame, storage=storage,
-            import_path=list(import_path))
-        if rep["fit"] != "exact" and units is None:
+            import_path=list(import_path), returns=returns)
+        if rep["fit"] != "exact" and units is None and returns == "angles":
             rep["hint"] = "no fit with the default --units rad; try --units deg"
     else:
         frame_df, units = _read_data(data, units)

@@ -28,7 +28,10 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
         from ..cli.infer import _load_callable
 
         func = _load_callable(spec, kw.pop("import_path", None))
-        if builder:
+        returns = kw.pop("returns", "angles")
+        if returns != "angles":  # a decoder returning a rotation vector, quaternion, 6-D vector or matrix
+            rep = inf.infer_storage_decoder(inf.as_value_decoder(func), n=samples or 256, **kw)
+        elif builder:
             rep = inf.infer_builder(inf.as_builder(func, roles, units, packed), n=samples or 64, **kw)
         else:
             rep = inf.infer_decoder(inf.as_decoder(func, roles, units), n=samples or 256, **kw)
