@@ -17,7 +17,14 @@ _WRITABLE = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"}
 
 
 def _read_all(src, mode, radians, system):
-    """Whole table as (frame, canonical A, angles for captions, reasons)."""
+    """Whole table as (frame, canonical A, angles for captions in ``system``, reasons).
+
+    A dataset reader's labels (.mat Pose_Para: always 300w_lp) are read in
+    the dataset's own system and only the captions use ``system``.
+    """
+    from ..io.columns import label_system
+
+    out_system, system = system, label_system(src, system)
     import numpy as np
     import pyarrow as pa
 
@@ -26,7 +33,11 @@ def _read_all(src, mode, radians, system):
     batches = list(src.batches())
     table = pa.Table.from_batches(batches, schema=src.schema)
     if mode not in ("angles", "matrix") or (system.columns and all(c in src.columns for c in system.value_columns)):
-        return (table.to_pandas(),) + _read_stored(batches, mode, radians, system)
+        A, angles, reasons = _read_stored(batches, mode, radians, system)
+        ok = reasons == ""
+        if out_system is not system and ok.any():
+            angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
+        return table.to_pandas(), A, angles, reasons
     values, reasons = [], []
     for b in batches:
         v, r = batch_labels(b, mode, radians)
@@ -45,6 +56,8 @@ def _read_all(src, mode, radians, system):
         else:
             A[ok] = system.to_canonical(values[ok])
             angles[ok] = system.to_angles(values[ok])[0]
+        if out_system is not system:
+            angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
     return table.to_pandas(), A, angles, reasons
 
 
