@@ -618,6 +618,8 @@ def _result(mode: str, sc: Scores, *, roles, units, source, tol, n, name, frame,
             report["selection_differs"] = note
         system = replace(base, order=tuple(roles), units=units_word,
                          notes=(base.notes + " " if base.notes else "") + note, **changes)
+        if system.definition() != base.definition():  # a built-in's name may only carry its own definition
+            system = replace(system, name=name or f"{base.name}_as_inferred")
         best = base.name
     else:
         system = cand.system(name or "custom", f"inferred from {source}: {cand.formula()}", order=roles,
