@@ -259,7 +259,7 @@ def _batches(src, mode, path):
 
 def run_audit(input_path, system, *, report=None, plots=None, output=None, only_flagged=False,
               near_tol_deg=1.0, radians=False, use="auto", keys=(), n_examples=5, overwrite=False,
-              batch_size=262_144, progress=None, echo=None) -> dict:
+              batch_size=262_144, progress=None, echo=None, decoder=None) -> dict:
     """Audit ``input_path`` and write the requested outputs; return the report dict."""
     from ..io import ANGLE_COLS, MATRIX_COLS, check_output, label_mode, write_json
     from ..io.plots import AngleHistograms, plot_files, write_plots
@@ -281,8 +281,18 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
 
     src = _source(input_path, batch_size)
     columns = src.columns
-    mode = label_mode(columns, src.path) if use == "auto" else use
+    mode = label_mode(columns, src.path, system) if use == "auto" else use
     need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
+    # the system's own columns (rotvec, quaternion, 6-D, 4x4, named angles): read through the system
+    via_system = use == "auto" and (system.storage_kind != "angles" or bool(system.columns)) and \
+        all(c in columns for c in system.value_columns)
+    if via_system:
+        need = list(system.value_columns)
+    tally = None
+    if decoder:
+        from ..rotation.decoders import DecoderTally
+
+        tally = DecoderTally(decoder)
     missing = [c for c in need if c not in columns]
     if missing:
         raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
@@ -306,13 +316,24 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     flag_bits = []  # one bit a row: flagged by a check other than duplicates
     unread_examples = []
     rows = 0
-    for batch, lines, unread in _batches(src, mode, src.path):
+    read_mode = mode if mode in ("angles", "matrix") else "matrix"
+    for batch, lines, unread in _batches(src, read_mode, src.path):
         if unread:  # rows with a non-numeric label value: non_finite, as when read from a text column
             rows += len(unread)
             counts["non_finite"] += len(unread)
             flagged += len(unread)
             unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[:n_examples]]
-        cols = _label_cols(batch, mode, radians)
+        if via_system:
+            from ..io.labels import label_values
+
+            values = label_values(batch, system, mode, radians)
+            mode = "angles" if values.ndim == 2 else "matrix"
+            cols = [np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T]
+        else:
+            cols = _label_cols(batch, mode, radians)
+        if tally is not None:
+            values = np.stack(cols, axis=-1)
+            tally.add(system.to_canonical(system.from_angles(values) if mode == "angles" else values.reshape(-1, 3, 3)))
         res = _checks(cols, mode, system, near_tol_deg)
         any_flag = np.zeros(batch.num_rows, dtype=bool)
         for c in CHECKS[:-1]:
@@ -351,6 +372,8 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
                            "duplicate_key": (list(need) + key_cols)},
               "details": {"flagged": flagged, "near_gimbal_not_locked": near_not_locked},
               "examples": examples}
+    if tally is not None:
+        result["decoder"] = tally.result()
 
     if output:
         _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians,
