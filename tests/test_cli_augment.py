@@ -304,13 +304,20 @@ def test_table_errors(tmp_path):
     t = pd.DataFrame({"pitch": ["1", "abc"], "yaw": [2.0, 2.0], "roll": [3.0, 3.0], "lm0_x": ["1", "x"],
                       "lm0_y": [1.0, np.nan]})
     t.to_csv(tmp_path / "text.csv", index=False)
+    # without --rejects a bad row fails the run, naming the file line (header = line 1), as in every command
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5)
+    assert res.exit_code == 1, res.output
+    assert "text.csv: row 3: non-numeric value in pitch (1 bad rows in all" in res.output
+    assert not (tmp_path / "t.csv").exists()
+    res = run(tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5,
+              "--rejects", tmp_path / "r.csv")
     assert res.exit_code == 0, res.output
     assert "1 of 2 rows" in res.output and "non-numeric value in pitch" in res.output
+    assert pd.read_csv(tmp_path / "r.csv")["row"].tolist() == [3]
     t["pitch"] = ["1", "2"]
     t.to_csv(tmp_path / "text.csv", index=False)
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t2.csv", "--image-size", W, H, "--rotate", 5)
-    assert res.exit_code == 0 and "non-numeric value in lm0_x" in res.output
+    assert res.exit_code == 1 and "row 3: non-numeric value in lm0_x" in res.output
     df = make_table(2)[["pitch", "yaw", "roll"] + landmark_cols(5)]
     df.to_csv(tmp_path / "five.csv", index=False)
     res = run(tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--hflip")
@@ -329,7 +336,7 @@ def test_image_errors_leave_nothing_behind(tmp_path):
         .to_csv(tmp_path / "in.csv", index=False)
     base = [tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", tmp_path / "imgs"]
     res = run(*base, "--image-size", 30, 20, "--out-images", tmp_path / "out")
-    assert res.exit_code == 1 and "row 1: no image for 'missing.png'" in res.output
+    assert res.exit_code == 1 and "row 3: no image for 'missing.png'" in res.output
     assert not (tmp_path / "o.csv").exists() and not (tmp_path / "out").exists()
     res = run(*base, "--image-size", 31, 20, "--out-images", tmp_path / "out")
     assert res.exit_code == 1 and "is 30x20, expected --image-size 31 20" in res.output

@@ -111,7 +111,7 @@ def test_rejects_file_and_fail_without_it(tmp_path):
     res = run(src, "-o", out, "--from", "300w_lp", "--to", "whenet", "--rejects", rej, "-q")
     assert res.exit_code == 0, res.output
     r = pd.read_csv(rej)
-    assert r["row"].tolist() == [1, 2, 4]
+    assert r["row"].tolist() == [3, 4, 6]
     assert r["reason"].tolist() == ["non-numeric value in yaw", "missing value in pitch", "non-finite value in yaw"]
     assert pd.read_parquet(out)["id"].tolist() == [0, 3]
 
@@ -124,7 +124,7 @@ def test_not_rotation_matrix(tmp_path):
     assert res.exit_code == 1 and "line 3: not a rotation" in res.output
     res = run(src, "-o", tmp_path / "o.csv", "--from", "opencv", "--to", "300w_lp", "--rejects", tmp_path / "r.csv")
     assert res.exit_code == 0
-    assert pd.read_csv(tmp_path / "r.csv")["row"].tolist() == [1, 2]
+    assert pd.read_csv(tmp_path / "r.csv")["row"].tolist() == [3, 4]
     # opencv identity = F A F with A = diag(1,-1,-1) @ I @ diag(1,-1,-1) = I
     assert np.allclose(pd.read_csv(tmp_path / "o.csv")[["pitch", "yaw", "roll"]].to_numpy(), 0)
 

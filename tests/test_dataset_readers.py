@@ -217,8 +217,8 @@ def test_w300lp_streams_in_chunks_same_table(w300_root):
     from hpe_cli.datasets.w300lp import open_w300lp, read_w300lp
 
     src = open_w300lp(w300_root, chunk=1)
-    batches = list(src.batches())
-    assert len(batches) == 3 and src.num_rows == 3 and src.dataset
+    batches = list(src.iter_batches())
+    assert len(batches) == 3 and src.num_rows == 3 and src.system == "300w_lp"
     f = pa.Table.from_batches(batches, schema=src.schema).to_pandas()
     full = read_w300lp(w300_root)
     pd.testing.assert_frame_equal(f[full.columns], full, check_dtype=False)

@@ -11,6 +11,10 @@ from ..errors import HpeError
 from .layout import ANGLE_COLS, MATRIX_COLS
 
 
+#: angles beyond this many degrees are rejected (a unit or storage mistake, and float precision is gone)
+MAX_ANGLE = 1e6
+
+
 def label_mode(columns, path="input") -> str:
     """``"angles"`` if ``pitch, yaw, roll`` are present, else ``"matrix"`` if ``r00..r22`` are, else an error."""
     cols = set(columns)
@@ -100,17 +104,26 @@ def label_columns_fast(batch, mode: str, radians: bool = False):
             reasons[first] = r[first]
             ok &= ~bad
     if mode == "matrix":
-        from ..rotation.check import rotation_reasons
+        from ..rotation.check import rotation_screen_columns
 
-        R = np.stack(cols, axis=-1).reshape(-1, 3, 3)
-        rr = rotation_reasons(R if ok.all() else R[ok])
-        not_rot = rr != ""
+        finite, ortho, proper = rotation_screen_columns(cols)
+        not_rot = ok & ~(ortho & proper)
         if not_rot.any():
             if reasons is None:
                 reasons = np.full(batch.num_rows, "", dtype=object)
-            idx = np.flatnonzero(ok)[not_rot]
-            reasons[idx] = rr[not_rot]
-            ok[idx] = False
+            reasons[not_rot & ~finite] = "non-finite matrix entry"
+            reasons[not_rot & finite & ~ortho] = "not a rotation: not orthonormal"
+            reasons[not_rot & finite & ortho & ~proper] = "not a rotation: determinant is not +1 (a reflection)"
+            ok &= ~not_rot
+    else:
+        huge = ok & ((np.abs(cols[0]) > MAX_ANGLE) | (np.abs(cols[1]) > MAX_ANGLE) | (np.abs(cols[2]) > MAX_ANGLE))
+        if huge.any():
+            if reasons is None:
+                reasons = np.full(batch.num_rows, "", dtype=object)
+            for name, c in zip(names, cols):
+                first = huge & (np.abs(c) > MAX_ANGLE) & (reasons == "")
+                reasons[first] = f"absurd angle in {name}: |value| > {MAX_ANGLE:g} degrees"
+            ok &= ~huge
     return cols, ok, reasons
 
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import HpeError
+from ..io.readers import LINE_COL
 from ..io import LABEL_COLS, Rejects, TableWriter, label_columns_fast, label_mode, open_table, system_metadata
 from ..rotation import soa
 from ..rotation.convert import soa_labels
@@ -41,7 +42,7 @@ def convert_batch(batch, mode, source, target, radians=False):
     else:
         X = [cols[0:3], cols[3:6], cols[6:9]]
     labels = soa_labels(source.soa_to_canonical(X), target, n)
-    keep = [name for name in batch.schema.names if name not in LABEL_COLS]
+    keep = [name for name in batch.schema.names if name not in LABEL_COLS and name != LINE_COL]
     kept = batch.select(keep)
     if not ok.all():
         kept = kept.filter(pa.array(ok))
@@ -65,23 +66,28 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
     from collections import deque
     from concurrent.futures import ThreadPoolExecutor
 
-    src = open_table(input_path, batch_size)
+    src = open_table(input_path, batch_size, with_lines=True)
     mode = label_mode(src.columns, src.path)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
-    csv_lines = src.path.suffix.lower() == ".csv"  # header = line 1
     summary = ConvertSummary()
     meta = {**system_metadata(target), "hpe:source_system": source.name, "hpe:input": str(src.path)}
     workers = workers or min(2, os.cpu_count() or 1)
 
-    def finish(batch, future, writer):
+    def finish(batch, read_rejects, future, writer):
         out, reasons, labels = future.result()
         bad = np.flatnonzero(reasons != "") if reasons is not None else ()
+        lines = batch.column(LINE_COL).to_numpy()
+        if read_rejects:
+            read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
+            rejects.add({"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
+                        [r.reason for r in read_rejects], lines=read_lines)
+            summary.rows += len(read_rejects)
         if len(bad):
-            cols = {"row": summary.rows + bad}
+            cols = {"row": lines[bad]}
             if rejects.path is not None:
-                cols.update({n: batch.column(n).take(bad).to_numpy(zero_copy_only=False)
-                             for n in batch.schema.names})
-            rejects.add(cols, reasons[bad], lines=summary.rows + bad + 2 if csv_lines else None)
+                cols.update({n: batch.column(n).take(bad).to_numpy(zero_copy_only=False) for n in batch.schema.names
+                             if n != LINE_COL})
+            rejects.add(cols, reasons[bad], lines=lines[bad])
         summary.rows += batch.num_rows
         if out.num_rows or writer.rows == 0:
             writer.write(out)
@@ -95,14 +101,15 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
     with TableWriter(output, overwrite, meta) as writer, ThreadPoolExecutor(workers) as pool:
         pending = deque()
         try:
-            for batch in src.batches():
-                pending.append((batch, pool.submit(convert_batch, batch, mode, source, target, radians)))
+            for batch, read_rejects in src.batches_with_rejects():
+                pending.append((batch, read_rejects,
+                                pool.submit(convert_batch, batch, mode, source, target, radians)))
                 if len(pending) > workers:
                     finish(*pending.popleft(), writer)
             while pending:
                 finish(*pending.popleft(), writer)
         finally:
-            for _, fut in pending:
+            for _, _, fut in pending:
                 fut.cancel()
         if summary.rows == 0:
             raise HpeError(f"{src.path}: empty table (no rows)")

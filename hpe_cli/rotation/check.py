@@ -38,6 +38,39 @@ def rotation_reasons(R, tol: float = ROTATION_TOL) -> np.ndarray:
     return out
 
 
+def rotation_screen_columns(cols, tol: float = ROTATION_TOL):
+    """Column-wise (structure-of-arrays) screen of row-major matrix entries.
+
+    Parameters
+    ----------
+    cols : sequence of 9 ndarray (n,)
+        ``r00, r01, ..., r22`` as contiguous float arrays.
+    tol : float
+        Tolerance on ``||R R^T - I||_F`` and ``|det R - 1|``.
+
+    Returns
+    -------
+    finite, orthonormal, proper : ndarray of bool (n,)
+        The same tests as :func:`rotation_mask`, without building ``(n, 3, 3)``
+        arrays (about 10x faster). Non-finite rows are False in all three.
+    """
+    a, b, c, d, e, f, g, h, i = (np.asarray(x, dtype=np.float64) for x in cols)
+    with np.errstate(invalid="ignore", over="ignore"):
+        # G = R R^T - I, symmetric: diagonal and the three upper entries
+        g00 = a * a + b * b + c * c - 1.0
+        g11 = d * d + e * e + f * f - 1.0
+        g22 = g * g + h * h + i * i - 1.0
+        g01 = a * d + b * e + c * f
+        g02 = a * g + b * h + c * i
+        g12 = d * g + e * h + f * i
+        err2 = g00 * g00 + g11 * g11 + g22 * g22 + 2.0 * (g01 * g01 + g02 * g02 + g12 * g12)
+        det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+        finite = np.isfinite(err2) & np.isfinite(det)
+        ortho = err2 <= tol * tol
+        proper = np.abs(det - 1.0) <= tol
+    return finite, ortho & finite, proper & finite
+
+
 def check_rotation(R, tol: float = ROTATION_TOL) -> np.ndarray:
     """Return ``R`` as float64 ``(..., 3, 3)`` or raise ``ValueError`` naming the first bad row."""
     R = np.asarray(R, dtype=np.float64)
