@@ -270,3 +270,16 @@ def test_every_table_command_has_column_options(cmd):
     assert r.exit_code == 0
     for opt in ("--columns-map", "--delimiter", "--no-header", "--names", "--input-format"):
         assert opt in r.output
+
+
+def test_cli_bad_line_is_a_reject_with_its_line(tmp_path):
+    p = tmp_path / "annotation.txt"
+    p.write_text("a.jpg,1,2,3\n\nb.jpg,4,5\nc.jpg,7,x,9\nd.jpg,1,1,1\n")
+    out, rej = tmp_path / "o.csv", tmp_path / "rej.csv"
+    r = CliRunner().invoke(cli, ["convert", str(p), "-o", str(out), "--from", "whenet", "--to", "whenet",
+                                 "--rejects", str(rej), "-q"])
+    assert r.exit_code == 0, r.output
+    assert list(pd.read_csv(out)["image"]) == ["a.jpg", "d.jpg"]
+    rj = pd.read_csv(rej)
+    assert list(rj["row"]) == [3, 4]
+    assert "expected 4 fields" in rj.loc[0, "reason"] and "pitch" in rj.loc[1, "reason"]
