@@ -110,7 +110,7 @@ def test_img2pose_biwi_matches_real_biwi_label():
         # the first line of vitoralbiero/img2pose evaluation/jupyter_notebooks/BIWI_annotations.txt
         p.write_text("../../datasets/BIWI/01/frame_00003_rgb.png 7.607222981354766 3.290994605902283 "
                      "-1.5666319048416875\n")
-        src, f = read(p, input_format="img2pose-biwi")
+        src, f = read(p)  # recognised by its name
     assert src.system == "300w_lp"
     t = read_biwi(pose)
     b, w = get_system("biwi"), get_system(src.system)

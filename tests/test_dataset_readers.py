@@ -222,3 +222,25 @@ def test_w300lp_streams_in_chunks_same_table(w300_root):
     f = pa.Table.from_batches(batches, schema=src.schema).to_pandas()
     full = read_w300lp(w300_root)
     pd.testing.assert_frame_equal(f[full.columns], full, check_dtype=False)
+
+
+def test_dad3dheads_converts_with_the_builtin_system(tmp_path):
+    from hpe_cli.rotation.systems import get_system
+
+    try:
+        get_system("dad3dheads")
+    except Exception:
+        pytest.skip("dad3dheads system not built in")
+    rots = Rotation.from_euler("xyz", [[10, -20, 5], [-40, 30, 100]], degrees=True).as_matrix()
+    _dad_tree(tmp_path, rots, [1.0, 1.0])
+    out = tmp_path / "o.csv"
+    r = CliRunner().invoke(cli, ["convert", str(tmp_path), "-o", str(out), "--from", "dad3dheads", "--to", "300w_lp",
+                                 "-q"])
+    assert r.exit_code == 0, r.output
+    f = pd.read_csv(out)
+    w = get_system("300w_lp")
+    A = w.to_canonical(w.from_angles(f[["pitch", "yaw", "roll"]].to_numpy()))
+    # by hand: R = diag(1,-1,-1) @ MV[:3,:3] and MV[:3,:3] is the canonical (OpenGL eye) rotation A
+    F = np.diag([1.0, -1.0, -1.0])
+    np.testing.assert_allclose(A, F @ rots, atol=1e-9)
+    assert list(f["item_id"]) == ["item000", "item001"]

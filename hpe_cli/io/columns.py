@@ -420,6 +420,8 @@ def sniff_format(path) -> str | None:
         return "whenet"
     if name == "celebamask-hq-pose-anno.txt":
         return "celeba-pose"
+    if name == "biwi_annotations.txt":
+        return "img2pose-biwi"
     if name.endswith(".txt"):
         first = _first_lines(path, 1)
         if first and first[0].startswith("#;"):
