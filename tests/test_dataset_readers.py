@@ -107,8 +107,10 @@ def _dad_tree(root: Path, rots, scales):
         mv[:3, :3] = s * (np.diag([1.0, -1.0, -1.0]) @ R_cv)  # OpenGL camera = OpenCV camera with y, z flipped
         mv[:3, 3] = [0.01 * n, 0.02, -0.5]
         (sub / "annotations" / f"{iid}.json").write_text(json.dumps(
-            {"vertices": [[0.0, 0.0, 0.0]] * 3, "model_view_matrix": mv.tolist(), "projection_matrix": np.eye(4).tolist()}))
-        items.append({"item_id": iid, "annotation_path": f"val/annotations/{iid}.json", "img_path": f"val/images/{iid}.png",
+            {"vertices": [[0.0, 0.0, 0.0]] * 3, "model_view_matrix": mv.tolist(),
+             "projection_matrix": np.eye(4).tolist()}))
+        items.append({"item_id": iid, "annotation_path": f"val/annotations/{iid}.json",
+                      "img_path": f"val/images/{iid}.png",
                       "bbox": [10 + n, 20, 30, 40],
                       "attributes": {"quality": "hq", "gender": "female", "expression": "false", "age": "young",
                                      "occlusions": "false", "pose": "front", "standard light": "true"}})

@@ -457,7 +457,8 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
             if is_dad_metadata(doc):
                 return None  # a dataset reader takes it
             raise HpeError(f"{path}: expected COCO JSON (an object with 'images' and 'annotations'), "
-                           f"got {type(doc).__name__} with keys {', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}")
+                           f"got {type(doc).__name__} with keys "
+                           f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}")
     if fmt is None:
         if delimiter is None and header and not names:
             return None
