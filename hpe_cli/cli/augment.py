@@ -3,9 +3,8 @@ from __future__ import annotations
 
 import click
 
-from .table_options import column_options
-
 from ..pipelines.augment import AGREE_TOL, IMAGE_COLUMNS, run_augment  # noqa: F401  (re-exported)
+from .table_options import column_options
 from .options import (batch_option, echo_summary, output_option, overwrite_option, progress, rejects_option,
                       system_option, verbosity_options)
 

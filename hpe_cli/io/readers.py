@@ -97,7 +97,9 @@ class TableSource:
         import pyarrow as pa
 
         try:
-            for batch, rejects in self._batches():
+            for item in self._batches():
+                # readers yield (batch, rejects) pairs; simple dataset readers may yield bare batches
+                batch, rejects = item if isinstance(item, tuple) else (item, [])
                 if not self.with_lines and LINE_COL in batch.schema.names:
                     batch = batch.drop_columns([LINE_COL])
                 yield batch, rejects
@@ -140,7 +142,7 @@ def sniff(path: Path) -> str:
 
 
 def open_table(path, batch_size: int = DEFAULT_BATCH, columns=None, delimiter=None, header: bool = True,
-               input_format=None, names=None, *, with_lines: bool = False, block_size: int = CSV_BLOCK) -> TableSource:
+               input_format=None, names=None, with_lines: bool = False, block_size: int | None = None) -> TableSource:
     """Open a label table for streaming.
 
     ``columns`` renames columns (``"pitch=Pitch,yaw=Yaw"`` or ``{"pitch": "Pitch"}``);
@@ -160,7 +162,7 @@ def open_table(path, batch_size: int = DEFAULT_BATCH, columns=None, delimiter=No
     src = open_formatted(path, batch_size, input_format=input_format, delimiter=delimiter, header=header,
                          names=names, with_lines=with_lines)
     if src is None:
-        src = _open_core(path, batch_size, with_lines=with_lines, block_size=block_size)
+        src = _open_core(path, batch_size, with_lines=with_lines, block_size=block_size or CSV_BLOCK)
     return apply_columns_map(src, columns)
 
 
