@@ -264,7 +264,7 @@ def test_cli_usage_errors(tmp_path):
     assert r.exit_code == 1 and "Nope" in r.output
 
 
-@pytest.mark.parametrize("cmd", ["convert", "audit", "draw", "augment", "infer"])
+@pytest.mark.parametrize("cmd", ["convert", "audit", "draw", "augment", "infer", "evaluate", "export"])
 def test_every_table_command_has_column_options(cmd):
     r = CliRunner().invoke(cli, [cmd, "--help"])
     assert r.exit_code == 0
@@ -283,3 +283,23 @@ def test_cli_bad_line_is_a_reject_with_its_line(tmp_path):
     rj = pd.read_csv(rej)
     assert list(rj["row"]) == [3, 4]
     assert "expected 4 fields" in rj.loc[0, "reason"] and "pitch" in rj.loc[1, "reason"]
+
+
+def test_cli_evaluate_two_inputs_share_the_options(tmp_path):
+    """--columns-map renames the input that has the columns; text options leave a .mat folder alone."""
+    real = REAL / "aflw2000_prnet" / "image00430.mat"
+    if not real.exists():
+        pytest.skip("real AFLW2000 sample absent")
+    import shutil
+
+    gt = tmp_path / "gt"
+    gt.mkdir()
+    shutil.copy(real, gt / "image00430.mat")
+    pred = tmp_path / "annotation.txt"  # WHENet layout: image,yaw,pitch,roll; PROVENANCE: 34.45, 4.69, 7.25
+    pred.write_text("image00430.mat,4.69,34.45,7.25\n")
+    rep = tmp_path / "r.json"
+    r = CliRunner().invoke(cli, ["evaluate", str(pred), str(gt), "--pred-system", "whenet", "--gt-system", "300w_lp",
+                                 "--key", "file", "--columns-map", "file=image", "--json", str(rep), "-q"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(rep.read_text())
+    assert doc["metrics"]["geodesic"]["max"] < 0.01  # the printed 2-decimal angles of the same rotation

@@ -86,6 +86,15 @@ def parse_columns_map(text) -> dict:
     return out
 
 
+class LenientMap(str):
+    """A command-wide ``--columns-map``: applied to each input that has the source columns.
+
+    With several inputs (``hpe evaluate PRED GT``) one map serves them all: an
+    input is renamed when it has at least one of the mapped source columns,
+    and left alone when it has none.
+    """
+
+
 def apply_columns_map(src, columns):
     """A :class:`~hpe_cli.io.readers.TableSource` whose columns are renamed by ``columns``.
 
@@ -101,6 +110,11 @@ def apply_columns_map(src, columns):
     if LINE_COL in mapping or LINE_COL in mapping.values():
         raise HpeError(f"--columns-map: {LINE_COL} is reserved for line numbers")
     missing = [s for s in mapping if s not in names]
+    if isinstance(columns, LenientMap):
+        if len(missing) == len(mapping):
+            return src
+        mapping = {k: v for k, v in mapping.items() if k in names}
+        missing = []
     if missing:
         raise HpeError(f"{src.path}: --columns-map names column(s) {', '.join(map(repr, missing))} that the table "
                        f"does not have; found {', '.join(n for n in names if n != LINE_COL)}")

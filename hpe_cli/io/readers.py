@@ -141,6 +141,10 @@ def sniff(path: Path) -> str:
     return "text"
 
 
+#: inputs that the command-wide --delimiter/--no-header/--names/--input-format options never apply to
+_NOT_TEXT = (".parquet", ".pq", ".mat", ".zip", ".tgz", ".gz", ".tar", ".npz", ".pkl", ".pickle")
+
+
 def open_table(path, batch_size: int = DEFAULT_BATCH, columns=None, delimiter=None, header: bool = True,
                input_format=None, names=None, with_lines: bool = False, block_size: int | None = None) -> TableSource:
     """Open a label table for streaming.
@@ -159,6 +163,14 @@ def open_table(path, batch_size: int = DEFAULT_BATCH, columns=None, delimiter=No
         if active:
             columns, delimiter, header = active["columns"], active["delimiter"], active["header"]
             input_format, names = active["input_format"], active["names"]
+            p = Path(path)
+            if p.is_dir() or p.suffix.lower() in _NOT_TEXT:
+                # a command with several inputs (evaluate PRED GT): text options apply to its text inputs
+                delimiter, header, input_format, names = None, True, None, None
+            if columns:
+                from .columns import LenientMap
+
+                columns = LenientMap(columns)
     src = open_formatted(path, batch_size, input_format=input_format, delimiter=delimiter, header=header,
                          names=names, with_lines=with_lines)
     if src is None:
