@@ -42,29 +42,30 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     """Stream one table into a :class:`Side`."""
     import pyarrow as pa
 
-    from ..io import ANGLE_COLS, MATRIX_COLS, label_columns_fast, label_mode, open_table
+    from ..io import ANGLE_COLS, MATRIX_COLS, batch_rotations, label_mode, open_table
     from ..io.readers import LINE_COL
     from ..rotation import soa
 
     src = open_table(path, batch_size, with_lines=True)
     columns = src.columns
-    mode = label_mode(columns, src.path) if use == "auto" else use
-    need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
-    missing = [c for c in need if c not in columns]
-    if missing:
-        raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
+    if use == "auto":  # the system's own value columns (rotvec, quaternion, 6-D...) first, then angles, matrix
+        mode = label_mode(columns, src.path, system)
+    else:
+        mode = use
+        native = system.storage_kind == mode and all(c in columns for c in system.value_columns)
+        need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
+        missing = [c for c in need if c not in columns]
+        if missing and not native:
+            raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
     keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else [])) if c in columns]
     parts, oks, reasons, key_parts, lines, unreadable = [], [], [], [], [], []
     any_bad = False
     for batch, bad_rows in src.batches_with_rejects():
         unreadable += [(r.line, r.reason) for r in bad_rows]
         lines.append(batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64))
-        cols, ok, rs = label_columns_fast(batch, mode, radians)
+        X, ok, rs = batch_rotations(batch, system, mode, radians)
         n = batch.num_rows
-        if mode == "angles":
-            X = system.soa_to_canonical(system.soa_from_angles(*cols))
-        else:
-            X = system.soa_to_canonical([[cols[3 * i + j] for j in range(3)] for i in range(3)])
+        X = system.soa_to_canonical(X)
         parts.append(np.stack(soa.columns(X, n)))
         oks.append(ok)
         if rs is not None:
