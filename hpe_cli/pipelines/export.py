@@ -99,7 +99,7 @@ def _subject_of(stem: str) -> str:
     return re.sub(r"_\d+$", "", stem) if re.search(r"_\d+_\d+$", stem) else stem
 
 
-def load_mat_input(path: Path, source: str):
+def load_mat_input(path: Path, source: str, landmarks: bool = True):
     """A 300W-LP/AFLW2000 ``.mat`` folder: box from the visible ``pt2d`` points (else ``pt3d_68``).
 
     The box is 6DRepNet's loose AFLW2000 test crop of the tight landmark box (``k = 0.2``:
@@ -147,12 +147,12 @@ def load_mat_input(path: Path, source: str):
         frame[c] = A[:, k]
     for c in ("tdx", "tdy", "tdz", "scale"):
         frame[c] = t[c].to_numpy(np.float64)
-    for i in range(lm.shape[1]):
+    for i in range(lm.shape[1] if landmarks else 0):
         frame[f"lm{i}_x"], frame[f"lm{i}_y"] = lm[:, i, 0], lm[:, i, 1]
     return frame.copy()
 
 
-def load_table_input(path: Path, source: str, input_system=None, images_root=None):
+def load_table_input(path: Path, source: str, input_system=None, images_root=None, landmarks: bool = True):
     """A label table (relabel-panoptic/agora output or any table with image, box and labels)."""
     import pandas as pd
     import pyarrow as pa
@@ -168,7 +168,7 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
     mode = label_mode(cols, path)
     system = _table_system(src.schema, input_system)
     kind = _kind_of_table(src.schema)
-    n_lm = landmark_count(cols)
+    n_lm = landmark_count(cols) if landmarks else 0
     keep = [c for c in ["image", "sequence", "camera", "frame", "person_id", "person", "subject", "image_width",
                         "image_height"] + BBOX_COLS if c in cols]
     if kind == "table" and "source" in cols:  # relabel-agora writes its source per row
@@ -227,8 +227,8 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
     return frame
 
 
-def load_inputs(paths, images=(), input_system=None):
-    """Every input as one table (a ``source`` column tells them apart)."""
+def load_inputs(paths, images=(), input_system=None, landmarks: bool = True):
+    """Every input as one table (a ``source`` column tells them apart); ``landmarks``: keep the 2-D points."""
     import pandas as pd
 
     if images and len(images) not in (1, len(paths)):
@@ -245,14 +245,14 @@ def load_inputs(paths, images=(), input_system=None):
         names.add(name)
         is_mat = (p.is_dir() and any(p.glob("*.mat"))) or p.suffix.lower() == ".mat"
         if is_mat:
-            f = load_mat_input(p, name)
+            f = load_mat_input(p, name, landmarks)
             if root:
                 f["root"] = str(root)
         elif p.is_dir():
             raise HpeError(f"{p}: expected a label table (.parquet/.csv) or a folder of 300W-LP/AFLW2000 .mat "
                            "files (BIWI: export its table with image and box columns)")
         else:
-            f = load_table_input(p, name, input_system, root)
+            f = load_table_input(p, name, input_system, root, landmarks)
         frames.append(f)
     frame = pd.concat(frames, ignore_index=True).copy()
     for c in [c for c in frame.columns if re.fullmatch(r"lm\d+_[xy]", c)]:
@@ -610,7 +610,7 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
                        f"expects; --system {get_system(opts.system).name} cannot be used with it")
     system = get_system(layout.system or opts.system or "300w_lp")
 
-    rows = load_inputs(inputs, opts.images, opts.input_system)
+    rows = load_inputs(inputs, opts.images, opts.input_system, landmarks=layout.uses_landmarks)
     n = len(rows)
     reasons = rows["reason"].to_numpy(dtype=object).copy()
     A = rows[A_COLS].to_numpy(np.float64).reshape(n, 3, 3)

@@ -65,6 +65,8 @@ class Layout:
         return the raw crop (uint8, H x W x 3, BGR).
     default_size : int or None
         Crop side the trainer expects (``--size`` overrides).
+    uses_landmarks : bool
+        The layout writes the 2-D landmarks (others never load them: less memory per row).
     stretch : bool
         Resize every crop to ``size x size`` even when the box is not square (the trainer's own script does).
     """
@@ -77,6 +79,7 @@ class Layout:
     default_square = False
     stretch = False
     needs_landmarks = False
+    uses_landmarks = False
 
     def __init__(self, system=None, form=None, **options):
         self.user_system = system
