@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...geometry.crop import landmark_boxes, pixel_boxes, points_to_crop
+from ...geometry.crop import landmark_boxes, points_to_crop
 from .base import Layout, abs_over
 
 RULE_99 = "outside ±99° (the 6DRepNet/Hopenet filter)"
