@@ -74,7 +74,12 @@ def test_bad_images_are_rejects(tmp_path):
     t.loc[len(t) - 1, ["bbox_x", "person_id"]] = [500, 9]  # outside the 160-px frame
     t.loc[len(t)] = t.iloc[0]
     t.loc[len(t) - 1, ["bbox_w", "person_id"]] = [np.nan, 8]  # no box
+    t = t.astype({"pitch": object})
+    t.loc[len(t)] = t.iloc[0]
+    t.loc[len(t) - 1, ["pitch", "person_id"]] = ["abc", 7]  # not a number
     t.to_csv(path, index=False)
+    with open(path, "a") as fh:
+        fh.write("img/f0.jpg,s0,,0,5,1,2,3,4,5,6,7,8,9\n")  # too many fields
     out = tmp_path / "o"
     r = run("export", path, "-o", out, "--layout", "whenet", "--rejects", tmp_path / "rej.csv")
     assert r.exit_code == 0, r.output
@@ -85,9 +90,10 @@ def test_bad_images_are_rejects(tmp_path):
     assert reasons[6] == reasons[7] == "unreadable image"
     assert reasons[10].startswith("box outside the image")
     assert reasons[11] == "missing or empty head box"
+    assert "pitch" in reasons[12] and reasons[13].startswith("unreadable row")
     lines = (out / "train" / "annotation.txt").read_text().splitlines()
-    assert len(lines) + len(rej) == len(t)
-    assert "rejected 6" in r.output and "unreadable image" in r.output
+    assert len(lines) + len(rej) == len(t) + 1
+    assert "rejected 8" in r.output and "unreadable image" in r.output
     # without --rejects, bad input is an error and nothing is written
     r = run("export", path, "-o", tmp_path / "o2", "--layout", "whenet")
     assert r.exit_code == 1 and "row 4: no image (file not found)" in r.output and "--rejects" in r.output

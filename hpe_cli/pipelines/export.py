@@ -159,7 +159,7 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
 
     from ..io import label_columns_fast, label_mode, open_table
 
-    src = open_table(path)
+    src = open_table(path, with_lines=True)
     cols = src.columns
     missing = [c for c in ["image"] + BBOX_COLS if c not in cols]
     if missing:
@@ -172,15 +172,17 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
     keep = [c for c in ["image", "sequence", "camera", "frame", "person_id", "person", "subject", "image_width",
                         "image_height"] + BBOX_COLS if c in cols]
     if kind == "table" and "source" in cols:  # relabel-agora writes its source per row
-        first = next(iter(src.batches()), None)
+        first = next(iter(src.batches_with_rejects()), (None, None))[0]
         if first is not None and first.num_rows and "agora" in str(first.column("source")[0]).lower():
             kind = "agora"
     keep += [f"lm{i}_{a}" for i in range(n_lm) for a in "xy"]
     parts = []
-    header = 1 if path.suffix.lower() == ".csv" else 0
-    start = 0
-    for batch in src.batches():
+    unreadable = []
+    for batch, bad in src.batches_with_rejects():
+        unreadable += [(r.line, f"unreadable row: {r.reason}") for r in bad]
         nb = batch.num_rows
+        if nb == 0:
+            continue
         lab, ok, reasons = label_columns_fast(batch, mode)
         reasons = np.full(nb, "", dtype=object) if reasons is None else reasons
         vals = np.stack(lab, -1)
@@ -192,7 +194,7 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
             R = np.where(ok[:, None, None], R, np.eye(3))
         A = system.to_canonical(R).reshape(nb, 9)
         df = pa.Table.from_batches([batch.select(keep)]).to_pandas()
-        df.insert(0, "row", np.arange(start + 1 + header, start + 1 + header + nb))
+        df.insert(0, "row", batch.column("__line__").to_numpy())
         box = df[BBOX_COLS].apply(pd.to_numeric, errors="coerce").to_numpy(np.float64)
         badbox = ~np.isfinite(box).all(1) | (box[:, 2] <= 0) | (box[:, 3] <= 0)
         reasons[(reasons == "") & badbox] = "missing or empty head box"
@@ -200,10 +202,14 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
         for k, c in enumerate(A_COLS):
             df[c] = A[:, k]
         parts.append(df)
-        start += nb
+    if unreadable:
+        eye = np.eye(3).reshape(9)
+        parts.append(pd.DataFrame({"row": [ln for ln, _ in unreadable], "image": "",
+                                   **{c: np.nan for c in BBOX_COLS}, "reason": [r for _, r in unreadable],
+                                   **{c: eye[k] for k, c in enumerate(A_COLS)}}))
     if not parts:
         raise HpeError(f"{path}: no rows")
-    frame = pd.concat(parts, ignore_index=True)
+    frame = pd.concat(parts, ignore_index=True).sort_values("row", kind="stable", ignore_index=True)
     n = len(frame)
     if "person_id" not in frame.columns and "person" in frame.columns:
         frame["person_id"] = frame.pop("person")
