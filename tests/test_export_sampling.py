@@ -127,3 +127,19 @@ def test_crop_points_follow_pixels(x0, y0, w, h, u, v):
     if 0 <= q[0] < w and 0 <= q[1] < h:
         assert crop[int(q[1]), int(q[0])] == img[v, u]
     assert (crop == 0).sum() >= w * h - max(0, min(x0 + w, 80) - max(x0, 0)) * max(0, min(y0 + h, 60) - max(y0, 0))
+
+
+def test_crop_names_unique_and_split_names_checked():
+    import pandas as pd
+
+    from hpe_cli.io.export.base import crop_names
+
+    rows = pd.DataFrame({"source": "s", "image": ["a/x.jpg", "a/x.jpg", "b/y.jpg", "q", "q"],
+                         "camera": ["", "", "", "00_01", "00_01"], "sequence": ["", "", "", "seq", "seq"],
+                         "frame": [-1, -1, -1, 7, 7], "person_id": [-1, -1, -1, 2, 2]})
+    assert crop_names(rows).tolist() == ["a__x_0", "a__x_1", "b__y", "seq/00_01_2_00000007",
+                                         "seq/00_01_2_00000007_dup1"]
+    with pytest.raises(HpeError):
+        parse_split("sequence:tr/ain=0.5,val=0.5")
+    with pytest.raises(HpeError):
+        parse_split("sequence:a=0.5,a=0.5")

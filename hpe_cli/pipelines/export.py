@@ -288,8 +288,18 @@ def parse_split(spec: str):
         if len(fr) not in SPLIT_NAMES:
             raise HpeError(f"--split: name the splits (train=0.7,...) when there are more than 3, got {spec!r}")
         names = SPLIT_NAMES[len(fr)]
+    check_split_names(names, "--split")
     fr = np.asarray(fr) / sum(fr)
     return ("subject" if col == "identity" else col), list(names), fr
+
+
+def check_split_names(names, where: str) -> None:
+    """Split names become folder and file names: letters, digits, ``_`` and ``-`` only, unique."""
+    for n in names:
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_-]*", str(n)):
+            raise HpeError(f"{where}: expected split names of letters, digits, '_' and '-', got {n!r}")
+    if len(set(names)) != len(names):
+        raise HpeError(f"{where}: expected distinct split names, got {', '.join(map(str, names))}")
 
 
 def group_hash(values, seed: int) -> np.ndarray:
@@ -331,6 +341,8 @@ def read_split_file(path):
     if dup.any():
         k = int(np.flatnonzero(dup.to_numpy())[0])
         raise HpeError(f"{path}: row {k + 2}: group {t[col].iloc[k]!r} is in two splits")
+    for n in sorted(set(t["split"].tolist())):
+        check_split_names([n], str(path))
     return ("subject" if col == "identity" else col), dict(zip(t[col].tolist(), t["split"].tolist()))
 
 

@@ -40,6 +40,12 @@ def crop_names(rows) -> np.ndarray:
             stem = safe_name(Path(str(image[i])).with_suffix("").as_posix().replace("/", "__"))
             name = stem if n_in_image[i] == 1 else f"{stem}_{int(k_in_image[i])}"
         out[i] = f"{safe_name(source[i])}/{name}" if multi_source else name
+    # the same head listed twice (or names equal after cleaning): later ones get _dup1, _dup2, ...
+    import pandas as pd
+
+    dup = pd.Series(out).groupby(out).cumcount().to_numpy()
+    for i in np.flatnonzero(dup):
+        out[i] = f"{out[i]}_dup{dup[i]}"
     return out
 
 
