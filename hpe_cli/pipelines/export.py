@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
-from ..geometry.crop import expand_boxes, inside_fraction, landmark_boxes, pixel_boxes, sixdrepnet_test_boxes
+from ..geometry.crop import expand_boxes, landmark_boxes, pixel_boxes, sixdrepnet_test_boxes
 from ..io.export import get_layout
 from ..io.layout import BBOX_COLS, landmark_count
 
@@ -467,7 +467,10 @@ def _process_image(image, data, items, cfg, out):
     wrote_full = False
     for it in items:
         idx, split, rel, box, bbox, osz = it
-        frac = inside_fraction(np.asarray([bbox]), W, H)[0]
+        bx, by, bw, bh = bbox  # fraction of the head box inside the frame (scalar form of inside_fraction)
+        iw = max(0.0, min(bx + bw, W) - max(bx, 0.0))
+        ih = max(0.0, min(by + bh, H) - max(by, 0.0))
+        frac = iw * ih / (bw * bh) if bw * bh > 0 else 0.0
         if frac < cfg["min_inside"]:
             out.append((idx, f"box outside the image ({frac * 100:.0f}% inside)", W, H, None))
             continue
