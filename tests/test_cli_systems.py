@@ -33,3 +33,25 @@ def test_json_listing_and_extra_file(tmp_path):
 def test_top_level_help_fast_and_lists_commands():
     res = CliRunner().invoke(cli, ["--help"])
     assert res.exit_code == 0 and "convert" in res.output and "systems" in res.output and "Examples" in res.output
+
+
+def test_verbose_shows_source_storage_frame_verification():
+    res = CliRunner().invoke(cli, ["systems", "--verbose"])
+    assert res.exit_code == 0, res.output
+    block = res.output.split("\ntrinet\n")[1].split("\n\n")[0]
+    assert "LEFT-HANDED" in block and "computeMAE.py" in block and "left_x" in block
+    assert "  verified" in block and "  source" in block and "  example" in block
+    for name in ("img2pose", "aflw", "openface", "mediapipe", "dad3dheads", "openvino_adas", "synhead",
+                 "6drepnet_6d"):
+        assert f"\n{name}\n" in "\n" + res.output
+    assert "documented, unverified on data" in res.output
+    assert "rotation vector" in res.output and "6-D: matrix column 0 then column 1" in res.output
+
+
+def test_bad_user_file_is_a_usage_error(tmp_path):
+    f = tmp_path / "bad.toml"
+    f.write_text('name = "mine"\ngimbal_tol = -1\n' + "".join(
+        f'[[turns]]\nangle = "{r}"\naxis = "{a}"\n' for r, a in [("yaw", "z"), ("pitch", "y"), ("roll", "x")]))
+    res = CliRunner().invoke(cli, ["convert", str(f), "-o", str(tmp_path / "o.csv"), "--from", str(f),
+                                   "--to", "300w_lp"])
+    assert res.exit_code == 2 and "gimbal_tol: expected a number in [0, 1)" in res.output and "got -1" in res.output

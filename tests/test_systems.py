@@ -175,7 +175,11 @@ def test_bad_system_files(tmp_path):
         get_system("no_such_system")
     f.write_text('name="r"\nframe=[[1,0,0],[0,1,0],[0,0,-1]]\n' + "".join(
         f'[[turns]]\nangle="{r}"\naxis="{a}"\n' for r, a in zip(["pitch", "yaw", "roll"], "xyz")))
-    with pytest.raises(SystemError_, match="right-handed"):
+    s = get_system(str(f))  # improper frames are allowed: B A B^T is still a rotation
+    assert not s.proper_frame and "LEFT-HANDED" in s.describe()["frame"]
+    f.write_text('name="r"\nframe=[[1,0,0],[0,1,0],[0,0,2]]\n' + "".join(
+        f'[[turns]]\nangle="{r}"\naxis="{a}"\n' for r, a in zip(["pitch", "yaw", "roll"], "xyz")))
+    with pytest.raises(SystemError_, match="frame: expected an orthonormal"):
         get_system(str(f))
 
 

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from .table_options import column_options
+
 from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
                       verbosity_options)
 
@@ -13,23 +15,34 @@ from .options import (SYSTEM, batch_option, echo_summary, output_option, overwri
 @click.option("--from", "source", type=SYSTEM, required=True, help="System of INPUT: built-in name or .toml file.")
 @click.option("--to", "target", type=SYSTEM, required=True, help="System to write: built-in name or .toml file.")
 @click.option("--radians", is_flag=True, help="INPUT angle columns are in radians (output is always degrees).")
+@click.option("--decoder", type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]), default=None,
+              help="Also write what this published decoder prints for each rotation (decoder_pitch, decoder_yaw, "
+                   "decoder_roll, decoder_ok), beside the exact angles. `hpe audit --decoder` measures the gap.")
 @rejects_options
 @overwrite_option
 @batch_option
 @verbosity_options
-def convert(input, output, source, target, radians, rejects, strict, overwrite, batch_size, verbose, quiet):
+@column_options
+def convert(input, output, source, target, radians, decoder, rejects, strict, overwrite, batch_size, verbose, quiet):
     """Convert head-pose labels between rotation systems.
 
-    INPUT is a .parquet or .csv table with angle columns pitch,yaw,roll
-    (degrees) or, when it has none, matrix columns r00..r22 (row-major, the
-    source system's stored matrix); or a folder of 300W-LP/AFLW2000 .mat files
-    (read from Pose_Para, with a `file` column).
+    INPUT is a .parquet or .csv table with the source system's own value
+    columns when it declares them (img2pose: rx,ry,rz radians; openface:
+    pose_Rx..; mediapipe: m00..m22; trinet: left_x..front_z; quaternion
+    systems: qw,qx,qy,qz; 6-D: sixd_0..sixd_5 -- see `hpe systems -v`), else
+    angle columns pitch,yaw,roll (degrees), else matrix columns r00..r22
+    (row-major, the source system's stored matrix); or a folder of
+    300W-LP/AFLW2000 .mat files (read from Pose_Para, with a `file` column).
 
     OUTPUT (.parquet or .csv) keeps every other input column, then
-    pitch,yaw,roll (primary solution), pitch_2,yaw_2,roll_2 (the other one),
-    r00..r22 (target matrix), gimbal_lock and roundtrip_err (Frobenius
-    distance between the input rotation and the one rebuilt from the output
-    angles). Parquet metadata records the target system's definition.
+    pitch,yaw,roll (primary solution; for systems that store no angles, the
+    300W-LP angles), pitch_2,yaw_2,roll_2 (the other one), r00..r22 (target
+    stored matrix), gimbal_lock and roundtrip_err (Frobenius distance between
+    the input rotation and the one rebuilt from the output angles), then --
+    in addition, never instead -- the target's own value columns when it
+    declares them (rotation vector, quaternion with w >= 0, 6-D, 4x4 block,
+    named angle columns in the system's units). Parquet metadata records the
+    target system's definition.
 
     \b
     Examples:
@@ -37,13 +50,16 @@ def convert(input, output, source, target, radians, rejects, strict, overwrite, 
       hpe convert AFLW2000/ -o aflw_scipy.csv --from 300w_lp --to scipy_zyx
       hpe convert preds.parquet -o fixed.parquet --from my_system.toml --to 300w_lp --rejects bad.csv
       hpe convert rad.csv -o deg.csv --from 3ddfa_v2 --to 300w_lp --radians
+      hpe convert img2pose_preds.csv -o preds_300wlp.csv --from img2pose --to 300w_lp
+      hpe convert AFLW2000/ -o aflw_q.parquet --from 300w_lp --to my_quaternions.toml
+      hpe convert AFLW2000/ -o synergy.csv --from 300w_lp --to 3ddfa_v2 --decoder synergynet
     """
     bar = progress(desc="convert", quiet=quiet)
     try:
         from ..pipelines.convert import run_convert
 
         s = run_convert(input, output, source, target, radians=radians, rejects_path=rejects, overwrite=overwrite,
-                        batch_size=batch_size, progress=bar, strict=strict)
+                        batch_size=batch_size, progress=bar, strict=strict, decoder=decoder)
     finally:
         bar.close()
     lines = [f"{s.written} of {s.rows} rows converted from {source.name} to {target.name} -> {output}",

@@ -7,16 +7,21 @@ import click
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("extra", nargs=-1, type=click.Path(exists=True, dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print every system's full definition as JSON.")
-def systems(extra, as_json):
+@click.option("-v", "--verbose", is_flag=True,
+              help="Also show each system's source (the code or document it follows), its storage kind and "
+                   "columns, its frame in words (and whether it is left-handed) and how it was verified.")
+def systems(extra, as_json, verbose):
     """List the built-in rotation systems (and any EXTRA .toml files).
 
     Each system is shown with its four defining parts: frame, axes and
     handedness, range (with the primary-solution rule) and order (sequence
-    and storage), in words; --json gives the same as data.
+    and storage), in words; --json gives the same as data. --verbose adds
+    where each definition comes from and whether it was verified on real data.
 
     \b
     Examples:
       hpe systems
+      hpe systems --verbose
       hpe systems --json > systems.json
       hpe systems my_system.toml
     """
@@ -35,4 +40,11 @@ def systems(extra, as_json):
             click.echo(f"  {key:<8} {text}")
         if s.notes:
             click.echo(f"  notes    {s.notes}")
+        if verbose:
+            click.echo(f"  source   {s.source or '(none given)'}")
+            click.echo(f"  verified {s.verified or '(not stated)'}")
+            for n, e in enumerate(s.examples):
+                what = (f"angles {e['angles']}" if "angles" in e else f"300W-LP angles {e['canonical_angles']}")
+                to = (f"values {e['values']}" if "values" in e else f"matrix {e.get('matrix')}")
+                click.echo(f"  example  {what} -> {to}")
         click.echo("")

@@ -15,18 +15,6 @@ from .layout import ANGLE_COLS, MATRIX_COLS
 MAX_ANGLE = 1e6
 
 
-def label_mode(columns, path="input") -> str:
-    """``"angles"`` if ``pitch, yaw, roll`` are present, else ``"matrix"`` if ``r00..r22`` are, else an error."""
-    cols = set(columns)
-    if all(c in cols for c in ANGLE_COLS):
-        return "angles"
-    if all(c in cols for c in MATRIX_COLS):
-        return "matrix"
-    missing = [c for c in ANGLE_COLS if c not in cols]
-    raise HpeError(f"{path}: missing column(s) {', '.join(missing)}: expected angle columns pitch,yaw,roll "
-                   f"(degrees) or matrix columns r00..r22; found {', '.join(list(columns)[:12]) or 'no columns'}")
-
-
 def numeric_column(batch, name):
     """Column as float64 plus a per-row reason ('' when usable)."""
     values, bad, reasons = _numeric(batch, name)
@@ -142,3 +130,154 @@ def batch_labels(batch, mode: str, radians: bool = False):
         reasons = np.full(batch.num_rows, "", dtype=object)
     values = np.stack(cols, axis=-1)
     return (values if mode == "angles" else values.reshape(-1, 3, 3)), reasons
+
+
+# ---------------------------------------------------------------- storage kinds
+# (kept apart from the numeric extraction above: every storage kind is read here the same way)
+
+def _native(system, columns) -> bool:
+    """True when ``columns`` hold the system's own declared value columns."""
+    if system is None or (system.storage_kind == "angles" and not system.columns):
+        return False
+    cols = set(columns)
+    return all(c in cols for c in system.value_columns)
+
+
+def label_mode(columns, path="input", system=None) -> str:
+    """The storage kind the label columns of a table hold.
+
+    With ``system`` given, its own value columns (``system.value_columns``:
+    e.g. ``rx, ry, rz`` for a rotation-vector system, ``pose_Rx..`` for
+    OpenFace) are looked for first and their ``storage_kind`` is returned.
+    Otherwise (or when they are absent) ``"angles"`` if ``pitch, yaw, roll``
+    (degrees) are present, else ``"matrix"`` if ``r00..r22`` (the system's
+    stored matrix) are, else an error naming what was expected.
+    """
+    from ..rotation.systems import get_system
+
+    system = get_system(system) if system is not None else None
+    if _native(system, columns):
+        return system.storage_kind
+    cols = set(columns)
+    if all(c in cols for c in ANGLE_COLS):
+        return "angles"
+    if all(c in cols for c in MATRIX_COLS):
+        return "matrix"
+    own = ""
+    if system is not None and (system.storage_kind != "angles" or system.columns):
+        missing_own = [c for c in system.value_columns if c not in cols]
+        own = (f"{system.name}'s {system.storage_kind} columns {','.join(system.value_columns)} "
+               f"(missing {','.join(missing_own)}), or ")
+    missing = [c for c in ANGLE_COLS if c not in cols]
+    raise HpeError(f"{path}: missing column(s) {', '.join(missing)}: expected {own}angle columns pitch,yaw,roll "
+                   f"(degrees) or matrix columns r00..r22; found {', '.join(list(columns)[:12]) or 'no columns'}")
+
+
+def _value_columns(batch, names):
+    """``(columns, ok, reasons_or_None)`` for arbitrary numeric columns (first reason per row)."""
+    cols, reasons = [], None
+    ok = np.ones(batch.num_rows, dtype=bool)
+    for name in names:
+        v, bad, r = _numeric(batch, name)
+        cols.append(v)
+        if r is not None:
+            if reasons is None:
+                reasons = np.full(batch.num_rows, "", dtype=object)
+            first = bad & ok
+            reasons[first] = r[first]
+            ok &= ~bad
+    return cols, ok, reasons
+
+
+def _merge(ok, reasons, sub_ok_idx, sub_reasons):
+    """Fold reasons found on the rows ``sub_ok_idx`` into the batch-wide ``ok``/``reasons``."""
+    if sub_reasons is None:
+        return ok, reasons
+    bad = sub_reasons != ""
+    if bad.any():
+        if reasons is None:
+            reasons = np.full(ok.size, "", dtype=object)
+        idx = sub_ok_idx[bad]
+        reasons[idx] = sub_reasons[bad]
+        ok[idx] = False
+    return ok, reasons
+
+
+def batch_rotations(batch, system, mode: str, radians: bool = False):
+    """The stored matrices of one record batch, whatever the storage kind.
+
+    Parameters
+    ----------
+    batch : pyarrow.RecordBatch
+    system : RotationSystem or name
+        The labels' system.
+    mode : str
+        What :func:`label_mode` returned for the table.
+    radians : bool
+        ``pitch, yaw, roll`` columns are in radians (hpe's own angle columns
+        are degrees otherwise; a system's declared angle columns use its ``units``).
+
+    Returns
+    -------
+    X : nested list (3x3) of 1-D float64 arrays of length n
+        The system's stored matrix (structure of arrays, see
+        :mod:`hpe_cli.rotation.soa`); unusable rows hold the identity.
+    ok : ndarray of bool (n,)
+    reasons : ndarray of object (n,) or None
+        ``''`` for usable rows, else the first reason; None when all rows are usable.
+    """
+    from ..rotation import soa
+    from ..rotation.systems import get_system
+
+    system = get_system(system)
+    n = batch.num_rows
+    native = _native(system, batch.schema.names)
+    if mode == "angles":
+        if native and system.storage_kind == "angles":
+            cols, ok, reasons = _value_columns(batch, system.value_columns)
+            if system.value_units == "radians":
+                cols = [c * (180.0 / np.pi) for c in cols]
+        else:
+            cols, ok, reasons = label_columns_fast(batch, "angles", radians)
+        if not ok.all():
+            cols = [np.where(ok, c, 0.0) for c in cols]
+        X = system.soa_from_angles(*cols)
+        return [[np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) if isinstance(v, float) else v
+                 for v in row] for row in X], ok, reasons
+    if mode == "matrix" and not (native and system.storage_kind == "matrix"):
+        cols, ok, reasons = label_columns_fast(batch, "matrix")
+        if not ok.all():
+            eye = np.eye(3).ravel()
+            cols = [np.where(ok, c, eye[k]) for k, c in enumerate(cols)]
+        return [cols[0:3], cols[3:6], cols[6:9]], ok, reasons
+    if mode != system.storage_kind or not native:
+        raise HpeError(f"{mode} columns {', '.join(system.value_columns)} not found for system {system.name}")
+    cols, ok, reasons = _value_columns(batch, system.value_columns)
+    values = np.stack(cols, axis=-1)
+    idx = np.flatnonzero(ok)
+    R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    if idx.size:
+        Rk, sub = system.values_to_matrix(values[idx])
+        ok, reasons = _merge(ok, reasons, idx, sub)
+        good = ok[idx]
+        R[idx[good]] = Rk[good]
+    return soa.from_array(R), ok, reasons
+
+
+def rotation_value_columns(system, X, n: int) -> dict:
+    """The system's own value columns (name -> 1-D array) of stored matrices ``X`` (nested list).
+
+    Empty for angle systems without declared columns (hpe's ``pitch, yaw, roll``
+    already hold them). Angle systems with declared columns get their angles
+    in the system's units, the others their stored values.
+    """
+    from ..rotation import soa
+
+    if system.storage_kind == "angles":
+        if not system.columns:
+            return {}
+        p1, _, _, _ = system.soa_to_angles(X)
+        f = np.pi / 180.0 if system.value_units == "radians" else 1.0
+        return {c: np.asarray(v * f, dtype=np.float64) for c, v in zip(system.value_columns, p1)}
+    values = system.matrix_to_values(soa.to_array(X, n)) if n else np.zeros((0, len(system.value_columns)))
+    return {c: np.ascontiguousarray(values[:, k]) for k, c in enumerate(system.value_columns)}

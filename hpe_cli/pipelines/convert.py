@@ -8,7 +8,8 @@ import numpy as np
 
 from ..errors import HpeError
 from ..io.readers import LINE_COL
-from ..io import LABEL_COLS, Rejects, TableWriter, label_columns_fast, label_mode, open_table, system_metadata
+from ..io import (LABEL_COLS, Rejects, TableWriter, batch_rotations, label_mode, open_table, rotation_value_columns,
+                  system_metadata)
 from ..rotation import soa
 from ..rotation.convert import soa_labels
 
@@ -22,38 +23,44 @@ class ConvertSummary:
     rejects: dict = field(default_factory=dict)
 
 
-def convert_batch(batch, mode, source, target, radians=False):
+def convert_batch(batch, mode, source, target, radians=False, decoder=None):
     """Convert one record batch.
 
     Returns ``(out_batch, reasons, labels)``: the converted rows (input columns
-    that the conversion does not replace, then ``LABEL_COLS``), the per-row
-    reject reason ('' for converted rows; None when every row converted) and
-    the label dict of
-    :func:`~hpe_cli.rotation.convert.soa_labels`.
+    that the conversion does not replace, then ``LABEL_COLS``, then the
+    target's own value columns when it has any -- e.g. ``rx, ry, rz`` for
+    ``img2pose`` -- then the ``decoder_*`` columns when ``decoder`` is given),
+    the per-row reject reason ('' for converted rows; None when every row
+    converted) and the label dict of :func:`~hpe_cli.rotation.convert.soa_labels`.
     """
     import pyarrow as pa
 
-    cols, ok, reasons = label_columns_fast(batch, mode, radians)
+    X, ok, reasons = batch_rotations(batch, source, mode, radians)
     if reasons is not None:
-        cols = [c[ok] for c in cols]
+        X = [[v[ok] for v in row] for row in X]
     n = int(ok.sum())
-    if mode == "angles":
-        X = source.soa_from_angles(*cols)
-    else:
-        X = [cols[0:3], cols[3:6], cols[6:9]]
-    labels = soa_labels(source.soa_to_canonical(X), target, n)
-    keep = [name for name in batch.schema.names if name not in LABEL_COLS and name != LINE_COL]
+    A = source.soa_to_canonical(X)
+    labels = soa_labels(A, target, n)
+    extra = rotation_value_columns(target, labels["matrix"], n)
+    if decoder is not None:
+        from ..rotation.decoders import decoder_columns
+
+        extra.update(decoder_columns(decoder, soa.to_array(A, n)))
+    replaced = set(LABEL_COLS) | set(extra) | {LINE_COL}
+    keep = [name for name in batch.schema.names if name not in replaced]
     kept = batch.select(keep)
     if not ok.all():
         kept = kept.filter(pa.array(ok))
     new = labels["primary"] + labels["secondary"] + soa.columns(labels["matrix"], n) + \
-        [labels["gimbal_lock"], labels["roundtrip_err"]]
-    arrays = list(kept.columns) + [pa.array(v) for v in new]
-    return pa.RecordBatch.from_arrays(arrays, names=keep + LABEL_COLS), reasons, labels
+        [labels["gimbal_lock"], labels["roundtrip_err"]] + list(extra.values())
+    names = keep + LABEL_COLS + [c for c in extra if c not in LABEL_COLS]
+    new = new[:len(LABEL_COLS)] + [v for c, v in extra.items() if c not in LABEL_COLS]
+    arrays = list(kept.columns) + [pa.array(np.asarray(v)) for v in new]
+    return pa.RecordBatch.from_arrays(arrays, names=names), reasons, labels
 
 
 def run_convert(input_path, output, source, target, *, radians=False, rejects_path=None, overwrite=False,
-                batch_size=262_144, progress=None, workers=None, strict=False) -> ConvertSummary:
+                batch_size=262_144, progress=None, workers=None, strict=False, decoder=None) -> ConvertSummary:
     """Convert every row of ``input_path`` from ``source`` to ``target`` into ``output``.
 
     Bad rows go to ``rejects_path`` when given; otherwise (or with
@@ -67,10 +74,12 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
     from concurrent.futures import ThreadPoolExecutor
 
     src = open_table(input_path, batch_size, with_lines=True)
-    mode = label_mode(src.columns, src.path)
+    mode = label_mode(src.columns, src.path, source)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
     summary = ConvertSummary()
     meta = {**system_metadata(target), "hpe:source_system": source.name, "hpe:input": str(src.path)}
+    if decoder is not None:
+        meta["hpe:decoder"] = decoder
     workers = workers or min(2, os.cpu_count() or 1)
 
     def finish(batch, read_rejects, future, writer):
@@ -103,7 +112,7 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
         try:
             for batch, read_rejects in src.batches_with_rejects():
                 pending.append((batch, read_rejects,
-                                pool.submit(convert_batch, batch, mode, source, target, radians)))
+                                pool.submit(convert_batch, batch, mode, source, target, radians, decoder)))
                 if len(pending) > workers:
                     finish(*pending.popleft(), writer)
             while pending:

@@ -13,6 +13,19 @@ intrinsic or extrinsic sequence.
 Angles cross this API in *role order* ``(pitch, yaw, roll)`` and in degrees,
 whatever the system's storage order or units; ``order`` and ``units`` only
 describe how a dataset stores them on disk.
+
+The frame ``B`` may be improper (det -1, e.g. image axes x right, y down, z
+towards the viewer): ``B @ A @ B.T`` is still a proper rotation. A system may
+also name a different head-model frame ``M`` (``model_frame``), giving
+``R_active = B @ A @ M.T`` (DAD-3DHeads' benchmark matrix maps the FLAME model
+frame into the OpenCV camera frame); ``det B * det M`` must be +1.
+
+``storage_kind`` says what a dataset's file holds: ``angles`` (three turns),
+``matrix`` (3x3, or the rotation block of a 4x4), ``rotvec`` (radians),
+``quaternion`` (``quaternion_order`` wxyz or xyzw) or ``6d`` (two matrix
+columns, ``sixd_columns``). Their file column names are ``value_columns``
+(defaults per kind, renamed by a ``[columns]`` table). A system that stores no
+angles and declares no turns reports the 300W-LP angles of the same rotation.
 """
 from __future__ import annotations
 
@@ -28,6 +41,8 @@ from . import soa as _soa
 
 ROLES = ("pitch", "yaw", "roll")
 SELECTIONS = ("tait_bryan", "proper", "whenet")
+STORAGE_KINDS = ("angles", "matrix", "rotvec", "quaternion", "6d")
+MATRIX_LAYOUTS = ("3x3", "4x4")
 
 #: default gimbal-lock tolerance on |cos b| (radians from the lock): 1e-4 rad is
 #: 0.0057 deg. Closer than that, float32-stored labels (Pose_Para, most datasets)
@@ -45,6 +60,25 @@ _CANONICAL_WORDS = {
     (2, -1): "into the head (away from the camera)",
 }
 
+#: the 300W-LP turns: the angles reported by systems that store no angles
+CANONICAL_TURNS = None  # set after Turn is defined
+
+
+def default_value_names(kind: str, layout: str = "3x3", quaternion_order: str = "wxyz") -> tuple:
+    """Canonical names of the stored values of a storage kind (the keys of ``[columns]``)."""
+    if kind == "angles":
+        return ROLES
+    if kind == "matrix":
+        p = "m" if layout == "4x4" else "r"
+        return tuple(f"{p}{i}{j}" for i in range(3) for j in range(3))
+    if kind == "rotvec":
+        return ("rx", "ry", "rz")
+    if kind == "quaternion":
+        return tuple("q" + c for c in quaternion_order)
+    if kind == "6d":
+        return tuple(f"sixd_{i}" for i in range(6))
+    raise SystemError_(f"expected storage_kind in {STORAGE_KINDS}, got {kind!r}")
+
 
 class SystemError_(ValueError):
     """An invalid or unknown rotation system."""
@@ -60,6 +94,9 @@ class Turn:
 
     def sign(self) -> float:
         return 1.0 if self.hand == "right" else -1.0
+
+
+CANONICAL_TURNS = (Turn("pitch", "x", "left"), Turn("yaw", "y", "left"), Turn("roll", "z", "left"))
 
 
 @dataclass(frozen=True)
@@ -91,6 +128,24 @@ class RotationSystem:
         first one (such rows are flagged out of range).
     gimbal_tol : float
         Rows with ``lock_distance < gimbal_tol`` are flagged as gimbal-locked.
+    storage_kind : {"angles", "matrix", "rotvec", "quaternion", "6d"}
+        What the dataset's own files hold.
+    matrix_layout : {"3x3", "4x4"}
+        For ``matrix``: a 3x3 matrix or the rotation block of a 4x4 one.
+    quaternion_order : {"wxyz", "xyzw"}
+    sixd_columns : (int, int)
+        For ``6d``: which two columns of the stored matrix, in file order.
+    model_frame : tuple of 3 tuples or None
+        ``M``, the head-model frame when it differs from ``frame``.
+    columns : dict
+        Canonical value name -> file column name (see :func:`default_value_names`).
+    angle_frame : {"system", "canonical"}
+        ``canonical``: the system has no turns of its own; its angles are the
+        300W-LP angles of the same rotation.
+    source, verified : str
+        The code or document the definition follows, and how it was checked.
+    examples : tuple of dict
+        Worked examples (``angles`` or ``canonical_angles`` -> ``matrix``/``values``).
     """
 
     name: str
@@ -105,14 +160,29 @@ class RotationSystem:
     selection: str = "tait_bryan"
     gimbal_tol: float = GIMBAL_TOL
     notes: str = ""
+    storage_kind: str = "angles"
+    matrix_layout: str = "3x3"
+    quaternion_order: str = "wxyz"
+    sixd_columns: tuple = (0, 1)
+    model_frame: tuple | None = None
+    columns: dict = field(default_factory=dict)
+    angle_frame: str = "system"
+    source: str = ""
+    verified: str = ""
+    examples: tuple = ()
 
     # ------------------------------------------------------------------ checks
     def __post_init__(self):
-        B = np.asarray(self.frame, dtype=float)
-        if B.shape != (3, 3) or not np.allclose(B @ B.T, np.eye(3), atol=1e-9):
-            raise SystemError_(f"system {self.name!r}: expected an orthonormal 3x3 frame, got {self.frame}")
-        if abs(np.linalg.det(B) - 1) > 1e-9:
-            raise SystemError_(f"system {self.name!r}: frame must be right-handed (det +1), got det {np.linalg.det(B):.3g}")
+        for key, F in (("frame", self.frame), ("model_frame", self.model_frame)):
+            if F is None:
+                continue
+            B = np.asarray(F, dtype=float)
+            if B.shape != (3, 3) or not np.isfinite(B).all() or not np.allclose(B @ B.T, np.eye(3), atol=1e-9):
+                raise SystemError_(f"system {self.name!r}: {key}: expected an orthonormal 3x3 matrix "
+                                   f"(det +1 or -1), got {_fmt(F)}")
+        if np.linalg.det(self.B) * np.linalg.det(self.M) < 0:
+            raise SystemError_(f"system {self.name!r}: model_frame: expected det(frame) * det(model_frame) = +1 "
+                               f"(a proper rotation), got {np.linalg.det(self.B) * np.linalg.det(self.M):+.0f}")
         if len(self.turns) != 3 or sorted(t.angle for t in self.turns) != sorted(ROLES):
             raise SystemError_(f"system {self.name!r}: expected three turns, one each for pitch, yaw, roll")
         for t in self.turns:
@@ -120,11 +190,42 @@ class RotationSystem:
                 raise SystemError_(f"system {self.name!r}: bad turn {t}: axis must be x/y/z, hand right/left")
         _euler.parse_seq(self.axes)
         for attr, allowed in (("sequence", ("intrinsic", "extrinsic")), ("storage", ("active", "transposed")),
-                              ("units", ("degrees", "radians")), ("selection", SELECTIONS)):
+                              ("units", ("degrees", "radians")), ("selection", SELECTIONS),
+                              ("storage_kind", STORAGE_KINDS), ("matrix_layout", MATRIX_LAYOUTS),
+                              ("quaternion_order", ("wxyz", "xyzw")), ("angle_frame", ("system", "canonical"))):
             if getattr(self, attr) not in allowed:
-                raise SystemError_(f"system {self.name!r}: expected {attr} in {allowed}, got {getattr(self, attr)!r}")
+                raise SystemError_(f"system {self.name!r}: {attr}: expected one of {', '.join(allowed)}, "
+                                   f"got {getattr(self, attr)!r}")
         if sorted(self.order) != sorted(ROLES):
-            raise SystemError_(f"system {self.name!r}: order must be a permutation of {ROLES}, got {self.order}")
+            raise SystemError_(f"system {self.name!r}: order: expected a permutation of {', '.join(ROLES)}, "
+                               f"got {list(self.order)}")
+        g = self.gimbal_tol
+        if not isinstance(g, (int, float)) or not np.isfinite(g) or g < 0 or g >= 1:
+            raise SystemError_(f"system {self.name!r}: gimbal_tol: expected a number in [0, 1), got {g!r}")
+        for role, rng in self.ranges.items():
+            if role not in ROLES:
+                raise SystemError_(f"system {self.name!r}: ranges.{role}: expected a key among "
+                                   f"{', '.join(ROLES)}, got {role!r}")
+            lo, hi = rng
+            if not (np.isfinite(lo) and np.isfinite(hi)) or lo >= hi:
+                raise SystemError_(f"system {self.name!r}: ranges.{role}: expected [low, high] with finite "
+                                   f"low < high (degrees), got [{lo!r}, {hi!r}]")
+        try:
+            from .storage import _check_pair
+
+            _check_pair(self.sixd_columns)
+        except ValueError as exc:
+            raise SystemError_(f"system {self.name!r}: sixd_columns: {exc}") from None
+        names = self.value_names
+        for key, col in self.columns.items():
+            if key not in names:
+                raise SystemError_(f"system {self.name!r}: columns.{key}: expected a key among "
+                                   f"{', '.join(names)} (storage_kind {self.storage_kind}), got {key!r}")
+            if not isinstance(col, str) or not col:
+                raise SystemError_(f"system {self.name!r}: columns.{key}: expected a column name, got {col!r}")
+        vc = self.value_columns
+        if len(set(vc)) != len(vc):
+            raise SystemError_(f"system {self.name!r}: columns: expected distinct column names, got {list(vc)}")
 
     # ------------------------------------------------------------- derived bits
     @property
@@ -142,6 +243,96 @@ class RotationSystem:
     @property
     def B(self) -> np.ndarray:
         return np.asarray(self.frame, dtype=np.float64)
+
+    @property
+    def M(self) -> np.ndarray:
+        """The head-model frame (``frame`` unless ``model_frame`` is given)."""
+        return self.B if self.model_frame is None else np.asarray(self.model_frame, dtype=np.float64)
+
+    @property
+    def proper_frame(self) -> bool:
+        return bool(np.linalg.det(self.B) > 0)
+
+    @property
+    def value_names(self) -> tuple:
+        """Canonical names of the stored values (keys of ``[columns]``)."""
+        return default_value_names(self.storage_kind, self.matrix_layout, self.quaternion_order)
+
+    @property
+    def value_columns(self) -> list:
+        """File column names of the stored values, in :attr:`value_names` order."""
+        return [self.columns.get(k, k) for k in self.value_names]
+
+    @property
+    def value_units(self) -> str:
+        """Units of angle value columns: the system's ``units`` when it names its own columns, else degrees."""
+        return self.units if (self.storage_kind == "angles" and self.columns) else "degrees"
+
+    # ---------------------------------------------------------- stored values
+    def values_to_matrix(self, values):
+        """Stored matrices ``(N, 3, 3)`` from stored values ``(N, k)`` (``value_names`` order).
+
+        Returns ``(R, reasons)``; ``reasons`` is None when every row is usable,
+        else an object array ('' for usable rows). Quaternions must have unit
+        norm within 1e-3 (they are then normalised); 6-D vectors must not be
+        degenerate; matrices must be rotations (:func:`~hpe_cli.rotation.check.rotation_reasons`).
+        Angles are not handled here (see :meth:`from_angles`).
+        """
+        from . import storage as st
+
+        v = np.asarray(values, dtype=np.float64)
+        n = v.shape[0]
+        reasons = None
+
+        def flag(mask, text):
+            nonlocal reasons
+            if mask.any():
+                if reasons is None:
+                    reasons = np.full(n, "", dtype=object)
+                reasons[mask & (reasons == "")] = text
+
+        kind = self.storage_kind
+        if kind == "matrix":
+            R = v.reshape(-1, 3, 3)
+        elif kind == "rotvec":
+            R = st.rotvec_to_matrix(v)
+        elif kind == "quaternion":
+            norm = np.linalg.norm(v, axis=-1)
+            bad = ~(np.abs(norm - 1.0) <= 1e-3)
+            flag(bad, "not a unit quaternion (norm differs from 1 by more than 1e-3)")
+            R = st.quaternion_to_matrix(np.where(bad[:, None], [1.0, 0, 0, 0], v), "wxyz") \
+                if self.quaternion_order == "wxyz" else \
+                st.quaternion_to_matrix(np.where(bad[:, None], [0, 0, 0, 1.0], v), "xyzw")
+        elif kind == "6d":
+            R = st.sixd_to_matrix(v, self.sixd_columns)
+            flag(~np.isfinite(R).all(axis=(1, 2)), "degenerate 6-D vector (zero or parallel columns)")
+            R = np.where(np.isfinite(R), R, np.eye(3))
+        else:
+            raise SystemError_(f"system {self.name!r}: values_to_matrix: no stored values for storage_kind angles")
+        if kind == "matrix":
+            from .check import rotation_reasons
+
+            rr = rotation_reasons(R)
+            flag(rr != "", "")
+            if reasons is not None:
+                reasons[rr != ""] = rr[rr != ""]
+        return R, reasons
+
+    def matrix_to_values(self, R) -> np.ndarray:
+        """Stored values ``(N, k)`` (``value_names`` order) of stored matrices ``(N, 3, 3)``."""
+        from . import storage as st
+
+        R = np.asarray(R, dtype=np.float64).reshape(-1, 3, 3)
+        kind = self.storage_kind
+        if kind == "matrix":
+            return R.reshape(-1, 9)
+        if kind == "rotvec":
+            return st.matrix_to_rotvec(R)
+        if kind == "quaternion":
+            return st.matrix_to_quaternion(R, self.quaternion_order)
+        if kind == "6d":
+            return st.matrix_to_sixd(R, self.sixd_columns)
+        raise SystemError_(f"system {self.name!r}: matrix_to_values: no stored values for storage_kind angles")
 
     # ----------------------------------------------------------------- kernels
     def from_angles(self, pyr_deg) -> np.ndarray:
@@ -187,17 +378,20 @@ class RotationSystem:
     # nested-list (structure of arrays) forms of the same four maps, for hot paths
     @property
     def _identity_frame(self) -> bool:
-        return np.array_equal(self.B, np.eye(3))
+        return np.array_equal(self.B, np.eye(3)) and np.array_equal(self.M, np.eye(3))
 
     def soa_from_angles(self, pitch, yaw, roll):
         """Stored matrix as a nested list, from 1-D angle arrays in degrees."""
         by_role = {"pitch": pitch, "yaw": yaw, "roll": roll}
         turns = self._intrinsic_turns()
         rad = [np.asarray(by_role[t.angle], dtype=np.float64) * (t.sign() * (np.pi / 180.0)) for t in turns]
-        return _euler.euler_to_soa(rad[0], rad[1], rad[2], self.intrinsic_axes)
+        X = _euler.euler_to_soa(rad[0], rad[1], rad[2], self.intrinsic_axes)
+        return self.soa_from_canonical(X) if self.angle_frame == "canonical" else X
 
     def soa_to_angles(self, X):
         """``(primary, secondary, locked, lock)`` with the angle triples as lists ``[pitch, yaw, roll]``."""
+        if self.angle_frame == "canonical":
+            X = self.soa_to_canonical(X)
         seq = self.intrinsic_axes
         a, b, c, lock = _euler.soa_to_euler(X, seq)
         turns = self._intrinsic_turns()
@@ -230,18 +424,18 @@ class RotationSystem:
         return p1, p2, lock < self.gimbal_tol, lock
 
     def soa_to_canonical(self, X):
+        """``A = B.T @ R_active @ M`` (``R_active`` is the stored matrix, transposed if stored so)."""
         if self.storage == "transposed":
             X = _soa.transpose(X)
         if self._identity_frame:
             return X
-        B = _soa.constant(self.B)
-        return _soa.mul(_soa.mul(_soa.transpose(B), X), B)
+        return _soa.mul(_soa.mul(_soa.constant(self.B.T), X), _soa.constant(self.M))
 
     def soa_from_canonical(self, A):
+        """``R_active = B @ A @ M.T``, then transposed if the system stores the inverse."""
         X = A
         if not self._identity_frame:
-            B = _soa.constant(self.B)
-            X = _soa.mul(_soa.mul(B, A), _soa.transpose(B))
+            X = _soa.mul(_soa.mul(_soa.constant(self.B), A), _soa.constant(self.M.T))
         return _soa.transpose(X) if self.storage == "transposed" else X
 
     def in_range(self, pyr_deg) -> np.ndarray:
@@ -254,11 +448,12 @@ class RotationSystem:
         return ok
 
     # ------------------------------------------------------------ description
-    def frame_words(self) -> dict:
+    def frame_words(self, frame=None) -> dict:
         """The system's x, y, z axes described in words."""
+        frame = self.frame if frame is None else frame
         words = {}
         for n, axis in enumerate("xyz"):
-            row = np.asarray(self.frame[n], dtype=float)
+            row = np.asarray(frame[n], dtype=float)
             m = int(np.argmax(np.abs(row)))
             if np.isclose(abs(row[m]), 1.0):
                 words[axis] = _CANONICAL_WORDS[(m, int(np.sign(row[m])))]
@@ -272,21 +467,59 @@ class RotationSystem:
         fw = self.frame_words()
         rng = ", ".join(f"{r} [{lo:g}, {hi:g}]" for r, (lo, hi) in
                         ((r, self.ranges.get(r, (-180, 180))) for r in ROLES))
-        return {
-            "frame": f"x: {fw['x']}; y: {fw['y']}; z: {fw['z']}",
+        hand = ("right-handed (det +1)" if self.proper_frame else
+                "LEFT-HANDED (det -1, improper; the system matrix B A B^T is still a proper rotation)")
+        frame = f"x: {fw['x']}; y: {fw['y']}; z: {fw['z']}; {hand}"
+        if self.model_frame is not None:
+            mw = self.frame_words(self.model_frame)
+            frame += f"; head-model frame x: {mw['x']}; y: {mw['y']}; z: {mw['z']}"
+        if self.angle_frame == "canonical":
+            turns = "no angles of its own: angles reported are the 300W-LP angles of the same rotation"
+        out = {
+            "frame": frame,
             "axes": turns,
             "range": rng + f"; primary solution: {self.selection}",
             "order": f"{self.sequence} {self.axes.upper()}, "
                      f"{'active' if self.storage == 'active' else 'transposed (passive)'} matrix",
-            "storage": f"angles stored as ({', '.join(self.order)}) in {self.units}",
+            "storage": self.storage_words(),
         }
+        return out
+
+    def storage_words(self) -> str:
+        cols = ", ".join(self.value_columns)
+        k = self.storage_kind
+        if k == "angles":
+            return f"angles stored as ({', '.join(self.order)}) in {self.units}; columns {cols} ({self.value_units})"
+        if k == "matrix":
+            what = "rotation block of a 4x4 matrix" if self.matrix_layout == "4x4" else "3x3 matrix"
+            return f"{what}, row-major, columns {cols}"
+        if k == "rotvec":
+            return f"rotation vector (axis * angle, radians), columns {cols}"
+        if k == "quaternion":
+            return (f"unit quaternion, {'scalar first' if self.quaternion_order == 'wxyz' else 'scalar last'} "
+                    f"({self.quaternion_order}; written with w >= 0), columns {cols}")
+        i, j = self.sixd_columns
+        return (f"6-D: matrix column {i} then column {j} (Gram-Schmidt on input, third column by cross product), "
+                f"columns {cols}")
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
         d["frame"] = [list(map(float, r)) for r in self.frame]
+        if self.model_frame is not None:
+            d["model_frame"] = [list(map(float, r)) for r in self.model_frame]
         d["turns"] = [dataclasses.asdict(t) for t in self.turns]
         d["order"] = list(self.order)
         d["ranges"] = {k: list(v) for k, v in self.ranges.items()}
+        d["sixd_columns"] = list(self.sixd_columns)
+        d["columns"] = dict(self.columns)
+        d["examples"] = [dict(e) for e in self.examples]
+        return d
+
+    def definition(self) -> dict:
+        """The mathematical definition only (no names, words or examples): equal dicts, same system."""
+        d = self.to_dict()
+        for k in ("name", "description", "notes", "source", "verified", "examples"):
+            d.pop(k, None)
         return d
 
     def to_json(self) -> str:
@@ -297,16 +530,34 @@ class RotationSystem:
         lines = [f'name = "{self.name}"', f'description = "{_esc(self.description)}"']
         if self.notes:
             lines.append(f'notes = "{_esc(self.notes)}"')
+        for key in ("source", "verified"):
+            if getattr(self, key):
+                lines.append(f'{key} = "{_esc(getattr(self, key))}"')
+        mat = lambda F: "[" + ", ".join("[" + ", ".join(_num(v) for v in r) + "]" for r in F) + "]"  # noqa: E731
+        lines += ["frame = " + mat(self.frame)]
+        if self.model_frame is not None:
+            lines += ["model_frame = " + mat(self.model_frame)]
+        if self.angle_frame == "system":
+            lines.append(f'sequence = "{self.sequence}"')
         lines += [
-            "frame = [" + ", ".join("[" + ", ".join(_num(v) for v in r) + "]" for r in self.frame) + "]",
-            f'sequence = "{self.sequence}"', f'storage = "{self.storage}"',
+            f'storage = "{self.storage}"',
             "order = [" + ", ".join(f'"{o}"' for o in self.order) + "]",
             f'units = "{self.units}"', f'selection = "{self.selection}"', f"gimbal_tol = {self.gimbal_tol!r}",
+            f'storage_kind = "{self.storage_kind}"',
         ]
-        for t in self.turns:
-            lines += ["", "[[turns]]", f'angle = "{t.angle}"', f'axis = "{t.axis}"', f'hand = "{t.hand}"']
+        if self.storage_kind == "matrix":
+            lines.append(f'matrix_layout = "{self.matrix_layout}"')
+        if self.storage_kind == "quaternion":
+            lines.append(f'quaternion_order = "{self.quaternion_order}"')
+        if self.storage_kind == "6d":
+            lines.append(f"sixd_columns = [{self.sixd_columns[0]}, {self.sixd_columns[1]}]")
+        if self.angle_frame == "system":
+            for t in self.turns:
+                lines += ["", "[[turns]]", f'angle = "{t.angle}"', f'axis = "{t.axis}"', f'hand = "{t.hand}"']
         if self.ranges:
             lines += ["", "[ranges]"] + [f"{k} = [{_num(lo)}, {_num(hi)}]" for k, (lo, hi) in self.ranges.items()]
+        if self.columns:
+            lines += ["", "[columns]"] + [f'{k} = "{_esc(v)}"' for k, v in self.columns.items()]
         return "\n".join(lines) + "\n"
 
 
@@ -319,34 +570,219 @@ def _num(v) -> str:
     return str(int(v)) if v.is_integer() else repr(v)
 
 
-def system_from_dict(d: dict, source: str = "<dict>") -> RotationSystem:
-    """Build a system from a parsed TOML/JSON mapping; errors name ``source``."""
+def _fmt(v) -> str:
     try:
-        turns = tuple(Turn(str(t["angle"]), str(t["axis"]).lower(), str(t.get("hand", "right")))
-                      for t in d["turns"])
-        ranges = {str(k): (float(v[0]), float(v[1])) for k, v in d.get("ranges", {}).items()}
-        return RotationSystem(
-            name=str(d["name"]),
+        return json.dumps(v)
+    except (TypeError, ValueError):
+        return repr(v)
+
+
+_TOP_KEYS = {"name", "description", "notes", "source", "verified", "frame", "model_frame", "turns", "sequence",
+             "storage", "order", "units", "ranges", "selection", "gimbal_tol", "storage_kind", "matrix_layout",
+             "quaternion_order", "sixd_columns", "columns", "examples"}
+_TURN_KEYS = {"angle", "axis", "hand"}
+_EXAMPLE_KEYS = {"angles", "canonical_angles", "matrix", "values", "note"}
+
+
+def _closest(key, allowed):
+    import difflib
+
+    m = difflib.get_close_matches(str(key), sorted(allowed), n=1)
+    return f" (did you mean {m[0]!r}?)" if m else ""
+
+
+def _expect(cond, where, what, got):
+    if not cond:
+        raise SystemError_(f"{where}: expected {what}, got {_fmt(got)}")
+
+
+def _number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _matrix3(v, where):
+    ok = isinstance(v, (list, tuple)) and len(v) == 3 and all(
+        isinstance(r, (list, tuple)) and len(r) == 3 and all(_number(x) for x in r) for r in v)
+    _expect(ok, where, "a 3x3 array of numbers", v)
+    return tuple(tuple(float(x) for x in r) for r in v)
+
+
+def system_from_dict(d: dict, source: str = "<dict>") -> RotationSystem:
+    """Build a system from a parsed TOML/JSON mapping, validating every key.
+
+    Every error reads ``"source: key: expected X, got Y"``: unknown keys
+    (with a close match when there is one), wrong types, NaN or negative
+    ``gimbal_tol``, NaN or inverted ranges, a frame that is not orthonormal,
+    unknown storage/order/kind values, and worked examples that disagree with
+    the definition.
+    """
+    _expect(isinstance(d, dict), source, "a table of system keys", type(d).__name__)
+    for key in d:
+        if key not in _TOP_KEYS:
+            raise SystemError_(f"{source}: {key}: unknown key{_closest(key, _TOP_KEYS)}; expected one of "
+                               f"{', '.join(sorted(_TOP_KEYS))}")
+    _expect(isinstance(d.get("name"), str) and d.get("name", "").strip() != "", f"{source}: name",
+            "a non-empty string", d.get("name"))
+    for key in ("description", "notes", "source", "verified", "sequence", "storage", "units", "selection",
+                "storage_kind", "matrix_layout", "quaternion_order"):
+        if key in d:
+            _expect(isinstance(d[key], str), f"{source}: {key}", "a string", d[key])
+    kind = d.get("storage_kind", "angles")
+    _expect(kind in STORAGE_KINDS, f"{source}: storage_kind", "one of " + ", ".join(STORAGE_KINDS), kind)
+    frame = _matrix3(d["frame"], f"{source}: frame") if "frame" in d else ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0))
+    model_frame = _matrix3(d["model_frame"], f"{source}: model_frame") if "model_frame" in d else None
+
+    raw_turns = d.get("turns")
+    if raw_turns is None:
+        _expect(kind != "angles", f"{source}: turns", "three [[turns]] tables (angle, axis, hand) for a system "
+                "that stores angles", None)
+        turns, angle_frame, sequence = CANONICAL_TURNS, "canonical", "intrinsic"
+        _expect("sequence" not in d, f"{source}: sequence", "no sequence when there are no [[turns]]", d.get("sequence"))
+    else:
+        _expect(isinstance(raw_turns, list) and len(raw_turns) == 3 and all(isinstance(t, dict) for t in raw_turns),
+                f"{source}: turns", "three [[turns]] tables", raw_turns)
+        turns = []
+        for n, t in enumerate(raw_turns):
+            for key in t:
+                if key not in _TURN_KEYS:
+                    raise SystemError_(f"{source}: turns[{n}].{key}: unknown key{_closest(key, _TURN_KEYS)}; "
+                                       f"expected angle, axis, hand")
+            _expect(t.get("angle") in ROLES, f"{source}: turns[{n}].angle", "pitch, yaw or roll", t.get("angle"))
+            axis = t.get("axis")
+            _expect(isinstance(axis, str) and axis.lower() in ("x", "y", "z"), f"{source}: turns[{n}].axis",
+                    "x, y or z", axis)
+            hand = t.get("hand", "right")
+            _expect(hand in ("right", "left"), f"{source}: turns[{n}].hand", "right or left", hand)
+            turns.append(Turn(t["angle"], axis.lower(), hand))
+        roles = [t.angle for t in turns]
+        _expect(sorted(roles) == sorted(ROLES), f"{source}: turns", "one turn each for pitch, yaw and roll", roles)
+        try:
+            _euler.parse_seq("".join(t.axis for t in turns))
+        except ValueError:
+            raise SystemError_(f"{source}: turns: expected axes forming an Euler sequence (no axis twice in a row), "
+                               f"got {''.join(t.axis for t in turns)}") from None
+        turns, angle_frame, sequence = tuple(turns), "system", d.get("sequence", "intrinsic")
+
+    ranges = {}
+    raw_ranges = d.get("ranges", {})
+    _expect(isinstance(raw_ranges, dict), f"{source}: ranges", "a [ranges] table", raw_ranges)
+    for k, v in raw_ranges.items():
+        if k not in ROLES:
+            raise SystemError_(f"{source}: ranges.{k}: unknown key{_closest(k, ROLES)}; expected pitch, yaw, roll")
+        ok = isinstance(v, list) and len(v) == 2 and all(_number(x) for x in v)
+        _expect(ok, f"{source}: ranges.{k}", "[low, high] in degrees", v)
+        lo, hi = float(v[0]), float(v[1])
+        _expect(np.isfinite(lo) and np.isfinite(hi), f"{source}: ranges.{k}", "finite numbers", v)
+        _expect(lo < hi, f"{source}: ranges.{k}", "low < high", v)
+        ranges[k] = (lo, hi)
+
+    g = d.get("gimbal_tol", GIMBAL_TOL)
+    _expect(_number(g) and np.isfinite(g) and 0 <= g < 1, f"{source}: gimbal_tol",
+            "a number in [0, 1) (|cos| of the middle turn)", g)
+    order = d.get("order", list(ROLES))
+    _expect(isinstance(order, list) and sorted(map(str, order)) == sorted(ROLES), f"{source}: order",
+            "a permutation of pitch, yaw, roll", order)
+    six = d.get("sixd_columns", [0, 1])
+    _expect(isinstance(six, list) and len(six) == 2 and all(isinstance(c, int) and not isinstance(c, bool)
+                                                           and 0 <= c <= 2 for c in six) and six[0] != six[1],
+            f"{source}: sixd_columns", "two different matrix columns out of 0, 1, 2", six)
+    cols = d.get("columns", {})
+    _expect(isinstance(cols, dict), f"{source}: columns", "a [columns] table of name = \"file column\"", cols)
+    raw_examples = d.get("examples", [])
+    _expect(isinstance(raw_examples, list) and all(isinstance(e, dict) for e in raw_examples),
+            f"{source}: examples", "[[examples]] tables", raw_examples)
+    for n, e in enumerate(raw_examples):
+        for key in e:
+            if key not in _EXAMPLE_KEYS:
+                raise SystemError_(f"{source}: examples[{n}].{key}: unknown key{_closest(key, _EXAMPLE_KEYS)}; "
+                                   f"expected {', '.join(sorted(_EXAMPLE_KEYS))}")
+    for key in ("sequence", "storage", "units", "selection", "matrix_layout", "quaternion_order"):
+        allowed = {"sequence": ("intrinsic", "extrinsic"), "storage": ("active", "transposed"),
+                   "units": ("degrees", "radians"), "selection": SELECTIONS, "matrix_layout": MATRIX_LAYOUTS,
+                   "quaternion_order": ("wxyz", "xyzw")}[key]
+        if key in d:
+            _expect(d[key] in allowed, f"{source}: {key}", "one of " + ", ".join(allowed), d[key])
+    try:
+        system = RotationSystem(
+            name=d["name"],
             description=str(d.get("description", "")),
-            frame=tuple(tuple(float(x) for x in row) for row in d.get("frame", np.eye(3).tolist())),
+            frame=frame,
             turns=turns,
-            sequence=str(d.get("sequence", "intrinsic")),
+            sequence=sequence,
             storage=str(d.get("storage", "active")),
-            order=tuple(d.get("order", ROLES)),
+            order=tuple(map(str, order)),
             units=str(d.get("units", "degrees")),
             ranges=ranges,
             selection=str(d.get("selection", "proper" if turns[0].axis == turns[2].axis else "tait_bryan")),
-            gimbal_tol=float(d.get("gimbal_tol", GIMBAL_TOL)),
+            gimbal_tol=float(g),
             notes=str(d.get("notes", "")),
+            storage_kind=kind,
+            matrix_layout=str(d.get("matrix_layout", "3x3")),
+            quaternion_order=str(d.get("quaternion_order", "wxyz")),
+            sixd_columns=tuple(six),
+            model_frame=model_frame,
+            columns=dict(cols),
+            angle_frame=angle_frame,
+            source=str(d.get("source", "")),
+            verified=str(d.get("verified", "")),
+            examples=tuple(dict(e) for e in raw_examples),
         )
     except SystemError_ as exc:
-        raise SystemError_(f"{source}: {exc}") from None
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
-        raise SystemError_(f"{source}: invalid system definition ({type(exc).__name__}: {exc})") from None
+        msg = str(exc)
+        prefix = f"system {d['name']!r}: "
+        raise SystemError_(f"{source}: {msg[len(prefix):] if msg.startswith(prefix) else msg}") from None
+    for n, e in enumerate(system.examples):
+        check_example(system, e, f"{source}: examples[{n}]")
+    return system
+
+
+#: worked examples are written with 6 decimals
+EXAMPLE_TOL = 2e-6
+
+
+def example_matrix(system: RotationSystem, example: dict, where: str = "example") -> np.ndarray:
+    """The stored matrix an example's angles build (``angles``: the system's; ``canonical_angles``: 300W-LP)."""
+    if "angles" in example:
+        a = example["angles"]
+        _expect(isinstance(a, list) and len(a) == 3 and all(_number(x) for x in a), f"{where}.angles",
+                "[pitch, yaw, roll] in degrees", a)
+        return system.from_angles(np.array([a], dtype=float))[0]
+    if "canonical_angles" in example:
+        a = example["canonical_angles"]
+        _expect(isinstance(a, list) and len(a) == 3 and all(_number(x) for x in a), f"{where}.canonical_angles",
+                "[pitch, yaw, roll] in degrees (300W-LP)", a)
+        A = RotationSystem("_canonical", "", ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0)), CANONICAL_TURNS) \
+            .from_angles(np.array([a], dtype=float))
+        return system.from_canonical(A)[0]
+    raise SystemError_(f"{where}: expected angles or canonical_angles, got neither")
+
+
+def check_example(system: RotationSystem, example: dict, where: str) -> None:
+    """Raise unless the example's matrix/values follow from its angles (within ``EXAMPLE_TOL``)."""
+    R = example_matrix(system, example, where)
+    if "matrix" in example:
+        M = np.array(_matrix3(example["matrix"], f"{where}.matrix"))
+        if not np.abs(M - R).max() <= EXAMPLE_TOL:
+            raise SystemError_(f"{where}.matrix: expected {_fmt(np.round(R, 6).tolist())} from the angles, "
+                               f"got {_fmt(M.tolist())}")
+    if "values" in example:
+        v = example["values"]
+        _expect(isinstance(v, list) and all(_number(x) for x in v), f"{where}.values", "a list of numbers", v)
+        if system.storage_kind == "angles":
+            raise SystemError_(f"{where}.values: expected no values for storage_kind angles (use angles), "
+                               f"got {_fmt(v)}")
+        want = system.matrix_to_values(R[None])[0]
+        got = np.asarray(v, dtype=float)
+        if got.shape != want.shape or not np.abs(got - want).max() <= EXAMPLE_TOL:
+            raise SystemError_(f"{where}.values: expected {_fmt(np.round(want, 6).tolist())} "
+                               f"({', '.join(system.value_columns)}) from the angles, got {_fmt(v)}")
 
 
 def load_system(path) -> RotationSystem:
-    """Read a system definition from a TOML file."""
+    """Read a system definition from a TOML file.
+
+    A file that uses a built-in system's name must define exactly that system.
+    """
     import tomllib
 
     path = Path(path)
@@ -354,9 +790,17 @@ def load_system(path) -> RotationSystem:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise SystemError_(f"{path}: no such system file") from None
+    except IsADirectoryError:
+        raise SystemError_(f"{path}: expected a .toml file, got a folder") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise SystemError_(f"{path}: not valid TOML ({exc})") from None
-    return system_from_dict(data, str(path))
+    system = system_from_dict(data, str(path))
+    builtin = builtin_systems().get(system.name)
+    if builtin is not None and builtin.definition() != system.definition():
+        diff = [k for k, v in system.definition().items() if builtin.definition().get(k) != v]
+        raise SystemError_(f"{path}: name: expected a name that is not a built-in system's, or the built-in's "
+                           f"definition; got {system.name!r} with a different {', '.join(diff)}")
+    return system
 
 
 def _builtin_dir():
