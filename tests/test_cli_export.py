@@ -213,3 +213,27 @@ def test_video_source_through_panoptic_video(tmp_path, monkeypatch):
                                       + " frame 13: past the end of the video)"]
     crop = cv2.imread(str(tmp_path / "o" / "train" / "seqA" / "00_03_1_00000011.jpg"))
     assert crop.shape == (40, 40, 3) and abs(float(crop.mean()) - 11) < 2
+
+
+def test_video_source_real_reader(tmp_path):
+    """End to end with pan's VideoFrames on a small synthetic hdVideos/hd_00_05.mp4 (frame k is gray 40 k)."""
+    pytest.importorskip("hpe_cli.datasets.panoptic_video")
+    (tmp_path / "hdVideos").mkdir()
+    vw = cv2.VideoWriter(str(tmp_path / "hdVideos" / "hd_00_05.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 30, (160, 120))
+    if not vw.isOpened():
+        pytest.skip("OpenCV cannot write mp4 here")
+    for k in range(5):
+        vw.write(np.full((120, 160, 3), 40 * k, np.uint8))
+    vw.release()
+    rows = [{"image": f"hdImgs/00_05/00_05_{f:08d}.jpg", "sequence": "", "camera": "00_05", "frame": f,
+             "person_id": 0, "bbox_x": 20.0, "bbox_y": 20.0, "bbox_w": 50.0, "bbox_h": 50.0, "pitch": 0.0,
+             "yaw": 10.0 * f, "roll": 0.0} for f in (3, 1, 9)]
+    path = tmp_path / "t.csv"
+    pd.DataFrame(rows).to_csv(path, index=False)
+    r = run("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
+    assert r.exit_code == 0, r.output
+    for f in (1, 3):
+        crop = cv2.imread(str(tmp_path / "o" / "train" / f"00_05_0_{f:08d}.jpg"))
+        assert abs(float(crop.mean()) - 40 * f) < 6
+    rej = pd.read_csv(tmp_path / "r.csv")
+    assert len(rej) == 1 and "past the end" in rej["reason"].iloc[0]

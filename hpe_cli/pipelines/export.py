@@ -401,19 +401,34 @@ def balance_keep(yaw, bin_deg: float, max_per_bin: int, ok, seed: int = 0):
 
 # ----------------------------------------------------------------------------------------------- images
 def resolve_image(root: str, image: str, sequence: str, camera: str, frame: int):
-    """The image file for a row, or None. Panoptic rows also try ``<root>/<sequence>/<image>`` and the
-    ``hdImgs/hd_<cam>/<frame:08d>.jpg`` layout some copies use."""
+    """The image file for a row, or None: ``<root>/<image>``, ``<root>/<sequence>/<image>``, and for Panoptic
+    rows :func:`hpe_cli.datasets.panoptic.hd_image_path` (``hdImgs/<cam>/<cam>_<frame:08d>.jpg`` or the
+    ``hdImgs/hd_<cam>/<frame:08d>.jpg`` layout some copies use) under both."""
     r = Path(root)
     cands = [r / image]
+    bases = (r, r / sequence) if sequence else (r,)
     if sequence:
         cands.append(r / sequence / image)
     if camera and frame >= 0:
-        for base in (r, r / sequence) if sequence else (r,):
-            cands.append(base / "hdImgs" / f"hd_{camera}" / f"{frame:08d}.jpg")
+        from ..datasets.panoptic import hd_image_path
+
+        for base in bases:
+            try:
+                cands.append(hd_image_path(base, camera, frame))
+            except HpeError:
+                break
     for c in cands:
         if c.is_file():
             return str(c)
     return None
+
+
+def video_path(root: str, sequence: str, camera: str):
+    """``hdVideos/hd_<cam>.mp4`` under ``root`` or ``root/sequence`` (:func:`~hpe_cli.datasets.panoptic.hd_video_path`)."""
+    from ..datasets.panoptic import hd_video_path
+
+    bases = (Path(root), Path(root) / sequence) if sequence else (Path(root),)
+    return next((str(v) for v in (hd_video_path(b, camera) for b in bases) if v.is_file()), None)
 
 
 def jpeg_size(data: bytes):
@@ -750,12 +765,7 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
                 vkey = ("video", roots[i], seqs[i], cams[i])
                 t = task_of.get(vkey)
                 if t is None:
-                    base = Path(roots[i])
-                    cands = [base / "hdVideos" / f"hd_{cams[i]}.mp4"]
-                    if seqs[i]:
-                        cands.append(base / seqs[i] / "hdVideos" / f"hd_{cams[i]}.mp4")
-                    video = next((str(v) for v in cands if v.is_file()), None)
-                    t = task_of[vkey] = ["video", video, {}]
+                    t = task_of[vkey] = ["video", video_path(roots[i], seqs[i], cams[i]), {}]
                     tasks.append(t)
                 task_of[key] = t
             else:

@@ -17,7 +17,7 @@ def safe_name(s: str) -> str:
 def crop_names(rows) -> np.ndarray:
     """Crop file names (no extension) that carry where each head came from.
 
-    Panoptic/AGORA-style rows (with ``camera``): ``<sequence>/<camera>_<person>_<frame:08d>`` -- the
+    Panoptic-style rows (with ``camera``): ``<sequence>/<camera>_<person>_<frame:08d>`` -- the
     fields of WHENet's own crop names (``prepare_images.py``), plus the sequence folder. Other rows:
     ``<image stem>`` (``_<k>`` appended for the k-th head of an image with several). With several
     inputs, the ``source`` name is a leading folder.
@@ -35,7 +35,9 @@ def crop_names(rows) -> np.ndarray:
     n_in_image = rows.groupby(["source", "image"], sort=False)["image"].transform("size").to_numpy()
     for i in range(n):
         if cam[i]:
-            name = f"{safe_name(seq[i] or 'seq')}/{safe_name(cam[i])}_{int(person[i])}_{int(frame[i]):08d}"
+            name = f"{safe_name(cam[i])}_{int(person[i])}_{int(frame[i]):08d}"
+            if seq[i]:
+                name = f"{safe_name(seq[i])}/{name}"
         else:
             stem = safe_name(Path(str(image[i])).with_suffix("").as_posix().replace("/", "__"))
             name = stem if n_in_image[i] == 1 else f"{stem}_{int(k_in_image[i])}"
