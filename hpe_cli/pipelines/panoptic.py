@@ -721,8 +721,11 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
         if fmt == "table":
             out = stack.enter_context(TableWriter(output, overwrite, meta))
         else:
-            check_output(output, overwrite)
-            out = None
+            out = _streaming_writer(fmt, output, overwrite)  # helper `read`'s CocoWriter/WhenetWriter
+            if out is None:
+                check_output(output, overwrite)
+            else:
+                out = stack.enter_context(out)
         rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
         for (si, _), (stats, t, r) in zip(units, results()):
             seq_stats[si].add_unit(stats)
@@ -741,7 +744,7 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
                 rej.write(r)
             if bar is not None:
                 bar.update(stats["frames"])
-        if fmt != "table":
+        if fmt != "table" and out is None:
             import pyarrow as pa
 
             frame = pa.concat_tables(collected).to_pandas()
@@ -754,6 +757,20 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     if per_sequence is not None:
         per_sequence.extend(seq_stats)
     return total
+
+
+def _streaming_writer(fmt: str, output, overwrite: bool):
+    """A streaming COCO / WHENet writer when this build has one (flat memory), else None."""
+    try:
+        if fmt == "coco":
+            from ..io.coco import CocoWriter
+
+            return CocoWriter(output, overwrite, image_size_cols=("image_width", "image_height"))
+        from ..io.whenet_txt import WhenetWriter
+
+        return WhenetWriter(output, overwrite)
+    except ImportError:
+        return None
 
 
 def _write_other(fmt: str, frame, output, overwrite: bool) -> None:
