@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from .table_options import column_options
+
 from .options import SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, verbosity_options
 
 #: columns that identify a sample, used (when present) in the ``duplicates`` key
@@ -37,6 +39,7 @@ _SEEDS = (0x9E3779B97F4A7C15, 0xD1B54A32D192ED03)
 @overwrite_option
 @batch_option
 @verbosity_options
+@column_options
 @click.pass_context
 def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, radians, use, keys, examples,
           strict, overwrite, batch_size, verbose, quiet):

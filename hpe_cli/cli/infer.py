@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from .table_options import column_options
+
 from .options import SYSTEM, overwrite_option, verbosity_options
 
 ROLE_NAMES = ("pitch", "yaw", "roll")
@@ -236,6 +238,7 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
               help="Seconds the code of --callable/--decoder may run (it runs in a separate process).")
 @overwrite_option
 @verbosity_options
+@column_options
 def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, landmarks3d, landmark_frame, tol,
           samples, seed, name, frame_of, storage, json_path, output, overwrite, verbose, quiet, timeout):
     """Find which rotation system a function or a dataset uses.

@@ -19,6 +19,9 @@ COMMANDS = {
     "draw": "hpe_cli.cli.draw:draw",
     "augment": "hpe_cli.cli.augment:augment",
     "infer": "hpe_cli.cli.infer:infer",
+    "biwi": "hpe_cli.cli.biwi:biwi",
+    "evaluate": "hpe_cli.cli.evaluate:evaluate",
+    "export": "hpe_cli.cli.export:export",
 }
 
 

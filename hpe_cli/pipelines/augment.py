@@ -165,6 +165,9 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     from ..io.readers import LINE_COL
 
     src = open_table(path, batch_size, with_lines=True)
+    from ..io.columns import label_system
+
+    in_system = label_system(src, system)  # .mat Pose_Para is always 300w_lp; output is in --system
     columns = src.columns
     mode = label_mode(columns, path)  # angles when present, else r00..r22
     cross_check = mode == "angles" and all(c in columns for c in MATRIX_COLS)
@@ -208,7 +211,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                 n = batch.num_rows
                 values, reasons = batch_labels(batch, mode)
                 if mode == "angles":
-                    R = system.from_angles(np.where(np.isfinite(values), values, 0.0))
+                    R = in_system.from_angles(np.where(np.isfinite(values), values, 0.0))
                     if cross_check:  # a table with both must agree, or which one is the label?
                         R_in, r_in = batch_labels(batch, "matrix")
                         reasons = np.where(reasons == "", r_in, reasons)
@@ -236,7 +239,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                     cand = (int(lines[i0]), str(reasons[i0]))
                     first_bad = min(first_bad, cand) if first_bad else cand
                 kb = batch.filter(pa.array(keep)) if not keep.all() else batch
-                A2 = augment_canonical(system.to_canonical(R[keep]), M)
+                A2 = augment_canonical(in_system.to_canonical(R[keep]), M)
                 new = conversion_columns(canonical_to_labels(A2, system))
                 lm_new = None
                 if n_lm:

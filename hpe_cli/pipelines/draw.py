@@ -17,7 +17,14 @@ _WRITABLE = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"}
 
 
 def _read_all(src, mode, radians, system):
-    """Whole table as (frame, canonical A, angles for captions, reasons)."""
+    """Whole table as (frame, canonical A, angles for captions in ``system``, reasons).
+
+    A dataset reader's labels (.mat Pose_Para: always 300w_lp) are read in
+    the dataset's own system and only the captions use ``system``.
+    """
+    from ..io.columns import label_system
+
+    out_system, system = system, label_system(src, system)
     import numpy as np
     import pyarrow as pa
 
@@ -43,6 +50,8 @@ def _read_all(src, mode, radians, system):
         else:
             A[ok] = system.to_canonical(values[ok])
             angles[ok] = system.to_angles(values[ok])[0]
+        if out_system is not system:
+            angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
     return table.to_pandas(), A, angles, reasons
 
 
