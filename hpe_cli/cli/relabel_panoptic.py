@@ -47,7 +47,8 @@ FORMATS = ("table", "coco", "whenet")
                    "LocalCluster of --workers processes. Needs the dask extra.")
 @click.option("--resume", is_flag=True,
               help="Keep the finished units of an interrupted run with the same inputs and options "
-                   "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes.")
+                   "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
+                   "Give it on the first run too: a run without --resume removes its parts when interrupted.")
 @click.option("--max-rmse", type=float, default=None, callback=non_negative_or_inf, metavar="X",
               help="Reject faces whose fit RMSE is above X (cm). 'inf' labels every fit, as WHENet did. "
                    "[default: 2.0: consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones "
@@ -77,9 +78,11 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
     `hpe convert` (pitch, yaw, roll, pitch_2.., r00..r22, gimbal_lock,
     roundtrip_err), fit_rmse (cm), n_pairs, scale, image_width,
     image_height and lm0_x..lm69_y. Every face/camera that gets no label is
-    listed by --rejects with its reason (too few confident points, bad fit,
-    behind camera, outside image, box rejected, dropped by legacy rule) and
-    counted in the summary. --format whenet and coco name the whole frame's
+    listed by --rejects with its reason (bad landmarks, too few confident
+    points, bad fit, behind camera, outside image, box rejected, dropped by
+    legacy rule, not seen by every camera, below --min-change, truncated face
+    file) and counted in the summary, per sequence and in total. --frame crop
+    labels relative to the line of sight and adds ray_angle. --format whenet and coco name the whole frame's
     image: crop it with the box.
 
     \b

@@ -27,8 +27,11 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
 
     conn.send(("ready",))  # hpe itself is loaded: the time limit starts now
     try:
-        func = _load_callable(spec)
-        if builder:
+        func = _load_callable(spec, kw.pop("import_path", None))
+        returns = kw.pop("returns", "angles")
+        if returns != "angles":  # a decoder returning a rotation vector, quaternion, 6-D vector or matrix
+            rep = inf.infer_storage_decoder(inf.as_value_decoder(func), n=samples or 256, **kw)
+        elif builder:
             rep = inf.infer_builder(inf.as_builder(func, roles, units, packed), n=samples or 64, **kw)
         else:
             rep = inf.infer_decoder(inf.as_decoder(func, roles, units), n=samples or 256, **kw)
