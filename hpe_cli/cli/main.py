@@ -140,7 +140,10 @@ def _utf8(path) -> bool:
 
 def _error(msg: str) -> None:
     from ..io.transaction import printable
+    from . import signals
 
+    if msg.startswith("interrupted ("):
+        signals.reported = True
     click.echo(f"Error: {printable(' '.join(str(msg).split()))}", err=True)
 
 

@@ -44,9 +44,39 @@ def _handler(signum, frame):
 
     request_stop(exc)  # if the exception below is swallowed (a __del__, a callback), nothing commits anyway
     _terminate_children()  # so a pool's shutdown does not wait for work nobody will use
+    _arm_watchdog(signum)
     if in_critical_section(exc):  # raised when the file operation under way is recorded
         return
     raise exc
+
+
+#: seconds the orderly shutdown may take after a signal before the watchdog ends the process
+WATCHDOG_SECONDS = 10.0
+reported = False
+
+
+def _arm_watchdog(signum: int) -> None:
+    """If the orderly cleanup hangs (a pool's lock taken when the signal landed, a thread join at exit),
+    remove the staged outputs, stop the workers and exit 128+signum anyway."""
+    def force():
+        from ..io import transaction
+
+        txn = transaction._run or transaction._current.get()
+        try:
+            if txn is not None:
+                txn.abort()
+        finally:
+            stop_children(timeout=1.0)
+            if not reported:
+                try:
+                    os.write(2, f"Error: interrupted ({signal.Signals(signum).name})\n".encode())
+                except OSError:
+                    pass
+            os._exit(128 + signum)
+
+    t = threading.Timer(WATCHDOG_SECONDS, force)
+    t.daemon = True
+    t.start()
 
 
 def fired():
@@ -57,12 +87,52 @@ def fired():
 
 
 def _terminate_children() -> None:
+    """Kill worker processes at once (SIGKILL: one busy in C code would finish its write otherwise) and
+    reap them, so nothing they write can appear after the run's cleanup."""
     import multiprocessing
 
-    for p in multiprocessing.active_children():
+    children = multiprocessing.active_children()
+    for p in children:
         try:
-            p.terminate()
+            p.kill()
         except Exception:  # noqa: BLE001 - already gone
+            pass
+    _kill_forked()
+    for p in children:
+        try:
+            p.join(1.0)
+        except Exception:  # noqa: BLE001
+            pass
+
+
+def _kill_forked() -> None:
+    """SIGKILL every direct child process of this one that multiprocessing does not know yet (a signal
+    landing inside ``Process.start()`` between the fork and its bookkeeping), then reap it (Linux)."""
+    import multiprocessing
+
+    me = os.getpid()
+    known = {p.pid for p in multiprocessing.active_children()}  # multiprocessing reaps these itself
+    try:
+        tasks = os.listdir(f"/proc/{me}/task")
+    except OSError:
+        return
+    pids = set()
+    for t in tasks:
+        try:
+            with open(f"/proc/{me}/task/{t}/children") as f:
+                pids.update(int(x) for x in f.read().split())
+        except (OSError, ValueError):
+            pass
+    pids -= known
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+    for pid in pids:
+        try:
+            os.waitpid(pid, 0)
+        except OSError:  # reaped by multiprocessing meanwhile, or not ours to wait for
             pass
 
 
@@ -101,6 +171,7 @@ def stop_children(timeout: float = 2.0) -> None:
     """Terminate every worker process this process started (multiprocessing and ProcessPoolExecutor)."""
     import multiprocessing
 
+    _kill_forked()
     children = multiprocessing.active_children()
     for p in children:
         try:

@@ -62,6 +62,14 @@ _critical = 0
 _pending = None
 
 
+def critical():
+    """A block no signal exception interrupts: one arriving inside it is raised when it ends.
+
+    Use it around creating a file or folder and recording it for cleanup.
+    """
+    return _section()
+
+
 def in_critical_section(exc: BaseException) -> bool:
     """From a signal handler: if a file operation and its bookkeeping are under way, hold ``exc`` back
     (it is raised as soon as the section ends) and return True."""
@@ -192,6 +200,7 @@ class OutputTransaction:
         self._staged: list = []
         self._made_dirs: list = []  # folders created for outputs, removed on abort if still empty
         self._after: list = []
+        self._on_abort: list = []
         self.state = "open"
 
     # ------------------------------------------------------------- declarations
@@ -228,6 +237,10 @@ class OutputTransaction:
     def paths(self) -> list:
         """Every input and output path of the run, as given (for error messages)."""
         return [i.shown for i in self._inputs + self._outputs] + [os.fspath(s.target) for s in self._staged]
+
+    def on_abort(self, func) -> None:
+        """Call ``func()`` if the run aborts (e.g. remove a work folder that is not an output)."""
+        self._on_abort.append(func)
 
     def after_commit(self, func) -> None:
         """Call ``func()`` once everything is committed (e.g. print the summary)."""
@@ -402,6 +415,11 @@ class OutputTransaction:
         if self.state in ("aborted", "committed"):
             return
         self.state = "aborted"
+        for func in self._on_abort:
+            try:
+                func()
+            except Exception:  # noqa: BLE001 - cleanup is best effort
+                pass
         for s in self._staged:
             _remove(s.tmp)
         self._staged.clear()

@@ -690,7 +690,13 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     rschema = _reject_schema()
     units = make_units(plans)
     use_parts = workers > 1 or scheduler is not None or resume
-    parts = _prepare_parts(plans, cfg, fmt, output, resume) if use_parts else None
+    from ..io.transaction import critical, current
+
+    parts = None
+    with critical():  # a signal waits until `parts` is known and registered for cleanup
+        parts = _prepare_parts(plans, cfg, fmt, output, resume) if use_parts else None
+        if parts is not None and not resume and current() is not None:
+            current().on_abort(lambda: shutil.rmtree(parts, ignore_errors=True))  # whatever ends the run
     tasks = [unit_task(plans, cfg, u, parts) for u in units]
     mc = MinChange(cfg.min_change) if cfg.min_change else None
 

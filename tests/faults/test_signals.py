@@ -65,7 +65,16 @@ def _wait_for(cond, proc, timeout=60.0):
 
 def _interrupt(proc, sig, folder, snap, children=()):
     proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        alive = proc.poll() is None
+        info = {c: open(f"/proc/{c}/cmdline").read().replace("\0", " ")[:80] for c in _children(proc.pid)
+                if _alive(c)}
+        left = [c for c in children if _alive(c)]
+        proc.kill()
+        pytest.fail(f"no exit 60 s after {signal.Signals(sig).name}: parent alive={alive}, its children={info}, "
+                    f"workers alive={left}")
     assert proc.returncode == 128 + sig, err
     lines = err.decode(errors="replace").strip().splitlines()
     assert lines == [f"Error: interrupted ({signal.Signals(sig).name})"], err
