@@ -350,3 +350,24 @@ def test_help_has_examples():
     res = CliRunner().invoke(cli, ["augment", "--help"])
     assert res.exit_code == 0
     assert "Examples:" in res.output and "hpe augment labels.parquet" in res.output
+
+
+def test_threaded_pipeline_same_output_and_rejects(tmp_path):
+    """Two worker threads and small batches give exactly the one-thread output and rejects, in order."""
+    from hpe_cli.pipelines.augment import run_augment
+    from hpe_cli.rotation import get_system
+
+    df = make_table(50)
+    df.loc[[3, 17, 41], "pitch"] = np.nan
+    src = tmp_path / "in.parquet"
+    df.to_parquet(src)
+    outs = []
+    for workers, bs in ((1, 1000), (2, 7)):
+        out, rej = tmp_path / f"o{workers}.parquet", tmp_path / f"r{workers}.csv"
+        s = run_augment(src, out, get_system("300w_lp"), (W, H), "rotate", 20.0, rejects_path=rej, batch_size=bs,
+                        workers=workers)
+        assert s["rows"] == 50 and s["written"] == 47
+        outs.append((pd.read_parquet(out), pd.read_csv(rej)))
+    pd.testing.assert_frame_equal(outs[0][0], outs[1][0])
+    pd.testing.assert_frame_equal(outs[0][1], outs[1][1])
+    assert outs[1][1]["row"].tolist() == [5, 19, 43]
