@@ -307,7 +307,7 @@ def test_table_errors(tmp_path):
     # without --rejects a bad row fails the run, naming the file line (header = line 1), as in every command
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5)
     assert res.exit_code == 1, res.output
-    assert "text.csv: row 3: non-numeric value in pitch (1 bad rows in all" in res.output
+    assert "text.csv: line 3: non-numeric value in pitch; 1 row(s) cannot be used" in res.output
     assert not (tmp_path / "t.csv").exists()
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5,
               "--rejects", tmp_path / "r.csv")
@@ -317,7 +317,10 @@ def test_table_errors(tmp_path):
     t["pitch"] = ["1", "2"]
     t.to_csv(tmp_path / "text.csv", index=False)
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t2.csv", "--image-size", W, H, "--rotate", 5)
-    assert res.exit_code == 1 and "row 3: non-numeric value in lm0_x" in res.output
+    assert res.exit_code == 1 and "line 3: non-numeric value in lm0_x" in res.output
+    res = run(tmp_path / "text.csv", "-o", tmp_path / "t2.csv", "--image-size", W, H, "--rotate", 5,
+              "--rejects", tmp_path / "r2.csv", "--strict")
+    assert res.exit_code == 1 and "--strict" in res.output and not (tmp_path / "t2.csv").exists()
     df = make_table(2)[["pitch", "yaw", "roll"] + landmark_cols(5)]
     df.to_csv(tmp_path / "five.csv", index=False)
     res = run(tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--hflip")

@@ -148,7 +148,7 @@ class _ImageJob:
 def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
                 images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
                 jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=262_144, bar=None, verbose=0,
-                description="", workers=None):
+                description="", workers=None, strict=False):
     """Augment a label table (and optionally its images). Returns a summary dict.
 
     Batches are transformed on ``workers`` threads (default: up to 2) while
@@ -191,7 +191,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     elif image_column is not None:
         raise HpeError("--image-column needs --images and --out-images")
     M = plane_matrix(op, angle)
-    rejects = Rejects(rejects_path, overwrite)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=path)
     meta = {**system_metadata(system), "hpe:augment": {
         "op": op, "angle_deg": angle, "description": description, "image_size": list(image_size),
         "landmarks": lm_text, "box_from": box_from, "clip": clip,
@@ -200,7 +200,6 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     if images_dir is not None:
         job = _ImageJob(images_dir, out_images, M, image_size, interpolation, border, jpeg_quality, overwrite, path)
     rows = written = n_boxes = n_images = 0
-    first_bad = None
     workers = workers or min(2, os.cpu_count() or 1)
     try:
         def work(batch):  # on a worker thread: labels, landmarks and boxes of one batch
@@ -255,13 +254,11 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
             return batch, lines, reasons, keep, kb, out, boxes
 
         def finish(_, read_rejects, future):
-            nonlocal rows, written, n_boxes, first_bad
+            nonlocal rows, written, n_boxes
             if read_rejects:
-                rejects.add({"row": np.array([r.line for r in read_rejects], dtype=np.int64),
-                             "raw": np.array([r.raw for r in read_rejects], dtype=object)},
-                            [r.reason for r in read_rejects])
-                cand = (read_rejects[0].line, read_rejects[0].reason)
-                first_bad = min(first_bad, cand) if first_bad else cand
+                read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
+                rejects.add({"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
+                            [r.reason for r in read_rejects], lines=read_lines)
                 rows += len(read_rejects)
             batch, lines, reasons, keep, kb, out, boxes = future.result()
             n = batch.num_rows
@@ -269,10 +266,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                 drop = ~keep
                 rejects.add({"row": lines[drop], **{c: batch.column(i).to_numpy(zero_copy_only=False)[drop]
                                                     for i, c in enumerate(batch.schema.names)}},
-                            reasons[drop])
-                i0 = int(np.flatnonzero(drop)[0])
-                cand = (int(lines[i0]), str(reasons[i0]))
-                first_bad = min(first_bad, cand) if first_bad else cand
+                            reasons[drop], lines=lines[drop])
             if job is not None:
                 names = kb.column(kb.schema.get_field_index(img_col)).to_pylist()
                 orig = np.flatnonzero(keep)
@@ -289,9 +283,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
 
         with TableWriter(output, overwrite, meta) as writer:
             in_order(_batches_or_empty(src), work, finish, workers)
-            if first_bad and rejects.path is None:
-                raise HpeError(f"{path}: row {first_bad[0]}: {first_bad[1]} ({len(rejects)} bad rows in all; "
-                               "use --rejects FILE to set them aside and write the others)")
+            rejects.check()  # without --rejects (or with --strict) any bad row fails the run: nothing is written
             if job is not None:
                 n_images = len(job.done)
                 job.commit()
@@ -300,7 +292,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         if job is not None:
             job.cleanup()
         raise
-    rejects.write()
+    rejects.finish()
     box_text = f"{n_boxes} moved ({box_from}{', clipped' if clip else ''})" if has_box else "none in input"
     label_source = "pitch,yaw,roll" + (" (checked against r00..r22)" if cross_check else "") \
         if mode == "angles" else "r00..r22"
