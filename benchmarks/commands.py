@@ -9,8 +9,8 @@ time and peak RSS of that process alone):
   angles from CSV;
 * ``hpe audit`` (JSON report);
 * ``hpe augment --hflip`` (labels only);
-* ``hpe convert --format`` is not a thing: COCO/WHENet writers are measured by
-  ``benchmarks/writers.py``.
+* the COCO and WHENet writers against the Parquet writer on the same
+  relabel-like table (in this process).
 
 Floors, measured in the same run the same way: a pyarrow script that reads
 the same input and writes a table of the output's width with the encoding
@@ -58,19 +58,19 @@ pq.write_table(t, out, use_dictionary=[c for c in t.schema.names if c not in flo
 
 
 def timed(cmd, env) -> tuple:
-    """Wall seconds and peak RSS (MB) of one subprocess, from GNU time."""
-    fmt = "@@%e %M"
+    """Wall seconds, peak RSS (MB) and CPU seconds (user + system) of one subprocess, from GNU time."""
+    fmt = "@@%e %M %U %S"
     res = subprocess.run(["/usr/bin/time", "-f", fmt] + cmd, env=env, capture_output=True, text=True)
     if res.returncode != 0:
         raise SystemExit(f"failed ({res.returncode}): {' '.join(map(str, cmd))}\n{res.stderr[-2000:]}")
     line = [ln for ln in res.stderr.splitlines() if ln.startswith("@@")][-1]
-    sec, kb = line[2:].split()
-    return float(sec), int(kb) / 1024
+    sec, kb, user, system = line[2:].split()
+    return float(sec), int(kb) / 1024, float(user) + float(system)
 
 
 def best(cmd, env, repeat):
     runs = [timed(cmd, env) for _ in range(repeat)]
-    return min(r[0] for r in runs), max(r[1] for r in runs)
+    return min(r[0] for r in runs), max(r[1] for r in runs), min(r[2] for r in runs)
 
 
 def make_inputs(tmp: Path, n: int):
@@ -132,13 +132,16 @@ def main():
                                                     "450", "450", "--hflip", "-q", "--overwrite"],
                  floor_cmd("angles.parquet", out_width)),
             ]
-            print(f"\n{n:,} rows (Parquet in, Parquet out unless noted); times are wall seconds, best of "
-                  f"{args.repeat}; RSS is each process's peak")
-            print(f"  {'command':<30} {'hpe s':>8} {'floor s':>8} {'ratio':>6} {'hpe MB':>8} {'floor MB':>9}")
+            print(f"\n{n:,} rows (Parquet in, Parquet out unless noted); wall and CPU (user+sys) seconds, best of "
+                  f"{args.repeat}; RSS is each process's peak; the load average is printed because a shared "
+                  "machine inflates wall times")
+            print(f"  {'command':<28} {'hpe s':>7} {'floor s':>7} {'ratio':>6} {'hpe cpu':>7} {'floor cpu':>9} "
+                  f"{'cpu ratio':>9} {'hpe MB':>7} {'floor MB':>8}  load")
             for name, cmd, fcmd in jobs:
-                th, mh = best([str(c) for c in cmd], env, args.repeat)
-                tf, mf = best(fcmd, env, args.repeat)
-                print(f"  {name:<30} {th:8.2f} {tf:8.2f} {th / tf:6.2f} {mh:8.0f} {mf:9.0f}", flush=True)
+                th, mh, ch = best([str(c) for c in cmd], env, args.repeat)
+                tf, mf, cf = best(fcmd, env, args.repeat)
+                print(f"  {name:<28} {th:7.2f} {tf:7.2f} {th / tf:6.2f} {ch:7.2f} {cf:9.2f} {ch / cf:9.2f} "
+                      f"{mh:7.0f} {mf:8.0f}  {os.getloadavg()[0]:.1f}", flush=True)
 
 
 if __name__ == "__main__":

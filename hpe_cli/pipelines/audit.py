@@ -260,7 +260,7 @@ def _batches(src, mode, path):
 
 def run_audit(input_path, system, *, report=None, plots=None, output=None, only_flagged=False,
               near_tol_deg=1.0, radians=False, use="auto", keys=(), n_examples=5, overwrite=False,
-              batch_size=262_144, progress=None, echo=None, workers=None) -> dict:
+              batch_size=65_536, progress=None, echo=None, workers=None) -> dict:
     """Audit ``input_path`` and write the requested outputs; return the report dict.
 
     Batches are checked and hashed on ``workers`` threads (default: up to 2)

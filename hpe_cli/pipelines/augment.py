@@ -147,7 +147,7 @@ class _ImageJob:
 
 def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
                 images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
-                jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=262_144, bar=None, verbose=0,
+                jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=65_536, bar=None, verbose=0,
                 description="", workers=None, strict=False):
     """Augment a label table (and optionally its images). Returns a summary dict.
 
