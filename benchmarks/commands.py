@@ -73,6 +73,43 @@ def best(cmd, env, repeat):
     return min(r[0] for r in runs), max(r[1] for r in runs), min(r[2] for r in runs)
 
 
+WRITER = r"""
+import sys, pyarrow.parquet as pq
+from hpe_cli.io import TableWriter
+from hpe_cli.io.coco import CocoWriter
+from hpe_cli.io.whenet_txt import WhenetWriter
+inp, out, fmt = sys.argv[1], sys.argv[2], sys.argv[3]
+w = {"parquet": lambda: TableWriter(out, True), "coco": lambda: CocoWriter(out, True),
+     "whenet": lambda: WhenetWriter(out, True)}[fmt]()
+with w:
+    for b in pq.ParquetFile(inp).iter_batches(batch_size=65536):
+        w.write(b)
+"""
+
+
+def make_views(path: Path, n: int, n_lm: int = 70):
+    """A relabel-panoptic-like output table: image, box, angles, image size, 70 2-D landmarks."""
+    rng = np.random.default_rng(1)
+    chunk = 200_000
+    w = None
+    for lo in range(0, n, chunk):
+        m = min(chunk, n - lo)
+        cols = {"image": pa.array([f"171204_pose1/hdImgs/00_{k % 31:02d}/00_{k % 31:02d}_{k // 155:08d}.jpg"
+                                   for k in range(lo, lo + m)])}
+        for c in ("bbox_x", "bbox_y", "bbox_w", "bbox_h", "pitch", "yaw", "roll"):
+            cols[c] = rng.uniform(0, 500, m) if c.startswith("bbox") else rng.uniform(-90, 90, m)
+        cols["image_width"] = np.full(m, 1920)
+        cols["image_height"] = np.full(m, 1080)
+        for i in range(n_lm):
+            cols[f"lm{i}_x"] = rng.uniform(0, 1920, m)
+            cols[f"lm{i}_y"] = rng.uniform(0, 1080, m)
+        t = pa.table(cols)
+        if w is None:
+            w = pq.ParquetWriter(path, t.schema)
+        w.write_table(t, row_group_size=65_536)
+    w.close()
+
+
 def make_inputs(tmp: Path, n: int):
     """angles.parquet, matrix.parquet, angles.csv (written in chunks: the parent stays small)."""
     sys.path.insert(0, str(ROOT))
@@ -103,10 +140,24 @@ def make_inputs(tmp: Path, n: int):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rows", type=int, nargs="+", default=[1_000_000, 10_000_000])
+    ap.add_argument("--rows", type=int, nargs="*", default=[1_000_000, 10_000_000])
     ap.add_argument("--repeat", type=int, default=1, help="runs per measurement (best time, worst memory)")
+    ap.add_argument("--views", type=int, nargs="*", default=[775_000],
+                    help="rows of the writer benchmark (775,000 = 5,000 Panoptic frames x 5 people x 31 cameras)")
     args = ap.parse_args()
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    for n in args.views:
+        with tempfile.TemporaryDirectory(dir=os.environ.get("HPE_BENCH_TMP")) as tmp:
+            tmp = Path(tmp)
+            make_views(tmp / "views.parquet", n)
+            print(f"\nwriters, {n:,} relabel-like rows (image, box, angles, size, 70 landmarks), streamed in "
+                  "batches of 65,536; floor = hpe's Parquet writer on the same batches")
+            res = {fmt: best([sys.executable, "-c", WRITER, str(tmp / "views.parquet"), str(tmp / f"o.{fmt}"), fmt],
+                             env, args.repeat) for fmt in ("parquet", "coco", "whenet")}
+            tp, _, cp = res["parquet"]
+            for fmt, (t, mb, c) in res.items():
+                print(f"  {fmt:<8} {t:7.2f} s ({t / tp:4.2f}x)  cpu {c:7.2f} s ({c / cp:4.2f}x)  peak {mb:5.0f} MB",
+                      flush=True)
     out_width = 1 + 3 + 3 + 9 + 2  # id, pitch..roll, pitch_2.., r00..r22, gimbal_lock, roundtrip_err
     for n in args.rows:
         with tempfile.TemporaryDirectory(dir=os.environ.get("HPE_BENCH_TMP")) as tmp:

@@ -82,17 +82,24 @@ class CocoWriter:
         self._fh.write(b'{"info":' + orjson.dumps(self.info) + b',"licenses":[],"annotations":[')
         return self
 
+    #: rows encoded at a time (bounds the Python objects alive at once)
+    CHUNK = 8192
+
     def write(self, frame) -> None:
         """Append one batch (pandas DataFrame, pyarrow Table or RecordBatch) of label rows."""
-        import orjson
-
         names = _names(frame)
         missing = [c for c in ["image"] + BBOX_COLS + ANGLE_COLS if c not in names]
         if missing:
             raise HpeError(f"{self.path}: expected columns {', '.join(missing)} in the label table")
         n = len(frame)
-        if n == 0:
-            return
+        for lo in range(0, n, self.CHUNK):
+            part = frame.iloc[lo:lo + self.CHUNK] if hasattr(frame, "iloc") else frame.slice(lo, self.CHUNK)
+            self._write(part, names)
+
+    def _write(self, frame, names) -> None:
+        import orjson
+
+        n = len(frame)
         off = self.rows
         files = _strings(frame, "image")
         sizes = []
@@ -116,11 +123,13 @@ class CocoWriter:
                            f"got {box[bad, 2]:g}, {box[bad, 3]:g}")
         ang = np.stack([_finite(_column(frame, c), c, self.path, off) for c in ANGLE_COLS], axis=1)
         n_lm = landmark_count(names)
-        if n_lm:
-            xs = np.stack([_column(frame, f"lm{i}_x") for i in range(n_lm)], axis=1)
-            ys = np.stack([_column(frame, f"lm{i}_y") for i in range(n_lm)], axis=1)
-            gone = ~(np.isfinite(xs) & np.isfinite(ys))
-            pts = np.stack([np.where(gone, MISSING_POINT, xs), np.where(gone, MISSING_POINT, ys)], axis=1).tolist()
+        if n_lm:  # (n, 2, n_lm): face2d_pts = [[x0, x1, ...], [y0, y1, ...]], serialised by orjson from numpy
+            pts = np.empty((n, 2, n_lm))
+            for i in range(n_lm):
+                pts[:, 0, i] = _column(frame, f"lm{i}_x")
+                pts[:, 1, i] = _column(frame, f"lm{i}_y")
+            gone = ~np.isfinite(pts).all(axis=1)
+            pts[np.repeat(gone[:, None, :], 2, axis=1)] = MISSING_POINT
         else:
             pts = [[] for _ in range(n)]
         images = self.images
@@ -136,11 +145,10 @@ class CocoWriter:
                                f"got {min(a, b):g} and {max(a, b):g}")
             image_ids.append(e[0])
         area = np.round(box[:, 2] * box[:, 3], 4).tolist()
-        box_l, ang_l = box.tolist(), ang.tolist()
-        anns = [{"image_id": image_ids[k], "id": off + k + 1, "category_id": 1, "bbox": box_l[k],
-                 "euler_angles": ang_l[k], "face2d_pts": pts[k], "area": area[k], "iscrowd": 0,
+        anns = [{"image_id": image_ids[k], "id": off + k + 1, "category_id": 1, "bbox": box[k],
+                 "euler_angles": ang[k], "face2d_pts": pts[k], "area": area[k], "iscrowd": 0,
                  "segmentation": []} for k in range(n)]
-        text = orjson.dumps(anns)[1:-1]
+        text = orjson.dumps(anns, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1]
         self._fh.write((b"," if self.rows else b"") + text)
         self.rows += n
 
