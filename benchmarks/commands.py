@@ -82,7 +82,8 @@ inp, out, fmt = sys.argv[1], sys.argv[2], sys.argv[3]
 w = {"parquet": lambda: TableWriter(out, True), "coco": lambda: CocoWriter(out, True),
      "whenet": lambda: WhenetWriter(out, True)}[fmt]()
 with w:
-    for b in pq.ParquetFile(inp).iter_batches(batch_size=65536):
+    for b in pq.ParquetFile(inp, pre_buffer=False, buffer_size=1 << 20).iter_batches(batch_size=65536,
+                                                                                     use_threads=False):
         w.write(b)
 """
 

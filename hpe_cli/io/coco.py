@@ -55,6 +55,33 @@ def _strings(frame, col) -> list:
     return frame[col].astype(str).tolist()
 
 
+def _rows_json(a) -> list:
+    """orjson text of each row of a 2-D or 3-D float array, from one call (no Python float per value).
+
+    Floats never contain brackets, so the rows of ``[[...],[...]]`` split at ``],[`` (``]],[[`` for 3-D).
+    """
+    import orjson
+
+    if len(a) == 0:
+        return []
+    text = orjson.dumps(np.ascontiguousarray(a), option=orjson.OPT_SERIALIZE_NUMPY)
+    if a.ndim == 2:
+        return [b"[" + r + b"]" for r in text[2:-2].split(b"],[")]
+    return [b"[[" + r + b"]]" for r in text[3:-3].split(b"]],[[")]
+
+
+def _annotations(image_ids, off, box, ang, pts, area) -> list:
+    """The JSON text of each annotation (DirectMHP's keys, in :func:`coco_dict`'s order)."""
+    import orjson
+
+    boxes, angles = _rows_json(box), _rows_json(ang)
+    points = _rows_json(pts) if pts is not None else [b"[]"] * len(box)
+    areas = orjson.dumps(area, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].split(b",") if len(area) else []
+    return [b'{"image_id":%d,"id":%d,"category_id":1,"bbox":%s,"euler_angles":%s,"face2d_pts":%s,"area":%s,'
+            b'"iscrowd":0,"segmentation":[]}' % (i, off + k + 1, b, a, p, ar)
+            for k, (i, b, a, p, ar) in enumerate(zip(image_ids, boxes, angles, points, areas))]
+
+
 class CocoWriter:
     """Write DirectMHP-style COCO JSON batch by batch, atomically (see :func:`write_coco`).
 
@@ -144,11 +171,8 @@ class CocoWriter:
                 raise HpeError(f"{self.path}: image {e[0] - 1}: expected one {col} per image, "
                                f"got {min(a, b):g} and {max(a, b):g}")
             image_ids.append(e[0])
-        area = np.round(box[:, 2] * box[:, 3], 4).tolist()
-        anns = [{"image_id": image_ids[k], "id": off + k + 1, "category_id": 1, "bbox": box[k],
-                 "euler_angles": ang[k], "face2d_pts": pts[k], "area": area[k], "iscrowd": 0,
-                 "segmentation": []} for k in range(n)]
-        text = orjson.dumps(anns, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1]
+        area = np.round(box[:, 2] * box[:, 3], 4)
+        text = b",".join(_annotations(image_ids, off, box, ang, pts if n_lm else None, area))
         self._fh.write((b"," if self.rows else b"") + text)
         self.rows += n
 
