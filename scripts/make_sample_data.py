@@ -19,10 +19,18 @@ Deterministic: the same command always writes the same bytes.
    only) and four real face frames of CMU Panoptic's 160906_pizza1, copied
    from ``../shared/realdata`` when it exists (see ``sample_data/ATTRIBUTION.md``).
 
+3. With ``--tar`` the face files are packed into ``hdFace3d.tar`` (as
+   downloaded) and the folder removed; with ``--videos`` each HD camera gets a
+   short ``hdVideos/hd_00_XX.mp4`` (``cv2.VideoWriter``, mp4v) whose frame k
+   shows k as a row of 16 black/white blocks (:func:`encode_frame_number`,
+   read back by :func:`decode_frame_number`, robust to compression), from
+   frame 0 to the last face frame.
+
 Usage::
 
     python scripts/make_sample_data.py            # writes sample_data/
     python scripts/make_sample_data.py --out DIR --frames 2000 --people 5 --cameras 31 --plain
+    python scripts/make_sample_data.py --out DIR --frames 20000 --plain --tar --videos --video-size 192x108
 """
 from __future__ import annotations
 
@@ -281,6 +289,87 @@ def make_synthetic(out_dir, n_frames: int = 24, n_people: int = 3, n_cameras: in
     return {"heads": heads, "frames": frames, "cameras": cams}
 
 
+# ------------------------------------------------------ archives and videos
+BITS = 16
+
+
+def encode_frame_number(k: int, width: int = 192, height: int = 108) -> np.ndarray:
+    """A BGR image showing ``k`` as 16 black/white blocks (most significant bit left),
+    on a mid-grey background, with a white guard block before and a black one after."""
+    img = np.full((height, width, 3), 128, np.uint8)
+    bw = width // (BITS + 2)
+    y0, y1 = height // 4, 3 * height // 4
+    img[y0:y1, 0:bw] = 255
+    for b in range(BITS):
+        on = (int(k) >> (BITS - 1 - b)) & 1
+        img[y0:y1, (b + 1) * bw:(b + 2) * bw] = 255 if on else 0
+    img[y0:y1, (BITS + 1) * bw:(BITS + 2) * bw] = 0
+    return img
+
+
+def decode_frame_number(img) -> int:
+    """Read back :func:`encode_frame_number` (block centres thresholded at mid-grey)."""
+    h, w = img.shape[:2]
+    bw = w // (BITS + 2)
+    y = h // 2
+    k = 0
+    for b in range(BITS):
+        x = (b + 1) * bw + bw // 2
+        k = (k << 1) | int(img[y - 2:y + 3, x - 2:x + 3].mean() > 128)
+    return k
+
+
+def pack_tar(seq_dir, remove: bool = True, duplicate: int | None = None) -> Path:
+    """Pack ``hdFace3d/`` into ``hdFace3d.tar`` (members ``hdFace3d/<name>``, sorted, fixed
+    metadata so the bytes are reproducible); ``duplicate=k`` adds frame k again under
+    an unpadded name (a broken archive for tests)."""
+    import io
+    import tarfile
+
+    seq_dir = Path(seq_dir)
+    face_dir = seq_dir / "hdFace3d"
+    out = seq_dir / "hdFace3d.tar"
+    with tarfile.open(out, "w", format=tarfile.USTAR_FORMAT) as tf:
+        files = sorted(face_dir.iterdir())
+        if duplicate is not None:
+            files.append(face_dir / f"faceRecon3D_hd{duplicate:08d}.json")
+        for i, p in enumerate(files):
+            data = p.read_bytes()
+            name = f"hdFace3d/{p.name}" if i < len(files) - (duplicate is not None) \
+                else f"hdFace3d/faceRecon3D_hd{duplicate}.json"
+            info = tarfile.TarInfo(name)
+            info.size, info.mtime, info.mode = len(data), 0, 0o644
+            tf.addfile(info, io.BytesIO(data))
+    if remove:
+        shutil.rmtree(face_dir)
+    return out
+
+
+def write_videos(seq_dir, last_frame: int, size=(192, 108), cameras=None, fps: float = 29.97) -> list:
+    """``hdVideos/hd_<cam>.mp4`` for each HD camera of the calibration: frames 0..last_frame,
+    frame k encoding k (:func:`encode_frame_number`)."""
+    import cv2
+
+    seq_dir = Path(seq_dir)
+    calib = json.loads(next(seq_dir.glob("calibration_*.json")).read_text())
+    names = [c["name"] for c in calib["cameras"] if c.get("type") == "hd"]
+    if cameras is not None:
+        names = names[:cameras]
+    (seq_dir / "hdVideos").mkdir(exist_ok=True)
+    frames = [encode_frame_number(k, *size) for k in range(last_frame + 1)]
+    out = []
+    for name in names:
+        path = seq_dir / "hdVideos" / f"hd_{name}.mp4"
+        w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, tuple(size))
+        if not w.isOpened():
+            raise RuntimeError(f"cannot write {path} with the mp4v codec")
+        for img in frames:
+            w.write(img)
+        w.release()
+        out.append(path)
+    return out
+
+
 def copy_real(dst, src=REAL, frames=REAL_FRAMES) -> bool:
     """Copy the HD calibration and a few face frames of 160906_pizza1 (if available)."""
     src = Path(src)
@@ -308,9 +397,19 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=20240611)
     ap.add_argument("--plain", action="store_true", help="only a plain synthetic sequence in --out (no edge "
                     "cases, no real frames), e.g. for benchmarks")
+    ap.add_argument("--first-frame", type=int, default=100)
+    ap.add_argument("--tar", action="store_true", help="pack hdFace3d/ into hdFace3d.tar (with --plain)")
+    ap.add_argument("--videos", action="store_true", help="write hdVideos/hd_00_XX.mp4 (with --plain)")
+    ap.add_argument("--video-size", default="192x108", help="WxH of the videos")
     a = ap.parse_args(argv)
     if a.plain:
-        make_synthetic(a.out, a.frames, a.people, a.cameras, a.seed, special=False)
+        info = make_synthetic(a.out, a.frames, a.people, a.cameras, a.seed, first_frame=a.first_frame,
+                              special=False)
+        if a.videos:
+            w, h = (int(v) for v in a.video_size.lower().split("x"))
+            write_videos(a.out, max(info["frames"]), (w, h))
+        if a.tar:
+            pack_tar(a.out)
         print(f"wrote {a.out}")
         return
     out = Path(a.out)

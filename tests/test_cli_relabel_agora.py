@@ -150,3 +150,22 @@ def test_usage_errors(tmp_path):
     r = run(PKL, "-o", tmp_path / "a.csv", "--image-size", "1000x1000")
     assert r.exit_code == 1 and "principal point" in r.output
     assert not (tmp_path / "a.csv").exists()
+
+
+def test_frame_crop_rotates_by_the_ray_angle(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    a, b = tmp_path / "cam.parquet", tmp_path / "crop.parquet"
+    assert run(PKL, "-o", a, "--rejects", tmp_path / "r1.csv").exit_code == 0
+    r = run(PKL, "-o", b, "--frame", "crop", "--rejects", tmp_path / "r2.csv")
+    assert r.exit_code == 0, r.output
+    ta, tb = pq.read_table(a).to_pandas(), pq.read_table(b).to_pandas()
+    assert list(ta["person"]) == list(tb["person"]) and "ray_angle" in tb and "ray_angle" not in ta
+    np.testing.assert_array_equal(ta[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]], tb[["bbox_x", "bbox_y", "bbox_w",
+                                                                                      "bbox_h"]])
+    mat = lambda t: t[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy().reshape(-1, 3, 3)  # noqa: E731
+    rv = Rotation.from_matrix(mat(tb) @ np.swapaxes(mat(ta), 1, 2)).as_rotvec()
+    # A' A^T = E Q^T E: a rotation by the ray angle about an axis in the image plane (SPEC §10)
+    np.testing.assert_allclose(np.degrees(np.linalg.norm(rv, axis=1)), tb["ray_angle"], atol=1e-6)
+    np.testing.assert_allclose(rv[:, 2], 0.0, atol=1e-9)
+    assert tb["ray_angle"].max() > 5

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from .table_options import column_options
+
 from .options import SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, verbosity_options
 
 
@@ -29,12 +31,16 @@ from .options import SYSTEM, batch_option, echo_summary, output_option, overwrit
 @click.option("--examples", type=click.IntRange(0), default=5, show_default=True,
               help="Example rows per check in the JSON report.")
 @click.option("--strict", is_flag=True, help="Exit with status 1 when any row is flagged.")
+@click.option("--decoder", type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]), default=None,
+              help="Also report how far this published decoder's printed angles are from each rotation "
+                   "(max/mean geodesic and per-angle, JSON key 'decoder').")
 @overwrite_option
 @batch_option
 @verbosity_options
+@column_options
 @click.pass_context
 def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, radians, use, keys, examples,
-          strict, overwrite, batch_size, verbose, quiet):
+          strict, decoder, overwrite, batch_size, verbose, quiet):
     """Check every row of a label table and count what looks wrong.
 
     INPUT is a .parquet or .csv table with angle columns pitch,yaw,roll
@@ -68,6 +74,8 @@ def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, r
       hpe audit AFLW2000/ --json - --plots audit_plots/
       hpe audit preds.csv --system 6drepnet --columns matrix -o flagged.parquet --only-flagged
       hpe audit labels.csv --system whenet --gimbal-tol 2 --strict
+      hpe audit AFLW2000/ --decoder synergynet --json -
+      hpe audit img2pose_preds.csv --system img2pose --json report.json
     """
     from ..pipelines.audit import run_audit
 
@@ -76,7 +84,7 @@ def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, r
         result = run_audit(input, system, report=report, plots=plots, output=output, only_flagged=only_flagged,
                            near_tol_deg=gimbal_tol, radians=radians, use=use, keys=keys, n_examples=examples,
                            overwrite=overwrite, batch_size=batch_size, progress=bar,
-                           echo=click.echo)
+                           echo=click.echo, decoder=decoder)
     finally:
         bar.close()
     from ..rotation.audit import CHECKS
@@ -88,6 +96,12 @@ def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, r
     for c in CHECKS:
         if verbose and result["examples"].get(c):
             lines.append(f"  e.g. {c}: rows " + ", ".join(str(e["row"]) for e in result["examples"][c]))
+    if "decoder" in result:
+        d = result["decoder"]
+        lines.append(f"  decoder {d['decoder']} vs {d['reference_system']}: geodesic max {d['geodesic_deg']['max']:.3g} "
+                     f"mean {d['geodesic_deg']['mean']:.3g} deg; |d_yaw| max {d['d_yaw']['max']:.3g}, |d_pitch| max "
+                     f"{d['d_pitch']['max']:.3g}, |d_roll| max {d['d_roll']['max']:.3g} deg; "
+                     f"{d['rows_off_by_more_than_0.01deg']} rows off by > 0.01 deg; {d['not_decoded']} not decoded")
     outs = [str(p) for p in (report if report != "-" else None, output, plots) if p]
     if outs:
         lines.append("  wrote " + ", ".join(outs))

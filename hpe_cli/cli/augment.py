@@ -4,6 +4,7 @@ from __future__ import annotations
 import click
 
 from ..pipelines.augment import AGREE_TOL, IMAGE_COLUMNS, run_augment  # noqa: F401  (re-exported)
+from .table_options import column_options
 from .options import (batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
                       system_option, verbosity_options)
 
@@ -45,6 +46,7 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 @overwrite_option
 @batch_option
 @verbosity_options
+@column_options
 def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line, scheme, box_from, clip, images_dir,
             out_images, image_column, interpolation, border, jpeg_quality, rejects, strict, overwrite, batch_size,
             verbose, quiet):

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from .table_options import column_options
+
 from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
                       verbosity_options)
 
@@ -20,6 +22,7 @@ from .options import (SYSTEM, batch_option, echo_summary, output_option, overwri
 @overwrite_option
 @batch_option
 @verbosity_options
+@column_options
 def convert(input, output, source, target, radians, decoder, rejects, strict, overwrite, batch_size, verbose, quiet):
     """Convert head-pose labels between rotation systems.
 

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from .table_options import column_options
+
 from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_options, verbosity_options
 
 def _canvas_size(ctx, param, value):
@@ -47,6 +49,7 @@ def _canvas_size(ctx, param, value):
 @rejects_options
 @overwrite_option
 @verbosity_options
+@column_options
 def draw(input, outdir, images, system, style, canvas, radians, use, length, thickness, tdy_origin, annotate,
          grid, grid_cols, tile, limit, rejects, strict, overwrite, verbose, quiet):
     """Draw head poses onto their images.

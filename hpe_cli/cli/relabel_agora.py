@@ -43,6 +43,10 @@ def _image_size(ctx, param, value):
 @click.option("--legacy-whenet", is_flag=True,
               help="Label with DirectMHP's chain, which is WHENet's (compound, Z-Y-X decomposition, "
                    "select_euler, negation), and drop what it drops; adds legacy_pitch/yaw/roll columns.")
+@click.option("--frame", "label_frame", type=click.Choice(["camera", "crop"]), default="camera",
+              show_default=True,
+              help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
+                   "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.")
 @click.option("--trust-pickle", is_flag=True,
               help="Load any pickle, even one that asks for more than a pandas DataFrame needs. A pickle can run "
                    "code: only for files you trust.")
@@ -50,7 +54,7 @@ def _image_size(ctx, param, value):
 @overwrite_option
 @verbosity_options
 def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse, max_occlusion, legacy_whenet,
-                  trust_pickle, rejects, strict, overwrite, verbose, quiet):
+                  label_frame, trust_pickle, rejects, strict, overwrite, verbose, quiet):
     """Relabel AGORA: one head-pose label per person, from SMPL-X face joints.
 
     DATAFRAMES are AGORA ground-truth dataframes (*_withjv.pkl, pandas
@@ -90,6 +94,7 @@ def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse,
       hpe relabel-agora train_0_withjv.pkl -o train.json --format coco --image-size 1280x720
       hpe relabel-agora val_0_withjv.pkl -o annotation.txt --legacy-whenet --max-rmse inf
       hpe relabel-agora val_0_withjv.pkl -o labels.csv --system 6drepnet --rejects rejects.csv
+      hpe relabel-agora val_0_withjv.pkl -o crops.parquet --frame crop
     """
     from ..pipelines import agora as job
 
@@ -100,7 +105,7 @@ def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse,
     system = system or SYSTEM.convert("whenet" if fmt != "table" else "300w_lp", None, None)
     cfg = job.Config(system=system, image_size=image_size,
                      max_rmse=job.DEFAULT_MAX_RMSE if max_rmse is None else max_rmse,
-                     max_occlusion=max_occlusion, legacy=legacy_whenet, preset=preset,
+                     max_occlusion=max_occlusion, legacy=legacy_whenet, preset=preset, frame=label_frame,
                      trust_pickle=trust_pickle)
     bar = progress(total=len(dataframes), desc="relabel-agora", quiet=quiet, unit="files")
     try:

@@ -10,7 +10,7 @@ FORMATS = ("table", "coco", "whenet")
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
-@click.argument("seq_dir", type=click.Path(exists=True, file_okay=False))
+@click.argument("seq_dirs", nargs=-1, required=True, type=click.Path(exists=True, file_okay=False))
 @output_option(help="Output: a .parquet/.csv table, or with --format coco a .json, with --format whenet a .txt.")
 @click.option("--calibration", type=click.Path(exists=True, dir_okay=False),
               help="Calibration JSON [default: SEQ_DIR/calibration_<seq>.json].")
@@ -24,13 +24,31 @@ FORMATS = ("table", "coco", "whenet")
               help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
                    "[default: from OUTPUT's extension].")
 @click.option("--cameras", default="hd", show_default=True,
-              help="hd, or comma-separated camera names such as 00_00,00_08.")
+              help="hd (all 31 HD cameras), whenet-haggling (WHENet's 20-camera subset for the haggling "
+                   "sequences), or comma-separated camera names such as 00_00,00_08.")
 @click.option("--every", type=click.IntRange(1), default=1, show_default=True,
               help="Frame step: keep frame numbers start, start+N, ... (looked up by number).")
 @click.option("--frames", "frame_range", default=None, metavar="A:B",
               help="Only frames A <= frame < B (either side may be empty).")
+@click.option("--min-change", type=click.FloatRange(0, 180, min_open=True), default=None, metavar="DEG",
+              help="Keep a label only if it differs by at least DEG degrees (geodesic) from the last label "
+                   "kept for the same sequence, person and camera; the others go to the rejects.")
+@click.option("--all-views", is_flag=True,
+              help="Keep a face in a frame only if every selected camera labels it.")
+@click.option("--frame", "label_frame", type=click.Choice(["camera", "crop"]), default="camera",
+              show_default=True,
+              help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
+                   "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.")
+@click.option("--no-landmarks", is_flag=True, help="Leave out the 140 projected landmark columns (faster).")
 @click.option("--workers", type=click.IntRange(1), default=1, show_default=True,
-              help="Worker processes (chunks of 64 frames each).")
+              help="Worker processes; each computes units of 64 frames and writes its own parts.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run the units on a Dask distributed scheduler (tcp://host:8786), or 'local' for a "
+                   "LocalCluster of --workers processes. Needs the dask extra.")
+@click.option("--resume", is_flag=True,
+              help="Keep the finished units of an interrupted run with the same inputs and options "
+                   "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
+                   "Give it on the first run too: a run without --resume removes its parts when interrupted.")
 @click.option("--max-rmse", type=float, default=None, callback=non_negative_or_inf, metavar="X",
               help="Reject faces whose fit RMSE is above X (cm). 'inf' labels every fit, as WHENet did. "
                    "[default: 2.0: consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones "
@@ -41,12 +59,14 @@ FORMATS = ("table", "coco", "whenet")
 @rejects_options
 @overwrite_option
 @verbosity_options
-def relabel_panoptic(seq_dir, output, calibration, system, preset, fmt, cameras, every, frame_range, workers,
-                     max_rmse, legacy_whenet, rejects, strict, overwrite, verbose, quiet):
-    """Relabel a CMU Panoptic sequence: one head-pose label per face per camera.
+def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras, every, frame_range, min_change,
+                     all_views, label_frame, no_landmarks, workers, scheduler, resume, max_rmse, legacy_whenet,
+                     rejects, strict, overwrite, verbose, quiet):
+    """Relabel CMU Panoptic sequences: one head-pose label per face per camera.
 
-    SEQ_DIR holds calibration_<seq>.json and hdFace3d/faceRecon3D_hd*.json
-    (frames are found by number; gaps are fine). For each face, WHENet's
+    Each SEQ_DIR holds calibration_<seq>.json and hdFace3d/faceRecon3D_hd*.json
+    or the downloaded hdFace3d.tar (read in place; frames are found by
+    number; gaps are fine), or is a folder whose sub-folders are sequences. For each face, WHENet's
     58-point reference head is fitted to its 14 landmark pairs with
     confidence > 0.1 (at least 7 pairs needed); fits with RMSE above
     --max-rmse are rejected. Each HD camera then gets the label
@@ -58,9 +78,11 @@ def relabel_panoptic(seq_dir, output, calibration, system, preset, fmt, cameras,
     `hpe convert` (pitch, yaw, roll, pitch_2.., r00..r22, gimbal_lock,
     roundtrip_err), fit_rmse (cm), n_pairs, scale, image_width,
     image_height and lm0_x..lm69_y. Every face/camera that gets no label is
-    listed by --rejects with its reason (too few confident points, bad fit,
-    behind camera, outside image, box rejected, dropped by legacy rule) and
-    counted in the summary. --format whenet and coco name the whole frame's
+    listed by --rejects with its reason (bad landmarks, too few confident
+    points, bad fit, behind camera, outside image, box rejected, dropped by
+    legacy rule, not seen by every camera, below --min-change, truncated face
+    file) and counted in the summary, per sequence and in total. --frame crop
+    labels relative to the line of sight and adds ray_angle. --format whenet and coco name the whole frame's
     image: crop it with the box.
 
     \b
@@ -70,6 +92,9 @@ def relabel_panoptic(seq_dir, output, calibration, system, preset, fmt, cameras,
       hpe relabel-panoptic SEQ -o train.json --format coco --preset directmhp --workers 2
       hpe relabel-panoptic SEQ -o annotation.txt --format whenet --legacy-whenet --max-rmse inf
       hpe relabel-panoptic SEQ -o labels.parquet --system 6drepnet --rejects rejects.csv
+      hpe relabel-panoptic ROOT/seqA ROOT/seqB -o labels.parquet --no-landmarks --workers 2
+      hpe relabel-panoptic ROOT -o labels.parquet --frame crop --cameras whenet-haggling --min-change 5
+      hpe relabel-panoptic ROOT -o labels.parquet --scheduler tcp://head:8786 --resume
     """
     from ..pipelines import panoptic as job
     from ..pipelines.relabel import DEFAULT_MAX_RMSE
@@ -84,23 +109,37 @@ def relabel_panoptic(seq_dir, output, calibration, system, preset, fmt, cameras,
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--frames") from None
     max_rmse = DEFAULT_MAX_RMSE if max_rmse is None else max_rmse
-    plan = job.plan(seq_dir, calibration, cameras, every, frames)
-    cfg = job.Config(system=system, preset=preset, max_rmse=max_rmse, legacy=legacy_whenet)
+    plans = job.plan_many(seq_dirs, calibration, cameras, every, frames)
+    from ..io.transaction import note_input
+
+    for p in plans:  # no output may replace a file the run reads
+        for path in {str(p.calibration), *(f.path for f in p.frames.values())}:
+            note_input(path)
+    cfg = job.Config(system=system, preset=preset, max_rmse=max_rmse, legacy=legacy_whenet,
+                     landmarks=not no_landmarks, frame=label_frame, all_views=all_views, min_change=min_change)
     if verbose:
-        echo_summary([f"calibration: {plan.calibration} ({len(plan.cameras)} cameras: "
-                      f"{', '.join(plan.cameras.names[:6])}{' ...' if len(plan.cameras) > 6 else ''})",
-                      f"frames: {len(plan.frames)} selected of {plan.available} face files, "
-                      f"{len(plan.chunks)} chunks"], quiet)
-    bar = progress(total=len(plan.frames), desc="relabel-panoptic", quiet=quiet, unit="frames")
+        for plan in plans:
+            echo_summary([f"{plan.sequence}: calibration {plan.calibration} ({len(plan.cameras)} cameras: "
+                          f"{', '.join(plan.cameras.names[:6])}{' ...' if len(plan.cameras) > 6 else ''}); "
+                          f"frames: {len(plan.frames)} selected of {plan.available} face files, "
+                          f"{len(plan.chunks)} units"], quiet)
+    bar = progress(total=sum(len(p.frames) for p in plans), desc="relabel-panoptic", quiet=quiet, unit="frames")
+    per_seq: list = []
     try:
-        stats = job.write_outputs(plan, cfg, output, fmt, rejects, overwrite, workers, bar)
+        stats = job.write_outputs(plans, cfg, output, fmt, rejects, overwrite, workers, bar, scheduler=scheduler,
+                                  resume=resume, per_sequence=per_seq)
     finally:
         bar.close()
     if strict:  # any face/view not labelled fails the run (nothing is committed)
         from ..io.rejects import rejects_rule
 
-        first = next(iter(getattr(stats, "reasons", None) or getattr(stats, "face_reasons", None) or
-                          getattr(stats, "view_reasons", {})), None)
+        first = next(iter(stats.face_reasons or stats.view_reasons), None)
         rejects_rule(sum(stats.view_reasons.values()) + sum(stats.face_reasons.values()), first, has_file=True,
                      strict=True)
-    echo_summary(stats.summary(plan, cfg, output, rejects), quiet)
+    lines = []
+    for plan, st in zip(plans, per_seq):
+        lines += st.summary(plan, cfg, output, rejects)
+    if len(plans) > 1:
+        lines += stats.summary(None, cfg, output, rejects, n_cameras="N",
+                               title=f"total over {len(plans)} sequences")
+    echo_summary(lines, quiet)

@@ -264,3 +264,210 @@ def read_biwi_tgz(path, system=BIWI_SYSTEM):
     v = np.stack(vals)[order]
     return labels_table([names[k] for k in order], [seqs[k] for k in order], [frames[k] for k in order],
                         v[:, :3], angles=v[:, 3:], system=system)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# RGB camera, head boxes, protocols and sequence splits
+# ---------------------------------------------------------------------------------------------------------------
+#: diameter of the sphere taken as the head when boxes are projected (mm); an adult head is about 150 mm wide
+#: and 200 mm from chin to crown, so the box holds the whole head with a little margin
+HEAD_SIZE_MM = 200.0
+#: BIWI's depth intrinsics (every sequence's depth.cal): used when no depth.cal is found
+DEPTH_K = np.array([[575.816, 0.0, 320.0], [0.0, 575.816, 240.0], [0.0, 0.0, 1.0]])
+#: Hopenet / 6DRepNet keep test samples whose three 300W-LP angles lie within +-99 degrees
+PROTOCOLS = ("all", "hopenet-99")
+BOX_COLS = ["bbox_x", "bbox_y", "bbox_w", "bbox_h"]
+
+
+def to_rgb_camera(R, centres, cal):
+    """Move BIWI labels from the depth camera into the RGB camera with ``rgb.cal``'s extrinsics.
+
+    ``rgb.cal`` stores ``R_c, t_c`` with ``X_rgb = R_c @ X_depth + t_c`` (mm).
+    Checked on the real frame 01/00003: the head centre projects onto the
+    bridge of the nose with this direction (341.7, 274.6) and 22 px off the
+    face's midline with the inverse one. Both cameras are OpenCV frames, so
+    the ``biwi`` rotation becomes ``R_c @ R``.
+
+    Parameters
+    ----------
+    R : ndarray (N, 3, 3)
+        ``biwi`` matrices in the depth camera.
+    centres : ndarray (N, 3)
+        Head centres in mm, depth camera.
+    cal : dict
+        :func:`read_calibration` of ``rgb.cal``.
+    """
+    Rc, tc = np.asarray(cal["R"], dtype=np.float64), np.asarray(cal["t"], dtype=np.float64)
+    Rc = nearest_rotation(Rc)  # printed with 6 digits
+    return Rc @ np.asarray(R, dtype=np.float64), np.asarray(centres, dtype=np.float64) @ Rc.T + tc
+
+
+def head_boxes(centres, K, dist=None, head_size_mm: float = HEAD_SIZE_MM):
+    """Square head boxes from projecting a sphere of diameter ``head_size_mm`` around each head centre.
+
+    The box is centred on the projected centre ``(u, v)`` (OpenCV projection
+    with ``K`` and the 4 distortion coefficients) and its side is the
+    diameter of the sphere's image, ``2 f r / sqrt(|c|^2 - r^2)`` with
+    ``r = head_size_mm / 2`` and ``f = (fx + fy) / 2`` (exact for a sphere on
+    the optical axis, within 1 % over BIWI's field of view).
+
+    Returns
+    -------
+    boxes : ndarray (N, 4)
+        ``bbox_x, bbox_y, bbox_w, bbox_h`` in pixels (top-left corner, size).
+    uv : ndarray (N, 2)
+        The projected centres.
+    """
+    import cv2
+
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    K = np.asarray(K, dtype=np.float64)
+    d = np.zeros(4) if dist is None else np.asarray(dist, dtype=np.float64)
+    uv = np.full((len(c), 2), np.nan)
+    front = c[:, 2] > 0
+    if front.any():
+        pts, _ = cv2.projectPoints(c[front].reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, d)
+        uv[front] = pts.reshape(-1, 2)
+    r = head_size_mm / 2.0
+    dist2 = np.einsum("ij,ij->i", c, c) - r * r
+    f = (K[0, 0] + K[1, 1]) / 2.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        side = np.where(front & (dist2 > 0), 2.0 * f * r / np.sqrt(np.maximum(dist2, 1e-300)), np.nan)
+    boxes = np.stack([uv[:, 0] - side / 2, uv[:, 1] - side / 2, side, side], axis=1)
+    return boxes, uv
+
+
+def _find_calibration(root: Path, sequence: str, name: str):
+    for cand in (root / sequence / name, root / "hpdb" / sequence / name, root / name):
+        if cand.is_file():
+            return cand
+    hit = next((p for p in root.rglob(name) if p.parent.name == sequence), None)
+    return hit
+
+
+def read_biwi_camera(path, camera: str = "depth", calibration=None, head_size_mm: float = HEAD_SIZE_MM,
+                     system=BIWI_SYSTEM):
+    """BIWI labels in the depth or RGB camera, with head-centre boxes.
+
+    Parameters
+    ----------
+    path : str or Path
+        As for :func:`read_biwi` (``hpdb/``, one sequence, ``db_annotations``
+        or its ``.tgz``).
+    camera : {"depth", "rgb"}
+        ``rgb`` applies each sequence's ``rgb.cal`` (:func:`to_rgb_camera`)
+        to the matrices and centres, and projects the boxes with its
+        intrinsics; ``depth`` keeps the labels and uses ``depth.cal`` (or
+        BIWI's 575.816 px, (320, 240) when absent).
+    calibration : str or Path, optional
+        Folder holding ``NN/rgb.cal`` (and ``depth.cal``), e.g. ``hpdb/``;
+        default ``path`` (or its folder).
+    head_size_mm : float
+        Diameter of the head sphere for the boxes (:data:`HEAD_SIZE_MM`).
+
+    Returns
+    -------
+    pandas.DataFrame
+        :func:`labels_table` columns in ``system`` (centres in the chosen
+        camera), then ``camera``, ``image`` (``NN/frame_XXXXX_rgb.png`` or
+        ``_depth.bin``), ``center_u, center_v`` and ``bbox_x, bbox_y,
+        bbox_w, bbox_h`` (pixels). ``attrs["system"]`` is ``system``'s name.
+    """
+    from ..rotation import get_system
+
+    if camera not in ("depth", "rgb"):
+        raise HpeError(f"--camera: expected depth or rgb, got {camera!r}")
+    path = Path(path)
+    base = read_biwi(path, system=BIWI_SYSTEM)
+    R = np.array(base[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy(), dtype=np.float64).reshape(-1, 3, 3)
+    centres = np.array(base[CENTRE_COLS].to_numpy(), dtype=np.float64)
+    seqs = base["sequence"].astype(str).to_numpy()
+    root = Path(calibration) if calibration is not None else (path if path.is_dir() else path.parent)
+    K_rows = np.repeat(DEPTH_K[None], len(base), axis=0)
+    dist_rows = np.zeros((len(base), 4))
+    for seq in sorted(set(seqs.tolist())):
+        rows = seqs == seq
+        cal_name = "rgb.cal" if camera == "rgb" else "depth.cal"
+        calp = _find_calibration(root, seq, cal_name)
+        if calp is None:
+            if camera == "rgb":
+                raise HpeError(f"{root}: no {seq}/rgb.cal for sequence {seq} (--camera rgb needs hpdb/NN/rgb.cal; "
+                               "point --calibration at the hpdb folder)")
+            continue
+        cal = read_calibration(calp)
+        if camera == "rgb":
+            R[rows], centres[rows] = to_rgb_camera(R[rows], centres[rows], cal)
+        K_rows[rows] = cal["K"]
+        dist_rows[rows] = cal["dist"]
+    out = labels_table(base["file"].tolist(), seqs.tolist(), base["frame"].to_numpy(), centres, R=R,
+                       system=get_system(system))
+    boxes = np.full((len(out), 4), np.nan)
+    uv = np.full((len(out), 2), np.nan)
+    for key in {(tuple(k.ravel()), tuple(d)) for k, d in zip(K_rows, dist_rows)}:
+        rows = np.all(K_rows.reshape(-1, 9) == np.array(key[0]), axis=1) & np.all(dist_rows == np.array(key[1]), axis=1)
+        boxes[rows], uv[rows] = head_boxes(centres[rows], np.array(key[0]).reshape(3, 3), np.array(key[1]),
+                                           head_size_mm)
+    suffix = "rgb.png" if camera == "rgb" else "depth.bin"
+    out["camera"] = camera
+    out["image"] = [f"{s}/frame_{int(f):05d}_{suffix}" for s, f in zip(out["sequence"], out["frame"])]
+    out["center_u"], out["center_v"] = uv[:, 0], uv[:, 1]
+    for i, c in enumerate(BOX_COLS):
+        out[c] = boxes[:, i]
+    out.attrs["system"] = get_system(system).name
+    return out
+
+
+def protocol_mask(frame, protocol: str = "all"):
+    """Rows kept by a published BIWI test protocol.
+
+    ``all``: every frame. ``hopenet-99``: the three 300W-LP angles of the
+    label within +-99 degrees (the filter Hopenet's and 6DRepNet's
+    ``datasets.py`` apply to their test lists; over the 15,677 official
+    frames it removes none). FSA-Net's "protocol 1" list keeps the frames
+    where MTCNN found a face (confidence > 0.90, ``data/TYY_create_db_biwi.py``);
+    that list depends on the detector run and is not published, so it is
+    not offered.
+    """
+    from ..rotation import canonical_to_labels, get_system
+
+    if protocol not in PROTOCOLS:
+        raise HpeError(f"--protocol: expected one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+    if protocol == "all":
+        return np.ones(len(frame), dtype=bool)
+    R = frame[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy().reshape(-1, 3, 3)
+    system = get_system(frame.attrs.get("system", BIWI_SYSTEM))
+    conv = canonical_to_labels(system.to_canonical(R), get_system("300w_lp"))
+    return np.all(np.abs(conv.primary) <= 99.0, axis=1)
+
+
+def sequence_split(sequences, fractions=(0.7, 0.3), seed: int = 0, names=("train", "test")) -> dict:
+    """Deterministic split of BIWI sequences (never one sequence in two splits).
+
+    The sorted unique sequences are shuffled with ``numpy.random.default_rng(seed)``
+    and cut at the cumulative fractions (rounded, each split at least one
+    sequence when there are enough). FSA-Net's 70/30 protocol
+    (``data/TYY_create_db_biwi_70_30.py``) puts 16 of the 24 sequences in
+    training with an unseeded ``np.random.permutation``, so its lists cannot
+    be recovered; ``fractions=(16/24, 8/24)`` gives the same sizes, and the
+    lists written out make any split reproducible.
+
+    Returns
+    -------
+    dict
+        split name -> sorted list of sequence names.
+    """
+    fr = np.asarray(fractions, dtype=np.float64)
+    if fr.ndim != 1 or fr.size < 2 or (fr < 0).any() or not np.isclose(fr.sum(), 1.0):
+        raise HpeError(f"--split: expected fractions >= 0 that sum to 1, got {','.join(f'{f:g}' for f in fr)}")
+    if len(names) != fr.size:
+        names = tuple(["train", "val", "test"][:fr.size]) if fr.size <= 3 else \
+            tuple(f"split{i}" for i in range(fr.size))
+    uniq = sorted({str(s) for s in sequences})
+    perm = [uniq[i] for i in np.random.default_rng(seed).permutation(len(uniq))]
+    cuts = np.round(np.cumsum(fr) * len(uniq)).astype(int)
+    cuts[-1] = len(uniq)
+    out, start = {}, 0
+    for name, end in zip(names, cuts):
+        out[name] = sorted(perm[start:end])
+        start = end
+    return out

@@ -15,8 +15,8 @@ from ..errors import HpeError
 POSE_COLS = ["pitch", "yaw", "roll", "tdx", "tdy", "tdz", "scale"]
 
 
-def read_mat(path) -> dict:
-    """Read one ``.mat`` label file.
+def read_mat(path, fileobj=None) -> dict:
+    """Read one ``.mat`` label file (or ``fileobj``, e.g. a zip member in a BytesIO, named ``path`` in errors).
 
     Returns
     -------
@@ -29,11 +29,15 @@ def read_mat(path) -> dict:
 
     path = Path(path)
     try:
-        m = scipy.io.loadmat(path)
+        m = scipy.io.loadmat(fileobj if fileobj is not None else path,
+                             variable_names=["Pose_Para", "pt2d", "pt3d_68"])
     except Exception as exc:  # scipy raises many types for truncated/corrupt files
         raise HpeError(f"{path}: not a readable MATLAB .mat file ({' '.join(str(exc).split())[:160]})") from None
     if "Pose_Para" not in m:
-        raise HpeError(f"{path}: no Pose_Para variable (keys: {', '.join(k for k in m if not k.startswith('__'))})")
+        if fileobj is not None:
+            fileobj.seek(0)
+        keys = scipy.io.whosmat(fileobj if fileobj is not None else path)
+        raise HpeError(f"{path}: no Pose_Para variable (keys: {', '.join(k[0] for k in keys)})")
     pose = np.asarray(m["Pose_Para"], dtype=np.float64).reshape(-1)
     if pose.size < 3:
         raise HpeError(f"{path}: Pose_Para has {pose.size} values, expected 7")
@@ -79,6 +83,7 @@ def read_mat_dir(path, landmarks: bool = False):
     base = path if path.is_dir() else path.parent
     frame = pd.DataFrame(np.stack([r["pose"] for r in recs]), columns=POSE_COLS)
     frame.insert(0, "file", [str(f.relative_to(base)) for f in files])
+    frame.attrs["system"] = "300w_lp"  # Pose_Para is always 300W-LP's convention
     if not landmarks:
         return frame
     extra = {}
@@ -92,4 +97,6 @@ def read_mat_dir(path, landmarks: bool = False):
         for i in range(68):
             for n, a in enumerate("xyz"):
                 extra[f"lm3d{i}_{a}"] = p3[:, n, i]
-    return pd.concat([frame, pd.DataFrame(extra)], axis=1)
+    out = pd.concat([frame, pd.DataFrame(extra)], axis=1)
+    out.attrs["system"] = "300w_lp"
+    return out

@@ -8,13 +8,16 @@ and ``fpsType``) both parse. Problems in a file raise
 Layout of a sequence folder ``<seq>/``::
 
     calibration_<seq>.json
-    hdFace3d/faceRecon3D_hd%08d.json
-    hdImgs/<cam>/<cam>_%08d.jpg          (images, optional)
+    hdFace3d/faceRecon3D_hd%08d.json     (or hdFace3d.tar, read member by member)
+    hdImgs/<cam>/<cam>_%08d.jpg          (images, optional; panoptic-toolbox's
+                                          scripts/hdImgsExtractor.sh numbers them from 0)
+    hdVideos/hd_00_XX.mp4                (the videos; see panoptic_video.py)
 """
 from __future__ import annotations
 
 import json
 import re
+import tarfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +27,11 @@ from ..errors import HpeError
 
 FACE_DIR = "hdFace3d"
 FACE_RE = re.compile(r"^faceRecon3D_hd(\d+)\.json$")
+FACE_TAR = "hdFace3d.tar"
+#: camera names become path parts: letters, digits, '_', '-', '.' only (no '..', '/', NUL)
+NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
+#: landmarks farther than this from the origin (cm) are not a face in a 5-m dome
+ABSURD = 1e6
 N_FACE70 = 70
 CAMERA_TYPES = ("hd", "vga", "kinect-color")
 #: image folder of each camera type in Panoptic's layout
@@ -123,6 +131,7 @@ def read_calibration(path, cameras="all") -> Cameras:
         raise HpeError(f"{path}: expected an object with a 'cameras' list, got "
                        f"{type(data).__name__ if not isinstance(data, dict) else 'keys ' + ', '.join(data)}")
     cols = {k: [] for k in ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")}
+    seen: dict = {}
     for i, cam in enumerate(cams):
         where = f"{path}: camera {i}"
         try:
@@ -142,6 +151,8 @@ def read_calibration(path, cameras="all") -> Cameras:
             if res is None or len(res) != 2:
                 raise HpeError(f"{where}: expected resolution [width, height], got {res!r}")
             w, h = int(res[0]), int(res[1])
+            if w <= 0 or h <= 0:
+                raise HpeError(f"{where}: expected a positive resolution, got {w}x{h}")
         except KeyError as exc:
             raise HpeError(f"{where}: missing key {exc.args[0]!r}") from None
         except (TypeError, ValueError) as exc:
@@ -149,7 +160,17 @@ def read_calibration(path, cameras="all") -> Cameras:
         if not (np.isfinite(K).all() and np.isfinite(R).all() and np.isfinite(t).all() and np.isfinite(d).all()):
             raise HpeError(f"{where}: expected finite K, R, t and distCoef, got NaN or inf")
         if np.abs(R @ R.T - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
-            raise HpeError(f"{where}: expected R to be a rotation (orthonormal, det +1)")
+            raise HpeError(f"{where}: expected R to be a rotation (orthonormal, det +1), got det "
+                           f"{np.linalg.det(R):.6g}")
+        if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
+            raise HpeError(f"{where}: expected K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, "
+                           f"got {K.tolist()}")
+        if not NAME_RE.match(name) or name in (".", ".."):
+            raise HpeError(f"{where}: expected a camera name of letters, digits, '_', '-' or '.', got {name!r} "
+                           "(names become image paths)")
+        if name in seen:
+            raise HpeError(f"{path}: camera {seen[name]} and camera {i} are both named {name!r}")
+        seen[name] = i
         cols["names"].append(name)
         cols["types"].append(str(cam.get("type", "")))
         cols["panel"].append(int(cam.get("panel", -1)))
@@ -171,24 +192,150 @@ def read_calibration(path, cameras="all") -> Cameras:
     return out if cameras == "all" else out.select(cameras)
 
 
+@dataclass(frozen=True)
+class FaceRef:
+    """Where one frame's face JSON is: a file, or a member of ``hdFace3d.tar``.
+
+    Picklable and small, so worker processes (or Dask workers) open the
+    file themselves. ``truncated`` marks a tar member whose data is cut short.
+    """
+
+    path: str
+    member: str = ""
+    offset: int = -1
+    size: int = -1
+    truncated: bool = False
+
+    @property
+    def name(self) -> str:
+        """The name used in messages: the file, or ``tar:member``."""
+        return f"{self.path}:{self.member}" if self.member else self.path
+
+    def read_text(self) -> str:
+        return self.read_bytes().decode("utf-8")
+
+    def read_bytes(self) -> bytes:
+        if not self.member:
+            with open(self.path, "rb") as fh:
+                return fh.read()
+        with open(self.path, "rb") as fh:
+            fh.seek(self.offset)
+            data = fh.read(self.size)
+        if len(data) != self.size:
+            raise HpeError(f"{self.name}: truncated member ({len(data)} of {self.size} bytes)")
+        return data
+
+
 def face_frames(seq_dir) -> dict:
     """Face files of a sequence by frame number: ``{frame: Path}``, sorted.
 
     ``seq_dir`` is the sequence folder (with ``hdFace3d/``) or the
     ``hdFace3d`` folder itself. Frame numbers come from the file names, so
-    gaps are allowed; other files are ignored.
+    gaps are allowed; other files are ignored. Two files with the same frame
+    number (``faceRecon3D_hd00001147.json`` and ``faceRecon3D_hd1147.json``)
+    are an error naming both.
     """
     seq_dir = Path(seq_dir)
     face_dir = seq_dir / FACE_DIR if (seq_dir / FACE_DIR).is_dir() else seq_dir
-    frames = {}
+    frames: dict = {}
     if face_dir.is_dir():
-        for p in face_dir.iterdir():
+        for p in sorted(face_dir.iterdir()):
             m = FACE_RE.match(p.name)
             if m and p.is_file():
-                frames[int(m.group(1))] = p
+                k = int(m.group(1))
+                if k in frames:
+                    raise HpeError(f"{frames[k]} and {p}: both are frame {k}; keep one of them")
+                frames[k] = p
     if not frames and face_dir == seq_dir and seq_dir.name != FACE_DIR:
         raise HpeError(f"{seq_dir}: no {FACE_DIR}/ folder")
     return dict(sorted(frames.items()))
+
+
+def tar_frames(tar_path) -> dict:
+    """Members of ``hdFace3d.tar`` by frame number: ``{frame: FaceRef}``, sorted.
+
+    The archive is indexed once (headers only, nothing is extracted); the
+    JSON of a frame is read later from its offset. Members are matched by
+    base name (``hdFace3d/faceRecon3D_hd00000123.json``); two members with
+    the same frame number are an error naming both. A member whose data is
+    cut short (a truncated download) is kept with ``truncated=True`` (the
+    job rejects that frame); a tar whose headers are unreadable before any
+    member is an error.
+    """
+    tar_path = Path(tar_path)
+    frames: dict = {}
+    try:
+        size = tar_path.stat().st_size
+        with tarfile.open(tar_path, "r:") as tf:
+            while True:
+                try:
+                    info = tf.next()
+                except tarfile.ReadError as exc:
+                    if not frames:
+                        raise HpeError(f"{tar_path}: not a readable tar archive ({exc})") from None
+                    break  # truncated inside a header: the members before it are indexed
+                if info is None:
+                    break
+                if not info.isfile():
+                    continue
+                m = FACE_RE.match(info.name.rsplit("/", 1)[-1])
+                if not m:
+                    continue
+                k = int(m.group(1))
+                if k in frames:
+                    raise HpeError(f"{tar_path}: members {frames[k].member} and {info.name} are both frame {k}")
+                frames[k] = FaceRef(str(tar_path), info.name, info.offset_data, info.size,
+                                    info.offset_data + info.size > size)
+    except tarfile.ReadError as exc:
+        raise HpeError(f"{tar_path}: not a readable tar archive ({exc})") from None
+    except OSError as exc:
+        raise HpeError(f"{tar_path}: cannot read ({exc.strerror or exc})") from None
+    return dict(sorted(frames.items()))
+
+
+def face_sources(seq_dir) -> dict:
+    """A sequence's face frames as ``{frame: FaceRef}``: from ``hdFace3d/`` if it
+    holds face files, else from ``hdFace3d.tar`` (read in place)."""
+    seq_dir = Path(seq_dir)
+    if (seq_dir / FACE_DIR).is_dir():
+        found = face_frames(seq_dir)
+        if found or not (seq_dir / FACE_TAR).is_file():
+            return {k: FaceRef(str(p)) for k, p in found.items()}
+    if (seq_dir / FACE_TAR).is_file():
+        return tar_frames(seq_dir / FACE_TAR)
+    if seq_dir.name == FACE_DIR:
+        return {k: FaceRef(str(p)) for k, p in face_frames(seq_dir).items()}
+    raise HpeError(f"{seq_dir}: no {FACE_DIR}/ folder and no {FACE_TAR}")
+
+
+def is_sequence(path) -> bool:
+    """True if ``path`` looks like a Panoptic sequence folder (faces and a calibration)."""
+    path = Path(path)
+    return ((path / FACE_DIR).is_dir() or (path / FACE_TAR).is_file()) and any(path.glob("calibration_*.json"))
+
+
+def hd_image_path(seq_root, camera: str, frame: int) -> Path:
+    """The ``hdImgs`` image of ``camera`` at HD frame ``frame``.
+
+    panoptic-toolbox's ``scripts/hdImgsExtractor.sh`` writes
+    ``hdImgs/00_XX/00_XX_%08d.jpg`` (``ffmpeg -start_number 0``: image k is
+    video frame k, the HD frame number). Some mirrors store
+    ``hdImgs/hd_00_XX/%08d.jpg``; that layout is used when only it exists.
+    """
+    if not NAME_RE.match(str(camera)) or camera in (".", ".."):
+        raise HpeError(f"expected a camera name of letters, digits, '_', '-' or '.', got {camera!r}")
+    root = Path(seq_root) / IMAGE_DIRS["hd"]
+    main = root / camera / f"{camera}_{int(frame):08d}.jpg"
+    if not main.exists():
+        alt = root / f"hd_{camera}" / f"{int(frame):08d}.jpg"
+        if alt.exists():
+            return alt
+    return main
+
+
+def hd_video_path(seq_root, camera: str) -> Path:
+    """``hdVideos/hd_00_XX.mp4`` of an HD camera named ``00_XX``."""
+    return Path(seq_root) / "hdVideos" / f"hd_{camera}.mp4"
 
 
 def read_face_frame(path) -> dict:
@@ -203,9 +350,14 @@ def read_face_frame(path) -> dict:
         ``averageScore``, ``reproj_error`` (P, 70) ``averageReproError``
         (NaN when absent).
     """
-    path = Path(path)
-    data = _load_json(path)
-    m = FACE_RE.match(path.name)
+    if isinstance(path, FaceRef):
+        data = _parse_json(path.read_bytes(), path.name)
+        m = FACE_RE.match((path.member or path.path).replace("\\", "/").rsplit("/", 1)[-1])
+        path = path.name
+    else:
+        path = Path(path)
+        data = _load_json(path)
+        m = FACE_RE.match(path.name)
     if not isinstance(data, dict) or not isinstance(data.get("people"), list):
         raise HpeError(f"{path}: expected an object with a 'people' list")
     people = data["people"]
@@ -243,16 +395,23 @@ def read_face_frames(paths: dict) -> dict:
     -------
     dict
         ``frame`` (N,) int, ``person_id`` (N,) int, ``landmarks`` (N, 70, 3),
-        ``score`` (N, 70), one row per person per frame, in frame order.
+        ``score`` (N, 70), one row per person per frame, in frame order;
+        ``unreadable``: list of ``(frame, reason, detail)`` for tar members
+        cut short (their frames are not read).
     """
     parts = []
+    unreadable = []
     for frame, p in paths.items():
+        if isinstance(p, FaceRef) and p.truncated:
+            unreadable.append((int(frame), "truncated face file",
+                               f"{p.member}: {p.size} bytes declared, the archive ends first"))
+            continue
         f = read_face_frame(p)
         parts.append((np.full(len(f["person_id"]), int(frame), dtype=np.int64), f))
     if not parts:
         return {"frame": np.zeros(0, np.int64), "person_id": np.zeros(0, np.int64),
-                "landmarks": np.zeros((0, N_FACE70, 3)), "score": np.zeros((0, N_FACE70))}
-    return {"frame": np.concatenate([fr for fr, _ in parts]),
+                "landmarks": np.zeros((0, N_FACE70, 3)), "score": np.zeros((0, N_FACE70)), "unreadable": unreadable}
+    return {"unreadable": unreadable, "frame": np.concatenate([fr for fr, _ in parts]),
             "person_id": np.concatenate([f["person_id"] for _, f in parts]),
             "landmarks": np.concatenate([f["landmarks"] for _, f in parts]),
             "score": np.concatenate([f["score"] for _, f in parts])}
@@ -282,16 +441,32 @@ def find_calibration(seq_dir) -> Path:
 def _load_json(path: Path):
     try:
         with open(path, "rb") as fh:
-            return json.loads(fh.read())
+            raw = fh.read()
     except FileNotFoundError:
         raise HpeError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise HpeError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return _parse_json(raw, path)
+
+
+def _parse_json(raw: bytes, path):
+    """orjson (5x faster on face files); the standard library where orjson refuses
+    (NaN/Infinity literals) or to phrase the error."""
+    try:
+        import orjson
+
+        return orjson.loads(raw)
+    except ImportError:
+        pass
+    except ValueError:
+        pass
+    try:
+        return json.loads(raw)
     except json.JSONDecodeError as exc:
         raise HpeError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); "
                        "truncated file?") from None
     except UnicodeDecodeError as exc:
         raise HpeError(f"{path}: not valid JSON text ({exc.reason})") from None
-    except OSError as exc:
-        raise HpeError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
 
 def _matrix(value, shape, where, key) -> np.ndarray:

@@ -145,9 +145,22 @@ def helmet_boxes(scale, R, t, K, dist, cam_R, cam_t, width, height, preset="when
         safe_front = c[:, 2] - rho > 0
         safe_field = safe_front & (off < np.pi / 2) & (np.tan(np.minimum(off, 1.5)) ** 2 < r2_max)
     Mf32, cf32, dist32 = Mf.astype(DTYPE), cf.astype(DTYPE), dist.astype(DTYPE)
+    # Rows whose helmet is small in the image (angular radius < FAST_MAX_ANGLE), surely in front and inside
+    # the lens model's field, with fx, fy > 0 and no skew, take the fast path: only the grid points near the
+    # four tangent points of the sphere are projected (same float32 arithmetic, so the same box).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        small = rho / dist_c < np.sin(np.deg2rad(FAST_MAX_ANGLE))
+    fast = fitted & safe_field & small & (scale > 0) & (K[:, 0, 0] > 0) & (K[:, 1, 1] > 0) & (K[:, 0, 1] == 0)
+    if FAST and fast.any():
+        fi = np.flatnonzero(fast)
+        for s in range(0, len(fi), FAST_BLOCK_ROWS):
+            idx = fi[s:s + FAST_BLOCK_ROWS]
+            lo[idx], hi[idx] = _fast_extremes(Mf32[idx], cf32[idx], dist32[idx], K[idx], cam_R[idx] @ R[idx],
+                                              c[idx], rho[idx], dist[idx])
+    slow = np.flatnonzero(~fast) if FAST else np.arange(n)
     ct, st, sp, cp = (a.astype(DTYPE) for a in (ct, st, sp, cp))
-    for s in range(0, n, BLOCK_ROWS):
-        sl = slice(s, min(s + BLOCK_ROWS, n))
+    for s in range(0, len(slow), BLOCK_ROWS):
+        sl = slow[s:s + BLOCK_ROWS]
         m, cc, d, k = Mf32[sl], cf32[sl], dist32[sl], K[sl]
         b = m.shape[0]
         planes = []
@@ -170,27 +183,16 @@ def helmet_boxes(scale, R, t, K, dist, cam_R, cam_t, width, height, preset="when
         r2 += y * y
         if not safe_field[sl].all():
             beyond[sl] = r2.max(1) > r2_max[sl]
-        k1, k2, p1, p2, k3 = (d[:, j, None] for j in range(5))
-        # OpenCV: xd = x f + 2 p1 x y + p2 (r2 + 2 x^2), yd = y f + p1 (r2 + 2 y^2) + 2 p2 x y,
-        # which is xd = x g + p2 r2 and yd = y g + p1 r2 with g = f + 2 p1 y + 2 p2 x
-        g = r2 * k3
-        g += k2
-        g *= r2
-        g += k1
-        g *= r2
-        g += 1.0
-        g += (2.0 * p1) * y
-        g += (2.0 * p2) * x
-        xd = np.multiply(x, g, out=x)
-        xd += p2 * r2
-        yd = np.multiply(y, g, out=y)
-        yd += p1 * r2
+        xd, yd = _distort32(x, y, r2, d)
+        blo = np.empty((b, 2))
+        bhi = np.empty((b, 2))
         if np.any(k[:, 0, 1] != 0):  # skew: u mixes xd and yd
             u = k[:, 0, 0, None] * xd + k[:, 0, 1, None] * yd
-            lo[sl, 0], hi[sl, 0] = u.min(1) + k[:, 0, 2], u.max(1) + k[:, 0, 2]
+            blo[:, 0], bhi[:, 0] = u.min(1) + k[:, 0, 2], u.max(1) + k[:, 0, 2]
         else:  # u = fx xd + cx is monotonic in xd: scale the extremes only
-            _extremes(xd, k[:, 0, 0], k[:, 0, 2], lo[sl, 0], hi[sl, 0])
-        _extremes(yd, k[:, 1, 1], k[:, 1, 2], lo[sl, 1], hi[sl, 1])
+            _extremes(xd.min(1), xd.max(1), k[:, 0, 0], k[:, 0, 2], blo[:, 0], bhi[:, 0])
+        _extremes(yd.min(1), yd.max(1), k[:, 1, 1], k[:, 1, 2], blo[:, 1], bhi[:, 1])
+        lo[sl], hi[sl] = blo, bhi
 
     # the helmet centre, to tell "mostly outside" from "truncated by the border"
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -234,12 +236,165 @@ def helmet_boxes(scale, R, t, K, dist, cam_R, cam_t, width, height, preset="when
     return out
 
 
-def _extremes(a, scale, offset, lo, hi) -> None:
-    """min/max over axis 1 of ``scale * a + offset`` (per-row scale of any sign)."""
-    e0 = scale * a.min(1) + offset
-    e1 = scale * a.max(1) + offset
+def _extremes(amin, amax, scale, offset, lo, hi) -> None:
+    """min/max of ``scale * a + offset`` from a's min and max (per-row scale of any sign)."""
+    e0 = scale * amin + offset
+    e1 = scale * amax + offset
     lo[...] = np.minimum(e0, e1)
     hi[...] = np.maximum(e0, e1)
+
+
+def _distort32(x, y, r2, d):
+    """OpenCV's distortion in place on float32 planes (``d`` per row, (b, 5)); returns (xd, yd).
+
+    xd = x f + 2 p1 x y + p2 (r2 + 2 x^2), yd = y f + p1 (r2 + 2 y^2) + 2 p2 x y, written as
+    xd = x g + p2 r2 and yd = y g + p1 r2 with g = f + 2 p1 y + 2 p2 x.
+    """
+    if isinstance(d, tuple):  # one coefficient per element (flat layout)
+        k1, k2, p1, p2, k3 = d
+    else:
+        k1, k2, p1, p2, k3 = (d[:, j, None] for j in range(5))
+    g = r2 * k3
+    g += k2
+    g *= r2
+    g += k1
+    g *= r2
+    g += 1.0
+    g += (2.0 * p1) * y
+    g += (2.0 * p2) * x
+    xd = np.multiply(x, g, out=x)
+    xd += p2 * r2
+    yd = np.multiply(y, g, out=y)
+    yd += p1 * r2
+    return xd, yd
+
+
+# ------------------------------------------------------------------ fast path
+#: rows whose helmet subtends less than this (degrees of half-angle) use the fast path
+FAST_MAX_ANGLE = 9.0
+#: grid points within this angle of a tangent point are projected (measured: the grid extreme is
+#: always within 15 degrees of the tangent point of the distortion-linearised pencil for helmets under
+#: 9 degrees; the table adds the bin's half diagonal)
+FAST_NEIGHBOURHOOD = 15.0
+FAST_BIN = 2.0  # degrees, bins of tangent-point directions in the lookup table
+FAST_BLOCK_ROWS = 2048
+FAST = True
+_TABLE: dict = {}
+
+
+def _grid_angles():
+    """theta, phi (radians) of the 613 distinct helmet grid points, pole first (the slow path's order)."""
+    theta = np.deg2rad(np.arange(0, 360, 10, dtype=np.float64))
+    phi = np.deg2rad(np.arange(10, 180, 10, dtype=np.float64))
+    th = np.concatenate([[0.0], np.repeat(theta, 17)])
+    ph = np.concatenate([[0.0], np.tile(phi, 36)])
+    return th, ph
+
+
+def _table():
+    """CSR lookup: for each (theta, phi) bin of a tangent direction, the grid points near it.
+
+    The grid is invariant under theta turns of 10 degrees, so the neighbourhoods of the first
+    10 degrees of bins are computed and the others are the same index sets turned.
+    """
+    if _TABLE:
+        return _TABLE
+    th, ph = _grid_angles()
+    U = np.stack([np.cos(th) * np.sin(ph), np.sin(th) * np.sin(ph), np.cos(ph)], 1)
+    per10 = int(round(10 / FAST_BIN))
+    nt, nphi = 36 * per10, int(round(180 / FAST_BIN))
+    bt = np.deg2rad((np.arange(per10) + 0.5) * FAST_BIN)
+    bp = np.deg2rad((np.arange(nphi) + 0.5) * FAST_BIN)
+    BT, BP = np.meshgrid(bt, bp, indexing="ij")
+    B = np.stack([np.cos(BT) * np.sin(BP), np.sin(BT) * np.sin(BP), np.cos(BP)], -1)  # (per10, nphi, 3)
+    cosr = np.cos(np.deg2rad(FAST_NEIGHBOURHOOD + FAST_BIN))  # a bin is within FAST_BIN/sqrt(2) of its centre
+    near0 = np.einsum("tpk,gk->tpg", B, U) >= cosr  # (per10, nphi, 613)
+    pole, ring = near0[..., :1], near0[..., 1:].reshape(per10, nphi, 36, 17)
+    # bin (10 k + t0) sees the neighbourhood of bin t0 turned by k steps of theta
+    ring_all = np.stack([np.roll(ring, k, axis=2) for k in range(36)], 0)  # (36, per10, nphi, 36, 17)
+    near = np.concatenate([np.broadcast_to(pole, (36,) + pole.shape), ring_all.reshape(36, per10, nphi, -1)],
+                          -1).reshape(nt * nphi, -1)
+    counts = near.sum(1)
+    _TABLE.update(indices=np.nonzero(near)[1].astype(np.int32),
+                  offsets=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64), counts=counts.astype(np.int64),
+                  nt=nt, nphi=nphi,
+                  ct=np.cos(th).astype(DTYPE), st=np.sin(th).astype(DTYPE), sp=np.sin(ph).astype(DTYPE),
+                  cp=np.cos(ph).astype(DTYPE))
+    _TABLE["sp"][0] = 0.0  # the pole exactly (the slow path computes it as m2 + c)
+    _TABLE["cp"][0] = 1.0
+    return _TABLE
+
+
+def _fast_extremes(M, c32, d32, K, Rtot, c, rho, d64):
+    """Box extremes (lo, hi), each (b, 2), projecting only grid points near the tangent points.
+
+    The extreme of ``u = fx xd + cx`` over the sphere lies where a plane of the pencil
+    ``a x + b y = k z`` (``(a, b)`` the row of the distortion Jacobian at the helmet centre, so the
+    pencil follows the lens) touches the sphere; likewise for ``v``. Only grid points within
+    :data:`FAST_NEIGHBOURHOOD` of those four points are projected, with the slow path's float32
+    arithmetic.
+    """
+    T = _table()
+    b = len(c)
+    # normalised coordinates of the centre and the distortion Jacobian there
+    x0, y0 = c[:, 0] / c[:, 2], c[:, 1] / c[:, 2]
+    k1, k2, p1, p2, k3 = (d64[:, j] for j in range(5))
+    r2 = x0 * x0 + y0 * y0
+    f = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    fp = k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3)
+    jxx = f + 2.0 * x0 * x0 * fp + 2.0 * p1 * y0 + 6.0 * p2 * x0
+    jxy = 2.0 * x0 * y0 * fp + 2.0 * p1 * x0 + 2.0 * p2 * y0
+    jyx = 2.0 * x0 * y0 * fp + 2.0 * p1 * x0 + 2.0 * p2 * y0
+    jyy = f + 2.0 * y0 * y0 * fp + 6.0 * p1 * y0 + 2.0 * p2 * x0
+    cz = c[:, 2]
+    den = cz * cz - rho * rho
+    dirs = []
+    for a_, b_ in ((jxx, jxy), (jyx, jyy)):
+        q = a_ * c[:, 0] + b_ * c[:, 1]
+        root = rho * np.sqrt(np.maximum((a_ * a_ + b_ * b_) * den + q * q, 0.0))
+        for sign in (1.0, -1.0):
+            k = (q * cz + sign * root) / den
+            nrm = np.stack([a_, b_, -k], 1)
+            nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+            w = -np.sign(np.einsum("ni,ni->n", nrm, c))[:, None] * nrm
+            dirs.append(np.einsum("nji,nj->ni", Rtot, w))  # into the helmet's own frame
+    D = np.stack(dirs, 0)  # (4, b, 3): u max, u min, v max, v min
+    th = np.mod(np.arctan2(D[..., 1], D[..., 0]), 2 * np.pi)
+    ph = np.arccos(np.clip(D[..., 2], -1.0, 1.0))
+    ti = np.minimum((np.rad2deg(th) / FAST_BIN).astype(np.int64), T["nt"] - 1)
+    pi = np.minimum((np.rad2deg(ph) / FAST_BIN).astype(np.int64), T["nphi"] - 1)
+    bins = (ti * T["nphi"] + pi).reshape(-1)  # extreme-major, then row
+    counts = T["counts"][bins]
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    total = int(counts.sum())
+    flat = np.arange(total) - np.repeat(starts - T["offsets"][bins], counts)
+    g = T["indices"][flat]
+    ct, st, sp, cp = T["ct"][g], T["st"][g], T["sp"][g], T["cp"][g]
+    # per-row parameters repeated into contiguous per-element columns (no strided access)
+    params = np.concatenate([M.reshape(b, 9), c32, d32], 1).T  # (17, b)
+    col = [np.repeat(np.tile(params[j], 4), counts) for j in range(17)]
+    planes = []
+    for i in range(3):
+        ring = col[3 * i] * ct + col[3 * i + 1] * st
+        planes.append(ring * sp + (col[3 * i + 2] * cp + col[9 + i]))
+    X, Y, Z = planes
+    np.divide(1.0, Z, out=Z)
+    x = np.multiply(X, Z, out=X)
+    y = np.multiply(Y, Z, out=Y)
+    rr = np.multiply(x, x, out=Z)
+    rr += y * y
+    xd, yd = _distort32(x, y, rr, tuple(col[12:17]))
+    seg = starts.reshape(4, b)
+    lo = np.empty((b, 2))
+    hi = np.empty((b, 2))
+    ends = [int(seg[e + 1, 0]) if e < 3 else total for e in range(4)]
+    xmax = np.maximum.reduceat(xd[seg[0, 0]:ends[0]], seg[0] - seg[0, 0])
+    xmin = np.minimum.reduceat(xd[seg[1, 0]:ends[1]], seg[1] - seg[1, 0])
+    ymax = np.maximum.reduceat(yd[seg[2, 0]:ends[2]], seg[2] - seg[2, 0])
+    ymin = np.minimum.reduceat(yd[seg[3, 0]:ends[3]], seg[3] - seg[3, 0])
+    _extremes(xmin, xmax, K[:, 0, 0], K[:, 0, 2], lo[:, 0], hi[:, 0])
+    _extremes(ymin, ymax, K[:, 1, 1], K[:, 1, 2], lo[:, 1], hi[:, 1])
+    return lo, hi
 
 
 def _set(reason, detail, mask, r, d) -> None:

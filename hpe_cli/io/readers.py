@@ -84,6 +84,12 @@ class TableSource:
     with_lines: bool = False
     kind: str = "table"
     _pending: list = field(default_factory=list)
+    #: rotation system the reader's labels are in ("300w_lp" for .mat, "biwi", "dad3dheads", a Parquet
+    #: file's hpe:system metadata), or None when the file does not say
+    system: str | None = None
+    #: True when a dataset reader (.mat, 300W-LP, BIWI, DAD-3DHeads) produced the labels: their system is
+    #: fixed by the dataset, whatever a command's --system says
+    dataset: bool = False
 
     @property
     def columns(self) -> list:
@@ -93,7 +99,9 @@ class TableSource:
         import pyarrow as pa
 
         try:
-            for batch, rejects in self._batches():
+            for item in self._batches():
+                # readers yield (batch, rejects) pairs; simple dataset readers may yield bare batches
+                batch, rejects = item if isinstance(item, tuple) else (item, [])
                 if not self.with_lines and LINE_COL in batch.schema.names:
                     batch = batch.drop_columns([LINE_COL])
                 yield batch, rejects
@@ -135,7 +143,44 @@ def sniff(path: Path) -> str:
     return "text"
 
 
-def open_table(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = False,
+#: inputs that the command-wide --delimiter/--no-header/--names/--input-format options never apply to
+_NOT_TEXT = (".parquet", ".pq", ".mat", ".zip", ".tgz", ".gz", ".tar", ".npz", ".pkl", ".pickle")
+
+
+def open_table(path, batch_size: int = DEFAULT_BATCH, columns=None, delimiter=None, header: bool = True,
+               input_format=None, names=None, with_lines: bool = False, block_size: int | None = None) -> TableSource:
+    """Open a label table for streaming.
+
+    ``columns`` renames columns (``"pitch=Pitch,yaw=Yaw"`` or ``{"pitch": "Pitch"}``);
+    ``delimiter``/``header``/``names`` read delimited text of any suffix;
+    ``input_format`` names a label list (see :mod:`hpe_cli.io.columns`); COCO
+    ``.json`` and WHENet ``annotation.txt`` are recognised without it. Without
+    these arguments, the running command's ``--columns-map``/``--delimiter``/...
+    options apply (:func:`hpe_cli.cli.table_options.column_options`).
+    """
+    from .columns import active_table_options, apply_columns_map, open_formatted
+
+    if columns is None and delimiter is None and header and input_format is None and names is None:
+        active = active_table_options()
+        if active:
+            columns, delimiter, header = active["columns"], active["delimiter"], active["header"]
+            input_format, names = active["input_format"], active["names"]
+            p = Path(path)
+            if p.is_dir() or p.suffix.lower() in _NOT_TEXT:
+                # a command with several inputs (evaluate PRED GT): text options apply to its text inputs
+                delimiter, header, input_format, names = None, True, None, None
+            if columns:
+                from .columns import LenientMap
+
+                columns = LenientMap(columns)
+    src = open_formatted(path, batch_size, input_format=input_format, delimiter=delimiter, header=header,
+                         names=names, with_lines=with_lines)
+    if src is None:
+        src = _open_core(path, batch_size, with_lines=with_lines, block_size=block_size or CSV_BLOCK)
+    return apply_columns_map(src, columns)
+
+
+def _open_core(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = False,
                block_size: int = CSV_BLOCK) -> TableSource:
     """Open a label table for streaming.
 
@@ -152,7 +197,17 @@ def open_table(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = Fals
     if not path.exists():
         raise HpeError(f"{path}: no such file or folder")
     dataset = _read_dataset(path)
+    if dataset is not None and hasattr(dataset, "iter_batches"):  # a dataset reader that streams
+
+        def gen_stream():
+            line = 2
+            for b in dataset.iter_batches():
+                yield _with_line(b, line), []
+                line += b.num_rows
+        return TableSource(path, _schema(dataset.schema, with_lines), dataset.num_rows, gen_stream, with_lines,
+                           "dataset", system=dataset.system, dataset=True)
     if dataset is not None:
+        system = dataset.attrs.get("system")
         table = pa.Table.from_pandas(dataset, preserve_index=False)
 
         def gen():
@@ -160,7 +215,8 @@ def open_table(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = Fals
                 b = table.slice(start, batch_size).combine_chunks().to_batches()
                 b = b[0] if b else pa.RecordBatch.from_pylist([], schema=table.schema)
                 yield _with_line(b, start + 2), []
-        return TableSource(path, _schema(table.schema, with_lines), table.num_rows, gen, with_lines, "dataset")
+        return TableSource(path, _schema(table.schema, with_lines), table.num_rows, gen, with_lines, "dataset",
+                           system=system, dataset=system is not None)
     if path.is_dir():
         raise HpeError(f"{path}: expected a table file, got a folder")
     if path.stat().st_size == 0:
@@ -220,7 +276,10 @@ def _open_parquet(path, batch_size, with_lines):
             for b in f.iter_batches(batch_size=batch_size, row_groups=[rg], use_threads=True):
                 yield (_with_line(b, line) if with_lines else b), []
                 line += b.num_rows
-    return TableSource(path, _schema(schema, with_lines), pf.metadata.num_rows, gen, with_lines, "parquet")
+    meta = schema.metadata or {}
+    system = meta[b"hpe:system"].decode("utf-8", "replace") if b"hpe:system" in meta else None
+    return TableSource(path, _schema(schema, with_lines), pf.metadata.num_rows, gen, with_lines, "parquet",
+                       system=system)
 
 
 # ----------------------------------------------------------------------------------------------------- CSV
@@ -674,27 +733,48 @@ def _read_dataset(path: Path):
     """A dataset folder or archive as a pandas label table, or None for plain tables.
 
     ``.mat`` files (300W-LP/AFLW2000, angles in degrees in the ``300w_lp``
-    system) or BIWI pose files / ``db_annotations.tgz`` (angles in the
-    ``biwi`` system, see :mod:`hpe_cli.datasets.biwi`).
+    system; the 300W-LP root or ``300W-LP.zip``, see :mod:`hpe_cli.datasets.w300lp`),
+    BIWI pose files / ``db_annotations.tgz`` (angles in the ``biwi`` system,
+    see :mod:`hpe_cli.datasets.biwi`) or DAD-3DHeads (``dad3dheads`` matrices,
+    see :mod:`hpe_cli.datasets.dad3dheads`). The table's ``attrs["system"]``
+    names the system of its labels.
     """
     name = path.name.lower()
     if path.is_file() and name.endswith(".mat"):
         from ..datasets.mat import read_mat_dir
 
         return read_mat_dir(path)
+    if path.is_file() and name.endswith(".zip"):
+        from ..datasets.w300lp import is_w300lp_zip, open_w300lp
+
+        if is_w300lp_zip(path):
+            return open_w300lp(path)
+        raise HpeError(f"{path}: expected a 300W-LP zip with AFW/HELEN/IBUG/LFPW .mat members")
     is_biwi_file = path.is_file() and (name.endswith((".tgz", ".tar.gz")) or
                                        (name.startswith("frame_") and name.endswith(("_pose.txt", "_pose.bin"))))
     if path.is_dir() and any(path.glob("*.mat")):
         from ..datasets.mat import read_mat_dir
 
         return read_mat_dir(path)
+    if path.is_dir():
+        from ..datasets.w300lp import is_w300lp_root, open_w300lp
+
+        if is_w300lp_root(path):
+            return open_w300lp(path)
+    from ..datasets.dad3dheads import is_dad3dheads, read_dad3dheads
+
+    if is_dad3dheads(path):
+        return read_dad3dheads(path)
     if is_biwi_file or (path.is_dir() and next(path.rglob("frame_*_pose.*"), None) is not None):
         from ..datasets.biwi import read_biwi
 
         table = read_biwi(path)
-        return table[["file", "sequence", "frame", "pitch", "yaw", "roll", "center_x", "center_y", "center_z"]]
+        out = table[["file", "sequence", "frame", "pitch", "yaw", "roll", "center_x", "center_y", "center_z"]]
+        out.attrs["system"] = "biwi"
+        return out
     if path.is_dir():
-        raise HpeError(f"{path}: no .mat files or BIWI frame_XXXXX_pose.txt/.bin files found")
+        raise HpeError(f"{path}: no .mat files, 300W-LP subset folders, DAD-3DHeads annotations or BIWI "
+                       "frame_XXXXX_pose.txt/.bin files found")
     return None
 
 

@@ -39,6 +39,7 @@ class Config:
     max_occlusion: float = DEFAULT_MAX_OCCLUSION
     legacy: bool = False
     preset: str = "directmhp"
+    frame: str = "camera"  # "camera" or "crop" (line of sight to the helmet centre, SPEC §10)
     trust_pickle: bool = False
 
 
@@ -75,7 +76,7 @@ def relabel_people(people: ag.AgoraPeople, cfg: Config) -> dict:
     # rows without a fit carry NaN through the projection; their reason is already set
     with np.errstate(invalid="ignore", divide="ignore"):
         v = relabel_views(fit, np.arange(n), cam, cfg.system, preset=cfg.preset, legacy=cfg.legacy,
-                          landmarks=people.face3d)
+                          landmarks=people.face3d, frame=cfg.frame)
     ok = v["ok"]
     source = people.source.name
     table = {
@@ -188,7 +189,9 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
     about = {"source": "agora", "dataframes": [str(p) for p in paths], "preset": cfg.preset,
              "image_size": list(cfg.image_size), "max_occlusion": cfg.max_occlusion,
              "max_rmse_m": cfg.max_rmse if cfg.max_rmse is not None and np.isfinite(cfg.max_rmse) else None,
-             "legacy_whenet": cfg.legacy, "label": "A = E @ camR @ R_head, E = diag(1, -1, -1)"}
+             "legacy_whenet": cfg.legacy,
+             "label": "A = E @ camR @ R_head, E = diag(1, -1, -1)" if cfg.frame == "camera" else
+             "A = E @ Q.T @ camR @ R_head, Q: optical axis -> ray to the head centre (SPEC 10)"}
     meta = {**system_metadata(system), "hpe:relabel": json.dumps(about)}
     rschema = _reject_schema()
     with ExitStack() as stack:

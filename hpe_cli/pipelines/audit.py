@@ -260,7 +260,7 @@ def _batches(src, mode, path):
 
 def run_audit(input_path, system, *, report=None, plots=None, output=None, only_flagged=False,
               near_tol_deg=1.0, radians=False, use="auto", keys=(), n_examples=5, overwrite=False,
-              batch_size=65_536, progress=None, echo=None, workers=None) -> dict:
+              batch_size=65_536, progress=None, echo=None, decoder=None, workers=None) -> dict:
     """Audit ``input_path`` and write the requested outputs; return the report dict.
 
     Batches are checked and hashed on ``workers`` threads (default: up to 2)
@@ -288,8 +288,18 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
 
     src = _source(input_path, batch_size)
     columns = src.columns
-    mode = label_mode(columns, src.path) if use == "auto" else use
+    mode = label_mode(columns, src.path, system) if use == "auto" else use
     need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
+    # the system's own columns (rotvec, quaternion, 6-D, 4x4, named angles): read through the system
+    via_system = use == "auto" and (system.storage_kind != "angles" or bool(system.columns)) and \
+        all(c in columns for c in system.value_columns)
+    if via_system:
+        need = list(system.value_columns)
+    tally = None
+    if decoder:
+        from ..rotation.decoders import DecoderTally
+
+        tally = DecoderTally(decoder)
     missing = [c for c in need if c not in columns]
     if missing:
         raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
@@ -314,13 +324,23 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     flag_bits = []  # one bit a row: flagged by a check other than duplicates
     unread_examples = []
     rows = 0
+    read_mode = mode if mode in ("angles", "matrix") else "matrix"
+
     def work(batch):  # on a worker thread: numpy and Arrow release the GIL
-        cols = _label_cols(batch, mode, radians)
-        res = _checks(cols, mode, system, near_tol_deg)
+        if via_system:
+            from ..io.labels import label_values
+
+            values = label_values(batch, system, mode, radians)
+            eff = "angles" if values.ndim == 2 else "matrix"
+            cols = [np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T]
+        else:
+            eff = mode
+            cols = _label_cols(batch, mode, radians)
+        res = _checks(cols, eff, system, near_tol_deg)
         any_flag = np.zeros(batch.num_rows, dtype=bool)
         for c in CHECKS[:-1]:
             any_flag |= res[c]
-        return cols, res, any_flag, key_hashes(cols, batch, key_cols)
+        return eff, cols, res, any_flag, key_hashes(cols, batch, key_cols)
 
     def finish(batch, lines, unread, future):
         nonlocal rows, flagged, near_not_locked, unread_examples
@@ -329,25 +349,29 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
             counts["non_finite"] += len(unread)
             flagged += len(unread)
             unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[:n_examples]]
-        cols, res, any_flag, hashes = future.result()
+        eff, cols, res, any_flag, hashes = future.result()
+        if tally is not None:
+            values = np.stack(cols, axis=-1)
+            tally.add(system.to_canonical(system.from_angles(values) if eff == "angles"
+                                          else values.reshape(-1, 3, 3)))
         for c in CHECKS[:-1]:
             m = res[c]
             counts[c] += int(np.count_nonzero(m))
             want = n_examples - len(examples[c])
             if want > 0 and m.any():
                 for i in np.flatnonzero(m)[:want]:
-                    examples[c].append(_example(batch, int(i), lines[i], id_cols, cols, mode))
+                    examples[c].append(_example(batch, int(i), lines[i], id_cols, cols, eff))
         flagged += int(np.count_nonzero(any_flag))
         flag_bits.append(np.packbits(any_flag))
         near_not_locked += int(np.count_nonzero(res["near_gimbal"] & ~res["gimbal_lock"]))
         dups.add(hashes, lines)
         if hist is not None:
-            hist.add(np.stack(cols, axis=-1) if mode == "angles" else res["primary"])
+            hist.add(np.stack(cols, axis=-1) if eff == "angles" else res["primary"])
         rows += batch.num_rows
         if progress is not None:
             progress.update(batch.num_rows)
 
-    in_order(_batches(src, mode, src.path), work, finish, workers)
+    in_order(_batches(src, read_mode, src.path), work, finish, workers)
 
     counts["duplicates"] = dups.finish()
     if counts["duplicates"]:
@@ -367,6 +391,8 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
                            "duplicate_key": (list(need) + key_cols)},
               "details": {"flagged": flagged, "near_gimbal_not_locked": near_not_locked},
               "examples": examples}
+    if tally is not None:
+        result["decoder"] = tally.result()
 
     if output:
         _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians,

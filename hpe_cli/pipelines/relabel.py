@@ -33,7 +33,10 @@ DEFAULT_MAX_RMSE = 2.0
 #: views per block when projecting landmarks
 VIEW_BLOCK = 256
 
-REASONS = ("too few confident points", "bad fit", "behind camera", "outside image", "box rejected",
+#: a landmark coordinate beyond this (world units) is not a face
+ABSURD_COORD = 1e6
+
+REASONS = ("bad landmarks", "too few confident points", "bad fit", "behind camera", "outside image", "box rejected",
            "dropped by legacy rule")
 
 
@@ -134,8 +137,9 @@ def fit_faces(points, confidence=None, pairs=None, *, conf_min: float | None = N
     dict
         The :func:`~hpe_cli.geometry.similarity.fit_similarity` keys
         (``scale, R, t, rmse, n_pairs``), plus ``ok`` (N,) bool,
-        ``reason`` (N,) object (``''``, ``"too few confident points"`` or
-        ``"bad fit"``) and ``detail`` (N,) object.
+        ``reason`` (N,) object (``''``, ``"bad landmarks"`` (a coordinate
+        is infinite or beyond :data:`ABSURD_COORD`), ``"too few confident
+        points"`` or ``"bad fit"``) and ``detail`` (N,) object.
     """
     if pairs is None:
         raise ValueError("expected pairs=(landmark indices, reference-head indices)")
@@ -144,6 +148,11 @@ def fit_faces(points, confidence=None, pairs=None, *, conf_min: float | None = N
     min_pair_count = min_pairs() if min_pair_count is None else int(min_pair_count)
     points = np.asarray(points, dtype=np.float64)
     n = points.shape[0]
+    # NaN marks a missing point; inf or absurd values mark a broken face (rejected, not fitted)
+    with np.errstate(invalid="ignore"):
+        broken = ~(np.isnan(points) | (np.abs(points) <= ABSURD_COORD)).all(axis=(1, 2))
+    if broken.any():
+        points = np.where(broken[:, None, None], np.nan, points)
     dst = points[:, src_idx]
     mask = np.isfinite(dst).all(-1)
     if confidence is not None:
@@ -161,9 +170,11 @@ def fit_faces(points, confidence=None, pairs=None, *, conf_min: float | None = N
         bad = fitted & (fit["rmse"] > max_rmse)
         reason[bad] = "bad fit"
         detail[bad] = [f"rmse {r:.3g} > {max_rmse:g}" for r in fit["rmse"][bad]]
-    few = ~enough | ~fitted
+    few = (~enough | ~fitted) & ~broken
     reason[few] = "too few confident points"
     detail[few] = [f"{c} of {len(src_idx)} pairs usable, need {max(min_pair_count, 3)}" for c in count[few]]
+    reason[broken] = "bad landmarks"
+    detail[broken] = f"a landmark coordinate is infinite or beyond {ABSURD_COORD:g}"
     fit["ok"] = reason == ""
     fit["reason"] = reason
     fit["detail"] = detail
@@ -171,7 +182,7 @@ def fit_faces(points, confidence=None, pairs=None, *, conf_min: float | None = N
 
 
 def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy: bool = False,
-                  landmarks=None) -> dict:
+                  landmarks=None, frame: str = "camera") -> dict:
     """Labels, boxes and 2-D landmarks of (face, camera) views.
 
     Parameters
@@ -192,6 +203,10 @@ def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy
         what it drops; otherwise the corrected formula.
     landmarks : array_like, shape (N, L, 3), optional
         3-D landmarks to project into each view.
+    frame : {"camera", "crop"}
+        ``camera``: labels relative to the camera's optical axis (SPEC §6);
+        ``crop``: relative to the ray through the helmet centre (SPEC §10,
+        :mod:`hpe_cli.geometry.line_of_sight`), with ``ray_angle`` returned.
 
     Returns
     -------
@@ -216,8 +231,23 @@ def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy
     detail[take] = box["detail"][take]
     A = label_matrices(Rh, cam["R"])
     out = {"bbox": box["bbox"], "A": A}
+    if frame == "crop":
+        from ..geometry.line_of_sight import camera_to_crop_labels
+        from ..geometry.reference import helmet_preset
+
+        off = np.asarray(helmet_preset(preset).offset, dtype=np.float64)
+        world = fit["scale"][face, None] * (Rh @ off) + fit["t"][face]
+        centre = np.einsum("nij,nj->ni", np.broadcast_to(cam["R"], (len(face), 3, 3)), world) \
+            + np.broadcast_to(np.asarray(cam["t"], dtype=np.float64).reshape(-1, 3), (len(face), 3))
+        A, out["ray_angle"] = camera_to_crop_labels(A, centre)
+        out["A"] = A
+    elif frame != "camera":
+        raise ValueError(f"expected frame 'camera' or 'crop', got {frame!r}")
     if legacy:
-        pyr, kept = legacy_whenet_labels(Rh, cam["R"])
+        cam_R = cam["R"]
+        if frame == "crop":  # WHENet's chain applied to the crop camera's rotation Q.T @ cam_R
+            cam_R = E @ A @ np.swapaxes(Rh, -1, -2)
+        pyr, kept = legacy_whenet_labels(Rh, cam_R)
         drop = (reason == "") & ~kept & np.isfinite(A).all((1, 2))
         reason[drop] = "dropped by legacy rule"
         detail[drop] = "no triple with |pitch| < 90 and |roll| < 90"
@@ -267,6 +297,8 @@ def view_label_columns(views: dict, fit: dict, fit_index, legacy: bool) -> dict:
     if legacy:
         for k, col in enumerate(LEGACY_COLS):
             cols[col] = views["legacy_pyr"][ok, k]
+    if "ray_angle" in views:
+        cols["ray_angle"] = views["ray_angle"][ok]
     if "lm2d" in views:
         # one contiguous row per output column (strided columns cost a copy each in Arrow)
         lm2d = views["lm2d"][ok]

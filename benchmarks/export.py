@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Benchmark ``hpe export`` (crops/s) against a bare OpenCV loop on the same images, in the same run.
+
+Makes ``--images`` synthetic 1920x1080 JPEG frames (smooth gradients plus noise, quality 90) with
+``--heads`` head boxes each (about 180 px, one partly outside the frame), and a label table. Then times:
+
+1. the floor: for each image ``cv2.imdecode`` once, then per head slice + ``cv2.resize`` to SIZE x SIZE +
+   ``cv2.imencode`` + write the file (no padding, no labels, no bookkeeping);
+2. ``hpe export --layout whenet --square --size SIZE`` with ``--workers 1`` and ``--workers 2``, each in a fresh
+   process (the whole command: reading the table, labels, rejects, annotation.txt, staging and rename).
+
+Each line prints crops/s, the ratio to the floor and the peak RSS of that process.
+
+Usage::
+
+    python benchmarks/export.py                     # 200 frames x 3 heads, size 224
+    python benchmarks/export.py --images 1000 --heads 4 --size 112
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def make_data(folder: Path, n_images: int, heads: int, seed: int = 0):
+    import cv2
+    import pandas as pd
+
+    rng = np.random.default_rng(seed)
+    (folder / "img").mkdir(parents=True)
+    yy, xx = np.mgrid[0:1080, 0:1920]
+    base = np.stack([(xx / 8) % 256, (yy / 5) % 256, ((xx + yy) / 11) % 256], -1).astype(np.uint8)
+    rows = []
+    for i in range(n_images):
+        img = cv2.add(base, rng.integers(0, 40, base.shape, dtype=np.uint8))
+        cv2.imwrite(str(folder / "img" / f"{i:06d}.jpg"), img, [cv2.IMWRITE_JPEG_QUALITY, 90])
+        for h in range(heads):
+            x = 1800 if h == heads - 1 else 100 + 400 * h
+            rows.append({"image": f"img/{i:06d}.jpg", "sequence": "bench", "camera": f"00_{h:02d}", "frame": i,
+                         "person_id": h, "bbox_x": float(x), "bbox_y": 300.0 + 10 * h, "bbox_w": 180.0,
+                         "bbox_h": 180.0, "pitch": float(rng.uniform(-60, 60)), "yaw": float(rng.uniform(-80, 80)),
+                         "roll": float(rng.uniform(-40, 40))})
+    pd.DataFrame(rows).to_parquet(folder / "labels.parquet")
+    return folder / "labels.parquet", rows
+
+
+def floor_loop(folder: Path, rows, size: int, out: Path) -> float:
+    import cv2
+
+    cv2.setNumThreads(1)
+    out.mkdir()
+    by_image = {}
+    for r in rows:
+        by_image.setdefault(r["image"], []).append(r)
+    t0 = time.perf_counter()
+    k = 0
+    for image, heads in by_image.items():
+        with open(folder / image, "rb") as fh:
+            img = cv2.imdecode(np.frombuffer(fh.read(), np.uint8), cv2.IMREAD_COLOR)
+        for r in heads:
+            x0, y0 = int(r["bbox_x"]), int(r["bbox_y"])
+            crop = img[max(y0, 0):y0 + 180, max(x0, 0):x0 + 180]
+            crop = cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA)
+            ok, buf = cv2.imencode(".jpg", crop, [cv2.IMWRITE_JPEG_QUALITY, 95])
+            buf.tofile(str(out / f"{k}.jpg"))
+            k += 1
+    return time.perf_counter() - t0
+
+
+def run_hpe(labels: Path, images: Path, out: Path, size: int, workers: int):
+    code = ("import resource, sys, time; from hpe_cli.cli.main import cli; t0 = time.perf_counter()\n"
+            "try:\n    cli(sys.argv[1:])\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
+            "dt = time.perf_counter() - t0\n"
+            "hwm = [int(l.split()[1]) for l in open('/proc/self/status') if l.startswith('VmHWM')][0]\n"
+            "rss = max(hwm, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+            "print(dt, rss)")
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    r = subprocess.run([sys.executable, "-c", code, "export", str(labels), "-o", str(out), "--layout", "whenet",
+                        "--images", str(images), "--square", "--size", str(size), "--workers", str(workers), "-q"],
+                       capture_output=True, text=True, env=env, check=True)
+    dt, rss = r.stdout.split()
+    return float(dt), int(rss)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--images", type=int, default=200)
+    ap.add_argument("--heads", type=int, default=3)
+    ap.add_argument("--size", type=int, default=224)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        labels, rows = make_data(tmp / "data", args.images, args.heads)
+        n = len(rows)
+        print(f"{args.images} frames 1920x1080, {n} heads, crops {args.size}x{args.size}, JPEG q95")
+        # the floor runs before and after the hpe runs (the machine may be shared): their mean is the floor
+        t1 = floor_loop(tmp / "data", rows, args.size, tmp / "floor1")
+        rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        runs = [(w, *run_hpe(labels, tmp / "data", tmp / f"out{w}", args.size, w)) for w in (1, 2)]
+        t2 = floor_loop(tmp / "data", rows, args.size, tmp / "floor2")
+        t_floor = (t1 + t2) / 2
+        print(f"floor   bare imdecode+resize+imencode loop: {n / t_floor:8.1f} crops/s  ({t1:.2f} s and {t2:.2f} s, "
+              f"peak RSS {rss0 / 1024:.0f} MB)")
+        for w, dt, rss in runs:
+            print(f"hpe export --workers {w}:                  {n / dt:8.1f} crops/s  ({dt:.2f} s, "
+                  f"{dt / t_floor:.2f}x the floor, peak RSS {rss / 1024:.0f} MB)")
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,97 @@
+"""``column_options``: the --columns-map/--delimiter/--no-header/--names/--input-format options of every command
+that reads a table (see :mod:`hpe_cli.io.columns`). No numpy or pyarrow import here: `hpe --help` stays fast."""
+from __future__ import annotations
+
+import contextvars
+import functools
+
+import click
+
+INPUT_FORMATS = ("whenet", "opal23", "img2pose-biwi", "celeba-pose", "coco")
+
+
+def _split_names(ctx, param, value):
+    if value is None:
+        return None
+    names = [v.strip() for v in value.split(",")]
+    if not all(names):
+        raise click.BadParameter(f"expected comma-separated names such as image,yaw,pitch,roll, got {value!r}")
+    if len(set(names)) != len(names):
+        raise click.BadParameter(f"expected distinct names, got {value!r}")
+    return names
+
+
+def _delimiter(ctx, param, value):
+    if value is None:
+        return None
+    v = {"\\t": "\t", "tab": "\t", "space": " ", "semicolon": ";", "comma": ","}.get(value, value)
+    if len(v) != 1 or v in "\r\n\"":
+        raise click.BadParameter(f"expected one character such as ';' or '\\t' (or tab, space), got {value!r}")
+    return v
+
+
+def _columns_map(ctx, param, value):
+    if value is None:
+        return None
+    from ..errors import HpeError
+    from ..io.columns import parse_columns_map
+
+    try:
+        parse_columns_map(value)
+    except HpeError as exc:
+        raise click.BadParameter(str(exc).replace("--columns-map: ", "")) from None
+    return value
+
+
+_ACTIVE = contextvars.ContextVar("hpe_table_options", default=None)
+
+
+def active_table_options() -> dict | None:
+    """The ``open_table`` options of the running command (set by :func:`column_options`), or None."""
+    return _ACTIVE.get()
+
+
+def column_options(f):
+    """Click decorator adding ``--columns-map``, ``--delimiter``, ``--no-header``, ``--names``, ``--input-format``.
+
+    The command function never sees these values: they are held for the
+    duration of the command and every :func:`~hpe_cli.io.readers.open_table`
+    call that passes no table options of its own uses them, so adding this
+    one decorator is all a command needs.
+    """
+    @functools.wraps(f)
+    def wrapper(*args, **kwargs):
+        opts = pop_table_kwargs(kwargs)
+        given = any(v not in (None, True) for v in opts.values())
+        token = _ACTIVE.set(opts if given else None)
+        try:
+            return f(*args, **kwargs)
+        finally:
+            _ACTIVE.reset(token)
+
+    g = wrapper
+    g = click.option("--input-format", type=click.Choice(INPUT_FORMATS), default=None,
+                     help="Read INPUT as a named label list: whenet (annotation.txt), opal23, img2pose-biwi, "
+                          "celeba-pose (CelebAMask-HQ-pose-anno.txt) or coco (DirectMHP JSON). "
+                          "COCO .json and annotation.txt are recognised without it.")(g)
+    g = click.option("--names", callback=_split_names, metavar="A,B,...",
+                     help="Column names of a headerless file, in order (with --no-header).")(g)
+    g = click.option("--no-header", is_flag=True, help="INPUT has no header line (name columns with --names).")(g)
+    g = click.option("--delimiter", callback=_delimiter, metavar="CHAR",
+                     help="Field delimiter of a text INPUT (e.g. ';', tab, space); any file suffix.")(g)
+    g = click.option("--columns-map", "columns_map", callback=_columns_map, metavar="NAME=SOURCE,...",
+                     help="Rename INPUT columns to hpe's names, e.g. pitch=Pitch,yaw=Yaw,roll=Roll "
+                          "(also r00..r22, rx,ry,rz, qw..qz, image, bbox_x.., person, ...).")(g)
+    return g
+
+
+def table_kwargs(columns_map=None, delimiter=None, no_header=False, names=None, input_format=None) -> dict:
+    """``open_table`` keyword arguments from :func:`column_options` values."""
+    return {"columns": columns_map, "delimiter": delimiter, "header": not no_header, "names": names,
+            "input_format": input_format}
+
+
+def pop_table_kwargs(kwargs: dict) -> dict:
+    """Remove the :func:`column_options` values from a command's kwargs and return ``open_table`` kwargs."""
+    return table_kwargs(kwargs.pop("columns_map", None), kwargs.pop("delimiter", None),
+                        kwargs.pop("no_header", False), kwargs.pop("names", None), kwargs.pop("input_format", None))

@@ -1,0 +1,527 @@
+"""Column maps, delimiters, headerless lists and the named label-list formats.
+
+Everything here sits on top of :func:`hpe_cli.io.readers.open_table`: it
+renames columns (``--columns-map pitch=Pitch,yaw=Yaw,roll=Roll``), reads
+delimited text with or without a header (``--delimiter ';' --no-header
+--names image,yaw,pitch,roll``), and reads the label lists the field ships
+(``--input-format``):
+
+``whenet``
+    WHENet's ``annotation.txt``: ``image,yaw,pitch,roll`` per line, no header
+    (the layout :mod:`hpe_cli.io.whenet_txt` writes, after WHENet's data
+    preparation; angles in the ``whenet`` system).
+``opal23``
+    OPAL's annotation lists (``pcr-upm/opal23_headpose``, ``annotations/*_ann*.txt``,
+    read by ``test/opal23_headpose_panoptic.py::load_annotations``): ``;``
+    separated, a first line ``#;image;x_min;y_min;w;h;yaw;pitch;roll`` naming
+    the fields after the ``#`` marker, ``@;NAME`` lines switching the database
+    (skipped here), and in the AFLW2000 list ``#;image;identity;yaw;pitch;roll;pt_x;pt_y``
+    with the landmark x/y pairs filling the rest of the line.
+``img2pose-biwi``
+    img2pose's ``evaluation/jupyter_notebooks/BIWI_annotations.txt``:
+    ``path pitch yaw roll``, space separated, no header (its notebook reads it
+    with ``pd.read_csv(delimiter=" ", header=None)``).
+``celeba-pose``
+    CelebAMask-HQ ``CelebAMask-HQ-pose-anno.txt``: a first line with the count,
+    a second line ``Yaw Pitch Raw`` ('Raw' is the dataset's typo for roll),
+    then ``<n>.jpg yaw pitch roll`` space separated.
+``coco``
+    COCO JSON in DirectMHP's schema (``images`` + ``annotations`` with
+    ``euler_angles = [pitch, yaw, roll]`` and ``bbox = [x, y, w, h]``), one row
+    per annotation.
+
+Every row keeps its 1-based file line (header = line 1) in ``__line__`` when
+asked (``with_lines=True``), so rejects can name it; for COCO JSON the number
+is the 1-based position of the annotation in ``annotations``.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import HpeError
+
+LINE_COL = "__line__"
+from ..cli.table_options import INPUT_FORMATS  # noqa: E402
+#: rotation system of the angles each named format holds (None: the list does not say)
+FORMAT_SYSTEMS = {"whenet": "whenet", "opal23": None, "img2pose-biwi": "300w_lp", "celeba-pose": None, "coco": None}
+#: OPAL field names -> hpe column names
+_OPAL_NAMES = {"x_min": "bbox_x", "y_min": "bbox_y", "w": "bbox_w", "h": "bbox_h"}
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\- ]*$")
+
+
+# ------------------------------------------------------------------------------------------- column maps
+def parse_columns_map(text) -> dict:
+    """Parse ``"pitch=Pitch,yaw=Yaw"`` into ``{"Pitch": "pitch", "Yaw": "yaw"}`` (source -> hpe name).
+
+    ``text`` may also be a mapping ``{hpe_name: source}`` (the Python API form).
+    """
+    if text is None or text == "" or text == {}:
+        return {}
+    if isinstance(text, dict):
+        pairs = list(text.items())
+    else:
+        pairs = []
+        for part in str(text).split(","):
+            part = part.strip()
+            if not part:
+                continue
+            if "=" not in part:
+                raise HpeError(f"--columns-map: expected NAME=SOURCE pairs such as pitch=Pitch, got {part!r}")
+            target, source = (s.strip() for s in part.split("=", 1))
+            pairs.append((target, source))
+    out, targets = {}, set()
+    for target, source in pairs:
+        if not target or not source:
+            raise HpeError(f"--columns-map: expected NAME=SOURCE with both names non-empty, got {target}={source}")
+        if target in targets:
+            raise HpeError(f"--columns-map: {target!r} is mapped twice")
+        if source in out:
+            raise HpeError(f"--columns-map: source column {source!r} is mapped twice")
+        targets.add(target)
+        out[source] = target
+    return out
+
+
+class LenientMap(str):
+    """A command-wide ``--columns-map``: applied to each input that has the source columns.
+
+    With several inputs (``hpe evaluate PRED GT``) one map serves them all: an
+    input is renamed when it has at least one of the mapped source columns,
+    and left alone when it has none.
+    """
+
+
+def apply_columns_map(src, columns):
+    """A :class:`~hpe_cli.io.readers.TableSource` whose columns are renamed by ``columns``.
+
+    The source columns must exist; a renamed column may not collide with a
+    column that is kept under the same name.
+    """
+    mapping = parse_columns_map(columns)
+    if not mapping:
+        return src
+    import pyarrow as pa
+
+    names = list(src.schema.names)
+    if LINE_COL in mapping or LINE_COL in mapping.values():
+        raise HpeError(f"--columns-map: {LINE_COL} is reserved for line numbers")
+    missing = [s for s in mapping if s not in names]
+    if isinstance(columns, LenientMap):
+        if len(missing) == len(mapping):
+            return src
+        mapping = {k: v for k, v in mapping.items() if k in names}
+        missing = []
+    if missing:
+        raise HpeError(f"{src.path}: --columns-map names column(s) {', '.join(map(repr, missing))} that the table "
+                       f"does not have; found {', '.join(n for n in names if n != LINE_COL)}")
+    new = [mapping.get(n, n) for n in names]
+    dup = sorted({n for n in new if new.count(n) > 1})
+    if dup:
+        raise HpeError(f"{src.path}: --columns-map would give two columns named {', '.join(dup)} "
+                       f"(rename or drop the existing one)")
+    schema = pa.schema([f.with_name(n) for f, n in zip(src.schema, new)], metadata=src.schema.metadata)
+    inner = src._batches
+
+    def batches():
+        for b, rejects in inner():
+            yield b.rename_columns([mapping.get(n, n) for n in b.schema.names]), rejects
+
+    return replace(src, schema=schema, _batches=batches)
+
+
+# ------------------------------------------------------------------------------------------- text lists
+def _first_lines(path: Path, n: int) -> list:
+    out = []
+    try:
+        with open(path, encoding="utf-8", errors="replace", newline="") as fh:
+            for _ in range(n):
+                line = fh.readline()
+                if not line:
+                    break
+                out.append(line.rstrip("\r\n"))
+    except OSError as exc:
+        raise HpeError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    return out
+
+
+def _line_numbers(first_line: int, start: int, count: int, skipped: list) -> np.ndarray:
+    """1-based file lines of data rows ``start .. start+count-1``.
+
+    ``skipped`` are the (sorted) file lines that produced no row (comment and
+    malformed lines the parser skipped). Row ``k`` sits on line
+    ``first_line + k + #{j : skipped[j] - j <= first_line + k}``.
+    """
+    k = np.arange(start, start + count, dtype=np.int64) + first_line
+    if not skipped:
+        return k
+    gaps = np.asarray(skipped, dtype=np.int64) - np.arange(len(skipped), dtype=np.int64)
+    return k + np.searchsorted(gaps, k, side="right")
+
+
+def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: bool = True, names=None,
+              skip_lines: int = 0, comment_prefixes=(), quoting: bool = True, string_columns=(),
+              with_lines: bool = False, system=None):
+    """Stream a delimited text table.
+
+    Parameters
+    ----------
+    delimiter : str
+        One character (``"\\t"`` for tabs).
+    header : bool
+        The first line (after ``skip_lines``) names the columns; else ``names``
+        (or ``f0, f1, ...``) name them.
+    skip_lines : int
+        Lines before the header or the data (counts, banners).
+    comment_prefixes : tuple of str
+        Lines starting with one of these (after the header) are skipped.
+    string_columns : iterable of str
+        Columns read as text whatever they look like (image names).
+    with_lines : bool
+        Add ``__line__`` (int64, 1-based file line of each row).
+    """
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    from .readers import Reject, TableSource
+
+    path = Path(path)
+    if not path.is_file():
+        raise HpeError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise HpeError(f"{path}: empty file")
+    if delimiter is None or len(delimiter) != 1 or delimiter in "\r\n\"":
+        raise HpeError(f"--delimiter: expected one character such as ',' ';' or '\\t', got {delimiter!r}")
+    if names is not None:
+        names = [str(n).strip() for n in names]
+        if len(set(names)) != len(names) or not all(names):
+            raise HpeError(f"--names: expected distinct non-empty names, got {','.join(names)}")
+    skipped: list = []
+    bad: list = []
+    prefixes = tuple(comment_prefixes)
+
+    def handler(row):
+        text = row.text or ""
+        if row.number is not None:
+            if text.strip() == "" or (prefixes and text.startswith(prefixes)):
+                skipped.append(int(row.number))
+            else:
+                skipped.append(int(row.number))
+                bad.append((int(row.number), row.expected_columns, row.actual_columns, text))
+        return "skip"
+
+    read_opts = pcsv.ReadOptions(use_threads=False, block_size=1 << 22, skip_rows=skip_lines,
+                                 column_names=None if header else names,
+                                 autogenerate_column_names=(not header and names is None))
+    parse_opts = pcsv.ParseOptions(delimiter=delimiter, ignore_empty_lines=False, invalid_row_handler=handler,
+                                   quote_char='"' if quoting else False, newlines_in_values=False)
+    string_columns = list(string_columns)
+
+    def make_reader():
+        probe = pcsv.open_csv(path, read_options=read_opts, parse_options=parse_opts)
+        cols = probe.schema.names
+        types = {c: pa.string() for c in string_columns if c in cols}
+        skipped.clear()  # the probe parsed the first block too
+        bad.clear()
+        return pcsv.open_csv(path, read_options=read_opts, parse_options=parse_opts,
+                             convert_options=pcsv.ConvertOptions(column_types=types, strings_can_be_null=True))
+
+    try:
+        reader = make_reader()
+    except (pa.ArrowInvalid, OSError, UnicodeDecodeError) as exc:
+        raise HpeError(f"{path}: cannot read: {' '.join(str(exc).split())[:300]}") from None
+    schema = reader.schema
+    if header:
+        hdr = list(schema.names)
+        if len(set(hdr)) != len(hdr):
+            raise HpeError(f"{path}: row {skip_lines + 1}: the header names a column twice "
+                           f"({', '.join(sorted({h for h in hdr if hdr.count(h) > 1}))})")
+    first_line = skip_lines + (2 if header else 1)
+    base_schema = schema
+    schema = schema.append(pa.field(LINE_COL, pa.int64())) if with_lines else schema
+    line_schema = base_schema.append(pa.field(LINE_COL, pa.int64()))
+    first_reader = [reader]
+
+    def take_rejects():
+        out = [Reject(line, f"expected {want} fields separated by {delimiter!r}, got {got}", text[:200])
+               for line, want, got, text in bad]
+        bad.clear()
+        return out
+
+    def batches():
+        rdr = first_reader.pop() if first_reader else make_reader()
+        start = 0
+        for b in rdr:
+            n = b.num_rows
+            lines = _line_numbers(first_line, start, n, skipped)
+            start += n
+            # an empty line parses as a row of nulls: it is not a row of the table
+            empty = None
+            for col in b.columns:
+                v = col.is_null().to_numpy(zero_copy_only=False)
+                empty = v if empty is None else (empty & v)
+            if empty is not None and empty.any():
+                keep = ~empty
+                b = b.filter(pa.array(keep))
+                lines = lines[keep]
+            b = pa.RecordBatch.from_arrays(list(b.columns) + [pa.array(lines, type=pa.int64())], schema=line_schema)
+            yield b, take_rejects()
+        if bad:
+            yield pa.RecordBatch.from_pylist([], schema=line_schema), take_rejects()
+
+    return TableSource(path, schema, None, batches, with_lines, "text", system=system)
+
+
+def _opal23(path, batch_size, with_lines):
+    first = _first_lines(path, 2)
+    if not first or not first[0].startswith("#;"):
+        raise HpeError(f"{path}: row 1: expected OPAL's header '#;image;...;yaw;pitch;roll', "
+                       f"got {(first[0] if first else '')[:80]!r}")
+    fields = [f.strip() for f in first[0].split(";")[1:]]
+    base = [_OPAL_NAMES.get(f, f) for f in fields]
+    if len(base) >= 2 and base[-2] == "pt_x" and base[-1].startswith("pt_y"):
+        base = base[:-2]
+        data = [ln for ln in _first_lines(path, 50)[1:] if ln and not ln.startswith(("@", "#"))]
+        n_extra = (len(data[0].split(";")) - len(base)) if data else 0
+        if n_extra < 0 or n_extra % 2:
+            raise HpeError(f"{path}: row 2: expected {len(base)} fields then x;y landmark pairs, "
+                           f"got {len(base) + n_extra} fields")
+        base += [f"lm{i}_{a}" for i in range(n_extra // 2) for a in "xy"]
+    for need in ("image", "yaw", "pitch", "roll"):
+        if need not in base:
+            raise HpeError(f"{path}: row 1: expected a field named {need!r} in OPAL's header, "
+                           f"got {';'.join(fields)}")
+    return open_text(path, batch_size, delimiter=";", header=False, names=base, skip_lines=1,
+                     comment_prefixes=("@", "#"), quoting=False, string_columns=("image", "identity"),
+                     with_lines=with_lines, system=FORMAT_SYSTEMS["opal23"])
+
+
+def _celeba(path, batch_size, with_lines):
+    first = _first_lines(path, 2)
+    try:
+        int(first[0].strip())
+        ok = len(first) == 2 and [w.lower() for w in first[1].split()] == ["yaw", "pitch", "raw"]
+    except (ValueError, IndexError):
+        ok = False
+    if not ok:
+        got = " / ".join(first)[:80]
+        raise HpeError(f"{path}: row 1: expected CelebAMask-HQ's count line then 'Yaw Pitch Raw', got {got!r}")
+    return open_text(path, batch_size, delimiter=" ", header=False, names=["image", "yaw", "pitch", "roll"],
+                     skip_lines=2, quoting=False, string_columns=("image",), with_lines=with_lines,
+                     system=FORMAT_SYSTEMS["celeba-pose"])
+
+
+# ------------------------------------------------------------------------------------------- COCO JSON
+def _load_json(path: Path):
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise HpeError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        import orjson
+
+        return orjson.loads(data)
+    except ImportError:  # pragma: no cover - orjson is a dependency
+        import json
+
+        try:
+            return json.loads(data)
+        except ValueError as exc:
+            raise HpeError(f"{path}: not valid JSON ({exc})") from None
+    except ValueError as exc:
+        raise HpeError(f"{path}: not valid JSON ({' '.join(str(exc).split())[:160]})") from None
+
+
+def is_coco(doc) -> bool:
+    return isinstance(doc, dict) and isinstance(doc.get("images"), list) and isinstance(doc.get("annotations"), list)
+
+
+def coco_frame(doc, path="<coco>"):
+    """One row per COCO annotation (DirectMHP's schema) as a pandas DataFrame.
+
+    Columns: ``image`` (the image's ``file_name``), ``image_id``,
+    ``annotation_id``, ``image_width``, ``image_height``, ``bbox_x, bbox_y,
+    bbox_w, bbox_h`` (``bbox = [x, y, w, h]``), ``pitch, yaw, roll``
+    (``euler_angles = [pitch, yaw, roll]``, degrees), ``lm{i}_x, lm{i}_y``
+    from ``face2d_pts = [[x...], [y...]]`` when every annotation has the same
+    number of points (-1 = missing, read as NaN), and ``__line__`` = the
+    1-based position of the annotation.
+    """
+    import pandas as pd
+
+    if not is_coco(doc):
+        raise HpeError(f"{path}: expected a COCO object with 'images' and 'annotations' lists")
+    images = {}
+    for k, im in enumerate(doc["images"]):
+        if not isinstance(im, dict) or "id" not in im or "file_name" not in im:
+            raise HpeError(f"{path}: images[{k}]: expected an object with 'id' and 'file_name'")
+        images[im["id"]] = im
+    anns = doc["annotations"]
+    n = len(anns)
+    cols = {"image": [], "image_id": [], "annotation_id": [], "image_width": [], "image_height": []}
+    box = np.full((n, 4), np.nan)
+    ang = np.full((n, 3), np.nan)
+    pts = []
+    for k, a in enumerate(anns):
+        where = f"{path}: annotation {k + 1}"
+        if not isinstance(a, dict):
+            raise HpeError(f"{where}: expected an object, got {type(a).__name__}")
+        im = images.get(a.get("image_id"))
+        if im is None:
+            raise HpeError(f"{where}: image_id {a.get('image_id')!r} is not in 'images'")
+        cols["image"].append(str(im["file_name"]))
+        cols["image_id"].append(a.get("image_id"))
+        cols["annotation_id"].append(a.get("id"))
+        cols["image_width"].append(im.get("width"))
+        cols["image_height"].append(im.get("height"))
+        b, e = a.get("bbox"), a.get("euler_angles")
+        if b is not None:
+            if not (isinstance(b, list) and len(b) == 4):
+                raise HpeError(f"{where}: expected bbox [x, y, w, h], got {str(b)[:60]}")
+            box[k] = [np.nan if v is None else v for v in b]
+        if e is not None:
+            if not (isinstance(e, list) and len(e) == 3):
+                raise HpeError(f"{where}: expected euler_angles [pitch, yaw, roll], got {str(e)[:60]}")
+            ang[k] = [np.nan if v is None else v for v in e]
+        pts.append(a.get("face2d_pts"))
+    frame = pd.DataFrame(cols)
+    for i, c in enumerate(("bbox_x", "bbox_y", "bbox_w", "bbox_h")):
+        frame[c] = box[:, i]
+    for i, c in enumerate(("pitch", "yaw", "roll")):
+        frame[c] = ang[:, i]
+    sizes = {len(p[0]) for p in pts if isinstance(p, list) and len(p) == 2 and isinstance(p[0], list)}
+    if n and len(sizes) == 1 and all(isinstance(p, list) and len(p) == 2 for p in pts):
+        L = sizes.pop()
+        if L and all(len(p[0]) == L and len(p[1]) == L for p in pts):
+            xy = np.asarray(pts, dtype=np.float64)  # (n, 2, L)
+            xy = np.where((xy[:, :1] == -1) | (xy[:, 1:] == -1), np.nan, xy)
+            extra = {}
+            for i in range(L):
+                extra[f"lm{i}_x"], extra[f"lm{i}_y"] = xy[:, 0, i], xy[:, 1, i]
+            frame = pd.concat([frame, pd.DataFrame(extra)], axis=1)
+    frame[LINE_COL] = np.arange(1, n + 1, dtype=np.int64)
+    return frame
+
+
+def _frame_source(path, frame, batch_size, with_lines, system=None):
+    import pyarrow as pa
+
+    from .readers import TableSource
+
+    table = pa.Table.from_pandas(frame, preserve_index=False)  # carries __line__
+    schema = table.schema if with_lines else table.schema.remove(table.schema.get_field_index(LINE_COL))
+
+    def batches():
+        for b in table.to_batches(max_chunksize=batch_size):
+            yield b, []
+
+    return TableSource(Path(path), schema, table.num_rows, batches, with_lines, "json", system=system)
+
+
+# ------------------------------------------------------------------------------------------- dispatch
+def sniff_format(path) -> str | None:
+    """The named format a file unambiguously is, from its name and first line, else None."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    name = path.name.lower()
+    if name.endswith(".json"):
+        return "coco-or-json"
+    if name == "annotation.txt":
+        return "whenet"
+    if name == "celebamask-hq-pose-anno.txt":
+        return "celeba-pose"
+    if name == "biwi_annotations.txt":
+        return "img2pose-biwi"
+    if name.endswith(".txt"):
+        first = _first_lines(path, 1)
+        if first and first[0].startswith("#;"):
+            return "opal23"
+    return None
+
+
+def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimiter=None, header: bool = True,
+                   names=None, with_lines: bool = False):
+    """Open ``path`` as a named input format or delimited text; None when neither applies.
+
+    With ``input_format=None`` the format is sniffed (``.json`` with COCO keys,
+    ``annotation.txt``, ``CelebAMask-HQ-pose-anno.txt``, a ``.txt`` whose first
+    line starts with ``#;``); a plain ``.csv``/``.parquet`` without
+    ``delimiter``/``header=False``/``names`` returns None (the core reader
+    handles it).
+    """
+    path = Path(path)
+    if input_format is not None and input_format not in INPUT_FORMATS:
+        raise HpeError(f"--input-format: expected one of {', '.join(INPUT_FORMATS)}, got {input_format!r}")
+    if input_format is not None and (delimiter is not None or not header or names):
+        raise HpeError(f"--input-format {input_format} fixes the delimiter and the column names; "
+                       "drop --delimiter/--no-header/--names (use --columns-map to rename)")
+    fmt = input_format
+    if fmt is None and delimiter is None and header and not names:
+        fmt = sniff_format(path)
+        if fmt == "coco-or-json":
+            doc = _load_json(path)
+            if is_coco(doc):
+                return _frame_source(path, coco_frame(doc, path), batch_size, with_lines)
+            from ..datasets.dad3dheads import is_dad_metadata
+
+            if is_dad_metadata(doc):
+                return None  # a dataset reader takes it
+            raise HpeError(f"{path}: expected COCO JSON (an object with 'images' and 'annotations'), "
+                           f"got {type(doc).__name__} with keys "
+                           f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}")
+    if fmt is None:
+        if delimiter is None and header and not names:
+            return None
+        if not path.is_file():
+            raise HpeError(f"{path}: --delimiter/--no-header/--names apply to a text file, not a folder")
+        if path.suffix.lower() in (".parquet", ".pq"):
+            raise HpeError(f"{path}: --delimiter/--no-header/--names apply to delimited text, not Parquet")
+        if names and header:
+            raise HpeError("--names goes with --no-header (with a header line, use --columns-map to rename)")
+        delim = delimiter if delimiter is not None else ("\t" if path.suffix.lower() == ".tsv" else ",")
+        return open_text(path, batch_size, delimiter=delim, header=header, names=names,
+                         string_columns=("image", "file"), with_lines=with_lines)
+    if not path.is_file():
+        raise HpeError(f"{path}: --input-format {fmt} reads a file, got a folder")
+    if fmt == "coco":
+        return _frame_source(path, coco_frame(_load_json(path), path), batch_size, with_lines)
+    if fmt == "whenet":
+        return open_text(path, batch_size, delimiter=",", header=False, names=["image", "yaw", "pitch", "roll"],
+                         quoting=False, string_columns=("image",), with_lines=with_lines,
+                         system=FORMAT_SYSTEMS["whenet"])
+    if fmt == "img2pose-biwi":
+        return open_text(path, batch_size, delimiter=" ", header=False, names=["image", "pitch", "yaw", "roll"],
+                         quoting=False, string_columns=("image",), with_lines=with_lines,
+                         system=FORMAT_SYSTEMS["img2pose-biwi"])
+    if fmt == "celeba-pose":
+        return _celeba(path, batch_size, with_lines)
+    if fmt == "opal23":
+        return _opal23(path, batch_size, with_lines)
+    raise AssertionError(fmt)
+
+
+def label_system(src, requested):
+    """The system to read ``src``'s labels in: the dataset's own for dataset readers, else ``requested``.
+
+    ``.mat`` files always hold ``300w_lp`` angles (``Pose_Para``), BIWI files
+    ``biwi``, DAD-3DHeads ``dad3dheads``; a command's ``--system`` then names
+    the system its *output* (or captions) use, and the labels are converted.
+    """
+    if getattr(src, "dataset", False) and src.system:
+        from ..rotation.systems import get_system
+
+        try:
+            return get_system(src.system)
+        except Exception:  # a dataset system not built in yet (dad3dheads before its TOML lands)
+            return requested
+    return requested
+
+
+# ------------------------------------------------------------------------------------------- click
+# the decorator lives in a module without numpy/pyarrow imports, so `hpe --help` stays fast
+from ..cli.table_options import (active_table_options, column_options, pop_table_kwargs,  # noqa: E402,F401
+                                 table_kwargs)

@@ -1,0 +1,61 @@
+"""Run independent units of work on Dask distributed (optional extra ``dask``).
+
+The same unit functions that local worker processes run are submitted to a
+Dask cluster; each unit writes its own part files (so the cluster's workers
+must see the same file system as the client, as a shared disk or a single
+machine does) and returns only small counts. Results are yielded in
+submission order, so the output does not depend on which worker ran what.
+``address="local"`` starts a ``LocalCluster`` of ``workers`` single-threaded
+processes (for testing and single machines). Dask is imported lazily.
+"""
+from __future__ import annotations
+
+from ..errors import HpeError
+
+
+def _client(address: str, workers: int):
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise HpeError("--scheduler needs Dask distributed: pip install 'hpe[dask]'") from None
+    if address == "local":
+        cluster = LocalCluster(n_workers=max(1, int(workers)), threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=40)
+        return Client(cluster), cluster
+    try:
+        return Client(address, timeout="30s"), None
+    except (OSError, TimeoutError) as exc:
+        raise HpeError(f"--scheduler {address}: cannot connect ({exc})") from None
+
+
+def run_tasks(fn, tasks: list, address: str, workers: int = 1):
+    """Yield ``fn(task)`` for every task, in order, computed on Dask.
+
+    Parameters
+    ----------
+    fn : callable
+        A module-level function (picklable by reference).
+    tasks : list
+        Picklable arguments, one per unit.
+    address : str
+        ``"local"`` or a scheduler address such as ``tcp://host:8786``.
+    workers : int
+        Worker processes of the ``LocalCluster`` (ignored for an address).
+    """
+    if not tasks:
+        return
+    client, cluster = _client(address, workers)
+    try:
+        futures = [client.submit(fn, t, pure=False) for t in tasks]
+        try:
+            for f in futures:
+                yield f.result()
+        finally:
+            client.cancel(futures)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+__all__ = ["run_tasks"]

@@ -1,0 +1,427 @@
+"""``HeadPoseDataset``: an ``hpe`` label table (or ``.mat`` folder, or exported Parquet) as a PyTorch Dataset."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from torchvision import tv_tensors
+from torchvision.transforms.v2 import functional as F
+
+from ..errors import HpeError
+from ..rotation.systems import get_system
+from .rotation import from_matrix
+from .transforms import HeadPose
+
+#: columns naming the image of a row, in order of preference
+IMAGE_COLUMNS = ("image", "image_path", "img_path", "file", "path", "filename")
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".webp")
+
+
+class HeadPoseDataset(torch.utils.data.Dataset):
+    """Images with their head pose, box and landmarks, the pose in the system you ask for.
+
+    Parameters
+    ----------
+    labels : str, path or pandas.DataFrame
+        An ``hpe`` label table (``.parquet``/``.csv`` with ``pitch, yaw, roll`` degrees
+        or ``r00..r22``, optional ``bbox_x, bbox_y, bbox_w, bbox_h`` and ``lm{i}_x, lm{i}_y``),
+        a folder (or file) of 300W-LP/AFLW2000 ``.mat`` files (``Pose_Para``,
+        ``pt2d``, ``pt3d_68``) with the images next to them, a 6DRepNet file list
+        (``hpe export --layout 6drepnet``: ``<split>/files.txt`` naming ``.jpg``/``.mat``
+        pairs, or ``files_<split>.txt`` with ``<name>.jpg pitch yaw roll`` lines in the
+        ``whenet`` system), a Parquet file whose image column holds encoded bytes
+        (``{"bytes", "path"}`` structs, as the Hugging Face ``datasets`` Image feature
+        stores them), or an ``hpe export --layout hf`` folder (``data/*.parquet`` shards,
+        ``landmarks_x/y`` list columns, the system named in its ``README.md`` card).
+    images : str or path, optional
+        Root of relative image paths (default: the folder of ``labels``).
+    system : str, path or RotationSystem
+        System of the returned ``matrix`` and ``angles`` (default ``300w_lp``).
+    label_system : str, path or RotationSystem, optional
+        System of the stored labels. Default: the file's ``hpe:system`` metadata,
+        ``300w_lp`` for ``.mat`` input; required for CSV input and DataFrames.
+    crop : float, optional
+        Crop every sample to its box enlarged by this fraction of the box's width
+        and height on each side (``0`` = the box itself; ``None`` = no crop). The box
+        is the stored one (``bbox_*``), else the box of the finite landmarks.
+        Parts outside the image are filled with zeros.
+    square : bool
+        Make the crop a square around the box centre (side: the longer enlarged side), so
+        that a later ``Resize((s, s))`` scales uniformly and keeps the pose exact (an
+        aspect change raises :class:`~hpe_cli.torch.UndefinedPoseError`). Default True.
+    transform : callable, optional
+        Called on the sample dict ``{"image": Image, "box": BoundingBoxes (1, 4) XYWH,
+        "landmarks": KeyPoints (1, L, 2), "pose": HeadPose (1, 3, 3)}`` (absent keys
+        omitted) after the crop; a ``torchvision.transforms.v2`` pipeline moves all of
+        them together (use :mod:`hpe_cli.torch.transforms` flips for landmark re-indexing).
+    landmarks : str or None
+        Column prefix of the 2-D landmarks: ``"lm"`` (``lm{i}_x``; for ``.mat`` input
+        ``pt2d``) or ``"lm3d"`` (``.mat`` input: the x, y rows of ``pt3d_68``); None: none.
+    dtype : torch.dtype
+        Floating dtype of the returned rotations, boxes and landmarks.
+
+    Returns (per item)
+    ------------------
+    dict
+        ``image`` uint8 (3, H, W) RGB (unless ``transform`` converts it),
+        ``matrix`` (3, 3) the stored matrix of ``system``, ``angles`` (3,) its primary
+        ``(pitch, yaw, roll)`` in degrees, ``canonical`` (3, 3), ``gimbal_lock`` bool,
+        ``box`` (4,) ``(x, y, w, h)`` pixels and ``landmarks`` (L, 2) pixels
+        (rows going down, NaN = missing) when available, ``index`` int.
+
+    Notes
+    -----
+    Labels are read and converted once (vectorised, in the constructor); images are
+    decoded lazily in ``__getitem__``. The object is picklable and opens file handles
+    lazily in each ``DataLoader`` worker.
+
+    Examples
+    --------
+    >>> import numpy as np, pandas as pd, tempfile, cv2, os
+    >>> from hpe_cli.torch import HeadPoseDataset
+    >>> d = tempfile.mkdtemp(); _ = cv2.imwrite(os.path.join(d, "a.png"), np.zeros((40, 60, 3), np.uint8))
+    >>> df = pd.DataFrame({"file": ["a.png"], "pitch": [10.0], "yaw": [20.0], "roll": [0.0],
+    ...                    "bbox_x": [10.0], "bbox_y": [5.0], "bbox_w": [20.0], "bbox_h": [20.0]})
+    >>> ds = HeadPoseDataset(df, images=d, label_system="300w_lp", system="6drepnet", crop=0.0)
+    >>> s = ds[0]
+    >>> tuple(s["image"].shape), s["angles"].round(decimals=4), s["box"]
+    ((3, 20, 20), tensor([10., 20.,  0.]), tensor([ 0.,  0., 20., 20.]))
+    """
+
+    def __init__(self, labels, images=None, system="300w_lp", *, label_system=None, crop=None, square=True,
+                 transform=None, landmarks="lm", dtype=torch.float32):
+        self.system = get_system(system)
+        self.crop = None if crop is None else float(crop)
+        self.square = bool(square)
+        if self.crop is not None and not (self.crop >= 0):
+            raise ValueError(f"expected crop >= 0 (a margin fraction), got {crop!r}")
+        self.transform = transform
+        self.dtype = dtype
+        table, found, source, parquet = _load_table(labels, landmarks)
+        src_system = get_system(label_system) if label_system is not None else found
+        if src_system is None:
+            raise HpeError(f"{source}: the labels name no rotation system: pass label_system=")
+        self.label_system = src_system
+        self.source = source
+        self.canonical = _canonical(table, src_system, source)
+        n = len(table)
+        self.images_root = Path(images) if images is not None else (
+            Path(source) if Path(source).is_dir() else Path(source).parent)
+        self._parquet = None
+        self._image_refs = None
+        col = next((c for c in IMAGE_COLUMNS if c in table.columns), None)
+        if parquet is not None and col is not None and parquet[1] == col:
+            self._parquet = parquet  # (files, column, global row-group offsets, (file, local group) per group)
+        elif col is not None:
+            self._image_refs = np.asarray(table[col].astype(str))
+        else:
+            raise HpeError(f"{source}: no image column: expected one of {', '.join(IMAGE_COLUMNS)}")
+        self.boxes = _boxes(table)
+        self.landmarks = _landmarks(table, landmarks)
+        if self.crop is not None and self.boxes is None and self.landmarks is None:
+            raise HpeError(f"{source}: crop= needs bbox_x, bbox_y, bbox_w, bbox_h or landmark columns, found neither")
+        self._n = n
+        self._pf = None
+        self._rg_cache = (None, None)
+
+    # ---------------------------------------------------------------------------- pickling (workers)
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_pf"] = None
+        state["_rg_cache"] = (None, None)
+        return state
+
+    def __len__(self):
+        return self._n
+
+    # -------------------------------------------------------------------------------------- images
+    def _image_path(self, i) -> Path:
+        ref = Path(self._image_refs[i])
+        path = ref if ref.is_absolute() else self.images_root / ref
+        if path.suffix.lower() == ".mat" or not path.suffix:
+            for suf in IMAGE_SUFFIXES:
+                cand = path.with_suffix(suf)
+                if cand.exists():
+                    return cand
+        return path
+
+    def _image_bytes(self, i):
+        import pyarrow.parquet as pq
+
+        files, column, offsets, groups = self._parquet
+        if self._pf is None:  # opened lazily, once per worker process
+            self._pf = {}
+        g = int(np.searchsorted(offsets, i, side="right") - 1)  # global row group
+        f, local = groups[g]
+        path = files[f]
+        if self._rg_cache[0] != g:
+            if f not in self._pf:
+                self._pf[f] = pq.ParquetFile(path)
+            self._rg_cache = (g, self._pf[f].read_row_group(local, columns=[column]).column(0))
+        value = self._rg_cache[1][i - int(offsets[g])].as_py()
+        if isinstance(value, dict):
+            value = value.get("bytes")
+        if value is None:
+            raise HpeError(f"{path}: row {i + 1}: no image bytes in column {column!r}")
+        return np.frombuffer(value, dtype=np.uint8), f"{path}: row {i - int(offsets[g]) + 1} of row group {local}"
+
+    def _read_image(self, i):
+        """The image as a uint8 (3, H, W) RGB tensor (decoded with OpenCV)."""
+        import cv2
+
+        if self._parquet is not None:
+            data, where = self._image_bytes(i)
+        else:
+            path = self._image_path(i)
+            if not path.exists():
+                raise HpeError(f"{path}: no such image (row {i + 1} of {self.source})")
+            data, where = np.fromfile(path, dtype=np.uint8), str(path)
+        bgr = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+        if bgr is None:
+            raise HpeError(f"{where}: cannot decode image")
+        return torch.from_numpy(np.ascontiguousarray(bgr[:, :, ::-1].transpose(2, 0, 1)))
+
+    # -------------------------------------------------------------------------------------- samples
+    def _crop_box(self, i, canvas):
+        b = self.boxes[i] if self.boxes is not None else None
+        if b is None or not np.isfinite(b).all():
+            from ..geometry.augment import box_of_points
+
+            if self.landmarks is None:
+                return None
+            b, ok = box_of_points(self.landmarks[i])
+            if not ok:
+                return None
+        x, y, w, h = (float(v) for v in b)
+        m = self.crop
+        if self.square:
+            side = max(w, h) * (1.0 + 2.0 * m)
+            cx, cy = x + w / 2.0, y + h / 2.0
+            size = int(np.ceil(side))
+            left, top = int(np.floor(cx - size / 2.0)), int(np.floor(cy - size / 2.0))
+            return top, left, size, size
+        left, top = int(np.floor(x - m * w)), int(np.floor(y - m * h))
+        right, bottom = int(np.ceil(x + w + m * w)), int(np.ceil(y + h + m * h))
+        return top, left, max(1, bottom - top), max(1, right - left)
+
+    def __getitem__(self, i):
+        i = int(i)
+        if not -self._n <= i < self._n:
+            raise IndexError(f"index {i} out of range for {self._n} samples")
+        i %= self._n
+        image = tv_tensors.Image(self._read_image(i))
+        canvas = tuple(image.shape[-2:])
+        sample = {"image": image,
+                  "pose": HeadPose(torch.tensor(self.canonical[i][None], dtype=torch.float64), canvas_size=canvas)}
+        if self.boxes is not None:
+            sample["box"] = tv_tensors.BoundingBoxes(torch.tensor(self.boxes[i][None], dtype=torch.float64),
+                                                     format="XYWH", canvas_size=canvas)
+        if self.landmarks is not None:
+            sample["landmarks"] = tv_tensors.KeyPoints(torch.tensor(self.landmarks[i][None], dtype=torch.float64),
+                                                       canvas_size=canvas)
+        if self.crop is not None:
+            crop = self._crop_box(i, canvas)
+            if crop is not None:
+                sample = {k: F.crop(v, *crop) for k, v in sample.items()}
+        if self.transform is not None:
+            sample = self.transform(sample)
+        A = sample["pose"].as_subclass(torch.Tensor)[0]
+        from .rotation import from_canonical
+
+        R = from_canonical(A, self.system)
+        angles, _, locked, _ = from_matrix(R, self.system)
+        out = {"image": sample["image"], "matrix": R.to(self.dtype), "angles": angles.to(self.dtype),
+               "canonical": A.to(self.dtype), "gimbal_lock": locked, "index": i}
+        if "box" in sample:
+            out["box"] = sample["box"].as_subclass(torch.Tensor)[0].to(self.dtype)
+        if "landmarks" in sample:
+            out["landmarks"] = sample["landmarks"].as_subclass(torch.Tensor)[0].to(self.dtype)
+        return out
+
+
+# ------------------------------------------------------------------------------------ table loading
+def _load_table(labels, landmarks):
+    """``(DataFrame, system or None, source name, parquet image info or None)``."""
+    import pandas as pd
+
+    if isinstance(labels, pd.DataFrame):
+        return labels.reset_index(drop=True), None, "<DataFrame>", None
+    path = Path(labels)
+    if not path.exists():
+        raise HpeError(f"{path}: no such file or folder")
+    if path.is_file() and path.suffix.lower() == ".txt":
+        return _read_list_file(path) + (None,)
+    if path.is_dir() and not any(path.glob("*.mat")) and (path / "data").is_dir() and \
+            any((path / "data").glob("*.parquet")):
+        return _read_parquet(sorted((path / "data").glob("*.parquet")), path)
+    if (path.is_dir() and any(path.glob("*.mat"))) or path.suffix.lower() == ".mat":
+        from ..datasets.mat import read_mat_dir
+
+        table = read_mat_dir(path, landmarks=True)
+        return table, get_system("300w_lp"), str(path), None
+    if path.suffix.lower() in (".parquet", ".pq"):
+        return _read_parquet([path], path)
+    from .. import read_labels
+
+    table, found = read_labels(path)
+    return table, found, str(path), None
+
+
+def _read_parquet(files, source):
+    """Parquet shard(s) with labels; an image column of encoded bytes is read lazily per row."""
+    import re
+
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    from .. import _system_from_schema
+
+    tables, offsets, groups, found, col, binary = [], [0], [], None, None, False
+    for f, path in enumerate(files):
+        pf = pq.ParquetFile(path)
+        schema = pf.schema_arrow
+        col = next((c for c in IMAGE_COLUMNS if c in schema.names), None)
+        binary = col is not None and _is_image_bytes(schema.field(col).type)
+        names = [c for c in schema.names if not (binary and c == col)]
+        part = pf.read(columns=names).to_pandas()
+        if binary:
+            part[col] = ""  # placeholder: bytes are read lazily
+        tables.append(part)
+        for g in range(pf.metadata.num_row_groups):
+            groups.append((f, g))
+            offsets.append(offsets[-1] + pf.metadata.row_group(g).num_rows)
+        found = found or _system_from_schema(schema, path)
+    table = pd.concat(tables, ignore_index=True)
+    if "landmarks_x" in table.columns and "landmarks_y" in table.columns and "lm0_x" not in table.columns:
+        lens = table["landmarks_x"].map(len)
+        if len(table) and (lens == lens.iloc[0]).all():  # hf export: one list column per coordinate
+            xs = np.stack(table["landmarks_x"].map(np.asarray).to_list())
+            ys = np.stack(table["landmarks_y"].map(np.asarray).to_list())
+            extra = {f"lm{k}_{a}": v[:, k] for k in range(xs.shape[1]) for a, v in (("x", xs), ("y", ys))}
+            table = pd.concat([table, pd.DataFrame(extra)], axis=1)
+    card = Path(source) / "README.md" if Path(source).is_dir() else None
+    if found is None and card is not None and card.exists():  # hpe export --layout hf names it in the card
+        m = re.search(r"in the rotation system `([^`]+)`", card.read_text(encoding="utf-8"))
+        if m:
+            found = get_system(m.group(1))
+    parquet = ([str(f) for f in files], col, np.asarray(offsets), groups) if binary else None
+    return table, found, str(source), parquet
+
+
+def _read_list_file(path):
+    """6DRepNet file lists (``hpe export --layout 6drepnet``), followed from thohemp/6DRepNet ``sixdrepnet/datasets.py``.
+
+    - ``<split>/files.txt`` (``--form mat``): one name per line, no extension; ``<name>.mat`` holds
+      ``Pose_Para`` (radians, the ``300w_lp`` system) and ``pt2d`` (visible points only), ``<name>.jpg`` the image.
+    - ``files_<split>.txt`` (``--form crops``, DirectMHP's ``gen_dataset_full_AGORA_CMU.py``): ``<name>.jpg pitch
+      yaw roll`` per line, degrees in the ``whenet`` system, images in the folder ``<split>/`` next to the list.
+    """
+    import pandas as pd
+
+    from ..datasets.mat import read_mat
+
+    path = path.resolve()
+    lines = [ln.split() for ln in path.read_text(encoding="utf-8").splitlines()]
+    rows = [(n + 1, ln) for n, ln in enumerate(lines) if ln]
+    if not rows:
+        raise HpeError(f"{path}: empty file list")
+    widths = {len(ln) for _, ln in rows}
+    if widths == {4}:
+        try:
+            ang = np.array([[float(v) for v in ln[1:]] for _, ln in rows])
+        except ValueError:
+            n, ln = next((n, ln) for n, ln in rows if not _floats(ln[1:]))
+            raise HpeError(f"{path}: row {n}: expected '<name>.jpg pitch yaw roll', got {' '.join(ln)!r}") from None
+        split = path.stem[len("files_"):] if path.stem.startswith("files_") else ""
+        base = path.parent / split if split and (path.parent / split).is_dir() else path.parent
+        table = pd.DataFrame({"file": [str(base / ln[0]) for _, ln in rows],
+                              "pitch": ang[:, 0], "yaw": ang[:, 1], "roll": ang[:, 2]})
+        return table, get_system("whenet"), str(path)
+    if widths != {1}:
+        n, ln = next((n, ln) for n, ln in rows if len(ln) != len(rows[0][1]))
+        raise HpeError(f"{path}: row {n}: expected one name per line (mat form) or '<name>.jpg pitch yaw roll' "
+                       f"(crops form), got {' '.join(ln)!r}")
+    recs, names = [], []
+    for n, ln in rows:
+        mat = path.parent / (ln[0] + ".mat")
+        if not mat.exists():
+            raise HpeError(f"{path}: row {n}: {mat} does not exist")
+        recs.append(read_mat(mat))
+        names.append(str(path.parent / ln[0]))
+    table = pd.DataFrame(np.stack([r["pose"][:3] for r in recs]), columns=["pitch", "yaw", "roll"])
+    table.insert(0, "file", names)
+    from ..geometry.augment import box_of_points
+
+    boxes = np.full((len(recs), 4), np.nan)
+    for k, r in enumerate(recs):  # visible points only, so their number varies: a box per file
+        if r["pt2d"] is not None and r["pt2d"].size:
+            boxes[k] = box_of_points(r["pt2d"].T)[0]
+    table[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]] = boxes
+    return table, get_system("300w_lp"), str(path)
+
+
+def _floats(tokens) -> bool:
+    try:
+        [float(t) for t in tokens]
+        return True
+    except ValueError:
+        return False
+
+
+def _is_image_bytes(t) -> bool:
+    import pyarrow as pa
+
+    if pa.types.is_binary(t) or pa.types.is_large_binary(t):
+        return True
+    return pa.types.is_struct(t) and any(t.field(k).name == "bytes" for k in range(t.num_fields))
+
+
+def _canonical(table, system, source) -> np.ndarray:
+    from ..io.layout import ANGLE_COLS, MATRIX_COLS
+
+    cols = set(table.columns)
+    if all(c in cols for c in ANGLE_COLS):
+        values = table[ANGLE_COLS].to_numpy(dtype=np.float64, na_value=np.nan)
+        R = None
+    elif all(c in cols for c in MATRIX_COLS):
+        values = table[MATRIX_COLS].to_numpy(dtype=np.float64, na_value=np.nan).reshape(-1, 3, 3)
+        R = values
+    else:
+        raise HpeError(f"{source}: expected angle columns pitch, yaw, roll (degrees) or matrix columns r00..r22, "
+                       f"found {', '.join(map(str, list(table.columns)[:12]))}")
+    bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        line = f"row {row + 2}" if str(source).lower().endswith(".csv") else f"row {row + 1}"
+        raise HpeError(f"{source}: {line}: label is missing or not finite ({int(bad.sum())} such rows)")
+    if R is None:
+        R = system.from_angles(values)
+    else:
+        from ..rotation.check import rotation_mask
+
+        ok = rotation_mask(R)
+        if not ok.all():
+            row = int(np.flatnonzero(~ok)[0])
+            raise HpeError(f"{source}: row {row + 1}: r00..r22 is not a rotation matrix")
+    return system.to_canonical(R)
+
+
+def _boxes(table):
+    from ..io.layout import BBOX_COLS
+
+    if not all(c in table.columns for c in BBOX_COLS):
+        return None
+    return table[BBOX_COLS].to_numpy(dtype=np.float64, na_value=np.nan)
+
+
+def _landmarks(table, prefix):
+    if prefix is None:
+        return None
+    n = 0
+    while f"{prefix}{n}_x" in table.columns and f"{prefix}{n}_y" in table.columns:
+        n += 1
+    if n == 0:
+        return None
+    cols = [f"{prefix}{k}_{a}" for k in range(n) for a in "xy"]
+    return table[cols].to_numpy(dtype=np.float64, na_value=np.nan).reshape(-1, n, 2)
