@@ -323,18 +323,11 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
             counts["non_finite"] += len(unread)
             flagged += len(unread)
             unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[:n_examples]]
-        if via_system:
-            from ..io.labels import label_values
-
-            values = label_values(batch, system, mode, radians)
-            mode = "angles" if values.ndim == 2 else "matrix"
-            cols = [np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T]
-        else:
-            cols = _label_cols(batch, mode, radians)
+        cols, check_mode = _system_cols(batch, system, mode, radians, via_system)
         if tally is not None:
             values = np.stack(cols, axis=-1)
-            tally.add(system.to_canonical(system.from_angles(values) if mode == "angles" else values.reshape(-1, 3, 3)))
-        res = _checks(cols, mode, system, near_tol_deg)
+            tally.add(system.to_canonical(system.from_angles(values) if check_mode == "angles" else values.reshape(-1, 3, 3)))
+        res = _checks(cols, check_mode, system, near_tol_deg)
         any_flag = np.zeros(batch.num_rows, dtype=bool)
         for c in CHECKS[:-1]:
             m = res[c]
@@ -343,13 +336,13 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
             want = n_examples - len(examples[c])
             if want > 0 and m.any():
                 for i in np.flatnonzero(m)[:want]:
-                    examples[c].append(_example(batch, int(i), lines[i], id_cols, cols, mode))
+                    examples[c].append(_example(batch, int(i), lines[i], id_cols, cols, check_mode))
         flagged += int(np.count_nonzero(any_flag))
         flag_bits.append(np.packbits(any_flag))
         near_not_locked += int(np.count_nonzero(res["near_gimbal"] & ~res["gimbal_lock"]))
         dups.add(key_hashes(cols, batch, key_cols), lines)
         if hist is not None:
-            hist.add(np.stack(cols, axis=-1) if mode == "angles" else res["primary"])
+            hist.add(np.stack(cols, axis=-1) if check_mode == "angles" else res["primary"])
         rows += batch.num_rows
         if progress is not None:
             progress.update(batch.num_rows)
@@ -377,7 +370,7 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
 
     if output:
         _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians,
-                       near_tol_deg, dups)
+                       near_tol_deg, dups, via_system)
     if plots:
         write_plots(hist, plots, system, {"input": str(src.path), "system": system.name, "rows": rows,
                                           **counts, "flagged": result["details"]["flagged"]},
@@ -403,8 +396,19 @@ def _unpack_rows(flag_bits, batch_sizes, idx) -> np.ndarray:
     return out
 
 
+def _system_cols(batch, system, mode, radians, via_system):
+    """Label columns to check and their mode: a system's own columns (any storage kind) are read through it."""
+    if not via_system:
+        return _label_cols(batch, mode, radians), mode
+    from ..io.labels import label_values
+
+    values = label_values(batch, system, mode, radians)
+    return ([np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T],
+            "angles" if values.ndim == 2 else "matrix")
+
+
 def _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians, near_tol_deg,
-                   dups):
+                   dups, via_system=False):
     """Second pass over the input: every column, then one boolean column per check and 'flagged'."""
     import pyarrow as pa
 
@@ -419,7 +423,7 @@ def _write_flagged(input_path, output, only_flagged, overwrite, batch_size, syst
     with TableWriter(output, overwrite, meta) as w:
         for batch, _, _ in _batches(src, mode, src.path):
             n = batch.num_rows
-            res = _checks(_label_cols(batch, mode, radians), mode, system, near_tol_deg)
+            res = _checks(*_system_cols(batch, system, mode, radians, via_system), system, near_tol_deg)
             res["duplicates"] = dups.mask(offset, offset + n)
             any_flag = np.zeros(n, dtype=bool)
             for c in CHECKS:
