@@ -47,6 +47,9 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     from ..rotation import soa
 
     src = open_table(path, batch_size, with_lines=True)
+    from ..io.columns import label_system
+
+    read_system = label_system(src, system)  # .mat Pose_Para is always 300w_lp, whatever --gt-system says
     columns = src.columns
     mode = label_mode(columns, src.path) if use == "auto" else use
     need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
@@ -62,9 +65,9 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
         cols, ok, rs = label_columns_fast(batch, mode, radians)
         n = batch.num_rows
         if mode == "angles":
-            X = system.soa_to_canonical(system.soa_from_angles(*cols))
+            X = read_system.soa_to_canonical(read_system.soa_from_angles(*cols))
         else:
-            X = system.soa_to_canonical([[cols[3 * i + j] for j in range(3)] for i in range(3)])
+            X = read_system.soa_to_canonical([[cols[3 * i + j] for j in range(3)] for i in range(3)])
         parts.append(np.stack(soa.columns(X, n)))
         oks.append(ok)
         if rs is not None:
