@@ -249,8 +249,10 @@ def read_biwi_tgz(path, system=BIWI_SYSTEM):
                 parsed = _parse_name(m.name)
                 if parsed is None or parsed[2] != "bin":
                     continue
+                if m.size != 24:  # checked from the header, before reading the member
+                    raise HpeError(f"{path}:{m.name}: expected 24 bytes (6 float32), got {m.size}")
                 fh = tf.extractfile(m)
-                vals.append(_decode_bin(f"{path}:{m.name}", fh.read()))
+                vals.append(_decode_bin(f"{path}:{m.name}", fh.read(25)))
                 names.append(m.name)
                 seqs.append(parsed[0])
                 frames.append(parsed[1])
