@@ -237,3 +237,11 @@ def test_video_source_real_reader(tmp_path):
         assert abs(float(crop.mean()) - 40 * f) < 6
     rej = pd.read_csv(tmp_path / "r.csv")
     assert len(rej) == 1 and "past the end" in rej["reason"].iloc[0]
+    # pixel layouts get a video's crops through the worker's spill file
+    r = run("export", path, "-o", tmp_path / "f", "--layout", "fsanet", "--rejects", tmp_path / "r2.csv",
+            "--workers", "2")
+    assert r.exit_code == 0, r.output
+    d = np.load(tmp_path / "f" / "train.npz")
+    assert d["image"].shape == (2, 64, 64, 3)
+    np.testing.assert_allclose(d["image"].reshape(2, -1).mean(1), [40, 120], atol=6)
+    assert not list((tmp_path / "f").glob(".spill-*"))

@@ -13,6 +13,7 @@ import hashlib
 import json
 import os
 import re
+import tempfile
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -506,11 +507,11 @@ def _process_image(image, data, items, cfg, out):
             crop = cv2.resize(crop, tuple(osz), interpolation=cv2.INTER_AREA
                               if osz[0] < crop.shape[1] else cv2.INTER_LINEAR)
         if cfg["pixels"] == "array":
-            out.append((idx, "", W, H, np.ascontiguousarray(crop)))
+            out.append((idx, "", W, H, _spill(np.ascontiguousarray(crop), cfg)))
             continue
         buf = _encode(crop, cfg)
         if cfg["pixels"] == "jpeg":
-            out.append((idx, "", W, H, buf.tobytes()))
+            out.append((idx, "", W, H, _spill(buf.tobytes(), cfg)))
         else:
             dst = os.path.join(cfg["root"], cfg["split_dirs"][split], rel)
             d = os.path.dirname(dst)
@@ -521,7 +522,46 @@ def _process_image(image, data, items, cfg, out):
             out.append((idx, "", W, H, None))
 
 
+def _spill(payload, cfg):
+    """In a video task, pixels go to the task's spill file (a video can hold thousands of heads): the parent
+    reads them back one by one, so neither process holds a whole video's crops."""
+    fh = cfg.get("spill")
+    if fh is None:
+        return payload
+    if isinstance(payload, np.ndarray):
+        data, shape = payload.tobytes(), payload.shape
+    else:
+        data, shape = payload, None
+    off = fh.tell()
+    fh.write(data)
+    return ("spill", off, len(data), shape)
+
+
+def _unspill(payload, fh):
+    if isinstance(payload, tuple) and payload and payload[0] == "spill":
+        _, off, n, shape = payload
+        fh.seek(off)
+        data = fh.read(n)
+        return np.frombuffer(data, np.uint8).reshape(shape) if shape is not None else data
+    return payload
+
+
 def _work(task):
+    """Run one task; returns ``(results, spill file or None)``."""
+    cfg = _CFG
+    if task[0] != "video" or cfg["pixels"] == "file":
+        return _work_items(task), None
+    fd, spill = tempfile.mkstemp(prefix=".spill-", suffix=".bin", dir=cfg["root"])
+    with os.fdopen(fd, "wb") as fh:
+        cfg["spill"] = fh
+        try:
+            out = _work_items(task)
+        finally:
+            cfg["spill"] = None
+    return out, spill
+
+
+def _work_items(task):
     """One task: an image file (or a video with its frames) and the heads to crop from it."""
     import cv2
 
@@ -804,9 +844,12 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
                 _init_worker(cfg)
                 results = map(_work, [tuple(t) for t in tasks])
             try:
-                for res in results:
+                for res, spill in results:
+                    spill_fh = open(spill, "rb") if spill else None
                     good, payloads = [], []
                     for idx, reason, w, h, payload in res:
+                        if w > 0:
+                            W[idx], H[idx] = w, h
                         if reason:
                             status[idx] = reason
                         else:
@@ -814,14 +857,16 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
                             counter += 1
                             good.append(idx)
                             payloads.append(payload)
-                        if w > 0:
-                            W[idx], H[idx] = w, h
+                            if spill_fh is not None and len(payloads) >= 256:  # flush in small slices
+                                _add_pixels(layout, rows, good, payloads, split, spill_fh, ang, conv, rel, pbox,
+                                            osz, W, H, lm)
+                                good, payloads = [], []
                     if good and layout.pixels != "file":
-                        g = np.asarray(good)
-                        for s in sorted(set(split[g].tolist())):
-                            sel = [k for k, gi in enumerate(good) if split[gi] == s]
-                            sub = _exported_frame(rows, g[sel], ang, conv, rel, pbox, osz, W, H, lm)
-                            layout.add_pixels(s, sub, [payloads[k] for k in sel])
+                        _add_pixels(layout, rows, good, payloads, split, spill_fh, ang, conv, rel, pbox, osz, W, H,
+                                    lm)
+                    if spill_fh is not None:
+                        spill_fh.close()
+                        os.unlink(spill)
                     if bar is not None:
                         bar.update(len(res))
             finally:
@@ -893,6 +938,15 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
         rejects.write()
     summary["output"] = str(output)
     return summary
+
+
+def _add_pixels(layout, rows, good, payloads, split, spill_fh, ang, conv, rel, pbox, osz, W, H, lm):
+    """Hand one slice of finished heads (and their pixels) to the layout, split by split."""
+    g = np.asarray(good)
+    for s in sorted(set(split[g].tolist())):
+        sel = [k for k, gi in enumerate(good) if split[gi] == s]
+        sub = _exported_frame(rows, g[sel], ang, conv, rel, pbox, osz, W, H, lm)
+        layout.add_pixels(s, sub, [_unspill(payloads[k], spill_fh) for k in sel])
 
 
 def _exported_frame(rows, idx, ang, conv, rel, pbox, osz, W, H, lm):
