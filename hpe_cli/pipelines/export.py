@@ -153,6 +153,61 @@ def load_mat_input(path: Path, source: str, landmarks: bool = True):
     return frame.copy()
 
 
+def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
+    """The 300W-LP root folder (``{AFW,HELEN,IBUG,LFPW}[_Flip]/NAME_k``, :func:`hpe_cli.datasets.w300lp.read_w300lp`).
+
+    The box is built as for a ``.mat`` folder, from the copy's own ``landmarks/<subset>/NAME_k_pts.mat`` points
+    when present (the main file's ``pt2d`` comes from the original image, 3DDFA issue #192), else ``pt2d``.
+    The group column ``subject`` is the identity ``NAME``.
+    """
+    import pandas as pd
+
+    from ..datasets.w300lp import read_w300lp
+    from ..rotation.systems import get_system
+
+    t = read_w300lp(path, landmarks=True, pt2d=True)
+    n = len(t)
+
+    def pts(prefix):
+        L = 0
+        while f"{prefix}{L}_x" in t.columns:
+            L += 1
+        if not L:
+            return np.full((n, 0, 2), np.nan)
+        return np.stack([t[[f"{prefix}{i}_{a}" for i in range(L)]].to_numpy(np.float64) for a in "xy"], -1)
+
+    own, main = pts("lm"), pts("pt2d")
+    main = np.where((main == -1).any(-1, keepdims=True), np.nan, main)
+    has_own = np.isfinite(own).all(-1).any(1) if own.shape[1] else np.zeros(n, bool)
+    lm = own if own.shape[1] else main
+    if own.shape[1] and main.shape[1] and not has_own.all():
+        L = max(own.shape[1], main.shape[1])
+        pad = lambda a: np.concatenate([a, np.full((n, L - a.shape[1], 2), np.nan)], 1)  # noqa: E731
+        lm = np.where(has_own[:, None, None], pad(own), pad(main))
+    box = sixdrepnet_test_boxes(landmark_boxes(lm))
+    pyr = t[["pitch", "yaw", "roll"]].to_numpy(np.float64)
+    reasons = np.full(n, "", dtype=object)
+    bad = ~np.isfinite(pyr).all(1)
+    reasons[bad] = "non-finite Pose_Para angle"
+    reasons[(reasons == "") & ~np.isfinite(box).all(1)] = "no visible 2-D landmark to box the head"
+    sysm = get_system("300w_lp")
+    A = sysm.to_canonical(sysm.from_angles(np.where(bad[:, None], 0.0, pyr))).reshape(n, 9)
+    frame = pd.DataFrame({
+        "source": source, "kind": "300w_lp", "input": str(path), "row": t["file"].astype(str).to_numpy(),
+        "image": t["image"].astype(str).to_numpy(), "root": str(path), "sequence": "", "camera": "", "frame": -1,
+        "person_id": -1, "subject": t["identity"].astype(str).to_numpy(), "image_width": np.nan,
+        "image_height": np.nan, "reason": reasons})
+    for k, c in enumerate(BBOX_COLS):
+        frame[c] = box[:, k]
+    for k, c in enumerate(A_COLS):
+        frame[c] = A[:, k]
+    for c in ("tdx", "tdy", "tdz", "scale"):
+        frame[c] = t[c].to_numpy(np.float64)
+    for i in range(lm.shape[1] if landmarks else 0):
+        frame[f"lm{i}_x"], frame[f"lm{i}_y"] = lm[:, i, 0], lm[:, i, 1]
+    return frame.copy()
+
+
 def load_table_input(path: Path, source: str, input_system=None, images_root=None, landmarks: bool = True):
     """A label table (relabel-panoptic/agora output or any table with image, box and labels)."""
     import pandas as pd
@@ -250,8 +305,14 @@ def load_inputs(paths, images=(), input_system=None, landmarks: bool = True):
         while name in names:
             name += "_"
         names.add(name)
+        from ..datasets.w300lp import is_w300lp_root
+
         is_mat = (p.is_dir() and any(p.glob("*.mat"))) or p.suffix.lower() == ".mat"
-        if is_mat:
+        if p.is_dir() and not is_mat and is_w300lp_root(p):
+            f = load_w300lp_input(p, name, landmarks)
+            if root:
+                f["root"] = str(root)
+        elif is_mat:
             f = load_mat_input(p, name, landmarks)
             if root:
                 f["root"] = str(root)
