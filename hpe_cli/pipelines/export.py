@@ -515,6 +515,7 @@ def jpeg_size(data: bytes):
 
 
 _CFG: dict = {}
+_LAST_FRAME: list = [None]
 
 
 def _init_worker(cfg):
@@ -662,6 +663,9 @@ def _work_items(task):
             _process_image(_SizeOnly(size), data, items, cfg, out)
             return out
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    # keep this frame alive until the next one is decoded: freeing a multi-MB frame before the next allocation
+    # makes every decode fault in fresh pages (measured: decoding 1080p JPEGs about 25% slower)
+    _LAST_FRAME[0] = image
     if image is None:
         return [(it[0], "unreadable image", -1, -1, None) for it in items]
     _process_image(image, data if cfg["full_frames"] and src.lower().endswith((".jpg", ".jpeg")) else None,
