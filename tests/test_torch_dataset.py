@@ -46,7 +46,7 @@ def test_parquet_table_with_system_metadata_converts_and_crops(tmp_path):
     names = _images(tmp_path)
     df = _table(names)
     path = write_labels(df, tmp_path / "labels.parquet", system="6drepnet")
-    ds = HeadPoseDataset(path, system="biwi", crop=0.25)
+    ds = HeadPoseDataset(path, system="biwi", crop=0.25, square=False)
     assert ds.label_system.name == "6drepnet" and len(ds) == 6
     s = ds[2]
     src, dst = get_system("6drepnet"), get_system("biwi")
@@ -60,6 +60,12 @@ def test_parquet_table_with_system_metadata_converts_and_crops(tmp_path):
     assert np.allclose(s["landmarks"].numpy(), lm - [2, 2], atol=1e-5)
     img = cv2.imread(str(tmp_path / names[2]))[:, :, ::-1]
     assert np.array_equal(s["image"].permute(1, 2, 0).numpy()[:, :], img[2:38, 2:48])
+    # square (the default): side max(30, 24) * 1.5 = 45 around the centre (25, 20): left 2, top floor(-2.5) = -3;
+    # the 3 rows above the image are zeros
+    sq = HeadPoseDataset(path, system="biwi", crop=0.25)[2]
+    assert tuple(sq["image"].shape) == (3, 45, 45)
+    assert np.allclose(sq["box"].numpy(), [10 - 2, 8 + 3, 30, 24])
+    assert sq["image"][:, :3].max() == 0 and np.array_equal(sq["image"].permute(1, 2, 0).numpy()[3:], img[0:42, 2:47])
 
 
 def test_csv_needs_a_label_system_and_names_bad_rows(tmp_path):
@@ -171,7 +177,7 @@ def test_6drepnet_mat_list_and_crops_list(tmp_path):
         shutil.copy(AFLW / f"{n}.mat", split)
         shutil.copy(AFLW / f"{n}.jpg", split)
     (split / "files.txt").write_text("".join(n + "\n" for n in names))
-    ds = HeadPoseDataset(split / "files.txt", crop=0.0)
+    ds = HeadPoseDataset(split / "files.txt", crop=0.0, square=False)
     assert ds.label_system.name == "300w_lp" and len(ds) == 3
     s = ds[1]
     rec = read_mat(AFLW / "image00081.mat")

@@ -159,11 +159,19 @@ def test_cuda_kernels_stay_on_device_and_match_cpu():
     from hpe_cli.torch import HeadPose
 
     pyr = torch.tensor(_angles(builtin_systems()["300w_lp"], 256, 10, lock_rows=64))
+    to_matrix(pyr.cuda(), "6drepnet")  # warm-up (constant frames are copied to the device once)
     for dtype in (torch.float32, torch.float64):
         x = pyr.to("cuda", dtype)
-        R = to_matrix(x, "6drepnet")
-        p1, _, locked, _ = from_matrix(R, "6drepnet")
-        A = to_canonical(R, "6drepnet")
+        to_canonical(from_canonical(torch.eye(3, device="cuda", dtype=dtype), "biwi"), "biwi")  # warm the constants
+        torch.cuda.set_sync_debug_mode("error")  # any device -> host synchronisation in the kernels raises
+        try:
+            R = to_matrix(x, "6drepnet")
+            p1, _, locked, _ = from_matrix(R, "6drepnet")
+            A = to_canonical(R, "6drepnet")
+            to_canonical(from_canonical(A, "biwi"), "biwi")
+            geodesic(A, A.flip(0))
+        finally:
+            torch.cuda.set_sync_debug_mode("default")
         assert R.is_cuda and p1.is_cuda and locked.is_cuda and A.is_cuda
         tol = 1e-6 if dtype == torch.float32 else 1e-12
         assert (R.cpu() - to_matrix(pyr.to(dtype), "6drepnet")).abs().max() < tol

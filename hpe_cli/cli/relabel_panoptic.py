@@ -47,7 +47,8 @@ FORMATS = ("table", "coco", "whenet")
                    "LocalCluster of --workers processes. Needs the dask extra.")
 @click.option("--resume", is_flag=True,
               help="Keep the finished units of an interrupted run with the same inputs and options "
-                   "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes.")
+                   "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
+                   "Give it on the first run too: a run without --resume removes its parts when interrupted.")
 @click.option("--max-rmse", type=float, default=None, callback=non_negative_or_inf, metavar="X",
               help="Reject faces whose fit RMSE is above X (cm). 'inf' labels every fit, as WHENet did. "
                    "[default: 2.0: consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones "
@@ -109,6 +110,11 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
         raise click.BadParameter(str(exc), param_hint="--frames") from None
     max_rmse = DEFAULT_MAX_RMSE if max_rmse is None else max_rmse
     plans = job.plan_many(seq_dirs, calibration, cameras, every, frames)
+    from ..io.transaction import note_input
+
+    for p in plans:  # no output may replace a file the run reads
+        for path in {str(p.calibration), *(f.path for f in p.frames.values())}:
+            note_input(path)
     cfg = job.Config(system=system, preset=preset, max_rmse=max_rmse, legacy=legacy_whenet,
                      landmarks=not no_landmarks, frame=label_frame, all_views=all_views, min_change=min_change)
     if verbose:

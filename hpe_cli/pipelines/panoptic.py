@@ -717,38 +717,45 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
             stats = json.loads(Path(stem + ".json").read_text())
             yield stats, _read_part(stem + ".labels.arrow"), _read_part(stem + ".rejects.arrow")
 
-    with ExitStack() as stack:
-        if fmt == "table":
-            out = stack.enter_context(TableWriter(output, overwrite, meta))
-        else:
-            out = _streaming_writer(fmt, output, overwrite)  # helper `read`'s CocoWriter/WhenetWriter
-            if out is None:
-                check_output(output, overwrite)
+    try:
+        with ExitStack() as stack:
+            if fmt == "table":
+                out = stack.enter_context(TableWriter(output, overwrite, meta))
             else:
-                out = stack.enter_context(out)
-        rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
-        for (si, _), (stats, t, r) in zip(units, results()):
-            seq_stats[si].add_unit(stats)
-            if mc is not None:
-                t, moved = mc.apply(t, rschema)
-                if moved is not None:
-                    seq_stats[si].moved("below --min-change", moved.num_rows)
-                    import pyarrow as pa
+                out = _streaming_writer(fmt, output, overwrite)  # helper `read`'s CocoWriter/WhenetWriter
+                if out is None:
+                    check_output(output, overwrite)
+                else:
+                    out = stack.enter_context(out)
+            rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
+            for (si, _), (stats, t, r) in zip(units, results()):
+                seq_stats[si].add_unit(stats)
+                if mc is not None:
+                    t, moved = mc.apply(t, rschema)
+                    if moved is not None:
+                        seq_stats[si].moved("below --min-change", moved.num_rows)
+                        import pyarrow as pa
 
-                    r = pa.concat_tables([r, moved])
-            if out is not None:
-                out.write(t)
-            else:
-                collected.append(t)
-            if rej is not None:
-                rej.write(r)
-            if bar is not None:
-                bar.update(stats["frames"])
-        if fmt != "table" and out is None:
-            import pyarrow as pa
+                        r = pa.concat_tables([r, moved])
+                if out is not None:
+                    out.write(t)
+                else:
+                    collected.append(t)
+                if rej is not None:
+                    rej.write(r)
+                if bar is not None:
+                    bar.update(stats["frames"])
+            if fmt != "table" and out is None:
+                import pyarrow as pa
 
-            frame = pa.concat_tables(collected).to_pandas()
-            _write_other(fmt, frame, output, overwrite)
+                frame = pa.concat_tables(collected).to_pandas()
+                _write_other(fmt, frame, output, overwrite)
+    except BaseException:
+        # an interrupted run keeps its parts only when it was asked to be resumable (--resume);
+        # otherwise nothing of it is left behind (the output transaction's promise)
+        if parts is not None and not resume:
+            shutil.rmtree(parts, ignore_errors=True)
+        raise
     if parts is not None:
         shutil.rmtree(parts, ignore_errors=True)
     total = Stats()

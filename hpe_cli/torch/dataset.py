@@ -46,6 +46,10 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         and height on each side (``0`` = the box itself; ``None`` = no crop). The box
         is the stored one (``bbox_*``), else the box of the finite landmarks.
         Parts outside the image are filled with zeros.
+    square : bool
+        Make the crop a square around the box centre (side: the longer enlarged side), so
+        that a later ``Resize((s, s))`` scales uniformly and keeps the pose exact (an
+        aspect change raises :class:`~hpe_cli.torch.UndefinedPoseError`). Default True.
     transform : callable, optional
         Called on the sample dict ``{"image": Image, "box": BoundingBoxes (1, 4) XYWH,
         "landmarks": KeyPoints (1, L, 2), "pose": HeadPose (1, 3, 3)}`` (absent keys
@@ -85,10 +89,11 @@ class HeadPoseDataset(torch.utils.data.Dataset):
     ((3, 20, 20), tensor([10., 20.,  0.]), tensor([ 0.,  0., 20., 20.]))
     """
 
-    def __init__(self, labels, images=None, system="300w_lp", *, label_system=None, crop=None, transform=None,
-                 landmarks="lm", dtype=torch.float32):
+    def __init__(self, labels, images=None, system="300w_lp", *, label_system=None, crop=None, square=True,
+                 transform=None, landmarks="lm", dtype=torch.float32):
         self.system = get_system(system)
         self.crop = None if crop is None else float(crop)
+        self.square = bool(square)
         if self.crop is not None and not (self.crop >= 0):
             raise ValueError(f"expected crop >= 0 (a margin fraction), got {crop!r}")
         self.transform = transform
@@ -190,6 +195,12 @@ class HeadPoseDataset(torch.utils.data.Dataset):
                 return None
         x, y, w, h = (float(v) for v in b)
         m = self.crop
+        if self.square:
+            side = max(w, h) * (1.0 + 2.0 * m)
+            cx, cy = x + w / 2.0, y + h / 2.0
+            size = int(np.ceil(side))
+            left, top = int(np.floor(cx - size / 2.0)), int(np.floor(cy - size / 2.0))
+            return top, left, size, size
         left, top = int(np.floor(x - m * w)), int(np.floor(y - m * h))
         right, bottom = int(np.ceil(x + w + m * w)), int(np.ceil(y + h + m * h))
         return top, left, max(1, bottom - top), max(1, right - left)

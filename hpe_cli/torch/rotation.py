@@ -103,8 +103,17 @@ def to_matrix(angles, system) -> torch.Tensor:
     return R
 
 
+_CONST: dict = {}
+
+
 def _const(M, like):
-    return torch.as_tensor(np.asarray(M, dtype=np.float64), dtype=like.dtype, device=like.device)
+    """A constant 3x3 frame on ``like``'s device and dtype, copied there once (cached), never read back."""
+    M = np.asarray(M, dtype=np.float64)
+    key = (M.tobytes(), like.device, like.dtype)
+    t = _CONST.get(key)
+    if t is None:
+        t = _CONST[key] = torch.as_tensor(M, dtype=like.dtype, device=like.device)
+    return t
 
 
 def _identity(system) -> bool:

@@ -156,11 +156,11 @@ def pose_rotate(A: torch.Tensor, angle_deg: float) -> torch.Tensor:
 
 def pose_mirror(A: torch.Tensor, horizontal: bool) -> torch.Tensor:
     """``M3 @ A @ diag(-1, 1, 1)`` for a horizontal (``diag(-1, 1)``) or vertical (``diag(1, -1)``) flip."""
-    row = 0 if horizontal else 1
-    sign = torch.ones(3, 3, dtype=A.dtype, device=A.device)
-    sign[row] = -1.0
-    sign[:, 0] *= -1.0
-    return A * sign
+    # row 0 (hflip) or 1 (vflip) negated by M3, column 0 by diag(-1, 1, 1): built from A, no host data
+    r0, r1, r2 = A[..., 0, :], A[..., 1, :], A[..., 2, :]
+    rows = [-r0, r1, r2] if horizontal else [r0, -r1, r2]
+    out = torch.stack(rows, -2)
+    return torch.cat([-out[..., :1], out[..., 1:]], -1)
 
 
 def _raw(pose):
