@@ -85,7 +85,7 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline-rows", type=int, default=20_000)
     args = ap.parse_args(argv)
 
-    from hpe_cli.cli.audit import run_audit
+    from hpe_cli.pipelines.audit import run_audit
     from hpe_cli.rotation import get_system
 
     system = get_system("300w_lp")

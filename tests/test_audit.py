@@ -148,3 +148,30 @@ def test_vectorised_shapes():
     system = get_system("300w_lp")
     res = audit_angles(np.zeros((0, 3)), system)
     assert all(res[c].shape == (0,) for c in CHECKS)
+
+
+def test_audit_columns_equal_array_functions():
+    """The column kernels give the same masks as audit_angles / audit_matrices (the reference)."""
+    from hpe_cli.rotation.audit import audit_angles, audit_columns, audit_matrices
+
+    rng = np.random.default_rng(3)
+    n = 3000
+    pyr = np.c_[rng.uniform(-200, 200, n), rng.uniform(-100, 100, n), rng.uniform(-200, 200, n)]
+    pyr[:50, 1] = 90.0  # locked
+    pyr[50:100, 1] = 89.5  # near
+    pyr[100:110] = np.nan
+    pyr[110, 2] = np.inf
+    for name in ("300w_lp", "whenet", "6drepnet"):
+        ref = audit_angles(pyr, name)
+        got = audit_columns([pyr[:, 0], pyr[:, 1], pyr[:, 2]], name, "angles")
+        for k in ref:
+            assert np.array_equal(ref[k], got[k], equal_nan=True), (name, k)
+        sys_ = get_system(name)
+        R = sys_.from_angles(np.nan_to_num(pyr))
+        R[:5] *= 2.0
+        R[5:8] = R[5:8] @ np.diag([1.0, 1, -1])
+        R[8, 0, 0] = np.nan
+        ref = audit_matrices(R, name)
+        got = audit_columns([np.ascontiguousarray(R[:, i, j]) for i in range(3) for j in range(3)], name, "matrix")
+        for k in ref:
+            assert np.array_equal(ref[k], got[k], equal_nan=True), (name, k)

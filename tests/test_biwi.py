@@ -253,3 +253,24 @@ def test_small_tgz_and_single_file(tmp_path):
     shutil.copy(BIWI / "db_annotations_subset" / "03" / "frame_00562_pose.bin", one)
     t = read_biwi(one / "frame_00562_pose.bin")
     assert t["sequence"][0] == "03" and t["frame"][0] == 562 and t["yaw"][0] == pytest.approx(76.893, abs=1e-3)
+
+
+def test_tgz_member_size_checked_before_reading(tmp_path, monkeypatch):
+    """A huge pose member is refused from its tar header; its data is never read."""
+    import io
+    import tarfile
+
+    import hpe_cli.datasets.biwi as biwi_mod
+    from hpe_cli.errors import HpeError
+
+    path = tmp_path / "db_annotations.tgz"
+    with tarfile.open(path, "w:gz") as tf:
+        info = tarfile.TarInfo("01/frame_00003_pose.bin")
+        info.size = 4 << 20
+        tf.addfile(info, io.BytesIO(b"\0" * info.size))
+    calls = []
+    real = tarfile.TarFile.extractfile
+    monkeypatch.setattr(tarfile.TarFile, "extractfile", lambda self, m: calls.append(m) or real(self, m))
+    with pytest.raises(HpeError, match=r"01/frame_00003_pose.bin: expected 24 bytes \(6 float32\), got 4194304"):
+        biwi_mod.read_biwi_tgz(path)
+    assert not calls

@@ -48,7 +48,7 @@ def test_report_counts_and_keys(table, tmp_path):
     assert {k: rep[k] for k in KEYS[1:]} == expect
     assert rep["rows"] == len(ROWS)
     assert rep["examples"]["gimbal_lock"][0]["file"] == "HELEN_2375918801_1_14.jpg"
-    assert rep["examples"]["duplicates"] == [{"row": 3, "same_as": 2}]
+    assert rep["examples"]["duplicates"] == [{"row": 5, "same_as": 4}]  # file lines (header = 1)
     assert rep["details"]["near_gimbal_not_locked"] == 1
 
 

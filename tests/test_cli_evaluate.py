@@ -243,3 +243,23 @@ def test_help_has_examples_and_sources():
     for s in ("Examples:", "test_hopenet.py", "FSANET_test.py", "sixdrepnet/test.py", "sixdrepnet360/test.py",
               "utils/mae.py", "evaluator.py", "calc_error.py", "aflw_2000_3d_evaluation.ipynb", "benchmark.py"):
         assert s in r.output, s
+
+
+@pytest.mark.parametrize("name", ["img2pose", "6drepnet_6d", "trinet"])
+def test_prediction_in_a_native_storage_kind(tmp_path, name):
+    """Rotation vectors, 6-D and vector-column systems are read through their own columns (auto)."""
+    from hpe_cli.rotation.systems import get_system
+
+    from conftest import canonical_A
+
+    gt, df = _gt_table(tmp_path, n=12)
+    s = get_system(name)
+    values = s.matrix_to_values(s.from_canonical(canonical_A(df[["pitch", "yaw", "roll"]].to_numpy())))
+    pred = pd.DataFrame(values, columns=s.value_columns)
+    pred.insert(0, "image", df["image"])
+    path = tmp_path / "pred.parquet"
+    pred.to_parquet(path)
+    r = run(path, gt, "--pred-system", name, "--gt-system", "300w_lp", "--json", "-", "-q", "--protocol", "hopenet")
+    assert r.exit_code == 0, r.output
+    rep = json.loads(r.output)
+    assert rep["n"]["pairs"] == 12 and rep["metrics"]["geodesic"]["max"] < 1e-6

@@ -74,7 +74,12 @@ def test_bad_images_are_rejects(tmp_path):
     t.loc[len(t) - 1, ["bbox_x", "person_id"]] = [500, 9]  # outside the 160-px frame
     t.loc[len(t)] = t.iloc[0]
     t.loc[len(t) - 1, ["bbox_w", "person_id"]] = [np.nan, 8]  # no box
+    t = t.astype({"pitch": object})
+    t.loc[len(t)] = t.iloc[0]
+    t.loc[len(t) - 1, ["pitch", "person_id"]] = ["abc", 7]  # not a number
     t.to_csv(path, index=False)
+    with open(path, "a") as fh:
+        fh.write("img/f0.jpg,s0,,0,5,1,2,3,4,5,6,7,8,9\n")  # too many fields
     out = tmp_path / "o"
     r = run("export", path, "-o", out, "--layout", "whenet", "--rejects", tmp_path / "rej.csv")
     assert r.exit_code == 0, r.output
@@ -85,9 +90,10 @@ def test_bad_images_are_rejects(tmp_path):
     assert reasons[6] == reasons[7] == "unreadable image"
     assert reasons[10].startswith("box outside the image")
     assert reasons[11] == "missing or empty head box"
+    assert "pitch" in reasons[12] and reasons[13].startswith("unreadable row")
     lines = (out / "train" / "annotation.txt").read_text().splitlines()
-    assert len(lines) + len(rej) == len(t)
-    assert "rejected 6" in r.output and "unreadable image" in r.output
+    assert len(lines) + len(rej) == len(t) + 1
+    assert "rejected 8" in r.output and "unreadable image" in r.output
     # without --rejects, bad input is an error and nothing is written
     r = run("export", path, "-o", tmp_path / "o2", "--layout", "whenet")
     assert r.exit_code == 1 and "row 4: no image (file not found)" in r.output and "--rejects" in r.output
@@ -207,3 +213,27 @@ def test_video_source_through_panoptic_video(tmp_path, monkeypatch):
                                       + " frame 13: past the end of the video)"]
     crop = cv2.imread(str(tmp_path / "o" / "train" / "seqA" / "00_03_1_00000011.jpg"))
     assert crop.shape == (40, 40, 3) and abs(float(crop.mean()) - 11) < 2
+
+
+def test_video_source_real_reader(tmp_path):
+    """End to end with pan's VideoFrames on a small synthetic hdVideos/hd_00_05.mp4 (frame k is gray 40 k)."""
+    pytest.importorskip("hpe_cli.datasets.panoptic_video")
+    (tmp_path / "hdVideos").mkdir()
+    vw = cv2.VideoWriter(str(tmp_path / "hdVideos" / "hd_00_05.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 30, (160, 120))
+    if not vw.isOpened():
+        pytest.skip("OpenCV cannot write mp4 here")
+    for k in range(5):
+        vw.write(np.full((120, 160, 3), 40 * k, np.uint8))
+    vw.release()
+    rows = [{"image": f"hdImgs/00_05/00_05_{f:08d}.jpg", "sequence": "", "camera": "00_05", "frame": f,
+             "person_id": 0, "bbox_x": 20.0, "bbox_y": 20.0, "bbox_w": 50.0, "bbox_h": 50.0, "pitch": 0.0,
+             "yaw": 10.0 * f, "roll": 0.0} for f in (3, 1, 9)]
+    path = tmp_path / "t.csv"
+    pd.DataFrame(rows).to_csv(path, index=False)
+    r = run("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
+    assert r.exit_code == 0, r.output
+    for f in (1, 3):
+        crop = cv2.imread(str(tmp_path / "o" / "train" / f"00_05_0_{f:08d}.jpg"))
+        assert abs(float(crop.mean()) - 40 * f) < 6
+    rej = pd.read_csv(tmp_path / "r.csv")
+    assert len(rej) == 1 and "past the end" in rej["reason"].iloc[0]

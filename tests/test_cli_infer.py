@@ -165,3 +165,82 @@ def test_aflw2000_landmarks(tmp_path, realdata):
     by = {r: h["rms_residual_deg"] for h in rep["hypotheses"] for r in h["readings"]}
     assert by["3ddfa_v2"] > 10 * by["300w_lp"]
     assert by["6drepnet (stored matrix read as active)"] > 10 * by["300w_lp"]
+
+
+# a repository layout written at test time (pytest's doctest collection would import these files on its own)
+PKG_FILES = {
+    'pkg_repo/headpose/__init__.py': '',
+    'pkg_repo/headpose/geometry/__init__.py': '',
+    'pkg_repo/headpose/geometry/build.py': '"""A module deep in a package with a parent-relative import: get_R = Rz(r) Ry(y) Rx(p) (6DRepNet\'s, per SPEC)."""\nfrom ..rotations import rx, ry, rz\n\n\ndef get_R(pitch, yaw, roll):\n    return rz(roll) @ ry(yaw) @ rx(pitch)\n\n\ndef hopenet_like(pitch, yaw, roll):\n    """300W-LP\'s A (the matrix Hopenet\'s draw_axis projects): left-handed X-Y-Z."""\n    return (rz(roll) @ ry(yaw) @ rx(pitch)).T\n',
+    'pkg_repo/headpose/rotations.py': '"""Elemental rotations of a small package (imported with ``from ..rotations import``)."""\nimport numpy as np\n\n\ndef rx(a):\n    c, s = np.cos(a), np.sin(a)\n    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])\n\n\ndef ry(a):\n    c, s = np.cos(a), np.sin(a)\n    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])\n\n\ndef rz(a):\n    c, s = np.cos(a), np.sin(a)\n    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])\n',
+    'tddfa_repo/utils/functions.py': '"""Helpers a sibling module imports relatively (layout of 3DDFA_V2\'s utils/, which has no __init__.py)."""\nimport math\n\n\ndef safe_cos(x):\n    return math.cos(x)\n',
+    'tddfa_repo/utils/pose.py': '"""A 3DDFA_V2-style decoder in a folder without __init__.py that imports its sibling relatively.\n\nSame layout as 3DDFA_V2\'s utils/pose.py (``from .functions import ...``); the\ndecoder itself is written from SPEC section 3 (yaw, pitch, roll in radians).\n"""\nimport math\n\nfrom .functions import safe_cos\n\n\ndef matrix2angle(R):\n    s = R[2][0]\n    if s > 0.998:\n        return math.pi / 2, math.atan2(-R[0][1], -R[0][2]), 0.0\n    if s < -0.998:\n        return -math.pi / 2, math.atan2(R[0][1], R[0][2]), 0.0\n    yaw = math.asin(s)\n    c = safe_cos(yaw)\n    return yaw, math.atan2(R[2][1] / c, R[2][2] / c), math.atan2(R[1][0] / c, R[0][0] / c)\n',
+}
+
+
+@pytest.fixture
+def PKG(tmp_path):
+    root = tmp_path / "repos"
+    for rel, text in PKG_FILES.items():
+        p = root / rel
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(text)
+    return root
+
+
+def test_file_inside_folder_with_relative_import(tmp_path, PKG):
+    """3DDFA_V2's utils/pose.py layout: `from .functions import` in a folder without __init__.py."""
+    rep, res = report(tmp_path, "--decoder", f"{PKG}/tddfa_repo/utils/pose.py:matrix2angle",
+                      "--args", "yaw,pitch,roll")
+    assert rep["best"] == "3ddfa_v2", res.output
+
+
+def test_module_with_path_root(tmp_path, PKG):
+    rep, res = report(tmp_path, "--decoder", "utils.pose:matrix2angle", "--path", f"{PKG}/tddfa_repo",
+                      "--args", "yaw,pitch,roll")
+    assert rep["best"] == "3ddfa_v2", res.output
+
+
+def test_file_deep_in_package_imported_as_package_module(tmp_path, PKG):
+    rep, res = report(tmp_path, "--callable", f"{PKG}/pkg_repo/headpose/geometry/build.py:get_R")
+    assert rep["best"] == "6drepnet", res.output
+    assert "biwi" in rep["reproduced_by"]  # BIWI's Rz Ry Rx is the same function (TriNet's BIWI vectors too)
+
+
+def test_lists_every_builtin_reproducing_the_function(tmp_path, PKG):
+    rep, res = report(tmp_path, "--callable", f"{PKG}/pkg_repo/headpose/geometry/build.py:hopenet_like")
+    assert rep["best"] == "300w_lp" and "whenet" in rep["also_matches"]["names"]
+    assert "also reproduced by built-in" in res.output and "whenet" in res.output
+
+
+@pytest.mark.parametrize("func, kind, order, storage, same", [
+    ("to_rotvec", "rotvec", None, "active", "img2pose"),
+    ("to_quat_inverse", "quaternion", "xyzw", "transposed", None),
+    ("to_6d", "6d", [0, 1], "active", "6drepnet_6d"),
+])
+def test_decoder_returning_stored_values(tmp_path, func, kind, order, storage, same):
+    out = tmp_path / "found.toml"
+    rep, res = report(tmp_path, "--decoder", f"{FIX}/stored_values.py:{func}", "--returns", "stored", "-o", out)
+    assert rep["fit"] == "exact" and rep["storage_form"]["kind"] == kind and rep["best"] == "custom", res.output
+    assert (same in rep["reproduced_by"]) if same else rep["reproduced_by"] == []
+    assert rep["system"]["storage"] == storage
+    text = out.read_text()
+    assert f'storage_kind = "{kind}"' in text
+
+
+def test_decoder_returning_unknown_width(tmp_path):
+    rep, res = report(tmp_path, "--decoder", f"{FIX}/stored_values.py:five_numbers", "--returns", "stored", code=1)
+    assert rep["fit"] == "none" and "no storage form returns 5 numbers" in res.output
+
+
+def test_written_system_loads_back_even_when_it_differs_from_the_builtin(tmp_path):
+    """6DRepNet's get_R takes radians; the built-in 6drepnet says degrees: the file gets its own name."""
+    out = tmp_path / "s.toml"
+    res = run("--callable", f"{FIX}/sixdrepnet.py:get_R", "-o", out, "-q")
+    assert res.exit_code == 0, res.output
+    assert 'name = "6drepnet_as_inferred"' in out.read_text()
+    labels = tmp_path / "l.csv"
+    pd.DataFrame({"pitch": [10.0], "yaw": [20.0], "roll": [30.0]}).to_csv(labels, index=False)
+    res = CliRunner().invoke(cli, ["convert", str(labels), "-o", str(tmp_path / "o.csv"), "--from", str(out),
+                                   "--to", "6drepnet", "-q"])
+    assert res.exit_code == 0, res.output

@@ -110,7 +110,7 @@ def test_img2pose_biwi_matches_real_biwi_label():
         # the first line of vitoralbiero/img2pose evaluation/jupyter_notebooks/BIWI_annotations.txt
         p.write_text("../../datasets/BIWI/01/frame_00003_rgb.png 7.607222981354766 3.290994605902283 "
                      "-1.5666319048416875\n")
-        src, f = read(p, input_format="img2pose-biwi")
+        src, f = read(p)  # recognised by its name
     assert src.system == "300w_lp"
     t = read_biwi(pose)
     b, w = get_system("biwi"), get_system(src.system)
@@ -194,10 +194,10 @@ def test_tab_separated(tmp_path):
 
 # ------------------------------------------------------------------------------------------------ bad input
 @pytest.mark.parametrize("text,kw,msg", [
-    ("a.jpg,1,2,3\nb.jpg,4,5\n", {"input_format": "whenet"}, "line 2: expected 4 fields"),
-    ("#;image;yaw;pitch;roll\nx.jpg;1;2\n", {"input_format": "opal23"}, "line 2: expected 4 fields"),
-    ("nonsense\n", {"input_format": "opal23"}, "line 1: expected OPAL's header"),
-    ("5\nYaw Pitch Roll\n", {"input_format": "celeba-pose"}, "line 1: expected CelebAMask-HQ"),
+    ("a.jpg,1,2,3\nb.jpg,4,5\n", {"input_format": "whenet"}, "row 2: expected 4 fields"),
+    ("#;image;yaw;pitch;roll\nx.jpg;1;2\n", {"input_format": "opal23"}, "row 2: expected 4 fields"),
+    ("nonsense\n", {"input_format": "opal23"}, "row 1: expected OPAL's header"),
+    ("5\nYaw Pitch Roll\n", {"input_format": "celeba-pose"}, "row 1: expected CelebAMask-HQ"),
 ])
 def test_bad_lines_name_file_and_line(tmp_path, text, kw, msg):
     p = tmp_path / "in.txt"
@@ -264,9 +264,42 @@ def test_cli_usage_errors(tmp_path):
     assert r.exit_code == 1 and "Nope" in r.output
 
 
-@pytest.mark.parametrize("cmd", ["convert", "audit", "draw", "augment", "infer"])
+@pytest.mark.parametrize("cmd", ["convert", "audit", "draw", "augment", "infer", "evaluate", "export"])
 def test_every_table_command_has_column_options(cmd):
     r = CliRunner().invoke(cli, [cmd, "--help"])
     assert r.exit_code == 0
     for opt in ("--columns-map", "--delimiter", "--no-header", "--names", "--input-format"):
         assert opt in r.output
+
+
+def test_cli_bad_line_is_a_reject_with_its_line(tmp_path):
+    p = tmp_path / "annotation.txt"
+    p.write_text("a.jpg,1,2,3\n\nb.jpg,4,5\nc.jpg,7,x,9\nd.jpg,1,1,1\n")
+    out, rej = tmp_path / "o.csv", tmp_path / "rej.csv"
+    r = CliRunner().invoke(cli, ["convert", str(p), "-o", str(out), "--from", "whenet", "--to", "whenet",
+                                 "--rejects", str(rej), "-q"])
+    assert r.exit_code == 0, r.output
+    assert list(pd.read_csv(out)["image"]) == ["a.jpg", "d.jpg"]
+    rj = pd.read_csv(rej)
+    assert list(rj["row"]) == [3, 4]
+    assert "expected 4 fields" in rj.loc[0, "reason"] and "pitch" in rj.loc[1, "reason"]
+
+
+def test_cli_evaluate_two_inputs_share_the_options(tmp_path):
+    """--columns-map renames the input that has the columns; text options leave a .mat folder alone."""
+    real = REAL / "aflw2000_prnet" / "image00430.mat"
+    if not real.exists():
+        pytest.skip("real AFLW2000 sample absent")
+    import shutil
+
+    gt = tmp_path / "gt"
+    gt.mkdir()
+    shutil.copy(real, gt / "image00430.mat")
+    pred = tmp_path / "annotation.txt"  # WHENet layout: image,yaw,pitch,roll; PROVENANCE: 34.45, 4.69, 7.25
+    pred.write_text("image00430.mat,4.69,34.45,7.25\n")
+    rep = tmp_path / "r.json"
+    r = CliRunner().invoke(cli, ["evaluate", str(pred), str(gt), "--pred-system", "whenet", "--gt-system", "300w_lp",
+                                 "--key", "file", "--columns-map", "file=image", "--json", str(rep), "-q"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(rep.read_text())
+    assert doc["metrics"]["geodesic"]["max"] < 0.01  # the printed 2-decimal angles of the same rotation

@@ -107,8 +107,10 @@ def _dad_tree(root: Path, rots, scales):
         mv[:3, :3] = s * (np.diag([1.0, -1.0, -1.0]) @ R_cv)  # OpenGL camera = OpenCV camera with y, z flipped
         mv[:3, 3] = [0.01 * n, 0.02, -0.5]
         (sub / "annotations" / f"{iid}.json").write_text(json.dumps(
-            {"vertices": [[0.0, 0.0, 0.0]] * 3, "model_view_matrix": mv.tolist(), "projection_matrix": np.eye(4).tolist()}))
-        items.append({"item_id": iid, "annotation_path": f"val/annotations/{iid}.json", "img_path": f"val/images/{iid}.png",
+            {"vertices": [[0.0, 0.0, 0.0]] * 3, "model_view_matrix": mv.tolist(),
+             "projection_matrix": np.eye(4).tolist()}))
+        items.append({"item_id": iid, "annotation_path": f"val/annotations/{iid}.json",
+                      "img_path": f"val/images/{iid}.png",
                       "bbox": [10 + n, 20, 30, 40],
                       "attributes": {"quality": "hq", "gender": "female", "expression": "false", "age": "young",
                                      "occlusions": "false", "pose": "front", "standard light": "true"}})
@@ -217,8 +219,30 @@ def test_w300lp_streams_in_chunks_same_table(w300_root):
     from hpe_cli.datasets.w300lp import open_w300lp, read_w300lp
 
     src = open_w300lp(w300_root, chunk=1)
-    batches = list(src.batches())
-    assert len(batches) == 3 and src.num_rows == 3 and src.dataset
+    batches = list(src.iter_batches())
+    assert len(batches) == 3 and src.num_rows == 3 and src.system == "300w_lp"
     f = pa.Table.from_batches(batches, schema=src.schema).to_pandas()
     full = read_w300lp(w300_root)
     pd.testing.assert_frame_equal(f[full.columns], full, check_dtype=False)
+
+
+def test_dad3dheads_converts_with_the_builtin_system(tmp_path):
+    from hpe_cli.rotation.systems import get_system
+
+    try:
+        get_system("dad3dheads")
+    except Exception:
+        pytest.skip("dad3dheads system not built in")
+    rots = Rotation.from_euler("xyz", [[10, -20, 5], [-40, 30, 100]], degrees=True).as_matrix()
+    _dad_tree(tmp_path, rots, [1.0, 1.0])
+    out = tmp_path / "o.csv"
+    r = CliRunner().invoke(cli, ["convert", str(tmp_path), "-o", str(out), "--from", "dad3dheads", "--to", "300w_lp",
+                                 "-q"])
+    assert r.exit_code == 0, r.output
+    f = pd.read_csv(out)
+    w = get_system("300w_lp")
+    A = w.to_canonical(w.from_angles(f[["pitch", "yaw", "roll"]].to_numpy()))
+    # by hand: R = diag(1,-1,-1) @ MV[:3,:3] and MV[:3,:3] is the canonical (OpenGL eye) rotation A
+    F = np.diag([1.0, -1.0, -1.0])
+    np.testing.assert_allclose(A, F @ rots, atol=1e-9)
+    assert list(f["item_id"]) == ["item000", "item001"]

@@ -305,3 +305,33 @@ def test_hf_parquet_image_feature(pizza, tmp_path):
         return
     ds = datasets.load_dataset("parquet", data_dir=str(out / "data"))
     assert sum(len(v) for v in ds.values()) == total
+
+
+# --------------------------------------------------------------------------------------------- read back
+def _open_or_skip(path):
+    from hpe_cli.errors import HpeError
+    from hpe_cli.io import read_table
+
+    try:
+        t = read_table(path)
+    except HpeError as exc:  # helper `data` adds COCO JSON and annotation.txt to open_table
+        pytest.skip(f"open_table cannot read {path.name} yet: {exc}")
+    if not {"pitch", "yaw", "roll"} <= set(t.columns):
+        pytest.skip(f"open_table does not read {path.name} as labels yet (columns {list(t.columns)[:5]})")
+    return t
+
+
+def test_read_back_through_open_table(pizza, tmp_path):
+    path, t = pizza
+    assert export(path, tmp_path / "w", "--layout", "whenet", "-q").exit_code == 0
+    assert export(path, tmp_path / "d", "--layout", "directmhp", "-q").exit_code == 0
+    lines = (tmp_path / "w" / "train" / "annotation.txt").read_text().splitlines()
+    back = _open_or_skip(tmp_path / "w" / "train" / "annotation.txt")
+    want = np.array([[float(v) for v in (l.split(",")[2], l.split(",")[1], l.split(",")[3])] for l in lines])
+    np.testing.assert_allclose(back[["pitch", "yaw", "roll"]].to_numpy(float), want, atol=1e-12)
+    coco = json.loads((tmp_path / "d" / "annotations" / "coco_style_train.json").read_text())
+    back = _open_or_skip(tmp_path / "d" / "annotations" / "coco_style_train.json")
+    np.testing.assert_allclose(back[["pitch", "yaw", "roll"]].to_numpy(float),
+                               np.array([a["euler_angles"] for a in coco["annotations"]]), atol=1e-12)
+    np.testing.assert_allclose(back[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]].to_numpy(float),
+                               np.array([a["bbox"] for a in coco["annotations"]]), atol=1e-9)

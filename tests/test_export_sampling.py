@@ -1,6 +1,8 @@
 """Splits, --min-change and --balance against small hand-computed cases; crop maths."""
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from hpe_cli.errors import HpeError
@@ -110,3 +112,34 @@ def test_crop_maths():
     # resize 60 -> 30: pixel centres map by (x + 0.5) * 0.5 - 0.5
     p = points_to_crop([[[-5.0, 10.0], [54.0, 69.0]]], [[-5, 10, 55, 70]], (30, 30))
     np.testing.assert_allclose(p, [[[-0.25, -0.25], [29.25, 29.25]]])
+
+
+@settings(max_examples=40)
+@given(st.integers(-60, 100), st.integers(-60, 80), st.integers(1, 90), st.integers(1, 90),
+       st.integers(0, 79), st.integers(0, 59))
+def test_crop_points_follow_pixels(x0, y0, w, h, u, v):
+    """A frame pixel inside the crop box sits in the crop at points_to_crop of its coordinates."""
+    img = np.random.default_rng(0).integers(1, 255, (60, 80), dtype=np.uint8)
+    box = (x0, y0, x0 + w, y0 + h)
+    crop = crop_padded(img, box, value=0)
+    assert crop.shape == (h, w)
+    q = points_to_crop([[[u, v]]], [box], None)[0, 0]
+    if 0 <= q[0] < w and 0 <= q[1] < h:
+        assert crop[int(q[1]), int(q[0])] == img[v, u]
+    assert (crop == 0).sum() >= w * h - max(0, min(x0 + w, 80) - max(x0, 0)) * max(0, min(y0 + h, 60) - max(y0, 0))
+
+
+def test_crop_names_unique_and_split_names_checked():
+    import pandas as pd
+
+    from hpe_cli.io.export.base import crop_names
+
+    rows = pd.DataFrame({"source": "s", "image": ["a/x.jpg", "a/x.jpg", "b/y.jpg", "q", "q"],
+                         "camera": ["", "", "", "00_01", "00_01"], "sequence": ["", "", "", "seq", "seq"],
+                         "frame": [-1, -1, -1, 7, 7], "person_id": [-1, -1, -1, 2, 2]})
+    assert crop_names(rows).tolist() == ["a__x_0", "a__x_1", "b__y", "seq/00_01_2_00000007",
+                                         "seq/00_01_2_00000007_dup1"]
+    with pytest.raises(HpeError):
+        parse_split("sequence:tr/ain=0.5,val=0.5")
+    with pytest.raises(HpeError):
+        parse_split("sequence:a=0.5,a=0.5")

@@ -290,3 +290,12 @@ def test_table_skips_non_rotations():
     R[4, 0, 0] = np.nan
     rep = inf.infer_table(pyr, R)
     assert rep["best"] == "300w_lp" and rep["rows_skipped"] == {"non_finite": 1, "not_a_rotation": 1}
+
+
+def test_trinet_and_img2pose_functions_are_named():
+    from hpe_cli.rotation import rx, ry, rz
+
+    rep = inf.infer_builder(inf.as_builder(lambda p, y, r: rx(p) @ ry(-y) @ rz(r)))  # TriNet W300 vectors
+    assert rep["best"] == "trinet"
+    rep = inf.infer_builder(inf.as_builder(lambda p, y, r: rx(-p) @ ry(y) @ rz(r)))  # F A F
+    assert rep["best"] == "opencv" and "img2pose" in rep["reproduced_by"]

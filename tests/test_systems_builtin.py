@@ -157,3 +157,40 @@ def test_real_aflw2000_through_new_systems(realdata):
     s = get_system("img2pose")
     rv = s.matrix_to_values(canonical_to_labels(A, s).matrix)
     assert np.abs(rv - np.stack([img2pose_rotvec(*x) for x in pp])).max() < 1e-12
+
+
+def test_real_biwi_and_300wlp_through_camera_frame_systems(realdata):
+    """BIWI's pose.txt R is in the depth camera frame (x right, y down, z forward): the same frame as
+    openface, img2pose and opencv. Its .bin angles through hpe land on R itself in each of them."""
+    bins = sorted((realdata / "biwi" / "db_annotations_subset").rglob("*.bin"))
+    pyr = np.array([np.fromfile(b, dtype="<f4")[3:6] for b in bins], dtype=np.float64)
+    # BIWI .bin: R = Rz(roll) Ry(yaw) Rx(pitch) (SPEC section 8), written here by hand
+    R = np.stack([Rz(d2r(r)) @ Ry(d2r(y)) @ Rx(d2r(p)) for p, y, r in pyr])
+    for name in ("openface", "opencv"):
+        c = convert_angles(pyr, "biwi", name)
+        assert np.abs(c.matrix - R).max() < 1e-12, name
+    c = convert_angles(pyr, "biwi", "img2pose")
+    rv = get_system("img2pose").matrix_to_values(c.matrix)
+    assert np.abs(rv - Rotation.from_matrix(R).as_rotvec()).max() < 1e-12
+    # TriNet's BIWI vectors (BIWI_EulerAngles2Vectors: columns of Rz Ry Rx) are the biwi stored matrix
+    assert np.abs(get_system("biwi").from_angles(pyr) - R).max() < 1e-12
+    # pose.txt of frame 00003 (float text) read as openface's matrix: pose_Rx..Rz are its XYZ angles
+    P = np.loadtxt(realdata / "biwi" / "hpdb" / "01" / "frame_00003_pose.txt", max_rows=3)
+    Pq = Rotation.from_matrix(P).as_matrix()  # nearest rotation of the 6-digit text
+    ang = canonical_to_labels(get_system("openface").to_canonical(Pq[None]), "openface").primary[0]
+    assert np.abs(Rotation.from_euler("XYZ", ang, degrees=True).as_matrix() - Pq).max() < 1e-12
+
+
+def test_real_300wlp_sample(realdata):
+    pp = sio.loadmat(realdata / "300wlp_face3d" / "IBUG_image_008_1_0.mat")["Pose_Para"][0, :3].astype(np.float64)
+    A = canonical_A(np.rad2deg(pp)[None])
+    for name in NEW:
+        s = get_system(name)
+        R = s.from_canonical(A)
+        if s.storage_kind != "angles":
+            R2, reasons = s.values_to_matrix(s.matrix_to_values(R))
+            assert reasons is None and np.abs(R2 - R).max() < 1e-13
+        assert np.abs(canonical_to_labels(s.to_canonical(R), "300w_lp").primary[0] - np.rad2deg(pp)).max() < 1e-9
+    tri = get_system("trinet").from_canonical(A)[0]
+    p, y, r = pp
+    assert np.abs(tri - Rx(p) @ Ry(-y) @ Rz(r)).max() < 1e-14  # TriNet's W300 vectors of this label

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from .table_options import column_options
+
 from .options import SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, \
     rejects_options, verbosity_options
 
@@ -47,6 +49,7 @@ def _split_keys(ctx, param, value):
 @overwrite_option
 @batch_option
 @verbosity_options
+@column_options
 def evaluate(pred, gt, output, pred_system, gt_system, keys, protocols, align, by, yaw_bins, report, plots, rejects,
              use, pred_columns, gt_columns, radians, overwrite, batch_size, verbose, quiet, strict):
     """Score predictions PRED against ground truth GT, each in its own system.

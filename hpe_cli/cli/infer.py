@@ -47,8 +47,41 @@ def _matrix_columns(value: str | None, columns) -> list | None:
     return [prefix + s for s in ij]
 
 
-def _load_callable(spec: str):
-    """``path/to/file.py:func`` or ``package.module:func`` (``func`` may be ``Class.method``)."""
+def _module_name_of(path):
+    """``(root, "pkg.sub.mod")`` for a file inside a package, else None.
+
+    Walks up the folders that hold an ``__init__.py``; a folder without one is
+    still taken as a (namespace) package when the file uses relative imports
+    (3DDFA_V2's ``utils/pose.py`` does ``from .functions import ...`` and
+    ``utils/`` has no ``__init__.py``).
+    """
+    import re
+
+    path = path.resolve()
+    parts, folder = [], path.parent
+    while (folder / "__init__.py").is_file() and folder.parent != folder:
+        parts.insert(0, folder.name)
+        folder = folder.parent
+    if not parts:
+        try:
+            text = path.read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            return None
+        if not re.search(r"^\s*from\s+\.", text, re.M):
+            return None
+        parts, folder = [path.parent.name], path.parent.parent
+    if not all(p.isidentifier() for p in parts) or not path.stem.isidentifier():
+        return None
+    return folder, ".".join(parts + [path.stem])
+
+
+def _load_callable(spec: str, path=None):
+    """``path/to/file.py:func`` or ``package.module:func`` (``func`` may be ``Class.method``).
+
+    A file inside a package is imported as that package's module (so its
+    relative imports work); ``path`` (folders) is put on ``sys.path`` first,
+    for ``package.module:func`` specs that live outside the installed packages.
+    """
     import importlib
     import importlib.util
     import sys
@@ -59,28 +92,45 @@ def _load_callable(spec: str):
     target, sep, attr = spec.rpartition(":")
     if not sep or not target or not attr:
         raise HpeError(f"{spec}: expected FILE.py:FUNC or module.path:FUNC")
-    path = Path(target)
+    for root in reversed([str(Path(p).resolve()) for p in (path or ())]):
+        if root not in sys.path:
+            sys.path.insert(0, root)
+    file = Path(target)
     try:
-        if target.endswith(".py") or path.exists():
-            if not path.is_file():
+        if target.endswith(".py") or file.exists():
+            if not file.is_file():
                 raise HpeError(f"{target}: no such file")
-            name = f"_hpe_infer_{abs(hash(str(path.resolve())))}"
-            mod_spec = importlib.util.spec_from_file_location(name, path)
-            module = importlib.util.module_from_spec(mod_spec)
-            sys.modules[name] = module  # dataclasses and pickling look their module up here
-            folder = str(path.resolve().parent)
-            sys.path.insert(0, folder)  # let the file import its siblings
-            try:
-                mod_spec.loader.exec_module(module)
-            finally:
-                if folder in sys.path:
-                    sys.path.remove(folder)
+            found = _module_name_of(file)
+            top = found[1].split(".")[0] if found else None
+            if found is not None and (top not in sys.modules or
+                                      str(found[0]) in str(getattr(sys.modules[top], "__path__", ""))):
+                root, dotted = found
+                for folder in (str(root), str(file.resolve().parent)):
+                    if folder not in sys.path:
+                        sys.path.insert(0, folder)  # the package root, and the file's siblings
+                module = importlib.import_module(dotted)
+            else:
+                name = f"_hpe_infer_{abs(hash(str(file.resolve())))}"
+                mod_spec = importlib.util.spec_from_file_location(name, file)
+                module = importlib.util.module_from_spec(mod_spec)
+                sys.modules[name] = module  # dataclasses and pickling look their module up here
+                folder = str(file.resolve().parent)
+                sys.path.insert(0, folder)  # let the file import its siblings
+                try:
+                    mod_spec.loader.exec_module(module)
+                finally:
+                    if folder in sys.path:
+                        sys.path.remove(folder)
         else:
             module = importlib.import_module(target)
     except HpeError:
         raise
     except Exception as exc:
-        raise HpeError(f"{target}: import failed: {type(exc).__name__}: {' '.join(str(exc).split())[:200]}") from None
+        hint = ""
+        if "relative import" in str(exc):
+            hint = " (the file is not inside a package: give module:FUNC with --path ROOT)"
+        raise HpeError(f"{target}: import failed: {type(exc).__name__}: "
+                       f"{' '.join(str(exc).split())[:200]}{hint}") from None
     obj = module
     for part in attr.split("."):
         if not hasattr(obj, part):
@@ -158,6 +208,9 @@ def _print_report(rep: dict, quiet: bool) -> None:
         echo(f"  {m['turns']}")
         if m["transpose_of"]:
             echo(f"  (the transpose of the matrix of {', '.join(m['transpose_of'])})")
+        if rep.get("also_matches"):
+            echo(f"  also reproduced by built-in: {', '.join(rep['also_matches']['names'])} "
+                 "(same matrix from the same angles)")
         if rep.get("selection"):
             echo(f"  solution kept by the decoder: {rep['selection']['rule']}")
         if rep.get("near_lock"):
@@ -207,6 +260,9 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
 @click.option("--callable", "builder", metavar="FILE.py:FUNC",
               help="A function angles -> 3x3 matrix (a file path or a module path, then :FUNC).")
 @click.option("--decoder", metavar="FILE.py:FUNC", help="A function 3x3 matrix -> three angles.")
+@click.option("--returns", type=click.Choice(["angles", "stored"]), default="angles", show_default=True,
+              help="--decoder returns three angles, or stored values (a rotation vector, quaternion, 6-D vector "
+                   "or 9 matrix entries): then find which storage form and whether of the matrix or its transpose.")
 @click.option("--args", "args_", default="pitch,yaw,roll", show_default=True,
               help="Role of each positional argument (--callable) or returned angle (--decoder).")
 @click.option("--packed", is_flag=True, help="--callable takes one sequence of the three angles.")
@@ -234,13 +290,16 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write the full report.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
               help="Write the matched system as a .toml file (for `hpe convert --from`).")
+@click.option("--path", "import_path", multiple=True, type=click.Path(exists=True, file_okay=False),
+              help="Folder to import module:FUNC from (a repository root); repeatable.")
 @click.option("--timeout", type=click.FloatRange(min=0, min_open=True), default=60.0, show_default=True,
               help="Seconds the code of --callable/--decoder may run (it runs in a separate process).")
 @overwrite_option
 @verbosity_options
 @column_options
-def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, landmarks3d, landmark_frame, tol,
-          samples, seed, name, frame_of, storage, json_path, output, overwrite, verbose, quiet, timeout):
+def infer(data, builder, decoder, returns, args_, packed, units, angles, matrix_cols, landmarks3d, landmark_frame, tol,
+          samples, seed, name, frame_of, storage, json_path, output, overwrite, verbose, quiet, timeout,
+          import_path):
     """Find which rotation system a function or a dataset uses.
 
     With --callable, call the function on well-spread angles and find the
@@ -267,6 +326,8 @@ def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, lan
     Examples:
       hpe infer --callable sixdrepnet.py:get_R --args pitch,yaw,roll
       hpe infer --decoder 3DDFA_V2/utils/pose.py:matrix2angle --args yaw,pitch,roll --json report.json
+      hpe infer --decoder utils.pose:matrix2angle --path 3DDFA_V2 --args yaw,pitch,roll
+      hpe infer --decoder mycode.py:to_rotvec --returns stored -o mine.toml
       hpe infer --callable mylib.pose:euler_to_matrix --args roll,pitch,yaw --units deg -o mine.toml
       hpe infer labels.parquet --angles pitch,yaw,roll --matrix r00..r22
       hpe infer AFLW2000/ --landmarks3d lm3d --json aflw_system.json
@@ -280,6 +341,8 @@ def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, lan
     modes = sum(x is not None for x in (data, builder, decoder))
     if modes != 1:
         raise click.UsageError("give exactly one of DATA, --callable FILE.py:FUNC or --decoder FILE.py:FUNC")
+    if returns != "angles" and decoder is None:
+        raise click.UsageError("--returns stored applies to --decoder only")
     if packed and builder is None:
         raise click.UsageError("--packed applies to --callable only")
     if output is not None:
@@ -303,8 +366,9 @@ def infer(data, builder, decoder, args_, packed, units, angles, matrix_cols, lan
         u = "degrees" if units == "deg" else "radians"
         rep, system_toml, system_name = run_code_inference(
             spec, builder=bool(builder), roles=roles, units=u, packed=packed, samples=samples, timeout=timeout,
-            tol=tol or inf.CODE_TOL, seed=seed, source=spec, name=name, frame=frame, storage=storage)
-        if rep["fit"] != "exact" and units is None:
+            tol=tol or inf.CODE_TOL, seed=seed, source=spec, name=name, frame=frame, storage=storage,
+            import_path=list(import_path), returns=returns)
+        if rep["fit"] != "exact" and units is None and returns == "angles":
             rep["hint"] = "no fit with the default --units rad; try --units deg"
     else:
         frame_df, units = _read_data(data, units)

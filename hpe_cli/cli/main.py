@@ -61,6 +61,11 @@ class HpeGroup(click.Group):
                 with txn.activate(run=True):
                     return super().invoke(ctx)
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
+            if signals.fired() is not None:
+                exc = signals.fired()
+                signals.stop_children()
+                _error(f"interrupted ({exc.name})")
+                ctx.exit(128 + exc.signum)
             raise
         except signals.Interrupted as exc:
             signals.stop_children()
@@ -75,7 +80,12 @@ class HpeGroup(click.Group):
             os.dup2(devnull, 1)
             ctx.exit(1)
         except Exception as exc:
-            msg = _message(exc)
+            if signals.fired() is not None:  # e.g. a worker pool broken by the signal: report the signal
+                stop = signals.fired()
+                signals.stop_children()
+                _error(f"interrupted ({stop.name})")
+                ctx.exit(128 + stop.signum)
+            msg = _message(exc, txn)
             if msg is None:  # a bug: never show a traceback unless asked to
                 if os.environ.get("HPE_DEBUG"):
                     raise
@@ -85,7 +95,7 @@ class HpeGroup(click.Group):
             ctx.exit(1)
 
 
-def _message(exc) -> str | None:
+def _message(exc, txn=None) -> str | None:
     """The one-line message of an error a user can provoke, or None for a bug."""
     from ..errors import HpeError
     from ..io.transaction import os_reason
@@ -98,9 +108,34 @@ def _message(exc) -> str | None:
     if isinstance(exc, OSError):
         name = exc.filename if exc.filename is not None else None
         return f"{name}: {os_reason(exc)}" if name is not None else os_reason(exc)
+    if isinstance(exc, UnicodeEncodeError) and "surrogate" in str(exc):
+        bad = [p for p in (txn.paths() if txn is not None else []) if not _utf8(p)]
+        if bad:
+            return f"{bad[0]}: file name is not valid UTF-8, which this reader cannot open (rename the file)"
+        return "a file name is not valid UTF-8, which this reader cannot open (rename the file)"
+    inputs = txn.input_paths() if txn is not None else []
+    if isinstance(exc, UnicodeDecodeError):
+        where = f"{inputs[0]}: " if len(inputs) == 1 else ""
+        return f"{where}text is not valid UTF-8 (byte {exc.start}: {exc.reason})"
     if isinstance(exc, UnicodeError):
         return f"text is not valid UTF-8 ({exc.reason})" if hasattr(exc, "reason") else str(exc)
+    if len(inputs) == 1 and type(exc).__module__.split(".")[0] in _READER_MODULES:
+        # a reader library's own error while the run read its one input: name that file
+        return f"{inputs[0]}: cannot read: {' '.join(str(exc).split())[:200]}"
     return None
+
+
+#: libraries whose errors, in a run with one input, come from reading that input
+_READER_MODULES = {"pyarrow", "pandas", "scipy", "json", "orjson", "pickle", "_pickle", "tarfile", "zipfile", "gzip",
+                   "zlib", "h5py", "numpy"}
+
+
+def _utf8(path) -> bool:
+    try:
+        str(path).encode("utf-8")
+        return True
+    except UnicodeEncodeError:
+        return False
 
 
 def _error(msg: str) -> None:

@@ -47,16 +47,22 @@ def _image_size(ctx, param, value):
               show_default=True,
               help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
                    "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.")
+@click.option("--trust-pickle", is_flag=True,
+              help="Load any pickle, even one that asks for more than a pandas DataFrame needs. A pickle can run "
+                   "code: only for files you trust.")
 @rejects_options
 @overwrite_option
 @verbosity_options
 def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse, max_occlusion, legacy_whenet,
-                  label_frame, rejects, strict, overwrite, verbose, quiet):
+                  label_frame, trust_pickle, rejects, strict, overwrite, verbose, quiet):
     """Relabel AGORA: one head-pose label per person, from SMPL-X face joints.
 
     DATAFRAMES are AGORA ground-truth dataframes (*_withjv.pkl, pandas
-    pickles). Loading a pickle RUNS CODE stored in it: only pass files you
-    trust (AGORA's own downloads). Each needs the columns imgPath, isValid,
+    pickles, or the same converted to Parquet; recognised by content).
+    Pickles are loaded by a restricted unpickler that builds only the
+    pandas/numpy objects a dataframe is made of; one that asks for more is
+    refused with the command that converts it to Parquet (or use
+    --trust-pickle for files you trust). Each needs the columns imgPath, isValid,
     occlusion, and either DirectMHP's cam_j3d, camR, camT, camK or AGORA's
     gt_joints_3d (then the joints are read in the camera frame and the
     intrinsics are rebuilt by AGORA's rule: 36 x 20.25 mm sensor, focal length
@@ -99,7 +105,8 @@ def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse,
     system = system or SYSTEM.convert("whenet" if fmt != "table" else "300w_lp", None, None)
     cfg = job.Config(system=system, image_size=image_size,
                      max_rmse=job.DEFAULT_MAX_RMSE if max_rmse is None else max_rmse,
-                     max_occlusion=max_occlusion, legacy=legacy_whenet, preset=preset, frame=label_frame)
+                     max_occlusion=max_occlusion, legacy=legacy_whenet, preset=preset, frame=label_frame,
+                     trust_pickle=trust_pickle)
     bar = progress(total=len(dataframes), desc="relabel-agora", quiet=quiet, unit="files")
     try:
         stats = job.write_outputs(list(dataframes), cfg, output, fmt, rejects, overwrite, bar)

@@ -47,7 +47,8 @@ FORMATS = ("table", "coco", "whenet")
                    "LocalCluster of --workers processes. Needs the dask extra.")
 @click.option("--resume", is_flag=True,
               help="Keep the finished units of an interrupted run with the same inputs and options "
-                   "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes.")
+                   "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
+                   "Give it on the first run too: a run without --resume removes its parts when interrupted.")
 @click.option("--max-rmse", type=float, default=None, callback=non_negative_or_inf, metavar="X",
               help="Reject faces whose fit RMSE is above X (cm). 'inf' labels every fit, as WHENet did. "
                    "[default: 2.0: consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones "
@@ -77,9 +78,11 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
     `hpe convert` (pitch, yaw, roll, pitch_2.., r00..r22, gimbal_lock,
     roundtrip_err), fit_rmse (cm), n_pairs, scale, image_width,
     image_height and lm0_x..lm69_y. Every face/camera that gets no label is
-    listed by --rejects with its reason (too few confident points, bad fit,
-    behind camera, outside image, box rejected, dropped by legacy rule) and
-    counted in the summary. --format whenet and coco name the whole frame's
+    listed by --rejects with its reason (bad landmarks, too few confident
+    points, bad fit, behind camera, outside image, box rejected, dropped by
+    legacy rule, not seen by every camera, below --min-change, truncated face
+    file) and counted in the summary, per sequence and in total. --frame crop
+    labels relative to the line of sight and adds ray_angle. --format whenet and coco name the whole frame's
     image: crop it with the box.
 
     \b
@@ -107,6 +110,11 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
         raise click.BadParameter(str(exc), param_hint="--frames") from None
     max_rmse = DEFAULT_MAX_RMSE if max_rmse is None else max_rmse
     plans = job.plan_many(seq_dirs, calibration, cameras, every, frames)
+    from ..io.transaction import note_input
+
+    for p in plans:  # no output may replace a file the run reads
+        for path in {str(p.calibration), *(f.path for f in p.frames.values())}:
+            note_input(path)
     cfg = job.Config(system=system, preset=preset, max_rmse=max_rmse, legacy=legacy_whenet,
                      landmarks=not no_landmarks, frame=label_frame, all_views=all_views, min_change=min_change)
     if verbose:

@@ -39,8 +39,21 @@ def _handler(signum, frame):
     if _fired:  # cleanup already under way
         return
     _fired = True
+    exc = Interrupted(signum)
+    from ..io.transaction import in_critical_section, request_stop
+
+    request_stop(exc)  # if the exception below is swallowed (a __del__, a callback), nothing commits anyway
     _terminate_children()  # so a pool's shutdown does not wait for work nobody will use
-    raise Interrupted(signum)
+    if in_critical_section(exc):  # raised when the file operation under way is recorded
+        return
+    raise exc
+
+
+def fired():
+    """The :class:`Interrupted` of the signal received during this run, or None."""
+    from ..io.transaction import stop_requested
+
+    return stop_requested()
 
 
 def _terminate_children() -> None:
@@ -60,13 +73,23 @@ def handled():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    from ..io.transaction import request_stop
+
     previous = {s: signal.getsignal(s) for s in SIGNALS}
     _owner, _fired = os.getpid(), False
+    request_stop(None)
     for s in SIGNALS:
         signal.signal(s, _handler)
+    import sys
+
+    unraisable = sys.unraisablehook
+    # an interrupt landing in a finaliser is reported by Python as "Exception ignored in ..." with a
+    # traceback; the run is stopping anyway (request_stop above), so say nothing
+    sys.unraisablehook = lambda u: None if isinstance(u.exc_value, Interrupted) else unraisable(u)
     try:
         yield
     finally:
+        sys.unraisablehook = unraisable
         for s, h in previous.items():
             try:
                 signal.signal(s, h if h is not None else signal.SIG_DFL)

@@ -20,7 +20,18 @@ DirectMHP's camera columns; a dataframe without them but with ``gt_joints_3d``
 (AGORA's own release) is read in the camera frame (identity extrinsics) with
 the intrinsics rebuilt by AGORA's rule (:func:`agora_intrinsics`).
 
-**Loading a pickle runs code stored in it**: read only dataframes you trust.
+Pickles are loaded through a restricted unpickler (:func:`load_dataframe`)
+that builds only the pandas, numpy and pyarrow objects a dataframe is made of;
+a pickle that asks for anything else is refused, with the one-line command
+that converts it once to Parquet (which hpe reads too). ``trust=True``
+(``--trust-pickle``) lifts the restriction for files you trust. Files are
+recognised by content (pickle, Parquet), not by extension.
+
+Everything read is validated at the door, per person: ``camR`` finite,
+orthonormal and of determinant +1; ``camT`` finite; ``camK`` finite with
+positive focal lengths; joints smaller than 1e6 in magnitude (NaN is a missing point);
+``imgPath`` a relative path without ``..`` or NUL. A person that fails gets
+the reason in :attr:`AgoraPeople.reason` (and no label), never an exception.
 """
 from __future__ import annotations
 
@@ -46,6 +57,46 @@ SCENE_FOCAL_MM = (("hdri", 50.0), ("cam00", 18.0), ("cam01", 18.0), ("cam02", 18
 DEFAULT_FOCAL_MM = 28.0
 #: AGORA's full-resolution images
 AGORA_SIZE = (3840, 2160)
+#: tolerance of the camR rotation test (||R R^T - I||_F and |det R - 1|)
+CAM_R_TOL = 1e-6
+#: joints at or beyond this magnitude (metres) are absurd
+MAX_JOINT = 1e6
+
+#: the globals a pandas DataFrame pickle may name (module, name), after pandas' own renames of old paths
+SAFE_GLOBALS = frozenset({
+    ("builtins", "slice"), ("builtins", "bytearray"), ("builtins", "complex"), ("builtins", "set"),
+    ("builtins", "frozenset"), ("builtins", "range"), ("builtins", "object"),
+    ("copyreg", "_reconstructor"),
+    ("numpy", "ndarray"), ("numpy", "dtype"), ("numpy", "bool_"),
+    ("numpy._core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "scalar"),
+    ("numpy._core.numeric", "_frombuffer"),
+    ("numpy.core.multiarray", "_reconstruct"), ("numpy.core.multiarray", "scalar"),
+    ("numpy.core.numeric", "_frombuffer"),
+    ("pandas", "DataFrame"), ("pandas", "Series"), ("pandas", "Index"), ("pandas", "RangeIndex"),
+    ("pandas", "StringDtype"),
+    ("pandas.core.frame", "DataFrame"), ("pandas.core.series", "Series"),
+    ("pandas.core.indexes.base", "_new_Index"), ("pandas.core.indexes.base", "Index"),
+    ("pandas.core.indexes.range", "RangeIndex"), ("pandas.core.indexes.numeric", "Int64Index"),
+    ("pandas.core.indexes.numeric", "Float64Index"), ("pandas.core.indexes.numeric", "UInt64Index"),
+    ("pandas.core.internals.managers", "BlockManager"), ("pandas.core.internals.managers", "SingleBlockManager"),
+    ("pandas.core.internals.blocks", "new_block"), ("pandas.core.internals.blocks", "Block"),
+    ("pandas.core.internals.blocks", "ObjectBlock"), ("pandas.core.internals.blocks", "FloatBlock"),
+    ("pandas.core.internals.blocks", "IntBlock"), ("pandas.core.internals.blocks", "BoolBlock"),
+    ("pandas.core.internals.blocks", "NumpyBlock"),
+    ("pandas._libs.internals", "_unpickle_block"),
+    ("pandas.arrays", "ArrowStringArray"), ("pandas.arrays", "StringArray"),
+    ("pandas.core.arrays.string_", "StringDtype"), ("pandas.core.arrays.string_", "StringArray"),
+    ("pandas.core.arrays.string_arrow", "ArrowStringArray"),
+    ("pyarrow.lib", "_restore_array"), ("pyarrow.lib", "py_buffer"), ("pyarrow.lib", "type_for_alias"),
+})
+
+#: how to turn a trusted AGORA pickle into Parquet once (nested lists instead of numpy arrays)
+TO_PARQUET = ("python -c \"import sys, numpy as np, pandas as pd; "
+              "f = lambda v: v.tolist() if isinstance(v, np.ndarray) else [f(x) for x in v] "
+              "if isinstance(v, (list, tuple)) else v; "
+              "df = pd.read_pickle(sys.argv[1]); "
+              "df = df.apply(lambda c: c.map(f) if c.dtype == object else c); "
+              "df.to_parquet(sys.argv[2])\" IN.pkl OUT.parquet")
 
 
 @dataclass
@@ -75,6 +126,10 @@ class AgoraPeople:
         ``gt_joints_3d`` with identity extrinsics and AGORA's intrinsics.
     images : int
         Rows (images) in the dataframe.
+    reason : ndarray of object (N,)
+        '' for a usable person, else why not (bad camera, joints or image
+        path); set by :func:`read_agora`, which also replaces the unusable
+        geometry by NaN.
     """
 
     source: Path
@@ -89,23 +144,83 @@ class AgoraPeople:
     K: np.ndarray
     frame: str
     images: int
+    reason: object = None
 
     def __len__(self) -> int:
         return len(self.row)
 
 
-def load_dataframe(path):
-    """Unpickle an AGORA dataframe. **This runs code stored in the file**: trusted files only."""
+def _sniff(path: Path) -> str:
+    with open(path, "rb") as f:
+        head = f.read(8)
+    if head[:4] == b"PAR1":
+        return "parquet"
+    if head[:1] == b"\x80":
+        return "pickle"
+    return "other"
+
+
+def _restricted_unpickler(fh, path):
+    import pickle
+
+    try:
+        from pandas.compat.pickle_compat import _class_locations_map as renames
+    except ImportError:  # pragma: no cover - pandas without the map
+        renames = {}
+
+    class RestrictedUnpickler(pickle.Unpickler):
+        def find_class(self, module, name):
+            module, name = renames.get((module, name), (module, name))
+            if (module, name) not in SAFE_GLOBALS:
+                raise HpeError(f"{path}: refused to load the pickle: it asks for {module}.{name}, which is not "
+                               "part of a pandas DataFrame (a pickle can run code). If you trust the file, "
+                               "pass --trust-pickle, or convert it once to Parquet and give the .parquet: "
+                               + TO_PARQUET)
+            import importlib
+            import warnings
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return getattr(importlib.import_module(module), name)
+
+    return RestrictedUnpickler(fh)
+
+
+def load_dataframe(path, trust: bool = False):
+    """Load an AGORA dataframe from a pickle (restricted unless ``trust``) or a Parquet file.
+
+    The file's kind is read from its first bytes, whatever its extension.
+    A pickle is unpickled by a restricted unpickler that only builds
+    pandas/numpy/pyarrow data objects (see :data:`SAFE_GLOBALS`); with
+    ``trust=True`` any pickle is loaded (**this runs code stored in the
+    file**: trusted files only).
+    """
     import pandas as pd
 
     path = Path(path)
+    if not path.is_file():
+        raise HpeError(f"{path}: no such file")
+    kind = _sniff(path)
     try:
-        df = pd.read_pickle(path)
-    except FileNotFoundError:
-        raise HpeError(f"{path}: no such file") from None
-    except Exception as exc:  # unpickling raises anything: EOFError, UnpicklingError, ModuleNotFoundError...
-        raise HpeError(f"{path}: cannot load the pickle ({type(exc).__name__}: "
-                       f"{' '.join(str(exc).split())[:160]})") from None
+        if kind == "parquet":
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(path)
+            df = pd.DataFrame({name: table.column(name).to_pylist() for name in table.column_names})
+        elif kind == "pickle":
+            if trust:
+                df = pd.read_pickle(path)
+            else:
+                with open(path, "rb") as fh:
+                    df = _restricted_unpickler(fh, path).load()
+        else:
+            raise HpeError(f"{path}: expected an AGORA dataframe as a pandas pickle or Parquet file, got "
+                           "neither (checked by content)")
+    except HpeError:
+        raise
+    except Exception as exc:  # unpickling raises anything: EOFError, UnpicklingError, TypeError...
+        raise HpeError(f"{path}: cannot load the {'Parquet file' if kind == 'parquet' else 'pickle'} "
+                       f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
     if not isinstance(df, pd.DataFrame):
         raise HpeError(f"{path}: expected a pandas DataFrame (AGORA *_withjv.pkl), got {type(df).__name__}")
     return df
@@ -203,19 +318,77 @@ def _joints(path, col, cells, counts, rows, dim):
     return out
 
 
-def read_agora(path, df=None) -> AgoraPeople:
+def unsafe_name(name: str) -> str:
+    """Why a name from a file cannot become a path or an ``image`` value ('' when it can)."""
+    if not isinstance(name, str) or not name:
+        return "empty image path"
+    if "\x00" in name:
+        return "image path contains NUL"
+    p = name.replace("\\", "/")
+    if p.startswith("/") or (len(p) > 1 and p[1] == ":"):
+        return "absolute image path"
+    if ".." in p.split("/"):
+        return "image path contains '..'"
+    return ""
+
+
+def _validate(people) -> np.ndarray:
+    """Per-person reasons ('' when usable); unusable geometry is replaced by NaN so nothing downstream fails."""
+    from ..rotation.check import rotation_screen_columns
+
+    n = len(people.row)
+    reason = np.full(n, "", dtype=object)
+
+    def mark(mask, why):
+        new = mask & (reason == "")
+        reason[new] = why
+
+    names = [unsafe_name(x) for x in people.image.tolist()]
+    for k, why in enumerate(names):
+        if why:
+            reason[k] = why
+    with np.errstate(invalid="ignore", over="ignore"):
+        R = people.cam_R
+        fin = np.isfinite(R).all(axis=(1, 2))
+        _, ortho, proper = rotation_screen_columns([R[:, i, j] for i in range(3) for j in range(3)], CAM_R_TOL)
+        mark(~fin, "camR not finite")
+        mark(fin & ~ortho, "camR not orthonormal")
+        mark(fin & ortho & ~proper, "camR determinant is not +1")
+        mark(~np.isfinite(people.cam_t).all(axis=1), "camT not finite")
+        K = people.K
+        if people.frame == "body":
+            kfin = np.isfinite(K).all(axis=(1, 2))
+            mark(~kfin, "camK not finite")
+            mark(kfin & ~((K[:, 0, 0] > 0) & (K[:, 1, 1] > 0)), "camK focal length not positive")
+        f = people.face3d
+        jbad = (np.abs(f) >= MAX_JOINT).any(axis=(1, 2))  # inf included; NaN is a missing point, fit_faces' job
+        mark(jbad, "face joints infinite or |value| >= 1e6")
+    bad = reason != ""
+    if bad.any():
+        people.cam_R[bad] = np.eye(3)
+        people.cam_t[bad] = 0.0
+        people.face3d[bad] = np.nan
+        if people.frame == "body":
+            people.K[bad] = np.nan
+        people.image[bad] = [repr(x)[:200] if unsafe_name(x) else x for x in people.image[bad].tolist()]
+    return reason
+
+
+def read_agora(path, df=None, trust: bool = False) -> AgoraPeople:
     """Read one AGORA ``*_withjv.pkl`` into per-person arrays (:class:`AgoraPeople`).
 
     Parameters
     ----------
     path : str or Path
-        The pickle (**loading it runs code**; trusted files only).
+        The pickle (restricted unpickler, see :func:`load_dataframe`) or Parquet file.
     df : pandas.DataFrame, optional
         The already-loaded dataframe (``path`` is then only used in messages).
+    trust : bool
+        Load any pickle (``--trust-pickle``).
     """
     path = Path(path)
     if df is None:
-        df = load_dataframe(path)
+        df = load_dataframe(path, trust)
     frame = check_columns(df, path)
     rows = np.arange(len(df))
     valid_cells = [_as_list(v) for v in df["isValid"].tolist()]
@@ -248,7 +421,9 @@ def read_agora(path, df=None) -> AgoraPeople:
         cam_R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
         cam_t = np.zeros((n, 3))
         K = np.full((n, 3, 3), np.nan)  # rebuilt for the requested image size by the caller
-    return AgoraPeople(path, row, person, image, valid, occ, face3d, cam_R, cam_t, K, frame, len(df))
+    people = AgoraPeople(path, row, person, image, valid, occ, face3d, cam_R, cam_t, K, frame, len(df))
+    people.reason = _validate(people)
+    return people
 
 
 def intrinsics_for_size(people: AgoraPeople, width: int, height: int):
@@ -280,6 +455,9 @@ def intrinsics_for_size(people: AgoraPeople, width: int, height: int):
     with np.errstate(divide="ignore", invalid="ignore"):
         sx, sy = (width / 2.0) / cx, (height / 2.0) / cy
     bad = ~(np.isfinite(sx) & np.isfinite(sy) & (sx > 0) & (np.abs(sx - sy) <= 1e-3 * np.abs(sx)))
+    reason = getattr(people, "reason", None)
+    if reason is not None:
+        bad &= reason == ""  # already rejected at the door
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise HpeError(f"{people.source}: row {people.row[k]}: camK's principal point ({cx[k]:g}, {cy[k]:g}) "

@@ -249,8 +249,10 @@ def read_biwi_tgz(path, system=BIWI_SYSTEM):
                 parsed = _parse_name(m.name)
                 if parsed is None or parsed[2] != "bin":
                     continue
+                if m.size != 24:  # checked from the header, before reading the member
+                    raise HpeError(f"{path}:{m.name}: expected 24 bytes (6 float32), got {m.size}")
                 fh = tf.extractfile(m)
-                vals.append(_decode_bin(f"{path}:{m.name}", fh.read()))
+                vals.append(_decode_bin(f"{path}:{m.name}", fh.read(25)))
                 names.append(m.name)
                 seqs.append(parsed[0])
                 frames.append(parsed[1])
@@ -458,7 +460,8 @@ def sequence_split(sequences, fractions=(0.7, 0.3), seed: int = 0, names=("train
     if fr.ndim != 1 or fr.size < 2 or (fr < 0).any() or not np.isclose(fr.sum(), 1.0):
         raise HpeError(f"--split: expected fractions >= 0 that sum to 1, got {','.join(f'{f:g}' for f in fr)}")
     if len(names) != fr.size:
-        names = tuple(["train", "val", "test"][:fr.size]) if fr.size <= 3 else tuple(f"split{i}" for i in range(fr.size))
+        names = tuple(["train", "val", "test"][:fr.size]) if fr.size <= 3 else \
+            tuple(f"split{i}" for i in range(fr.size))
     uniq = sorted({str(s) for s in sequences})
     perm = [uniq[i] for i in np.random.default_rng(seed).permutation(len(uniq))]
     cuts = np.round(np.cumsum(fr) * len(uniq)).astype(int)

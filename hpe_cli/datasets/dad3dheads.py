@@ -15,7 +15,12 @@ The head pose is the rotation block of the OpenGL model-view matrix
 ``MV`` (FLAME model frame -> camera frame, camera looking down -z with y up).
 ``hpe`` stores the ``dad3dheads`` label as ``R = diag(1, -1, -1) @ MV[:3, :3] / s``
 (``s = det(MV[:3, :3]) ** (1/3)``, 1 for a pure rotation): the same rotation
-seen from an OpenCV camera (y down, z forward).
+seen from an OpenCV camera (y down, z forward). This is the ground truth the
+dataset's benchmark compares predictions with
+(``dad_3dheads_benchmark/benchmark.py``, ``DADEvaluator.get_gt_rot_mat``:
+``(diag(1, -1, -1, 1) @ MV)[:3, :3]``); the benchmark does not divide by
+``s``, so the two agree exactly when the model-view matrix has no scale
+(``mv_scale`` = 1, which the column lets you check).
 """
 from __future__ import annotations
 

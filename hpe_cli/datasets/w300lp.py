@@ -237,31 +237,50 @@ def read_w300lp(path, landmarks: bool = True, pt2d: bool = False):
     return _table(src.rows, poses, lms, path, p2 if pt2d else None)
 
 
-def open_w300lp(path, batch_size: int = 262_144, landmarks: bool = True, chunk: int = 2048):
-    """Stream 300W-LP (root or zip) as a :class:`~hpe_cli.io.readers.TableSource`, ``chunk`` files at a time.
+class W300LPStream:
+    """300W-LP read ``chunk`` files at a time: ``schema``, ``num_rows``, ``system``, ``iter_batches()``.
+
+    :func:`hpe_cli.io.readers.open_table` wraps it into a ``TableSource`` (line numbers, rejects protocol).
+    """
+
+    def __init__(self, src, schema, names, fields, chunk, landmarks, path):
+        self.src, self.schema, self.names, self.fields = src, schema, names, fields
+        self.chunk, self.landmarks, self.path = chunk, landmarks, path
+        self.num_rows = len(src.rows)
+        self.system = SYSTEM
+
+    def iter_batches(self):
+        import pyarrow as pa
+
+        rows_all = self.src.rows
+        for start in range(0, len(rows_all), self.chunk):
+            rows = rows_all[start:start + self.chunk]
+            poses, _, lms = self.src.read(rows, self.landmarks)
+            f = _table(rows, poses, lms, self.path)
+            cols = [pa.array(f[n].to_numpy(), type=fd.type) if n in f.columns else
+                    pa.array(np.full(len(f), np.nan), type=fd.type) for n, fd in zip(self.names, self.fields)]
+            yield pa.RecordBatch.from_arrays(cols, schema=self.schema)
+
+
+def open_w300lp(path, landmarks: bool = True, chunk: int = 2048) -> W300LPStream:
+    """Stream 300W-LP (root or zip), ``chunk`` files at a time (memory flat in the number of files).
 
     The columns are those of :func:`read_w300lp` (without ``pt2d``); the
     landmark columns are present when the dataset has any landmark file.
-    Memory is flat in the number of files.
     """
     import pyarrow as pa
 
-    from ..io.readers import TableSource
-
     src = _Source(path)
-    chunk = max(1, min(int(chunk), int(batch_size)))
     dims3 = 0
     if landmarks and src.pts:
-        key = next(iter(src.pts))
-        s0 = src.pts[key]
+        s0 = next(iter(src.pts.values()))
         if src.zip:
             with zipfile.ZipFile(src.path) as z:
                 first = read_pts(f"{src.path}:{s0}", io.BytesIO(z.read(s0)))
         else:
             first = read_pts(s0)
         dims3 = 0 if first["pts_3d"] is None else first["pts_3d"].shape[1]
-    probe = _table(src.rows[:0], [], [], path)
-    names = list(probe.columns)
+    names = list(_table(src.rows[:0], [], [], path).columns)
     if landmarks and src.pts:
         names += [f"lm{i}_{a}" for i in range(68) for a in "xy"]
         names += [f"lm3d{i}_{a}" for i in range(68) for a in "xyz"[:dims3]]
@@ -269,14 +288,4 @@ def open_w300lp(path, batch_size: int = 262_144, landmarks: bool = True, chunk: 
               pa.field(n, pa.bool_()) if n == "flipped" else pa.field(n, pa.int64()) if n == "k" else
               pa.field(n, pa.float64()) for n in names]
     schema = pa.schema(fields, metadata={b"hpe:system": SYSTEM.encode()})
-
-    def batches():
-        for start in range(0, len(src.rows), chunk):
-            rows = src.rows[start:start + chunk]
-            poses, _, lms = src.read(rows, landmarks)
-            f = _table(rows, poses, lms, path)
-            cols = [pa.array(f[n].to_numpy(), type=fd.type) if n in f.columns else
-                    pa.array(np.full(len(f), np.nan), type=fd.type) for n, fd in zip(names, fields)]
-            yield pa.RecordBatch.from_arrays(cols, schema=schema)
-
-    return TableSource(Path(path), schema, len(src.rows), batches, system=SYSTEM, dataset=True)
+    return W300LPStream(src, schema, names, fields, max(1, int(chunk)), landmarks, Path(path))

@@ -5,11 +5,13 @@ DirectMHP (``exps/AGORA/data_process_hpe.py``) trains from a COCO file whose
 are ``{image_id, id, category_id: 1, bbox: [x, y, w, h], euler_angles: [pitch,
 yaw, roll], face2d_pts: [[x...], [y...]], area, iscrowd: 0, segmentation: []}``
 with a single ``person`` category. :func:`write_coco` writes that layout from
-a label table, atomically.
+a label table, atomically, streaming: :class:`CocoWriter` takes the table in
+batches and writes each batch's annotations at once (floats by ``orjson``),
+so memory does not grow with the number of rows (only with the number of
+distinct images, whose ids must be remembered).
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -23,97 +25,170 @@ CATEGORIES = [{"supercategory": "person", "id": 1, "name": "person"}]
 MISSING_POINT = -1.0
 
 
-def _finite_column(frame, col, path):
-    v = frame[col].to_numpy(dtype=np.float64, na_value=np.nan)
+def _finite(v, col, path, offset):
     bad = np.flatnonzero(~np.isfinite(v))
     if bad.size:
-        raise HpeError(f"{path}: row {bad[0]}: expected a finite {col}, got {v[bad[0]]} "
-                       f"({bad.size} such rows)")
+        raise HpeError(f"{path}: row {offset + bad[0]}: expected a finite {col}, got {v[bad[0]]} "
+                       f"({bad.size} such rows in this batch)")
     return v
 
 
-def _image_sizes(frame, codes, n_images, width, height, path, cols=("image_width", "image_height")):
-    """Per-image (width, height): from the table's columns, else the arguments."""
-    sizes = []
-    for col, given in ((cols[0], width), (cols[1], height)):
-        if col in frame.columns:
-            v = frame[col].to_numpy(dtype=np.float64, na_value=np.nan)
-            if not np.isfinite(v).all() or (v <= 0).any():
-                bad = int(np.flatnonzero(~(np.isfinite(v) & (v > 0)))[0])
-                raise HpeError(f"{path}: row {bad}: expected a positive {col}, got {v[bad]}")
-            per = np.full(n_images, np.nan)
-            per[codes] = v
-            lo = np.full(n_images, np.inf)
-            hi = np.full(n_images, -np.inf)
-            np.minimum.at(lo, codes, v)
-            np.maximum.at(hi, codes, v)
-            if (lo != hi).any():
-                k = int(np.flatnonzero(lo != hi)[0])
-                raise HpeError(f"{path}: image {k}: expected one {col} per image, got {lo[k]:g} and {hi[k]:g}")
-            sizes.append(per.astype(np.int64))
-        elif given is not None:
-            sizes.append(np.full(n_images, int(given), dtype=np.int64))
+def _column(frame, col):
+    """A column of a pandas DataFrame, pyarrow Table or RecordBatch as float64 (NaN for nulls)."""
+    if hasattr(frame, "schema") and not hasattr(frame, "iloc"):
+        import pyarrow.compute as pc
+        import pyarrow as pa
+
+        c = frame.column(col)
+        return np.asarray(pc.cast(c, pa.float64()).to_numpy(zero_copy_only=False), dtype=np.float64)
+    return frame[col].to_numpy(dtype=np.float64, na_value=np.nan)
+
+
+def _names(frame):
+    return list(frame.schema.names) if hasattr(frame, "schema") and not hasattr(frame, "iloc") \
+        else list(frame.columns)
+
+
+def _strings(frame, col) -> list:
+    if hasattr(frame, "schema") and not hasattr(frame, "iloc"):
+        return [str(x) for x in frame.column(col).to_pylist()]
+    return frame[col].astype(str).tolist()
+
+
+class CocoWriter:
+    """Write DirectMHP-style COCO JSON batch by batch, atomically (see :func:`write_coco`).
+
+    ``annotations`` are written as they come; ``images`` (one entry per
+    distinct ``image``, ids in order of first appearance) follow at the end,
+    then ``categories``. The document equals :func:`coco_dict`'s, value for
+    value (JSON key order aside).
+    """
+
+    def __init__(self, path, overwrite: bool = False, *, width=None, height=None, info: dict | None = None,
+                 image_size_cols=("image_width", "image_height")):
+        self._atomic = AtomicFile(path, overwrite)  # refuse an existing file before doing any work
+        self.path = Path(path)
+        self.width, self.height, self.info = width, height, dict(info or {})
+        self.size_cols = tuple(image_size_cols)
+        self.images: dict = {}  # name -> [id, width, height]
+        self.rows = 0
+        self._fh = None
+
+    def __enter__(self):
+        import orjson
+
+        self._tmp = self._atomic.__enter__()
+        self._fh = open(self._tmp, "wb")
+        self._fh.write(b'{"info":' + orjson.dumps(self.info) + b',"licenses":[],"annotations":[')
+        return self
+
+    def write(self, frame) -> None:
+        """Append one batch (pandas DataFrame, pyarrow Table or RecordBatch) of label rows."""
+        import orjson
+
+        names = _names(frame)
+        missing = [c for c in ["image"] + BBOX_COLS + ANGLE_COLS if c not in names]
+        if missing:
+            raise HpeError(f"{self.path}: expected columns {', '.join(missing)} in the label table")
+        n = len(frame)
+        if n == 0:
+            return
+        off = self.rows
+        files = _strings(frame, "image")
+        sizes = []
+        for col, given in ((self.size_cols[0], self.width), (self.size_cols[1], self.height)):
+            if col in names:
+                v = _column(frame, col)
+                ok = np.isfinite(v) & (v > 0)
+                if not ok.all():
+                    bad = int(np.flatnonzero(~ok)[0])
+                    raise HpeError(f"{self.path}: row {off + bad}: expected a positive {col}, got {v[bad]}")
+                sizes.append(v.astype(np.int64).tolist())
+            elif given is not None:
+                sizes.append([int(given)] * n)
+            else:
+                raise HpeError(f"{self.path}: expected an {col} column or an image size for the COCO "
+                               "'images' entries")
+        box = np.stack([_finite(_column(frame, c), c, self.path, off) for c in BBOX_COLS], axis=1)
+        if (box[:, 2:] < 0).any():
+            bad = int(np.flatnonzero((box[:, 2:] < 0).any(1))[0])
+            raise HpeError(f"{self.path}: row {off + bad}: expected bbox_w, bbox_h >= 0, "
+                           f"got {box[bad, 2]:g}, {box[bad, 3]:g}")
+        ang = np.stack([_finite(_column(frame, c), c, self.path, off) for c in ANGLE_COLS], axis=1)
+        n_lm = landmark_count(names)
+        if n_lm:
+            xs = np.stack([_column(frame, f"lm{i}_x") for i in range(n_lm)], axis=1)
+            ys = np.stack([_column(frame, f"lm{i}_y") for i in range(n_lm)], axis=1)
+            gone = ~(np.isfinite(xs) & np.isfinite(ys))
+            pts = np.stack([np.where(gone, MISSING_POINT, xs), np.where(gone, MISSING_POINT, ys)], axis=1).tolist()
         else:
-            raise HpeError(f"{path}: expected an {col} column or an image size for the COCO 'images' entries")
-    return sizes
+            pts = [[] for _ in range(n)]
+        images = self.images
+        image_ids = []
+        for f, w, h in zip(files, sizes[0], sizes[1]):
+            e = images.get(f)
+            if e is None:
+                e = images[f] = [len(images) + 1, w, h]
+            elif e[1] != w or e[2] != h:
+                col = self.size_cols[0] if e[1] != w else self.size_cols[1]
+                a, b = (e[1], w) if e[1] != w else (e[2], h)
+                raise HpeError(f"{self.path}: image {e[0] - 1}: expected one {col} per image, "
+                               f"got {min(a, b):g} and {max(a, b):g}")
+            image_ids.append(e[0])
+        area = np.round(box[:, 2] * box[:, 3], 4).tolist()
+        box_l, ang_l = box.tolist(), ang.tolist()
+        anns = [{"image_id": image_ids[k], "id": off + k + 1, "category_id": 1, "bbox": box_l[k],
+                 "euler_angles": ang_l[k], "face2d_pts": pts[k], "area": area[k], "iscrowd": 0,
+                 "segmentation": []} for k in range(n)]
+        text = orjson.dumps(anns)[1:-1]
+        self._fh.write((b"," if self.rows else b"") + text)
+        self.rows += n
+
+    def __exit__(self, exc_type, exc, tb):
+        import orjson
+
+        try:
+            if exc_type is None:
+                images = [{"file_name": f, "height": h, "width": w, "id": i} for f, (i, w, h) in self.images.items()]
+                self._fh.write(b'],"images":' + orjson.dumps(images) + b',"categories":' +
+                               orjson.dumps(CATEGORIES) + b"}")
+            self._fh.close()
+        except BaseException:
+            self._fh.close()
+            self._atomic.__exit__(RuntimeError, None, None)
+            raise
+        return self._atomic.__exit__(exc_type, exc, tb)
 
 
 def coco_dict(frame, *, width=None, height=None, info: dict | None = None, path="<coco>",
               image_size_cols=("image_width", "image_height")) -> dict:
-    """Build the COCO dictionary of a label table (see :func:`write_coco`)."""
-    missing = [c for c in ["image"] + BBOX_COLS + ANGLE_COLS if c not in frame.columns]
-    if missing:
-        raise HpeError(f"{path}: expected columns {', '.join(missing)} in the label table")
-    files = frame["image"].astype(str).to_numpy()
-    # images in order of first appearance; ids start at 1 (0 is falsy in some COCO tools)
-    uniq, first, codes = np.unique(files, return_index=True, return_inverse=True)
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    codes = rank[codes.reshape(-1)]
-    names = uniq[order]
-    w_img, h_img = _image_sizes(frame, codes, names.size, width, height, path, tuple(image_size_cols))
-    box = np.stack([_finite_column(frame, c, path) for c in BBOX_COLS], axis=1)
-    if (box[:, 2:] < 0).any():
-        bad = int(np.flatnonzero((box[:, 2:] < 0).any(1))[0])
-        raise HpeError(f"{path}: row {bad}: expected bbox_w, bbox_h >= 0, got {box[bad, 2]:g}, {box[bad, 3]:g}")
-    ang = np.stack([_finite_column(frame, c, path) for c in ANGLE_COLS], axis=1)
-    n_lm = landmark_count(frame.columns)
-    if n_lm:
-        xs = frame[[f"lm{i}_x" for i in range(n_lm)]].to_numpy(dtype=np.float64, na_value=np.nan)
-        ys = frame[[f"lm{i}_y" for i in range(n_lm)]].to_numpy(dtype=np.float64, na_value=np.nan)
-        gone = ~(np.isfinite(xs) & np.isfinite(ys))
-        xs = np.where(gone, MISSING_POINT, xs).tolist()
-        ys = np.where(gone, MISSING_POINT, ys).tolist()
-        pts = [[x, y] for x, y in zip(xs, ys)]
-    else:
-        pts = [[] for _ in range(len(frame))]
-    area = np.round(box[:, 2] * box[:, 3], 4).tolist()
-    image_ids = (codes + 1).tolist()
-    box_l, ang_l = box.tolist(), ang.tolist()
-    images = [{"file_name": str(f), "height": int(h), "width": int(w), "id": i + 1}
-              for i, (f, w, h) in enumerate(zip(names.tolist(), w_img.tolist(), h_img.tolist()))]
-    annotations = [{"image_id": image_ids[k], "id": k + 1, "category_id": 1, "bbox": box_l[k],
-                    "euler_angles": ang_l[k], "face2d_pts": pts[k], "area": area[k], "iscrowd": 0,
-                    "segmentation": []} for k in range(len(frame))]
-    return {"info": dict(info or {}), "licenses": [], "images": images, "annotations": annotations,
-            "categories": CATEGORIES}
+    """The COCO dictionary of a label table, as :func:`write_coco` writes it (small tables, tests)."""
+    import tempfile
+
+    import orjson
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "c.json"
+        write_coco(frame, out, width=width, height=height, info=info, image_size_cols=image_size_cols)
+        doc = orjson.loads(out.read_bytes())
+    return {k: doc[k] for k in ("info", "licenses", "images", "annotations", "categories")}
 
 
 def write_coco(frame, path, overwrite: bool = False, *, width=None, height=None, info: dict | None = None,
-               image_size_cols=("image_width", "image_height")):
+               image_size_cols=("image_width", "image_height"), batch_size: int = 65536):
     """Write a label table as DirectMHP-style COCO JSON, atomically.
 
     Parameters
     ----------
-    frame : pandas.DataFrame
+    frame : pandas.DataFrame, pyarrow Table, or an iterable of either
         One row per head: ``image`` (path, used as ``file_name``), ``bbox_x,
         bbox_y, bbox_w, bbox_h`` (pixels, top-left corner and size),
         ``pitch, yaw, roll`` (degrees, written as ``euler_angles`` in that
         order and in whatever system the table holds -- DirectMHP's own files
         use the ``whenet`` system), optionally ``lm{i}_x, lm{i}_y`` (pixels;
         written as ``face2d_pts = [[x0, x1, ...], [y0, y1, ...]]``, a missing
-        point as -1) and ``image_width, image_height``.
+        point as -1) and ``image_width, image_height``. An iterable of
+        batches is written as it comes (memory flat in the number of rows).
     path : str or Path
         Output ``.json``; refused if it exists unless ``overwrite``.
     width, height : int, optional
@@ -127,11 +202,24 @@ def write_coco(frame, path, overwrite: bool = False, *, width=None, height=None,
     -----
     Image ids are 1, 2, ... in order of first appearance; annotation ids are
     1, 2, ... in row order; ``area`` is ``bbox_w * bbox_h``; ``category_id``
-    is 1 (``person``). The output is strict JSON (no NaN).
+    is 1 (``person``). The output is strict JSON (no NaN). ``images`` follow
+    ``annotations`` in the file (a streaming writer learns them as it goes);
+    COCO readers look both up by key, so the order of keys is immaterial.
     """
-    atomic = AtomicFile(path, overwrite)  # refuse an existing file before doing any work
-    doc = coco_dict(frame, width=width, height=height, info=info, path=path, image_size_cols=image_size_cols)
-    with atomic as tmp:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(doc, fh, allow_nan=False)
+    with CocoWriter(path, overwrite, width=width, height=height, info=info,
+                    image_size_cols=image_size_cols) as w:
+        for part in _parts(frame, batch_size):
+            w.write(part)
     return Path(path)
+
+
+def _parts(frame, batch_size):
+    if hasattr(frame, "iloc"):
+        for lo in range(0, len(frame), batch_size):
+            yield frame.iloc[lo:lo + batch_size]
+    elif hasattr(frame, "to_batches"):
+        yield from frame.to_batches(max_chunksize=batch_size)
+    elif hasattr(frame, "schema"):
+        yield frame
+    else:
+        yield from frame

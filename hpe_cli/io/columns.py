@@ -86,6 +86,15 @@ def parse_columns_map(text) -> dict:
     return out
 
 
+class LenientMap(str):
+    """A command-wide ``--columns-map``: applied to each input that has the source columns.
+
+    With several inputs (``hpe evaluate PRED GT``) one map serves them all: an
+    input is renamed when it has at least one of the mapped source columns,
+    and left alone when it has none.
+    """
+
+
 def apply_columns_map(src, columns):
     """A :class:`~hpe_cli.io.readers.TableSource` whose columns are renamed by ``columns``.
 
@@ -98,7 +107,14 @@ def apply_columns_map(src, columns):
     import pyarrow as pa
 
     names = list(src.schema.names)
+    if LINE_COL in mapping or LINE_COL in mapping.values():
+        raise HpeError(f"--columns-map: {LINE_COL} is reserved for line numbers")
     missing = [s for s in mapping if s not in names]
+    if isinstance(columns, LenientMap):
+        if len(missing) == len(mapping):
+            return src
+        mapping = {k: v for k, v in mapping.items() if k in names}
+        missing = []
     if missing:
         raise HpeError(f"{src.path}: --columns-map names column(s) {', '.join(map(repr, missing))} that the table "
                        f"does not have; found {', '.join(n for n in names if n != LINE_COL)}")
@@ -111,11 +127,8 @@ def apply_columns_map(src, columns):
     inner = src._batches
 
     def batches():
-        for item in inner():
-            b, rejects = item if isinstance(item, tuple) else (item, [])
-            if LINE_COL in b.schema.names and LINE_COL not in names:
-                b = b.drop_columns([LINE_COL])
-            yield pa.RecordBatch.from_arrays(b.columns, schema=schema), rejects
+        for b, rejects in inner():
+            yield b.rename_columns([mapping.get(n, n) for n in b.schema.names]), rejects
 
     return replace(src, schema=schema, _batches=batches)
 
@@ -173,7 +186,7 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
-    from .readers import TableSource
+    from .readers import Reject, TableSource
 
     path = Path(path)
     if not path.is_file():
@@ -224,22 +237,25 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
     if header:
         hdr = list(schema.names)
         if len(set(hdr)) != len(hdr):
-            raise HpeError(f"{path}: line {skip_lines + 1}: the header names a column twice "
+            raise HpeError(f"{path}: row {skip_lines + 1}: the header names a column twice "
                            f"({', '.join(sorted({h for h in hdr if hdr.count(h) > 1}))})")
     first_line = skip_lines + (2 if header else 1)
-    if with_lines:
-        schema = schema.append(pa.field(LINE_COL, pa.int64()))
+    base_schema = schema
+    schema = schema.append(pa.field(LINE_COL, pa.int64())) if with_lines else schema
+    line_schema = base_schema.append(pa.field(LINE_COL, pa.int64()))
     first_reader = [reader]
+
+    def take_rejects():
+        out = [Reject(line, f"expected {want} fields separated by {delimiter!r}, got {got}", text[:200])
+               for line, want, got, text in bad]
+        bad.clear()
+        return out
 
     def batches():
         rdr = first_reader.pop() if first_reader else make_reader()
         start = 0
         for b in rdr:
             n = b.num_rows
-            if bad:
-                line, want, got, text = bad[0]
-                raise HpeError(f"{path}: line {line}: expected {want} fields separated by {delimiter!r}, "
-                               f"got {got} ({text[:80]!r})")
             lines = _line_numbers(first_line, start, n, skipped)
             start += n
             # an empty line parses as a row of nulls: it is not a row of the table
@@ -251,23 +267,18 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
                 keep = ~empty
                 b = b.filter(pa.array(keep))
                 lines = lines[keep]
-            if with_lines:
-                b = pa.RecordBatch.from_arrays(list(b.columns) + [pa.array(lines)], schema=schema)
-            yield b
+            b = pa.RecordBatch.from_arrays(list(b.columns) + [pa.array(lines, type=pa.int64())], schema=line_schema)
+            yield b, take_rejects()
         if bad:
-            line, want, got, text = bad[0]
-            raise HpeError(f"{path}: line {line}: expected {want} fields separated by {delimiter!r}, "
-                           f"got {got} ({text[:80]!r})")
+            yield pa.RecordBatch.from_pylist([], schema=line_schema), take_rejects()
 
-    src = TableSource(path, schema, None, batches, with_lines=with_lines)
-    src.system = system
-    return src
+    return TableSource(path, schema, None, batches, with_lines, "text", system=system)
 
 
 def _opal23(path, batch_size, with_lines):
     first = _first_lines(path, 2)
     if not first or not first[0].startswith("#;"):
-        raise HpeError(f"{path}: line 1: expected OPAL's header '#;image;...;yaw;pitch;roll', "
+        raise HpeError(f"{path}: row 1: expected OPAL's header '#;image;...;yaw;pitch;roll', "
                        f"got {(first[0] if first else '')[:80]!r}")
     fields = [f.strip() for f in first[0].split(";")[1:]]
     base = [_OPAL_NAMES.get(f, f) for f in fields]
@@ -276,12 +287,12 @@ def _opal23(path, batch_size, with_lines):
         data = [ln for ln in _first_lines(path, 50)[1:] if ln and not ln.startswith(("@", "#"))]
         n_extra = (len(data[0].split(";")) - len(base)) if data else 0
         if n_extra < 0 or n_extra % 2:
-            raise HpeError(f"{path}: line 2: expected {len(base)} fields then x;y landmark pairs, "
+            raise HpeError(f"{path}: row 2: expected {len(base)} fields then x;y landmark pairs, "
                            f"got {len(base) + n_extra} fields")
         base += [f"lm{i}_{a}" for i in range(n_extra // 2) for a in "xy"]
     for need in ("image", "yaw", "pitch", "roll"):
         if need not in base:
-            raise HpeError(f"{path}: line 1: expected a field named {need!r} in OPAL's header, "
+            raise HpeError(f"{path}: row 1: expected a field named {need!r} in OPAL's header, "
                            f"got {';'.join(fields)}")
     return open_text(path, batch_size, delimiter=";", header=False, names=base, skip_lines=1,
                      comment_prefixes=("@", "#"), quoting=False, string_columns=("image", "identity"),
@@ -297,7 +308,7 @@ def _celeba(path, batch_size, with_lines):
         ok = False
     if not ok:
         got = " / ".join(first)[:80]
-        raise HpeError(f"{path}: line 1: expected CelebAMask-HQ's count line then 'Yaw Pitch Raw', got {got!r}")
+        raise HpeError(f"{path}: row 1: expected CelebAMask-HQ's count line then 'Yaw Pitch Raw', got {got!r}")
     return open_text(path, batch_size, delimiter=" ", header=False, names=["image", "yaw", "pitch", "roll"],
                      skip_lines=2, quoting=False, string_columns=("image",), with_lines=with_lines,
                      system=FORMAT_SYSTEMS["celeba-pose"])
@@ -400,13 +411,14 @@ def _frame_source(path, frame, batch_size, with_lines, system=None):
 
     from .readers import TableSource
 
-    if not with_lines and LINE_COL in frame.columns:
-        frame = frame.drop(columns=[LINE_COL])
-    table = pa.Table.from_pandas(frame, preserve_index=False)
-    src = TableSource(Path(path), table.schema, table.num_rows, lambda: iter(table.to_batches(batch_size)),
-                      with_lines=with_lines)
-    src.system = system
-    return src
+    table = pa.Table.from_pandas(frame, preserve_index=False)  # carries __line__
+    schema = table.schema if with_lines else table.schema.remove(table.schema.get_field_index(LINE_COL))
+
+    def batches():
+        for b in table.to_batches(max_chunksize=batch_size):
+            yield b, []
+
+    return TableSource(Path(path), schema, table.num_rows, batches, with_lines, "json", system=system)
 
 
 # ------------------------------------------------------------------------------------------- dispatch
@@ -422,6 +434,8 @@ def sniff_format(path) -> str | None:
         return "whenet"
     if name == "celebamask-hq-pose-anno.txt":
         return "celeba-pose"
+    if name == "biwi_annotations.txt":
+        return "img2pose-biwi"
     if name.endswith(".txt"):
         first = _first_lines(path, 1)
         if first and first[0].startswith("#;"):
@@ -457,7 +471,8 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
             if is_dad_metadata(doc):
                 return None  # a dataset reader takes it
             raise HpeError(f"{path}: expected COCO JSON (an object with 'images' and 'annotations'), "
-                           f"got {type(doc).__name__} with keys {', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}")
+                           f"got {type(doc).__name__} with keys "
+                           f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}")
     if fmt is None:
         if delimiter is None and header and not names:
             return None

@@ -253,6 +253,25 @@ def batch_rotations(batch, system, mode: str, radians: bool = False):
     if mode != system.storage_kind or not native:
         raise HpeError(f"{mode} columns {', '.join(system.value_columns)} not found for system {system.name}")
     cols, ok, reasons = _value_columns(batch, system.value_columns)
+    if system.storage_kind in ("rotvec", "quaternion"):  # column kernels: no (n, 3, 3) stack on the hot path
+        from ..rotation import storage as st
+
+        if system.storage_kind == "quaternion":
+            c = cols if system.quaternion_order == "wxyz" else [cols[3], cols[0], cols[1], cols[2]]
+            norm = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3])
+            bad = ok & ~(np.abs(norm - 1.0) <= 1e-3)
+            if bad.any():
+                if reasons is None:
+                    reasons = np.full(n, "", dtype=object)
+                reasons[bad] = "not a unit quaternion (norm differs from 1 by more than 1e-3)"
+                ok = ok & ~bad
+            if not ok.all():
+                c = [np.where(ok, v, d) for v, d in zip(c, (1.0, 0.0, 0.0, 0.0))]
+            X = st.quaternion_to_soa(*c)
+        else:
+            c = cols if ok.all() else [np.where(ok, v, 0.0) for v in cols]
+            X = st.rotvec_to_soa(*c)
+        return X, ok, reasons
     values = np.stack(cols, axis=-1)
     idx = np.flatnonzero(ok)
     R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
@@ -281,3 +300,37 @@ def rotation_value_columns(system, X, n: int) -> dict:
         return {c: np.asarray(v * f, dtype=np.float64) for c, v in zip(system.value_columns, p1)}
     values = system.matrix_to_values(soa.to_array(X, n)) if n else np.zeros((0, len(system.value_columns)))
     return {c: np.ascontiguousarray(values[:, k]) for k, c in enumerate(system.value_columns)}
+
+
+def label_values(batch, system, mode: str, radians: bool = False):
+    """Label values for checks that look at angles or matrices as read (``hpe audit``).
+
+    ``(n, 3)`` angles in degrees (role order) when the table holds angles
+    (hpe's ``pitch, yaw, roll`` or the system's declared angle columns), else
+    ``(n, 3, 3)`` stored matrices (any other storage kind is turned into its
+    matrix). Unusable entries are NaN (for stored values: the whole row).
+    """
+    from ..rotation.systems import get_system
+
+    system = get_system(system)
+    names = batch.schema.names
+    if mode == "angles":
+        native = _native(system, names) and system.storage_kind == "angles"
+        cols = system.value_columns if native else ANGLE_COLS
+        values = np.stack([numeric_column(batch, c)[0] for c in cols], axis=-1)
+        rad = (system.value_units == "radians") if native else radians
+        return np.rad2deg(values) if rad else values
+    if mode == "matrix" and not (_native(system, names) and system.storage_kind == "matrix"):
+        return np.stack([numeric_column(batch, c)[0] for c in MATRIX_COLS], axis=-1).reshape(-1, 3, 3)
+    cols = system.value_columns
+    values = np.stack([numeric_column(batch, c)[0] for c in cols], axis=-1)
+    R = np.full((len(values), 3, 3), np.nan)
+    ok = np.isfinite(values).all(axis=1)
+    if ok.any():
+        Rk, reasons = system.values_to_matrix(values[ok]) if mode != "matrix" else (values[ok].reshape(-1, 3, 3), None)
+        good = np.ones(len(Rk), dtype=bool) if reasons is None else reasons == ""
+        if mode == "matrix":  # let audit's own checks see a non-rotation as it is
+            good[:] = True
+        idx = np.flatnonzero(ok)[good]
+        R[idx] = Rk[good]
+    return R

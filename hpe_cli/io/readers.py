@@ -141,6 +141,10 @@ def sniff(path: Path) -> str:
     return "text"
 
 
+#: inputs that the command-wide --delimiter/--no-header/--names/--input-format options never apply to
+_NOT_TEXT = (".parquet", ".pq", ".mat", ".zip", ".tgz", ".gz", ".tar", ".npz", ".pkl", ".pickle")
+
+
 def open_table(path, batch_size: int = DEFAULT_BATCH, columns=None, delimiter=None, header: bool = True,
                input_format=None, names=None, with_lines: bool = False, block_size: int | None = None) -> TableSource:
     """Open a label table for streaming.
@@ -148,15 +152,25 @@ def open_table(path, batch_size: int = DEFAULT_BATCH, columns=None, delimiter=No
     ``columns`` renames columns (``"pitch=Pitch,yaw=Yaw"`` or ``{"pitch": "Pitch"}``);
     ``delimiter``/``header``/``names`` read delimited text of any suffix;
     ``input_format`` names a label list (see :mod:`hpe_cli.io.columns`); COCO
-    ``.json`` and WHENet ``annotation.txt`` are recognised without it.
+    ``.json`` and WHENet ``annotation.txt`` are recognised without it. Without
+    these arguments, the running command's ``--columns-map``/``--delimiter``/...
+    options apply (:func:`hpe_cli.cli.table_options.column_options`).
     """
     from .columns import active_table_options, apply_columns_map, open_formatted
 
     if columns is None and delimiter is None and header and input_format is None and names is None:
-        active = active_table_options()  # the running command's --columns-map/--delimiter/... options
+        active = active_table_options()
         if active:
             columns, delimiter, header = active["columns"], active["delimiter"], active["header"]
             input_format, names = active["input_format"], active["names"]
+            p = Path(path)
+            if p.is_dir() or p.suffix.lower() in _NOT_TEXT:
+                # a command with several inputs (evaluate PRED GT): text options apply to its text inputs
+                delimiter, header, input_format, names = None, True, None, None
+            if columns:
+                from .columns import LenientMap
+
+                columns = LenientMap(columns)
     src = open_formatted(path, batch_size, input_format=input_format, delimiter=delimiter, header=header,
                          names=names, with_lines=with_lines)
     if src is None:
@@ -181,8 +195,15 @@ def _open_core(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = Fals
     if not path.exists():
         raise HpeError(f"{path}: no such file or folder")
     dataset = _read_dataset(path)
-    if isinstance(dataset, TableSource):  # a dataset reader that streams
-        return dataset
+    if dataset is not None and hasattr(dataset, "iter_batches"):  # a dataset reader that streams
+
+        def gen_stream():
+            line = 2
+            for b in dataset.iter_batches():
+                yield _with_line(b, line), []
+                line += b.num_rows
+        return TableSource(path, _schema(dataset.schema, with_lines), dataset.num_rows, gen_stream, with_lines,
+                           "dataset", system=dataset.system, dataset=True)
     if dataset is not None:
         system = dataset.attrs.get("system")
         table = pa.Table.from_pandas(dataset, preserve_index=False)

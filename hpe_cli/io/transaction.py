@@ -44,6 +44,46 @@ TEMP_PREFIX = ".hpe-"
 _current: contextvars.ContextVar = contextvars.ContextVar("hpe_output_transaction", default=None)
 #: the run's transaction, also visible from worker threads (which do not inherit context variables)
 _run = None
+#: set by a signal handler: no transaction may commit any more (the exception to raise instead)
+_stop = None
+
+
+def request_stop(exc: BaseException | None) -> None:
+    """From a signal handler: make every later commit raise ``exc`` (None clears it)."""
+    global _stop
+    _stop = exc
+
+
+def stop_requested() -> BaseException | None:
+    return _stop
+
+
+_critical = 0
+_pending = None
+
+
+def in_critical_section(exc: BaseException) -> bool:
+    """From a signal handler: if a file operation and its bookkeeping are under way, hold ``exc`` back
+    (it is raised as soon as the section ends) and return True."""
+    global _pending
+    if _critical:
+        _pending = exc
+        return True
+    return False
+
+
+@contextmanager
+def _section():
+    """Create/rename a file and record it, with no signal exception in between."""
+    global _critical, _pending
+    _critical += 1
+    try:
+        yield
+    finally:
+        _critical -= 1
+        if not _critical and _pending is not None:
+            exc, _pending = _pending, None
+            raise exc
 
 _REASONS = {
     errno.EACCES: "permission denied",
@@ -181,6 +221,14 @@ class OutputTransaction:
             if inp.same(item):
                 raise HpeError(_collision(item, inp, "input"))
 
+    def input_paths(self) -> list:
+        """The run's inputs, as given."""
+        return [i.shown for i in self._inputs]
+
+    def paths(self) -> list:
+        """Every input and output path of the run, as given (for error messages)."""
+        return [i.shown for i in self._inputs + self._outputs] + [os.fspath(s.target) for s in self._staged]
+
     def after_commit(self, func) -> None:
         """Call ``func()`` once everything is committed (e.g. print the summary)."""
         self._after.append(func)
@@ -202,7 +250,8 @@ class OutputTransaction:
         if path.exists() and not overwrite and not is_dir:
             raise HpeError(f"{path}: already exists (use --overwrite to replace it)")
         parent = path.parent
-        self._make_parents(path, parent)
+        with _section():
+            self._make_parents(path, parent)
         if len(os.fsencode(path.name)) > _name_max(parent):
             raise HpeError(f"{path}: file name too long")
         return path, parent
@@ -233,14 +282,15 @@ class OutputTransaction:
         path, parent = self._prepare(path, overwrite, is_dir=False)
         for _ in range(16):
             tmp = _temp_in(parent)
-            try:
-                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
-            except FileExistsError:
-                continue
-            except OSError as exc:
-                raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
-            os.close(fd)
-            self._staged.append(_Staged(path, tmp, overwrite, False))
+            with _section():
+                try:
+                    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
+                except FileExistsError:
+                    continue
+                except OSError as exc:
+                    raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
+                os.close(fd)
+                self._staged.append(_Staged(path, tmp, overwrite, False))
             return tmp
         raise HpeError(f"{path}: cannot create a temporary file in {parent}")
 
@@ -253,13 +303,14 @@ class OutputTransaction:
         path, parent = self._prepare(path, overwrite, is_dir=True)
         for _ in range(16):
             tmp = _temp_in(parent)
-            try:
-                os.mkdir(tmp, 0o777)
-            except FileExistsError:
-                continue
-            except OSError as exc:
-                raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
-            self._staged.append(_Staged(path, tmp, overwrite, True))
+            with _section():
+                try:
+                    os.mkdir(tmp, 0o777)
+                except FileExistsError:
+                    continue
+                except OSError as exc:
+                    raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
+                self._staged.append(_Staged(path, tmp, overwrite, True))
             return tmp
         raise HpeError(f"{path}: cannot create a temporary folder in {parent}")
 
@@ -298,6 +349,9 @@ class OutputTransaction:
         """Move every staged output into place; on any failure undo what was moved and remove the rest."""
         if self.state != "open":
             return
+        if _stop is not None:  # a signal arrived (even if something swallowed its exception): commit nothing
+            self.abort()
+            raise _stop
         self.state = "committing"
         undo: list = []
         backups: list = []
@@ -314,11 +368,13 @@ class OutputTransaction:
                     plans.append((s, [(s.tmp, s.target)]))
             for s, pairs in plans:
                 if s.is_dir:
-                    self._make_parents(s.target / "x", s.target)
+                    with _section():
+                        self._make_parents(s.target / "x", s.target)
                 for src, dst in pairs:
-                    if s.is_dir:
-                        self._make_parents(dst, dst.parent)
-                    _place(src, dst, s.overwrite, undo, backups)
+                    with _section():
+                        if s.is_dir:
+                            self._make_parents(dst, dst.parent)
+                        _place(src, dst, s.overwrite, undo, backups)
         except BaseException as exc:
             for action in reversed(undo):
                 try:

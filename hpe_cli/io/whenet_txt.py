@@ -26,40 +26,69 @@ from .writers import AtomicFile
 WHENET_FIELDS = ("image", "yaw", "pitch", "roll")
 
 
-def whenet_lines(frame, path="<annotation.txt>") -> list:
-    """The ``annotation.txt`` lines (with their newline) of a label table."""
-    missing = [c for c in WHENET_FIELDS if c not in frame.columns]
+def whenet_lines(frame, path="<annotation.txt>", offset: int = 0) -> list:
+    """The ``annotation.txt`` lines (with their newline) of a label table or batch.
+
+    ``frame`` is a pandas DataFrame, pyarrow Table or RecordBatch; ``offset``
+    is the index of its first row in the whole table (for error messages).
+    """
+    from .coco import _column, _names, _strings
+
+    missing = [c for c in WHENET_FIELDS if c not in _names(frame)]
     if missing:
         raise HpeError(f"{path}: expected columns {', '.join(missing)} in the label table")
-    images = frame["image"].astype(str).to_numpy()
-    if images.size:
-        unsafe = np.char.find(images.astype(str), ",") >= 0
-        for ch in ("\n", "\r"):
-            unsafe |= np.char.find(images.astype(str), ch) >= 0
-        if unsafe.any():
-            k = int(np.flatnonzero(unsafe)[0])
-            raise HpeError(f"{path}: row {k}: expected an image path without commas or line breaks, "
-                           f"got {images[k]!r}")
+    images = _strings(frame, "image")
+    for k, im in enumerate(images):
+        if "," in im or "\n" in im or "\r" in im:
+            raise HpeError(f"{path}: row {offset + k}: expected an image path without commas or line breaks, "
+                           f"got {im!r}")
     cols = []
     for c in WHENET_FIELDS[1:]:
-        v = frame[c].to_numpy(dtype=np.float64, na_value=np.nan)
+        v = _column(frame, c)
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
-            raise HpeError(f"{path}: row {bad[0]}: expected a finite {c}, got {v[bad[0]]}")
+            raise HpeError(f"{path}: row {offset + bad[0]}: expected a finite {c}, got {v[bad[0]]}")
         cols.append(v.tolist())
     # str(float) is the shortest repr that round-trips, exactly what WHENet writes
-    return [f"{im},{y!s},{p!s},{r!s}\n" for im, y, p, r in zip(images.tolist(), *cols)]
+    return [f"{im},{y!s},{p!s},{r!s}\n" for im, y, p, r in zip(images, *cols)]
 
 
-def write_whenet(frame, path, overwrite: bool = False) -> Path:
+class WhenetWriter:
+    """Write ``annotation.txt`` batch by batch, atomically (see :func:`write_whenet`)."""
+
+    def __init__(self, path, overwrite: bool = False):
+        self._atomic = AtomicFile(path, overwrite)
+        self.path = Path(path)
+        self.rows = 0
+
+    def __enter__(self):
+        self._tmp = self._atomic.__enter__()
+        self._fh = open(self._tmp, "w", encoding="utf-8", newline="")
+        return self
+
+    def write(self, frame) -> None:
+        lines = whenet_lines(frame, self.path, self.rows)
+        self._fh.write("".join(lines))
+        self.rows += len(lines)
+
+    def __exit__(self, exc_type, exc, tb):
+        try:
+            self._fh.close()
+        except BaseException:
+            self._atomic.__exit__(RuntimeError, None, None)
+            raise
+        return self._atomic.__exit__(exc_type, exc, tb)
+
+
+def write_whenet(frame, path, overwrite: bool = False, batch_size: int = 65536) -> Path:
     """Write a label table as WHENet ``annotation.txt`` lines, atomically.
 
     Parameters
     ----------
-    frame : pandas.DataFrame
+    frame : pandas.DataFrame, pyarrow Table, or an iterable of either
         Needs ``image`` (path, written as is) and ``pitch, yaw, roll``
         (degrees). Other columns, such as the box, are not part of the format
-        and are ignored.
+        and are ignored. An iterable of batches is written as it comes.
     path : str or Path
         Output text file; refused if it exists unless ``overwrite`` (WHENet
         itself appends to an existing file; hpe never does).
@@ -69,11 +98,11 @@ def write_whenet(frame, path, overwrite: bool = False) -> Path:
     Each line is ``image,yaw,pitch,roll`` -- yaw first, as in WHENet -- with
     degrees printed by Python's ``str(float)`` (shortest round-trip form).
     """
-    atomic = AtomicFile(path, overwrite)
-    lines = whenet_lines(frame, path)
-    with atomic as tmp:
-        with open(tmp, "w", encoding="utf-8", newline="") as fh:
-            fh.writelines(lines)
+    from .coco import _parts
+
+    with WhenetWriter(path, overwrite) as w:
+        for part in _parts(frame, batch_size):
+            w.write(part)
     return Path(path)
 
 

@@ -331,7 +331,7 @@ def _mean(x) -> float | None:
 
 
 def _angles_summary(err, mask, labels) -> dict:
-    e = err[mask]
+    e = err if mask.all() else err[mask]
     out = {"n": int(mask.sum())}
     means = [_mean(e[:, k]) for k in range(3)]
     out.update(dict(zip(labels, means)))

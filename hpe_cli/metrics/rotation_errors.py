@@ -109,7 +109,9 @@ def maev_deg(P, G) -> np.ndarray:
 
 def wrap_abs_deg(d) -> np.ndarray:
     """``min(e, 360 - e)`` with ``e = |d| mod 360``: an angle difference wrapped into [0, 180]."""
-    e = np.abs(np.asarray(d, dtype=np.float64)) % 360.0
+    e = np.abs(np.asarray(d, dtype=np.float64))
+    if e.size and not (e.max() < 360.0):  # differences of angles in (-180, 180] never need the (slow) fmod
+        e = e % 360.0
     return np.minimum(e, 360.0 - e)
 
 

@@ -25,7 +25,7 @@ from .relabel import LEGACY_COLS, fit_faces, relabel_views, summary_tail, view_l
 DEFAULT_MAX_RMSE = 0.02
 #: DirectMHP keeps people with occlusion < 90 (percent)
 DEFAULT_MAX_OCCLUSION = 90.0
-REASON_ORDER = ("occluded", "invalid", "too few confident points", "bad fit", "behind camera", "outside image",
+REASON_ORDER = ("bad input", "occluded", "invalid", "too few confident points", "bad fit", "behind camera", "outside image",
                 "box rejected", "dropped by legacy rule")
 
 
@@ -40,6 +40,7 @@ class Config:
     legacy: bool = False
     preset: str = "directmhp"
     frame: str = "camera"  # "camera" or "crop" (line of sight to the helmet centre, SPEC §10)
+    trust_pickle: bool = False
 
 
 def relabel_people(people: ag.AgoraPeople, cfg: Config) -> dict:
@@ -66,6 +67,10 @@ def relabel_people(people: ag.AgoraPeople, cfg: Config) -> dict:
     fit["detail"][invalid] = "isValid is False"
     fit["reason"][occluded] = "occluded"
     fit["detail"][occluded] = [f"occlusion {o:g}% not < {cfg.max_occlusion:g}%" for o in occ[occluded]]
+    door = getattr(people, "reason", None)  # validated at the door (datasets/agora.py)
+    if door is not None and (door != "").any():
+        fit["reason"][door != ""] = "bad input"
+        fit["detail"][door != ""] = door[door != ""]
     cam = {"K": K, "dist": np.zeros((n, 5)), "R": people.cam_R, "t": people.cam_t,
            "width": np.full(n, float(W)), "height": np.full(n, float(H))}
     # rows without a fit carry NaN through the projection; their reason is already set
@@ -175,7 +180,7 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
     import json
     from contextlib import ExitStack
 
-    from ..io import TableWriter, arrow_table, check_output, system_metadata
+    from ..io import TableWriter, arrow_table, system_metadata
     from ..rotation import get_system
 
     system = get_system(cfg.system)
@@ -188,45 +193,33 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
              "label": "A = E @ camR @ R_head, E = diag(1, -1, -1)" if cfg.frame == "camera" else
              "A = E @ Q.T @ camR @ R_head, Q: optical axis -> ray to the head centre (SPEC 10)"}
     meta = {**system_metadata(system), "hpe:relabel": json.dumps(about)}
-    collected = []
     rschema = _reject_schema()
     with ExitStack() as stack:
         if fmt == "table":
             out = stack.enter_context(TableWriter(output, overwrite, meta))
+        elif fmt == "coco":  # streamed: memory flat in the number of people
+            from ..io.coco import CocoWriter
+
+            out = stack.enter_context(CocoWriter(output, overwrite, info={
+                "description": "AGORA head-pose labels (hpe relabel-agora)", "hpe:system": system.name,
+                "hpe:relabel": about}))
+        elif fmt == "whenet":
+            from ..io.whenet_txt import WhenetWriter
+
+            out = stack.enter_context(WhenetWriter(output, overwrite))
         else:
-            check_output(output, overwrite)
-            out = None
+            raise HpeError(f"expected --format table, coco or whenet, got {fmt!r}")
         rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
         for path in paths:
-            people = ag.read_agora(path)
+            people = ag.read_agora(path, trust=cfg.trust_pickle)
             res = relabel_people(people, cfg)
             del people
             stats.add(path, res, system)
-            t = arrow_table(res["table"])
-            if out is not None:
-                out.write(t)
-            else:
-                collected.append(t)
+            out.write(arrow_table(res["table"]))
             if rej is not None:
                 rej.write(arrow_table(res["rejects"], rschema))
             if bar is not None:
                 bar.update(1)
-        if fmt != "table":
-            import pyarrow as pa
-
-            frame = pa.concat_tables(collected).to_pandas()
-            if fmt == "coco":
-                from ..io.coco import write_coco
-
-                write_coco(frame, output, overwrite=overwrite, info={
-                    "description": "AGORA head-pose labels (hpe relabel-agora)", "hpe:system": system.name,
-                    "hpe:relabel": about})
-            elif fmt == "whenet":
-                from ..io.whenet_txt import write_whenet
-
-                write_whenet(frame, output, overwrite=overwrite)
-            else:
-                raise HpeError(f"expected --format table, coco or whenet, got {fmt!r}")
     return stats
 
 

@@ -169,8 +169,10 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
 
     in_system = label_system(src, system)  # .mat Pose_Para is always 300w_lp; output is in --system
     columns = src.columns
-    mode = label_mode(columns, path)  # angles when present, else r00..r22
-    cross_check = mode == "angles" and all(c in columns for c in MATRIX_COLS)
+    mode = label_mode(columns, path, in_system)  # the system's own columns, else angles, else r00..r22
+    stored_kind = mode not in ("angles", "matrix") or bool(in_system.columns and all(c in columns for c in
+                                                                                     in_system.value_columns))
+    cross_check = mode == "angles" and not stored_kind and all(c in columns for c in MATRIX_COLS)
     n_lm, perm, lm_text = _plan_landmarks(path, columns, scheme, op)
     lm_names = landmark_cols(n_lm)
     box_present = [c for c in BBOX_COLS if c in columns]
@@ -209,8 +211,16 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                 lines = batch.column(LINE_COL).to_numpy()
                 batch = batch.drop_columns([LINE_COL])
                 n = batch.num_rows
-                values, reasons = batch_labels(batch, mode)
-                if mode == "angles":
+                if stored_kind:  # rotation vectors, quaternions, 6-D, named columns: read as matrices
+                    from ..io import batch_rotations
+                    from ..rotation import soa as _soa
+
+                    X, _, reasons = batch_rotations(batch, in_system, mode)
+                    values = _soa.to_array(X, n)
+                    reasons = reasons if reasons is not None else np.full(n, "", dtype=object)
+                else:
+                    values, reasons = batch_labels(batch, mode)
+                if mode == "angles" and not stored_kind:
                     R = in_system.from_angles(np.where(np.isfinite(values), values, 0.0))
                     if cross_check:  # a table with both must agree, or which one is the label?
                         R_in, r_in = batch_labels(batch, "matrix")

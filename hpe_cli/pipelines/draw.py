@@ -32,6 +32,12 @@ def _read_all(src, mode, radians, system):
 
     batches = list(src.batches())
     table = pa.Table.from_batches(batches, schema=src.schema)
+    if mode not in ("angles", "matrix") or (system.columns and all(c in src.columns for c in system.value_columns)):
+        A, angles, reasons = _read_stored(batches, mode, radians, system)
+        ok = reasons == ""
+        if out_system is not system and ok.any():
+            angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
+        return table.to_pandas(), A, angles, reasons
     values, reasons = [], []
     for b in batches:
         v, r = batch_labels(b, mode, radians)
@@ -53,6 +59,30 @@ def _read_all(src, mode, radians, system):
         if out_system is not system:
             angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
     return table.to_pandas(), A, angles, reasons
+
+
+def _read_stored(batches, mode, radians, system):
+    """(canonical A, angles, reasons) of any storage kind (rotation vectors, quaternions, 6-D, named columns)."""
+    import numpy as np
+
+    from ..io import batch_rotations
+    from ..rotation import soa
+
+    As, angles, reasons = [], [], []
+    for b in batches:
+        X, ok, r = batch_rotations(b, system, mode, radians)
+        R = soa.to_array(X, b.num_rows)
+        a = np.full((b.num_rows, 3, 3), np.nan)
+        g = np.full((b.num_rows, 3), np.nan)
+        if ok.any():
+            a[ok] = system.to_canonical(R[ok])
+            g[ok] = system.to_angles(R[ok])[0]
+        As.append(a)
+        angles.append(g)
+        reasons.append(r if r is not None else np.full(b.num_rows, "", dtype=object))
+    if not As:
+        return np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0, dtype=object)
+    return np.concatenate(As), np.concatenate(angles), np.concatenate(reasons)
 
 
 def _column(frame, name):
@@ -138,7 +168,7 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
 
     input_path = Path(input_path)
     src = open_table(input_path)
-    mode = label_mode(src.columns, src.path) if use == "auto" else use
+    mode = label_mode(src.columns, src.path, system) if use == "auto" else use
     is_mat = input_path.is_dir() or input_path.suffix.lower() == ".mat"
     pose_para = is_mat or {"tdz", "scale"} <= set(src.columns)
     flip = tdy_origin == "bottom" or (tdy_origin == "auto" and pose_para)
@@ -229,7 +259,7 @@ def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, c
     tiles, captions = [], []
     for name, rel, src_img, rows in plan:
         if src_img is not None:
-            img = cv2.imread(str(src_img), cv2.IMREAD_COLOR)
+            img = _read_image(src_img)
             if img is None:
                 if rejects.path is None or rejects.strict:
                     raise HpeError(f"{src_img}: not a readable image (row {rows[0]}; use --rejects FILE to skip it)")
@@ -287,6 +317,18 @@ def check_output_exists(path, overwrite):
 
     if path.exists() and not overwrite:
         raise HpeError(f"{path}: already exists (use --overwrite to replace it)")
+
+
+def _read_image(path):
+    """BGR image or None; read as bytes first (OpenCV's own file functions cannot take non-UTF-8 names)."""
+    import cv2
+    import numpy as np
+
+    try:
+        data = np.fromfile(path, dtype=np.uint8)
+    except OSError:
+        return None
+    return cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
 
 
 def _write_image(img, staged, shown):

@@ -24,7 +24,7 @@ class Side:
     path: object
     system: object
     mode: str
-    canonical: np.ndarray  # (9, N) row-major canonical entries
+    canonical: list  # 9 arrays (N,): the canonical matrix entries, row-major
     ok: np.ndarray  # (N,) bool
     reasons: np.ndarray | None  # (N,) object, '' when usable; None when every row is usable
     keys: object  # pyarrow Table of the key (and --by) columns, or None
@@ -42,30 +42,31 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     """Stream one table into a :class:`Side`."""
     import pyarrow as pa
 
-    from ..io import ANGLE_COLS, MATRIX_COLS, label_columns_fast, label_mode, open_table
+    from ..io import ANGLE_COLS, MATRIX_COLS, batch_rotations, label_mode, open_table
     from ..io.readers import LINE_COL
     from ..rotation import soa
 
     src = open_table(path, batch_size, with_lines=True)
     columns = src.columns
-    mode = label_mode(columns, src.path) if use == "auto" else use
-    need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
-    missing = [c for c in need if c not in columns]
-    if missing:
-        raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
+    if use == "auto":  # the system's own value columns (rotvec, quaternion, 6-D...) first, then angles, matrix
+        mode = label_mode(columns, src.path, system)
+    else:
+        mode = use
+        native = system.storage_kind == mode and all(c in columns for c in system.value_columns)
+        need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
+        missing = [c for c in need if c not in columns]
+        if missing and not native:
+            raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
     keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else [])) if c in columns]
     parts, oks, reasons, key_parts, lines, unreadable = [], [], [], [], [], []
     any_bad = False
     for batch, bad_rows in src.batches_with_rejects():
         unreadable += [(r.line, r.reason) for r in bad_rows]
         lines.append(batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64))
-        cols, ok, rs = label_columns_fast(batch, mode, radians)
+        X, ok, rs = batch_rotations(batch, system, mode, radians)
         n = batch.num_rows
-        if mode == "angles":
-            X = system.soa_to_canonical(system.soa_from_angles(*cols))
-        else:
-            X = system.soa_to_canonical([[cols[3 * i + j] for j in range(3)] for i in range(3)])
-        parts.append(np.stack(soa.columns(X, n)))
+        X = system.soa_to_canonical(X)
+        parts.append(soa.columns(X, n))
         oks.append(ok)
         if rs is not None:
             any_bad = True
@@ -74,7 +75,7 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
             key_parts.append(batch.select(keep))
         if progress is not None:
             progress.update(n)
-    canonical = np.concatenate(parts, axis=1) if parts else np.zeros((9, 0))
+    canonical = [np.concatenate([p[k] for p in parts]) if parts else np.zeros(0) for k in range(9)]
     ok = np.concatenate(oks) if oks else np.zeros(0, dtype=bool)
     rs_all = None
     if any_bad:
@@ -237,8 +238,13 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     rej.check()  # without --rejects (or with --strict) any set-aside row is an error: nothing is written
 
     gv, pv = gidx[valid], pidx[valid]
-    P = [[pred.canonical[3 * i + j][pv] for j in range(3)] for i in range(3)]
-    G = [[gt.canonical[3 * i + j][gv] for j in range(3)] for i in range(3)]
+    def gather(side, idx):  # no copy when every row is used in its own order
+        if len(idx) == side.n and (idx[0] == 0 if len(idx) else True) and np.all(np.diff(idx) == 1):
+            return [[side.canonical[3 * i + j] for j in range(3)] for i in range(3)]
+        return [[side.canonical[3 * i + j][idx] for j in range(3)] for i in range(3)]
+
+    P = gather(pred, pv)
+    G = gather(gt, gv)
     pred.canonical = gt.canonical = None  # the pairs hold their own copies now
     by_values = None
     if by:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
-from ..geometry.crop import expand_boxes, inside_fraction, landmark_boxes, pixel_boxes, sixdrepnet_test_boxes
+from ..geometry.crop import expand_boxes, landmark_boxes, pixel_boxes, sixdrepnet_test_boxes
 from ..io.export import get_layout
 from ..io.layout import BBOX_COLS, landmark_count
 
@@ -99,7 +99,7 @@ def _subject_of(stem: str) -> str:
     return re.sub(r"_\d+$", "", stem) if re.search(r"_\d+_\d+$", stem) else stem
 
 
-def load_mat_input(path: Path, source: str):
+def load_mat_input(path: Path, source: str, landmarks: bool = True):
     """A 300W-LP/AFLW2000 ``.mat`` folder: box from the visible ``pt2d`` points (else ``pt3d_68``).
 
     The box is 6DRepNet's loose AFLW2000 test crop of the tight landmark box (``k = 0.2``:
@@ -147,19 +147,19 @@ def load_mat_input(path: Path, source: str):
         frame[c] = A[:, k]
     for c in ("tdx", "tdy", "tdz", "scale"):
         frame[c] = t[c].to_numpy(np.float64)
-    for i in range(lm.shape[1]):
+    for i in range(lm.shape[1] if landmarks else 0):
         frame[f"lm{i}_x"], frame[f"lm{i}_y"] = lm[:, i, 0], lm[:, i, 1]
     return frame.copy()
 
 
-def load_table_input(path: Path, source: str, input_system=None, images_root=None):
+def load_table_input(path: Path, source: str, input_system=None, images_root=None, landmarks: bool = True):
     """A label table (relabel-panoptic/agora output or any table with image, box and labels)."""
     import pandas as pd
     import pyarrow as pa
 
     from ..io import label_columns_fast, label_mode, open_table
 
-    src = open_table(path)
+    src = open_table(path, with_lines=True)
     cols = src.columns
     missing = [c for c in ["image"] + BBOX_COLS if c not in cols]
     if missing:
@@ -168,19 +168,21 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
     mode = label_mode(cols, path)
     system = _table_system(src.schema, input_system)
     kind = _kind_of_table(src.schema)
-    n_lm = landmark_count(cols)
+    n_lm = landmark_count(cols) if landmarks else 0
     keep = [c for c in ["image", "sequence", "camera", "frame", "person_id", "person", "subject", "image_width",
                         "image_height"] + BBOX_COLS if c in cols]
     if kind == "table" and "source" in cols:  # relabel-agora writes its source per row
-        first = next(iter(src.batches()), None)
+        first = next(iter(src.batches_with_rejects()), (None, None))[0]
         if first is not None and first.num_rows and "agora" in str(first.column("source")[0]).lower():
             kind = "agora"
     keep += [f"lm{i}_{a}" for i in range(n_lm) for a in "xy"]
     parts = []
-    header = 1 if path.suffix.lower() == ".csv" else 0
-    start = 0
-    for batch in src.batches():
+    unreadable = []
+    for batch, bad in src.batches_with_rejects():
+        unreadable += [(r.line, f"unreadable row: {r.reason}") for r in bad]
         nb = batch.num_rows
+        if nb == 0:
+            continue
         lab, ok, reasons = label_columns_fast(batch, mode)
         reasons = np.full(nb, "", dtype=object) if reasons is None else reasons
         vals = np.stack(lab, -1)
@@ -192,7 +194,7 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
             R = np.where(ok[:, None, None], R, np.eye(3))
         A = system.to_canonical(R).reshape(nb, 9)
         df = pa.Table.from_batches([batch.select(keep)]).to_pandas()
-        df.insert(0, "row", np.arange(start + 1 + header, start + 1 + header + nb))
+        df.insert(0, "row", batch.column("__line__").to_numpy())
         box = df[BBOX_COLS].apply(pd.to_numeric, errors="coerce").to_numpy(np.float64)
         badbox = ~np.isfinite(box).all(1) | (box[:, 2] <= 0) | (box[:, 3] <= 0)
         reasons[(reasons == "") & badbox] = "missing or empty head box"
@@ -200,10 +202,14 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
         for k, c in enumerate(A_COLS):
             df[c] = A[:, k]
         parts.append(df)
-        start += nb
+    if unreadable:
+        eye = np.eye(3).reshape(9)
+        parts.append(pd.DataFrame({"row": [ln for ln, _ in unreadable], "image": "",
+                                   **{c: np.nan for c in BBOX_COLS}, "reason": [r for _, r in unreadable],
+                                   **{c: eye[k] for k, c in enumerate(A_COLS)}}))
     if not parts:
         raise HpeError(f"{path}: no rows")
-    frame = pd.concat(parts, ignore_index=True)
+    frame = pd.concat(parts, ignore_index=True).sort_values("row", kind="stable", ignore_index=True)
     n = len(frame)
     if "person_id" not in frame.columns and "person" in frame.columns:
         frame["person_id"] = frame.pop("person")
@@ -227,8 +233,8 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
     return frame
 
 
-def load_inputs(paths, images=(), input_system=None):
-    """Every input as one table (a ``source`` column tells them apart)."""
+def load_inputs(paths, images=(), input_system=None, landmarks: bool = True):
+    """Every input as one table (a ``source`` column tells them apart); ``landmarks``: keep the 2-D points."""
     import pandas as pd
 
     if images and len(images) not in (1, len(paths)):
@@ -245,14 +251,14 @@ def load_inputs(paths, images=(), input_system=None):
         names.add(name)
         is_mat = (p.is_dir() and any(p.glob("*.mat"))) or p.suffix.lower() == ".mat"
         if is_mat:
-            f = load_mat_input(p, name)
+            f = load_mat_input(p, name, landmarks)
             if root:
                 f["root"] = str(root)
         elif p.is_dir():
             raise HpeError(f"{p}: expected a label table (.parquet/.csv) or a folder of 300W-LP/AFLW2000 .mat "
                            "files (BIWI: export its table with image and box columns)")
         else:
-            f = load_table_input(p, name, input_system, root)
+            f = load_table_input(p, name, input_system, root, landmarks)
         frames.append(f)
     frame = pd.concat(frames, ignore_index=True).copy()
     for c in [c for c in frame.columns if re.fullmatch(r"lm\d+_[xy]", c)]:
@@ -282,8 +288,18 @@ def parse_split(spec: str):
         if len(fr) not in SPLIT_NAMES:
             raise HpeError(f"--split: name the splits (train=0.7,...) when there are more than 3, got {spec!r}")
         names = SPLIT_NAMES[len(fr)]
+    check_split_names(names, "--split")
     fr = np.asarray(fr) / sum(fr)
     return ("subject" if col == "identity" else col), list(names), fr
+
+
+def check_split_names(names, where: str) -> None:
+    """Split names become folder and file names: letters, digits, ``_`` and ``-`` only, unique."""
+    for n in names:
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_-]*", str(n)):
+            raise HpeError(f"{where}: expected split names of letters, digits, '_' and '-', got {n!r}")
+    if len(set(names)) != len(names):
+        raise HpeError(f"{where}: expected distinct split names, got {', '.join(map(str, names))}")
 
 
 def group_hash(values, seed: int) -> np.ndarray:
@@ -325,6 +341,8 @@ def read_split_file(path):
     if dup.any():
         k = int(np.flatnonzero(dup.to_numpy())[0])
         raise HpeError(f"{path}: row {k + 2}: group {t[col].iloc[k]!r} is in two splits")
+    for n in sorted(set(t["split"].tolist())):
+        check_split_names([n], str(path))
     return ("subject" if col == "identity" else col), dict(zip(t[col].tolist(), t["split"].tolist()))
 
 
@@ -383,19 +401,34 @@ def balance_keep(yaw, bin_deg: float, max_per_bin: int, ok, seed: int = 0):
 
 # ----------------------------------------------------------------------------------------------- images
 def resolve_image(root: str, image: str, sequence: str, camera: str, frame: int):
-    """The image file for a row, or None. Panoptic rows also try ``<root>/<sequence>/<image>`` and the
-    ``hdImgs/hd_<cam>/<frame:08d>.jpg`` layout some copies use."""
+    """The image file for a row, or None: ``<root>/<image>``, ``<root>/<sequence>/<image>``, and for Panoptic
+    rows :func:`hpe_cli.datasets.panoptic.hd_image_path` (``hdImgs/<cam>/<cam>_<frame:08d>.jpg`` or the
+    ``hdImgs/hd_<cam>/<frame:08d>.jpg`` layout some copies use) under both."""
     r = Path(root)
     cands = [r / image]
+    bases = (r, r / sequence) if sequence else (r,)
     if sequence:
         cands.append(r / sequence / image)
     if camera and frame >= 0:
-        for base in (r, r / sequence) if sequence else (r,):
-            cands.append(base / "hdImgs" / f"hd_{camera}" / f"{frame:08d}.jpg")
+        from ..datasets.panoptic import hd_image_path
+
+        for base in bases:
+            try:
+                cands.append(hd_image_path(base, camera, frame))
+            except HpeError:
+                break
     for c in cands:
         if c.is_file():
             return str(c)
     return None
+
+
+def video_path(root: str, sequence: str, camera: str):
+    """``hdVideos/hd_<cam>.mp4`` under ``root`` or ``root/sequence`` (:func:`~hpe_cli.datasets.panoptic.hd_video_path`)."""
+    from ..datasets.panoptic import hd_video_path
+
+    bases = (Path(root), Path(root) / sequence) if sequence else (Path(root),)
+    return next((str(v) for v in (hd_video_path(b, camera) for b in bases) if v.is_file()), None)
 
 
 def jpeg_size(data: bytes):
@@ -449,7 +482,10 @@ def _process_image(image, data, items, cfg, out):
     wrote_full = False
     for it in items:
         idx, split, rel, box, bbox, osz = it
-        frac = inside_fraction(np.asarray([bbox]), W, H)[0]
+        bx, by, bw, bh = bbox  # fraction of the head box inside the frame (scalar form of inside_fraction)
+        iw = max(0.0, min(bx + bw, W) - max(bx, 0.0))
+        ih = max(0.0, min(by + bh, H) - max(by, 0.0))
+        frac = iw * ih / (bw * bh) if bw * bh > 0 else 0.0
         if frac < cfg["min_inside"]:
             out.append((idx, f"box outside the image ({frac * 100:.0f}% inside)", W, H, None))
             continue
@@ -610,7 +646,7 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
                        f"expects; --system {get_system(opts.system).name} cannot be used with it")
     system = get_system(layout.system or opts.system or "300w_lp")
 
-    rows = load_inputs(inputs, opts.images, opts.input_system)
+    rows = load_inputs(inputs, opts.images, opts.input_system, landmarks=layout.uses_landmarks)
     n = len(rows)
     reasons = rows["reason"].to_numpy(dtype=object).copy()
     A = rows[A_COLS].to_numpy(np.float64).reshape(n, 3, 3)
@@ -729,12 +765,7 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
                 vkey = ("video", roots[i], seqs[i], cams[i])
                 t = task_of.get(vkey)
                 if t is None:
-                    base = Path(roots[i])
-                    cands = [base / "hdVideos" / f"hd_{cams[i]}.mp4"]
-                    if seqs[i]:
-                        cands.append(base / seqs[i] / "hdVideos" / f"hd_{cams[i]}.mp4")
-                    video = next((str(v) for v in cands if v.is_file()), None)
-                    t = task_of[vkey] = ["video", video, {}]
+                    t = task_of[vkey] = ["video", video_path(roots[i], seqs[i], cams[i]), {}]
                     tasks.append(t)
                 task_of[key] = t
             else:

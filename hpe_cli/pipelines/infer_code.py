@@ -22,13 +22,16 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
     import os
     import sys
 
+    from ..cli.infer import _load_callable
     from ..rotation import infer as inf
 
+    conn.send(("ready",))  # hpe itself is loaded: the time limit starts now
     try:
-        from ..cli.infer import _load_callable
-
-        func = _load_callable(spec)
-        if builder:
+        func = _load_callable(spec, kw.pop("import_path", None))
+        returns = kw.pop("returns", "angles")
+        if returns != "angles":  # a decoder returning a rotation vector, quaternion, 6-D vector or matrix
+            rep = inf.infer_storage_decoder(inf.as_value_decoder(func), n=samples or 256, **kw)
+        elif builder:
             rep = inf.infer_builder(inf.as_builder(func, roles, units, packed), n=samples or 64, **kw)
         else:
             rep = inf.infer_decoder(inf.as_decoder(func, roles, units), n=samples or 256, **kw)
@@ -76,7 +79,14 @@ def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: b
     proc.start()
     send.close()
     try:
-        got = recv.poll(timeout)
+        # the child first loads Python, numpy and hpe (not the user's time), then says "ready"
+        ready = recv.poll(max(120.0, timeout))
+        if ready:
+            try:
+                recv.recv()
+            except (EOFError, OSError):
+                ready = False
+        got = recv.poll(timeout) if ready else True
         msg = None
         if got:
             try:

@@ -717,35 +717,45 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
             stats = json.loads(Path(stem + ".json").read_text())
             yield stats, _read_part(stem + ".labels.arrow"), _read_part(stem + ".rejects.arrow")
 
-    with ExitStack() as stack:
-        if fmt == "table":
-            out = stack.enter_context(TableWriter(output, overwrite, meta))
-        else:
-            check_output(output, overwrite)
-            out = None
-        rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
-        for (si, _), (stats, t, r) in zip(units, results()):
-            seq_stats[si].add_unit(stats)
-            if mc is not None:
-                t, moved = mc.apply(t, rschema)
-                if moved is not None:
-                    seq_stats[si].moved("below --min-change", moved.num_rows)
-                    import pyarrow as pa
-
-                    r = pa.concat_tables([r, moved])
-            if out is not None:
-                out.write(t)
+    try:
+        with ExitStack() as stack:
+            if fmt == "table":
+                out = stack.enter_context(TableWriter(output, overwrite, meta))
             else:
-                collected.append(t)
-            if rej is not None:
-                rej.write(r)
-            if bar is not None:
-                bar.update(stats["frames"])
-        if fmt != "table":
-            import pyarrow as pa
+                out = _streaming_writer(fmt, output, overwrite)  # helper `read`'s CocoWriter/WhenetWriter
+                if out is None:
+                    check_output(output, overwrite)
+                else:
+                    out = stack.enter_context(out)
+            rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
+            for (si, _), (stats, t, r) in zip(units, results()):
+                seq_stats[si].add_unit(stats)
+                if mc is not None:
+                    t, moved = mc.apply(t, rschema)
+                    if moved is not None:
+                        seq_stats[si].moved("below --min-change", moved.num_rows)
+                        import pyarrow as pa
 
-            frame = pa.concat_tables(collected).to_pandas()
-            _write_other(fmt, frame, output, overwrite)
+                        r = pa.concat_tables([r, moved])
+                if out is not None:
+                    out.write(t)
+                else:
+                    collected.append(t)
+                if rej is not None:
+                    rej.write(r)
+                if bar is not None:
+                    bar.update(stats["frames"])
+            if fmt != "table" and out is None:
+                import pyarrow as pa
+
+                frame = pa.concat_tables(collected).to_pandas()
+                _write_other(fmt, frame, output, overwrite)
+    except BaseException:
+        # an interrupted run keeps its parts only when it was asked to be resumable (--resume);
+        # otherwise nothing of it is left behind (the output transaction's promise)
+        if parts is not None and not resume:
+            shutil.rmtree(parts, ignore_errors=True)
+        raise
     if parts is not None:
         shutil.rmtree(parts, ignore_errors=True)
     total = Stats()
@@ -754,6 +764,20 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     if per_sequence is not None:
         per_sequence.extend(seq_stats)
     return total
+
+
+def _streaming_writer(fmt: str, output, overwrite: bool):
+    """A streaming COCO / WHENet writer when this build has one (flat memory), else None."""
+    try:
+        if fmt == "coco":
+            from ..io.coco import CocoWriter
+
+            return CocoWriter(output, overwrite, image_size_cols=("image_width", "image_height"))
+        from ..io.whenet_txt import WhenetWriter
+
+        return WhenetWriter(output, overwrite)
+    except ImportError:
+        return None
 
 
 def _write_other(fmt: str, frame, output, overwrite: bool) -> None:

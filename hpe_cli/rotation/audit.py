@@ -190,3 +190,65 @@ def duplicate_first(keys) -> np.ndarray:
     first = np.empty(n, dtype=np.int64)
     first[order] = order[group_start]
     return first
+
+
+def audit_columns(cols, system, mode: str, near_tol_deg: float = NEAR_GIMBAL_DEG,
+                  canonical_tol_deg: float = CANONICAL_TOL_DEG, rotation_tol: float = ROTATION_TOL) -> dict:
+    """The checks of :func:`audit_angles` / :func:`audit_matrices` on label columns (structure of arrays).
+
+    Parameters
+    ----------
+    cols : list of ndarray (N,)
+        ``[pitch, yaw, roll]`` in degrees (``mode="angles"``) or the nine
+        row-major entries ``r00..r22`` of the stored matrix (``mode="matrix"``);
+        NaN allowed.
+    system : str or RotationSystem
+    mode : {"angles", "matrix"}
+
+    Returns
+    -------
+    dict
+        The same masks as the array functions (identical results, without
+        building ``(N, 3, 3)`` stacks), plus ``lock_distance`` and, for
+        matrices, ``primary`` (N, 3).
+    """
+    from .check import rotation_screen_columns
+
+    system = get_system(system)
+    cols = [np.asarray(c, dtype=np.float64) for c in cols]
+    n = len(cols[0])
+    out = _empty(n)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        if mode == "angles":
+            finite = np.isfinite(cols[0]) & np.isfinite(cols[1]) & np.isfinite(cols[2])
+            safe = cols if finite.all() else [np.where(finite, c, 0.0) for c in cols]
+            p1, _, locked, lock = system.soa_to_angles(system.soa_from_angles(*safe))
+            pyr = np.stack(safe, axis=-1)
+            primary = np.stack(p1, axis=-1)
+            d = np.abs(wrap_180(pyr) - primary)
+            d = np.minimum(d, 360.0 - d).max(axis=1)
+            out["non_finite"] = ~finite
+            out["gimbal_lock"] = locked & finite
+            out["near_gimbal"] = (locked | (lock < np.sin(np.deg2rad(near_tol_deg)))) & finite
+            out["non_canonical"] = ~locked & (d > canonical_tol_deg) & finite
+            out["out_of_range"] = _range_mask(pyr, system) & finite
+            out["lock_distance"] = np.where(finite, lock, np.nan)
+            return out
+        fin_entries = np.ones(n, dtype=bool)
+        for c in cols:
+            fin_entries &= np.isfinite(c)
+        _, ortho, proper = rotation_screen_columns(cols, rotation_tol)
+        rot = fin_entries & ortho & proper
+        X = [cols[0:3], cols[3:6], cols[6:9]]
+        if not rot.all():
+            X = [[np.where(rot, c, float(i == j)) for j, c in enumerate(row)] for i, row in enumerate(X)]
+        p1, _, locked, lock = system.soa_to_angles(X)
+        primary = np.stack(p1, axis=-1)
+        out["non_finite"] = ~fin_entries
+        out["not_rotation"] = fin_entries & ~rot
+        out["gimbal_lock"] = locked & rot
+        out["near_gimbal"] = (locked | (lock < np.sin(np.deg2rad(near_tol_deg)))) & rot
+        out["out_of_range"] = _range_mask(primary, system) & rot
+        out["lock_distance"] = np.where(rot, lock, np.nan)
+        out["primary"] = np.where(rot[:, None], primary, np.nan)
+        return out

@@ -11,7 +11,8 @@ angles in role order ``(pitch, yaw, roll)``, degrees.
 - ``synergynet``: SynergyNet ``matrix2angle_corr`` (choyingw/SynergyNet
   ``utils/inference.py``): ``yaw = asin(R20)``, ``pitch = atan2(R12, R22)``,
   ``roll = atan2(R01, R00)`` (each over ``cos yaw``), lock only when ``R20``
-  is exactly +-1. It mixes two systems' index patterns (SPEC section 3).
+  is exactly +-1. It mixes two systems' index patterns (SPEC section 3):
+  pitch and roll are the 300W-LP angles, yaw is 3DDFA's; measured against ``300w_lp``.
 - ``3ddfa_v2``: 3DDFA_V2 ``matrix2angle`` (cleardusk/3DDFA_V2 ``utils/pose.py``):
   the ``3ddfa_v2`` system's split, but with ``|R20| > 0.998`` (about 86.4 deg of
   yaw) forced to roll = 0, yaw = +-90.
@@ -103,7 +104,7 @@ def _directmhp(M):
 
 
 DECODERS = {
-    "synergynet": Decoder("synergynet", "choyingw/SynergyNet utils/inference.py (matrix2angle_corr)", "3ddfa_v2",
+    "synergynet": Decoder("synergynet", "choyingw/SynergyNet utils/inference.py (matrix2angle_corr)", "300w_lp",
                           "SynergyNet matrix2angle_corr: yaw = asin(R20) with pitch/roll from another system's "
                           "indices"),
     "3ddfa_v2": Decoder("3ddfa_v2", "cleardusk/3DDFA_V2 utils/pose.py (matrix2angle)", "3ddfa_v2",
@@ -173,3 +174,47 @@ def summarise_errors(errs: dict) -> dict:
         out[k] = {"max": float(v.max()) if v.size else 0.0, "mean": float(v.mean()) if v.size else 0.0}
     out["rows_off_by_more_than_0.01deg"] = int((errs["geodesic_deg"][ok] > 0.01).sum())
     return out
+
+
+class DecoderTally:
+    """Streaming max/mean of :func:`decoder_errors` over batches (flat memory).
+
+    ``add(A)`` takes canonical matrices (rows with non-finite entries are
+    skipped); ``result()`` gives the same dict as :func:`summarise_errors`
+    plus the decoder's name, source and reference system.
+    """
+
+    KEYS = ("geodesic_deg", "d_pitch", "d_yaw", "d_roll")
+
+    def __init__(self, name: str):
+        self.decoder = get_decoder(name)
+        self.rows = self.decoded = self.off = 0
+        self.max = dict.fromkeys(self.KEYS, 0.0)
+        self.sum = dict.fromkeys(self.KEYS, 0.0)
+
+    def add(self, A) -> None:
+        A = np.asarray(A, dtype=np.float64).reshape(-1, 3, 3)
+        A = A[np.isfinite(A).all(axis=(1, 2))]
+        if not len(A):
+            return
+        e = decoder_errors(self.decoder.name, A)
+        ok = e["ok"]
+        self.rows += len(A)
+        self.decoded += int(ok.sum())
+        self.off += int((e["geodesic_deg"][ok] > 0.01).sum())
+        for k in self.KEYS:
+            v = e[k][ok]
+            if v.size:
+                self.max[k] = max(self.max[k], float(v.max()))
+                self.sum[k] += float(v.sum())
+
+    def result(self) -> dict:
+        d = self.decoder
+        out = {"decoder": d.name, "source": d.source, "reference_system": d.reference, "rows": self.rows,
+               "decoded": self.decoded, "not_decoded": self.rows - self.decoded,
+               "rows_off_by_more_than_0.01deg": self.off,
+               "note": "geodesic_deg: angle between the rotation and the one the printed angles denote in the "
+                       "reference system; d_*: differences from the reference system's exact angles (degrees)"}
+        for k in self.KEYS:
+            out[k] = {"max": self.max[k], "mean": self.sum[k] / self.decoded if self.decoded else 0.0}
+        return out

@@ -303,10 +303,25 @@ def score(err, tol: float, locks=None, index=None) -> Scores:
 
 # --------------------------------------------------------------------------- built-in names
 def builtin_names_by_candidate() -> dict:
-    """Candidate index -> built-in names whose stored matrix function it is."""
+    """Candidate index -> every built-in whose stored matrix function (angles -> stored matrix) it is.
+
+    Found by probing ``from_angles`` so that systems with improper frames or
+    another storage kind (whose stored matrix may still be an Euler product,
+    e.g. img2pose's ``F A F`` equals the opencv function) are listed too.
+    """
+    return dict(_builtin_names_by_candidate())
+
+
+@lru_cache(maxsize=1)
+def _builtin_names_by_candidate():
+    probe = spread_angles(16, seed=11)
+    cm = candidate_matrices(probe)
     out: dict = {}
     for name, s in builtin_systems().items():
-        out.setdefault(_index()[candidate_of(s).key()], []).append(name)
+        g = s.from_angles(probe)
+        hit = np.flatnonzero(frobenius(cm, g[None]).max(1) < 1e-9)
+        for h in hit[:1]:
+            out.setdefault(int(h), []).append(name)
     return out
 
 
@@ -328,7 +343,8 @@ def _rank_builtins(names, order=None, units=None, selection=None) -> list:
 
     def key(n):
         s = systems[n]
-        return (selection is not None and s.selection != selection,
+        return (s.storage_kind != "angles" or s.angle_frame != "system",  # systems that store angles first
+                selection is not None and s.selection != selection,
                 order is not None and tuple(s.order) != tuple(order),
                 units is not None and s.units != units,
                 PRIORITY.index(n) if n in PRIORITY else len(PRIORITY), n)
@@ -602,6 +618,8 @@ def _result(mode: str, sc: Scores, *, roles, units, source, tol, n, name, frame,
             report["selection_differs"] = note
         system = replace(base, order=tuple(roles), units=units_word,
                          notes=(base.notes + " " if base.notes else "") + note, **changes)
+        if system.definition() != base.definition():  # a built-in's name may only carry its own definition
+            system = replace(system, name=name or f"{base.name}_as_inferred")
         best = base.name
     else:
         system = cand.system(name or "custom", f"inferred from {source}: {cand.formula()}", order=roles,
@@ -611,6 +629,7 @@ def _result(mode: str, sc: Scores, *, roles, units, source, tol, n, name, frame,
         best = "custom"
     report.update(best=best, max_error=entry["max_error"], matched=entry, definition=system.describe(),
                   system=system.to_dict(), runners_up=_runners_up(sc, stored, best_pos))
+    report["reproduced_by"] = names
     if len(names) > 1:
         report["also_matches"] = {"names": names[1:], "note": "same matrix from the same angles; these differ only "
                                   "in what the code cannot reveal (frame, storage, solution rule, storage order)"}
@@ -896,3 +915,121 @@ def infer_landmarks(pyr_deg, R_obs, *, roles=ROLES, fit_offset: bool | None = No
 def report_json(report: dict) -> dict:
     """The report without its in-memory objects (ready for :func:`hpe_cli.io.write_json`)."""
     return {k: v for k, v in report.items() if not k.startswith("_")}
+
+
+# --------------------------------------------------------------------------- decoders returning stored values
+#: (kind, order or 6-D columns, number of values) searched for a decoder that returns no angles
+STORAGE_FORMS = ([("rotvec", None, 3), ("quaternion", "wxyz", 4), ("quaternion", "xyzw", 4)]
+                 + [("6d", (i, j), 6) for i in range(3) for j in range(3) if i != j]
+                 + [("matrix", None, 9)])
+
+
+def as_value_decoder(func):
+    """Wrap ``func`` (3x3 matrix -> k numbers, per sample or batched) as ``(N, 3, 3) -> (N, k)``."""
+
+    def per_sample(R):
+        return np.stack([_to_numpy(func(m)).reshape(-1) for m in R])
+
+    def vectorised(R):
+        out = _to_numpy(func(R))
+        if out.ndim != 2 or out.shape[0] != len(R):
+            raise ValueError("not batched")
+        return out
+
+    def decode(R):
+        R = np.asarray(R, dtype=np.float64)
+        try:
+            return _prefer_vectorised(vectorised, per_sample, 1e-9, True)(R)
+        except CallError:
+            raise
+        except Exception:  # noqa: BLE001 - the code may not take a batch
+            return per_sample(R)
+
+    return decode
+
+
+def _form_matrices(kind, arg, values):
+    from . import storage as st
+
+    if kind == "rotvec":
+        return st.rotvec_to_matrix(values)
+    if kind == "quaternion":
+        return st.quaternion_to_matrix(values, arg)
+    if kind == "6d":
+        return st.sixd_to_matrix(values, arg)
+    return values.reshape(-1, 3, 3)
+
+
+def _form_words(kind, arg, transposed):
+    what = {"rotvec": "rotation vector (axis * angle, radians)",
+            "quaternion": f"unit quaternion ({arg}, {'scalar first' if arg == 'wxyz' else 'scalar last'})",
+            "6d": f"6-D: matrix column {arg[0] if arg else 0} then column {arg[1] if arg else 1}",
+            "matrix": "3x3 matrix, row-major"}[kind]
+    return f"{what} of the {'transpose of the ' if transposed else ''}matrix it is given"
+
+
+def infer_storage_decoder(decode, *, n: int = 256, tol: float = CODE_TOL, seed: int = 0, source: str = "<callable>",
+                          name: str | None = None, frame=None, **_ignored) -> dict:
+    """Which storage form a decoder returning no angles (matrix -> k numbers) writes.
+
+    Tries every form of :data:`STORAGE_FORMS` with the right width, of the
+    matrix given and of its transpose, and compares the *rotations* (so ``q``
+    and ``-q``, or a rotation vector of angle pi with either axis sign, are
+    equal). The answer is a system with that ``storage_kind`` (identity frame
+    unless ``frame``: code cannot reveal its frame).
+    """
+    R = random_rotations(n, seed)
+    out = np.asarray(decode(R), dtype=np.float64)
+    k = out.shape[1] if out.ndim == 2 else 0
+    tried = []
+    for kind, arg, width in STORAGE_FORMS:
+        if width != k:
+            continue
+        with np.errstate(invalid="ignore", divide="ignore"):
+            M = _form_matrices(kind, arg, out)
+        for transposed in (False, True):
+            ref = np.swapaxes(R, -1, -2) if transposed else R
+            err = frobenius(M, ref)
+            err = np.where(np.isfinite(err), err, np.inf)
+            tried.append((float(np.max(err)), float(np.median(err)), int((err <= tol).sum()), kind, arg, transposed))
+    report = {"mode": "storage_decoder", "source": source, "samples": int(len(R)), "tolerance": tol,
+              "values_per_sample": int(k), "candidates": len(tried)}
+    if not tried:
+        report.update(fit="none", best="none", max_error=float("inf"),
+                      best_partial={"formula": f"no storage form returns {k} numbers (rotvec 3, quaternion 4, "
+                                               "6-D 6, matrix 9)", "builtins": [], "explained": 0,
+                                    "median_error": float("inf")}, runners_up=[])
+        return report
+    tried.sort(key=lambda t: (t[0], -t[2]))
+    best = tried[0]
+    entry = lambda t: {"formula": _form_words(t[3], t[4], t[5]), "max_error": t[0], "median_error": t[1],  # noqa
+                       "explained": t[2], "builtins": [], "turns": f"storage_kind {t[3]}", "transpose_of": []}
+    if best[0] > tol:
+        report.update(fit="none", best="none", max_error=best[0], best_partial=entry(best),
+                      runners_up=[entry(t) for t in tried[1:4]])
+        return report
+    kind, arg, transposed = best[3], best[4], best[5]
+    same = [n_ for n_, s in builtin_systems().items() if s.storage_kind == kind and
+            (kind != "quaternion" or s.quaternion_order == arg) and (kind != "6d" or tuple(s.sixd_columns) == arg)]
+    d = {"name": name or "custom", "description": f"inferred from {source}: {_form_words(kind, arg, transposed)}",
+         "storage_kind": kind, "storage": "transposed" if transposed else "active",
+         "notes": "frame is not observable from code alone; set it to what the code means"}
+    if frame is not None:
+        d["frame"] = [list(map(float, r)) for r in frame]
+    if kind == "quaternion":
+        d["quaternion_order"] = arg
+    if kind == "6d":
+        d["sixd_columns"] = list(arg)
+    from .systems import system_from_dict
+
+    system = system_from_dict(d, source)
+    e = entry(best)
+    e["builtins"] = same
+    report.update(fit="exact", best=system.name, max_error=best[0], matched=e,
+                  definition=system.describe(), system=system.to_dict(), runners_up=[entry(t) for t in tried[1:4]],
+                  reproduced_by=same, storage_form={"kind": kind, "order": arg, "transposed": transposed})
+    if same:
+        report["also_matches"] = {"names": same, "note": "built-ins storing the same form (their frame and "
+                                  "storage may differ: code cannot reveal them)"}
+    report["_system"] = system
+    return report

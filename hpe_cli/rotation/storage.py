@@ -27,32 +27,47 @@ def _as_batch(x, width, name):
 
 
 # ------------------------------------------------------------------ rotvec
-def rotvec_to_matrix(rotvec) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` in radians.
+def rotvec_to_soa(x, y, z):
+    """Rotation matrices as a nested list of 1-D arrays (see :mod:`hpe_cli.rotation.soa`) from rotvec columns.
 
     ``R = I + (sin t / t) K + ((1 - cos t) / t^2) K^2`` with ``K`` the cross-product
     matrix of the vector and ``t`` its norm; both coefficients use their Taylor
     series below ``t = 1e-4`` so that small vectors stay exact to machine precision.
     """
-    v = _as_batch(rotvec, 3, "rotation vectors")
-    t2 = np.einsum("...i,...i->...", v, v)
+    x, y, z = (np.asarray(v, dtype=np.float64) for v in (x, y, z))
+    t2 = x * x + y * y + z * z
     t = np.sqrt(t2)
     small = t < 1e-4
-    ts = np.where(small, 1.0, t)
-    a = np.where(small, 1.0 - t2 / 6.0 + t2 * t2 / 120.0, np.sin(ts) / ts)
-    b = np.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - np.cos(ts)) / (ts * ts))
-    x, y, z = v[..., 0], v[..., 1], v[..., 2]
-    R = np.empty(v.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1.0 - b * (y * y + z * z)
-    R[..., 1, 1] = 1.0 - b * (x * x + z * z)
-    R[..., 2, 2] = 1.0 - b * (x * x + y * y)
-    R[..., 0, 1] = -a * z + b * x * y
-    R[..., 1, 0] = a * z + b * x * y
-    R[..., 0, 2] = a * y + b * x * z
-    R[..., 2, 0] = -a * y + b * x * z
-    R[..., 1, 2] = -a * x + b * y * z
-    R[..., 2, 1] = a * x + b * y * z
-    return R
+    if small.any():
+        ts = np.where(small, 1.0, t)
+        a = np.where(small, 1.0 - t2 / 6.0 + t2 * t2 / 120.0, np.sin(ts) / ts)
+        b = np.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - np.cos(ts)) / (ts * ts))
+    else:
+        a = np.sin(t) / t
+        b = (1.0 - np.cos(t)) / t2
+    bx, by, bz = b * x, b * y, b * z
+    ax, ay, az = a * x, a * y, a * z
+    xy, xz, yz = bx * y, bx * z, by * z
+    xx, yy, zz = bx * x, by * y, bz * z
+    return [[1.0 - (yy + zz), xy - az, xz + ay],
+            [xy + az, 1.0 - (xx + zz), yz - ax],
+            [xz - ay, yz + ax, 1.0 - (xx + yy)]]
+
+
+def _soa_to_array(X, shape):
+    out = np.empty(shape + (3, 3))
+    flat = out.reshape(-1, 3, 3)
+    for m in range(3):
+        for k in range(3):
+            flat[:, m, k] = X[m][k]
+    return out
+
+
+def rotvec_to_matrix(rotvec) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` in radians (see :func:`rotvec_to_soa`)."""
+    v = _as_batch(rotvec, 3, "rotation vectors")
+    flat = v.reshape(-1, 3)
+    return _soa_to_array(rotvec_to_soa(flat[:, 0], flat[:, 1], flat[:, 2]), v.shape[:-1])
 
 
 def matrix_to_rotvec(R) -> np.ndarray:
@@ -77,25 +92,28 @@ def _check_order(order):
         raise ValueError(f"expected quaternion order 'wxyz' or 'xyzw', got {order!r}")
 
 
+def quaternion_to_soa(w, x, y, z):
+    """Rotation matrices as a nested list of 1-D arrays from quaternion columns (normalised first)."""
+    w, x, y, z = (np.asarray(v, dtype=np.float64) for v in (w, x, y, z))
+    n2 = w * w + x * x + y * y + z * z
+    s = 2.0 / n2
+    xs, ys, zs = x * s, y * s, z * s
+    wx, wy, wz = w * xs, w * ys, w * zs
+    xx, xy, xz = x * xs, x * ys, x * zs
+    yy, yz, zz = y * ys, y * zs, z * zs
+    return [[1.0 - (yy + zz), xy - wz, xz + wy],
+            [xy + wz, 1.0 - (xx + zz), yz - wx],
+            [xz - wy, yz + wx, 1.0 - (xx + yy)]]
+
+
 def quaternion_to_matrix(q, order: str = "wxyz") -> np.ndarray:
     """Rotation matrices from quaternions ``(..., 4)`` in ``order``; normalised first."""
     _check_order(order)
     q = _as_batch(q, 4, "quaternions")
-    if order == "xyzw":
-        q = q[..., [3, 0, 1, 2]]
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - z * w)
-    R[..., 0, 2] = 2 * (x * z + y * w)
-    R[..., 1, 0] = 2 * (x * y + z * w)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - x * w)
-    R[..., 2, 0] = 2 * (x * z - y * w)
-    R[..., 2, 1] = 2 * (y * z + x * w)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
+    flat = q.reshape(-1, 4)
+    cols = (flat[:, 0], flat[:, 1], flat[:, 2], flat[:, 3]) if order == "wxyz" else \
+        (flat[:, 3], flat[:, 0], flat[:, 1], flat[:, 2])
+    return _soa_to_array(quaternion_to_soa(*cols), q.shape[:-1])
 
 
 def matrix_to_quaternion(R, order: str = "wxyz") -> np.ndarray:

@@ -17,7 +17,7 @@ def safe_name(s: str) -> str:
 def crop_names(rows) -> np.ndarray:
     """Crop file names (no extension) that carry where each head came from.
 
-    Panoptic/AGORA-style rows (with ``camera``): ``<sequence>/<camera>_<person>_<frame:08d>`` -- the
+    Panoptic-style rows (with ``camera``): ``<sequence>/<camera>_<person>_<frame:08d>`` -- the
     fields of WHENet's own crop names (``prepare_images.py``), plus the sequence folder. Other rows:
     ``<image stem>`` (``_<k>`` appended for the k-th head of an image with several). With several
     inputs, the ``source`` name is a leading folder.
@@ -35,11 +35,19 @@ def crop_names(rows) -> np.ndarray:
     n_in_image = rows.groupby(["source", "image"], sort=False)["image"].transform("size").to_numpy()
     for i in range(n):
         if cam[i]:
-            name = f"{safe_name(seq[i] or 'seq')}/{safe_name(cam[i])}_{int(person[i])}_{int(frame[i]):08d}"
+            name = f"{safe_name(cam[i])}_{int(person[i])}_{int(frame[i]):08d}"
+            if seq[i]:
+                name = f"{safe_name(seq[i])}/{name}"
         else:
             stem = safe_name(Path(str(image[i])).with_suffix("").as_posix().replace("/", "__"))
             name = stem if n_in_image[i] == 1 else f"{stem}_{int(k_in_image[i])}"
         out[i] = f"{safe_name(source[i])}/{name}" if multi_source else name
+    # the same head listed twice (or names equal after cleaning): later ones get _dup1, _dup2, ...
+    import pandas as pd
+
+    dup = pd.Series(out).groupby(out).cumcount().to_numpy()
+    for i in np.flatnonzero(dup):
+        out[i] = f"{out[i]}_dup{dup[i]}"
     return out
 
 
@@ -65,6 +73,8 @@ class Layout:
         return the raw crop (uint8, H x W x 3, BGR).
     default_size : int or None
         Crop side the trainer expects (``--size`` overrides).
+    uses_landmarks : bool
+        The layout writes the 2-D landmarks (others never load them: less memory per row).
     stretch : bool
         Resize every crop to ``size x size`` even when the box is not square (the trainer's own script does).
     """
@@ -77,6 +87,7 @@ class Layout:
     default_square = False
     stretch = False
     needs_landmarks = False
+    uses_landmarks = False
 
     def __init__(self, system=None, form=None, **options):
         self.user_system = system

@@ -81,6 +81,7 @@ class DirectMHPLayout(Layout):
     name = "directmhp"
     system = "whenet"
     full_frames = True
+    uses_landmarks = True
 
     def label_reasons(self, angles):
         bad = (np.abs(angles[:, 0]) > 90) | (np.abs(angles[:, 2]) > 90)

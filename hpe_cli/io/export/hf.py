@@ -41,6 +41,7 @@ class HFLayout(Layout):
     name = "hf"
     system = None
     pixels = "jpeg"
+    uses_landmarks = True
 
     def open(self, root, splits):
         super().open(root, splits)

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...geometry.crop import landmark_boxes, pixel_boxes, points_to_crop
+from ...geometry.crop import landmark_boxes, points_to_crop
 from .base import Layout, abs_over
 
 RULE_99 = "outside ±99° (the 6DRepNet/Hopenet filter)"
@@ -43,7 +43,7 @@ class SixDRepNetLayout(Layout):
         super().__init__(system, form or "crops", **options)
         if self.form not in ("crops", "mat"):
             raise ValueError(f"expected --form crops or mat, got {self.form!r}")
-        self.needs_landmarks = self.form == "mat"
+        self.needs_landmarks = self.uses_landmarks = self.form == "mat"
         if self.form == "crops":  # DirectMHP's full-range 6DRepNet data: COCO euler_angles, 256 x 256 crops
             self.system = "whenet"
             self.default_size = 256

@@ -1,0 +1,145 @@
+#!/usr/bin/env python3
+"""Every streaming command next to its floor, with peak memory, in one run.
+
+For each size (default 1M and 10M rows) this builds the inputs in a temporary
+folder, then runs, each as its own subprocess under ``/usr/bin/time`` (wall
+time and peak RSS of that process alone):
+
+* ``hpe convert`` on angles and on matrices (Parquet in, Parquet out), and on
+  angles from CSV;
+* ``hpe audit`` (JSON report);
+* ``hpe augment --hflip`` (labels only);
+* ``hpe convert --format`` is not a thing: COCO/WHENet writers are measured by
+  ``benchmarks/writers.py``.
+
+Floors, measured in the same run the same way: a pyarrow script that reads
+the same input and writes a table of the output's width with the encoding
+hpe's writer uses (floats plain, the rest snappy + dictionary); for audit, a
+read of the label columns alone.
+
+Usage::
+
+    nice python benchmarks/commands.py                      # 1M and 10M rows
+    nice python benchmarks/commands.py --rows 200000        # quick look
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pcsv
+import pyarrow.parquet as pq
+
+ROOT = Path(__file__).resolve().parents[1]
+HPE = [sys.executable, "-c", "from hpe_cli.cli.main import cli; cli(prog_name=\"hpe\")"]
+
+FLOOR = r"""
+import sys, numpy as np, pyarrow as pa, pyarrow.parquet as pq, pyarrow.csv as pcsv
+inp, out, width, kind = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4]
+t = pcsv.read_csv(inp) if inp.endswith(".csv") else pq.read_table(inp)
+if kind == "read":
+    sys.exit(0)
+n = t.num_rows
+rng = np.random.default_rng(0)
+k = 0
+while t.num_columns < width - 1:
+    t = t.append_column(f"x{k}", pa.array(rng.standard_normal(n))); k += 1
+t = t.append_column("flag", pa.array(np.zeros(n, bool)))
+floats = {f.name for f in t.schema if pa.types.is_floating(f.type)}
+pq.write_table(t, out, use_dictionary=[c for c in t.schema.names if c not in floats],
+               compression={c: ("none" if c in floats else "snappy") for c in t.schema.names})
+"""
+
+
+def timed(cmd, env) -> tuple:
+    """Wall seconds and peak RSS (MB) of one subprocess, from GNU time."""
+    fmt = "@@%e %M"
+    res = subprocess.run(["/usr/bin/time", "-f", fmt] + cmd, env=env, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise SystemExit(f"failed ({res.returncode}): {' '.join(map(str, cmd))}\n{res.stderr[-2000:]}")
+    line = [ln for ln in res.stderr.splitlines() if ln.startswith("@@")][-1]
+    sec, kb = line[2:].split()
+    return float(sec), int(kb) / 1024
+
+
+def best(cmd, env, repeat):
+    runs = [timed(cmd, env) for _ in range(repeat)]
+    return min(r[0] for r in runs), max(r[1] for r in runs)
+
+
+def make_inputs(tmp: Path, n: int):
+    """angles.parquet, matrix.parquet, angles.csv (written in chunks: the parent stays small)."""
+    sys.path.insert(0, str(ROOT))
+    from hpe_cli.rotation import get_system
+
+    system = get_system("300w_lp")
+    rng = np.random.default_rng(0)
+    chunk = 1_000_000
+    wa = wm = wc = None
+    for lo in range(0, n, chunk):
+        m = min(chunk, n - lo)
+        pyr = np.c_[rng.uniform(-89, 89, m), rng.uniform(-99, 99, m), rng.uniform(-89, 89, m)]
+        ta = pa.table({"id": np.arange(lo, lo + m), "pitch": pyr[:, 0], "yaw": pyr[:, 1], "roll": pyr[:, 2]})
+        R = system.from_angles(pyr).reshape(m, 9)
+        tm = pa.table({"id": np.arange(lo, lo + m),
+                       **{f"r{i}{j}": np.ascontiguousarray(R[:, 3 * i + j]) for i in range(3) for j in range(3)}})
+        if wa is None:
+            wa = pq.ParquetWriter(tmp / "angles.parquet", ta.schema)
+            wm = pq.ParquetWriter(tmp / "matrix.parquet", tm.schema)
+            wc = pcsv.CSVWriter(tmp / "angles.csv", ta.schema)
+        wa.write_table(ta)
+        wm.write_table(tm)
+        wc.write_table(ta)
+    wa.close()
+    wm.close()
+    wc.close()
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rows", type=int, nargs="+", default=[1_000_000, 10_000_000])
+    ap.add_argument("--repeat", type=int, default=1, help="runs per measurement (best time, worst memory)")
+    args = ap.parse_args()
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    out_width = 1 + 3 + 3 + 9 + 2  # id, pitch..roll, pitch_2.., r00..r22, gimbal_lock, roundtrip_err
+    for n in args.rows:
+        with tempfile.TemporaryDirectory(dir=os.environ.get("HPE_BENCH_TMP")) as tmp:
+            tmp = Path(tmp)
+            make_inputs(tmp, n)
+            o = tmp / "out.parquet"
+            floor_cmd = lambda inp, width, kind="rw": [sys.executable, "-c", FLOOR, str(tmp / inp), str(o),  # noqa
+                                                       str(width), kind]
+            jobs = [
+                ("convert angles (Parquet)", HPE + ["convert", tmp / "angles.parquet", "-o", o, "--from", "300w_lp",
+                                                    "--to", "scipy_zyx", "-q", "--overwrite"],
+                 floor_cmd("angles.parquet", out_width)),
+                ("convert matrices (Parquet)", HPE + ["convert", tmp / "matrix.parquet", "-o", o, "--from",
+                                                      "300w_lp", "--to", "scipy_zyx", "-q", "--overwrite"],
+                 floor_cmd("matrix.parquet", out_width)),
+                ("convert angles (CSV in)", HPE + ["convert", tmp / "angles.csv", "-o", o, "--from", "300w_lp",
+                                                   "--to", "scipy_zyx", "-q", "--overwrite"],
+                 floor_cmd("angles.csv", out_width)),
+                ("audit (JSON report)", HPE + ["audit", tmp / "angles.parquet", "--json", tmp / "r.json", "-q",
+                                               "--overwrite"],
+                 floor_cmd("angles.parquet", 0, "read")),
+                ("augment --hflip (labels)", HPE + ["augment", tmp / "angles.parquet", "-o", o, "--image-size",
+                                                    "450", "450", "--hflip", "-q", "--overwrite"],
+                 floor_cmd("angles.parquet", out_width)),
+            ]
+            print(f"\n{n:,} rows (Parquet in, Parquet out unless noted); times are wall seconds, best of "
+                  f"{args.repeat}; RSS is each process's peak")
+            print(f"  {'command':<30} {'hpe s':>8} {'floor s':>8} {'ratio':>6} {'hpe MB':>8} {'floor MB':>9}")
+            for name, cmd, fcmd in jobs:
+                th, mh = best([str(c) for c in cmd], env, args.repeat)
+                tf, mf = best(fcmd, env, args.repeat)
+                print(f"  {name:<30} {th:8.2f} {tf:8.2f} {th / tf:6.2f} {mh:8.0f} {mf:9.0f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
