@@ -327,14 +327,15 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
             from ..io.labels import label_values
 
             values = label_values(batch, system, mode, radians)
-            mode = "angles" if values.ndim == 2 else "matrix"
+            eff = "angles" if values.ndim == 2 else "matrix"
             cols = [np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T]
         else:
+            eff = mode
             cols = _label_cols(batch, mode, radians)
         if tally is not None:
             values = np.stack(cols, axis=-1)
-            tally.add(system.to_canonical(system.from_angles(values) if mode == "angles" else values.reshape(-1, 3, 3)))
-        res = _checks(cols, mode, system, near_tol_deg)
+            tally.add(system.to_canonical(system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3)))
+        res = _checks(cols, eff, system, near_tol_deg)
         any_flag = np.zeros(batch.num_rows, dtype=bool)
         for c in CHECKS[:-1]:
             m = res[c]
@@ -343,13 +344,13 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
             want = n_examples - len(examples[c])
             if want > 0 and m.any():
                 for i in np.flatnonzero(m)[:want]:
-                    examples[c].append(_example(batch, int(i), lines[i], id_cols, cols, mode))
+                    examples[c].append(_example(batch, int(i), lines[i], id_cols, cols, eff))
         flagged += int(np.count_nonzero(any_flag))
         flag_bits.append(np.packbits(any_flag))
         near_not_locked += int(np.count_nonzero(res["near_gimbal"] & ~res["gimbal_lock"]))
         dups.add(key_hashes(cols, batch, key_cols), lines)
         if hist is not None:
-            hist.add(np.stack(cols, axis=-1) if mode == "angles" else res["primary"])
+            hist.add(np.stack(cols, axis=-1) if eff == "angles" else res["primary"])
         rows += batch.num_rows
         if progress is not None:
             progress.update(batch.num_rows)
