@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import click
 
-from .table_options import column_options
 
 from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_options, verbosity_options
+from .table_options import column_options
 
 LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 

@@ -327,15 +327,7 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     read_mode = mode if mode in ("angles", "matrix") else "matrix"
 
     def work(batch):  # on a worker thread: numpy and Arrow release the GIL
-        if via_system:
-            from ..io.labels import label_values
-
-            values = label_values(batch, system, mode, radians)
-            eff = "angles" if values.ndim == 2 else "matrix"
-            cols = [np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T]
-        else:
-            eff = mode
-            cols = _label_cols(batch, mode, radians)
+        cols, eff = _system_cols(batch, system, mode, radians, via_system)
         res = _checks(cols, eff, system, near_tol_deg)
         any_flag = np.zeros(batch.num_rows, dtype=bool)
         for c in CHECKS[:-1]:
@@ -396,7 +388,7 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
 
     if output:
         _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians,
-                       near_tol_deg, dups)
+                       near_tol_deg, dups, via_system)
     if plots:
         write_plots(hist, plots, system, {"input": str(src.path), "system": system.name, "rows": rows,
                                           **counts, "flagged": result["details"]["flagged"]},
@@ -422,8 +414,19 @@ def _unpack_rows(flag_bits, batch_sizes, idx) -> np.ndarray:
     return out
 
 
+def _system_cols(batch, system, mode, radians, via_system):
+    """Label columns to check and their mode: a system's own columns (any storage kind) are read through it."""
+    if not via_system:
+        return _label_cols(batch, mode, radians), mode
+    from ..io.labels import label_values
+
+    values = label_values(batch, system, mode, radians)
+    return ([np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T],
+            "angles" if values.ndim == 2 else "matrix")
+
+
 def _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians, near_tol_deg,
-                   dups):
+                   dups, via_system=False):
     """Second pass over the input: every column, then one boolean column per check and 'flagged'."""
     import pyarrow as pa
 
@@ -438,7 +441,7 @@ def _write_flagged(input_path, output, only_flagged, overwrite, batch_size, syst
     with TableWriter(output, overwrite, meta) as w:
         for batch, _, _ in _batches(src, mode, src.path):
             n = batch.num_rows
-            res = _checks(_label_cols(batch, mode, radians), mode, system, near_tol_deg)
+            res = _checks(*_system_cols(batch, system, mode, radians, via_system), system, near_tol_deg)
             res["duplicates"] = dups.mask(offset, offset + n)
             any_flag = np.zeros(n, dtype=bool)
             for c in CHECKS:
