@@ -209,7 +209,7 @@ def test_duplicate_column_names_are_an_error(tmp_path):
     src = tmp_path / "d.csv"
     src.write_text("yaw,pitch,yaw,roll,extra\n10,1,20,3,999\n")
     res = run(src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "300w_lp")
-    assert res.exit_code == 1 and "d.csv: row 1: duplicate column name(s) 'yaw'" in res.output
+    assert res.exit_code == 1 and "d.csv: line 1: duplicate column name(s) 'yaw'" in res.output
     assert "Traceback" not in res.output and not (tmp_path / "o.csv").exists()
 
 
