@@ -49,6 +49,7 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @click.option("--drop-images-with-rejects", is_flag=True,
               help="Drop a whole image when any head in it is rejected (DirectMHP's rule).")
 @click.option("--workers", type=click.IntRange(1), default=1, show_default=True, help="Worker processes.")
+@column_options
 @rejects_options
 @overwrite_option
 @verbosity_options
