@@ -6,6 +6,7 @@ import click
 from .table_options import column_options
 
 from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_options, verbosity_options
+from .table_options import column_options
 
 LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 
@@ -50,6 +51,7 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @click.option("--drop-images-with-rejects", is_flag=True,
               help="Drop a whole image when any head in it is rejected (DirectMHP's rule).")
 @click.option("--workers", type=click.IntRange(1), default=1, show_default=True, help="Worker processes.")
+@column_options
 @rejects_options
 @overwrite_option
 @verbosity_options

@@ -21,7 +21,10 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
     """Runs in the child: load, search, send ``("ok", report, toml, name)`` or ``("error", message)``."""
     import os
     import sys
+    import warnings
 
+    if not os.environ.get("HPE_DEBUG"):
+        warnings.simplefilter("ignore")  # as in the parent: no library warnings with internal paths
     from ..cli.infer import _load_callable
     from ..rotation import infer as inf
 

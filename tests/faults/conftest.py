@@ -94,7 +94,7 @@ class Case:
     def file_option(self) -> str:
         """The option of the main file output (draw writes a folder: its rejects file; infer: --json,
         since -o must end in .toml)."""
-        return {"draw": "--rejects", "infer": "--json"}.get(self.name, "-o")
+        return {"draw": "--rejects", "export": "--rejects", "infer": "--json"}.get(self.name, "-o")
 
     def args(self, **outputs):
         outs = {**self.outputs, **outputs}
@@ -156,6 +156,28 @@ class Case:
             "infer", "--callable", f"{code}:{func}", "-o", o["-o"], "--json", o["--json"], "-q"]
 
 
+    def _evaluate(self, t):
+        pred, gt = t / "pred.csv", t / "gt.csv"
+        base = {"image": [f"i{k}.jpg" for k in range(4)], "pitch": [1.0, 2, 3, 4], "yaw": [10.0, -20, 30, 5],
+                "roll": [0.0, 5, -5, 2]}
+        pd.DataFrame(base).to_csv(gt, index=False)
+        pd.DataFrame({**base, "yaw": [11.0, -21, 29, 5]}).to_csv(pred, index=False)
+        return [pred, gt], {"-o": t / "errors.csv", "--json": t / "report.json", "--rejects": t / "rej.csv"}, \
+            lambda o: ["evaluate", pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", o["-o"],
+                       "--json", o["--json"], "--rejects", o["--rejects"], "-q"]
+
+    def _export(self, t):
+        make_images(t / "img", ["f0.jpg", "f1.jpg"], size=(160, 120))
+        rows = [{"image": f"img/f{i}.jpg", "sequence": "s0", "camera": "", "frame": i, "person_id": 0,
+                 "bbox_x": 10, "bbox_y": 20, "bbox_w": 40, "bbox_h": 50, "pitch": 5.0, "yaw": 20.0 * i - 10,
+                 "roll": 5.0} for i in range(2)]
+        src = t / "labels.csv"
+        pd.DataFrame(rows).to_csv(src, index=False)
+        return [src, t / "img" / "f0.jpg"], {"-o": t / "exported", "--rejects": t / "rej.csv"}, \
+            lambda o: ["export", src, "-o", o["-o"], "--layout", "whenet", "--images", t, "--rejects",
+                       o["--rejects"], "-q"]
+
+
 def _first_function(path: Path) -> str:
     import ast
 
@@ -163,7 +185,7 @@ def _first_function(path: Path) -> str:
                 and not n.name.startswith("_"))
 
 
-COMMANDS = ["convert", "relabel-panoptic", "relabel-agora", "audit", "draw", "augment", "infer"]
+COMMANDS = ["convert", "relabel-panoptic", "relabel-agora", "audit", "draw", "augment", "infer", "evaluate", "export"]
 WRITING = COMMANDS  # every command that writes files (systems only prints)
 
 
