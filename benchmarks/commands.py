@@ -9,8 +9,8 @@ time and peak RSS of that process alone):
   angles from CSV;
 * ``hpe audit`` (JSON report);
 * ``hpe augment --hflip`` (labels only);
-* ``hpe convert --format`` is not a thing: COCO/WHENet writers are measured by
-  ``benchmarks/writers.py``.
+* the COCO and WHENet writers against the Parquet writer on the same
+  relabel-like table (in this process).
 
 Floors, measured in the same run the same way: a pyarrow script that reads
 the same input and writes a table of the output's width with the encoding
@@ -58,19 +58,57 @@ pq.write_table(t, out, use_dictionary=[c for c in t.schema.names if c not in flo
 
 
 def timed(cmd, env) -> tuple:
-    """Wall seconds and peak RSS (MB) of one subprocess, from GNU time."""
-    fmt = "@@%e %M"
+    """Wall seconds, peak RSS (MB) and CPU seconds (user + system) of one subprocess, from GNU time."""
+    fmt = "@@%e %M %U %S"
     res = subprocess.run(["/usr/bin/time", "-f", fmt] + cmd, env=env, capture_output=True, text=True)
     if res.returncode != 0:
         raise SystemExit(f"failed ({res.returncode}): {' '.join(map(str, cmd))}\n{res.stderr[-2000:]}")
     line = [ln for ln in res.stderr.splitlines() if ln.startswith("@@")][-1]
-    sec, kb = line[2:].split()
-    return float(sec), int(kb) / 1024
+    sec, kb, user, system = line[2:].split()
+    return float(sec), int(kb) / 1024, float(user) + float(system)
 
 
 def best(cmd, env, repeat):
     runs = [timed(cmd, env) for _ in range(repeat)]
-    return min(r[0] for r in runs), max(r[1] for r in runs)
+    return min(r[0] for r in runs), max(r[1] for r in runs), min(r[2] for r in runs)
+
+
+WRITER = r"""
+import sys, pyarrow.parquet as pq
+from hpe_cli.io import TableWriter
+from hpe_cli.io.coco import CocoWriter
+from hpe_cli.io.whenet_txt import WhenetWriter
+inp, out, fmt = sys.argv[1], sys.argv[2], sys.argv[3]
+w = {"parquet": lambda: TableWriter(out, True), "coco": lambda: CocoWriter(out, True),
+     "whenet": lambda: WhenetWriter(out, True)}[fmt]()
+with w:
+    for b in pq.ParquetFile(inp, pre_buffer=False, buffer_size=1 << 20).iter_batches(batch_size=65536,
+                                                                                     use_threads=False):
+        w.write(b)
+"""
+
+
+def make_views(path: Path, n: int, n_lm: int = 70):
+    """A relabel-panoptic-like output table: image, box, angles, image size, 70 2-D landmarks."""
+    rng = np.random.default_rng(1)
+    chunk = 200_000
+    w = None
+    for lo in range(0, n, chunk):
+        m = min(chunk, n - lo)
+        cols = {"image": pa.array([f"171204_pose1/hdImgs/00_{k % 31:02d}/00_{k % 31:02d}_{k // 155:08d}.jpg"
+                                   for k in range(lo, lo + m)])}
+        for c in ("bbox_x", "bbox_y", "bbox_w", "bbox_h", "pitch", "yaw", "roll"):
+            cols[c] = rng.uniform(0, 500, m) if c.startswith("bbox") else rng.uniform(-90, 90, m)
+        cols["image_width"] = np.full(m, 1920)
+        cols["image_height"] = np.full(m, 1080)
+        for i in range(n_lm):
+            cols[f"lm{i}_x"] = rng.uniform(0, 1920, m)
+            cols[f"lm{i}_y"] = rng.uniform(0, 1080, m)
+        t = pa.table(cols)
+        if w is None:
+            w = pq.ParquetWriter(path, t.schema)
+        w.write_table(t, row_group_size=65_536)
+    w.close()
 
 
 def make_inputs(tmp: Path, n: int):
@@ -103,10 +141,24 @@ def make_inputs(tmp: Path, n: int):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rows", type=int, nargs="+", default=[1_000_000, 10_000_000])
+    ap.add_argument("--rows", type=int, nargs="*", default=[1_000_000, 10_000_000])
     ap.add_argument("--repeat", type=int, default=1, help="runs per measurement (best time, worst memory)")
+    ap.add_argument("--views", type=int, nargs="*", default=[775_000],
+                    help="rows of the writer benchmark (775,000 = 5,000 Panoptic frames x 5 people x 31 cameras)")
     args = ap.parse_args()
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    for n in args.views:
+        with tempfile.TemporaryDirectory(dir=os.environ.get("HPE_BENCH_TMP")) as tmp:
+            tmp = Path(tmp)
+            make_views(tmp / "views.parquet", n)
+            print(f"\nwriters, {n:,} relabel-like rows (image, box, angles, size, 70 landmarks), streamed in "
+                  "batches of 65,536; floor = hpe's Parquet writer on the same batches")
+            res = {fmt: best([sys.executable, "-c", WRITER, str(tmp / "views.parquet"), str(tmp / f"o.{fmt}"), fmt],
+                             env, args.repeat) for fmt in ("parquet", "coco", "whenet")}
+            tp, _, cp = res["parquet"]
+            for fmt, (t, mb, c) in res.items():
+                print(f"  {fmt:<8} {t:7.2f} s ({t / tp:4.2f}x)  cpu {c:7.2f} s ({c / cp:4.2f}x)  peak {mb:5.0f} MB",
+                      flush=True)
     out_width = 1 + 3 + 3 + 9 + 2  # id, pitch..roll, pitch_2.., r00..r22, gimbal_lock, roundtrip_err
     for n in args.rows:
         with tempfile.TemporaryDirectory(dir=os.environ.get("HPE_BENCH_TMP")) as tmp:
@@ -132,13 +184,16 @@ def main():
                                                     "450", "450", "--hflip", "-q", "--overwrite"],
                  floor_cmd("angles.parquet", out_width)),
             ]
-            print(f"\n{n:,} rows (Parquet in, Parquet out unless noted); times are wall seconds, best of "
-                  f"{args.repeat}; RSS is each process's peak")
-            print(f"  {'command':<30} {'hpe s':>8} {'floor s':>8} {'ratio':>6} {'hpe MB':>8} {'floor MB':>9}")
+            print(f"\n{n:,} rows (Parquet in, Parquet out unless noted); wall and CPU (user+sys) seconds, best of "
+                  f"{args.repeat}; RSS is each process's peak; the load average is printed because a shared "
+                  "machine inflates wall times")
+            print(f"  {'command':<28} {'hpe s':>7} {'floor s':>7} {'ratio':>6} {'hpe cpu':>7} {'floor cpu':>9} "
+                  f"{'cpu ratio':>9} {'hpe MB':>7} {'floor MB':>8}  load")
             for name, cmd, fcmd in jobs:
-                th, mh = best([str(c) for c in cmd], env, args.repeat)
-                tf, mf = best(fcmd, env, args.repeat)
-                print(f"  {name:<30} {th:8.2f} {tf:8.2f} {th / tf:6.2f} {mh:8.0f} {mf:9.0f}", flush=True)
+                th, mh, ch = best([str(c) for c in cmd], env, args.repeat)
+                tf, mf, cf = best(fcmd, env, args.repeat)
+                print(f"  {name:<28} {th:7.2f} {tf:7.2f} {th / tf:6.2f} {ch:7.2f} {cf:9.2f} {ch / cf:9.2f} "
+                      f"{mh:7.0f} {mf:8.0f}  {os.getloadavg()[0]:.1f}", flush=True)
 
 
 if __name__ == "__main__":

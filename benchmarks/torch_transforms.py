@@ -41,8 +41,10 @@ from hpe_cli.torch import transforms as T  # noqa: E402
 
 
 def _time(fn, repeat, device):
+    """Median wall time; the RNG is reseeded per run so every pipeline draws the same random parameters."""
     times = []
-    for _ in range(repeat):
+    for k in range(repeat):
+        torch.manual_seed(k)
         if device == "cuda":
             torch.cuda.synchronize()
         t0 = time.perf_counter()

@@ -417,9 +417,9 @@ def evaluate(pred, gt, *, pred_system, gt_system, protocols=None, align: str = "
     --------
     >>> import hpe_cli as hpe
     >>> pred, gt = [[0.0, 12.0, 1.0], [5.0, -30.0, 0.0]], [[0.0, 10.0, 0.0], [4.0, -33.0, 2.0]]
-    >>> report = hpe.evaluate(pred, gt, pred_system="300w_lp", gt_system="300w_lp")  # doctest: +SKIP
-    >>> callable(hpe.evaluate)
-    True
+    >>> report = hpe.evaluate(pred, gt, pred_system="300w_lp", gt_system="300w_lp")
+    >>> report["n"]["pairs"], round(report["metrics"]["mae_wrapped"]["yaw"], 6)
+    (2, 2.5)
     """
     import importlib.util
 

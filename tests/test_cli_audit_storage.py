@@ -37,3 +37,16 @@ def test_audit_rotvec_table(tmp_path):
     assert res.exit_code == 0, res.output
     rep = json.loads(out.read_text())
     assert rep["label_columns"] == "rotvec" and rep["non_finite"] == 1 and rep["rows"] == 2
+
+
+def test_audit_rotvec_several_batches_and_flagged_output(tmp_path):
+    rv = Rotation.random(50, random_state=3).as_rotvec()
+    src = tmp_path / "rv.csv"
+    pd.DataFrame({"rx": rv[:, 0], "ry": rv[:, 1], "rz": rv[:, 2]}).to_csv(src, index=False)
+    out = tmp_path / "f.csv"
+    res = CliRunner().invoke(cli, ["audit", str(src), "--system", "img2pose", "--batch-size", "7", "-o", str(out),
+                                   "--json", str(tmp_path / "r.json")])
+    assert res.exit_code == 0, res.output
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["label_columns"] == "rotvec" and rep["rows"] == 50 and rep["not_rotation"] == 0
+    assert len(pd.read_csv(out)) == 50

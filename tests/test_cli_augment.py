@@ -307,7 +307,7 @@ def test_table_errors(tmp_path):
     # without --rejects a bad row fails the run, naming the file line (header = line 1), as in every command
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5)
     assert res.exit_code == 1, res.output
-    assert "text.csv: row 3: non-numeric value in pitch (1 bad rows in all" in res.output
+    assert "text.csv: line 3: non-numeric value in pitch; 1 row(s) cannot be used" in res.output
     assert not (tmp_path / "t.csv").exists()
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5,
               "--rejects", tmp_path / "r.csv")
@@ -317,7 +317,10 @@ def test_table_errors(tmp_path):
     t["pitch"] = ["1", "2"]
     t.to_csv(tmp_path / "text.csv", index=False)
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t2.csv", "--image-size", W, H, "--rotate", 5)
-    assert res.exit_code == 1 and "row 3: non-numeric value in lm0_x" in res.output
+    assert res.exit_code == 1 and "line 3: non-numeric value in lm0_x" in res.output
+    res = run(tmp_path / "text.csv", "-o", tmp_path / "t2.csv", "--image-size", W, H, "--rotate", 5,
+              "--rejects", tmp_path / "r2.csv", "--strict")
+    assert res.exit_code == 1 and "--strict" in res.output and not (tmp_path / "t2.csv").exists()
     df = make_table(2)[["pitch", "yaw", "roll"] + landmark_cols(5)]
     df.to_csv(tmp_path / "five.csv", index=False)
     res = run(tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--hflip")
@@ -350,3 +353,24 @@ def test_help_has_examples():
     res = CliRunner().invoke(cli, ["augment", "--help"])
     assert res.exit_code == 0
     assert "Examples:" in res.output and "hpe augment labels.parquet" in res.output
+
+
+def test_threaded_pipeline_same_output_and_rejects(tmp_path):
+    """Two worker threads and small batches give exactly the one-thread output and rejects, in order."""
+    from hpe_cli.pipelines.augment import run_augment
+    from hpe_cli.rotation import get_system
+
+    df = make_table(50)
+    df.loc[[3, 17, 41], "pitch"] = np.nan
+    src = tmp_path / "in.parquet"
+    df.to_parquet(src)
+    outs = []
+    for workers, bs in ((1, 1000), (2, 7)):
+        out, rej = tmp_path / f"o{workers}.parquet", tmp_path / f"r{workers}.csv"
+        s = run_augment(src, out, get_system("300w_lp"), (W, H), "rotate", 20.0, rejects_path=rej, batch_size=bs,
+                        workers=workers)
+        assert s["rows"] == 50 and s["written"] == 47
+        outs.append((pd.read_parquet(out), pd.read_csv(rej)))
+    pd.testing.assert_frame_equal(outs[0][0], outs[1][0])
+    pd.testing.assert_frame_equal(outs[0][1], outs[1][1])
+    assert outs[1][1]["row"].tolist() == [5, 19, 43]

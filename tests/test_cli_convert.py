@@ -202,3 +202,26 @@ def test_output_has_normal_permissions(tmp_path, labels):
     umask = os.umask(0)
     os.umask(umask)
     assert stat.S_IMODE(out.stat().st_mode) == 0o666 & ~umask
+
+
+def test_duplicate_column_names_are_an_error(tmp_path):
+    """Issue 9, class 1: 'yaw,pitch,yaw,roll,extra' used to convert the wrong column with exit 0."""
+    src = tmp_path / "d.csv"
+    src.write_text("yaw,pitch,yaw,roll,extra\n10,1,20,3,999\n")
+    res = run(src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "300w_lp")
+    assert res.exit_code == 1 and "d.csv: line 1: duplicate column name(s) 'yaw'" in res.output
+    assert "Traceback" not in res.output and not (tmp_path / "o.csv").exists()
+
+
+def test_bad_rows_of_every_kind_go_to_rejects_with_their_lines(tmp_path):
+    src = tmp_path / "b.csv"
+    src.write_bytes(b"pitch,yaw,roll,image\n1,2,3,a\n1,2\n4,x,6,b\n7,8,9,caf\xe9\n1e300,0,0,c\n5,5,5,\"q\n")
+    rej = tmp_path / "r.csv"
+    res = run(src, "-o", tmp_path / "o.parquet", "--from", "300w_lp", "--to", "whenet", "--rejects", rej, "-q")
+    assert res.exit_code == 0, res.output
+    r = pd.read_csv(rej).sort_values("row")
+    assert r["row"].tolist() == [3, 4, 5, 6, 7]
+    assert r["reason"].tolist() == ["expected 4 fields, got 2", "non-numeric value in yaw",
+                                    "undecodable bytes in image (not UTF-8)",
+                                    "absurd angle in pitch: |value| > 1e+06 degrees", "unclosed quote"]
+    assert pd.read_parquet(tmp_path / "o.parquet")["image"].tolist() == ["a"]

@@ -237,3 +237,38 @@ def test_video_source_real_reader(tmp_path):
         assert abs(float(crop.mean()) - 40 * f) < 6
     rej = pd.read_csv(tmp_path / "r.csv")
     assert len(rej) == 1 and "past the end" in rej["reason"].iloc[0]
+    # pixel layouts get a video's crops through the worker's spill file
+    r = run("export", path, "-o", tmp_path / "f", "--layout", "fsanet", "--rejects", tmp_path / "r2.csv",
+            "--workers", "2")
+    assert r.exit_code == 0, r.output
+    d = np.load(tmp_path / "f" / "train.npz")
+    assert d["image"].shape == (2, 64, 64, 3)
+    np.testing.assert_allclose(d["image"].reshape(2, -1).mean(1), [40, 120], atol=6)
+    assert not list((tmp_path / "f").glob(".spill-*"))
+
+
+@pytest.mark.skipif(not (REALDATA / "300wlp_face3d").exists(), reason="no 300W-LP sample")
+def test_w300lp_root_identity_groups(tmp_path):
+    import shutil
+
+    import scipy.io
+
+    src = REALDATA / "300wlp_face3d" / "IBUG_image_008_1_0"
+    root = tmp_path / "300W_LP"
+    for sub, k in (("IBUG", 0), ("IBUG", 1), ("IBUG_Flip", 0)):
+        (root / sub).mkdir(parents=True, exist_ok=True)
+        for ext in (".jpg", ".mat"):
+            shutil.copy(str(src) + ext, root / sub / f"IBUG_image_008_1_{k}{ext}")
+    (root / "AFW").mkdir()
+    for ext in (".jpg", ".mat"):
+        shutil.copy(str(src) + ext, root / "AFW" / f"AFW_111_2_0{ext}")
+    out = tmp_path / "o"
+    r = run("export", root, "-o", out, "--layout", "6drepnet", "--form", "mat", "--split", "identity:0.5,0.5")
+    assert r.exit_code == 0, r.output
+    crops = pd.read_csv(out / "crops.csv")
+    assert len(crops) == 4
+    by_id = crops.assign(identity=crops["image"].str.extract(r"/(.+)_\d+\.jpg$")[0]).groupby("identity")["split"]
+    assert (by_id.nunique() == 1).all() and set(by_id.groups) == {"IBUG_image_008_1", "AFW_111_2"}
+    pose = scipy.io.loadmat(src.with_suffix(".mat"))["Pose_Para"][0][:3]
+    for f in (out / crops["split"].iloc[0]).glob("*.mat"):
+        np.testing.assert_allclose(scipy.io.loadmat(f)["Pose_Para"][0][:3], pose, atol=1e-6)

@@ -194,10 +194,10 @@ def test_tab_separated(tmp_path):
 
 # ------------------------------------------------------------------------------------------------ bad input
 @pytest.mark.parametrize("text,kw,msg", [
-    ("a.jpg,1,2,3\nb.jpg,4,5\n", {"input_format": "whenet"}, "row 2: expected 4 fields"),
-    ("#;image;yaw;pitch;roll\nx.jpg;1;2\n", {"input_format": "opal23"}, "row 2: expected 4 fields"),
-    ("nonsense\n", {"input_format": "opal23"}, "row 1: expected OPAL's header"),
-    ("5\nYaw Pitch Roll\n", {"input_format": "celeba-pose"}, "row 1: expected CelebAMask-HQ"),
+    ("a.jpg,1,2,3\nb.jpg,4,5\n", {"input_format": "whenet"}, "line 2: expected 4 fields"),
+    ("#;image;yaw;pitch;roll\nx.jpg;1;2\n", {"input_format": "opal23"}, "line 2: expected 4 fields"),
+    ("nonsense\n", {"input_format": "opal23"}, "line 1: expected OPAL's header"),
+    ("5\nYaw Pitch Roll\n", {"input_format": "celeba-pose"}, "line 1: expected CelebAMask-HQ"),
 ])
 def test_bad_lines_name_file_and_line(tmp_path, text, kw, msg):
     p = tmp_path / "in.txt"

@@ -246,3 +246,19 @@ def test_dad3dheads_converts_with_the_builtin_system(tmp_path):
     F = np.diag([1.0, -1.0, -1.0])
     np.testing.assert_allclose(A, F @ rots, atol=1e-9)
     assert list(f["item_id"]) == ["item000", "item001"]
+
+
+def test_evaluate_mat_gt_is_300w_lp_whatever_gt_system(aflw430, tmp_path):
+    """A prediction equal to the .mat label scores 0 whatever --gt-system names (it names the reporting system)."""
+    import json
+
+    pose = np.rad2deg(scipy.io.loadmat(aflw430 / "image00430.mat")["Pose_Para"][0, :3].astype(np.float64))
+    pred = tmp_path / "pred.csv"
+    pd.DataFrame({"file": ["image00430.mat"], "pitch": [pose[0]], "yaw": [pose[1]], "roll": [pose[2]]}).to_csv(
+        pred, index=False)
+    for gsys in ("300w_lp", "3ddfa_v2"):
+        rep = tmp_path / f"{gsys}.json"
+        r = CliRunner().invoke(cli, ["evaluate", str(pred), str(aflw430), "--pred-system", "300w_lp",
+                                     "--gt-system", gsys, "--key", "file", "--json", str(rep), "-q"])
+        assert r.exit_code == 0, r.output
+        assert json.loads(rep.read_text())["metrics"]["geodesic"]["max"] < 1e-6

@@ -270,3 +270,25 @@ def test_absurd_landmarks_are_a_face_reject(tmp_path):
     rej = pd.read_csv(rj)
     n_cams = len(pan.read_calibration(pan.find_calibration(seq), "hd"))
     assert (rej["reason"] == "bad landmarks").sum() == n_cams  # one face x every hd camera
+
+
+@pytest.mark.parametrize("fmt,suffix", [("coco", ".json"), ("whenet", ".txt")])
+def test_coco_and_whenet_stream_with_the_same_content(seqs, tmp_path, fmt, suffix):
+    seq = seqs / "multi" / "seqB"
+    a, b, t = tmp_path / f"a{suffix}", tmp_path / f"b{suffix}", tmp_path / "t.parquet"
+    _run(["relabel-panoptic", str(seq), "-o", str(a), "-q", "--format", fmt])
+    _run(["relabel-panoptic", str(seq), "-o", str(b), "-q", "--format", fmt, "--workers", "2"])
+    assert a.read_bytes() == b.read_bytes()
+    _run(["relabel-panoptic", str(seq), "-o", str(t), "-q", "--system", "whenet"])
+    frame = _read(t).to_pandas()
+    ref = tmp_path / f"ref{suffix}"
+    if fmt == "coco":
+        from hpe_cli.io.coco import write_coco
+
+        write_coco(frame, ref, image_size_cols=("image_width", "image_height"))
+        assert json.loads(a.read_text()) == json.loads(ref.read_text())
+    else:
+        from hpe_cli.io.whenet_txt import write_whenet
+
+        write_whenet(frame, ref)
+        assert a.read_text() == ref.read_text()

@@ -87,7 +87,7 @@ def test_string_column_stays_string_and_types_do_not_depend_on_block(tmp_path):
 def test_duplicate_columns_are_an_error(tmp_path):
     p = tmp_path / "d.csv"
     p.write_bytes(b"yaw,pitch,yaw,roll,extra\n10,1,20,3,999\n")
-    with pytest.raises(HpeError, match=r"d.csv: row 1: duplicate column name\(s\) 'yaw'"):
+    with pytest.raises(HpeError, match=r"d.csv: line 1: duplicate column name\(s\) 'yaw'"):
         open_table(p)
     t = pa.table([pa.array([1.0]), pa.array([2.0])], names=["yaw", "yaw"])
     pq.write_table(t, tmp_path / "d.parquet")
@@ -98,7 +98,7 @@ def test_duplicate_columns_are_an_error(tmp_path):
 def test_batches_raises_at_first_bad_row(tmp_path):
     p = tmp_path / "t.csv"
     build(p, [b"1,2,3,a\n", b"1,2\n", b"x,2,3,b\n"])
-    with pytest.raises(HpeError, match=r"t.csv: row 3: expected 4 fields, got 2"):
+    with pytest.raises(HpeError, match=r"t.csv: line 3: expected 4 fields, got 2"):
         list(open_table(p).batches())
 
 

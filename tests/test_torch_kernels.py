@@ -141,6 +141,9 @@ def test_maev_oracle():
     got = maev(torch.tensor(R1), torch.tensor(R2), reduction="none").numpy()
     assert np.abs(got - ref).max() < 1e-6
     assert abs(maev(torch.tensor(R1), torch.tensor(R2)).item() - ref.mean()) < 1e-6
+    from hpe_cli.metrics.rotation_errors import maev_deg  # the numpy metric of hpe evaluate
+
+    assert np.abs(np.asarray(maev_deg(R1, R2)) - got).max() < 1e-6
 
 
 def test_errors():

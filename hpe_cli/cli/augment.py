@@ -5,7 +5,7 @@ import click
 
 from ..pipelines.augment import AGREE_TOL, IMAGE_COLUMNS, run_augment  # noqa: F401  (re-exported)
 from .table_options import column_options
-from .options import (batch_option, echo_summary, output_option, overwrite_option, progress, rejects_option,
+from .options import (batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
                       system_option, verbosity_options)
 
 
@@ -42,14 +42,14 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 @click.option("--border", type=click.Choice(["constant", "replicate", "reflect", "reflect101", "wrap"]),
               default="constant", show_default=True, help="Fill of pixels that come from outside the image.")
 @click.option("--jpeg-quality", type=click.IntRange(1, 100), default=95, show_default=True)
-@rejects_option
+@rejects_options
 @overwrite_option
 @batch_option
 @verbosity_options
 @column_options
 def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line, scheme, box_from, clip, images_dir,
-            out_images, image_column, interpolation, border, jpeg_quality, rejects, overwrite, batch_size, verbose,
-            quiet):
+            out_images, image_column, interpolation, border, jpeg_quality, rejects, strict, overwrite, batch_size,
+            verbose, quiet):
     """Rotate or mirror a head-pose dataset: labels, landmarks, boxes and images.
 
     INPUT is a .parquet/.csv label table (or a folder of .mat files) with
@@ -104,7 +104,8 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
         s = run_augment(input, output, system, tuple(image_size), op, angle, scheme=scheme, box_from=box_from,
                         clip=clip, images_dir=images_dir, out_images=out_images, image_column=image_column,
                         interpolation=interpolation, border=border, jpeg_quality=jpeg_quality, rejects_path=rejects,
-                        overwrite=overwrite, batch_size=batch_size, bar=bar, verbose=verbose, description=desc)
+                        strict=strict, overwrite=overwrite, batch_size=batch_size, bar=bar, verbose=verbose,
+                        description=desc)
     finally:
         bar.close()
     lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {system.name} -> {output}",

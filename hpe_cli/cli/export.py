@@ -3,9 +3,8 @@ from __future__ import annotations
 
 import click
 
-from .table_options import column_options
-
 from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_options, verbosity_options
+from .table_options import column_options
 
 LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 
@@ -50,10 +49,10 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @click.option("--drop-images-with-rejects", is_flag=True,
               help="Drop a whole image when any head in it is rejected (DirectMHP's rule).")
 @click.option("--workers", type=click.IntRange(1), default=1, show_default=True, help="Worker processes.")
+@column_options
 @rejects_options
 @overwrite_option
 @verbosity_options
-@column_options
 def export(labels, output, layout, form, images, system, input_system, crop_scale, square, size, quality,
            pad_value, min_inside, split, split_file, min_change, balance, seed, drop_images_with_rejects, workers,
            rejects, strict, overwrite, verbose, quiet):

@@ -107,7 +107,7 @@ strict_option = click.option("--strict", is_flag=True,
 def rejects_options(f):
     """``--rejects FILE`` and ``--strict``: every command that sets rows aside has both."""
     return rejects_option(strict_option(f))
-batch_option = click.option("--batch-size", type=click.IntRange(1), default=262_144, show_default=True,
+batch_option = click.option("--batch-size", type=click.IntRange(1), default=65_536, show_default=True,
                             help="Rows per streamed batch.")
 
 

@@ -65,6 +65,8 @@ def column_options(f):
         given = any(v not in (None, True) for v in opts.values())
         token = _ACTIVE.set(opts if given else None)
         try:
+            if opts["columns"]:
+                _check_columns_map(opts["columns"], kwargs)
             return f(*args, **kwargs)
         finally:
             _ACTIVE.reset(token)
@@ -83,6 +85,40 @@ def column_options(f):
                      help="Rename INPUT columns to hpe's names, e.g. pitch=Pitch,yaw=Yaw,roll=Roll "
                           "(also r00..r22, rx,ry,rz, qw..qz, image, bbox_x.., person, ...).")(g)
     return g
+
+
+#: command arguments that name input tables
+_INPUT_ARGS = ("input", "pred", "gt", "labels", "data")
+
+
+def _check_columns_map(columns, kwargs):
+    """Before any work: every source column of ``--columns-map`` must be in at least one input table."""
+    from pathlib import Path
+
+    from ..errors import HpeError
+    from ..io.columns import parse_columns_map
+    from ..io.readers import open_table
+
+    paths = []
+    for name in _INPUT_ARGS:
+        v = kwargs.get(name)
+        for p in (v if isinstance(v, (list, tuple)) else [v]):
+            if isinstance(p, (str, Path)) and Path(p).exists():
+                paths.append(p)
+    if not paths:
+        return
+    found = set()
+    token = _ACTIVE.set({**_ACTIVE.get(), "columns": None})  # the inputs' own names, before renaming
+    try:
+        for p in paths:
+            found |= set(open_table(p).columns)
+    finally:
+        _ACTIVE.reset(token)
+    mapping = parse_columns_map(columns)
+    missing = [s for s in mapping if s not in found]
+    if missing:
+        raise HpeError(f"{paths[0]}: --columns-map names column(s) {', '.join(map(repr, missing))} that no input "
+                       f"has; found {', '.join(sorted(found))[:300]}")
 
 
 def table_kwargs(columns_map=None, delimiter=None, no_header=False, names=None, input_format=None) -> dict:

@@ -55,6 +55,33 @@ def _strings(frame, col) -> list:
     return frame[col].astype(str).tolist()
 
 
+def _rows_json(a) -> list:
+    """orjson text of each row of a 2-D or 3-D float array, from one call (no Python float per value).
+
+    Floats never contain brackets, so the rows of ``[[...],[...]]`` split at ``],[`` (``]],[[`` for 3-D).
+    """
+    import orjson
+
+    if len(a) == 0:
+        return []
+    text = orjson.dumps(np.ascontiguousarray(a), option=orjson.OPT_SERIALIZE_NUMPY)
+    if a.ndim == 2:
+        return [b"[" + r + b"]" for r in text[2:-2].split(b"],[")]
+    return [b"[[" + r + b"]]" for r in text[3:-3].split(b"]],[[")]
+
+
+def _annotations(image_ids, off, box, ang, pts, area) -> list:
+    """The JSON text of each annotation (DirectMHP's keys, in :func:`coco_dict`'s order)."""
+    import orjson
+
+    boxes, angles = _rows_json(box), _rows_json(ang)
+    points = _rows_json(pts) if pts is not None else [b"[]"] * len(box)
+    areas = orjson.dumps(area, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].split(b",") if len(area) else []
+    return [b'{"image_id":%d,"id":%d,"category_id":1,"bbox":%s,"euler_angles":%s,"face2d_pts":%s,"area":%s,'
+            b'"iscrowd":0,"segmentation":[]}' % (i, off + k + 1, b, a, p, ar)
+            for k, (i, b, a, p, ar) in enumerate(zip(image_ids, boxes, angles, points, areas))]
+
+
 class CocoWriter:
     """Write DirectMHP-style COCO JSON batch by batch, atomically (see :func:`write_coco`).
 
@@ -82,17 +109,24 @@ class CocoWriter:
         self._fh.write(b'{"info":' + orjson.dumps(self.info) + b',"licenses":[],"annotations":[')
         return self
 
+    #: rows encoded at a time (bounds the Python objects alive at once)
+    CHUNK = 8192
+
     def write(self, frame) -> None:
         """Append one batch (pandas DataFrame, pyarrow Table or RecordBatch) of label rows."""
-        import orjson
-
         names = _names(frame)
         missing = [c for c in ["image"] + BBOX_COLS + ANGLE_COLS if c not in names]
         if missing:
             raise HpeError(f"{self.path}: expected columns {', '.join(missing)} in the label table")
         n = len(frame)
-        if n == 0:
-            return
+        for lo in range(0, n, self.CHUNK):
+            part = frame.iloc[lo:lo + self.CHUNK] if hasattr(frame, "iloc") else frame.slice(lo, self.CHUNK)
+            self._write(part, names)
+
+    def _write(self, frame, names) -> None:
+        import orjson
+
+        n = len(frame)
         off = self.rows
         files = _strings(frame, "image")
         sizes = []
@@ -116,11 +150,13 @@ class CocoWriter:
                            f"got {box[bad, 2]:g}, {box[bad, 3]:g}")
         ang = np.stack([_finite(_column(frame, c), c, self.path, off) for c in ANGLE_COLS], axis=1)
         n_lm = landmark_count(names)
-        if n_lm:
-            xs = np.stack([_column(frame, f"lm{i}_x") for i in range(n_lm)], axis=1)
-            ys = np.stack([_column(frame, f"lm{i}_y") for i in range(n_lm)], axis=1)
-            gone = ~(np.isfinite(xs) & np.isfinite(ys))
-            pts = np.stack([np.where(gone, MISSING_POINT, xs), np.where(gone, MISSING_POINT, ys)], axis=1).tolist()
+        if n_lm:  # (n, 2, n_lm): face2d_pts = [[x0, x1, ...], [y0, y1, ...]], serialised by orjson from numpy
+            pts = np.empty((n, 2, n_lm))
+            for i in range(n_lm):
+                pts[:, 0, i] = _column(frame, f"lm{i}_x")
+                pts[:, 1, i] = _column(frame, f"lm{i}_y")
+            gone = ~np.isfinite(pts).all(axis=1)
+            pts[np.repeat(gone[:, None, :], 2, axis=1)] = MISSING_POINT
         else:
             pts = [[] for _ in range(n)]
         images = self.images
@@ -135,12 +171,8 @@ class CocoWriter:
                 raise HpeError(f"{self.path}: image {e[0] - 1}: expected one {col} per image, "
                                f"got {min(a, b):g} and {max(a, b):g}")
             image_ids.append(e[0])
-        area = np.round(box[:, 2] * box[:, 3], 4).tolist()
-        box_l, ang_l = box.tolist(), ang.tolist()
-        anns = [{"image_id": image_ids[k], "id": off + k + 1, "category_id": 1, "bbox": box_l[k],
-                 "euler_angles": ang_l[k], "face2d_pts": pts[k], "area": area[k], "iscrowd": 0,
-                 "segmentation": []} for k in range(n)]
-        text = orjson.dumps(anns)[1:-1]
+        area = np.round(box[:, 2] * box[:, 3], 4)
+        text = b",".join(_annotations(image_ids, off, box, ang, pts if n_lm else None, area))
         self._fh.write((b"," if self.rows else b"") + text)
         self.rows += n
 

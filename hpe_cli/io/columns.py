@@ -237,7 +237,7 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
     if header:
         hdr = list(schema.names)
         if len(set(hdr)) != len(hdr):
-            raise HpeError(f"{path}: row {skip_lines + 1}: the header names a column twice "
+            raise HpeError(f"{path}: line {skip_lines + 1}: the header names a column twice "
                            f"({', '.join(sorted({h for h in hdr if hdr.count(h) > 1}))})")
     first_line = skip_lines + (2 if header else 1)
     base_schema = schema
@@ -278,7 +278,7 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
 def _opal23(path, batch_size, with_lines):
     first = _first_lines(path, 2)
     if not first or not first[0].startswith("#;"):
-        raise HpeError(f"{path}: row 1: expected OPAL's header '#;image;...;yaw;pitch;roll', "
+        raise HpeError(f"{path}: line 1: expected OPAL's header '#;image;...;yaw;pitch;roll', "
                        f"got {(first[0] if first else '')[:80]!r}")
     fields = [f.strip() for f in first[0].split(";")[1:]]
     base = [_OPAL_NAMES.get(f, f) for f in fields]
@@ -287,12 +287,12 @@ def _opal23(path, batch_size, with_lines):
         data = [ln for ln in _first_lines(path, 50)[1:] if ln and not ln.startswith(("@", "#"))]
         n_extra = (len(data[0].split(";")) - len(base)) if data else 0
         if n_extra < 0 or n_extra % 2:
-            raise HpeError(f"{path}: row 2: expected {len(base)} fields then x;y landmark pairs, "
+            raise HpeError(f"{path}: line 2: expected {len(base)} fields then x;y landmark pairs, "
                            f"got {len(base) + n_extra} fields")
         base += [f"lm{i}_{a}" for i in range(n_extra // 2) for a in "xy"]
     for need in ("image", "yaw", "pitch", "roll"):
         if need not in base:
-            raise HpeError(f"{path}: row 1: expected a field named {need!r} in OPAL's header, "
+            raise HpeError(f"{path}: line 1: expected a field named {need!r} in OPAL's header, "
                            f"got {';'.join(fields)}")
     return open_text(path, batch_size, delimiter=";", header=False, names=base, skip_lines=1,
                      comment_prefixes=("@", "#"), quoting=False, string_columns=("image", "identity"),
@@ -308,7 +308,7 @@ def _celeba(path, batch_size, with_lines):
         ok = False
     if not ok:
         got = " / ".join(first)[:80]
-        raise HpeError(f"{path}: row 1: expected CelebAMask-HQ's count line then 'Yaw Pitch Raw', got {got!r}")
+        raise HpeError(f"{path}: line 1: expected CelebAMask-HQ's count line then 'Yaw Pitch Raw', got {got!r}")
     return open_text(path, batch_size, delimiter=" ", header=False, names=["image", "yaw", "pitch", "roll"],
                      skip_lines=2, quoting=False, string_columns=("image",), with_lines=with_lines,
                      system=FORMAT_SYSTEMS["celeba-pose"])

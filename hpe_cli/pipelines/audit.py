@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import HpeError
+from .inorder import in_order
 
 #: columns that identify a sample, used (when present) in the ``duplicates`` key
 ID_COLUMNS = ("file", "image", "image_id", "id", "path", "person_id", "face_id", "frame", "camera",
@@ -251,7 +252,7 @@ def _batches(src, mode, path):
         unread = [r for r in rejects if r.reason in label]
         if len(unread) < len(rejects):
             r = next(r for r in rejects if r.reason not in label)
-            raise HpeError(f"{path}: row {r.line}: {r.reason} ({len(rejects) - len(unread)} unreadable rows in "
+            raise HpeError(f"{path}: line {r.line}: {r.reason} ({len(rejects) - len(unread)} unreadable rows in "
                            "this block; hpe convert --rejects sets them aside)")
         lines = batch.column(LINE_COL).to_numpy()
         yield batch.drop_columns([LINE_COL]), lines, unread
@@ -259,8 +260,14 @@ def _batches(src, mode, path):
 
 def run_audit(input_path, system, *, report=None, plots=None, output=None, only_flagged=False,
               near_tol_deg=1.0, radians=False, use="auto", keys=(), n_examples=5, overwrite=False,
-              batch_size=262_144, progress=None, echo=None, decoder=None) -> dict:
-    """Audit ``input_path`` and write the requested outputs; return the report dict."""
+              batch_size=65_536, progress=None, echo=None, decoder=None, workers=None) -> dict:
+    """Audit ``input_path`` and write the requested outputs; return the report dict.
+
+    Batches are checked and hashed on ``workers`` threads (default: up to 2)
+    while this thread reads and tallies them in order.
+    """
+    import os
+
     from ..io import ANGLE_COLS, MATRIX_COLS, check_output, label_mode, write_json
     from ..io.plots import AngleHistograms, plot_files, write_plots
     from ..rotation.audit import CHECKS
@@ -312,35 +319,36 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     examples = {c: [] for c in CHECKS}
     counts = {c: 0 for c in CHECKS}
     flagged = near_not_locked = 0
+    workers = workers or min(2, os.cpu_count() or 1)
     dups = _Duplicates()
     flag_bits = []  # one bit a row: flagged by a check other than duplicates
     unread_examples = []
     rows = 0
     read_mode = mode if mode in ("angles", "matrix") else "matrix"
-    for batch, lines, unread in _batches(src, read_mode, src.path):
+
+    def work(batch):  # on a worker thread: numpy and Arrow release the GIL
+        cols, eff = _system_cols(batch, system, mode, radians, via_system)
+        res = _checks(cols, eff, system, near_tol_deg)
+        any_flag = np.zeros(batch.num_rows, dtype=bool)
+        for c in CHECKS[:-1]:
+            any_flag |= res[c]
+        return eff, cols, res, any_flag, key_hashes(cols, batch, key_cols)
+
+    def finish(batch, lines, unread, future):
+        nonlocal rows, flagged, near_not_locked, unread_examples
         if unread:  # rows with a non-numeric label value: non_finite, as when read from a text column
             rows += len(unread)
             counts["non_finite"] += len(unread)
             flagged += len(unread)
             unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[:n_examples]]
-        if via_system:
-            from ..io.labels import label_values
-
-            values = label_values(batch, system, mode, radians)
-            eff = "angles" if values.ndim == 2 else "matrix"
-            cols = [np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T]
-        else:
-            eff = mode
-            cols = _label_cols(batch, mode, radians)
+        eff, cols, res, any_flag, hashes = future.result()
         if tally is not None:
             values = np.stack(cols, axis=-1)
-            tally.add(system.to_canonical(system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3)))
-        res = _checks(cols, eff, system, near_tol_deg)
-        any_flag = np.zeros(batch.num_rows, dtype=bool)
+            tally.add(system.to_canonical(system.from_angles(values) if eff == "angles"
+                                          else values.reshape(-1, 3, 3)))
         for c in CHECKS[:-1]:
             m = res[c]
             counts[c] += int(np.count_nonzero(m))
-            any_flag |= m
             want = n_examples - len(examples[c])
             if want > 0 and m.any():
                 for i in np.flatnonzero(m)[:want]:
@@ -348,12 +356,14 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
         flagged += int(np.count_nonzero(any_flag))
         flag_bits.append(np.packbits(any_flag))
         near_not_locked += int(np.count_nonzero(res["near_gimbal"] & ~res["gimbal_lock"]))
-        dups.add(key_hashes(cols, batch, key_cols), lines)
+        dups.add(hashes, lines)
         if hist is not None:
             hist.add(np.stack(cols, axis=-1) if eff == "angles" else res["primary"])
         rows += batch.num_rows
         if progress is not None:
             progress.update(batch.num_rows)
+
+    in_order(_batches(src, read_mode, src.path), work, finish, workers)
 
     counts["duplicates"] = dups.finish()
     if counts["duplicates"]:
@@ -378,7 +388,7 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
 
     if output:
         _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians,
-                       near_tol_deg, dups)
+                       near_tol_deg, dups, via_system)
     if plots:
         write_plots(hist, plots, system, {"input": str(src.path), "system": system.name, "rows": rows,
                                           **counts, "flagged": result["details"]["flagged"]},
@@ -404,8 +414,19 @@ def _unpack_rows(flag_bits, batch_sizes, idx) -> np.ndarray:
     return out
 
 
+def _system_cols(batch, system, mode, radians, via_system):
+    """Label columns to check and their mode: a system's own columns (any storage kind) are read through it."""
+    if not via_system:
+        return _label_cols(batch, mode, radians), mode
+    from ..io.labels import label_values
+
+    values = label_values(batch, system, mode, radians)
+    return ([np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T],
+            "angles" if values.ndim == 2 else "matrix")
+
+
 def _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians, near_tol_deg,
-                   dups):
+                   dups, via_system=False):
     """Second pass over the input: every column, then one boolean column per check and 'flagged'."""
     import pyarrow as pa
 
@@ -420,7 +441,7 @@ def _write_flagged(input_path, output, only_flagged, overwrite, batch_size, syst
     with TableWriter(output, overwrite, meta) as w:
         for batch, _, _ in _batches(src, mode, src.path):
             n = batch.num_rows
-            res = _checks(_label_cols(batch, mode, radians), mode, system, near_tol_deg)
+            res = _checks(*_system_cols(batch, system, mode, radians, via_system), system, near_tol_deg)
             res["duplicates"] = dups.mask(offset, offset + n)
             any_flag = np.zeros(n, dtype=bool)
             for c in CHECKS:

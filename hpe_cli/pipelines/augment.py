@@ -147,9 +147,16 @@ class _ImageJob:
 
 def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
                 images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
-                jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=262_144, bar=None, verbose=0,
-                description=""):
-    """Augment a label table (and optionally its images). Returns a summary dict."""
+                jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=65_536, bar=None, verbose=0,
+                description="", workers=None, strict=False):
+    """Augment a label table (and optionally its images). Returns a summary dict.
+
+    Batches are transformed on ``workers`` threads (default: up to 2) while
+    this thread reads, moves images and writes in order, as ``hpe convert``
+    does; at most ``workers + 1`` batches are in flight.
+    """
+    import os
+
     import numpy as np
     import pyarrow as pa
 
@@ -159,6 +166,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                       landmark_cols, open_table, system_metadata)
     from ..io.labels import batch_labels, label_mode, numeric_column
     from ..rotation import canonical_to_labels, frobenius
+    from .inorder import in_order
 
     path = Path(input)
     check_output(output, overwrite)
@@ -188,7 +196,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     elif image_column is not None:
         raise HpeError("--image-column needs --images and --out-images")
     M = plane_matrix(op, angle)
-    rejects = Rejects(rejects_path, overwrite)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=path)
     meta = {**system_metadata(system), "hpe:augment": {
         "op": op, "angle_deg": angle, "description": description, "image_size": list(image_size),
         "landmarks": lm_text, "box_from": box_from, "clip": clip,
@@ -197,94 +205,98 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     if images_dir is not None:
         job = _ImageJob(images_dir, out_images, M, image_size, interpolation, border, jpeg_quality, overwrite, path)
     rows = written = n_boxes = n_images = 0
-    first_bad = None
+    workers = workers or min(2, os.cpu_count() or 1)
     try:
-        with TableWriter(output, overwrite, meta) as writer:
-            for batch, read_rejects in _batches_or_empty(src):
-                if read_rejects:
-                    rejects.add({"row": np.array([r.line for r in read_rejects], dtype=np.int64),
-                                 "raw": np.array([r.raw for r in read_rejects], dtype=object)},
-                                [r.reason for r in read_rejects])
-                    cand = (read_rejects[0].line, read_rejects[0].reason)
-                    first_bad = min(first_bad, cand) if first_bad else cand
-                    rows += len(read_rejects)
-                lines = batch.column(LINE_COL).to_numpy()
-                batch = batch.drop_columns([LINE_COL])
-                n = batch.num_rows
-                if stored_kind:  # rotation vectors, quaternions, 6-D, named columns: read as matrices
-                    from ..io import batch_rotations
-                    from ..rotation import soa as _soa
+        def work(batch):  # on a worker thread: labels, landmarks and boxes of one batch
+            lines = batch.column(LINE_COL).to_numpy()
+            batch = batch.drop_columns([LINE_COL])
+            n = batch.num_rows
+            if stored_kind:  # rotation vectors, quaternions, 6-D, named columns: read as matrices
+                from ..io import batch_rotations
+                from ..rotation import soa as _soa
 
-                    X, _, reasons = batch_rotations(batch, in_system, mode)
-                    values = _soa.to_array(X, n)
-                    reasons = reasons if reasons is not None else np.full(n, "", dtype=object)
-                else:
-                    values, reasons = batch_labels(batch, mode)
-                if mode == "angles" and not stored_kind:
-                    R = in_system.from_angles(np.where(np.isfinite(values), values, 0.0))
-                    if cross_check:  # a table with both must agree, or which one is the label?
-                        R_in, r_in = batch_labels(batch, "matrix")
-                        reasons = np.where(reasons == "", r_in, reasons)
-                        ok = reasons == ""
-                        gap = np.zeros(n)
-                        gap[ok] = frobenius(R[ok], R_in[ok])
-                        reasons[ok & (gap > AGREE_TOL)] = "angles and r00..r22 disagree"
-                else:
-                    R = values
-                # landmarks and boxes: NaN means missing and is kept; only non-numbers reject a row
-                extra = {}
-                for c in lm_names + (BBOX_COLS if has_box else []):
-                    v, r = numeric_column(batch, c)
-                    extra[c] = v
-                    if not _is_numeric_type(batch.schema.field(c).type):  # only text can hold non-numbers
-                        bad = np.char.startswith(r.astype(str), "non-numeric")
-                        reasons = np.where((reasons == "") & bad, r, reasons)
-                keep = reasons == ""
-                if not keep.all():
-                    drop = ~keep
-                    rejects.add({"row": lines[drop], **{c: batch.column(i).to_numpy(zero_copy_only=False)[drop]
-                                                        for i, c in enumerate(batch.schema.names)}},
-                                reasons[drop])
-                    i0 = int(np.flatnonzero(drop)[0])
-                    cand = (int(lines[i0]), str(reasons[i0]))
-                    first_bad = min(first_bad, cand) if first_bad else cand
-                kb = batch.filter(pa.array(keep)) if not keep.all() else batch
-                A2 = augment_canonical(in_system.to_canonical(R[keep]), M)
-                new = conversion_columns(canonical_to_labels(A2, system))
-                lm_new = None
-                if n_lm:
-                    lm = np.stack([extra[c][keep] for c in lm_names], axis=-1).reshape(-1, n_lm, 2)
-                    lm_new = augment_points(lm, M, image_size, perm)
-                    flat = lm_new.reshape(-1, 2 * n_lm)
-                    new.update({c: flat[:, i] for i, c in enumerate(lm_names)})
-                if has_box:
-                    box = np.stack([extra[c][keep] for c in BBOX_COLS], axis=-1)
-                    box_new = augment_boxes(box, M, image_size, lm_new, box_from, clip)
-                    n_boxes += int(np.isfinite(box_new).all(axis=1).sum())
-                    new.update({c: box_new[:, i] for i, c in enumerate(BBOX_COLS)})
-                if job is not None:
-                    names = kb.column(kb.schema.get_field_index(img_col)).to_pylist()
-                    orig = np.flatnonzero(keep)
-                    for i, name in enumerate(names):
-                        if name is None:
-                            raise HpeError(f"{path}: row {lines[orig[i]]}: empty {img_col}")
-                        job.add(str(name), int(lines[orig[i]]))
-                out_cols, out_names = [], []
-                for i, c in enumerate(kb.schema.names):
+                X, _, reasons = batch_rotations(batch, in_system, mode)
+                values = _soa.to_array(X, n)
+                reasons = reasons if reasons is not None else np.full(n, "", dtype=object)
+            else:
+                values, reasons = batch_labels(batch, mode)
+            if mode == "angles" and not stored_kind:
+                R = in_system.from_angles(np.where(np.isfinite(values), values, 0.0))
+                if cross_check:  # a table with both must agree, or which one is the label?
+                    R_in, r_in = batch_labels(batch, "matrix")
+                    reasons = np.where(reasons == "", r_in, reasons)
+                    ok = reasons == ""
+                    gap = np.zeros(n)
+                    gap[ok] = frobenius(R[ok], R_in[ok])
+                    reasons[ok & (gap > AGREE_TOL)] = "angles and r00..r22 disagree"
+            else:
+                R = values
+            # landmarks and boxes: NaN means missing and is kept; only non-numbers reject a row
+            extra = {}
+            for c in lm_names + (BBOX_COLS if has_box else []):
+                v, r = numeric_column(batch, c)
+                extra[c] = v
+                if not _is_numeric_type(batch.schema.field(c).type):  # only text can hold non-numbers
+                    bad = np.char.startswith(r.astype(str), "non-numeric")
+                    reasons = np.where((reasons == "") & bad, r, reasons)
+            keep = reasons == ""
+            kb = batch.filter(pa.array(keep)) if not keep.all() else batch
+            A2 = augment_canonical(in_system.to_canonical(R[keep]), M)
+            new = conversion_columns(canonical_to_labels(A2, system))
+            lm_new = None
+            boxes = 0
+            if n_lm:
+                lm = np.stack([extra[c][keep] for c in lm_names], axis=-1).reshape(-1, n_lm, 2)
+                lm_new = augment_points(lm, M, image_size, perm)
+                flat = lm_new.reshape(-1, 2 * n_lm)
+                new.update({c: flat[:, i] for i, c in enumerate(lm_names)})
+            if has_box:
+                box = np.stack([extra[c][keep] for c in BBOX_COLS], axis=-1)
+                box_new = augment_boxes(box, M, image_size, lm_new, box_from, clip)
+                boxes = int(np.isfinite(box_new).all(axis=1).sum())
+                new.update({c: box_new[:, i] for i, c in enumerate(BBOX_COLS)})
+            out_cols, out_names = [], []
+            for i, c in enumerate(kb.schema.names):
+                out_names.append(c)
+                out_cols.append(pa.array(new.pop(c)) if c in new else kb.column(i))
+            for c in LABEL_COLS:
+                if c in new:
                     out_names.append(c)
-                    out_cols.append(pa.array(new.pop(c)) if c in new else kb.column(i))
-                for c in LABEL_COLS:
-                    if c in new:
-                        out_names.append(c)
-                        out_cols.append(pa.array(new.pop(c)))
-                writer.write(pa.RecordBatch.from_arrays(out_cols, names=out_names))
-                rows += n
-                written += int(keep.sum())
-                if bar is not None:
-                    bar.update(n)
-            if first_bad and rejects.path is None:
-                raise HpeError(f"{path}: row {first_bad[0]}: {first_bad[1]} ({len(rejects)} bad rows in all; "
-                               "use --rejects FILE to set them aside and write the others)")
+                    out_cols.append(pa.array(new.pop(c)))
+            out = pa.RecordBatch.from_arrays(out_cols, names=out_names)
+            return batch, lines, reasons, keep, kb, out, boxes
+
+        def finish(_, read_rejects, future):
+            nonlocal rows, written, n_boxes
+            if read_rejects:
+                read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
+                rejects.add({"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
+                            [r.reason for r in read_rejects], lines=read_lines)
+                rows += len(read_rejects)
+            batch, lines, reasons, keep, kb, out, boxes = future.result()
+            n = batch.num_rows
+            if not keep.all():
+                drop = ~keep
+                rejects.add({"row": lines[drop], **{c: batch.column(i).to_numpy(zero_copy_only=False)[drop]
+                                                    for i, c in enumerate(batch.schema.names)}},
+                            reasons[drop], lines=lines[drop])
+            if job is not None:
+                names = kb.column(kb.schema.get_field_index(img_col)).to_pylist()
+                orig = np.flatnonzero(keep)
+                for i, name in enumerate(names):
+                    if name is None:
+                        raise HpeError(f"{path}: row {lines[orig[i]]}: empty {img_col}")
+                    job.add(str(name), int(lines[orig[i]]))
+            writer.write(out)
+            n_boxes += boxes
+            rows += n
+            written += int(keep.sum())
+            if bar is not None:
+                bar.update(n)
+
+        with TableWriter(output, overwrite, meta) as writer:
+            in_order(_batches_or_empty(src), work, finish, workers)
+            rejects.check()  # without --rejects (or with --strict) any bad row fails the run: nothing is written
             if job is not None:
                 n_images = len(job.done)
                 job.commit()
@@ -293,7 +305,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         if job is not None:
             job.cleanup()
         raise
-    rejects.write()
+    rejects.finish()
     box_text = f"{n_boxes} moved ({box_from}{', clipped' if clip else ''})" if has_box else "none in input"
     label_source = "pitch,yaw,roll" + (" (checked against r00..r22)" if cross_check else "") \
         if mode == "angles" else "r00..r22"

@@ -60,7 +60,7 @@ def convert_batch(batch, mode, source, target, radians=False, decoder=None):
 
 
 def run_convert(input_path, output, source, target, *, radians=False, rejects_path=None, overwrite=False,
-                batch_size=262_144, progress=None, workers=None, strict=False, decoder=None) -> ConvertSummary:
+                batch_size=65_536, progress=None, workers=None, strict=False, decoder=None) -> ConvertSummary:
     """Convert every row of ``input_path`` from ``source`` to ``target`` into ``output``.
 
     Bad rows go to ``rejects_path`` when given; otherwise (or with

@@ -47,6 +47,9 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     from ..rotation import soa
 
     src = open_table(path, batch_size, with_lines=True)
+    from ..io.columns import label_system
+
+    system = label_system(src, system)  # .mat Pose_Para is always 300w_lp, whatever --gt-system says
     columns = src.columns
     if use == "auto":  # the system's own value columns (rotvec, quaternion, 6-D...) first, then angles, matrix
         mode = label_mode(columns, src.path, system)

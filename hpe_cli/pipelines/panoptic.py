@@ -582,17 +582,25 @@ def _mp_context():
 
 def _local_units(tasks: list, workers: int):
     """Yield ``run_unit`` results in order from a local process pool (each
-    worker writes its own parts; only counts come back)."""
+    worker writes its own parts; only counts come back). At most
+    ``2 * workers`` units are in flight, so an error or a signal stops the
+    pool after a few units, and no future is cancelled under the pool's feet."""
+    from collections import deque
     from concurrent.futures import ProcessPoolExecutor
 
     with ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context()) as ex:
-        futures = [ex.submit(run_unit, t) for t in tasks]
-        try:
-            for f in futures:
-                yield f.result()
-        finally:
-            for f in futures:
-                f.cancel()
+        pending: deque = deque()
+        it = iter(tasks)
+        for t in it:
+            pending.append(ex.submit(run_unit, t))
+            if len(pending) >= 2 * workers:
+                break
+        while pending:
+            res = pending.popleft().result()
+            nxt = next(it, None)
+            if nxt is not None:
+                pending.append(ex.submit(run_unit, nxt))
+            yield res
 
 
 def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:

@@ -4,8 +4,9 @@ Followed: shamangary/FSA-Net ``data/type1/TYY_create_db_type1.py`` (the writer i
 ``np.savez(output, image=np.array(out_imgs), pose=np.array(out_poses), img_size=img_size)``, images read with
 ``cv2.imread`` (so **BGR**) and resized to ``img_size`` x ``img_size`` (64 by default), ``pose`` rows
 ``[yaw, pitch, roll]`` in degrees from ``Pose_Para`` (the ``300w_lp`` system, |yaw| <= 90). Its training
-scripts load the arrays back with ``np.load(path)['image']`` / ``['pose']``. FSA-Net's stage-wise regression
-outputs lie in ±99° (the SSR-Net range its models use), so labels outside ±99° are rejects.
+scripts load the arrays back with ``np.load(path)['image']`` / ``['pose']``. FSA-Net evaluates with Hopenet's
+protocol, which keeps only |angle| <= 99° (Hopenet/6DRepNet ``create_filename_list.py``); labels outside are
+rejects here too.
 
 The crops are streamed to a raw temporary file and the ``.npz`` (a stored zip of ``.npy`` members, as
 ``np.savez`` writes) is assembled member by member, so memory stays flat.
@@ -18,7 +19,7 @@ import numpy as np
 
 from .base import Layout, abs_over
 
-RULE_99 = "outside ±99° (FSA-Net's output range)"
+RULE_99 = "outside ±99° (the Hopenet protocol FSA-Net uses)"
 
 
 class FSANetLayout(Layout):
