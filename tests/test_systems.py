@@ -196,3 +196,15 @@ def test_describe_in_words():
     d = get_system("scipy_zyx").describe()
     assert "out of the face" in d["frame"].split(";")[0]
     assert set(d) >= {"frame", "axes", "range", "order"}
+
+
+def test_every_builtin_round_trips_through_its_dict_and_json():
+    """A system written into a file's metadata (to_dict/to_json) reads back as the same system."""
+    import json
+
+    from hpe_cli.rotation.systems import builtin_systems, system_from_dict
+
+    for name, s in builtin_systems().items():
+        for d in (s.to_dict(), json.loads(s.to_json())):
+            t = system_from_dict(d, f"<{name}>")
+            assert t.name == s.name and t.definition() == s.definition(), name

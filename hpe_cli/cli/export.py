@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import click
 
-from .table_options import column_options
-
 from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_options, verbosity_options
 from .table_options import column_options
 
@@ -55,7 +53,6 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @rejects_options
 @overwrite_option
 @verbosity_options
-@column_options
 def export(labels, output, layout, form, images, system, input_system, crop_scale, square, size, quality,
            pad_value, min_inside, split, split_file, min_change, balance, seed, drop_images_with_rejects, workers,
            rejects, strict, overwrite, verbose, quiet):

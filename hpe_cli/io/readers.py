@@ -405,8 +405,7 @@ class _CsvBlocks:
                     block = b"".join(good) if isinstance(good, list) else good
                 try:
                     t = pcsv.read_csv(pa.py_buffer(block), read_options=pcsv.ReadOptions(column_names=names),
-                                      parse_options=pcsv.ParseOptions(newlines_in_values=b'"' in block,
-                                                                      invalid_row_handler=lambda row: "skip"),
+                                      parse_options=pcsv.ParseOptions(newlines_in_values=b'"' in block),
                                       convert_options=pcsv.ConvertOptions(column_types=types))
                     break
                 except pa.ArrowInvalid:
@@ -567,18 +566,11 @@ def _parse_block(path, block: bytes, first_line: int, schema, nnl=None):
     import pyarrow.csv as pcsv
 
     names = schema.names
-    invalid = []
-
-    def on_invalid(row):
-        invalid.append(row)
-        return "skip"
-
     nlines = (block.count(b"\n") if nnl is None else nnl) + (0 if block.endswith(b"\n") else 1)
     try:
         table = pcsv.read_csv(pa.py_buffer(block), read_options=pcsv.ReadOptions(column_names=names),
-                              parse_options=pcsv.ParseOptions(invalid_row_handler=on_invalid),
                               convert_options=pcsv.ConvertOptions(column_types=schema))
-        if not invalid and table.num_rows == nlines:
+        if table.num_rows == nlines:  # a short or long row raised ArrowInvalid: slow path
             lines = np.arange(first_line, first_line + nlines, dtype=np.int64)
             return table.append_column(LINE_COL, pa.array(lines)), []
     except pa.ArrowInvalid:

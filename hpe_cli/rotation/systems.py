@@ -513,6 +513,12 @@ class RotationSystem:
         d["sixd_columns"] = list(self.sixd_columns)
         d["columns"] = dict(self.columns)
         d["examples"] = [dict(e) for e in self.examples]
+        # the same keys the TOML layout has, so that system_from_dict(s.to_dict()) rebuilds s
+        if d.pop("angle_frame", "system") == "canonical":  # no turns of its own: reports 300W-LP angles
+            d.pop("turns", None)
+            d.pop("sequence", None)
+        if d.get("model_frame") is None:
+            d.pop("model_frame", None)
         return d
 
     def definition(self) -> dict:
