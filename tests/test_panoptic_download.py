@@ -292,3 +292,24 @@ def test_coco_and_whenet_stream_with_the_same_content(seqs, tmp_path, fmt, suffi
 
         write_whenet(frame, ref)
         assert a.read_text() == ref.read_text()
+
+
+def test_corrupt_header_in_the_middle_is_an_error(seqs, tmp_path):
+    tar = tmp_path / "hdFace3d.tar"
+    shutil.copy(seqs / "tar" / "seqA" / "hdFace3d.tar", tar)
+    refs = list(pan.tar_frames(tar).values())
+    mid = refs[len(refs) // 2]
+    data = bytearray(tar.read_bytes())
+    header = mid.offset - 512
+    data[header:header + 512] = b"\x7f" * 512  # garbage where a member header was
+    tar.write_bytes(bytes(data))
+    with pytest.raises(HpeError, match=r"unreadable member header at byte \d+"):
+        pan.tar_frames(tar)
+    # cut inside the last member's header: an error, not a silently missing frame
+    tar.write_bytes((seqs / "tar" / "seqA" / "hdFace3d.tar").read_bytes()[:refs[-1].offset - 300])
+    with pytest.raises(HpeError, match=r"ends inside a member header at byte \d+ \(truncated download\)"):
+        pan.tar_frames(tar)
+    # cut exactly after a member: no end-of-archive blocks
+    tar.write_bytes((seqs / "tar" / "seqA" / "hdFace3d.tar").read_bytes()[:refs[-1].offset - 512])
+    with pytest.raises(HpeError, match="without tar's end-of-archive blocks"):
+        pan.tar_frames(tar)

@@ -273,8 +273,20 @@ def tar_frames(tar_path) -> dict:
                 except tarfile.ReadError as exc:
                     if not frames:
                         raise HpeError(f"{tar_path}: not a readable tar archive ({exc})") from None
-                    break  # truncated inside a header: the members before it are indexed
-                if info is None:
+                    if size - tf.offset >= tarfile.BLOCKSIZE:  # a whole header is there but unreadable
+                        raise HpeError(f"{tar_path}: unreadable member header at byte {tf.offset} ({exc}); "
+                                       "the frames after it cannot be found (corrupt download?)") from None
+                    break  # cut inside the last header: the members before it are indexed
+                if info is None:  # end of the archive, or a header tarfile cannot read
+                    if size - tf.offset < tarfile.BLOCKSIZE and _nonzero_after(tar_path, tf.offset):
+                        raise HpeError(f"{tar_path}: the archive ends inside a member header at byte {tf.offset} "
+                                       "(truncated download); the frames after it cannot be found")
+                    if _nonzero_after(tar_path, tf.offset):
+                        raise HpeError(f"{tar_path}: unreadable member header at byte {tf.offset}; the frames "
+                                       "after it cannot be found (corrupt download?)")
+                    if tf.offset == size and frames and not any(r.truncated for r in frames.values()):
+                        raise HpeError(f"{tar_path}: ends at byte {size} without tar's end-of-archive blocks "
+                                       "(truncated download?); frames after the last member may be missing")
                     break
                 if not info.isfile():
                     continue
@@ -291,6 +303,18 @@ def tar_frames(tar_path) -> dict:
     except OSError as exc:
         raise HpeError(f"{tar_path}: cannot read ({exc.strerror or exc})") from None
     return dict(sorted(frames.items()))
+
+
+def _nonzero_after(path, offset: int) -> bool:
+    """True if the file has a non-zero byte at or after ``offset`` (a tar ends in zero blocks)."""
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        while True:
+            block = fh.read(1 << 20)
+            if not block:
+                return False
+            if block.count(0) != len(block):
+                return True
 
 
 def face_sources(seq_dir) -> dict:
