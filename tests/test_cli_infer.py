@@ -244,3 +244,43 @@ def test_written_system_loads_back_even_when_it_differs_from_the_builtin(tmp_pat
     res = CliRunner().invoke(cli, ["convert", str(labels), "-o", str(tmp_path / "o.csv"), "--from", str(out),
                                    "--to", "6drepnet", "-q"])
     assert res.exit_code == 0, res.output
+
+
+def test_data_table_with_stored_rotation_vectors_and_quaternions(tmp_path):
+    """A table of angles plus rotation vectors / quaternions (no r00..r22): the rotations are read through the
+    storage kernels and the search names the angle convention. Oracle: SciPy builds the stored values of the
+    OpenCV-frame matrix F A F (img2pose's storage) from 300W-LP angles written out by hand."""
+    import json
+
+    import numpy as np
+    import pandas as pd
+    from click.testing import CliRunner
+    from scipy.spatial.transform import Rotation
+
+    from hpe_cli.cli.main import cli
+
+    rng = np.random.default_rng(3)
+    pyr = np.column_stack([rng.uniform(-80, 80, 60), rng.uniform(-85, 85, 60), rng.uniform(-80, 80, 60)])
+    p, y, r = np.deg2rad(pyr).T
+    Rx = lambda a: np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])  # noqa: E731
+    Ry = lambda a: np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])  # noqa: E731
+    Rz = lambda a: np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])  # noqa: E731
+    F = np.diag([1.0, -1.0, -1.0])
+    M = np.stack([F @ (Rz(c) @ Ry(b) @ Rx(a)).T @ F for a, b, c in zip(p, y, r)])
+    rot = Rotation.from_matrix(M)
+    frame = pd.DataFrame(pyr, columns=["pitch", "yaw", "roll"])
+    frame[["rx", "ry", "rz"]] = rot.as_rotvec()
+    q = rot.as_quat()  # x, y, z, w
+    frame[["qx", "qy", "qz", "qw"]] = q
+    src = tmp_path / "t.csv"
+    frame.to_csv(src, index=False)
+    for extra in ([], ["--rotations", "quaternion-xyzw:qx,qy,qz,qw"]):
+        report = tmp_path / f"r{len(extra)}.json"
+        res = CliRunner().invoke(cli, ["infer", str(src), "--angles", "pitch,yaw,roll", *extra, "--json", str(report),
+                                       "-q"])
+        assert res.exit_code == 0, res.output
+        rep = json.loads(report.read_text())
+        assert rep["fit"] == "exact" and rep["best"] in ("opencv", "img2pose"), rep.get("best")
+        assert rep["rotation_columns"]["kind"] == ("rotvec" if not extra else "quaternion-xyzw")
+    res = CliRunner().invoke(cli, ["infer", str(src), "--angles", "pitch,yaw,roll", "--rotations", "rotvec:rx,ry"])
+    assert res.exit_code == 2 and "expected 3 columns" in res.output

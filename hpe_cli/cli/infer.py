@@ -47,6 +47,52 @@ def _matrix_columns(value: str | None, columns) -> list | None:
     return [prefix + s for s in ij]
 
 
+#: stored rotation columns infer reads from a data table when it has no r00..r22 (see --rotations)
+STORED_DEFAULTS = (("rotvec", ("rx", "ry", "rz")), ("quaternion-wxyz", ("qw", "qx", "qy", "qz")))
+
+
+def _stored_rotations(value: str | None, columns):
+    """``(kind, columns)`` of stored rotation values in a data table, or None.
+
+    ``value`` is ``KIND:COL,COL,...`` with KIND one of rotvec (radians),
+    quaternion-wxyz, quaternion-xyzw or 6d (matrix columns 0 and 1); without
+    it, ``rx,ry,rz`` or ``qw,qx,qy,qz`` are used when present.
+    """
+    kinds = {"rotvec": 3, "quaternion-wxyz": 4, "quaternion-xyzw": 4, "6d": 6}
+    if value is None:
+        for kind, cols in STORED_DEFAULTS:
+            if set(cols) <= set(columns):
+                return kind, list(cols)
+        return None
+    kind, sep, cols = value.partition(":")
+    if kind not in kinds or not sep:
+        raise click.BadParameter(f"expected KIND:COLUMNS with KIND one of {', '.join(kinds)}, got {value!r}",
+                                 param_hint="--rotations")
+    names = [c.strip() for c in cols.split(",") if c.strip()]
+    if len(names) != kinds[kind]:
+        raise click.BadParameter(f"expected {kinds[kind]} columns for {kind}, got {len(names)}",
+                                 param_hint="--rotations")
+    return kind, names
+
+
+def _stored_to_matrices(kind, values):
+    """Matrices from stored values (rows that are not finite stay NaN, and are skipped by the search)."""
+    import numpy as np
+
+    from ..rotation import storage as st
+
+    R = np.full((len(values), 3, 3), np.nan)
+    ok = np.isfinite(values).all(axis=1)
+    v = values[ok]
+    if kind == "rotvec":
+        R[ok] = st.rotvec_to_matrix(v)
+    elif kind.startswith("quaternion"):
+        R[ok] = st.quaternion_to_matrix(v, order=kind.split("-")[1])
+    else:
+        R[ok] = st.sixd_to_matrix(v)
+    return R
+
+
 def _module_name_of(path):
     """``(root, "pkg.sub.mod")`` for a file inside a package, else None.
 
@@ -230,17 +276,23 @@ def _print_report(rep: dict, quiet: bool) -> None:
 
 
 def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_frame, tol, seed, name, frame,
-                storage) -> dict:
-    """The table search (matrix columns) or the landmark ranking (3-D landmark columns)."""
+                storage, stored=None) -> dict:
+    """The table search (matrix or stored rotation columns) or the landmark ranking (3-D landmark columns)."""
     import numpy as np
 
     from ..rotation import infer as inf
 
     if landmarks3d is None:
-        R = _numeric(frame_df, mcols, data).reshape(-1, 3, 3)
-        return inf.infer_table(pyr, R, roles=roles, units="degrees" if units == "deg" else "radians",
+        if stored is not None:
+            R = _stored_to_matrices(stored[0], _numeric(frame_df, stored[1], data))
+        else:
+            R = _numeric(frame_df, mcols, data).reshape(-1, 3, 3)
+        rep = inf.infer_table(pyr, R, roles=roles, units="degrees" if units == "deg" else "radians",
                                tol=tol or inf.DATA_TOL, source=str(data), name=name, frame=frame, storage=storage,
                                seed=seed)
+        if stored is not None:
+            rep["rotation_columns"] = {"kind": stored[0], "columns": list(stored[1])}
+        return rep
     from ..geometry.template import POOR_FIT_RMSE, fit_template, to_canonical_points
 
     lcols = [f"{landmarks3d}{i}_{a}" for i in range(68) for a in "xyz"]
@@ -272,6 +324,10 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
               help="DATA's angle columns, in storage order: ROLE or ROLE=COLUMN.")
 @click.option("--matrix", "matrix_cols", default=None, metavar="COLS",
               help="DATA's matrix columns: r00..r22 (a prefix) or 9 comma-separated names.")
+@click.option("--rotations", "rotation_cols", default=None, metavar="KIND:COLS",
+              help="DATA's rotations as stored values instead of r00..r22: rotvec:rx,ry,rz (radians), "
+                   "quaternion-wxyz:qw,qx,qy,qz, quaternion-xyzw:..., or 6d:six columns (matrix columns 0, 1). "
+                   "Default: rx,ry,rz or qw,qx,qy,qz when present and r00..r22 are not.")
 @click.option("--landmarks3d", default=None, metavar="PREFIX",
               help="DATA's 68 3-D landmark columns PREFIX{i}_x/_y/_z (AFLW2000 .mat: lm3d).")
 @click.option("--landmark-frame", type=click.Choice(["image", "canonical", "opencv"]), default="image",
@@ -297,7 +353,8 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
 @overwrite_option
 @verbosity_options
 @column_options
-def infer(data, builder, decoder, returns, args_, packed, units, angles, matrix_cols, landmarks3d, landmark_frame, tol,
+def infer(data, builder, decoder, returns, args_, packed, units, angles, matrix_cols, rotation_cols, landmarks3d,
+          landmark_frame, tol,
           samples, seed, name, frame_of, storage, json_path, output, overwrite, verbose, quiet, timeout,
           import_path):
     """Find which rotation system a function or a dataset uses.
@@ -330,6 +387,7 @@ def infer(data, builder, decoder, returns, args_, packed, units, angles, matrix_
       hpe infer --decoder mycode.py:to_rotvec --returns stored -o mine.toml
       hpe infer --callable mylib.pose:euler_to_matrix --args roll,pitch,yaw --units deg -o mine.toml
       hpe infer labels.parquet --angles pitch,yaw,roll --matrix r00..r22
+      hpe infer preds.csv --angles pitch,yaw,roll --rotations rotvec:rx,ry,rz
       hpe infer AFLW2000/ --landmarks3d lm3d --json aflw_system.json
     """
     import numpy as np
@@ -379,15 +437,18 @@ def infer(data, builder, decoder, returns, args_, packed, units, angles, matrix_
         pyr = np.empty_like(vals)
         pyr[:, [ROLE_NAMES.index(r) for r in roles]] = vals
         mcols = _matrix_columns(matrix_cols, frame_df.columns) if landmarks3d is None else None
-        if landmarks3d is None and mcols is None:
+        stored = None
+        if landmarks3d is None and (rotation_cols is not None or mcols is None):
+            stored = _stored_rotations(rotation_cols, frame_df.columns)
+        if landmarks3d is None and mcols is None and stored is None:
             if "lm3d0_x" in frame_df.columns:
                 landmarks3d = "lm3d"
             else:
-                raise HpeError(f"{data}: found neither matrix columns r00..r22 nor 3-D landmarks lm3d0_x..; "
-                               "use --matrix or --landmarks3d")
+                raise HpeError(f"{data}: found neither matrix columns r00..r22, stored rotations (rx,ry,rz or "
+                               "qw,qx,qy,qz) nor 3-D landmarks lm3d0_x..; use --matrix, --rotations or --landmarks3d")
         try:
             rep = _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_frame, tol, seed,
-                              name, frame, storage)
+                              name, frame, storage, stored)
         except ValueError as exc:
             raise HpeError(f"{data}: {exc}") from None
 
