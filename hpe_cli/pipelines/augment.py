@@ -112,7 +112,12 @@ class _ImageJob:
         final = self.dst / rel
         if final.exists() and not self.overwrite:
             raise HpeError(f"{final}: already exists (use --overwrite to replace it)")
-        img = cv2.imread(str(src), cv2.IMREAD_UNCHANGED)
+        import numpy as np
+
+        try:  # through bytes: OpenCV's own file functions fail on names that are not UTF-8
+            img = cv2.imdecode(np.fromfile(src, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+        except OSError:
+            img = None
         if img is None:
             raise HpeError(f"{where}: {src}: not a readable image")
         h, w = img.shape[:2]
@@ -122,8 +127,10 @@ class _ImageJob:
         staged = self.stage / rel
         staged.parent.mkdir(parents=True, exist_ok=True)
         params = [cv2.IMWRITE_JPEG_QUALITY, self.quality] if src.suffix.lower() in (".jpg", ".jpeg") else []
-        if not cv2.imwrite(str(staged), out, params):
-            raise HpeError(f"{staged}: could not write image")
+        ok, buf = cv2.imencode(src.suffix.lower() or ".png", out, params)
+        if not ok:
+            raise HpeError(f"{final}: could not encode the image as {src.suffix or 'PNG'}")
+        buf.tofile(staged)
         self.done[name] = rel
 
     def commit(self):

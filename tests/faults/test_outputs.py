@@ -191,9 +191,6 @@ def test_name_too_long_is_named_and_a_long_legal_name_works(case_factory, cmd):
 
 @pytest.mark.parametrize("cmd", COMMANDS)
 def test_non_utf8_output_names(case_factory, cmd):
-    if cmd == "augment":
-        pytest.skip("augment writes images with cv2.imwrite(str(path)), which crashes on non-UTF-8 names "
-                    "(issue 9 part B moves augment to pipelines/ and its images to staged_dir)")
     case = case_factory(cmd)
     folder = case.tmp / os.fsdecode(b"caf\xe9")
     folder.mkdir()
