@@ -248,49 +248,6 @@ def _image_paths(cams: pan.Cameras, ci, frames):
     return pc.binary_join_element_wise(prefix.take(pa.array(ci)), names.take(pa.array(inv.reshape(-1))), "")
 
 
-# -------------------------------------------------------------- streaming
-_WORKER: dict = {}
-
-
-def _init_worker(cams, sequence, cfg):
-    _WORKER.update(cams=cams, sequence=sequence, cfg=cfg)
-
-
-def _work(paths):
-    return process_chunk(paths, _WORKER["cams"], _WORKER["sequence"], _WORKER["cfg"])
-
-
-def run(p: Plan, cfg: Config, workers: int = 1):
-    """Yield :func:`process_chunk` results for every chunk of ``p``, in order.
-
-    With ``workers > 1`` chunks are computed in worker processes, at most
-    ``2 * workers`` at a time, so memory stays bounded.
-    """
-    if workers <= 1 or len(p.chunks) <= 1:
-        for chunk in p.chunks:
-            yield process_chunk(chunk, p.cameras, p.sequence, cfg)
-        return
-    import multiprocessing as mp
-    from collections import deque
-    from concurrent.futures import ProcessPoolExecutor
-
-    ctx = mp.get_context("spawn" if mp.get_start_method(allow_none=True) == "spawn" else "fork")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
-                             initargs=(p.cameras, p.sequence, cfg)) as ex:
-        pending: deque = deque()
-        it = iter(p.chunks)
-        for chunk in it:
-            pending.append(ex.submit(_work, chunk))
-            if len(pending) >= 2 * workers:
-                break
-        while pending:
-            res = pending.popleft().result()
-            nxt = next(it, None)
-            if nxt is not None:
-                pending.append(ex.submit(_work, nxt))
-            yield res
-
-
 class RmseStats:
     """Fixed-size histogram of fit RMSE values (flat memory) for the summary."""
 
@@ -555,23 +512,11 @@ def run(p: Plan, cfg: Config, workers: int = 1):
         for chunk in p.chunks:
             yield process_chunk(chunk, p.cameras, p.sequence, cfg)
         return
-    from collections import deque
     from concurrent.futures import ProcessPoolExecutor
 
     with ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=_init_worker,
                              initargs=(p.cameras, p.sequence, cfg)) as ex:
-        pending: deque = deque()
-        it = iter(p.chunks)
-        for chunk in it:
-            pending.append(ex.submit(_work, chunk))
-            if len(pending) >= 2 * workers:
-                break
-        while pending:
-            res = pending.popleft().result()
-            nxt = next(it, None)
-            if nxt is not None:
-                pending.append(ex.submit(_work, nxt))
-            yield res
+        yield from _bounded_in_order(ex, _work, p.chunks, workers)
 
 
 def _mp_context():
@@ -585,22 +530,30 @@ def _local_units(tasks: list, workers: int):
     worker writes its own parts; only counts come back). At most
     ``2 * workers`` units are in flight, so an error or a signal stops the
     pool after a few units, and no future is cancelled under the pool's feet."""
-    from collections import deque
     from concurrent.futures import ProcessPoolExecutor
 
     with ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context()) as ex:
-        pending: deque = deque()
-        it = iter(tasks)
-        for t in it:
-            pending.append(ex.submit(run_unit, t))
-            if len(pending) >= 2 * workers:
-                break
-        while pending:
-            res = pending.popleft().result()
-            nxt = next(it, None)
-            if nxt is not None:
-                pending.append(ex.submit(run_unit, nxt))
-            yield res
+        yield from _bounded_in_order(ex, run_unit, tasks, workers)
+
+
+def _bounded_in_order(ex, fn, items, workers: int):
+    """``fn(item)`` on the pool ``ex`` for every item, results yielded in input order, at most ``2 * workers``
+    submitted at a time (an error or a signal stops the pool after a few items; no future is cancelled under
+    the pool's feet)."""
+    from collections import deque
+
+    pending: deque = deque()
+    it = iter(items)
+    for item in it:
+        pending.append(ex.submit(fn, item))
+        if len(pending) >= 2 * workers:
+            break
+    while pending:
+        res = pending.popleft().result()
+        nxt = next(it, None)
+        if nxt is not None:
+            pending.append(ex.submit(fn, nxt))
+        yield res
 
 
 def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:
