@@ -124,8 +124,6 @@ class CocoWriter:
             self._write(part, names)
 
     def _write(self, frame, names) -> None:
-        import orjson
-
         n = len(frame)
         off = self.rows
         files = _strings(frame, "image")

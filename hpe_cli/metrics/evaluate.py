@@ -12,7 +12,7 @@ import numpy as np
 
 from . import rotation_errors as re_
 from .align import mean_offset, remove_offset
-from .protocols import PROTOCOLS, PosePair, ProtocolRows, summarize
+from .protocols import PROTOCOLS, PosePair, summarize
 
 #: thresholds (degrees) of the ``within_*`` fractions of the geodesic error
 WITHIN = (5, 10, 15, 30)

@@ -156,13 +156,11 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
              length=None, thickness=None, tdy_origin="auto", annotate=False, grid=False, grid_cols=6, tile=256,
              limit=None, rejects_path=None, overwrite=False, progress=None, strict=False) -> dict:
     """Draw every row of ``input_path``; return counts (``faces``, ``images``, ``sheets``, ``rejects``)."""
-    from collections import Counter
     from pathlib import Path
 
     import numpy as np
 
     from ..errors import HpeError
-    from ..geometry import draw as g
     from ..io import Rejects, label_mode, open_table
     from ..io.transaction import ensure_transaction, note_input, staged_dir
 

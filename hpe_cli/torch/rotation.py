@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from ..rotation import euler as _euler
-from ..rotation.systems import GIMBAL_TOL, ROLES, RotationSystem, get_system
+from ..rotation.systems import ROLES, RotationSystem, get_system
 
 _DEG = 180.0 / math.pi
 _AXIS = {"x": 0, "y": 1, "z": 2}

@@ -148,7 +148,7 @@ class DirectMHPLayout(Layout):
                     fh.writelines(ls)
             with open(root / "yolov5_labels_coco" / "img_txt" / f"{split}.txt", "w", encoding="utf-8") as fh:
                 fh.writelines(f"{final_root / 'images' / split / im['file_name']}\n" for im in images)
-        yaml = [f"# written by hpe export --layout directmhp (DirectMHP data/cmu_panoptic_coco.yaml keys)",
+        yaml = ["# written by hpe export --layout directmhp (DirectMHP data/cmu_panoptic_coco.yaml keys)",
                 f"path: {final_root}/", "labels: yolov5_labels_coco"]
         for split in splits:
             yaml.append(f"{split}: yolov5_labels_coco/img_txt/{split}.txt")
