@@ -184,8 +184,22 @@ def write_table(table, path, overwrite: bool = False, metadata: dict | None = No
 def write_json(obj, path, overwrite: bool = False) -> Path:
     """Write JSON atomically."""
     with AtomicFile(path, overwrite) as tmp:
-        tmp.write_text(json.dumps(obj, indent=2, default=_json_default), encoding="utf-8")
+        tmp.write_text(json_text(obj), encoding="utf-8")
     return Path(path)
+
+
+def json_text(obj) -> str:
+    """The JSON text :func:`write_json` writes (indented; numpy scalars and arrays as numbers and lists)."""
+    return json.dumps(obj, indent=2, default=_json_default)
+
+
+def check_report_outputs(report, output, overwrite: bool) -> None:
+    """Before any work: a ``--json`` report (``-`` = stdout) and an ``-o`` table may be written (name, suffix)."""
+    for p in (report if report != "-" else None, output):
+        if p:
+            check_output(p, overwrite)
+    if output:
+        table_format(output)
 
 
 def _json_default(o):

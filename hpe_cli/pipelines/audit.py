@@ -272,13 +272,9 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     from ..io.plots import AngleHistograms, plot_files, write_plots
     from ..rotation.audit import CHECKS
 
-    for p in (report if report != "-" else None, output):
-        if p:
-            check_output(p, overwrite)
-    if output:
-        from ..io import table_format
+    from ..io.writers import check_report_outputs
 
-        table_format(output)
+    check_report_outputs(report, output, overwrite)
     if plots:
         from pathlib import Path
 
@@ -394,9 +390,9 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
                                           **counts, "flagged": result["details"]["flagged"]},
                     title=f"hpe audit: {src.path.name}", overwrite=overwrite)
     if report == "-":
-        import json
+        from ..io.writers import json_text
 
-        (echo or print)(json.dumps(result, indent=2))
+        (echo or print)(json_text(result))
     elif report:
         write_json(result, report, overwrite=overwrite)
     return result

@@ -170,7 +170,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
                  use_gt="auto", radians=False, overwrite=False, batch_size=262_144, progress=None,
                  strict=False) -> dict:
     """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report."""
-    from ..io import Rejects, check_output, write_json
+    from ..io import Rejects, write_json
     from ..metrics.evaluate import check_protocols, evaluate_canonical
     from ..metrics.protocols import PROTOCOLS
 
@@ -178,13 +178,9 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         protocols = check_protocols(protocols or None)
     except ValueError as exc:
         raise HpeError(str(exc)) from None
-    for p in (report if report != "-" else None, output):
-        if p:
-            check_output(p, overwrite)
-    if output:
-        from ..io import table_format
+    from ..io.writers import check_report_outputs
 
-        table_format(output)
+    check_report_outputs(report, output, overwrite)
     if plots:
         from ..io.eval_plots import check_plot_outputs
 
@@ -273,22 +269,14 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
 
         write_eval_plots(plots, rows, result, gt_system, overwrite=overwrite)
     if report == "-":
-        import json
-
         import click
 
-        click.echo(json.dumps(result, indent=2, default=_json_default))
+        from ..io.writers import json_text
+
+        click.echo(json_text(result))
     elif report:
         write_json(result, report, overwrite=overwrite)
     return result
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
 def _write_rows(output, rows, keycols, by, by_values, gt_system, pred_system, overwrite, batch_size):
