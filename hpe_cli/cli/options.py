@@ -28,30 +28,31 @@ class SystemType(click.ParamType):
 SYSTEM = SystemType()
 
 
-class InputPath(click.Path):
+class _DeclaredPath(click.Path):
+    """A path declared to the run's output transaction as it is parsed (``_declare``: its method name)."""
+
+    _declare = ""
+
+    def convert(self, value, param, ctx):
+        value = super().convert(value, param, ctx)
+        from ..io.transaction import current
+
+        txn = current()
+        if txn is not None:
+            getattr(txn, self._declare)(value, _label(param))  # a collision is an HpeError: one line, exit 1
+        return value
+
+
+class InputPath(_DeclaredPath):
     """A path the run reads: declared to the run's output transaction, so no output may resolve to it."""
 
-    def convert(self, value, param, ctx):
-        value = super().convert(value, param, ctx)
-        from ..io.transaction import current
-
-        txn = current()
-        if txn is not None:
-            txn.add_input(value, _label(param))  # a collision is an HpeError: one line, exit 1
-        return value
+    _declare = "add_input"
 
 
-class OutputPath(click.Path):
+class OutputPath(_DeclaredPath):
     """A path the run writes: declared to the run's output transaction (no collision with inputs/outputs)."""
 
-    def convert(self, value, param, ctx):
-        value = super().convert(value, param, ctx)
-        from ..io.transaction import current
-
-        txn = current()
-        if txn is not None:
-            txn.add_output(value, _label(param))  # a collision is an HpeError: one line, exit 1
-        return value
+    _declare = "add_output"
 
 
 def _label(param) -> str:

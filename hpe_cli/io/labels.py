@@ -80,17 +80,9 @@ def label_columns_fast(batch, mode: str, radians: bool = False):
         an object array.
     """
     names = ANGLE_COLS if mode == "angles" else MATRIX_COLS
-    cols, reasons = [], None
-    ok = np.ones(batch.num_rows, dtype=bool)
-    for name in names:
-        v, bad, r = _numeric(batch, name)
-        cols.append(v * (180.0 / np.pi) if (radians and mode == "angles") else v)
-        if r is not None:
-            if reasons is None:
-                reasons = np.full(batch.num_rows, "", dtype=object)
-            first = bad & ok
-            reasons[first] = r[first]
-            ok &= ~bad
+    cols, ok, reasons = _value_columns(batch, names)
+    if radians and mode == "angles":
+        cols = [v * (180.0 / np.pi) for v in cols]
     if mode == "matrix":
         from ..rotation.check import rotation_screen_columns
 
