@@ -106,10 +106,7 @@ def load_mat_input(path: Path, source: str, landmarks: bool = True):
     The box is 6DRepNet's loose AFLW2000 test crop of the tight landmark box (``k = 0.2``:
     :func:`hpe_cli.geometry.crop.sixdrepnet_test_boxes`), the margin its loader uses to show the whole head.
     """
-    import pandas as pd
-
     from ..datasets.mat import read_mat_dir
-    from ..rotation.systems import get_system
 
     t = read_mat_dir(path, landmarks=True)
     n = len(t)
@@ -129,28 +126,11 @@ def load_mat_input(path: Path, source: str, landmarks: bool = True):
     box = sixdrepnet_test_boxes(tight)
     files = t["file"].astype(str).to_numpy()
     stems = [Path(f).with_suffix("").as_posix() for f in files]
-    pyr = t[["pitch", "yaw", "roll"]].to_numpy(np.float64)
-    reasons = np.full(n, "", dtype=object)
-    bad = ~np.isfinite(pyr).all(1)
-    reasons[bad] = "non-finite Pose_Para angle"
-    reasons[(reasons == "") & ~np.isfinite(box).all(1)] = "no visible 2-D landmark to box the head"
-    sysm = get_system("300w_lp")
-    A = sysm.to_canonical(sysm.from_angles(np.where(bad[:, None], 0.0, pyr))).reshape(n, 9)
-    kind = "300w_lp"
-    frame = pd.DataFrame({
-        "source": source, "kind": kind, "input": str(path), "row": files, "image": [s + ".jpg" for s in stems],
+    return _pose_para_frame(t, box, lm, landmarks, {
+        "source": source, "kind": "300w_lp", "input": str(path), "row": files, "image": [s + ".jpg" for s in stems],
         "root": str(path if path.is_dir() else path.parent), "sequence": "", "camera": "", "frame": -1,
         "person_id": -1, "subject": [_subject_of(Path(s).name) for s in stems],
-        "image_width": np.nan, "image_height": np.nan, "reason": reasons})
-    for k, c in enumerate(BBOX_COLS):
-        frame[c] = box[:, k]
-    for k, c in enumerate(A_COLS):
-        frame[c] = A[:, k]
-    for c in ("tdx", "tdy", "tdz", "scale"):
-        frame[c] = t[c].to_numpy(np.float64)
-    for i in range(lm.shape[1] if landmarks else 0):
-        frame[f"lm{i}_x"], frame[f"lm{i}_y"] = lm[:, i, 0], lm[:, i, 1]
-    return frame.copy()
+        "image_width": np.nan, "image_height": np.nan})
 
 
 def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
@@ -160,10 +140,7 @@ def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
     when present (the main file's ``pt2d`` comes from the original image, 3DDFA issue #192), else ``pt2d``.
     The group column ``subject`` is the identity ``NAME``.
     """
-    import pandas as pd
-
     from ..datasets.w300lp import read_w300lp
-    from ..rotation.systems import get_system
 
     t = read_w300lp(path, landmarks=True, pt2d=True)
     n = len(t)
@@ -185,6 +162,21 @@ def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
         pad = lambda a: np.concatenate([a, np.full((n, L - a.shape[1], 2), np.nan)], 1)  # noqa: E731
         lm = np.where(has_own[:, None, None], pad(own), pad(main))
     box = sixdrepnet_test_boxes(landmark_boxes(lm))
+    return _pose_para_frame(t, box, lm, landmarks, {
+        "source": source, "kind": "300w_lp", "input": str(path), "row": t["file"].astype(str).to_numpy(),
+        "image": t["image"].astype(str).to_numpy(), "root": str(path), "sequence": "", "camera": "", "frame": -1,
+        "person_id": -1, "subject": t["identity"].astype(str).to_numpy(), "image_width": np.nan,
+        "image_height": np.nan})
+
+
+def _pose_para_frame(t, box, lm, landmarks: bool, columns: dict):
+    """Export rows of 300W-LP-style labels (``Pose_Para`` angles in ``300w_lp``): ``columns``, then the reason,
+    box, canonical matrix, ``tdx..scale`` and (with ``landmarks``) the 2-D landmarks ``lm`` (n, L, 2)."""
+    import pandas as pd
+
+    from ..rotation.systems import get_system
+
+    n = len(t)
     pyr = t[["pitch", "yaw", "roll"]].to_numpy(np.float64)
     reasons = np.full(n, "", dtype=object)
     bad = ~np.isfinite(pyr).all(1)
@@ -192,11 +184,7 @@ def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
     reasons[(reasons == "") & ~np.isfinite(box).all(1)] = "no visible 2-D landmark to box the head"
     sysm = get_system("300w_lp")
     A = sysm.to_canonical(sysm.from_angles(np.where(bad[:, None], 0.0, pyr))).reshape(n, 9)
-    frame = pd.DataFrame({
-        "source": source, "kind": "300w_lp", "input": str(path), "row": t["file"].astype(str).to_numpy(),
-        "image": t["image"].astype(str).to_numpy(), "root": str(path), "sequence": "", "camera": "", "frame": -1,
-        "person_id": -1, "subject": t["identity"].astype(str).to_numpy(), "image_width": np.nan,
-        "image_height": np.nan, "reason": reasons})
+    frame = pd.DataFrame({**columns, "reason": reasons})
     for k, c in enumerate(BBOX_COLS):
         frame[c] = box[:, k]
     for k, c in enumerate(A_COLS):
