@@ -29,24 +29,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from ..io.columns import load_json
 
 SYSTEM = "dad3dheads"
 SUBSETS = ("train", "val", "test")
 FLIP_YZ = np.diag([1.0, -1.0, -1.0])
 ATTRIBUTES = ("quality", "gender", "expression", "age", "occlusions", "pose", "standard light")
-
-
-def _load(path: Path):
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise HpeError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    try:
-        import orjson
-
-        return orjson.loads(data)
-    except ValueError as exc:
-        raise HpeError(f"{path}: not valid JSON ({' '.join(str(exc).split())[:160]})") from None
 
 
 def is_dad_metadata(doc) -> bool:
@@ -85,7 +73,7 @@ def is_dad3dheads(path) -> bool:
         return bool(_metadata_files(path))
     if path.is_file() and path.suffix.lower() == ".json" and path.stem in SUBSETS:
         try:
-            return is_dad_metadata(_load(path))
+            return is_dad_metadata(load_json(path))
         except HpeError:
             return False
     return False
@@ -115,7 +103,7 @@ def read_dad3dheads(path, with_lines: bool = False):
                        "<subset>.json with annotations/<ID>.json)")
     frames = []
     for subset, meta in metas:
-        items = _load(meta)
+        items = load_json(meta)
         if not is_dad_metadata(items) and items != []:
             raise HpeError(f"{meta}: expected a list of objects with item_id and bbox")
         base = meta.parent
@@ -142,7 +130,7 @@ def read_dad3dheads(path, with_lines: bool = False):
                 attrs[a].append(None if v is None else str(v))
             ann = base / "annotations" / f"{iid}.json"
             if ann.is_file():
-                doc = _load(ann)
+                doc = load_json(ann)
                 m = doc.get("model_view_matrix") if isinstance(doc, dict) else None
                 arr = np.asarray(m, dtype=np.float64) if m is not None else None
                 if arr is None or arr.shape != (4, 4):

@@ -315,22 +315,16 @@ def _celeba(path, batch_size, with_lines):
 
 
 # ------------------------------------------------------------------------------------------- COCO JSON
-def _load_json(path: Path):
+def load_json(path: Path):
+    """A JSON file's document (orjson); an unreadable file or invalid JSON is one HpeError naming the file."""
     try:
-        data = path.read_bytes()
+        data = Path(path).read_bytes()
     except OSError as exc:
         raise HpeError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    import orjson
+
     try:
-        import orjson
-
         return orjson.loads(data)
-    except ImportError:  # pragma: no cover - orjson is a dependency
-        import json
-
-        try:
-            return json.loads(data)
-        except ValueError as exc:
-            raise HpeError(f"{path}: not valid JSON ({exc})") from None
     except ValueError as exc:
         raise HpeError(f"{path}: not valid JSON ({' '.join(str(exc).split())[:160]})") from None
 
@@ -463,7 +457,7 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
     if fmt is None and delimiter is None and header and not names:
         fmt = sniff_format(path)
         if fmt == "coco-or-json":
-            doc = _load_json(path)
+            doc = load_json(path)
             if is_coco(doc):
                 return _frame_source(path, coco_frame(doc, path), batch_size, with_lines)
             from ..datasets.dad3dheads import is_dad_metadata
@@ -488,7 +482,7 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
     if not path.is_file():
         raise HpeError(f"{path}: --input-format {fmt} reads a file, got a folder")
     if fmt == "coco":
-        return _frame_source(path, coco_frame(_load_json(path), path), batch_size, with_lines)
+        return _frame_source(path, coco_frame(load_json(path), path), batch_size, with_lines)
     if fmt == "whenet":
         return open_text(path, batch_size, delimiter=",", header=False, names=["image", "yaw", "pitch", "roll"],
                          quoting=False, string_columns=("image",), with_lines=with_lines,
