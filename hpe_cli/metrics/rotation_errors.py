@@ -75,13 +75,9 @@ def frobenius(P, G) -> np.ndarray:
     Computed as ``||P - G||_F``, which is the same number (multiply by the
     orthogonal ``G``) without the cancellation of ``I - P G^T`` for small errors.
     """
-    P, G = as_nested(P), as_nested(G)
-    acc = 0.0
-    for i in range(3):
-        for j in range(3):
-            d = P[i][j] - G[i][j]
-            acc = acc + d * d
-    return np.sqrt(acc)
+    from ..rotation.soa import frobenius as soa_frobenius
+
+    return soa_frobenius(as_nested(P), as_nested(G))
 
 
 def maev_deg(P, G) -> np.ndarray:
