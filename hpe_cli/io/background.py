@@ -1,0 +1,64 @@
+"""A file written from a background thread, so the bytes of one batch go to the
+kernel while the next batch is being formatted.
+
+File writes release the GIL, so on a machine with a spare core the write of
+batch *k* overlaps the formatting of batch *k + 1*. At most ``depth`` writes
+are queued, so memory stays bounded (``depth`` batches of text).
+"""
+from __future__ import annotations
+
+
+class BackgroundFile:
+    """Write ``bytes``-like objects to the binary file ``fh`` in order, on one thread.
+
+    Parameters
+    ----------
+    fh : binary file object
+        Written only by the thread; closed by :meth:`close`.
+    depth : int
+        Writes queued at most; :meth:`write` waits for the oldest beyond that.
+
+    Notes
+    -----
+    An error raised by a write (``ENOSPC``, ``EFBIG``, ...) is raised again by
+    the next :meth:`write` or by :meth:`close`. :meth:`abort` drops what is
+    queued and waits only for the write under way.
+    """
+
+    def __init__(self, fh, depth: int = 2):
+        from collections import deque
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.fh = fh
+        self.depth = max(1, int(depth))
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="hpe-write")
+        self._pending = deque()
+
+    def write(self, data) -> None:
+        while len(self._pending) >= self.depth:
+            self._pending.popleft().result()
+        self._pending.append(self._pool.submit(self.fh.write, data))
+
+    def flush(self) -> None:
+        """Wait for every queued write (raising the first error)."""
+        while self._pending:
+            self._pending.popleft().result()
+
+    def close(self) -> None:
+        """Finish every queued write, then close the file (errors are raised)."""
+        try:
+            self.flush()
+        finally:
+            self._pool.shutdown(wait=True)
+            self.fh.close()
+
+    def abort(self) -> None:
+        """Drop the queued writes, wait for the one under way, close the file; never raises."""
+        for fut in self._pending:
+            fut.cancel()
+        self._pending.clear()
+        self._pool.shutdown(wait=True)
+        try:
+            self.fh.close()
+        except Exception:  # the file is being discarded anyway
+            pass
