@@ -39,6 +39,19 @@ class BackgroundFile:
             self._pending.popleft().result()
         self._pending.append(self._pool.submit(self.fh.write, data))
 
+    def copy_from(self, path) -> None:
+        """Append the whole content of the file ``path`` (after the writes queued before), copied by the
+        kernel (``os.copy_file_range``) where it can, else through a buffer. The file is opened here, so it
+        may be removed as soon as this returns."""
+        while len(self._pending) >= self.depth:
+            self._pending.popleft().result()
+        src = open(path, "rb")
+        try:
+            self._pending.append(self._pool.submit(_append_file, self.fh, src))
+        except BaseException:
+            src.close()
+            raise
+
     def flush(self) -> None:
         """Wait for every queued write (raising the first error)."""
         while self._pending:
@@ -62,3 +75,28 @@ class BackgroundFile:
             self.fh.close()
         except Exception:  # the file is being discarded anyway
             pass
+
+
+def _append_file(fh, src) -> None:
+    import os
+    import shutil
+
+    with src:
+        fh.flush()
+        left = os.fstat(src.fileno()).st_size
+        if hasattr(os, "copy_file_range"):
+            try:
+                while left > 0:
+                    n = os.copy_file_range(src.fileno(), fh.fileno(), left)
+                    if n == 0:
+                        break
+                    left -= n
+            except OSError as exc:
+                import errno
+
+                if exc.errno not in (errno.EXDEV, errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP):
+                    raise
+        fh.seek(0, os.SEEK_END)  # the buffered file learns where the kernel left the descriptor
+        if left > 0:  # no kernel copy (or a short one): the rest through a buffer
+            src.seek(os.fstat(src.fileno()).st_size - left)
+            shutil.copyfileobj(src, fh, 1 << 22)

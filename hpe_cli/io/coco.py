@@ -82,6 +82,84 @@ def _image_codes(frame, path, offset: int):
     return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), enc.dictionary.to_pylist()
 
 
+#: rows serialised by one orjson call (bounds the Python objects alive at once)
+CHUNK_ROWS = 8192
+
+
+def annotations_text(frame, image_ids, first_id: int, *, path="<coco>", offset: int = 0):
+    """The COCO ``annotations`` of a label batch as JSON text (bytes-like): the objects joined by commas, no
+    brackets.
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame, pyarrow Table or RecordBatch
+        ``bbox_x, bbox_y, bbox_w, bbox_h`` (pixels), ``pitch, yaw, roll``
+        (degrees), optionally ``lm{i}_x, lm{i}_y`` (pixels); see :func:`write_coco`.
+    image_ids : array of int, shape (n,)
+        Each row's image id (:meth:`CocoWriter.image_ids`).
+    first_id : int
+        The annotation id of the first row (the others follow, +1 each).
+    path, offset
+        Output name and index of the batch's first row, for error messages.
+
+    Notes
+    -----
+    The text of a row does not depend on how the table is cut into batches,
+    so texts made apart (in worker processes) and joined with commas are the
+    bytes :class:`CocoWriter` writes for the whole table. Each chunk of rows is
+    one ``orjson.dumps`` over per-row dicts whose arrays are numpy row views:
+    orjson formats the floats (shortest round-trip form) straight into its
+    output, one pass over the text.
+    """
+    import gc
+
+    import orjson
+
+    names = _names(frame)
+    missing = [c for c in BBOX_COLS + ANGLE_COLS if c not in names]
+    if missing:
+        raise HpeError(f"{path}: expected columns {', '.join(missing)} in the label table")
+    n_lm = landmark_count(names)
+    image_ids = np.asarray(image_ids, dtype=np.int64)
+    texts = []
+    for lo in range(0, len(frame), CHUNK_ROWS):
+        part = frame.iloc[lo:lo + CHUNK_ROWS] if hasattr(frame, "iloc") else frame.slice(lo, CHUNK_ROWS)
+        n, off = len(part), offset + lo
+        box = np.stack([_finite(_column(part, c), c, path, off) for c in BBOX_COLS], axis=1)
+        if (box[:, 2:] < 0).any():
+            bad = int(np.flatnonzero((box[:, 2:] < 0).any(1))[0])
+            raise HpeError(f"{path}: row {off + bad}: expected bbox_w, bbox_h >= 0, "
+                           f"got {box[bad, 2]:g}, {box[bad, 3]:g}")
+        ang = np.stack([_finite(_column(part, c), c, path, off) for c in ANGLE_COLS], axis=1)
+        if n_lm:  # (n, 2, n_lm): face2d_pts = [[x0, x1, ...], [y0, y1, ...]]
+            pts = np.empty((n, 2, n_lm))
+            for i in range(n_lm):
+                pts[:, 0, i] = _column(part, f"lm{i}_x")
+                pts[:, 1, i] = _column(part, f"lm{i}_y")
+            gone = ~np.isfinite(pts).all(axis=1)
+            pts[np.repeat(gone[:, None, :], 2, axis=1)] = MISSING_POINT
+        else:
+            pts = [[]] * n  # orjson writes the same empty list for every row
+        area = np.round(box[:, 2] * box[:, 3], 4).tolist()
+        ids = image_ids[lo:lo + n].tolist()
+        k0 = first_id + lo
+        # one dict per row (about 1 us, a tenth of what formatting its floats costs), keys in coco_dict's order;
+        # the cyclic garbage collector is paused meanwhile (these dicts hold no cycles, and its passes over
+        # thousands of fresh containers would double the cost)
+        paused = gc.isenabled()
+        gc.disable()
+        try:
+            rows = [{"image_id": i, "id": k, "category_id": 1, "bbox": b, "euler_angles": a, "face2d_pts": p,
+                     "area": ar, "iscrowd": 0, "segmentation": []}
+                    for i, k, b, a, p, ar in zip(ids, range(k0, k0 + n), box, ang, pts, area)]
+        finally:
+            if paused:
+                gc.enable()
+        if n:  # the list's brackets dropped without a copy
+            texts.append(memoryview(orjson.dumps(rows, option=orjson.OPT_SERIALIZE_NUMPY))[1:-1])
+    return texts[0] if len(texts) == 1 else b",".join(texts)
+
+
 class CocoWriter:
     """Write DirectMHP-style COCO JSON batch by batch, atomically (see :func:`write_coco`).
 
@@ -122,8 +200,8 @@ class CocoWriter:
         self._out.write(b'{"info":' + orjson.dumps(self.info) + b',"licenses":[],"annotations":[')
         return self
 
-    #: rows encoded at a time (bounds the text and the Python objects alive at once)
-    CHUNK = 8192
+    #: rows encoded at a time (bounds the text alive at once)
+    CHUNK = CHUNK_ROWS
 
     def write(self, frame) -> None:
         """Append one batch (pandas DataFrame, pyarrow Table or RecordBatch) of label rows."""
@@ -180,50 +258,35 @@ class CocoWriter:
         return ids[codes]
 
     def _write(self, frame, names) -> None:
-        import orjson
-
-        n = len(frame)
         off = self.rows
-        box = np.stack([_finite(_column(frame, c), c, self.path, off) for c in BBOX_COLS], axis=1)
-        if (box[:, 2:] < 0).any():
-            bad = int(np.flatnonzero((box[:, 2:] < 0).any(1))[0])
-            raise HpeError(f"{self.path}: row {off + bad}: expected bbox_w, bbox_h >= 0, "
-                           f"got {box[bad, 2]:g}, {box[bad, 3]:g}")
-        ang = np.stack([_finite(_column(frame, c), c, self.path, off) for c in ANGLE_COLS], axis=1)
-        image_ids = self._image_ids(frame, names, n, off)
-        n_lm = landmark_count(names)
-        if n_lm:  # (n, 2, n_lm): face2d_pts = [[x0, x1, ...], [y0, y1, ...]]
-            pts = np.empty((n, 2, n_lm))
-            for i in range(n_lm):
-                pts[:, 0, i] = _column(frame, f"lm{i}_x")
-                pts[:, 1, i] = _column(frame, f"lm{i}_y")
-            gone = ~np.isfinite(pts).all(axis=1)
-            pts[np.repeat(gone[:, None, :], 2, axis=1)] = MISSING_POINT
-        else:
-            pts = [[]] * n  # orjson writes the same empty list for every row
-        area = np.round(box[:, 2] * box[:, 3], 4).tolist()
-        # one dict per row (about 1 us each, a tenth of what formatting its floats costs), the arrays as numpy
-        # row views: a single orjson pass writes the whole chunk, keys in coco_dict's order
-        # (the cyclic garbage collector is paused meanwhile: these dicts hold no cycles, and its passes over
-        # thousands of fresh containers would double the cost)
-        import gc
+        image_ids = self.image_ids(frame, off)
+        self.append_text(annotations_text(frame, image_ids, off + 1, path=self.path, offset=off), len(frame))
 
-        paused = gc.isenabled()
-        gc.disable()
-        try:
-            rows = [{"image_id": i, "id": k, "category_id": 1, "bbox": b, "euler_angles": a, "face2d_pts": p,
-                     "area": ar, "iscrowd": 0, "segmentation": []}
-                    for i, k, b, a, p, ar in zip(image_ids.tolist(), range(off + 1, off + n + 1), box, ang, pts,
-                                                 area)]
-        finally:
-            if paused:
-                gc.enable()
-        text = orjson.dumps(rows, option=orjson.OPT_SERIALIZE_NUMPY)
-        if n:
+    def image_ids(self, frame, offset: int = 0) -> np.ndarray:
+        """Each row's image id (int64), the batch's new images remembered with their size.
+
+        Ids are 1, 2, ... in order of first appearance over everything passed
+        here; one image must keep one size (checked). ``offset`` is the index
+        of the batch's first row in the whole table (for error messages).
+        """
+        return self._image_ids(frame, _names(frame), len(frame), offset)
+
+    def append_text(self, text, rows: int) -> None:
+        """Append ``rows`` annotations already formatted by :func:`annotations_text` (bytes-like)."""
+        if rows:
             if self.rows:
                 self._out.write(b",")
-            self._out.write(memoryview(text)[1:-1])  # the list's brackets dropped without a copy
-        self.rows += n
+            self._out.write(text)
+        self.rows += rows
+
+    def append_file(self, path, rows: int) -> None:
+        """Append ``rows`` annotations whose :func:`annotations_text` is the content of the file ``path``
+        (copied by the kernel where it can; the file is left in place)."""
+        if rows:
+            if self.rows:
+                self._out.write(b",")
+            self._out.copy_from(path)
+        self.rows += rows
 
     def __exit__(self, exc_type, exc, tb):
         import orjson

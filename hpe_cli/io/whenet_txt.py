@@ -53,29 +53,61 @@ def whenet_lines(frame, path="<annotation.txt>", offset: int = 0) -> list:
     return [f"{im},{y!s},{p!s},{r!s}\n" for im, y, p, r in zip(images, *cols)]
 
 
+def whenet_text(frame, path="<annotation.txt>", offset: int = 0) -> bytes:
+    """The ``annotation.txt`` lines of a label batch as UTF-8 bytes (see :func:`whenet_lines`).
+
+    Lines do not depend on how the table is cut into batches, so texts made
+    apart (in worker processes) and concatenated are the bytes
+    :class:`WhenetWriter` writes for the whole table.
+    """
+    return "".join(whenet_lines(frame, path, offset)).encode("utf-8")
+
+
 class WhenetWriter:
-    """Write ``annotation.txt`` batch by batch, atomically (see :func:`write_whenet`)."""
+    """Write ``annotation.txt`` batch by batch, atomically (see :func:`write_whenet`); the bytes go to the file
+    from a background thread (:class:`~hpe_cli.io.background.BackgroundFile`) while the next batch is formatted."""
 
     def __init__(self, path, overwrite: bool = False):
         self._atomic = AtomicFile(path, overwrite)
         self.path = Path(path)
         self.rows = 0
+        self._out = None
 
     def __enter__(self):
+        from .background import BackgroundFile
+
         self._tmp = self._atomic.__enter__()
-        self._fh = open(self._tmp, "w", encoding="utf-8", newline="")
+        try:
+            self._out = BackgroundFile(open(self._tmp, "wb"))
+        except BaseException as e:
+            self._atomic.__exit__(type(e), e, None)
+            raise
         return self
 
     def write(self, frame) -> None:
-        lines = whenet_lines(frame, self.path, self.rows)
-        self._fh.write("".join(lines))
-        self.rows += len(lines)
+        self.append_text(whenet_text(frame, self.path, self.rows), len(frame))
+
+    def append_text(self, text, rows: int) -> None:
+        """Append ``rows`` lines already made by :func:`whenet_text`."""
+        if rows:
+            self._out.write(text)
+        self.rows += rows
+
+    def append_file(self, path, rows: int) -> None:
+        """Append ``rows`` lines whose :func:`whenet_text` is the content of the file ``path``."""
+        if rows:
+            self._out.copy_from(path)
+        self.rows += rows
 
     def __exit__(self, exc_type, exc, tb):
         try:
-            self._fh.close()
-        except BaseException:
-            self._atomic.__exit__(RuntimeError, None, None)
+            if exc_type is None:
+                self._out.close()
+            else:
+                self._out.abort()
+        except BaseException as e:
+            self._out.abort()
+            self._atomic.__exit__(type(e), e, None)
             raise
         return self._atomic.__exit__(exc_type, exc, tb)
 

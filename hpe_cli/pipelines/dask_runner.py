@@ -10,6 +10,8 @@ processes (for testing and single machines). Dask is imported lazily.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 from ..errors import HpeError
 
 
@@ -28,6 +30,19 @@ def _client(address: str, workers: int):
         raise HpeError(f"--scheduler {address}: cannot connect ({exc})") from None
 
 
+@contextmanager
+def dask_client(address: str, workers: int = 1):
+    """A Dask ``Client`` for ``address`` (``"local"``: a ``LocalCluster`` of ``workers`` single-threaded
+    processes, closed on leaving)."""
+    client, cluster = _client(address, workers)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
 def run_tasks(fn, tasks: list, address: str, workers: int = 1):
     """Yield ``fn(task)`` for every task, in order, computed on Dask.
 
@@ -44,18 +59,13 @@ def run_tasks(fn, tasks: list, address: str, workers: int = 1):
     """
     if not tasks:
         return
-    client, cluster = _client(address, workers)
-    try:
+    with dask_client(address, workers) as client:
         futures = [client.submit(fn, t, pure=False) for t in tasks]
         try:
             for f in futures:
                 yield f.result()
         finally:
             client.cancel(futures)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
-__all__ = ["run_tasks"]
+__all__ = ["run_tasks", "dask_client"]

@@ -414,18 +414,12 @@ def run_unit(task: dict) -> dict:
     JSON exists is complete). Returns the counts; nothing big crosses processes."""
     import os
 
-    import pyarrow as pa
-
     from ..io import arrow_table
 
     res = process_chunk(task["chunk"], task["cameras"], task["sequence"], task["cfg"])
     stem = task["stem"]
-    for suffix, tab in (("labels", arrow_table(res["table"])), ("rejects", arrow_table(res["rejects"],
-                                                                                      _reject_schema()))):
-        tmp = f"{stem}.{suffix}.arrow.tmp"
-        with pa.OSFile(tmp, "wb") as sink, pa.ipc.new_file(sink, tab.schema) as w:
-            w.write_table(tab)
-        os.replace(tmp, f"{stem}.{suffix}.arrow")
+    _write_part(f"{stem}.labels.arrow", arrow_table(res["table"]))
+    _write_part(f"{stem}.rejects.arrow", arrow_table(res["rejects"], _reject_schema()))
     stats = unit_stats(res, task["cfg"])
     import json
 
@@ -514,46 +508,33 @@ def run(p: Plan, cfg: Config, workers: int = 1):
         return
     from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=_init_worker,
+    from .pools import in_order, mp_context
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp_context(), initializer=_init_worker,
                              initargs=(p.cameras, p.sequence, cfg)) as ex:
-        yield from _bounded_in_order(ex, _work, p.chunks, workers)
+        yield from in_order(ex, _work, p.chunks, 2 * workers)
 
 
-def _mp_context():
-    import multiprocessing as mp
+def format_unit(task: dict) -> int:
+    """Format one unit's labels part as output text (COCO annotations or WHENet lines) into its text part,
+    by an atomic rename; return the number of rows. Ids come with the task (the parent assigns them in order),
+    so the text is the bytes the streaming writer makes for these rows."""
+    import os
 
-    return mp.get_context("spawn" if mp.get_start_method(allow_none=True) == "spawn" else "fork")
+    t = _read_part(task["labels"])
+    if task["fmt"] == "coco":
+        from ..io.coco import annotations_text
 
+        text = annotations_text(t, task["image_ids"], task["first_id"], path=task["path"], offset=task["offset"])
+    else:
+        from ..io.whenet_txt import whenet_text
 
-def _local_units(tasks: list, workers: int):
-    """Yield ``run_unit`` results in order from a local process pool (each
-    worker writes its own parts; only counts come back). At most
-    ``2 * workers`` units are in flight, so an error or a signal stops the
-    pool after a few units, and no future is cancelled under the pool's feet."""
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context()) as ex:
-        yield from _bounded_in_order(ex, run_unit, tasks, workers)
-
-
-def _bounded_in_order(ex, fn, items, workers: int):
-    """``fn(item)`` on the pool ``ex`` for every item, results yielded in input order, at most ``2 * workers``
-    submitted at a time (an error or a signal stops the pool after a few items; no future is cancelled under
-    the pool's feet)."""
-    from collections import deque
-
-    pending: deque = deque()
-    it = iter(items)
-    for item in it:
-        pending.append(ex.submit(fn, item))
-        if len(pending) >= 2 * workers:
-            break
-    while pending:
-        res = pending.popleft().result()
-        nxt = next(it, None)
-        if nxt is not None:
-            pending.append(ex.submit(fn, nxt))
-        yield res
+        text = whenet_text(t, task["path"], task["offset"])
+    tmp = task["text"] + ".tmp"
+    with open(tmp, "wb") as fh:
+        fh.write(text)
+    os.replace(tmp, task["text"])
+    return t.num_rows
 
 
 def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:
@@ -612,20 +593,30 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     processes, or a Dask cluster at ``scheduler``, ``"local"`` for a
     ``LocalCluster``), writes its own part files next to the output, and
     returns only its counts; the parts are appended to the outputs in unit
-    order and removed at the commit, so the output is the same bytes
-    whoever computed it. ``resume`` keeps the parts of an interrupted run
-    (same inputs and options) and computes only the missing units.
+    order (and removed as they are, unless ``resume``), so the output is
+    the same bytes whoever computed it. ``resume`` keeps the parts of an
+    interrupted run (same inputs and options) and computes only the missing
+    units.
 
     ``fmt`` is ``table`` (streamed to Parquet/CSV), ``coco`` or ``whenet``
-    (collected, then written by :mod:`hpe_cli.io.coco` /
-    :mod:`hpe_cli.io.whenet_txt`). The rejects table is streamed too.
+    (streamed by :class:`hpe_cli.io.coco.CocoWriter` /
+    :class:`hpe_cli.io.whenet_txt.WhenetWriter`). With workers, text is
+    made by the workers too: once a unit is computed, this process gives its
+    rows their ids (in order: image ids by first appearance, annotation ids
+    by row) and submits a second task, :func:`format_unit`, that writes the
+    unit's text part; the parts are appended to the output in order (copied
+    by the kernel), so the heavy float formatting runs in parallel and the
+    bytes are those of the one-process run. The rejects table is streamed
+    too.
     ``per_sequence``, if a list, receives one :class:`Stats` per sequence.
     """
     import json
     import shutil
     from contextlib import ExitStack
 
-    from ..io import TableWriter, arrow_table, check_output, system_metadata
+    from collections import deque
+
+    from ..io import TableWriter, arrow_table, system_metadata
     from ..rotation import get_system
 
     plans = p if isinstance(p, (list, tuple)) else [p]
@@ -647,7 +638,6 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
         if getattr(cfg, k):
             relabel[k] = getattr(cfg, k)
     meta = {**system_metadata(system), "hpe:relabel": json.dumps(relabel)}
-    collected = []
     rschema = _reject_schema()
     units = make_units(plans)
     use_parts = workers > 1 or scheduler is not None or resume
@@ -661,21 +651,16 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     tasks = [unit_task(plans, cfg, u, parts) for u in units]
     mc = MinChange(cfg.min_change) if cfg.min_change else None
 
-    def results():
+    def results(pool):
         if not use_parts:
             for t in tasks:
                 res = process_chunk(t["chunk"], t["cameras"], t["sequence"], t["cfg"])
                 yield unit_stats(res, cfg), arrow_table(res["table"]), arrow_table(res["rejects"], rschema)
             return
-        todo = [t for t in tasks if not Path(t["stem"] + ".json").exists()]
-        if scheduler is not None:
-            from .dask_runner import run_tasks
+        from .pools import in_order
 
-            computed = run_tasks(run_unit, todo, scheduler, workers)
-        elif workers > 1 and len(todo) > 1:
-            computed = _local_units(todo, workers)
-        else:
-            computed = (run_unit(t) for t in todo)
+        todo = [t for t in tasks if not Path(t["stem"] + ".json").exists()]
+        computed = in_order(pool, run_unit, todo)
         need = {t["stem"] for t in todo}
         for t in tasks:
             stem = t["stem"]
@@ -684,19 +669,38 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
             stats = json.loads(Path(stem + ".json").read_text())
             yield stats, _read_part(stem + ".labels.arrow"), _read_part(stem + ".rejects.arrow")
 
+    def drop_parts(stem):  # a consumed unit's parts, unless they are kept for --resume
+        if not resume:
+            for suffix in (".labels.arrow", ".rejects.arrow", ".json", ".kept.arrow"):
+                Path(stem + suffix).unlink(missing_ok=True)
+
+    text_parts = use_parts and fmt != "table"
+    formatting: deque = deque()  # (future, text part, rows, stem) in output order
+
+    def append_formatted(limit):
+        """Append the formatted units at the head of the queue: all that are done, and more while over limit."""
+        while formatting and (len(formatting) > limit or formatting[0][0].done()):
+            fut, text, rows, stem = formatting.popleft()
+            fut.result()
+            out.append_file(text, rows)  # opened before it returns: the part can go at once
+            Path(text).unlink(missing_ok=True)
+            drop_parts(stem)
+
+    from .pools import unit_pool
+
     try:
         with ExitStack() as stack:
             if fmt == "table":
                 out = stack.enter_context(TableWriter(output, overwrite, meta))
             else:
-                out = _streaming_writer(fmt, output, overwrite)  # helper `read`'s CocoWriter/WhenetWriter
-                if out is None:
-                    check_output(output, overwrite)
-                else:
-                    out = stack.enter_context(out)
+                out = stack.enter_context(_text_writer(fmt, output, overwrite))
             rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
-            for (si, _), (stats, t, r) in zip(units, results()):
+            pool = stack.enter_context(unit_pool(workers if use_parts else 1, scheduler if use_parts else None))
+            ahead = 2 * getattr(pool, "workers", 1)
+            registered = 0  # rows given ids so far (text formats on parts)
+            for (si, _), task, (stats, t, r) in zip(units, tasks, results(pool)):
                 seq_stats[si].add_unit(stats)
+                kept = None
                 if mc is not None:
                     t, moved = mc.apply(t, rschema)
                     if moved is not None:
@@ -704,19 +708,28 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
                         import pyarrow as pa
 
                         r = pa.concat_tables([r, moved])
-                if out is not None:
-                    out.write(t)
-                else:
-                    collected.append(t)
+                        kept = t
                 if rej is not None:
                     rej.write(r)
+                if text_parts:  # ids here, in order; the text is made by a worker
+                    stem = task["stem"]
+                    labels = stem + ".labels.arrow"
+                    if kept is not None:  # --min-change dropped rows: the worker formats what is kept
+                        labels = stem + ".kept.arrow"
+                        _write_part(labels, kept)
+                    job2 = {"fmt": fmt, "labels": labels, "text": f"{stem}.{fmt}.text", "path": str(output),
+                            "offset": registered, "first_id": registered + 1,
+                            "image_ids": out.image_ids(t, registered) if fmt == "coco" else None}
+                    registered += t.num_rows
+                    formatting.append((pool.submit(format_unit, job2), job2["text"], t.num_rows, stem))
+                    append_formatted(ahead)
+                else:
+                    out.write(t)
+                    if use_parts:
+                        drop_parts(task["stem"])
                 if bar is not None:
                     bar.update(stats["frames"])
-            if fmt != "table" and out is None:
-                import pyarrow as pa
-
-                frame = pa.concat_tables(collected).to_pandas()
-                _write_other(fmt, frame, output, overwrite)
+            append_formatted(0)
     except BaseException:
         # an interrupted run keeps its parts only when it was asked to be resumable (--resume);
         # otherwise nothing of it is left behind (the output transaction's promise)
@@ -733,35 +746,29 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     return total
 
 
-def _streaming_writer(fmt: str, output, overwrite: bool):
-    """A streaming COCO / WHENet writer when this build has one (flat memory), else None."""
-    try:
-        if fmt == "coco":
-            from ..io.coco import CocoWriter
-
-            return CocoWriter(output, overwrite, image_size_cols=("image_width", "image_height"))
-        from ..io.whenet_txt import WhenetWriter
-
-        return WhenetWriter(output, overwrite)
-    except ImportError:
-        return None
-
-
-def _write_other(fmt: str, frame, output, overwrite: bool) -> None:
-    try:
-        if fmt == "coco":
-            from ..io.coco import write_coco as writer
-        else:
-            from ..io.whenet_txt import write_whenet as writer
-    except ImportError:
-        raise HpeError(f"--format {fmt}: its writer (hpe_cli.io.{'coco' if fmt == 'coco' else 'whenet_txt'}) "
-                       "is not available in this build") from None
+def _text_writer(fmt: str, output, overwrite: bool):
+    """The streaming COCO or WHENet writer (flat memory; units formatted elsewhere are appended as files)."""
     if fmt == "coco":
-        writer(frame, output, overwrite=overwrite, image_size_cols=("image_width", "image_height"))
-    else:
-        writer(frame, output, overwrite=overwrite)
+        from ..io.coco import CocoWriter
+
+        return CocoWriter(output, overwrite, image_size_cols=("image_width", "image_height"))
+    from ..io.whenet_txt import WhenetWriter
+
+    return WhenetWriter(output, overwrite)
+
+
+def _write_part(path, table) -> None:
+    """An Arrow IPC part file, by an atomic rename (a part that exists is complete)."""
+    import os
+
+    import pyarrow as pa
+
+    tmp = f"{path}.tmp"
+    with pa.OSFile(tmp, "wb") as sink, pa.ipc.new_file(sink, table.schema) as w:
+        w.write_table(table)
+    os.replace(tmp, path)
 
 
 __all__ = ["Config", "Plan", "plan", "plan_many", "find_sequences", "process_chunk", "run", "run_unit",
            "write_outputs", "parse_frames", "Stats", "RmseStats", "MinChange", "REASONS", "CHUNK_FRAMES",
-           "LEGACY_COLS", "REJECT_COLS", "WHENET_HAGGLING", "CAMERA_PRESETS", "parts_dir_for"]
+           "LEGACY_COLS", "REJECT_COLS", "WHENET_HAGGLING", "CAMERA_PRESETS", "parts_dir_for", "format_unit"]

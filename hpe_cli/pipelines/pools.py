@@ -1,0 +1,124 @@
+"""Where independent units of work run: this process, local worker processes, or Dask distributed.
+
+:func:`unit_pool` gives an object with ``submit(fn, arg) -> future`` (futures
+have ``result()`` and ``done()``): a :class:`concurrent.futures.ProcessPoolExecutor`
+for ``workers > 1`` (the default engine), a Dask ``Client`` for a
+``scheduler`` (the optional extra, see :mod:`.dask_runner`), or this process.
+:func:`in_order` maps a function over items on such a pool with a bounded
+number in flight and yields the results in input order, so a job can chain
+stages (compute a unit, then format it) on one pool and still write its
+output in order. No scheduling of our own: the engines schedule.
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+
+class _Inline:
+    """``submit`` runs the function at once, in this process (one worker, no scheduler)."""
+
+    workers = 1
+
+    def submit(self, fn, arg):
+        from concurrent.futures import Future
+
+        fut = Future()
+        try:
+            fut.set_result(fn(arg))
+        except Exception as exc:  # a BaseException (a signal) propagates at once
+            fut.set_exception(exc)
+        return fut
+
+
+class _DaskPool:
+    def __init__(self, client, workers: int):
+        self.client = client
+        try:
+            threads = sum(client.nthreads().values())
+        except Exception:  # an old or unusual client: fall back to what was asked
+            threads = 0
+        self.workers = max(int(workers), int(threads), 1)
+        self._futures: list = []
+
+    def submit(self, fn, arg):
+        fut = self.client.submit(fn, arg, pure=False)
+        self._futures.append(fut)
+        if len(self._futures) > 4 * self.workers:
+            self._futures = [f for f in self._futures if not f.done()]
+        return fut
+
+    def cancel(self) -> None:
+        pending = [f for f in self._futures if not f.done()]
+        if pending:
+            self.client.cancel(pending)
+
+
+def mp_context():
+    """``fork`` where the platform's default allows it (fast start, no re-import), else ``spawn``."""
+    import multiprocessing as mp
+
+    return mp.get_context("spawn" if mp.get_start_method(allow_none=True) == "spawn" else "fork")
+
+
+@contextmanager
+def unit_pool(workers: int = 1, scheduler: str | None = None):
+    """A pool for unit functions (module-level, picklable by reference, returning small results).
+
+    Parameters
+    ----------
+    workers : int
+        Local worker processes (``> 1``: a process pool; ``1``: this process), or
+        the size of a Dask ``LocalCluster`` with ``scheduler="local"``.
+    scheduler : str, optional
+        A Dask distributed scheduler address (``tcp://host:8786``) or ``"local"``.
+
+    Notes
+    -----
+    On leaving, a process pool waits for the units under way; callers keep
+    only a few in flight (:func:`in_order`), so an error or a signal stops the
+    job after those few.
+    """
+    if scheduler is not None:
+        from .dask_runner import dask_client
+
+        with dask_client(scheduler, workers) as client:
+            pool = _DaskPool(client, workers)
+            try:
+                yield pool
+            finally:
+                pool.cancel()
+    elif workers > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=workers, mp_context=mp_context()) as ex:
+            ex.workers = workers
+            yield ex
+    else:
+        yield _Inline()
+
+
+def in_order(pool, fn, items, ahead: int | None = None):
+    """Yield ``fn(item)`` for every item, computed on ``pool``, in input order.
+
+    At most ``ahead`` (default: twice the pool's workers) are submitted
+    beyond the one being waited for, so memory and the work lost to an error
+    stay bounded.
+    """
+    from collections import deque
+
+    ahead = max(1, int(ahead if ahead is not None else 2 * getattr(pool, "workers", 1)))
+    pending: deque = deque()
+    it = iter(items)
+    for item in it:
+        pending.append(pool.submit(fn, item))
+        if len(pending) >= ahead:
+            break
+    while pending:
+        res = pending.popleft().result()
+        nxt = next(it, None)
+        if nxt is not None:
+            pending.append(pool.submit(fn, nxt))
+        yield res
+
+
+__all__ = ["unit_pool", "in_order", "mp_context"]
