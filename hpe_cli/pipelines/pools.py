@@ -61,7 +61,7 @@ def mp_context():
 
 
 @contextmanager
-def unit_pool(workers: int = 1, scheduler: str | None = None):
+def unit_pool(workers: int = 1, scheduler: str | None = None, preload=()):
     """A pool for unit functions (module-level, picklable by reference, returning small results).
 
     Parameters
@@ -71,6 +71,10 @@ def unit_pool(workers: int = 1, scheduler: str | None = None):
         the size of a Dask ``LocalCluster`` with ``scheduler="local"``.
     scheduler : str, optional
         A Dask distributed scheduler address (``tcp://host:8786``) or ``"local"``.
+    preload : iterable of str
+        Modules to import here before local workers are forked, so that each
+        worker starts with them instead of importing them again (``fork`` only;
+        pandas alone takes about 0.2 s to import, per process).
 
     Notes
     -----
@@ -88,9 +92,14 @@ def unit_pool(workers: int = 1, scheduler: str | None = None):
             finally:
                 pool.cancel()
     elif workers > 1:
+        import importlib
         from concurrent.futures import ProcessPoolExecutor
 
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp_context()) as ex:
+        ctx = mp_context()
+        if ctx.get_start_method() == "fork":
+            for name in preload:
+                importlib.import_module(name)
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
             ex.workers = workers
             yield ex
     else:
