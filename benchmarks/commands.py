@@ -10,7 +10,11 @@ time and peak RSS of that process alone):
 * ``hpe audit`` (JSON report);
 * ``hpe augment --hflip`` (labels only);
 * the COCO and WHENet writers against the Parquet writer on the same
-  relabel-like table (in this process).
+  relabel-like table (in this process);
+* ``hpe relabel-panoptic`` on 5,000 and 20,000 synthetic frames (views/s, one
+  process and ``--workers 2``, next to an orjson parse of the tar), and its
+  output formats (Parquet, COCO, WHENet) with landmarks on -- the runs of
+  ``benchmarks/panoptic.py``.
 
 Floors, measured in the same run the same way: a pyarrow script that reads
 the same input and writes a table of the output's width with the encoding
@@ -65,7 +69,10 @@ def timed(cmd, env) -> tuple:
         raise SystemExit(f"failed ({res.returncode}): {' '.join(map(str, cmd))}\n{res.stderr[-2000:]}")
     line = [ln for ln in res.stderr.splitlines() if ln.startswith("@@")][-1]
     sec, kb, user, system = line[2:].split()
-    return float(sec), int(kb) / 1024, float(user) + float(system)
+    # a process that reports its own peak (VmHWM) is believed over GNU time's, which can carry the launching
+    # process's peak across exec
+    own = [ln.split()[1] for ln in res.stdout.splitlines() if ln.startswith("@@hwm")]
+    return float(sec), int(own[-1] if own else kb) / 1024, float(user) + float(system)
 
 
 def best(cmd, env, repeat):
@@ -85,6 +92,7 @@ with w:
     for b in pq.ParquetFile(inp, pre_buffer=False, buffer_size=1 << 20).iter_batches(batch_size=65536,
                                                                                      use_threads=False):
         w.write(b)
+print("@@hwm", [ln.split()[1] for ln in open("/proc/self/status") if ln.startswith("VmHWM")][0])
 """
 
 
@@ -145,6 +153,11 @@ def main():
     ap.add_argument("--repeat", type=int, default=1, help="runs per measurement (best time, worst memory)")
     ap.add_argument("--views", type=int, nargs="*", default=[775_000],
                     help="rows of the writer benchmark (775,000 = 5,000 Panoptic frames x 5 people x 31 cameras)")
+    ap.add_argument("--frames", type=int, nargs="*", default=[5_000, 20_000],
+                    help="Panoptic frames for relabel-panoptic (benchmarks/panoptic.py: 1 process and --workers 2, "
+                         "landmarks off); none skips it")
+    ap.add_argument("--formats-frames", type=int, default=5_000,
+                    help="frames for relabel-panoptic's output formats (Parquet, COCO, WHENet; landmarks on); 0 skips")
     args = ap.parse_args()
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     for n in args.views:
@@ -194,6 +207,17 @@ def main():
                 tf, mf, cf = best(fcmd, env, args.repeat)
                 print(f"  {name:<28} {th:7.2f} {tf:7.2f} {th / tf:6.2f} {ch:7.2f} {cf:9.2f} {ch / cf:9.2f} "
                       f"{mh:7.0f} {mf:8.0f}  {os.getloadavg()[0]:.1f}", flush=True)
+
+
+    if args.frames or args.formats_frames:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import panoptic
+
+        with tempfile.TemporaryDirectory(dir=os.environ.get("HPE_BENCH_TMP")) as tmp:
+            for n in args.frames:
+                panoptic.bench_labels(n, Path(tmp), max(3, args.repeat), dask=False)
+            if args.formats_frames:
+                panoptic.bench_formats(args.formats_frames, Path(tmp), max(1, args.repeat))
 
 
 if __name__ == "__main__":
