@@ -690,13 +690,14 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
 
     try:
         with ExitStack() as stack:
+            # the pool first: its workers start (and import what a unit needs) while the writers are set up
+            pool = stack.enter_context(unit_pool(workers if use_parts else 1, scheduler if use_parts else None,
+                                                 warm=WORKER_IMPORTS))
             if fmt == "table":
                 out = stack.enter_context(TableWriter(output, overwrite, meta))
             else:
                 out = stack.enter_context(_text_writer(fmt, output, overwrite))
             rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
-            pool = stack.enter_context(unit_pool(workers if use_parts else 1, scheduler if use_parts else None,
-                                                 preload=WORKER_PRELOAD))
             ahead = 2 * getattr(pool, "workers", 1)
             registered = 0  # rows given ids so far (text formats on parts)
             for (si, _), task, (stats, t, r) in zip(units, tasks, results(pool)):
@@ -747,9 +748,9 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     return total
 
 
-#: what a unit imports on its first run (pyarrow converts Python objects through pandas), imported before
-#: local workers fork so that each does not import it again
-WORKER_PRELOAD = ("pandas", "pyarrow.compute", "pyarrow.ipc", "pyarrow.pandas_compat", "hpe_cli.io")
+#: what a unit imports on its first run (pyarrow converts Python objects through pandas): local workers
+#: import it as they start, while the parent prepares the job
+WORKER_IMPORTS = ("pandas", "pyarrow.compute", "pyarrow.ipc", "pyarrow.pandas_compat", "hpe_cli.io")
 
 
 def _text_writer(fmt: str, output, overwrite: bool):
