@@ -117,14 +117,16 @@ def _long_sequence(dst: Path, frames: int = 260) -> Path:
     return dst / SYNTH.name
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM])
-def test_signal_stops_relabel_workers(tmp_path, sig):
+@pytest.mark.parametrize("sig,output", [(signal.SIGTERM, "labels.parquet"), (signal.SIGTERM, "train.json")])
+def test_signal_stops_relabel_workers(tmp_path, sig, output):
+    """Parquet, and COCO whose text the workers make in a second task per unit (parts and text parts)."""
     seq = _long_sequence(tmp_path)
     snap = tree(tmp_path)
-    proc = _popen("relabel-panoptic", seq, "-o", tmp_path / "labels.parquet", "--workers", "2",
+    proc = _popen("relabel-panoptic", seq, "-o", tmp_path / output, "--workers", "2",
                   "--rejects", tmp_path / "rej.csv", "-q")
-    if not _wait_for(lambda: len(_children(proc.pid)) >= 2, proc):
-        pytest.fail("no workers seen: " + proc.communicate()[1].decode())
+    parts = tmp_path / f".{output}.hpe-parts"
+    if not _wait_for(lambda: len(_children(proc.pid)) >= 2 and parts.is_dir() and any(parts.iterdir()), proc):
+        pytest.fail("no workers or parts seen: " + proc.communicate()[1].decode())
     kids = _children(proc.pid)
     _interrupt(proc, sig, tmp_path, snap, kids)
 
