@@ -8,6 +8,17 @@ settings.register_profile("hpe", max_examples=60, deadline=None)
 settings.load_profile("hpe")
 
 REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def sample_data_script():
+    """``scripts/make_sample_data.py`` as a module (synthetic Panoptic sequences, tars, videos, templates)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 @pytest.fixture

@@ -1,5 +1,4 @@
 """Issue 13 "Reading back": hpe export's whenet and directmhp layouts read back by open_table give the same labels."""
-from pathlib import Path
 
 import cv2
 import numpy as np

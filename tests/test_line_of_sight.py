@@ -1,7 +1,5 @@
 """Line-of-sight ("crop") labels, SPEC §10: oracles are SciPy rotation vectors, and the real pizza1
 faces' own 2-D landmarks as the image shows them."""
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,8 +8,8 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from hpe_cli.geometry.line_of_sight import camera_to_crop_labels, ray_rotation
+from conftest import sample_data_script
 
-ROOT = Path(__file__).resolve().parents[1]
 E = np.diag([1.0, -1.0, -1.0])
 
 
@@ -47,10 +45,7 @@ def test_on_axis_is_identity_and_crop_label_formula():
 
 
 def _template():
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.face70_template()
+    return sample_data_script().face70_template()
 
 
 def _axis_errors(t, tpl):

@@ -1,7 +1,6 @@
 """Panoptic as downloaded: hdFace3d.tar in place, hdVideos, several sequences, units with parts
 (workers, resume, Dask), sampling rules and geometry validation. Oracles: the extracted folder,
 frames that encode their own number, an uninterrupted single-process run, and hand counts."""
-import importlib.util
 import json
 import shutil
 from pathlib import Path
@@ -16,18 +15,13 @@ from hpe_cli.datasets import panoptic as pan
 from hpe_cli.datasets.panoptic_video import VideoFrames
 from hpe_cli.errors import HpeError
 from hpe_cli.pipelines import panoptic as job
+from conftest import sample_data_script
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _script():
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
-
-GEN = _script()
+GEN = sample_data_script()
 
 
 @pytest.fixture(scope="module")

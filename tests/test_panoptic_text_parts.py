@@ -5,30 +5,22 @@ and, independently, ``json`` parsing of the COCO document checked against the Pa
 Several sequences and many small units (4 frames each) so ids cross unit and sequence boundaries; with
 ``--min-change`` (units formatted from the rows it keeps), with ``--resume``, and on a Dask ``LocalCluster``.
 """
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import sample_data_script
 
 from hpe_cli.errors import HpeError
 from hpe_cli.pipelines import panoptic as job
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _gen():
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @pytest.fixture(scope="module")
 def plans(tmp_path_factory):
-    gen = _gen()
+    gen = sample_data_script()
     root = tmp_path_factory.mktemp("text")
     gen.make_synthetic(root / "seqA", n_frames=18, n_people=2, n_cameras=3, first_frame=3)
     gen.make_synthetic(root / "seqB", n_frames=10, n_people=2, n_cameras=3, seed=5, special=False)

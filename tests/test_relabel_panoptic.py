@@ -1,6 +1,5 @@
 """The relabel core and the Panoptic job: known ground truth, WHENet's legacy chain, and the real frames."""
 import csv
-import importlib.util
 import json
 from pathlib import Path
 
@@ -8,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from conftest import canonical_A
+from conftest import canonical_A, sample_data_script
 from hpe_cli.geometry.reference import panoptic_pairs, reference_head
 from hpe_cli.pipelines import panoptic as job
 from hpe_cli.pipelines.relabel import fit_faces, label_matrices, legacy_whenet_labels
@@ -17,12 +16,6 @@ from hpe_cli.rotation import canonical_to_labels
 ROOT = Path(__file__).resolve().parents[1]
 SYNTH = ROOT / "sample_data" / "panoptic_synth"
 
-
-def _script():
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _scipy_300wlp(A):
@@ -121,7 +114,7 @@ def _numbers(obj):
 
 def test_sample_is_reproduced_by_the_script(tmp_path):
     """The shipped sample is what the script makes (to float rounding: libm may differ by an ulp)."""
-    _script().make_synthetic(tmp_path / "panoptic_synth")
+    sample_data_script().make_synthetic(tmp_path / "panoptic_synth")
     made = sorted(q.relative_to(tmp_path / "panoptic_synth") for q in (tmp_path / "panoptic_synth").rglob("*.*"))
     assert made == sorted(q.relative_to(SYNTH) for q in SYNTH.rglob("*.*"))
     for rel in made:

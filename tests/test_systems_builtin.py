@@ -1,5 +1,4 @@
 """The nine new built-in systems: worked examples rebuilt by hand/SciPy, round trips, improper frames, real data."""
-import itertools
 import math
 
 import numpy as np
