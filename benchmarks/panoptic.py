@@ -73,7 +73,8 @@ print(json.dumps({{"views": views, "seconds": dt, "rss_mb": peak, "worker_rss_mb
 """
 
 
-def _gen():
+def sample_data_script():
+    """``scripts/make_sample_data.py`` as a module (also used by the other benchmarks)."""
     spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
@@ -109,7 +110,7 @@ def _median(xs):
 def _sequence(n_frames: int, tmp: Path) -> Path:
     seq = tmp / f"seq{n_frames}"
     if not (seq / "hdFace3d.tar").exists():
-        gen = _gen()
+        gen = sample_data_script()
         t = time.perf_counter()
         gen.make_synthetic(seq, n_frames, 5, 31, special=False)
         gen.pack_tar(seq)
@@ -176,7 +177,7 @@ def bench_video(n_frames: int, size, tmp: Path) -> None:
 
     from hpe_cli.datasets.panoptic_video import VideoFrames
 
-    gen = _gen()
+    gen = sample_data_script()
     seq = tmp / "vid"
     gen.make_synthetic(seq, 2, 1, 1, special=False, first_frame=0)
     path = gen.write_videos(seq, n_frames - 1, size)[0]

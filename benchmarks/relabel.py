@@ -27,7 +27,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import resource
 import sys
@@ -37,14 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from panoptic import sample_data_script  # benchmarks/panoptic.py, beside this file
 
-
-def _load_script():
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 # ---------------------------------------------------------- WHENet-style loop
@@ -159,7 +152,7 @@ def main(argv=None) -> None:
     from hpe_cli.geometry.reference import panoptic_pairs, reference_head
     from hpe_cli.pipelines import panoptic as job
 
-    gen = _load_script()
+    gen = sample_data_script()
     with tempfile.TemporaryDirectory() as tmp:
         seq = Path(a.keep) if a.keep else Path(tmp) / "bench_seq"
         if not (seq / "hdFace3d").is_dir():

@@ -11,10 +11,8 @@ from __future__ import annotations
 import argparse
 import resource
 import tempfile
-import time
 from pathlib import Path
 
-import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 from scipy.spatial.transform import Rotation
@@ -23,14 +21,7 @@ from hpe_cli.pipelines.convert import run_convert
 from hpe_cli.rotation import get_system
 from hpe_cli.rotation import storage as st
 
-
-def best_of(fn, repeat=3):
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+from convert import best_of  # benchmarks/convert.py, beside this file
 
 
 def line(name, rows, seconds):

@@ -20,7 +20,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import resource
 import statistics
 import sys
@@ -33,13 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from hpe_cli.datasets import panoptic as pan  # noqa: E402
-
-
-def _generator():
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from panoptic import sample_data_script  # noqa: E402  (benchmarks/panoptic.py, beside this file)
 
 
 def build(root: Path, n: int) -> Path:
@@ -47,7 +40,7 @@ def build(root: Path, n: int) -> Path:
     seq = root / f"seq{n}"
     tar = seq / "hdFace3d.tar"
     if not tar.exists():
-        gen = _generator()
+        gen = sample_data_script()
         gen.make_synthetic(seq, n_frames=n, n_people=1, n_cameras=3, special=False)
         gen.pack_tar(seq)
     return tar
