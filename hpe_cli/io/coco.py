@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import HpeError
 from .layout import ANGLE_COLS, BBOX_COLS, landmark_count
-from .writers import AtomicFile
+from .writers import StreamWriter
 
 CATEGORIES = [{"supercategory": "person", "id": 1, "name": "person"}]
 #: written for a missing landmark (JSON has no NaN); AFLW2000-3D's own marker
@@ -160,7 +160,7 @@ def annotations_text(frame, image_ids, first_id: int, *, path="<coco>", offset: 
     return texts[0] if len(texts) == 1 else b",".join(texts)
 
 
-class CocoWriter:
+class CocoWriter(StreamWriter):
     """Write DirectMHP-style COCO JSON batch by batch, atomically (see :func:`write_coco`).
 
     ``annotations`` are written as they come; ``images`` (one entry per
@@ -176,29 +176,25 @@ class CocoWriter:
     the next chunk is formatted.
     """
 
+    separator = b","
+
     def __init__(self, path, overwrite: bool = False, *, width=None, height=None, info: dict | None = None,
                  image_size_cols=("image_width", "image_height")):
-        self._atomic = AtomicFile(path, overwrite)  # refuse an existing file before doing any work
-        self.path = Path(path)
+        super().__init__(path, overwrite)
         self.width, self.height, self.info = width, height, dict(info or {})
         self.size_cols = tuple(image_size_cols)
         self.images: dict = {}  # name -> [id, width, height]
-        self.rows = 0
-        self._out = None
 
-    def __enter__(self):
+    def head(self) -> bytes:
         import orjson
 
-        from .background import BackgroundFile
+        return b'{"info":' + orjson.dumps(self.info) + b',"licenses":[],"annotations":['
 
-        self._tmp = self._atomic.__enter__()
-        try:
-            self._out = BackgroundFile(open(self._tmp, "wb"))
-        except BaseException as e:
-            self._atomic.__exit__(type(e), e, None)
-            raise
-        self._out.write(b'{"info":' + orjson.dumps(self.info) + b',"licenses":[],"annotations":[')
-        return self
+    def tail(self) -> bytes:
+        import orjson
+
+        images = [{"file_name": f, "height": h, "width": w, "id": i} for f, (i, w, h) in self.images.items()]
+        return b'],"images":' + orjson.dumps(images) + b',"categories":' + orjson.dumps(CATEGORIES) + b"}"
 
     #: rows encoded at a time (bounds the text alive at once)
     CHUNK = CHUNK_ROWS
@@ -209,10 +205,11 @@ class CocoWriter:
         missing = [c for c in ["image"] + BBOX_COLS + ANGLE_COLS if c not in names]
         if missing:
             raise HpeError(f"{self.path}: expected columns {', '.join(missing)} in the label table")
-        n = len(frame)
-        for lo in range(0, n, self.CHUNK):
+        for lo in range(0, len(frame), self.CHUNK):
             part = frame.iloc[lo:lo + self.CHUNK] if hasattr(frame, "iloc") else frame.slice(lo, self.CHUNK)
-            self._write(part, names)
+            off = self.rows
+            ids = self.image_ids(part, off)
+            self.append_text(annotations_text(part, ids, off + 1, path=self.path, offset=off), len(part))
 
     def _sizes(self, frame, names, n: int, off: int) -> list:
         sizes = []
@@ -231,17 +228,22 @@ class CocoWriter:
                                "'images' entries")
         return sizes
 
-    def _image_ids(self, frame, names, n: int, off: int) -> np.ndarray:
-        """Each row's image id; new images are remembered with their size (checked: one size per image)."""
-        codes, files = _image_codes(frame, self.path, off)
-        sizes = self._sizes(frame, names, n, off)
+    def image_ids(self, frame, offset: int = 0) -> np.ndarray:
+        """Each row's image id (int64), the batch's new images remembered with their size.
+
+        Ids are 1, 2, ... in order of first appearance over everything passed
+        here; one image must keep one size (checked). ``offset`` is the index
+        of the batch's first row in the whole table (for error messages).
+        """
+        codes, files = _image_codes(frame, self.path, offset)
+        sizes = self._sizes(frame, _names(frame), len(frame), offset)
         first = np.unique(codes, return_index=True)[1]  # codes are 0, 1, ... in order of first appearance
         for col, v in zip(self.size_cols, sizes):
             differ = v != v[first][codes]
             if differ.any():
                 bad = int(np.flatnonzero(differ)[0])
                 a, b = sorted((int(v[first[codes[bad]]]), int(v[bad])))
-                raise HpeError(f"{self.path}: row {off + bad}: expected one {col} per image "
+                raise HpeError(f"{self.path}: row {offset + bad}: expected one {col} per image "
                                f"({files[codes[bad]]}), got {a} and {b}")
         images = self.images
         ids = np.empty(len(files), dtype=np.int64)
@@ -252,58 +254,10 @@ class CocoWriter:
             elif e[1] != w or e[2] != h:
                 col = self.size_cols[0] if e[1] != w else self.size_cols[1]
                 a, b = (e[1], w) if e[1] != w else (e[2], h)
-                raise HpeError(f"{self.path}: row {off + int(first[c])}: expected one {col} per image ({f}), "
+                raise HpeError(f"{self.path}: row {offset + int(first[c])}: expected one {col} per image ({f}), "
                                f"got {min(a, b):g} and {max(a, b):g}")
             ids[c] = e[0]
         return ids[codes]
-
-    def _write(self, frame, names) -> None:
-        off = self.rows
-        image_ids = self.image_ids(frame, off)
-        self.append_text(annotations_text(frame, image_ids, off + 1, path=self.path, offset=off), len(frame))
-
-    def image_ids(self, frame, offset: int = 0) -> np.ndarray:
-        """Each row's image id (int64), the batch's new images remembered with their size.
-
-        Ids are 1, 2, ... in order of first appearance over everything passed
-        here; one image must keep one size (checked). ``offset`` is the index
-        of the batch's first row in the whole table (for error messages).
-        """
-        return self._image_ids(frame, _names(frame), len(frame), offset)
-
-    def append_text(self, text, rows: int) -> None:
-        """Append ``rows`` annotations already formatted by :func:`annotations_text` (bytes-like)."""
-        if rows:
-            if self.rows:
-                self._out.write(b",")
-            self._out.write(text)
-        self.rows += rows
-
-    def append_file(self, path, rows: int) -> None:
-        """Append ``rows`` annotations whose :func:`annotations_text` is the content of the file ``path``
-        (copied by the kernel where it can; the file is left in place)."""
-        if rows:
-            if self.rows:
-                self._out.write(b",")
-            self._out.copy_from(path)
-        self.rows += rows
-
-    def __exit__(self, exc_type, exc, tb):
-        import orjson
-
-        try:
-            if exc_type is None:
-                images = [{"file_name": f, "height": h, "width": w, "id": i} for f, (i, w, h) in self.images.items()]
-                self._out.write(b'],"images":' + orjson.dumps(images) + b',"categories":' +
-                                orjson.dumps(CATEGORIES) + b"}")
-                self._out.close()
-            else:
-                self._out.abort()
-        except BaseException as e:
-            self._out.abort()
-            self._atomic.__exit__(type(e), e, None)
-            raise
-        return self._atomic.__exit__(exc_type, exc, tb)
 
 
 def coco_dict(frame, *, width=None, height=None, info: dict | None = None, path="<coco>",

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
-from .writers import AtomicFile
+from .writers import StreamWriter
 
 #: column order of one line, as WHENet writes it
 WHENET_FIELDS = ("image", "yaw", "pitch", "roll")
@@ -63,53 +63,12 @@ def whenet_text(frame, path="<annotation.txt>", offset: int = 0) -> bytes:
     return "".join(whenet_lines(frame, path, offset)).encode("utf-8")
 
 
-class WhenetWriter:
+class WhenetWriter(StreamWriter):
     """Write ``annotation.txt`` batch by batch, atomically (see :func:`write_whenet`); the bytes go to the file
-    from a background thread (:class:`~hpe_cli.io.background.BackgroundFile`) while the next batch is formatted."""
-
-    def __init__(self, path, overwrite: bool = False):
-        self._atomic = AtomicFile(path, overwrite)
-        self.path = Path(path)
-        self.rows = 0
-        self._out = None
-
-    def __enter__(self):
-        from .background import BackgroundFile
-
-        self._tmp = self._atomic.__enter__()
-        try:
-            self._out = BackgroundFile(open(self._tmp, "wb"))
-        except BaseException as e:
-            self._atomic.__exit__(type(e), e, None)
-            raise
-        return self
+    from a background thread (:class:`~hpe_cli.io.writers.StreamWriter`) while the next batch is formatted."""
 
     def write(self, frame) -> None:
         self.append_text(whenet_text(frame, self.path, self.rows), len(frame))
-
-    def append_text(self, text, rows: int) -> None:
-        """Append ``rows`` lines already made by :func:`whenet_text`."""
-        if rows:
-            self._out.write(text)
-        self.rows += rows
-
-    def append_file(self, path, rows: int) -> None:
-        """Append ``rows`` lines whose :func:`whenet_text` is the content of the file ``path``."""
-        if rows:
-            self._out.copy_from(path)
-        self.rows += rows
-
-    def __exit__(self, exc_type, exc, tb):
-        try:
-            if exc_type is None:
-                self._out.close()
-            else:
-                self._out.abort()
-        except BaseException as e:
-            self._out.abort()
-            self._atomic.__exit__(type(e), e, None)
-            raise
-        return self._atomic.__exit__(exc_type, exc, tb)
 
 
 def write_whenet(frame, path, overwrite: bool = False, batch_size: int = 65536) -> Path:

@@ -174,6 +174,81 @@ class TableWriter:
         return self._atomic.__exit__(exc_type, exc, tb)
 
 
+class StreamWriter:
+    """Base of the streaming text writers (:class:`~hpe_cli.io.coco.CocoWriter`,
+    :class:`~hpe_cli.io.whenet_txt.WhenetWriter`): the output is staged like any
+    other (:class:`AtomicFile`) and its bytes go out through a
+    :class:`~hpe_cli.io.background.BackgroundFile` (a writer thread), so one
+    batch is written while the next is formatted.
+
+    A subclass formats rows and hands them to :meth:`append_text` (or
+    :meth:`append_file`, for text made elsewhere); :attr:`separator` goes
+    between two non-empty pieces, :meth:`head` opens the file and
+    :meth:`tail` closes it.
+    """
+
+    #: bytes between two non-empty pieces of rows
+    separator = b""
+
+    def __init__(self, path, overwrite: bool = False):
+        self._atomic = AtomicFile(path, overwrite)  # refuse an existing file before doing any work
+        self.path = Path(path)
+        self.rows = 0
+        self._out = None
+
+    def head(self) -> bytes:
+        """Bytes before the first row."""
+        return b""
+
+    def tail(self) -> bytes:
+        """Bytes after the last row (asked for once every row is in)."""
+        return b""
+
+    def __enter__(self):
+        from .background import BackgroundFile
+
+        self._tmp = self._atomic.__enter__()
+        try:
+            self._out = BackgroundFile(open(self._tmp, "wb"))
+            self._out.write(self.head())
+        except BaseException as e:
+            if self._out is not None:
+                self._out.abort()
+            self._atomic.__exit__(type(e), e, None)
+            raise
+        return self
+
+    def append_text(self, text, rows: int) -> None:
+        """Append ``rows`` rows already formatted as ``text`` (bytes-like)."""
+        if rows:
+            if self.rows and self.separator:
+                self._out.write(self.separator)
+            self._out.write(text)
+        self.rows += rows
+
+    def append_file(self, path, rows: int) -> None:
+        """Append ``rows`` rows whose formatted text is the content of the file ``path`` (copied by the kernel
+        where it can; the file may be removed as soon as this returns)."""
+        if rows:
+            if self.rows and self.separator:
+                self._out.write(self.separator)
+            self._out.copy_from(path)
+        self.rows += rows
+
+    def __exit__(self, exc_type, exc, tb):
+        try:
+            if exc_type is None:
+                self._out.write(self.tail())
+                self._out.close()
+            else:
+                self._out.abort()
+        except BaseException as e:
+            self._out.abort()
+            self._atomic.__exit__(type(e), e, None)
+            raise
+        return self._atomic.__exit__(exc_type, exc, tb)
+
+
 def write_table(table, path, overwrite: bool = False, metadata: dict | None = None) -> Path:
     """Write one table (pyarrow Table, dict of arrays or pandas DataFrame) atomically."""
     with TableWriter(path, overwrite, metadata) as w:
