@@ -47,11 +47,16 @@ def rotvec_to_soa(x, y, z):
         b = (1.0 - np.cos(t)) / t2
     bx, by, bz = b * x, b * y, b * z
     ax, ay, az = a * x, a * y, a * z
-    xy, xz, yz = bx * y, bx * z, by * z
-    xx, yy, zz = bx * x, by * y, bz * z
-    return [[1.0 - (yy + zz), xy - az, xz + ay],
-            [xy + az, 1.0 - (xx + zz), yz - ax],
-            [xz - ay, yz + ax, 1.0 - (xx + yy)]]
+    return _soa_from_products(bx * x, by * y, bz * z, bx * y, bx * z, by * z, ax, ay, az)
+
+
+def _soa_from_products(xx, yy, zz, xy, xz, yz, sx, sy, sz):
+    """``I + [s]x + (symmetric part)`` as nested lists ``X[row][col]`` of 1-D arrays: the matrix both Rodrigues' formula
+    (``s = sin(t) v / t``, products scaled by ``(1 - cos t) / t^2``) and the quaternion formula (``s = w v * 2/|q|^2``,
+    products scaled by ``2/|q|^2``) reduce to."""
+    return [[1.0 - (yy + zz), xy - sz, xz + sy],
+            [xy + sz, 1.0 - (xx + zz), yz - sx],
+            [xz - sy, yz + sx, 1.0 - (xx + yy)]]
 
 
 def _soa_to_array(X, shape):
@@ -98,12 +103,7 @@ def quaternion_to_soa(w, x, y, z):
     n2 = w * w + x * x + y * y + z * z
     s = 2.0 / n2
     xs, ys, zs = x * s, y * s, z * s
-    wx, wy, wz = w * xs, w * ys, w * zs
-    xx, xy, xz = x * xs, x * ys, x * zs
-    yy, yz, zz = y * ys, y * zs, z * zs
-    return [[1.0 - (yy + zz), xy - wz, xz + wy],
-            [xy + wz, 1.0 - (xx + zz), yz - wx],
-            [xz - wy, yz + wx, 1.0 - (xx + yy)]]
+    return _soa_from_products(x * xs, y * ys, z * zs, x * ys, x * zs, y * zs, w * xs, w * ys, w * zs)
 
 
 def quaternion_to_matrix(q, order: str = "wxyz") -> np.ndarray:
