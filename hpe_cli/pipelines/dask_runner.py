@@ -3,9 +3,10 @@
 The same unit functions that local worker processes run are submitted to a
 Dask cluster; each unit writes its own part files (so the cluster's workers
 must see the same file system as the client, as a shared disk or a single
-machine does) and returns only small counts. Results are yielded in
-submission order, so the output does not depend on which worker ran what.
-``address="local"`` starts a ``LocalCluster`` of ``workers`` single-threaded
+machine does) and returns only small counts. :func:`dask_client` gives the
+client that :func:`hpe_cli.pipelines.pools.unit_pool` submits to; results are
+taken in submission order (:func:`~hpe_cli.pipelines.pools.in_order`), so the
+output does not depend on which worker ran what. ``address="local"`` starts a ``LocalCluster`` of ``workers`` single-threaded
 processes (for testing and single machines). Dask is imported lazily.
 """
 from __future__ import annotations
@@ -43,29 +44,4 @@ def dask_client(address: str, workers: int = 1):
             cluster.close()
 
 
-def run_tasks(fn, tasks: list, address: str, workers: int = 1):
-    """Yield ``fn(task)`` for every task, in order, computed on Dask.
-
-    Parameters
-    ----------
-    fn : callable
-        A module-level function (picklable by reference).
-    tasks : list
-        Picklable arguments, one per unit.
-    address : str
-        ``"local"`` or a scheduler address such as ``tcp://host:8786``.
-    workers : int
-        Worker processes of the ``LocalCluster`` (ignored for an address).
-    """
-    if not tasks:
-        return
-    with dask_client(address, workers) as client:
-        futures = [client.submit(fn, t, pure=False) for t in tasks]
-        try:
-            for f in futures:
-                yield f.result()
-        finally:
-            client.cancel(futures)
-
-
-__all__ = ["run_tasks", "dask_client"]
+__all__ = ["dask_client"]
