@@ -54,14 +54,15 @@ if mode == "floor":
         n += len(orjson.loads(r.read_bytes())["people"])
     views = n * 31
 else:
-    p = job.plan(seq)
-    cfg = job.Config(landmarks=lm, system="whenet" if fmt != "table" else "300w_lp")
     kw = dict(workers=1)
     if mode == "workers2":
         kw = dict(workers=2)
     elif mode == "dask2":
         kw = dict(workers=2, scheduler="local")
-    st = job.write_outputs(p, cfg, Path(out), fmt=fmt, overwrite=True, **kw)
+    with job.worker_pool(**kw) as pool:  # as the CLI does: the workers start while the sequence is planned
+        p = job.plan(seq)
+        cfg = job.Config(landmarks=lm, system="whenet" if fmt != "table" else "300w_lp")
+        st = job.write_outputs(p, cfg, Path(out), fmt=fmt, overwrite=True, pool=pool, **kw)
     views = st.views
 dt = time.perf_counter() - t0
 me, ch = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)

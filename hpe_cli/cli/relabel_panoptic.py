@@ -109,27 +109,29 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--frames") from None
     max_rmse = DEFAULT_MAX_RMSE if max_rmse is None else max_rmse
-    plans = job.plan_many(seq_dirs, calibration, cameras, every, frames)
-    from ..io.transaction import note_input
+    # the workers start (and import what a unit needs) while the sequences are planned
+    with job.worker_pool(workers, scheduler, resume) as pool:
+        plans = job.plan_many(seq_dirs, calibration, cameras, every, frames)
+        from ..io.transaction import note_input
 
-    for p in plans:  # no output may replace a file the run reads
-        for path in {str(p.calibration), *(f.path for f in p.frames.values())}:
-            note_input(path)
-    cfg = job.Config(system=system, preset=preset, max_rmse=max_rmse, legacy=legacy_whenet,
-                     landmarks=not no_landmarks, frame=label_frame, all_views=all_views, min_change=min_change)
-    if verbose:
-        for plan in plans:
-            echo_summary([f"{plan.sequence}: calibration {plan.calibration} ({len(plan.cameras)} cameras: "
-                          f"{', '.join(plan.cameras.names[:6])}{' ...' if len(plan.cameras) > 6 else ''}); "
-                          f"frames: {len(plan.frames)} selected of {plan.available} face files, "
-                          f"{len(plan.chunks)} units"], quiet)
-    bar = progress(total=sum(len(p.frames) for p in plans), desc="relabel-panoptic", quiet=quiet, unit="frames")
-    per_seq: list = []
-    try:
-        stats = job.write_outputs(plans, cfg, output, fmt, rejects, overwrite, workers, bar, scheduler=scheduler,
-                                  resume=resume, per_sequence=per_seq)
-    finally:
-        bar.close()
+        for p in plans:  # no output may replace a file the run reads
+            for path in {str(p.calibration), *(f.path for f in p.frames.values())}:
+                note_input(path)
+        cfg = job.Config(system=system, preset=preset, max_rmse=max_rmse, legacy=legacy_whenet,
+                         landmarks=not no_landmarks, frame=label_frame, all_views=all_views, min_change=min_change)
+        if verbose:
+            for plan in plans:
+                echo_summary([f"{plan.sequence}: calibration {plan.calibration} ({len(plan.cameras)} cameras: "
+                              f"{', '.join(plan.cameras.names[:6])}{' ...' if len(plan.cameras) > 6 else ''}); "
+                              f"frames: {len(plan.frames)} selected of {plan.available} face files, "
+                              f"{len(plan.chunks)} units"], quiet)
+        bar = progress(total=sum(len(p.frames) for p in plans), desc="relabel-panoptic", quiet=quiet, unit="frames")
+        per_seq: list = []
+        try:
+            stats = job.write_outputs(plans, cfg, output, fmt, rejects, overwrite, workers, bar, scheduler=scheduler,
+                                      resume=resume, per_sequence=per_seq, pool=pool)
+        finally:
+            bar.close()
     if strict:  # any face/view not labelled fails the run (nothing is committed)
         from ..io.rejects import rejects_rule
 

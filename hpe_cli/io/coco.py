@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
-from .layout import ANGLE_COLS, BBOX_COLS, landmark_count
+from .layout import ANGLE_COLS, BBOX_COLS, arrow_to_numpy, landmark_count
 from .writers import StreamWriter
 
 CATEGORIES = [{"supercategory": "person", "id": 1, "name": "person"}]
@@ -36,11 +36,7 @@ def _finite(v, col, path, offset):
 def _column(frame, col):
     """A column of a pandas DataFrame, pyarrow Table or RecordBatch as float64 (NaN for nulls)."""
     if hasattr(frame, "schema") and not hasattr(frame, "iloc"):
-        import pyarrow.compute as pc
-        import pyarrow as pa
-
-        c = frame.column(col)
-        return np.asarray(pc.cast(c, pa.float64()).to_numpy(zero_copy_only=False), dtype=np.float64)
+        return arrow_to_numpy(frame.column(col), np.float64)
     return frame[col].to_numpy(dtype=np.float64, na_value=np.nan)
 
 
@@ -72,14 +68,14 @@ def _image_codes(frame, path, offset: int):
 
     col = frame.column("image")
     if col.null_count:
-        bad = int(np.flatnonzero(pc.is_null(col).to_numpy(zero_copy_only=False))[0])
+        bad = int(np.flatnonzero(arrow_to_numpy(pc.is_null(col), np.uint8))[0])
         raise HpeError(f"{path}: row {offset + bad}: expected an image name, got a missing value")
     if not (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
         col = pc.cast(col, pa.string())
     enc = pc.dictionary_encode(col)
     if isinstance(enc, pa.ChunkedArray):  # one dictionary for the whole batch
         enc = pc.dictionary_encode(col.combine_chunks()) if enc.num_chunks != 1 else enc.chunk(0)
-    return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), enc.dictionary.to_pylist()
+    return arrow_to_numpy(enc.indices, np.int64), enc.dictionary.to_pylist()
 
 
 #: rows serialised by one orjson call (bounds the Python objects alive at once)

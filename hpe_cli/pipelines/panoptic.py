@@ -175,6 +175,8 @@ def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config) ->
         (list of face-level reasons), ``legacy_considered`` (int).
     """
 
+    from ..io.layout import numpy_to_arrow, string_array
+
     data = pan.read_face_frames(paths)
     n = len(data["frame"])
     C = len(cams)
@@ -203,11 +205,10 @@ def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config) ->
             v["ok"] = ok
     fo, co = face[ok], ci[ok]
     frames = data["frame"][fo]
-    names = cams.names[co]
-    table = {
-        "sequence": np.full(len(fo), sequence, dtype=object),
+    table = {  # strings taken in Arrow from the few distinct values (no Python object per row)
+        "sequence": string_array([sequence]).take(numpy_to_arrow(np.zeros(len(fo), dtype=np.int64))),
         "frame": frames,
-        "camera": names,
+        "camera": string_array(cams.names).take(numpy_to_arrow(co)),
         "person_id": data["person_id"][fo],
         "image": _image_paths(cams, co, frames),
     }
@@ -237,15 +238,23 @@ def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config) ->
 
 
 def _image_paths(cams: pan.Cameras, ci, frames):
-    """``hdImgs/<cam>/<cam>_<frame>.jpg`` per row, joined in Arrow (no Python loop per row)."""
+    """``hdImgs/<cam>/<cam>_<frame>.jpg`` per row (:func:`hpe_cli.datasets.panoptic.image_path`), joined in
+    Arrow from the cameras' prefixes and the distinct frames' names (no Python step per row, and no
+    ``pa.array``, which imports pandas: 0.3 s in every worker)."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    prefix = pa.array([pan.image_path(c, 0, t)[:-len("00000000.jpg")] for c, t in zip(cams.names, cams.types)],
-                      type=pa.string())
-    uniq, inv = np.unique(frames, return_inverse=True)
-    names = pa.array([f"{int(f):08d}.jpg" for f in uniq], type=pa.string())
-    return pc.binary_join_element_wise(prefix.take(pa.array(ci)), names.take(pa.array(inv.reshape(-1))), "")
+    from ..io.layout import numpy_to_arrow, string_array
+
+    ci = np.asarray(ci, dtype=np.int64).reshape(-1)
+    tail = len("00000000.jpg")
+    prefix = string_array([pan.image_path(c, 0, t)[:-tail] for c, t in zip(cams.names, cams.types)])
+    uniq, inv = np.unique(np.asarray(frames, dtype=np.int64).reshape(-1), return_inverse=True)
+    names = string_array([f"{f:08d}.jpg" for f in uniq.tolist()])
+    n = len(ci)
+    empty = pa.StringArray.from_buffers(n, pa.py_buffer(np.zeros(n + 1, dtype=np.int32)), pa.py_buffer(b""))
+    return pc.binary_join_element_wise(prefix.take(numpy_to_arrow(ci)), names.take(numpy_to_arrow(inv.reshape(-1))),
+                                       empty)
 
 
 class RmseStats:
@@ -583,7 +592,7 @@ def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
 
 def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None, overwrite: bool = False,
                   workers: int = 1, bar=None, *, scheduler: str | None = None, resume: bool = False,
-                  per_sequence: list | None = None) -> Stats:
+                  per_sequence: list | None = None, pool=None) -> Stats:
     """Run the job and write its outputs atomically; return the total :class:`Stats`.
 
     ``p`` is one :class:`Plan` or a list of them (several sequences). The
@@ -609,6 +618,10 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     bytes are those of the one-process run. The rejects table is streamed
     too.
     ``per_sequence``, if a list, receives one :class:`Stats` per sequence.
+    ``pool``, if given, is a running :func:`worker_pool` for the same
+    ``workers``, ``scheduler`` and ``resume`` (started before planning, so
+    its workers are ready when the first unit is); by default the job starts
+    its own.
     """
     import json
     import shutil
@@ -686,13 +699,13 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
             Path(text).unlink(missing_ok=True)
             drop_parts(stem)
 
-    from .pools import unit_pool
+    from .pools import borrow
 
     try:
         with ExitStack() as stack:
             # the pool first: its workers start (and import what a unit needs) while the writers are set up
-            pool = stack.enter_context(unit_pool(workers if use_parts else 1, scheduler if use_parts else None,
-                                                 warm=WORKER_IMPORTS))
+            pool = stack.enter_context(borrow(pool) if pool is not None else
+                                       worker_pool(workers, scheduler, resume))
             if fmt == "table":
                 out = stack.enter_context(TableWriter(output, overwrite, meta))
             else:
@@ -748,9 +761,20 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     return total
 
 
-#: what a unit imports on its first run (pyarrow converts Python objects through pandas): local workers
-#: import it as they start, while the parent prepares the job
-WORKER_IMPORTS = ("pandas", "pyarrow.compute", "pyarrow.ipc", "pyarrow.pandas_compat", "hpe_cli.io")
+#: what a unit imports on its first run: local workers import it as they start, while the parent prepares the
+#: job (a unit builds its Arrow arrays from numpy buffers, so pandas, 0.3 s to import, is never needed)
+WORKER_IMPORTS = ("pyarrow.compute", "pyarrow.ipc", "hpe_cli.io", "hpe_cli.io.coco", "orjson")
+
+
+def worker_pool(workers: int = 1, scheduler: str | None = None, resume: bool = False):
+    """The pool :func:`write_outputs` runs its units on for these options (a context manager): ``workers``
+    local processes, a Dask cluster at ``scheduler``, or this process (one worker, no scheduler, no
+    ``resume``). Start it before planning and pass it as ``pool=``: the workers start and import what a
+    unit needs meanwhile."""
+    from .pools import unit_pool
+
+    use_parts = workers > 1 or scheduler is not None or resume
+    return unit_pool(workers if use_parts else 1, scheduler if use_parts else None, warm=WORKER_IMPORTS)
 
 
 def _text_writer(fmt: str, output, overwrite: bool):
@@ -778,4 +802,5 @@ def _write_part(path, table) -> None:
 
 __all__ = ["Config", "Plan", "plan", "plan_many", "find_sequences", "process_chunk", "run", "run_unit",
            "write_outputs", "parse_frames", "Stats", "RmseStats", "MinChange", "REASONS", "CHUNK_FRAMES",
-           "LEGACY_COLS", "REJECT_COLS", "WHENET_HAGGLING", "CAMERA_PRESETS", "parts_dir_for", "format_unit"]
+           "LEGACY_COLS", "REJECT_COLS", "WHENET_HAGGLING", "CAMERA_PRESETS", "parts_dir_for", "format_unit",
+           "worker_pool"]

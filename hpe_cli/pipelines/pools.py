@@ -112,6 +112,41 @@ def unit_pool(workers: int = 1, scheduler: str | None = None, warm=()):
         yield _Inline()
 
 
+class _Borrowed:
+    """A started pool lent to one job (:func:`borrow`): it counts the job's own units."""
+
+    def __init__(self, pool):
+        self.pool = pool
+        self.workers = getattr(pool, "workers", 1)
+        self.futures: list = []
+
+    def submit(self, fn, arg):
+        fut = self.pool.submit(fn, arg)
+        self.futures.append(fut)
+        if len(self.futures) > 64:
+            self.futures = [f for f in self.futures if not f.done()]
+        return fut
+
+
+@contextmanager
+def borrow(pool):
+    """Lend a pool that is already running (started by the caller, for instance while the job is planned)
+    to one job. On leaving, the job's units that have not started are cancelled and those under way are
+    waited for, as leaving :func:`unit_pool` would; the pool itself goes on."""
+    lent = _Borrowed(pool)
+    try:
+        yield lent
+    finally:
+        for fut in lent.futures:
+            fut.cancel()
+        for fut in lent.futures:
+            if not fut.cancelled():
+                try:
+                    fut.result()
+                except BaseException:  # the job's own error is already on its way
+                    pass
+
+
 def in_order(pool, fn, items, ahead: int | None = None):
     """Yield ``fn(item)`` for every item, computed on ``pool``, in input order.
 
@@ -136,4 +171,4 @@ def in_order(pool, fn, items, ahead: int | None = None):
         yield res
 
 
-__all__ = ["unit_pool", "in_order", "mp_context"]
+__all__ = ["unit_pool", "borrow", "in_order", "mp_context"]
