@@ -76,3 +76,51 @@ def test_abort_never_raises_and_closes():
         bf.write(b"x")
     bf.abort()
     assert bf.fh.closed
+
+
+class _Slow:
+    """A file that holds every write until released, and records how many bytes were queued at once."""
+
+    def __init__(self, bf_ref):
+        import threading
+
+        self.gate = threading.Event()
+        self.bf_ref = bf_ref
+        self.data = []
+        self.closed = False
+
+    def write(self, data):
+        self.gate.wait(5)
+        self.data.append(bytes(data))
+
+    def close(self):
+        self.closed = True
+
+
+@pytest.mark.parametrize("depth,max_bytes,sizes", [(8, 100, [40] * 10), (3, 10 ** 6, [5] * 10),
+                                                    (8, 100, [250, 10, 10])])
+def test_the_queue_is_bounded_in_writes_and_bytes(depth, max_bytes, sizes):
+    """At most ``depth`` writes and ``max_bytes`` bytes wait (a bigger write goes alone), and order is kept."""
+    import threading
+
+    holder = []
+    fh = _Slow(holder)
+    bf = BackgroundFile(fh, depth=depth, max_bytes=max_bytes)
+    seen = []
+
+    def writer():
+        for k, n in enumerate(sizes):
+            bf.write(bytes([k]) * n)
+            seen.append((len(bf._pending), bf._queued))
+
+    t = threading.Thread(target=writer)
+    t.start()
+    t.join(0.3)  # the writer is blocked by the bounds while the file holds every write
+    assert t.is_alive() == (len(sizes) > depth or sum(sizes) > max_bytes)
+    fh.gate.set()
+    t.join(5)
+    bf.close()
+    assert fh.data == [bytes([k]) * n for k, n in enumerate(sizes)]
+    for count, queued in seen:
+        assert count <= depth
+        assert queued <= max(max_bytes, max(sizes))

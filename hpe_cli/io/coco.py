@@ -79,7 +79,7 @@ def _image_codes(frame, path, offset: int):
 
 
 #: rows serialised by one orjson call (bounds the Python objects alive at once)
-CHUNK_ROWS = 8192
+CHUNK_ROWS = 4096
 
 
 def annotations_text(frame, image_ids, first_id: int, *, path="<coco>", offset: int = 0):
