@@ -141,11 +141,5 @@ def arrow_table(cols: dict, schema=None):
     """
     import pyarrow as pa
 
-    arrays = []
-    for v in cols.values():
-        if not isinstance(v, (pa.Array, pa.ChunkedArray)):
-            v = np.asarray(v)
-            v = string_array(v) if v.dtype == object else numpy_to_arrow(v)
-        arrays.append(v)
-    t = pa.Table.from_arrays(arrays, names=list(cols))
+    t = pa.Table.from_arrays([numpy_to_arrow(v) for v in cols.values()], names=list(cols))
     return t.cast(schema) if schema is not None else t

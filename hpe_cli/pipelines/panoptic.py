@@ -497,15 +497,8 @@ class MinChange:
 
 
 # -------------------------------------------------------------- streaming
-_WORKER: dict = {}
-
-
-def _init_worker(cams, sequence, cfg):
-    _WORKER.update(cams=cams, sequence=sequence, cfg=cfg)
-
-
-def _work(paths):
-    return process_chunk(paths, _WORKER["cams"], _WORKER["sequence"], _WORKER["cfg"])
+def _process(args: tuple) -> dict:
+    return process_chunk(*args)
 
 
 def run(p: Plan, cfg: Config, workers: int = 1):
@@ -515,13 +508,10 @@ def run(p: Plan, cfg: Config, workers: int = 1):
         for chunk in p.chunks:
             yield process_chunk(chunk, p.cameras, p.sequence, cfg)
         return
-    from concurrent.futures import ProcessPoolExecutor
+    from .pools import in_order, unit_pool
 
-    from .pools import in_order, mp_context
-
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp_context(), initializer=_init_worker,
-                             initargs=(p.cameras, p.sequence, cfg)) as ex:
-        yield from in_order(ex, _work, p.chunks, 2 * workers)
+    with unit_pool(workers, warm=WORKER_IMPORTS) as pool:
+        yield from in_order(pool, _process, [(chunk, p.cameras, p.sequence, cfg) for chunk in p.chunks])
 
 
 def format_unit(task: dict) -> int:

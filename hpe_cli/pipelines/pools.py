@@ -30,25 +30,36 @@ class _Inline:
         return fut
 
 
-class _DaskPool:
+class _Tracking:
+    """Keeps the futures it submitted that may not be done yet (finished ones are dropped now and then)."""
+
+    workers = 1
+
+    def __init__(self):
+        self.futures: list = []
+
+    def _track(self, fut):
+        self.futures.append(fut)
+        if len(self.futures) > max(64, 4 * self.workers):
+            self.futures = [f for f in self.futures if not f.done()]
+        return fut
+
+
+class _DaskPool(_Tracking):
     def __init__(self, client, workers: int):
+        super().__init__()
         self.client = client
         try:
             threads = sum(client.nthreads().values())
         except Exception:  # an old or unusual client: fall back to what was asked
             threads = 0
         self.workers = max(int(workers), int(threads), 1)
-        self._futures: list = []
 
     def submit(self, fn, arg):
-        fut = self.client.submit(fn, arg, pure=False)
-        self._futures.append(fut)
-        if len(self._futures) > 4 * self.workers:
-            self._futures = [f for f in self._futures if not f.done()]
-        return fut
+        return self._track(self.client.submit(fn, arg, pure=False))
 
     def cancel(self) -> None:
-        pending = [f for f in self._futures if not f.done()]
+        pending = [f for f in self.futures if not f.done()]
         if pending:
             self.client.cancel(pending)
 
@@ -112,20 +123,16 @@ def unit_pool(workers: int = 1, scheduler: str | None = None, warm=()):
         yield _Inline()
 
 
-class _Borrowed:
-    """A started pool lent to one job (:func:`borrow`): it counts the job's own units."""
+class _Borrowed(_Tracking):
+    """A started pool lent to one job (:func:`borrow`): it keeps the job's own units."""
 
     def __init__(self, pool):
+        super().__init__()
         self.pool = pool
         self.workers = getattr(pool, "workers", 1)
-        self.futures: list = []
 
     def submit(self, fn, arg):
-        fut = self.pool.submit(fn, arg)
-        self.futures.append(fut)
-        if len(self.futures) > 64:
-            self.futures = [f for f in self.futures if not f.done()]
-        return fut
+        return self._track(self.pool.submit(fn, arg))
 
 
 @contextmanager
