@@ -220,19 +220,18 @@ class StreamWriter:
 
     def append_text(self, text, rows: int) -> None:
         """Append ``rows`` rows already formatted as ``text`` (bytes-like)."""
-        if rows:
-            if self.rows and self.separator:
-                self._out.write(self.separator)
-            self._out.write(text)
-        self.rows += rows
+        self._append(rows, self._out.write, text)
 
     def append_file(self, path, rows: int) -> None:
         """Append ``rows`` rows whose formatted text is the content of the file ``path`` (copied by the kernel
         where it can; the file may be removed as soon as this returns)."""
+        self._append(rows, self._out.copy_from, path)
+
+    def _append(self, rows: int, put, piece) -> None:
         if rows:
             if self.rows and self.separator:
                 self._out.write(self.separator)
-            self._out.copy_from(path)
+            put(piece)
         self.rows += rows
 
     def __exit__(self, exc_type, exc, tb):
