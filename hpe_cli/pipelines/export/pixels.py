@@ -1,0 +1,180 @@
+"""Export stage 3, place pixels (parent side): the crop box and written size of every head, one task per source
+image (or Panoptic video), and the loop that runs the tasks (in worker processes with ``--workers``) and hands
+the finished heads and their pixels to the layout."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...errors import HpeError
+from ...geometry.crop import expand_boxes, pixel_boxes
+from ...io.layout import BBOX_COLS
+from . import workers
+from .resolve import resolve_image, video_path
+
+
+@dataclass
+class CropPlan:
+    """Crop geometry of every row: head box, crop box in pixels (exclusive ends), written size, file name."""
+
+    scale: float
+    square: bool
+    size: int | None
+    bbox: np.ndarray
+    pbox: np.ndarray
+    osz: np.ndarray
+    rel: np.ndarray | None = None
+
+
+def plan_crops(sel, layout, opts) -> CropPlan:
+    """Crop boxes from the head boxes (``--crop-scale``, ``--square``, the layout's own boxes) and sizes."""
+    rows, reasons, n = sel.rows, sel.reasons, sel.n
+    scale = opts.crop_scale if opts.crop_scale is not None else 1.0
+    square = layout.default_square if opts.square is None else opts.square
+    size = opts.size if opts.size is not None else layout.default_size
+    bbox = rows[BBOX_COLS].to_numpy(np.float64)
+    cbox = layout.crop_boxes(rows, expand_boxes(np.nan_to_num(bbox, nan=0.0), scale, square), sel.lm)
+    ok = reasons == ""
+    reasons[ok & ~np.isfinite(cbox).all(1)] = "no crop box"
+    cbox = np.nan_to_num(cbox, nan=0.0)
+    pbox = pixel_boxes(cbox)
+    cw, ch = pbox[:, 2] - pbox[:, 0], pbox[:, 3] - pbox[:, 1]
+    if size is not None:
+        if square or layout.stretch:
+            osz = np.stack([np.full(n, size), np.full(n, size)], 1)
+        else:
+            osz = np.stack([np.full(n, size), np.maximum(1, np.round(size * ch / np.maximum(cw, 1)))], 1)
+    else:
+        osz = np.stack([cw, ch], 1)
+    return CropPlan(scale, bool(square), size, bbox, pbox, osz.astype(np.int64))
+
+
+def name_files(sel, layout, plan: CropPlan, todo) -> None:
+    """The layout's file name of each row to export, split by split."""
+    rel = np.empty(sel.n, dtype=object)
+    for s in np.unique(sel.split[todo]).tolist():
+        idx = todo[sel.split[todo] == s]
+        rel[idx] = layout.relpath(sel.rows.iloc[idx], s)
+    plan.rel = rel
+
+
+def build_tasks(sel, layout, plan: CropPlan, todo) -> list:
+    """One task per source image (or per Panoptic video): ``[kind, source path, items]``."""
+    rows, split = sel.rows, sel.split
+    roots = rows["root"].to_numpy(dtype=object)
+    images = rows["image"].to_numpy(dtype=object)
+    seqs = rows["sequence"].to_numpy(dtype=object)
+    cams = rows["camera"].to_numpy(dtype=object)
+    frames = rows["frame"].to_numpy()
+    full_frames = layout.full_frames
+    task_of = {}
+    tasks = []
+    for i in todo.tolist():
+        key = (roots[i], images[i])
+        t = task_of.get(key)
+        if t is None:
+            src = resolve_image(roots[i], images[i], seqs[i], cams[i], int(frames[i]))
+            if src is None and cams[i] and frames[i] >= 0:
+                vkey = ("video", roots[i], seqs[i], cams[i])
+                t = task_of.get(vkey)
+                if t is None:
+                    t = task_of[vkey] = ["video", video_path(roots[i], seqs[i], cams[i]), {}]
+                    tasks.append(t)
+                task_of[key] = t
+            else:
+                t = task_of[key] = ["image", src, []]
+                tasks.append(t)
+        item = (i, split[i], plan.rel[i], tuple(plan.pbox[i].tolist()), tuple(plan.bbox[i].tolist()),
+                None if full_frames else tuple(plan.osz[i].tolist()))
+        if t[0] == "video":
+            t[2].setdefault(int(frames[i]), []).append(item)
+        else:
+            t[2].append(item)
+    return tasks
+
+
+def _results(tasks, cfg, n_workers: int):
+    """Yield each task's ``(results, spill)``, in task order; closes the pool at the end."""
+    if n_workers > 1 and len(tasks) > 1:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn" if os.name == "nt" else "fork")
+        pool = ctx.Pool(n_workers, initializer=workers._init_worker, initargs=(cfg,))
+        try:
+            yield from pool.imap(workers._work, [tuple(t) for t in tasks],
+                                 chunksize=max(1, min(16, len(tasks) // (8 * n_workers))))
+        finally:
+            pool.close()
+            pool.join()
+    else:
+        workers._init_worker(cfg)
+        yield from map(workers._work, [tuple(t) for t in tasks])
+
+
+@dataclass
+class PixelResult:
+    """What the tasks gave back: per row, its image-level reject (``''``), written order and image size."""
+
+    status: np.ndarray
+    order: np.ndarray
+    W: np.ndarray
+    H: np.ndarray
+
+
+def run_tasks(tasks, cfg, sel, layout, plan: CropPlan, n_workers: int, bar=None) -> PixelResult:
+    """Run every task and pass finished heads (with their pixels) to the layout in small slices."""
+    from .write import add_pixels
+
+    n = sel.n
+    res_all = PixelResult(np.full(n, "", dtype=object), np.full(n, -1, dtype=np.int64),
+                          sel.rows["image_width"].to_numpy(np.float64).copy(),
+                          sel.rows["image_height"].to_numpy(np.float64).copy())
+    status, order, W, H = res_all.status, res_all.order, res_all.W, res_all.H
+    counter = 0
+    results = _results(tasks, cfg, n_workers)
+    try:
+        for res, spill in results:
+            spill_fh = open(spill, "rb") if spill else None
+            good, payloads = [], []
+            for idx, reason, w, h, payload in res:
+                if w > 0:
+                    W[idx], H[idx] = w, h
+                if reason:
+                    status[idx] = reason
+                    continue
+                order[idx] = counter
+                counter += 1
+                good.append(idx)
+                payloads.append(payload)
+                if spill_fh is not None and len(payloads) >= 256:  # flush in small slices
+                    add_pixels(layout, sel, plan, res_all, good, payloads, spill_fh)
+                    good, payloads = [], []
+            if good and layout.pixels != "file":
+                add_pixels(layout, sel, plan, res_all, good, payloads, spill_fh)
+            if spill_fh is not None:
+                spill_fh.close()
+                os.unlink(spill)
+            if bar is not None:
+                bar.update(len(res))
+    finally:
+        results.close()
+    return res_all
+
+
+def worker_config(stage, layout, splits_used, opts) -> dict:
+    """The settings every worker reads (``workers._CFG``)."""
+    split_dirs = {s: str(layout.split_dir(s).relative_to(stage)) for s in splits_used}
+    return {"root": str(stage), "split_dirs": split_dirs, "quality": int(opts.quality),
+            "pad_value": int(opts.pad_value), "min_inside": float(opts.min_inside),
+            "full_frames": layout.full_frames, "pixels": layout.pixels, "made": set()}
+
+
+def nothing_left(layout, reasons, idx, what: str) -> HpeError:
+    """The error for a run where every label of ``idx`` is rejected."""
+    import pandas as pd
+
+    c = pd.Series(reasons[idx]).value_counts()
+    return HpeError(f"--layout {layout.name}: {what}, nothing written "
+                    f"({'; '.join(f'{r}: {k}' for r, k in c.items())})")
