@@ -126,7 +126,7 @@ def test_whenet_workers_give_the_same_files(pizza, tmp_path):
 def test_6drepnet_crops_matrices(pizza, tmp_path):
     path, t = pizza
     out = tmp_path / "s"
-    assert export(path, out, "--layout", "6drepnet", "-q").exit_code == 0
+    assert export(path, out, "--layout", "6drepnet", "--form", "crops", "-q").exit_code == 0
     idx = lookup(t)
     A = table_A(t)
     # DirectMHP's gen_dataset_full_AGORA_CMU.py list: "<name>.jpg pitch yaw roll", 256 x 256 crops
@@ -182,23 +182,39 @@ def test_directmhp_layout(pizza, tmp_path):
 
     path, t = pizza
     out = tmp_path / "d"
-    r = run("export", path, "-o", out, "--layout", "directmhp", "--images", PIZZA, "--rejects", tmp_path / "r.csv")
+    r = run("export", path, "-o", out, "--layout", "directmhp", "--images", PIZZA, "--rejects", tmp_path / "r.csv",
+            "--split", DMHP_SPLIT)
     assert r.exit_code == 0, r.output
-    coco = json.loads((out / "annotations" / "coco_style_train.json").read_text())
-    assert {"images", "annotations", "categories"} <= set(coco)
     A = table_A(t)
     idx = lookup(t)
+    n_ann = 0
+    for split in ("train", "val"):
+        coco = json.loads((out / "annotations" / f"coco_style_{split}.json").read_text())
+        assert {"images", "annotations", "categories"} <= set(coco)
+        n_ann += len(coco["annotations"])
+        _check_directmhp_split(out, split, coco, A, idx)
+    assert "path: .\n" in (out / "data.yaml").read_text()  # no absolute path: the export can be moved
+    rej = pd.read_csv(tmp_path / "r.csv")
+    assert len(rej) + n_ann == len(t)
+
+
+DMHP_SPLIT = "camera:train=0.75,val=0.25"
+
+
+def _check_directmhp_split(out, split, coco, A, idx):
+    from hpe_cli.io.export.directmhp import SEQ_NAMES
+
     for im in coco["images"]:
         i = im["id"]
-        assert im["file_name"] == f"{i}.jpg" and (out / "images" / "train" / im["file_name"]).is_file()
+        assert im["file_name"] == f"{i}.jpg" and (out / "images" / split / im["file_name"]).is_file()
         seq_num = (i - 10000000000) // 100000000 - 1  # data_split_hpe.py
         assert SEQ_NAMES[seq_num] == "160906_pizza1"
         frame, node = (i // 100) % 1_000_000, i % 100
         assert frame in (1147, 6577) and node in (0, 8, 15, 23)
-        img = cv2.imread(str(out / "images" / "train" / im["file_name"]))
+        img = cv2.imread(str(out / "images" / split / im["file_name"]))
         assert img.shape[:2] == (im["height"], im["width"])
         # YOLO label lines: every value in [0, 1]; the angles decode back to the table's rotation
-        lines = (out / "yolov5_labels_coco" / "train" / f"{i}.txt").read_text().splitlines()
+        lines = (out / "yolov5_labels_coco" / split / f"{i}.txt").read_text().splitlines()
         anns = [a for a in coco["annotations"] if a["image_id"] == i]
         assert len(lines) == len(anns)
         for line, a in zip(lines, anns):
@@ -209,11 +225,6 @@ def test_directmhp_layout(pizza, tmp_path):
             Aw = canonical_A([a["euler_angles"]])[0]
             cands = [j for (c, pid, f), j in idx.items() if c == f"00_{node:02d}" and f == frame]
             assert min(np.abs(A[j] - Aw).max() for j in cands) < 1e-9
-    listed = (out / "yolov5_labels_coco" / "img_txt" / "train.txt").read_text().splitlines()
-    assert all(Path(p).is_file() for p in listed) and len(listed) == len(coco["images"])
-    assert f"path: {out.resolve()}/" in (out / "data.yaml").read_text()
-    rej = pd.read_csv(tmp_path / "r.csv")
-    assert len(rej) + len(coco["annotations"]) == len(t)
 
 
 def test_directmhp_drop_images_with_rejects(pizza, tmp_path):
@@ -227,10 +238,11 @@ def test_directmhp_drop_images_with_rejects(pizza, tmp_path):
     t.to_parquet(path)
     out = tmp_path / "d"
     r = run("export", path, "-o", out, "--layout", "directmhp", "--images", PIZZA, "--drop-images-with-rejects",
-            "--rejects", tmp_path / "r.csv")
+            "--rejects", tmp_path / "r.csv", "--split", DMHP_SPLIT)
     assert r.exit_code == 0, r.output
     rej = pd.read_csv(tmp_path / "r.csv")
-    coco = json.loads((out / "annotations" / "coco_style_train.json").read_text())
+    coco = {"images": [im for s in ("train", "val") for im in
+                       json.loads((out / "annotations" / f"coco_style_{s}.json").read_text())["images"]]}
     dropped = rej[rej["reason"].str.startswith("image dropped")]
     rule = rej[rej["reason"].str.startswith("DirectMHP normalisation")]
     # no exported image has a rejected (normalisation) head
@@ -292,7 +304,7 @@ def test_hf_parquet_image_feature(pizza, tmp_path):
         for _, row in tab.iterrows():
             im = cv2.imdecode(np.frombuffer(row["image"]["bytes"], np.uint8), cv2.IMREAD_COLOR)
             assert im.shape[1] == row.crop_x1 - row.crop_x0 and im.shape[0] == row.crop_y1 - row.crop_y0
-            G = row[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy(float).reshape(3, 3)
+            G = np.array([list(r) for r in row["rotation"]], dtype=float).reshape(3, 3)
             k = idx[(row.camera, row.person_id, row.frame)]
             np.testing.assert_allclose(G, A[k].T, atol=1e-9)
             np.testing.assert_allclose(get_R_6drepnet(*np.deg2rad([row.pitch, row.yaw, row.roll])), G, atol=1e-9)
@@ -324,7 +336,7 @@ def _open_or_skip(path):
 def test_read_back_through_open_table(pizza, tmp_path):
     path, t = pizza
     assert export(path, tmp_path / "w", "--layout", "whenet", "-q").exit_code == 0
-    assert export(path, tmp_path / "d", "--layout", "directmhp", "-q").exit_code == 0
+    assert export(path, tmp_path / "d", "--layout", "directmhp", "--split", DMHP_SPLIT, "-q").exit_code == 0
     lines = (tmp_path / "w" / "train" / "annotation.txt").read_text().splitlines()
     back = _open_or_skip(tmp_path / "w" / "train" / "annotation.txt")
     want = np.array([[float(v) for v in (l.split(",")[2], l.split(",")[1], l.split(",")[3])] for l in lines])
@@ -340,7 +352,7 @@ def test_read_back_through_open_table(pizza, tmp_path):
 def test_coco_export_is_an_export_input(pizza, tmp_path):
     """DirectMHP's COCO JSON (read by open_table) exports again: same rotations, now as WHENet crops."""
     path, t = pizza
-    assert export(path, tmp_path / "d", "--layout", "directmhp", "-q").exit_code == 0
+    assert export(path, tmp_path / "d", "--layout", "directmhp", "--split", DMHP_SPLIT, "-q").exit_code == 0
     coco = tmp_path / "d" / "annotations" / "coco_style_train.json"
     try:
         from hpe_cli.io import read_table

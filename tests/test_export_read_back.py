@@ -41,7 +41,8 @@ def read_all(path):
 def test_export_reads_back(tmp_path, layout):
     path, labels = make_set(tmp_path)
     out = tmp_path / "out"
-    r = CliRunner().invoke(cli, ["export", str(path), "-o", str(out), "--layout", layout, "-q"])
+    split = ["--split", "image:train=0.67,val=0.33"] if layout == "directmhp" else []  # DirectMHP needs a val split
+    r = CliRunner().invoke(cli, ["export", str(path), "-o", str(out), "--layout", layout, "-q", *split])
     assert r.exit_code == 0, r.output
     files = sorted(out.rglob("annotation.txt" if layout == "whenet" else "coco_style_*.json"))
     assert files

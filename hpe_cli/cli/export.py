@@ -3,7 +3,14 @@ from __future__ import annotations
 
 import click
 
-from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_options, verbosity_options
+from .options import (
+    SYSTEM,
+    echo_summary,
+    overwrite_option,
+    progress,
+    rejects_options,
+    verbosity_options,
+)
 from .table_options import column_options
 
 LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
@@ -13,11 +20,17 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @click.argument("labels", nargs=-1, required=True, type=click.Path(exists=True))
 @click.option("-o", "--output", "output", required=True, type=click.Path(), help="Output folder (OUT_DIR).")
 @click.option("--layout", required=True, type=click.Choice(LAYOUTS),
-              help="whenet (crops + annotation.txt), 6drepnet (crops + list, or --form mat: images + .mat + "
-                   "file list), directmhp (frames, COCO JSON, YOLO labels, data.yaml), fsanet (.npz), "
-                   "hf (Parquet + dataset card).")
-@click.option("--form", type=click.Choice(["crops", "mat"]), default=None,
-              help="6drepnet only: crops + list.txt (default), or mat (300W-LP-style .jpg + .mat + files.txt).")
+              help="whenet (crops + annotation.txt), 6drepnet (images + .mat + file list of stems; --form crops: "
+                   "crops + list), directmhp (frames, COCO JSON, YOLO labels, data.yaml; needs a train and a val "
+                   "split), fsanet (.npz), hf (Parquet + dataset card).")
+@click.option("--form", type=click.Choice(["mat", "crops"]), default=None,
+              help="6drepnet only: mat (default; <split>/<stem>.jpg + <stem>.mat + files.txt of stems, what the "
+                   "Pose_300W_LP/AFLW2000 classes of 6DRepNet, 6DRepNet360 and Hopenet read), or crops "
+                   "(256 x 256 crops + files_<split>.txt 'name.jpg pitch yaw roll', DirectMHP's 6DRepNet fork).")
+@click.option("--trainer", type=click.Choice(["hopenet", "6drepnet", "6drepnet360"]), default=None,
+              help="6drepnet only: whose range rule applies. hopenet: every angle in [-99, 99) (its 66 bins); "
+                   "6drepnet: |angle| <= 99 (its create_filename_list.py; its training class itself reads any "
+                   "angle); 6drepnet360: full range [default: 6drepnet with --form mat, no rule with --form crops].")
 @click.option("--images", multiple=True, type=click.Path(exists=True, file_okay=False),
               help="Where image paths resolve (once for all inputs, or once per input) "
                    "[default: each table's folder; a .mat folder itself].")
@@ -53,7 +66,7 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @rejects_options
 @overwrite_option
 @verbosity_options
-def export(labels, output, layout, form, images, system, input_system, crop_scale, square, size, quality,
+def export(labels, output, layout, form, trainer, images, system, input_system, crop_scale, square, size, quality,
            pad_value, min_inside, split, split_file, min_change, balance, seed, drop_images_with_rejects, workers,
            rejects, strict, overwrite, verbose, quiet):
     """Export labels as a training-ready dataset in a trainer's own layout.
@@ -71,7 +84,10 @@ def export(labels, output, layout, form, images, system, input_system, crop_scal
     Examples:
       hpe export pizza.parquet -o out/whenet --layout whenet --images SEQ --rejects rej.csv
       hpe export a.parquet b.parquet -o out/dmhp --layout directmhp --drop-images-with-rejects --rejects rej.csv
-      hpe export AFLW2000/ -o out/aflw --layout 6drepnet --form mat
+      hpe export AFLW2000/ -o out/aflw --layout 6drepnet
+      hpe export pizza.parquet -o out/360 --layout 6drepnet --trainer 6drepnet360 --images SEQ --rejects rej.csv
+      hpe export 300W_LP/ -o out/hopenet --layout 6drepnet --trainer hopenet
+      hpe export pizza.parquet -o out/dmhp --layout directmhp --split camera:train=0.75,val=0.25 --images SEQ
       hpe export AFLW2000/ 300W_LP/AFW -o out/fsa --layout fsanet --split identity:0.9,0.1
       hpe export pizza.parquet -o out/hf --layout hf --system 6drepnet --min-change 5 --balance yaw:10:500
     """
@@ -84,7 +100,10 @@ def export(labels, output, layout, form, images, system, input_system, crop_scal
                                f"--system {system.name} cannot be used with it")
     if form is not None and layout != "6drepnet":
         raise click.UsageError("--form applies to --layout 6drepnet only")
-    opts = ExportOptions(layout=layout, images=tuple(images), system=system, input_system=input_system, form=form,
+    if trainer is not None and layout != "6drepnet":
+        raise click.UsageError("--trainer applies to --layout 6drepnet only (the layout Hopenet, 6DRepNet and "
+                               "6DRepNet360 share)")
+    opts = ExportOptions(layout=layout, images=tuple(images), system=system, input_system=input_system, form=form, trainer=trainer,
                          crop_scale=crop_scale, square=square, size=size, quality=quality, pad_value=pad_value,
                          min_inside=min_inside, split=split, split_file=split_file, min_change=min_change,
                          balance=balance, seed=seed, drop_images_with_rejects=drop_images_with_rejects,

@@ -88,14 +88,24 @@ class Layout:
     stretch = False
     needs_landmarks = False
     uses_landmarks = False
+    #: the trainer code that reads the layout, ``repo@commit file:lines`` (written to ``export.json``)
+    loader = ""
+    #: the trainer whose range rule applies (layouts read by several trainers: ``--trainer``)
+    trainer = None
 
-    def __init__(self, system=None, form=None, **options):
+    def __init__(self, system=None, form=None, trainer=None, **options):
+        if trainer is not None:
+            raise ValueError(f"--trainer applies to --layout 6drepnet only (its file lists are read by Hopenet, "
+                             f"6DRepNet and 6DRepNet360), not to --layout {self.name}")
         self.user_system = system
         self.form = form
         self.options = options
         self.root: Path | None = None
 
     # ---------------------------------------------------------------- rules
+    def check_splits(self, splits) -> None:
+        """Raise ``ValueError`` (with what to do) when the trainer needs splits the export does not have."""
+
     def label_reasons(self, angles: np.ndarray) -> np.ndarray:
         """Reasons (``''`` = keep) from the labels in the layout's system, ``(N, 3)`` pitch, yaw, roll degrees."""
         return np.full(len(angles), "", dtype=object)

@@ -1,12 +1,14 @@
 """FSA-Net layout: one ``<split>.npz`` per split with ``image`` (N x S x S x 3 uint8) and ``pose`` (N x 3).
 
-Followed: shamangary/FSA-Net ``data/type1/TYY_create_db_type1.py`` (the writer its training reads):
+Followed: shamangary/FSA-Net@4361d0e4 ``data/type1/TYY_create_db_type1.py:117`` (the writer its training reads):
 ``np.savez(output, image=np.array(out_imgs), pose=np.array(out_poses), img_size=img_size)``, images read with
 ``cv2.imread`` (so **BGR**) and resized to ``img_size`` x ``img_size`` (64 by default), ``pose`` rows
 ``[yaw, pitch, roll]`` in degrees from ``Pose_Para`` (the ``300w_lp`` system, |yaw| <= 90). Its training
-scripts load the arrays back with ``np.load(path)['image']`` / ``['pose']``. FSA-Net evaluates with Hopenet's
-protocol, which keeps only |angle| <= 99° (Hopenet/6DRepNet ``create_filename_list.py``); labels outside are
-rejects here too.
+scripts load the arrays back with ``np.load(path)['image']`` / ``['pose']``
+(``training_and_testing/FSANET_fine_train.py:25-27``, ``load_data_npz``) and keep only samples whose three angles
+are within [-99, 99] (``:78-87``); labels outside are rejects here. thohemp/6DRepNet@464b2ba5
+``sixdrepnet/datasets.py:177-228`` (``BIWI``) reads the same ``.npz`` (``pose`` = yaw, pitch, roll degrees,
+``get_R(pitch, yaw, roll)``).
 
 The crops are streamed to a raw temporary file and the ``.npz`` (a stored zip of ``.npy`` members, as
 ``np.savez`` writes) is assembled member by member, so memory stays flat.
@@ -19,12 +21,14 @@ import numpy as np
 
 from .base import Layout, abs_over
 
-RULE_99 = "outside ±99° (the Hopenet protocol FSA-Net uses)"
+RULE_99 = "outside ±99° (FSA-Net's FSANET_fine_train.py keeps [-99, 99])"
 
 
 class FSANetLayout(Layout):
     name = "fsanet"
     system = "300w_lp"
+    loader = ("shamangary/FSA-Net@4361d0e4 training_and_testing/FSANET_fine_train.py:25-27,78-92 (load_data_npz, "
+              "the [-99, 99] filter); thohemp/6DRepNet@464b2ba5 sixdrepnet/datasets.py:177-228 (BIWI)")
     pixels = "array"
     default_size = 64
     default_square = True
@@ -80,4 +84,4 @@ class FSANetLayout(Layout):
                 with z.open("img_size.npy", "w") as out:
                     np.lib.format.write_array(out, np.asarray(int(self._shape[0])))
             raw.unlink()
-        return []
+        return [f"read by {self.loader}"]

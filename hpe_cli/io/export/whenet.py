@@ -22,6 +22,8 @@ RULE = "WHENet rule: |pitch| >= 90 or |roll| >= 90 in the whenet primary solutio
 class WhenetLayout(Layout):
     name = "whenet"
     system = "whenet"
+    loader = ("Ascend-Research/HeadPoseEstimation-WHENet@a0d7bdfb prepare_images.py:160-165 (annotation.txt lines; "
+              "the repository publishes no training loader)")
 
     def label_reasons(self, angles):
         bad = (np.abs(angles[:, 0]) >= 90) | (np.abs(angles[:, 2]) >= 90)
@@ -36,4 +38,4 @@ class WhenetLayout(Layout):
             path = self.split_dir(split) / "annotation.txt"
             with open(path, "w", encoding="utf-8", newline="") as fh:
                 fh.writelines(whenet_lines(frame, path))
-        return []
+        return [f"format of {self.loader}"]

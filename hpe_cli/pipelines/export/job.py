@@ -27,7 +27,10 @@ def _check_output(inputs, output: Path, opts) -> None:
 def _layout_and_system(opts):
     from ...rotation.systems import get_system
 
-    layout = get_layout(opts.layout, system=opts.system, form=opts.form)
+    try:
+        layout = get_layout(opts.layout, system=opts.system, form=opts.form, trainer=opts.trainer)
+    except ValueError as exc:
+        raise HpeError(str(exc)) from None
     if layout.system is not None and opts.system is not None and get_system(opts.system).name != layout.system:
         raise HpeError(f"--layout {layout.name} stores labels in the {layout.system} system, which its trainer "
                        f"expects; --system {get_system(opts.system).name} cannot be used with it")
@@ -53,6 +56,10 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
     pixels.name_files(sel, layout, plan, todo)
     tasks = pixels.build_tasks(sel, layout, plan, todo)
     splits_used = sorted(set(sel.split[todo].tolist()))
+    try:
+        layout.check_splits(splits_used)
+    except ValueError as exc:
+        raise HpeError(str(exc)) from None
     final_root = output.resolve()
     with write.staged_dir(output, opts.overwrite) as stage:
         layout.open(stage, splits_used)

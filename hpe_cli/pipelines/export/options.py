@@ -27,6 +27,7 @@ class ExportOptions:
     system: object = None
     input_system: object = None
     form: str | None = None
+    trainer: str | None = None
     crop_scale: float | None = None
     square: bool | None = None
     size: int | None = None

@@ -144,7 +144,7 @@ def balance_keep(yaw, bin_deg: float, max_per_bin: int, ok, seed: int = 0):
 
 
 CHOICE_PREFIXES = ("WHENet rule", "DirectMHP normalisation", "outside ±99", "min-change", "balance",
-                   "image dropped", "no 2-D landmarks")
+                   "image dropped", "no 2-D landmarks", "Hopenet bins", "6DRepNet create_filename_list")
 
 
 def is_choice(reason: str) -> bool:

@@ -101,6 +101,10 @@ def write_index(stage, layout, sel, plan, px, todo, system, final_root):
 
         raise nothing_left(layout, sel.reasons, todo, "no label could be exported")
     exported = exported_frame(sel, plan, px, done)
+    try:  # a split whose every image was unreadable is gone: check again what the trainer needs
+        layout.check_splits(sorted(set(exported["split"].tolist())))
+    except ValueError as exc:
+        raise HpeError(str(exc)) from None
     notes_extra = layout.finish(exported, final_root)
     if not layout.full_frames:
         # every crop's box in the source frame's pixels (exclusive ends) and its written size
@@ -119,7 +123,8 @@ def summary_of(layout, system, inputs, sel, plan, exported, notes_extra, opts) -
     reasons = sel.reasons
     per_reason = pd.Series(reasons[reasons != ""]).value_counts().to_dict()
     per_split = exported["split"].value_counts().sort_index().to_dict()
-    return {"layout": layout.name, "form": getattr(layout, "form", None), "system": system.name,
+    return {"layout": layout.name, "form": getattr(layout, "form", None), "trainer": layout.trainer,
+            "read_by": layout.loader, "system": system.name,
             "system_description": system.describe(), "inputs": [str(p) for p in inputs],
             "labels": int(sel.n), "exported": len(exported), "per_split": per_split,
             "rejected": int((reasons != "").sum()), "rejects_per_reason": per_reason, "sampling": sel.notes,
