@@ -154,12 +154,20 @@ def _work_items(task):
             data = fh.read()
     except OSError as exc:
         return [(it[0], f"no image ({exc.strerror or exc})", -1, -1, None) for it in items]
+    if truncated_jpeg(data):
+        return [(it[0], "unreadable image (truncated JPEG: no end-of-image marker after its last scan)", -1, -1,
+                 None) for it in items]
     if cfg["full_frames"] and src.lower().endswith((".jpg", ".jpeg")):
         size = jpeg_size(data)
         if size is not None:  # copy the JPEG as is: no decode needed for the whole frame
             _process_image(_SizeOnly(size), data, items, cfg, out)
             return out
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if not data:
+        return [(it[0], "unreadable image (empty file)", -1, -1, None) for it in items]
+    try:
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    except cv2.error:  # OpenCV asserts on some inputs instead of returning None
+        image = None
     # keep this frame alive until the next one is decoded: freeing a multi-MB frame before the next allocation
     # makes every decode fault in fresh pages (measured: decoding 1080p JPEGs about 25% slower)
     _LAST_FRAME[0] = image
@@ -168,6 +176,20 @@ def _work_items(task):
     _process_image(image, data if cfg["full_frames"] and src.lower().endswith((".jpg", ".jpeg")) else None,
                    items, cfg, out)
     return out
+
+
+def truncated_jpeg(data: bytes) -> bool:
+    """A JPEG (``FF D8`` first) with no scan (``FF DA``), or whose last scan has no end-of-image marker (``FF D9``)
+    after it.
+
+    Entropy-coded data escapes ``FF`` as ``FF 00``, so neither marker appears inside a scan; an EXIF thumbnail's
+    own ``FF D9`` comes before the main image's scans. OpenCV decodes such a file without an error, filling the
+    missing rows with grey.
+    """
+    if data[:2] != b"\xff\xd8":
+        return False
+    sos = data.rfind(b"\xff\xda")
+    return sos < 0 or data.rfind(b"\xff\xd9") < sos
 
 
 class _SizeOnly:

@@ -137,6 +137,17 @@ def summary_of(layout, system, inputs, sel, plan, exported, notes_extra, opts) -
             "seed": opts.seed, "notes": notes_extra}
 
 
+def where(rows, k: int, reason: str) -> str:
+    """``FILE: row N: reason`` for a table row, ``FOLDER/NAME.mat: reason`` for a one-record ``.mat`` label; an
+    image fault also names the image."""
+    inp, row = str(rows["input"].iat[k]), str(rows["row"].iat[k])
+    head = f"{Path(inp) / row}" if row.lower().endswith(".mat") else f"{inp}: row {row}"
+    image = str(rows["image"].iat[k])
+    if reason.startswith(("no image", "unreadable image")) and image:
+        return f"{head}: {reason}: {Path(str(rows['root'].iat[k])) / image}"
+    return f"{head}: {reason}"
+
+
 def write_rejects(rejects, sel, opts) -> None:
     """Every input label not exported, with its reason; bad input follows the ``--rejects``/``--strict`` rule.
 
@@ -148,6 +159,8 @@ def write_rejects(rejects, sel, opts) -> None:
     rej = np.flatnonzero(reasons != "")
     if rej.size:
         sub = rows.iloc[rej]
+        if rejects.first_where is None:  # rows of a .mat folder are file names, not numbers
+            rejects.first_where = where(rows, int(rej[0]), str(reasons[rej[0]]))
         rejects.add({"input": sub["input"].to_numpy(), "row": sub["row"].astype(str).to_numpy(),
                      "source": sub["source"].to_numpy(), "image": sub["image"].to_numpy(),
                      "sequence": sub["sequence"].to_numpy(), "camera": sub["camera"].to_numpy(),
@@ -158,11 +171,11 @@ def write_rejects(rejects, sel, opts) -> None:
         from ...io.rejects import rejects_rule
 
         k = int(bad[0])
-        first = f"{rows['input'].iat[k]}: row {rows['row'].iat[k]}: {reasons[k]}"
-        rejects_rule(int(bad.size), first, has_file=rejects.path is not None, strict=opts.strict)
+        rejects_rule(int(bad.size), where(rows, k, str(reasons[k])), has_file=rejects.path is not None,
+                     strict=opts.strict)
     if opts.strict and (reasons != "").any():
         k = int(np.flatnonzero(reasons != "")[0])
-        raise HpeError(f"{rows['input'].iat[k]}: row {rows['row'].iat[k]}: {reasons[k]}; "
+        raise HpeError(f"{where(rows, k, str(reasons[k]))}; "
                        f"{int((reasons != '').sum())} label(s) not exported and --strict given: nothing written")
     rejects.write()
 
