@@ -356,7 +356,7 @@ def test_hf_pose_dataset(tmp_path, pizza, truth):
     cache = {}
     for row in rows:
         name = row["image"]["path"]
-        R_in, pts_in, src = truth_of(name, truth)
+        R_in, _, src = truth_of(name, truth)
         R = np.array(row["rotation"], dtype=float)
         assert R.shape == (3, 3)
         assert geodesic_deg(R, R_in.T) < 1e-6  # 300w_lp: the stored matrix is get_R(angles) transposed

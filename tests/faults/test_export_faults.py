@@ -89,6 +89,6 @@ def test_every_image_broken_exits_1(tmp_path):
 
 @pytest.mark.skipif(not AFLW.exists(), reason="no AFLW2000 sample")
 def test_png_under_a_jpg_name_is_exported(tmp_path):
-    src, victim = broken_copy(tmp_path, "png-named-jpg")
+    src, _ = broken_copy(tmp_path, "png-named-jpg")
     res = run("export", src, "-o", tmp_path / "out", "--layout", "whenet", "-q")
     assert res.exit_code == 0, res.output
