@@ -92,3 +92,61 @@ def test_png_under_a_jpg_name_is_exported(tmp_path):
     src, _ = broken_copy(tmp_path, "png-named-jpg")
     res = run("export", src, "-o", tmp_path / "out", "--layout", "whenet", "-q")
     assert res.exit_code == 0, res.output
+
+
+def _sized_table(tmp_path, width, height):
+    import cv2
+    import numpy as np
+
+    (tmp_path / "img").mkdir()
+    cv2.imwrite(str(tmp_path / "img" / "a.jpg"), np.full((720, 1280, 3), 90, np.uint8))
+    cv2.imwrite(str(tmp_path / "img" / "b.jpg"), np.full((1080, 1920, 3), 90, np.uint8))
+    rows = [{"image": f"img/{n}.jpg", "image_width": width, "image_height": height, "bbox_x": 100.0,
+             "bbox_y": 100.0, "bbox_w": 80.0, "bbox_h": 90.0, "pitch": 1.0, "yaw": 2.0, "roll": 3.0} for n in "ab"]
+    path = tmp_path / "t.csv"
+    pd.DataFrame(rows).to_csv(path, index=False)
+    return path
+
+
+def test_image_size_differs_from_the_labels(tmp_path):
+    """A frame whose size is not the labels' image_width x image_height (a 1280x720 video or image for a
+    1920x1080 calibration) is refused: its boxes would be cut from the wrong pixels."""
+    path = _sized_table(tmp_path, 1920, 1080)
+    res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet")
+    line = check_failed(res, must_name=str(path))
+    assert "row 2" in line and "image size 1280x720 differs" in line and "1920x1080" in line
+    assert not (tmp_path / "out").exists()
+    res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv", "-q")
+    assert res.exit_code == 0, res.output
+    r = pd.read_csv(tmp_path / "r.csv")
+    assert r["image"].tolist() == ["img/a.jpg"] and r["reason"].iloc[0].startswith("image size 1280x720")
+
+
+def test_video_frames_smaller_than_the_calibration(tmp_path, monkeypatch):
+    """hdVideos read through pan's VideoFrames (a stand-in giving 1280x720 frames) for 1920x1080 labels."""
+    import sys
+    import types
+
+    import numpy as np
+
+    class VideoFrames:
+        def __init__(self, path):
+            self.path = path
+
+        def read(self, frames):
+            for f in frames:
+                yield f, np.full((720, 1280, 3), 80, np.uint8), ""
+
+    mod = types.ModuleType("hpe_cli.datasets.panoptic_video")
+    mod.VideoFrames = VideoFrames
+    monkeypatch.setitem(sys.modules, "hpe_cli.datasets.panoptic_video", mod)
+    rows = [{"image": f"hdImgs/00_03/00_03_{f:08d}.jpg", "sequence": "", "camera": "00_03", "frame": f,
+             "person_id": 1, "image_width": 1920, "image_height": 1080, "bbox_x": 10.0, "bbox_y": 10.0,
+             "bbox_w": 40.0, "bbox_h": 40.0, "pitch": 0.0, "yaw": 5.0, "roll": 0.0} for f in (3, 4)]
+    path = tmp_path / "t.csv"
+    pd.DataFrame(rows).to_csv(path, index=False)
+    (tmp_path / "hdVideos").mkdir()
+    (tmp_path / "hdVideos" / "hd_00_03.mp4").write_bytes(b"")
+    res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
+    check_failed(res)  # every head rejected: nothing written, exit 1
+    assert "image size 1280x720 differs" in res.output and not (tmp_path / "out").exists()

@@ -69,6 +69,7 @@ def build_tasks(sel, layout, plan: CropPlan, todo) -> list:
     cams = rows["camera"].to_numpy(dtype=object)
     frames = rows["frame"].to_numpy()
     full_frames = layout.full_frames
+    want = np.stack([rows["image_width"].to_numpy(np.float64), rows["image_height"].to_numpy(np.float64)], 1)
     task_of = {}
     tasks = []
     for i in todo.tolist():
@@ -86,8 +87,9 @@ def build_tasks(sel, layout, plan: CropPlan, todo) -> list:
             else:
                 t = task_of[key] = ["image", src, []]
                 tasks.append(t)
+        size = tuple(int(v) for v in want[i]) if np.isfinite(want[i]).all() and (want[i] > 0).all() else None
         item = (i, split[i], plan.rel[i], tuple(plan.pbox[i].tolist()), tuple(plan.bbox[i].tolist()),
-                None if full_frames else tuple(plan.osz[i].tolist()))
+                None if full_frames else tuple(plan.osz[i].tolist()), size)
         if t[0] == "video":
             t[2].setdefault(int(frames[i]), []).append(item)
         else:

@@ -41,7 +41,11 @@ def _process_image(image, data, items, cfg, out):
     H, W = image.shape[:2]
     wrote_full = False
     for it in items:
-        idx, split, rel, box, bbox, osz = it
+        idx, split, rel, box, bbox, osz, want = it
+        if want is not None and want != (W, H):  # e.g. a 1280x720 video for a 1920x1080 calibration
+            out.append((idx, f"image size {W}x{H} differs from the labels' image_width x image_height "
+                             f"{want[0]}x{want[1]} (boxes would be cut from the wrong pixels)", W, H, None))
+            continue
         bx, by, bw, bh = bbox  # fraction of the head box inside the frame (scalar form of inside_fraction)
         iw = max(0.0, min(bx + bw, W) - max(bx, 0.0))
         ih = max(0.0, min(by + bh, H) - max(by, 0.0))
