@@ -43,8 +43,9 @@ def _process_image(image, data, items, cfg, out):
     for it in items:
         idx, split, rel, box, bbox, osz, want = it
         if want is not None and want != (W, H):  # e.g. a 1280x720 video for a 1920x1080 calibration
-            out.append((idx, f"image size {W}x{H} differs from the labels' image_width x image_height "
-                             f"{want[0]}x{want[1]} (boxes would be cut from the wrong pixels)", W, H, None))
+            reason = (f"image size {W}x{H} differs from the labels' image_width x image_height "
+                      f"{want[0]}x{want[1]} (boxes would be cut from the wrong pixels)")
+            out.append((idx, reason, W, H, None))
             continue
         bx, by, bw, bh = bbox  # fraction of the head box inside the frame (scalar form of inside_fraction)
         iw = max(0.0, min(bx + bw, W) - max(bx, 0.0))
