@@ -298,7 +298,7 @@ def row_ids(frame):
     def text(col):
         if col not in frame.columns:
             return [""] * n
-        return ["" if v is None or (isinstance(v, float) and v != v) else str(v) for v in frame[col].tolist()]
+        return ["" if v is None or pd.isna(v) else str(v) for v in frame[col].tolist()]
 
     frames = pd.to_numeric(frame["frame"], errors="coerce").fillna(-1).astype(np.int64).tolist() \
         if "frame" in frame.columns else [-1] * n

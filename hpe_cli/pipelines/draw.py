@@ -31,7 +31,6 @@ def _read_all(src, mode, radians, system):
     import pyarrow as pa
 
     from ..io import batch_labels
-
     from ..io.readers import LINE_COL
 
     batches = list(src.batches())
@@ -132,6 +131,7 @@ def face_placement(frame, pose_para: bool, length=None):
 
 def _image_names(frame):
     """Image name per row (str), or None when the table names no images."""
+    import math
     from pathlib import PurePath
 
     from ..io.images import IMAGE_COLUMNS
@@ -141,7 +141,7 @@ def _image_names(frame):
         return None
     out = []
     for v in frame[col].tolist():
-        if v is None or v != v:
+        if v is None or (isinstance(v, float) and math.isnan(v)):
             out.append(None)
             continue
         p = PurePath(str(v))

@@ -1,5 +1,4 @@
 """hpe_cli.io.images: every layout a label table's image names can take, and draw on the real Panoptic folder."""
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -8,7 +7,14 @@ import pytest
 from click.testing import CliRunner
 
 from hpe_cli.cli.main import cli
-from hpe_cli.io.images import ImageResolver, image_size, jpeg_size, panoptic_view, resolve_image, video_path
+from hpe_cli.io.images import (
+    ImageResolver,
+    image_size,
+    jpeg_size,
+    panoptic_view,
+    resolve_image,
+    video_path,
+)
 
 
 def _img(path, w=64, h=48, value=100):
