@@ -241,7 +241,8 @@ def plan_images(items, *, img_root, outdir, canvas, frame, where, overwrite, che
 
 def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=None, radians=False, use="auto",
              length=None, thickness=None, tdy_origin="auto", annotate=False, grid=False, grid_cols=6, tile=256,
-             limit=None, rejects_path=None, overwrite=False, progress=None, strict=False) -> dict:
+             limit=None, rejects_path=None, overwrite=False, progress=None, strict=False, worst=None,
+             sort_by=None) -> dict:
     """Draw every row of ``input_path``; return counts (``faces``, ``images``, ``sheets``, ``rejects``).
 
     A table written by ``hpe evaluate -o`` (``gt_*`` and ``pred_*`` columns) is drawn by
@@ -256,6 +257,15 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
 
     input_path = Path(input_path)
     src = open_table(input_path, with_lines=True)
+    from .draw_errors import is_errors_table, run_draw_errors
+
+    if is_errors_table(src.columns):
+        return run_draw_errors(input_path, outdir, images=images, system=system, worst=worst,
+                               sort_by=sort_by or "geodesic", overwrite=overwrite, progress=progress,
+                               thickness=thickness, rejects_path=rejects_path, strict=strict)
+    if worst is not None or sort_by is not None:
+        raise HpeError(f"{src.path}: --worst and --sort-by draw the output of `hpe evaluate -o` (columns "
+                       "gt_pitch..pred_roll), got a label table")
     mode = label_mode(src.columns, src.path, system) if use == "auto" else use
     is_mat = input_path.is_dir() or input_path.suffix.lower() == ".mat"
     pose_para = is_mat or {"tdz", "scale"} <= set(src.columns)
@@ -442,3 +452,10 @@ def _write_image(img, staged, shown):
         staged.write_bytes(buf.tobytes())
     except OSError as exc:
         raise HpeError(f"{shown}: cannot write: {os_reason(exc)}") from None
+
+
+def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", **kw):
+    """See :func:`hpe_cli.pipelines.draw_errors.draw_worst` (re-exported here)."""
+    from .draw_errors import draw_worst as _dw
+
+    return _dw(rows, images=images, out_dir=out_dir, worst=worst, sort_by=sort_by, **kw)
