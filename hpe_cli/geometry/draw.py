@@ -249,7 +249,7 @@ def render_axes_dashed(img, A, centre, length, thickness=None):
         for i in range(3):
             _dashed(img, centre[n], ends[n, i], AXIS_COLOURS[i], t, dash=max(4.0, 3.0 * t + 3))
             if np.isfinite(ends[n, i]).all():
-                cv2.circle(img, _pt(ends[n, i]), int(max(3, 2 * t)) * _ONE, AXIS_COLOURS[i], -1, cv2.LINE_AA, _SHIFT)
+                cv2.circle(img, _pt(ends[n, i]), max(3, 2 * t) * _ONE, AXIS_COLOURS[i], -1, cv2.LINE_AA, _SHIFT)
     return img
 
 
