@@ -4,17 +4,11 @@ from __future__ import annotations
 import click
 
 from ..pipelines.augment import AGREE_TOL, IMAGE_COLUMNS, run_augment  # noqa: F401  (re-exported)
-from .options import (
-    batch_option,
-    echo_summary,
-    output_option,
-    overwrite_option,
-    progress,
-    rejects_options,
-    system_option,
-    verbosity_options,
-)
 from .table_options import column_options
+from .options import (batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
+                      system_option, verbosity_options)
+
+
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
