@@ -10,7 +10,6 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 
 
 
-
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
