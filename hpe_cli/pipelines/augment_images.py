@@ -119,14 +119,14 @@ class ImageJob:
         pose[:3] = np.deg2rad(s.to_angles(s.from_canonical(A2[None]))[0][0])
         tdx, tdy = move_td(pose[3:4], pose[4:5], P, size_in[1], size_out[1], True)
         pose[3], pose[4] = tdx[0], tdy[0]
-        m["Pose_Para"] = pose.reshape(1, -1).astype(m["Pose_Para"].dtype)
+        m["Pose_Para"] = pose.reshape(1, -1)  # float64: the new angles to the last bit
         if "pt2d" in m:
             m["pt2d"] = self._move_cols(np.asarray(m["pt2d"], dtype=np.float64), P, mirror, invisible=-1.0)
         if "pt3d_68" in m:
             p3 = np.asarray(m["pt3d_68"], dtype=np.float64)
             xy = self._move_cols(p3[:2], P, mirror)
             z = p3[2][self._perm(p3.shape[1])] if mirror else p3[2]
-            m["pt3d_68"] = np.vstack([xy, z]).astype(m["pt3d_68"].dtype)
+            m["pt3d_68"] = np.vstack([xy, z])
         if "roi" in m and roi_fn is not None:
             m["roi"] = roi_fn(np.asarray(m["roi"], dtype=np.float64), size_in).reshape(m["roi"].shape)
         out = self.stage / rel.with_suffix(".mat")
