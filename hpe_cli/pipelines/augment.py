@@ -330,6 +330,9 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         "pixel_convention": "pixel centres at integer coordinates; centre ((W-1)/2, (H-1)/2)"}}
     counts = {"rows": 0, "written": 0, "boxes": 0}
     workers = workers or min(2, os.cpu_count() or 1)
+    if bar is not None and src.num_rows is not None:
+        bar.total = src.num_rows
+        bar.refresh()
 
     def perm_of(n):
         name = scheme_for_count(n)
@@ -380,10 +383,12 @@ def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan)
                 base = job.mat_dir if job.mat_dir.is_dir() else job.mat_dir.parent
                 mat = (base / files[i], A2[i], plan.roi_fn)
             job.add(names[i] or "", plan.where(lines[i]), refs[i], P[i], wh_in[i], wh_out[i], plan.mirror, mat)
+            if bar is not None:  # the image work is the slow part: move the bar per image
+                bar.update(1)
     writer.write(out)
     counts["boxes"] += boxes
     counts["rows"] += batch.num_rows
     counts["written"] += int(keep.sum())
     if bar is not None:
-        bar.update(batch.num_rows)
+        bar.update(batch.num_rows - (int(keep.sum()) if job is not None else 0))
 

@@ -206,3 +206,32 @@ def test_commit_failing_after_some_images_were_placed_undoes_them(tmp_path, monk
     assert res.exit_code == 1 and "c.png: cannot write: input/output error" in res.output
     assert not out.exists() or os.listdir(out) == []
     assert not (tmp_path / "o.csv").exists()
+
+
+class _Bar:
+    def __init__(self):
+        self.total, self.n, self.steps = None, 0, []
+
+    def update(self, k):
+        self.n += k
+        self.steps.append(k)
+
+    def refresh(self):
+        pass
+
+
+def test_progress_bars_have_totals_and_move_per_image(tmp_path):
+    from hpe_cli.pipelines.augment import run_augment
+    from hpe_cli.pipelines.draw import run_draw
+    from hpe_cli.rotation import get_system
+
+    root = _images(tmp_path, ["a.png", "b.png", "c.png"])
+    pd.DataFrame({"image": ["a.png", "b.png", "c.png", "a.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}) \
+        .to_parquet(tmp_path / "in.parquet")
+    bar = _Bar()
+    run_augment(tmp_path / "in.parquet", tmp_path / "o.parquet", get_system("300w_lp"), (W, H), "hflip", None,
+                images_dir=root, out_images=tmp_path / "out", bar=bar)
+    assert bar.total == 4 and bar.n == 4 and bar.steps.count(1) >= 4  # one step per row's image
+    bar = _Bar()
+    run_draw(tmp_path / "in.parquet", tmp_path / "drawn", images=root, system=get_system("300w_lp"), progress=bar)
+    assert bar.total == 3 and bar.n == 3  # three images (two rows on a.png)
