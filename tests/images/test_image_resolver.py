@@ -128,3 +128,45 @@ def test_draw_real_panoptic_folder(realdata, tmp_path):
                               str(tmp_path / "rej2.csv")], catch_exceptions=False)
     assert res.exit_code == 1 and "nothing drawn" in res.output
     assert not (tmp_path / "d2").exists() and not (tmp_path / "rej2.csv").exists()
+
+
+def _draw(*args):
+    return CliRunner().invoke(cli, ["draw", *map(str, args)], catch_exceptions=False)
+
+
+def test_draw_video_frames(tmp_path):
+    """Rows naming extracted frames that only exist in hdVideos/ are drawn from the video."""
+    _video(tmp_path / "seq" / "hdVideos" / "hd_00_03.mp4", n=6, w=96, h=64)
+    pd.DataFrame({"image": ["hdImgs/00_03/00_03_00000001.jpg", "hdImgs/00_03/00_03_00000004.jpg"],
+                  "camera": ["00_03", "00_03"], "frame": [1, 4], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}) \
+        .to_parquet(tmp_path / "l.parquet")
+    res = _draw(tmp_path / "l.parquet", "-o", tmp_path / "d", "--images", tmp_path / "seq", "--length", 20,
+                "--thickness", 3)
+    assert res.exit_code == 0, res.output
+    for f in (1, 4):
+        img = cv2.imread(str(tmp_path / "d" / "hdImgs" / "00_03" / f"00_03_{f:08d}.jpg"))
+        assert img.shape == (64, 96, 3)
+        assert abs(img[5:15, 5:15].mean() - 40 * f) < 8  # the right frame (grey level 40 * frame)
+        assert img[32, 58, 2] > 180 and img[32, 58, 1] < 90  # the red line from the centre (47.5, 31.5)
+
+
+def test_draw_same_picture_by_two_names_and_two_pictures_for_one_name(tmp_path):
+    a = _img(tmp_path / "imgs" / "face.jpg")
+    _img(tmp_path / "other" / "face.jpg", value=30)
+    (tmp_path / "imgs" / "face.mat").write_bytes(b"")
+    t = pd.DataFrame({"image": ["face.jpg", "face.mat"], "tdx": [20.0, 44.0], "tdy": 24.0, "size": 10.0,
+                      "pitch": 0.0, "yaw": 0.0, "roll": 0.0})
+    t.to_csv(tmp_path / "l.csv", index=False)
+    # face.mat names the same picture as face.jpg: both faces on one image
+    res = _draw(tmp_path / "l.csv", "-o", tmp_path / "d", "--images", tmp_path / "imgs", "--thickness", 2)
+    assert res.exit_code == 0, res.output
+    assert "drew 2 faces" in res.output and [p.name for p in (tmp_path / "d").iterdir()] == ["face.jpg"]
+    img = cv2.imread(str(tmp_path / "d" / "face.jpg"))
+    assert img[24, 27, 2] > 150 and img[24, 51, 2] > 150  # both red lines
+    # an absolute name of another picture with the same base name: an error naming both rows, nothing written
+    t.loc[1, "image"] = str(tmp_path / "other" / "face.jpg")
+    t.to_csv(tmp_path / "l2.csv", index=False)
+    res = _draw(tmp_path / "l2.csv", "-o", tmp_path / "d2", "--images", tmp_path / "imgs")
+    assert res.exit_code == 1 and "line 3" in res.output and "line 2" in res.output
+    assert "two different pictures for one output file" in res.output and not (tmp_path / "d2").exists()
+    assert a.is_file()
