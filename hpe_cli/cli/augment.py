@@ -27,6 +27,9 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 @click.option("--crop", nargs=4, type=float, default=None, metavar="X Y W H",
               help="Cut the W x H rectangle whose top-left pixel is (X, Y) (whole pixels); labels keep their "
                    "rotation, every position moves by (-X, -Y).")
+@click.option("--scale", "zoom", type=click.FloatRange(0, min_open=True), default=None, metavar="S",
+              help="Resize by S (W*S and H*S must be whole pixels): positions scale about the image's top-left "
+                   "edge as cv2.resize maps them; size and Pose_Para scale multiply by S.")
 @click.option("--landmarks", "scheme", type=click.Choice(["auto", "ibug68", "face70", "aflw21", "none"]),
               default="auto", show_default=True,
               help="Left/right scheme of the lm{i}_x/lm{i}_y columns, re-indexed after a mirror. auto: by count "
@@ -51,16 +54,16 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 @batch_option
 @verbosity_options
 @column_options
-def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line, crop, scheme, box_from, clip, images_dir,
+def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line, crop, zoom, scheme, box_from, clip, images_dir,
             out_images, image_column, interpolation, border, jpeg_quality, rejects, strict, overwrite, batch_size,
             verbose, quiet):
-    """Rotate or mirror a head-pose dataset: labels, landmarks, boxes and images.
+    """Rotate, mirror, crop or resize a head-pose dataset: labels, landmarks, boxes and images.
 
     INPUT is a .parquet/.csv label table (or a folder of .mat files) with
     angle columns pitch,yaw,roll (degrees) or, when it has none, matrix
     columns r00..r22 (the stored matrix of --system); rows where both are
     present and disagree are rejected. Labels are moved
-    exactly (SPEC §5): A' = M A for a rotation, A' = M A diag(-1,1,1) for a
+    exactly: A' = M A for a rotation, A' = M A diag(-1,1,1) for a
     mirror, in the canonical frame, then written back in --system with both
     Euler solutions, the matrix, gimbal_lock and roundtrip_err.
 
@@ -73,7 +76,10 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
     (OpenCV's); --hflip maps x to W-1-x and --rotate turns about
     ((W-1)/2, (H-1)/2), exactly like cv2.flip and
     cv2.warpAffine(getRotationMatrix2D(((W-1)/2, (H-1)/2), DEG, 1)).
-    Images keep their size (--crop: W x H); rotated corners are filled per
+    A crop or a resize keeps the labels' rotation (the 300W-LP model is
+    orthographic) and moves every position; a resize also multiplies the
+    lengths (size, Pose_Para scale). Images keep their size (--crop: W x H,
+    --scale: W*S x H*S); rotated corners are filled per
     --border. tdx, tdy move too (from the bottom row for Pose_Para tables);
     image_width/image_height become the output size.
 
@@ -96,11 +102,13 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
       hpe augment labels.parquet -o both.parquet --image-size 450 450 --hflip --vflip
       hpe augment out/labels.parquet -o flipped.parquet --hflip   # sizes from image_width/image_height
       hpe augment AFLW2000/ -o c.parquet --crop 50 50 350 350 --images AFLW2000/ --out-images c/   # + .mat files
+      hpe augment labels.parquet -o half.parquet --scale 0.5 --images frames/ --out-images half/
     """
     chosen = [name for name, on in (("--hflip", hflip), ("--vflip", vflip), ("--rotate", rotate is not None),
-                                    ("--mirror-line", mirror_line is not None), ("--crop", crop is not None)) if on]
+                                    ("--mirror-line", mirror_line is not None), ("--crop", crop is not None),
+                                    ("--scale", zoom is not None)) if on]
     if not chosen:
-        raise click.UsageError("expected one of --hflip, --vflip, --rotate DEG, --mirror-line DEG, --crop X Y W H; "
+        raise click.UsageError("expected one of --hflip, --vflip, --rotate DEG, --mirror-line DEG, --crop X Y W H, --scale S; "
                                "got none")
     if len(chosen) > 1 and sorted(chosen) != ["--hflip", "--vflip"]:
         raise click.UsageError(f"expected one augmentation (or --hflip with --vflip), got {' and '.join(chosen)}")
@@ -116,6 +124,8 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
                                      param_hint="--crop")
         crop = tuple(int(v) for v in crop)
         op, angle, desc = "crop", None, f"crop {crop[2]}x{crop[3]} at ({crop[0]}, {crop[1]})"
+    elif zoom is not None:
+        op, angle, desc = "scale", None, f"scale by {zoom:g}"
     else:
         op, angle, desc = "mirror", mirror_line, f"mirror about the {mirror_line:g} deg line"
     for name, v in (("--rotate", rotate), ("--mirror-line", mirror_line)):
@@ -125,7 +135,7 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
         raise click.UsageError("--images and --out-images go together")
     bar = progress(desc="augment", quiet=quiet)
     try:
-        s = run_augment(input, output, system, tuple(image_size) if image_size else None, op, angle, crop=crop, scheme=scheme, box_from=box_from,
+        s = run_augment(input, output, system, tuple(image_size) if image_size else None, op, angle, crop=crop, scale=zoom, scheme=scheme, box_from=box_from,
                         clip=clip, images_dir=images_dir, out_images=out_images, image_column=image_column,
                         interpolation=interpolation, border=border, jpeg_quality=jpeg_quality, rejects_path=rejects,
                         strict=strict, overwrite=overwrite, batch_size=batch_size, bar=bar, verbose=verbose,

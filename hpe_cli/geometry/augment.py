@@ -205,6 +205,16 @@ def crop_affine(x, y) -> np.ndarray:
     return np.array([[1.0, 0.0, -x], [0.0, 1.0, -y]])
 
 
+def scale_affine(sx, sy=None) -> np.ndarray:
+    """The pixel affine (2, 3) of a resize by ``sx`` (and ``sy``, default ``sx``) with pixel centres at integers:
+    ``u' = (u + 0.5) * sx - 0.5``, the mapping ``cv2.resize`` uses (image edges stay image edges)."""
+    sx = float(sx)
+    sy = sx if sy is None else float(sy)
+    if not (np.isfinite(sx) and np.isfinite(sy) and sx > 0 and sy > 0):
+        raise ValueError(f"expected positive finite scale factors, got ({sx}, {sy})")
+    return np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5]])
+
+
 def move_point(u, v, P) -> tuple:
     """One point per row ``(u, v)`` (each shape (N,)) moved by pixel affines ``P`` (N, 2, 3) or (2, 3)."""
     P = np.asarray(P, dtype=np.float64)

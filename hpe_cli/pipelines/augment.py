@@ -118,25 +118,36 @@ def row_sizes(batch, image_size, has_cols, pics, names, ids):
     return wh, refs, reasons
 
 
-def _pixel_transform(op, M, wh, crop):
-    """Per-row pixel affine (N, 2, 3) and output size (N, 2)."""
-    import numpy as np
-
+def _pixel_transform(op, M, wh, crop, scale=None):
+    """Per-row pixel affine (N, 2, 3), output size (N, 2) and reasons ('' or why the row cannot be resized)."""
     from ..geometry.augment import _affine, crop_affine
 
+    n = len(wh)
+    reasons = np.full(n, "", dtype=object)
     safe = np.where(np.isfinite(wh), wh, 1.0)
     if op == "crop":
         x, y, cw, ch = crop
-        return np.broadcast_to(crop_affine(x, y), (len(wh), 2, 3)), np.broadcast_to(np.array([cw, ch], float),
-                                                                                      wh.shape)
-    return _affine(np.asarray(M), safe), safe
+        return (np.broadcast_to(crop_affine(x, y), (n, 2, 3)), np.broadcast_to(np.array([cw, ch], float), wh.shape),
+                reasons)
+    if op == "scale":
+        out = np.round(safe * scale)
+        whole = (np.abs(safe * scale - out) < 1e-6).all(1) & (out >= 1).all(1)
+        for i in np.flatnonzero(~whole):
+            reasons[i] = (f"scale: {safe[i, 0]:g}x{safe[i, 1]:g} times {scale:g} is not a whole number of pixels "
+                          "(the aspect would change)")
+        out = np.where(whole[:, None], out, safe)
+        P = np.zeros((n, 2, 3))
+        P[:, 0, 0] = P[:, 1, 1] = scale
+        P[:, :, 2] = 0.5 * scale - 0.5
+        return P, out, reasons
+    return _affine(np.asarray(M), safe), safe, reasons
 
 
 class _Plan:
     """What every batch needs: the label reader, the landmark/box/size columns, the transform."""
 
     def __init__(self, path, src, in_system, system, columns, n_lm, perm, has_box, M, op, crop, image_size,
-                 has_cols, box_from, clip, pose_para, img_col, pics):
+                 has_cols, box_from, clip, pose_para, img_col, pics, scale=None):
         from ..io import MATRIX_COLS, landmark_cols
         from ..io.labels import label_mode
 
@@ -149,6 +160,10 @@ class _Plan:
         self.M, self.op, self.crop, self.image_size, self.has_cols = M, op, crop, image_size, has_cols
         self.box_from, self.clip, self.pose_para, self.img_col, self.pics = box_from, clip, pose_para, img_col, pics
         self.has_td = "tdx" in columns and "tdy" in columns
+        self.scale = scale
+        self.zoom = scale if op == "scale" else 1.0  # lengths in pixels (size, Pose_Para scale) change by this
+        self.zoom_cols = [c for c in ("size", "scale") if c in columns and (c == "size" or pose_para)] \
+            if op == "scale" else []
         self.mirror = bool(np.linalg.det(M) < 0)
         self.label_source = ("pitch,yaw,roll" + (" (checked against r00..r22)" if self.cross_check else "")
                              if self.mode == "angles" else "r00..r22")
@@ -224,14 +239,16 @@ class _Plan:
         wh, refs, size_reasons = row_sizes(batch, self.image_size, self.has_cols, self.pics, names, ids)
         reasons = np.where(reasons == "", size_reasons, reasons)
         extra = {}  # landmarks and boxes: NaN means missing and is kept; only non-numbers reject a row
-        for c in self.lm_names + (BBOX_COLS if self.has_box else []) + (["tdx", "tdy"] if self.has_td else []):
+        for c in (self.lm_names + (BBOX_COLS if self.has_box else []) + (["tdx", "tdy"] if self.has_td else [])
+                  + self.zoom_cols):
             v, r = numeric_column(batch, c)
             extra[c] = v
             if not _is_numeric_type(batch.schema.field(c).type):  # only text can hold non-numbers
                 bad = np.char.startswith(r.astype(str), "non-numeric")
                 reasons = np.where((reasons == "") & bad, r, reasons)
+        P, wh_out, scale_reasons = _pixel_transform(self.op, self.M, wh, self.crop, self.scale)
+        reasons = np.where(reasons == "", scale_reasons, reasons)
         keep = reasons == ""
-        P, wh_out = _pixel_transform(self.op, self.M, wh, self.crop)
         kb = batch.filter(pa.array(keep)) if not keep.all() else batch
         A2 = augment_canonical(self.in_system.to_canonical(R[keep]), self.M)
         new = conversion_columns(canonical_to_labels(A2, self.system))
@@ -251,6 +268,8 @@ class _Plan:
         if self.has_td:
             new["tdx"], new["tdy"] = move_td(extra["tdx"][keep], extra["tdy"][keep], Pk, wh[keep, 1], out_k[:, 1],
                                              self.pose_para)
+        for c in self.zoom_cols:
+            new[c] = extra[c][keep] * self.zoom
         if self.has_cols:
             new["image_width"], new["image_height"] = out_k[:, 0].astype(np.int64), out_k[:, 1].astype(np.int64)
         out_cols, out_names = [], []
@@ -271,7 +290,7 @@ class _Plan:
 def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
                 images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
                 jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=65_536, bar=None, verbose=0,
-                description="", workers=None, strict=False, crop=None):
+                description="", workers=None, strict=False, crop=None, scale=None):
     """Augment a label table (and optionally its images). Returns a summary dict.
 
     ``image_size`` (``(W, H)`` or None) is checked against the table's ``image_width/image_height`` and the
@@ -316,15 +335,16 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         raise HpeError("--image-column needs --images and --out-images")
     if out_images is not None and images_dir is not None and Path(out_images).resolve() == Path(images_dir).resolve():
         raise HpeError(f"{out_images}: --out-images must differ from --images (inputs are never modified)")
-    M = plane_matrix(op, angle) if op != "crop" else np.eye(2)
+    M = plane_matrix(op, angle) if op not in ("crop", "scale") else np.eye(2)
     mat_input = bool(getattr(src, "dataset", False)) and (path.is_dir() or path.suffix.lower() == ".mat") \
         and out_images is not None
     pose_para = (path.is_dir() or path.suffix.lower() == ".mat") or {"tdz", "scale"} <= set(columns)
     plan = _Plan(path, src, in_system, system, columns, n_lm, perm, bool(box_present), M, op, crop, image_size,
-                 has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir) if images_dir else None)
+                 has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir) if images_dir else None,
+                 scale=scale)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=path)
     meta = {**system_metadata(system), "hpe:augment": {
-        "op": op, "angle_deg": angle, "crop": list(crop) if crop else None, "description": description,
+        "op": op, "angle_deg": angle, "crop": list(crop) if crop else None, "scale": scale, "description": description,
         "image_size": list(image_size) if image_size else "from image_width/image_height or the images",
         "landmarks": lm_text, "box_from": box_from, "clip": clip,
         "pixel_convention": "pixel centres at integer coordinates; centre ((W-1)/2, (H-1)/2)"}}
@@ -381,7 +401,7 @@ def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan)
             mat = None
             if job.mat_dir is not None and files is not None:
                 base = job.mat_dir if job.mat_dir.is_dir() else job.mat_dir.parent
-                mat = (base / files[i], A2[i], plan.roi_fn)
+                mat = (base / files[i], A2[i], plan.roi_fn, plan.zoom)
             job.add(names[i] or "", plan.where(lines[i]), refs[i], P[i], wh_in[i], wh_out[i], plan.mirror, mat)
             if bar is not None:  # the image work is the slow part: move the bar per image
                 bar.update(1)

@@ -107,7 +107,7 @@ class ImageJob:
         from ..geometry.augment import move_td
         from ..rotation import get_system
 
-        src_mat, A2, roi_fn = mat
+        src_mat, A2, roi_fn, zoom = mat
         try:
             m = scipy.io.loadmat(src_mat)
         except Exception as exc:  # noqa: BLE001 - scipy raises many types for a damaged file
@@ -119,13 +119,14 @@ class ImageJob:
         pose[:3] = np.deg2rad(s.to_angles(s.from_canonical(A2[None]))[0][0])
         tdx, tdy = move_td(pose[3:4], pose[4:5], P, size_in[1], size_out[1], True)
         pose[3], pose[4] = tdx[0], tdy[0]
+        pose[6] *= zoom  # weak perspective: projected = scale * R @ X + t; a resize multiplies scale
         m["Pose_Para"] = pose.reshape(1, -1)  # float64: the new angles to the last bit
         if "pt2d" in m:
             m["pt2d"] = self._move_cols(np.asarray(m["pt2d"], dtype=np.float64), P, mirror, invisible=-1.0)
         if "pt3d_68" in m:
             p3 = np.asarray(m["pt3d_68"], dtype=np.float64)
             xy = self._move_cols(p3[:2], P, mirror)
-            z = p3[2][self._perm(p3.shape[1])] if mirror else p3[2]
+            z = (p3[2][self._perm(p3.shape[1])] if mirror else p3[2]) * zoom
             m["pt3d_68"] = np.vstack([xy, z])
         if "roi" in m and roi_fn is not None:
             m["roi"] = roi_fn(np.asarray(m["roi"], dtype=np.float64), size_in).reshape(m["roi"].shape)
@@ -183,6 +184,10 @@ def _warp(img, P, size_out, interpolation, border):
             code = {(-1.0, 1.0): 1, (1.0, -1.0): 0, (-1.0, -1.0): -1}.get((sx, sy))
             return img.copy() if code is None else cv2.flip(img, code)
     interp, borders = _cv_flags()
+    if A[0, 1] == 0 and A[1, 0] == 0 and A[0, 0] == A[1, 1] > 0 and np.allclose(t, 0.5 * A[0, 0] - 0.5):
+        # a resize: cv2.resize has the same pixel-centre mapping; area averaging when shrinking
+        flag = cv2.INTER_AREA if A[0, 0] < 1 and interpolation == "linear" else interp[interpolation]
+        return cv2.resize(img, (W, H), interpolation=flag)
     return cv2.warpAffine(img, P, (W, H), flags=interp[interpolation], borderMode=borders[border],
                           borderValue=(0, 0, 0, 0))
 

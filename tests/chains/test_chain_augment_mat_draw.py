@@ -52,13 +52,16 @@ def expected(how, A, pts, size):
         S = np.diag([-1.0, 1.0, 1.0])
         q = np.vstack([W - 1 - pts[0], pts[1]])
         return S @ A @ S, q, (W, H)
+    if kind == "scale":
+        return A, (pts + 0.5) * arg - 0.5, (round(W * arg), round(H * arg))
     x, y, w, h = arg
     return A, pts - np.array([[x], [y]]), (w, h)
 
 
 @pytest.mark.parametrize("how,args", [(("hflip", None), ["--hflip"]), (("rotate", 30.0), ["--rotate", 30]),
-                                      (("crop", (60, 40, 330, 360)), ["--crop", 60, 40, 330, 360])],
-                         ids=["hflip", "rotate30", "crop"])
+                                      (("crop", (60, 40, 330, 360)), ["--crop", 60, 40, 330, 360]),
+                                      (("scale", 0.5), ["--scale", 0.5])],
+                         ids=["hflip", "rotate30", "crop", "half"])
 def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
     out = tmp_path / "out"
     res = cli_run("augment", aflw, "-o", tmp_path / "aug.parquet", *args, "--images", aflw, "--out-images", out)
@@ -97,12 +100,13 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
         _, q3, _ = expected(how, A0, p3[:2], (W0, H0))
         perm68 = flip_permutation("ibug68") if how[0] == "hflip" else np.arange(68)
         assert np.allclose(m1["pt3d_68"][:2], q3[:, perm68], atol=1e-6)
-        assert np.allclose(m1["pt3d_68"][2], p3[2][perm68], atol=1e-6)
+        zoom = how[1] if how[0] == "scale" else 1.0
+        assert np.allclose(m1["pt3d_68"][2], p3[2][perm68] * zoom, atol=1e-6)
         # tdx, tdy (tdy from the bottom row) moved as a point
         c0 = np.array([[p0[3]], [H0 - 1 - p0[4]]])
         _, c1, _ = expected(how, A0, c0, (W0, H0))
         p1 = m1["Pose_Para"].reshape(-1)
-        assert np.allclose([p1[3], H1 - 1 - p1[4]], c1[:, 0], atol=1e-6) and np.allclose(p1[5:], p0[5:], atol=1e-6)
+        assert np.allclose([p1[3], H1 - 1 - p1[4]], c1[:, 0], atol=1e-6) and np.allclose(p1[5], p0[5]) and np.isclose(p1[6], p0[6] * zoom)
         # roi: the region of the original photo; a crop shows a sub-rectangle of it
         roi0, roi1 = m0["roi"].reshape(-1).astype(float), m1["roi"].reshape(-1)
         if how[0] == "crop":
@@ -119,6 +123,8 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
             ref = cv2.flip(img0, 1)
         elif how[0] == "rotate":
             ref = cv2.warpAffine(img0, cv2.getRotationMatrix2D(((W0 - 1) / 2, (H0 - 1) / 2), 30, 1.0), (W0, H0))
+        elif how[0] == "scale":
+            ref = cv2.resize(img0, (W1, H1), interpolation=cv2.INTER_AREA)
         else:
             x, y, w, h = how[1]
             ref = img0[y:y + h, x:x + w]

@@ -47,15 +47,20 @@ def cv2_transform(img, how):
     if kind == "rotate":
         P = cv2.getRotationMatrix2D(((img.shape[1] - 1) / 2, (img.shape[0] - 1) / 2), arg, 1.0)
         return cv2.warpAffine(img, P, (img.shape[1], img.shape[0]), flags=cv2.INTER_LINEAR)
+    if kind == "scale":
+        h, w = img.shape[:2]
+        return cv2.resize(img, (round(w * arg), round(h * arg)),
+                          interpolation=cv2.INTER_AREA if arg < 1 else cv2.INTER_LINEAR)
     x, y, w, h = arg
     return img[y:y + h, x:x + w]
 
 
 CASES = [(("hflip", None), ["--hflip"]), (("rotate", 33.0), ["--rotate", "33"]),
-         (("rotate", -120.0), ["--rotate", "-120"]), (("crop", (20, 10, 100, 90)), ["--crop", 20, 10, 100, 90])]
+         (("rotate", -120.0), ["--rotate", "-120"]), (("crop", (20, 10, 100, 90)), ["--crop", 20, 10, 100, 90]),
+         (("scale", 0.5), ["--scale", "0.5"]), (("scale", 2.0), ["--scale", "2"])]
 
 
-@pytest.mark.parametrize("how,args", CASES, ids=["hflip", "rot33", "rot-120", "crop"])
+@pytest.mark.parametrize("how,args", CASES, ids=["hflip", "rot33", "rot-120", "crop", "half", "double"])
 def test_landmarks_and_tdx_tdy_land_on_the_moved_pixels(tmp_path, how, args):
     rng = np.random.default_rng(4)
     n_lm = 21  # AFLW's 21 points: a mirror re-indexes them with its left/right pairs
@@ -68,7 +73,8 @@ def test_landmarks_and_tdx_tdy_land_on_the_moved_pixels(tmp_path, how, args):
     res = run(tmp_path / "in.parquet", "-o", tmp_path / "out.parquet", *args)
     assert res.exit_code == 0, res.output
     out = pd.read_parquet(tmp_path / "out.parquet").iloc[0]
-    wo, ho = (how[1][2], how[1][3]) if how[0] == "crop" else (W, H)
+    wo, ho = (how[1][2], how[1][3]) if how[0] == "crop" else (round(W * how[1]), round(H * how[1])) \
+        if how[0] == "scale" else (W, H)
     assert (out.image_width, out.image_height) == (wo, ho)
     perm = flip_permutation("aflw21") if how[0] == "hflip" else np.arange(n_lm)
     for i in range(n_lm):
@@ -77,6 +83,7 @@ def test_landmarks_and_tdx_tdy_land_on_the_moved_pixels(tmp_path, how, args):
         assert abs(out[f"lm{i}_x"] - u) < 0.05 and abs(out[f"lm{i}_y"] - v) < 0.05, (i, j)
     u, v = centroid(cv2_transform(blob(td[0], H - 1 - td[1]), how))
     assert abs(out.tdx - u) < 0.05 and abs((ho - 1 - out.tdy) - v) < 0.05
+    assert out.scale == pytest.approx(0.001 * (how[1] if how[0] == "scale" else 1.0))
     # the label, against SciPy: a turn by phi counter-clockwise on screen is Rz(phi) about the camera axis
     A = a300([10.0], [-35.0], [20.0])[0]
     if how[0] == "rotate":
@@ -84,7 +91,7 @@ def test_landmarks_and_tdx_tdy_land_on_the_moved_pixels(tmp_path, how, args):
     elif how[0] == "hflip":
         want = a300([10.0], [35.0], [-20.0])[0]  # the mirror image of a head: yaw and roll change sign
     else:
-        want = A  # a crop moves the origin only
+        want = A  # a crop moves the origin only; a resize changes lengths only
     got = a300([out.pitch], [out.yaw], [out.roll])[0]
     assert geodesic(want, got) < 1e-6
 
