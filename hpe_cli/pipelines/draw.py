@@ -162,9 +162,13 @@ def _safe_relative(name, where):
     return rel
 
 
-def row_namer(src, lines):
+def row_namer(src, lines, frame=None):
     """``f(i)`` naming 0-based row ``i`` of ``src`` as its error messages do: ``FILE: line N`` for text
-    (1-based, header = line 1), ``FILE: row N`` (1-based) otherwise."""
+    (1-based, header = line 1), the ``.mat`` file itself for a ``.mat`` folder, ``FILE: row N`` (1-based)
+    otherwise."""
+    if frame is not None and Path(src.path).is_dir() and "file" in frame.columns:
+        files = frame["file"].tolist()
+        return lambda i: f"{Path(src.path) / str(files[i])}"
     if src.kind == "csv" and lines is not None:
         return lambda i: f"{src.path}: line {int(lines[i])}"
     return lambda i: f"{src.path}: row {int(i) + 1}"
@@ -271,7 +275,7 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     pose_para = is_mat or {"tdz", "scale"} <= set(src.columns)
     flip = tdy_origin == "bottom" or (tdy_origin == "auto" and pose_para)
     frame, A, angles, reasons, lines = _read_all(src, mode, radians, system)
-    where = row_namer(src, lines)
+    where = row_namer(src, lines, frame)
     n = len(frame)
     if n == 0:
         raise HpeError(f"{src.path}: empty table (no rows)")
