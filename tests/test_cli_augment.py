@@ -284,7 +284,7 @@ def test_matrix_checks(tmp_path):
     ([], 2, "expected one of --hflip"),
     (["--hflip", "--rotate", "3"], 2, "expected one augmentation"),
     (["--rotate", "nan"], 2, "finite"),
-    (["--hflip", "--images", "."], 2, "--images and --out-images go together"),
+    (["--hflip", "--out-images", "o"], 2, "--out-images needs --images"),
     (["--hflip", "--landmarks", "aflw21"], 1, "--landmarks aflw21 expects 21"),
 ])
 def test_usage_and_input_errors(tmp_path, args, code, msg):

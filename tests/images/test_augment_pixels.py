@@ -242,3 +242,13 @@ def test_progress_bars_have_totals_and_move_per_image(tmp_path):
     bar = _Bar()
     run_draw(tmp_path / "in.parquet", tmp_path / "drawn", images=root, system=get_system("300w_lp"), progress=bar)
     assert bar.total == 3 and bar.n == 3  # three images (two rows on a.png)
+
+
+def test_images_alone_give_the_sizes(tmp_path):
+    root = _images(tmp_path, ["a.png"])
+    pd.DataFrame({"image": ["a.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0, "bbox_x": 10.0, "bbox_y": 5.0,
+                  "bbox_w": 20.0, "bbox_h": 20.0}).to_csv(tmp_path / "in.csv", index=False)
+    res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root)
+    assert res.exit_code == 0, res.output
+    assert pd.read_csv(tmp_path / "o.csv")["bbox_x"].tolist() == [W - 1 - 10.0 - 20.0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["imgs", "in.csv", "o.csv"]
