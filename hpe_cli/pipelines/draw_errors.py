@@ -10,6 +10,7 @@ image never share an output file.
 """
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -138,45 +139,17 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
         (:func:`key_columns`), ``path`` the written PNG (a :class:`~pathlib.Path` in ``out_dir``),
         ``caption`` one line (key, error, both angle triples).
     """
-    import pandas as pd
-
     from ..errors import HpeError
-    from ..geometry import draw as g
     from ..io.images import ImageResolver, row_ids
     from ..io.transaction import ensure_transaction, note_input, staged_dir
-    from ..rotation import get_system
-    from .draw import _image_names, _write_image
+    from .draw import _image_names
 
-    if not isinstance(rows, pd.DataFrame):
-        import pyarrow.parquet as pq
-
-        path = Path(rows)
-        note_input(path)
-        table = pq.read_table(path)
-        if system is None:
-            system, _ = table_system(table.schema, get_system("300w_lp"))
-        where = where or str(path)
-        rows = table.to_pandas()
-    where = where or "evaluate output"
-    if system is None:
-        system = get_system(rows.attrs.get("hpe:system", "300w_lp"))
-    system = get_system(system) if isinstance(system, str) else system
-    missing = [c for c in ANGLE_COLUMNS if c not in rows.columns]
-    if missing:
-        raise HpeError(f"{where}: expected hpe evaluate's per-row output with {', '.join(ANGLE_COLUMNS)}, "
-                       f"missing {', '.join(missing)}")
-    keys = key_columns(rows.columns)
+    rows, system, where = _load(rows, system, where)
     order = _order(rows, sort_by, worst, where)
     names = _image_names(rows) or [None] * len(rows)
     seqs, cams, frs = row_ids(rows)
     resolver = ImageResolver(images)
-    gt = rows[list(ANGLE_COLUMNS[:3])].to_numpy(np.float64)
-    pr = rows[list(ANGLE_COLUMNS[3:])].to_numpy(np.float64)
-    ok = np.isfinite(gt).all(1) & np.isfinite(pr).all(1)
-    A_gt = np.full((len(rows), 3, 3), np.nan)
-    A_pr = np.full((len(rows), 3, 3), np.nan)
-    A_gt[ok] = system.to_canonical(system.from_angles(gt[ok]))
-    A_pr[ok] = system.to_canonical(system.from_angles(pr[ok]))
+    job = _Pairs(rows, system, sort_by, names, thickness)
     refs = []
     for i in order.tolist():
         ref = resolver.find(names[i], seqs[i], cams[i], frs[i]) if (names[i] or cams[i]) else None
@@ -189,38 +162,95 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
     if progress is not None:
         progress.total = len(order)
         progress.refresh()
-    result = []
+    done = {}
     found = [k for k, r in enumerate(refs) if r is not None]
-    pics = {found[k]: (img, why) for k, img, why in ImageResolver.read([refs[k] for k in found])}
     with ensure_transaction(), staged_dir(out_dir, overwrite) as stage:
-        for rank, i in enumerate(order.tolist()):
-            img, why = pics.get(rank, (None, "image not found"))
-            if img is None:
-                if on_missing == "error":
-                    raise HpeError(f"{where}: row {i + 1}: {why}")
-                img = g.blank_canvas(320, 320, 96)
-                g.render_caption(img, f"{why[:48]}", (4, 310), height_px=11)
-            H, W = img.shape[:2]
-            key = tuple(rows[k].iat[i] for k in keys)
-            err = float(rows[sort_by].iat[i])
-            corner = [f"{sort_by} {err:.2f}" + (" deg" if sort_by != "frobenius" else "")]
-            if sort_by != "geodesic" and "geodesic" in rows.columns:
-                corner.append(f"geodesic {float(rows['geodesic'].iat[i]):.2f} deg")
-            if ok[i]:
-                centre, length = _placement(rows, i, refs[rank], H, W)
-                render_pair(img, A_gt[i], A_pr[i], centre, length, corner, thickness)
-            else:
-                g.render_caption(img, "angles missing", (4, H - 6), height_px=14)
-            stem = Path(str(names[i] or f"row{i + 1}")).stem
-            rel = Path(f"{rank + 1:04d}_{_safe_stem(stem)}.png")
-            _write_image(img, stage / rel, out_dir / rel)
-            caption = (f"{', '.join(map(str, key))}: {sort_by} {err:.2f}; gt (p, y, r) = "
-                       f"({gt[i, 0]:.1f}, {gt[i, 1]:.1f}, {gt[i, 2]:.1f}), pred = "
-                       f"({pr[i, 0]:.1f}, {pr[i, 1]:.1f}, {pr[i, 2]:.1f}) deg in {system.name}")
-            result.append((key, out_dir / rel, caption))
+        # one picture in memory at a time: files in rank order, then each video's frames, decoded once
+        missing = ((k, None, "image not found") for k, r in enumerate(refs) if r is None)
+        pictures = ((found[k], img, why) for k, img, why in ImageResolver.read([refs[k] for k in found]))
+        for rank, img, why in itertools.chain(missing, pictures):
+            i = int(order[rank])
+            if img is None and on_missing == "error":
+                raise HpeError(f"{where}: row {i + 1}: {why}")
+            done[rank] = job.draw(img, why, i, rank, refs[rank], stage, out_dir)
             if progress is not None:
                 progress.update(1)
-    return result
+    return [done[k] for k in sorted(done)]
+
+
+def _load(rows, system, where):
+    """(DataFrame, RotationSystem, name for messages) of a DataFrame or a Parquet/CSV file of evaluate's output."""
+    import pandas as pd
+
+    from ..errors import HpeError
+    from ..io.transaction import note_input
+    from ..rotation import get_system
+
+    if not isinstance(rows, pd.DataFrame):
+        path = Path(rows)
+        note_input(path)
+        if path.suffix.lower() in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(path)
+            if system is None:
+                system, _ = table_system(table.schema, get_system("300w_lp"))
+            rows = table.to_pandas()
+        else:
+            rows = pd.read_csv(path)
+        where = where or str(path)
+    where = where or "evaluate output"
+    if system is None:
+        system = rows.attrs.get("hpe:system", "300w_lp")
+    system = get_system(system) if isinstance(system, str) else system
+    missing = [c for c in ANGLE_COLUMNS if c not in rows.columns]
+    if missing:
+        raise HpeError(f"{where}: expected hpe evaluate's per-row output with {', '.join(ANGLE_COLUMNS)}, "
+                       f"missing {', '.join(missing)}")
+    return rows, system, where
+
+
+class _Pairs:
+    """Draws one row of evaluate's output: both poses, legend, error; writes ``<rank>_<stem>.png``."""
+
+    def __init__(self, rows, system, sort_by, names, thickness):
+        self.rows, self.system, self.sort_by, self.names, self.thickness = rows, system, sort_by, names, thickness
+        self.keys = key_columns(rows.columns)
+        self.gt = rows[list(ANGLE_COLUMNS[:3])].to_numpy(np.float64)
+        self.pr = rows[list(ANGLE_COLUMNS[3:])].to_numpy(np.float64)
+        self.ok = np.isfinite(self.gt).all(1) & np.isfinite(self.pr).all(1)
+        self.A_gt = np.full((len(rows), 3, 3), np.nan)
+        self.A_pr = np.full((len(rows), 3, 3), np.nan)
+        ok = self.ok
+        self.A_gt[ok] = system.to_canonical(system.from_angles(self.gt[ok]))
+        self.A_pr[ok] = system.to_canonical(system.from_angles(self.pr[ok]))
+
+    def draw(self, img, why, i, rank, ref, stage, out_dir):
+        from ..geometry import draw as g
+        from .draw import _write_image
+
+        rows, sort_by, gt, pr = self.rows, self.sort_by, self.gt, self.pr
+        if img is None:
+            img = g.blank_canvas(320, 320, 96)
+            g.render_caption(img, f"{why[:48]}", (4, 310), height_px=11)
+        H, W = img.shape[:2]
+        key = tuple(rows[k].iat[i] for k in self.keys)
+        err = float(rows[sort_by].iat[i])
+        corner = [f"{sort_by} {err:.2f}" + (" deg" if sort_by != "frobenius" else "")]
+        if sort_by != "geodesic" and "geodesic" in rows.columns:
+            corner.append(f"geodesic {float(rows['geodesic'].iat[i]):.2f} deg")
+        if self.ok[i]:
+            centre, length = _placement(rows, i, ref, H, W)
+            render_pair(img, self.A_gt[i], self.A_pr[i], centre, length, corner, self.thickness)
+        else:
+            g.render_caption(img, "angles missing", (4, H - 6), height_px=14)
+        stem = Path(str(self.names[i] or f"row{i + 1}")).stem
+        rel = Path(f"{rank + 1:04d}_{_safe_stem(stem)}.png")
+        _write_image(img, stage / rel, out_dir / rel)
+        caption = (f"{', '.join(map(str, key))}: {sort_by} {err:.2f}; gt (p, y, r) = "
+                   f"({gt[i, 0]:.1f}, {gt[i, 1]:.1f}, {gt[i, 2]:.1f}), pred = "
+                   f"({pr[i, 0]:.1f}, {pr[i, 1]:.1f}, {pr[i, 2]:.1f}) deg in {self.system.name}")
+        return key, out_dir / rel, caption
 
 
 def _safe_stem(stem: str) -> str:
