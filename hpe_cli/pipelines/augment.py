@@ -118,6 +118,21 @@ def row_sizes(batch, image_size, has_cols, pics, names, ids):
     return wh, refs, reasons
 
 
+def _image_column(path, columns, images_dir, out_images, image_column):
+    """The column naming each row's image (None without --images); usage errors for the image options."""
+    if out_images is not None and images_dir is not None and Path(out_images).resolve() == Path(images_dir).resolve():
+        raise HpeError(f"{out_images}: --out-images must differ from --images (inputs are never modified)")
+    if images_dir is None:
+        if image_column is not None:
+            raise HpeError("--image-column needs --images")
+        return None
+    img_col = image_column or next((c for c in IMAGE_COLUMNS if c in columns), None)
+    if img_col is None or img_col not in columns:
+        raise HpeError(f"{path}: expected an image column ({image_column or ', '.join(IMAGE_COLUMNS)}) "
+                       "to go with --images, got none")
+    return img_col
+
+
 def _pixel_transform(op, M, wh, crop, scale=None):
     """Per-row pixel affine (N, 2, 3), output size (N, 2) and reasons ('' or why the row cannot be resized)."""
     from ..geometry.augment import _affine, crop_affine
@@ -302,14 +317,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
 
     from ..geometry.augment import plane_matrix
     from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
-    from ..io import (
-        BBOX_COLS,
-        Rejects,
-        TableWriter,
-        check_output,
-        open_table,
-        system_metadata,
-    )
+    from ..io import BBOX_COLS, Rejects, TableWriter, check_output, open_table, system_metadata
     from ..io.columns import label_system
     from ..io.transaction import ensure_transaction, staged_dir
     from .augment_images import ImageJob, RowImages
@@ -325,16 +333,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     if box_present and len(box_present) != 4:
         raise HpeError(f"{path}: expected all of {', '.join(BBOX_COLS)}, got only {', '.join(box_present)}")
     has_cols = _size_source(columns, image_size, images_dir, path)
-    img_col = None
-    if images_dir is not None:
-        img_col = image_column or next((c for c in IMAGE_COLUMNS if c in columns), None)
-        if img_col is None or img_col not in columns:
-            raise HpeError(f"{path}: expected an image column ({image_column or ', '.join(IMAGE_COLUMNS)}) "
-                           "to go with --images, got none")
-    elif image_column is not None:
-        raise HpeError("--image-column needs --images and --out-images")
-    if out_images is not None and images_dir is not None and Path(out_images).resolve() == Path(images_dir).resolve():
-        raise HpeError(f"{out_images}: --out-images must differ from --images (inputs are never modified)")
+    img_col = _image_column(path, columns, images_dir, out_images, image_column)
     M = plane_matrix(op, angle) if op not in ("crop", "scale") else np.eye(2)
     mat_input = bool(getattr(src, "dataset", False)) and (path.is_dir() or path.suffix.lower() == ".mat") \
         and out_images is not None
