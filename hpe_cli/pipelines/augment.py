@@ -317,7 +317,14 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
 
     from ..geometry.augment import plane_matrix
     from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
-    from ..io import BBOX_COLS, Rejects, TableWriter, check_output, open_table, system_metadata
+    from ..io import (
+        BBOX_COLS,
+        Rejects,
+        TableWriter,
+        check_output,
+        open_table,
+        system_metadata,
+    )
     from ..io.columns import label_system
     from ..io.transaction import ensure_transaction, staged_dir
     from .augment_images import ImageJob, RowImages
