@@ -153,6 +153,11 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
         lines.append(f"images: {s['images']} written -> {out_images}"
                      + (f"; {s['mats']} .mat files written back beside them" if s.get("mats") else ""))
     if s["rejects"]:
-        lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in sorted(s["rejects"].items(), key=lambda x: -x[1]))
+        from collections import Counter
+
+        kinds = Counter()  # "image not found: PATH" -> "image not found" (the file keeps each row's reason)
+        for r, n in s["rejects"].items():
+            kinds[r.split(": ", 1)[0]] += n
+        lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in kinds.most_common())
                      + (f" -> {rejects}" if rejects else " (use --rejects FILE to keep them)"))
     echo_summary(lines, quiet)
