@@ -39,8 +39,8 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
                    "landmarks. auto: corners when exact, else landmarks, else corners.")
 @click.option("--clip", is_flag=True, help="Clip boxes to the pixel centres [0, W-1] x [0, H-1].")
 @click.option("--images", "images_dir", type=click.Path(exists=True, file_okay=False),
-              help="Folder of the input images (names from the image column, relative to it); alone, it gives "
-                   "each row's image size.")
+              help="Folder of the input images (names from the image column, relative to it; default for a "
+                   ".mat folder: the folder); alone, it gives each row's image size.")
 @click.option("--out-images", "out_images", type=click.Path(file_okay=False),
               help="Folder for the transformed images (same relative names); created if missing.")
 @click.option("--image-column", help=f"Column with image file names. Default: the first of {', '.join(IMAGE_COLUMNS)}; "
@@ -133,7 +133,11 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
         if v is not None and not abs(v) < float("inf"):
             raise click.BadParameter(f"expected a finite angle in degrees, got {v}", param_hint=name)
     if out_images is not None and images_dir is None:
-        raise click.UsageError("--out-images needs --images (the folder of the input images)")
+        from pathlib import Path
+
+        if not Path(input).is_dir():
+            raise click.UsageError("--out-images needs --images (the folder of the input images)")
+        images_dir = input  # a .mat folder holds its images
     bar = progress(desc="augment", quiet=quiet)
     try:
         s = run_augment(input, output, system, tuple(image_size) if image_size else None, op, angle, crop=crop, scale=zoom, scheme=scheme, box_from=box_from,
