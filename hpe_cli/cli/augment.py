@@ -14,8 +14,9 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
 @system_option()
-@click.option("--image-size", nargs=2, type=click.IntRange(1), required=True, metavar="W H",
-              help="Width and height of the images, in pixels.")
+@click.option("--image-size", nargs=2, type=click.IntRange(1), default=None, metavar="W H",
+              help="Width and height of the images, in pixels. Optional when the table has image_width/"
+                   "image_height or --images is given; a row where these disagree is rejected.")
 @click.option("--hflip", is_flag=True, help="Mirror left-right (with --vflip: both, a rotation by 180).")
 @click.option("--vflip", is_flag=True, help="Mirror top-bottom.")
 @click.option("--rotate", type=float, metavar="DEG",
@@ -23,6 +24,12 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 @click.option("--mirror-line", type=float, metavar="DEG",
               help="Mirror about the line through the image centre at DEG degrees counter-clockwise from the "
                    "horizontal (90 = --hflip, 0 = --vflip).")
+@click.option("--crop", nargs=4, type=float, default=None, metavar="X Y W H",
+              help="Cut the W x H rectangle whose top-left pixel is (X, Y) (whole pixels); labels keep their "
+                   "rotation, every position moves by (-X, -Y).")
+@click.option("--scale", "zoom", type=click.FloatRange(0, min_open=True), default=None, metavar="S",
+              help="Resize by S (W*S and H*S must be whole pixels): positions scale about the image's top-left "
+                   "edge as cv2.resize maps them; size and Pose_Para scale multiply by S.")
 @click.option("--landmarks", "scheme", type=click.Choice(["auto", "ibug68", "face70", "aflw21", "none"]),
               default="auto", show_default=True,
               help="Left/right scheme of the lm{i}_x/lm{i}_y columns, re-indexed after a mirror. auto: by count "
@@ -32,7 +39,8 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
                    "landmarks. auto: corners when exact, else landmarks, else corners.")
 @click.option("--clip", is_flag=True, help="Clip boxes to the pixel centres [0, W-1] x [0, H-1].")
 @click.option("--images", "images_dir", type=click.Path(exists=True, file_okay=False),
-              help="Folder of the input images (names from the image column, relative to it).")
+              help="Folder of the input images (names from the image column, relative to it; default for a "
+                   ".mat folder: the folder); alone, it gives each row's image size.")
 @click.option("--out-images", "out_images", type=click.Path(file_okay=False),
               help="Folder for the transformed images (same relative names); created if missing.")
 @click.option("--image-column", help=f"Column with image file names. Default: the first of {', '.join(IMAGE_COLUMNS)}; "
@@ -47,16 +55,16 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 @batch_option
 @verbosity_options
 @column_options
-def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line, scheme, box_from, clip, images_dir,
+def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line, crop, zoom, scheme, box_from, clip, images_dir,
             out_images, image_column, interpolation, border, jpeg_quality, rejects, strict, overwrite, batch_size,
             verbose, quiet):
-    """Rotate or mirror a head-pose dataset: labels, landmarks, boxes and images.
+    """Rotate, mirror, crop or resize a head-pose dataset: labels, landmarks, boxes and images.
 
     INPUT is a .parquet/.csv label table (or a folder of .mat files) with
     angle columns pitch,yaw,roll (degrees) or, when it has none, matrix
     columns r00..r22 (the stored matrix of --system); rows where both are
     present and disagree are rejected. Labels are moved
-    exactly (SPEC §5): A' = M A for a rotation, A' = M A diag(-1,1,1) for a
+    exactly: A' = M A for a rotation, A' = M A diag(-1,1,1) for a
     mirror, in the canonical frame, then written back in --system with both
     Euler solutions, the matrix, gimbal_lock and roundtrip_err.
 
@@ -69,7 +77,21 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
     (OpenCV's); --hflip maps x to W-1-x and --rotate turns about
     ((W-1)/2, (H-1)/2), exactly like cv2.flip and
     cv2.warpAffine(getRotationMatrix2D(((W-1)/2, (H-1)/2), DEG, 1)).
-    Images keep their size; rotated corners are filled per --border.
+    A crop or a resize keeps the labels' rotation (the 300W-LP model is
+    orthographic) and moves every position; a resize also multiplies the
+    lengths (size, Pose_Para scale). Images keep their size (--crop: W x H,
+    --scale: W*S x H*S); rotated corners are filled per
+    --border. tdx, tdy move too (from the bottom row for Pose_Para tables);
+    image_width/image_height become the output size.
+
+    Image sizes come from the images (--images), the image_width/image_height
+    columns or --image-size; a row where two of them disagree is rejected
+    (never transformed with the wrong centre). A .mat folder augmented with
+    --out-images gets its .mat files written back beside the images:
+    Pose_Para (angles, tdx, tdy), pt2d and pt3d_68 moved (re-indexed after a
+    mirror), roi cut to the crop. The images are committed with the table as
+    a whole; two rows whose different images would be written to one output
+    name are an error naming both; a run where every row is rejected exits 1.
 
     \b
     Examples:
@@ -79,11 +101,16 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
       hpe augment aflw_lm.parquet -o aflw_v.parquet --image-size 450 450 --vflip --landmarks aflw21
       hpe augment labels.parquet -o m20.parquet --image-size 450 450 --mirror-line 20 --clip
       hpe augment labels.parquet -o both.parquet --image-size 450 450 --hflip --vflip
+      hpe augment out/labels.parquet -o flipped.parquet --hflip   # sizes from image_width/image_height
+      hpe augment AFLW2000/ -o c.parquet --crop 50 50 350 350 --images AFLW2000/ --out-images c/   # + .mat files
+      hpe augment labels.parquet -o half.parquet --scale 0.5 --images frames/ --out-images half/
     """
     chosen = [name for name, on in (("--hflip", hflip), ("--vflip", vflip), ("--rotate", rotate is not None),
-                                    ("--mirror-line", mirror_line is not None)) if on]
+                                    ("--mirror-line", mirror_line is not None), ("--crop", crop is not None),
+                                    ("--scale", zoom is not None)) if on]
     if not chosen:
-        raise click.UsageError("expected one of --hflip, --vflip, --rotate DEG, --mirror-line DEG; got none")
+        raise click.UsageError("expected one of --hflip, --vflip, --rotate DEG, --mirror-line DEG, --crop X Y W H, --scale S; "
+                               "got none")
     if len(chosen) > 1 and sorted(chosen) != ["--hflip", "--vflip"]:
         raise click.UsageError(f"expected one augmentation (or --hflip with --vflip), got {' and '.join(chosen)}")
     if hflip and vflip:
@@ -92,16 +119,28 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
         op, angle, desc = ("hflip" if hflip else "vflip"), None, "hflip" if hflip else "vflip"
     elif rotate is not None:
         op, angle, desc = "rotate", rotate, f"rotate {rotate:g} deg counter-clockwise"
+    elif crop is not None:
+        if any(v != int(v) for v in crop) or crop[2] < 1 or crop[3] < 1:
+            raise click.BadParameter(f"expected whole pixels and W, H >= 1, got {' '.join(f'{v:g}' for v in crop)}",
+                                     param_hint="--crop")
+        crop = tuple(int(v) for v in crop)
+        op, angle, desc = "crop", None, f"crop {crop[2]}x{crop[3]} at ({crop[0]}, {crop[1]})"
+    elif zoom is not None:
+        op, angle, desc = "scale", None, f"scale by {zoom:g}"
     else:
         op, angle, desc = "mirror", mirror_line, f"mirror about the {mirror_line:g} deg line"
     for name, v in (("--rotate", rotate), ("--mirror-line", mirror_line)):
         if v is not None and not abs(v) < float("inf"):
             raise click.BadParameter(f"expected a finite angle in degrees, got {v}", param_hint=name)
-    if (images_dir is None) != (out_images is None):
-        raise click.UsageError("--images and --out-images go together")
+    if out_images is not None and images_dir is None:
+        from pathlib import Path
+
+        if not Path(input).is_dir():
+            raise click.UsageError("--out-images needs --images (the folder of the input images)")
+        images_dir = input  # a .mat folder holds its images
     bar = progress(desc="augment", quiet=quiet)
     try:
-        s = run_augment(input, output, system, tuple(image_size), op, angle, scheme=scheme, box_from=box_from,
+        s = run_augment(input, output, system, tuple(image_size) if image_size else None, op, angle, crop=crop, scale=zoom, scheme=scheme, box_from=box_from,
                         clip=clip, images_dir=images_dir, out_images=out_images, image_column=image_column,
                         interpolation=interpolation, border=border, jpeg_quality=jpeg_quality, rejects_path=rejects,
                         strict=strict, overwrite=overwrite, batch_size=batch_size, bar=bar, verbose=verbose,
@@ -111,11 +150,18 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
     lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {system.name} -> {output}",
              f"landmarks: {s['landmarks']}; boxes: {s['boxes']}"]
     if verbose:
-        lines.append(f"labels read from {s['label_source']}; pixel centres at integers, "
-                     f"image centre ({(image_size[0] - 1) / 2:g}, {(image_size[1] - 1) / 2:g})")
+        lines.append(f"labels read from {s['label_source']}; pixel centres at integers, image centre "
+                     + (f"({(image_size[0] - 1) / 2:g}, {(image_size[1] - 1) / 2:g})" if image_size else
+                        "((W-1)/2, (H-1)/2) of each image"))
     if images_dir is not None:
-        lines.append(f"images: {s['images']} written -> {out_images}")
+        lines.append(f"images: {s['images']} written -> {out_images}"
+                     + (f"; {s['mats']} .mat files written back beside them" if s.get("mats") else ""))
     if s["rejects"]:
-        lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in sorted(s["rejects"].items(), key=lambda x: -x[1]))
+        from collections import Counter
+
+        kinds = Counter()  # "image not found: PATH" -> "image not found" (the file keeps each row's reason)
+        for r, n in s["rejects"].items():
+            kinds[r.split(": ", 1)[0]] += n
+        lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in kinds.most_common())
                      + (f" -> {rejects}" if rejects else " (use --rejects FILE to keep them)"))
     echo_summary(lines, quiet)

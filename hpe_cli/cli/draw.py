@@ -46,12 +46,17 @@ def _canvas_size(ctx, param, value):
               help="Tiles per row (a sheet holds cols x cols tiles).")
 @click.option("--tile", type=click.IntRange(32, 2048), default=256, show_default=True, help="Tile size, pixels.")
 @click.option("--limit", type=click.IntRange(1), help="Draw at most this many images.")
+@click.option("--worst", type=click.IntRange(1), metavar="N",
+              help="With `hpe evaluate -o` output: draw only the N rows with the largest --sort-by error.")
+@click.option("--sort-by", "sort_by", metavar="COLUMN",
+              help="With `hpe evaluate -o` output: the error column to rank rows by, largest first "
+                   "[default: geodesic].")
 @rejects_options
 @overwrite_option
 @verbosity_options
 @column_options
 def draw(input, outdir, images, system, style, canvas, radians, use, length, thickness, tdy_origin, annotate,
-         grid, grid_cols, tile, limit, rejects, strict, overwrite, verbose, quiet):
+         grid, grid_cols, tile, limit, worst, sort_by, rejects, strict, overwrite, verbose, quiet):
     """Draw head poses onto their images.
 
     INPUT is a .parquet or .csv label table (angles pitch,yaw,roll in degrees,
@@ -68,6 +73,16 @@ def draw(input, outdir, images, system, style, canvas, radians, use, length, thi
     square; hidden edges are dashed, so a face turned away shows its green
     square dashed behind the red one.
 
+    INPUT may also be the per-row output of `hpe evaluate -o` (columns
+    gt_pitch..pred_roll, system from its metadata): each of its rows (or the
+    --worst N by --sort-by) becomes one PNG, <rank>_<image>.png, with the
+    ground truth solid and the prediction dashed (dots at the ends) on the same
+    face, a legend top-left and the error top-right.
+
+    Rows naming the same image are drawn together on it; two different images
+    that would be written to one output name are an error naming both rows.
+    A run that draws nothing because every row was rejected exits 1.
+
     \b
     Centre and length, per row (first that is present):
       bbox_x,bbox_y,bbox_w,bbox_h  centre of the box, length bbox_h/2
@@ -83,6 +98,7 @@ def draw(input, outdir, images, system, style, canvas, radians, use, length, thi
       hpe draw preds.csv -o drawn/ --images frames/ --system 6drepnet --columns matrix
       hpe draw poses.csv -o canvas/ --canvas 640x480 --annotate
       hpe draw AFLW2000/ -o sheet/ --grid --grid-cols 4 --annotate
+      hpe draw errors.parquet -o worst/ --images AFLW2000/ --worst 20 --sort-by geodesic
     """
     from ..pipelines.draw import run_draw
 
@@ -91,9 +107,14 @@ def draw(input, outdir, images, system, style, canvas, radians, use, length, thi
         s = run_draw(input, outdir, images=images, system=system, style=style, canvas=canvas, radians=radians,
                      use=use, length=length, thickness=thickness, tdy_origin=tdy_origin, annotate=annotate,
                      grid=grid, grid_cols=grid_cols, tile=tile, limit=limit, rejects_path=rejects,
-                     overwrite=overwrite, progress=bar, strict=strict)
+                     overwrite=overwrite, progress=bar, strict=strict, worst=worst, sort_by=sort_by)
     finally:
         bar.close()
+    if "drawn" in s:
+        echo_summary([(f"drew ground truth (solid) and prediction (dashed) of {s['faces']} rows, worst "
+                       f"{sort_by or 'geodesic'} first, angles in {s['system']} ({s['system_source']}) -> {outdir}")],
+                     quiet)
+        return
     lines = [f"drew {s['faces']} faces ({style}) on {s['images']} {'canvases' if canvas else 'images'} -> "
              + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir))]
     if s["rejects"]:

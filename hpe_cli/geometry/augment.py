@@ -192,6 +192,65 @@ def _affine(M, wh):
     return np.concatenate([N, t[..., None]], axis=-1)
 
 
+def crop_affine(x, y) -> np.ndarray:
+    """The pixel affine (2, 3) of a crop whose top-left pixel is ``(x, y)`` of the input: ``u' = u - x``.
+
+    A crop only moves the origin: the head's rotation is unchanged (the 300W-LP model is orthographic), and
+    points, boxes and ``tdx, tdy`` shift by ``(-x, -y)``. ``cv2.warpAffine`` with this matrix (or slicing, for
+    integer ``x, y`` inside the image) gives the cropped image.
+    """
+    x, y = float(x), float(y)
+    if not (np.isfinite(x) and np.isfinite(y)):
+        raise ValueError(f"expected a finite crop origin, got ({x}, {y})")
+    return np.array([[1.0, 0.0, -x], [0.0, 1.0, -y]])
+
+
+def scale_affine(sx, sy=None) -> np.ndarray:
+    """The pixel affine (2, 3) of a resize by ``sx`` (and ``sy``, default ``sx``) with pixel centres at integers:
+    ``u' = (u + 0.5) * sx - 0.5``, the mapping ``cv2.resize`` uses (image edges stay image edges)."""
+    sx = float(sx)
+    sy = sx if sy is None else float(sy)
+    if not (np.isfinite(sx) and np.isfinite(sy) and sx > 0 and sy > 0):
+        raise ValueError(f"expected positive finite scale factors, got ({sx}, {sy})")
+    return np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5]])
+
+
+def move_point(u, v, P) -> tuple:
+    """One point per row ``(u, v)`` (each shape (N,)) moved by pixel affines ``P`` (N, 2, 3) or (2, 3)."""
+    P = np.asarray(P, dtype=np.float64)
+    u, v = np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64)
+    return (P[..., 0, 0] * u + P[..., 0, 1] * v + P[..., 0, 2],
+            P[..., 1, 0] * u + P[..., 1, 1] * v + P[..., 1, 2])
+
+
+def move_td(tdx, tdy, P, h_in, h_out, from_bottom) -> tuple:
+    """Move a head centre ``(tdx, tdy)`` with the image.
+
+    ``from_bottom``: ``tdy`` counts rows from the bottom row (300W-LP ``Pose_Para``: row = ``H - 1 - tdy``),
+    so it is turned into a row with the input height ``h_in`` and back with the output height ``h_out``.
+    """
+    tdy = np.asarray(tdy, dtype=np.float64)
+    fb = np.asarray(from_bottom, dtype=bool)
+    v = np.where(fb, np.asarray(h_in, dtype=np.float64) - 1.0 - tdy, tdy)
+    u2, v2 = move_point(tdx, v, P)
+    return u2, np.where(fb, np.asarray(h_out, dtype=np.float64) - 1.0 - v2, v2)
+
+
+def move_points(points, P, mirror=False, perm=None) -> np.ndarray:
+    """Landmarks (..., L, 2) moved by pixel affines ``P`` (..., 2, 3); re-indexed by ``perm`` where ``mirror``."""
+    pts = np.asarray(points, dtype=np.float64)
+    mirror = np.asarray(mirror, dtype=bool)
+    if mirror.any() and perm is None:
+        raise ValueError(f"a mirror needs a left/right permutation for the {pts.shape[-2]} landmarks, got none")
+    return _move_points(pts, np.asarray(P, dtype=np.float64), mirror, perm)
+
+
+def move_boxes(boxes, P, M, out_size, points=None, box_from: str = "auto", clip: bool = False) -> np.ndarray:
+    """Boxes (..., 4) moved by pixel affines ``P``; see :func:`augment_boxes` (``out_size`` = output ``(W, H)``)."""
+    return _move_boxes(np.asarray(boxes, dtype=np.float64), np.asarray(P, dtype=np.float64),
+                       _check_plane(M)[0], _image_size(out_size), points, box_from, clip)
+
+
 def _apply_affine(P, pts):
     """``P`` (..., 2, 3) applied to points (..., L, 2)."""
     # one batched matmul beats elementwise formulas on (N, L, 2) by ~10x (no strided temporaries)

@@ -236,6 +236,52 @@ def render_axes(img, A, centre, length, thickness=None):
     return img
 
 
+def render_axes_dashed(img, A, centre, length, thickness=None):
+    """Draw the three lines dashed, with a dot at each far end (a second pose on the same face, e.g. a
+    prediction next to the solid ground truth). Same colours and geometry as :func:`render_axes`."""
+    import cv2
+
+    ends = axis_endpoints(A, centre, length)
+    centre = np.asarray(centre, dtype=np.float64).reshape(-1, 2)
+    L = np.broadcast_to(np.asarray(length, dtype=np.float64), (len(ends),))
+    for n in range(len(ends)):
+        t = thickness or max(1, auto_thickness(L[n]) // 2)
+        for i in range(3):
+            _dashed(img, centre[n], ends[n, i], AXIS_COLOURS[i], t, dash=max(4.0, 3.0 * t + 3))
+            if np.isfinite(ends[n, i]).all():
+                cv2.circle(img, _pt(ends[n, i]), max(3, 2 * t) * _ONE, AXIS_COLOURS[i], -1, cv2.LINE_AA, _SHIFT)
+    return img
+
+
+def render_legend(img, entries, height_px: float = 14.0):
+    """A legend box in the top-left corner: one row per ``(label, style)``, style ``"solid"`` or ``"dashed"``,
+    each with a sample of that line style in the three axis colours."""
+    h = float(height_px)
+    t = max(1, int(round(h / 7)))
+    sample = 3.2 * h
+    rows = len(entries)
+    import cv2
+
+    scale = max(0.3, h / 22.0)
+    text_w = max(cv2.getTextSize(f"{label} ({style})", cv2.FONT_HERSHEY_SIMPLEX, scale,
+                                 max(1, int(round(scale * 1.5))))[0][0] for label, style in entries)
+    box_w, box_h = int(1.2 * h + sample + text_w + 4), int(rows * 1.6 * h + 0.6 * h)
+    H, W = img.shape[:2]
+    sub = img[0:min(H, box_h), 0:min(W, box_w)]
+    sub[:] = (sub.astype(np.float32) * 0.35).astype(np.uint8)  # darken behind the legend
+    for k, (label, style) in enumerate(entries):
+        y = (k + 0.8) * 1.6 * h
+        for i, colour in enumerate(AXIS_COLOURS):
+            p = np.array([0.4 * h, y - h * 0.6 + i * h * 0.45])
+            q = p + np.array([sample, 0.0])
+            if style == "dashed":
+                _dashed(img, p, q, colour, max(1, t), dash=max(3.0, 0.4 * h))
+            else:
+                _line(img, p, q, colour, t + 1)
+        render_caption(img, f"{label} ({style})", (0.8 * h + sample, y), height_px=h)
+    return img
+
+
 def render_cube(img, A, centre, length, thickness=None, anchor: str = "centre"):
     """Draw the pose cube of one or more faces onto ``img`` (BGR uint8, in place).
 

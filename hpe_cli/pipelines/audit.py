@@ -269,7 +269,7 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     import os
 
     from ..io import ANGLE_COLS, MATRIX_COLS, check_output, label_mode, write_json
-    from ..io.plots import AngleHistograms, plot_files, write_plots
+    from ..report.plots import AngleHistograms, plot_files, write_plots
     from ..rotation.audit import CHECKS
 
     from ..io.writers import check_report_outputs

@@ -1,7 +1,12 @@
 """``hpe augment`` as a streaming job: read batches, move labels/landmarks/boxes (and images), write."""
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
+
+import numpy as np
+
+from ..errors import HpeError
 
 #: columns tried, in order, for the image file name when --image-column is not given
 IMAGE_COLUMNS = ("image", "image_path", "img_path", "file_name", "filename", "file", "path")
@@ -57,264 +62,359 @@ def _plan_landmarks(path, columns, scheme, op):
     return n, flip_permutation(scheme), f"{n} moved, scheme {scheme}"
 
 
-def _find_image(images_dir: Path, name: str):
-    """The image for a table entry: the path itself, or the same stem with an image suffix."""
-    p = images_dir / name
-    if p.suffix.lower() in _IMAGE_SUFFIXES and p.is_file():
-        return p
-    for suf in _IMAGE_SUFFIXES:
-        for cand in (p.with_suffix(suf), p.with_suffix(suf.upper())):
-            if cand.is_file():
-                return cand
-    return None
+def _size_source(columns, image_size, images_dir, path):
+    """Which sources give image sizes; a usage error when none does."""
+    has_cols = "image_width" in columns and "image_height" in columns
+    if not has_cols and image_size is None and images_dir is None:
+        raise HpeError(f"{path}: expected the image size: --image-size W H, image_width/image_height columns "
+                       "or --images (the images themselves); got none")
+    return has_cols
 
 
-def _safe_relative(name: str) -> bool:
-    p = Path(name)
-    return bool(name) and not p.is_absolute() and ".." not in p.parts
+def row_sizes(batch, image_size, has_cols, pics, names, ids):
+    """Per-row input size (N, 2), the picture refs, and a reason per row ('' when the sizes agree).
+
+    Sources: the images (``pics``), the ``image_width/image_height`` columns, ``--image-size``; each row uses
+    the first that gives a size, and any two that disagree reject the row.
+    """
+    import numpy as np
+
+    from ..io.labels import numeric_column
+
+    n = batch.num_rows
+    reasons = np.full(n, "", dtype=object)
+    col = np.full((n, 2), np.nan)
+    if has_cols:
+        col = np.stack([numeric_column(batch, "image_width")[0], numeric_column(batch, "image_height")[0]], -1)
+    img = np.full((n, 2), np.nan)
+    refs = [None] * n
+    if pics is not None:
+        seqs, cams, frs = ids
+        for i in range(n):
+            if names[i] is None:
+                reasons[i] = "no image name"
+                continue
+            ref, size, why = pics.lookup(names[i], seqs[i], cams[i], frs[i])
+            refs[i] = ref
+            if why:
+                reasons[i] = why
+            else:
+                img[i] = size
+    opt = np.full((n, 2), np.nan) if image_size is None else np.broadcast_to(np.asarray(image_size, float), (n, 2))
+    labelled = (("the image", img), ("image_width/image_height", col), ("--image-size", opt))
+    wh = np.full((n, 2), np.nan)
+    for _, v in reversed(labelled):
+        wh = np.where(np.isfinite(v).all(1, keepdims=True), v, wh)
+    for k, (na, va) in enumerate(labelled):
+        for nb, vb in labelled[k + 1:]:
+            both = np.isfinite(va).all(1) & np.isfinite(vb).all(1) & (reasons == "")
+            bad = both & (va != vb).any(1)
+            for i in np.flatnonzero(bad):
+                reasons[i] = (f"image size: {na} is {va[i, 0]:g}x{va[i, 1]:g}, {nb} says {vb[i, 0]:g}x{vb[i, 1]:g}")
+    none = ~np.isfinite(wh).all(1) & (reasons == "")
+    reasons[none] = "no image size (image_width/image_height empty; give --image-size or --images)"
+    bad = (reasons == "") & ((wh < 1) | (wh != np.round(wh))).any(1)
+    reasons[bad] = "image size: expected whole numbers of pixels >= 1"
+    return wh, refs, reasons
 
 
-class _ImageJob:
-    """Warp images into a staging folder; move them into place only when everything succeeded."""
+def _image_column(path, columns, images_dir, out_images, image_column):
+    """The column naming each row's image (None without --images); usage errors for the image options."""
+    if out_images is not None and images_dir is not None and Path(out_images).resolve() == Path(images_dir).resolve():
+        raise HpeError(f"{out_images}: --out-images must differ from --images (inputs are never modified)")
+    if images_dir is None:
+        if image_column is not None:
+            raise HpeError("--image-column needs --images")
+        return None
+    img_col = image_column or next((c for c in IMAGE_COLUMNS if c in columns), None)
+    if img_col is None or img_col not in columns:
+        raise HpeError(f"{path}: expected an image column ({image_column or ', '.join(IMAGE_COLUMNS)}) "
+                       "to go with --images, got none")
+    return img_col
 
-    def __init__(self, images_dir, out_dir, M, image_size, interpolation, border, jpeg_quality, overwrite, path):
-        import tempfile
 
-        from ..errors import HpeError
+def _pixel_transform(op, M, wh, crop, scale=None):
+    """Per-row pixel affine (N, 2, 3), output size (N, 2) and reasons ('' or why the row cannot be resized)."""
+    from ..geometry.augment import _affine, crop_affine
 
-        self.src, self.dst = Path(images_dir), Path(out_dir)
-        if self.dst.exists() and self.dst.resolve() == self.src.resolve():
-            raise HpeError(f"{out_dir}: --out-images must differ from --images (inputs are never modified)")
-        if not self.dst.parent.exists():
-            raise HpeError(f"{out_dir}: folder {self.dst.parent} does not exist")
-        self.created = not self.dst.exists()
-        self.dst.mkdir(exist_ok=True)
-        self.stage = Path(tempfile.mkdtemp(prefix=".hpe-augment-", dir=self.dst))
-        self.M, self.size, self.interp, self.border = M, image_size, interpolation, border
-        self.quality, self.overwrite, self.path = jpeg_quality, overwrite, path
-        self.done: dict = {}
+    n = len(wh)
+    reasons = np.full(n, "", dtype=object)
+    safe = np.where(np.isfinite(wh), wh, 1.0)
+    if op == "crop":
+        x, y, cw, ch = crop
+        return (np.broadcast_to(crop_affine(x, y), (n, 2, 3)), np.broadcast_to(np.array([cw, ch], float), wh.shape),
+                reasons)
+    if op == "scale":
+        out = np.round(safe * scale)
+        whole = (np.abs(safe * scale - out) < 1e-6).all(1) & (out >= 1).all(1)
+        for i in np.flatnonzero(~whole):
+            reasons[i] = (f"scale: {safe[i, 0]:g}x{safe[i, 1]:g} times {scale:g} is not a whole number of pixels "
+                          "(the aspect would change)")
+        out = np.where(whole[:, None], out, safe)
+        P = np.zeros((n, 2, 3))
+        P[:, 0, 0] = P[:, 1, 1] = scale
+        P[:, :, 2] = 0.5 * scale - 0.5
+        return P, out, reasons
+    return _affine(np.asarray(M), safe), safe, reasons
 
-    def add(self, name: str, row: int):
-        import cv2
 
-        from ..errors import HpeError
-        from ..geometry.image_ops import warp_image
+class _Plan:
+    """What every batch needs: the label reader, the landmark/box/size columns, the transform."""
 
-        if name in self.done:
-            return
-        where = f"{self.path}: row {row}"
-        if not _safe_relative(name):
-            raise HpeError(f"{where}: expected an image name relative to --images, got {name!r}")
-        src = _find_image(self.src, name)
-        if src is None:
-            raise HpeError(f"{where}: no image for {name!r} in {self.src}")
-        rel = src.relative_to(self.src)
-        final = self.dst / rel
-        if final.exists() and not self.overwrite:
-            raise HpeError(f"{final}: already exists (use --overwrite to replace it)")
-        import numpy as np
+    def __init__(self, path, src, in_system, system, columns, n_lm, perm, has_box, M, op, crop, image_size,
+                 has_cols, box_from, clip, pose_para, img_col, pics, scale=None):
+        from ..io import MATRIX_COLS, landmark_cols
+        from ..io.labels import label_mode
 
-        try:  # through bytes: OpenCV's own file functions fail on names that are not UTF-8
-            img = cv2.imdecode(np.fromfile(src, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-        except OSError:
-            img = None
-        if img is None:
-            raise HpeError(f"{where}: {src}: not a readable image")
-        h, w = img.shape[:2]
-        if (w, h) != tuple(self.size):
-            raise HpeError(f"{where}: {src} is {w}x{h}, expected --image-size {self.size[0]} {self.size[1]}")
-        out = warp_image(img, self.M, self.interp, self.border)
-        staged = self.stage / rel
-        staged.parent.mkdir(parents=True, exist_ok=True)
-        params = [cv2.IMWRITE_JPEG_QUALITY, self.quality] if src.suffix.lower() in (".jpg", ".jpeg") else []
-        ok, buf = cv2.imencode(src.suffix.lower() or ".png", out, params)
-        if not ok:
-            raise HpeError(f"{final}: could not encode the image as {src.suffix or 'PNG'}")
-        buf.tofile(staged)
-        self.done[name] = rel
+        self.path, self.src, self.in_system, self.system = path, src, in_system, system
+        self.mode = label_mode(columns, path, in_system)  # the system's own columns, else angles, else r00..r22
+        self.stored_kind = self.mode not in ("angles", "matrix") or bool(
+            in_system.columns and all(c in columns for c in in_system.value_columns))
+        self.cross_check = self.mode == "angles" and not self.stored_kind and all(c in columns for c in MATRIX_COLS)
+        self.n_lm, self.perm, self.lm_names, self.has_box = n_lm, perm, landmark_cols(n_lm), has_box
+        self.M, self.op, self.crop, self.image_size, self.has_cols = M, op, crop, image_size, has_cols
+        self.box_from, self.clip, self.pose_para, self.img_col, self.pics = box_from, clip, pose_para, img_col, pics
+        self.has_td = "tdx" in columns and "tdy" in columns
+        self.scale = scale
+        self.zoom = scale if op == "scale" else 1.0  # lengths in pixels (size, Pose_Para scale) change by this
+        self.zoom_cols = [c for c in ("size", "scale") if c in columns and (c == "size" or pose_para)] \
+            if op == "scale" else []
+        self.mirror = bool(np.linalg.det(M) < 0)
+        self.label_source = ("pitch,yaw,roll" + (" (checked against r00..r22)" if self.cross_check else "")
+                             if self.mode == "angles" else "r00..r22")
+        self.csv = src.kind == "csv"
 
-    def commit(self):
-        import os
+    def numbers(self, lines):
+        """The row numbers messages and rejects use: CSV lines (header = 1), else 1-based rows."""
+        return lines if self.csv else lines - 1
 
-        for rel in self.done.values():
-            (self.dst / rel).parent.mkdir(parents=True, exist_ok=True)
-            os.replace(self.stage / rel, self.dst / rel)
-        self.cleanup(failed=False)
+    def where(self, line) -> str:
+        return f"{self.path}: line {int(line)}" if self.csv else f"{self.path}: row {int(line) - 1}"
 
-    def cleanup(self, failed: bool = True):
-        import shutil
+    def roi_fn(self, roi, size_in):
+        """``roi`` (x1, y1, x2, y2) of the original photo shown by the image: a crop shows the sub-rectangle;
+        a flip or a turn about the centre shows the same region (so it is kept)."""
+        if self.op != "crop":
+            return roi
+        x, y, cw, ch = self.crop
+        r = roi.reshape(-1)
+        sx, sy = (r[2] - r[0]) / size_in[0], (r[3] - r[1]) / size_in[1]
+        return np.array([r[0] + x * sx, r[1] + y * sy, r[0] + (x + cw) * sx, r[1] + (y + ch) * sy])
 
-        shutil.rmtree(self.stage, ignore_errors=True)
-        if failed and self.created:
-            try:
-                self.dst.rmdir()
-            except OSError:
-                pass
+    def labels(self, batch):
+        """(matrices of the input system, reasons) of a batch."""
+        from ..io.labels import batch_labels
+        from ..rotation import frobenius
+
+        n = batch.num_rows
+        if self.stored_kind:  # rotation vectors, quaternions, 6-D, named columns: read as matrices
+            from ..io import batch_rotations
+            from ..rotation import soa as _soa
+
+            X, _, reasons = batch_rotations(batch, self.in_system, self.mode)
+            return _soa.to_array(X, n), (reasons if reasons is not None else np.full(n, "", dtype=object))
+        values, reasons = batch_labels(batch, self.mode)
+        if self.mode != "angles":
+            return values, reasons
+        R = self.in_system.from_angles(np.where(np.isfinite(values), values, 0.0))
+        if self.cross_check:  # a table with both must agree, or which one is the label?
+            R_in, r_in = batch_labels(batch, "matrix")
+            reasons = np.where(reasons == "", r_in, reasons)
+            ok = reasons == ""
+            gap = np.zeros(n)
+            gap[ok] = frobenius(R[ok], R_in[ok])
+            reasons[ok & (gap > AGREE_TOL)] = "angles and r00..r22 disagree"
+        return R, reasons
+
+    def work(self, batch):
+        """On a worker thread: labels, sizes, landmarks, boxes, tdx/tdy of one batch."""
+        import pyarrow as pa
+
+        from ..geometry.augment import (
+            augment_canonical,
+            move_boxes,
+            move_points,
+            move_td,
+        )
+        from ..io import BBOX_COLS, LABEL_COLS, conversion_columns
+        from ..io.images import row_ids
+        from ..io.labels import numeric_column
+        from ..io.readers import LINE_COL
+        from ..rotation import canonical_to_labels
+
+        lines = batch.column(LINE_COL).to_numpy()
+        batch = batch.drop_columns([LINE_COL])
+        n = batch.num_rows
+        R, reasons = self.labels(batch)
+        names = ids = None
+        if self.pics is not None:
+            names = [None if v is None else str(v) for v in batch.column(self.img_col).to_pylist()]
+            ids = row_ids(batch.select([c for c in ("sequence", "camera", "frame") if c in batch.schema.names])
+                          .to_pandas())
+        wh, refs, size_reasons = row_sizes(batch, self.image_size, self.has_cols, self.pics, names, ids)
+        reasons = np.where(reasons == "", size_reasons, reasons)
+        extra = {}  # landmarks and boxes: NaN means missing and is kept; only non-numbers reject a row
+        for c in (self.lm_names + (BBOX_COLS if self.has_box else []) + (["tdx", "tdy"] if self.has_td else [])
+                  + self.zoom_cols):
+            v, r = numeric_column(batch, c)
+            extra[c] = v
+            if not _is_numeric_type(batch.schema.field(c).type):  # only text can hold non-numbers
+                bad = np.char.startswith(r.astype(str), "non-numeric")
+                reasons = np.where((reasons == "") & bad, r, reasons)
+        P, wh_out, scale_reasons = _pixel_transform(self.op, self.M, wh, self.crop, self.scale)
+        reasons = np.where(reasons == "", scale_reasons, reasons)
+        keep = reasons == ""
+        kb = batch.filter(pa.array(keep)) if not keep.all() else batch
+        A2 = augment_canonical(self.in_system.to_canonical(R[keep]), self.M)
+        new = conversion_columns(canonical_to_labels(A2, self.system))
+        Pk, out_k = P[keep], wh_out[keep]
+        lm_new = None
+        if self.n_lm:
+            lm = np.stack([extra[c][keep] for c in self.lm_names], axis=-1).reshape(-1, self.n_lm, 2)
+            lm_new = move_points(lm, Pk, self.mirror, self.perm)
+            flat = lm_new.reshape(-1, 2 * self.n_lm)
+            new.update({c: flat[:, i] for i, c in enumerate(self.lm_names)})
+        boxes = 0
+        if self.has_box:
+            box = np.stack([extra[c][keep] for c in BBOX_COLS], axis=-1)
+            box_new = move_boxes(box, Pk, self.M, out_k, lm_new, self.box_from, self.clip)
+            boxes = int(np.isfinite(box_new).all(axis=1).sum())
+            new.update({c: box_new[:, i] for i, c in enumerate(BBOX_COLS)})
+        if self.has_td:
+            new["tdx"], new["tdy"] = move_td(extra["tdx"][keep], extra["tdy"][keep], Pk, wh[keep, 1], out_k[:, 1],
+                                             self.pose_para)
+        for c in self.zoom_cols:
+            new[c] = extra[c][keep] * self.zoom
+        if self.has_cols:
+            new["image_width"], new["image_height"] = out_k[:, 0].astype(np.int64), out_k[:, 1].astype(np.int64)
+        out_cols, out_names = [], []
+        for i, c in enumerate(kb.schema.names):
+            out_names.append(c)
+            out_cols.append(pa.array(new.pop(c)) if c in new else kb.column(i))
+        for c in LABEL_COLS:
+            if c in new:
+                out_names.append(c)
+                out_cols.append(pa.array(new.pop(c)))
+        out = pa.RecordBatch.from_arrays(out_cols, names=out_names)
+        A2_full = np.full((n, 3, 3), np.nan)
+        A2_full[keep] = A2
+        files = batch.column("file").to_pylist() if "file" in batch.schema.names else None
+        return batch, lines, reasons, keep, out, boxes, (refs, names, P, wh, wh_out, A2_full, files)
 
 
 def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
                 images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
                 jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=65_536, bar=None, verbose=0,
-                description="", workers=None, strict=False):
+                description="", workers=None, strict=False, crop=None, scale=None):
     """Augment a label table (and optionally its images). Returns a summary dict.
 
-    Batches are transformed on ``workers`` threads (default: up to 2) while
-    this thread reads, moves images and writes in order, as ``hpe convert``
-    does; at most ``workers + 1`` batches are in flight.
+    ``image_size`` (``(W, H)`` or None) is checked against the table's ``image_width/image_height`` and the
+    images; a row where two of them disagree is rejected. ``op = "crop"`` with ``crop = (x, y, w, h)`` cuts
+    the images to that rectangle. Batches are transformed on ``workers`` threads (default: up to 2) while
+    this thread reads, moves images and writes in order; at most ``workers + 1`` batches are in flight.
     """
     import os
 
-    import numpy as np
-    import pyarrow as pa
-
-    from ..errors import HpeError
-    from ..geometry.augment import augment_boxes, augment_canonical, augment_points, plane_matrix
-    from ..io import (BBOX_COLS, LABEL_COLS, MATRIX_COLS, Rejects, TableWriter, check_output, conversion_columns,
-                      landmark_cols, open_table, system_metadata)
-    from ..io.labels import batch_labels, label_mode, numeric_column
-    from ..rotation import canonical_to_labels, frobenius
+    from ..geometry.augment import plane_matrix
+    from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
+    from ..io import (
+        BBOX_COLS,
+        Rejects,
+        TableWriter,
+        check_output,
+        open_table,
+        system_metadata,
+    )
+    from ..io.columns import label_system
+    from ..io.transaction import ensure_transaction, staged_dir
+    from .augment_images import ImageJob, RowImages
     from .inorder import in_order
 
     path = Path(input)
     check_output(output, overwrite)
-    from ..io.readers import LINE_COL
-
     src = open_table(path, batch_size, with_lines=True)
-    from ..io.columns import label_system
-
     in_system = label_system(src, system)  # .mat Pose_Para is always 300w_lp; output is in --system
     columns = src.columns
-    mode = label_mode(columns, path, in_system)  # the system's own columns, else angles, else r00..r22
-    stored_kind = mode not in ("angles", "matrix") or bool(in_system.columns and all(c in columns for c in
-                                                                                     in_system.value_columns))
-    cross_check = mode == "angles" and not stored_kind and all(c in columns for c in MATRIX_COLS)
     n_lm, perm, lm_text = _plan_landmarks(path, columns, scheme, op)
-    lm_names = landmark_cols(n_lm)
     box_present = [c for c in BBOX_COLS if c in columns]
     if box_present and len(box_present) != 4:
         raise HpeError(f"{path}: expected all of {', '.join(BBOX_COLS)}, got only {', '.join(box_present)}")
-    has_box = bool(box_present)
-    img_col = None
-    if images_dir is not None:
-        img_col = image_column or next((c for c in IMAGE_COLUMNS if c in columns), None)
-        if img_col is None or img_col not in columns:
-            raise HpeError(f"{path}: expected an image column ({image_column or ', '.join(IMAGE_COLUMNS)}) "
-                           "to go with --images, got none")
-    elif image_column is not None:
-        raise HpeError("--image-column needs --images and --out-images")
-    M = plane_matrix(op, angle)
+    has_cols = _size_source(columns, image_size, images_dir, path)
+    img_col = _image_column(path, columns, images_dir, out_images, image_column)
+    M = plane_matrix(op, angle) if op not in ("crop", "scale") else np.eye(2)
+    mat_input = bool(getattr(src, "dataset", False)) and (path.is_dir() or path.suffix.lower() == ".mat") \
+        and out_images is not None
+    pose_para = (path.is_dir() or path.suffix.lower() == ".mat") or {"tdz", "scale"} <= set(columns)
+    plan = _Plan(path, src, in_system, system, columns, n_lm, perm, bool(box_present), M, op, crop, image_size,
+                 has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir) if images_dir else None,
+                 scale=scale)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=path)
     meta = {**system_metadata(system), "hpe:augment": {
-        "op": op, "angle_deg": angle, "description": description, "image_size": list(image_size),
+        "op": op, "angle_deg": angle, "crop": list(crop) if crop else None, "scale": scale, "description": description,
+        "image_size": list(image_size) if image_size else "from image_width/image_height or the images",
         "landmarks": lm_text, "box_from": box_from, "clip": clip,
         "pixel_convention": "pixel centres at integer coordinates; centre ((W-1)/2, (H-1)/2)"}}
-    job = None
-    if images_dir is not None:
-        job = _ImageJob(images_dir, out_images, M, image_size, interpolation, border, jpeg_quality, overwrite, path)
-    rows = written = n_boxes = n_images = 0
+    counts = {"rows": 0, "written": 0, "boxes": 0}
     workers = workers or min(2, os.cpu_count() or 1)
-    try:
-        def work(batch):  # on a worker thread: labels, landmarks and boxes of one batch
-            lines = batch.column(LINE_COL).to_numpy()
-            batch = batch.drop_columns([LINE_COL])
-            n = batch.num_rows
-            if stored_kind:  # rotation vectors, quaternions, 6-D, named columns: read as matrices
-                from ..io import batch_rotations
-                from ..rotation import soa as _soa
+    if bar is not None and src.num_rows is not None:
+        bar.total = src.num_rows
+        bar.refresh()
 
-                X, _, reasons = batch_rotations(batch, in_system, mode)
-                values = _soa.to_array(X, n)
-                reasons = reasons if reasons is not None else np.full(n, "", dtype=object)
-            else:
-                values, reasons = batch_labels(batch, mode)
-            if mode == "angles" and not stored_kind:
-                R = in_system.from_angles(np.where(np.isfinite(values), values, 0.0))
-                if cross_check:  # a table with both must agree, or which one is the label?
-                    R_in, r_in = batch_labels(batch, "matrix")
-                    reasons = np.where(reasons == "", r_in, reasons)
-                    ok = reasons == ""
-                    gap = np.zeros(n)
-                    gap[ok] = frobenius(R[ok], R_in[ok])
-                    reasons[ok & (gap > AGREE_TOL)] = "angles and r00..r22 disagree"
-            else:
-                R = values
-            # landmarks and boxes: NaN means missing and is kept; only non-numbers reject a row
-            extra = {}
-            for c in lm_names + (BBOX_COLS if has_box else []):
-                v, r = numeric_column(batch, c)
-                extra[c] = v
-                if not _is_numeric_type(batch.schema.field(c).type):  # only text can hold non-numbers
-                    bad = np.char.startswith(r.astype(str), "non-numeric")
-                    reasons = np.where((reasons == "") & bad, r, reasons)
-            keep = reasons == ""
-            kb = batch.filter(pa.array(keep)) if not keep.all() else batch
-            A2 = augment_canonical(in_system.to_canonical(R[keep]), M)
-            new = conversion_columns(canonical_to_labels(A2, system))
-            lm_new = None
-            boxes = 0
-            if n_lm:
-                lm = np.stack([extra[c][keep] for c in lm_names], axis=-1).reshape(-1, n_lm, 2)
-                lm_new = augment_points(lm, M, image_size, perm)
-                flat = lm_new.reshape(-1, 2 * n_lm)
-                new.update({c: flat[:, i] for i, c in enumerate(lm_names)})
-            if has_box:
-                box = np.stack([extra[c][keep] for c in BBOX_COLS], axis=-1)
-                box_new = augment_boxes(box, M, image_size, lm_new, box_from, clip)
-                boxes = int(np.isfinite(box_new).all(axis=1).sum())
-                new.update({c: box_new[:, i] for i, c in enumerate(BBOX_COLS)})
-            out_cols, out_names = [], []
-            for i, c in enumerate(kb.schema.names):
-                out_names.append(c)
-                out_cols.append(pa.array(new.pop(c)) if c in new else kb.column(i))
-            for c in LABEL_COLS:
-                if c in new:
-                    out_names.append(c)
-                    out_cols.append(pa.array(new.pop(c)))
-            out = pa.RecordBatch.from_arrays(out_cols, names=out_names)
-            return batch, lines, reasons, keep, kb, out, boxes
+    def perm_of(n):
+        name = scheme_for_count(n)
+        return None if name is None else flip_permutation(name)
+
+    with ensure_transaction(), contextlib.ExitStack() as stack:
+        job = None
+        if out_images is not None:
+            stage = stack.enter_context(staged_dir(out_images, overwrite))
+            job = ImageJob(stage, Path(out_images), interpolation, border, jpeg_quality, overwrite,
+                           mat_dir=path if mat_input else None, perm_of=perm_of)
+        writer = stack.enter_context(TableWriter(output, overwrite, meta))
 
         def finish(_, read_rejects, future):
-            nonlocal rows, written, n_boxes
-            if read_rejects:
-                read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
-                rejects.add({"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
-                            [r.reason for r in read_rejects], lines=read_lines)
-                rows += len(read_rejects)
-            batch, lines, reasons, keep, kb, out, boxes = future.result()
-            n = batch.num_rows
-            if not keep.all():
-                drop = ~keep
-                rejects.add({"row": lines[drop], **{c: batch.column(i).to_numpy(zero_copy_only=False)[drop]
-                                                    for i, c in enumerate(batch.schema.names)}},
-                            reasons[drop], lines=lines[drop])
-            if job is not None:
-                names = kb.column(kb.schema.get_field_index(img_col)).to_pylist()
-                orig = np.flatnonzero(keep)
-                for i, name in enumerate(names):
-                    if name is None:
-                        raise HpeError(f"{path}: row {lines[orig[i]]}: empty {img_col}")
-                    job.add(str(name), int(lines[orig[i]]))
-            writer.write(out)
-            n_boxes += boxes
-            rows += n
-            written += int(keep.sum())
-            if bar is not None:
-                bar.update(n)
+            _finish_batch(read_rejects, future.result(), rejects, job, writer, counts, bar, plan)
 
-        with TableWriter(output, overwrite, meta) as writer:
-            in_order(_batches_or_empty(src), work, finish, workers)
-            rejects.check()  # without --rejects (or with --strict) any bad row fails the run: nothing is written
-            if job is not None:
-                n_images = len(job.done)
-                job.commit()
-                job = None
-    except BaseException:
-        if job is not None:
-            job.cleanup()
-        raise
-    rejects.finish()
-    box_text = f"{n_boxes} moved ({box_from}{', clipped' if clip else ''})" if has_box else "none in input"
-    label_source = "pitch,yaw,roll" + (" (checked against r00..r22)" if cross_check else "") \
-        if mode == "angles" else "r00..r22"
-    return {"rows": rows, "written": written, "label_source": label_source, "landmarks": lm_text, "boxes": box_text,
-            "images": n_images, "rejects": dict(rejects.counts)}
+        in_order(_batches_or_empty(src), plan.work, finish, workers)
+        rejects.check()  # without --rejects (or with --strict) any bad row fails the run: nothing is written
+        if counts["rows"] and not counts["written"]:
+            raise HpeError(f"{path}: nothing augmented: all {counts['rows']} row(s) rejected "
+                           f"({rejects.first_where or 'see the rejects file'})")
+        rejects.finish()
+    box_text = f"{counts['boxes']} moved ({box_from}{', clipped' if clip else ''})" if box_present else "none in input"
+    return {"rows": counts["rows"], "written": counts["written"], "label_source": plan.label_source,
+            "landmarks": lm_text, "boxes": box_text, "images": len(job.done) if job else 0,
+            "mats": job.mats if job else 0, "rejects": dict(rejects.counts)}
+
+
+def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan):
+    """On the main thread, in input order: rejects, images, the table."""
+    batch, lines, reasons, keep, out, boxes, extra = result
+    if read_rejects:
+        read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
+        rejects.add({"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
+                    [r.reason for r in read_rejects], lines=read_lines)
+        counts["rows"] += len(read_rejects)
+    if not keep.all():
+        drop = ~keep
+        rejects.add({"row": plan.numbers(lines[drop]),
+                     **{c: batch.column(i).to_numpy(zero_copy_only=False)[drop]
+                        for i, c in enumerate(batch.schema.names)}}, reasons[drop],
+                    lines=lines[drop] if plan.csv else None)
+    if job is not None:
+        refs, names, P, wh_in, wh_out, A2, files = extra
+        for i in np.flatnonzero(keep):
+            mat = None
+            if job.mat_dir is not None and files is not None:
+                base = job.mat_dir if job.mat_dir.is_dir() else job.mat_dir.parent
+                mat = (base / files[i], A2[i], plan.roi_fn, plan.zoom)
+            job.add(names[i] or "", plan.where(lines[i]), refs[i], P[i], wh_in[i], wh_out[i], plan.mirror, mat)
+            if bar is not None:  # the image work is the slow part: move the bar per image
+                bar.update(1)
+    writer.write(out)
+    counts["boxes"] += boxes
+    counts["rows"] += batch.num_rows
+    counts["written"] += int(keep.sum())
+    if bar is not None:
+        bar.update(batch.num_rows - (int(keep.sum()) if job is not None else 0))
+

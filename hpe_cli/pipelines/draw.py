@@ -7,6 +7,8 @@ meets images of a failed run.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 #: 300W-LP/AFLW2000 Pose_Para: line length = this many Basel-Face-Model units times ``scale``.
 #: The model is in micrometres and its origin is the centre of the head (the nose tip is
 #: about 130 mm in front of it, the outer eye corners 43 mm to each side).
@@ -29,15 +31,21 @@ def _read_all(src, mode, radians, system):
     import pyarrow as pa
 
     from ..io import batch_labels
+    from ..io.readers import LINE_COL
 
     batches = list(src.batches())
-    table = pa.Table.from_batches(batches, schema=src.schema)
+    lines = None
+    if src.with_lines:
+        lines = np.concatenate([b.column(LINE_COL).to_numpy() for b in batches]) if batches else np.zeros(0, int)
+        batches = [b.drop_columns([LINE_COL]) for b in batches]
+    schema = pa.schema([f for f in src.schema if f.name != LINE_COL], metadata=src.schema.metadata)
+    table = pa.Table.from_batches(batches, schema=schema)
     if mode not in ("angles", "matrix") or (system.columns and all(c in src.columns for c in system.value_columns)):
         A, angles, reasons = _read_stored(batches, mode, radians, system)
         ok = reasons == ""
         if out_system is not system and ok.any():
             angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
-        return table.to_pandas(), A, angles, reasons
+        return table.to_pandas(), A, angles, reasons, lines
     values, reasons = [], []
     for b in batches:
         v, r = batch_labels(b, mode, radians)
@@ -58,7 +66,7 @@ def _read_all(src, mode, radians, system):
             angles[ok] = system.to_angles(values[ok])[0]
         if out_system is not system:
             angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
-    return table.to_pandas(), A, angles, reasons
+    return table.to_pandas(), A, angles, reasons, lines
 
 
 def _read_stored(batches, mode, radians, system):
@@ -123,23 +131,25 @@ def face_placement(frame, pose_para: bool, length=None):
 
 def _image_names(frame):
     """Image name per row (str), or None when the table names no images."""
+    import math
     from pathlib import PurePath
 
-    if "image" in frame.columns:
-        return [None if v is None or v != v else str(v) for v in frame["image"].tolist()]
-    if "file" in frame.columns:
-        out = []
-        for v in frame["file"].tolist():
-            if v is None or v != v:
-                out.append(None)
-                continue
-            p = PurePath(str(v))
-            out.append(str(p.with_suffix(".jpg")) if p.suffix.lower() == ".mat" else str(p))
-        return out
-    return None
+    from ..io.images import IMAGE_COLUMNS
+
+    col = next((c for c in IMAGE_COLUMNS if c in frame.columns), None)
+    if col is None:
+        return None
+    out = []
+    for v in frame[col].tolist():
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            out.append(None)
+            continue
+        p = PurePath(str(v))
+        out.append(str(p.with_suffix(".jpg")) if p.suffix.lower() == ".mat" else str(p))
+    return out
 
 
-def _safe_relative(name, row):
+def _safe_relative(name, where):
     from pathlib import Path
 
     from ..errors import HpeError
@@ -148,29 +158,124 @@ def _safe_relative(name, row):
     if rel.is_absolute():
         rel = Path(rel.name)
     if ".." in rel.parts or not rel.parts:
-        raise HpeError(f"row {row}: image name {name!r} would be written outside the output folder")
+        raise HpeError(f"{where}: image name {name!r} would be written outside the output folder")
     return rel
+
+
+def row_namer(src, lines, frame=None):
+    """``f(i)`` naming 0-based row ``i`` of ``src`` as its error messages do: ``FILE: line N`` for text
+    (1-based, header = line 1), the ``.mat`` file itself for a ``.mat`` folder, ``FILE: row N`` (1-based)
+    otherwise."""
+    if frame is not None and Path(src.path).is_dir() and "file" in frame.columns:
+        files = frame["file"].tolist()
+        return lambda i: f"{Path(src.path) / str(files[i])}"
+    if src.kind == "csv" and lines is not None:
+        return lambda i: f"{src.path}: line {int(lines[i])}"
+    return lambda i: f"{src.path}: row {int(i) + 1}"
+
+
+def row_numbers(src, lines, idx):
+    """The numbers :func:`row_namer` prints for 0-based rows ``idx`` (for a rejects file's ``row`` column)."""
+    import numpy as np
+
+    idx = np.asarray(idx, dtype=np.int64)
+    return np.asarray(lines, dtype=np.int64)[idx] if src.kind == "csv" and lines is not None else idx + 1
+
+
+def _group_rows(names, usable, limit):
+    """``[(name, rows)]`` in order of first appearance."""
+    import numpy as np
+    import pandas as pd
+
+    codes, uniques = pd.factorize(names[usable], sort=False)
+    order = np.argsort(codes, kind="stable")
+    cuts = np.flatnonzero(np.diff(codes[order])) + 1
+    items = list(zip(uniques.tolist(), np.split(usable[order], cuts))) if usable.size else []
+    return items[:limit] if limit else items
+
+
+def plan_images(items, *, img_root, outdir, canvas, frame, where, overwrite, check_exists=True):
+    """Resolve each image and its output name; ``(plan, bad_rows)``.
+
+    ``plan`` is a list of ``[name, rel, ref, rows]`` (``ref`` an :class:`hpe_cli.io.images.ImageRef` or None on
+    canvases). Rows naming the same picture (even by different names, e.g. ``a.mat`` and ``a.jpg``) are drawn
+    together on it; two different pictures that would be written to the same output name are an error naming
+    a row of each.
+    """
+    import numpy as np
+
+    from ..errors import HpeError
+    from ..io.images import ImageResolver, row_ids
+    from ..io.transaction import note_input
+
+    resolver = ImageResolver(img_root)
+    seqs, cams, frs = row_ids(frame)
+    plan, bad_rows, by_rel = [], [], {}
+    for name, rows in items:
+        i0 = int(rows[0])
+        rel = _safe_relative(name, where(i0))
+        ref = None
+        if canvas is None:
+            ref = resolver.find(name, seqs[i0], cams[i0], frs[i0])
+            if ref is None:
+                bad_rows.extend((int(i), f"image not found: {resolver.tried(name, seqs[i0])}") for i in rows)
+                continue
+            note_input(ref.path or ref.video)  # an image read is an input: no output may replace it
+        elif rel.suffix.lower() not in _WRITABLE:
+            rel = rel.with_name(rel.name + ".png")
+        key = str(rel)
+        if key in by_rel:
+            other = by_rel[key]
+            if ref is not None and other[2] is not None and other[2].key == ref.key:
+                other[3] = np.sort(np.concatenate([other[3], rows]))
+                continue
+            raise HpeError(f"{where(i0)}: image {name!r} would be written to {outdir / rel}, as "
+                           f"{other[0]!r} of {where(int(other[3][0])).split(': ', 1)[-1]} is: two different "
+                           "pictures for one output file (give the images distinct names)")
+        dst = outdir / rel
+        if ref is not None and ref.path is not None and dst.resolve() == Path(ref.path).resolve():
+            raise HpeError(f"{dst}: refusing to overwrite an input image (choose another output folder)")
+        if check_exists:
+            check_output_exists(dst, overwrite)
+        entry = [name, rel, ref, np.asarray(rows)]
+        by_rel[key] = entry
+        plan.append(entry)
+    return plan, bad_rows
 
 
 def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=None, radians=False, use="auto",
              length=None, thickness=None, tdy_origin="auto", annotate=False, grid=False, grid_cols=6, tile=256,
-             limit=None, rejects_path=None, overwrite=False, progress=None, strict=False) -> dict:
-    """Draw every row of ``input_path``; return counts (``faces``, ``images``, ``sheets``, ``rejects``)."""
-    from pathlib import Path
+             limit=None, rejects_path=None, overwrite=False, progress=None, strict=False, worst=None,
+             sort_by=None) -> dict:
+    """Draw every row of ``input_path``; return counts (``faces``, ``images``, ``sheets``, ``rejects``).
 
+    A table written by ``hpe evaluate -o`` (``gt_*`` and ``pred_*`` columns) is drawn by
+    :func:`hpe_cli.pipelines.draw_errors.run_draw_errors` instead.
+    """
     import numpy as np
+    import pandas as pd
 
     from ..errors import HpeError
     from ..io import Rejects, label_mode, open_table
-    from ..io.transaction import ensure_transaction, note_input, staged_dir
+    from ..io.transaction import ensure_transaction, staged_dir
 
     input_path = Path(input_path)
-    src = open_table(input_path)
+    src = open_table(input_path, with_lines=True)
+    from .draw_errors import is_errors_table, run_draw_errors
+
+    if is_errors_table(src.columns):
+        return run_draw_errors(input_path, outdir, images=images, system=system, worst=worst,
+                               sort_by=sort_by or "geodesic", overwrite=overwrite, progress=progress,
+                               thickness=thickness, rejects_path=rejects_path, strict=strict)
+    if worst is not None or sort_by is not None:
+        raise HpeError(f"{src.path}: --worst and --sort-by draw the output of `hpe evaluate -o` (columns "
+                       "gt_pitch..pred_roll), got a label table")
     mode = label_mode(src.columns, src.path, system) if use == "auto" else use
     is_mat = input_path.is_dir() or input_path.suffix.lower() == ".mat"
     pose_para = is_mat or {"tdz", "scale"} <= set(src.columns)
     flip = tdy_origin == "bottom" or (tdy_origin == "auto" and pose_para)
-    frame, A, angles, reasons = _read_all(src, mode, radians, system)
+    frame, A, angles, reasons, lines = _read_all(src, mode, radians, system)
+    where = row_namer(src, lines, frame)
     n = len(frame)
     if n == 0:
         raise HpeError(f"{src.path}: empty table (no rows)")
@@ -183,9 +288,6 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     outdir = Path(outdir)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
 
-    # group rows by image, in order of first appearance
-    import pandas as pd
-
     bad_rows = [(int(i), reasons[i]) for i in np.flatnonzero(reasons != "")]
     if names is None:
         name_arr = np.array([f"row_{i:06d}.png" for i in range(n)], dtype=object)
@@ -194,41 +296,14 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
         unnamed = np.flatnonzero((reasons == "") & pd.isna(name_arr))
         bad_rows += [(int(i), "no image name") for i in unnamed]
     usable = np.flatnonzero((reasons == "") & ~pd.isna(name_arr))
-    codes, uniques = pd.factorize(name_arr[usable], sort=False)
-    order = np.argsort(codes, kind="stable")
-    cuts = np.flatnonzero(np.diff(codes[order])) + 1
-    items = list(zip(uniques.tolist(), np.split(usable[order], cuts))) if usable.size else []
-    if limit:
-        items = items[:limit]
+    items = _group_rows(name_arr, usable, limit)
 
     # check every input and output before drawing anything
-    plan = []
-    for name, rows in items:
-        rel = _safe_relative(name, rows[0])
-        src_img = None
-        if canvas is None:
-            src_img = img_root / name
-            if not src_img.is_file():
-                bad_rows.extend((i, f"image not found: {src_img}") for i in rows)
-                continue
-            note_input(src_img)  # an image read is an input: no output may replace it
-        if canvas is not None and rel.suffix.lower() not in _WRITABLE:
-            rel = rel.with_name(rel.name + ".png")
-        dst = outdir / rel
-        if src_img is not None and dst.resolve() == src_img.resolve():
-            raise HpeError(f"{dst}: refusing to overwrite an input image (choose another output folder)")
-        if not grid:
-            check_output_exists(dst, overwrite)
-        plan.append((name, rel, src_img, rows))
-    if bad_rows:
-        bad_rows.sort()
-        if rejects.path is None or strict:  # fail before drawing anything
-            rejects.add({"row": np.array([i for i, _ in bad_rows])}, [why for _, why in bad_rows])
-            rejects.check()
-        idx = np.array([i for i, _ in bad_rows])
-        cols = {"row": idx}
-        cols.update({c: frame[c].to_numpy()[idx] for c in frame.columns})
-        rejects.add(cols, [why for _, why in bad_rows])
+    plan, missing = plan_images(items, img_root=img_root, outdir=outdir, canvas=canvas, frame=frame, where=where,
+                                overwrite=overwrite, check_exists=not grid)
+    bad_rows += missing
+    book = _Book(rejects, frame, src, lines, where)
+    book.add(bad_rows, before_drawing=True)
     sheet_paths = []
     if grid:
         per_sheet = grid_cols * grid_cols
@@ -238,35 +313,77 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
             check_output_exists(p, overwrite)
     if progress is not None:
         progress.total = len(plan)
+        progress.refresh()
     with ensure_transaction(), staged_dir(outdir, overwrite) as stage:
-        return _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, centre, L, from_td, flip,
-                         style, thickness, annotate, A, angles, frame, rejects, bad_rows, progress)
+        s = _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, centre, L, from_td, flip,
+                      style, thickness, annotate, A, angles, book, progress)
+        book.finish(s["images"])
+        return s
+
+
+class _Book:
+    """Rejected rows of a draw run: numbered as the input numbers them, checked before anything is drawn."""
+
+    def __init__(self, rejects, frame, src, lines, where):
+        self.rejects, self.frame, self.src, self.lines, self.where = rejects, frame, src, lines, where
+        self.rows: list = []
+
+    def add(self, bad, before_drawing=False):
+        import numpy as np
+
+        if not bad:
+            return
+        bad = sorted(bad)
+        self.rows += bad
+        idx = np.array([i for i, _ in bad])
+        why = [w for _, w in bad]
+        if self.rejects.path is None or self.rejects.strict:  # fail before drawing anything
+            from ..errors import HpeError
+
+            extra = f" ({len(bad) - 1} more; use --rejects FILE to skip them)" if len(bad) > 1 else \
+                " (use --rejects FILE to skip it)"
+            raise HpeError(f"{self.where(idx[0])}: {why[0]}{extra if not self.rejects.strict else ''}")
+        cols = {"row": row_numbers(self.src, self.lines, idx)}
+        cols.update({c: self.frame[c].to_numpy()[idx] for c in self.frame.columns})
+        self.rejects.add(cols, why)
+
+    def finish(self, drawn):
+        from ..errors import HpeError
+
+        if drawn == 0 and self.rows:
+            raise HpeError(f"{self.src.path}: nothing drawn: all {len(self.rows)} row(s) rejected "
+                           f"(first: {self.where(self.rows[0][0]).split(': ', 1)[-1]}: {self.rows[0][1]})")
+        self.rejects.finish()
+
+
+def pictures(plan, canvas):
+    """Yield ``(plan entry, BGR image or None, reason)``; video frames are decoded once per video, in order."""
+    from ..geometry import draw as g
+    from ..io.images import ImageResolver
+
+    if canvas is not None:
+        for entry in plan:
+            yield entry, g.blank_canvas(*canvas), ""
+        return
+    for k, img, why in ImageResolver.read([e[2] for e in plan]):
+        yield plan[k], img, why
 
 
 def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, centre, L, from_td, flip, style,
-              thickness, annotate, A, angles, frame, rejects, bad_rows, progress=None):
+              thickness, annotate, A, angles, book, progress=None):
     from collections import Counter
 
     import cv2
     import numpy as np
 
-    from ..errors import HpeError
     from ..geometry import draw as g
 
     faces = drawn = 0
     tiles, captions = [], []
-    for name, rel, src_img, rows in plan:
-        if src_img is not None:
-            img = _read_image(src_img)
-            if img is None:
-                if rejects.path is None or rejects.strict:
-                    raise HpeError(f"{src_img}: not a readable image (row {rows[0]}; use --rejects FILE to skip it)")
-                why = f"not a readable image: {src_img}"
-                bad_rows.extend((int(i), why) for i in rows)
-                rejects.add({"row": rows, **{c: frame[c].to_numpy()[rows] for c in frame.columns}}, [why] * len(rows))
-                continue
-        else:
-            img = g.blank_canvas(*canvas)
+    for (name, rel, ref, rows), img, why in pictures(plan, canvas):
+        if img is None:
+            book.add([(int(i), why) for i in rows])
+            continue
         H, W = img.shape[:2]
         r = np.asarray(rows)
         c = centre[r].copy()
@@ -283,7 +400,7 @@ def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, c
             for k, i in enumerate(r):
                 p, y, rr = angles[i]
                 above = (1.15 if style == "axes" else 1.8) * Lr[k]
-                ink = ((0, 0, 0), (255, 255, 255)) if src_img is None else ((255, 255, 255), (0, 0, 0))
+                ink = ((0, 0, 0), (255, 255, 255)) if ref is None else ((255, 255, 255), (0, 0, 0))
                 g.render_caption(img, f"p {p:.1f} y {y:.1f} r {rr:.1f}", (c[k, 0] - Lr[k], c[k, 1] - above),
                                  height_px=float(np.clip(Lr[k] / 6, 12.0, 0.05 * max(H, W) + 12.0)),
                                  colour=ink[0], outline=ink[1])
@@ -305,9 +422,8 @@ def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, c
             if tiles[part]:
                 sheet = g.contact_sheet(tiles[part], grid_cols, tile, captions[part])
                 _write_image(sheet, stage / p.relative_to(outdir), p)
-    rejects.finish()
     return {"faces": faces, "images": drawn, "sheets": len(sheet_paths) if tiles else 0,
-            "rejects": dict(Counter(why.split(":")[0] for _, why in bad_rows))}
+            "rejects": dict(Counter(why.split(":")[0] for _, why in book.rows))}
 
 
 def check_output_exists(path, overwrite):
@@ -318,15 +434,10 @@ def check_output_exists(path, overwrite):
 
 
 def _read_image(path):
-    """BGR image or None; read as bytes first (OpenCV's own file functions cannot take non-UTF-8 names)."""
-    import cv2
-    import numpy as np
+    """BGR image or None (see :func:`hpe_cli.io.images.read_image`)."""
+    from ..io.images import read_image
 
-    try:
-        data = np.fromfile(path, dtype=np.uint8)
-    except OSError:
-        return None
-    return cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+    return read_image(path)
 
 
 def _write_image(img, staged, shown):
@@ -345,3 +456,10 @@ def _write_image(img, staged, shown):
         staged.write_bytes(buf.tobytes())
     except OSError as exc:
         raise HpeError(f"{shown}: cannot write: {os_reason(exc)}") from None
+
+
+def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", **kw):
+    """See :func:`hpe_cli.pipelines.draw_errors.draw_worst` (re-exported here)."""
+    from .draw_errors import draw_worst as _dw
+
+    return _dw(rows, images=images, out_dir=out_dir, worst=worst, sort_by=sort_by, **kw)

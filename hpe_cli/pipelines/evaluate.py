@@ -182,7 +182,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
 
     check_report_outputs(report, output, overwrite)
     if plots:
-        from ..io.eval_plots import check_plot_outputs
+        from ..report.eval_plots import check_plot_outputs
 
         check_plot_outputs(plots, overwrite)
     rej = Rejects(rejects, overwrite, strict=strict, source=gt_path)
@@ -265,7 +265,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
                     by, by_values, gt_system, pred_system, overwrite, batch_size)
     rej.write()
     if plots:
-        from ..io.eval_plots import write_eval_plots
+        from ..report.eval_plots import write_eval_plots
 
         write_eval_plots(plots, rows, result, gt_system, overwrite=overwrite)
     if report == "-":

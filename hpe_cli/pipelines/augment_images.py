@@ -1,0 +1,195 @@
+"""``hpe augment``'s pictures: per-row image sizes, the transformed images and, for a ``.mat`` folder, the
+``.mat`` files written back beside them.
+
+Images are written into a staged folder (:func:`hpe_cli.io.transaction.staged_dir`) that the run commits as
+a whole with the table: a failure, also halfway through the commit, leaves none of them in place.
+"""
+from __future__ import annotations
+
+from pathlib import Path, PurePath
+
+import numpy as np
+
+from ..errors import HpeError
+from ..io.images import IMAGE_SUFFIXES, ImageResolver, image_size
+
+
+class RowImages:
+    """Resolve each row's picture and its size once per name (thread-safe enough: a dict under the GIL)."""
+
+    def __init__(self, root):
+        self.resolver = ImageResolver(root)
+        self.cache: dict = {}
+
+    def lookup(self, name, sequence="", camera="", frame=-1):
+        """``(ref or None, (W, H) or None, reason)``."""
+        key = (name, sequence, camera, frame)
+        hit = self.cache.get(key)
+        if hit is None:
+            ref = self.resolver.find(name, sequence, camera, frame)
+            if ref is None:
+                hit = (None, None, f"image not found: {self.resolver.tried(name, sequence)}")
+            else:
+                size = image_size(ref)
+                hit = (ref, size, "" if size is not None else f"not a readable image: {ref}")
+            self.cache[key] = hit
+        return hit
+
+
+def output_name(name: str, ref) -> PurePath:
+    """The output image's name relative to ``--out-images``: the table's name (an absolute name: its base name),
+    with the picture's own suffix when the table names a ``.mat`` or a video frame."""
+    p = PurePath(name) if name else PurePath(f"{Path(ref.video).stem}_{ref.frame:08d}.jpg")
+    if p.is_absolute():
+        p = PurePath(p.name)
+    if ".." in p.parts or not p.parts:
+        raise HpeError(f"expected an image name inside --images, got {name!r}")
+    if p.suffix.lower() not in IMAGE_SUFFIXES:
+        suffix = Path(ref.path).suffix if ref.path is not None else ".jpg"
+        p = p.with_name((p.stem if p.suffix.lower() == ".mat" else p.name) + suffix)
+    return p
+
+
+class ImageJob:
+    """Warp each picture once into the staged folder; write ``.mat`` files back when the input is a ``.mat`` folder."""
+
+    def __init__(self, stage: Path, out_dir: Path, interpolation, border, jpeg_quality, overwrite, mat_dir=None,
+                 perm_of=None):
+        self.stage, self.dst = Path(stage), Path(out_dir)
+        self.interp, self.border, self.quality, self.overwrite = interpolation, border, jpeg_quality, overwrite
+        self.mat_dir, self.perm_of = mat_dir, perm_of
+        self.done: dict = {}  # output name -> (picture key, where of the first row)
+        self.mats = 0
+
+    def add(self, name, where, ref, P, size_in, size_out, mirror, mat=None):
+        """Transform the picture of one row (once per picture); ``mat``: (file, canonical A', crop roi fn) or None."""
+        rel = output_name(name, ref)
+        key = str(rel)
+        if key in self.done:
+            if self.done[key][0] != ref.key:
+                raise HpeError(f"{where}: image {name!r} ({ref}) would be written to {self.dst / rel}, as the image "
+                               f"of {self.done[key][1]} ({self.done[key][0]}) is: two different pictures for one "
+                               "output file")
+            if mat is not None:
+                self._write_mat(rel, mat, P, size_in, size_out, mirror, where)
+            return
+        final = self.dst / rel
+        if final.is_dir():
+            raise HpeError(f"{final}: is a folder, expected a file name")
+        if final.exists() and not self.overwrite:
+            raise HpeError(f"{final}: already exists (use --overwrite to replace it)")
+        img = _read(ref)
+        if img is None:
+            raise HpeError(f"{where}: {ref}: not a readable image")
+        h, w = img.shape[:2]
+        if (w, h) != tuple(int(x) for x in size_in):
+            raise HpeError(f"{where}: {ref} is {w}x{h}, but its header said {size_in[0]:g}x{size_in[1]:g}")
+        out = _warp(img, P, size_out, self.interp, self.border)
+        staged = self.stage / rel
+        staged.parent.mkdir(parents=True, exist_ok=True)
+        import cv2
+
+        suffix = rel.suffix.lower() or ".png"
+        params = [cv2.IMWRITE_JPEG_QUALITY, self.quality] if suffix in (".jpg", ".jpeg") else []
+        ok, buf = cv2.imencode(suffix, out, params)
+        if not ok:
+            raise HpeError(f"{final}: could not encode the image as {suffix}")
+        buf.tofile(staged)
+        self.done[key] = (ref.key, where.split(": ", 1)[-1])
+        if mat is not None:
+            self._write_mat(rel, mat, P, size_in, size_out, mirror, where)
+
+    def _write_mat(self, rel, mat, P, size_in, size_out, mirror, where):
+        """``<stem>.mat`` beside the output image: Pose_Para (new angles, tdx, tdy), pt2d, pt3d_68 and roi moved;
+        every other variable copied."""
+        import scipy.io
+
+        from ..geometry.augment import move_td
+        from ..rotation import get_system
+
+        src_mat, A2, roi_fn, zoom = mat
+        try:
+            m = scipy.io.loadmat(src_mat)
+        except Exception as exc:  # noqa: BLE001 - scipy raises many types for a damaged file
+            raise HpeError(f"{src_mat}: not a readable MATLAB .mat file ({' '.join(str(exc).split())[:120]})") \
+                from None
+        m = {k: v for k, v in m.items() if not k.startswith("__")}
+        s = get_system("300w_lp")
+        pose = np.asarray(m["Pose_Para"], dtype=np.float64).reshape(-1).copy()
+        pose[:3] = np.deg2rad(s.to_angles(s.from_canonical(A2[None]))[0][0])
+        tdx, tdy = move_td(pose[3:4], pose[4:5], P, size_in[1], size_out[1], True)
+        pose[3], pose[4] = tdx[0], tdy[0]
+        pose[6] *= zoom  # weak perspective: projected = scale * R @ X + t; a resize multiplies scale
+        m["Pose_Para"] = pose.reshape(1, -1)  # float64: the new angles to the last bit
+        if "pt2d" in m:
+            m["pt2d"] = self._move_cols(np.asarray(m["pt2d"], dtype=np.float64), P, mirror, invisible=-1.0)
+        if "pt3d_68" in m:
+            p3 = np.asarray(m["pt3d_68"], dtype=np.float64)
+            xy = self._move_cols(p3[:2], P, mirror)
+            z = (p3[2][self._perm(p3.shape[1])] if mirror else p3[2]) * zoom
+            m["pt3d_68"] = np.vstack([xy, z])
+        if "roi" in m and roi_fn is not None:
+            m["roi"] = roi_fn(np.asarray(m["roi"], dtype=np.float64), size_in).reshape(m["roi"].shape)
+        out = self.stage / rel.with_suffix(".mat")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if (self.dst / rel.with_suffix(".mat")).exists() and not self.overwrite:
+            raise HpeError(f"{self.dst / rel.with_suffix('.mat')}: already exists (use --overwrite to replace it)")
+        scipy.io.savemat(out, m, do_compression=False)
+        self.mats += 1
+
+    def _perm(self, n):
+        perm = self.perm_of(n) if self.perm_of else None
+        if perm is None:
+            raise HpeError(f"a mirror needs the left/right order of {n} landmarks; no built-in scheme has {n}")
+        return perm
+
+    def _move_cols(self, pts, P, mirror, invisible=None):
+        """(2, L) points moved by P, re-indexed after a mirror; ``invisible`` marks points (x = -1) kept as is."""
+        from ..geometry.augment import move_point
+
+        hidden = (pts[0] == invisible) | (pts[1] == invisible) if invisible is not None else np.zeros(pts.shape[1],
+                                                                                                        bool)
+        u, v = move_point(pts[0], pts[1], P)
+        out = np.vstack([u, v])
+        out[:, hidden] = pts[:, hidden]
+        if mirror:
+            out = out[:, self._perm(pts.shape[1])]
+        return out
+
+
+def _read(ref):
+    if ref.path is not None:
+        import cv2
+
+        from ..io.images import read_image
+
+        return read_image(ref.path, cv2.IMREAD_UNCHANGED)
+    for _, img, _ in ImageResolver.read([ref]):
+        return img
+    return None
+
+
+def _warp(img, P, size_out, interpolation, border):
+    """The picture under the pixel affine ``P`` (2, 3), ``size_out = (W, H)``; flips and integer crops exactly."""
+    import cv2
+
+    from ..geometry.image_ops import _cv_flags
+
+    W, H = (int(x) for x in size_out)
+    h, w = img.shape[:2]
+    A, t = P[:, :2], P[:, 2]
+    if (w, h) == (W, H) and np.array_equal(np.abs(A), np.eye(2)):
+        sx, sy = float(A[0, 0]), float(A[1, 1])
+        if t[0] == (0.0 if sx > 0 else w - 1.0) and t[1] == (0.0 if sy > 0 else h - 1.0):
+            code = {(-1.0, 1.0): 1, (1.0, -1.0): 0, (-1.0, -1.0): -1}.get((sx, sy))
+            return img.copy() if code is None else cv2.flip(img, code)
+    interp, borders = _cv_flags()
+    if A[0, 1] == 0 and A[1, 0] == 0 and A[0, 0] == A[1, 1] > 0 and np.allclose(t, 0.5 * A[0, 0] - 0.5):
+        # a resize: cv2.resize has the same pixel-centre mapping; area averaging when shrinking
+        flag = cv2.INTER_AREA if A[0, 0] < 1 and interpolation == "linear" else interp[interpolation]
+        return cv2.resize(img, (W, H), interpolation=flag)
+    return cv2.warpAffine(img, P, (W, H), flags=interp[interpolation], borderMode=borders[border],
+                          borderValue=(0, 0, 0, 0))
+
+
+__all__ = ["ImageJob", "RowImages", "output_name"]

@@ -1,0 +1,292 @@
+"""``hpe draw`` on the per-row output of ``hpe evaluate -o``: ground truth and prediction on the same face.
+
+Ground truth is drawn with solid lines, the prediction with dashed, thinner lines ending in a dot (both in the
+axis colours: red = the subject's left, green = forehead to chin, blue = out of the nose); a legend in the
+top-left corner says which is which, and the error (``--sort-by`` column, and the geodesic error) is written in
+the top-right corner. One PNG per row, named ``<rank>_<image stem>.png`` (rank 1 = worst), so two rows of one
+image never share an output file.
+
+:func:`draw_worst` is the function a report calls; :func:`run_draw_errors` is ``hpe draw``'s job.
+"""
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+
+#: columns ``hpe evaluate -o`` writes besides its key columns
+ANGLE_COLUMNS = ("gt_pitch", "gt_yaw", "gt_roll", "pred_pitch", "pred_yaw", "pred_roll")
+_EVAL_COLUMNS = set(ANGLE_COLUMNS) | {"err_pitch", "err_yaw", "err_roll", "geodesic", "maev_left", "maev_down",
+                                      "maev_front", "frobenius", "row"}
+_PLACEMENT = {"bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "tdz", "size", "scale"}
+GT_STYLE = "solid"
+PRED_STYLE = "dashed"
+
+
+def is_errors_table(columns) -> bool:
+    """True for a table written by ``hpe evaluate -o`` (it has ``gt_*`` and ``pred_*`` angles)."""
+    return all(c in columns for c in ANGLE_COLUMNS)
+
+
+def key_columns(columns) -> list:
+    """The columns that identify a row of evaluate's output (its ``--key`` columns, else ``row``)."""
+    keys = [c for c in columns if c not in _EVAL_COLUMNS and c not in _PLACEMENT]
+    return keys or (["row"] if "row" in columns else [])
+
+
+def table_system(schema, default):
+    """The system named by a Parquet file's ``hpe:system`` metadata, else ``default``; and where it came from."""
+    from ..rotation import get_system
+
+    name = (getattr(schema, "metadata", None) or {}).get(b"hpe:system")
+    if name:
+        try:
+            return get_system(name.decode("utf-8", "replace")), "file metadata"
+        except Exception:  # noqa: BLE001 - a custom system whose TOML is not at hand: the given one
+            return default, "option (the file's system is not known here)"
+    return default, "option"
+
+
+def _order(frame, sort_by, worst, where):
+    import pandas as pd
+
+    from ..errors import HpeError
+
+    if sort_by not in frame.columns:
+        numeric = [c for c in frame.columns if pd.api.types.is_numeric_dtype(frame[c])]
+        raise HpeError(f"{where}: --sort-by {sort_by!r}: expected one of the numeric columns "
+                       f"{', '.join(numeric)}, got no column of that name")
+
+    v = pd.to_numeric(frame[sort_by], errors="coerce").to_numpy(np.float64)
+    if np.isnan(v).all() and len(v):
+        raise HpeError(f"{where}: --sort-by {sort_by!r}: expected a numeric column, got no numbers")
+    order = np.argsort(np.where(np.isnan(v), -np.inf, -v), kind="stable")  # worst first, NaN last
+    return order[:worst] if worst else order
+
+
+def _placement(frame, idx, ref, H, W):
+    """Head centre (u, v) and line length for row ``idx``: the table's box/tdx, else the ``.mat`` beside the
+    image (Pose_Para tdx, tdy from the bottom, length 100000 * scale), else the image centre."""
+    from .draw import DEFAULT_LENGTH_FRACTION, MAT_LENGTH_UNITS, face_placement
+
+    c, L, _ = face_placement(frame.iloc[[idx]], pose_para=False)
+    if np.isfinite(c[0]).all():
+        return c[0], (L[0] if np.isfinite(L[0]) else DEFAULT_LENGTH_FRACTION * min(H, W))
+    if ref is not None and ref.path is not None:
+        mat = Path(ref.path).with_suffix(".mat")
+        if mat.is_file():
+            from ..datasets.mat import read_mat
+            from ..errors import HpeError
+
+            try:
+                pose = read_mat(mat)["pose"]
+            except HpeError:
+                pose = None
+            if pose is not None and np.isfinite(pose[3:5]).all():
+                L0 = abs(pose[6]) * MAT_LENGTH_UNITS if np.isfinite(pose[6]) and pose[6] != 0 else np.nan
+                return np.array([pose[3], H - 1 - pose[4]]), (L0 if np.isfinite(L0) else
+                                                               DEFAULT_LENGTH_FRACTION * min(H, W))
+    return np.array([W / 2.0, H / 2.0]), DEFAULT_LENGTH_FRACTION * min(H, W)
+
+
+def render_pair(img, A_gt, A_pred, centre, length, corner_text, thickness=None):
+    """Draw ground truth (solid) and prediction (dashed, dot at each end) on ``img``, a legend top-left and
+    ``corner_text`` (lines) top-right. In place; returns ``img``."""
+    from ..geometry import draw as g
+
+    t = thickness or g.auto_thickness(length)
+    c = np.asarray(centre, dtype=np.float64).reshape(1, 2)
+    g.render_axes(img, A_gt[None], c, length, t)
+    g.render_axes_dashed(img, A_pred[None], c, length, max(1, (t + 1) // 2))
+    H, W = img.shape[:2]
+    g.render_legend(img, [("ground truth", GT_STYLE), ("prediction", PRED_STYLE)], max(12.0, 0.035 * min(H, W)))
+    h = max(12.0, 0.035 * min(H, W))
+    for k, line in enumerate(corner_text):
+        g.render_caption(img, line, (W, (k + 1) * (h * 1.5)), height_px=h)
+    return img
+
+
+def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=None, overwrite=False,
+               progress=None, on_missing="canvas", thickness=None, where=None):
+    """Draw the worst rows of ``hpe evaluate -o``'s output, ground truth and prediction on the same face.
+
+    Parameters
+    ----------
+    rows : pandas.DataFrame or str or Path
+        The per-row output of ``hpe evaluate -o`` (a DataFrame, or the file). Needs ``gt_pitch, gt_yaw,
+        gt_roll, pred_pitch, pred_yaw, pred_roll`` (degrees, in the ground truth's system), the column
+        ``sort_by``, and a key column naming the image (``image``, ``file``, ... or Panoptic ``sequence,
+        camera, frame``).
+    images : str or Path
+        Folder the image names are relative to (see :mod:`hpe_cli.io.images`).
+    out_dir : str or Path
+        Folder for the PNGs; created; staged and committed with the run (:func:`hpe_cli.io.transaction.staged_dir`).
+    worst : int, optional
+        Draw only the ``worst`` rows with the largest ``sort_by`` (all rows when None).
+    sort_by : str
+        Numeric column to sort by, largest first (NaN last); default ``geodesic``.
+    system : str or RotationSystem, optional
+        System of the ``gt_*``/``pred_*`` angles; default: the file's ``hpe:system`` metadata (or
+        ``rows.attrs["hpe:system"]``), else ``300w_lp``.
+    on_missing : {"canvas", "error"}
+        A row whose image is not found is drawn on a grey canvas that says so, or is an error.
+
+    Returns
+    -------
+    list of (key, path, caption)
+        One per drawn row, worst first: ``key`` a tuple of the row's key-column values
+        (:func:`key_columns`), ``path`` the written PNG (a :class:`~pathlib.Path` in ``out_dir``),
+        ``caption`` one line (key, error, both angle triples).
+    """
+    from ..errors import HpeError
+    from ..io.images import ImageResolver, row_ids
+    from ..io.transaction import ensure_transaction, note_input, staged_dir
+    from .draw import _image_names
+
+    rows, system, where = _load(rows, system, where)
+    order = _order(rows, sort_by, worst, where)
+    names = _image_names(rows) or [None] * len(rows)
+    seqs, cams, frs = row_ids(rows)
+    resolver = ImageResolver(images)
+    job = _Pairs(rows, system, sort_by, names, thickness)
+    refs = []
+    for i in order.tolist():
+        ref = resolver.find(names[i], seqs[i], cams[i], frs[i]) if (names[i] or cams[i]) else None
+        if ref is None and on_missing == "error":
+            raise HpeError(f"{where}: row {i + 1}: image not found: {resolver.tried(names[i], seqs[i])}")
+        if ref is not None:
+            note_input(ref.path or ref.video)
+        refs.append(ref)
+    out_dir = Path(out_dir)
+    if progress is not None:
+        progress.total = len(order)
+        progress.refresh()
+    done = {}
+    found = [k for k, r in enumerate(refs) if r is not None]
+    with ensure_transaction(), staged_dir(out_dir, overwrite) as stage:
+        # one picture in memory at a time: files in rank order, then each video's frames, decoded once
+        missing = ((k, None, "image not found") for k, r in enumerate(refs) if r is None)
+        pictures = ((found[k], img, why) for k, img, why in ImageResolver.read([refs[k] for k in found]))
+        for rank, img, why in itertools.chain(missing, pictures):
+            i = int(order[rank])
+            if img is None and on_missing == "error":
+                raise HpeError(f"{where}: row {i + 1}: {why}")
+            done[rank] = job.draw(img, why, i, rank, refs[rank], stage, out_dir)
+            if progress is not None:
+                progress.update(1)
+    return [done[k] for k in sorted(done)]
+
+
+def _load(rows, system, where):
+    """(DataFrame, RotationSystem, name for messages) of a DataFrame or a Parquet/CSV file of evaluate's output."""
+    import pandas as pd
+
+    from ..errors import HpeError
+    from ..io.transaction import note_input
+    from ..rotation import get_system
+
+    if not isinstance(rows, pd.DataFrame):
+        path = Path(rows)
+        note_input(path)
+        if path.suffix.lower() in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(path)
+            if system is None:
+                system, _ = table_system(table.schema, get_system("300w_lp"))
+            rows = table.to_pandas()
+        else:
+            rows = pd.read_csv(path)
+        where = where or str(path)
+    where = where or "evaluate output"
+    if system is None:
+        system = rows.attrs.get("hpe:system", "300w_lp")
+    system = get_system(system) if isinstance(system, str) else system
+    missing = [c for c in ANGLE_COLUMNS if c not in rows.columns]
+    if missing:
+        raise HpeError(f"{where}: expected hpe evaluate's per-row output with {', '.join(ANGLE_COLUMNS)}, "
+                       f"missing {', '.join(missing)}")
+    return rows, system, where
+
+
+class _Pairs:
+    """Draws one row of evaluate's output: both poses, legend, error; writes ``<rank>_<stem>.png``."""
+
+    def __init__(self, rows, system, sort_by, names, thickness):
+        self.rows, self.system, self.sort_by, self.names, self.thickness = rows, system, sort_by, names, thickness
+        self.keys = key_columns(rows.columns)
+        self.gt = rows[list(ANGLE_COLUMNS[:3])].to_numpy(np.float64)
+        self.pr = rows[list(ANGLE_COLUMNS[3:])].to_numpy(np.float64)
+        self.ok = np.isfinite(self.gt).all(1) & np.isfinite(self.pr).all(1)
+        self.A_gt = np.full((len(rows), 3, 3), np.nan)
+        self.A_pr = np.full((len(rows), 3, 3), np.nan)
+        ok = self.ok
+        self.A_gt[ok] = system.to_canonical(system.from_angles(self.gt[ok]))
+        self.A_pr[ok] = system.to_canonical(system.from_angles(self.pr[ok]))
+
+    def draw(self, img, why, i, rank, ref, stage, out_dir):
+        from ..geometry import draw as g
+        from .draw import _write_image
+
+        rows, sort_by, gt, pr = self.rows, self.sort_by, self.gt, self.pr
+        if img is None:
+            img = g.blank_canvas(320, 320, 96)
+            g.render_caption(img, f"{why[:48]}", (4, 310), height_px=11)
+        H, W = img.shape[:2]
+        key = tuple(rows[k].iat[i] for k in self.keys)
+        err = float(rows[sort_by].iat[i])
+        corner = [f"{sort_by} {err:.2f}" + (" deg" if sort_by != "frobenius" else "")]
+        if sort_by != "geodesic" and "geodesic" in rows.columns:
+            corner.append(f"geodesic {float(rows['geodesic'].iat[i]):.2f} deg")
+        if self.ok[i]:
+            centre, length = _placement(rows, i, ref, H, W)
+            render_pair(img, self.A_gt[i], self.A_pr[i], centre, length, corner, self.thickness)
+        else:
+            g.render_caption(img, "angles missing", (4, H - 6), height_px=14)
+        stem = Path(str(self.names[i] or f"row{i + 1}")).stem
+        rel = Path(f"{rank + 1:04d}_{_safe_stem(stem)}.png")
+        _write_image(img, stage / rel, out_dir / rel)
+        caption = (f"{', '.join(map(str, key))}: {sort_by} {err:.2f}; gt (p, y, r) = "
+                   f"({gt[i, 0]:.1f}, {gt[i, 1]:.1f}, {gt[i, 2]:.1f}), pred = "
+                   f"({pr[i, 0]:.1f}, {pr[i, 1]:.1f}, {pr[i, 2]:.1f}) deg in {self.system.name}")
+        return key, out_dir / rel, caption
+
+
+def _safe_stem(stem: str) -> str:
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", stem)[:80] or "image"
+
+
+def run_draw_errors(input_path, outdir, *, images=None, system=None, worst=None, sort_by="geodesic",
+                    overwrite=False, progress=None, thickness=None, rejects_path=None, strict=False) -> dict:
+    """``hpe draw`` on evaluate's output: a missing image is a reject (an error without ``--rejects``)."""
+    import pyarrow.parquet as pq
+
+    from ..errors import HpeError
+    from ..io import open_table
+    from ..rotation import get_system
+
+    input_path = Path(input_path)
+    src = open_table(input_path)
+    frame = src.read_all().to_pandas() if hasattr(src, "read_all") else None
+    if frame is None:
+        import pyarrow as pa
+
+        frame = pa.Table.from_batches(list(src.batches()), schema=src.schema).to_pandas()
+    source = "option"
+    if input_path.suffix.lower() in (".parquet", ".pq"):
+        file_system, source = table_system(pq.read_schema(input_path), system)
+        system = file_system
+    if system is None:
+        system, source = get_system("300w_lp"), "default"
+    if len(frame) == 0:
+        raise HpeError(f"{input_path}: empty table (no rows)")
+    if rejects_path is not None:
+        raise HpeError("--rejects: not supported with evaluate's output; every drawn row needs its image")
+    res = draw_worst(frame, images=images or input_path.parent, out_dir=outdir, worst=worst, sort_by=sort_by,
+                     system=system, overwrite=overwrite, progress=progress, on_missing="error", thickness=thickness,
+                     where=str(input_path))
+    return {"faces": len(res), "images": len(res), "sheets": 0, "rejects": {}, "system": system.name,
+            "system_source": source, "drawn": res}
