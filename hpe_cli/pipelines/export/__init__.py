@@ -7,7 +7,7 @@ The job runs in four stages, one module each:
 2. :mod:`.select` -- express the labels in the layout's rotation system through the matrices (never by editing
    angles), apply the layout's own rules, the split, ``--min-change`` and ``--balance`` (rules in
    :mod:`.sampling`);
-3. :mod:`.pixels` / :mod:`.workers` -- decode each source image once (:mod:`.resolve` finds it), crop every head in
+3. :mod:`.pixels` / :mod:`.workers` -- decode each source image once (:mod:`hpe_cli.io.images` finds it, the resolver draw and augment use), crop every head in
    it (padding outside the frame), encode;
 4. :mod:`.write` -- let the layout write its index files, then ``export.json`` and the rejects.
 
@@ -19,7 +19,7 @@ from __future__ import annotations
 from .inputs import load_inputs, load_mat_input, load_table_input, load_w300lp_input
 from .job import run_export
 from .options import ExportOptions
-from .resolve import jpeg_size, resolve_image, video_path
+from ...io.images import jpeg_size, resolve_image, video_path
 from .sampling import (
                        assign_splits,
                        balance_keep,

@@ -12,7 +12,7 @@ from ...errors import HpeError
 from ...geometry.crop import expand_boxes, pixel_boxes
 from ...io.layout import BBOX_COLS
 from . import workers
-from .resolve import resolve_image, video_path
+from ...io.images import resolve_image, video_path
 
 
 @dataclass

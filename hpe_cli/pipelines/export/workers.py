@@ -9,7 +9,7 @@ import numpy as np
 
 from ...errors import HpeError
 from .options import NO_FILES, NO_VIDEO
-from .resolve import jpeg_size
+from ...io.images import jpeg_size
 
 _CFG: dict = {}
 _LAST_FRAME: list = [None]
