@@ -178,40 +178,79 @@ def distortion_problem(dist, K=None, width=None, height=None, field: str = "dist
     ``r g(r)`` must increase over every radius the image reaches (see the module notes); ``|p1|, |p2|``
     at most :data:`MAX_TANGENTIAL`; ``|k1|, |k2|, |k3|`` at most :data:`MAX_RADIAL` in any case.
     """
-    d = np.asarray(dist, dtype=np.float64).reshape(-1)
-    if not np.isfinite(d).all():
-        return f"{field}: expected finite distortion coefficients, got {d.tolist()}"
-    d = np.concatenate([d, np.zeros(5)])[:5]
-    k1, k2, p1, p2, k3 = d
-    if max(abs(k1), abs(k2), abs(k3)) > MAX_RADIAL:
-        return f"{field}: expected radial coefficients |k1|, |k2|, |k3| <= {MAX_RADIAL:g} (a real lens), got {d.tolist()}"
-    if max(abs(p1), abs(p2)) > MAX_TANGENTIAL:
-        return (f"{field}: expected tangential coefficients |p1|, |p2| <= {MAX_TANGENTIAL:g} (a real lens is "
-                f"decentred by ~1e-3), got p1 {p1:g}, p2 {p2:g}")
-    if K is None or width is None or height is None or not (k1 or k2 or k3):
-        return ""
-    K = np.asarray(K, dtype=np.float64)
-    corners = np.array([[0, 0, 1], [width, 0, 1], [0, height, 1], [width, height, 1]], dtype=np.float64)
+    d = np.asarray(dist, dtype=np.float64).reshape(1, -1)
+    if K is None or width is None or height is None:
+        return distortion_problems(d, None, None, None, field)[0]
+    return distortion_problems(d, np.asarray(K, dtype=np.float64)[None], np.array([width], dtype=np.float64),
+                               np.array([height], dtype=np.float64), field)[0]
+
+
+def distortion_problems(dist, K=None, width=None, height=None, field: str = "distCoef") -> list:
+    """:func:`distortion_problem` of C cameras at once: ``dist`` (C, 4 or 5), ``K`` (C, 3, 3), sizes (C,)."""
+    d = np.asarray(dist, dtype=np.float64)
+    d = np.concatenate([d, np.zeros((len(d), 5))], axis=1)[:, :5]
+    out = [""] * len(d)
+    k1, k2, p1, p2, k3 = d.T
+    fin = np.isfinite(d).all(axis=1)
     with np.errstate(all="ignore"):
-        xy = np.linalg.solve(K, corners.T).T
-        r_max = float(np.sqrt((xy[:, :2] ** 2).sum(axis=1)).max())
-        r = np.linspace(0.0, r_max, 257)
-        r2 = r * r
-        g = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
-        slope = 1 + 3 * k1 * r2 + 5 * k2 * r2 ** 2 + 7 * k3 * r2 ** 3  # d(r g)/dr
-    if not np.isfinite(r_max):
-        return ""
-    lo, hi = RADIAL_FACTOR
-    bad = ~((g >= lo) & (g <= hi))
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        return (f"{field}: expected a lens model that scales image radii by {lo:g} to {hi:g}, got a factor of "
-                f"{g[k]:.3g} at normalised radius {r[k]:.3g} (inside the image; coefficients {d.tolist()})")
-    if (slope <= 0).any():
-        k = int(np.flatnonzero(slope <= 0)[0])
-        return (f"{field}: expected a lens model that is one-to-one over the image, got one that folds back at "
-                f"normalised radius {r[k]:.3g} (coefficients {d.tolist()})")
-    return ""
+        radial_big = np.maximum(np.maximum(np.abs(k1), np.abs(k2)), np.abs(k3)) > MAX_RADIAL
+        tang_big = np.maximum(np.abs(p1), np.abs(p2)) > MAX_TANGENTIAL
+        bad_shape = np.zeros(len(d), dtype=bool)
+        g_at = np.full(len(d), np.nan)
+        r_at = np.full(len(d), np.nan)
+        fold = np.zeros(len(d), dtype=bool)
+        if K is not None and len(d):
+            K = np.asarray(K, dtype=np.float64)
+            w, h = np.asarray(width, dtype=np.float64), np.asarray(height, dtype=np.float64)
+            fx, s, cx, fy, cy = K[:, 0, 0], K[:, 0, 1], K[:, 0, 2], K[:, 1, 1], K[:, 1, 2]
+            r_max = np.zeros(len(d))
+            for u, v in ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)):  # the image corners through K^-1
+                y = (v * h - cy) / fy
+                x = (u * w - cx - s * y) / fx
+                r_max = np.maximum(r_max, np.sqrt(x * x + y * y))
+            r = r_max[:, None] * np.linspace(0.0, 1.0, 65)[None]
+            r2 = r * r
+            g = 1 + k1[:, None] * r2 + k2[:, None] * r2 ** 2 + k3[:, None] * r2 ** 3
+            slope = 1 + 3 * k1[:, None] * r2 + 5 * k2[:, None] * r2 ** 2 + 7 * k3[:, None] * r2 ** 3
+            lo, hi = RADIAL_FACTOR
+            out_range = ~((g >= lo) & (g <= hi))
+            bad_shape = out_range.any(axis=1) & np.isfinite(r_max)
+            first = out_range.argmax(axis=1)
+            g_at = g[np.arange(len(d)), first]
+            r_at = r[np.arange(len(d)), first]
+            folds = slope <= 0
+            fold = folds.any(axis=1) & np.isfinite(r_max) & ~bad_shape
+            r_fold = r[np.arange(len(d)), folds.argmax(axis=1)]
+    for c in np.flatnonzero(~fin | radial_big | tang_big | bad_shape | fold):
+        v = d[c].tolist()
+        if not fin[c]:
+            out[c] = f"{field}: expected finite distortion coefficients, got {v}"
+        elif radial_big[c]:
+            out[c] = f"{field}: expected radial coefficients |k1|, |k2|, |k3| <= {MAX_RADIAL:g} (a real lens), got {v}"
+        elif tang_big[c]:
+            out[c] = (f"{field}: expected tangential coefficients |p1|, |p2| <= {MAX_TANGENTIAL:g} (a real lens is "
+                      f"decentred by ~1e-3), got p1 {v[2]:g}, p2 {v[3]:g}")
+        elif bad_shape[c]:
+            out[c] = (f"{field}: expected a lens model that scales image radii by {RADIAL_FACTOR[0]:g} to "
+                      f"{RADIAL_FACTOR[1]:g}, got a factor of {g_at[c]:.3g} at normalised radius {r_at[c]:.3g} "
+                      f"(inside the image; coefficients {v})")
+        else:
+            out[c] = (f"{field}: expected a lens model that is one-to-one over the image, got one that folds back "
+                      f"at normalised radius {r_fold[c]:.3g} (coefficients {v})")
+    return out
+
+
+def rotation_problems(R, field: str = "R", tol: float = ROTATION_TOL) -> list:
+    """:func:`rotation_problem` of (C, 3, 3) matrices at once."""
+    R = np.asarray(R, dtype=np.float64)
+    out = [""] * len(R)
+    with np.errstate(all="ignore"):
+        fin = np.isfinite(R).all(axis=(1, 2))
+        err = np.linalg.norm(R @ np.swapaxes(R, 1, 2) - np.eye(3), axis=(1, 2))
+        det = np.linalg.det(np.where(fin[:, None, None], R, 0.0))
+    for c in np.flatnonzero(~fin | ~(err <= tol) | (det < 0)):
+        out[c] = rotation_problem(R[c], field, tol)
+    return out
 
 
 def name_problem(name, field: str = "name") -> str:
@@ -236,5 +275,6 @@ def member_problem(name: str) -> str:
 
 
 __all__ = ["describe", "as_numbers", "numbers_or_why", "as_bool", "as_int", "frame_number_problem",
-           "rotation_problem", "intrinsics_problem", "distortion_problem", "name_problem", "member_problem",
+           "rotation_problem", "rotation_problems", "intrinsics_problem", "distortion_problem",
+           "distortion_problems", "name_problem", "member_problem",
            "MAX_FRAME", "MAX_TANGENTIAL", "MAX_RADIAL", "RADIAL_FACTOR", "ROTATION_TOL"]
