@@ -104,6 +104,21 @@ def read_pts(path, fileobj=None) -> dict:
     return out
 
 
+def _check_members(path, names) -> None:
+    """Refuse members with '..' or absolute names, and a name stored twice (its rows would be duplicated)."""
+    from .fields import member_problem
+
+    seen = set()
+    for n in names:
+        why = member_problem(n)
+        if why:
+            raise HpeError(f"{path}: member {n!r}: refused: {why}")
+        if n in seen:
+            raise HpeError(f"{path}: member {n} appears twice in the archive (its rows would be duplicated); "
+                           "repack it with one copy")
+        seen.add(n)
+
+
 class _Source:
     """The .mat entries of a root folder or a zip, and a way to open each (zip kept open while iterating)."""
 
@@ -117,6 +132,7 @@ class _Source:
                     names = [n for n in z.namelist() if not n.endswith("/")]
             except (zipfile.BadZipFile, OSError) as exc:
                 raise HpeError(f"{self.path}: not a readable zip archive ({exc})") from None
+            _check_members(self.path, names)
             for n in sorted(names):
                 p = PurePosixPath(n)
                 if p.suffix.lower() != ".mat":
