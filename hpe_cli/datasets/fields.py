@@ -42,7 +42,11 @@ MAX_FRAME = 2**31 - 1
 
 
 def describe(value) -> str:
-    """A short name of what a value is (``str 'no'``, ``None``, ``a (2, 3) array of str``, ``a nested list``)."""
+    """A short, one-line name of what a value is (``str 'no'``, ``None``, ``a (2, 3) array of str``)."""
+    return " ".join(_describe(value).split())
+
+
+def _describe(value) -> str:
     if value is None:
         return "None"
     if isinstance(value, (bool, np.bool_)):
@@ -59,7 +63,7 @@ def describe(value) -> str:
         inner = {type(v).__name__ for v in value[:50]}
         return f"a {type(value).__name__} of {len(value)} ({', '.join(sorted(inner)) or 'empty'})"
     if isinstance(value, dict):
-        return f"a dict (keys {', '.join(map(str, list(value)[:4]))})"
+        return f"a dict (keys {', '.join(repr(k)[:20] for k in list(value)[:4])})"
     if isinstance(value, (int, float, np.integer, np.floating)):
         return f"{type(value).__name__} {value!r}"
     return type(value).__name__

@@ -206,7 +206,7 @@ def _camera(cam, i: int, path) -> tuple:
     if not np.isfinite(d).all():
         raise HpeError(f"{where}: expected finite K, R, t and distCoef, got NaN or inf in distCoef")
     if d.size > 5 and np.any(d[5:] != 0):
-        raise HpeError(f"{where}: only the 5-coefficient OpenCV model is supported, got {d.size} "
+        raise HpeError(f"{where}: distCoef: only the 5-coefficient OpenCV model is supported, got {d.size} "
                        "non-zero coefficients")
     d = np.concatenate([d, np.zeros(5)])[:5]
     res = cam.get("resolution")
