@@ -27,11 +27,20 @@ that converts it once to Parquet (which hpe reads too). ``trust=True``
 (``--trust-pickle``) lifts the restriction for files you trust. Files are
 recognised by content (pickle, Parquet), not by extension.
 
-Everything read is validated at the door, per person: ``camR`` finite,
-orthonormal and of determinant +1; ``camT`` finite; ``camK`` finite with
-positive focal lengths; joints smaller than 1e6 in magnitude (NaN is a missing point);
-``imgPath`` a relative path without ``..`` or NUL. A person that fails gets
-the reason in :attr:`AgoraPeople.reason` (and no label), never an exception.
+Everything read is validated at the door. Types and shapes first: a field
+that is not what AGORA stores (``cam_j3d`` or ``occlusion`` given as a string,
+``isValid`` as ``'no'``, ``imgPath`` as None, ``camR`` as a ragged list) raises
+:class:`~hpe_cli.errors.HpeError` naming the file, the row (0-based, as the
+output's ``row`` column), the person and the field:
+``FILE: row 3, person 0: cam_j3d: expected a (J, 3) array of numbers ..., got str 'abc'``.
+Then values, per person: ``camR`` finite, orthonormal and of determinant +1;
+``camT`` finite and below 1e6 m; ``camK`` finite, ``[[fx, s, cx], [0, fy, cy],
+[0, 0, 1]]`` with positive focal lengths and a positive principal point;
+``occlusion`` within 0-100 (or missing); joints smaller than 1e6 in magnitude
+(NaN is a missing point); ``imgPath`` a relative path without ``..`` or NUL.
+A person that fails gets the reason, starting with the field, in
+:attr:`AgoraPeople.reason` (and no label), never an exception; ``hpe
+relabel-agora`` without ``--rejects`` refuses the file on such a person.
 """
 from __future__ import annotations
 
@@ -401,7 +410,9 @@ def _validate(people) -> np.ndarray:
         mark(~fin, "camR not finite (expected a rotation matrix)")
         mark(fin & ~ortho, f"camR not orthonormal (expected a rotation matrix: ||R R^T - I|| <= {CAM_R_TOL:g}, det +1)")
         mark(fin & ortho & ~proper, "camR determinant is not +1 (a reflection; expected a rotation matrix)")
-        mark(~np.isfinite(people.cam_t).all(axis=1), "camT not finite (expected a translation in metres)")
+        tfin = np.isfinite(people.cam_t).all(axis=1)
+        mark(~tfin, "camT not finite (expected a translation in metres)")
+        mark(tfin & ~(np.abs(people.cam_t) < MAX_JOINT).all(axis=1), "camT |value| >= 1e6 (expected a translation in metres)")
         K = people.K
         if people.frame == "body":
             kfin = np.isfinite(K).all(axis=(1, 2))
