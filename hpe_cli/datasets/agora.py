@@ -412,7 +412,8 @@ def _validate(people) -> np.ndarray:
         mark(fin & ortho & ~proper, "camR determinant is not +1 (a reflection; expected a rotation matrix)")
         tfin = np.isfinite(people.cam_t).all(axis=1)
         mark(~tfin, "camT not finite (expected a translation in metres)")
-        mark(tfin & ~(np.abs(people.cam_t) < MAX_JOINT).all(axis=1), "camT |value| >= 1e6 (expected a translation in metres)")
+        mark(tfin & ~(np.abs(people.cam_t) < MAX_JOINT).all(axis=1),
+             "camT |value| >= 1e6 (expected a translation in metres)")
         K = people.K
         if people.frame == "body":
             kfin = np.isfinite(K).all(axis=(1, 2))

@@ -79,9 +79,7 @@ def as_numbers(value, shape=None, min_size: int = 0):
         try:
             with np.errstate(all="ignore"):
                 raw = np.asarray(value)
-            if raw.dtype.kind in "fiu":
-                arr = raw.astype(np.float64)
-            elif raw.dtype.kind == "O" and raw.size and all(
+            if raw.dtype.kind in "fiu" or raw.dtype.kind == "O" and raw.size and all(
                     isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
                     for v in raw.reshape(-1).tolist()):
                 arr = raw.astype(np.float64)
@@ -278,7 +276,23 @@ def member_problem(name: str) -> str:
     return ""
 
 
-__all__ = ["describe", "as_numbers", "numbers_or_why", "as_bool", "as_int", "frame_number_problem",
-           "rotation_problem", "rotation_problems", "intrinsics_problem", "distortion_problem",
-           "distortion_problems", "name_problem", "member_problem",
-           "MAX_FRAME", "MAX_TANGENTIAL", "MAX_RADIAL", "RADIAL_FACTOR", "ROTATION_TOL"]
+__all__ = [
+    "MAX_FRAME",
+    "MAX_RADIAL",
+    "MAX_TANGENTIAL",
+    "RADIAL_FACTOR",
+    "ROTATION_TOL",
+    "as_bool",
+    "as_int",
+    "as_numbers",
+    "describe",
+    "distortion_problem",
+    "distortion_problems",
+    "frame_number_problem",
+    "intrinsics_problem",
+    "member_problem",
+    "name_problem",
+    "numbers_or_why",
+    "rotation_problem",
+    "rotation_problems",
+]

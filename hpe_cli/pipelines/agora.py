@@ -263,5 +263,6 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
     return stats
 
 
-__all__ = ["Config", "Stats", "relabel_people", "write_outputs", "check_inputs", "bad_input_rule", "DEFAULT_MAX_RMSE", "DEFAULT_MAX_OCCLUSION",
+__all__ = ["Config", "Stats", "relabel_people", "write_outputs", "check_inputs", "bad_input_rule",
+           "DEFAULT_MAX_RMSE", "DEFAULT_MAX_OCCLUSION",
            "LEGACY_COLS", "REASON_ORDER"]
