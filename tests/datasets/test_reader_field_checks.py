@@ -403,3 +403,27 @@ def test_dad3dheads_item_fields(tmp_path, field, value, message):
     with pytest.raises(HpeError) as err:
         read_dad3dheads(sub)
     assert "val.json" in str(err.value) and message in str(err.value), str(err.value)
+
+
+# ================================================================== 300W-LP zip members
+@pytest.mark.parametrize("extra, message", [
+    ("300W_LP/IBUG/../../evil_0.mat", "member '300W_LP/IBUG/../../evil_0.mat': refused: a name with '..'"),
+    ("/300W_LP/IBUG/IBUG_x_0.mat", "member '/300W_LP/IBUG/IBUG_x_0.mat': refused: an absolute name"),
+    ("300W_LP/IBUG/IBUG_image_008_1_0.mat", "member 300W_LP/IBUG/IBUG_image_008_1_0.mat appears twice"),
+])
+def test_w300lp_zip_members(tmp_path, extra, message):
+    import warnings
+    import zipfile
+
+    src = REAL / "300wlp_face3d" / "IBUG_image_008_1_0.mat"
+    if not src.exists():
+        pytest.skip("../shared/realdata is not available")
+    arc = tmp_path / "300W-LP.zip"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # zipfile warns about the duplicate name
+        with zipfile.ZipFile(arc, "w") as z:
+            z.writestr("300W_LP/IBUG/IBUG_image_008_1_0.mat", src.read_bytes())
+            z.writestr(extra, src.read_bytes())
+    one_error(run("convert", arc, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet", "-q"),
+              arc, message)
+    assert not (tmp_path / "o.csv").exists()
