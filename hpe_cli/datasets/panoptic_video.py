@@ -69,6 +69,16 @@ class VideoFrames:
         """
         want = self.expected_size if expected_size is None else _size(expected_size, self.path)
         got = self.size()
+        if want is not None and 0 in got:  # the container does not say: the first frame does
+            cap = self._open()
+            try:
+                ok, image = cap.read()
+            finally:
+                cap.release()
+            if not ok or image is None:
+                raise HpeError(f"{self.path}: no decodable frame to check against the calibration's "
+                               f"{want[0]}x{want[1]}")
+            got = (image.shape[1], image.shape[0])
         if want is not None:
             self._compare(got, want)
         return got
@@ -90,6 +100,11 @@ class VideoFrames:
             cap.release()
 
     def _open(self):
+        import os
+
+        # libav prints its own decoder complaints ("moov atom not found", "Error at MB") on stderr, past
+        # hpe's one line; OpenCV reads this when its FFmpeg backend starts (the first capture of a process)
+        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
         import cv2
 
         if not self.path.is_file():
@@ -137,7 +152,7 @@ class VideoFrames:
             return
         want = self.expected_size
         try:
-            if want is not None:
+            if want is not None and 0 not in _cap_size(cap):  # 0: the container does not say (frames are checked)
                 self._compare(_cap_size(cap), want)
             pos = 0  # index of the next frame grab() returns
             for f in wanted.tolist():

@@ -407,3 +407,45 @@ def test_dad3dheads_fields(field, value, element):
             assert "\n" not in msg and ("val.json" in msg or "item001.json" in msg), msg
             assert re.search(r"item 2|item001", msg), msg
             assert any(f in msg for f in ITEM_FIELDS), msg
+
+
+# ------------------------------------------------------------------ Panoptic HD video
+@pytest.fixture(scope="module")
+def video_bytes(tmp_path_factory):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    root = tmp_path_factory.mktemp("video") / "seqV"
+    gen.make_synthetic(root, n_frames=4, n_people=1, n_cameras=1, first_frame=0, special=False)
+    return gen.write_videos(root, last_frame=5, size=(192, 108), cameras=1)[0].read_bytes()
+
+
+@FUZZ
+@given(cut=st.booleans(), where=st.integers(0, 10**6), flips=st.lists(st.tuples(st.integers(0, 10**6),
+                                                                             st.integers(1, 255)), max_size=6),
+       expected=st.sampled_from([(192, 108), (1920, 1080), None]))
+def test_video_bytes(video_bytes, cut, where, flips, expected):
+    from hpe_cli.datasets.panoptic_video import VideoFrames
+
+    data = bytearray(video_bytes)
+    if cut:
+        data = data[:where % len(data)]
+    else:
+        for off, x in flips:
+            data[off % len(data)] ^= x
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "hd_00_00.mp4"
+        path.write_bytes(bytes(data))
+        try:
+            got = list(VideoFrames(path, expected_size=expected).read([0, 3, 5, 9]))
+        except HpeError as exc:
+            msg = _one_line_naming(exc, path, None, ["pixels", "frame"])
+            assert expected is not None and f"{expected[0]}x{expected[1]}" in msg, msg
+            return
+        assert [f for f, _, _ in got] == [0, 3, 5, 9]
+        for _, img, reason in got:
+            assert (img is None) == bool(reason)
+            if img is not None and expected is not None:
+                assert img.shape == (expected[1], expected[0], 3)
