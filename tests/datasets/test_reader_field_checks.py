@@ -347,7 +347,8 @@ def test_biwi_calibration_checked(tmp_path, edit, message):
 def test_real_biwi_files_pass():
     for name in ("rgb.cal", "depth.cal"):
         biwi.read_calibration(REAL / "biwi" / "hpdb" / "01" / name)
-    assert len(biwi.read_biwi_tgz(REAL / "biwi" / "db_annotations.tgz")) > 0
+    assert len(biwi.read_biwi(REAL / "biwi" / "hpdb")) == 1
+    assert len(biwi.read_biwi(REAL / "biwi" / "db_annotations_subset")) > 0  # .bin centres and angles in range
 
 
 # ================================================================== video frames against the calibration
