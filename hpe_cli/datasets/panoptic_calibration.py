@@ -117,7 +117,7 @@ def read_calibration(path, cameras="all") -> Cameras:
     cams = data.get("cameras") if isinstance(data, dict) else None
     if not isinstance(cams, list):
         raise HpeError(f"{path}: expected an object with a 'cameras' list, got "
-                       f"{type(data).__name__ if not isinstance(data, dict) else 'keys ' + ', '.join(data)}")
+                       f"{type(data).__name__ if not isinstance(data, dict) else 'keys ' + ', '.join(repr(k)[:30] for k in list(data)[:6])}")
     cols = {k: [] for k in ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")}
     seen: dict = {}
     for i, cam in enumerate(cams):
