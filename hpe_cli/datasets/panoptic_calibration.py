@@ -116,8 +116,9 @@ def read_calibration(path, cameras="all") -> Cameras:
     data = _load_json(path)
     cams = data.get("cameras") if isinstance(data, dict) else None
     if not isinstance(cams, list):
-        raise HpeError(f"{path}: expected an object with a 'cameras' list, got "
-                       f"{type(data).__name__ if not isinstance(data, dict) else 'keys ' + ', '.join(repr(k)[:30] for k in list(data)[:6])}")
+        got = type(data).__name__ if not isinstance(data, dict) else \
+            "keys " + ", ".join(repr(k)[:30] for k in list(data)[:6])
+        raise HpeError(f"{path}: expected an object with a 'cameras' list, got {got}")
     cols = {k: [] for k in ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")}
     seen: dict = {}
     for i, cam in enumerate(cams):
