@@ -235,7 +235,7 @@ def test_wrong_joint_shape(df, tmp_path):
     bad.at[2, "cam_j3d"] = lst
     f = tmp_path / "short.pkl"
     bad.to_pickle(f)
-    with pytest.raises(HpeError, match=r"short.pkl: row 2: column 'cam_j3d' holds joints of shape \(100, 3\)"):
+    with pytest.raises(HpeError, match=r"short.pkl: row 2, person 1: cam_j3d: expected a \(J, 3\) array .*got shape \(100, 3\)"):
         read_agora(f)
 
 

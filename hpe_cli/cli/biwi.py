@@ -48,6 +48,14 @@ def biwi(input, output, camera, calibration, head_size, system, protocol, split,
     center_u, center_v and a square head box bbox_x, bbox_y, bbox_w, bbox_h
     (the image of a --head-size sphere around the head centre).
 
+    Files are checked at the door: a pose must be a rotation with the head
+    centre in front of the camera (within 10 m), .bin angles within a Z-Y-X
+    split's range, rgb.cal/depth.cal a real camera (positive focal lengths,
+    principal point inside the image, distortion a real lens has, R a
+    rotation). Two files or archive members that are the same sequence and
+    frame, a member stored twice, and members named with '..' or an absolute
+    path are refused, naming them.
+
     \b
     Examples:
       hpe biwi hpdb/ -o biwi.parquet

@@ -88,6 +88,15 @@ def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse,
     by the legacy rule) is listed by --rejects with its reason and counted in
     the summary.
 
+    Every field is checked at the door. A field of the wrong type or shape
+    (cam_j3d or occlusion given as text, isValid 'no', imgPath missing) is an
+    error naming the file, row, person and field. A person whose values are
+    invalid (camR not a rotation, camK without positive focal lengths or
+    principal point, occlusion outside 0-100, absurd joints, an image path
+    with '..') is a 'bad input' reject with --rejects, and an error without
+    it. The same dataframe given twice, or two with the same file name (the
+    source column would repeat), is refused.
+
     \b
     Examples:
       hpe relabel-agora validation_*_withjv.pkl -o agora_val.parquet

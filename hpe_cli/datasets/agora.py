@@ -27,11 +27,20 @@ that converts it once to Parquet (which hpe reads too). ``trust=True``
 (``--trust-pickle``) lifts the restriction for files you trust. Files are
 recognised by content (pickle, Parquet), not by extension.
 
-Everything read is validated at the door, per person: ``camR`` finite,
-orthonormal and of determinant +1; ``camT`` finite; ``camK`` finite with
-positive focal lengths; joints smaller than 1e6 in magnitude (NaN is a missing point);
-``imgPath`` a relative path without ``..`` or NUL. A person that fails gets
-the reason in :attr:`AgoraPeople.reason` (and no label), never an exception.
+Everything read is validated at the door. Types and shapes first: a field
+that is not what AGORA stores (``cam_j3d`` or ``occlusion`` given as a string,
+``isValid`` as ``'no'``, ``imgPath`` as None, ``camR`` as a ragged list) raises
+:class:`~hpe_cli.errors.HpeError` naming the file, the row (0-based, as the
+output's ``row`` column), the person and the field:
+``FILE: row 3, person 0: cam_j3d: expected a (J, 3) array of numbers ..., got str 'abc'``.
+Then values, per person: ``camR`` finite, orthonormal and of determinant +1;
+``camT`` finite and below 1e6 m; ``camK`` finite, ``[[fx, s, cx], [0, fy, cy],
+[0, 0, 1]]`` with positive focal lengths and a positive principal point;
+``occlusion`` within 0-100 (or missing); joints smaller than 1e6 in magnitude
+(NaN is a missing point); ``imgPath`` a relative path without ``..`` or NUL.
+A person that fails gets the reason, starting with the field, in
+:attr:`AgoraPeople.reason` (and no label), never an exception; ``hpe
+relabel-agora`` without ``--rejects`` refuses the file on such a person.
 """
 from __future__ import annotations
 
@@ -278,44 +287,89 @@ def _as_list(value):
     return [value]
 
 
-def _stack(path, col, cells, counts, shape, rows):
-    """Stack per-person arrays of one column into (N, *shape), checking shapes."""
-    flat = list(chain.from_iterable(cells))
-    if len(flat) != int(counts.sum()):
-        lens = np.array([len(c) for c in cells])
-        k = int(np.flatnonzero(lens != counts)[0])
-        raise HpeError(f"{path}: row {rows[k]}: column {col!r} has {lens[k]} entries, expected {counts[k]} "
-                       "(one per person)")
+def _where(path, rows, persons, n) -> str:
+    return f"{path}: row {rows[n]}, person {persons[n]}"
+
+
+def _person_arrays(path, col, flat, rows, persons, shape, want):
+    """Stack one per-person array column into ``(N, *shape)`` float64 (``-1`` in ``shape``: any length,
+    at least 127 joints), checking every entry's type and shape at the door.
+
+    Raises ``FILE: row R, person P: COL: expected WANT, got ...`` for the first entry that is not
+    numbers of that shape (a string, None, a nested or ragged list, objects).
+    """
+    from .fields import as_numbers
+
     if not flat:
-        return np.zeros((0,) + shape)
-    try:
-        arr = np.stack([np.asarray(a, dtype=np.float64) for a in flat])
-    except (ValueError, TypeError):
-        arr = None
-    if arr is None or arr.shape[1:] != shape:
-        for n, a in enumerate(flat):
-            a = np.asarray(a)
-            if a.shape != shape:
-                k = int(np.searchsorted(np.cumsum(counts), n, side="right"))
-                raise HpeError(f"{path}: row {rows[k]}: column {col!r} holds an array of shape {a.shape}, "
-                               f"expected {shape}")
-    return arr
-
-
-def _joints(path, col, cells, counts, rows, dim):
-    """The 51 face joints of every person from a (J, dim) joints column."""
-    flat = list(chain.from_iterable(cells))
-    if len(flat) != int(counts.sum()):
-        return _stack(path, col, cells, counts, (FACE_COUNT, dim), rows)  # raises the count error
-    out = np.empty((len(flat), FACE_COUNT, dim))
+        return np.zeros((0,) + tuple(FACE_FIRST + FACE_COUNT if s == -1 else s for s in shape))
+    fixed = all(s != -1 for s in shape)
+    if fixed and all(isinstance(a, np.ndarray) and a.dtype.kind in "fiu" and a.shape == shape for a in flat):
+        return np.stack(flat).astype(np.float64, copy=False)  # the common case: one stack, no per-entry work
+    out = []
     for n, a in enumerate(flat):
-        a = np.asarray(a, dtype=np.float64)
-        if a.ndim != 2 or a.shape[1] != dim or a.shape[0] < FACE_FIRST + FACE_COUNT:
-            k = int(np.searchsorted(np.cumsum(counts), n, side="right"))
-            raise HpeError(f"{path}: row {rows[k]}: column {col!r} holds joints of shape {a.shape}, "
-                           f"expected (127 or more, {dim})")
-        out[n] = a[FACE_FIRST:FACE_FIRST + FACE_COUNT]
+        arr, got = as_numbers(a, shape)
+        if arr is not None and not fixed and arr.shape[0] < FACE_FIRST + FACE_COUNT:
+            arr, got = None, f"got shape {arr.shape}"
+        if arr is None:
+            raise HpeError(f"{_where(path, rows, persons, n)}: {col}: expected {want}, {got}")
+        out.append(arr[FACE_FIRST:FACE_FIRST + FACE_COUNT] if not fixed else arr)
+    return np.stack(out)
+
+
+def _person_translations(path, col, flat, rows, persons):
+    """``camT`` entries (3, 1), (1, 3) or (3,) as (N, 3)."""
+    from .fields import as_numbers
+
+    out = np.empty((len(flat), 3))
+    for n, a in enumerate(flat):
+        arr, got = as_numbers(a)
+        if arr is not None and arr.size != 3:
+            arr, got = None, f"got shape {arr.shape}"
+        if arr is None:
+            raise HpeError(f"{_where(path, rows, persons, n)}: {col}: expected 3 numbers (a (3, 1) translation), {got}")
+        out[n] = arr.reshape(3)
     return out
+
+
+def _person_flags(path, flat, rows, persons) -> np.ndarray:
+    """``isValid`` entries as bools: True/False (numpy bools, 0/1 too); 'no', None, numbers refused."""
+    from .fields import as_bool
+
+    if all(isinstance(v, (bool, np.bool_)) for v in flat):
+        return np.array(flat, dtype=bool).reshape(-1)
+    out = np.empty(len(flat), dtype=bool)
+    for n, v in enumerate(flat):
+        b, got = as_bool(v)
+        if b is None:
+            raise HpeError(f"{_where(path, rows, persons, n)}: isValid: expected True or False, {got}")
+        out[n] = b
+    return out
+
+
+def _person_occlusion(path, flat, rows, persons) -> np.ndarray:
+    """``occlusion`` entries as floats (None/NaN: unknown); strings, bools and arrays refused."""
+    from .fields import describe
+
+    out = np.empty(len(flat))
+    for n, v in enumerate(flat):
+        if v is None:
+            out[n] = np.nan
+        elif isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_)):
+            out[n] = float(v)
+        else:
+            raise HpeError(f"{_where(path, rows, persons, n)}: occlusion: expected a percentage (a number "
+                           f"0-100), got {describe(v)}")
+    return out
+
+
+def _image_paths(path, values) -> np.ndarray:
+    """``imgPath`` per row: a string (checked for traversal later, per person); None, numbers refused."""
+    from .fields import describe
+
+    for k, v in enumerate(values):
+        if not isinstance(v, str):
+            raise HpeError(f"{path}: row {k}: imgPath: expected a string (the image's path), got {describe(v)}")
+    return np.asarray(values, dtype=object)
 
 
 def unsafe_name(name: str) -> str:
@@ -346,20 +400,29 @@ def _validate(people) -> np.ndarray:
     names = [unsafe_name(x) for x in people.image.tolist()]
     for k, why in enumerate(names):
         if why:
-            reason[k] = why
+            reason[k] = f"imgPath: {why}"
     with np.errstate(invalid="ignore", over="ignore"):
+        occ = people.occlusion
+        mark(~np.isnan(occ) & ~((occ >= 0) & (occ <= 100)), "occlusion out of range (expected a percentage 0-100)")
         R = people.cam_R
         fin = np.isfinite(R).all(axis=(1, 2))
         _, ortho, proper = rotation_screen_columns([R[:, i, j] for i in range(3) for j in range(3)], CAM_R_TOL)
-        mark(~fin, "camR not finite")
-        mark(fin & ~ortho, "camR not orthonormal")
-        mark(fin & ortho & ~proper, "camR determinant is not +1")
-        mark(~np.isfinite(people.cam_t).all(axis=1), "camT not finite")
+        mark(~fin, "camR not finite (expected a rotation matrix)")
+        mark(fin & ~ortho, f"camR not orthonormal (expected a rotation matrix: ||R R^T - I|| <= {CAM_R_TOL:g}, det +1)")
+        mark(fin & ortho & ~proper, "camR determinant is not +1 (a reflection; expected a rotation matrix)")
+        tfin = np.isfinite(people.cam_t).all(axis=1)
+        mark(~tfin, "camT not finite (expected a translation in metres)")
+        mark(tfin & ~(np.abs(people.cam_t) < MAX_JOINT).all(axis=1),
+             "camT |value| >= 1e6 (expected a translation in metres)")
         K = people.K
         if people.frame == "body":
             kfin = np.isfinite(K).all(axis=(1, 2))
-            mark(~kfin, "camK not finite")
-            mark(kfin & ~((K[:, 0, 0] > 0) & (K[:, 1, 1] > 0)), "camK focal length not positive")
+            mark(~kfin, "camK not finite (expected intrinsics)")
+            mark(kfin & ~((K[:, 0, 0] > 0) & (K[:, 1, 1] > 0)), "camK focal length not positive (expected fx, fy > 0)")
+            pinhole = (K[:, 2, 0] == 0) & (K[:, 2, 1] == 0) & (K[:, 2, 2] == 1) & (K[:, 1, 0] == 0)
+            mark(kfin & ~pinhole, "camK not a pinhole matrix (expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]])")
+            mark(kfin & ~((K[:, 0, 2] > 0) & (K[:, 1, 2] > 0)),
+                 "camK principal point not positive (expected cx, cy > 0: AGORA puts it at the image centre)")
         f = people.face3d
         jbad = (np.abs(f) >= MAX_JOINT).any(axis=(1, 2))  # inf included; NaN is a missing point, fit_faces' job
         mark(jbad, "face joints infinite or |value| >= 1e6")
@@ -395,28 +458,34 @@ def read_agora(path, df=None, trust: bool = False) -> AgoraPeople:
     counts = np.array([len(c) for c in valid_cells], dtype=np.int64)
     row = np.repeat(rows, counts)
     person = np.concatenate([np.arange(c) for c in counts]) if len(counts) else np.zeros(0, dtype=np.int64)
-    image = np.repeat(np.asarray(df["imgPath"].astype(str).tolist(), dtype=object), counts)
+    image = np.repeat(_image_paths(path, df["imgPath"].tolist()), counts)
+
+    raw_valid = df["isValid"].tolist()
 
     def per_person(col):
-        cells = [_as_list(v) for v in df[col].tolist()]
+        from .fields import describe
+
+        raw = df[col].tolist()
+        cells = [_as_list(v) for v in raw]
         lens = np.array([len(c) for c in cells], dtype=np.int64)
         if (lens != counts).any():
             k = int(np.flatnonzero(lens != counts)[0])
-            raise HpeError(f"{path}: row {k}: column {col!r} has {lens[k]} entries, expected {counts[k]} "
-                           "(one per person, as in isValid)")
-        return cells
+            got = "" if isinstance(raw[k], (list, tuple, np.ndarray)) else f" ({describe(raw[k])})"
+            iv = "" if isinstance(raw_valid[k], (list, tuple, np.ndarray)) else f", which is {describe(raw_valid[k])}"
+            raise HpeError(f"{path}: row {k}: column {col!r} has {lens[k]} entries{got}, expected {counts[k]} "
+                           f"(one per person, as in isValid{iv})")
+        return list(chain.from_iterable(cells))
 
-    valid = np.array(list(chain.from_iterable(valid_cells)), dtype=bool).reshape(-1)
-    occ = np.array([np.nan if v is None else v for v in chain.from_iterable(per_person("occlusion"))],
-                   dtype=np.float64).reshape(-1)
+    valid = _person_flags(path, list(chain.from_iterable(valid_cells)), row, person)
+    occ = _person_occlusion(path, per_person("occlusion"), row, person)
+    joints = "a (J, 3) array of numbers (J = 127 or more SMPL-X joints)"
     if frame == "body":
-        face3d = _joints(path, "cam_j3d", per_person("cam_j3d"), counts, rows, 3)
-        cam_R = _stack(path, "camR", per_person("camR"), counts, (3, 3), rows)
-        t_cells = [[np.asarray(t, dtype=np.float64).reshape(-1) for t in c] for c in per_person("camT")]
-        cam_t = _stack(path, "camT", t_cells, counts, (3,), rows)
-        K = _stack(path, "camK", per_person("camK"), counts, (3, 3), rows)
+        face3d = _person_arrays(path, "cam_j3d", per_person("cam_j3d"), row, person, (-1, 3), joints)
+        cam_R = _person_arrays(path, "camR", per_person("camR"), row, person, (3, 3), "a (3, 3) array of numbers")
+        cam_t = _person_translations(path, "camT", per_person("camT"), row, person)
+        K = _person_arrays(path, "camK", per_person("camK"), row, person, (3, 3), "a (3, 3) array of numbers")
     else:
-        face3d = _joints(path, "gt_joints_3d", per_person("gt_joints_3d"), counts, rows, 3)
+        face3d = _person_arrays(path, "gt_joints_3d", per_person("gt_joints_3d"), row, person, (-1, 3), joints)
         n = len(row)
         cam_R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
         cam_t = np.zeros((n, 3))

@@ -50,12 +50,23 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from .fields import (
+    distortion_problem,
+    frame_number_problem,
+    intrinsics_problem,
+    member_problem,
+    rotation_problem,
+)
 
 #: the rotation system of BIWI's matrices and ``.bin`` angles
 BIWI_SYSTEM = "biwi"
 #: largest ||R R^T - I||_F accepted from a pose.txt (its 6 printed digits give ~1e-6)
 POSE_TXT_TOL = 1e-4
 
+#: head centres farther than this (mm) are not a Kinect recording (its depth range is 0.5-4.5 m)
+MAX_CENTRE_MM = 1e4
+#: largest |pitch|, |yaw|, |roll| (degrees) of a Z-Y-X split (atan2, asin, atan2), with float32's slack
+ANGLE_LIMITS = (180.001, 90.001, 180.001)
 _NAME = re.compile(r"(?:^|/)(\d+)/frame_(\d+)_pose\.(txt|bin)$")
 CENTRE_COLS = ["center_x", "center_y", "center_z"]
 
@@ -99,7 +110,19 @@ def read_pose_txt(path):
     if err > POSE_TXT_TOL or np.linalg.det(M) < 0:
         raise HpeError(f"{path}: expected a rotation matrix, got ||R R^T - I|| = {err:.3g}, "
                        f"det = {np.linalg.det(M):.4g}")
+    why = centre_problem(v[9:])
+    if why:
+        raise HpeError(f"{path}: {why}")
     return nearest_rotation(M), v[9:]
+
+
+def centre_problem(c) -> str:
+    """'' for a head centre (mm, depth camera) in front of the camera and nearer than :data:`MAX_CENTRE_MM`."""
+    c = np.asarray(c, dtype=np.float64)
+    if not (c[2] > 0 and np.abs(c).max() <= MAX_CENTRE_MM):
+        return (f"head centre: expected a point in front of the camera (z > 0) within {MAX_CENTRE_MM:g} mm, "
+                f"got ({c[0]:g}, {c[1]:g}, {c[2]:g}) mm")
+    return ""
 
 
 def _read_text(path: Path, what: str) -> str:
@@ -115,6 +138,12 @@ def _decode_bin(path, data: bytes) -> np.ndarray:
     v = np.frombuffer(data, dtype="<f4").astype(np.float64)
     if not np.isfinite(v).all():
         raise HpeError(f"{path}: expected finite values, got {v.tolist()}")
+    why = centre_problem(v[:3])
+    if why:
+        raise HpeError(f"{path}: {why}")
+    for name, a, lim in zip(("pitch", "yaw", "roll"), v[3:], ANGLE_LIMITS):
+        if abs(a) > lim:
+            raise HpeError(f"{path}: {name}: expected degrees within +-{lim:.0f} (a Z-Y-X split), got {a:g}")
     return v
 
 
@@ -141,15 +170,36 @@ def read_calibration(path) -> dict:
     path = Path(path)
     text = _read_text(path, "BIWI calibration")
     v = _numbers(path, text, 27, "K 3x3, 4 distortion, R 3x3, t 3, width height")
-    return {"K": v[:9].reshape(3, 3), "dist": v[9:13], "R": v[13:22].reshape(3, 3), "t": v[22:25],
-            "size": (int(v[25]), int(v[26]))}
+    w, h = v[25], v[26]
+    if not (w > 0 and h > 0 and float(w).is_integer() and float(h).is_integer() and max(w, h) <= 1e5):
+        raise HpeError(f"{path}: width, height: expected positive whole numbers of pixels, got {w:g}, {h:g}")
+    K, dist, R, t = v[:9].reshape(3, 3), v[9:13], v[13:22].reshape(3, 3), v[22:25]
+    for why in (intrinsics_problem(K, w, h), distortion_problem(dist, K, w, h, "distortion"),
+                rotation_problem(R, "R", POSE_TXT_TOL)):
+        if why:
+            raise HpeError(f"{path}: {why}")
+    if np.abs(t).max() > MAX_CENTRE_MM:
+        raise HpeError(f"{path}: t: expected a translation within {MAX_CENTRE_MM:g} mm, got {t.tolist()}")
+    return {"K": K, "dist": dist, "R": R, "t": t, "size": (int(w), int(h))}
 
 
-def _parse_name(name: str):
+def _parse_name(name: str, where=None):
     m = _NAME.search(name.replace("\\", "/"))
     if m is None:
         return None
+    if frame_number_problem(m.group(2)):
+        raise HpeError(f"{where or name}: {frame_number_problem(m.group(2))}")
     return m.group(1), int(m.group(2)), m.group(3)
+
+
+def _refuse_duplicates(keys, names, where) -> None:
+    """Two files (or members) that are the same frame of the same sequence: an error naming both."""
+    seen: dict = {}
+    for key, name in zip(keys, names):
+        if key in seen:
+            raise HpeError(f"{where}: {seen[key]} and {name} are both sequence {key[0]} frame {key[1]}; keep one "
+                           "(its rows would be duplicated)")
+        seen[key] = name
 
 
 def labels_table(files, sequences, frames, centres, R=None, angles=None, system=BIWI_SYSTEM):
@@ -213,7 +263,7 @@ def read_biwi(path, system=BIWI_SYSTEM, kind: str = "auto"):
         raise HpeError(f"{path}: no such file or folder")
     recs = []
     for f in files:
-        parsed = _parse_name(f.resolve().as_posix())  # the sequence is the parent folder's name
+        parsed = _parse_name(f.resolve().as_posix(), f)  # the sequence is the parent folder's name
         if parsed is None:
             raise HpeError(f"{f}: expected a name like NN/frame_XXXXX_pose.txt or .bin")
         recs.append((f, *parsed))
@@ -224,6 +274,7 @@ def read_biwi(path, system=BIWI_SYSTEM, kind: str = "auto"):
     if len(kinds) > 1:
         raise HpeError(f"{path}: expected one kind of pose file, got both .txt and .bin (use kind=)")
     names = [r[0].relative_to(base).as_posix() for r in recs]
+    _refuse_duplicates([(r[1], r[2]) for r in recs], names, path)
     seqs = [r[1] for r in recs]
     frames = [r[2] for r in recs]
     if kinds == {"txt"}:
@@ -241,14 +292,21 @@ def read_biwi_tgz(path, system=BIWI_SYSTEM):
     """
     path = Path(path)
     names, seqs, frames, vals = [], [], [], []
+    seen_members: set = set()
     try:
         with tarfile.open(path, "r:*") as tf:
             for m in tf:
+                if member_problem(m.name):
+                    raise HpeError(f"{path}: member {m.name!r}: refused: {member_problem(m.name)}")
                 if not m.isfile():
                     continue
-                parsed = _parse_name(m.name)
+                parsed = _parse_name(m.name, f"{path}:{m.name}")
                 if parsed is None or parsed[2] != "bin":
                     continue
+                if m.name in seen_members:
+                    raise HpeError(f"{path}: member {m.name} appears twice in the archive (its rows would be "
+                                   "duplicated); repack it with one copy")
+                seen_members.add(m.name)
                 if m.size != 24:  # checked from the header, before reading the member
                     raise HpeError(f"{path}:{m.name}: expected 24 bytes (6 float32), got {m.size}")
                 fh = tf.extractfile(m)
@@ -260,6 +318,7 @@ def read_biwi_tgz(path, system=BIWI_SYSTEM):
         raise HpeError(f"{path}: not a readable tar archive ({' '.join(str(exc).split())[:120]})") from None
     if not vals:
         raise HpeError(f"{path}: no NN/frame_XXXXX_pose.bin members found")
+    _refuse_duplicates(list(zip(seqs, frames)), names, path)
     order = sorted(range(len(names)), key=lambda k: (seqs[k], frames[k]))
     v = np.stack(vals)[order]
     return labels_table([names[k] for k in order], [seqs[k] for k in order], [frames[k] for k in order],

@@ -79,6 +79,53 @@ def is_dad3dheads(path) -> bool:
     return False
 
 
+def _item_fields(it: dict, where: str, subset: str):
+    """``(item_id, image, bbox (4,), attributes)`` of one metadata item, each field's type checked at the door."""
+    from .fields import as_numbers, describe, member_problem
+
+    iid = it["item_id"]
+    if isinstance(iid, bool) or not isinstance(iid, (str, int)) or str(iid) == "":
+        raise HpeError(f"{where}: item_id: expected a non-empty string, got {describe(iid)}")
+    iid = str(iid)
+    if "/" in iid or "\\" in iid or "\x00" in iid or iid in (".", ".."):
+        raise HpeError(f"{where}: item_id: expected a file name (it names annotations/<item_id>.json), got {iid!r}")
+    image = it.get("img_path", f"{subset}/images/{iid}.png")
+    if not isinstance(image, str) or not image or member_problem(image):
+        why = member_problem(image) if isinstance(image, str) and image else ""
+        raise HpeError(f"{where}: img_path: expected a relative image path, got "
+                       f"{why or describe(image)}")
+    box = np.full(4, np.nan)
+    b = it.get("bbox")
+    if b is not None:
+        arr, got = as_numbers(b, (4,)) if isinstance(b, list) else (None, f"got {describe(b)}")
+        if arr is None:
+            raise HpeError(f"{where}: bbox: expected [x, y, w, h] (4 numbers), {got}")
+        box = arr
+    at = it.get("attributes")
+    if at is None:
+        at = {}
+    if not isinstance(at, dict):
+        raise HpeError(f"{where}: attributes: expected an object, got {describe(at)}")
+    for a in ATTRIBUTES:
+        v = at.get(a)
+        if isinstance(v, (list, dict)):
+            raise HpeError(f"{where}: attributes.{a}: expected a value (string or number), got {describe(v)}")
+    return iid, image, box, at
+
+
+def _model_view(ann: Path) -> np.ndarray:
+    """The 4 x 4 ``model_view_matrix`` of one annotation file (numbers only)."""
+    from .fields import as_numbers
+
+    doc = load_json(ann)
+    if not isinstance(doc, dict) or doc.get("model_view_matrix") is None:
+        raise HpeError(f"{ann}: expected model_view_matrix as 4 x 4 numbers, got none")
+    arr, got = as_numbers(doc["model_view_matrix"], (4, 4))
+    if arr is None:
+        raise HpeError(f"{ann}: expected model_view_matrix as 4 x 4 numbers, {got}")
+    return arr
+
+
 def read_dad3dheads(path, with_lines: bool = False):
     """Read DAD-3DHeads labels into a table (``attrs["system"] == "dad3dheads"``).
 
@@ -116,27 +163,15 @@ def read_dad3dheads(path, with_lines: bool = False):
             where = f"{meta}: item {k + 1}"
             if not isinstance(it, dict) or "item_id" not in it:
                 raise HpeError(f"{where}: expected an object with item_id")
-            iid = str(it["item_id"])
+            iid, image, box[k], at = _item_fields(it, where, subset)
             cols["item_id"].append(iid)
-            cols["image"].append(str(it.get("img_path", f"{subset}/images/{iid}.png")))
-            b = it.get("bbox")
-            if b is not None:
-                if not (isinstance(b, list) and len(b) == 4):
-                    raise HpeError(f"{where}: expected bbox [x, y, w, h], got {str(b)[:60]}")
-                box[k] = b
-            at = it.get("attributes") or {}
+            cols["image"].append(image)
             for a in ATTRIBUTES:
                 v = at.get(a)
                 attrs[a].append(None if v is None else str(v))
             ann = base / "annotations" / f"{iid}.json"
             if ann.is_file():
-                doc = load_json(ann)
-                m = doc.get("model_view_matrix") if isinstance(doc, dict) else None
-                arr = np.asarray(m, dtype=np.float64) if m is not None else None
-                if arr is None or arr.shape != (4, 4):
-                    raise HpeError(f"{ann}: expected model_view_matrix as 4 x 4 numbers, got "
-                                   f"{None if arr is None else arr.shape}")
-                mv[k] = arr
+                mv[k] = _model_view(ann)
         f = pd.DataFrame(cols)
         for i, c in enumerate(("bbox_x", "bbox_y", "bbox_w", "bbox_h")):
             f[c] = box[:, i]

@@ -25,172 +25,22 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from .fields import as_int, describe, frame_number_problem, member_problem
+# the calibration reader lives in panoptic_calibration.py; its names are part of this module's API
+from .panoptic_calibration import (  # noqa: F401
+    ABSURD,
+    CAMERA_TYPES,
+    NAME_RE,
+    Cameras,
+    read_calibration,
+)
 
 FACE_DIR = "hdFace3d"
 FACE_RE = re.compile(r"^faceRecon3D_hd(\d+)\.json$")
 FACE_TAR = "hdFace3d.tar"
-#: camera names become path parts: letters, digits, '_', '-', '.' only (no '..', '/', NUL)
-NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
-#: landmarks farther than this from the origin (cm) are not a face in a 5-m dome
-ABSURD = 1e6
 N_FACE70 = 70
-CAMERA_TYPES = ("hd", "vga", "kinect-color")
 #: image folder of each camera type in Panoptic's layout
 IMAGE_DIRS = {"hd": "hdImgs", "vga": "vgaImgs", "kinect-color": "kinectImgs"}
-
-
-@dataclass
-class Cameras:
-    """C calibrated cameras, as arrays.
-
-    Attributes
-    ----------
-    names : ndarray of str (C,)
-        ``"00_08"`` ...
-    types : ndarray of str (C,)
-        ``"hd"``, ``"vga"`` or ``"kinect-color"``.
-    panel, node : ndarray of int (C,)
-    width, height : ndarray of int (C,)
-        ``resolution`` in pixels.
-    K : ndarray (C, 3, 3)
-    dist : ndarray (C, 5)
-        ``k1, k2, p1, p2, k3`` (OpenCV); missing trailing values are 0.
-    R : ndarray (C, 3, 3)
-        World -> camera rotation (``R @ X + t``; OpenCV camera frame).
-    t : ndarray (C, 3)
-        World -> camera translation, cm.
-    source : str
-        The calibration file.
-    """
-
-    names: np.ndarray
-    types: np.ndarray
-    panel: np.ndarray
-    node: np.ndarray
-    width: np.ndarray
-    height: np.ndarray
-    K: np.ndarray
-    dist: np.ndarray
-    R: np.ndarray
-    t: np.ndarray
-    source: str = ""
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-    def take(self, idx) -> "Cameras":
-        idx = np.asarray(idx, dtype=np.intp)
-        return Cameras(*(getattr(self, f)[idx] for f in
-                         ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")),
-                       source=self.source)
-
-    def select(self, spec="hd") -> "Cameras":
-        """Cameras by type (``hd``, ``vga``, ``kinect-color``, ``all``) or by names.
-
-        ``spec`` is a type, a list of names, or a comma-separated string of
-        them (``"00_00,00_08"``); order follows ``spec`` for names.
-        """
-        items = [s.strip() for s in (spec.split(",") if isinstance(spec, str) else spec) if str(s).strip()]
-        if not items:
-            raise HpeError(f"{self.source}: expected camera names or a camera type, got nothing")
-        chosen: list = []
-        index = {n: i for i, n in enumerate(self.names)}
-        for item in items:
-            if item == "all":
-                chosen += list(range(len(self)))
-            elif item in CAMERA_TYPES:
-                chosen += [i for i, t in enumerate(self.types) if t == item]
-            elif item in index:
-                chosen.append(index[item])
-            else:
-                known = ", ".join(list(self.names[:4]) + ["..."]) if len(self) > 4 else ", ".join(self.names)
-                raise HpeError(f"{self.source}: expected a camera name ({known}) or a type "
-                               f"({', '.join(CAMERA_TYPES)}, all), got {item!r}")
-        chosen = list(dict.fromkeys(chosen))
-        if not chosen:
-            raise HpeError(f"{self.source}: no camera matches {spec!r}")
-        return self.take(chosen)
-
-
-def read_calibration(path, cameras="all") -> Cameras:
-    """Read ``calibration_<seq>.json``.
-
-    Parameters
-    ----------
-    path : str or Path
-    cameras : str or list
-        Passed to :meth:`Cameras.select` (``"all"`` keeps every camera).
-
-    Returns
-    -------
-    Cameras
-    """
-    path = Path(path)
-    data = _load_json(path)
-    cams = data.get("cameras") if isinstance(data, dict) else None
-    if not isinstance(cams, list):
-        raise HpeError(f"{path}: expected an object with a 'cameras' list, got "
-                       f"{type(data).__name__ if not isinstance(data, dict) else 'keys ' + ', '.join(data)}")
-    cols = {k: [] for k in ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")}
-    seen: dict = {}
-    for i, cam in enumerate(cams):
-        where = f"{path}: camera {i}"
-        try:
-            name = str(cam["name"])
-            where = f"{path}: camera {i} ({name})"
-            K = _matrix(cam["K"], (3, 3), where, "K")
-            R = _matrix(cam["R"], (3, 3), where, "R")
-            t = _matrix(cam["t"], (3,), where, "t")
-            d = np.asarray(cam.get("distCoef", [0.0] * 5), dtype=np.float64).reshape(-1)
-            res = cam.get("resolution")
-            if d.size not in (4, 5, 8, 12, 14):
-                raise HpeError(f"{where}: expected 5 distCoef values (k1, k2, p1, p2, k3), got {d.size}")
-            if d.size > 5 and np.any(d[5:] != 0):
-                raise HpeError(f"{where}: only the 5-coefficient OpenCV model is supported, got {d.size} "
-                               "non-zero coefficients")
-            d = np.concatenate([d, np.zeros(5)])[:5]
-            if res is None or len(res) != 2:
-                raise HpeError(f"{where}: expected resolution [width, height], got {res!r}")
-            w, h = int(res[0]), int(res[1])
-            if w <= 0 or h <= 0:
-                raise HpeError(f"{where}: expected a positive resolution, got {w}x{h}")
-        except KeyError as exc:
-            raise HpeError(f"{where}: missing key {exc.args[0]!r}") from None
-        except (TypeError, ValueError) as exc:
-            raise HpeError(f"{where}: bad value ({exc})") from None
-        if not (np.isfinite(K).all() and np.isfinite(R).all() and np.isfinite(t).all() and np.isfinite(d).all()):
-            raise HpeError(f"{where}: expected finite K, R, t and distCoef, got NaN or inf")
-        if np.abs(R @ R.T - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
-            raise HpeError(f"{where}: expected R to be a rotation (orthonormal, det +1), got det "
-                           f"{np.linalg.det(R):.6g}")
-        if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
-            raise HpeError(f"{where}: expected K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, "
-                           f"got {K.tolist()}")
-        if not NAME_RE.match(name) or name in (".", ".."):
-            raise HpeError(f"{where}: expected a camera name of letters, digits, '_', '-' or '.', got {name!r} "
-                           "(names become image paths)")
-        if name in seen:
-            raise HpeError(f"{path}: camera {seen[name]} and camera {i} are both named {name!r}")
-        seen[name] = i
-        cols["names"].append(name)
-        cols["types"].append(str(cam.get("type", "")))
-        cols["panel"].append(int(cam.get("panel", -1)))
-        cols["node"].append(int(cam.get("node", -1)))
-        cols["width"].append(w)
-        cols["height"].append(h)
-        cols["K"].append(K)
-        cols["dist"].append(d)
-        cols["R"].append(R)
-        cols["t"].append(t)
-    if not cols["names"]:
-        raise HpeError(f"{path}: the calibration lists no cameras")
-    out = Cameras(
-        names=np.asarray(cols["names"], dtype=object), types=np.asarray(cols["types"], dtype=object),
-        panel=np.asarray(cols["panel"], dtype=np.int64), node=np.asarray(cols["node"], dtype=np.int64),
-        width=np.asarray(cols["width"], dtype=np.int64), height=np.asarray(cols["height"], dtype=np.int64),
-        K=np.stack(cols["K"]), dist=np.stack(cols["dist"]), R=np.stack(cols["R"]), t=np.stack(cols["t"]),
-        source=str(path))
-    return out if cameras == "all" else out.select(cameras)
 
 
 @dataclass(frozen=True)
@@ -243,6 +93,8 @@ def face_frames(seq_dir) -> dict:
         for p in sorted(face_dir.iterdir()):
             m = FACE_RE.match(p.name)
             if m and p.is_file():
+                if frame_number_problem(m.group(1)):
+                    raise HpeError(f"{p}: {frame_number_problem(m.group(1))}")
                 k = int(m.group(1))
                 if k in frames:
                     raise HpeError(f"{frames[k]} and {p}: both are frame {k}; keep one of them")
@@ -284,9 +136,13 @@ def _tar_frames_fast(tar_path):
     path = str(tar_path)
     match = FACE_RE.match
     for name, is_dir, offset, size in members:
+        if member_problem(name):
+            return None  # _tar_frames_tarfile refuses it with the message
         if not is_dir:
             m = match(name[name.rfind("/") + 1:])  # the base name, as _tar_frames_tarfile matches it
             if m:
+                if frame_number_problem(m[1]):
+                    return None
                 k = int(m[1])
                 if k in frames:
                     return None  # tarfile's path names both members
@@ -457,11 +313,15 @@ def _tar_frames_tarfile(tar_path) -> dict:
                         raise HpeError(f"{tar_path}: ends at byte {size} without tar's end-of-archive blocks "
                                        "(truncated download?); frames after the last member may be missing")
                     break
+                if member_problem(info.name):
+                    raise HpeError(f"{tar_path}: member {info.name!r}: refused: {member_problem(info.name)}")
                 if not info.isfile():
                     continue
                 m = FACE_RE.match(info.name.rsplit("/", 1)[-1])
                 if not m:
                     continue
+                if frame_number_problem(m.group(1)):
+                    raise HpeError(f"{tar_path}: member {info.name}: {frame_number_problem(m.group(1))}")
                 k = int(m.group(1))
                 if k in frames:
                     raise HpeError(f"{tar_path}: members {frames[k].member} and {info.name} are both frame {k}")
@@ -561,23 +421,31 @@ def read_face_frame(path) -> dict:
     rep = np.full((n, N_FACE70), np.nan)
     for i, person in enumerate(people):
         where = f"{path}: person {i}"
+        if not isinstance(person, dict):
+            raise HpeError(f"{where}: expected an object with id and face70, got {describe(person)}")
         try:
-            ids[i] = int(person["id"])
+            pid, why = as_int(person["id"], -2**63, 2**63 - 1)
+            if pid is None:
+                raise HpeError(f"{where}: id: expected an integer, {why}")
+            ids[i] = pid
             where = f"{path}: person {i} (id {ids[i]})"
             face = person["face70"]
+            if not isinstance(face, dict):
+                raise HpeError(f"{where}: face70: expected an object with landmarks and averageScore, got "
+                               f"{describe(face)}")
             lm[i] = _floats(face["landmarks"], 3 * N_FACE70, where, "landmarks").reshape(N_FACE70, 3)
             score[i] = _floats(face["averageScore"], N_FACE70, where, "averageScore")
             if face.get("averageReproError") is not None:
                 rep[i] = _floats(face["averageReproError"], N_FACE70, where, "averageReproError")
         except KeyError as exc:
             raise HpeError(f"{where}: missing key {exc.args[0]!r}") from None
-        except (TypeError, ValueError) as exc:
-            raise HpeError(f"{where}: bad value ({exc})") from None
     if len(set(ids.tolist())) != n:
         raise HpeError(f"{path}: person ids repeat ({ids.tolist()})")
     t = data.get("univTime")
+    if m and frame_number_problem(m.group(1)):
+        raise HpeError(f"{path}: {frame_number_problem(m.group(1))}")
     return {"frame": int(m.group(1)) if m else -1, "version": data.get("version"),
-            "univTime": float(t) if isinstance(t, (int, float)) else float("nan"),
+            "univTime": float(t) if isinstance(t, float) or (isinstance(t, int) and abs(t) < 2**53) else float("nan"),
             "person_id": ids, "landmarks": lm, "score": score, "reproj_error": rep}
 
 
@@ -662,16 +530,22 @@ def _parse_json(raw: bytes, path):
         raise HpeError(f"{path}: not valid JSON text ({exc.reason})") from None
 
 
-def _matrix(value, shape, where, key) -> np.ndarray:
-    a = np.asarray(value, dtype=np.float64)
-    if a.size != int(np.prod(shape)):
-        raise HpeError(f"{where}: expected {key} with {int(np.prod(shape))} values {shape}, got shape {a.shape}")
-    return a.reshape(shape)
-
-
 def _floats(value, n, where, key) -> np.ndarray:
+    """A list of ``n`` numbers (null -> NaN); strings, bools, nested lists and objects are refused."""
     if not isinstance(value, list):
-        raise HpeError(f"{where}: expected {key} to be a list of {n} numbers, got {type(value).__name__}")
+        raise HpeError(f"{where}: expected {key} to be a list of {n} numbers, got {describe(value)}")
     if len(value) != n:
         raise HpeError(f"{where}: expected {n} {key} values, got {len(value)}")
-    return np.asarray(value, dtype=np.float64)  # null becomes NaN
+    try:
+        arr = np.array(value)  # no dtype: strings stay strings, nulls make an object array
+    except (ValueError, TypeError, OverflowError, RecursionError):
+        arr = None
+    if arr is not None and arr.dtype.kind in "fi" and arr.ndim == 1 and not any(type(v) is bool for v in value):
+        return arr.astype(np.float64, copy=False)
+    for k, v in enumerate(value):  # the slow path finds the culprit (or accepts numbers mixed with nulls)
+        if v is not None and (type(v) is bool or not isinstance(v, (int, float))):
+            raise HpeError(f"{where}: {key}: expected numbers (or null), got {describe(v)} at index {k}")
+    try:
+        return np.array([np.nan if v is None else v for v in value], dtype=np.float64)
+    except OverflowError:  # an integer beyond float64
+        raise HpeError(f"{where}: {key}: expected numbers within float64's range") from None

@@ -25,16 +25,69 @@ class VideoFrames:
     ----------
     video_path : str or Path
         An ``.mp4`` (anything OpenCV's ``VideoCapture`` opens).
+    expected_size : (int, int), optional
+        ``(width, height)`` the camera's calibration gives (``Cameras.width/height``,
+        Panoptic's ``resolution``). When given, :meth:`read` first checks the video's
+        frame size against it (:meth:`check_size`) and every decoded frame too: a
+        1280x720 video of a camera calibrated at 1920x1080 is an error naming the
+        video and both sizes, never crops from the wrong pixels.
 
     Examples
     --------
     >>> for frame, image, reason in VideoFrames("hdVideos/hd_00_08.mp4").read([0, 10, 20]):  # doctest: +SKIP
     ...     if image is None:
     ...         print(frame, reason)
+    >>> VideoFrames("hdVideos/hd_00_08.mp4", expected_size=(1920, 1080)).check_size()  # doctest: +SKIP
+    (1920, 1080)
     """
 
-    def __init__(self, video_path):
+    def __init__(self, video_path, expected_size=None):
         self.path = Path(video_path)
+        self.expected_size = None if expected_size is None else _size(expected_size, self.path)
+
+    def size(self) -> tuple:
+        """``(width, height)`` of the video's frames, as the container declares them."""
+        cap = self._open()
+        try:
+            return _cap_size(cap)
+        finally:
+            cap.release()
+
+    def check_size(self, expected_size=None) -> tuple:
+        """Check the video's frame size against ``expected_size`` (default: the one given at construction).
+
+        Returns
+        -------
+        (width, height)
+            The video's size.
+
+        Raises
+        ------
+        HpeError
+            ``VIDEO: frames are 1280x720 pixels, but the calibration gives 1920x1080 for this camera ...``;
+            or the video cannot be opened.
+        """
+        want = self.expected_size if expected_size is None else _size(expected_size, self.path)
+        got = self.size()
+        if want is not None and 0 in got:  # the container does not say: the first frame does
+            cap = self._open()
+            try:
+                ok, image = cap.read()
+            finally:
+                cap.release()
+            if not ok or image is None:
+                raise HpeError(f"{self.path}: no decodable frame to check against the calibration's "
+                               f"{want[0]}x{want[1]}")
+            got = (image.shape[1], image.shape[0])
+        if want is not None:
+            self._compare(got, want)
+        return got
+
+    def _compare(self, got, want) -> None:
+        if tuple(got) != tuple(want):
+            raise HpeError(f"{self.path}: frames are {got[0]}x{got[1]} pixels, but the calibration gives "
+                           f"{want[0]}x{want[1]} for this camera; expected the camera's full-resolution video "
+                           "(crops and projections would use the wrong pixels)")
 
     def frame_count(self) -> int:
         """The container's frame count (may be approximate; :meth:`read` does not rely on it)."""
@@ -47,6 +100,11 @@ class VideoFrames:
             cap.release()
 
     def _open(self):
+        import os
+
+        # libav prints its own decoder complaints ("moov atom not found", "Error at MB") on stderr, past
+        # hpe's one line; OpenCV reads this when its FFmpeg backend starts (the first capture of a process)
+        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
         import cv2
 
         if not self.path.is_file():
@@ -92,7 +150,10 @@ class VideoFrames:
             for f in wanted.tolist():
                 yield f, None, reason
             return
+        want = self.expected_size
         try:
+            if want is not None and 0 not in _cap_size(cap):  # 0: the container does not say (frames are checked)
+                self._compare(_cap_size(cap), want)
             pos = 0  # index of the next frame grab() returns
             for f in wanted.tolist():
                 ended = False
@@ -111,9 +172,28 @@ class VideoFrames:
                 if not ok or image is None:
                     yield f, None, "frame could not be decoded"
                 else:
+                    if want is not None:
+                        self._compare((image.shape[1], image.shape[0]), want)
                     yield f, image, ""
         finally:
             cap.release()
+
+
+def _cap_size(cap) -> tuple:
+    import cv2
+
+    return int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+
+
+def _size(value, path) -> tuple:
+    """``(width, height)`` as two positive ints."""
+    try:
+        w, h = (int(v) for v in value)
+    except (TypeError, ValueError):
+        raise HpeError(f"{path}: expected_size: expected (width, height), got {value!r}") from None
+    if w <= 0 or h <= 0:
+        raise HpeError(f"{path}: expected_size: expected a positive (width, height), got {value!r}")
+    return w, h
 
 
 __all__ = ["VideoFrames"]

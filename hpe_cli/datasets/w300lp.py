@@ -34,6 +34,7 @@ import numpy as np
 
 from ..errors import HpeError
 from .mat import POSE_COLS, read_mat
+from .mat_fields import check_fields
 
 SUBSETS = ("AFW", "HELEN", "IBUG", "LFPW")
 SYSTEM = "300w_lp"
@@ -96,10 +97,26 @@ def read_pts(path, fileobj=None) -> dict:
         m = scipy.io.loadmat(fileobj if fileobj is not None else path, variable_names=["pts_2d", "pts_3d"])
     except Exception as exc:  # scipy raises many types for corrupt files
         raise HpeError(f"{path}: not a readable MATLAB .mat file ({' '.join(str(exc).split())[:160]})") from None
+    m = check_fields(m, path)
     out = {"pts_2d": _points(m, "pts_2d", path), "pts_3d": _points(m, "pts_3d", path)}
     if out["pts_2d"] is None and out["pts_3d"] is None:
         raise HpeError(f"{path}: expected pts_2d and/or pts_3d in a 300W-LP landmark file")
     return out
+
+
+def _check_members(path, names) -> None:
+    """Refuse members with '..' or absolute names, and a name stored twice (its rows would be duplicated)."""
+    from .fields import member_problem
+
+    seen = set()
+    for n in names:
+        why = member_problem(n)
+        if why:
+            raise HpeError(f"{path}: member {n!r}: refused: {why}")
+        if n in seen:
+            raise HpeError(f"{path}: member {n} appears twice in the archive (its rows would be duplicated); "
+                           "repack it with one copy")
+        seen.add(n)
 
 
 class _Source:
@@ -115,6 +132,7 @@ class _Source:
                     names = [n for n in z.namelist() if not n.endswith("/")]
             except (zipfile.BadZipFile, OSError) as exc:
                 raise HpeError(f"{self.path}: not a readable zip archive ({exc})") from None
+            _check_members(self.path, names)
             for n in sorted(names):
                 p = PurePosixPath(n)
                 if p.suffix.lower() != ".mat":

@@ -159,6 +159,43 @@ class Stats:
 
 
 
+def check_inputs(paths) -> None:
+    """Refuse a dataframe given twice (same file by inode, also through another path or a link) and two
+    dataframes with the same file name (the ``source`` column holds the name, so their people would have
+    the same keys ``source, row, person``): one line naming both."""
+    import os
+
+    by_inode: dict = {}
+    by_name: dict = {}
+    for p in paths:
+        try:
+            st = os.stat(p)
+        except OSError as exc:
+            raise HpeError(f"{p}: cannot read ({exc.strerror or exc})") from None
+        ident = (st.st_dev, st.st_ino)
+        if ident in by_inode:
+            raise HpeError(f"{by_inode[ident]} and {p}: the same dataframe given twice (its people would be "
+                           "labelled twice, with the same keys); give it once")
+        by_inode[ident] = p
+        name = os.path.basename(os.fspath(p))
+        if name in by_name:
+            raise HpeError(f"{by_name[name]} and {p}: two dataframes named {name!r}; the output's source column "
+                           "holds the file name, so their people would have the same keys (source, row, person); "
+                           "rename one")
+        by_name[name] = p
+
+
+def bad_input_rule(people: ag.AgoraPeople) -> None:
+    """Without a rejects file, a person whose fields are invalid (camera, joints, image path, occlusion:
+    :attr:`AgoraPeople.reason`) is an error naming the file, row, person and field, as for every reader."""
+    bad = np.flatnonzero(people.reason != "") if people.reason is not None else []
+    if len(bad):
+        k = int(bad[0])
+        raise HpeError(f"{people.source}: row {people.row[k]}, person {people.person[k]}: {people.reason[k]}; "
+                       f"{len(bad)} person(s) with invalid input: nothing written (use --rejects FILE to set "
+                       "them aside and write the rest)")
+
+
 def _reject_schema():
     import pyarrow as pa
 
@@ -194,6 +231,7 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
              "A = E @ Q.T @ camR @ R_head, Q: optical axis -> ray to the head centre (SPEC 10)"}
     meta = {**system_metadata(system), "hpe:relabel": json.dumps(about)}
     rschema = _reject_schema()
+    check_inputs(paths)
     with ExitStack() as stack:
         if fmt == "table":
             out = stack.enter_context(TableWriter(output, overwrite, meta))
@@ -212,6 +250,8 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
         rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
         for path in paths:
             people = ag.read_agora(path, trust=cfg.trust_pickle)
+            if not rejects_path:
+                bad_input_rule(people)
             res = relabel_people(people, cfg)
             del people
             stats.add(path, res, system)
@@ -223,5 +263,6 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
     return stats
 
 
-__all__ = ["Config", "Stats", "relabel_people", "write_outputs", "DEFAULT_MAX_RMSE", "DEFAULT_MAX_OCCLUSION",
+__all__ = ["Config", "Stats", "relabel_people", "write_outputs", "check_inputs", "bad_input_rule",
+           "DEFAULT_MAX_RMSE", "DEFAULT_MAX_OCCLUSION",
            "LEGACY_COLS", "REASON_ORDER"]
