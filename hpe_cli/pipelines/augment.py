@@ -183,12 +183,18 @@ class _Plan:
         self.label_source = ("pitch,yaw,roll" + (" (checked against r00..r22)" if self.cross_check else "")
                              if self.mode == "angles" else "r00..r22")
         self.csv = src.kind == "csv"
+        is_mat = path.is_dir() or path.suffix.lower() == ".mat"
+        self.mat_base = (path if path.is_dir() else path.parent) if is_mat and "file" in columns else None
 
     def numbers(self, lines):
         """The row numbers messages and rejects use: CSV lines (header = 1), else 1-based rows."""
         return lines if self.csv else lines - 1
 
-    def where(self, line) -> str:
+    def where(self, line, file=None) -> str:
+        """How messages name a row: ``FILE: line N`` (text), the ``.mat`` file itself (a ``.mat`` folder: one
+        record per file), else ``FILE: row N`` (1-based)."""
+        if self.mat_base is not None and file is not None:
+            return str(self.mat_base / str(file))
         return f"{self.path}: line {int(line)}" if self.csv else f"{self.path}: row {int(line) - 1}"
 
     def roi_fn(self, roi, size_in):
@@ -348,7 +354,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     plan = _Plan(path, src, in_system, system, columns, n_lm, perm, bool(box_present), M, op, crop, image_size,
                  has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir) if images_dir else None,
                  scale=scale)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=path)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=None if plan.mat_base is not None else path)
     meta = {**system_metadata(system), "hpe:augment": {
         "op": op, "angle_deg": angle, "crop": list(crop) if crop else None, "scale": scale, "description": description,
         "image_size": list(image_size) if image_size else "from image_width/image_height or the images",
@@ -397,20 +403,26 @@ def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan)
         counts["rows"] += len(read_rejects)
     if not keep.all():
         drop = ~keep
-        rejects.add({"row": plan.numbers(lines[drop]),
-                     **{c: batch.column(i).to_numpy(zero_copy_only=False)[drop]
-                        for i, c in enumerate(batch.schema.names)}}, reasons[drop],
-                    lines=lines[drop] if plan.csv else None)
+        cols = {c: batch.column(i).to_numpy(zero_copy_only=False)[drop] for i, c in enumerate(batch.schema.names)}
+        if plan.mat_base is not None:  # a .mat file is one record: named by its file, as the messages do
+            cols["file"] = np.array([plan.where(0, f) for f in cols["file"]], dtype=object)
+            if rejects.first_where is None:
+                rejects.first_where = f"{cols['file'][0]}: {reasons[drop][0]}"
+        else:
+            cols = {"row": plan.numbers(lines[drop]), **cols}
+        rejects.add(cols, reasons[drop], lines=lines[drop] if plan.csv else None)
     if job is not None:
         refs, names, P, wh_in, wh_out, A2, files = extra
+        rows = []
         for i in np.flatnonzero(keep):
             mat = None
             if job.mat_dir is not None and files is not None:
                 base = job.mat_dir if job.mat_dir.is_dir() else job.mat_dir.parent
                 mat = (base / files[i], A2[i], plan.roi_fn, plan.zoom)
-            job.add(names[i] or "", plan.where(lines[i]), refs[i], P[i], wh_in[i], wh_out[i], plan.mirror, mat)
-            if bar is not None:  # the image work is the slow part: move the bar per image
-                bar.update(1)
+            rows.append((names[i] or "", plan.where(lines[i], files[i] if files else None), refs[i], P[i], wh_in[i],
+                         wh_out[i], plan.mirror, mat))
+        # the image work is the slow part: move the bar per row as its picture is done
+        job.add_rows(rows, tick=bar.update if bar is not None else None)
     writer.write(out)
     counts["boxes"] += boxes
     counts["rows"] += batch.num_rows
