@@ -343,8 +343,11 @@ class _Book:
             extra = f" ({len(bad) - 1} more; use --rejects FILE to skip them)" if len(bad) > 1 else \
                 " (use --rejects FILE to skip it)"
             raise HpeError(f"{self.where(idx[0])}: {why[0]}{extra if not self.rejects.strict else ''}")
-        cols = {"row": row_numbers(self.src, self.lines, idx)}
-        cols.update({c: self.frame[c].to_numpy()[idx] for c in self.frame.columns})
+        cols = {c: self.frame[c].to_numpy()[idx] for c in self.frame.columns}
+        if Path(self.src.path).is_dir() and "file" in cols:  # a .mat file is one record: named as messages do
+            cols["file"] = np.array([self.where(i) for i in idx], dtype=object)
+        else:
+            cols = {"row": row_numbers(self.src, self.lines, idx), **cols}
         self.rejects.add(cols, why)
 
     def finish(self, drawn):
