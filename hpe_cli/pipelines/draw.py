@@ -18,8 +18,9 @@ DEFAULT_LENGTH_FRACTION = 0.25
 _WRITABLE = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"}
 
 
-def _read_all(src, mode, radians, system):
-    """Whole table as (frame, canonical A, angles for captions in ``system``, reasons).
+def _read_all(src, mode, radians, system, batches=None):
+    """Whole table (or the given ``batches`` of it) as (frame, canonical A, angles for captions in ``system``,
+    reasons, lines).
 
     A dataset reader's labels (.mat Pose_Para: always 300w_lp) are read in
     the dataset's own system and only the captions use ``system``.
@@ -33,7 +34,7 @@ def _read_all(src, mode, radians, system):
     from ..io import batch_labels
     from ..io.readers import LINE_COL
 
-    batches = list(src.batches())
+    batches = list(src.batches()) if batches is None else list(batches)
     lines = None
     if src.with_lines:
         lines = np.concatenate([b.column(LINE_COL).to_numpy() for b in batches]) if batches else np.zeros(0, int)
