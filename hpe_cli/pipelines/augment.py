@@ -98,7 +98,7 @@ def row_sizes(batch, image_size, has_cols, pics, names, ids):
             refs[i] = ref
             if why:
                 reasons[i] = why
-            else:
+            elif size is not None:
                 img[i] = size
     opt = np.full((n, 2), np.nan) if image_size is None else np.broadcast_to(np.asarray(image_size, float), (n, 2))
     labelled = (("the image", img), ("image_width/image_height", col), ("--image-size", opt))
@@ -311,13 +311,15 @@ class _Plan:
 def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
                 images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
                 jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=65_536, bar=None, verbose=0,
-                description="", workers=None, strict=False, crop=None, scale=None):
+                description="", workers=None, strict=False, crop=None, scale=None, images_optional=False):
     """Augment a label table (and optionally its images). Returns a summary dict.
 
     ``image_size`` (``(W, H)`` or None) is checked against the table's ``image_width/image_height`` and the
     images; a row where two of them disagree is rejected. ``op = "crop"`` with ``crop = (x, y, w, h)`` cuts
     the images to that rectangle. Batches are transformed on ``workers`` threads (default: up to 2) while
     this thread reads, moves images and writes in order; at most ``workers + 1`` batches are in flight.
+    ``images_optional``: ``images_dir`` is a ``.mat`` folder's own (not given by the user): an image found there
+    gives (and checks) the row's size, a missing one is no reject.
     """
     import os
 
@@ -352,7 +354,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         and out_images is not None
     pose_para = (path.is_dir() or path.suffix.lower() == ".mat") or {"tdz", "scale"} <= set(columns)
     plan = _Plan(path, src, in_system, system, columns, n_lm, perm, bool(box_present), M, op, crop, image_size,
-                 has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir) if images_dir else None,
+                 has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir, images_optional) if images_dir else None,
                  scale=scale)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=None if plan.mat_base is not None else path)
     meta = {**system_metadata(system), "hpe:augment": {

@@ -17,8 +17,9 @@ from ..io.images import IMAGE_SUFFIXES, ImageResolver, image_size
 class RowImages:
     """Resolve each row's picture and its size once per name (thread-safe enough: a dict under the GIL)."""
 
-    def __init__(self, root):
+    def __init__(self, root, optional=False):
         self.resolver = ImageResolver(root)
+        self.optional = optional  # a .mat folder's own images: sizes when present, no reject when absent
         self.cache: dict = {}
         self.video_sizes: dict = {}  # a video's frame size, read once (not once per frame)
 
@@ -29,7 +30,7 @@ class RowImages:
         if hit is None:
             ref = self.resolver.find(name, sequence, camera, frame)
             if ref is None:
-                hit = (None, None, f"image not found: {self.resolver.tried(name, sequence)}")
+                hit = (None, None, "" if self.optional else f"image not found: {self.resolver.tried(name, sequence)}")
             else:
                 if ref.video is not None:
                     if ref.video not in self.video_sizes:

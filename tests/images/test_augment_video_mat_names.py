@@ -99,3 +99,14 @@ def test_draw_mat_folder_rejects_named_by_mat_file(mat3, tmp_path):
     assert res.exit_code == 0, res.output
     rej = pd.read_csv(tmp_path / "rej.csv")
     assert rej["file"].tolist() == [str(mat3 / "image00251.mat")] and "row" not in rej.columns
+
+
+def test_mat_folder_images_give_sizes_without_images_option(mat3, tmp_path):
+    """A .mat folder's own images check --image-size even without --images; a .mat without its image then needs
+    --image-size (no reject for the missing picture itself: no image is written)."""
+    res = run(mat3, "-o", tmp_path / "a.parquet", "--hflip", "--image-size", 400, 450)
+    assert res.exit_code == 1 and "image size: the image is 450x450, --image-size says 400x450" in res.output
+    assert f"{mat3 / 'image00050.mat'}: " in res.output
+    res = run(mat3, "-o", tmp_path / "b.parquet", "--hflip", "--image-size", 450, 450)
+    assert res.exit_code == 0, res.output
+    assert len(pd.read_parquet(tmp_path / "b.parquet")) == 3
