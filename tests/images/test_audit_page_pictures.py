@@ -91,3 +91,25 @@ def test_missing_images_listed_and_no_images_no_section(tmp_path):
     res = _audit(tmp_path / "n.parquet", "--plots", tmp_path / "q")
     assert res.exit_code == 0 and "Flagged rows" not in (tmp_path / "q" / "index.html").read_text()
     assert Path(tmp_path / "q" / "yaw_hist.png").is_file()
+
+
+def test_panoptic_page_pictures_around_the_faces(realdata, tmp_path):
+    """relabel-panoptic -> audit --plots --images on the real pizza1 folder (hdImgs/hd_00_XX/ layout): each
+    picture is the part of the 1920x1080 frame around the face's box, with the axes drawn from its centre."""
+    seq = realdata / "panoptic_160906_pizza1"
+    labels = tmp_path / "pizza.parquet"
+    res = CliRunner().invoke(cli, ["relabel-panoptic", str(seq), "-o", str(labels), "--cameras", "00_00,00_08",
+                                   "--frames", "1147:1148"], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "plots"
+    res = _audit(labels, "--plots", out, "--images", seq, "--gimbal-tol", 89)  # every row is near_gimbal
+    assert res.exit_code == 0, res.output
+    refs = _refs(out / "index.html")
+    caps = [c for c in refs.captions if c.startswith("near_gimbal: ")]
+    t = pd.read_parquet(labels)
+    assert caps == [f"near_gimbal: row {k + 1} ({t['image'][k]})" for k in range(3)]
+    for k, s in enumerate(p for p in refs.src if p.startswith("pictures/")):
+        img = cv2.imread(str(out / s))
+        side = max(3 * t["bbox_h"][k] / 2, 80) * 2
+        assert img is not None and max(img.shape[:2]) <= min(side + 2, 480)
+        assert (np.abs(img.astype(int) - (0, 0, 255)).max(axis=2) < 40).sum() > 5  # the red axis is there
