@@ -145,8 +145,8 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
         ``caption`` one line (key, error, both angle triples).
     """
     from ..errors import HpeError
-    from ..io.images import ImageResolver, row_ids
-    from ..io.transaction import ensure_transaction, note_input, staged_dir
+    from ..io.images import ImageResolver
+    from ..io.transaction import ensure_transaction, staged_dir
     from .draw import _image_names
 
     rows, system, where = _load(rows, system, where)
@@ -154,20 +154,8 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
     skipped = [] if skipped is None else skipped
     order = _order(rows, sort_by, worst, where)
     names = _image_names(rows) or [None] * len(rows)
-    seqs, cams, frs = row_ids(rows)
-    resolver = ImageResolver(images)
     job = _Pairs(rows, system, sort_by, names, thickness)
-    refs = []
-    for i in order.tolist():
-        ref = resolver.find(names[i], seqs[i], cams[i], frs[i]) if (names[i] or cams[i]) else None
-        if ref is None and on_missing != "canvas":
-            why = f"image not found: {resolver.tried(names[i], seqs[i])}"
-            if on_missing == "error":
-                raise HpeError(f"{row_name(i)}: {why}")
-            skipped.append((i, why))
-        if ref is not None:
-            note_input(ref.path or ref.video)
-        refs.append(ref)
+    refs = _find_all(rows, names, order, images, on_missing, skipped, row_name)
     out_dir = Path(out_dir)
     if progress is not None:
         progress.total = len(order)
@@ -189,6 +177,28 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
             if progress is not None:
                 progress.update(1)
     return [done[k] for k in sorted(done)]
+
+
+def _find_all(rows, names, order, images, on_missing, skipped, row_name):
+    """The picture of each row of ``order`` (None when not found: an error, a skipped row or a canvas)."""
+    from ..errors import HpeError
+    from ..io.images import ImageResolver, row_ids
+    from ..io.transaction import note_input
+
+    seqs, cams, frs = row_ids(rows)
+    resolver = ImageResolver(images)
+    refs = []
+    for i in order.tolist():
+        ref = resolver.find(names[i], seqs[i], cams[i], frs[i]) if (names[i] or cams[i]) else None
+        if ref is None and on_missing != "canvas":
+            why = f"image not found: {resolver.tried(names[i], seqs[i])}"
+            if on_missing == "error":
+                raise HpeError(f"{row_name(i)}: {why}")
+            skipped.append((i, why))
+        if ref is not None:
+            note_input(ref.path or ref.video)
+        refs.append(ref)
+    return refs
 
 
 def _load(rows, system, where):
