@@ -138,7 +138,7 @@ def _gallery(pictures) -> str:
     e = html.escape
     parts = ["<h2>Flagged rows, drawn</h2>",
              ("<p>The first rows of each check on their images: red points to the subject's left, green from "
-              "forehead to chin, blue out of the nose. Click a picture for its full size.</p>")]
+              "forehead to chin, blue out of the nose. Each picture links to its PNG.</p>")]
     by_check: dict = {}
     for p in pictures.get("pictures", []):
         by_check.setdefault(p["check"], []).append(p)
