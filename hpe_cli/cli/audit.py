@@ -17,6 +17,9 @@ from .options import SYSTEM, batch_option, echo_summary, output_option, overwrit
               help="Write the report (counts, settings, example rows) as JSON; '-' prints it.")
 @click.option("--plots", type=click.Path(file_okay=False),
               help="Folder for yaw/pitch/roll histograms, a yaw-pitch coverage map (PNG) and index.html.")
+@click.option("--images", type=click.Path(exists=True, file_okay=False),
+              help="With --plots: folder of the images, to draw the first flagged rows of each check on the page "
+                   "(default: INPUT's folder; a .mat folder holds its images).")
 @output_option(required=False, help="Write the table with one boolean column per check plus 'flagged' "
                                     "(.parquet or .csv).")
 @click.option("--only-flagged", is_flag=True, help="With -o, write only the rows with at least one flag.")
@@ -39,7 +42,7 @@ from .options import SYSTEM, batch_option, echo_summary, output_option, overwrit
 @verbosity_options
 @column_options
 @click.pass_context
-def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, radians, use, keys, examples,
+def audit(ctx, input, system, report, plots, images, output, only_flagged, gimbal_tol, radians, use, keys, examples,
           strict, decoder, overwrite, batch_size, verbose, quiet):
     """Check every row of a label table and count what looks wrong.
 
@@ -72,6 +75,7 @@ def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, r
     Examples:
       hpe audit labels.parquet --system 300w_lp --json report.json
       hpe audit AFLW2000/ --json - --plots audit_plots/
+      hpe audit labels.parquet --plots audit_plots/ --images frames/
       hpe audit preds.csv --system 6drepnet --columns matrix -o flagged.parquet --only-flagged
       hpe audit labels.csv --system whenet --gimbal-tol 2 --strict
       hpe audit AFLW2000/ --decoder synergynet --json -
@@ -84,7 +88,7 @@ def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, r
         result = run_audit(input, system, report=report, plots=plots, output=output, only_flagged=only_flagged,
                            near_tol_deg=gimbal_tol, radians=radians, use=use, keys=keys, n_examples=examples,
                            overwrite=overwrite, batch_size=batch_size, progress=bar,
-                           echo=click.echo, decoder=decoder)
+                           echo=click.echo, decoder=decoder, images=images)
     finally:
         bar.close()
     from ..rotation.audit import CHECKS

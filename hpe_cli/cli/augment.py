@@ -95,7 +95,7 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
 
     \b
     Examples:
-      hpe augment labels.parquet -o flipped.parquet --image-size 450 450 --hflip
+      hpe augment labels.csv -o flipped.csv --image-size 450 450 --hflip   # a table without image sizes
       hpe augment labels.csv -o rot30.csv --system 6drepnet --image-size 640 480 --rotate 30
       hpe augment AFLW2000/ -o rot.parquet --image-size 450 450 --rotate -15 --images AFLW2000/ --out-images rot/
       hpe augment aflw_lm.parquet -o aflw_v.parquet --image-size 450 450 --vflip --landmarks aflw21
@@ -132,19 +132,21 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
     for name, v in (("--rotate", rotate), ("--mirror-line", mirror_line)):
         if v is not None and not abs(v) < float("inf"):
             raise click.BadParameter(f"expected a finite angle in degrees, got {v}", param_hint=name)
-    if out_images is not None and images_dir is None:
+    images_optional = False
+    if images_dir is None:
         from pathlib import Path
 
-        if not Path(input).is_dir():
+        if out_images is not None and not Path(input).is_dir():
             raise click.UsageError("--out-images needs --images (the folder of the input images)")
-        images_dir = input  # a .mat folder holds its images
+        if Path(input).is_dir() and image_column is None:  # a .mat folder holds its images: they give the sizes
+            images_dir, images_optional = input, out_images is None
     bar = progress(desc="augment", quiet=quiet)
     try:
         s = run_augment(input, output, system, tuple(image_size) if image_size else None, op, angle, crop=crop, scale=zoom, scheme=scheme, box_from=box_from,
                         clip=clip, images_dir=images_dir, out_images=out_images, image_column=image_column,
                         interpolation=interpolation, border=border, jpeg_quality=jpeg_quality, rejects_path=rejects,
                         strict=strict, overwrite=overwrite, batch_size=batch_size, bar=bar, verbose=verbose,
-                        description=desc)
+                        description=desc, images_optional=images_optional)
     finally:
         bar.close()
     lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {system.name} -> {output}",
@@ -153,7 +155,7 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
         lines.append(f"labels read from {s['label_source']}; pixel centres at integers, image centre "
                      + (f"({(image_size[0] - 1) / 2:g}, {(image_size[1] - 1) / 2:g})" if image_size else
                         "((W-1)/2, (H-1)/2) of each image"))
-    if images_dir is not None:
+    if out_images is not None:
         lines.append(f"images: {s['images']} written -> {out_images}"
                      + (f"; {s['mats']} .mat files written back beside them" if s.get("mats") else ""))
     if s["rejects"]:

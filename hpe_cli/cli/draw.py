@@ -99,6 +99,7 @@ def draw(input, outdir, images, system, style, canvas, radians, use, length, thi
       hpe draw poses.csv -o canvas/ --canvas 640x480 --annotate
       hpe draw AFLW2000/ -o sheet/ --grid --grid-cols 4 --annotate
       hpe draw errors.parquet -o worst/ --images AFLW2000/ --worst 20 --sort-by geodesic
+      hpe draw errors.parquet -o worst/ --images frames/ --worst 20 --rejects missing.csv
     """
     from ..pipelines.draw import run_draw
 
@@ -111,9 +112,11 @@ def draw(input, outdir, images, system, style, canvas, radians, use, length, thi
     finally:
         bar.close()
     if "drawn" in s:
-        echo_summary([(f"drew ground truth (solid) and prediction (dashed) of {s['faces']} rows, worst "
-                       f"{sort_by or 'geodesic'} first, angles in {s['system']} ({s['system_source']}) -> {outdir}")],
-                     quiet)
+        lines = [(f"drew ground truth (solid) and prediction (dashed) of {s['faces']} rows, worst "
+                  f"{sort_by or 'geodesic'} first, angles in {s['system']} ({s['system_source']}) -> {outdir}")]
+        if s["rejects"]:
+            lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in s["rejects"].items()) + f" -> {rejects}")
+        echo_summary(lines, quiet)
         return
     lines = [f"drew {s['faces']} faces ({style}) on {s['images']} {'canvases' if canvas else 'images'} -> "
              + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir))]

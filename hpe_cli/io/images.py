@@ -241,16 +241,19 @@ class ImageResolver:
         return str(_name_candidates(self.root, str(image or ""), sequence or "")[0]) if image else str(self.root)
 
     @staticmethod
-    def read(refs):
-        """Yield ``(index, image or None, reason)`` for each ref of ``refs`` (a list).
+    def read(refs, flags=None):
+        """Yield ``(index, image or None, reason)`` for each ref of ``refs`` (a list): the one way draw, the
+        audit page and augment read pictures.
 
-        Image files come in the given order; the frames of each video follow, grouped so each video is
-        decoded once, front to back.
+        Image files come in the given order (read with ``cv2.imdecode`` ``flags``, default colour BGR); the
+        frames of each video follow, grouped so each video is decoded once, front to back, whatever the
+        order of ``refs`` (:class:`hpe_cli.datasets.panoptic_video.VideoFrames`). One picture is in memory
+        at a time when the caller consumes them one by one.
         """
         videos: dict = {}
         for i, ref in enumerate(refs):
             if ref.path is not None:
-                img = read_image(ref.path)
+                img = read_image(ref.path, flags)
                 yield i, img, "" if img is not None else f"not a readable image: {ref.path}"
             else:
                 videos.setdefault(ref.video, {}).setdefault(ref.frame, []).append(i)

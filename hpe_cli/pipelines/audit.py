@@ -260,7 +260,7 @@ def _batches(src, mode, path):
 
 def run_audit(input_path, system, *, report=None, plots=None, output=None, only_flagged=False,
               near_tol_deg=1.0, radians=False, use="auto", keys=(), n_examples=5, overwrite=False,
-              batch_size=65_536, progress=None, echo=None, decoder=None, workers=None) -> dict:
+              batch_size=65_536, progress=None, echo=None, decoder=None, workers=None, images=None) -> dict:
     """Audit ``input_path`` and write the requested outputs; return the report dict.
 
     Batches are checked and hashed on ``workers`` threads (default: up to 2)
@@ -386,9 +386,14 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
         _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians,
                        near_tol_deg, dups, via_system)
     if plots:
+        from .draw_flagged import flagged_pictures
+
+        # the first flagged rows of each check, drawn on their images, for the page
+        pics = flagged_pictures(src.path, examples, plots, system, images=images, radians=radians,
+                                overwrite=overwrite)
         write_plots(hist, plots, system, {"input": str(src.path), "system": system.name, "rows": rows,
                                           **counts, "flagged": result["details"]["flagged"]},
-                    title=f"hpe audit: {src.path.name}", overwrite=overwrite)
+                    title=f"hpe audit: {src.path.name}", overwrite=overwrite, pictures=pics)
     if report == "-":
         from ..io.writers import json_text
 

@@ -98,7 +98,7 @@ def row_sizes(batch, image_size, has_cols, pics, names, ids):
             refs[i] = ref
             if why:
                 reasons[i] = why
-            else:
+            elif size is not None:
                 img[i] = size
     opt = np.full((n, 2), np.nan) if image_size is None else np.broadcast_to(np.asarray(image_size, float), (n, 2))
     labelled = (("the image", img), ("image_width/image_height", col), ("--image-size", opt))
@@ -183,12 +183,18 @@ class _Plan:
         self.label_source = ("pitch,yaw,roll" + (" (checked against r00..r22)" if self.cross_check else "")
                              if self.mode == "angles" else "r00..r22")
         self.csv = src.kind == "csv"
+        is_mat = path.is_dir() or path.suffix.lower() == ".mat"
+        self.mat_base = (path if path.is_dir() else path.parent) if is_mat and "file" in columns else None
 
     def numbers(self, lines):
         """The row numbers messages and rejects use: CSV lines (header = 1), else 1-based rows."""
         return lines if self.csv else lines - 1
 
-    def where(self, line) -> str:
+    def where(self, line, file=None) -> str:
+        """How messages name a row: ``FILE: line N`` (text), the ``.mat`` file itself (a ``.mat`` folder: one
+        record per file), else ``FILE: row N`` (1-based)."""
+        if self.mat_base is not None and file is not None:
+            return str(self.mat_base / str(file))
         return f"{self.path}: line {int(line)}" if self.csv else f"{self.path}: row {int(line) - 1}"
 
     def roi_fn(self, roi, size_in):
@@ -305,13 +311,15 @@ class _Plan:
 def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
                 images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
                 jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=65_536, bar=None, verbose=0,
-                description="", workers=None, strict=False, crop=None, scale=None):
+                description="", workers=None, strict=False, crop=None, scale=None, images_optional=False):
     """Augment a label table (and optionally its images). Returns a summary dict.
 
     ``image_size`` (``(W, H)`` or None) is checked against the table's ``image_width/image_height`` and the
     images; a row where two of them disagree is rejected. ``op = "crop"`` with ``crop = (x, y, w, h)`` cuts
     the images to that rectangle. Batches are transformed on ``workers`` threads (default: up to 2) while
     this thread reads, moves images and writes in order; at most ``workers + 1`` batches are in flight.
+    ``images_optional``: ``images_dir`` is a ``.mat`` folder's own (not given by the user): an image found there
+    gives (and checks) the row's size, a missing one is no reject.
     """
     import os
 
@@ -346,9 +354,9 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         and out_images is not None
     pose_para = (path.is_dir() or path.suffix.lower() == ".mat") or {"tdz", "scale"} <= set(columns)
     plan = _Plan(path, src, in_system, system, columns, n_lm, perm, bool(box_present), M, op, crop, image_size,
-                 has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir) if images_dir else None,
+                 has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir, images_optional) if images_dir else None,
                  scale=scale)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=path)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=None if plan.mat_base is not None else path)
     meta = {**system_metadata(system), "hpe:augment": {
         "op": op, "angle_deg": angle, "crop": list(crop) if crop else None, "scale": scale, "description": description,
         "image_size": list(image_size) if image_size else "from image_width/image_height or the images",
@@ -397,20 +405,26 @@ def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan)
         counts["rows"] += len(read_rejects)
     if not keep.all():
         drop = ~keep
-        rejects.add({"row": plan.numbers(lines[drop]),
-                     **{c: batch.column(i).to_numpy(zero_copy_only=False)[drop]
-                        for i, c in enumerate(batch.schema.names)}}, reasons[drop],
-                    lines=lines[drop] if plan.csv else None)
+        cols = {c: batch.column(i).to_numpy(zero_copy_only=False)[drop] for i, c in enumerate(batch.schema.names)}
+        if plan.mat_base is not None:  # a .mat file is one record: named by its file, as the messages do
+            cols["file"] = np.array([plan.where(0, f) for f in cols["file"]], dtype=object)
+            if rejects.first_where is None:
+                rejects.first_where = f"{cols['file'][0]}: {reasons[drop][0]}"
+        else:
+            cols = {"row": plan.numbers(lines[drop]), **cols}
+        rejects.add(cols, reasons[drop], lines=lines[drop] if plan.csv else None)
     if job is not None:
         refs, names, P, wh_in, wh_out, A2, files = extra
+        rows = []
         for i in np.flatnonzero(keep):
             mat = None
             if job.mat_dir is not None and files is not None:
                 base = job.mat_dir if job.mat_dir.is_dir() else job.mat_dir.parent
                 mat = (base / files[i], A2[i], plan.roi_fn, plan.zoom)
-            job.add(names[i] or "", plan.where(lines[i]), refs[i], P[i], wh_in[i], wh_out[i], plan.mirror, mat)
-            if bar is not None:  # the image work is the slow part: move the bar per image
-                bar.update(1)
+            rows.append((names[i] or "", plan.where(lines[i], files[i] if files else None), refs[i], P[i], wh_in[i],
+                         wh_out[i], plan.mirror, mat))
+        # the image work is the slow part: move the bar per row as its picture is done
+        job.add_rows(rows, tick=bar.update if bar is not None else None)
     writer.write(out)
     counts["boxes"] += boxes
     counts["rows"] += batch.num_rows

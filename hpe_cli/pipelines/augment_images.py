@@ -17,9 +17,11 @@ from ..io.images import IMAGE_SUFFIXES, ImageResolver, image_size
 class RowImages:
     """Resolve each row's picture and its size once per name (thread-safe enough: a dict under the GIL)."""
 
-    def __init__(self, root):
+    def __init__(self, root, optional=False):
         self.resolver = ImageResolver(root)
+        self.optional = optional  # a .mat folder's own images: sizes when present, no reject when absent
         self.cache: dict = {}
+        self.video_sizes: dict = {}  # a video's frame size, read once (not once per frame)
 
     def lookup(self, name, sequence="", camera="", frame=-1):
         """``(ref or None, (W, H) or None, reason)``."""
@@ -28,9 +30,14 @@ class RowImages:
         if hit is None:
             ref = self.resolver.find(name, sequence, camera, frame)
             if ref is None:
-                hit = (None, None, f"image not found: {self.resolver.tried(name, sequence)}")
+                hit = (None, None, "" if self.optional else f"image not found: {self.resolver.tried(name, sequence)}")
             else:
-                size = image_size(ref)
+                if ref.video is not None:
+                    if ref.video not in self.video_sizes:
+                        self.video_sizes[ref.video] = image_size(ref)
+                    size = self.video_sizes[ref.video]
+                else:
+                    size = image_size(ref)
                 hit = (ref, size, "" if size is not None else f"not a readable image: {ref}")
             self.cache[key] = hit
         return hit
@@ -61,8 +68,34 @@ class ImageJob:
         self.done: dict = {}  # output name -> (picture key, where of the first row)
         self.mats = 0
 
-    def add(self, name, where, ref, P, size_in, size_out, mirror, mat=None):
-        """Transform the picture of one row (once per picture); ``mat``: (file, canonical A', crop roi fn) or None."""
+    def add_rows(self, rows, tick=None):
+        """Transform the pictures of a batch's rows, each picture once.
+
+        ``rows``: ``(name, where, ref, P, size_in, size_out, mirror, mat)`` per row (``mat``: (file, canonical
+        A', crop roi fn, zoom) or None). Every output name is checked first; then the pictures are read with
+        :meth:`hpe_cli.io.images.ImageResolver.read` (image files in order, each video decoded once, front to
+        back) and warped one at a time. ``tick(n)`` is called as ``n`` rows are done.
+        """
+        todo = []  # (row tuple, rel) of the first row of each new picture
+        for row in rows:
+            if self._claim(row):
+                todo.append(row)
+            elif tick is not None:
+                tick(1)
+        cv_flags = None
+        if todo:
+            import cv2
+
+            cv_flags = cv2.IMREAD_UNCHANGED  # keep grey, alpha and 16-bit images as they are
+        for k, img, why in ImageResolver.read([r[2] for r in todo], flags=cv_flags):
+            self._render(todo[k], img, why)
+            if tick is not None:
+                tick(1)
+
+    def _claim(self, row):
+        """Check the row's output name; True when its picture is new (to be warped), False when an earlier row
+        already claimed it. A ``.mat`` file is written back either way."""
+        name, where, ref, P, size_in, size_out, mirror, mat = row
         rel = output_name(name, ref)
         key = str(rel)
         if key in self.done:
@@ -70,34 +103,39 @@ class ImageJob:
                 raise HpeError(f"{where}: image {name!r} ({ref}) would be written to {self.dst / rel}, as the image "
                                f"of {self.done[key][1]} ({self.done[key][0]}) is: two different pictures for one "
                                "output file")
-            if mat is not None:
-                self._write_mat(rel, mat, P, size_in, size_out, mirror, where)
-            return
-        final = self.dst / rel
-        if final.is_dir():
-            raise HpeError(f"{final}: is a folder, expected a file name")
-        if final.exists() and not self.overwrite:
-            raise HpeError(f"{final}: already exists (use --overwrite to replace it)")
-        img = _read(ref)
+            new = False
+        else:
+            final = self.dst / rel
+            if final.is_dir():
+                raise HpeError(f"{final}: is a folder, expected a file name")
+            if final.exists() and not self.overwrite:
+                raise HpeError(f"{final}: already exists (use --overwrite to replace it)")
+            self.done[key] = (ref.key, _row_part(where))
+            new = True
+        if mat is not None:
+            self._write_mat(rel, mat, P, size_in, size_out, mirror, where)
+        return new
+
+    def _render(self, row, img, why):
+        """Warp one picture into the staged folder."""
+        import cv2
+
+        name, where, ref, P, size_in, size_out, _, _ = row
         if img is None:
-            raise HpeError(f"{where}: {ref}: not a readable image")
+            raise HpeError(f"{where}: {why or f'{ref}: not a readable image'}")
         h, w = img.shape[:2]
         if (w, h) != tuple(int(x) for x in size_in):
             raise HpeError(f"{where}: {ref} is {w}x{h}, but its header said {size_in[0]:g}x{size_in[1]:g}")
         out = _warp(img, P, size_out, self.interp, self.border)
+        rel = output_name(name, ref)
         staged = self.stage / rel
         staged.parent.mkdir(parents=True, exist_ok=True)
-        import cv2
-
         suffix = rel.suffix.lower() or ".png"
         params = [cv2.IMWRITE_JPEG_QUALITY, self.quality] if suffix in (".jpg", ".jpeg") else []
         ok, buf = cv2.imencode(suffix, out, params)
         if not ok:
-            raise HpeError(f"{final}: could not encode the image as {suffix}")
+            raise HpeError(f"{self.dst / rel}: could not encode the image as {suffix}")
         buf.tofile(staged)
-        self.done[key] = (ref.key, where.split(": ", 1)[-1])
-        if mat is not None:
-            self._write_mat(rel, mat, P, size_in, size_out, mirror, where)
 
     def _write_mat(self, rel, mat, P, size_in, size_out, mirror, where):
         """``<stem>.mat`` beside the output image: Pose_Para (new angles, tdx, tdy), pt2d, pt3d_68 and roi moved;
@@ -157,16 +195,9 @@ class ImageJob:
         return out
 
 
-def _read(ref):
-    if ref.path is not None:
-        import cv2
-
-        from ..io.images import read_image
-
-        return read_image(ref.path, cv2.IMREAD_UNCHANGED)
-    for _, img, _ in ImageResolver.read([ref]):
-        return img
-    return None
+def _row_part(where: str) -> str:
+    """``line 3`` of ``FILE: line 3``; a ``.mat`` file's own name (it is one row)."""
+    return where.split(": ", 1)[-1] if ": " in where else where
 
 
 def _warp(img, P, size_out, interpolation, border):

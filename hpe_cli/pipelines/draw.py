@@ -18,8 +18,9 @@ DEFAULT_LENGTH_FRACTION = 0.25
 _WRITABLE = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"}
 
 
-def _read_all(src, mode, radians, system):
-    """Whole table as (frame, canonical A, angles for captions in ``system``, reasons).
+def _read_all(src, mode, radians, system, batches=None):
+    """Whole table (or the given ``batches`` of it) as (frame, canonical A, angles for captions in ``system``,
+    reasons, lines).
 
     A dataset reader's labels (.mat Pose_Para: always 300w_lp) are read in
     the dataset's own system and only the captions use ``system``.
@@ -33,7 +34,7 @@ def _read_all(src, mode, radians, system):
     from ..io import batch_labels
     from ..io.readers import LINE_COL
 
-    batches = list(src.batches())
+    batches = list(src.batches()) if batches is None else list(batches)
     lines = None
     if src.with_lines:
         lines = np.concatenate([b.column(LINE_COL).to_numpy() for b in batches]) if batches else np.zeros(0, int)
@@ -343,8 +344,11 @@ class _Book:
             extra = f" ({len(bad) - 1} more; use --rejects FILE to skip them)" if len(bad) > 1 else \
                 " (use --rejects FILE to skip it)"
             raise HpeError(f"{self.where(idx[0])}: {why[0]}{extra if not self.rejects.strict else ''}")
-        cols = {"row": row_numbers(self.src, self.lines, idx)}
-        cols.update({c: self.frame[c].to_numpy()[idx] for c in self.frame.columns})
+        cols = {c: self.frame[c].to_numpy()[idx] for c in self.frame.columns}
+        if Path(self.src.path).is_dir() and "file" in cols:  # a .mat file is one record: named as messages do
+            cols["file"] = np.array([self.where(i) for i in idx], dtype=object)
+        else:
+            cols = {"row": row_numbers(self.src, self.lines, idx), **cols}
         self.rejects.add(cols, why)
 
     def finish(self, drawn):

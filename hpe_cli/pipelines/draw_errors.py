@@ -108,7 +108,7 @@ def render_pair(img, A_gt, A_pred, centre, length, corner_text, thickness=None):
 
 
 def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=None, overwrite=False,
-               progress=None, on_missing="canvas", thickness=None, where=None):
+               progress=None, on_missing="canvas", thickness=None, where=None, skipped=None, row_name=None):
     """Draw the worst rows of ``hpe evaluate -o``'s output, ground truth and prediction on the same face.
 
     Parameters
@@ -129,8 +129,13 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
     system : str or RotationSystem, optional
         System of the ``gt_*``/``pred_*`` angles; default: the file's ``hpe:system`` metadata (or
         ``rows.attrs["hpe:system"]``), else ``300w_lp``.
-    on_missing : {"canvas", "error"}
-        A row whose image is not found is drawn on a grey canvas that says so, or is an error.
+    on_missing : {"canvas", "error", "skip"}
+        A row whose image is not found (or cannot be read) is drawn on a grey canvas that says so, is an
+        error, or is left out and listed in ``skipped``.
+    skipped : list, optional
+        With ``on_missing="skip"``: ``(row index, reason)`` is appended for each row left out.
+    row_name : callable, optional
+        ``row_name(i)`` names 0-based row ``i`` in messages (default ``"<where>: row <i + 1>"``).
 
     Returns
     -------
@@ -140,24 +145,17 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
         ``caption`` one line (key, error, both angle triples).
     """
     from ..errors import HpeError
-    from ..io.images import ImageResolver, row_ids
-    from ..io.transaction import ensure_transaction, note_input, staged_dir
+    from ..io.images import ImageResolver
+    from ..io.transaction import ensure_transaction, staged_dir
     from .draw import _image_names
 
     rows, system, where = _load(rows, system, where)
+    row_name = row_name or (lambda i: f"{where}: row {i + 1}")
+    skipped = [] if skipped is None else skipped
     order = _order(rows, sort_by, worst, where)
     names = _image_names(rows) or [None] * len(rows)
-    seqs, cams, frs = row_ids(rows)
-    resolver = ImageResolver(images)
     job = _Pairs(rows, system, sort_by, names, thickness)
-    refs = []
-    for i in order.tolist():
-        ref = resolver.find(names[i], seqs[i], cams[i], frs[i]) if (names[i] or cams[i]) else None
-        if ref is None and on_missing == "error":
-            raise HpeError(f"{where}: row {i + 1}: image not found: {resolver.tried(names[i], seqs[i])}")
-        if ref is not None:
-            note_input(ref.path or ref.video)
-        refs.append(ref)
+    refs = _find_all(rows, names, order, images, on_missing, skipped, row_name)
     out_dir = Path(out_dir)
     if progress is not None:
         progress.total = len(order)
@@ -166,16 +164,41 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
     found = [k for k, r in enumerate(refs) if r is not None]
     with ensure_transaction(), staged_dir(out_dir, overwrite) as stage:
         # one picture in memory at a time: files in rank order, then each video's frames, decoded once
-        missing = ((k, None, "image not found") for k, r in enumerate(refs) if r is None)
+        missing = ((k, None, "image not found") for k, r in enumerate(refs) if r is None and on_missing == "canvas")
         pictures = ((found[k], img, why) for k, img, why in ImageResolver.read([refs[k] for k in found]))
         for rank, img, why in itertools.chain(missing, pictures):
             i = int(order[rank])
             if img is None and on_missing == "error":
-                raise HpeError(f"{where}: row {i + 1}: {why}")
+                raise HpeError(f"{row_name(i)}: {why}")
+            if img is None and on_missing == "skip":
+                skipped.append((i, why))
+                continue
             done[rank] = job.draw(img, why, i, rank, refs[rank], stage, out_dir)
             if progress is not None:
                 progress.update(1)
     return [done[k] for k in sorted(done)]
+
+
+def _find_all(rows, names, order, images, on_missing, skipped, row_name):
+    """The picture of each row of ``order`` (None when not found: an error, a skipped row or a canvas)."""
+    from ..errors import HpeError
+    from ..io.images import ImageResolver, row_ids
+    from ..io.transaction import note_input
+
+    seqs, cams, frs = row_ids(rows)
+    resolver = ImageResolver(images)
+    refs = []
+    for i in order.tolist():
+        ref = resolver.find(names[i], seqs[i], cams[i], frs[i]) if (names[i] or cams[i]) else None
+        if ref is None and on_missing != "canvas":
+            why = f"image not found: {resolver.tried(names[i], seqs[i])}"
+            if on_missing == "error":
+                raise HpeError(f"{row_name(i)}: {why}")
+            skipped.append((i, why))
+        if ref is not None:
+            note_input(ref.path or ref.video)
+        refs.append(ref)
+    return refs
 
 
 def _load(rows, system, where):
@@ -261,20 +284,23 @@ def _safe_stem(stem: str) -> str:
 
 def run_draw_errors(input_path, outdir, *, images=None, system=None, worst=None, sort_by="geodesic",
                     overwrite=False, progress=None, thickness=None, rejects_path=None, strict=False) -> dict:
-    """``hpe draw`` on evaluate's output: a missing image is a reject (an error without ``--rejects``)."""
+    """``hpe draw`` on evaluate's output: a row whose image is missing is a reject (an error without ``--rejects``
+    or with ``strict``); a run that draws nothing exits 1. Rows are named as the input numbers them."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     from ..errors import HpeError
-    from ..io import open_table
+    from ..io import Rejects, open_table
+    from ..io.readers import LINE_COL
+    from ..io.transaction import ensure_transaction
     from ..rotation import get_system
+    from .draw import row_namer, row_numbers
 
     input_path = Path(input_path)
-    src = open_table(input_path)
-    frame = src.read_all().to_pandas() if hasattr(src, "read_all") else None
-    if frame is None:
-        import pyarrow as pa
-
-        frame = pa.Table.from_batches(list(src.batches()), schema=src.schema).to_pandas()
+    src = open_table(input_path, with_lines=True)
+    table = pa.Table.from_batches(list(src.batches()), schema=src.schema)
+    lines = table.column(LINE_COL).to_numpy() if LINE_COL in table.column_names else None
+    frame = table.drop_columns([LINE_COL]).to_pandas() if lines is not None else table.to_pandas()
     source = "option"
     if input_path.suffix.lower() in (".parquet", ".pq"):
         file_system, source = table_system(pq.read_schema(input_path), system)
@@ -283,10 +309,27 @@ def run_draw_errors(input_path, outdir, *, images=None, system=None, worst=None,
         system, source = get_system("300w_lp"), "default"
     if len(frame) == 0:
         raise HpeError(f"{input_path}: empty table (no rows)")
-    if rejects_path is not None:
-        raise HpeError("--rejects: not supported with evaluate's output; every drawn row needs its image")
-    res = draw_worst(frame, images=images or input_path.parent, out_dir=outdir, worst=worst, sort_by=sort_by,
-                     system=system, overwrite=overwrite, progress=progress, on_missing="error", thickness=thickness,
-                     where=str(input_path))
-    return {"faces": len(res), "images": len(res), "sheets": 0, "rejects": {}, "system": system.name,
+    where = row_namer(src, lines)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=input_path)
+    skip = rejects_path is not None and not strict
+    skipped: list = []
+    with ensure_transaction():
+        res = draw_worst(frame, images=images or input_path.parent, out_dir=outdir, worst=worst, sort_by=sort_by,
+                         system=system, overwrite=overwrite, progress=progress,
+                         on_missing="skip" if skip else "error", thickness=thickness, where=str(input_path),
+                         skipped=skipped, row_name=where)
+        if skipped:
+            skipped.sort()
+            idx = np.array([i for i, _ in skipped], dtype=np.int64)
+            why = [w for _, w in skipped]
+            if not res:
+                raise HpeError(f"{input_path}: nothing drawn: all {len(idx)} row(s) rejected "
+                               f"(first: {where(int(idx[0])).split(': ', 1)[-1]}: {why[0]})")
+            rejects.add({"row": row_numbers(src, lines, idx), **{c: frame[c].to_numpy()[idx] for c in frame.columns}},
+                        why, lines=np.asarray(lines)[idx] if src.kind == "csv" and lines is not None else None)
+        rejects.finish()
+    from collections import Counter
+
+    return {"faces": len(res), "images": len(res), "sheets": 0,
+            "rejects": dict(Counter(w.split(":")[0] for _, w in skipped)), "system": system.name,
             "system_source": source, "drawn": res}

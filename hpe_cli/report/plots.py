@@ -64,7 +64,7 @@ def plot_files(folder) -> dict:
 
 
 def write_plots(hist: AngleHistograms, folder, system, summary: dict, title: str = "hpe audit",
-                overwrite: bool = False) -> dict:
+                overwrite: bool = False, pictures=None) -> dict:
     """Write the three histograms, the coverage map and ``index.html``.
 
     Parameters
@@ -76,6 +76,9 @@ def write_plots(hist: AngleHistograms, folder, system, summary: dict, title: str
         Its declared ranges are drawn as dashed lines.
     summary : dict
         Shown on the HTML page: check name -> count (and any other scalars).
+    pictures : dict, optional
+        Drawn flagged rows (:func:`hpe_cli.pipelines.draw_flagged.flagged_pictures`): shown on the page by
+        check, each linking to its PNG; rows whose image was not found are listed.
     """
     from matplotlib.colors import LogNorm
     from matplotlib.figure import Figure
@@ -124,24 +127,54 @@ def write_plots(hist: AngleHistograms, folder, system, summary: dict, title: str
     fig.tight_layout()
     _save(fig, paths["coverage"], overwrite)
     with AtomicFile(paths["html"], overwrite) as tmp:
-        tmp.write_text(_page(title, summary, paths), encoding="utf-8")
+        tmp.write_text(_page(title, summary, paths, pictures), encoding="utf-8")
     return paths
 
 
-def _page(title, summary, paths) -> str:
-    rows = "\n".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>"
-                     for k, v in summary.items())
+def _gallery(pictures) -> str:
+    """The page's section of drawn flagged rows, by check; each picture links to its PNG."""
+    if not pictures or not (pictures.get("pictures") or pictures.get("missing")):
+        return ""
+    e = html.escape
+    parts = ["<h2>Flagged rows, drawn</h2>",
+             ("<p>The first rows of each check on their images: red points to the subject's left, green from "
+              "forehead to chin, blue out of the nose. Each picture links to its PNG.</p>")]
+    by_check: dict = {}
+    for p in pictures.get("pictures", []):
+        by_check.setdefault(p["check"], []).append(p)
+    for check, pics in by_check.items():
+        figs = "\n".join(f'<figure><a href="{e(p["path"])}"><img class="row" src="{e(p["path"])}" '
+                         f'alt="{e(p["caption"])}"></a><figcaption>{e(p["caption"])}</figcaption></figure>'
+                         for p in pics)
+        parts.append(f'<h3 id="check-{e(check)}">{e(check)}</h3>\n{figs}')
+    missing = pictures.get("missing", [])
+    if missing:
+        items = "\n".join(f"<li>{e(c)}: {e(w)}: {e(r)}</li>" for c, w, r in missing)
+        parts.append(f"<p>Not drawn (images under {e(str(pictures.get('root', '')))}):</p><ul>{items}</ul>")
+    return "\n".join(parts)
+
+
+def _page(title, summary, paths, pictures=None) -> str:
+    drawn = {p["check"] for p in (pictures or {}).get("pictures", [])}
+
+    def cell(k, v):  # a check with pictures links to them
+        text = html.escape(str(v))
+        return f'<a href="#check-{html.escape(str(k))}">{text}</a>' if k in drawn else text
+
+    rows = "\n".join(f"<tr><th>{html.escape(str(k))}</th><td>{cell(k, v)}</td></tr>" for k, v in summary.items())
     imgs = "\n".join(f'<figure><img src="{html.escape(paths[k].name)}" alt="{k}"><figcaption>{k}</figcaption></figure>'
                      for k in ("yaw", "pitch", "roll", "coverage"))
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:75em}} table{{border-collapse:collapse}}
 th,td{{border:1px solid #ccc;padding:.2em .6em;text-align:left}} td{{text-align:right}}
-figure{{display:inline-block;margin:.5em}} img{{max-width:44em}}</style></head>
+figure{{display:inline-block;margin:.5em;vertical-align:top}} img{{max-width:44em}}
+img.row{{max-width:20em;max-height:20em}} figcaption{{font-size:.85em;max-width:24em}}</style></head>
 <body><h1>{html.escape(title)}</h1>
 <table>
 {rows}
 </table>
 {imgs}
+{_gallery(pictures)}
 </body></html>
 """
