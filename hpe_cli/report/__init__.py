@@ -1,0 +1,1 @@
+"""Reports: plots, HTML pages, galleries."""
