@@ -50,13 +50,13 @@ def check_protocols(protocols) -> list:
     return names
 
 
-def compute_rows(P, G, gt_system, protocols=None, raw=None) -> PairRows:
+def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None) -> PairRows:
     """Every per-row error for canonical rotations ``P`` (predicted) and ``G`` (true).
 
     ``raw`` (``{"pred" | "gt": (system, angles (N, 3))}``) holds the angles as
     written for sides given as angles (see :class:`PosePair`).
     """
-    pair = PosePair(P, G, gt_system, raw)
+    pair = PosePair(P, G, gt_system, raw, context)
     g, _ = pair.written(gt_system, "gt")
     p1, p2 = pair.angles(gt_system, "pred")
     pw, _ = pair.written(gt_system, "pred")

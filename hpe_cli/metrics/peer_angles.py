@@ -125,28 +125,48 @@ def _log(M) -> np.ndarray:
     return Rotation.from_matrix(M).as_rotvec()
 
 
-def opal23_align(ann, pred, tol: float = 1e-4, max_iter: int = 100_000):
+def opal23_near_deltas(ann, pred) -> np.ndarray:
+    """``P_i A_i^T`` of the rows within 90 degrees of the identity: what opal23's mean is taken over."""
+    deltas = np.matmul(pred, np.transpose(ann, (0, 2, 1)))
+    return deltas[np.linalg.norm(_log(deltas), axis=1) < np.pi / 2]
+
+
+def opal23_karcher(deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20) -> np.ndarray:
+    """opal23's ``_compute_mean_rotation`` (test/evaluator.py:111-126) over ``deltas`` (any array-like, e.g. a memmap).
+
+    Started at the first delta, ``mean <- mean @ exp(mean displacement)`` until
+    the mean displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the
+    sums run chunk by chunk, so a memory-mapped spill of any length works.
+    """
+    from scipy.spatial.transform import Rotation
+
+    n = len(deltas)
+    if not n:
+        return np.eye(3)
+    mean = np.array(deltas[0], dtype=np.float64)
+    for _ in range(max_iter):
+        total = np.zeros(3)
+        for a in range(0, n, chunk):
+            total += _log(np.matmul(mean.T, np.asarray(deltas[a:a + chunk]))).sum(axis=0)
+        d = total / n
+        if np.linalg.norm(d) < tol:
+            break
+        mean = mean @ Rotation.from_rotvec(d).as_matrix()
+    return mean
+
+
+def opal23_align(ann, pred, tol: float = 1e-4, max_iter: int = 100_000, mean=None):
     """``Evaluator.align_predictions`` with ``mask=None`` (test/evaluator.py:95-129).
 
     The Karcher mean of ``P_i A_i^T`` over the rows within 90 degrees of the
     identity (``distances < pi/2``), started at the first such row and
     iterated until the mean displacement is below ``tol``; every prediction
-    becomes ``mean.T @ P_i``. Returns ``(aligned predictions, mean, rows used)``.
+    becomes ``mean.T @ P_i``. ``mean`` given (from all chunks of a streamed
+    run) skips the estimate. Returns ``(aligned predictions, mean)``.
     """
-    from scipy.spatial.transform import Rotation
-
-    deltas = np.matmul(pred, np.transpose(ann, (0, 2, 1)))
-    near = np.linalg.norm(_log(deltas), axis=1) < np.pi / 2
-    m = deltas[near]
-    if not len(m):
-        return pred.copy(), np.eye(3), 0
-    mean = m[0]
-    for _ in range(max_iter):
-        d = _log(np.matmul(mean.T, m)).mean(axis=0)
-        if np.linalg.norm(d) < tol:
-            break
-        mean = mean @ Rotation.from_rotvec(d).as_matrix()
-    return np.matmul(mean.T, pred), mean, int(near.sum())
+    if mean is None:
+        mean = opal23_karcher(opal23_near_deltas(ann, pred), tol, max_iter)
+    return np.matmul(mean.T, pred), mean
 
 
 def trinet_euler(T) -> np.ndarray:

@@ -41,7 +41,8 @@ class PosePair:
         raw-angle protocols compare these numbers as written.
     """
 
-    def __init__(self, P, G, gt_system, raw=None):
+    def __init__(self, P, G, gt_system, raw=None, context=None):
+        self.context = dict(context or {})
         self.P = re_.as_nested(P)
         self.G = re_.as_nested(G)
         self.gt_system = gt_system
@@ -288,14 +289,14 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
     """opal23 after ``Evaluator.align_predictions`` (test/evaluator.py:95-129): Karcher mean offset removed.
 
     The mean of ``P G^T`` is taken over the rows within 90 degrees of the
-    identity only; every prediction is then turned by its inverse.
+    identity only (``left_out_of_mean`` counts the others); every prediction
+    is then turned by its inverse. A streamed run estimates the mean over all
+    pairs first and passes it in ``pair.context["opal23_mean"]``.
     """
     P, G, rx = _opal23_mats(pair)
-    Pa, _, used = pa_.opal23_align(G, P)
-    left_out = np.zeros(pair.n, dtype=bool)
-    if used < pair.n:
-        d = np.matmul(P, np.transpose(G, (0, 2, 1)))
-        left_out = np.linalg.norm(pa_._log(d), axis=1) >= np.pi / 2
+    Pa, _ = pa_.opal23_align(G, P, mean=pair.context.get("opal23_mean"))
+    d = np.matmul(P, np.transpose(G, (0, 2, 1)))
+    left_out = np.linalg.norm(pa_._log(d), axis=1) >= np.pi / 2 if len(d) else np.zeros(0, dtype=bool)
     return ProtocolRows(pa_.opal23_mae(G, Pa), np.ones(pair.n, dtype=bool),
                         scalars={"geodesic": pa_.opal23_geodesic(G, Pa)},
                         counts={"left_out_of_mean": left_out}, reexpressed=rx)
