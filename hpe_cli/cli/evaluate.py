@@ -143,51 +143,8 @@ def evaluate(pred, gt, output, pred_system, gt_system, keys, join_mode, protocol
 evaluate.help = evaluate.help.replace("{protocols}", _protocol_help())
 
 
-def _v(x, w=8):
-    return f"{x:{w}.3f}" if isinstance(x, (int, float)) and x is not None else f"{'-':>{w}}"
-
-
 def format_table(result: dict) -> list:
-    """The readable summary: counts, one line per metric, one line per protocol."""
-    n = result["n"]
-    lines = [f"pairs {n['pairs']} of {n['gt']} GT rows ({n['pred']} predictions): missing {n['missing']}, "
-             f"invalid {n['invalid']}, unmatched predictions {n.get('unmatched_pred', 0)}; "
-             f"systems pred {result['systems']['pred']}, gt {result['systems']['gt']}"]
-    al = result.get("align", {})
-    if al.get("method") == "mean":
-        a = al["offset_angles"]
-        lines.append(f"aligned: removed a constant offset of {al['offset_deg']:.3f} deg "
-                     f"(pitch {a['pitch']:.3f}, yaw {a['yaw']:.3f}, roll {a['roll']:.3f} in {al['gt_system']}); "
-                     f"geodesic mean before {al['before']['metrics']['geodesic']['mean'] or 0:.3f}")
-    m = result["metrics"]
-    g = m["geodesic"]
-    lines.append(f"{'metric':<16}{'pitch':>8}{'yaw':>8}{'roll':>8}{'mean':>8}   detail")
-    lines.append(f"{'geodesic':<16}{'':>24}{_v(g['mean'])}   median {_v(g['median'], 0)}, p90 {_v(g['p90'], 0)}, "
-                 f"p95 {_v(g['p95'], 0)}, max {_v(g['max'], 0)}; within 5/10/15/30: "
-                 + "/".join(f"{g[f'within_{t}']:.3f}" if g[f'within_{t}'] is not None else "-" for t in (5, 10, 15, 30)))
-    mv = m["maev"]
-    lines.append(f"{'maev':<16}{'':>24}{_v(mv['mean'])}   left {_v(mv['left'], 0)}, down {_v(mv['down'], 0)}, "
-                 f"front {_v(mv['front'], 0)}")
-    lines.append(f"{'frobenius':<16}{'':>24}{_v(m['frobenius']['mean'])}   ||I - P G^T||_F (unitless)")
-    for k in ("mae_wrapped", "mae_best_of_two"):
-        e = m[k]
-        lines.append(f"{k:<16}{_v(e['pitch'])}{_v(e['yaw'])}{_v(e['roll'])}{_v(e['mean'])}")
-    if result.get("protocols"):
-        lines.append(f"{'protocol':<16}{'pitch':>8}{'yaw':>8}{'roll':>8}{'mean':>8}{'n':>9}{'dropped':>9}   extras")
-        for name, p in result["protocols"].items():
-            extras = []
-            for k, v in p.items():
-                if k in ("n", "dropped", "pitch", "yaw", "roll", "mean", "system", "source", "notes") or \
-                        k.startswith("rotvec_"):
-                    continue
-                if isinstance(v, dict):
-                    extras.append(f"{k} " + _v(v.get("mean"), 0).strip() + (f" (n {v['n']})" if "n" in v else ""))
-                else:
-                    extras.append(f"{k} {_v(v, 0).strip()}")
-            lines.append(f"{name:<16}{_v(p['pitch'])}{_v(p['yaw'])}{_v(p['roll'])}{_v(p['mean'])}{p['n']:>9}"
-                         f"{p['dropped']:>9}   " + ", ".join(extras))
-        for note in result.get("notes", []):
-            lines.append(f"note: {note}")
-    if result.get("rejects"):
-        lines.append("rejects: " + ", ".join(f"{k} {v}" for k, v in result["rejects"].items()))
-    return lines
+    """The readable summary (see :func:`hpe_cli.report.evaluate_text.summary_lines`)."""
+    from ..report.evaluate_text import summary_lines
+
+    return summary_lines(result)

@@ -57,14 +57,12 @@ def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None) -> Pai
     written for sides given as angles (see :class:`PosePair`).
     """
     pair = PosePair(P, G, gt_system, raw, context)
-    g, _ = pair.written(gt_system, "gt")
+    g, _ = pair.angles(gt_system, "gt")  # hpe's own metrics: primary solutions from the matrices
     p1, p2 = pair.angles(gt_system, "pred")
-    pw, _ = pair.written(gt_system, "pred")
-    gp, _ = pair.angles(gt_system, "gt")
-    best, _ = re_.best_of_two_error(p1, p2, gp)
+    best, _ = re_.best_of_two_error(p1, p2, g)
     protos = {name: PROTOCOLS[name].func(pair) for name in check_protocols(protocols)}
     return PairRows(re_.geodesic_deg(pair.P, pair.G), re_.maev_deg(pair.P, pair.G), re_.frobenius(pair.P, pair.G),
-                    re_.wrapped_error(pw, g), best, g, pw, protos)
+                    re_.wrapped_error(p1, g), best, g, p1, protos)
 
 
 def _f(x) -> float | None:

@@ -394,7 +394,7 @@ def _run_memory(s, rej, writer):
     out = _score(s, _memory_pairs(gt, pred, gv, pv, s.batch_size), rej, gt.system, pred.system, glob, writer,
                  False)
     out[2]["invalid"] = int(invalid.sum())
-    n = {"gt": gt.n, "pred": pred.n, "missing": int(missing.sum()), "unmatched_pred": int(len(unmatched))}
+    n = {"gt": gt.n, "pred": pred.n, "missing": int(missing.sum()), "unmatched_pred": len(unmatched)}
     return out, glob, n, notes, gt, pred
 
 
@@ -458,8 +458,8 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
                   strict=strict, join_mode=join_mode, orthonormalize=orthonormalize, html=html, worst=worst,
                   images=_Images(folder) if folder else None)
     meta = {**system_metadata(gt_system), "hpe:evaluate_pred_system": pred_system.name,
-            "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (as written when the file's angles "
-                                 "mean the same rotation, else the primary solution; pred after --align); err_* "
+            "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution of each "
+                                 "rotation; pred after --align); err_* "
                                  "are wrapped |pred - gt| in [0, 180]; geodesic and maev_* in degrees; frobenius "
                                  "unitless"}
 
@@ -504,7 +504,9 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     if html:
         from ..report.evaluate_page import write_page
 
-        write_page(html, result, worst_rows.frame, overwrite=overwrite, plots=sample.rows())
+        frame = worst_rows.frame.to_pandas() if worst_rows.frame is not None else None
+        write_page(html, result, frame, overwrite=overwrite, plots=sample.rows(),
+                   pictures=_worst_pictures(frame, s.images))
     if report == "-":
         import click
 
@@ -514,6 +516,40 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     elif report:
         write_json(result, report, overwrite=overwrite)
     return result
+
+
+def _worst_pictures(frame, images):
+    """GT and prediction drawn on the face for each worst row (data URIs), via ``hpe draw``'s ``draw_worst``.
+
+    Guarded: without ``hpe_cli.pipelines.draw.draw_worst`` (or when it cannot
+    run) the page embeds no pictures and lists the image paths instead.
+    """
+    if frame is None or not len(frame):
+        return None
+    try:
+        from .draw import draw_worst
+    except (ImportError, AttributeError):
+        return None
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    from ..report.evaluate_page import data_uri
+
+    out = tempfile.mkdtemp(prefix="hpe_eval_worst_")
+    try:
+        try:
+            res = draw_worst(frame, images=images.folder if images is not None else None, out_dir=out,
+                             worst=len(frame), sort_by="geodesic")
+        except (ImportError, AttributeError):
+            return None
+        if isinstance(res, (list, tuple)) and len(res) == len(frame):
+            paths = [Path(p) if p else None for p in res]
+        else:
+            paths = sorted(p for p in Path(out).rglob("*") if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
+        return [data_uri(p) if p is not None and p.is_file() else None for p in paths]
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
 
 
 def _empty_rows(keys):

@@ -32,7 +32,7 @@ def test_shuffled_predictions_score_the_same_against_the_mat_folder(tmp_path):
     # the .mat folder key is the file stem; the prediction file names the .mat: joined on the stems, and said so
     assert any("stem" in n for n in b["notes"])
     # against the golden gt.csv (same labels, same image names): the same numbers as the folder
-    r3, c = _eval(shuffled, PRED.parent / "gt.csv")
+    _, c = _eval(shuffled, PRED.parent / "gt.csv")
     assert c["protocols"]["hopenet"] == b["protocols"]["hopenet"]
 
 

@@ -56,7 +56,7 @@ def test_orthonormalize_matches_polar_decomposition(tmp_path):
     idx = rows["image"].str.slice(3, 6).astype(int).to_numpy()
     # oracle: the orthogonal polar factor (SciPy), with det fixed to +1 by flipping the smallest singular direction
     for k, i in enumerate(idx):
-        U, s, Vt = scipy.linalg.svd(M[i])
+        U, _, Vt = scipy.linalg.svd(M[i])
         R = U @ np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))]) @ Vt
         if np.linalg.det(M[i]) > 0:
             R_polar, _ = scipy.linalg.polar(M[i])
