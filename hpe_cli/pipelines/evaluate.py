@@ -35,7 +35,7 @@ def _add_rejects(rej, side, name, rows, reasons, keycols):
     """Rejected rows of ``side`` (its own file and line), the first one named in the error message."""
     if not len(rows):
         return
-    unit = "row" if str(side.path).lower().endswith((".parquet", ".pq")) else "line"
+    unit = side.unit
     if rej.first_where is None:
         rej.first_where = f"{_where(side, rows[0])}: {reasons[0]}".replace(f"{side.path}: ", "", 0)
         rej.source = side.path
@@ -327,7 +327,7 @@ def _stream_rejects(rej, s, g: Chunk, p: Chunk, bad):
         if m.any():
             rs = c.reasons[m] if c.reasons is not None else np.full(int(m.sum()), "not usable", dtype=object)
             reasons = ("invalid: " + what + " " + rs.astype(str)).astype(object)
-            unit = "row" if str(side.path).lower().endswith((".parquet", ".pq")) else "line"
+            unit = side.unit
             lines = c.lines[m]
             if rej.first_where is None:
                 rej.first_where, rej.source = f"{unit} {int(lines[0])}: {reasons[0]}", side.path

@@ -39,6 +39,7 @@ class Side:
     raw: np.ndarray | None = None  # (N, 3) the angles as written (degrees), when the side holds angles
     dist: np.ndarray | None = None  # (N,) distance to the nearest rotation (--orthonormalize)
     image_dir: object = None  # folder of a dataset reader whose images sit next to the labels
+    unit: str = "line"  # "row" for Parquet
 
     @property
     def n(self) -> int:
@@ -162,6 +163,8 @@ class SideReader:
         self.unreadable: list = []
         self.n = 0
         self.image_dir = src.path if self.dataset_stem else None
+        #: how a row is named in messages: Parquet "row N" (1-based), text "line N" (header = line 1)
+        self.unit = "row" if src.kind == "parquet" else "line"
 
     def chunks(self):
         """Yield one :class:`Chunk` per batch of the table."""
@@ -173,6 +176,8 @@ class SideReader:
                 batch = _stem_key_hook(batch)
             self.unreadable += [(r.line, r.reason) for r in bad_rows]
             lines = batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64)
+            if self.unit == "row":
+                lines = lines - 1  # the Parquet reader numbers rows as lines after a header
             X, ok, rs, raw, dist = _batch_labels(batch, self.system, self.mode, self.radians, self.orthonormalize)
             n = batch.num_rows
             X = self.system.soa_to_canonical(X)
@@ -219,6 +224,7 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     side.raw = cat("raw") if chunks else None
     side.dist = cat("dist") if chunks else None
     side.image_dir = r.image_dir
+    side.unit = r.unit
     return side
 
 
@@ -294,7 +300,7 @@ def _key_codes(gt_keys, pred_keys, keys):
 
 
 def _where(side, row):
-    unit = "row" if str(side.path).lower().endswith((".parquet", ".pq")) else "line"
+    unit = side.unit
     if side.image_dir is not None:
         return f"{side.path}"
     return f"{side.path}: {unit} {int(side.lines[row])}"
@@ -307,7 +313,7 @@ def _check_unique(codes, side, keys):
         first = int(np.flatnonzero(dup)[0])
         again = int(np.flatnonzero(codes == codes[first])[1])
         what = ", ".join(f"{k}={side.keys.column(k)[first].as_py()!r}" for k in keys)
-        unit = "row" if str(side.path).lower().endswith((".parquet", ".pq")) else "line"
+        unit = side.unit
         raise HpeError(f"{_where(side, first)}: duplicate key {what} (again at {unit} {int(side.lines[again])}); "
                        f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
 
@@ -341,7 +347,7 @@ def _add_rejects(rej, side, name, rows, reasons, keycols):
     """Rejected rows of ``side`` (its own file and line), the first one named in the error message."""
     if not len(rows):
         return
-    unit = "row" if str(side.path).lower().endswith((".parquet", ".pq")) else "line"
+    unit = side.unit
     if rej.first_where is None:
         rej.first_where = f"{_where(side, rows[0])}: {reasons[0]}".replace(f"{side.path}: ", "", 0)
         rej.source = side.path

@@ -88,3 +88,17 @@ def test_header_only_prediction_file_is_one_line_error(tmp_path):
     r, _ = _eval(pred, AFLW)
     assert r.exit_code == 1 and "empty.csv" in r.output and "header only" in r.output
     assert len(r.output.strip().splitlines()) == 1
+
+
+def test_bad_parquet_prediction_row_is_named_by_row_number(tmp_path):
+    p = pd.read_csv(PRED)
+    p.loc[2, "yaw"] = float("nan")  # the third row of the table
+    pred = tmp_path / "pred.parquet"
+    p.to_parquet(pred, index=False)
+    for extra in ((), ("--key", "image")):
+        r, _ = _eval(pred, PRED.parent / "gt.csv", *extra)
+        assert r.exit_code == 1 and f"{pred}: row 3:" in r.output, r.output
+    shuffled = tmp_path / "shuffled.parquet"
+    p.iloc[::-1].to_parquet(shuffled, index=False)  # in-memory join: the same row, now row 14
+    r, _ = _eval(shuffled, PRED.parent / "gt.csv")
+    assert r.exit_code == 1 and f"{shuffled}: row 14:" in r.output, r.output
