@@ -79,19 +79,29 @@ class _Grouping:
 
     def add(self, rows, codes):
         G = self.n
+        single = codes is None  # one group (all rows): plain sums, no bincount
         for path, mask, values in _items(rows):
-            c = codes if mask is None else codes[mask]
-            cnt = np.bincount(c, minlength=G).astype(np.float64)
+            if single:
+                cnt = np.array([float(len(rows.geodesic) if mask is None else np.count_nonzero(mask))])
+            else:
+                c = codes if mask is None else codes[mask]
+                cnt = np.bincount(c, minlength=G).astype(np.float64)
             self.counts[path] = self.counts.get(path, np.zeros(G)) + cnt
             if values is not None:
                 v = values if mask is None else values[mask]
-                s = np.bincount(c, weights=v, minlength=G) if len(c) else np.zeros(G)
+                if single:
+                    s = np.array([float(np.sum(v))])
+                else:
+                    s = np.bincount(c, weights=v, minlength=G) if len(c) else np.zeros(G)
                 self.sums[path] = self.sums.get(path, np.zeros(G)) + s
         for name, pr in rows.protocols.items():
             for side, m in pr.reexpressed.items():
                 if m is None:
                     self.static[("p", name, "rx", side)] = "from matrix"
-        if len(codes):
+        if single:
+            if len(rows.geodesic):
+                self.max[0] = max(self.max[0], float(rows.geodesic.max()))
+        elif len(codes):
             np.maximum.at(self.max, codes, rows.geodesic)
 
     def mean(self, path, g):
@@ -164,7 +174,7 @@ class Accumulator:
         """Add one chunk of per-row results (``PairRows``) and its ``--by`` values."""
         n = rows.n
         self.n += n
-        self.all.add(rows, np.zeros(n, dtype=np.int64))
+        self.all.add(rows, None)
         if self.percentiles:
             self._spill("geo", rows.geodesic.astype(np.float32))
         if self.by is not None:
