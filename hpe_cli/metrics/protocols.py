@@ -101,7 +101,7 @@ class PosePair:
             out = (conv, None)
         else:
             rsys, a = get_system(raw[0]), np.asarray(raw[1], dtype=np.float64)
-            if rsys.name == system.name:
+            if rsys.name == system.name or _same_angles(rsys, system):
                 out = (a, np.zeros(self.n, dtype=bool))
             else:
                 X = system.soa_to_canonical(system.soa_from_angles(a[:, 0], a[:, 1], a[:, 2]))
@@ -117,6 +117,28 @@ class PosePair:
     def array(self, system, side: str) -> np.ndarray:
         """Stored matrices of ``side`` in ``system`` as ``(N, 3, 3)``."""
         return pa_.stack3(self.stored(system, side))
+
+
+_SAME: dict = {}
+
+
+def _same_angles(a, b) -> bool:
+    """True when (pitch, yaw, roll) mean the same rotation in systems ``a`` and ``b`` for EVERY triple.
+
+    Checked once per pair of systems on 2,000 triples spread over the whole
+    [-180, 180]^3 cube (other solutions, past-range yaws, gimbal lock
+    included): e.g. 300w_lp and 6drepnet angles are the same numbers.
+    """
+    key = (a.name, b.name)
+    if key not in _SAME:
+        rng = np.random.default_rng(0)
+        t = np.concatenate([rng.uniform(-180, 180, (1900, 3)),
+                            np.c_[rng.uniform(-180, 180, 100), np.repeat([90.0, -90.0], 50), rng.uniform(-180, 180, 100)]])
+        Xa = a.soa_to_canonical(a.soa_from_angles(t[:, 0], t[:, 1], t[:, 2]))
+        Xb = b.soa_to_canonical(b.soa_from_angles(t[:, 0], t[:, 1], t[:, 2]))
+        _SAME[key] = all(np.allclose(np.broadcast_to(Xa[i][j], (len(t),)), np.broadcast_to(Xb[i][j], (len(t),)),
+                                     atol=1e-12, rtol=0) for i in range(3) for j in range(3))
+    return _SAME[key]
 
 
 @dataclass
