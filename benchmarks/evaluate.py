@@ -123,21 +123,24 @@ def main():
         t_floor = time.perf_counter() - t
         print(f"  floor (pyarrow stream + numpy geodesic)  {t_floor:7.2f} s  {n / t_floor / 1e6:6.2f} M pairs/s  "
               f"peak RSS {int(out[2]):,} MB  (geodesic mean {float(out[1]):.3f})")
-        cmd = [sys.executable, "-c", HPE, "evaluate", str(folder / "pred.parquet"), str(folder / "gt.parquet"),
-               "--pred-system", "6drepnet", "--gt-system", "300w_lp", "-o", str(folder / "errors.parquet"),
-               "--json", str(folder / "report.json"), "-q"]
-        if "all" not in protocols:
-            for p in protocols:
-                cmd += ["--protocol", p]
-        t = time.perf_counter()
-        r = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
-        t_hpe = time.perf_counter() - t
-        hwm = int(r.stderr.split("VmHWM_MB")[1].split()[0])
-        rep = json.loads((folder / "report.json").read_text())
-        assert rep["n"]["pairs"] == n, rep["n"]
-        print(f"  hpe evaluate (-o rows.parquet --json)     {t_hpe:7.2f} s  {n / t_hpe / 1e6:6.2f} M pairs/s  "
-              f"peak RSS {hwm:,} MB  ({t_hpe / t_floor:.2f}x the floor; {rep['inputs']['paired']}; "
-              f"geodesic mean {rep['metrics']['geodesic']['mean']:.3f}, median {rep['metrics']['geodesic']['median']:.3f})")
+        for label, extra in (("hpe evaluate --json", []), ("hpe evaluate --json -o rows.parquet",
+                                                           ["-o", str(folder / "errors.parquet")])):
+            cmd = [sys.executable, "-c", HPE, "evaluate", str(folder / "pred.parquet"), str(folder / "gt.parquet"),
+                   "--pred-system", "6drepnet", "--gt-system", "300w_lp", "--json", str(folder / "report.json"),
+                   "-q", "--overwrite", *extra]
+            if "all" not in protocols:
+                for p in protocols:
+                    cmd += ["--protocol", p]
+            t = time.perf_counter()
+            r = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
+            t_hpe = time.perf_counter() - t
+            hwm = int(r.stderr.split("VmHWM_MB")[1].split()[0])
+            rep = json.loads((folder / "report.json").read_text())
+            assert rep["n"]["pairs"] == n, rep["n"]
+            g = rep["metrics"]["geodesic"]
+            print(f"  {label:<40} {t_hpe:7.2f} s  {n / t_hpe / 1e6:6.2f} M pairs/s  peak RSS {hwm:,} MB  "
+                  f"({t_hpe / t_floor:.2f}x the floor; {rep['inputs']['paired']}; geodesic mean {g['mean']:.3f}, "
+                  f"median {g['median']:.3f})")
 
 
 if __name__ == "__main__":

@@ -95,15 +95,15 @@ class PosePair:
         key = ("written", system.name, side)
         if key in self._cache:
             return self._cache[key]
-        conv, _ = self.angles(system, side)
         raw = self.raw.get(side)
         if raw is None:
-            out = (conv, None)
+            out = (self.angles(system, side)[0], None)
         else:
             rsys, a = get_system(raw[0]), np.asarray(raw[1], dtype=np.float64)
             if rsys.name == system.name or _same_angles(rsys, system):
                 out = (a, np.zeros(self.n, dtype=bool))
             else:
+                conv, _ = self.angles(system, side)
                 X = system.soa_to_canonical(system.soa_from_angles(a[:, 0], a[:, 1], a[:, 2]))
                 C = self.P if side == "pred" else self.G
                 same = np.ones(self.n, dtype=bool)
