@@ -35,8 +35,9 @@ def _split_keys(ctx, param, value):
 @click.argument("pred", type=click.Path(exists=True))
 @click.argument("gt", type=click.Path(exists=True))
 @output_option(required=False, help="Per-pair errors (.parquet or .csv): key columns, gt_/pred_ pitch,yaw,roll "
-                                    "in the GT system, err_pitch/yaw/roll (wrapped), geodesic, maev_left/down/"
-                                    "front, frobenius.")
+                                    "in the GT system (Parquet metadata hpe:system), err_pitch/yaw/roll (wrapped), "
+                                    "geodesic, maev_left/down/front (degrees), frobenius (unitless), "
+                                    "pred_rotation_distance (--orthonormalize), image_path (when images are found).")
 @click.option("--pred-system", type=SYSTEM, required=True, help="Rotation system of PRED (name or .toml).")
 @click.option("--gt-system", type=SYSTEM, required=True, help="Rotation system of GT (name or .toml).")
 @click.option("--key", "keys", multiple=True, callback=_split_keys, metavar="COL[,COL...]",
@@ -114,6 +115,9 @@ def evaluate(pred, gt, output, pred_system, gt_system, keys, join_mode, protocol
       hpe evaluate preds.csv gt.csv --pred-system opencv --gt-system biwi --key image,person_id \\
           --align mean --by sequence --yaw-bins 15 --plots eval_plots/ --rejects rejects.csv
       hpe evaluate preds.csv gt.csv --pred-system 6drepnet --gt-system 300w_lp --columns matrix --json -
+      hpe evaluate trinet_raw.csv gt.csv --pred-system trinet --gt-system 300w_lp --orthonormalize -o rows.parquet
+      hpe evaluate preds.csv AFLW2000/ --pred-system 300w_lp --gt-system 300w_lp --report page.html --worst 20
+      hpe evaluate preds_in_gt_order.csv gt.csv --pred-system 300w_lp --gt-system 300w_lp --join order
     """
     from ..pipelines.evaluate import JoinUsageError, run_evaluate
 

@@ -298,6 +298,10 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 P = remove_offset(P, glob["Q"])
             rows = compute_rows(P, G, gsys, s.protocols, _raw(g, p, gsys, psys, aligned=before is not None), ctx)
             counts["pairs"] += rows.n
+            if p.dist is not None and len(p.dist):
+                counts["orthonormalized"] = counts.get("orthonormalized", 0) + int((p.dist > 1e-6).sum())
+                counts["dist_sum"] = counts.get("dist_sum", 0.0) + float(p.dist.sum())
+                counts["dist_max"] = max(counts.get("dist_max", 0.0), float(p.dist.max()))
             acc.add(rows, by_values)
             sample.add(rows)
             if writer is not None or worst.n:
@@ -484,6 +488,12 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
               "systems": {"pred": pside.system.name, "gt": gside.system.name}}
     if gside.unreadable or pside.unreadable:
         result["n"]["unreadable"] = len(gside.unreadable) + len(pside.unreadable)
+    if orthonormalize:
+        result["n"]["orthonormalized"] = counts.get("orthonormalized", 0)
+        result["orthonormalize"] = {"method": "nearest rotation (SVD, det +1) of each prediction matrix",
+                                    "max_distance": counts.get("dist_max"),
+                                    "mean_distance": counts["dist_sum"] / counts["pairs"] if counts.get("pairs")
+                                    and "dist_sum" in counts else None}
     result["align"] = _align_block(glob, rep_before, gside.system) if align == "mean" else {"method": "none"}
     result["metrics"], result["protocols"] = rep["metrics"], rep["protocols"]
     if by:
