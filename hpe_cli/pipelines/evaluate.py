@@ -27,6 +27,14 @@ from .evaluate_join import (  # noqa: F401
     lockstep,
     read_side,
 )
+from .evaluate_outputs import (
+    Images,
+    Sample,
+    Worst,
+    empty_rows,
+    row_table,
+    worst_pictures,
+)
 
 ANGLES = ("pitch", "yaw", "roll")
 
@@ -160,115 +168,6 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
         os.unlink(path)
 
 
-class _Worst:
-    """The ``n`` pairs with the largest geodesic error, kept across chunks."""
-
-    def __init__(self, n: int):
-        self.n = n
-        self.frame = None
-
-    def add(self, table):
-        import pyarrow as pa
-        import pyarrow.compute as pc
-
-        if not self.n or not table.num_rows:
-            return
-        if table.num_rows > self.n:
-            geo = table.column("geodesic").to_numpy()
-            table = table.take(pa.array(np.argpartition(-geo, self.n - 1)[:self.n]))
-        t = table if self.frame is None else pa.concat_tables([self.frame, table], promote_options="permissive")
-        order = pc.sort_indices(t, sort_keys=[("geodesic", "descending")])
-        self.frame = t.take(order).slice(0, self.n)
-
-
-class _Sample:
-    """Rows kept for the plots: all of them up to ``cap``, then every k-th (k doubling), float32."""
-
-    def __init__(self, cap: int = 400_000):
-        self.cap, self.step, self.seen = cap, 1, 0
-        self.parts: list = []
-
-    def add(self, rows):
-        n = rows.n
-        idx = np.arange((-self.seen) % self.step, n, self.step)
-        self.seen += n
-        part = np.column_stack([rows.gt_angles[idx, 1], rows.geodesic[idx], rows.mae_wrapped[idx]]).astype(np.float32)
-        self.parts.append(part)
-        if sum(len(p) for p in self.parts) > self.cap:
-            allp = np.concatenate(self.parts)
-            self.parts = [allp[::2]]
-            self.step *= 2
-
-    def rows(self):
-        from types import SimpleNamespace
-
-        a = np.concatenate(self.parts) if self.parts else np.zeros((0, 5), dtype=np.float32)
-        a = a.astype(np.float64)
-        gt = np.zeros((len(a), 3))
-        gt[:, 1] = a[:, 0]
-        return SimpleNamespace(n=len(a), gt_angles=gt, geodesic=a[:, 1], mae_wrapped=a[:, 2:5], step=self.step)
-
-
-def _row_table(rows, g: Chunk, p: Chunk, keys, by, by_values, images):
-    """The per-row output of one chunk: keys, angles in the GT system, errors, extras."""
-    import pyarrow as pa
-
-    cols = {}
-    if keys:
-        for k in keys:
-            cols[k] = g.keys.column(k)
-    else:
-        cols["gt_line"] = pa.array(g.lines)
-        cols["pred_line"] = pa.array(p.lines)
-    if by and by not in cols:
-        cols[by] = pa.array(by_values)
-    for k, a in enumerate(ANGLES):
-        cols[f"gt_{a}"] = pa.array(rows.gt_angles[:, k])
-    for k, a in enumerate(ANGLES):
-        cols[f"pred_{a}"] = pa.array(rows.pred_angles[:, k])
-    for k, a in enumerate(ANGLES):
-        cols[f"err_{a}"] = pa.array(rows.mae_wrapped[:, k])
-    cols["geodesic"] = pa.array(rows.geodesic)
-    for k, a in enumerate(("left", "down", "front")):
-        cols[f"maev_{a}"] = pa.array(rows.maev[:, k])
-    cols["frobenius"] = pa.array(rows.frobenius)
-    if p.dist is not None:
-        cols["pred_rotation_distance"] = pa.array(p.dist)
-    if images is not None and g.keys is not None and "image" in g.keys.column_names:
-        cols["image_path"] = images.paths(g.keys.column("image"))
-    return pa.table({k: (v.combine_chunks() if isinstance(v, pa.ChunkedArray) else v) for k, v in cols.items()})
-
-
-class _Images:
-    """Image files of one folder by stem (listed once), for the per-row output and the report's pictures."""
-
-    def __init__(self, folder):
-        import os
-
-        self.folder = folder
-        exts = (".jpg", ".jpeg", ".png", ".bmp")
-        self.by_stem = {}
-        for name in sorted(os.listdir(folder)):
-            stem, ext = os.path.splitext(name)
-            if ext.lower() in exts:
-                self.by_stem.setdefault(stem, os.path.join(folder, name))
-
-    def paths(self, names):
-        """The image path of each name (matched on the file stem), '' when the folder has none."""
-        import pyarrow as pa
-        import pyarrow.compute as pc
-
-        from .evaluate_join import _stems
-
-        if isinstance(names, pa.ChunkedArray):
-            names = names.combine_chunks()
-        stems = _stems(pc.cast(names, pa.string()))
-        idx = pc.index_in(stems, value_set=pa.array(list(self.by_stem), pa.string()))
-        out = pa.array(list(self.by_stem.values()), pa.string()).take(pc.fill_null(idx, 0)) if self.by_stem \
-            else pa.nulls(len(stems), pa.string())
-        return pc.if_else(pc.is_null(idx), "", out)
-
-
 def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     """Score every chunk of pairs: accumulate, write rows, keep the worst and a plot sample."""
     from ..metrics.align import remove_offset
@@ -280,7 +179,7 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     edges = yaw_bin_edges(gsys, float(s.yaw_bins)) if s.yaw_bins else None
     acc = Accumulator(protos, edges, by=bool(s.by))
     before = Accumulator(protos, None, by=False, percentiles=True) if s.align == "mean" else None
-    worst, sample = _Worst(s.worst if s.html else 0), _Sample()
+    worst, sample = Worst(s.worst if s.html else 0), Sample()
     ctx = {"opal23_mean": glob["opal23_mean"]} if "opal23_mean" in glob else {}
     counts = {"pairs": 0, "invalid": 0}
     try:
@@ -305,7 +204,7 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             acc.add(rows, by_values)
             sample.add(rows)
             if writer is not None or worst.n:
-                t = _row_table(rows, g, p, s.keys, s.by, by_values, s.images)
+                t = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
                 if writer is not None:
                     writer.write(t)
                 worst.add(t)
@@ -426,6 +325,36 @@ def _align_block(glob, rep_before, gsys) -> dict:
             "before": {"metrics": rep_before["metrics"], "protocols": rep_before["protocols"]}}
 
 
+def _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed) -> dict:
+    """The report dict of one run."""
+    from ..metrics.protocols import PROTOCOLS
+
+    result = {"n": {"gt": n["gt"], "pred": n["pred"], "pairs": counts["pairs"], "missing": n["missing"],
+                    "invalid": counts["invalid"], "unmatched_pred": n["unmatched_pred"]},
+              "systems": {"pred": pside.system.name, "gt": gside.system.name}}
+    if gside.unreadable or pside.unreadable:
+        result["n"]["unreadable"] = len(gside.unreadable) + len(pside.unreadable)
+    if s.orthonormalize:
+        result["n"]["orthonormalized"] = counts.get("orthonormalized", 0)
+        result["orthonormalize"] = {"method": "nearest rotation (SVD, det +1) of each prediction matrix",
+                                    "max_distance": counts.get("dist_max"),
+                                    "mean_distance": counts["dist_sum"] / counts["pairs"] if counts.get("pairs")
+                                    and "dist_sum" in counts else None}
+    result["align"] = _align_block(glob, rep_before, gside.system) if s.align == "mean" else {"method": "none"}
+    result["metrics"], result["protocols"] = rep["metrics"], rep["protocols"]
+    if s.by:
+        result["by"] = {"column": s.by, "groups": rep["by_groups"]}
+    if s.yaw_bins:
+        result["yaw_bins"] = rep["yaw_bins"]
+    result["inputs"] = {"pred": str(pside.path), "gt": str(gside.path), "key": s.keys or "row order",
+                        "join": s.join_mode, "paired": "streamed in file order" if streamed else "joined in memory",
+                        "columns": {"pred": pside.mode, "gt": gside.mode}}
+    result["notes"] = list(notes) + [f"{name}: {note}" for name in s.protocols for note in PROTOCOLS[name].notes]
+    if rej.counts:
+        result["rejects"] = dict(rej.counts)
+    return result
+
+
 def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, keys=(), protocols=None,
                  align="none", by=None, yaw_bins=None, report=None, plots=None, rejects=None, use_pred="auto",
                  use_gt="auto", radians=False, overwrite=False, batch_size=262_144, progress=None,
@@ -434,7 +363,6 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     from ..io import TableWriter, open_table, system_metadata, write_json
     from ..io.writers import check_report_outputs
     from ..metrics.evaluate import check_protocols
-    from ..metrics.protocols import PROTOCOLS
 
     try:
         protocols = check_protocols(protocols or None)
@@ -460,7 +388,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
                   protocols=protocols, align=align, by=by, yaw_bins=yaw_bins, rejects=rejects, use_pred=use_pred,
                   use_gt=use_gt, radians=radians, overwrite=overwrite, batch_size=batch_size, progress=progress,
                   strict=strict, join_mode=join_mode, orthonormalize=orthonormalize, html=html, worst=worst,
-                  images=_Images(folder) if folder else None)
+                  images=Images(folder) if folder else None)
     meta = {**system_metadata(gt_system), "hpe:evaluate_pred_system": pred_system.name,
             "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution of each "
                                  "rotation; pred after --align); err_* "
@@ -472,7 +400,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
             with TableWriter(output, overwrite, meta) as w:
                 res = _run(s, w, stream)
                 if w.rows == 0:
-                    w.write(_empty_rows(keys))
+                    w.write(empty_rows(keys))
                 return res
         return _run(s, None, stream)
 
@@ -483,29 +411,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         out, glob, n, notes, gside, pside, rej = attempt(False)
         streamed = False
     (rep, rep_before, counts, worst_rows, sample) = out
-    result = {"n": {"gt": n["gt"], "pred": n["pred"], "pairs": counts["pairs"], "missing": n["missing"],
-                    "invalid": counts["invalid"], "unmatched_pred": n["unmatched_pred"]},
-              "systems": {"pred": pside.system.name, "gt": gside.system.name}}
-    if gside.unreadable or pside.unreadable:
-        result["n"]["unreadable"] = len(gside.unreadable) + len(pside.unreadable)
-    if orthonormalize:
-        result["n"]["orthonormalized"] = counts.get("orthonormalized", 0)
-        result["orthonormalize"] = {"method": "nearest rotation (SVD, det +1) of each prediction matrix",
-                                    "max_distance": counts.get("dist_max"),
-                                    "mean_distance": counts["dist_sum"] / counts["pairs"] if counts.get("pairs")
-                                    and "dist_sum" in counts else None}
-    result["align"] = _align_block(glob, rep_before, gside.system) if align == "mean" else {"method": "none"}
-    result["metrics"], result["protocols"] = rep["metrics"], rep["protocols"]
-    if by:
-        result["by"] = {"column": by, "groups": rep["by_groups"]}
-    if yaw_bins:
-        result["yaw_bins"] = rep["yaw_bins"]
-    result["inputs"] = {"pred": str(pside.path), "gt": str(gside.path), "key": keys or "row order",
-                        "join": join_mode, "paired": "streamed in file order" if streamed else "joined in memory",
-                        "columns": {"pred": pside.mode, "gt": gside.mode}}
-    result["notes"] = list(notes) + [f"{name}: {note}" for name in protocols for note in PROTOCOLS[name].notes]
-    if rej.counts:
-        result["rejects"] = dict(rej.counts)
+    result = _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed)
     rej.write()
     if plots:
         from ..io.eval_plots import write_eval_plots
@@ -516,7 +422,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
 
         frame = worst_rows.frame.to_pandas() if worst_rows.frame is not None else None
         write_page(html, result, frame, overwrite=overwrite, plots=sample.rows(),
-                   pictures=_worst_pictures(frame, s.images))
+                   pictures=worst_pictures(frame, s.images))
     if report == "-":
         import click
 
@@ -528,45 +434,3 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     return result
 
 
-def _worst_pictures(frame, images):
-    """GT and prediction drawn on the face for each worst row (data URIs), via ``hpe draw``'s ``draw_worst``.
-
-    Guarded: without ``hpe_cli.pipelines.draw.draw_worst`` (or when it cannot
-    run) the page embeds no pictures and lists the image paths instead.
-    """
-    if frame is None or not len(frame):
-        return None
-    try:
-        from .draw import draw_worst
-    except (ImportError, AttributeError):
-        return None
-    import shutil
-    import tempfile
-    from pathlib import Path
-
-    from ..report.evaluate_page import data_uri
-
-    out = tempfile.mkdtemp(prefix="hpe_eval_worst_")
-    try:
-        try:
-            res = draw_worst(frame, images=images.folder if images is not None else None, out_dir=out,
-                             worst=len(frame), sort_by="geodesic")
-        except (ImportError, AttributeError):
-            return None
-        if isinstance(res, (list, tuple)) and len(res) == len(frame):
-            paths = [Path(p) if p else None for p in res]
-        else:
-            paths = sorted(p for p in Path(out).rglob("*") if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
-        return [data_uri(p) if p is not None and p.is_file() else None for p in paths]
-    finally:
-        shutil.rmtree(out, ignore_errors=True)
-
-
-def _empty_rows(keys):
-    import pyarrow as pa
-
-    cols = {k: pa.array([], pa.string()) for k in keys}
-    for pre in ("gt_", "pred_", "err_"):
-        cols.update({pre + a: pa.array([], pa.float64()) for a in ANGLES})
-    cols["geodesic"] = pa.array([], pa.float64())
-    return pa.table(cols)
