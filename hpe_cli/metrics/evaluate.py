@@ -1,8 +1,9 @@
 """Score predictions against ground truth: core metrics, protocols, alignment, breakdowns (pure numpy).
 
-:func:`evaluate` is the array API (``hpe_cli.evaluate``); ``hpe evaluate``
-(:mod:`hpe_cli.pipelines.evaluate`) reads and joins tables, then calls
-:func:`evaluate_canonical`, so both return the same report dict.
+:func:`evaluate` is the array API (``hpe_cli.evaluate``, whole arrays in memory). ``hpe evaluate``
+(:mod:`hpe_cli.pipelines.evaluate`) reads and pairs tables chunk by chunk, scores each chunk with
+:func:`compute_rows` and sums the results with :class:`hpe_cli.metrics.stream.Accumulator`; both give the same
+report blocks (tested in ``tests/evaluate/test_evaluate_streaming.py``).
 """
 from __future__ import annotations
 
