@@ -25,6 +25,7 @@ from .evaluate_join import (  # noqa: F401
     _where,
     join,
     lockstep,
+    prefetch,
     read_side,
 )
 from .evaluate_outputs import (
@@ -266,7 +267,8 @@ def _run_stream(s, rej, writer):
     gr, pr = _readers(s, s.progress)
     s.gside, s.pside = gr, pr
     glob = _globals(s, factory, gr.system, pr.system)
-    out = _score(s, lockstep(gr, pr, s.keys, s.join_mode, notes), rej, gr.system, pr.system, glob, writer, True)
+    out = _score(s, prefetch(lockstep(gr, pr, s.keys, s.join_mode, notes)), rej, gr.system, pr.system, glob,
+                 writer, True)
     if s.join_mode == "order" and (gr.unreadable or pr.unreadable):
         side = gr if gr.unreadable else pr
         raise HpeError(f"{side.path}: line {side.unreadable[0][0]}: unreadable row ({side.unreadable[0][1]}): "

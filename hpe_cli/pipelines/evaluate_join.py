@@ -403,6 +403,7 @@ def _same_keys(g: Chunk, p: Chunk, keys, notes: set) -> None:
 
     for k in keys:
         a, b = g.keys.column(k), p.keys.column(k)
+        a, b = (x.cast(x.type.value_type) if pa.types.is_dictionary(x.type) else x for x in (a, b))
         if a.type != b.type:
             a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
         if pc.all(pc.equal(a, b)).as_py() is not False and a.null_count == 0 and b.null_count == 0:
@@ -455,3 +456,27 @@ def lockstep(gr: SideReader, pr: SideReader, keys, join_mode: str, notes: set):
             raise JoinUsageError(f"{pr.path}: --join order pairs rows by position and needs equal row counts; "
                                  f"got {pr.n} predictions and {gr.n} ground-truth rows in {gr.path}")
         raise Unaligned("row counts")
+
+
+_END = object()
+
+
+def prefetch(gen):
+    """Iterate ``gen`` one item ahead in one worker thread (Parquet/CSV decoding and numpy release the GIL).
+
+    The worker only ever runs one ``next(gen)`` at a time and is joined before
+    this generator returns or raises, so no thread outlives the run.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    ex = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-read")
+    try:
+        fut = ex.submit(next, gen, _END)
+        while True:
+            item = fut.result()
+            if item is _END:
+                return
+            fut = ex.submit(next, gen, _END)
+            yield item
+    finally:
+        ex.shutdown(wait=True, cancel_futures=True)
