@@ -17,6 +17,8 @@ import numpy as np
 
 UNITS = {"geodesic": "deg", "maev": "deg", "frobenius": "unitless", "mae_wrapped": "deg", "mae_best_of_two": "deg"}
 ANGLES = ("pitch", "yaw", "roll")
+#: rows per --by / --yaw-bins table on the page (the JSON report holds every group)
+MAX_GROUPS = 500
 _SKIP = {"n", "dropped", "pitch", "yaw", "roll", "mean", "system", "source", "notes", "units", "re_expressed"}
 
 
@@ -101,12 +103,15 @@ def _group_table(label, groups, protocols) -> str:
     head = [html.escape(label), "n", "geodesic mean (deg)", "median", "p90", "mae_wrapped (deg)", "maev (deg)"] + \
         [f"{html.escape(n)} ({'unitless' if protocols[n].get('units') == 'unitless' else 'deg'})" for n in names]
     rows = []
-    for key, s in groups:
+    groups = list(groups)
+    for key, s in groups[:MAX_GROUPS]:
         g = s["metrics"]["geodesic"]
         rows.append([html.escape(str(key)), _f(s["n"]), _f(g["mean"]), _f(g["median"]), _f(g["p90"]),
                      _f(s["metrics"]["mae_wrapped"]["mean"]), _f(s["metrics"]["maev"]["mean"])] +
                     [_f(s["protocols"][n].get("mean")) for n in names])
-    return _table(head, rows, "groups")
+    more = len(groups) - MAX_GROUPS
+    note = f"<p class='note'>{more:,} more groups: see the JSON report</p>" if more > 0 else ""
+    return _table(head, rows, "groups") + note
 
 
 def _png(fig) -> str:

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 ANGLES = ("pitch", "yaw", "roll")
+#: groups printed per --by / --yaw-bins table (the JSON and the HTML page hold more)
+MAX_GROUPS = 40
 _SKIP = {"n", "dropped", "pitch", "yaw", "roll", "mean", "system", "source", "notes", "units", "re_expressed"}
 
 
@@ -73,11 +75,14 @@ def _groups(title, groups, protocols) -> list:
     head = f"{title:<{w}}{'n':>9}{'geo mean':>10}{'median':>9}{'p90':>9}{'mae_wr':>9}" + \
         "".join(f"{n[:10]:>11}" for n in names)
     out = [head]
-    for k, s in groups:
+    more = len(groups) - MAX_GROUPS
+    for k, s in groups[:MAX_GROUPS]:
         g = s["metrics"]["geodesic"]
         out.append(f"{k!s:<{w}}{s['n']:>9}{_v(g['mean'], 10)}{_v(g['median'], 9)}{_v(g['p90'], 9)}"
                    f"{_v(s['metrics']['mae_wrapped']['mean'], 9)}" +
                    "".join(_v(s["protocols"][n].get("mean"), 11) for n in names))
+    if more > 0:
+        out.append(f"... {more} more groups (all of them in --json and --report)")
     return out
 
 
