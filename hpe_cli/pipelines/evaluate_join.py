@@ -191,38 +191,49 @@ class SideReader:
 
 def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None, role="input",
               orthonormalize=False) -> Side:
-    """Read one table whole into a :class:`Side` (for the in-memory key join)."""
+    """Read one table whole into a :class:`Side` (for the in-memory key join).
+
+    Each field is gathered as a list of chunk arrays and concatenated (and its
+    list freed) one field at a time, so the peak is one field above the data.
+    """
     import pyarrow as pa
 
     r = SideReader(path, system, use, keys, by, radians, batch_size, progress, orthonormalize)
-    chunks = list(r.chunks())
+    parts: dict = {f"c{k}": [] for k in range(9)}
+    parts.update(ok=[], reasons=[], raw=[], dist=[], keys=[], by=[], lines=[])
+    any_reasons = False
+    for c in r.chunks():
+        for k in range(9):
+            parts[f"c{k}"].append(c.canonical[k])
+        any_reasons |= c.reasons is not None
+        for name in ("ok", "reasons", "raw", "dist", "keys", "by", "lines"):
+            v = getattr(c, name)
+            parts[name].append(np.full(c.n, "", dtype=object) if name == "reasons" and v is None else v)
 
-    def cat(name, dtype=np.float64):
-        parts = [getattr(c, name) for c in chunks]
-        if parts and all(p is not None for p in parts):
-            return np.concatenate(parts)
-        return None
+    def cat(name, empty=None):
+        lst, parts[name] = parts[name], None
+        if not lst:
+            return empty
+        if any(x is None for x in lst):
+            return None
+        return np.concatenate(lst)
 
-    canonical = [np.concatenate([c.canonical[k] for c in chunks]) if chunks else np.zeros(0) for k in range(9)]
-    ok = np.concatenate([c.ok for c in chunks]) if chunks else np.zeros(0, dtype=bool)
-    rs_all = None
-    if any(c.reasons is not None for c in chunks):
-        rs_all = np.concatenate([c.reasons if c.reasons is not None else np.full(c.n, "", dtype=object)
-                                 for c in chunks])
+    canonical = [cat(f"c{k}", np.zeros(0)) for k in range(9)]
+    ok = cat("ok", np.zeros(0, dtype=bool))
+    rs_all = cat("reasons") if any_reasons else None
     table = None
     if r.keep:
-        import pyarrow as pa
-
-        if chunks:
-            table = pa.Table.from_batches([c.keys for c in chunks])
+        if parts["keys"]:
+            table = pa.Table.from_batches(parts["keys"])
         else:
             table = pa.schema([r.src.schema.field(c) if c in r.src.schema.names else pa.field(c, pa.string())
                                for c in r.keep]).empty_table()
+    parts["keys"] = None
     by_values = cat("by") if r.by else None
-    lines = np.concatenate([c.lines for c in chunks]) if chunks else np.zeros(0, dtype=np.int64)
+    lines = cat("lines", np.zeros(0, dtype=np.int64))
     side = Side(r.path, r.system, r.mode, canonical, ok, rs_all, table, by_values, r.columns, lines, r.unreadable)
-    side.raw = cat("raw") if chunks else None
-    side.dist = cat("dist") if chunks else None
+    side.raw = cat("raw")
+    side.dist = cat("dist")
     side.image_dir = r.image_dir
     side.unit = r.unit
     return side
