@@ -3,10 +3,17 @@ from __future__ import annotations
 
 import click
 
+from .options import (
+    SYSTEM,
+    batch_option,
+    echo_summary,
+    output_option,
+    overwrite_option,
+    progress,
+    rejects_options,
+    verbosity_options,
+)
 from .table_options import column_options
-
-from .options import SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, \
-    rejects_options, verbosity_options
 
 _PROTOCOL_NAMES = ("hopenet", "fsanet", "6drepnet", "6drepnet360", "6drepnet360-2023", "directmhp",
                    "directmhp-single", "whenet", "opal23", "opal23-align", "headposeplus", "img2pose", "trinet",

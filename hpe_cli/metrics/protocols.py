@@ -15,8 +15,8 @@ reproduces (see :data:`PROTOCOLS`).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

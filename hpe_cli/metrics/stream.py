@@ -109,7 +109,7 @@ class _Grouping:
         if c is None or not c[g]:
             return None
         v = self.sums[path][g] / c[g]
-        return None if v != v else float(v)
+        return None if np.isnan(v) else float(v)
 
     def count(self, path, g) -> int:
         c = self.counts.get(path)
@@ -309,7 +309,7 @@ class Accumulator:
 def _plain(u):
     if isinstance(u, np.generic):
         u = u.item()
-    if isinstance(u, float) and u != u:
+    if isinstance(u, float) and np.isnan(u):
         return "NaN"
     return u if isinstance(u, (str, int, float, bool)) or u is None else str(u)
 
