@@ -186,14 +186,17 @@ def test_row_order_join_and_count_mismatch(tmp_path):
     gt, df = _gt_table(tmp_path, n=8)
     pred = tmp_path / "pred.csv"
     df[["pitch", "yaw", "roll"]].to_csv(pred, index=False)
+    # no shared key: a usage error unless --join order says so (issue 20: joins by key only)
+    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-q", "--protocol", "hopenet")
+    assert r.exit_code == 2 and "--key" in r.output and "--join order" in r.output
     r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--json", "-", "-q",
-            "--protocol", "hopenet")
+            "--protocol", "hopenet", "--join", "order")
     assert r.exit_code == 0, r.output
     assert json.loads(r.output)["inputs"]["key"] == "row order"
     df[["pitch", "yaw", "roll"]].iloc[:7].to_csv(pred, index=False)
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp")
-    assert r.exit_code == 1
-    assert "rows" in r.output and "--key" in r.output and len(r.output.strip().splitlines()) == 1
+    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--join", "order")
+    assert r.exit_code == 2
+    assert "equal row counts" in r.output
 
 
 def test_bad_input_errors(tmp_path):

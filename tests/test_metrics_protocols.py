@@ -11,6 +11,8 @@ back-facing heads (|yaw| > 90 in the WHENet system), rows at gimbal lock
 (yaw = +-90 in 300W-LP) and GT past +-99.
 """
 import cv2
+import warnings
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -138,10 +140,14 @@ def test_6drepnet(data):
 
 def test_6drepnet360_vmae(data):
     P, G, rows, o, free = data
-    _check(rows, "6drepnet360", _sixd_min(o["p6"], o["g6"]), np.ones(len(G), bool), free)
+    # current 6DRepNet360 (b06e4fe, since 9c1cfaf): three terms, no +-180
+    p, g = o["p6"], o["g6"]
+    three = np.min(np.stack([np.abs(g - p), np.abs(p + 360 - g), np.abs(p - 360 - g)]), axis=0)
+    _check(rows, "6drepnet360", three, np.ones(len(G), bool), free)
     R_gt, R_pred = np.swapaxes(G, 1, 2), np.swapaxes(P, 1, 2)  # 6DRepNet's matrices; R[:, k] is row k
     v = np.stack([np.rad2deg(np.arccos(np.clip(np.sum(R_gt[:, k] * R_pred[:, k], 1), -1, 1))) for k in range(3)], 1)
-    np.testing.assert_allclose(rows.protocols["6drepnet360"].vectors["vmae"][1], v, atol=1e-5)
+    # the peer computes these in float32 tensors, and so does hpe: acos near 0 differs by up to ~0.03 deg
+    np.testing.assert_allclose(rows.protocols["6drepnet360"].vectors["vmae"][1], v, atol=0.05)
 
 
 def test_directmhp(data):
@@ -182,11 +188,16 @@ def test_headposeplus_pyr_is_scipy_xyz_of_the_rotation(data):
 
 def test_img2pose(data):
     P, G, rows, o, free = data
-    e = np.abs(_rodrigues_deg(P) - _rodrigues_deg(G))
+    # img2pose@fd5473e notebook: convert_to_aflw (as_euler('xyz') of R.T, then (x, -y, -z)) vs Pose_Para
+    F = np.diag([1.0, -1.0, -1.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        a = Rotation.from_matrix(np.swapaxes(F @ P @ F, 1, 2)).as_euler("xyz", degrees=True) * [1, -1, -1]
+    e = np.abs(a - o["g300"])
     keep = ~np.any(np.abs(o["g300"]) > 99, axis=1)
     pr = rows.protocols["img2pose"]
     np.testing.assert_array_equal(pr.keep[free], keep[free])
-    np.testing.assert_allclose(pr.err, e, atol=1e-6)  # rotation vectors are defined at gimbal lock too
+    np.testing.assert_allclose(pr.err[free], e[free], atol=1e-6)
 
 
 def test_dad3dheads(data):
@@ -215,4 +226,4 @@ def test_every_protocol_is_reported_with_its_source_and_notes():
     assert "narrow" in r["protocols"]["whenet"]
     assert {"left", "down", "front", "mean"} == set(r["protocols"]["6drepnet360"]["vmae"])
     assert "ypr" in r["protocols"]["headposeplus"]
-    assert {"rotvec_x", "rotvec_y", "rotvec_z"} <= set(r["protocols"]["img2pose"])
+    assert r["protocols"]["dad3dheads"]["units"] == "unitless"

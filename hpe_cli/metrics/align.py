@@ -1,14 +1,16 @@
-"""Remove a constant rotation offset between predictions and ground truth (pure numpy).
+"""Remove a constant rotation offset; project matrices onto rotations (pure numpy).
 
-``--align mean`` estimates the one rotation ``Q`` that best maps the ground
-truth onto the predictions, ``P ~ Q @ G``: the rotation nearest (in the
-Frobenius sense) to the arithmetic mean of ``P @ G.T``, found by projecting
-that mean back onto SO(3) with an SVD (the chordal L2 mean). Predictions are
-then replaced by ``Q.T @ P``. opal23's ``Evaluator.align_predictions``
-(pcr-upm/opal23_headpose ``test/evaluator.py``) removes the same kind of
-offset with an iterative geodesic (Karcher) mean over the rows within 90
-degrees of the identity; for a constant offset with symmetric noise both
-estimates coincide.
+``--align mean`` (hpe's own estimate, not a peer's) finds the one rotation
+``Q`` that best maps the ground truth onto the predictions, ``P ~ Q @ G``:
+the rotation nearest (Frobenius) to the arithmetic mean of ``P @ G.T`` over
+ALL pairs, found by projecting that mean onto SO(3) with an SVD (the chordal
+L2 mean). Predictions are then replaced by ``Q.T @ P``.
+
+This is NOT opal23's alignment: opal23's ``Evaluator.align_predictions``
+(pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:95-129) iterates a
+geodesic (Karcher) mean and leaves out the rows more than 90 degrees from
+the identity; that one is the ``opal23-align`` protocol. The two agree for a
+constant offset with small symmetric noise and no far-off rows.
 """
 from __future__ import annotations
 
@@ -22,6 +24,26 @@ def project_to_so3(M) -> np.ndarray:
     U, _, Vt = np.linalg.svd(np.asarray(M, dtype=np.float64))
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
     return U @ D @ Vt
+
+
+def project_to_so3_batch(M):
+    """Nearest rotations (Frobenius) of ``(N, 3, 3)`` matrices and their distances ``||M - R||_F``.
+
+    ``R = U diag(1, 1, det(U V^T)) V^T`` from the SVD ``M = U S V^T`` (det +1
+    always). Rows that are not finite get the identity and distance NaN.
+    """
+    M = np.asarray(M, dtype=np.float64)
+    finite = np.isfinite(M).all(axis=(1, 2))
+    Mf = np.where(finite[:, None, None], M, np.eye(3))
+    U, _, Vt = np.linalg.svd(Mf)
+    d = np.sign(np.linalg.det(U @ Vt))
+    d[d == 0] = 1.0
+    U[:, :, 2] *= d[:, None]
+    R = U @ Vt
+    dist = np.sqrt(((Mf - R) ** 2).sum(axis=(1, 2)))
+    dist[~finite] = np.nan
+    R[~finite] = np.eye(3)
+    return R, dist
 
 
 def mean_offset(P, G, mask=None) -> np.ndarray:

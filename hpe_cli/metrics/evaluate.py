@@ -1,8 +1,9 @@
 """Score predictions against ground truth: core metrics, protocols, alignment, breakdowns (pure numpy).
 
-:func:`evaluate` is the array API (``hpe_cli.evaluate``); ``hpe evaluate``
-(:mod:`hpe_cli.pipelines.evaluate`) reads and joins tables, then calls
-:func:`evaluate_canonical`, so both return the same report dict.
+:func:`evaluate` is the array API (``hpe_cli.evaluate``, whole arrays in memory). ``hpe evaluate``
+(:mod:`hpe_cli.pipelines.evaluate`) reads and pairs tables chunk by chunk, scores each chunk with
+:func:`compute_rows` and sums the results with :class:`hpe_cli.metrics.stream.Accumulator`; both give the same
+report blocks (tested in ``tests/evaluate/test_evaluate_streaming.py``).
 """
 from __future__ import annotations
 
@@ -50,10 +51,14 @@ def check_protocols(protocols) -> list:
     return names
 
 
-def compute_rows(P, G, gt_system, protocols=None) -> PairRows:
-    """Every per-row error for canonical rotations ``P`` (predicted) and ``G`` (true)."""
-    pair = PosePair(P, G, gt_system)
-    g, _ = pair.angles(gt_system, "gt")
+def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None) -> PairRows:
+    """Every per-row error for canonical rotations ``P`` (predicted) and ``G`` (true).
+
+    ``raw`` (``{"pred" | "gt": (system, angles (N, 3))}``) holds the angles as
+    written for sides given as angles (see :class:`PosePair`).
+    """
+    pair = PosePair(P, G, gt_system, raw, context)
+    g, _ = pair.angles(gt_system, "gt")  # hpe's own metrics: primary solutions from the matrices
     p1, p2 = pair.angles(gt_system, "pred")
     best, _ = re_.best_of_two_error(p1, p2, g)
     protos = {name: PROTOCOLS[name].func(pair) for name in check_protocols(protocols)}
@@ -125,7 +130,7 @@ def _plain(u):
 
 
 def evaluate_canonical(P, G, *, gt_system, protocols=None, align: str = "none", by=None, by_name: str = "by",
-                       yaw_bins: float | None = None):
+                       yaw_bins: float | None = None, raw=None):
     """Score canonical rotations ``P`` against ``G``; return ``(report_part, rows)``.
 
     ``report_part`` holds ``metrics``, ``protocols``, ``align`` and, when
@@ -142,12 +147,13 @@ def evaluate_canonical(P, G, *, gt_system, protocols=None, align: str = "none", 
     if align not in ("none", "mean"):
         raise ValueError(f"expected align 'none' or 'mean', got {align!r}")
     if align == "mean":
-        before = compute_rows(P, G, gt_system, protocols)
+        before = compute_rows(P, G, gt_system, protocols, raw)
         Q = mean_offset(P, G)
         Qg = gt_system.from_canonical(Q[None])
         qp, _, _, _ = gt_system.to_angles(Qg)
         angle = float(re_.geodesic_deg(Q[None], np.eye(3)[None])[0])
         P = remove_offset(P, Q)
+        raw = {k: v for k, v in (raw or {}).items() if k != "pred"}  # the aligned predictions have no written angles
         out["align"] = {"method": "mean", "offset_deg": angle,
                         "offset_angles": dict(zip(ANGLES, map(float, qp[0]))),
                         "offset_matrix_canonical": Q.tolist(), "gt_system": gt_system.name,
@@ -155,7 +161,7 @@ def evaluate_canonical(P, G, *, gt_system, protocols=None, align: str = "none", 
                                    "protocols": {k: summarize(v, None, k) for k, v in before.protocols.items()}}}
     else:
         out["align"] = {"method": "none"}
-    rows = compute_rows(P, G, gt_system, protocols)
+    rows = compute_rows(P, G, gt_system, protocols, raw)
     s = summary(rows)
     out["metrics"] = s["metrics"]
     out["protocols"] = s["protocols"]
@@ -244,7 +250,12 @@ def evaluate(pred, gt, *, pred_system, gt_system, protocols=None, align: str = "
     if not ok.all():
         P = [[x[ok] for x in r] for r in P]
         G = [[x[ok] for x in r] for r in G]
-    part, _ = evaluate_canonical(P, G, gt_system=gs, protocols=protocols, align=align)
+    raw = {}
+    for side, vals, sysm in (("pred", pred, ps), ("gt", gt, gs)):
+        a = np.asarray(vals, dtype=np.float64)
+        if a.ndim == 2 and a.shape[1] == 3 and (cp if side == "pred" else cg) in (None, "angles"):
+            raw[side] = (sysm, a[ok])  # angles as written: the raw-angle protocols compare these
+    part, _ = evaluate_canonical(P, G, gt_system=gs, protocols=protocols, align=align, raw=raw)
     report = {"n": {"gt": n_g, "pred": n_p, "pairs": int(ok.sum()), "missing": 0, "invalid": int((~ok).sum())},
               "systems": {"pred": ps.name, "gt": gs.name}}
     report.update(part)

@@ -1,22 +1,26 @@
-"""Published head-pose evaluation protocols, each reproduced from its code (pure numpy).
+"""Published head-pose evaluation protocols, each reproduced from its peer's current code.
 
 Each protocol takes a :class:`PosePair` (predicted and true rotations as
-canonical 300W-LP matrices), converts both sides to its own system *through
-the matrices*, applies its own filter, and returns per-row errors
-(:class:`ProtocolRows`). Summaries over any subset of rows (all rows, a
-``--by`` group, a yaw bin) are made by :func:`summarize`.
+canonical 300W-LP matrices, plus the angles as written for sides given as
+angles) and reads what its peer's code reads: raw-angle protocols (hopenet,
+fsanet, headposeplus, directmhp, whenet and the GT side of 6drepnet,
+6drepnet360 and img2pose) compare the angles as written whenever they mean the
+same rotation in the protocol's system, and count the rows they had to
+re-express (``re_expressed``); matrix-reading protocols decode the matrix the
+way the peer does. Summaries over any subset of rows (all rows, a ``--by``
+group, a yaw bin) are made by :func:`summarize`.
 
-The source file each protocol reproduces is named in its docstring and in
-:data:`PROTOCOLS`. Where a published computation is ill-defined, it is still
-computed exactly as published and the problem is stated in ``notes``.
+Every protocol's ``source`` names ``repo@commit file:lines`` of the code it
+reproduces (see :data:`PROTOCOLS`).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
+from . import peer_angles as pa_
 from . import rotation_errors as re_
 
 _DEG = 180.0 / np.pi
@@ -30,14 +34,20 @@ class PosePair:
     P, G : nested list (3x3 of 1-D arrays) or ndarray (N, 3, 3)
         Canonical 300W-LP matrices (``A = Rx(p).T Ry(y).T Rz(r).T``).
     gt_system : RotationSystem
-        The ground truth's own system (used by the core metrics and opal23).
+        The ground truth's own system (used by the core metrics).
+    raw : dict, optional
+        ``{"pred" | "gt": (system, angles (N, 3) degrees)}``: the angles as
+        written in the input file, for sides that were given as angles. The
+        raw-angle protocols compare these numbers as written.
     """
 
-    def __init__(self, P, G, gt_system):
+    def __init__(self, P, G, gt_system, raw=None, context=None):
+        self.context = dict(context or {})
         self.P = re_.as_nested(P)
         self.G = re_.as_nested(G)
         self.gt_system = gt_system
         self.n = int(np.broadcast(*[x for row in self.G for x in row]).shape[0])
+        self.raw = dict(raw or {})
         self._cache = {}
 
     def stored(self, system, side: str):
@@ -61,14 +71,74 @@ class PosePair:
             self._cache[key] = (np.stack(np.broadcast_arrays(*p1), -1), np.stack(np.broadcast_arrays(*p2), -1))
         return self._cache[key]
 
+    def written(self, system, side: str):
+        """Angles of ``side`` as a peer reading ``system`` labels sees them, and the re-expressed rows.
+
+        When ``side`` was given as angles and those numbers mean the same
+        rotation in ``system`` (same system, or one whose angles are the same
+        numbers, e.g. 6drepnet and 300w_lp), they are returned as written: no
+        re-extraction from the matrix, so a non-primary solution, a yaw past
+        the range or a gimbal-lock label stays what the file says. Other rows
+        (another system's angles, or matrices/vectors) take the primary
+        solution of ``system`` from the matrix.
+
+        Returns
+        -------
+        angles : ndarray (N, 3)
+        changed : ndarray of bool (N,) or None
+            Rows given as angles whose numbers were changed by the conversion;
+            None when the side was not given as angles (all from the matrix).
+        """
+        from ..rotation.systems import get_system
+
+        system = get_system(system)
+        key = ("written", system.name, side)
+        if key in self._cache:
+            return self._cache[key]
+        raw = self.raw.get(side)
+        if raw is None:
+            out = (self.angles(system, side)[0], None)
+        else:
+            rsys, a = get_system(raw[0]), np.asarray(raw[1], dtype=np.float64)
+            if rsys.name == system.name or _same_angles(rsys, system):
+                out = (a, np.zeros(self.n, dtype=bool))
+            else:
+                conv, _ = self.angles(system, side)
+                X = system.soa_to_canonical(system.soa_from_angles(a[:, 0], a[:, 1], a[:, 2]))
+                C = self.P if side == "pred" else self.G
+                same = np.ones(self.n, dtype=bool)
+                for i in range(3):
+                    for j in range(3):
+                        same &= np.abs(np.asarray(X[i][j]) - C[i][j]) <= 1e-9
+                out = (np.where(same[:, None], a, conv), ~same)
+        self._cache[key] = out
+        return out
+
     def array(self, system, side: str) -> np.ndarray:
         """Stored matrices of ``side`` in ``system`` as ``(N, 3, 3)``."""
-        X = self.stored(system, side)
-        out = np.empty((self.n, 3, 3))
-        for i in range(3):
-            for j in range(3):
-                out[:, i, j] = X[i][j]
-        return out
+        return pa_.stack3(self.stored(system, side))
+
+
+_SAME: dict = {}
+
+
+def _same_angles(a, b) -> bool:
+    """True when (pitch, yaw, roll) mean the same rotation in systems ``a`` and ``b`` for EVERY triple.
+
+    Checked once per pair of systems on 2,000 triples spread over the whole
+    [-180, 180]^3 cube (other solutions, past-range yaws, gimbal lock
+    included): e.g. 300w_lp and 6drepnet angles are the same numbers.
+    """
+    key = (a.name, b.name)
+    if key not in _SAME:
+        rng = np.random.default_rng(0)
+        t = np.concatenate([rng.uniform(-180, 180, (1900, 3)),
+                            np.c_[rng.uniform(-180, 180, 100), np.repeat([90.0, -90.0], 50), rng.uniform(-180, 180, 100)]])
+        Xa = a.soa_to_canonical(a.soa_from_angles(t[:, 0], t[:, 1], t[:, 2]))
+        Xb = b.soa_to_canonical(b.soa_from_angles(t[:, 0], t[:, 1], t[:, 2]))
+        _SAME[key] = all(np.allclose(np.broadcast_to(Xa[i][j], (len(t),)), np.broadcast_to(Xb[i][j], (len(t),)),
+                                     atol=1e-12, rtol=0) for i in range(3) for j in range(3))
+    return _SAME[key]
 
 
 @dataclass
@@ -88,6 +158,12 @@ class ProtocolRows:
     vectors : dict
         name -> (labels, per-row values (N, k)): per-column means over ``keep``
         plus their mean.
+    reexpressed : dict
+        side -> boolean mask (N,) of rows given as angles whose numbers the
+        protocol had to convert into its own system (see :meth:`PosePair.written`),
+        or None when that side came as matrices/vectors.
+    counts : dict
+        name -> boolean mask (N,): reported as the number of kept rows in it.
     """
 
     err: np.ndarray
@@ -96,6 +172,8 @@ class ProtocolRows:
     scalars: dict = field(default_factory=dict)
     vectors: dict = field(default_factory=dict)
     angle_labels: tuple = ("pitch", "yaw", "roll")
+    reexpressed: dict = field(default_factory=dict)
+    counts: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -107,6 +185,7 @@ class Protocol:
     source: str
     func: Callable
     notes: tuple = ()
+    units: str = "deg"
 
 
 def _within_99(pyr) -> np.ndarray:
@@ -114,177 +193,202 @@ def _within_99(pyr) -> np.ndarray:
     return (np.abs(pyr) <= 99.0).all(axis=-1)
 
 
-def _sixdrepnet_euler(R) -> np.ndarray:
-    """6DRepNet's ``compute_euler_angles_from_rotation_matrices`` on stored 6drepnet matrices.
-
-    ``sy = sqrt(R00^2 + R10^2)``; regular rows: ``x = atan2(R21, R22)``,
-    ``y = atan2(-R20, sy)``, ``z = atan2(R10, R00)``; rows with ``sy < 1e-6``:
-    ``x = atan2(-R12, R11)``, ``z = 0``. Returned as (pitch, yaw, roll) =
-    (x, y, z) in degrees (sixdrepnet/utils.py).
-    """
-    sy = np.sqrt(R[0][0] * R[0][0] + R[1][0] * R[1][0])
-    singular = sy < 1e-6
-    x = np.where(singular, np.arctan2(-R[1][2], R[1][1]), np.arctan2(R[2][1], R[2][2]))
-    y = np.arctan2(-R[2][0], sy)
-    z = np.where(singular, 0.0, np.arctan2(R[1][0], R[0][0]))
-    return np.stack(np.broadcast_arrays(x, y, z), -1) * _DEG
-
-
-def _sixdrepnet_min(pred, gt) -> np.ndarray:
-    """min(|gt - p|, |p + 360 - gt|, |p - 360 - gt|, |p + 180 - gt|, |p - 180 - gt|) per angle."""
-    # min(|d + c|, |d - c|) = ||d| - c| exactly (c >= 0), so three terms give the five
-    a = np.abs(pred - gt)
-    out = np.abs(a - 180.0)
-    np.minimum(out, a, out=out)
-    np.minimum(out, np.abs(a - 360.0), out=out)
-    return out
+def _written_pair(pair, system):
+    p, cp = pair.written(system, "pred")
+    g, cg = pair.written(system, "gt")
+    return p, g, {"pred": cp, "gt": cg}
 
 
 # ---------------------------------------------------------------------------- protocols
 def hopenet(pair: PosePair) -> ProtocolRows:
-    """Hopenet: plain |pred - gt| per angle in the ``300w_lp`` system, no wrap, no filter.
+    """Hopenet: plain |pred - gt| per 300w_lp angle as written, no wrap, no filter.
 
-    Reproduces ``code/test_hopenet.py`` (natanielruiz/deep-head-pose):
-    ``yaw_error += sum(abs(yaw_predicted - label_yaw))`` and the same for
-    pitch and roll, divided by the number of images.
+    natanielruiz/deep-head-pose@f7bbb99 code/test_hopenet.py:124-127:
+    ``yaw_error += sum(abs(yaw_predicted - label_yaw))`` (float32 tensors).
     """
-    p, _ = pair.angles("300w_lp", "pred")
-    g, _ = pair.angles("300w_lp", "gt")
-    return ProtocolRows(re_.abs_error(p, g), np.ones(pair.n, dtype=bool))
+    p, g, rx = _written_pair(pair, "300w_lp")
+    return ProtocolRows(re_.abs_error(p, g), np.ones(pair.n, dtype=bool), reexpressed=rx)
 
 
 def fsanet(pair: PosePair) -> ProtocolRows:
-    """FSA-Net: as hopenet, keeping GT rows whose three angles are all within [-99, 99].
+    """FSA-Net: as hopenet, keeping GT rows whose three written angles are all within [-99, 99].
 
-    Reproduces ``training_and_testing/FSANET_test.py`` (shamangary/FSA-Net):
-    ``if np.max(temp_pose) <= 99.0 and np.min(temp_pose) >= -99.0`` on the GT
-    (yaw, pitch, roll), then ``np.mean(np.abs(p_data - y_data), axis=0)``.
+    shamangary/FSA-Net@4361d0e training_and_testing/FSANET_test.py:88-101
+    (``np.max(temp_pose) <= 99.0 and np.min(temp_pose) >= -99.0``) and 444-448
+    (``np.mean(np.abs(p_data - y_data), axis=0)``).
     """
-    p, _ = pair.angles("300w_lp", "pred")
-    g, _ = pair.angles("300w_lp", "gt")
-    return ProtocolRows(re_.abs_error(p, g), _within_99(g))
+    p, g, rx = _written_pair(pair, "300w_lp")
+    return ProtocolRows(re_.abs_error(p, g), _within_99(g), reexpressed=rx)
+
+
+def _sixd(pair, with_180: bool, filt: bool) -> ProtocolRows:
+    p = pa_.sixdrepnet_euler(pair.stored("6drepnet", "pred"))
+    g, cg = pair.written("6drepnet", "gt")
+    keep = _within_99(g) if filt else np.ones(pair.n, dtype=bool)
+    vec = {} if filt else {"vmae": (re_.AXES, pa_.column_acos_deg(pair.P, pair.G, float32=True))}
+    return ProtocolRows(pa_.min_wrapped(p, g, with_180), keep, vectors=vec, reexpressed={"pred": None, "gt": cg})
 
 
 def sixdrepnet(pair: PosePair) -> ProtocolRows:
-    """6DRepNet: min over d, d +- 360, d +- 180 per angle in the ``6drepnet`` system, GT within +-99.
+    """6DRepNet: predicted matrix -> Euler, 5-term wrapped minimum against the GT label as written, GT within 99.
 
-    Reproduces ``sixdrepnet/test.py`` (thohemp/6DRepNet): Euler angles from
-    ``utils.compute_euler_angles_from_rotation_matrices`` and
-    ``min(|gt - p|, |p + 360 - gt|, |p - 360 - gt|, |p + 180 - gt|, |p - 180 - gt|)``;
-    the +-99 filter is ``sixdrepnet/create_filename_list.py`` (the test list
-    keeps files with all three |Pose_Para| <= 99 degrees).
+    thohemp/6DRepNet@464b2ba sixdrepnet/test.py:113-142 (GT ``cont_labels``,
+    prediction ``compute_euler_angles_from_rotation_matrices``, ``min`` over d,
+    d +- 360, d +- 180); the +-99 filter is sixdrepnet/create_filename_list.py:53.
     """
-    p = _sixdrepnet_euler(pair.stored("6drepnet", "pred"))
-    g = _sixdrepnet_euler(pair.stored("6drepnet", "gt"))
-    return ProtocolRows(_sixdrepnet_min(p, g), _within_99(g))
+    return _sixd(pair, True, True)
 
 
 def sixdrepnet360(pair: PosePair) -> ProtocolRows:
-    """6DRepNet360: the same five-term minimum as 6DRepNet, no filter, plus VMAE.
+    """6DRepNet360 (current): the 3-term minimum over d, d +- 360, no filter, plus VMAE.
 
-    Reproduces ``sixdrepnet360/test.py`` (thohemp/6DRepNet360): the per-angle
-    error is the same ``min`` over d, d +- 360, d +- 180 as 6DRepNet (the
-    published code keeps the +-180 terms), and ``Vec1..Vec3`` are
-    ``acos(clamp(sum(R_gt[:, k] * R_pred[:, k])))``: the angle between row
-    ``k`` of the stored 6drepnet matrices, i.e. column ``k`` of the canonical
-    ones (``vmae``: left, down, front and their mean).
+    thohemp/6DRepNet360@b06e4fe sixdrepnet360/test.py:164-193 (the +-180 terms
+    were dropped in 9c1cfaf, 2024-05-29); ``Vec1..3`` = ``acos(clamp(R_gt[:, k] .
+    R_pred[:, k]))`` (rows of the stored matrix = the head's axes).
     """
-    p = _sixdrepnet_euler(pair.stored("6drepnet", "pred"))
-    g = _sixdrepnet_euler(pair.stored("6drepnet", "gt"))
-    return ProtocolRows(_sixdrepnet_min(p, g), np.ones(pair.n, dtype=bool),
-                        vectors={"vmae": (re_.AXES, re_.maev_deg(pair.P, pair.G))})
+    return _sixd(pair, False, False)
+
+
+def sixdrepnet360_2023(pair: PosePair) -> ProtocolRows:
+    """6DRepNet360 before 9c1cfaf (superseded): the 5-term minimum incl. d +- 180, no filter, VMAE."""
+    return _sixd(pair, True, False)
+
+
+def _directmhp(pair: PosePair, split: float) -> ProtocolRows:
+    p, g, rx = _written_pair(pair, "whenet")
+    e = re_.abs_error(p, g)
+    e[:, 1] = np.minimum(e[:, 1], 360.0 - e[:, 1])
+    back = np.abs(g[:, 1]) > split
+    return ProtocolRows(e, np.ones(pair.n, dtype=bool), splits={"front": ~back, "back": back}, reexpressed=rx)
 
 
 def directmhp(pair: PosePair) -> ProtocolRows:
-    """DirectMHP: |d| per angle in the ``whenet`` system with only yaw wrapped; front/back split.
+    """DirectMHP ``mean_absolute_error_calculate_v2`` (CMU Panoptic, AGORA): whenet labels as written.
 
-    Reproduces ``mean_absolute_error_calculate`` in ``utils/mae.py``
-    (hnuzhy/DirectMHP): ``error_list = abs(gt - pd)``,
-    ``error_list[:, 1] = min(error_list[:, 1], 360 - error_list[:, 1])``;
-    ``back`` rows have ``abs(gt_yaw) > 90``, the others are ``front``.
+    hnuzhy/DirectMHP@a51b06b utils/mae.py:162-278: ``abs(gt - pd)``, only yaw
+    wrapped ``min(e, 360 - e)``; ``back`` rows have ``abs(gt_yaw) > 90``.
     """
-    p, _ = pair.angles("whenet", "pred")
-    g, _ = pair.angles("whenet", "gt")
-    e = re_.abs_error(p, g)
-    e[:, 1] = np.minimum(e[:, 1], 360.0 - e[:, 1])
-    back = np.abs(g[:, 1]) > 90.0
-    return ProtocolRows(e, np.ones(pair.n, dtype=bool), splits={"front": ~back, "back": back})
+    return _directmhp(pair, 90.0)
+
+
+def directmhp_single(pair: PosePair) -> ProtocolRows:
+    """DirectMHP ``mean_absolute_error_calculate_single`` (AFLW2000, 300W-LP, BIWI): back = ``abs(gt_yaw) > 99``.
+
+    hnuzhy/DirectMHP@a51b06b utils/mae.py:281-356 (the split at line 324).
+    """
+    return _directmhp(pair, 99.0)
 
 
 def whenet(pair: PosePair) -> ProtocolRows:
-    """WHENet: every angle wrapped, min(e, 360 - e), in the ``whenet`` system; also |GT yaw| <= 90.
+    """WHENet: every angle wrapped, min(e, 360 - e), whenet labels as written; also |GT yaw| <= 90.
 
-    WHENet's repository (Ascend-Research/HeadPoseEstimation-WHENet) publishes
-    no evaluation script; this is the paper's "wrapped MAE", as quoted in the
-    ``compute_mae`` docstring of opal23's ``test/evaluator.py``
-    ("min(MAE, 360 - MAE)"), with WHENet's full-range labels (``select_euler``).
-    ``narrow`` is the summary over rows with |GT yaw| <= 90.
+    WHENet's repository publishes no evaluation script; this is the paper's
+    "wrapped MAE", as quoted in opal23_headpose@78c0c45 test/evaluator.py:56-59.
     """
-    p, _ = pair.angles("whenet", "pred")
-    g, _ = pair.angles("whenet", "gt")
+    p, g, rx = _written_pair(pair, "whenet")
     return ProtocolRows(re_.wrapped_error(p, g), np.ones(pair.n, dtype=bool),
-                        splits={"narrow": np.abs(g[:, 1]) <= 90.0})
+                        splits={"narrow": np.abs(g[:, 1]) <= 90.0}, reexpressed=rx)
+
+
+def _opal23_mats(pair):
+    p, g, rx = _written_pair(pair, "300w_lp")
+    return pa_.opal23_matrices(p), pa_.opal23_matrices(g), rx
 
 
 def opal23(pair: PosePair) -> ProtocolRows:
-    """opal23: the better of the prediction's two Euler solutions, wrapped, plus geodesic error.
+    """opal23: ``compute_mae`` and ``compute_ge`` on ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])`` matrices.
 
-    Reproduces ``Evaluator.compute_mae`` and ``compute_ge`` in ``test/evaluator.py``
-    (pcr-upm/opal23_headpose), in the GT system: raw errors of both
-    solutions compared by their mean, the smaller kept, each wrapped
-    ``min(e, 360 - e)``; ``geodesic`` = ``arccos((trace(G P^T) - 1) / 2)``.
+    pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:51-93; the matrices are
+    built from the annotation angles as the images_framework AFLW2000 reader
+    does, whatever the dataset (here: the 300w_lp angles as written).
     """
-    g, _ = pair.angles(pair.gt_system, "gt")
-    p1, p2 = pair.angles(pair.gt_system, "pred")
-    e, second = re_.best_of_two_error(p1, p2, g)
-    return ProtocolRows(e, np.ones(pair.n, dtype=bool),
-                        scalars={"geodesic": re_.geodesic_deg(pair.P, pair.G),
-                                 "second_solution_fraction": second.astype(np.float64)})
+    P, G, rx = _opal23_mats(pair)
+    return ProtocolRows(pa_.opal23_mae(G, P), np.ones(pair.n, dtype=bool),
+                        scalars={"geodesic": pa_.opal23_geodesic(G, P)}, reexpressed=rx)
+
+
+def opal23_align(pair: PosePair) -> ProtocolRows:
+    """opal23 after ``Evaluator.align_predictions`` (test/evaluator.py:95-129): Karcher mean offset removed.
+
+    The mean of ``P G^T`` is taken over the rows within 90 degrees of the
+    identity only (``left_out_of_mean`` counts the others); every prediction
+    is then turned by its inverse. A streamed run estimates the mean over all
+    pairs first and passes it in ``pair.context["opal23_mean"]``.
+    """
+    P, G, rx = _opal23_mats(pair)
+    Pa, _ = pa_.opal23_align(G, P, mean=pair.context.get("opal23_mean"))
+    d = np.matmul(P, np.transpose(G, (0, 2, 1)))
+    left_out = np.linalg.norm(pa_._log(d), axis=1) >= np.pi / 2 if len(d) else np.zeros(0, dtype=bool)
+    return ProtocolRows(pa_.opal23_mae(G, Pa), np.ones(pair.n, dtype=bool),
+                        scalars={"geodesic": pa_.opal23_geodesic(G, Pa)},
+                        counts={"left_out_of_mean": left_out}, reexpressed=rx)
 
 
 def headposeplus(pair: PosePair) -> ProtocolRows:
-    """HeadPose+: plain |d| in two formats, ``pyr`` (``biwi`` system) and ``ypr`` (``300w_lp``).
+    """HeadPose+: |d| in two blocks, ``pyr`` (SciPy ``as_euler('xyz')``) and ``ypr`` (the labels as written).
 
-    Reproduces ``hpp/calc_error.py`` (kuhnkeF/headposeplus): ``pyr`` is SciPy
-    ``as_euler('xyz')`` of the rotation, ``ypr`` Hopenet/FSA-Net's reading
-    (``_ypr2pyr`` / ``_pyr2ypr``); errors ``mean(abs(arr - gt_arr), axis=0)``.
-    The top-level pitch/yaw/roll are the ``pyr`` errors; ``ypr`` is an extra.
-    HeadPose+ applies ``as_euler('xyz')`` to the 300W-LP matrix itself, whose
-    yaw and roll are the ``biwi`` system's with both signs flipped on both
-    sides; absolute differences are the same.
+    kuhnkeF/headposeplus@b94d162 hpp/calc_error.py:14-18 (``_ypr2pyr``), 40-70
+    (``calc_error``: ``mean(abs(arr - gt_arr), axis=0)`` per block). The
+    top-level pitch/yaw/roll are the ``pyr`` block; ``ypr`` is an extra.
+    ``as_euler('xyz')`` of the 300W-LP matrix gives the biwi angles with yaw
+    and roll negated on both sides: the absolute differences are the same.
     """
     p, _ = pair.angles("biwi", "pred")
     g, _ = pair.angles("biwi", "gt")
-    py, _ = pair.angles("300w_lp", "pred")
-    gy, _ = pair.angles("300w_lp", "gt")
+    py, gy, rx = _written_pair(pair, "300w_lp")
     return ProtocolRows(re_.abs_error(p, g), np.ones(pair.n, dtype=bool),
-                        vectors={"ypr": (("pitch", "yaw", "roll"), re_.abs_error(py, gy))})
+                        vectors={"pyr": (("pitch", "yaw", "roll"), re_.abs_error(p, g)),
+                                 "ypr": (("pitch", "yaw", "roll"), re_.abs_error(py, gy))}, reexpressed=rx)
 
 
 def img2pose(pair: PosePair) -> ProtocolRows:
-    """img2pose: mean |d| of rotation-vector components (OpenCV camera frame), GT within +-99.
+    """img2pose: ``convert_to_aflw`` Euler angles of the prediction vs Pose_Para as written, GT within 99.
 
-    Reproduces ``evaluation/jupyter_notebooks/aflw_2000_3d_evaluation.ipynb``
-    (vitoralbiero/img2pose): ``pose_mae = mean(abs(predictions - targets))``
-    on the 6-DoF vectors whose first three entries are the rotation vector
-    (``cv2.Rodrigues`` of the ``opencv`` matrix), times 180/pi, printed as
-    "Pitch" (x), "Yaw" (y), "Roll" (z); images with any |Pose_Para| > 99
-    degrees are skipped. The numbers are rotation-vector components, not
-    Euler angles: the report labels them ``rotvec_x/y/z``.
+    vitoralbiero/img2pose@fd5473e evaluation/jupyter_notebooks/aflw_2000_3d_evaluation.ipynb
+    (notebook lines 112-118 ``convert_to_aflw``, 276 the +-99 skip, 324
+    ``pose_mae = mean(abs(predictions - targets))``); compared as Euler angles
+    since March 2021 (rotation-vector components before).
     """
-    rp = re_.rotvec_deg(pair.stored("opencv", "pred"))
-    rg = re_.rotvec_deg(pair.stored("opencv", "gt"))
-    g300, _ = pair.angles("300w_lp", "gt")
-    return ProtocolRows(re_.abs_error(rp, rg), _within_99(g300), angle_labels=("rotvec_x", "rotvec_y", "rotvec_z"))
+    p = pa_.img2pose_euler(pair.stored("img2pose", "pred"))
+    g, cg = pair.written("300w_lp", "gt")
+    return ProtocolRows(re_.abs_error(p, g), _within_99(g), reexpressed={"pred": None, "gt": cg})
+
+
+def trinet(pair: PosePair) -> ProtocolRows:
+    """TriNet: Euler angles of the [left|down|front] matrices, 5-term minimum, and vector MAE.
+
+    chuzcjoe/TriNet@d2689de computeMAE.py:92-197 (``W300_Get_MAE_NPY``,
+    ``mode='svd'``): GT and SVD-projected prediction through
+    ``W300_R2EulerAngles`` (84-89), errors as 6DRepNet's 5-term minimum, vector
+    errors ``acos(clip(gt_v . pred_v))`` of the (normalised) columns.
+    """
+    T = pair.stored("trinet", "pred")
+    Tg = pair.stored("trinet", "gt")
+    e = pa_.min_wrapped(pa_.trinet_euler(T), pa_.trinet_euler(Tg), True)
+    return ProtocolRows(e, np.ones(pair.n, dtype=bool),
+                        vectors={"vmae": (re_.AXES, pa_.column_acos_deg(T, Tg))})
+
+
+def opentrack(pair: PosePair) -> ProtocolRows:
+    """opentrack: wrapped Euler errors ``arccos(cos a cos b + sin a sin b)`` and quaternion geodesic.
+
+    opentrack/neuralnet-tracker-traincode@8d2478c trackertraincode/eval.py:337-354
+    (``_angle_errors``, ``_aflw3d_euler_errors``) with utils.py:41-62; the
+    peer does not clip the ``arccos`` argument, so rows where rounding puts it
+    above 1 are NaN there: hpe clips it and counts them (``peer_nan_rows``).
+    """
+    a = pa_.opentrack_euler(pair.stored("trinet", "pred"))
+    b = pa_.opentrack_euler(pair.stored("trinet", "gt"))
+    e, nan = pa_.opentrack_errors(a, b)
+    return ProtocolRows(e, np.ones(pair.n, dtype=bool), scalars={"geodesic": re_.geodesic_deg(pair.P, pair.G)},
+                        counts={"peer_nan_rows": nan})
 
 
 def dad3dheads(pair: PosePair) -> ProtocolRows:
-    """DAD-3DHeads: mean ||I - R_pred R_gt^T||_F (no angles).
+    """DAD-3DHeads: mean ||I - R_pred R_gt^T||_F (unitless; no angles).
 
-    Reproduces ``DADEvaluator.pose_error`` in ``dad_3dheads_benchmark/benchmark.py``
-    (PinataFarms/DAD-3DHeads): ``np.linalg.norm(np.eye(3) - R_pred @ R_gt.T, "fro")``.
-    The norm is the same in every frame, so no system is needed; pitch, yaw
-    and roll are reported as null.
+    PinataFarms/DAD-3DHeads@4fc16a2 dad_3dheads_benchmark/benchmark.py:79-83
+    (``DADEvaluator.pose_error``). The norm is the same in every frame.
     """
     nan = np.full((pair.n, 3), np.nan)
     return ProtocolRows(nan, np.ones(pair.n, dtype=bool), scalars={"frobenius": re_.frobenius(pair.P, pair.G)})
@@ -295,29 +399,49 @@ _BRANCH = "plain |d| of Euler angles compares solution branches: a correct rotat
           "solution (or past the system's range) scores a large error"
 
 PROTOCOLS = {p.name: p for p in (
-    Protocol("hopenet", "300w_lp", "|d| per angle, no wrap", "none",
-             "natanielruiz/deep-head-pose code/test_hopenet.py", hopenet, (_BRANCH,)),
-    Protocol("fsanet", "300w_lp", "|d| per angle, no wrap", "GT |pitch|,|yaw|,|roll| <= 99",
-             "shamangary/FSA-Net training_and_testing/FSANET_test.py", fsanet, (_BRANCH,)),
-    Protocol("6drepnet", "6drepnet", "min(|d|, |d+-360|, |d+-180|) per angle", "GT |pitch|,|yaw|,|roll| <= 99",
-             "thohemp/6DRepNet sixdrepnet/test.py (+ create_filename_list.py)", sixdrepnet, (_FLIPS,)),
-    Protocol("6drepnet360", "6drepnet", "min(|d|, |d+-360|, |d+-180|) per angle; vmae = column angles",
-             "none", "thohemp/6DRepNet360 sixdrepnet360/test.py", sixdrepnet360, (_FLIPS,)),
-    Protocol("directmhp", "whenet", "|d|, yaw wrapped min(e, 360-e); front |GT yaw|<=90 / back", "none",
-             "hnuzhy/DirectMHP utils/mae.py", directmhp,
-             ("pitch and roll are not wrapped: " + _BRANCH,)),
-    Protocol("whenet", "whenet", "min(e, 360-e) per angle; narrow |GT yaw|<=90", "none",
-             "WHENet paper (no evaluation script published); opal23 test/evaluator.py quotes it", whenet, ()),
-    Protocol("opal23", "gt", "better of the two Euler solutions, wrapped; geodesic", "none",
-             "pcr-upm/opal23_headpose test/evaluator.py", opal23, ()),
-    Protocol("headposeplus", "biwi + 300w_lp", "|d| per angle in pyr (biwi) and ypr (300w_lp)", "none",
-             "kuhnkeF/headposeplus hpp/calc_error.py", headposeplus, (_BRANCH,)),
-    Protocol("img2pose", "opencv rotvec", "|d| of rotation-vector components (not Euler angles)",
+    Protocol("hopenet", "300w_lp", "|d| per angle as written, no wrap", "none",
+             "natanielruiz/deep-head-pose@f7bbb99 code/test_hopenet.py:104-106,124-127,143-145", hopenet, (_BRANCH,)),
+    Protocol("fsanet", "300w_lp", "|d| per angle as written, no wrap", "GT |pitch|,|yaw|,|roll| <= 99",
+             "shamangary/FSA-Net@4361d0e training_and_testing/FSANET_test.py:88-101,444-448", fsanet, (_BRANCH,)),
+    Protocol("6drepnet", "6drepnet", "min(|d|, |d+-360|, |d+-180|); pred Euler from its matrix",
              "GT |pitch|,|yaw|,|roll| <= 99",
-             "vitoralbiero/img2pose evaluation/jupyter_notebooks/aflw_2000_3d_evaluation.ipynb", img2pose,
-             ("rotation-vector components are printed as pitch/yaw/roll by img2pose; they are not Euler angles",)),
-    Protocol("dad3dheads", "any", "||I - P G^T||_F", "none",
-             "PinataFarms/DAD-3DHeads dad_3dheads_benchmark/benchmark.py", dad3dheads, ()),
+             "thohemp/6DRepNet@464b2ba sixdrepnet/test.py:113-142,162-164; utils.py:165-184; "
+             "create_filename_list.py:53", sixdrepnet, (_FLIPS,)),
+    Protocol("6drepnet360", "6drepnet", "min(|d|, |d+-360|); vmae = axis angles", "none",
+             "thohemp/6DRepNet360@b06e4fe sixdrepnet360/test.py:164-193 (3 terms since 9c1cfaf)", sixdrepnet360),
+    Protocol("6drepnet360-2023", "6drepnet", "SUPERSEDED: min(|d|, |d+-360|, |d+-180|); vmae", "none",
+             "thohemp/6DRepNet360@5b0622d sixdrepnet360/test.py:188-193 (superseded by 9c1cfaf, 2024-05-29)", sixdrepnet360_2023,
+             (_FLIPS, "superseded by the 3-term minimum in 9c1cfaf; kept only to reproduce 2023 numbers")),
+    Protocol("directmhp", "whenet", "|d| as written, yaw wrapped; back |GT yaw| > 90 (v2)", "none",
+             "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-278 mean_absolute_error_calculate_v2 (CMU, AGORA)",
+             directmhp, ("pitch and roll are not wrapped: " + _BRANCH,)),
+    Protocol("directmhp-single", "whenet", "|d| as written, yaw wrapped; back |GT yaw| > 99", "none",
+             "hnuzhy/DirectMHP@a51b06b utils/mae.py:281-356 mean_absolute_error_calculate_single "
+             "(AFLW2000, 300W-LP, BIWI)", directmhp_single, ("pitch and roll are not wrapped: " + _BRANCH,)),
+    Protocol("whenet", "whenet", "min(e, 360-e) per angle as written; narrow |GT yaw|<=90", "none",
+             "WHENet paper (no script published); pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:56-59",
+             whenet),
+    Protocol("opal23", "300w_lp -> from_euler('XYZ', [p, -y, r])", "better of two solutions, wrapped; geodesic",
+             "none", "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:51-93", opal23),
+    Protocol("opal23-align", "300w_lp -> from_euler('XYZ', [p, -y, r])",
+             "opal23 after its Karcher-mean alignment (rows > 90 deg off left out of the mean)", "none",
+             "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:95-129 align_predictions, then 51-93",
+             opal23_align),
+    Protocol("headposeplus", "300w_lp (ypr) + scipy xyz (pyr)", "|d| per angle in pyr and ypr", "none",
+             "kuhnkeF/headposeplus@b94d162 hpp/calc_error.py:14-18,40-70", headposeplus, (_BRANCH,)),
+    Protocol("img2pose", "img2pose -> convert_to_aflw", "|d| of convert_to_aflw Euler angles vs Pose_Para",
+             "GT |pitch|,|yaw|,|roll| <= 99",
+             "vitoralbiero/img2pose@fd5473e evaluation/jupyter_notebooks/aflw_2000_3d_evaluation.ipynb"
+             ":112-118,276,324 (lines of the .ipynb JSON: convert_to_aflw, the 99 skip, pose_mae)", img2pose, (_BRANCH,)),
+    Protocol("trinet", "trinet", "min(|d|, |d+-360|, |d+-180|) of W300_R2EulerAngles; vmae", "none",
+             "chuzcjoe/TriNet@d2689de computeMAE.py:84-89,92-197", trinet, (_FLIPS,)),
+    Protocol("opentrack", "trinet (XYZ of [p, -y, r])", "arccos(cos a cos b + sin a sin b) per angle; geodesic",
+             "none", "opentrack/neuralnet-tracker-traincode@8d2478c trackertraincode/eval.py:337-354; "
+             "utils.py:41-62", opentrack,
+             ("the peer's arccos is not clipped (NaN rows, counted in peer_nan_rows); hpe clips it to [-1, 1]",)),
+    Protocol("dad3dheads", "any", "||I - P G^T||_F (unitless)", "none",
+             "PinataFarms/DAD-3DHeads@4fc16a2 dad_3dheads_benchmark/benchmark.py:79-83", dad3dheads,
+             units="unitless"),
 )}
 
 
@@ -358,12 +482,20 @@ def summarize(rows: ProtocolRows, subset=None, name: str = "") -> dict:
         d = dict(zip(labels, means))
         d["mean"] = float(np.mean(means)) if means and all(m is not None for m in means) else None
         out[k] = d
+    for k, m in rows.counts.items():
+        out[k] = int((mask & m).sum())
+    if rows.reexpressed:
+        rx = {}
+        for side, m in rows.reexpressed.items():
+            rx[side] = "from matrix" if m is None else int((subset & m).sum())
+        out["re_expressed"] = rx
     if out["mean"] is None and "frobenius" in rows.scalars:
         out["mean"] = out["frobenius"]
     p = PROTOCOLS.get(name)
     if p is not None:
         out["system"] = p.system
         out["source"] = p.source
+        out["units"] = p.units
         if p.notes:
             out["notes"] = list(p.notes)
     return out

@@ -1,273 +1,430 @@
-"""``hpe evaluate``: read predictions and ground truth, join them, score them, write the outputs.
+"""``hpe evaluate``: pair predictions with ground truth by key, score every pair, write the outputs.
 
-Both tables are streamed batch by batch; each batch's labels go straight to
-canonical matrices (nine float64 columns per side) and only those, the key
-columns and the ``--by`` column stay in memory. The join encodes the key columns
-with Arrow (dictionary encoding) and pairs rows by numpy indexing; every metric is computed on whole columns.
+Memory is flat in the number of pairs whenever the two files list the same
+keys in the same order (or ``--join order``): chunks are paired as they are
+read (:func:`hpe_cli.pipelines.evaluate_join.lockstep`, keys verified chunk by
+chunk), every metric is summed per group (:class:`hpe_cli.metrics.stream.Accumulator`),
+the geodesic errors are spilled as float32 for exact medians and percentiles,
+and the per-row output is written chunk by chunk. Files in different orders
+are joined in memory (Arrow dictionary encoding) and then scored the same way.
+Global estimates (``--align mean``, opal23's alignment) take one extra pass.
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import HpeError
+from .evaluate_join import (  # noqa: F401
+    DEFAULT_KEYS,
+    Chunk,
+    JoinUsageError,
+    SideReader,
+    Unaligned,
+    _choose_keys,
+    _reasons,
+    _where,
+    join,
+    lockstep,
+    prefetch,
+    read_side,
+)
+from .evaluate_outputs import (
+    Images,
+    Sample,
+    Worst,
+    empty_rows,
+    row_table,
+    worst_pictures,
+)
 
-#: key columns tried in order when --key is not given
-DEFAULT_KEYS = ("image", "file")
-
-
-@dataclass
-class Side:
-    """One input table, read: canonical matrices, usability, keys."""
-
-    path: object
-    system: object
-    mode: str
-    canonical: list  # 9 arrays (N,): the canonical matrix entries, row-major
-    ok: np.ndarray  # (N,) bool
-    reasons: np.ndarray | None  # (N,) object, '' when usable; None when every row is usable
-    keys: object  # pyarrow Table of the key (and --by) columns, or None
-    by: np.ndarray | None
-    columns: list
-    lines: np.ndarray  # (N,) 1-based file line of each row (header = line 1)
-    unreadable: list  # rows the reader could not parse: (line, reason)
-
-    @property
-    def n(self) -> int:
-        return len(self.ok)
-
-
-def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None, role="input"):
-    """Stream one table into a :class:`Side`."""
-    import pyarrow as pa
-
-    from ..io import ANGLE_COLS, MATRIX_COLS, batch_rotations, label_mode, open_table
-    from ..io.readers import LINE_COL
-    from ..rotation import soa
-
-    src = open_table(path, batch_size, with_lines=True)
-    from ..io.columns import label_system
-
-    system = label_system(src, system)  # .mat Pose_Para is always 300w_lp, whatever --gt-system says
-    columns = src.columns
-    if use == "auto":  # the system's own value columns (rotvec, quaternion, 6-D...) first, then angles, matrix
-        mode = label_mode(columns, src.path, system)
-    else:
-        mode = use
-        native = system.storage_kind == mode and all(c in columns for c in system.value_columns)
-        need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
-        missing = [c for c in need if c not in columns]
-        if missing and not native:
-            raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
-    keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else [])) if c in columns]
-    parts, oks, reasons, key_parts, lines, unreadable = [], [], [], [], [], []
-    any_bad = False
-    for batch, bad_rows in src.batches_with_rejects():
-        unreadable += [(r.line, r.reason) for r in bad_rows]
-        lines.append(batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64))
-        X, ok, rs = batch_rotations(batch, system, mode, radians)
-        n = batch.num_rows
-        X = system.soa_to_canonical(X)
-        parts.append(soa.columns(X, n))
-        oks.append(ok)
-        if rs is not None:
-            any_bad = True
-        reasons.append(rs if rs is not None else n)
-        if keep:
-            key_parts.append(batch.select(keep))
-        if progress is not None:
-            progress.update(n)
-    canonical = [np.concatenate([p[k] for p in parts]) if parts else np.zeros(0) for k in range(9)]
-    ok = np.concatenate(oks) if oks else np.zeros(0, dtype=bool)
-    rs_all = None
-    if any_bad:
-        rs_all = np.concatenate([r if isinstance(r, np.ndarray) else np.full(r, "", dtype=object) for r in reasons])
-    table = None
-    if keep:
-        table = pa.Table.from_batches(key_parts, schema=pa.schema([src.schema.field(c) for c in keep])) \
-            if key_parts else pa.schema([src.schema.field(c) for c in keep]).empty_table()
-    by_values = table.column(by).to_numpy() if (by and table is not None and by in table.column_names) else None
-    line_arr = np.concatenate(lines) if lines else np.zeros(0, dtype=np.int64)
-    return Side(src.path, system, mode, canonical, ok, rs_all, table, by_values, columns, line_arr, unreadable)
+ANGLES = ("pitch", "yaw", "roll")
 
 
-def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path):
-    if keys:
-        for side_cols, p in ((gt_cols, gt_path), (pred_cols, pred_path)):
-            bad = [k for k in keys if k not in side_cols]
-            if bad:
-                raise HpeError(f"{p}: --key column(s) {', '.join(bad)} not in the table; "
-                               f"found: {', '.join(side_cols[:20])}")
-        return list(keys)
-    for k in DEFAULT_KEYS:
-        if k in pred_cols and k in gt_cols:
-            return [k]
-    return []
+def _add_rejects(rej, side, name, rows, reasons, keycols):
+    """Rejected rows of ``side`` (its own file and line), the first one named in the error message."""
+    if not len(rows):
+        return
+    unit = side.unit
+    if rej.first_where is None:
+        rej.first_where = f"{_where(side, rows[0])}: {reasons[0]}".replace(f"{side.path}: ", "", 0)
+        rej.source = side.path
+    rej.add({**keycols, "side": np.full(len(rows), name, dtype=object),
+             "input": np.full(len(rows), str(side.path), dtype=object), unit: side.lines[rows]},
+            np.asarray(reasons, dtype=object))
 
 
-def _key_codes(gt_keys, pred_keys, keys):
-    """One int64 code per row of each side; equal codes iff all key columns are equal (Arrow hashing)."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    n_g = gt_keys.num_rows
-    code = None
-    for k in keys:
-        a = gt_keys.column(k).combine_chunks()
-        b = pred_keys.column(k).combine_chunks()
-        if a.type != b.type:  # a key read as numbers on one side and text on the other: compare as text
-            a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
-        enc = pa.concat_arrays([a, b]).dictionary_encode(null_encoding="encode")
-        c = enc.indices.to_numpy(zero_copy_only=False).astype(np.int64)
-        m = len(enc.dictionary)
-        if code is None:
-            code = c
-        else:
-            code = code * m + c
-            code = np.unique(code, return_inverse=True)[1].astype(np.int64).reshape(-1)
-    return code[:n_g], code[n_g:]
-
-
-def _check_unique(codes, table, keys, path):
-    counts = np.bincount(codes)
-    dup = counts[codes] > 1
-    if dup.any():
-        first = int(np.flatnonzero(dup)[0])
-        again = int(np.flatnonzero(codes == codes[first])[1])
-        what = ", ".join(f"{k}={table.column(k)[first].as_py()!r}" for k in keys)
-        raise HpeError(f"{path}: row {first + 1}: duplicate key {what} (again at row {again + 1}); "
-                       f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
+def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
+    """Send unreadable, missing, invalid and unmatched rows to ``rej``; return the masks over GT rows."""
+    missing = pidx < 0
+    p_ok = np.where(missing, False, pred.ok[np.maximum(pidx, 0)])
+    valid = ~missing & gt.ok[gidx] & p_ok
+    invalid = ~missing & ~valid
+    for side, name in ((gt, "gt"), (pred, "pred")):
+        if side.unreadable:
+            ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
+            if rej.first_where is None:
+                rej.first_where, rej.source = f"line {ln[0]}: unreadable {name} row: {side.unreadable[0][1]}", side.path
+            rej.add({"side": np.full(len(ln), name, dtype=object),
+                     "input": np.full(len(ln), str(side.path), dtype=object), "line": ln},
+                    np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln)
+    rows = gidx[missing]
+    _add_rejects(rej, gt, "gt", rows, np.full(len(rows), "missing: no prediction for this ground-truth row",
+                                              dtype=object), key_cols(gt, rows))
+    rows, prow = gidx[invalid], pidx[invalid]
+    gt_bad = ~gt.ok[rows]
+    _add_rejects(rej, gt, "gt", rows[gt_bad], ("invalid: gt " + _reasons(gt, rows[gt_bad])).astype(object),
+                 key_cols(gt, rows[gt_bad]))
+    _add_rejects(rej, pred, "pred", prow[~gt_bad], ("invalid: prediction " + _reasons(pred, prow[~gt_bad]))
+                 .astype(object), key_cols(pred, prow[~gt_bad]))
+    _add_rejects(rej, pred, "pred", unmatched, np.full(len(unmatched), "unmatched: prediction with no "
+                                                       "ground-truth row", dtype=object), key_cols(pred, unmatched))
+    return valid, missing, invalid
 
 
-def join(pred: Side, gt: Side, keys):
-    """Index arrays ``(gt_idx, pred_idx)`` (pred_idx -1 where missing) and the unmatched prediction rows."""
-    if not keys:
-        if pred.n != gt.n:
-            raise HpeError(f"{pred.path}: {pred.n} rows but {gt.path} has {gt.n}: without a shared 'image' or "
-                           "'file' column rows are paired by order, which needs equal counts; give --key COLUMN")
-        idx = np.arange(gt.n)
-        return idx, idx.copy(), np.zeros(0, dtype=np.int64)
-    cg, cp = _key_codes(gt.keys, pred.keys, keys)
-    _check_unique(cg, gt.keys, keys, gt.path)
-    _check_unique(cp, pred.keys, keys, pred.path)
-    m = int(max(cg.max(initial=-1), cp.max(initial=-1))) + 1
-    pred_pos = np.full(m, -1, dtype=np.int64)
-    pred_pos[cp] = np.arange(len(cp))
-    gt_has = np.zeros(m, dtype=bool)
-    gt_has[cg] = True
-    return np.arange(len(cg)), pred_pos[cg], np.flatnonzero(~gt_has[cp])
+def _take(c: Chunk, idx) -> Chunk:
+    """Rows ``idx`` (int array or bool mask) of a chunk."""
+    def t(x):
+        return None if x is None else x[idx]
+    keys = None
+    if c.keys is not None:
+        keys = c.keys.filter(idx) if np.asarray(idx).dtype == bool else c.keys.take(idx)
+    return Chunk([x[idx] for x in c.canonical], c.ok[idx], t(c.reasons), t(c.raw), t(c.dist), keys, t(c.by),
+                 c.lines[idx])
 
 
-def _reasons(side: Side, idx):
-    if side.reasons is None:
-        return np.full(len(idx), "", dtype=object)
-    return side.reasons[idx]
+def _memory_pairs(gt, pred, gv, pv, batch_size):
+    """Chunks of the joined valid pairs (in GT order) from two sides held in memory."""
+    for a in range(0, len(gv), batch_size):
+        gi, pi = gv[a:a + batch_size], pv[a:a + batch_size]
+        g = Chunk([x[gi] for x in gt.canonical], gt.ok[gi], None, None if gt.raw is None else gt.raw[gi],
+                  None, None if gt.keys is None else gt.keys.take(gi), None if gt.by is None else gt.by[gi],
+                  gt.lines[gi])
+        p = Chunk([x[pi] for x in pred.canonical], pred.ok[pi], None, None if pred.raw is None else pred.raw[pi],
+                  None if pred.dist is None else pred.dist[pi], None, None if pred.by is None else pred.by[pi],
+                  pred.lines[pi])
+        yield g, p
+
+
+class _Settings:
+    """Everything one run needs, so a pass can be repeated (re-read in streaming, replayed in memory)."""
+
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+
+def _nested(c: Chunk):
+    return [[c.canonical[3 * i + j] for j in range(3)] for i in range(3)]
+
+
+def _raw(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
+    raw = {}
+    if g.raw is not None:
+        raw["gt"] = (gsys, g.raw)
+    if p.raw is not None and not aligned:
+        raw["pred"] = (psys, p.raw)
+    return raw
+
+
+def _globals(s, pairs_factory, gsys, psys) -> dict:
+    """Estimates over all pairs that the per-chunk scores need: --align mean's offset, opal23's mean."""
+    import os
+    import tempfile
+
+    from ..metrics import peer_angles as pa_
+    from ..metrics.align import project_to_so3
+    from ..metrics.protocols import PosePair, _opal23_mats
+
+    need_mean = s.align == "mean"
+    need_opal = "opal23-align" in s.protocols
+    if not (need_mean or need_opal):
+        return {}
+    M, n = np.zeros((3, 3)), 0
+    fd, path = tempfile.mkstemp(prefix="hpe_eval_opal23_", suffix=".bin")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            for g, p in pairs_factory():
+                ok = g.ok & p.ok
+                if not ok.all():
+                    g, p = _take(g, ok), _take(p, ok)
+                P, G = _nested(p), _nested(g)
+                if need_mean:
+                    for k in range(3):
+                        for m in range(3):
+                            M[k, m] += float(np.sum(P[k][0] * G[m][0] + P[k][1] * G[m][1] + P[k][2] * G[m][2]))
+                    n += g.n
+                if need_opal and g.n:
+                    pair = PosePair(P, G, gsys, _raw(g, p, gsys, psys))
+                    Po, Go, _ = _opal23_mats(pair)
+                    np.ascontiguousarray(pa_.opal23_near_deltas(Go, Po)).tofile(f)
+        out = {}
+        if need_mean:
+            out["Q"] = project_to_so3(M / n) if n else np.eye(3)
+        if need_opal:
+            size = os.path.getsize(path)
+            deltas = np.memmap(path, dtype=np.float64, mode="r").reshape(-1, 3, 3) if size else np.zeros((0, 3, 3))
+            out["opal23_mean"] = pa_.opal23_karcher(deltas)
+            del deltas
+        return out
+    finally:
+        os.unlink(path)
+
+
+def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
+    """Score every chunk of pairs: accumulate, write rows, keep the worst and a plot sample."""
+    from ..metrics.align import remove_offset
+    from ..metrics.evaluate import compute_rows, yaw_bin_edges
+    from ..metrics.protocols import PROTOCOLS
+    from ..metrics.stream import Accumulator
+
+    protos = {k: PROTOCOLS[k] for k in s.protocols}
+    edges = yaw_bin_edges(gsys, float(s.yaw_bins)) if s.yaw_bins else None
+    acc = Accumulator(protos, edges, by=bool(s.by))
+    before = Accumulator(protos, None, by=False, percentiles=True) if s.align == "mean" else None
+    worst, sample = Worst(s.worst if s.html else 0), Sample()
+    ctx = {"opal23_mean": glob["opal23_mean"]} if "opal23_mean" in glob else {}
+    counts = {"pairs": 0, "invalid": 0}
+    try:
+        for g, p in pairs:
+            if stream:
+                bad = ~(g.ok & p.ok)
+                if bad.any():
+                    _stream_rejects(rej, s, g, p, bad)
+                    counts["invalid"] += int(bad.sum())
+                    g, p = _take(g, ~bad), _take(p, ~bad)
+            P, G = _nested(p), _nested(g)
+            by_values = (g.by if g.by is not None else p.by) if s.by else None
+            if before is not None:
+                before.add(compute_rows(P, G, gsys, s.protocols, _raw(g, p, gsys, psys), ctx))
+                P = remove_offset(P, glob["Q"])
+            rows = compute_rows(P, G, gsys, s.protocols, _raw(g, p, gsys, psys, aligned=before is not None), ctx)
+            counts["pairs"] += rows.n
+            if p.dist is not None and len(p.dist):
+                counts["orthonormalized"] = counts.get("orthonormalized", 0) + int((p.dist > 1e-6).sum())
+                counts["dist_sum"] = counts.get("dist_sum", 0.0) + float(p.dist.sum())
+                counts["dist_max"] = max(counts.get("dist_max", 0.0), float(p.dist.max()))
+            acc.add(rows, by_values)
+            sample.add(rows)
+            if writer is not None or worst.n:
+                t = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
+                if writer is not None:
+                    writer.write(t)
+                worst.add(t)
+        rep = acc.report()
+        rep_before = before.report() if before is not None else None
+    finally:
+        acc.close()
+        if before is not None:
+            before.close()
+    return rep, rep_before, counts, worst, sample
+
+
+def _stream_rejects(rej, s, g: Chunk, p: Chunk, bad):
+    gt_bad = bad & ~g.ok
+    pred_bad = bad & g.ok & ~p.ok
+
+    def keycols(c, m):
+        if s.keys:
+            return {k: c.keys.column(k).filter(m).to_numpy(zero_copy_only=False) for k in s.keys}
+        return {}
+
+    for c, m, name, side, what in ((g, gt_bad, "gt", s.gside, "gt"), (p, pred_bad, "pred", s.pside, "prediction")):
+        if m.any():
+            rs = c.reasons[m] if c.reasons is not None else np.full(int(m.sum()), "not usable", dtype=object)
+            reasons = ("invalid: " + what + " " + rs.astype(str)).astype(object)
+            unit = side.unit
+            lines = c.lines[m]
+            if rej.first_where is None:
+                rej.first_where, rej.source = f"{unit} {int(lines[0])}: {reasons[0]}", side.path
+            rej.add({**keycols(c, m), "side": np.full(len(lines), name, dtype=object),
+                     "input": np.full(len(lines), str(side.path), dtype=object), unit: lines}, reasons)
+
+
+def _unreadable_rejects(rej, side, name):
+    if side.unreadable:
+        ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
+        if rej.first_where is None:
+            rej.first_where, rej.source = f"line {ln[0]}: unreadable {name} row: {side.unreadable[0][1]}", side.path
+        rej.add({"side": np.full(len(ln), name, dtype=object),
+                 "input": np.full(len(ln), str(side.path), dtype=object), "line": ln},
+                np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln)
+
+
+def _readers(s, progress=None):
+    gr = SideReader(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, progress)
+    pr = SideReader(s.pred_path, s.pred_system, s.use_pred, s.keys, s.by if s.by not in gr.columns else None,
+                    s.radians, s.batch_size, progress, s.orthonormalize)
+    return gr, pr
+
+
+def _run_stream(s, rej, writer):
+    """Pair the chunks as they are read (same keys in the same order, or --join order)."""
+    notes: set = set()
+
+    def factory():
+        gr, pr = _readers(s)
+        return lockstep(gr, pr, s.keys, s.join_mode, set())
+
+    gr, pr = _readers(s, s.progress)
+    s.gside, s.pside = gr, pr
+    glob = _globals(s, factory, gr.system, pr.system)
+    out = _score(s, prefetch(lockstep(gr, pr, s.keys, s.join_mode, notes)), rej, gr.system, pr.system, glob,
+                 writer, True)
+    if s.join_mode == "order" and (gr.unreadable or pr.unreadable):
+        side = gr if gr.unreadable else pr
+        raise HpeError(f"{side.path}: line {side.unreadable[0][0]}: unreadable row ({side.unreadable[0][1]}): "
+                       "rows cannot be paired by position (--join order) once one is skipped")
+    for side, name in ((gr, "gt"), (pr, "pred")):
+        _unreadable_rejects(rej, side, name)
+    n = {"gt": gr.n, "pred": pr.n, "missing": 0, "unmatched_pred": 0}
+    return out, glob, n, sorted(notes), gr, pr
+
+
+def _run_memory(s, rej, writer):
+    """Read both sides whole, join them by key, then score the pairs in chunks."""
+    gt = read_side(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, s.progress)
+    pred = read_side(s.pred_path, s.pred_system, s.use_pred, s.keys, s.by if s.by not in gt.columns else None,
+                     s.radians, s.batch_size, s.progress, orthonormalize=s.orthonormalize)
+    if pred.n == 0 and not pred.unreadable:
+        raise HpeError(f"{pred.path}: no prediction rows (the file has a header only)")
+    gidx, pidx, unmatched, notes = join(pred, gt, s.keys, s.join_mode)
+
+    def key_cols(side, rows):
+        if s.keys:
+            return {k: side.keys.column(k).take(rows).to_numpy(zero_copy_only=False) for k in s.keys}
+        return {"row": rows + 1}
+
+    valid, missing, invalid = _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols)
+    gv, pv = gidx[valid], pidx[valid]
+    glob = _globals(s, lambda: _memory_pairs(gt, pred, gv, pv, s.batch_size), gt.system, pred.system)
+    out = _score(s, _memory_pairs(gt, pred, gv, pv, s.batch_size), rej, gt.system, pred.system, glob, writer,
+                 False)
+    out[2]["invalid"] = int(invalid.sum())
+    n = {"gt": gt.n, "pred": pred.n, "missing": int(missing.sum()), "unmatched_pred": len(unmatched)}
+    return out, glob, n, notes, gt, pred
+
+
+def _run(s, writer, stream: bool):
+    from ..io import Rejects
+
+    rej = Rejects(s.rejects, s.overwrite, strict=s.strict, source=None)
+    out, glob, n, notes, gside, pside = (_run_stream if stream else _run_memory)(s, rej, writer)
+    rej.check()  # without --rejects (or with --strict) any set-aside row is an error: nothing is written
+    if pside.n == 0 and not pside.unreadable:
+        raise HpeError(f"{pside.path}: no prediction rows (the file has a header only)")
+    if gside.n == 0 and not gside.unreadable:
+        raise HpeError(f"{gside.path}: no ground-truth rows")
+    return out, glob, n, notes, gside, pside, rej
+
+
+def _align_block(glob, rep_before, gsys) -> dict:
+    from ..metrics import rotation_errors as re_
+
+    Q = glob["Q"]
+    qp, _, _, _ = gsys.to_angles(gsys.from_canonical(Q[None]))
+    return {"method": "mean", "offset_deg": float(re_.geodesic_deg(Q[None], np.eye(3)[None])[0]),
+            "offset_angles": dict(zip(ANGLES, map(float, qp[0]))), "offset_matrix_canonical": Q.tolist(),
+            "gt_system": gsys.name, "estimate": "hpe chordal mean over all pairs (not opal23's Karcher mean)",
+            "before": {"metrics": rep_before["metrics"], "protocols": rep_before["protocols"]}}
+
+
+def _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed) -> dict:
+    """The report dict of one run."""
+    from ..metrics.protocols import PROTOCOLS
+
+    result = {"n": {"gt": n["gt"], "pred": n["pred"], "pairs": counts["pairs"], "missing": n["missing"],
+                    "invalid": counts["invalid"], "unmatched_pred": n["unmatched_pred"]},
+              "systems": {"pred": pside.system.name, "gt": gside.system.name}}
+    if gside.unreadable or pside.unreadable:
+        result["n"]["unreadable"] = len(gside.unreadable) + len(pside.unreadable)
+    if s.orthonormalize:
+        result["n"]["orthonormalized"] = counts.get("orthonormalized", 0)
+        result["orthonormalize"] = {"method": "nearest rotation (SVD, det +1) of each prediction matrix",
+                                    "max_distance": counts.get("dist_max"),
+                                    "mean_distance": counts["dist_sum"] / counts["pairs"] if counts.get("pairs")
+                                    and "dist_sum" in counts else None}
+    result["align"] = _align_block(glob, rep_before, gside.system) if s.align == "mean" else {"method": "none"}
+    result["metrics"], result["protocols"] = rep["metrics"], rep["protocols"]
+    if s.by:
+        result["by"] = {"column": s.by, "groups": rep["by_groups"]}
+    if s.yaw_bins:
+        result["yaw_bins"] = rep["yaw_bins"]
+    result["inputs"] = {"pred": str(pside.path), "gt": str(gside.path), "key": s.keys or "row order",
+                        "join": s.join_mode, "paired": "streamed in file order" if streamed else "joined in memory",
+                        "columns": {"pred": pside.mode, "gt": gside.mode}}
+    result["notes"] = list(notes) + [f"{name}: {note}" for name in s.protocols for note in PROTOCOLS[name].notes]
+    if rej.counts:
+        result["rejects"] = dict(rej.counts)
+    return result
 
 
 def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, keys=(), protocols=None,
                  align="none", by=None, yaw_bins=None, report=None, plots=None, rejects=None, use_pred="auto",
                  use_gt="auto", radians=False, overwrite=False, batch_size=262_144, progress=None,
-                 strict=False) -> dict:
+                 strict=False, join_mode="key", orthonormalize=False, html=None, worst=12, images=None) -> dict:
     """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report."""
-    from ..io import Rejects, write_json
-    from ..metrics.evaluate import check_protocols, evaluate_canonical
-    from ..metrics.protocols import PROTOCOLS
+    from ..io import TableWriter, open_table, system_metadata, write_json
+    from ..io.writers import check_report_outputs
+    from ..metrics.evaluate import check_protocols
 
     try:
         protocols = check_protocols(protocols or None)
     except ValueError as exc:
         raise HpeError(str(exc)) from None
-    from ..io.writers import check_report_outputs
-
     check_report_outputs(report, output, overwrite)
+    if html:
+        check_report_outputs(html, None, overwrite)
     if plots:
         from ..report.eval_plots import check_plot_outputs
 
         check_plot_outputs(plots, overwrite)
-    rej = Rejects(rejects, overwrite, strict=strict, source=gt_path)
-
-    from ..io import open_table
-
     pcols = open_table(pred_path, batch_size).columns
-    gcols = open_table(gt_path, batch_size).columns
-    keys = _choose_keys(list(keys or ()), pcols, gcols, pred_path, gt_path)
+    gsrc = open_table(gt_path, batch_size)
+    gcols = list(gsrc.columns)
+    if "file" in gcols and "image" not in gcols and getattr(gsrc, "dataset", False):
+        gcols.append("image")  # the .mat folder's key: see evaluate_join._stem_key_hook
+    keys = _choose_keys(list(keys or ()), pcols, gcols, pred_path, gt_path, join_mode)
     if by and by not in gcols and by not in pcols:
         raise HpeError(f"{gt_path}: --by column {by!r} is in neither table; found: {', '.join(gcols[:20])}")
-    gt = read_side(gt_path, gt_system, use_gt, keys, by, radians, batch_size, progress, "gt")
-    pred = read_side(pred_path, pred_system, use_pred, keys, by if by not in gcols else None, radians,
-                     batch_size, progress, "pred")
-    gidx, pidx, unmatched = join(pred, gt, keys)
+    folder = images or (str(gsrc.path) if getattr(gsrc, "dataset", False) and gsrc.path.is_dir() else None)
+    s = _Settings(pred_path=pred_path, gt_path=gt_path, pred_system=pred_system, gt_system=gt_system, keys=keys,
+                  protocols=protocols, align=align, by=by, yaw_bins=yaw_bins, rejects=rejects, use_pred=use_pred,
+                  use_gt=use_gt, radians=radians, overwrite=overwrite, batch_size=batch_size, progress=progress,
+                  strict=strict, join_mode=join_mode, orthonormalize=orthonormalize, html=html, worst=worst,
+                  images=Images(folder) if folder else None)
+    meta = {**system_metadata(gt_system), "hpe:evaluate_pred_system": pred_system.name,
+            "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution of each "
+                                 "rotation; pred after --align); err_* "
+                                 "are wrapped |pred - gt| in [0, 180]; geodesic and maev_* in degrees; frobenius "
+                                 "unitless"}
 
-    missing = pidx < 0
-    g_ok = gt.ok[gidx]
-    p_ok = np.where(missing, False, pred.ok[np.maximum(pidx, 0)])
-    valid = ~missing & g_ok & p_ok
-    invalid = ~missing & ~valid
+    def attempt(stream):
+        if output:
+            with TableWriter(output, overwrite, meta) as w:
+                res = _run(s, w, stream)
+                if w.rows == 0:
+                    w.write(empty_rows(keys))
+                return res
+        return _run(s, None, stream)
 
-    def key_cols(side, rows, arrow=False):
-        if keys:
-            return {k: (side.keys.column(k).take(rows) if arrow else
-                        side.keys.column(k).take(rows).to_numpy(zero_copy_only=False)) for k in keys}
-        return {"row": rows + 1}
-
-    for side, name in ((gt, "gt"), (pred, "pred")):
-        if side.unreadable:
-            ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
-            rej.add({"side": np.full(len(ln), name, dtype=object), "input": np.full(len(ln), str(side.path),
-                                                                                    dtype=object), "line": ln},
-                    np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln)
-    if missing.any():
-        rows = gidx[missing]
-        rej.add({**key_cols(gt, rows), "side": np.full(len(rows), "gt", dtype=object),
-                 "input": np.full(len(rows), str(gt.path), dtype=object), "line": gt.lines[rows]},
-                np.full(len(rows), "missing: no prediction for this ground-truth row", dtype=object))
-    if invalid.any():
-        rows = gidx[invalid]
-        prow = pidx[invalid]
-        gt_bad = ~gt.ok[rows]
-        why = np.where(gt_bad, "invalid: gt " + _reasons(gt, rows), "invalid: prediction " + _reasons(pred, prow))
-        rej.add({**key_cols(gt, rows), "side": np.where(gt_bad, "gt", "pred").astype(object),
-                 "input": np.where(gt_bad, str(gt.path), str(pred.path)).astype(object),
-                 "line": np.where(gt_bad, gt.lines[rows], pred.lines[prow])}, why.astype(object))
-    if len(unmatched):
-        rej.add({**key_cols(pred, unmatched), "side": np.full(len(unmatched), "pred", dtype=object),
-                 "input": np.full(len(unmatched), str(pred.path), dtype=object), "line": pred.lines[unmatched]},
-                np.full(len(unmatched), "unmatched: prediction with no ground-truth row", dtype=object))
-    rej.check()  # without --rejects (or with --strict) any set-aside row is an error: nothing is written
-
-    gv, pv = gidx[valid], pidx[valid]
-    def gather(side, idx):  # no copy when every row is used in its own order
-        if len(idx) == side.n and (idx[0] == 0 if len(idx) else True) and np.all(np.diff(idx) == 1):
-            return [[side.canonical[3 * i + j] for j in range(3)] for i in range(3)]
-        return [[side.canonical[3 * i + j][idx] for j in range(3)] for i in range(3)]
-
-    P = gather(pred, pv)
-    G = gather(gt, gv)
-    pred.canonical = gt.canonical = None  # the pairs hold their own copies now
-    by_values = None
-    if by:
-        by_values = gt.by[gv] if gt.by is not None else pred.by[pv]
-    part, rows = evaluate_canonical(P, G, gt_system=gt_system, protocols=protocols, align=align, by=by_values,
-                                    by_name=by or "by", yaw_bins=yaw_bins)
-    result = {"n": {"gt": gt.n, "pred": pred.n, "pairs": int(valid.sum()), "missing": int(missing.sum()),
-                    "invalid": int(invalid.sum()), "unmatched_pred": int(len(unmatched))},
-              "systems": {"pred": pred_system.name, "gt": gt_system.name}}
-    result.update(part)
-    result["inputs"] = {"pred": str(pred.path), "gt": str(gt.path), "key": keys or "row order",
-                        "columns": {"pred": pred.mode, "gt": gt.mode}}
-    result["notes"] = [f"{name}: {note}" for name in protocols for note in PROTOCOLS[name].notes]
-    if rej.counts:
-        result["rejects"] = dict(rej.counts)
-
-    if output:
-        _write_rows(output, rows, key_cols(gt, gidx[valid], arrow=True),
-                    by, by_values, gt_system, pred_system, overwrite, batch_size)
+    try:
+        out, glob, n, notes, gside, pside, rej = attempt(True)
+        streamed = True
+    except Unaligned:
+        out, glob, n, notes, gside, pside, rej = attempt(False)
+        streamed = False
+    (rep, rep_before, counts, worst_rows, sample) = out
+    result = _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed)
     rej.write()
     if plots:
         from ..report.eval_plots import write_eval_plots
 
-        write_eval_plots(plots, rows, result, gt_system, overwrite=overwrite)
+        write_eval_plots(plots, sample.rows(), result, gside.system, overwrite=overwrite)
+    if html:
+        from ..report.evaluate_page import write_page
+
+        frame = worst_rows.frame.to_pandas() if worst_rows.frame is not None else None
+        write_page(html, result, frame, overwrite=overwrite, plots=sample.rows(),
+                   pictures=worst_pictures(frame, s.images))
     if report == "-":
         import click
 
@@ -279,34 +436,3 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     return result
 
 
-def _write_rows(output, rows, keycols, by, by_values, gt_system, pred_system, overwrite, batch_size):
-    """One row per valid pair: keys, both labels in the GT system, per-angle errors, geodesic, maev."""
-    import pyarrow as pa
-
-    from ..io import TableWriter, system_metadata
-
-    cols = dict(keycols)
-    if by and by not in cols:
-        cols[by] = by_values
-    for k, a in enumerate(("pitch", "yaw", "roll")):
-        cols[f"gt_{a}"] = rows.gt_angles[:, k]
-    for k, a in enumerate(("pitch", "yaw", "roll")):
-        cols[f"pred_{a}"] = rows.pred_angles[:, k]
-    for k, a in enumerate(("pitch", "yaw", "roll")):
-        cols[f"err_{a}"] = rows.mae_wrapped[:, k]
-    cols["geodesic"] = rows.geodesic
-    for k, a in enumerate(("left", "down", "front")):
-        cols[f"maev_{a}"] = rows.maev[:, k]
-    cols["frobenius"] = rows.frobenius
-    meta = {**system_metadata(gt_system), "hpe:evaluate_pred_system": pred_system.name,
-            "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution; pred after "
-                                 "--align); err_* are "
-                                 "wrapped |pred - gt| in [0, 180]; geodesic and maev_* in degrees"}
-    n = rows.n
-    arrays = {k: (v if isinstance(v, (pa.Array, pa.ChunkedArray)) else pa.array(v)) for k, v in cols.items()}
-    table = pa.table(arrays)
-    with TableWriter(output, overwrite, meta) as w:
-        if n == 0:
-            w.write(table)
-        for start in range(0, n, batch_size):
-            w.write(table.slice(start, batch_size))

@@ -1,0 +1,222 @@
+"""The angle extractions and error formulas of published evaluation code, column-wise.
+
+Each function reproduces a few named lines of a peer's current code (the
+``repo@commit file:lines`` is in its docstring). Where the peer calls SciPy's
+``Rotation`` the same SciPy call is made here, so the numbers agree to the
+last bits; everything runs on whole columns (no loop per row).
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+_DEG = 180.0 / np.pi
+
+SRC_6DREPNET_EULER = "thohemp/6DRepNet@464b2ba sixdrepnet/utils.py:165-184"
+SRC_OPAL23 = "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py"
+
+
+def stack3(X) -> np.ndarray:
+    """A nested 3x3 list of columns as an ``(N, 3, 3)`` array."""
+    n = int(np.broadcast(*[x for row in X for x in row]).shape[0])
+    out = np.empty((n, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[:, i, j] = X[i][j]
+    return out
+
+
+def sixdrepnet_euler(R) -> np.ndarray:
+    """6DRepNet's ``compute_euler_angles_from_rotation_matrices`` (pitch, yaw, roll degrees).
+
+    thohemp/6DRepNet@464b2ba sixdrepnet/utils.py:165-184 (the same function in
+    6DRepNet360@b06e4fe sixdrepnet360/utils.py:164): ``sy = sqrt(R00^2 + R10^2)``;
+    ``x = atan2(R21, R22)``, ``y = atan2(-R20, sy)``, ``z = atan2(R10, R00)``;
+    rows with ``sy < 1e-6``: ``x = atan2(-R12, R11)``, ``z = 0``.
+    """
+    sy = np.sqrt(R[0][0] * R[0][0] + R[1][0] * R[1][0])
+    singular = sy < 1e-6
+    x = np.where(singular, np.arctan2(-R[1][2], R[1][1]), np.arctan2(R[2][1], R[2][2]))
+    y = np.arctan2(-R[2][0], sy)
+    z = np.where(singular, 0.0, np.arctan2(R[1][0], R[0][0]))
+    return np.stack(np.broadcast_arrays(x, y, z), -1) * _DEG
+
+
+def min_wrapped(pred, gt, with_180: bool) -> np.ndarray:
+    """``min(|gt - p|, |p + 360 - gt|, |p - 360 - gt|[, |p + 180 - gt|, |p - 180 - gt|])`` per angle.
+
+    ``with_180=False`` is 6DRepNet360's current 3-term minimum
+    (thohemp/6DRepNet360@b06e4fe sixdrepnet360/test.py:188-193, since 9c1cfaf);
+    ``True`` the 5-term one of 6DRepNet (sixdrepnet/test.py:137-142) and TriNet
+    (chuzcjoe/TriNet@d2689de computeMAE.py:168-170).
+    """
+    d = np.asarray(pred, dtype=np.float64) - np.asarray(gt, dtype=np.float64)
+    terms = [np.abs(d), np.abs(d + 360.0), np.abs(d - 360.0)]
+    if with_180:
+        terms += [np.abs(d + 180.0), np.abs(d - 180.0)]
+    out = terms[0]
+    for t in terms[1:]:
+        out = np.minimum(out, t)
+    return out
+
+
+def img2pose_euler(R_img2pose) -> np.ndarray:
+    """img2pose's ``convert_to_aflw``: ``as_euler('xyz')`` of ``R.T``, as ``(x, -y, -z)`` degrees.
+
+    vitoralbiero/img2pose@fd5473e evaluation/jupyter_notebooks/aflw_2000_3d_evaluation.ipynb
+    (notebook lines 112-118; ``R`` is ``Rotation.from_rotvec`` of the predicted rotation vector).
+    """
+
+    M = np.transpose(stack3(R_img2pose), (0, 2, 1))
+    a = _euler(M, "xyz", True)
+    return a * np.array([1.0, -1.0, -1.0])
+
+
+def opal23_matrices(pyr) -> np.ndarray:
+    """opal23's matrices of (pitch, yaw, roll) degrees: ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])``."""
+    from scipy.spatial.transform import Rotation
+
+    a = np.asarray(pyr, dtype=np.float64) * np.array([1.0, -1.0, 1.0])
+    return Rotation.from_euler("XYZ", a, degrees=True).as_matrix()
+
+
+def opal23_mae(ann, pred) -> np.ndarray:
+    """``Evaluator.compute_mae`` (opal23_headpose@78c0c45 test/evaluator.py:51-75, 131-139).
+
+    Returns (N, 3) errors in the order (pitch, yaw, roll); the peer's array is
+    (yaw, pitch, roll) after its ``PYR -> YPR`` swap.
+    """
+
+    a = _euler(ann, "XYZ", True)
+    p = _euler(pred, "XYZ", True)
+    a[:, [0, 1]] = a[:, [1, 0]]
+    p[:, [0, 1]] = p[:, [1, 0]]
+    sign = np.sign(p)
+    w = np.stack([180 - p[:, 0], p[:, 1] - sign[:, 1] * 180, p[:, 2] - sign[:, 2] * 180], axis=1)
+    w[w > 180] -= 360
+    w[w < -180] += 360
+    e = np.abs(a - p)
+    ew = np.abs(a - w)
+    use = ew.mean(axis=-1) < e.mean(axis=-1)
+    e[use] = ew[use]
+    e = np.minimum(e, 360 - e)
+    return e[:, [1, 0, 2]]
+
+
+def opal23_geodesic(ann, pred) -> np.ndarray:
+    """``Evaluator.compute_ge`` (test/evaluator.py:77-93): ``arccos(clip((trace(A P^T) - 1) / 2))`` degrees."""
+    t = np.einsum("nij,nij->n", ann, pred)
+    return np.rad2deg(np.arccos(np.clip((t - 1) / 2, -1, 1)))
+
+
+def _euler(R, seq: str, degrees: bool = False) -> np.ndarray:
+    """SciPy ``Rotation.from_matrix(R).as_euler(seq)``, without its gimbal-lock warning (the peers see it too)."""
+    from scipy.spatial.transform import Rotation
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        return Rotation.from_matrix(R).as_euler(seq, degrees=degrees)
+
+
+def _log(M) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(M).as_rotvec()
+
+
+def opal23_near_deltas(ann, pred) -> np.ndarray:
+    """``P_i A_i^T`` of the rows within 90 degrees of the identity: what opal23's mean is taken over."""
+    deltas = np.matmul(pred, np.transpose(ann, (0, 2, 1)))
+    return deltas[np.linalg.norm(_log(deltas), axis=1) < np.pi / 2]
+
+
+def opal23_karcher(deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20) -> np.ndarray:
+    """opal23's ``_compute_mean_rotation`` (test/evaluator.py:111-126) over ``deltas`` (any array-like, e.g. a memmap).
+
+    Started at the first delta, ``mean <- mean @ exp(mean displacement)`` until
+    the mean displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the
+    sums run chunk by chunk, so a memory-mapped spill of any length works.
+    """
+    from scipy.spatial.transform import Rotation
+
+    n = len(deltas)
+    if not n:
+        return np.eye(3)
+    mean = np.array(deltas[0], dtype=np.float64)
+    for _ in range(max_iter):
+        total = np.zeros(3)
+        for a in range(0, n, chunk):
+            total += _log(np.matmul(mean.T, np.asarray(deltas[a:a + chunk]))).sum(axis=0)
+        d = total / n
+        if np.linalg.norm(d) < tol:
+            break
+        mean = mean @ Rotation.from_rotvec(d).as_matrix()
+    return mean
+
+
+def opal23_align(ann, pred, tol: float = 1e-4, max_iter: int = 100_000, mean=None):
+    """``Evaluator.align_predictions`` with ``mask=None`` (test/evaluator.py:95-129).
+
+    The Karcher mean of ``P_i A_i^T`` over the rows within 90 degrees of the
+    identity (``distances < pi/2``), started at the first such row and
+    iterated until the mean displacement is below ``tol``; every prediction
+    becomes ``mean.T @ P_i``. ``mean`` given (from all chunks of a streamed
+    run) skips the estimate. Returns ``(aligned predictions, mean)``.
+    """
+    if mean is None:
+        mean = opal23_karcher(opal23_near_deltas(ann, pred), tol, max_iter)
+    return np.matmul(mean.T, pred), mean
+
+
+def trinet_euler(T) -> np.ndarray:
+    """TriNet's ``W300_R2EulerAngles`` (chuzcjoe/TriNet@d2689de computeMAE.py:84-89), degrees.
+
+    ``yaw = -arcsin(R02)``, ``roll = atan2(-R01, R00)``, ``pitch = atan2(-R12, R22)``
+    on the matrix whose columns are the [left | down | front] vectors.
+    """
+    yaw = -np.arcsin(np.clip(T[0][2], -1.0, 1.0))
+    roll = np.arctan2(-T[0][1], T[0][0])
+    pitch = np.arctan2(-T[1][2], T[2][2])
+    return np.stack(np.broadcast_arrays(pitch, yaw, roll), -1) * _DEG
+
+
+def column_acos_deg(P, G, float32: bool = False) -> np.ndarray:
+    """``acos(clip(sum(g_k * p_k), -1, 1))`` for the three columns k, degrees (TriNet computeMAE.py:163-165).
+
+    ``float32=True`` computes the dot products and ``acos`` in float32, as
+    6DRepNet360's test.py:181-186 does on its float32 tensors (near 0 degrees
+    ``acos`` of a float32 dot product differs from the float64 one by up to
+    0.02 degrees per row, which moves the mean by 1e-4 degrees).
+    """
+    dt = np.float32 if float32 else np.float64
+    out = []
+    for j in range(3):
+        p = [np.asarray(P[i][j], dtype=dt) for i in range(3)]
+        g = [np.asarray(G[i][j], dtype=dt) for i in range(3)]
+        dot = (g[0] * p[0] + g[1] * p[1]) + g[2] * p[2]
+        out.append(np.degrees(np.arccos(np.clip(dot, -1.0, 1.0))).astype(np.float64))
+    return np.stack(np.broadcast_arrays(*out), -1)
+
+
+def opentrack_euler(T) -> np.ndarray:
+    """opentrack's ``inv_aflw_rotation_conversion`` (radians; pitch, yaw, roll).
+
+    opentrack/neuralnet-tracker-traincode@8d2478c trackertraincode/utils.py:41-62:
+    the rotation is ``P from_euler('XYZ', [p, -y, r]) P`` (P = diag(1, 1, -1)); its
+    inverse takes ``as_euler('XYZ')`` of ``P M P`` (the [p, -y, r] matrix ``T``
+    here) and negates yaw.
+    """
+    return _euler(stack3(T), "XYZ") * np.array([1.0, -1.0, 1.0])
+
+
+def opentrack_errors(e1, e2):
+    """``_angle_errors`` (trackertraincode/eval.py:337-341) with the ``arccos`` argument clipped.
+
+    The peer computes ``arccos(cos a cos b + sin a sin b)`` without clipping,
+    which is NaN where rounding puts the argument above 1. Returns the clipped
+    errors (degrees) and the mask of rows the peer turns into NaN.
+    """
+    dot = np.cos(e1) * np.cos(e2) + np.sin(e1) * np.sin(e2)
+    peer_nan = (np.abs(dot) > 1.0).any(axis=-1)
+    return np.degrees(np.arccos(np.clip(dot, -1.0, 1.0))), peer_nan

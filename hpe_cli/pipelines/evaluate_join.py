@@ -1,0 +1,493 @@
+"""``hpe evaluate`` inputs: read each side in chunks, pair the two by key (or by position when asked).
+
+Each side is read batch by batch (:class:`SideReader`); a batch becomes a
+:class:`Chunk`: canonical matrices (nine float64 columns), usability, the
+angles as written (when the side holds angles), key and ``--by`` columns.
+Pairing is by key columns only: when both files list the same keys in the same
+order the chunks are paired as they stream (memory flat in the number of
+pairs, keys verified chunk by chunk); otherwise both sides are held in memory
+and joined with Arrow dictionary encoding. Row order is used only with
+``--join order`` and equal row counts.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import HpeError
+
+#: key columns tried in order when --key is not given
+DEFAULT_KEYS = ("image", "file")
+
+
+@dataclass
+class Side:
+    """One input table, read: canonical matrices, usability, keys."""
+
+    path: object
+    system: object
+    mode: str
+    canonical: list  # 9 arrays (N,): the canonical matrix entries, row-major
+    ok: np.ndarray  # (N,) bool
+    reasons: np.ndarray | None  # (N,) object, '' when usable; None when every row is usable
+    keys: object  # pyarrow Table of the key (and --by) columns, or None
+    by: np.ndarray | None
+    columns: list
+    lines: np.ndarray  # (N,) 1-based file line of each row (header = line 1)
+    unreadable: list  # rows the reader could not parse: (line, reason)
+    raw: np.ndarray | None = None  # (N, 3) the angles as written (degrees), when the side holds angles
+    dist: np.ndarray | None = None  # (N,) distance to the nearest rotation (--orthonormalize)
+    image_dir: object = None  # folder of a dataset reader whose images sit next to the labels
+    unit: str = "line"  # "row" for Parquet
+
+    @property
+    def n(self) -> int:
+        return len(self.ok)
+
+
+def _batch_labels(batch, system, mode, radians, orthonormalize):
+    """``(stored soa, ok, reasons, raw angles (n, 3) or None, distance (n,) or None)`` of one batch.
+
+    Angle columns are kept as written (``raw``): the raw-angle protocols compare
+    them. With ``orthonormalize`` a matrix that is not a rotation (a network's
+    raw output, e.g. TriNet's vectors) is replaced by its nearest rotation
+    (SVD, det +1) and ``distance`` is ``||M - R||_F``.
+    """
+    from ..io import batch_rotations
+    from ..io.labels import _native, _value_columns, label_columns_fast
+
+    n = batch.num_rows
+    native = _native(system, batch.schema.names)
+    if mode == "angles":
+        if native and system.storage_kind == "angles":
+            cols, ok, reasons = _value_columns(batch, system.value_columns)
+            if system.value_units == "radians":
+                cols = [c * (180.0 / np.pi) for c in cols]
+        else:
+            cols, ok, reasons = label_columns_fast(batch, "angles", radians)
+        raw = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1)
+        X = system.soa_from_angles(raw[:, 0], raw[:, 1], raw[:, 2])
+        X = [[np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) if np.ndim(v) == 0 else v for v in row]
+             for row in X]
+        return X, ok, reasons, raw, None
+    if orthonormalize and (mode == "matrix" or system.storage_kind == "matrix"):
+        from ..metrics.align import project_to_so3_batch
+
+        names = system.value_columns if (native and system.storage_kind == "matrix") else None
+        if names is None:
+            from ..io import MATRIX_COLS
+            names = MATRIX_COLS
+        cols, ok, reasons = _value_columns(batch, names)
+        M = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1).reshape(n, 3, 3)
+        R, dist = project_to_so3_batch(M)
+        bad = ok & ~np.isfinite(dist)
+        if bad.any():
+            reasons = np.full(n, "", dtype=object) if reasons is None else reasons
+            reasons[bad] = "matrix has no nearest rotation (rank < 2)"
+            ok &= ~bad
+        R[~ok] = np.eye(3)
+        return [[R[:, i, j] for j in range(3)] for i in range(3)], ok, reasons, None, np.where(ok, dist, np.nan)
+    X, ok, rs = batch_rotations(batch, system, mode, radians)
+    return X, ok, rs, None, None
+
+
+def _stem_key_hook(batch):
+    """HOOK (joins by key): a dataset reader with ``file`` but no ``image`` (the ``.mat`` folder reader) gets
+    ``image`` = the file stem, so predictions keyed by image name join. Remove once the reader provides it."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    names = batch.schema.names
+    if "image" in names or "file" not in names:
+        return batch
+    f = batch.column(names.index("file"))
+    stem = pc.replace_substring_regex(pc.cast(f, pa.string()), r"^.*[\\/]|\.[^.\\/]*$", "")
+    return pa.RecordBatch.from_arrays(list(batch.columns) + [stem], names=names + ["image"])
+
+
+@dataclass
+class Chunk:
+    """One batch of one side."""
+
+    canonical: list  # 9 arrays (n,): canonical matrix entries, row-major
+    ok: np.ndarray
+    reasons: np.ndarray | None
+    raw: np.ndarray | None
+    dist: np.ndarray | None
+    keys: object  # pyarrow Table of the key (and --by) columns, or None
+    by: np.ndarray | None
+    lines: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.ok)
+
+    def slice(self, a: int, b: int) -> Chunk:
+        def cut(x):
+            return None if x is None else x[a:b]
+        return Chunk([c[a:b] for c in self.canonical], self.ok[a:b], cut(self.reasons), cut(self.raw),
+                     cut(self.dist), None if self.keys is None else self.keys.slice(a, b - a), cut(self.by),
+                     self.lines[a:b])
+
+
+class SideReader:
+    """One input table: its system, label columns, keys; :meth:`chunks` streams it."""
+
+    def __init__(self, path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None,
+                 orthonormalize=False):
+        from ..io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
+        from ..io.columns import label_system
+
+        self.src = src = open_table(path, batch_size, with_lines=True)
+        self.system = label_system(src, system)  # .mat Pose_Para is always 300w_lp, whatever --gt-system says
+        self.path = src.path
+        columns = list(src.columns)
+        self.dataset_stem = "file" in columns and "image" not in columns and getattr(src, "dataset", False)
+        if self.dataset_stem:
+            columns.append("image")
+        self.columns = columns
+        if use == "auto":  # the system's own value columns (rotvec, quaternion, 6-D...) first, then angles, matrix
+            self.mode = label_mode(columns, src.path, self.system)
+        else:
+            self.mode = use
+            native = self.system.storage_kind == use and all(c in columns for c in self.system.value_columns)
+            need = ANGLE_COLS if use == "angles" else MATRIX_COLS
+            missing = [c for c in need if c not in columns]
+            if missing and not native:
+                raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {use}")
+        self.keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else []))
+                     if c in columns]
+        self.by = by if by and by in columns else None
+        self.radians, self.progress, self.orthonormalize = radians, progress, orthonormalize
+        self.unreadable: list = []
+        self.n = 0
+        self.image_dir = src.path if self.dataset_stem else None
+        #: how a row is named in messages: Parquet "row N" (1-based), text "line N" (header = line 1)
+        self.unit = "row" if src.kind == "parquet" else "line"
+
+    def chunks(self):
+        """Yield one :class:`Chunk` per batch of the table."""
+        from ..io.readers import LINE_COL
+        from ..rotation import soa
+
+        for batch, bad_rows in self.src.batches_with_rejects():
+            if self.dataset_stem:
+                batch = _stem_key_hook(batch)
+            self.unreadable += [(r.line, r.reason) for r in bad_rows]
+            lines = batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64)
+            if self.unit == "row":
+                lines = lines - 1  # the Parquet reader numbers rows as lines after a header
+            X, ok, rs, raw, dist = _batch_labels(batch, self.system, self.mode, self.radians, self.orthonormalize)
+            n = batch.num_rows
+            X = self.system.soa_to_canonical(X)
+            keys = batch.select(self.keep) if self.keep else None
+            by = keys.column(self.by).to_numpy(zero_copy_only=False) if self.by else None
+            self.n += n
+            if self.progress is not None:
+                self.progress.update(n)
+            yield Chunk(soa.columns(X, n), ok, rs, raw, dist, keys, by, lines)
+
+
+def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None, role="input",
+              orthonormalize=False) -> Side:
+    """Read one table whole into a :class:`Side` (for the in-memory key join).
+
+    Each field is gathered as a list of chunk arrays and concatenated (and its
+    list freed) one field at a time, so the peak is one field above the data.
+    """
+    import pyarrow as pa
+
+    r = SideReader(path, system, use, keys, by, radians, batch_size, progress, orthonormalize)
+    parts: dict = {f"c{k}": [] for k in range(9)}
+    parts.update(ok=[], reasons=[], raw=[], dist=[], keys=[], by=[], lines=[])
+    any_reasons = False
+    for c in r.chunks():
+        for k in range(9):
+            parts[f"c{k}"].append(c.canonical[k])
+        any_reasons |= c.reasons is not None
+        for name in ("ok", "reasons", "raw", "dist", "keys", "by", "lines"):
+            v = getattr(c, name)
+            parts[name].append(np.full(c.n, "", dtype=object) if name == "reasons" and v is None else v)
+
+    def cat(name, empty=None):
+        lst, parts[name] = parts[name], None
+        if not lst:
+            return empty
+        if any(x is None for x in lst):
+            return None
+        return np.concatenate(lst)
+
+    canonical = [cat(f"c{k}", np.zeros(0)) for k in range(9)]
+    ok = cat("ok", np.zeros(0, dtype=bool))
+    rs_all = cat("reasons") if any_reasons else None
+    table = None
+    if r.keep:
+        if parts["keys"]:
+            table = pa.Table.from_batches(parts["keys"])
+        else:
+            table = pa.schema([r.src.schema.field(c) if c in r.src.schema.names else pa.field(c, pa.string())
+                               for c in r.keep]).empty_table()
+    parts["keys"] = None
+    by_values = cat("by") if r.by else None
+    lines = cat("lines", np.zeros(0, dtype=np.int64))
+    side = Side(r.path, r.system, r.mode, canonical, ok, rs_all, table, by_values, r.columns, lines, r.unreadable)
+    side.raw = cat("raw")
+    side.dist = cat("dist")
+    side.image_dir = r.image_dir
+    side.unit = r.unit
+    return side
+
+
+class JoinUsageError(HpeError):
+    """A join that cannot be made as asked (the CLI turns it into a usage error, exit 2)."""
+
+    exit_code = 2
+
+
+def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path, join_mode="key"):
+    if join_mode == "order":
+        return []
+    if keys:
+        for side_cols, p in ((gt_cols, gt_path), (pred_cols, pred_path)):
+            bad = [k for k in keys if k not in side_cols]
+            if bad:
+                raise HpeError(f"{p}: --key column(s) {', '.join(bad)} not in the table; "
+                               f"found: {', '.join(side_cols[:20])}")
+        return list(keys)
+    for k in DEFAULT_KEYS:
+        if k in pred_cols and k in gt_cols:
+            return [k]
+    raise JoinUsageError(f"{pred_path}: no key column shared with {gt_path} (looked for {', '.join(DEFAULT_KEYS)}; "
+                         f"prediction columns: {', '.join(pred_cols[:12])}); give --key COL[,COL...], or "
+                         "--join order to pair rows by position (only with equal row counts)")
+
+
+def _stems(arr):
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    return pc.replace_substring_regex(pc.cast(arr, pa.string()), r"^.*[\\/]|\.[^.\\/]*$", "")
+
+
+def _encode(a, b):
+    import pyarrow as pa
+
+    enc = pa.concat_arrays([a, b]).dictionary_encode(null_encoding="encode")
+    return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), len(enc.dictionary)
+
+
+def _key_codes(gt_keys, pred_keys, keys):
+    """One int64 code per row of each side (equal codes iff all key columns are equal) and the notes.
+
+    Text keys that name files are compared as written; when that matches fewer
+    rows than comparing their file stems (``image00050.jpg``, ``AFLW/image00050.mat``
+    and ``image00050`` are one image), the stems are used and a note says so.
+    """
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    n_g = gt_keys.num_rows
+    code, notes = None, []
+    for k in keys:
+        a = gt_keys.column(k).combine_chunks()
+        b = pred_keys.column(k).combine_chunks()
+        if a.type != b.type:  # a key read as numbers on one side and text on the other: compare as text
+            a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
+        c, m = _encode(a, b)
+        if pa.types.is_string(a.type) or pa.types.is_large_string(a.type):
+            exact = np.isin(c[:n_g], c[n_g:]).sum()
+            if exact < min(n_g, len(c) - n_g):
+                cs, ms = _encode(_stems(a), _stems(b))
+                if np.isin(cs[:n_g], cs[n_g:]).sum() > exact:
+                    c, m = cs, ms
+                    notes.append(f"key {k!r} joined on file stems (the two files spell the names differently)")
+        if code is None:
+            code = c
+        else:
+            code = code * m + c
+            code = np.unique(code, return_inverse=True)[1].astype(np.int64).reshape(-1)
+    return code[:n_g], code[n_g:], notes
+
+
+def _where(side, row):
+    unit = side.unit
+    if side.image_dir is not None:
+        return f"{side.path}"
+    return f"{side.path}: {unit} {int(side.lines[row])}"
+
+
+def _check_unique(codes, side, keys):
+    counts = np.bincount(codes) if len(codes) else np.zeros(0, dtype=np.int64)
+    dup = counts[codes] > 1
+    if dup.any():
+        first = int(np.flatnonzero(dup)[0])
+        again = int(np.flatnonzero(codes == codes[first])[1])
+        what = ", ".join(f"{k}={side.keys.column(k)[first].as_py()!r}" for k in keys)
+        unit = side.unit
+        raise HpeError(f"{_where(side, first)}: duplicate key {what} (again at {unit} {int(side.lines[again])}); "
+                       f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
+
+
+def join(pred: Side, gt: Side, keys, join_mode="key"):
+    """``(gt_idx, pred_idx, unmatched prediction rows, notes)``; pred_idx is -1 where a GT row has no prediction."""
+    if join_mode == "order":
+        if pred.n != gt.n:
+            raise JoinUsageError(f"{pred.path}: --join order pairs rows by position and needs equal row counts; "
+                                 f"got {pred.n} predictions and {gt.n} ground-truth rows in {gt.path}")
+        idx = np.arange(gt.n)
+        return idx, idx.copy(), np.zeros(0, dtype=np.int64), ["rows paired by position (--join order)"]
+    cg, cp, notes = _key_codes(gt.keys, pred.keys, keys)
+    _check_unique(cg, gt, keys)
+    _check_unique(cp, pred, keys)
+    m = int(max(cg.max(initial=-1), cp.max(initial=-1))) + 1
+    pred_pos = np.full(m, -1, dtype=np.int64)
+    pred_pos[cp] = np.arange(len(cp))
+    gt_has = np.zeros(m, dtype=bool)
+    gt_has[cg] = True
+    return np.arange(len(cg)), pred_pos[cg], np.flatnonzero(~gt_has[cp]), notes
+
+
+def _reasons(side: Side, idx):
+    if side.reasons is None:
+        return np.full(len(idx), "", dtype=object)
+    return side.reasons[idx]
+
+
+def _add_rejects(rej, side, name, rows, reasons, keycols):
+    """Rejected rows of ``side`` (its own file and line), the first one named in the error message."""
+    if not len(rows):
+        return
+    unit = side.unit
+    if rej.first_where is None:
+        rej.first_where = f"{_where(side, rows[0])}: {reasons[0]}".replace(f"{side.path}: ", "", 0)
+        rej.source = side.path
+    rej.add({**keycols, "side": np.full(len(rows), name, dtype=object),
+             "input": np.full(len(rows), str(side.path), dtype=object), unit: side.lines[rows]},
+            np.asarray(reasons, dtype=object))
+
+
+def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
+    """Send unreadable, missing, invalid and unmatched rows to ``rej``; return the masks over GT rows."""
+    missing = pidx < 0
+    p_ok = np.where(missing, False, pred.ok[np.maximum(pidx, 0)])
+    valid = ~missing & gt.ok[gidx] & p_ok
+    invalid = ~missing & ~valid
+    for side, name in ((gt, "gt"), (pred, "pred")):
+        if side.unreadable:
+            ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
+            if rej.first_where is None:
+                rej.first_where, rej.source = f"line {ln[0]}: unreadable {name} row: {side.unreadable[0][1]}", side.path
+            rej.add({"side": np.full(len(ln), name, dtype=object),
+                     "input": np.full(len(ln), str(side.path), dtype=object), "line": ln},
+                    np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln)
+    rows = gidx[missing]
+    _add_rejects(rej, gt, "gt", rows, np.full(len(rows), "missing: no prediction for this ground-truth row",
+                                              dtype=object), key_cols(gt, rows))
+    rows, prow = gidx[invalid], pidx[invalid]
+    gt_bad = ~gt.ok[rows]
+    _add_rejects(rej, gt, "gt", rows[gt_bad], ("invalid: gt " + _reasons(gt, rows[gt_bad])).astype(object),
+                 key_cols(gt, rows[gt_bad]))
+    _add_rejects(rej, pred, "pred", prow[~gt_bad], ("invalid: prediction " + _reasons(pred, prow[~gt_bad]))
+                 .astype(object), key_cols(pred, prow[~gt_bad]))
+    _add_rejects(rej, pred, "pred", unmatched, np.full(len(unmatched), "unmatched: prediction with no "
+                                                       "ground-truth row", dtype=object), key_cols(pred, unmatched))
+    return valid, missing, invalid
+
+
+def _gather(side, idx):
+    """Canonical nested matrix of the rows ``idx`` (no copy when every row is used in its own order)."""
+    if len(idx) == side.n and (idx[0] == 0 if len(idx) else True) and np.all(np.diff(idx) == 1):
+        return [[side.canonical[3 * i + j] for j in range(3)] for i in range(3)]
+    return [[side.canonical[3 * i + j][idx] for j in range(3)] for i in range(3)]
+
+
+
+
+class Unaligned(Exception):
+    """The two files do not list the same keys in the same order: pair them with the in-memory join."""
+
+
+def _same_keys(g: Chunk, p: Chunk, keys, notes: set) -> None:
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    for k in keys:
+        a, b = g.keys.column(k), p.keys.column(k)
+        a, b = (x.cast(x.type.value_type) if pa.types.is_dictionary(x.type) else x for x in (a, b))
+        if a.type != b.type:
+            a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
+        if pc.all(pc.equal(a, b)).as_py() is not False and a.null_count == 0 and b.null_count == 0:
+            continue
+        if pa.types.is_string(a.type) and pc.all(pc.equal(_stems(a), _stems(b))).as_py():
+            notes.add(f"key {k!r} joined on file stems (the two files spell the names differently)")
+            continue
+        raise Unaligned(k)
+    if len(keys) == 1 and g.n > 1:  # a duplicate key inside the chunk: let the full join name it
+        col = g.keys.column(keys[0])
+        if isinstance(col, pa.ChunkedArray):
+            col = col.combine_chunks()
+        increasing = pc.all(pc.greater(col.slice(1), col.slice(0, g.n - 1))).as_py()
+        if not increasing and len(pc.unique(col)) != g.n:  # sorted keys (the usual case) need no hash
+            raise Unaligned("duplicate")
+
+
+def lockstep(gr: SideReader, pr: SideReader, keys, join_mode: str, notes: set):
+    """Pairs of equal-length chunks of the two sides, in file order; keys verified chunk by chunk.
+
+    Raises :class:`Unaligned` (key join) when the keys differ or one side has
+    rows left over, :class:`JoinUsageError` (``--join order``) on unequal counts.
+    """
+    gi, pi = gr.chunks(), pr.chunks()
+    gbuf = pbuf = None
+    while True:
+        while gbuf is None or gbuf.n == 0:
+            gbuf = next(gi, None)
+            if gbuf is None:
+                break
+        while pbuf is None or pbuf.n == 0:
+            pbuf = next(pi, None)
+            if pbuf is None:
+                break
+        if gbuf is None or pbuf is None:
+            break
+        m = min(gbuf.n, pbuf.n)
+        g, p = gbuf.slice(0, m), pbuf.slice(0, m)
+        gbuf, pbuf = gbuf.slice(m, gbuf.n), pbuf.slice(m, pbuf.n)
+        if keys:
+            _same_keys(g, p, keys, notes)
+        yield g, p
+    if (gbuf is not None and gbuf.n) or (pbuf is not None and pbuf.n) or next(gi, None) is not None \
+            or next(pi, None) is not None:
+        if join_mode == "order":
+            for _ in gi:
+                pass
+            for _ in pi:
+                pass
+            raise JoinUsageError(f"{pr.path}: --join order pairs rows by position and needs equal row counts; "
+                                 f"got {pr.n} predictions and {gr.n} ground-truth rows in {gr.path}")
+        raise Unaligned("row counts")
+
+
+_END = object()
+
+
+def prefetch(gen):
+    """Iterate ``gen`` one item ahead in one worker thread (Parquet/CSV decoding and numpy release the GIL).
+
+    The worker only ever runs one ``next(gen)`` at a time and is joined before
+    this generator returns or raises, so no thread outlives the run.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    ex = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-read")
+    try:
+        fut = ex.submit(next, gen, _END)
+        while True:
+            item = fut.result()
+            if item is _END:
+                return
+            fut = ex.submit(next, gen, _END)
+            yield item
+    finally:
+        ex.shutdown(wait=True, cancel_futures=True)

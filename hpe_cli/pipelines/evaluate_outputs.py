@@ -1,0 +1,162 @@
+"""``hpe evaluate`` outputs kept in flat memory: the per-row table of a chunk, the worst rows, a plot sample,
+the image files by stem, and the pictures of the worst rows (drawn by ``hpe draw`` when it can)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .evaluate_join import Chunk
+
+ANGLES = ("pitch", "yaw", "roll")
+
+
+class Worst:
+    """The ``n`` pairs with the largest geodesic error, kept across chunks."""
+
+    def __init__(self, n: int):
+        self.n = n
+        self.frame = None
+
+    def add(self, table):
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        if not self.n or not table.num_rows:
+            return
+        if table.num_rows > self.n:
+            geo = table.column("geodesic").to_numpy()
+            table = table.take(pa.array(np.argpartition(-geo, self.n - 1)[:self.n]))
+        t = table if self.frame is None else pa.concat_tables([self.frame, table], promote_options="permissive")
+        order = pc.sort_indices(t, sort_keys=[("geodesic", "descending")])
+        self.frame = t.take(order).slice(0, self.n)
+
+
+class Sample:
+    """Rows kept for the plots: all of them up to ``cap``, then every k-th (k doubling), float32."""
+
+    def __init__(self, cap: int = 400_000):
+        self.cap, self.step, self.seen = cap, 1, 0
+        self.parts: list = []
+
+    def add(self, rows):
+        n = rows.n
+        idx = np.arange((-self.seen) % self.step, n, self.step)
+        self.seen += n
+        part = np.column_stack([rows.gt_angles[idx, 1], rows.geodesic[idx], rows.mae_wrapped[idx]]).astype(np.float32)
+        self.parts.append(part)
+        if sum(len(p) for p in self.parts) > self.cap:
+            allp = np.concatenate(self.parts)
+            self.parts = [allp[::2]]
+            self.step *= 2
+
+    def rows(self):
+        from types import SimpleNamespace
+
+        a = np.concatenate(self.parts) if self.parts else np.zeros((0, 5), dtype=np.float32)
+        a = a.astype(np.float64)
+        gt = np.zeros((len(a), 3))
+        gt[:, 1] = a[:, 0]
+        return SimpleNamespace(n=len(a), gt_angles=gt, geodesic=a[:, 1], mae_wrapped=a[:, 2:5], step=self.step)
+
+
+def row_table(rows, g: Chunk, p: Chunk, keys, by, by_values, images):
+    """The per-row output of one chunk: keys, angles in the GT system, errors, extras."""
+    import pyarrow as pa
+
+    cols = {}
+    if keys:
+        for k in keys:
+            cols[k] = g.keys.column(k)
+    else:
+        cols["gt_line"] = pa.array(g.lines)
+        cols["pred_line"] = pa.array(p.lines)
+    if by and by not in cols:
+        cols[by] = pa.array(by_values)
+    for k, a in enumerate(ANGLES):
+        cols[f"gt_{a}"] = pa.array(rows.gt_angles[:, k])
+    for k, a in enumerate(ANGLES):
+        cols[f"pred_{a}"] = pa.array(rows.pred_angles[:, k])
+    for k, a in enumerate(ANGLES):
+        cols[f"err_{a}"] = pa.array(rows.mae_wrapped[:, k])
+    cols["geodesic"] = pa.array(rows.geodesic)
+    for k, a in enumerate(("left", "down", "front")):
+        cols[f"maev_{a}"] = pa.array(rows.maev[:, k])
+    cols["frobenius"] = pa.array(rows.frobenius)
+    if p.dist is not None:
+        cols["pred_rotation_distance"] = pa.array(p.dist)
+    if images is not None and g.keys is not None and "image" in g.keys.column_names:
+        cols["image_path"] = images.paths(g.keys.column("image"))
+    return pa.table({k: (v.combine_chunks() if isinstance(v, pa.ChunkedArray) else v) for k, v in cols.items()})
+
+
+class Images:
+    """Image files of one folder by stem (listed once), for the per-row output and the report's pictures."""
+
+    def __init__(self, folder):
+        import os
+
+        self.folder = folder
+        exts = (".jpg", ".jpeg", ".png", ".bmp")
+        self.by_stem = {}
+        for name in sorted(os.listdir(folder)):
+            stem, ext = os.path.splitext(name)
+            if ext.lower() in exts:
+                self.by_stem.setdefault(stem, os.path.join(folder, name))
+
+    def paths(self, names):
+        """The image path of each name (matched on the file stem), '' when the folder has none."""
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        from .evaluate_join import _stems
+
+        if isinstance(names, pa.ChunkedArray):
+            names = names.combine_chunks()
+        stems = _stems(pc.cast(names, pa.string()))
+        idx = pc.index_in(stems, value_set=pa.array(list(self.by_stem), pa.string()))
+        out = pa.array(list(self.by_stem.values()), pa.string()).take(pc.fill_null(idx, 0)) if self.by_stem \
+            else pa.nulls(len(stems), pa.string())
+        return pc.if_else(pc.is_null(idx), "", out)
+
+
+def worst_pictures(frame, images):
+    """GT and prediction drawn on the face for each worst row (data URIs), via ``hpe draw``'s ``draw_worst``.
+
+    Guarded: without ``hpe_cli.pipelines.draw.draw_worst`` (or when it cannot
+    run) the page embeds no pictures and lists the image paths instead.
+    """
+    if frame is None or not len(frame):
+        return None
+    try:
+        from .draw import draw_worst
+    except (ImportError, AttributeError):
+        return None
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    from ..report.evaluate_page import data_uri
+
+    out = tempfile.mkdtemp(prefix="hpe_eval_worst_")
+    try:
+        try:
+            res = draw_worst(frame, images=images.folder if images is not None else None, out_dir=out,
+                             worst=len(frame), sort_by="geodesic")
+        except (ImportError, AttributeError):
+            return None
+        if isinstance(res, (list, tuple)) and len(res) == len(frame):
+            paths = [Path(p) if p else None for p in res]
+        else:
+            paths = sorted(p for p in Path(out).rglob("*") if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
+        return [data_uri(p) if p is not None and p.is_file() else None for p in paths]
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+
+
+def empty_rows(keys):
+    import pyarrow as pa
+
+    cols = {k: pa.array([], pa.string()) for k in keys}
+    for pre in ("gt_", "pred_", "err_"):
+        cols.update({pre + a: pa.array([], pa.float64()) for a in ANGLES})
+    cols["geodesic"] = pa.array([], pa.float64())
+    return pa.table(cols)
