@@ -56,7 +56,7 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
     angle columns pitch,yaw,roll (degrees) or, when it has none, matrix
     columns r00..r22 (the stored matrix of --system); rows where both are
     present and disagree are rejected. Labels are moved
-    exactly (SPEC §5): A' = M A for a rotation, A' = M A diag(-1,1,1) for a
+    exactly: A' = M A for a rotation, A' = M A diag(-1,1,1) for a
     mirror, in the canonical frame, then written back in --system with both
     Euler solutions, the matrix, gimbal_lock and roundtrip_err.
 
