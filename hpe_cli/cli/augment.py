@@ -5,17 +5,17 @@ import click
 
 from ..pipelines.augment import AGREE_TOL, IMAGE_COLUMNS, run_augment  # noqa: F401  (re-exported)
 from .table_options import column_options
-from .options import (batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
-                      system_option, verbosity_options)
+from .options import (batch_option, deprecated_spellings, echo_summary, image_size_option, output_option,
+                      overwrite_option, progress, rejects_options, system_option, verbosity_options)
 
 
 
+@deprecated_spellings("image-size")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
 @system_option()
-@click.option("--image-size", nargs=2, type=click.IntRange(1), required=True, metavar="W H",
-              help="Width and height of the images, in pixels.")
+@image_size_option(required=True)
 @click.option("--hflip", is_flag=True, help="Mirror left-right (with --vflip: both, a rotation by 180).")
 @click.option("--vflip", is_flag=True, help="Mirror top-bottom.")
 @click.option("--rotate", type=float, metavar="DEG",
@@ -73,12 +73,12 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
 
     \b
     Examples:
-      hpe augment labels.parquet -o flipped.parquet --image-size 450 450 --hflip
-      hpe augment labels.csv -o rot30.csv --system 6drepnet --image-size 640 480 --rotate 30
-      hpe augment AFLW2000/ -o rot.parquet --image-size 450 450 --rotate -15 --images AFLW2000/ --out-images rot/
-      hpe augment aflw_lm.parquet -o aflw_v.parquet --image-size 450 450 --vflip --landmarks aflw21
-      hpe augment labels.parquet -o m20.parquet --image-size 450 450 --mirror-line 20 --clip
-      hpe augment labels.parquet -o both.parquet --image-size 450 450 --hflip --vflip
+      hpe augment labels.parquet -o flipped.parquet --image-size 450x450 --hflip
+      hpe augment labels.csv -o rot30.csv --system 6drepnet --image-size 640x480 --rotate 30
+      hpe augment AFLW2000/ -o rot.parquet --image-size 450x450 --rotate -15 --images AFLW2000/ --out-images rot/
+      hpe augment aflw_lm.parquet -o aflw_v.parquet --image-size 450x450 --vflip --landmarks aflw21
+      hpe augment labels.parquet -o m20.parquet --image-size 450x450 --mirror-line 20 --clip
+      hpe augment labels.parquet -o both.parquet --image-size 450x450 --hflip --vflip
     """
     chosen = [name for name, on in (("--hflip", hflip), ("--vflip", vflip), ("--rotate", rotate is not None),
                                     ("--mirror-line", mirror_line is not None)) if on]

@@ -60,6 +60,13 @@ class HpeGroup(click.Group):
                     warnings.simplefilter("ignore")  # numpy/pandas warnings name internal paths
                 with txn.activate(run=True):
                     return super().invoke(ctx)
+        except click.UsageError as exc:  # one line, exit 2 (click's own form is usage + hint + error)
+            if signals.fired() is None:
+                where = exc.ctx.command_path.split()[-1] if exc.ctx is not None else ""
+                hint = f" (see 'hpe {where} --help')" if exc.ctx is not None and exc.ctx.parent is not None else ""
+                _error(exc.format_message() + hint)
+                ctx.exit(2)
+            raise
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
             if signals.fired() is not None:
                 exc = signals.fired()
