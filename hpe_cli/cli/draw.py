@@ -5,6 +5,7 @@ import click
 
 from .table_options import column_options
 
+from .options import radians_option  # the one spelling of input angle units
 from .options import (SYSTEM, deprecated_spellings, echo_summary, image_size_option, overwrite_option, progress,
                       rejects_options, verbosity_options)
 
@@ -21,7 +22,7 @@ from .options import (SYSTEM, deprecated_spellings, echo_summary, image_size_opt
               help="Three axis lines (Hopenet's draw_axis) or the pose cube.")
 @image_size_option("canvas", help="Draw on blank canvases of this size (WxH, e.g. 640x480) instead of reading "
                   "images. The old --canvas WxH still works, with a warning.")
-@click.option("--radians", is_flag=True, help="INPUT angle columns are in radians.")
+@radians_option()
 @click.option("--columns", "use", type=click.Choice(["auto", "angles", "matrix"]), default="auto",
               show_default=True, help="Draw from pitch,yaw,roll or r00..r22 (auto: angles when present).")
 @click.option("--length", type=click.FloatRange(0, min_open=True),

@@ -5,6 +5,7 @@ import click
 
 from .table_options import column_options
 
+from .options import radians_option  # the one spelling of input angle units
 from .options import SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, \
     rejects_options, verbosity_options
 
@@ -45,7 +46,7 @@ def _split_keys(ctx, param, value):
               show_default=True, help="Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).")
 @click.option("--pred-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for PRED.")
 @click.option("--gt-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for GT.")
-@click.option("--radians", is_flag=True, help="Angle columns of both tables are in radians.")
+@radians_option()
 @overwrite_option
 @batch_option
 @verbosity_options

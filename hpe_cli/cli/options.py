@@ -194,7 +194,7 @@ def image_size_option(*names, help="Width and height of the images, in pixels, a
     return click.option("--image-size", *names, type=IMAGE_SIZE, metavar="WxH", help=help, **kw)
 
 
-RADIANS_HELP = "Angle columns of the input are in radians (default: degrees)."
+RADIANS_HELP = "Angle columns of the input are in radians (default: degrees; hpe always writes degrees)."
 
 
 def radians_option(help: str = RADIANS_HELP):
@@ -252,11 +252,12 @@ def _rewrite_deprecated(args, names):
         if a == "--":
             out += args[i:]
             break
+        a = str(a)
         if "canvas" in names and (a == "--canvas" or a.startswith("--canvas=")):
             _warn("--canvas is deprecated; use --image-size WxH")
             out.append("--image-size" + a[len("--canvas"):])
         elif "image-size" in names and a == "--image-size" and i + 2 < len(args) \
-                and args[i + 1].isdigit() and args[i + 2].isdigit():
+                and str(args[i + 1]).isdigit() and str(args[i + 2]).isdigit():
             _warn(f"--image-size {args[i + 1]} {args[i + 2]} is deprecated; use --image-size "
                   f"{args[i + 1]}x{args[i + 2]}")
             out += ["--image-size", f"{args[i + 1]}x{args[i + 2]}"]

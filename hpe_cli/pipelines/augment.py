@@ -180,6 +180,8 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     from ..io.readers import LINE_COL
 
     src = open_table(path, batch_size, with_lines=True)
+    if bar is not None and src.num_rows:  # Parquet metadata, .mat file counts: the bar has a total
+        bar.total = src.num_rows
     from ..io.columns import label_system
 
     in_system = label_system(src, system)  # .mat Pose_Para is always 300w_lp; output is in --system
