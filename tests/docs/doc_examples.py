@@ -9,6 +9,7 @@ per page that holds links to the repository's ``sample_data``, ``tests`` and ``c
 
     python tests/docs/doc_examples.py            # run every example, report differences
     python tests/docs/doc_examples.py --update   # run them and rewrite the output blocks
+    python tests/docs/doc_examples.py --update systems.md   # one page
 """
 from __future__ import annotations
 
@@ -120,7 +121,10 @@ def update(page: Path) -> None:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    only = [a for a in argv if not a.startswith("--")]
     for page in pages():
+        if only and not any(page.match(o) or page.name == o for o in only):
+            continue
         if "--update" in argv:
             update(page)
             print(f"updated {page.relative_to(ROOT)}")
