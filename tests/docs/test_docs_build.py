@@ -87,6 +87,12 @@ def test_api_reference_rendered(built):
     assert "--from" in convert and "--radians" in convert
 
 
+def test_built_site_cites_no_internal_notes(built):
+    _, site, _, _ = built
+    for page in site.rglob("*.html"):
+        assert "SPEC" not in page.read_text(encoding="utf-8"), page
+
+
 def test_no_internal_design_notes_cited():
     """User-facing pages cite papers and peer code, not internal notes."""
     for page in (ROOT / "docs").rglob("*.md"):
