@@ -73,10 +73,11 @@ def formula(s) -> tuple[str, str]:
     same = np.allclose(B, np.eye(3)) and np.allclose(M, np.eye(3))
     if same:
         rel = f"R = A{t}"
-    elif np.allclose(B, M):
-        rel = f"R = (B\\,A\\,B^T){t},\\quad B = {_mat(B)}"
     else:
-        rel = f"R = (B\\,A\\,M^T){t},\\quad B = {_mat(B)},\\ M = {_mat(M)}"
+        core = "B\\,A\\,B^T" if np.allclose(B, M) else "B\\,A\\,M^T"
+        core = f"({core})^T" if t else core
+        frames = f"B = {_mat(B)}" if np.allclose(B, M) else f"B = {_mat(B)},\\ M = {_mat(M)}"
+        rel = f"R = {core},\\quad {frames}"
     expect = B @ A @ M.T
     if s.storage == "transposed":
         expect = np.swapaxes(expect, 1, 2)
