@@ -122,7 +122,7 @@ class _ImageJob:
             raise HpeError(f"{where}: {src}: not a readable image")
         h, w = img.shape[:2]
         if (w, h) != tuple(self.size):
-            raise HpeError(f"{where}: {src} is {w}x{h}, expected --image-size {self.size[0]} {self.size[1]}")
+            raise HpeError(f"{where}: {src} is {w}x{h}, expected --image-size {self.size[0]}x{self.size[1]}")
         out = warp_image(img, self.M, self.interp, self.border)
         staged = self.stage / rel
         staged.parent.mkdir(parents=True, exist_ok=True)

@@ -58,6 +58,12 @@ def _all_command_lines():
         for block in blocks:
             for line in dx.commands(block.replace("$ hpe ", "hpe ")):
                 out.append((f.relative_to(dx.ROOT), line))
+    from hpe_cli.cli.main import COMMANDS, cli
+
+    for name in COMMANDS:  # the examples of every --help too
+        helptext = (cli.get_command(None, name).help or "").replace("\\\n", "\\\n")
+        for line in dx.commands(helptext):
+            out.append((f"hpe {name} --help", line))
     return out
 
 
