@@ -33,6 +33,16 @@ class HpeGroup(click.Group):
     removing every staged output and stopping worker processes.
     """
 
+    def make_context(self, info_name, args, parent=None, **extra):
+        """``hpe --bogus``: the group's own usage errors are one line too (exit 2); no arguments shows the help."""
+        try:
+            return super().make_context(info_name, args, parent=parent, **extra)
+        except click.UsageError as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":
+                raise
+            _error(f"{exc.format_message()} (see 'hpe --help')")
+            raise SystemExit(2) from None
+
     def list_commands(self, ctx):
         return [n for n, target in COMMANDS.items() if importlib.util.find_spec(target.split(":")[0])]
 

@@ -38,6 +38,7 @@ def hpe(*args):
     ["augment", LABELS, "-o", "x.csv", "--hflip"],
     ["relabel-panoptic", ROOT / "sample_data" / "panoptic_synth", "-o", "x.parquet", "--max-rmse", "2km"],
     ["conver"],
+    ["--bogus"],
 ])
 def test_usage_errors_are_one_line_exit_2(args, tmp_path):
     p = hpe(*args)
