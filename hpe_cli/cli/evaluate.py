@@ -106,7 +106,9 @@ def evaluate(pred, gt, output, pred_system, gt_system, keys, protocols, align, b
     from ..pipelines.evaluate import run_evaluate
 
     protos = None if (not protocols or "all" in protocols) else list(protocols)
-    bar = progress(desc="evaluate", quiet=quiet)
+    from .options import known_rows
+
+    bar = progress(total=known_rows(pred, gt), desc="evaluate", quiet=quiet)  # both tables' rows, when known
     try:
         result = run_evaluate(pred, gt, pred_system=pred_system, gt_system=gt_system, output=output, keys=keys,
                               protocols=protos, align=align, by=by, yaw_bins=yaw_bins, report=report, plots=plots,

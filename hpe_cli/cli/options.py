@@ -311,3 +311,27 @@ def _unknown_system(value, names) -> str:
         near = [keyed[key(value)]]
     hint = f"did you mean {' or '.join(near)}? " if near else ""
     return f"unknown system {value!r}; {hint}expected one of: {', '.join(names)} or a .toml file"
+
+
+def known_rows(*paths) -> int | None:
+    """Rows of the inputs when known before reading (Parquet metadata, a folder's ``.mat`` files), else None."""
+    from pathlib import Path
+
+    total = 0
+    for p in map(Path, paths):
+        try:
+            if p.is_dir():
+                n = sum(1 for _ in p.glob("*.mat"))
+                if not n:
+                    return None
+            else:
+                with open(p, "rb") as f:
+                    if f.read(4) != b"PAR1":
+                        return None
+                import pyarrow.parquet as pq
+
+                n = pq.ParquetFile(p).metadata.num_rows
+        except (OSError, ValueError):
+            return None
+        total += n
+    return total

@@ -146,33 +146,3 @@ def test_a_handful_of_small_angles_do_not_warn(tmp_path):
     src = _radians_file(tmp_path, n=5)
     r = run("convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet")
     assert r.exit_code == 0 and "+-pi" not in r.stderr
-
-
-def test_convert_progress_bar_has_a_total(tmp_path, monkeypatch):
-    """Parquet row counts come from the metadata: the bar knows its total before the first batch."""
-    from hpe_cli.cli import convert as cmd
-
-    seen = []
-
-    class Bar:
-        total = None
-
-        def update(self, n):
-            seen.append(self.total)
-
-        def close(self):
-            pass
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *a):
-            return False
-
-    monkeypatch.setattr(cmd, "progress", lambda *a, **k: Bar())
-    src = tmp_path / "l.parquet"
-    pd.read_csv(LABELS).to_parquet(src)
-    r = run("convert", src, "-o", tmp_path / "o.parquet", "--from", "300w_lp", "--to", "6drepnet", "--batch-size",
-            "50")
-    assert r.exit_code == 0, r.output
-    assert seen and set(seen) == {204}
