@@ -342,7 +342,7 @@ def test_image_errors_leave_nothing_behind(tmp_path):
     assert res.exit_code == 1 and "row 3: no image for 'missing.png'" in res.output
     assert not (tmp_path / "o.csv").exists() and not (tmp_path / "out").exists()
     res = run(*base, "--image-size", 31, 20, "--out-images", tmp_path / "out")
-    assert res.exit_code == 1 and "is 30x20, expected --image-size 31 20" in res.output
+    assert res.exit_code == 1 and "is 30x20, expected --image-size 31x20" in res.output
     res = run(*base, "--image-size", 30, 20, "--out-images", tmp_path / "imgs")
     assert res.exit_code == 1 and "must differ from --images" in res.output
     assert not (tmp_path / "o.csv").exists()
