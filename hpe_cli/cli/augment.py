@@ -5,7 +5,7 @@ import click
 
 from ..pipelines.augment import AGREE_TOL, IMAGE_COLUMNS, run_augment  # noqa: F401  (re-exported)
 from .table_options import column_options
-from .options import (batch_option, deprecated_spellings, echo_summary, image_size_option, output_option,
+from .options import (batch_option, deprecated_spellings, radians_option, echo_summary, image_size_option, output_option,
                       overwrite_option, progress, rejects_options, system_option, verbosity_options)
 
 
@@ -16,6 +16,7 @@ from .options import (batch_option, deprecated_spellings, echo_summary, image_si
 @output_option()
 @system_option()
 @image_size_option(required=True)
+@radians_option()
 @click.option("--hflip", is_flag=True, help="Mirror left-right (with --vflip: both, a rotation by 180).")
 @click.option("--vflip", is_flag=True, help="Mirror top-bottom.")
 @click.option("--rotate", type=float, metavar="DEG",
@@ -47,7 +48,7 @@ from .options import (batch_option, deprecated_spellings, echo_summary, image_si
 @batch_option
 @verbosity_options
 @column_options
-def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line, scheme, box_from, clip, images_dir,
+def augment(input, output, system, image_size, radians, hflip, vflip, rotate, mirror_line, scheme, box_from, clip, images_dir,
             out_images, image_column, interpolation, border, jpeg_quality, rejects, strict, overwrite, batch_size,
             verbose, quiet):
     """Rotate or mirror a head-pose dataset: labels, landmarks, boxes and images.
@@ -105,7 +106,7 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
                         clip=clip, images_dir=images_dir, out_images=out_images, image_column=image_column,
                         interpolation=interpolation, border=border, jpeg_quality=jpeg_quality, rejects_path=rejects,
                         strict=strict, overwrite=overwrite, batch_size=batch_size, bar=bar, verbose=verbose,
-                        description=desc)
+                        description=desc, radians=radians)
     finally:
         bar.close()
     lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {system.name} -> {output}",

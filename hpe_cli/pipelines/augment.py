@@ -155,7 +155,7 @@ class _ImageJob:
 def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
                 images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
                 jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=65_536, bar=None, verbose=0,
-                description="", workers=None, strict=False):
+                description="", workers=None, strict=False, radians=False):
     """Augment a label table (and optionally its images). Returns a summary dict.
 
     Batches are transformed on ``workers`` threads (default: up to 2) while
@@ -224,11 +224,11 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                 from ..io import batch_rotations
                 from ..rotation import soa as _soa
 
-                X, _, reasons = batch_rotations(batch, in_system, mode)
+                X, _, reasons = batch_rotations(batch, in_system, mode, radians)
                 values = _soa.to_array(X, n)
                 reasons = reasons if reasons is not None else np.full(n, "", dtype=object)
             else:
-                values, reasons = batch_labels(batch, mode)
+                values, reasons = batch_labels(batch, mode, radians)  # --radians: input angles in radians
             if mode == "angles" and not stored_kind:
                 R = in_system.from_angles(np.where(np.isfinite(values), values, 0.0))
                 if cross_check:  # a table with both must agree, or which one is the label?

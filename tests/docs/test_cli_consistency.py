@@ -15,10 +15,9 @@ NAMES = list(COMMANDS)
 #: commands that read label rows from a table or dataset
 ROW_READERS = ["convert", "audit", "draw", "augment", "evaluate", "export", "relabel-panoptic", "relabel-agora"]
 #: commands that read angle columns given in degrees by default
-ANGLE_READERS = ["convert", "audit", "draw", "evaluate", "infer"]
+ANGLE_READERS = ["convert", "audit", "draw", "augment", "evaluate", "infer"]
 #: known gaps, each with who closes it
-RADIANS_GAPS = {"augment": "its pipeline (owned by the image helper) takes no radians flag yet",
-                "export": "its pipeline reads hpe's degree columns only"}
+RADIANS_GAPS = {"export": "its pipeline reads hpe's degree columns only"}
 
 
 def command(name):
@@ -173,3 +172,23 @@ def test_agora_max_rmse_in_centimetres(tmp_path):
     c = _run("relabel-agora", pkl, "-o", tmp_path / "c.parquet", "--rejects", tmp_path / "rc.csv", "--max-rmse",
              "0.02")
     assert c.exit_code == 0 and "write 0.02m for metres" in c.stderr
+
+
+def test_augment_radians_equals_degrees(tmp_path):
+    import numpy as np
+    import pandas as pd
+
+    df = pd.read_csv(ROOT / "sample_data/labels_300wlp.csv")
+    rad = df.copy()
+    rad[["pitch", "yaw", "roll"]] = np.radians(df[["pitch", "yaw", "roll"]])
+    df.to_csv(tmp_path / "deg.csv", index=False)
+    rad.to_csv(tmp_path / "rad.csv", index=False)
+    a = _run("augment", tmp_path / "deg.csv", "-o", tmp_path / "a.parquet", "--image-size", "512x512", "--rotate", 20)
+    b = _run("augment", tmp_path / "rad.csv", "-o", tmp_path / "b.parquet", "--image-size", "512x512", "--rotate", 20,
+             "--radians")
+    assert a.exit_code == 0 and b.exit_code == 0, b.output
+    A, B = pd.read_parquet(tmp_path / "a.parquet"), pd.read_parquet(tmp_path / "b.parquet")
+    cols = [f"r{i}{j}" for i in range(3) for j in range(3)]
+    np.testing.assert_allclose(B[cols].to_numpy(), A[cols].to_numpy(), atol=1e-12)
+    np.testing.assert_allclose(B[["pitch", "yaw", "roll"]].to_numpy(), A[["pitch", "yaw", "roll"]].to_numpy(),
+                               atol=1e-9)
