@@ -133,7 +133,7 @@ def test_usage_errors(tmp_path):
     t = tmp_path / "p.csv"
     pd.DataFrame({"pitch": [0], "yaw": [0], "roll": [0]}).to_csv(t, index=False)
     res = run(t, "-o", tmp_path / "o")
-    assert res.exit_code == 1 and "--canvas" in res.output
+    assert res.exit_code == 1 and "--image-size WxH" in res.output
     assert run(t, "-o", tmp_path / "o", "--canvas", "12by3").exit_code == 2
     assert run(t, "-o", tmp_path / "o", "--canvas", "64x64", "-q").exit_code == 0
     assert (tmp_path / "o" / "row_000000.png").exists()

@@ -94,7 +94,7 @@ def test_synergynet_no_exact_fit(tmp_path):
 
 def test_wrong_units_hint(tmp_path):
     rep, _ = report(tmp_path, "--callable", f"{FIX}/made_up.py:made_up", "--args", "roll,pitch,yaw", code=1)
-    assert rep["fit"] == "none" and "--units deg" in rep["hint"]
+    assert rep["fit"] == "none" and "--degrees" in rep["hint"]
 
 
 @pytest.mark.parametrize("args, code, text", [

@@ -5,6 +5,7 @@ import click
 
 from .table_options import column_options
 
+from .options import radians_option  # the one spelling of input angle units
 from .options import SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, verbosity_options
 
 
@@ -25,7 +26,7 @@ from .options import SYSTEM, batch_option, echo_summary, output_option, overwrit
 @click.option("--only-flagged", is_flag=True, help="With -o, write only the rows with at least one flag.")
 @click.option("--gimbal-tol", type=click.FloatRange(0, 90), default=1.0, show_default=True,
               help="near_gimbal: the middle angle within this many degrees of its gimbal lock.")
-@click.option("--radians", is_flag=True, help="INPUT angle columns are in radians.")
+@radians_option()
 @click.option("--columns", "use", type=click.Choice(["auto", "angles", "matrix"]), default="auto",
               show_default=True, help="Audit pitch,yaw,roll or r00..r22 (auto: angles when present).")
 @click.option("--key", "keys", multiple=True, metavar="COLUMN",

@@ -5,18 +5,19 @@ import click
 
 from ..pipelines.augment import AGREE_TOL, IMAGE_COLUMNS, run_augment  # noqa: F401  (re-exported)
 from .table_options import column_options
-from .options import (batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
-                      system_option, verbosity_options)
+from .options import (batch_option, deprecated_spellings, radians_option, echo_summary, image_size_option, output_option,
+                      overwrite_option, progress, rejects_options, system_option, verbosity_options)
 
 
 
+@deprecated_spellings("image-size")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
 @system_option()
-@click.option("--image-size", nargs=2, type=click.IntRange(1), default=None, metavar="W H",
-              help="Width and height of the images, in pixels. Optional when the table has image_width/"
-                   "image_height or --images is given; a row where these disagree is rejected.")
+@image_size_option(help="Width and height of the images, in pixels, as WxH. Optional when the table has "
+                  "image_width/image_height or --images is given; a row where these disagree is rejected.")
+@radians_option()
 @click.option("--hflip", is_flag=True, help="Mirror left-right (with --vflip: both, a rotation by 180).")
 @click.option("--vflip", is_flag=True, help="Mirror top-bottom.")
 @click.option("--rotate", type=float, metavar="DEG",
@@ -55,7 +56,8 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 @batch_option
 @verbosity_options
 @column_options
-def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line, crop, zoom, scheme, box_from, clip, images_dir,
+def augment(input, output, system, image_size, radians, hflip, vflip, rotate, mirror_line, crop, zoom, scheme, box_from, clip,
+            images_dir,
             out_images, image_column, interpolation, border, jpeg_quality, rejects, strict, overwrite, batch_size,
             verbose, quiet):
     """Rotate, mirror, crop or resize a head-pose dataset: labels, landmarks, boxes and images.
@@ -95,12 +97,12 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
 
     \b
     Examples:
-      hpe augment labels.csv -o flipped.csv --image-size 450 450 --hflip   # a table without image sizes
-      hpe augment labels.csv -o rot30.csv --system 6drepnet --image-size 640 480 --rotate 30
-      hpe augment AFLW2000/ -o rot.parquet --image-size 450 450 --rotate -15 --images AFLW2000/ --out-images rot/
-      hpe augment aflw_lm.parquet -o aflw_v.parquet --image-size 450 450 --vflip --landmarks aflw21
-      hpe augment labels.parquet -o m20.parquet --image-size 450 450 --mirror-line 20 --clip
-      hpe augment labels.parquet -o both.parquet --image-size 450 450 --hflip --vflip
+      hpe augment labels.csv -o flipped.csv --image-size 450x450 --hflip   # a table without image sizes
+      hpe augment labels.csv -o rot30.csv --system 6drepnet --image-size 640x480 --rotate 30
+      hpe augment AFLW2000/ -o rot.parquet --image-size 450x450 --rotate -15 --images AFLW2000/ --out-images rot/
+      hpe augment aflw_lm.parquet -o aflw_v.parquet --image-size 450x450 --vflip --landmarks aflw21
+      hpe augment labels.parquet -o m20.parquet --image-size 450x450 --mirror-line 20 --clip
+      hpe augment labels.parquet -o both.parquet --image-size 450x450 --hflip --vflip
       hpe augment out/labels.parquet -o flipped.parquet --hflip   # sizes from image_width/image_height
       hpe augment AFLW2000/ -o c.parquet --crop 50 50 350 350 --images AFLW2000/ --out-images c/   # + .mat files
       hpe augment labels.parquet -o half.parquet --scale 0.5 --images frames/ --out-images half/
@@ -146,7 +148,7 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
                         clip=clip, images_dir=images_dir, out_images=out_images, image_column=image_column,
                         interpolation=interpolation, border=border, jpeg_quality=jpeg_quality, rejects_path=rejects,
                         strict=strict, overwrite=overwrite, batch_size=batch_size, bar=bar, verbose=verbose,
-                        description=desc, images_optional=images_optional)
+                        description=desc, images_optional=images_optional, radians=radians)
     finally:
         bar.close()
     lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {system.name} -> {output}",

@@ -5,6 +5,7 @@ import click
 
 from .table_options import column_options
 
+from .options import radians_option  # the one spelling of input angle units
 from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
                       verbosity_options)
 
@@ -14,7 +15,7 @@ from .options import (SYSTEM, batch_option, echo_summary, output_option, overwri
 @output_option()
 @click.option("--from", "source", type=SYSTEM, required=True, help="System of INPUT: built-in name or .toml file.")
 @click.option("--to", "target", type=SYSTEM, required=True, help="System to write: built-in name or .toml file.")
-@click.option("--radians", is_flag=True, help="INPUT angle columns are in radians (output is always degrees).")
+@radians_option()
 @click.option("--decoder", type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]), default=None,
               help="Also write what this published decoder prints for each rotation (decoder_pitch, decoder_yaw, "
                    "decoder_roll, decoder_ok), beside the exact angles. `hpe audit --decoder` measures the gap.")

@@ -5,20 +5,11 @@ import click
 
 from .table_options import column_options
 
-from .options import SYSTEM, echo_summary, overwrite_option, progress, rejects_options, verbosity_options
+from .options import radians_option  # the one spelling of input angle units
+from .options import (SYSTEM, deprecated_spellings, echo_summary, image_size_option, overwrite_option, progress,
+                      rejects_options, verbosity_options)
 
-def _canvas_size(ctx, param, value):
-    if value is None:
-        return None
-    try:
-        w, h = (int(v) for v in value.lower().split("x"))
-    except ValueError:
-        raise click.BadParameter(f"expected WIDTHxHEIGHT such as 640x480, got {value!r}") from None
-    if not (1 <= w <= 20000 and 1 <= h <= 20000):
-        raise click.BadParameter(f"expected sizes between 1 and 20000 pixels, got {value!r}")
-    return w, h
-
-
+@deprecated_spellings("canvas", "image-size")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), required=True,
@@ -29,9 +20,9 @@ def _canvas_size(ctx, param, value):
               help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file.")
 @click.option("--style", type=click.Choice(["axes", "cube"]), default="axes", show_default=True,
               help="Three axis lines (Hopenet's draw_axis) or the pose cube.")
-@click.option("--canvas", type=str, callback=_canvas_size, metavar="WxH",
-              help="Draw on blank WxH canvases instead of reading images.")
-@click.option("--radians", is_flag=True, help="INPUT angle columns are in radians.")
+@image_size_option("canvas", help="Draw on blank canvases of this size (WxH, e.g. 640x480) instead of reading "
+                  "images. The old --canvas WxH still works, with a warning.")
+@radians_option()
 @click.option("--columns", "use", type=click.Choice(["auto", "angles", "matrix"]), default="auto",
               show_default=True, help="Draw from pitch,yaw,roll or r00..r22 (auto: angles when present).")
 @click.option("--length", type=click.FloatRange(0, min_open=True),
@@ -96,7 +87,7 @@ def draw(input, outdir, images, system, style, canvas, radians, use, length, thi
       hpe draw AFLW2000/ -o drawn/
       hpe draw labels.parquet -o drawn/ --images 300W_LP/ --style cube
       hpe draw preds.csv -o drawn/ --images frames/ --system 6drepnet --columns matrix
-      hpe draw poses.csv -o canvas/ --canvas 640x480 --annotate
+      hpe draw poses.csv -o canvas/ --image-size 640x480 --annotate
       hpe draw AFLW2000/ -o sheet/ --grid --grid-cols 4 --annotate
       hpe draw errors.parquet -o worst/ --images AFLW2000/ --worst 20 --sort-by geodesic
       hpe draw errors.parquet -o worst/ --images frames/ --worst 20 --rejects missing.csv

@@ -10,6 +10,7 @@ from .options import (
     output_option,
     overwrite_option,
     progress,
+    radians_option,
     rejects_options,
     verbosity_options,
 )
@@ -77,7 +78,7 @@ def _split_keys(ctx, param, value):
               show_default=True, help="Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).")
 @click.option("--pred-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for PRED.")
 @click.option("--gt-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for GT.")
-@click.option("--radians", is_flag=True, help="Angle columns of both tables are in radians.")
+@radians_option()
 @overwrite_option
 @batch_option
 @verbosity_options
@@ -129,7 +130,9 @@ def evaluate(pred, gt, output, pred_system, gt_system, keys, join_mode, protocol
     from ..pipelines.evaluate import JoinUsageError, run_evaluate
 
     protos = None if (not protocols or "all" in protocols) else list(protocols)
-    bar = progress(desc="evaluate", quiet=quiet)
+    from .options import known_rows
+
+    bar = progress(total=known_rows(pred, gt), desc="evaluate", quiet=quiet)  # both tables' rows, when known
     try:
         result = run_evaluate(pred, gt, pred_system=pred_system, gt_system=gt_system, output=output, keys=keys,
                               protocols=protos, align=align, by=by, yaw_bins=yaw_bins, report=report, plots=plots,

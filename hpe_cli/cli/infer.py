@@ -5,7 +5,7 @@ import click
 
 from .table_options import column_options
 
-from .options import SYSTEM, overwrite_option, verbosity_options
+from .options import SYSTEM, deprecated_spellings, overwrite_option, verbosity_options
 
 ROLE_NAMES = ("pitch", "yaw", "roll")
 
@@ -205,7 +205,7 @@ def _read_data(path, units):
     p = Path(path)
     if p.is_dir() or p.suffix.lower() == ".mat":
         if units == "rad":
-            raise HpeError(f"{path}: --units rad does not apply to .mat files (Pose_Para is read in degrees)")
+            raise HpeError(f"{path}: --radians does not apply to .mat files (Pose_Para is read in degrees)")
         from ..datasets.mat import read_mat_dir
 
         return read_mat_dir(p, landmarks=True), "deg"
@@ -307,6 +307,7 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
     return rep
 
 
+@deprecated_spellings("units")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("data", required=False, type=click.Path(exists=True))
 @click.option("--callable", "builder", metavar="FILE.py:FUNC",
@@ -318,8 +319,9 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
 @click.option("--args", "args_", default="pitch,yaw,roll", show_default=True,
               help="Role of each positional argument (--callable) or returned angle (--decoder).")
 @click.option("--packed", is_flag=True, help="--callable takes one sequence of the three angles.")
-@click.option("--units", type=click.Choice(["rad", "deg"]), default=None,
-              help="Angle units of the code (default rad) or of DATA's angle columns (default deg).")
+@click.option("--radians/--degrees", "radians", default=None,
+              help="Angle units of the code (default --radians) or of DATA's angle columns (default --degrees). "
+                   "The old --units rad|deg still works, with a warning.")
 @click.option("--angles", default="pitch,yaw,roll", show_default=True,
               help="DATA's angle columns, in storage order: ROLE or ROLE=COLUMN.")
 @click.option("--matrix", "matrix_cols", default=None, metavar="COLS",
@@ -353,7 +355,7 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
 @overwrite_option
 @verbosity_options
 @column_options
-def infer(data, builder, decoder, returns, args_, packed, units, angles, matrix_cols, rotation_cols, landmarks3d,
+def infer(data, builder, decoder, returns, args_, packed, radians, angles, matrix_cols, rotation_cols, landmarks3d,
           landmark_frame, tol,
           samples, seed, name, frame_of, storage, json_path, output, overwrite, verbose, quiet, timeout,
           import_path):
@@ -385,11 +387,12 @@ def infer(data, builder, decoder, returns, args_, packed, units, angles, matrix_
       hpe infer --decoder 3DDFA_V2/utils/pose.py:matrix2angle --args yaw,pitch,roll --json report.json
       hpe infer --decoder utils.pose:matrix2angle --path 3DDFA_V2 --args yaw,pitch,roll
       hpe infer --decoder mycode.py:to_rotvec --returns stored -o mine.toml
-      hpe infer --callable mylib.pose:euler_to_matrix --args roll,pitch,yaw --units deg -o mine.toml
+      hpe infer --callable mylib.pose:euler_to_matrix --args roll,pitch,yaw --degrees -o mine.toml
       hpe infer labels.parquet --angles pitch,yaw,roll --matrix r00..r22
       hpe infer preds.csv --angles pitch,yaw,roll --rotations rotvec:rx,ry,rz
       hpe infer AFLW2000/ --landmarks3d lm3d --json aflw_system.json
     """
+    units = None if radians is None else ("rad" if radians else "deg")
     import numpy as np
 
     from ..errors import HpeError
@@ -427,7 +430,7 @@ def infer(data, builder, decoder, returns, args_, packed, units, angles, matrix_
             tol=tol or inf.CODE_TOL, seed=seed, source=spec, name=name, frame=frame, storage=storage,
             import_path=list(import_path), returns=returns)
         if rep["fit"] != "exact" and units is None and returns == "angles":
-            rep["hint"] = "no fit with the default --units rad; try --units deg"
+            rep["hint"] = "no fit with the default --radians; try --degrees"
     else:
         frame_df, units = _read_data(data, units)
         roles, cols = _angle_columns(angles)

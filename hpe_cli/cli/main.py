@@ -33,6 +33,16 @@ class HpeGroup(click.Group):
     removing every staged output and stopping worker processes.
     """
 
+    def make_context(self, info_name, args, parent=None, **extra):
+        """``hpe --bogus``: the group's own usage errors are one line too (exit 2); no arguments shows the help."""
+        try:
+            return super().make_context(info_name, args, parent=parent, **extra)
+        except click.UsageError as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":
+                raise
+            _error(f"{exc.format_message()} (see 'hpe --help')")
+            raise SystemExit(2) from None
+
     def list_commands(self, ctx):
         return [n for n, target in COMMANDS.items() if importlib.util.find_spec(target.split(":")[0])]
 
@@ -60,6 +70,13 @@ class HpeGroup(click.Group):
                     warnings.simplefilter("ignore")  # numpy/pandas warnings name internal paths
                 with txn.activate(run=True):
                     return super().invoke(ctx)
+        except click.UsageError as exc:  # one line, exit 2 (click's own form is usage + hint + error)
+            if signals.fired() is None:
+                where = exc.ctx.command_path.split()[-1] if exc.ctx is not None else ""
+                hint = f" (see 'hpe {where} --help')" if exc.ctx is not None and exc.ctx.parent is not None else ""
+                _error(exc.format_message() + hint)
+                ctx.exit(2)
+            raise
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
             if signals.fired() is not None:
                 exc = signals.fired()

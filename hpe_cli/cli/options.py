@@ -21,8 +21,10 @@ class SystemType(click.ParamType):
         except SystemError_ as exc:
             if str(value).endswith(".toml"):
                 self.fail(str(exc), param, ctx)
-            self.fail(f"unknown system {value!r}; expected one of: {', '.join(system_names())} "
-                      "or a .toml file", param, ctx)
+            folded = _system_fold(value, system_names())  # names match case-insensitively
+            if folded is not None:
+                return get_system(folded)
+            self.fail(_unknown_system(value, system_names()), param, ctx)
 
 
 SYSTEM = SystemType()
@@ -162,3 +164,174 @@ def non_negative_or_inf(ctx, param, value):
     if value != value or value < 0:  # NaN or negative
         raise click.BadParameter(f"expected a number >= 0 or inf, got {value}")
     return value
+
+
+# --------------------------------------------------------------------------------------------------------------
+# One spelling per idea (image sizes, angle units, fit thresholds), with the old spellings as warned aliases.
+
+class ImageSize(click.ParamType):
+    """``WxH`` in pixels (``1920x1080``), returned as ``(W, H)``; a usage error otherwise."""
+
+    name = "WxH"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, tuple):
+            return value
+        try:
+            w, h = (int(v) for v in str(value).lower().replace("×", "x").split("x"))
+        except ValueError:
+            self.fail(f"expected WIDTHxHEIGHT in pixels such as 1920x1080, got {value!r}", param, ctx)
+        if not (1 <= w <= 100_000 and 1 <= h <= 100_000):
+            self.fail(f"expected sizes between 1 and 100000 pixels, got {value!r}", param, ctx)
+        return (w, h)
+
+
+IMAGE_SIZE = ImageSize()
+
+
+def image_size_option(*names, help="Width and height of the images, in pixels, as WxH (e.g. 1920x1080).", **kw):
+    """``--image-size WxH``: the one spelling of an image size (``--image-size W H`` is a warned alias)."""
+    return click.option("--image-size", *names, type=IMAGE_SIZE, metavar="WxH", help=help, **kw)
+
+
+RADIANS_HELP = "Angle columns of the input are in radians (default: degrees; hpe always writes degrees)."
+
+
+def radians_option(help: str = RADIANS_HELP):
+    """``--radians``: the one spelling of input angle units."""
+    return click.option("--radians", is_flag=True, help=help)
+
+
+class Length(click.ParamType):
+    """A length with an optional unit suffix (``2cm``, ``0.02m``, ``20mm``; a bare number is in ``default``),
+    returned in ``unit``; ``inf`` is accepted (no threshold)."""
+
+    name = "CM"
+    _scale = {"mm": 0.1, "cm": 1.0, "m": 100.0}
+
+    def __init__(self, unit: str = "cm", default: str = "cm"):
+        self.unit, self.default = unit, default
+
+    def convert(self, value, param, ctx):
+        if value is None or isinstance(value, float):
+            return value
+        import re
+
+        m = re.fullmatch(r"\s*([-+0-9.eE]+|inf|infinity)\s*(mm|cm|m)?\s*", str(value).lower())
+        try:
+            number = float(m.group(1)) if m else float("nan")
+        except ValueError:
+            number = float("nan")
+        if not number >= 0:
+            self.fail(f"expected a length >= 0 such as 2, 2cm, 0.02m or 20mm (or inf), got {value!r}", param, ctx)
+        unit = m.group(2) or self.default
+        if m.group(2) is None and 0 < number < 0.1 and self.default == "cm":
+            _warn(f"{value} is read as {number:g} cm ({number * 10:g} mm): this option is in centimetres; "
+                  f"write {value}m for metres")
+        return number * self._scale[unit] / self._scale[self.unit]
+
+
+def max_rmse_option(unit: str, default_cm: float, note: str):
+    """``--max-rmse``: a fit threshold in centimetres everywhere (unit suffixes accepted), given to the command in
+    ``unit`` (what its pipeline uses)."""
+    return click.option(
+        "--max-rmse", type=Length(unit=unit), default=None, metavar="CM",
+        help=f"Reject faces whose fit RMSE is above this, in centimetres; a unit suffix is accepted (2cm, 0.02m, "
+             f"20mm). 'inf' labels every fit. [default: {default_cm:g} cm: {note}]")
+
+
+def _warn(msg: str) -> None:
+    click.echo(f"Warning: {msg}", err=True)
+
+
+def _rewrite_deprecated(args, names):
+    """Rewrite the deprecated spellings in ``names`` (a subset of image-size, canvas, units) to the current ones."""
+    out, i, args = [], 0, list(args)
+    while i < len(args):
+        a = args[i]
+        if a == "--":
+            out += args[i:]
+            break
+        a = str(a)
+        if "canvas" in names and (a == "--canvas" or a.startswith("--canvas=")):
+            _warn("--canvas is deprecated; use --image-size WxH")
+            out.append("--image-size" + a[len("--canvas"):])
+        elif "image-size" in names and a == "--image-size" and i + 2 < len(args) \
+                and str(args[i + 1]).isdigit() and str(args[i + 2]).isdigit():
+            _warn(f"--image-size {args[i + 1]} {args[i + 2]} is deprecated; use --image-size "
+                  f"{args[i + 1]}x{args[i + 2]}")
+            out += ["--image-size", f"{args[i + 1]}x{args[i + 2]}"]
+            i += 2
+        elif "units" in names and (a == "--units" or a.startswith("--units=")):
+            value = a.split("=", 1)[1] if "=" in a else (args[i + 1] if i + 1 < len(args) else "")
+            if "=" not in a:
+                i += 1
+            flag = {"rad": "--radians", "deg": "--degrees"}.get(value)
+            if flag is None:
+                raise click.UsageError(f"Invalid value for '--units': expected rad or deg, got {value!r} "
+                                       "(deprecated: use --radians or --degrees)")
+            _warn(f"--units {value} is deprecated; use {flag}")
+            out.append(flag)
+        else:
+            out.append(a)
+        i += 1
+    return out
+
+
+def deprecated_spellings(*names):
+    """Let ``command`` accept old spellings (``image-size``: ``--image-size W H``; ``canvas``: ``--canvas WxH``;
+    ``units``: ``--units rad|deg``), each rewritten with a warning on stderr before parsing."""
+    def deco(command):
+        parse = command.parse_args
+
+        def parse_args(ctx, args):
+            return parse(ctx, _rewrite_deprecated(args, names))
+
+        command.parse_args = parse_args
+        return command
+    return deco
+
+
+def _system_fold(value, names):
+    """The built-in name equal to ``value`` up to case (``300W_LP`` -> ``300w_lp``), or None."""
+    low = str(value).lower()
+    return next((n for n in names if n.lower() == low), None)
+
+
+def _unknown_system(value, names) -> str:
+    """'unknown system' with a "did you mean" for near misses (``300wlp``, ``6DRepNet``, ``biwii``)."""
+    import difflib
+
+    def key(n):
+        return "".join(ch for ch in str(n).lower() if ch.isalnum())
+
+    keyed = {key(n): n for n in names}
+    near = [keyed[k] for k in difflib.get_close_matches(key(value), list(keyed), n=3, cutoff=0.75)]
+    if key(value) in keyed:
+        near = [keyed[key(value)]]
+    hint = f"did you mean {' or '.join(near)}? " if near else ""
+    return f"unknown system {value!r}; {hint}expected one of: {', '.join(names)} or a .toml file"
+
+
+def known_rows(*paths) -> int | None:
+    """Rows of the inputs when known before reading (Parquet metadata, a folder's ``.mat`` files), else None."""
+    from pathlib import Path
+
+    total = 0
+    for p in map(Path, paths):
+        try:
+            if p.is_dir():
+                n = sum(1 for _ in p.glob("*.mat"))
+                if not n:
+                    return None
+            else:
+                with open(p, "rb") as f:
+                    if f.read(4) != b"PAR1":
+                        return None
+                import pyarrow.parquet as pq
+
+                n = pq.ParquetFile(p).metadata.num_rows
+        except (OSError, ValueError):
+            return None
+        total += n
+    return total

@@ -3,22 +3,14 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, non_negative_or_inf, echo_summary, format_from_suffix, output_option, overwrite_option, progress, rejects_options,
+from .options import (SYSTEM, non_negative_or_inf, deprecated_spellings, echo_summary, format_from_suffix,
+                      image_size_option, max_rmse_option, output_option, overwrite_option, progress, rejects_options,
                       verbosity_options)
 
 FORMATS = ("table", "coco", "whenet")
 
 
-def _image_size(ctx, param, value):
-    try:
-        w, h = (int(v) for v in str(value).lower().split("x"))
-    except ValueError:
-        raise click.BadParameter(f"expected WIDTHxHEIGHT such as 3840x2160, got {value!r}") from None
-    if w <= 0 or h <= 0:
-        raise click.BadParameter(f"expected a positive WIDTHxHEIGHT, got {value!r}")
-    return (w, h)
-
-
+@deprecated_spellings("image-size")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("dataframes", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
 @output_option(help="Output: a .parquet/.csv table, or with --format coco a .json, with --format whenet a .txt.")
@@ -28,16 +20,14 @@ def _image_size(ctx, param, value):
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default=None,
               help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
                    "[default: from OUTPUT's extension].")
-@click.option("--image-size", default="3840x2160", show_default=True, callback=_image_size, metavar="WxH",
-              help="Size of the images the labels are for. AGORA renders 3840x2160 and ships 1280x720 copies; "
+@image_size_option(default="3840x2160", show_default=True,
+                   help="Size of the images the labels are for. AGORA renders 3840x2160 and ships 1280x720 copies; "
                    "camK (and so the boxes and 2-D points) is rescaled from the size the dataframe was built for "
                    "(read from camK's principal point, which AGORA puts at the image centre).")
 @click.option("--preset", type=click.Choice(["directmhp", "whenet"]), default="directmhp", show_default=True,
               help="Helmet radius and box rule: directmhp (radius 18, aspect < 1.5, each side < 70% of the "
                    "image) or whenet (radius 22, aspect <= 2).")
-@click.option("--max-rmse", type=float, default=None, callback=non_negative_or_inf, metavar="X",
-              help="Reject faces whose fit RMSE is above X metres (AGORA's joints are in metres). "
-                   "'inf' labels every fit, as DirectMHP did. [default: 0.02]")
+@max_rmse_option("m", 2, "DirectMHP used no threshold: inf")
 @click.option("--max-occlusion", type=float, default=90.0, show_default=True, callback=non_negative_or_inf,
               metavar="PCT", help="Label only people with occlusion < PCT percent (DirectMHP: 90).")
 @click.option("--legacy-whenet", is_flag=True,

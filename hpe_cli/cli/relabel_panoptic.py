@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, non_negative_or_inf, format_from_suffix, echo_summary, output_option, overwrite_option, progress, rejects_options,
+from .options import (SYSTEM, format_from_suffix, echo_summary, max_rmse_option, output_option,
+                      overwrite_option, progress, rejects_options,
                       verbosity_options)
 
 FORMATS = ("table", "coco", "whenet")
@@ -49,10 +50,8 @@ FORMATS = ("table", "coco", "whenet")
               help="Keep the finished units of an interrupted run with the same inputs and options "
                    "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
                    "Give it on the first run too: a run without --resume removes its parts when interrupted.")
-@click.option("--max-rmse", type=float, default=None, callback=non_negative_or_inf, metavar="X",
-              help="Reject faces whose fit RMSE is above X (cm). 'inf' labels every fit, as WHENet did. "
-                   "[default: 2.0: consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones "
-                   "to 2.8-6.7 cm]")
+@max_rmse_option("cm", 2, "consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones to 2.8-6.7 cm; "
+                             "WHENet used no threshold: inf")
 @click.option("--legacy-whenet", is_flag=True,
               help="Label with WHENet's own chain (compound, Z-Y-X decomposition, select_euler, negation) "
                    "and drop what it drops; adds legacy_pitch/yaw/roll columns.")

@@ -83,6 +83,10 @@ def label_columns_fast(batch, mode: str, radians: bool = False):
     cols, ok, reasons = _value_columns(batch, names)
     if radians and mode == "angles":
         cols = [v * (180.0 / np.pi) for v in cols]
+    elif mode == "angles":
+        from .units_watch import observe_degrees  # warns at the end of the run if they look like radians
+
+        observe_degrees(cols, ok)
     if mode == "matrix":
         from ..rotation.check import rotation_screen_columns
 
@@ -162,7 +166,23 @@ def label_mode(columns, path="input", system=None) -> str:
                f"(missing {','.join(missing_own)}), or ")
     missing = [c for c in ANGLE_COLS if c not in cols]
     raise HpeError(f"{path}: missing column(s) {', '.join(missing)}: expected {own}angle columns pitch,yaw,roll "
-                   f"(degrees) or matrix columns r00..r22; found {', '.join(list(columns)[:12]) or 'no columns'}")
+                   f"(degrees) or matrix columns r00..r22; found {', '.join(list(columns)[:12]) or 'no columns'}"
+                   f"{columns_map_hint(columns)}")
+
+
+def columns_map_hint(columns) -> str:
+    """``; rename them with --columns-map pitch=Pitch,...`` when capitalised or decorated angle columns are
+    present (``Pitch``, ``PITCH``, ``head_pitch``, ``yaw_deg``), else ``''``."""
+    found = {}
+    for role in ANGLE_COLS:
+        hits = [c for c in columns if c != role and role in "".join(ch for ch in str(c).lower() if ch.isalpha())]
+        exact = [c for c in hits if str(c).lower() == role]
+        if len(exact) == 1 or len(hits) == 1:
+            found[role] = (exact or hits)[0]
+    if not found or set(found) | (set(columns) & set(ANGLE_COLS)) != set(ANGLE_COLS):  # the rename must complete them
+        return ""
+    pairs = ",".join(f"{r}={found[r]}" for r in ANGLE_COLS if r in found)
+    return f"; rename them with --columns-map {pairs}"
 
 
 def _value_columns(batch, names):
@@ -311,6 +331,10 @@ def label_values(batch, system, mode: str, radians: bool = False):
         cols = system.value_columns if native else ANGLE_COLS
         values = np.stack([numeric_column(batch, c)[0] for c in cols], axis=-1)
         rad = (system.value_units == "radians") if native else radians
+        if not rad:
+            from .units_watch import observe_degrees
+
+            observe_degrees([values[:, 0], values[:, 1], values[:, 2]])
         return np.rad2deg(values) if rad else values
     if mode == "matrix" and not (_native(system, names) and system.storage_kind == "matrix"):
         return np.stack([numeric_column(batch, c)[0] for c in MATRIX_COLS], axis=-1).reshape(-1, 3, 3)

@@ -142,9 +142,9 @@ class Stats:
         rmse = np.concatenate(self.rmse) if self.rmse else np.zeros(0)
         if rmse.size:
             q = np.quantile(rmse, [0.5, 0.95])
-            gate = "off" if cfg.max_rmse is None or not np.isfinite(cfg.max_rmse) else f"{cfg.max_rmse:g}"
-            lines.append(f"fit RMSE (m) of {rmse.size} fitted faces: median {q[0]:.4f}, p95 {q[1]:.4f}, "
-                         f"max {rmse.max():.4f} (--max-rmse {gate})")
+            gate = "off" if cfg.max_rmse is None or not np.isfinite(cfg.max_rmse) else f"{100 * cfg.max_rmse:g}"
+            lines.append(f"fit RMSE (cm) of {rmse.size} fitted faces: median {100 * q[0]:.2f}, p95 {100 * q[1]:.2f}, "
+                         f"max {100 * rmse.max():.2f} (--max-rmse {gate})")  # the option is in cm, as in Panoptic
         pct = 100.0 * self.labelled / self.people if self.people else 0.0
         lines.append(f"labelled {self.labelled} of {self.people} people ({pct:.1f}%) in {sysname} -> {output}")
         rej = sum(self.reasons.values())

@@ -140,6 +140,10 @@ def _label_cols(batch, mode, radians):
     for c in names:
         v, _, _ = _numeric(batch, c)  # NaN where missing or non-numeric, inf kept
         cols.append(np.rad2deg(v) if (radians and mode == "angles") else v)
+    if mode == "angles" and not radians:
+        from ..io.units_watch import observe_degrees  # warns at the end of the run if they look like radians
+
+        observe_degrees(cols)
     return cols
 
 

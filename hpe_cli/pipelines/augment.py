@@ -162,7 +162,7 @@ class _Plan:
     """What every batch needs: the label reader, the landmark/box/size columns, the transform."""
 
     def __init__(self, path, src, in_system, system, columns, n_lm, perm, has_box, M, op, crop, image_size,
-                 has_cols, box_from, clip, pose_para, img_col, pics, scale=None):
+                 has_cols, box_from, clip, pose_para, img_col, pics, scale=None, radians=False):
         from ..io import MATRIX_COLS, landmark_cols
         from ..io.labels import label_mode
 
@@ -176,6 +176,7 @@ class _Plan:
         self.box_from, self.clip, self.pose_para, self.img_col, self.pics = box_from, clip, pose_para, img_col, pics
         self.has_td = "tdx" in columns and "tdy" in columns
         self.scale = scale
+        self.radians = radians
         self.zoom = scale if op == "scale" else 1.0  # lengths in pixels (size, Pose_Para scale) change by this
         self.zoom_cols = [c for c in ("size", "scale") if c in columns and (c == "size" or pose_para)] \
             if op == "scale" else []
@@ -217,9 +218,9 @@ class _Plan:
             from ..io import batch_rotations
             from ..rotation import soa as _soa
 
-            X, _, reasons = batch_rotations(batch, self.in_system, self.mode)
+            X, _, reasons = batch_rotations(batch, self.in_system, self.mode, self.radians)
             return _soa.to_array(X, n), (reasons if reasons is not None else np.full(n, "", dtype=object))
-        values, reasons = batch_labels(batch, self.mode)
+        values, reasons = batch_labels(batch, self.mode, self.radians)  # --radians: input angles in radians
         if self.mode != "angles":
             return values, reasons
         R = self.in_system.from_angles(np.where(np.isfinite(values), values, 0.0))
@@ -311,7 +312,8 @@ class _Plan:
 def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
                 images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
                 jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=65_536, bar=None, verbose=0,
-                description="", workers=None, strict=False, crop=None, scale=None, images_optional=False):
+                description="", workers=None, strict=False, crop=None, scale=None, images_optional=False,
+                radians=False):
     """Augment a label table (and optionally its images). Returns a summary dict.
 
     ``image_size`` (``(W, H)`` or None) is checked against the table's ``image_width/image_height`` and the
@@ -355,7 +357,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     pose_para = (path.is_dir() or path.suffix.lower() == ".mat") or {"tdz", "scale"} <= set(columns)
     plan = _Plan(path, src, in_system, system, columns, n_lm, perm, bool(box_present), M, op, crop, image_size,
                  has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir, images_optional) if images_dir else None,
-                 scale=scale)
+                 scale=scale, radians=radians)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=None if plan.mat_base is not None else path)
     meta = {**system_metadata(system), "hpe:augment": {
         "op": op, "angle_deg": angle, "crop": list(crop) if crop else None, "scale": scale, "description": description,

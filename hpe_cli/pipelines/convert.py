@@ -77,6 +77,8 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
     mode = label_mode(src.columns, src.path, source)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
     summary = ConvertSummary()
+    if progress is not None and src.num_rows:  # Parquet metadata, .mat file counts: the bar has a total
+        progress.total = src.num_rows
     meta = {**system_metadata(target), "hpe:source_system": source.name, "hpe:input": str(src.path)}
     if decoder is not None:
         meta["hpe:decoder"] = decoder

@@ -283,7 +283,7 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     centre, L, from_td = face_placement(frame, pose_para, length)
     names = _image_names(frame)
     if names is None and canvas is None:
-        raise HpeError(f"{src.path}: expected an `image` (or `file`) column naming the images, or --canvas WxH "
+        raise HpeError(f"{src.path}: expected an `image` (or `file`) column naming the images, or --image-size WxH "
                        f"to draw on blank canvases; found {', '.join(frame.columns[:12])}")
     img_root = Path(images) if images else (input_path if input_path.is_dir() else input_path.parent)
     outdir = Path(outdir)

@@ -14,7 +14,7 @@ moves image, ``BoundingBoxes``, ``KeyPoints`` and ``HeadPose`` together::
                        v2.RandomResizedCrop(224, ratio=(1, 1)), v2.ToDtype(torch.float32, scale=True)])
     image, boxes, points, pose = pipe(image, boxes, points, pose)
 
-The maths is SPEC §5 (:mod:`hpe_cli.geometry.augment`): with ``M`` the 2x2
+The maths is that of :mod:`hpe_cli.geometry.augment` (the docs' Maths page, augmentation formulas): with ``M`` the 2x2
 image-plane matrix of the operation (x right, **y up**: an image's rows go down,
 so a flip of rows is ``diag(1, -1)``) and ``M3 = [[M, 0], [0, 1]]``,
 
@@ -148,7 +148,7 @@ def plane_matrix_rotate(angle_deg: float):
 
 
 def pose_rotate(A: torch.Tensor, angle_deg: float) -> torch.Tensor:
-    """``M3 @ A`` for an image rotated counter-clockwise on screen by ``angle_deg`` (SPEC §5)."""
+    """``M3 @ A`` for an image rotated counter-clockwise on screen by ``angle_deg``."""
     c, s = _cos_sin_deg(angle_deg)
     r0, r1 = A[..., 0, :], A[..., 1, :]
     return torch.stack([c * r0 - s * r1, s * r0 + c * r1, A[..., 2, :]], -2)

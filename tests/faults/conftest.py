@@ -145,7 +145,7 @@ class Case:
             .to_csv(src, index=False)
         return [src, t / "imgs" / "a.png"], {"-o": t / "aug.csv", "--rejects": t / "rej.csv",
                                              "--out-images": t / "augimgs"}, \
-            lambda o: ["augment", src, "-o", o["-o"], "--image-size", 40, 30, "--hflip", "--images", t / "imgs",
+            lambda o: ["augment", src, "-o", o["-o"], "--image-size", "40x30", "--hflip", "--images", t / "imgs",
                        "--out-images", o["--out-images"], "--rejects", o["--rejects"], "-q"]
 
     def _infer(self, t):

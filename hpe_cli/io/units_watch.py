@@ -1,0 +1,55 @@
+"""A warning when angle columns read as degrees look like radians.
+
+Radians read as degrees give labels that are silently almost frontal. Degrees data where every angle of more
+than a handful of rows is within +-pi (3.14 degrees) is implausible, so the run says so on stderr once its outputs
+are committed (the check is per run: it needs every row, and rows stream in batches).
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+#: more rows than this, all within +-pi, are worth a warning
+MIN_ROWS = 5
+
+
+class UnitsWatch:
+    """Running count and largest |value| of the usable angle rows read as degrees in one run."""
+
+    def __init__(self, inputs):
+        self.inputs, self.rows, self.largest = inputs, 0, 0.0
+
+    def observe(self, cols, ok=None) -> None:
+        v = np.stack([np.asarray(c, dtype=np.float64) for c in cols], axis=-1)
+        good = np.isfinite(v).all(axis=-1) if ok is None else (np.asarray(ok) & np.isfinite(v).all(axis=-1))
+        if good.any():
+            self.rows += int(good.sum())
+            self.largest = max(self.largest, float(np.abs(v[good]).max()))
+
+    def message(self) -> str | None:
+        if self.rows <= MIN_ROWS or self.largest > np.pi:
+            return None
+        where = f"{self.inputs[0]}: " if len(self.inputs) == 1 else ""
+        return (f"Warning: {where}every angle read as degrees is within +-pi (largest |value| {self.largest:.3g}, "
+                f"more than {MIN_ROWS} rows): if these are radians, add --radians")
+
+    def report(self) -> None:
+        msg = self.message()
+        if msg is not None:
+            print(msg, file=sys.stderr)
+
+
+def observe_degrees(cols, ok=None) -> None:
+    """Feed angle columns read as degrees to the running command's watch (no-op outside a command)."""
+    from .transaction import current
+
+    txn = current()
+    if txn is None:
+        return
+    watch = getattr(txn, "_units_watch", None)
+    if watch is None:
+        watch = UnitsWatch(txn.input_paths())
+        txn._units_watch = watch
+        txn.after_commit(watch.report)
+    watch.observe(cols, ok)
