@@ -1,0 +1,171 @@
+"""Units and their part files: what a worker computes and writes, what ``--resume`` keeps, and
+``--min-change`` (the one rule that crosses units, applied by the parent in order)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import HpeError
+from .panoptic_plan import Config, process_chunk
+from .panoptic_stats import unit_stats
+
+
+def _reject_schema():
+    import pyarrow as pa
+
+    return pa.schema([("sequence", pa.string()), ("frame", pa.int64()), ("person_id", pa.int64()),
+                      ("camera", pa.string()), ("reason", pa.string()), ("detail", pa.string()),
+                      ("fit_rmse", pa.float64()), ("n_pairs", pa.int64()), ("scale", pa.float64())])
+
+
+# ------------------------------------------------------------------- units
+def make_units(plans: list) -> list:
+    """Independent units of work: ``(sequence index, chunk index)`` in output order."""
+    return [(si, ci) for si, p in enumerate(plans) for ci in range(len(p.chunks))]
+
+
+def unit_task(plans: list, cfg: Config, unit: tuple, parts_dir) -> dict:
+    """Everything a worker needs for one unit (small and picklable)."""
+    si, ci = unit
+    p = plans[si]
+    return {"chunk": p.chunks[ci], "cameras": p.cameras, "sequence": p.sequence, "cfg": cfg,
+            "stem": str(Path(parts_dir) / f"{si:04d}-{ci:06d}") if parts_dir is not None else None}
+
+
+def run_unit(task: dict) -> dict:
+    """Compute one unit and write its parts (labels and rejects as Arrow IPC
+    files, then its counts as JSON, each by an atomic rename: a unit whose
+    JSON exists is complete). Returns the counts; nothing big crosses processes."""
+    import os
+
+    from ..io import arrow_table
+
+    res = process_chunk(task["chunk"], task["cameras"], task["sequence"], task["cfg"])
+    stem = task["stem"]
+    _write_part(f"{stem}.labels.arrow", arrow_table(res["table"]))
+    _write_part(f"{stem}.rejects.arrow", arrow_table(res["rejects"], _reject_schema()))
+    stats = unit_stats(res, task["cfg"])
+    import json
+
+    with open(f"{stem}.json.tmp", "w") as fh:
+        json.dump(stats, fh)
+    os.replace(f"{stem}.json.tmp", f"{stem}.json")
+    return stats
+
+
+def _read_part(path):
+    import pyarrow as pa
+
+    with pa.memory_map(str(path), "r") as src:
+        return pa.ipc.open_file(src).read_all()
+
+
+class MinChange:
+    """``--min-change DEG``: keep a label only if its rotation differs by at least
+    DEG degrees (geodesic) from the last label kept for the same (sequence,
+    person, camera); labels arrive in frame order, whoever computed them."""
+
+    def __init__(self, degrees: float):
+        self.deg = float(degrees)
+        self.last: dict = {}
+
+    def apply(self, table, schema):
+        import pyarrow as pa
+
+        n = table.num_rows
+        if not n:
+            return table, None
+        R = np.stack([table.column(f"r{i}{j}").to_numpy() for i in range(3) for j in range(3)], 1)
+        seq = table.column("sequence").to_pylist()
+        pid = table.column("person_id").to_numpy()
+        cam = table.column("camera").to_pylist()
+        frame = table.column("frame").to_numpy()
+        keep = np.ones(n, dtype=bool)
+        angle = np.full(n, np.nan)
+        since = np.full(n, -1, dtype=np.int64)
+        last = self.last
+        for k in range(n):  # sequential by nature: each decision depends on the previous kept label
+            key = (seq[k], int(pid[k]), cam[k])
+            prev = last.get(key)
+            if prev is not None:
+                # geodesic angle from the Frobenius distance: |R1 - R2|_F = 2 sqrt(2) sin(theta / 2)
+                d = float(np.sqrt(np.sum((R[k] - prev[0]) ** 2)))
+                a = 2.0 * np.degrees(np.arcsin(min(1.0, d / (2.0 * np.sqrt(2.0)))))
+                if a < self.deg:
+                    keep[k] = False
+                    angle[k] = a
+                    since[k] = prev[1]
+                    continue
+            last[key] = (R[k], int(frame[k]))
+        if keep.all():
+            return table, None
+        drop = ~keep
+        t_drop = table.filter(pa.array(drop))
+        rej = {"sequence": t_drop.column("sequence"), "frame": t_drop.column("frame"),
+               "person_id": t_drop.column("person_id"), "camera": t_drop.column("camera"),
+               "reason": pa.array(["below --min-change"] * int(drop.sum()), pa.string()),
+               "detail": pa.array([f"{a:.3g} deg since frame {f}" for a, f in zip(angle[drop], since[drop])],
+                                  pa.string()),
+               "fit_rmse": t_drop.column("fit_rmse"), "n_pairs": t_drop.column("n_pairs"),
+               "scale": t_drop.column("scale")}
+        return table.filter(pa.array(keep)), pa.Table.from_pydict(rej).cast(schema)
+
+
+
+def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:
+    import hashlib
+
+    h = hashlib.sha256()
+    for p in plans:
+        h.update(f"{p.sequence}|{p.calibration}|{','.join(map(str, p.cameras.names))}|".encode())
+        h.update(np.fromiter(p.frames, dtype=np.int64, count=len(p.frames)).tobytes())
+        h.update(str([len(c) for c in p.chunks]).encode())
+    sysname = getattr(cfg.system, "name", cfg.system)
+    return {"hpe_parts": 1, "format": fmt, "config": repr({**cfg.__dict__, "system": sysname,
+                                                           "min_change": None}), "plans": h.hexdigest()}
+
+
+def parts_dir_for(output) -> Path:
+    """Where a run's parts are kept until the commit (and for ``--resume``)."""
+    out = Path(output)
+    return out.parent / f".{out.name}.hpe-parts"
+
+
+def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
+    import json
+    import shutil
+
+    d = parts_dir_for(output)
+    fp = _fingerprint(plans, cfg, fmt)
+    run_file = d / "run.json"
+    if d.exists():
+        try:
+            old = json.loads(run_file.read_text())
+        except (OSError, ValueError):
+            old = None
+        if old is None or old.get("hpe_parts") != 1:
+            raise HpeError(f"{d}: exists and is not an hpe parts folder; move it away")
+        if resume and old != fp:
+            raise HpeError(f"{d}: its parts were made with other inputs or options; run without --resume "
+                           "to start over")
+        if not resume:
+            shutil.rmtree(d)
+    d.mkdir(parents=True, exist_ok=True)
+    if not run_file.exists():
+        run_file.write_text(json.dumps(fp))
+    return d
+
+
+
+def _write_part(path, table) -> None:
+    """An Arrow IPC part file, by an atomic rename (a part that exists is complete)."""
+    import os
+
+    import pyarrow as pa
+
+    tmp = f"{path}.tmp"
+    with pa.OSFile(tmp, "wb") as sink, pa.ipc.new_file(sink, table.schema) as w:
+        w.write_table(table)
+    os.replace(tmp, path)
+
