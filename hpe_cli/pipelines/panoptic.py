@@ -22,6 +22,7 @@ from .panoptic_parts import (  # noqa: F401
     _read_part,
     _reject_schema,
     _write_part,
+    compute,
     make_units,
     parts_dir_for,
     run_unit,
@@ -31,6 +32,8 @@ from .panoptic_plan import (  # noqa: F401
     CAMERA_PRESETS,
     CHUNK_FRAMES,
     REJECT_COLS,
+    SAMPLING_REASONS,
+    SKIPPED,
     WHENET_HAGGLING,
     Config,
     Plan,
@@ -45,21 +48,18 @@ from .panoptic_stats import RmseStats, Stats, unit_stats
 from .relabel import LEGACY_COLS, REASONS
 
 
-def _process(args: tuple) -> dict:
-    return process_chunk(*args)
-
-
 def run(p: Plan, cfg: Config, workers: int = 1):
     """Yield :func:`process_chunk` results for every chunk of ``p``, in order
     (in memory; :func:`write_outputs` uses parts instead)."""
+    tasks = [unit_task([p], cfg, (0, ci), None) for ci in range(len(p.chunks))]
     if workers <= 1 or len(p.chunks) <= 1:
-        for chunk in p.chunks:
-            yield process_chunk(chunk, p.cameras, p.sequence, cfg)
+        for task in tasks:
+            yield compute(task)
         return
     from .pools import in_order, unit_pool
 
     with unit_pool(workers, warm=WORKER_IMPORTS) as pool:
-        yield from in_order(pool, _process, [(chunk, p.cameras, p.sequence, cfg) for chunk in p.chunks])
+        yield from in_order(pool, compute, tasks)
 
 
 def format_unit(task: dict) -> int:
@@ -160,7 +160,7 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     def results(pool):
         if not use_parts:
             for t in tasks:
-                res = process_chunk(t["chunk"], t["cameras"], t["sequence"], t["cfg"])
+                res = compute(t)
                 yield unit_stats(res, cfg), arrow_table(res["table"]), arrow_table(res["rejects"], rschema)
             return
         from .pools import in_order

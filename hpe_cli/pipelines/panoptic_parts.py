@@ -30,7 +30,14 @@ def unit_task(plans: list, cfg: Config, unit: tuple, parts_dir) -> dict:
     si, ci = unit
     p = plans[si]
     return {"chunk": p.chunks[ci], "cameras": p.cameras, "sequence": p.sequence, "cfg": cfg,
+            "skipped": p.skipped[ci] if ci < len(p.skipped) else None, "every": p.every,
             "stem": str(Path(parts_dir) / f"{si:04d}-{ci:06d}") if parts_dir is not None else None}
+
+
+def compute(task: dict) -> dict:
+    """:func:`process_chunk` of one :func:`unit_task`."""
+    return process_chunk(task["chunk"], task["cameras"], task["sequence"], task["cfg"], task.get("skipped"),
+                         task.get("every", 1))
 
 
 def run_unit(task: dict) -> dict:
@@ -41,7 +48,7 @@ def run_unit(task: dict) -> dict:
 
     from ..io import arrow_table
 
-    res = process_chunk(task["chunk"], task["cameras"], task["sequence"], task["cfg"])
+    res = compute(task)
     stem = task["stem"]
     _write_part(f"{stem}.labels.arrow", arrow_table(res["table"]))
     _write_part(f"{stem}.rejects.arrow", arrow_table(res["rejects"], _reject_schema()))
@@ -121,6 +128,7 @@ def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:
         h.update(f"{p.sequence}|{p.calibration}|{','.join(map(str, p.cameras.names))}|".encode())
         h.update(np.fromiter(p.frames, dtype=np.int64, count=len(p.frames)).tobytes())
         h.update(str([len(c) for c in p.chunks]).encode())
+        h.update(f"every={p.every}:{[sorted(s) for s in p.skipped]}".encode())
     sysname = getattr(cfg.system, "name", cfg.system)
     return {"hpe_parts": 1, "format": fmt, "config": repr({**cfg.__dict__, "system": sysname,
                                                            "min_change": None}), "plans": h.hexdigest()}

@@ -57,6 +57,10 @@ class Plan:
     available: int  # face files in the folder or tar
     missing: int  # frame numbers on the --every grid inside the range with no file
     chunks: list = field(default_factory=list)
+    every: int = 1
+    #: per chunk, the face files inside the range that ``--every`` skips (frame -> FaceRef), read only to list
+    #: their views in the rejects ("skipped by --every"), so labels + rejects = every view of the range
+    skipped: list = field(default_factory=list)
 
 
 def parse_frames(spec: str | None) -> tuple:
@@ -108,7 +112,9 @@ def plan(seq_dir, calibration=None, cameras="hd", every: int = 1, frames=(None, 
     sel = keys >= start
     if b is not None:
         sel &= keys < b
-    sel &= (keys - start) % every == 0
+    on_grid = (keys - start) % every == 0
+    off_grid = keys[sel & ~on_grid]
+    sel &= on_grid
     chosen = keys[sel]
     stop = (b - 1) if b is not None else int(keys[-1])
     last = min(stop, int(keys[-1]))
@@ -119,7 +125,14 @@ def plan(seq_dir, calibration=None, cameras="hd", every: int = 1, frames=(None, 
                        f"{b if b is not None else ''} --every {every} (frames {keys[0]}..{keys[-1]} exist)")
     items = list(selected.items())
     chunks = [dict(items[i:i + chunk_frames]) for i in range(0, len(items), chunk_frames)]
-    return Plan(seq_dir, sequence, calib, cams, selected, len(available), grid - len(selected), chunks)
+    # each skipped frame goes with the chunk whose frames surround it (the first chunk for those before it)
+    starts = np.asarray([next(iter(c)) for c in chunks], dtype=np.int64)
+    owner = np.maximum(np.searchsorted(starts, off_grid, side="right") - 1, 0)
+    skipped: list = [{} for _ in chunks]
+    for f, k in zip(off_grid.tolist(), owner.tolist()):
+        skipped[k][int(f)] = available[int(f)]
+    return Plan(seq_dir, sequence, calib, cams, selected, len(available), grid - len(selected), chunks,
+                every, skipped)
 
 
 def find_sequences(paths) -> list:
@@ -162,8 +175,10 @@ def plan_many(paths, calibration=None, cameras="hd", every: int = 1, frames=(Non
     return plans
 
 
-def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config) -> dict:
-    """Relabel one chunk of frames seen by all ``cams``.
+def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config, skipped: dict | None = None,
+                  every: int = 1) -> dict:
+    """Relabel one chunk of frames seen by all ``cams``; list the views of the ``skipped`` frames
+    (frame -> face file, skipped by ``--every``) as rejects.
 
     Returns
     -------
@@ -231,9 +246,53 @@ def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config) ->
     }
     fitted = np.isfinite(fit["rmse"])
     legacy_considered = int(np.isin(v["reason"], ("", "dropped by legacy rule")).sum()) if cfg.legacy else 0
-    return {"table": table, "rejects": rejects, "faces": n, "fit_rmse": fit["rmse"][fitted],
-            "face_reasons": fit["reason"], "views": n * C, "legacy_considered": legacy_considered,
-            "frames": len(paths), "unreadable": u}
+    res = {"table": table, "rejects": rejects, "faces": n, "fit_rmse": fit["rmse"][fitted],
+           "face_reasons": fit["reason"], "views": n * C, "legacy_considered": legacy_considered,
+           "frames": len(paths), "unreadable": u}
+    if skipped:
+        _add_skipped(res, skipped, cams, sequence, every)
+    return res
+
+
+SKIPPED = "skipped by --every"
+#: reject reasons of the sampling rules a user asks for (not failures: ``--strict`` ignores them)
+SAMPLING_REASONS = (SKIPPED, "below --min-change", "not seen by every camera")
+
+
+def _add_skipped(res: dict, skipped: dict, cams: pan.Cameras, sequence: str, every: int) -> None:
+    """Append one reject per view of the frames ``--every`` skipped (their faces are read, not fitted) and
+    count them: frames, faces (face reason :data:`SKIPPED`) and views."""
+    data = pan.read_face_frames(skipped)
+    n, C = len(data["frame"]), len(cams)
+    face = np.repeat(np.arange(n), C)
+    ci = np.tile(np.arange(C), n)
+    unread = data["unreadable"]
+    u = len(unread)
+    frames = np.concatenate([data["frame"][face], np.asarray([f for f, _, _ in unread], dtype=np.int64)])
+    detail = np.asarray([f"--every {every}: frame {f} is not on the grid of frames kept" for f in frames.tolist()],
+                        dtype=object)
+    detail[n * C:] = [d for _, _, d in unread]
+    add = {
+        "sequence": np.full(n * C + u, sequence, dtype=object),
+        "frame": frames,
+        "person_id": np.concatenate([data["person_id"][face], np.full(u, -1, dtype=np.int64)]),
+        "camera": np.concatenate([np.asarray(cams.names, dtype=object)[ci], np.full(u, "", dtype=object)]),
+        "reason": np.asarray([SKIPPED] * (n * C) + [r for _, r, _ in unread], dtype=object),
+        "detail": detail,
+        "fit_rmse": np.full(n * C + u, np.nan),
+        "n_pairs": np.zeros(n * C + u, dtype=np.int64),
+        "scale": np.full(n * C + u, np.nan),
+    }
+    rej = res["rejects"]
+    for k in rej:
+        rej[k] = np.concatenate([np.asarray(rej[k], dtype=add[k].dtype), add[k]])
+    res["face_reasons"] = np.concatenate([np.asarray(res["face_reasons"], dtype=object),
+                                          np.full(n, SKIPPED, dtype=object)])
+    res["faces"] += n
+    res["views"] += n * C
+    res["frames"] += len(skipped)
+    res["unreadable"] += u
+    res["skipped_frames"] = len(skipped)
 
 
 def _image_paths(cams: pan.Cameras, ci, frames):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .panoptic_plan import Config, Plan
+from .panoptic_plan import SKIPPED, Config, Plan
 from .relabel import summary_tail
 
 
@@ -67,7 +67,7 @@ def unit_stats(res: dict, cfg: Config) -> dict:
     rm.add(res["fit_rmse"])
     return {"frames": res["frames"], "faces": res["faces"], "views": res["views"], "labelled": len(t["frame"]),
             "legacy_considered": res["legacy_considered"], "out_of_range": out_of_range, "gimbal": gimbal,
-            "unreadable": res.get("unreadable", 0),
+            "unreadable": res.get("unreadable", 0), "skipped_frames": res.get("skipped_frames", 0),
             "view_reasons": dict(Counter(r for r in res["rejects"]["reason"].tolist())),
             "face_reasons": dict(Counter(r for r in res["face_reasons"].tolist() if r)), "rmse": rm.to_dict()}
 
@@ -78,7 +78,7 @@ class Stats:
     def __init__(self):
         from collections import Counter
 
-        self.frames = self.faces = self.views = self.labelled = self.unreadable = 0
+        self.frames = self.faces = self.views = self.labelled = self.unreadable = self.skipped_frames = 0
         self.legacy_considered = self.out_of_range = self.gimbal = 0
         self.view_reasons: Counter = Counter()
         self.face_reasons: Counter = Counter()
@@ -91,7 +91,7 @@ class Stats:
     def add_unit(self, u: dict) -> None:
         """Add a :func:`unit_stats` dict."""
         for k in ("frames", "faces", "views", "labelled", "legacy_considered", "out_of_range", "gimbal",
-                  "unreadable"):
+                  "unreadable", "skipped_frames"):
             setattr(self, k, getattr(self, k) + int(u.get(k, 0)))
         self.view_reasons.update(u["view_reasons"])
         self.face_reasons.update(u["face_reasons"])
@@ -105,7 +105,7 @@ class Stats:
 
     def merge(self, other: Stats) -> None:
         for k in ("frames", "faces", "views", "labelled", "legacy_considered", "out_of_range", "gimbal",
-                  "unreadable"):
+                  "unreadable", "skipped_frames"):
             setattr(self, k, getattr(self, k) + getattr(other, k))
         self.view_reasons.update(other.view_reasons)
         self.face_reasons.update(other.face_reasons)
@@ -123,14 +123,18 @@ class Stats:
         else:
             head = f"{title or 'total'}: {self.frames} frames"
         unread = f"; {self.unreadable} unreadable (truncated) face files" if self.unreadable else ""
+        if self.skipped_frames:
+            unread += f"; {self.skipped_frames} skipped by --every {cfg_every(p)}"
         lines = [f"{head}{unread}, {self.faces} faces x {n_cameras} cameras = {self.views} views"]
         few = self.face_reasons["too few confident points"]
         broken = self.face_reasons["bad landmarks"]
-        fitted = self.faces - few - broken
+        skipped = self.face_reasons[SKIPPED]
+        fitted = self.faces - few - broken - skipped
         gate = "off" if cfg.max_rmse is None or not np.isfinite(cfg.max_rmse) else f"{cfg.max_rmse:g}"
         lines.append(f"faces: {fitted} fitted; {few} with too few confident points; "
                      f"{self.face_reasons['bad fit']} bad fits (--max-rmse {gate})"
-                     + (f"; {broken} with bad landmarks (infinite or absurd)" if broken else ""))
+                     + (f"; {broken} with bad landmarks (infinite or absurd)" if broken else "")
+                     + (f"; {skipped} in frames skipped by --every (not fitted)" if skipped else ""))
         if self.rmse.n:
             lines.append(f"fit RMSE (cm) of fitted faces: median {self.rmse.quantile(0.5):.2f}, "
                          f"p95 {self.rmse.quantile(0.95):.2f}, p99 {self.rmse.quantile(0.99):.2f}, "
@@ -144,3 +148,8 @@ class Stats:
         lines += summary_tail(cfg.legacy, self.view_reasons["dropped by legacy rule"], self.legacy_considered,
                               self.out_of_range, self.gimbal, sysname, "views", "WHENet")
         return lines
+
+
+def cfg_every(p: Plan | None) -> str:
+    """``N`` of ``--every N`` for the summary ("N" over several sequences)."""
+    return str(p.every) if p is not None else "N"
