@@ -58,6 +58,22 @@ def stop_requested() -> BaseException | None:
     return _stop
 
 
+#: True once the run's transaction (the one opened by the ``hpe`` group) has committed: from then on the
+#: run's outputs are complete, and a signal no longer undoes anything (cli/signals.py says so instead)
+_run_committed = False
+
+
+def run_committed() -> bool:
+    return _run_committed
+
+
+def reset_run_state() -> None:
+    """At the start of a run: no signal received, nothing committed."""
+    global _stop, _run_committed
+    _stop = None
+    _run_committed = False
+
+
 _critical = 0
 _pending = None
 
@@ -407,6 +423,9 @@ class OutputTransaction:
         self._staged.clear()
         self._made_dirs.clear()
         self.state = "committed"
+        if self is _run:
+            global _run_committed
+            _run_committed = True
         for func in self._after:
             func()
 

@@ -1,0 +1,109 @@
+"""The output transaction commits several files as a whole, also when the commit itself fails halfway
+(the N-th placement fails: an injected error, a target name that became a folder, a read-only folder):
+the files already placed are undone (new ones removed, replaced ones restored) and nothing staged is left."""
+from __future__ import annotations
+
+import errno
+import os
+
+import pytest
+
+from hpe_cli.errors import HpeError
+from hpe_cli.io import transaction as tx
+
+from .conftest import temp_files, tree
+
+
+def _stage(tmp_path, overwrite=False):
+    """A run with a folder of 5 files (2 replace existing ones) and 2 single files (1 replaces)."""
+    txn = tx.OutputTransaction()
+    d = txn.stage_dir(tmp_path / "imgs", overwrite=overwrite)
+    (d / "sub").mkdir()
+    for k in range(4):
+        (d / f"{k}.jpg").write_bytes(b"new%d" % k)
+    (d / "sub" / "x.jpg").write_bytes(b"newx")
+    for name in ("a.csv", "b.json"):
+        tmp = txn.stage_file(tmp_path / name, overwrite=overwrite)
+        tmp.write_bytes(b"new " + name.encode())
+    return txn
+
+
+def _existing(tmp_path):
+    (tmp_path / "imgs").mkdir()
+    (tmp_path / "imgs" / "1.jpg").write_bytes(b"old1")
+    (tmp_path / "imgs" / "3.jpg").write_bytes(b"old3")
+    (tmp_path / "a.csv").write_bytes(b"old a")
+    os.chmod(tmp_path / "a.csv", 0o640)
+
+
+@pytest.mark.parametrize("overwrite", [False, True])
+@pytest.mark.parametrize("fail_at", range(7))
+def test_nth_placement_fails(tmp_path, monkeypatch, fail_at, overwrite):
+    if overwrite:
+        _existing(tmp_path)
+    before = tree(tmp_path)
+    modes = {p: os.stat(tmp_path / p).st_mode for p in before if (tmp_path / p).is_file()}
+    txn = _stage(tmp_path, overwrite)
+    calls = []
+    real = tx._place
+
+    def place(src, dst, ow, undo, backups):
+        calls.append(dst)
+        if len(calls) == fail_at + 1:
+            exc = OSError(errno.EACCES, "Permission denied")
+            exc.hpe_target = dst
+            raise exc
+        real(src, dst, ow, undo, backups)
+
+    monkeypatch.setattr(tx, "_place", place)
+    with pytest.raises(HpeError, match="permission denied") as err:
+        txn.commit()
+    assert str(calls[-1]) in str(err.value)
+    assert tree(tmp_path) == before  # placed files undone, replaced ones restored
+    assert {p: os.stat(tmp_path / p).st_mode for p in modes} == modes
+    assert not temp_files(tmp_path)
+    assert txn.state == "aborted"
+
+
+def test_commit_without_failure_places_everything(tmp_path):
+    _existing(tmp_path)
+    _stage(tmp_path, overwrite=True).commit()
+    assert (tmp_path / "imgs" / "1.jpg").read_bytes() == b"new1"
+    assert (tmp_path / "imgs" / "sub" / "x.jpg").read_bytes() == b"newx"
+    assert oct(os.stat(tmp_path / "a.csv").st_mode & 0o777) == oct(0o640)
+    assert not temp_files(tmp_path)
+
+
+def test_a_target_that_became_a_folder(tmp_path):
+    """Another process makes a folder where a file goes, after the plan was checked: undone, named."""
+    before = tree(tmp_path)
+    txn = _stage(tmp_path)
+    real = tx._place
+
+    def place(src, dst, ow, undo, backups):
+        if dst.name == "2.jpg":
+            dst.mkdir()
+        real(src, dst, ow, undo, backups)
+
+    import unittest.mock
+
+    with unittest.mock.patch.object(tx, "_place", place), pytest.raises(HpeError, match="2.jpg"):
+        txn.commit()
+    assert tree(tmp_path) == {**before, "imgs": "dir", "imgs/2.jpg": "dir"}  # the other process's folder stays
+    assert not temp_files(tmp_path)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root ignores folder permissions")
+def test_a_read_only_subfolder_fails_halfway(tmp_path):
+    """imgs/sub exists and is read-only: 0..3.jpg are placed first, then sub/x.jpg fails; all undone."""
+    (tmp_path / "imgs" / "sub").mkdir(parents=True)
+    before = tree(tmp_path)
+    txn = _stage(tmp_path)
+    os.chmod(tmp_path / "imgs" / "sub", 0o555)
+    try:
+        with pytest.raises(HpeError, match=r"sub/x.jpg: cannot write: permission denied"):
+            txn.commit()
+        assert tree(tmp_path) == before
+        assert not temp_files(tmp_path)
+    finally:
+        os.chmod(tmp_path / "imgs" / "sub", 0o755)
