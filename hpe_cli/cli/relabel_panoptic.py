@@ -57,7 +57,10 @@ FORMATS = ("table", "coco", "whenet")
 @click.option("--resume", is_flag=True,
               help="Keep the finished units of an interrupted run with the same inputs and options "
                    "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
-                   "Give it on the first run too: a run without --resume removes its parts when interrupted.")
+                   "Give it on the first run too: a run without --resume removes its parts when interrupted. "
+                   "A changed input is refused, naming the file: calibration files are compared by their "
+                   "contents, face files and hdFace3d.tar by size, modification time and inode. The temp files "
+                   "of the run it resumes (killed by kill -9 or a power cut) are removed.")
 @click.option("--max-rmse", type=float, default=None, callback=non_negative_or_inf, metavar="X",
               help="Reject faces whose fit RMSE is above X (cm). 'inf' labels every fit, as WHENet did. "
                    "[default: 2.0: consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones "

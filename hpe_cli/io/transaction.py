@@ -350,6 +350,10 @@ class OutputTransaction:
                 self._staged.remove(s)
                 _remove(s.tmp)
 
+    def staged_temps(self) -> list:
+        """The temporary files and folders staged so far (to be removed by a later run if this one is killed)."""
+        return [s.tmp for s in self._staged]
+
     def target_of(self, tmp) -> Path | None:
         for s in self._staged:
             if s.tmp == Path(tmp):

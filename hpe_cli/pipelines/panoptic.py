@@ -22,7 +22,9 @@ from .panoptic_parts import (  # noqa: F401
     _read_part,
     _reject_schema,
     _write_part,
+    check_done,
     compute,
+    record_temps,
     make_units,
     parts_dir_for,
     run_unit,
@@ -165,6 +167,8 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
             return
         from .pools import in_order
 
+        if resume:
+            check_done(tasks)
         todo = [t for t in tasks if not Path(t["stem"] + ".json").exists()]
         computed = in_order(pool, run_unit, todo)
         need = {t["stem"] for t in todo}
@@ -204,6 +208,8 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
             else:
                 out = stack.enter_context(_text_writer(fmt, output, overwrite))
             rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
+            if parts is not None and current() is not None:  # a run killed from now on leaves these
+                record_temps(parts, current().staged_temps())
             ahead = 2 * getattr(pool, "workers", 1)
             registered = 0  # rows given ids so far (text formats on parts)
             for (si, _), task, (stats, t, r) in zip(units, tasks, results(pool)):

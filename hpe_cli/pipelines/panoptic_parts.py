@@ -121,6 +121,7 @@ class MinChange:
 
 
 def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:
+    """What a run's parts depend on: options, plans, and every input (:func:`input_signatures`)."""
     import hashlib
 
     h = hashlib.sha256()
@@ -130,14 +131,108 @@ def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:
         h.update(str([len(c) for c in p.chunks]).encode())
         h.update(f"every={p.every}:{[sorted(s) for s in p.skipped]}".encode())
     sysname = getattr(cfg.system, "name", cfg.system)
-    return {"hpe_parts": 1, "format": fmt, "config": repr({**cfg.__dict__, "system": sysname,
-                                                           "min_change": None}), "plans": h.hexdigest()}
+    return {"hpe_parts": 2, "format": fmt, "config": repr({**cfg.__dict__, "system": sysname,
+                                                           "min_change": None}), "plans": h.hexdigest(),
+            "inputs": input_signatures(plans)}
+
+
+#: how ``--resume`` tells that an input changed (stated in messages and in ``--help``)
+HOW_COMPARED = ("calibration files by their contents (SHA-256), face files and hdFace3d.tar by size, "
+                "modification time and inode")
+
+
+def input_signatures(plans: list) -> dict:
+    """path -> signature of every file the run reads: a calibration's SHA-256 of its contents, a face
+    file's or tar's ``size:mtime_ns:inode`` (reading every face file again would cost as much as a unit)."""
+    import hashlib
+    import os
+
+    out = {}
+    for p in plans:
+        cal = str(p.calibration)
+        try:
+            out[cal] = "sha256:" + hashlib.sha256(Path(cal).read_bytes()).hexdigest()
+        except OSError as exc:
+            raise HpeError(f"{cal}: cannot read: {exc.strerror or exc}") from None
+        files = {getattr(f, "path", f) for f in p.frames.values()}
+        for s in p.skipped:
+            files.update(getattr(f, "path", f) for f in s.values())
+        for f in sorted(map(str, files)):
+            try:
+                st = os.stat(f)
+            except OSError:
+                out[f] = "missing"
+                continue
+            out[f] = f"stat:{st.st_size}:{st.st_mtime_ns}:{st.st_ino}"
+    return out
 
 
 def parts_dir_for(output) -> Path:
     """Where a run's parts are kept until the commit (and for ``--resume``)."""
     out = Path(output)
     return out.parent / f".{out.name}.hpe-parts"
+
+
+def _mismatch(d: Path, old: dict, fp: dict) -> str:
+    """Why the parts in ``d`` (fingerprint ``old``) cannot be resumed by a run with fingerprint ``fp``."""
+    again = "run without --resume to start over"
+    if old.get("hpe_parts") != fp["hpe_parts"]:
+        return f"{d}: its parts were made by another version of hpe; {again}"
+    if old.get("config") != fp["config"] or old.get("format") != fp["format"]:
+        return f"{d}: its parts were made with other options; {again}"
+    a, b = old.get("inputs", {}), fp["inputs"]
+    for path in b:
+        if path in a and a[path] != b[path]:
+            how = ("its contents differ" if b[path].startswith("sha256:") else
+                   "it is gone" if b[path] == "missing" else "its size, modification time or inode differ")
+            n = sum(1 for q in b if q in a and a[q] != b[q])
+            more = f" (and {n - 1} more inputs)" if n > 1 else ""
+            return (f"{path}: changed since the interrupted run whose parts are in {d} ({how}){more}; "
+                    f"--resume compares {HOW_COMPARED}; {again}")
+    return f"{d}: its parts were made with other inputs (sequences, cameras or frames); {again}"
+
+
+def _remove_leftovers(d: Path) -> None:
+    """Remove what the run that made ``d`` left half done: its staged outputs (``temps.json``: the
+    ``.hpe-*.tmp`` files next to its outputs) and its unfinished part files (``*.tmp`` in ``d``)."""
+    import json
+    import os
+    import re
+
+    try:
+        temps = json.loads((d / "temps.json").read_text())
+    except (OSError, ValueError):
+        temps = []
+    for t in temps if isinstance(temps, list) else []:
+        if isinstance(t, str) and re.fullmatch(r"\.hpe-[0-9a-f]{8}\.tmp", os.path.basename(t)):
+            _rm(Path(t))
+    for f in d.glob("*.tmp"):
+        _rm(f)
+
+
+def _rm(p: Path) -> None:
+    import shutil
+
+    try:
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink()
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        raise HpeError(f"{p}: cannot remove a file of the interrupted run: {exc.strerror or exc}") from None
+
+
+def record_temps(d: Path, temps) -> None:
+    """Note the run's staged outputs in its parts folder, so the run that resumes (or replaces) it can remove
+    them if this one never ends (``kill -9``, a power cut)."""
+    import json
+    import os
+
+    tmp = d / "temps.json.tmp"
+    tmp.write_text(json.dumps(sorted(map(os.fspath, temps))))
+    os.replace(tmp, d / "temps.json")
 
 
 def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
@@ -152,11 +247,11 @@ def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
             old = json.loads(run_file.read_text())
         except (OSError, ValueError):
             old = None
-        if old is None or old.get("hpe_parts") != 1:
+        if not isinstance(old, dict) or old.get("hpe_parts") not in (1, 2):
             raise HpeError(f"{d}: exists and is not an hpe parts folder; move it away")
         if resume and old != fp:
-            raise HpeError(f"{d}: its parts were made with other inputs or options; run without --resume "
-                           "to start over")
+            raise HpeError(_mismatch(d, old, fp))
+        _remove_leftovers(d)
         if not resume:
             shutil.rmtree(d)
     d.mkdir(parents=True, exist_ok=True)
@@ -164,6 +259,37 @@ def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
         run_file.write_text(json.dumps(fp))
     return d
 
+
+def check_done(tasks: list) -> None:
+    """Before resuming: every unit marked done (its ``.json``) has readable parts, else name the part."""
+    import json
+
+    import pyarrow as pa
+
+    for t in tasks:
+        stem = t["stem"]
+        marker = Path(stem + ".json")
+        if not marker.exists():
+            continue
+        fix = (f"delete {Path(stem).name}.* in {Path(stem).parent} to compute that unit again, or run without "
+               "--resume")
+        try:
+            json.loads(marker.read_text())
+        except (OSError, ValueError) as exc:
+            raise HpeError(f"{marker}: damaged part of the interrupted run ({_short(exc)}); {fix}") from None
+        for suffix in (".labels.arrow", ".rejects.arrow"):
+            part = Path(stem + suffix)
+            if not part.exists():
+                raise HpeError(f"{part}: missing part of the interrupted run (its unit is marked done); {fix}")
+            try:
+                with pa.memory_map(str(part), "r") as src:
+                    pa.ipc.open_file(src)
+            except (OSError, pa.ArrowException) as exc:
+                raise HpeError(f"{part}: damaged part of the interrupted run ({_short(exc)}); {fix}") from None
+
+
+def _short(exc) -> str:
+    return " ".join(str(exc).split())[:120] or type(exc).__name__
 
 
 def _write_part(path, table) -> None:
