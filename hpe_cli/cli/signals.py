@@ -162,6 +162,7 @@ def _kill_forked() -> None:
         except (OSError, ValueError):
             pass
     pids -= known
+    pids.discard(_tracker_pid())
     for pid in pids:
         try:
             os.kill(pid, signal.SIGKILL)
@@ -172,6 +173,18 @@ def _kill_forked() -> None:
             os.waitpid(pid, 0)
         except OSError:  # reaped by multiprocessing meanwhile, or not ours to wait for
             pass
+
+
+def _tracker_pid():
+    """multiprocessing's resource tracker: left running (it ends by itself when this process does); killed,
+    it would be started again by the next process a pool spawns while shutting down, printing a ``KeyError``
+    traceback for every semaphore its predecessor knew."""
+    try:
+        from multiprocessing import resource_tracker
+
+        return resource_tracker._resource_tracker._pid
+    except (ImportError, AttributeError):
+        return None
 
 
 @contextmanager
