@@ -25,6 +25,7 @@ from .panoptic_parts import (  # noqa: F401
     check_done,
     compute,
     record_temps,
+    unlock_parts,
     make_units,
     parts_dir_for,
     run_unit,
@@ -249,9 +250,12 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
         # otherwise nothing of it is left behind (the output transaction's promise)
         if parts is not None and not resume:
             shutil.rmtree(parts, ignore_errors=True)
+        if parts is not None:
+            unlock_parts(parts)
         raise
     if parts is not None:
         shutil.rmtree(parts, ignore_errors=True)
+        unlock_parts(parts)
     total = Stats()
     for st in seq_stats:
         total.merge(st)

@@ -179,7 +179,7 @@ def _mismatch(d: Path, old: dict, fp: dict) -> str:
     if old.get("hpe_parts") != fp["hpe_parts"]:
         return f"{d}: its parts were made by another version of hpe; {again}"
     if old.get("config") != fp["config"] or old.get("format") != fp["format"]:
-        return f"{d}: its parts were made with other options; {again}"
+        return f"{d}: its parts were made with other inputs or options (here: other options); {again}"
     a, b = old.get("inputs", {}), fp["inputs"]
     for path in b:
         if path in a and a[path] != b[path]:
@@ -189,7 +189,7 @@ def _mismatch(d: Path, old: dict, fp: dict) -> str:
             more = f" (and {n - 1} more inputs)" if n > 1 else ""
             return (f"{path}: changed since the interrupted run whose parts are in {d} ({how}){more}; "
                     f"--resume compares {HOW_COMPARED}; {again}")
-    return f"{d}: its parts were made with other inputs (sequences, cameras or frames); {again}"
+    return f"{d}: its parts were made with other inputs or options (here: other sequences, cameras or frames); {again}"
 
 
 def _remove_leftovers(d: Path) -> None:
@@ -235,14 +235,86 @@ def record_temps(d: Path, temps) -> None:
     os.replace(tmp, d / "temps.json")
 
 
-def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
-    import json
-    import shutil
+#: parts folder -> file descriptor holding its lock (one run at a time per output)
+_LOCKS: dict = {}
 
+
+def lock_parts(d: Path, output) -> None:
+    """Create (if needed) and lock the parts folder ``d`` for this run, or fail at once with one line if
+    another run holds it (two runs writing one output: one goes on, the other stops here, nothing mixed).
+
+    The lock is ``flock`` on the folder itself; a folder removed and made again by the other run meanwhile
+    is detected (inode changed) and locked afresh."""
+    import os
+
+    try:
+        import fcntl
+    except ImportError:  # no flock on this platform: runs are not protected from each other
+        d.mkdir(parents=True, exist_ok=True)
+        return
+    held = _LOCKS.get(str(d))
+    if held is not None:  # this process holds it already (the lock keeps other processes out)
+        try:
+            if os.stat(d).st_ino == os.fstat(held).st_ino:
+                return
+        except FileNotFoundError:
+            pass
+        unlock_parts(d)
+    for _ in range(100):
+        d.mkdir(parents=True, exist_ok=True)
+        try:
+            fd = os.open(d, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+        except FileNotFoundError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise HpeError(f"{output}: another hpe run is writing this output now (its parts are in {d}); "
+                           "wait for it to end, or choose another output") from None
+        try:
+            same = os.stat(d).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            _LOCKS[str(d)] = fd
+            return
+        os.close(fd)
+    raise HpeError(f"{d}: cannot lock the parts folder (it keeps being replaced by another run)")
+
+
+def unlock_parts(d) -> None:
+    """Release the lock taken by :func:`lock_parts` (after the folder is removed, or kept for --resume)."""
+    import os
+
+    fd = _LOCKS.pop(str(d), None)
+    if fd is not None:
+        os.close(fd)
+
+
+def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
+    """The locked parts folder of this run (:func:`lock_parts`; release it with :func:`unlock_parts`)."""
     d = parts_dir_for(output)
     fp = _fingerprint(plans, cfg, fmt)
     run_file = d / "run.json"
-    if d.exists():
+    existed = d.exists()
+    lock_parts(d, output)
+    try:
+        _reuse_or_reset(d, run_file, fp, existed, resume)
+    except BaseException:
+        unlock_parts(d)
+        raise
+    return d
+
+
+def _reuse_or_reset(d: Path, run_file: Path, fp: dict, existed: bool, resume: bool) -> None:
+    """With the lock held: check the parts of an earlier run against ``fp`` (``resume``) or clear them."""
+    import json
+    import shutil
+
+    if existed and not run_file.exists() and not any(d.iterdir()):
+        existed = False  # made by a run that stopped before writing anything
+    if existed:
         try:
             old = json.loads(run_file.read_text())
         except (OSError, ValueError):
@@ -252,12 +324,11 @@ def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
         if resume and old != fp:
             raise HpeError(_mismatch(d, old, fp))
         _remove_leftovers(d)
-        if not resume:
-            shutil.rmtree(d)
-    d.mkdir(parents=True, exist_ok=True)
+        if not resume:  # start afresh in the same (locked) folder
+            for f in d.iterdir():
+                shutil.rmtree(f) if f.is_dir() and not f.is_symlink() else f.unlink()
     if not run_file.exists():
         run_file.write_text(json.dumps(fp))
-    return d
 
 
 def check_done(tasks: list) -> None:

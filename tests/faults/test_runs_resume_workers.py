@@ -151,3 +151,25 @@ def test_a_killed_worker_is_one_clear_error(tmp_path):
     assert os.listdir(dst) == []
     time.sleep(0.3)
     assert not [k for k in kids if _alive(k)]
+
+
+@pytest.mark.parametrize("extra", [["--workers", "2"], ["--workers", "2", "--resume"]])
+def test_two_runs_writing_one_output_at_once(tmp_path, extra):
+    """Both start together: one writes the output, the other stops with one line (the parts folder is
+    locked, or the output exists by then); the output is never a mix of the two."""
+    seq = _sequence(tmp_path / "in", frames=150)
+    ref = tmp_path / "ref.parquet"
+    assert run("relabel-panoptic", seq, "-o", ref, "-q").exit_code == 0
+    dst = tmp_path / "out"
+    dst.mkdir()
+    out = dst / "o.parquet"
+    procs = [subprocess.Popen([sys.executable, "-m", "hpe_cli", "relabel-panoptic", str(seq), "-o", str(out),
+                               "-q", *extra], env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+             for _ in range(2)]
+    results = [(p.wait(timeout=120), p.stderr.read().decode()) for p in procs]
+    assert sorted(c for c, _ in results) == [0, 1], results
+    err = next(e for c, e in results if c)
+    assert err.count("\n") == 1 and err.startswith("Error: ") and str(out) in err, err
+    assert "another hpe run is writing this output" in err or "already exists" in err, err
+    assert out.read_bytes() == ref.read_bytes()
+    assert sorted(os.listdir(dst)) == ["o.parquet"]
