@@ -97,7 +97,10 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
     and in total: labels + rejects = every view of the frames in --frames.
     The frames --every skips are read (not fitted) to list their views.
     --strict fails on any reject except those of the sampling rules asked
-    for (--every, --min-change, --all-views). --frame crop
+    for (--every, --min-change, --all-views).
+    With several sequences, one that cannot be read (its calibration, a
+    face file, no face files) fails the run with an error naming the file;
+    no dataset is written without it. --frame crop
     labels relative to the line of sight and adds ray_angle. --format whenet and coco name the whole frame's
     image: crop it with the box.
 
