@@ -43,7 +43,7 @@ def probe(address: str, seconds: float | None = None) -> None:
         raise HpeError(f"--scheduler {address}: expected tcp://HOST:PORT (or 'local')")
     try:
         conn = socket.create_connection((host, int(port)), timeout=seconds)
-    except socket.timeout:
+    except TimeoutError:
         raise HpeError(f"--scheduler {address}: no connection within {seconds:g} s") from None
     except socket.gaierror as exc:
         raise HpeError(f"--scheduler {address}: cannot resolve host {host!r} ({exc.strerror or exc})") from None
@@ -55,7 +55,7 @@ def probe(address: str, seconds: float | None = None) -> None:
         conn.settimeout(seconds)
         try:
             data = conn.recv(1)
-        except socket.timeout:
+        except TimeoutError:
             raise HpeError(f"--scheduler {address}: accepts connections but sent nothing within {seconds:g} s "
                            "(is it a Dask scheduler?)") from None
         except OSError as exc:

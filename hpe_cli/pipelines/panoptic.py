@@ -24,12 +24,12 @@ from .panoptic_parts import (  # noqa: F401
     _write_part,
     check_done,
     compute,
-    record_temps,
-    unlock_parts,
     make_units,
     parts_dir_for,
+    record_temps,
     run_unit,
     unit_task,
+    unlock_parts,
 )
 from .panoptic_plan import (  # noqa: F401
     CAMERA_PRESETS,
