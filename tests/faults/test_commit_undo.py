@@ -107,3 +107,69 @@ def test_a_read_only_subfolder_fails_halfway(tmp_path):
         assert not temp_files(tmp_path)
     finally:
         os.chmod(tmp_path / "imgs" / "sub", 0o755)
+
+
+def test_a_killed_runs_temps_are_removed_by_the_next_run(tmp_path):
+    """Temps old and unlocked (their run is gone) are removed when a run stages into their folder; a live
+    run's (locked) and young ones stay."""
+    import fcntl
+    import time
+
+    old = time.time() - 2 * tx.SWEEP_AGE
+    dead_file, dead_dir = tmp_path / ".hpe-deadbeef.tmp", tmp_path / ".hpe-0badcafe.tmp"
+    live, young, other = tmp_path / ".hpe-12345678.tmp", tmp_path / ".hpe-87654321.tmp", tmp_path / ".hpe-x.tmp"
+    dead_file.write_bytes(b"partial output")
+    (dead_dir / "sub").mkdir(parents=True)
+    (dead_dir / "sub" / "a.jpg").write_bytes(b"img")
+    for p in (live, young, other):
+        p.write_bytes(b"x")
+    fd = os.open(live, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # a live run holds its temp
+    try:
+        for p in (dead_file, dead_dir, live, other):
+            os.utime(p, (old, old))
+        txn = tx.OutputTransaction()
+        with txn.activate():
+            txn.stage_file(tmp_path / "out.csv").write_text("a\n")
+        names = sorted(os.listdir(tmp_path))
+        assert names == sorted([live.name, young.name, other.name, "out.csv"]), names
+    finally:
+        os.close(fd)
+
+
+def test_kill9_of_a_plain_run_then_another_run_cleans_up(tmp_path):
+    """``hpe convert`` killed with SIGKILL mid-write leaves its temp; the next run in that folder removes it."""
+    import signal as sg
+    import subprocess
+    import sys
+    import time
+
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from .conftest import ROOT
+
+    src = tmp_path / "in.parquet"
+    rng = np.random.default_rng(0)
+    pq.write_table(pa.table({k: rng.uniform(-80, 80, 300_000) for k in ("pitch", "yaw", "roll")}), src)
+    out = tmp_path / "out"
+    out.mkdir()
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "hpe_cli", "convert", str(src), "-o", str(out / "a.csv"),
+                             "--from", "300w_lp", "--to", "6drepnet", "--batch-size", "2000"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    end = time.monotonic() + 60
+    while time.monotonic() < end and proc.poll() is None and not temp_files(out):
+        time.sleep(0.005)
+    proc.send_signal(sg.SIGKILL)
+    proc.wait()
+    left = temp_files(out)
+    assert left, "the run ended before it was killed"
+    old = time.time() - 2 * tx.SWEEP_AGE
+    for p in left:
+        os.utime(p, (old, old))
+    res = subprocess.run([sys.executable, "-m", "hpe_cli", "convert", str(src), "-o", str(out / "b.csv"),
+                          "--from", "300w_lp", "--to", "6drepnet", "-q"], env=env, capture_output=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert sorted(os.listdir(out)) == ["b.csv"]
