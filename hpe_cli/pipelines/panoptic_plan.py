@@ -293,6 +293,7 @@ def _add_skipped(res: dict, skipped: dict, cams: pan.Cameras, sequence: str, eve
     res["frames"] += len(skipped)
     res["unreadable"] += u
     res["skipped_frames"] = len(skipped)
+    res["every"] = int(every)
 
 
 def _image_paths(cams: pan.Cameras, ci, frames):

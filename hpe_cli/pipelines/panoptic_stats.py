@@ -68,6 +68,7 @@ def unit_stats(res: dict, cfg: Config) -> dict:
     return {"frames": res["frames"], "faces": res["faces"], "views": res["views"], "labelled": len(t["frame"]),
             "legacy_considered": res["legacy_considered"], "out_of_range": out_of_range, "gimbal": gimbal,
             "unreadable": res.get("unreadable", 0), "skipped_frames": res.get("skipped_frames", 0),
+            "every": res.get("every", 1),
             "view_reasons": dict(Counter(r for r in res["rejects"]["reason"].tolist())),
             "face_reasons": dict(Counter(r for r in res["face_reasons"].tolist() if r)), "rmse": rm.to_dict()}
 
@@ -83,6 +84,7 @@ class Stats:
         self.view_reasons: Counter = Counter()
         self.face_reasons: Counter = Counter()
         self.rmse = RmseStats()
+        self.every = 1
 
     def add(self, res: dict, cfg: Config) -> None:
         """Add a :func:`process_chunk` result."""
@@ -96,6 +98,7 @@ class Stats:
         self.view_reasons.update(u["view_reasons"])
         self.face_reasons.update(u["face_reasons"])
         self.rmse.merge(RmseStats.from_dict(u["rmse"]))
+        self.every = max(self.every, int(u.get("every", 1)))
 
     def moved(self, reason: str, n: int) -> None:
         """``n`` labelled views were set aside by the writer (``--min-change``)."""
@@ -110,6 +113,7 @@ class Stats:
         self.view_reasons.update(other.view_reasons)
         self.face_reasons.update(other.face_reasons)
         self.rmse.merge(other.rmse)
+        self.every = max(self.every, other.every)
 
     def summary(self, p: Plan | None, cfg: Config, output, rejects_path, n_cameras: int | None = None,
                 title: str | None = None) -> list:
@@ -124,7 +128,7 @@ class Stats:
             head = f"{title or 'total'}: {self.frames} frames"
         unread = f"; {self.unreadable} unreadable (truncated) face files" if self.unreadable else ""
         if self.skipped_frames:
-            unread += f"; {self.skipped_frames} skipped by --every {cfg_every(p)}"
+            unread += f"; {self.skipped_frames} skipped by --every {self.every}"
         lines = [f"{head}{unread}, {self.faces} faces x {n_cameras} cameras = {self.views} views"]
         few = self.face_reasons["too few confident points"]
         broken = self.face_reasons["bad landmarks"]
@@ -149,7 +153,3 @@ class Stats:
                               self.out_of_range, self.gimbal, sysname, "views", "WHENet")
         return lines
 
-
-def cfg_every(p: Plan | None) -> str:
-    """``N`` of ``--every N`` for the summary ("N" over several sequences)."""
-    return str(p.every) if p is not None else "N"
