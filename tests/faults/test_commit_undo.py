@@ -173,3 +173,45 @@ def test_kill9_of_a_plain_run_then_another_run_cleans_up(tmp_path):
                           "--from", "300w_lp", "--to", "6drepnet", "-q"], env=env, capture_output=True, timeout=120)
     assert res.returncode == 0, res.stderr
     assert sorted(os.listdir(out)) == ["b.csv"]
+
+
+def test_a_target_folder_whose_sub_path_is_a_file(tmp_path):
+    """imgs/sub is a file where the staged folder has sub/x.jpg: the files placed before are undone."""
+    (tmp_path / "imgs").mkdir()
+    (tmp_path / "imgs" / "sub").write_bytes(b"a file, not a folder")
+    before = tree(tmp_path)
+    txn = _stage(tmp_path)
+    with pytest.raises(HpeError, match="sub"):
+        txn.commit()
+    assert tree(tmp_path) == before
+    assert not temp_files(tmp_path)
+
+
+@pytest.mark.xfail(reason="augment on this branch moves its images itself (os.replace, no undo); the img branch "
+                          "stages them with io.transaction.staged_dir: remove this mark after the merge",
+                   strict=False)
+def test_augment_out_images_commit_failing_halfway_leaves_nothing(tmp_path):
+    """``hpe augment --out-images`` whose commit fails on a later image (its name is taken by a folder made
+    after the run started) leaves none of the earlier images."""
+    from .conftest import make_images, run
+
+    imgs = tmp_path / "imgs"
+    make_images(imgs, ["a.jpg", "b.jpg", "c.jpg"], size=(80, 60))
+    t = tmp_path / "t.csv"
+    t.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\nb.jpg,4,5,6\nc.jpg,7,8,9\n")
+    out = tmp_path / "ai"
+    real = tx._place
+
+    def place(src, dst, ow, undo, backups):
+        if dst.name == "c.jpg":
+            dst.mkdir()  # another process takes the name meanwhile
+        real(src, dst, ow, undo, backups)
+
+    import unittest.mock
+
+    with unittest.mock.patch.object(tx, "_place", place):
+        res = run("augment", t, "-o", tmp_path / "a.csv", "--image-size", "80", "60", "--hflip", "--images", imgs,
+                  "--out-images", out)
+    assert res.exit_code == 1 and "c.jpg" in res.output, res.output
+    assert sorted(os.listdir(out)) == ["c.jpg"] and (out / "c.jpg").is_dir()  # only the other process's folder
+    assert not (tmp_path / "a.csv").exists() and not temp_files(tmp_path)
