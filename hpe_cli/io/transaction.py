@@ -21,6 +21,17 @@ Rules enforced here, for every command:
 - errors name the user's path and the reason (permission denied, read-only
   file system, disk full, name too long), never a temporary name.
 
+- a commit that fails halfway (a target name taken by a folder meanwhile, a
+  read-only folder, a full disk) undoes the files already placed: new ones are
+  removed, replaced ones restored from hard-link backups;
+- a signal before the commit removes everything staged (exit 128+N); once the
+  run's transaction has committed, a signal no longer undoes anything: the run
+  ends normally and says it is complete (``cli/signals.py``);
+- each staged temp is ``flock``-ed while its run lives, so a later run staging
+  into the same folder removes the temps of runs that were killed (``kill -9``)
+  once they are :data:`~hpe_cli.io.stale_temps.SWEEP_AGE` seconds old
+  (:mod:`hpe_cli.io.stale_temps`).
+
 Without a transaction, each writer commits its own output atomically.
 """
 from __future__ import annotations
