@@ -49,7 +49,10 @@ FORMATS = ("table", "coco", "whenet")
 @click.option("--resume", is_flag=True,
               help="Keep the finished units of an interrupted run with the same inputs and options "
                    "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
-                   "Give it on the first run too: a run without --resume removes its parts when interrupted.")
+                   "Give it on the first run too: a run without --resume removes its parts when interrupted. "
+                   "A changed input is refused, naming the file: calibration files are compared by their "
+                   "contents, face files and hdFace3d.tar by size, modification time and inode. The temp files "
+                   "of the run it resumes (killed by kill -9 or a power cut) are removed.")
 @max_rmse_option("cm", 2, "consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones to 2.8-6.7 cm; "
                              "WHENet used no threshold: inf")
 @click.option("--legacy-whenet", is_flag=True,
@@ -79,8 +82,15 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
     image_height and lm0_x..lm69_y. Every face/camera that gets no label is
     listed by --rejects with its reason (bad landmarks, too few confident
     points, bad fit, behind camera, outside image, box rejected, dropped by
-    legacy rule, not seen by every camera, below --min-change, truncated face
-    file) and counted in the summary, per sequence and in total. --frame crop
+    legacy rule, not seen by every camera, below --min-change, skipped by
+    --every, truncated face file) and counted in the summary, per sequence
+    and in total: labels + rejects = every view of the frames in --frames.
+    The frames --every skips are read (not fitted) to list their views.
+    --strict fails on any reject except those of the sampling rules asked
+    for (--every, --min-change, --all-views).
+    With several sequences, one that cannot be read (its calibration, a
+    face file, no face files) fails the run with an error naming the file;
+    no dataset is written without it. --frame crop
     labels relative to the line of sight and adds ray_angle. --format whenet and coco name the whole frame's
     image: crop it with the box.
 
@@ -120,23 +130,25 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
                          landmarks=not no_landmarks, frame=label_frame, all_views=all_views, min_change=min_change)
         if verbose:
             for plan in plans:
-                echo_summary([f"{plan.sequence}: calibration {plan.calibration} ({len(plan.cameras)} cameras: "
+                echo_summary([(f"{plan.sequence}: calibration {plan.calibration} ({len(plan.cameras)} cameras: "
                               f"{', '.join(plan.cameras.names[:6])}{' ...' if len(plan.cameras) > 6 else ''}); "
                               f"frames: {len(plan.frames)} selected of {plan.available} face files, "
-                              f"{len(plan.chunks)} units"], quiet)
-        bar = progress(total=sum(len(p.frames) for p in plans), desc="relabel-panoptic", quiet=quiet, unit="frames")
+                              f"{len(plan.chunks)} units")], quiet)
+        bar = progress(total=sum(len(p.frames) + sum(map(len, p.skipped)) for p in plans), desc="relabel-panoptic",
+                       quiet=quiet, unit="frames")
         per_seq: list = []
         try:
             stats = job.write_outputs(plans, cfg, output, fmt, rejects, overwrite, workers, bar, scheduler=scheduler,
                                       resume=resume, per_sequence=per_seq, pool=pool)
         finally:
             bar.close()
-    if strict:  # any face/view not labelled fails the run (nothing is committed)
+    if strict:  # any face/view not labelled fails the run (nothing is committed); sampling asked for does not
         from ..io.rejects import rejects_rule
 
-        first = next(iter(stats.face_reasons or stats.view_reasons), None)
-        rejects_rule(sum(stats.view_reasons.values()) + sum(stats.face_reasons.values()), first, has_file=True,
-                     strict=True)
+        faces = {r: n for r, n in stats.face_reasons.items() if r not in job.SAMPLING_REASONS and n}
+        views = {r: n for r, n in stats.view_reasons.items() if r not in job.SAMPLING_REASONS and n}
+        first = next(iter(faces or views), None)
+        rejects_rule(sum(views.values()) + sum(faces.values()), first, has_file=True, strict=True)
     lines = []
     for plan, st in zip(plans, per_seq):
         lines += st.summary(plan, cfg, output, rejects)

@@ -38,6 +38,11 @@ def _handler(signum, frame):
         return
     if _fired:  # cleanup already under way
         return
+    from ..io.transaction import run_committed
+
+    if run_committed():  # the outputs are in place: nothing to undo, the run ends normally
+        _note_complete(signum)
+        return
     _fired = True
     exc = Interrupted(signum)
     from ..io.transaction import in_critical_section, request_stop
@@ -48,6 +53,39 @@ def _handler(signum, frame):
     if in_critical_section(exc):  # raised when the file operation under way is recorded
         return
     raise exc
+
+
+_noted = False
+
+
+def _note_complete(signum, frame=None) -> None:
+    """A signal after the run's outputs were committed: say the run is complete (once) and go on to exit 0."""
+    global _noted
+    if _noted:
+        return
+    _noted = True
+    try:
+        os.write(2, f"hpe: {signal.Signals(signum).name} received after the outputs were committed; "
+                    "the run is complete\n".encode())
+    except OSError:
+        pass
+
+
+def _ignore_at_exit() -> None:
+    for s in SIGNALS:
+        try:
+            signal.signal(s, signal.SIG_IGN)
+        except (OSError, ValueError):
+            pass
+
+
+def _is_program() -> bool:
+    """This process is the ``hpe`` command itself (not a test runner or a library calling the group)."""
+    import sys
+
+    main = sys.modules.get("__main__")
+    spec = getattr(main, "__spec__", None)
+    return getattr(spec, "name", None) == "hpe_cli.__main__" or os.path.basename(sys.argv[0] or "") == "hpe"
 
 
 #: seconds the orderly shutdown may take after a signal before the watchdog ends the process
@@ -124,6 +162,7 @@ def _kill_forked() -> None:
         except (OSError, ValueError):
             pass
     pids -= known
+    pids.discard(_tracker_pid())
     for pid in pids:
         try:
             os.kill(pid, signal.SIGKILL)
@@ -136,6 +175,18 @@ def _kill_forked() -> None:
             pass
 
 
+def _tracker_pid():
+    """multiprocessing's resource tracker: left running (it ends by itself when this process does); killed,
+    it would be started again by the next process a pool spawns while shutting down, printing a ``KeyError``
+    traceback for every semaphore its predecessor knew."""
+    try:
+        from multiprocessing import resource_tracker
+
+        return resource_tracker._resource_tracker._pid
+    except (ImportError, AttributeError):
+        return None
+
+
 @contextmanager
 def handled():
     """Install the handlers for the duration of a run (main thread only; elsewhere a no-op)."""
@@ -143,11 +194,11 @@ def handled():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    from ..io.transaction import request_stop
+    from ..io.transaction import reset_run_state, run_committed
 
     previous = {s: signal.getsignal(s) for s in SIGNALS}
     _owner, _fired = os.getpid(), False
-    request_stop(None)
+    reset_run_state()
     for s in SIGNALS:
         signal.signal(s, _handler)
     import sys
@@ -160,6 +211,14 @@ def handled():
         yield
     finally:
         sys.unraisablehook = unraisable
+        if run_committed() and _is_program():
+            # the run is complete: a signal while the process exits (threads joined, buffers flushed) must
+            # neither kill it with a signal status nor be reported as an interruption
+            # Python resets its handlers to the default action as it finalises: ignore them from then on
+            import atexit
+
+            previous = {s: _note_complete for s in previous}
+            atexit.register(_ignore_at_exit)
         for s, h in previous.items():
             try:
                 signal.signal(s, h if h is not None else signal.SIG_DFL)

@@ -21,6 +21,17 @@ Rules enforced here, for every command:
 - errors name the user's path and the reason (permission denied, read-only
   file system, disk full, name too long), never a temporary name.
 
+- a commit that fails halfway (a target name taken by a folder meanwhile, a
+  read-only folder, a full disk) undoes the files already placed: new ones are
+  removed, replaced ones restored from hard-link backups;
+- a signal before the commit removes everything staged (exit 128+N); once the
+  run's transaction has committed, a signal no longer undoes anything: the run
+  ends normally and says it is complete (``cli/signals.py``);
+- each staged temp is ``flock``-ed while its run lives, so a later run staging
+  into the same folder removes the temps of runs that were killed (``kill -9``)
+  once they are :data:`~hpe_cli.io.stale_temps.SWEEP_AGE` seconds old
+  (:mod:`hpe_cli.io.stale_temps`).
+
 Without a transaction, each writer commits its own output atomically.
 """
 from __future__ import annotations
@@ -28,7 +39,6 @@ from __future__ import annotations
 import contextvars
 import errno
 import os
-import re
 import secrets
 import shutil
 import stat
@@ -36,11 +46,14 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import HpeError
+from . import os_errors
+from .os_errors import os_reason, printable
+from .stale_temps import SWEEP_AGE, _lock, _sweep  # noqa: F401 - SWEEP_AGE for tests
 
 __all__ = ["OutputTransaction", "current", "ensure_transaction", "staged_dir", "note_input", "os_reason",
            "printable", "TEMP_PREFIX"]
 
-TEMP_PREFIX = ".hpe-"
+TEMP_PREFIX = os_errors.TEMP_PREFIX
 _current: contextvars.ContextVar = contextvars.ContextVar("hpe_output_transaction", default=None)
 #: the run's transaction, also visible from worker threads (which do not inherit context variables)
 _run = None
@@ -56,6 +69,22 @@ def request_stop(exc: BaseException | None) -> None:
 
 def stop_requested() -> BaseException | None:
     return _stop
+
+
+#: True once the run's transaction (the one opened by the ``hpe`` group) has committed: from then on the
+#: run's outputs are complete, and a signal no longer undoes anything (cli/signals.py says so instead)
+_run_committed = False
+
+
+def run_committed() -> bool:
+    return _run_committed
+
+
+def reset_run_state() -> None:
+    """At the start of a run: no signal received, nothing committed."""
+    global _stop, _run_committed
+    _stop = None
+    _run_committed = False
 
 
 _critical = 0
@@ -92,52 +121,6 @@ def _section():
         if not _critical and _pending is not None:
             exc, _pending = _pending, None
             raise exc
-
-_REASONS = {
-    errno.EACCES: "permission denied",
-    errno.EPERM: "operation not permitted",
-    errno.EROFS: "read-only file system",
-    errno.ENOSPC: "disk full (no space left on device)",
-    errno.EDQUOT: "disk quota exceeded",
-    errno.EFBIG: "file too large (file size limit reached)",
-    errno.ENAMETOOLONG: "file name too long",
-    errno.EISDIR: "is a folder",
-    errno.ENOTDIR: "a parent of it is not a folder",
-    errno.ENOENT: "no such file or folder",
-    errno.EEXIST: "already exists",
-    errno.EIO: "input/output error",
-    errno.ELOOP: "too many levels of symbolic links",
-    errno.EILSEQ: "file name is not valid in this file system's encoding",
-}
-
-
-def os_reason(exc: BaseException) -> str:
-    """Short reason of an OS error (also pyarrow's, whose message carries ``[errno N]``)."""
-    code = getattr(exc, "errno", None)
-    if not code:
-        m = re.search(r"errno[ =]?(\d+)", str(exc), re.IGNORECASE)
-        code = int(m.group(1)) if m else None
-    if code in _REASONS:
-        return _REASONS[code]
-    if code:
-        return os.strerror(code).lower()
-    if isinstance(exc, UnicodeError):
-        return "file name is not valid UTF-8"
-    text = " ".join(str(exc).split())
-    return re.sub(r"\S*" + re.escape(TEMP_PREFIX) + r"[0-9a-f]{8}\.tmp\S*", "", text)[:200] or type(exc).__name__
-
-
-def printable(text) -> str:
-    """``text`` with undecodable file-name bytes (surrogate escapes) shown as ``\\xNN``."""
-    if isinstance(text, bytes):
-        text = os.fsdecode(text)
-    text = str(text)
-    try:
-        text.encode("utf-8")
-        return text
-    except UnicodeEncodeError:
-        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
-
 
 def _real(path) -> str:
     return os.path.realpath(os.fspath(path))
@@ -178,11 +161,20 @@ class _Item:
 
 
 class _Staged:
-    __slots__ = ("target", "tmp", "overwrite", "is_dir", "item")
+    __slots__ = ("target", "tmp", "overwrite", "is_dir", "item", "lock")
 
-    def __init__(self, target: Path, tmp: Path, overwrite: bool, is_dir: bool):
+    def __init__(self, target: Path, tmp: Path, overwrite: bool, is_dir: bool, lock=None):
         self.target, self.tmp, self.overwrite, self.is_dir = target, tmp, overwrite, is_dir
         self.item = _Item(target)
+        self.lock = lock  # a descriptor holding flock on the temp while this run lives (see _sweep)
+
+    def release(self) -> None:
+        if self.lock is not None:
+            try:
+                os.close(self.lock)
+            except OSError:
+                pass
+            self.lock = None
 
 
 class OutputTransaction:
@@ -201,6 +193,7 @@ class OutputTransaction:
         self._made_dirs: list = []  # folders created for outputs, removed on abort if still empty
         self._after: list = []
         self._on_abort: list = []
+        self._swept: set = set()
         self.state = "open"
 
     # ------------------------------------------------------------- declarations
@@ -265,6 +258,10 @@ class OutputTransaction:
         parent = path.parent
         with _section():
             self._make_parents(path, parent)
+        key = _real(parent)
+        if key not in self._swept:  # a killed run's temps in this folder go now
+            self._swept.add(key)
+            _sweep(parent, {s.tmp for s in self._staged})
         if len(os.fsencode(path.name)) > _name_max(parent):
             raise HpeError(f"{path}: file name too long")
         return path, parent
@@ -302,8 +299,8 @@ class OutputTransaction:
                     continue
                 except OSError as exc:
                     raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
-                os.close(fd)
-                self._staged.append(_Staged(path, tmp, overwrite, False))
+                _lock(fd)
+                self._staged.append(_Staged(path, tmp, overwrite, False, fd))
             return tmp
         raise HpeError(f"{path}: cannot create a temporary file in {parent}")
 
@@ -323,7 +320,12 @@ class OutputTransaction:
                     continue
                 except OSError as exc:
                     raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
-                self._staged.append(_Staged(path, tmp, overwrite, True))
+                try:
+                    fd = os.open(tmp, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+                    _lock(fd)
+                except OSError:
+                    fd = None
+                self._staged.append(_Staged(path, tmp, overwrite, True, fd))
             return tmp
         raise HpeError(f"{path}: cannot create a temporary folder in {parent}")
 
@@ -333,6 +335,11 @@ class OutputTransaction:
             if s.tmp == Path(tmp):
                 self._staged.remove(s)
                 _remove(s.tmp)
+                s.release()
+
+    def staged_temps(self) -> list:
+        """The temporary files and folders staged so far (to be removed by a later run if this one is killed)."""
+        return [s.tmp for s in self._staged]
 
     def target_of(self, tmp) -> Path | None:
         for s in self._staged:
@@ -404,9 +411,13 @@ class OutputTransaction:
         for s in self._staged:
             if s.is_dir:
                 _remove(s.tmp)
+            s.release()
         self._staged.clear()
         self._made_dirs.clear()
         self.state = "committed"
+        if self is _run:
+            global _run_committed
+            _run_committed = True
         for func in self._after:
             func()
 
@@ -422,6 +433,7 @@ class OutputTransaction:
                 pass
         for s in self._staged:
             _remove(s.tmp)
+            s.release()
         self._staged.clear()
         for d in reversed(self._made_dirs):
             try:

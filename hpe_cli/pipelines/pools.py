@@ -71,6 +71,46 @@ def _import_all(names) -> None:
         importlib.import_module(name)
 
 
+def die_with_parent(parent: int) -> None:
+    """Make this worker process end when its parent does, however the parent ends (``kill -9`` included).
+
+    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (the kernel kills the worker when the parent's thread that
+    started it exits); everywhere, also a daemon thread that polls ``os.getppid()`` once a second and ends the
+    process when the parent is gone (re-parented). A parent already gone when this runs ends it at once.
+    """
+    import os
+    import sys
+    import threading
+
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            import signal
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:
+        os._exit(1)
+
+    def watch():
+        import time
+
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="hpe-parent-watch", daemon=True).start()
+
+
+def _worker_init(names, parent: int) -> None:
+    """Initializer of every local worker: die with the parent, then import ``names``."""
+    die_with_parent(parent)
+    _import_all(names)
+
+
 def mp_context():
     """``fork`` where the platform's default allows it (fast start, no re-import), else ``spawn``."""
     import multiprocessing as mp
@@ -111,16 +151,67 @@ def unit_pool(workers: int = 1, scheduler: str | None = None, warm=()):
             finally:
                 pool.cancel()
     elif workers > 1:
+        import os
         from concurrent.futures import ProcessPoolExecutor
 
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp_context(), initializer=_import_all,
-                                 initargs=(tuple(warm),)) as ex:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=mp_context(), initializer=_worker_init,
+                                 initargs=(tuple(warm), os.getpid())) as ex:
             ex.workers = workers
             for _ in range(workers):  # start every worker now (each runs the initializer, then this no-op)
                 ex.submit(_import_all, ())
-            yield ex
+            yield _Local(ex, workers)
     else:
         yield _Inline()
+
+
+class _Local:
+    """A ``ProcessPoolExecutor`` whose futures turn a worker's death into one clear error."""
+
+    def __init__(self, ex, workers: int):
+        self.ex = ex
+        self.workers = workers
+
+    def submit(self, fn, arg):
+        from concurrent.futures.process import BrokenProcessPool
+
+        try:
+            return _Checked(self.ex.submit(fn, arg))
+        except BrokenProcessPool:
+            raise _died() from None
+
+
+class _Checked:
+    """A future whose ``result()`` raises one clear :class:`~hpe_cli.errors.HpeError` instead of
+    ``BrokenProcessPool`` when a worker died."""
+
+    __slots__ = ("fut",)
+
+    def __init__(self, fut):
+        self.fut = fut
+
+    def result(self, timeout=None):
+        from concurrent.futures.process import BrokenProcessPool
+
+        try:
+            return self.fut.result(timeout)
+        except BrokenProcessPool:
+            raise _died() from None
+
+    def done(self):
+        return self.fut.done()
+
+    def cancel(self):
+        return self.fut.cancel()
+
+    def cancelled(self):
+        return self.fut.cancelled()
+
+
+def _died():
+    from ..errors import HpeError
+
+    return HpeError("a worker process died while computing a unit (killed, out of memory or crashed); "
+                    "nothing was written: run again (with --resume to keep the finished units)")
 
 
 class _Borrowed(_Tracking):
