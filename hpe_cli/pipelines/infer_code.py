@@ -25,12 +25,12 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
 
     if not os.environ.get("HPE_DEBUG"):
         warnings.simplefilter("ignore")  # as in the parent: no library warnings with internal paths
-    from ..cli.infer import _load_callable
     from ..rotation import infer as inf
+    from .infer import load_callable
 
     conn.send(("ready",))  # hpe itself is loaded: the time limit starts now
     try:
-        func = _load_callable(spec, kw.pop("import_path", None))
+        func = load_callable(spec, kw.pop("import_path", None))
         returns = kw.pop("returns", "angles")
         if returns != "angles":  # a decoder returning a rotation vector, quaternion, 6-D vector or matrix
             rep = inf.infer_storage_decoder(inf.as_value_decoder(func), n=samples or 256, **kw)
