@@ -2,8 +2,8 @@
 
 The command line (:mod:`hpe_cli.cli.infer`) parses options and calls :func:`run_infer`
 and :func:`finish`; the code search itself runs in a child process
-(:mod:`hpe_cli.pipelines.infer_code`), which loads the user's callable with
-:func:`load_callable`.
+(:mod:`hpe_cli.pipelines.infer_code`, which also loads the user's callable:
+:func:`~hpe_cli.pipelines.infer_code.load_callable`).
 """
 from __future__ import annotations
 
@@ -50,100 +50,6 @@ def stored_to_matrices(kind, values):
     else:
         R[ok] = st.sixd_to_matrix(v)
     return R
-
-
-def module_name_of(path):
-    """``(root, "pkg.sub.mod")`` for a file inside a package, else None.
-
-    Walks up the folders that hold an ``__init__.py``; a folder without one is
-    still taken as a (namespace) package when the file uses relative imports
-    (3DDFA_V2's ``utils/pose.py`` does ``from .functions import ...`` and
-    ``utils/`` has no ``__init__.py``).
-    """
-    import re
-
-    path = path.resolve()
-    parts, folder = [], path.parent
-    while (folder / "__init__.py").is_file() and folder.parent != folder:
-        parts.insert(0, folder.name)
-        folder = folder.parent
-    if not parts:
-        try:
-            text = path.read_text(encoding="utf-8", errors="replace")
-        except OSError:
-            return None
-        if not re.search(r"^\s*from\s+\.", text, re.MULTILINE):
-            return None
-        parts, folder = [path.parent.name], path.parent.parent
-    if not all(p.isidentifier() for p in parts) or not path.stem.isidentifier():
-        return None
-    return folder, ".".join(parts + [path.stem])
-
-
-def load_callable(spec: str, path=None):
-    """``path/to/file.py:func`` or ``package.module:func`` (``func`` may be ``Class.method``).
-
-    A file inside a package is imported as that package's module (so its
-    relative imports work); ``path`` (folders) is put on ``sys.path`` first,
-    for ``package.module:func`` specs that live outside the installed packages.
-    """
-    import importlib
-    import importlib.util
-    import sys
-    from pathlib import Path
-
-    from ..errors import HpeError
-
-    target, sep, attr = spec.rpartition(":")
-    if not sep or not target or not attr:
-        raise HpeError(f"{spec}: expected FILE.py:FUNC or module.path:FUNC")
-    for root in reversed([str(Path(p).resolve()) for p in (path or ())]):
-        if root not in sys.path:
-            sys.path.insert(0, root)
-    file = Path(target)
-    try:
-        if target.endswith(".py") or file.exists():
-            if not file.is_file():
-                raise HpeError(f"{target}: no such file")
-            found = module_name_of(file)
-            top = found[1].split(".")[0] if found else None
-            if found is not None and (top not in sys.modules or
-                                      str(found[0]) in str(getattr(sys.modules[top], "__path__", ""))):
-                root, dotted = found
-                for folder in (str(root), str(file.resolve().parent)):
-                    if folder not in sys.path:
-                        sys.path.insert(0, folder)  # the package root, and the file's siblings
-                module = importlib.import_module(dotted)
-            else:
-                name = f"_hpe_infer_{abs(hash(str(file.resolve())))}"
-                mod_spec = importlib.util.spec_from_file_location(name, file)
-                module = importlib.util.module_from_spec(mod_spec)
-                sys.modules[name] = module  # dataclasses and pickling look their module up here
-                folder = str(file.resolve().parent)
-                sys.path.insert(0, folder)  # let the file import its siblings
-                try:
-                    mod_spec.loader.exec_module(module)
-                finally:
-                    if folder in sys.path:
-                        sys.path.remove(folder)
-        else:
-            module = importlib.import_module(target)
-    except HpeError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - the user's module may raise anything on import
-        hint = ""
-        if "relative import" in str(exc):
-            hint = " (the file is not inside a package: give module:FUNC with --path ROOT)"
-        raise HpeError(f"{target}: import failed: {type(exc).__name__}: "
-                       f"{' '.join(str(exc).split())[:200]}{hint}") from None
-    obj = module
-    for part in attr.split("."):
-        if not hasattr(obj, part):
-            raise HpeError(f"{target}: has no attribute {attr!r}")
-        obj = getattr(obj, part)
-    if not callable(obj):
-        raise HpeError(f"{spec}: expected a callable, got {type(obj).__name__}")
-    return obj
 
 
 def code_file(spec: str):
