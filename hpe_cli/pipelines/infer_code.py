@@ -3,10 +3,15 @@
 The user's module is imported and called in a fresh interpreter
 (``multiprocessing`` with the ``spawn`` start method), so nothing it does can
 end, hang or change ``hpe`` itself: a hang past ``timeout`` seconds, a
-``sys.exit(n)``, an ``os._exit``, a crash (signal) or an exception becomes one
-:class:`~hpe_cli.errors.HpeError` line, and the command exits 1. The child
-sends back the JSON report and, for an exact fit, the matched system as TOML
-(the same objects the in-process search gives).
+``sys.exit(n)``, an ``os._exit``, a crash (signal), closed file descriptors or an
+exception becomes one :class:`~hpe_cli.errors.HpeError` line, and the command
+exits 1. The child sends back the JSON report and, for an exact fit, the matched
+system as TOML (the same objects the in-process search gives).
+
+The child leads its own process group; when the search ends (answer, error or
+timeout) the whole group is killed, so processes the code forked or started
+(``subprocess.Popen(["sleep", "3600"])``) do not outlive ``hpe``. (A process that
+leaves the group on purpose, ``setsid``, is beyond this.)
 """
 from __future__ import annotations
 
@@ -15,6 +20,8 @@ import signal
 from ..errors import HpeError
 
 DEFAULT_TIMEOUT = 60.0
+#: exit status of the child when the code closed the pipe it answers on (its file descriptors)
+_NO_CHANNEL = 86
 
 
 def _child(conn, spec, builder, roles, units, packed, samples, kw):
@@ -25,6 +32,8 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
 
     if not os.environ.get("HPE_DEBUG"):
         warnings.simplefilter("ignore")  # as in the parent: no library warnings with internal paths
+    if hasattr(os, "setpgid"):
+        os.setpgid(0, 0)  # a process group of our own: the parent ends it with everything the code starts
     from ..rotation import infer as inf
 
     conn.send(("ready",))  # hpe itself is loaded: the time limit starts now
@@ -48,13 +57,22 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
         msg = ("error", f"{spec}: the code called sys.exit({exc.code!r})")
     except BaseException as exc:  # noqa: BLE001 - the user's code may raise anything
         msg = ("error", f"{spec}: raised {type(exc).__name__}: {' '.join(str(exc).split())[:200]}")
+    status = 0
     try:
-        conn.send(msg)
-    except Exception as exc:  # noqa: BLE001 - e.g. an unpicklable value in the report
-        conn.send(("error", f"{spec}: cannot return the result ({type(exc).__name__})"))
-    conn.close()
-    sys.stdout.flush()
-    os._exit(0)  # skip the user's atexit handlers and non-daemon threads
+        try:
+            conn.send(msg)
+        except (OSError, EOFError):
+            raise
+        except Exception as exc:  # noqa: BLE001 - e.g. an unpicklable value in the report
+            conn.send(("error", f"{spec}: cannot return the result ({type(exc).__name__})"))
+        conn.close()
+    except BaseException:  # noqa: BLE001 - the code closed or replaced our pipe: no traceback, a status
+        status = _NO_CHANNEL
+    try:
+        sys.stdout.flush()
+    except BaseException:  # noqa: BLE001, S110 - stdout closed by the code
+        pass
+    os._exit(status)  # skip the user's atexit handlers and non-daemon threads
 
 
 def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: bool = False, samples=None,
@@ -80,30 +98,33 @@ def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: b
                        name="hpe-infer-user-code")
     proc.start()
     send.close()
+    ready = False
     try:
         # the child first loads Python, numpy and hpe (not the user's time), then says "ready"
         ready = recv.poll(max(120.0, timeout))
         if ready:
             try:
                 recv.recv()
-            except (EOFError, OSError):
+            except Exception:  # noqa: BLE001 - EOF, a closed pipe or garbage: no answer
                 ready = False
         got = recv.poll(timeout) if ready else True
         msg = None
         if got:
             try:
                 msg = recv.recv()
-            except (EOFError, OSError):
+            except Exception:  # noqa: BLE001 - as above
                 msg = None
+        if not (isinstance(msg, tuple) and msg and msg[0] in ("ok", "error")):
+            msg = None
         if msg is None:
             if proc.is_alive() and not got:
-                proc.terminate()
-                proc.join(2)
-                if proc.is_alive():
-                    proc.kill()
+                _end_group(proc, ready)
                 raise HpeError(f"{spec}: no answer within --timeout {timeout:g} s (the code hangs or is too slow)")
             proc.join(5)
             code = proc.exitcode
+            if code == _NO_CHANNEL:
+                raise HpeError(f"{spec}: the code closed the pipe hpe reads its answer from (it closes file "
+                               "descriptors it did not open), so it returned nothing")
             if code is not None and code < 0:
                 try:
                     name = signal.Signals(-code).name
@@ -116,11 +137,24 @@ def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: b
         return msg[1], msg[2], msg[3]
     finally:
         recv.close()
-        if proc.is_alive():
-            proc.join(2)
-            if proc.is_alive():
-                proc.kill()
-                proc.join(1)
+        _end_group(proc, ready)
+
+
+def _end_group(proc, grouped: bool) -> None:
+    """Kill the child's process group (the child and everything it started), then reap the child.
+
+    ``grouped``: the child said "ready", so it had made its own group (its id is the child's pid).
+    """
+    import os
+
+    if grouped and proc.pid is not None and hasattr(os, "killpg"):
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+    if proc.is_alive():
+        proc.kill()
+    proc.join(2)
 
 
 def module_name_of(path):
