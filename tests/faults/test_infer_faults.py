@@ -126,3 +126,44 @@ def test_timeout_takes_positive_finite_seconds(tmp_path, value):
     res = run("infer", "--callable", f"{tmp_path / 'x.py'}:f", "--timeout", value)
     assert res.exit_code == 2, res.output
     assert "positive finite" in res.output and "Traceback" not in res.output
+
+
+# ------------------------------------------------------------------------------------ hostile system files
+TURNS = "".join(f'[[turns]]\nangle = "{a}"\naxis = "{x}"\n' for a, x in (("pitch", "x"), ("yaw", "y"), ("roll", "z")))
+HOSTILE = {
+    "int_5000_digits": ('name = "x"\nframe = [[1' + "0" * 5000 + ", 0, 0], [0, 1, 0], [0, 0, 1]]\n" + TURNS,
+                        "frame: expected a 64-bit integer (TOML), got a 5001-digit number"),
+    "int_400_digits": ('name = "x"\n' + TURNS + "[ranges]\npitch = [-1, 1" + "0" * 400 + "]\n",
+                       "ranges.pitch.1: expected a 64-bit integer (TOML), got a 401-digit number"),
+    "int_past_64_bits": ('name = "x"\ngimbal_tol = 99999999999999999999999\n' + TURNS,
+                         "gimbal_tol: expected a 64-bit integer (TOML), got a 23-digit number"),
+    "float_overflow": ('name = "x"\n' + TURNS + "[ranges]\npitch = [-1e400, 1e400]\n",
+                       "ranges.pitch: expected finite numbers, got [-Infinity, Infinity]"),
+    "huge_array": ('name = "x"\norder = [' + ",".join(['"pitch"'] * 100_000) + "]\n" + TURNS,
+                   "order: expected at most 256 items, got 100000"),
+    "huge_file": ('name = "' + "x" * 2_000_000 + '"\n' + TURNS, "file: expected a system file of at most"),
+    "deep_array": ('name = "x"\nframe = ' + "[" * 50_000 + "]" * 50_000 + "\n" + TURNS,
+                   "frame: expected at most 6 levels of nesting"),
+    "deep_table": ('name = "x"\n' + TURNS + "[columns]\na = " + "{b = " * 3000 + "1" + "}" * 3000 + "\n",
+                   "columns.a: expected at most 6 levels of nesting"),
+    "nested_in_limits": ('name = "x"\n' + TURNS + "[columns]\na = [[[[[[[1]]]]]]]\n",
+                         "columns.a.0.0.0.0.0: expected at most 6 levels of nesting, got more"),
+}
+
+
+@pytest.mark.parametrize("kind", list(HOSTILE))
+def test_hostile_system_toml_is_one_line_quickly(tmp_path, kind):
+    from hpe_cli.rotation.systems import SystemError_, load_system
+
+    text, expected = HOSTILE[kind]
+    path = tmp_path / f"{kind}.toml"
+    path.write_text(text)
+    t0 = time.monotonic()
+    with pytest.raises(SystemError_) as info:
+        load_system(path)
+    assert time.monotonic() - t0 < 5
+    msg = str(info.value)
+    assert msg.startswith(f"{path}: ") and expected in msg and "\n" not in msg and len(msg) < 300, msg
+    res = run("systems", path)  # the command line: one line, no traceback
+    assert res.exit_code in (1, 2) and expected in res.output and "Traceback" not in res.output, res.output
+    assert len([ln for ln in res.output.splitlines() if ln.strip()]) <= 3, res.output
