@@ -538,7 +538,7 @@ class RotationSystem:
         for key in ("source", "verified"):
             if getattr(self, key):
                 lines.append(f'{key} = "{_esc(getattr(self, key))}"')
-        mat = lambda F: "[" + ", ".join("[" + ", ".join(_num(v) for v in r) + "]" for r in F) + "]"  # noqa: E731
+        mat = lambda F: "[" + ", ".join("[" + ", ".join(_num(v) for v in r) + "]" for r in F) + "]"
         lines += ["frame = " + mat(self.frame)]
         if self.model_frame is not None:
             lines += ["model_frame = " + mat(self.model_frame)]

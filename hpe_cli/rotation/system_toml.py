@@ -188,7 +188,7 @@ def system_from_dict(d: dict, source: str = "<dict>") -> RotationSystem:
     except SystemError_ as exc:
         msg = str(exc)
         prefix = f"system {d['name']!r}: "
-        raise SystemError_(f"{source}: {msg[len(prefix):] if msg.startswith(prefix) else msg}") from None
+        raise SystemError_(f"{source}: {msg.removeprefix(prefix)}") from None
     for n, e in enumerate(system.examples):
         check_example(system, e, f"{source}: examples[{n}]")
     return system
