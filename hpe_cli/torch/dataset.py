@@ -11,6 +11,8 @@ from torchvision import tv_tensors
 from ..errors import HpeError
 from ..rotation.systems import get_system
 from .samples import (
+    _FALSE,
+    _TRUE,
     INTERPOLATIONS,
     PoseOutputs,
     crop_rects,
@@ -314,7 +316,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         """``(partial output, i, A after the transform (None: the table's), undefined flag, flipped)``."""
         flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
         pix, origin, scale, note = self._pixels(i, flip)
-        image = to_tensor(pix).as_subclass(tv_tensors.Image)
+        image = to_tensor(pix)
         canvas = tuple(pix.shape[:2])
         box, lm = self._geometry(i, origin, scale, canvas[1], flip)
         pose = None
@@ -332,7 +334,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             if pose is None:
                 return out, i, None, False, flip
             return out, i, pose.as_subclass(torch.Tensor)[0], pose.undefined, flip
-        sample = {"image": image, "pose": pose}
+        sample = {"image": image.as_subclass(tv_tensors.Image), "pose": pose}
         if box is not None:
             sample["box"] = tv_tensors.BoundingBoxes(torch.from_numpy(box[None]), format="XYWH", canvas_size=canvas)
         if lm is not None:
@@ -351,7 +353,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         result = []
         for (out, i, _, undefined, _), pose in zip(prepared, poses):
             out.update(pose)
-            out["pose_undefined"] = torch.from_numpy(np.array(undefined))
+            out["pose_undefined"] = (_TRUE if undefined else _FALSE).clone()
             out["index"] = i
             result.append(out)
         return result

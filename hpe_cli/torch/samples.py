@@ -163,6 +163,9 @@ def to_tensor(pix) -> torch.Tensor:
     return torch.from_numpy(np.asarray(pix)).permute(2, 0, 1)
 
 
+_TRUE, _FALSE = torch.tensor(True), torch.tensor(False)
+
+
 class PoseOutputs:
     """The pose outputs of every row in ``system``, computed once (vectorised) and looked up per sample.
 
@@ -186,7 +189,7 @@ class PoseOutputs:
         return state
 
     def _convert(self, A: np.ndarray) -> dict:
-        """Stored matrix, primary angles, gimbal-lock flag of canonical matrices (N, 3, 3), as tensors."""
+        """``(packed, locked)``: matrix, primary angles, canonical (N, 21) in the output dtype; gimbal-lock flags."""
         A = np.asarray(A, dtype=np.float64)
         out = {"matrix": np.full(A.shape, np.nan), "angles": np.full(A.shape[:-1], np.nan),
                "gimbal_lock": np.zeros(len(A), bool)}
@@ -195,8 +198,16 @@ class PoseOutputs:
             R = self.system.from_canonical(A[good])
             p1, _, locked, _ = self.system.to_angles(R)
             out["matrix"][good], out["angles"][good], out["gimbal_lock"][good] = R, p1, locked
-        return {"matrix": out["matrix"].astype(self.np_dtype), "angles": out["angles"].astype(self.np_dtype),
-                "canonical": A.astype(self.np_dtype), "gimbal_lock": out["gimbal_lock"]}
+        packed = np.concatenate([out["matrix"].reshape(-1, 9), out["angles"], A.reshape(-1, 9)], axis=1)
+        return packed.astype(self.np_dtype), out["gimbal_lock"]
+
+    @staticmethod
+    def _row(table, i: int) -> dict:
+        """One row of a packed table ``(N, 21)`` (matrix, angles, canonical) as tensors of its own memory."""
+        packed, locked = table
+        row = torch.from_numpy(packed[i].copy())
+        return {"matrix": row[:9].view(3, 3), "angles": row[9:12], "canonical": row[12:].view(3, 3),
+                "gimbal_lock": (_TRUE if locked[i] else _FALSE).clone()}
 
     def mirrored(self, i: int) -> torch.Tensor:
         """Canonical matrix (1, 3, 3) of row ``i`` after a horizontal flip (from a table built on first use)."""
@@ -221,7 +232,7 @@ class PoseOutputs:
             table = self._mirror_table()
         else:
             return None
-        return {k: torch.from_numpy(np.array(v[i])) for k, v in table.items()}
+        return self._row(table, i)
 
     def outputs(self, rows) -> list:
         """Pose outputs of ``rows``: ``(i, A, flipped)``, ``A`` the (3, 3) canonical matrix after the transform.
@@ -234,5 +245,5 @@ class PoseOutputs:
             A = torch.stack([rows[k][1].detach().to("cpu", torch.float64) for k in miss]).numpy()
             conv = self._convert(A)
             for n, k in enumerate(miss):
-                found[k] = {key: torch.from_numpy(np.array(v[n])) for key, v in conv.items()}
+                found[k] = self._row(conv, n)
         return found
