@@ -3,9 +3,8 @@ from __future__ import annotations
 
 import click
 
-from .table_options import column_options
-
 from .options import SYSTEM, deprecated_spellings, overwrite_option, verbosity_options
+from .table_options import column_options
 
 ROLE_NAMES = ("pitch", "yaw", "roll")
 
@@ -31,38 +30,27 @@ def _angle_columns(value: str):
     return roles, cols
 
 
-def _matrix_columns(value: str | None, columns) -> list | None:
-    from ..io import MATRIX_COLS
-
-    ij = [f"{i}{j}" for i in range(3) for j in range(3)]
+def _matrix_columns(value: str | None) -> list | None:
+    """``--matrix``: 9 comma-separated names or a prefix (``r00..r22``); None: the table's ``r00..r22``."""
     if value is None:
-        return MATRIX_COLS if set(MATRIX_COLS) <= set(columns) else None
+        return None
     if "," in value:
         cols = [c.strip() for c in value.split(",")]
         if len(cols) != 9:
             raise click.BadParameter(f"expected 9 comma-separated columns, got {len(cols)}", param_hint="--matrix")
         return cols
     prefix = value.split("..")[0]
-    prefix = prefix[:-2] if prefix.endswith("00") else prefix
-    return [prefix + s for s in ij]
+    prefix = prefix.removesuffix("00")
+    return [prefix + f"{i}{j}" for i in range(3) for j in range(3)]
 
 
-#: stored rotation columns infer reads from a data table when it has no r00..r22 (see --rotations)
-STORED_DEFAULTS = (("rotvec", ("rx", "ry", "rz")), ("quaternion-wxyz", ("qw", "qx", "qy", "qz")))
+def _stored_rotations(value: str | None):
+    """``--rotations KIND:COL,COL,...`` -> ``(kind, columns)``; None: the table's defaults (see the pipeline).
 
-
-def _stored_rotations(value: str | None, columns):
-    """``(kind, columns)`` of stored rotation values in a data table, or None.
-
-    ``value`` is ``KIND:COL,COL,...`` with KIND one of rotvec (radians),
-    quaternion-wxyz, quaternion-xyzw or 6d (matrix columns 0 and 1); without
-    it, ``rx,ry,rz`` or ``qw,qx,qy,qz`` are used when present.
+    KIND is one of rotvec (radians), quaternion-wxyz, quaternion-xyzw or 6d (matrix columns 0 and 1).
     """
     kinds = {"rotvec": 3, "quaternion-wxyz": 4, "quaternion-xyzw": 4, "6d": 6}
     if value is None:
-        for kind, cols in STORED_DEFAULTS:
-            if set(cols) <= set(columns):
-                return kind, list(cols)
         return None
     kind, sep, cols = value.partition(":")
     if kind not in kinds or not sep:
@@ -75,236 +63,15 @@ def _stored_rotations(value: str | None, columns):
     return kind, names
 
 
-def _stored_to_matrices(kind, values):
-    """Matrices from stored values (rows that are not finite stay NaN, and are skipped by the search)."""
-    import numpy as np
+def _positive_seconds(ctx, param, value):
+    """``--timeout``: a positive finite number of seconds (nan, inf, 0 and negatives are usage errors)."""
+    import math
 
-    from ..rotation import storage as st
-
-    R = np.full((len(values), 3, 3), np.nan)
-    ok = np.isfinite(values).all(axis=1)
-    v = values[ok]
-    if kind == "rotvec":
-        R[ok] = st.rotvec_to_matrix(v)
-    elif kind.startswith("quaternion"):
-        R[ok] = st.quaternion_to_matrix(v, order=kind.split("-")[1])
-    else:
-        R[ok] = st.sixd_to_matrix(v)
-    return R
-
-
-def _module_name_of(path):
-    """``(root, "pkg.sub.mod")`` for a file inside a package, else None.
-
-    Walks up the folders that hold an ``__init__.py``; a folder without one is
-    still taken as a (namespace) package when the file uses relative imports
-    (3DDFA_V2's ``utils/pose.py`` does ``from .functions import ...`` and
-    ``utils/`` has no ``__init__.py``).
-    """
-    import re
-
-    path = path.resolve()
-    parts, folder = [], path.parent
-    while (folder / "__init__.py").is_file() and folder.parent != folder:
-        parts.insert(0, folder.name)
-        folder = folder.parent
-    if not parts:
-        try:
-            text = path.read_text(encoding="utf-8", errors="replace")
-        except OSError:
-            return None
-        if not re.search(r"^\s*from\s+\.", text, re.M):
-            return None
-        parts, folder = [path.parent.name], path.parent.parent
-    if not all(p.isidentifier() for p in parts) or not path.stem.isidentifier():
-        return None
-    return folder, ".".join(parts + [path.stem])
-
-
-def _load_callable(spec: str, path=None):
-    """``path/to/file.py:func`` or ``package.module:func`` (``func`` may be ``Class.method``).
-
-    A file inside a package is imported as that package's module (so its
-    relative imports work); ``path`` (folders) is put on ``sys.path`` first,
-    for ``package.module:func`` specs that live outside the installed packages.
-    """
-    import importlib
-    import importlib.util
-    import sys
-    from pathlib import Path
-
-    from ..errors import HpeError
-
-    target, sep, attr = spec.rpartition(":")
-    if not sep or not target or not attr:
-        raise HpeError(f"{spec}: expected FILE.py:FUNC or module.path:FUNC")
-    for root in reversed([str(Path(p).resolve()) for p in (path or ())]):
-        if root not in sys.path:
-            sys.path.insert(0, root)
-    file = Path(target)
-    try:
-        if target.endswith(".py") or file.exists():
-            if not file.is_file():
-                raise HpeError(f"{target}: no such file")
-            found = _module_name_of(file)
-            top = found[1].split(".")[0] if found else None
-            if found is not None and (top not in sys.modules or
-                                      str(found[0]) in str(getattr(sys.modules[top], "__path__", ""))):
-                root, dotted = found
-                for folder in (str(root), str(file.resolve().parent)):
-                    if folder not in sys.path:
-                        sys.path.insert(0, folder)  # the package root, and the file's siblings
-                module = importlib.import_module(dotted)
-            else:
-                name = f"_hpe_infer_{abs(hash(str(file.resolve())))}"
-                mod_spec = importlib.util.spec_from_file_location(name, file)
-                module = importlib.util.module_from_spec(mod_spec)
-                sys.modules[name] = module  # dataclasses and pickling look their module up here
-                folder = str(file.resolve().parent)
-                sys.path.insert(0, folder)  # let the file import its siblings
-                try:
-                    mod_spec.loader.exec_module(module)
-                finally:
-                    if folder in sys.path:
-                        sys.path.remove(folder)
-        else:
-            module = importlib.import_module(target)
-    except HpeError:
-        raise
-    except Exception as exc:
-        hint = ""
-        if "relative import" in str(exc):
-            hint = " (the file is not inside a package: give module:FUNC with --path ROOT)"
-        raise HpeError(f"{target}: import failed: {type(exc).__name__}: "
-                       f"{' '.join(str(exc).split())[:200]}{hint}") from None
-    obj = module
-    for part in attr.split("."):
-        if not hasattr(obj, part):
-            raise HpeError(f"{target}: has no attribute {attr!r}")
-        obj = getattr(obj, part)
-    if not callable(obj):
-        raise HpeError(f"{spec}: expected a callable, got {type(obj).__name__}")
-    return obj
-
-
-def _code_file(spec: str):
-    """The ``.py`` file of ``FILE.py:FUNC``, or None for ``module.path:FUNC``."""
-    from pathlib import Path
-
-    target = spec.rpartition(":")[0]
-    if target and (target.endswith(".py") or Path(target).is_file()):
-        return Path(target)
-    return None
-
-
-def _read_data(path, units):
-    from pathlib import Path
-
-    from ..errors import HpeError
-
-    p = Path(path)
-    if p.is_dir() or p.suffix.lower() == ".mat":
-        if units == "rad":
-            raise HpeError(f"{path}: --radians does not apply to .mat files (Pose_Para is read in degrees)")
-        from ..datasets.mat import read_mat_dir
-
-        return read_mat_dir(p, landmarks=True), "deg"
-    from ..io import read_table
-
-    return read_table(p), units or "deg"
-
-
-def _numeric(frame, cols, path):
-    import numpy as np
-
-    from ..errors import HpeError
-
-    missing = [c for c in cols if c not in frame.columns]
-    if missing:
-        raise HpeError(f"{path}: missing column(s) {', '.join(missing[:6])}{' ...' if len(missing) > 6 else ''}; "
-                       f"expected {', '.join(cols[:3])}{' ...' if len(cols) > 3 else ''}")
-    try:
-        return frame[cols].to_numpy(dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise HpeError(f"{path}: columns {', '.join(cols[:3])}...: expected numbers ({exc})") from None
-
-
-def _print_report(rep: dict, quiet: bool) -> None:
-    if quiet:
-        return
-    echo = click.echo
-    if rep["mode"] == "landmarks":
-        m = rep["matched"]
-        echo(f"best: {rep['best']} ({rep['fit']}; RMS residual {rep['rms_residual_deg']:.2f} deg, median "
-             f"{rep['median_residual_deg']:.2f} deg over {rep['samples']} faces; next candidate "
-             f"{rep['separation']:.1f}x worse)")
-        echo(f"  {m['formula']}")
-        echo("  built-in readings of the labels (RMS / max residual, deg):")
-        for h in rep["hypotheses"]:
-            echo(f"    {h['rms_residual_deg']:7.2f} {h['max_residual_deg']:7.2f}  {', '.join(h['readings'])}")
-        if rep.get("warning"):
-            echo(f"  warning: {rep['warning']}")
-        worst = sorted(rep["per_face"], key=lambda f: -f["residual_deg"])[:3]
-        echo("  largest per-face residuals: " + ", ".join(f"{f['id']} {f['residual_deg']:.2f} deg" for f in worst))
-        return
-    if rep["fit"] == "exact":
-        m = rep["matched"]
-        echo(f"best: {rep['best']} (exact; max Frobenius error {rep['max_error']:.2g} over {rep['samples']} samples)")
-        echo(f"  {m['formula']}")
-        echo(f"  {m['turns']}")
-        if m["transpose_of"]:
-            echo(f"  (the transpose of the matrix of {', '.join(m['transpose_of'])})")
-        if rep.get("also_matches"):
-            echo(f"  also reproduced by built-in: {', '.join(rep['also_matches']['names'])} "
-                 "(same matrix from the same angles)")
-        if rep.get("selection"):
-            echo(f"  solution kept by the decoder: {rep['selection']['rule']}")
-        if rep.get("near_lock"):
-            echo(f"  {rep['near_lock']['count']} samples near gimbal lock handled differently "
-                 f"(max error {rep['near_lock']['max_error']:.2g})")
-        if rep.get("ambiguous"):
-            echo(f"  warning: {rep['ambiguous']}")
-    else:
-        m = rep["best_partial"]
-        names = f" ({', '.join(m['builtins'])})" if m["builtins"] else ""
-        echo(f"no exact fit. best partial fit: {m['formula']}{names}: {m['explained']} of {rep['samples']} "
-             f"samples explained, median error {m['median_error']:.3g}")
-        if "breaks" in m:
-            echo(f"  {m['breaks']['summary']}")
-    for e in rep.get("runners_up", [])[:3]:
-        echo(f"  runner-up: {e['formula']}  max error {e['max_error']:.3g}")
-
-
-def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_frame, tol, seed, name, frame,
-                storage, stored=None) -> dict:
-    """The table search (matrix or stored rotation columns) or the landmark ranking (3-D landmark columns)."""
-    import numpy as np
-
-    from ..rotation import infer as inf
-
-    if landmarks3d is None:
-        if stored is not None:
-            R = _stored_to_matrices(stored[0], _numeric(frame_df, stored[1], data))
-        else:
-            R = _numeric(frame_df, mcols, data).reshape(-1, 3, 3)
-        rep = inf.infer_table(pyr, R, roles=roles, units="degrees" if units == "deg" else "radians",
-                               tol=tol or inf.DATA_TOL, source=str(data), name=name, frame=frame, storage=storage,
-                               seed=seed)
-        if stored is not None:
-            rep["rotation_columns"] = {"kind": stored[0], "columns": list(stored[1])}
-        return rep
-    from ..geometry.template import POOR_FIT_RMSE, fit_template, to_canonical_points
-
-    lcols = [f"{landmarks3d}{i}_{a}" for i in range(68) for a in "xyz"]
-    P = _numeric(frame_df, lcols, data).reshape(-1, 68, 3)
-    fit = fit_template(to_canonical_points(P, landmark_frame))
-    ids = frame_df["file"].astype(str).tolist() if "file" in frame_df.columns else None
-    rep = inf.infer_landmarks(pyr, fit["R"], roles=roles, source=str(data), row_ids=ids, fit_rmse=fit["rmse_rel"],
-                              fit_rmse_limit=POOR_FIT_RMSE, seed=seed, name=name)
-    rep["template"] = {"source": "hpe_cli/data/reference_3d_68_points_trans.npy (DirectMHP mean iBUG-68), "
-                                 "frame x right, y down, z into the head", "landmark_frame": landmark_frame,
-                       "median_fit_rmse_template_units": float(np.nanmedian(fit["rmse_rel"]))}
-    return rep
+    if value is None:
+        return value
+    if not (math.isfinite(value) and value > 0):
+        raise click.BadParameter(f"expected a positive finite number of seconds, got {value!r}")
+    return value
 
 
 @deprecated_spellings("units")
@@ -350,7 +117,7 @@ def _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_
               help="Write the matched system as a .toml file (for `hpe convert --from`).")
 @click.option("--path", "import_path", multiple=True, type=click.Path(exists=True, file_okay=False),
               help="Folder to import module:FUNC from (a repository root); repeatable.")
-@click.option("--timeout", type=click.FloatRange(min=0, min_open=True), default=60.0, show_default=True,
+@click.option("--timeout", type=float, callback=_positive_seconds, default=60.0, show_default=True,
               help="Seconds the code of --callable/--decoder may run (it runs in a separate process).")
 @overwrite_option
 @verbosity_options
@@ -392,12 +159,10 @@ def infer(data, builder, decoder, returns, args_, packed, radians, angles, matri
       hpe infer preds.csv --angles pitch,yaw,roll --rotations rotvec:rx,ry,rz
       hpe infer AFLW2000/ --landmarks3d lm3d --json aflw_system.json
     """
-    units = None if radians is None else ("rad" if radians else "deg")
-    import numpy as np
+    from ..io import check_output
+    from ..pipelines.infer import finish, run_infer
 
-    from ..errors import HpeError
-    from ..io import AtomicFile, check_output, write_json
-    from ..rotation import infer as inf
+    units = None if radians is None else ("rad" if radians else "deg")
 
     modes = sum(x is not None for x in (data, builder, decoder))
     if modes != 1:
@@ -412,75 +177,17 @@ def infer(data, builder, decoder, returns, args_, packed, radians, angles, matri
         check_output(output, overwrite)
     if json_path is not None:
         check_output(json_path, overwrite)
-    frame = frame_of.frame if frame_of is not None else None
+    spec = builder or decoder
+    rep = run_infer(data=data, spec=spec, builder=bool(builder), returns=returns,
+                    roles=_roles(args_, "--args") if spec else None, packed=packed, units=units,
+                    angle_columns=None if spec else _angle_columns(angles),
+                    matrix=_matrix_columns(matrix_cols), rotations=_stored_rotations(rotation_cols),
+                    landmarks3d=landmarks3d, landmark_frame=landmark_frame, tol=tol, samples=samples, seed=seed,
+                    name=name, frame=frame_of.frame if frame_of is not None else None, storage=storage,
+                    timeout=timeout, import_path=import_path)
+    _, written = finish(rep, spec or str(data), json_path=json_path, output=output, overwrite=overwrite,
+                        echo=None if quiet else click.echo)
+    if written and not quiet:
+        from .options import echo_summary
 
-    system_toml = system_name = None
-    if builder or decoder:
-        from ..io.transaction import note_input
-        from ..pipelines.infer_code import run_code_inference
-
-        spec = builder or decoder
-        roles = _roles(args_, "--args")
-        code_file = _code_file(spec)
-        if code_file is not None:
-            note_input(code_file)  # -o/--json may never be the user's own code
-        u = "degrees" if units == "deg" else "radians"
-        rep, system_toml, system_name = run_code_inference(
-            spec, builder=bool(builder), roles=roles, units=u, packed=packed, samples=samples, timeout=timeout,
-            tol=tol or inf.CODE_TOL, seed=seed, source=spec, name=name, frame=frame, storage=storage,
-            import_path=list(import_path), returns=returns)
-        if rep["fit"] != "exact" and units is None and returns == "angles":
-            rep["hint"] = "no fit with the default --radians; try --degrees"
-    else:
-        frame_df, units = _read_data(data, units)
-        roles, cols = _angle_columns(angles)
-        vals = _numeric(frame_df, cols, data)
-        if units == "rad":
-            vals = np.rad2deg(vals)
-        pyr = np.empty_like(vals)
-        pyr[:, [ROLE_NAMES.index(r) for r in roles]] = vals
-        mcols = _matrix_columns(matrix_cols, frame_df.columns) if landmarks3d is None else None
-        stored = None
-        if landmarks3d is None and (rotation_cols is not None or mcols is None):
-            stored = _stored_rotations(rotation_cols, frame_df.columns)
-        if landmarks3d is None and mcols is None and stored is None:
-            if "lm3d0_x" in frame_df.columns:
-                landmarks3d = "lm3d"
-            else:
-                raise HpeError(f"{data}: found neither matrix columns r00..r22, stored rotations (rx,ry,rz or "
-                               "qw,qx,qy,qz) nor 3-D landmarks lm3d0_x..; use --matrix, --rotations or --landmarks3d")
-        try:
-            rep = _infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_frame, tol, seed,
-                              name, frame, storage, stored)
-        except ValueError as exc:
-            raise HpeError(f"{data}: {exc}") from None
-
-    if "_system" in rep:
-        system = rep["_system"]
-        system_toml, system_name = system.to_toml(), system.name
-    report = inf.report_json(rep)
-    if json_path is not None:
-        write_json(report, json_path, overwrite)
-    _print_report(report, quiet)
-    ok = rep["fit"] in ("exact", "clear")
-    if not ok:
-        from ..io.transaction import current
-
-        txn = current()
-        if txn is not None:  # the report explains the failure: keep it (nothing is written with -o)
-            txn.commit()
-        what = f"{spec}" if (builder or decoder) else str(data)
-        if rep["mode"] == "landmarks":
-            raise HpeError(f"{what}: no system explains the landmarks clearly ({rep['fit']}: best {rep['best']}, "
-                           f"RMS residual {rep['rms_residual_deg']:.2f} deg)"
-                           + ("; nothing written to " + output if output else ""))
-        raise HpeError(f"{what}: no rotation system reproduces it exactly (best partial fit "
-                       f"{rep['best_partial']['formula']}, max error {rep['max_error']:.3g})"
-                       + ("; nothing written to " + output if output else ""))
-    if output is not None:
-        with AtomicFile(output, overwrite) as tmp:
-            tmp.write_text(system_toml, encoding="utf-8")
-        if not quiet:
-            from .options import echo_summary
-
-            echo_summary([f"wrote {output} (system {system_name})"])
+        echo_summary([written])

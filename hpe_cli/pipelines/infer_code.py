@@ -3,10 +3,15 @@
 The user's module is imported and called in a fresh interpreter
 (``multiprocessing`` with the ``spawn`` start method), so nothing it does can
 end, hang or change ``hpe`` itself: a hang past ``timeout`` seconds, a
-``sys.exit(n)``, an ``os._exit``, a crash (signal) or an exception becomes one
-:class:`~hpe_cli.errors.HpeError` line, and the command exits 1. The child
-sends back the JSON report and, for an exact fit, the matched system as TOML
-(the same objects the in-process search gives).
+``sys.exit(n)``, an ``os._exit``, a crash (signal), closed file descriptors or an
+exception becomes one :class:`~hpe_cli.errors.HpeError` line, and the command
+exits 1. The child sends back the JSON report and, for an exact fit, the matched
+system as TOML (the same objects the in-process search gives).
+
+The child leads its own process group; when the search ends (answer, error or
+timeout) the whole group is killed, so processes the code forked or started
+(``subprocess.Popen(["sleep", "3600"])``) do not outlive ``hpe``. (A process that
+leaves the group on purpose, ``setsid``, is beyond this.)
 """
 from __future__ import annotations
 
@@ -15,6 +20,8 @@ import signal
 from ..errors import HpeError
 
 DEFAULT_TIMEOUT = 60.0
+#: exit status of the child when the code closed the pipe it answers on (its file descriptors)
+_NO_CHANNEL = 86
 
 
 def _child(conn, spec, builder, roles, units, packed, samples, kw):
@@ -25,12 +32,13 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
 
     if not os.environ.get("HPE_DEBUG"):
         warnings.simplefilter("ignore")  # as in the parent: no library warnings with internal paths
-    from ..cli.infer import _load_callable
+    if hasattr(os, "setpgid"):
+        os.setpgid(0, 0)  # a process group of our own: the parent ends it with everything the code starts
     from ..rotation import infer as inf
 
     conn.send(("ready",))  # hpe itself is loaded: the time limit starts now
     try:
-        func = _load_callable(spec, kw.pop("import_path", None))
+        func = load_callable(spec, kw.pop("import_path", None))
         returns = kw.pop("returns", "angles")
         if returns != "angles":  # a decoder returning a rotation vector, quaternion, 6-D vector or matrix
             rep = inf.infer_storage_decoder(inf.as_value_decoder(func), n=samples or 256, **kw)
@@ -49,13 +57,22 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
         msg = ("error", f"{spec}: the code called sys.exit({exc.code!r})")
     except BaseException as exc:  # noqa: BLE001 - the user's code may raise anything
         msg = ("error", f"{spec}: raised {type(exc).__name__}: {' '.join(str(exc).split())[:200]}")
+    status = 0
     try:
-        conn.send(msg)
-    except Exception as exc:  # noqa: BLE001 - e.g. an unpicklable value in the report
-        conn.send(("error", f"{spec}: cannot return the result ({type(exc).__name__})"))
-    conn.close()
-    sys.stdout.flush()
-    os._exit(0)  # skip the user's atexit handlers and non-daemon threads
+        try:
+            conn.send(msg)
+        except (OSError, EOFError):
+            raise
+        except Exception as exc:  # noqa: BLE001 - e.g. an unpicklable value in the report
+            conn.send(("error", f"{spec}: cannot return the result ({type(exc).__name__})"))
+        conn.close()
+    except BaseException:  # noqa: BLE001 - the code closed or replaced our pipe: no traceback, a status
+        status = _NO_CHANNEL
+    try:
+        sys.stdout.flush()
+    except BaseException:  # noqa: BLE001, S110 - stdout closed by the code
+        pass
+    os._exit(status)  # skip the user's atexit handlers and non-daemon threads
 
 
 def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: bool = False, samples=None,
@@ -81,30 +98,33 @@ def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: b
                        name="hpe-infer-user-code")
     proc.start()
     send.close()
+    ready = False
     try:
         # the child first loads Python, numpy and hpe (not the user's time), then says "ready"
         ready = recv.poll(max(120.0, timeout))
         if ready:
             try:
                 recv.recv()
-            except (EOFError, OSError):
+            except Exception:  # noqa: BLE001 - EOF, a closed pipe or garbage: no answer
                 ready = False
         got = recv.poll(timeout) if ready else True
         msg = None
         if got:
             try:
                 msg = recv.recv()
-            except (EOFError, OSError):
+            except Exception:  # noqa: BLE001 - as above
                 msg = None
+        if not (isinstance(msg, tuple) and msg and msg[0] in ("ok", "error")):
+            msg = None
         if msg is None:
             if proc.is_alive() and not got:
-                proc.terminate()
-                proc.join(2)
-                if proc.is_alive():
-                    proc.kill()
+                _end_group(proc, ready)
                 raise HpeError(f"{spec}: no answer within --timeout {timeout:g} s (the code hangs or is too slow)")
             proc.join(5)
             code = proc.exitcode
+            if code == _NO_CHANNEL:
+                raise HpeError(f"{spec}: the code closed the pipe hpe reads its answer from (it closes file "
+                               "descriptors it did not open), so it returned nothing")
             if code is not None and code < 0:
                 try:
                     name = signal.Signals(-code).name
@@ -117,8 +137,115 @@ def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: b
         return msg[1], msg[2], msg[3]
     finally:
         recv.close()
-        if proc.is_alive():
-            proc.join(2)
-            if proc.is_alive():
-                proc.kill()
-                proc.join(1)
+        _end_group(proc, ready)
+
+
+def _end_group(proc, grouped: bool) -> None:
+    """Kill the child's process group (the child and everything it started), then reap the child.
+
+    ``grouped``: the child said "ready", so it had made its own group (its id is the child's pid).
+    """
+    import os
+
+    if grouped and proc.pid is not None and hasattr(os, "killpg"):
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+    if proc.is_alive():
+        proc.kill()
+    proc.join(2)
+
+
+def module_name_of(path):
+    """``(root, "pkg.sub.mod")`` for a file inside a package, else None.
+
+    Walks up the folders that hold an ``__init__.py``; a folder without one is
+    still taken as a (namespace) package when the file uses relative imports
+    (3DDFA_V2's ``utils/pose.py`` does ``from .functions import ...`` and
+    ``utils/`` has no ``__init__.py``).
+    """
+    import re
+
+    path = path.resolve()
+    parts, folder = [], path.parent
+    while (folder / "__init__.py").is_file() and folder.parent != folder:
+        parts.insert(0, folder.name)
+        folder = folder.parent
+    if not parts:
+        try:
+            text = path.read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            return None
+        if not re.search(r"^\s*from\s+\.", text, re.MULTILINE):
+            return None
+        parts, folder = [path.parent.name], path.parent.parent
+    if not all(p.isidentifier() for p in parts) or not path.stem.isidentifier():
+        return None
+    return folder, ".".join(parts + [path.stem])
+
+
+def load_callable(spec: str, path=None):
+    """``path/to/file.py:func`` or ``package.module:func`` (``func`` may be ``Class.method``).
+
+    A file inside a package is imported as that package's module (so its
+    relative imports work); ``path`` (folders) is put on ``sys.path`` first,
+    for ``package.module:func`` specs that live outside the installed packages.
+    """
+    import importlib
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    from ..errors import HpeError
+
+    target, sep, attr = spec.rpartition(":")
+    if not sep or not target or not attr:
+        raise HpeError(f"{spec}: expected FILE.py:FUNC or module.path:FUNC")
+    for root in reversed([str(Path(p).resolve()) for p in (path or ())]):
+        if root not in sys.path:
+            sys.path.insert(0, root)
+    file = Path(target)
+    try:
+        if target.endswith(".py") or file.exists():
+            if not file.is_file():
+                raise HpeError(f"{target}: no such file")
+            found = module_name_of(file)
+            top = found[1].split(".")[0] if found else None
+            if found is not None and (top not in sys.modules or
+                                      str(found[0]) in str(getattr(sys.modules[top], "__path__", ""))):
+                root, dotted = found
+                for folder in (str(root), str(file.resolve().parent)):
+                    if folder not in sys.path:
+                        sys.path.insert(0, folder)  # the package root, and the file's siblings
+                module = importlib.import_module(dotted)
+            else:
+                name = f"_hpe_infer_{abs(hash(str(file.resolve())))}"
+                mod_spec = importlib.util.spec_from_file_location(name, file)
+                module = importlib.util.module_from_spec(mod_spec)
+                sys.modules[name] = module  # dataclasses and pickling look their module up here
+                folder = str(file.resolve().parent)
+                sys.path.insert(0, folder)  # let the file import its siblings
+                try:
+                    mod_spec.loader.exec_module(module)
+                finally:
+                    if folder in sys.path:
+                        sys.path.remove(folder)
+        else:
+            module = importlib.import_module(target)
+    except HpeError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the user's module may raise anything on import
+        hint = ""
+        if "relative import" in str(exc):
+            hint = " (the file is not inside a package: give module:FUNC with --path ROOT)"
+        raise HpeError(f"{target}: import failed: {type(exc).__name__}: "
+                       f"{' '.join(str(exc).split())[:200]}{hint}") from None
+    obj = module
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise HpeError(f"{target}: has no attribute {attr!r}")
+        obj = getattr(obj, part)
+    if not callable(obj):
+        raise HpeError(f"{spec}: expected a callable, got {type(obj).__name__}")
+    return obj

@@ -1,17 +1,37 @@
 """``HeadPoseDataset``: an ``hpe`` label table (or ``.mat`` folder, or exported Parquet) as a PyTorch Dataset."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import torch
 from torchvision import tv_tensors
-from torchvision.transforms.v2 import functional as F
 
 from ..errors import HpeError
 from ..rotation.systems import get_system
-from .rotation import from_matrix
-from .transforms import HeadPose
+from .samples import (
+    _FALSE,
+    _TRUE,
+    INTERPOLATIONS,
+    PoseOutputs,
+    crop_rects,
+    crop_rgb,
+    decode,
+    flip_geometry,
+    hflip_pixels,
+    place,
+    resize,
+    to_tensor,
+)
+from .transforms import (
+    HeadPose,
+    _perm_for,
+    aspect_message,
+    check_policy,
+    is_uniform,
+    no_exact_pose,
+)
 
 #: columns naming the image of a row, in order of preference
 IMAGE_COLUMNS = ("image", "image_path", "img_path", "file", "path", "filename")
@@ -44,12 +64,28 @@ class HeadPoseDataset(torch.utils.data.Dataset):
     crop : float, optional
         Crop every sample to its box enlarged by this fraction of the box's width
         and height on each side (``0`` = the box itself; ``None`` = no crop). The box
-        is the stored one (``bbox_*``), else the box of the finite landmarks.
-        Parts outside the image are filled with zeros.
+        is the stored one (``bbox_*``), else the box of the finite landmarks (the
+        ``landmarks`` columns, or ``lm`` when ``landmarks=None``). Parts outside the
+        image are filled with zeros.
     square : bool
         Make the crop a square around the box centre (side: the longer enlarged side), so
-        that a later ``Resize((s, s))`` scales uniformly and keeps the pose exact (an
-        aspect change raises :class:`~hpe_cli.torch.UndefinedPoseError`). Default True.
+        that a later resize to a square scales uniformly and keeps the pose exact.
+        Default True.
+    size : int, optional
+        Resize the crop to ``size`` x ``size`` with ``cv2.resize`` before the transform
+        (the fast path: OpenCV on the HWC array; boxes and landmarks follow with OpenCV's
+        pixel-centre mapping ``x' = (x + 0.5) * s - 0.5``). A crop that is not square
+        (``square=False``, or a row with no box) is an aspect change: ``on_undefined``.
+    interpolation : {"linear", "area", "cubic", "nearest", "lanczos"}
+        ``cv2.INTER_*`` of ``size`` (default ``"linear"``, as ``cv2.resize``).
+    hflip : float
+        Probability of a horizontal flip done in the decode step (``cv2.flip``; the pose
+        from a table of the mirrored poses, landmarks re-indexed with ``flip_scheme``),
+        as 6DRepNet's and Hopenet's own datasets flip. Same result as
+        :class:`hpe_cli.torch.transforms.RandomHorizontalFlip` first in ``transform``,
+        without its dispatch cost. Draws ``torch.rand`` (seeded per worker by ``DataLoader``).
+    flip_scheme : "auto", {"ibug68", "face70", "aflw21"} or sequence of int
+        Left/right landmark permutation of ``hflip`` (``auto``: by the number of landmarks).
     transform : callable, optional
         Called on the sample dict ``{"image": Image, "box": BoundingBoxes (1, 4) XYWH,
         "landmarks": KeyPoints (1, L, 2), "pose": HeadPose (1, 3, 3)}`` (absent keys
@@ -57,24 +93,35 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         them together (use :mod:`hpe_cli.torch.transforms` flips for landmark re-indexing).
     landmarks : str or None
         Column prefix of the 2-D landmarks: ``"lm"`` (``lm{i}_x``; for ``.mat`` input
-        ``pt2d``) or ``"lm3d"`` (``.mat`` input: the x, y rows of ``pt3d_68``); None: none.
+        ``pt2d``) or ``"lm3d"`` (``.mat`` input: the x, y rows of ``pt3d_68``); None: no
+        landmark output (they still give the crop box of rows without a ``bbox``).
+    on_undefined : {"raise", "drop", "keep"}
+        What a transform step with no exact pose meaning does (shear, perspective,
+        elastic, an aspect change such as 6DRepNet's ``RandomResizedCrop(224, scale=(0.8, 1))``):
+        raise :class:`~hpe_cli.torch.UndefinedPoseError` (default); ``"drop"`` the pose
+        (``matrix``, ``angles``, ``canonical`` NaN) and mark it (``pose_undefined``);
+        ``"keep"`` the pose it had before that step, marked.
     dtype : torch.dtype
         Floating dtype of the returned rotations, boxes and landmarks.
 
     Returns (per item)
     ------------------
     dict
-        ``image`` uint8 (3, H, W) RGB (unless ``transform`` converts it),
-        ``matrix`` (3, 3) the stored matrix of ``system``, ``angles`` (3,) its primary
-        ``(pitch, yaw, roll)`` in degrees, ``canonical`` (3, 3), ``gimbal_lock`` bool,
-        ``box`` (4,) ``(x, y, w, h)`` pixels and ``landmarks`` (L, 2) pixels
-        (rows going down, NaN = missing) when available, ``index`` int.
+        ``image`` uint8 (3, H, W) RGB (unless ``transform`` converts it; without a
+        transform a channels-last view of the decoded pixels), ``matrix`` (3, 3) the
+        stored matrix of ``system``, ``angles`` (3,) its primary ``(pitch, yaw, roll)``
+        in degrees, ``canonical`` (3, 3), ``gimbal_lock`` bool, ``pose_undefined`` bool
+        (see ``on_undefined``), ``box`` (4,) ``(x, y, w, h)`` pixels and ``landmarks``
+        (L, 2) pixels (rows going down, NaN = missing) when available, ``index`` int.
 
     Notes
     -----
-    Labels are read and converted once (vectorised, in the constructor); images are
-    decoded lazily in ``__getitem__``. The object is picklable and opens file handles
-    lazily in each ``DataLoader`` worker.
+    Labels are read and converted once (vectorised, in the constructor), crop boxes
+    too; images are decoded lazily in ``__getitem__``, straight into RGB. The pose
+    outputs of a sample whose transform left its pose as it was or mirrored it are
+    looked up in tables built once; others are converted per batch (``__getitems__``,
+    which ``DataLoader`` calls). The object is picklable and opens file handles lazily
+    in each ``DataLoader`` worker.
 
     Examples
     --------
@@ -87,15 +134,28 @@ class HeadPoseDataset(torch.utils.data.Dataset):
     >>> s = ds[0]
     >>> tuple(s["image"].shape), s["angles"].round(decimals=4), s["box"]
     ((3, 20, 20), tensor([10., 20.,  0.]), tensor([ 0.,  0., 20., 20.]))
+    >>> tuple(HeadPoseDataset(df, images=d, label_system="300w_lp", crop=0.5, size=64)[0]["image"].shape)
+    (3, 64, 64)
     """
 
     def __init__(self, labels, images=None, system="300w_lp", *, label_system=None, crop=None, square=True,
-                 transform=None, landmarks="lm", dtype=torch.float32):
+                 size=None, interpolation="linear", hflip=0.0, flip_scheme="auto", transform=None, landmarks="lm",
+                 on_undefined="raise", dtype=torch.float32):
         self.system = get_system(system)
         self.crop = None if crop is None else float(crop)
         self.square = bool(square)
         if self.crop is not None and not (self.crop >= 0):
             raise ValueError(f"expected crop >= 0 (a margin fraction), got {crop!r}")
+        self.size = None if size is None else int(size)
+        if self.size is not None and not self.size > 0:
+            raise ValueError(f"expected size > 0 (pixels), got {size!r}")
+        if interpolation not in INTERPOLATIONS:
+            raise ValueError(f"expected interpolation one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
+        self.interpolation = interpolation
+        self.on_undefined = check_policy(on_undefined)
+        self.hflip = float(hflip)
+        if not 0.0 <= self.hflip <= 1.0:
+            raise ValueError(f"expected hflip a probability in [0, 1], got {hflip!r}")
         self.transform = transform
         self.dtype = dtype
         table, found, source, parquet = _load_table(labels, landmarks)
@@ -119,8 +179,19 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             raise HpeError(f"{source}: no image column: expected one of {', '.join(IMAGE_COLUMNS)}")
         self.boxes = _boxes(table)
         self.landmarks = _landmarks(table, landmarks)
-        if self.crop is not None and self.boxes is None and self.landmarks is None:
-            raise HpeError(f"{source}: crop= needs bbox_x, bbox_y, bbox_w, bbox_h or landmark columns, found neither")
+        self._rects = None
+        if self.crop is not None:
+            points = self.landmarks if landmarks is not None else _landmarks(table, "lm")
+            if self.boxes is None and points is None:
+                raise HpeError(f"{source}: crop= needs bbox_x, bbox_y, bbox_w, bbox_h or landmark columns, "
+                               "found neither")
+            self._rects = crop_rects(self.boxes, points, self.crop, self.square)
+        self._perm = None
+        if self.hflip > 0 and self.landmarks is not None:
+            self._perm = _perm_for(flip_scheme, self.landmarks.shape[1])
+        self._paths = None if self._image_refs is None else _join_paths(self.images_root, self._image_refs)
+        self._place_all()
+        self._poses = PoseOutputs(self.canonical, self.system, dtype)
         self._n = n
         self._pf = None
         self._rg_cache = (None, None)
@@ -135,8 +206,26 @@ class HeadPoseDataset(torch.utils.data.Dataset):
     def __len__(self):
         return self._n
 
+    def _place_all(self):
+        """Boxes and landmarks of every row in its crop's (resized) pixels, where the crop is known here."""
+        n = len(self.canonical)
+        if self._rects is None:
+            origin, known = np.zeros((n, 2)), np.full(n, self.size is None)
+        else:
+            rects, known = self._rects
+            origin = rects[:, [1, 0]].astype(np.float64)
+        scale = None
+        if self.size is not None:
+            with np.errstate(divide="ignore"):
+                scale = np.where(known[:, None], self.size / np.maximum(rects[:, [3, 2]], 1), np.nan) \
+                    if self._rects is not None else np.full((n, 2), np.nan)
+        self._placed = place(self.boxes, self.landmarks, origin, scale)
+        self._known = known
+
     # -------------------------------------------------------------------------------------- images
     def _image_path(self, i) -> Path:
+        if self._paths[i] is not None:
+            return self._paths[i]
         ref = Path(self._image_refs[i])
         path = ref if ref.is_absolute() else self.images_root / ref
         if path.suffix.lower() == ".mat" or not path.suffix:
@@ -166,78 +255,125 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             raise HpeError(f"{path}: row {i + 1}: no image bytes in column {column!r}")
         return np.frombuffer(value, dtype=np.uint8), f"{path}: row {i - int(offsets[g]) + 1} of row group {local}"
 
-    def _read_image(self, i):
-        """The image as a uint8 (3, H, W) RGB tensor (decoded with OpenCV)."""
-        import cv2
-
+    def _decoded(self, i):
+        """The decoded pixels (H, W, 3), in :func:`~hpe_cli.torch.samples.decode`'s channel order."""
         if self._parquet is not None:
             data, where = self._image_bytes(i)
+            img = decode(data=data)
         else:
             path = self._image_path(i)
-            if not path.exists():
+            img, where = decode(path=path), str(path)
+            if img is None and not path.exists():
                 raise HpeError(f"{path}: no such image (row {i + 1} of {self.source})")
-            data, where = np.fromfile(path, dtype=np.uint8), str(path)
-        bgr = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
-        if bgr is None:
+        if img is None:
             raise HpeError(f"{where}: cannot decode image")
-        return torch.from_numpy(np.ascontiguousarray(bgr[:, :, ::-1].transpose(2, 0, 1)))
+        return img
+
+    def _read_image(self, i):
+        """The whole image as a uint8 (3, H, W) RGB tensor (decoded with OpenCV)."""
+        return to_tensor(crop_rgb(self._decoded(i), None))
 
     # -------------------------------------------------------------------------------------- samples
-    def _crop_box(self, i, canvas):
-        b = self.boxes[i] if self.boxes is not None else None
-        if b is None or not np.isfinite(b).all():
-            from ..geometry.augment import box_of_points
-
-            if self.landmarks is None:
-                return None
-            b, ok = box_of_points(self.landmarks[i])
-            if not ok:
-                return None
-        x, y, w, h = (float(v) for v in b)
-        m = self.crop
-        if self.square:
-            side = max(w, h) * (1.0 + 2.0 * m)
-            cx, cy = x + w / 2.0, y + h / 2.0
-            size = int(np.ceil(side))
-            left, top = int(np.floor(cx - size / 2.0)), int(np.floor(cy - size / 2.0))
-            return top, left, size, size
-        left, top = int(np.floor(x - m * w)), int(np.floor(y - m * h))
-        right, bottom = int(np.ceil(x + w + m * w)), int(np.ceil(y + h + m * h))
-        return top, left, max(1, bottom - top), max(1, right - left)
-
-    def __getitem__(self, i):
+    def _index(self, i) -> int:
         i = int(i)
         if not -self._n <= i < self._n:
             raise IndexError(f"index {i} out of range for {self._n} samples")
-        i %= self._n
-        image = tv_tensors.Image(self._read_image(i))
-        canvas = tuple(image.shape[-2:])
-        sample = {"image": image,
-                  "pose": HeadPose(torch.tensor(self.canonical[i][None], dtype=torch.float64), canvas_size=canvas)}
-        if self.boxes is not None:
-            sample["box"] = tv_tensors.BoundingBoxes(torch.tensor(self.boxes[i][None], dtype=torch.float64),
-                                                     format="XYWH", canvas_size=canvas)
-        if self.landmarks is not None:
-            sample["landmarks"] = tv_tensors.KeyPoints(torch.tensor(self.landmarks[i][None], dtype=torch.float64),
-                                                       canvas_size=canvas)
-        if self.crop is not None:
-            crop = self._crop_box(i, canvas)
-            if crop is not None:
-                sample = {k: F.crop(v, *crop) for k, v in sample.items()}
-        if self.transform is not None:
-            sample = self.transform(sample)
-        A = sample["pose"].as_subclass(torch.Tensor)[0]
-        from .rotation import from_canonical
+        return i % self._n
 
-        R = from_canonical(A, self.system)
-        angles, _, locked, _ = from_matrix(R, self.system)
-        out = {"image": sample["image"], "matrix": R.to(self.dtype), "angles": angles.to(self.dtype),
-               "canonical": A.to(self.dtype), "gimbal_lock": locked, "index": i}
+    def _pixels(self, i, flip):
+        """Cropped (resized, flipped) RGB HWC pixels, the crop's ``(left, top)``, its scale ``(sx, sy)``, aspect note."""
+        img = self._decoded(i)
+        rect = None
+        if self._rects is not None and self._rects[1][i]:
+            rect = self._rects[0][i]
+        pix = crop_rgb(img, rect)
+        origin = (0, 0) if rect is None else (int(rect[1]), int(rect[0]))
+        scale = note = None
+        if self.size is not None:
+            h, w = pix.shape[:2]
+            if not is_uniform((h, w), (self.size, self.size)):
+                note = aspect_message((h, w), (self.size, self.size), "size= (resize of the crop)")
+            pix, scale = resize(pix, self.size, self.interpolation), (self.size / w, self.size / h)
+        if flip:
+            pix = hflip_pixels(pix)
+        return pix, origin, scale, note
+
+    def _geometry(self, i, origin, scale, width, flip):
+        """Box (4,) and landmarks (L, 2) of row ``i`` in the crop's (resized, flipped) pixels, float64, or None."""
+        box, lm = self._placed
+        if self._known[i]:  # placed in the constructor
+            box, lm = None if box is None else box[i], None if lm is None else lm[i]
+        else:
+            sc = None if scale is None else np.array([scale])
+            box, lm = place(None if box is None else self.boxes[i:i + 1],
+                            None if lm is None else self.landmarks[i:i + 1], np.array([origin], float), sc)
+            box, lm = None if box is None else box[0], None if lm is None else lm[0]
+        if flip:
+            box, lm = flip_geometry(box, lm, width, self._perm)
+        return box, lm
+
+    def _prepare(self, i):
+        """``(partial output, i, A after the transform (None: the table's), undefined flag, flipped)``."""
+        flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
+        pix, origin, scale, note = self._pixels(i, flip)
+        image = to_tensor(pix)
+        canvas = tuple(pix.shape[:2])
+        box, lm = self._geometry(i, origin, scale, canvas[1], flip)
+        pose = None
+        if note is not None or self.transform is not None:
+            A = self._poses.mirrored(i) if flip else self._poses.A[i:i + 1]
+            pose = HeadPose(A, canvas_size=canvas, on_undefined=self.on_undefined)
+            if note is not None:
+                pose = no_exact_pose(pose, note)
+        if self.transform is None:
+            out = {"image": image}
+            if box is not None:
+                out["box"] = torch.from_numpy(box.astype(self._poses.np_dtype))
+            if lm is not None:
+                out["landmarks"] = torch.from_numpy(lm.astype(self._poses.np_dtype))
+            if pose is None:
+                return out, i, None, False, flip
+            return out, i, pose.as_subclass(torch.Tensor)[0], pose.undefined, flip
+        sample = {"image": image.as_subclass(tv_tensors.Image), "pose": pose}
+        if box is not None:
+            sample["box"] = tv_tensors.BoundingBoxes(torch.from_numpy(box[None]), format="XYWH", canvas_size=canvas)
+        if lm is not None:
+            sample["landmarks"] = tv_tensors.KeyPoints(torch.from_numpy(lm[None]), canvas_size=canvas)
+        sample = self.transform(sample)
+        pose = sample["pose"]
+        out = {"image": sample["image"]}
         if "box" in sample:
             out["box"] = sample["box"].as_subclass(torch.Tensor)[0].to(self.dtype)
         if "landmarks" in sample:
             out["landmarks"] = sample["landmarks"].as_subclass(torch.Tensor)[0].to(self.dtype)
-        return out
+        return out, i, pose.as_subclass(torch.Tensor)[0], bool(getattr(pose, "undefined", False)), flip
+
+    def _finish(self, prepared) -> list:
+        poses = self._poses.outputs([(i, A, flip) for _, i, A, _, flip in prepared])
+        result = []
+        for (out, i, _, undefined, _), pose in zip(prepared, poses):
+            out.update(pose)
+            out["pose_undefined"] = (_TRUE if undefined else _FALSE).clone()
+            out["index"] = i
+            result.append(out)
+        return result
+
+    def __getitem__(self, i):
+        return self._finish([self._prepare(self._index(i))])[0]
+
+    def __getitems__(self, indices) -> list:
+        """The samples of a batch (``DataLoader`` calls this): their pose outputs are converted in one call."""
+        return self._finish([self._prepare(self._index(i)) for i in indices])
+
+
+def _join_paths(root, refs) -> list:
+    """Image paths of refs with an image suffix (None: a ``.mat`` or bare name, resolved when read)."""
+    base = str(root)
+    out = []
+    for ref in refs:
+        ext = os.path.splitext(ref)[1].lower()
+        out.append(os.path.join(base, ref) if ext in IMAGE_SUFFIXES else None)
+    return out
 
 
 # ------------------------------------------------------------------------------------ table loading

@@ -34,8 +34,17 @@ from ..rotation.systems import ROLES, RotationSystem, get_system
 _DEG = 180.0 / math.pi
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
-__all__ = ["to_matrix", "from_matrix", "to_canonical", "from_canonical", "angles_to_canonical",
-           "canonical_to_angles", "elemental", "sixd_to_matrix", "matrix_to_sixd"]
+__all__ = [
+    "angles_to_canonical",
+    "canonical_to_angles",
+    "elemental",
+    "from_canonical",
+    "from_matrix",
+    "matrix_to_sixd",
+    "sixd_to_matrix",
+    "to_canonical",
+    "to_matrix",
+]
 
 
 def _check_float(t, what):

@@ -24,12 +24,23 @@ so a flip of rows is ``diag(1, -1)``) and ``M3 = [[M, 0], [0, 1]]``,
 - translation, crop, pad and uniform scaling leave ``A`` unchanged (orthographic /
   weak-perspective head-pose labels carry no position or size).
 
-Operations with no exact pose meaning **raise** instead of silently keeping the old
-pose: shear (``F.affine`` with a non-zero shear), perspective, elastic, five/ten
-crops, and a resize or resized crop that changes the aspect ratio by more than the
-rounding of the output size to whole pixels (a squashed face is no rotation of the
-head; crop a square, e.g. ``RandomResizedCrop(..., ratio=(1, 1))``). Colour
-transforms pass ``HeadPose`` through unchanged, as they should.
+Operations with no exact pose meaning never silently keep the old pose: shear
+(``F.affine`` with a non-zero shear), perspective, elastic, a non-constant pad, and a
+resize or resized crop that changes the aspect ratio by more than the rounding of the
+output size to whole pixels (a squashed face is no rotation of the head; crop a square,
+e.g. ``RandomResizedCrop(..., ratio=(1, 1))``). What happens is the pose's
+``on_undefined`` policy (``HeadPose(A, on_undefined=...)``, or ``HeadPoseDataset(...,
+on_undefined=...)``):
+
+- ``"raise"`` (default): :class:`UndefinedPoseError`;
+- ``"drop"``: the pose becomes NaN and ``pose.undefined`` is True (mask it out of the loss);
+- ``"keep"``: the pose is kept as it was before the operation and ``pose.undefined`` is True
+  (an approximate label, e.g. a 6DRepNet recipe's ``RandomResizedCrop(224, scale=(0.8, 1))``,
+  whose aspect change 6DRepNet trains through with the old label).
+
+Once set, ``undefined`` stays True through later operations. Five and ten crops always
+raise (one pose cannot follow a tuple of crops). Colour transforms pass ``HeadPose``
+through unchanged, as they should.
 
 Landmarks after a mirror
 ------------------------
@@ -62,12 +73,33 @@ from torchvision import tv_tensors
 from torchvision.transforms import v2
 from torchvision.transforms.v2 import functional as F
 
-__all__ = ["HeadPose", "UndefinedPoseError", "RandomHorizontalFlip", "RandomVerticalFlip", "PermuteLandmarks",
-           "plane_matrix_rotate", "pose_rotate", "pose_mirror"]
+__all__ = [
+    "ON_UNDEFINED",
+    "HeadPose",
+    "PermuteLandmarks",
+    "RandomHorizontalFlip",
+    "RandomVerticalFlip",
+    "UndefinedPoseError",
+    "no_exact_pose",
+    "plane_matrix_rotate",
+    "pose_mirror",
+    "pose_rotate",
+]
+
+
+#: what a kernel does with an operation that is not a rotation of the head (see the module notes)
+ON_UNDEFINED = ("raise", "drop", "keep")
 
 
 class UndefinedPoseError(ValueError):
     """A transform has no exact meaning for a head pose (shear, perspective, elastic, aspect change)."""
+
+
+def check_policy(on_undefined) -> str:
+    """``on_undefined`` validated: one of :data:`ON_UNDEFINED`."""
+    if on_undefined not in ON_UNDEFINED:
+        raise ValueError(f"expected on_undefined one of {', '.join(map(repr, ON_UNDEFINED))}, got {on_undefined!r}")
+    return on_undefined
 
 
 class HeadPose(tv_tensors.TVTensor):
@@ -81,7 +113,13 @@ class HeadPose(tv_tensors.TVTensor):
         ``angles_to_canonical(pyr_deg, system)``.
     canvas_size : (int, int), optional
         ``(H, W)`` of the image, as for ``KeyPoints``. Needed by resize / resized
-        crop to tell a uniform scaling (pose unchanged) from an aspect change (raises).
+        crop to tell a uniform scaling (pose unchanged) from an aspect change.
+    on_undefined : {"raise", "drop", "keep"}
+        What an operation with no exact pose meaning does (module notes): raise
+        :class:`UndefinedPoseError`, make the pose NaN, or keep it; the latter two set
+        ``undefined``.
+    undefined : bool
+        True once such an operation has run on the pose (``drop`` / ``keep``).
     dtype, device, requires_grad
         As for any TVTensor.
 
@@ -93,27 +131,42 @@ class HeadPose(tv_tensors.TVTensor):
     >>> pose = HeadPose(angles_to_canonical(torch.tensor([[10.0, 30.0, 5.0]]), "300w_lp"), canvas_size=(64, 64))
     >>> canonical_to_angles(F.horizontal_flip(pose), "300w_lp")[0].round(decimals=4)
     tensor([[ 10., -30.,  -5.]])
+    >>> squash = F.resize(HeadPose(pose, on_undefined="drop"), [64, 32])
+    >>> squash.undefined, bool(squash.isnan().all())
+    (True, True)
     """
 
     canvas_size: tuple | None
+    on_undefined: str
+    undefined: bool
 
     @classmethod
-    def _wrap(cls, tensor: torch.Tensor, *, canvas_size=None, check_dims: bool = True) -> "HeadPose":
+    def _wrap(cls, tensor: torch.Tensor, *, canvas_size=None, on_undefined="raise", undefined=False,
+              check_dims: bool = True) -> HeadPose:
         if check_dims and tensor.shape[-2:] != (3, 3):
             raise ValueError(f"expected canonical rotation matrices of shape (..., 3, 3), got {tuple(tensor.shape)}")
         pose = tensor.as_subclass(cls)
         pose.canvas_size = None if canvas_size is None else tuple(int(v) for v in canvas_size)
+        pose.on_undefined = on_undefined
+        pose.undefined = bool(undefined)
         return pose
 
     @classmethod
-    def wrap(cls, tensor: torch.Tensor, like: "HeadPose", **kwargs: Any) -> "HeadPose":
-        return cls._wrap(tensor, canvas_size=kwargs.get("canvas_size", like.canvas_size))
+    def wrap(cls, tensor: torch.Tensor, like: HeadPose, **kwargs: Any) -> HeadPose:
+        return cls._wrap(tensor, canvas_size=kwargs.get("canvas_size", like.canvas_size),
+                         on_undefined=kwargs.get("on_undefined", _policy(like)),
+                         undefined=kwargs.get("undefined", getattr(like, "undefined", False)))
 
-    def __new__(cls, data, *, canvas_size=None, dtype=None, device=None, requires_grad=None) -> "HeadPose":
+    def __new__(cls, data, *, canvas_size=None, on_undefined=None, undefined=None, dtype=None, device=None,  # noqa: PYI034
+                requires_grad=None) -> HeadPose:
         tensor = cls._to_tensor(data, dtype=dtype, device=device, requires_grad=requires_grad)
         if not tensor.is_floating_point():
             tensor = tensor.to(torch.get_default_dtype())
-        return cls._wrap(tensor, canvas_size=canvas_size)
+        if canvas_size is None:  # HeadPose(pose) keeps the metadata of a pose
+            canvas_size = getattr(data, "canvas_size", None)
+        policy = check_policy(on_undefined if on_undefined is not None else _policy(data))
+        flag = undefined if undefined is not None else getattr(data, "undefined", False)
+        return cls._wrap(tensor, canvas_size=canvas_size, on_undefined=policy, undefined=flag)
 
     @classmethod
     def _wrap_output(cls, output, args=(), kwargs=None):
@@ -121,15 +174,37 @@ class HeadPose(tv_tensors.TVTensor):
 
         flat, _ = tree_flatten(args + (tuple(kwargs.values()) if kwargs else ()))
         like = next((x for x in flat if isinstance(x, HeadPose)), None)
-        size = None if like is None else like.canvas_size
+        meta = {} if like is None else {"canvas_size": like.canvas_size, "on_undefined": _policy(like),
+                                        "undefined": getattr(like, "undefined", False)}
         if isinstance(output, torch.Tensor) and not isinstance(output, HeadPose):
-            output = HeadPose._wrap(output, canvas_size=size, check_dims=False)
+            output = HeadPose._wrap(output, check_dims=False, **meta)
         elif isinstance(output, (tuple, list)):
-            output = type(output)(HeadPose._wrap(p, canvas_size=size, check_dims=False) for p in output)
+            output = type(output)(HeadPose._wrap(p, check_dims=False, **meta) for p in output)
         return output
 
     def __repr__(self, *, tensor_contents: Any = None) -> str:
-        return self._make_repr(canvas_size=self.canvas_size)
+        return self._make_repr(canvas_size=self.canvas_size, on_undefined=_policy(self),
+                               undefined=getattr(self, "undefined", False))
+
+
+def _policy(x) -> str:
+    return getattr(x, "on_undefined", None) or "raise"
+
+
+def no_exact_pose(pose, message: str, canvas_size=None):
+    """Apply the pose's ``on_undefined`` policy to an operation with no exact pose meaning.
+
+    Raises :class:`UndefinedPoseError` (``"raise"``), or returns the pose as NaN
+    (``"drop"``) or unchanged (``"keep"``), marked ``undefined``, on ``canvas_size``
+    (default: the pose's own).
+    """
+    policy = _policy(pose)
+    if policy == "raise":
+        raise UndefinedPoseError(f"{message} (or set on_undefined='drop' or 'keep' to train through it)")
+    raw = _raw(pose)
+    data = torch.full_like(raw, float("nan")) if policy == "drop" else raw.clone()
+    return HeadPose._wrap(data, canvas_size=pose.canvas_size if canvas_size is None else canvas_size,
+                          on_undefined=policy, undefined=True)
 
 
 # ------------------------------------------------------------------------------------------ the maths
@@ -207,25 +282,35 @@ def _shear_is_zero(shear) -> bool:
 @F.register_kernel(F.affine, HeadPose)
 def _affine(pose, angle, translate=None, scale=1.0, shear=None, interpolation=None, fill=None, center=None, **kw):
     if not _shear_is_zero(shear):
-        raise UndefinedPoseError(f"a sheared face has no exact head pose: expected shear 0 with HeadPose, got {shear} "
-                                 "(use v2.RandomAffine(..., shear=None))")
+        return no_exact_pose(pose, f"a sheared face has no exact head pose: expected shear 0 with HeadPose, got "
+                                   f"{shear} (use v2.RandomAffine(..., shear=None))")
     if not float(scale) > 0:
-        raise UndefinedPoseError(f"expected a positive affine scale, got {scale}")
+        return no_exact_pose(pose, f"expected a positive affine scale, got {scale}")
     # F.affine's angle is clockwise-positive in its matrix for points (it is F.rotate's angle negated... and
     # F.rotate calls the affine machinery with -angle): on screen, F.affine(angle) turns the image clockwise
     return tv_tensors.wrap(pose_rotate(_raw(pose), -float(angle)), like=pose)
 
 
-def _check_uniform(old, new, what):
-    """Raise unless ``old -> new`` (H, W) is a uniform scaling up to rounding each side to whole pixels."""
+def is_uniform(old, new) -> bool:
+    """Whether ``old -> new`` (H, W) is a uniform scaling up to rounding each side to whole pixels."""
     (h0, w0), (h1, w1) = old, new
     lo = max((h1 - 0.5) / h0, (w1 - 0.5) / w0)
     hi = min((h1 + 0.5) / h0, (w1 + 0.5) / w0)
-    if lo > hi + 1e-12:
-        raise UndefinedPoseError(
-            f"{what} from {w0}x{h0} to {w1}x{h1} changes the aspect ratio (x{w1 / w0:.4g} wide, x{h1 / h0:.4g} high): "
-            "a squashed face has no exact head pose; crop a region of the output's aspect ratio first "
+    return lo <= hi + 1e-12
+
+
+def aspect_message(old, new, what) -> str:
+    (h0, w0), (h1, w1) = old, new
+    return (f"{what} from {w0}x{h0} to {w1}x{h1} changes the aspect ratio (x{w1 / w0:.4g} wide, x{h1 / h0:.4g} "
+            "high): a squashed face has no exact head pose; crop a region of the output's aspect ratio first "
             "(e.g. RandomResizedCrop(size, ratio=(1, 1)) for square outputs, or Resize(shorter_side))")
+
+
+def _scaled(pose, old, new, what):
+    """The pose on the new canvas after a scaling ``old -> new`` (H, W): unchanged if uniform, else the policy."""
+    if not is_uniform(old, new):
+        return no_exact_pose(pose, aspect_message(old, new, what), canvas_size=new)
+    return tv_tensors.wrap(_raw(pose).clone(), like=pose, canvas_size=new)
 
 
 @F.register_kernel(F.resize, HeadPose)
@@ -233,18 +318,16 @@ def _resize(pose, size, interpolation=None, max_size=None, antialias=None, **kwa
     if pose.canvas_size is None:
         if size is not None and (isinstance(size, int) or len(size) == 1):
             return tv_tensors.wrap(_raw(pose).clone(), like=pose)  # keeps the aspect ratio
-        raise UndefinedPoseError("resizing to (H, W) needs HeadPose(..., canvas_size=(H, W)) to check that the "
-                                 "aspect ratio is kept, got a HeadPose without canvas_size")
+        return no_exact_pose(pose, "resizing to (H, W) needs HeadPose(..., canvas_size=(H, W)) to check that the "
+                                   "aspect ratio is kept, got a HeadPose without canvas_size")
     new = _dummy_canvas(F.resize_keypoints, pose, size=size, max_size=max_size)
-    _check_uniform(pose.canvas_size, new, "resize")
-    return tv_tensors.wrap(_raw(pose).clone(), like=pose, canvas_size=new)
+    return _scaled(pose, pose.canvas_size, new, "resize")
 
 
 @F.register_kernel(F.resized_crop, HeadPose)
 def _resized_crop(pose, top, left, height, width, size, interpolation=None, antialias=None, **kwargs):
     _, new = F.resized_crop_keypoints(torch.zeros(1, 2), top=top, left=left, height=height, width=width, size=size)
-    _check_uniform((height, width), tuple(new), "resized crop")
-    return tv_tensors.wrap(_raw(pose).clone(), like=pose, canvas_size=tuple(new))
+    return _scaled(pose, (height, width), tuple(new), "resized crop")
 
 
 @F.register_kernel(F.crop, HeadPose)
@@ -264,24 +347,34 @@ def _center_crop(pose, output_size, **kwargs):
 
 @F.register_kernel(F.pad, HeadPose)
 def _pad(pose, padding, fill=None, padding_mode="constant", **kwargs):
-    if padding_mode != "constant":
-        raise UndefinedPoseError(f"padding_mode {padding_mode!r} copies mirrored or repeated faces into the image; "
-                                 "expected 'constant' with HeadPose")
     new = _dummy_canvas(F.pad_keypoints, pose, padding=padding)
+    if padding_mode != "constant":
+        return no_exact_pose(pose, f"padding_mode {padding_mode!r} copies mirrored or repeated faces into the "
+                                   "image; expected 'constant' with HeadPose", canvas_size=new)
     return tv_tensors.wrap(_raw(pose).clone(), like=pose, canvas_size=new)
 
 
+def _message(name, why):
+    return (f"{name} has no exact head-pose meaning ({why}); remove it from a pipeline that carries a HeadPose, "
+            "or apply it to the image alone after the geometric steps")
+
+
 def _undefined(name, why):
+    def kernel(pose, *args, **kwargs):  # the canvas keeps its size (perspective, elastic)
+        return no_exact_pose(pose, _message(name, why))
+    return kernel
+
+
+def _never(name, why):
     def kernel(pose, *args, **kwargs):
-        raise UndefinedPoseError(f"{name} has no exact head-pose meaning ({why}); remove it from a pipeline "
-                                 "that carries a HeadPose, or apply it to the image alone after the geometric steps")
+        raise UndefinedPoseError(_message(name, why))
     return kernel
 
 
 F.register_kernel(F.perspective, HeadPose)(_undefined("perspective", "it is no rotation of the head"))
 F.register_kernel(F.elastic, HeadPose)(_undefined("elastic", "it deforms the face"))
-F.register_kernel(F.five_crop, HeadPose)(_undefined("five_crop", "one pose cannot follow five crops"))
-F.register_kernel(F.ten_crop, HeadPose)(_undefined("ten_crop", "one pose cannot follow ten crops"))
+F.register_kernel(F.five_crop, HeadPose)(_never("five_crop", "one pose cannot follow five crops"))
+F.register_kernel(F.ten_crop, HeadPose)(_never("ten_crop", "one pose cannot follow ten crops"))
 
 
 # ---------------------------------------------------------------------------- landmark re-indexing

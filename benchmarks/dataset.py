@@ -1,0 +1,199 @@
+#!/usr/bin/env python3
+"""``HeadPoseDataset`` against a bare OpenCV loop doing the same work, in one process and in a DataLoader.
+
+Both sides read the same AFLW2000-3D JPEGs (450x450) and, per sample,
+
+    decode -> square crop (the label box + ``--margin`` on each side, zeros outside the image)
+    -> resize to ``--size`` x ``--size`` (bilinear) -> horizontal flip
+
+The bare loop is ``cv2.imread`` (BGR, HWC numpy), numpy slicing, ``cv2.resize`` and
+``cv2.flip``: no pose, no boxes, no landmarks, no RGB. ``HeadPoseDataset`` does the
+same pixels work and also returns the pose (matrix, angles, canonical, gimbal lock)
+after the flip, the box and the 68 landmarks (moved and re-indexed), as an RGB
+(3, H, W) tensor. Three HeadPoseDataset configurations are timed:
+
+- ``size=S, hflip=1``: crop, resize and flip in the decode step (OpenCV), the pose from
+  the mirrored-pose table: the fast path, same pixels as the bare loop (checked);
+- ``size=S`` + ``transform=T.RandomHorizontalFlip(p=1)`` (torchvision v2 dispatch for the flip);
+- ``transform=v2.Compose([v2.Resize((S, S)), T.RandomHorizontalFlip(p=1)])`` (torchvision's
+  antialiased uint8 resize, a different filter from ``cv2.resize``).
+
+Samples/s are the best of ``--repeat`` passes over ``--items`` items (the 16 (or 4
+shipped) images cycled; the files stay in the page cache, so decode is CPU-bound), by
+wall clock and by CPU time (this process + its finished workers: steadier on a shared
+machine). The DataLoader runs use ``num_workers=2``, ``batch_size=16`` and the same items
+for both sides (the bare loop wrapped in a minimal ``Dataset`` returning ``torch.from_numpy``).
+Peak RSS is this process's (workers are separate processes) and the workers' largest.
+
+Usage::
+
+    python benchmarks/dataset.py
+    python benchmarks/dataset.py --items 400 --repeat 3 --workers 2
+    python benchmarks/dataset.py --images /path/to/AFLW2000   # a folder of .mat + .jpg
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import cv2
+import numpy as np
+import pandas as pd
+import torch
+from torchvision.transforms import v2
+
+from hpe_cli import write_labels
+from hpe_cli.datasets.mat import read_mat_dir
+from hpe_cli.geometry.augment import box_of_points
+from hpe_cli.torch import HeadPoseDataset
+from hpe_cli.torch import transforms as T
+
+REALDATA = ROOT.parent.parent / "shared" / "realdata" / "aflw2000_prnet"
+for _cand in (Path("/work/shared/realdata/aflw2000_prnet"), REALDATA, ROOT / "sample_data" / "aflw2000"):
+    if _cand.is_dir():
+        DEFAULT_IMAGES = _cand
+        break
+
+
+def make_labels(folder: Path, out: Path) -> Path:
+    """A Parquet label table of the folder's ``.mat`` files: pose, 68 landmarks (pt3d_68 x, y), their box."""
+    table = read_mat_dir(folder, landmarks=True)
+    lm = np.stack([table[[f"lm3d{i}_x", f"lm3d{i}_y"]].to_numpy() for i in range(68)], axis=1)
+    keep = ["file", "pitch", "yaw", "roll"]
+    frame = table[keep].copy()
+    frame["file"] = [str(folder / f).replace(".mat", ".jpg") for f in frame["file"]]
+    extra = dict(zip(["bbox_x", "bbox_y", "bbox_w", "bbox_h"], box_of_points(lm)[0].T))
+    extra.update({f"lm{i}_{a}": lm[:, i, k] for i in range(68) for k, a in enumerate("xy")})
+    return write_labels(pd.concat([frame, pd.DataFrame(extra)], axis=1), out, system="300w_lp")
+
+
+def square_crop(box, margin):
+    """``(top, left, size)``: the same square as ``HeadPoseDataset(crop=margin, square=True)``."""
+    x, y, w, h = box
+    side = max(w, h) * (1.0 + 2.0 * margin)
+    size = math.ceil(side)
+    left, top = math.floor(x + w / 2.0 - size / 2.0), math.floor(y + h / 2.0 - size / 2.0)
+    return top, left, size
+
+
+class BareLoop(torch.utils.data.Dataset):
+    """cv2.imread -> square crop (zeros outside) -> cv2.resize -> cv2.flip: the floor to beat."""
+
+    def __init__(self, files, boxes, margin, size):
+        self.files, self.boxes, self.margin, self.size = list(files), np.asarray(boxes), margin, size
+
+    def __len__(self):
+        return len(self.files)
+
+    def sample(self, i):
+        img = cv2.imread(self.files[i], cv2.IMREAD_COLOR)
+        top, left, side = square_crop(self.boxes[i], self.margin)
+        H, W = img.shape[:2]
+        t0, l0, t1, l1 = max(top, 0), max(left, 0), min(top + side, H), min(left + side, W)
+        if (t0, l0, t1, l1) == (top, left, top + side, left + side):
+            crop = img[t0:t1, l0:l1]
+        else:
+            crop = np.zeros((side, side, 3), np.uint8)
+            crop[t0 - top:t1 - top, l0 - left:l1 - left] = img[t0:t1, l0:l1]
+        return cv2.flip(cv2.resize(crop, (self.size, self.size), interpolation=cv2.INTER_LINEAR), 1)
+
+    def __getitem__(self, i):
+        return torch.from_numpy(self.sample(i))
+
+
+def _cpu():
+    own = time.process_time()
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own + kids.ru_utime + kids.ru_stime
+
+
+def _rates(runs, items, repeat):
+    """``{name: (samples/s by wall clock, by CPU time)}``, each the best of ``repeat`` rounds.
+
+    The runs are interleaved (one of each per round), so a load change on a shared machine
+    hits them all alike.
+    """
+    best = {name: [math.inf, math.inf] for name in runs}
+    for _ in range(repeat):
+        for name, fn in runs.items():
+            t0, c0 = time.perf_counter(), _cpu()
+            fn()
+            wall, cpu = time.perf_counter() - t0, _cpu() - c0
+            best[name] = [min(best[name][0], wall), min(best[name][1], cpu)]
+    return {name: (items / w, items / c) for name, (w, c) in best.items()}
+
+
+def one_process(get, order):
+    def run():
+        for k in order:
+            get(k)
+    return run
+
+
+def through_loader(ds, order, workers, batch):
+    def run():
+        loader = torch.utils.data.DataLoader(ds, batch_size=batch, sampler=order, num_workers=workers,
+                                             persistent_workers=False)
+        for _ in loader:
+            pass
+    return run
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--images", type=Path, default=DEFAULT_IMAGES, help="folder of AFLW2000-3D .mat + .jpg")
+    ap.add_argument("--items", type=int, default=256)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--size", type=int, default=224)
+    ap.add_argument("--margin", type=float, default=0.25)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    cv2.setNumThreads(1)
+    with tempfile.TemporaryDirectory() as tmp:
+        labels = make_labels(args.images, Path(tmp) / "labels.parquet")
+        flip = T.RandomHorizontalFlip(p=1.0, scheme="ibug68")
+        fused = HeadPoseDataset(labels, crop=args.margin, size=args.size, hflip=1.0, flip_scheme="ibug68")
+        v2flip = HeadPoseDataset(labels, crop=args.margin, size=args.size, transform=flip)
+        v2ds = HeadPoseDataset(labels, crop=args.margin,
+                               transform=v2.Compose([v2.Resize((args.size, args.size)), flip]))
+        bare = BareLoop(fused._image_refs, fused.boxes, args.margin, args.size)
+        n = len(fused)
+        order = [k % n for k in range(args.items)]
+        # same pixels: the fused path's crop + resize + flip is the bare loop's, in RGB
+        ref = bare.sample(0)[:, :, ::-1]
+        got = fused[0]["image"].permute(1, 2, 0).numpy()
+        same = np.array_equal(ref, got)
+        print(f"{n} images from {args.images}, {args.items} items, crop {args.margin:g} square, "
+              f"resize {args.size}, hflip; best of {args.repeat}; torch threads 1, cv2 threads 1")
+        print(f"fast-path pixels equal to the bare loop's (RGB): {same}")
+        configs = (("bare cv2 loop", bare, bare.sample),
+                   ("HeadPoseDataset(size, hflip)", fused, fused.__getitem__),
+                   ("HeadPoseDataset(size) + v2 flip", v2flip, v2flip.__getitem__),
+                   ("HeadPoseDataset + v2 Resize,flip", v2ds, v2ds.__getitem__))
+        one = _rates({name: one_process(get, order) for name, _, get in configs}, args.items, args.repeat)
+        dl = _rates({name: through_loader(ds, order, args.workers, args.batch) for name, ds, _ in configs},
+                    args.items, args.repeat)
+        rows = [(name, one[name], dl[name]) for name, _, _ in configs]
+        base = rows[0]
+        print(f"samples/s (x bare loop)  {'1 process: wall':>19s} {'CPU':>14s}   "
+              f"{f'DataLoader({args.workers}): wall':>22s} {'CPU':>14s}")
+        for name, one, dl in rows:
+            cells = [f"{v:7.0f} ({v / b:4.2f}x)" for v, b in zip(one + dl, base[1] + base[2])]
+            print(f"{name:33s} {cells[0]:>15s} {cells[1]:>15s}   {cells[2]:>18s} {cells[3]:>15s}")
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    print(f"peak RSS: this process {own:.0f} MiB, largest worker {kids:.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()
