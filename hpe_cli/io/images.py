@@ -76,6 +76,21 @@ def _bases(root, sequence) -> tuple:
     return (r, r / str(sequence)) if sequence else (r,)
 
 
+def leaves_root(image) -> bool:
+    """True when a relative image name climbs out of its root folder (``../x.jpg``, ``a/../../x.jpg``).
+
+    Such names are refused rather than read: a label table must not make hpe read (and copy into an
+    export or a drawing) files outside the folder given with ``--images``. Absolute names are the user's
+    own choice and are not affected.
+    """
+    import posixpath
+
+    name = str(image).replace("\\", "/")
+    if not name or PurePath(name).is_absolute():
+        return False
+    return posixpath.normpath(name).split("/")[0] == ".."
+
+
 def _name_candidates(root: Path, image: str, sequence: str) -> list:
     p = PurePath(image)
     out = []

@@ -11,7 +11,7 @@ from pathlib import Path, PurePath
 import numpy as np
 
 from ..errors import HpeError
-from ..io.images import IMAGE_SUFFIXES, ImageResolver, image_size
+from ..io.images import IMAGE_SUFFIXES, ImageResolver, image_size, leaves_root
 
 
 class RowImages:
@@ -27,6 +27,8 @@ class RowImages:
         """``(ref or None, (W, H) or None, reason)``."""
         key = (name, sequence, camera, frame)
         hit = self.cache.get(key)
+        if hit is None and leaves_root(name):
+            hit = self.cache[key] = (None, None, f"image name {name!r} leaves the --images folder (refused)")
         if hit is None:
             ref = self.resolver.find(name, sequence, camera, frame)
             if ref is None:
@@ -96,7 +98,10 @@ class ImageJob:
         """Check the row's output name; True when its picture is new (to be warped), False when an earlier row
         already claimed it. A ``.mat`` file is written back either way."""
         name, where, ref, P, size_in, size_out, mirror, mat = row
-        rel = output_name(name, ref)
+        try:
+            rel = output_name(name, ref)
+        except HpeError as exc:
+            raise HpeError(f"{where}: {exc}") from None
         key = str(rel)
         if key in self.done:
             if self.done[key][0] != ref.key:

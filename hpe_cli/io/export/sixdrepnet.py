@@ -105,6 +105,11 @@ class SixDRepNetLayout(Layout):
     def crop_boxes(self, rows, boxes, landmarks):
         if self.form != "mat":
             return boxes
+        if landmarks is None or np.asarray(landmarks).ndim != 3 or np.asarray(landmarks).shape[1] == 0:
+            from ...errors import HpeError
+
+            raise HpeError("--layout 6drepnet --form mat needs 2-D landmarks (lm0_x, lm0_y, ... or pt2d): 6DRepNet's and "
+                           "Hopenet's loaders crop each face from pt2d; the input has none: use --form crops")
         t = landmark_boxes(landmarks)
         ml, mt, mr, mb = MAT_MARGINS
         return np.stack([t[:, 0] - ml * t[:, 2], t[:, 1] - mt * t[:, 3],

@@ -12,7 +12,7 @@ from ...errors import HpeError
 from ...geometry.crop import expand_boxes, pixel_boxes
 from ...io.layout import BBOX_COLS
 from . import workers
-from ...io.images import resolve_image, video_path
+from ...io.images import leaves_root, resolve_image, video_path
 
 
 @dataclass
@@ -75,7 +75,10 @@ def build_tasks(sel, layout, plan: CropPlan, todo) -> list:
     for i in todo.tolist():
         key = (roots[i], images[i])
         t = task_of.get(key)
-        if t is None:
+        if t is None and leaves_root(images[i]):
+            t = task_of[key] = ["refused", f"image name {images[i]!r} leaves the --images folder (refused)", []]
+            tasks.append(t)
+        elif t is None:
             src = resolve_image(roots[i], images[i], seqs[i], cams[i], int(frames[i]))
             if src is None and cams[i] and frames[i] >= 0:
                 vkey = ("video", roots[i], seqs[i], cams[i])

@@ -152,6 +152,8 @@ def _work_items(task):
                     for items in groups.values() for it in items if it[0] not in done]
         return out
     items = groups
+    if kind == "refused":  # src is the reason
+        return [(it[0], src, -1, -1, None) for it in items]
     if src is None:
         return [(it[0], "no image (file not found)", -1, -1, None) for it in items]
     try:
