@@ -1,11 +1,11 @@
 """One spelling per idea across every command: names, metavars, types and help of the shared options."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 import pytest
 from click.testing import CliRunner
-
-from pathlib import Path
 
 from hpe_cli.cli import options as opt
 from hpe_cli.cli.main import COMMANDS, cli
