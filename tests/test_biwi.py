@@ -275,3 +275,51 @@ def test_tgz_member_size_checked_before_reading(tmp_path, monkeypatch):
     with pytest.raises(HpeError, match=r"01/frame_00003_pose.bin: expected 24 bytes \(6 float32\), got 4194304"):
         biwi_mod.read_biwi_tgz(path)
     assert not calls
+
+
+# ------------------------------------------------------------- rejected frames
+@needs_data
+def test_bad_frames_collected_not_raised(tmp_path):
+    """With ``bad=[]`` a damaged pose file is one reject (its reason, its file) and the other frames read as before."""
+    hp = tmp_path / "hpdb" / "01"
+    hp.mkdir(parents=True)
+    shutil.copy(BIWI / "hpdb" / "01" / "frame_00003_pose.txt", hp)
+    (hp / "frame_00004_pose.txt").write_text("1 0 0\n0 1 0\n0 0 -1\n\n1 2 3\n")  # a reflection
+    (hp / "frame_00005_pose.txt").write_bytes(b"\xff\xfe")  # not ASCII
+    with pytest.raises(HpeError, match="frame_00004_pose.txt: expected a rotation"):
+        read_biwi(tmp_path / "hpdb")
+    bad = []
+    t = read_biwi(tmp_path / "hpdb", bad=bad)
+    assert list(t["file"]) == ["01/frame_00003_pose.txt"]
+    np.testing.assert_allclose(t[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy().reshape(3, 3),
+                               nearest_rotation(R3), atol=1e-12)
+    assert [b["file"] for b in bad] == ["01/frame_00004_pose.txt", "01/frame_00005_pose.txt"]
+    assert bad[0]["reason"].startswith("expected a rotation matrix") and bad[0]["frame"] == 4
+    assert bad[0]["message"] == f"{hp / 'frame_00004_pose.txt'}: {bad[0]['reason']}"
+    assert bad[1]["reason"] == "cannot read BIWI pose file (UnicodeDecodeError)"
+    only_bad = tmp_path / "only" / "01"
+    only_bad.mkdir(parents=True)
+    shutil.copy(hp / "frame_00004_pose.txt", only_bad)
+    with pytest.raises(HpeError, match=r"no readable BIWI pose file in .*only \(1 rejected\)"):
+        read_biwi(tmp_path / "only", bad=[])
+
+
+def test_tgz_bad_member_collected_unread(tmp_path, monkeypatch):
+    """In an archive, a pose member of the wrong size is a reject, still judged from its header alone."""
+    import io
+
+    path = tmp_path / "db_annotations.tgz"
+    good = np.array([51.9, 38.3, 881.8, -7.7, 3.4, -2.5], "<f4").tobytes()
+    with tarfile.open(path, "w:gz") as tf:
+        for name, data in (("01/frame_00003_pose.bin", b"\0" * (4 << 20)), ("01/frame_00004_pose.bin", good)):
+            info = tarfile.TarInfo(name)
+            info.size = len(data)
+            tf.addfile(info, io.BytesIO(data))
+    calls = []
+    real = tarfile.TarFile.extractfile
+    monkeypatch.setattr(tarfile.TarFile, "extractfile", lambda self, m: calls.append(m.name) or real(self, m))
+    bad = []
+    t = read_biwi_tgz(path, bad=bad)
+    assert list(t["file"]) == ["01/frame_00004_pose.bin"] and calls == ["01/frame_00004_pose.bin"]
+    assert [(b["file"], b["frame"], b["reason"]) for b in bad] == [
+        ("01/frame_00003_pose.bin", 3, "expected 24 bytes (6 float32), got 4194304")]

@@ -118,3 +118,60 @@ def test_cli_biwi_rgb_without_calibration(tmp_path):
         f = pd.read_csv(tmp_path / "o.csv")
         # frame 166's head box (checked by eye on frame_00166_rgb.png) lies inside the 640x480 image
         assert 0 < f.loc[0, "bbox_x"] and f.loc[0, "bbox_x"] + f.loc[0, "bbox_w"] < 640
+
+
+def _damaged_copy(tmp_path):
+    """A copy of the real .bin subset with three damaged frames: truncated, NaN, and a yaw no Z-Y-X split gives."""
+    sub = BIWI / "db_annotations_subset"
+    if not sub.exists():
+        pytest.skip("real BIWI annotations absent")
+    ann = tmp_path / "ann"
+    shutil.copytree(sub, ann)
+    frames = sorted(p.relative_to(ann).as_posix() for p in ann.rglob("frame_*_pose.bin"))
+    (ann / "01/frame_00006_pose.bin").write_bytes((ann / "01/frame_00006_pose.bin").read_bytes()[:10])
+    v = np.frombuffer((ann / "02/frame_00348_pose.bin").read_bytes(), "<f4").copy()
+    v[4] = np.nan
+    (ann / "02/frame_00348_pose.bin").write_bytes(v.tobytes())
+    v = np.frombuffer((ann / "03/frame_00562_pose.bin").read_bytes(), "<f4").copy()
+    v[4] = 120.0
+    (ann / "03/frame_00562_pose.bin").write_bytes(v.tobytes())
+    return ann, frames
+
+
+def test_cli_biwi_rejects_damaged_frames(tmp_path):
+    """Every frame is in the labels or the rejects (file, reason); the kept ones equal a read of the originals."""
+    ann, frames = _damaged_copy(tmp_path)
+    out, rej = tmp_path / "o.parquet", tmp_path / "rej.csv"
+    r = CliRunner().invoke(cli, ["biwi", str(ann), "-o", str(out), "--system", "300w_lp", "--rejects", str(rej)])
+    assert r.exit_code == 0, r.output
+    assert "rejected 3 frames" in r.stderr and str(rej) in r.stderr
+    labels, rejects = pd.read_parquet(out), pd.read_csv(rej, dtype={"sequence": str})
+    assert list(rejects.columns) == ["file", "sequence", "frame", "reason"]
+    assert sorted(labels["file"].tolist() + rejects["file"].tolist()) == frames
+    assert len(labels) + len(rejects) == len(frames) and not set(labels["file"]) & set(rejects["file"])
+    why = dict(zip(rejects["file"], rejects["reason"]))
+    assert why == {"01/frame_00006_pose.bin": "expected 24 bytes (6 float32), got 10",
+                   "02/frame_00348_pose.bin": why["02/frame_00348_pose.bin"],
+                   "03/frame_00562_pose.bin": "yaw: expected degrees within +-90 (a Z-Y-X split), got 120"}
+    assert why["02/frame_00348_pose.bin"].startswith("expected finite values")
+    assert rejects.set_index("file").loc["03/frame_00562_pose.bin", ["sequence", "frame"]].tolist() == ["03", 562]
+    whole = read_biwi_camera(BIWI / "db_annotations_subset", system="300w_lp").set_index("file").loc[labels["file"]]
+    cols = [f"r{i}{j}" for i in range(3) for j in range(3)] + ["center_x", "center_y", "center_z", "bbox_w"]
+    np.testing.assert_allclose(labels[cols].to_numpy(), whole[cols].to_numpy(), atol=1e-12)
+
+
+def test_cli_biwi_without_rejects_or_strict_writes_nothing(tmp_path):
+    ann, _ = _damaged_copy(tmp_path)
+    out, rej = tmp_path / "o.csv", tmp_path / "rej.csv"
+    r = CliRunner().invoke(cli, ["biwi", str(ann), "-o", str(out)])
+    assert r.exit_code == 1 and len(r.output.strip().splitlines()) == 1, r.output
+    assert f"{ann / '01' / 'frame_00006_pose.bin'}: expected 24 bytes" in r.output and "3 row(s)" in r.output
+    assert "--rejects" in r.output and not out.exists()
+    r = CliRunner().invoke(cli, ["biwi", str(ann), "-o", str(out), "--rejects", str(rej), "--strict"])
+    assert r.exit_code == 1 and "--strict" in r.output and len(r.output.strip().splitlines()) == 1, r.output
+    assert not out.exists() and not rej.exists()
+    shutil.rmtree(ann)
+    shutil.copytree(BIWI / "db_annotations_subset", ann)
+    r = CliRunner().invoke(cli, ["biwi", str(ann), "-o", str(out), "--rejects", str(rej), "--strict", "-q"])
+    assert r.exit_code == 0, r.output  # nothing rejected: --strict changes nothing
+    assert pd.read_csv(rej).empty and len(pd.read_csv(out)) == len(list(ann.rglob("*.bin")))

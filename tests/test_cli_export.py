@@ -272,3 +272,36 @@ def test_w300lp_root_identity_groups(tmp_path):
     pose = scipy.io.loadmat(src.with_suffix(".mat"))["Pose_Para"][0][:3]
     for f in (out / crops["split"].iloc[0]).glob("*.mat"):
         np.testing.assert_allclose(scipy.io.loadmat(f)["Pose_Para"][0][:3], pose, atol=1e-6)
+
+
+
+def test_radians_table_exports_the_same_rotations(tmp_path):
+    """--radians: a table with its angles in radians exports the same rotations (as matrices) as in degrees."""
+    from scipy.spatial.transform import Rotation
+
+    deg = make_set(tmp_path, n_images=4, heads=2)
+    t = pd.read_csv(deg)
+    t["pitch"] += [0, -40, 70, 15, -85, 30, 5, -60]  # spread the angles over the range
+    t["roll"] += [160, -120, 0, 45, -10, 90, -170, 20]
+    t.to_csv(deg, index=False)
+    rad = tmp_path / "labels_rad.csv"
+    t.assign(**{c: np.radians(t[c]) for c in ("pitch", "yaw", "roll")}).to_csv(rad, index=False)
+    got = {}
+    for name, args in (("deg", [deg]), ("rad", [rad, "--radians"]), ("rad_as_deg", [rad])):
+        out = tmp_path / name
+        r = run("export", *args, "-o", out, "--layout", "hf", "--from", "300w_lp", "-q")
+        assert r.exit_code == 0, r.output
+        f = pd.concat([pd.read_parquet(p) for p in sorted(out.rglob("*.parquet"))], ignore_index=True)
+        f = f.sort_values(["image_file", "person_id"], ignore_index=True)
+        got[name] = np.stack([np.stack(m) for m in f["rotation"]]).astype(np.float64)
+        if name == "rad_as_deg":
+            assert "radians" in r.stderr  # the units watch: every |angle| is below pi
+    # oracle: img2pose's 300W-LP reading (utils/json_loader_300wlp.py, SciPy "xyz" of pitch, -yaw, -roll),
+    # transposed and seen in the camera frame diag(1, -1, -1)
+    F = np.diag([1.0, -1.0, -1.0])
+    pyr = t.sort_values(["image", "person_id"])[["pitch", "yaw", "roll"]].to_numpy()
+    want = F @ Rotation.from_euler("xyz", pyr * [1, -1, -1], degrees=True).as_matrix().transpose(0, 2, 1) @ F
+    assert got["deg"].shape == got["rad"].shape == (len(t), 3, 3)
+    np.testing.assert_allclose(got["deg"], want, atol=1e-6)
+    np.testing.assert_allclose(got["rad"], got["deg"], atol=1e-6)
+    assert np.abs(got["rad_as_deg"] - got["deg"]).max() > 0.1  # without --radians the rotations differ

@@ -3,7 +3,14 @@ from __future__ import annotations
 
 import click
 
-from .options import SYSTEM, echo_summary, output_option, overwrite_option, verbosity_options
+from .options import (
+    SYSTEM,
+    echo_summary,
+    output_option,
+    overwrite_option,
+    rejects_options,
+    verbosity_options,
+)
 
 
 def _fractions(ctx, param, value):
@@ -37,10 +44,11 @@ def _fractions(ctx, param, value):
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the sequence shuffle.")
 @click.option("--split-lists", type=click.Path(file_okay=False),
               help="Write <split>_sequences.txt (one sequence per line) into this folder.")
+@rejects_options
 @overwrite_option
 @verbosity_options
-def biwi(input, output, camera, calibration, head_size, system, protocol, split, seed, split_lists, overwrite,
-         verbose, quiet):
+def biwi(input, output, camera, calibration, head_size, system, protocol, split, seed, split_lists, rejects, strict,
+         overwrite, verbose, quiet):
     """Read BIWI Kinect Head Pose labels (hpdb/ pose.txt, db_annotations/ .bin or db_annotations.tgz).
 
     Writes one row per frame: the label in --system (matrix r00..r22 and
@@ -54,7 +62,9 @@ def biwi(input, output, camera, calibration, head_size, system, protocol, split,
     principal point inside the image, distortion a real lens has, R a
     rotation). Two files or archive members that are the same sequence and
     frame, a member stored twice, and members named with '..' or an absolute
-    path are refused, naming them.
+    path are refused, naming them. A frame whose pose file is unreadable or
+    invalid goes to --rejects (file, sequence, frame, reason); without
+    --rejects, or with --strict, it is an error and nothing is written.
 
     \b
     Examples:
@@ -62,15 +72,20 @@ def biwi(input, output, camera, calibration, head_size, system, protocol, split,
       hpe biwi hpdb/ -o biwi_rgb.parquet --camera rgb --system 300w_lp
       hpe biwi db_annotations.tgz -o biwi.parquet --camera rgb --calibration hpdb/
       hpe biwi hpdb/ -o biwi.parquet --split 0.7,0.3 --seed 0 --split-lists splits/
+      hpe biwi db_annotations/ -o biwi.parquet --rejects biwi_rejects.csv
     """
     from ..pipelines.biwi import run_biwi
 
     s = run_biwi(input, output, camera=camera, calibration=calibration, head_size=head_size, system=system,
-                 protocol=protocol, split=split, seed=seed, split_lists=split_lists, overwrite=overwrite)
+                 protocol=protocol, split=split, seed=seed, split_lists=split_lists, overwrite=overwrite,
+                 rejects_path=rejects, strict=strict)
     lines = [f"{s['rows']} frames of {s['sequences']} sequences ({camera} camera, {system.name}) -> {output}"]
     if s["dropped"]:
         lines.append(f"protocol {protocol}: {s['dropped']} frames left out")
     if s["splits"]:
         lines.append("split (sequences): " + ", ".join(f"{k} {v}" for k, v in s["splits"].items())
                      + (f" -> {', '.join(s['lists'])}" if s["lists"] else ""))
+    if s["rejected"]:
+        lines.append(f"rejected {s['rejected']} frames: "
+                     + "; ".join(f"{v} {k}" for k, v in s["rejects_per_reason"].items()) + f" -> {rejects}")
     echo_summary(lines, quiet)

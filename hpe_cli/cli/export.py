@@ -8,6 +8,7 @@ from .options import (
     echo_summary,
     overwrite_option,
     progress,
+    radians_option,
     rejects_options,
     verbosity_options,
 )
@@ -38,6 +39,7 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
               help="Label system of the hf layout [default: 300w_lp]; the other layouts fix their trainer's.")
 @click.option("--from", "input_system", type=SYSTEM, default=None,
               help="System of the input tables' angles [default: the table's hpe:system metadata, else 300w_lp].")
+@radians_option()
 @click.option("--crop-scale", type=click.FloatRange(0, min_open=True), default=None,
               help="Enlarge each head box by this factor about its centre [default: 1].")
 @click.option("--square/--no-square", default=None, help="Square crops (side = the box's longer side) "
@@ -66,7 +68,7 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @rejects_options
 @overwrite_option
 @verbosity_options
-def export(labels, output, layout, form, trainer, images, system, input_system, crop_scale, square, size, quality,
+def export(labels, output, layout, form, trainer, images, system, input_system, radians, crop_scale, square, size, quality,
            pad_value, min_inside, split, split_file, min_change, balance, seed, drop_images_with_rejects, workers,
            rejects, strict, overwrite, verbose, quiet):
     """Export labels as a training-ready dataset in a trainer's own layout.
@@ -90,6 +92,7 @@ def export(labels, output, layout, form, trainer, images, system, input_system, 
       hpe export pizza.parquet -o out/dmhp --layout directmhp --split camera:train=0.75,val=0.25 --images SEQ
       hpe export AFLW2000/ 300W_LP/AFW -o out/fsa --layout fsanet --split identity:0.9,0.1
       hpe export pizza.parquet -o out/hf --layout hf --system 6drepnet --min-change 5 --balance yaw:10:500
+      hpe export preds_rad.csv -o out/hf --layout hf --from 6drepnet --radians --rejects rej.csv
     """
     from ..io.export import get_layout
     from ..pipelines.export import ExportOptions, run_export
@@ -103,7 +106,7 @@ def export(labels, output, layout, form, trainer, images, system, input_system, 
     if trainer is not None and layout != "6drepnet":
         raise click.UsageError("--trainer applies to --layout 6drepnet only (the layout Hopenet, 6DRepNet and "
                                "6DRepNet360 share)")
-    opts = ExportOptions(layout=layout, images=tuple(images), system=system, input_system=input_system, form=form, trainer=trainer,
+    opts = ExportOptions(layout=layout, images=tuple(images), system=system, input_system=input_system, radians=radians, form=form, trainer=trainer,
                          crop_scale=crop_scale, square=square, size=size, quality=quality, pad_value=pad_value,
                          min_inside=min_inside, split=split, split_file=split_file, min_change=min_change,
                          balance=balance, seed=seed, drop_images_with_rejects=drop_images_with_rejects,

@@ -224,7 +224,7 @@ def labels_table(files, sequences, frames, centres, R=None, angles=None, system=
     return pd.DataFrame(cols)
 
 
-def read_biwi(path, system=BIWI_SYSTEM, kind: str = "auto"):
+def read_biwi(path, system=BIWI_SYSTEM, kind: str = "auto", bad: list | None = None):
     """Read BIWI pose files into the label table.
 
     Parameters
@@ -239,6 +239,12 @@ def read_biwi(path, system=BIWI_SYSTEM, kind: str = "auto"):
     kind : {"auto", "txt", "bin"}
         Which files of a folder to read; ``auto`` takes ``pose.txt`` when the
         folder has any, else ``.bin``.
+    bad : list, optional
+        Collect frames whose pose file is unreadable or invalid instead of
+        raising: one :func:`frame_reject` dict per frame (``file``,
+        ``sequence``, ``frame``, ``reason``, ``message``); the table holds the
+        other frames. Without it the first such file raises ``HpeError``.
+        Names, duplicates and archives that cannot be read stay errors.
 
     Returns
     -------
@@ -248,7 +254,7 @@ def read_biwi(path, system=BIWI_SYSTEM, kind: str = "auto"):
     """
     path = Path(path)
     if path.is_file() and path.name.endswith((".tgz", ".tar.gz", ".tar")):
-        return read_biwi_tgz(path, system)
+        return read_biwi_tgz(path, system, bad=bad)
     if path.is_file():
         files, base = [path], path.parent
     elif path.is_dir():
@@ -275,20 +281,46 @@ def read_biwi(path, system=BIWI_SYSTEM, kind: str = "auto"):
         raise HpeError(f"{path}: expected one kind of pose file, got both .txt and .bin (use kind=)")
     names = [r[0].relative_to(base).as_posix() for r in recs]
     _refuse_duplicates([(r[1], r[2]) for r in recs], names, path)
-    seqs = [r[1] for r in recs]
-    frames = [r[2] for r in recs]
+    reader = read_pose_txt if kinds == {"txt"} else read_pose_bin
+    keep, values = [], []
+    for k, r in enumerate(recs):
+        try:
+            values.append(reader(r[0]))
+        except HpeError as exc:
+            if bad is None:
+                raise
+            bad.append(frame_reject(names[k], r[1], r[2], exc, r[0]))
+            continue
+        keep.append(k)
+    _all_rejected(path, keep, bad)
+    names, seqs, frames = [names[k] for k in keep], [recs[k][1] for k in keep], [recs[k][2] for k in keep]
     if kinds == {"txt"}:
-        pairs = [read_pose_txt(r[0]) for r in recs]
-        return labels_table(names, seqs, frames, np.stack([p[1] for p in pairs]),
-                            R=np.stack([p[0] for p in pairs]), system=system)
-    vals = np.stack([read_pose_bin(r[0]) for r in recs])
+        return labels_table(names, seqs, frames, np.stack([p[1] for p in values]),
+                            R=np.stack([p[0] for p in values]), system=system)
+    vals = np.stack(values)
     return labels_table(names, seqs, frames, vals[:, :3], angles=vals[:, 3:], system=system)
 
 
-def read_biwi_tgz(path, system=BIWI_SYSTEM):
+def frame_reject(name, sequence, frame, exc, where) -> dict:
+    """A frame set aside: its ``file`` (as in the label table), ``sequence``, ``frame``, the ``reason`` (the
+    error without its ``where: `` prefix) and the whole one-line ``message`` (``FILE: reason``)."""
+    msg = str(exc)
+    head = f"{where}: "
+    return {"file": name, "sequence": sequence, "frame": int(frame),
+            "reason": msg.removeprefix(head), "message": msg}
+
+
+def _all_rejected(path, keep, bad) -> None:
+    if not keep and bad:
+        raise HpeError(f"{bad[0]['message']}; no readable BIWI pose file in {path} ({len(bad)} rejected)")
+
+
+def read_biwi_tgz(path, system=BIWI_SYSTEM, bad: list | None = None):
     """Read the official ``db_annotations.tgz`` (``NN/frame_XXXXX_pose.bin`` members) without extracting it.
 
     Members that are not pose files are skipped; ``file`` is the member name.
+    ``bad``: as for :func:`read_biwi` (a member of the wrong size or with
+    invalid values is set aside there instead of raising).
     """
     path = Path(path)
     names, seqs, frames, vals = [], [], [], []
@@ -307,15 +339,21 @@ def read_biwi_tgz(path, system=BIWI_SYSTEM):
                     raise HpeError(f"{path}: member {m.name} appears twice in the archive (its rows would be "
                                    "duplicated); repack it with one copy")
                 seen_members.add(m.name)
-                if m.size != 24:  # checked from the header, before reading the member
-                    raise HpeError(f"{path}:{m.name}: expected 24 bytes (6 float32), got {m.size}")
-                fh = tf.extractfile(m)
-                vals.append(_decode_bin(f"{path}:{m.name}", fh.read(25)))
+                try:
+                    if m.size != 24:  # checked from the header, before reading the member
+                        raise HpeError(f"{path}:{m.name}: expected 24 bytes (6 float32), got {m.size}")
+                    vals.append(_decode_bin(f"{path}:{m.name}", tf.extractfile(m).read(25)))
+                except HpeError as exc:
+                    if bad is None:
+                        raise
+                    bad.append(frame_reject(m.name, parsed[0], parsed[1], exc, f"{path}:{m.name}"))
+                    continue
                 names.append(m.name)
                 seqs.append(parsed[0])
                 frames.append(parsed[1])
     except (tarfile.TarError, OSError, EOFError) as exc:
         raise HpeError(f"{path}: not a readable tar archive ({' '.join(str(exc).split())[:120]})") from None
+    _all_rejected(path, vals, bad)
     if not vals:
         raise HpeError(f"{path}: no NN/frame_XXXXX_pose.bin members found")
     _refuse_duplicates(list(zip(seqs, frames)), names, path)
@@ -405,7 +443,7 @@ def _find_calibration(root: Path, sequence: str, name: str):
 
 
 def read_biwi_camera(path, camera: str = "depth", calibration=None, head_size_mm: float = HEAD_SIZE_MM,
-                     system=BIWI_SYSTEM):
+                     system=BIWI_SYSTEM, bad: list | None = None):
     """BIWI labels in the depth or RGB camera, with head-centre boxes.
 
     Parameters
@@ -423,6 +461,9 @@ def read_biwi_camera(path, camera: str = "depth", calibration=None, head_size_mm
         default ``path`` (or its folder).
     head_size_mm : float
         Diameter of the head sphere for the boxes (:data:`HEAD_SIZE_MM`).
+    bad : list, optional
+        Collects the frames whose pose file is unreadable or invalid
+        (:func:`read_biwi`); a bad calibration file stays an error.
 
     Returns
     -------
@@ -437,7 +478,7 @@ def read_biwi_camera(path, camera: str = "depth", calibration=None, head_size_mm
     if camera not in ("depth", "rgb"):
         raise HpeError(f"--camera: expected depth or rgb, got {camera!r}")
     path = Path(path)
-    base = read_biwi(path, system=BIWI_SYSTEM)
+    base = read_biwi(path, system=BIWI_SYSTEM, bad=bad)
     R = np.array(base[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy(), dtype=np.float64).reshape(-1, 3, 3)
     centres = np.array(base[CENTRE_COLS].to_numpy(), dtype=np.float64)
     seqs = base["sequence"].astype(str).to_numpy()

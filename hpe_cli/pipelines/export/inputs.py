@@ -140,8 +140,10 @@ def _pose_para_frame(t, box, lm, landmarks: bool, columns: dict):
     return frame.copy()
 
 
-def load_table_input(path: Path, source: str, input_system=None, images_root=None, landmarks: bool = True):
-    """A label table (relabel-panoptic/agora output or any table with image, box and labels)."""
+def load_table_input(path: Path, source: str, input_system=None, images_root=None, landmarks: bool = True,
+                     radians: bool = False):
+    """A label table (relabel-panoptic/agora output or any table with image, box and labels); ``radians``: its
+    angle columns are in radians (``--radians``; matrix columns and ``.mat`` folders are unaffected)."""
     import pandas as pd
     import pyarrow as pa
 
@@ -171,7 +173,7 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
         nb = batch.num_rows
         if nb == 0:
             continue
-        lab, ok, reasons = label_columns_fast(batch, mode)
+        lab, ok, reasons = label_columns_fast(batch, mode, radians)
         reasons = np.full(nb, "", dtype=object) if reasons is None else reasons
         vals = np.stack(lab, -1)
         vals = np.where(ok[:, None], vals, 0.0)
@@ -221,8 +223,9 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
     return frame
 
 
-def load_inputs(paths, images=(), input_system=None, landmarks: bool = True):
-    """Every input as one table (a ``source`` column tells them apart); ``landmarks``: keep the 2-D points."""
+def load_inputs(paths, images=(), input_system=None, landmarks: bool = True, radians: bool = False):
+    """Every input as one table (a ``source`` column tells them apart); ``landmarks``: keep the 2-D points;
+    ``radians``: the tables' angle columns are in radians."""
     import pandas as pd
 
     if images and len(images) not in (1, len(paths)):
@@ -252,7 +255,7 @@ def load_inputs(paths, images=(), input_system=None, landmarks: bool = True):
             raise HpeError(f"{p}: expected a label table (.parquet/.csv) or a folder of 300W-LP/AFLW2000 .mat "
                            "files (BIWI: export its table with image and box columns)")
         else:
-            f = load_table_input(p, name, input_system, root, landmarks)
+            f = load_table_input(p, name, input_system, root, landmarks, radians)
         frames.append(f)
     frame = pd.concat(frames, ignore_index=True).copy()
     for c in [c for c in frame.columns if re.fullmatch(r"lm\d+_[xy]", c)]:

@@ -46,7 +46,8 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
     rejects = Rejects(opts.rejects, opts.overwrite)
     layout, system = _layout_and_system(opts)
     # stage 1 and 2: the label table, the layout's rules, splits and sampling
-    rows = load_inputs(inputs, opts.images, opts.input_system, landmarks=layout.uses_landmarks)
+    rows = load_inputs(inputs, opts.images, opts.input_system, landmarks=layout.uses_landmarks,
+                       radians=opts.radians)
     sel = select(rows, layout, system, opts)
     # stage 3: crop geometry and one task per source image
     plan = pixels.plan_crops(sel, layout, opts)

@@ -26,6 +26,7 @@ class ExportOptions:
     images: tuple = ()
     system: object = None
     input_system: object = None
+    radians: bool = False
     form: str | None = None
     trainer: str | None = None
     crop_scale: float | None = None
