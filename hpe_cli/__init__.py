@@ -232,23 +232,9 @@ class LabelTable(tuple):
 
 
 def _system_from_schema(schema, path):
-    from .rotation.systems import system_from_dict
+    from .io.system_meta import system_from_metadata
 
-    meta = {k.decode(): v.decode() for k, v in (schema.metadata or {}).items()}
-    if "hpe:system_definition" in meta:
-        import json
-
-        d = json.loads(meta["hpe:system_definition"])
-        # RotationSystem.to_dict() also writes derived fields that the TOML layout does not take
-        if d.pop("angle_frame", "system") == "canonical":
-            d.pop("turns", None)
-            d.pop("sequence", None)
-        for key in [k for k, v in d.items() if v is None]:
-            del d[key]
-        return system_from_dict(d, f"{path}: hpe:system_definition")
-    if "hpe:system" in meta:
-        return get_system(meta["hpe:system"])
-    return None
+    return system_from_metadata(schema.metadata, path)
 
 
 def read_labels(path, system=None, **reader_options) -> LabelTable:

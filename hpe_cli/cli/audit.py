@@ -11,8 +11,9 @@ from .options import SYSTEM, batch_option, echo_summary, output_option, overwrit
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
-@click.option("--system", "system", type=SYSTEM, default="300w_lp", show_default=True,
-              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file.")
+@click.option("--system", "system", type=SYSTEM, default=None,
+              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
+                   "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].")
 @click.option("--json", "report", type=click.Path(dir_okay=False, allow_dash=True),
               help="Write the report (counts, settings, example rows) as JSON; '-' prints it.")
 @click.option("--plots", type=click.Path(file_okay=False),
@@ -90,7 +91,8 @@ def audit(ctx, input, system, report, plots, output, only_flagged, gimbal_tol, r
     from ..rotation.audit import CHECKS
 
     flagged = result["details"]["flagged"]
-    lines = [f"audit of {input}: {result['rows']} rows ({result['label_columns']}, system {system.name}), "
+    lines = [f"audit of {input}: {result['rows']} rows ({result['label_columns']}, system {result['system']} "
+             f"from {result['system_origin']}), "
              f"{flagged} flagged",
              "  " + ", ".join(f"{c} {result[c]}" for c in CHECKS)]
     for c in CHECKS:

@@ -13,7 +13,8 @@ from .options import (batch_option, echo_summary, output_option, overwrite_optio
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
-@system_option()
+@system_option(default=None, help="Rotation system of the labels and of OUTPUT: a built-in name or a .toml "
+               "file [default: the file's own (hpe:system metadata, dataset format), else 300w_lp].")
 @click.option("--image-size", nargs=2, type=click.IntRange(1), required=True, metavar="W H",
               help="Width and height of the images, in pixels.")
 @click.option("--hflip", is_flag=True, help="Mirror left-right (with --vflip: both, a rotation by 180).")
@@ -108,7 +109,7 @@ def augment(input, output, system, image_size, hflip, vflip, rotate, mirror_line
                         description=desc)
     finally:
         bar.close()
-    lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {system.name} -> {output}",
+    lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {s['system']} -> {output}",
              f"landmarks: {s['landmarks']}; boxes: {s['boxes']}"]
     if verbose:
         lines.append(f"labels read from {s['label_source']}; pixel centres at integers, "

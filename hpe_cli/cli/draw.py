@@ -25,8 +25,9 @@ def _canvas_size(ctx, param, value):
               help="Output folder (created if missing); images keep their relative names.")
 @click.option("--images", type=click.Path(exists=True, file_okay=False),
               help="Folder the `image` column is relative to (default: INPUT's folder).")
-@click.option("--system", "system", type=SYSTEM, default="300w_lp", show_default=True,
-              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file.")
+@click.option("--system", "system", type=SYSTEM, default=None,
+              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
+                   "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].")
 @click.option("--style", type=click.Choice(["axes", "cube"]), default="axes", show_default=True,
               help="Three axis lines (Hopenet's draw_axis) or the pose cube.")
 @click.option("--canvas", type=str, callback=_canvas_size, metavar="WxH",

@@ -25,8 +25,12 @@ def _split_keys(ctx, param, value):
 @output_option(required=False, help="Per-pair errors (.parquet or .csv): key columns, gt_/pred_ pitch,yaw,roll "
                                     "in the GT system, err_pitch/yaw/roll (wrapped), geodesic, maev_left/down/"
                                     "front, frobenius.")
-@click.option("--pred-system", type=SYSTEM, required=True, help="Rotation system of PRED (name or .toml).")
-@click.option("--gt-system", type=SYSTEM, required=True, help="Rotation system of GT (name or .toml).")
+@click.option("--pred-system", type=SYSTEM, default=None,
+              help="Rotation system of PRED (name or .toml) [default: the file's own; required for files that "
+                   "name none].")
+@click.option("--gt-system", type=SYSTEM, default=None,
+              help="Rotation system of GT (name or .toml) [default: the file's own; required for files that "
+                   "name none].")
 @click.option("--key", "keys", multiple=True, callback=_split_keys, metavar="COL[,COL...]",
               help="Join columns (default: 'image' if both tables have it, else 'file', else row order).")
 @click.option("--protocol", "protocols", multiple=True, type=click.Choice(_PROTOCOL_NAMES + ("all",)),

@@ -50,10 +50,12 @@ class HpeGroup(click.Group):
     def invoke(self, ctx):
         import warnings
 
+        from ..io.system_meta import end_run, start_run
         from ..io.transaction import OutputTransaction
         from . import signals
 
         txn = OutputTransaction()
+        run_token = start_run()
         try:
             with warnings.catch_warnings(), signals.handled():
                 if not os.environ.get("HPE_DEBUG"):
@@ -92,7 +94,11 @@ class HpeGroup(click.Group):
                 msg = (f"internal error {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
                        "(please report it; set HPE_DEBUG=1 for a traceback)")
             _error(msg)
-            ctx.exit(1)
+            from ..errors import HpeError
+
+            ctx.exit(exc.exit_code if isinstance(exc, HpeError) else 1)
+        finally:
+            end_run(run_token)
 
 
 def _message(exc, txn=None) -> str | None:

@@ -44,8 +44,9 @@ import numpy as np
 
 from ..errors import HpeError
 
+from .run_options import INPUT_FORMATS, active_table_options  # noqa: F401
+
 LINE_COL = "__line__"
-from ..cli.table_options import INPUT_FORMATS  # noqa: E402
 #: rotation system of the angles each named format holds (None: the list does not say)
 FORMAT_SYSTEMS = {"whenet": "whenet", "opal23": None, "img2pose-biwi": "300w_lp", "celeba-pose": None, "coco": None}
 #: OPAL field names -> hpe column names
@@ -333,6 +334,13 @@ def is_coco(doc) -> bool:
     return isinstance(doc, dict) and isinstance(doc.get("images"), list) and isinstance(doc.get("annotations"), list)
 
 
+def coco_system(doc):
+    """The system a COCO file written by ``hpe`` names in ``info["hpe:system"]``, else None."""
+    info = doc.get("info") if isinstance(doc, dict) else None
+    name = info.get("hpe:system") if isinstance(info, dict) else None
+    return name if isinstance(name, str) and name else None
+
+
 def coco_frame(doc, path="<coco>"):
     """One row per COCO annotation (DirectMHP's schema) as a pandas DataFrame.
 
@@ -459,7 +467,7 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
         if fmt == "coco-or-json":
             doc = load_json(path)
             if is_coco(doc):
-                return _frame_source(path, coco_frame(doc, path), batch_size, with_lines)
+                return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
             from ..datasets.dad3dheads import is_dad_metadata
 
             if is_dad_metadata(doc):
@@ -482,7 +490,8 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
     if not path.is_file():
         raise HpeError(f"{path}: --input-format {fmt} reads a file, got a folder")
     if fmt == "coco":
-        return _frame_source(path, coco_frame(load_json(path), path), batch_size, with_lines)
+        doc = load_json(path)
+        return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
     if fmt == "whenet":
         return open_text(path, batch_size, delimiter=",", header=False, names=["image", "yaw", "pitch", "roll"],
                          quoting=False, string_columns=("image",), with_lines=with_lines,
@@ -514,8 +523,3 @@ def label_system(src, requested):
             return requested
     return requested
 
-
-# ------------------------------------------------------------------------------------------- click
-# the decorator lives in a module without numpy/pyarrow imports, so `hpe --help` stays fast
-from ..cli.table_options import (active_table_options, column_options, pop_table_kwargs,  # noqa: E402,F401
-                                 table_kwargs)

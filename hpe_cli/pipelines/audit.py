@@ -283,6 +283,10 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
                 check_output(p, overwrite)
 
     src = _source(input_path, batch_size)
+    from ..io.system_meta import resolve_system
+
+    resolved = resolve_system(src, system, default="300w_lp")
+    system = resolved.system
     columns = src.columns
     mode = label_mode(columns, src.path, system) if use == "auto" else use
     need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
@@ -372,7 +376,8 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
                               zip(dups.line_of(dups.dup_idx[:n_examples]), dups.line_of(dups.first_idx[:n_examples]))]
 
     result = {"rows": rows, **counts,
-              "system": system.name, "input": str(src.path), "label_columns": mode,
+              "system": system.name, "system_origin": resolved.origin, "input": str(src.path),
+              "label_columns": mode,
               "units": "radians" if (radians and mode == "angles") else ("degrees" if mode == "angles" else None),
               "settings": {"near_gimbal_deg": near_tol_deg, "gimbal_lock_tol": system.gimbal_tol,
                            "lock_distance": "|cos| (or |sin| for proper Euler) of the middle angle",

@@ -180,9 +180,10 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     from ..io.readers import LINE_COL
 
     src = open_table(path, batch_size, with_lines=True)
-    from ..io.columns import label_system
+    from ..io.system_meta import output_system, resolve_system
 
-    in_system = label_system(src, system)  # .mat Pose_Para is always 300w_lp; output is in --system
+    res = resolve_system(src, system, option_is_output=True)  # the file's own system, else --system
+    in_system, system = res.system, output_system(res)  # .mat Pose_Para is always 300w_lp; output in --system
     columns = src.columns
     mode = label_mode(columns, path, in_system)  # the system's own columns, else angles, else r00..r22
     stored_kind = mode not in ("angles", "matrix") or bool(in_system.columns and all(c in columns for c in
@@ -316,5 +317,5 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     box_text = f"{n_boxes} moved ({box_from}{', clipped' if clip else ''})" if has_box else "none in input"
     label_source = "pitch,yaw,roll" + (" (checked against r00..r22)" if cross_check else "") \
         if mode == "angles" else "r00..r22"
-    return {"rows": rows, "written": written, "label_source": label_source, "landmarks": lm_text, "boxes": box_text,
+    return {"system": system.name, "rows": rows, "written": written, "label_source": label_source, "landmarks": lm_text, "boxes": box_text,
             "images": n_images, "rejects": dict(rejects.counts)}

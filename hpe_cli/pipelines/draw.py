@@ -166,6 +166,9 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
 
     input_path = Path(input_path)
     src = open_table(input_path)
+    from ..io.system_meta import output_system, resolve_system
+
+    system = output_system(resolve_system(src, system, option_is_output=True))  # file's own, else --system
     mode = label_mode(src.columns, src.path, system) if use == "auto" else use
     is_mat = input_path.is_dir() or input_path.suffix.lower() == ".mat"
     pose_para = is_mat or {"tdz", "scale"} <= set(src.columns)

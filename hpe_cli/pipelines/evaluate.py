@@ -47,9 +47,9 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     from ..rotation import soa
 
     src = open_table(path, batch_size, with_lines=True)
-    from ..io.columns import label_system
+    from ..io.system_meta import resolve_system
 
-    system = label_system(src, system)  # .mat Pose_Para is always 300w_lp, whatever --gt-system says
+    system = resolve_system(src, system, default=None, option_name=f"--{role}-system", option_is_output=True).system
     columns = src.columns
     if use == "auto":  # the system's own value columns (rotvec, quaternion, 6-D...) first, then angles, matrix
         mode = label_mode(columns, src.path, system)
@@ -197,6 +197,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     gt = read_side(gt_path, gt_system, use_gt, keys, by, radians, batch_size, progress, "gt")
     pred = read_side(pred_path, pred_system, use_pred, keys, by if by not in gcols else None, radians,
                      batch_size, progress, "pred")
+    gt_system, pred_system = gt_system or gt.system, pred_system or pred.system  # the files' own when not given
     gidx, pidx, unmatched = join(pred, gt, keys)
 
     missing = pidx < 0
