@@ -761,7 +761,9 @@ def _read_dataset(path: Path):
         from ..datasets.biwi import read_biwi
 
         table = read_biwi(path)
-        out = table[["file", "sequence", "frame", "pitch", "yaw", "roll", "center_x", "center_y", "center_z"]]
+        out = table[["file", "sequence", "frame", "pitch", "yaw", "roll", "center_x", "center_y", "center_z"]].copy()
+        # the key of each row: sequence + frame, and the RGB frame they label (BIWI's NN/frame_XXXXX_rgb.png)
+        out.insert(1, "image", [f"{s}/frame_{int(f):05d}_rgb.png" for s, f in zip(out["sequence"], out["frame"])])
         out.attrs["system"] = "biwi"
         return out
     if path.is_dir():
