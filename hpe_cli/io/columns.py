@@ -92,7 +92,7 @@ class LenientMap(str):
 
     With several inputs (``hpe evaluate PRED GT``) one map serves them all: an
     input is renamed when it has at least one of the mapped source columns,
-    and left alone when it has none.
+    and left alone when it has none (or already has the target names).
     """
 
 
@@ -112,9 +112,10 @@ def apply_columns_map(src, columns):
         raise HpeError(f"--columns-map: {LINE_COL} is reserved for line numbers")
     missing = [s for s in mapping if s not in names]
     if isinstance(columns, LenientMap):
-        if len(missing) == len(mapping):
+        # an input that already has the hpe name (a .mat folder's image and file) keeps it
+        mapping = {k: v for k, v in mapping.items() if k in names and v not in names}
+        if not mapping:
             return src
-        mapping = {k: v for k, v in mapping.items() if k in names}
         missing = []
     if missing:
         raise HpeError(f"{src.path}: --columns-map names column(s) {', '.join(map(repr, missing))} that the table "

@@ -93,7 +93,7 @@ def summary_lines() -> list:
 # ------------------------------------------------------------------------------------------------ the file's own
 def system_from_metadata(metadata, path="input"):
     """The RotationSystem a schema's metadata names (``hpe:system_definition``, else ``hpe:system``), or None."""
-    from ..rotation.systems import get_system, system_from_dict
+    from ..rotation.systems import system_from_dict
 
     meta = {(k.decode() if isinstance(k, bytes) else k): (v.decode("utf-8", "replace") if isinstance(v, bytes) else v)
             for k, v in (metadata or {}).items()}
@@ -113,19 +113,19 @@ def system_from_metadata(metadata, path="input"):
                 del d[key]
             try:
                 return system_from_dict(d, f"{path}: hpe:system_definition")
-            except Exception:
-                pass  # a definition this version cannot rebuild: fall back to the name
+            except (SystemError_, ValueError, TypeError, KeyError):  # not rebuildable here: use the name
+                d = None
     if meta.get("hpe:system"):
         return _named(meta["hpe:system"], path, "hpe:system metadata")
     return None
 
 
 def _named(name, path, what):
-    from ..rotation.systems import get_system
+    from ..rotation.systems import SystemError_, get_system
 
     try:
         return get_system(name)
-    except Exception:
+    except SystemError_:
         raise HpeError(f"{path}: {what} names system {name!r}, which this hpe does not know "
                        "(pass --reinterpret-as SYSTEM to read the labels in another one)") from None
 
@@ -138,11 +138,11 @@ def file_system(src):
     if getattr(src, "system", None):
         what = "format" if getattr(src, "dataset", False) else "metadata"
         if getattr(src, "dataset", False):
-            from ..rotation.systems import get_system
+            from ..rotation.systems import SystemError_, get_system
 
             try:
                 return get_system(src.system)
-            except Exception:  # a dataset system not built in (yet)
+            except SystemError_:  # a dataset system not built in (yet)
                 return None
         return _named(src.system, src.path, what)
     return None
