@@ -93,7 +93,7 @@ def summary_lines() -> list:
 # ------------------------------------------------------------------------------------------------ the file's own
 def system_from_metadata(metadata, path="input"):
     """The RotationSystem a schema's metadata names (``hpe:system_definition``, else ``hpe:system``), or None."""
-    from ..rotation.systems import system_from_dict
+    from ..rotation.systems import SystemError_, system_from_dict
 
     meta = {(k.decode() if isinstance(k, bytes) else k): (v.decode("utf-8", "replace") if isinstance(v, bytes) else v)
             for k, v in (metadata or {}).items()}
