@@ -339,7 +339,7 @@ def test_image_errors_leave_nothing_behind(tmp_path):
         .to_csv(tmp_path / "in.csv", index=False)
     base = [tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", tmp_path / "imgs"]
     res = run(*base, "--image-size", 30, 20, "--out-images", tmp_path / "out")
-    assert res.exit_code == 1 and "row 3: no image for 'missing.png'" in res.output
+    assert res.exit_code == 1 and "line 3: no image for 'missing.png'" in res.output
     assert not (tmp_path / "o.csv").exists() and not (tmp_path / "out").exists()
     res = run(*base, "--image-size", 31, 20, "--out-images", tmp_path / "out")
     assert res.exit_code == 1 and "is 30x20, expected --image-size 31 20" in res.output
@@ -373,4 +373,4 @@ def test_threaded_pipeline_same_output_and_rejects(tmp_path):
         outs.append((pd.read_parquet(out), pd.read_csv(rej)))
     pd.testing.assert_frame_equal(outs[0][0], outs[1][0])
     pd.testing.assert_frame_equal(outs[0][1], outs[1][1])
-    assert outs[1][1]["row"].tolist() == [5, 19, 43]
+    assert outs[1][1]["row"].tolist() == [4, 18, 42]  # Parquet input: 1-based rows

@@ -68,14 +68,14 @@ def test_missing_image_error_and_rejects(tmp_path):
     t = tmp_path / "l.csv"
     pd.DataFrame({"image": ["sub/a.png", "nope.png"], "pitch": 0, "yaw": 0, "roll": 0}).to_csv(t, index=False)
     res = run(t, "-o", tmp_path / "o1", "--images", root)
-    assert res.exit_code == 1 and "row 1" in res.output and "nope.png" in res.output
+    assert res.exit_code == 1 and "l.csv: line 3" in res.output and "nope.png" in res.output
     assert len(res.output.strip().splitlines()) == 1
     assert not (tmp_path / "o1" / "sub" / "a.png").exists()  # nothing drawn before the check
     rej = tmp_path / "rej.csv"
     res = run(t, "-o", tmp_path / "o2", "--images", root, "--rejects", rej)
     assert res.exit_code == 0
     assert (tmp_path / "o2" / "sub" / "a.png").exists()
-    assert pd.read_csv(rej)["row"].tolist() == [1]
+    assert pd.read_csv(rej)["row"].tolist() == [3]  # the file line, as in the message
     (root / "broken.png").write_bytes(b"not an image")
     pd.DataFrame({"image": ["broken.png", "sub/a.png"], "pitch": 0, "yaw": 0, "roll": 0}).to_csv(t, index=False)
     res = run(t, "-o", tmp_path / "o3", "--images", root)

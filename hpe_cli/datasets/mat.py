@@ -88,6 +88,7 @@ def read_mat_dir(path, landmarks: bool = False):
     frame.insert(0, "file", [str(r) for r in rel])
     frame.insert(1, "image", [r.with_suffix(".jpg").as_posix() for r in rel])
     frame.attrs["system"] = "300w_lp"  # Pose_Para is always 300W-LP's convention
+    frame.attrs["one_record_files"] = True  # a bad row is named by its .mat file
     if not landmarks:
         return frame
     extra = {}
@@ -102,5 +103,5 @@ def read_mat_dir(path, landmarks: bool = False):
             for n, a in enumerate("xyz"):
                 extra[f"lm3d{i}_{a}"] = p3[:, n, i]
     out = pd.concat([frame, pd.DataFrame(extra)], axis=1)
-    out.attrs["system"] = "300w_lp"
+    out.attrs.update(frame.attrs)
     return out

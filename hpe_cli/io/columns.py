@@ -421,7 +421,7 @@ def _frame_source(path, frame, batch_size, with_lines, system=None):
         for b in table.to_batches(max_chunksize=batch_size):
             yield b, []
 
-    return TableSource(Path(path), schema, table.num_rows, batches, with_lines, "json", system=system)
+    return TableSource(Path(path), schema, table.num_rows, batches, with_lines, "json", system=system, unit="row")
 
 
 # ------------------------------------------------------------------------------------------- dispatch

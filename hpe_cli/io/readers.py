@@ -3,12 +3,15 @@
 Memory does not depend on the number of rows: Parquet is read one record
 batch at a time without pre-buffering, CSV in bounded blocks of bytes.
 
-Row numbers ("line N")
-----------------------
-Every row has a 1-based *line number*: for CSV it is the file line where the
-record starts (the header is line 1, blank lines count, a record with quoted
-newlines counts from its first line); for Parquet and dataset folders it is
-the line the row would have in a CSV with a header (first row = line 2).
+Row numbers (one rule, :meth:`TableSource.where`)
+-------------------------------------------------
+Every row has a 1-based number in ``__line__``, and every message and rejects
+file uses it: for text files it is the file line where the record starts
+(``FILE: line N``; the header is line 1, blank lines count, a record with
+quoted newlines counts from its first line); for Parquet, JSON and dataset
+tables the 1-based row (``FILE: row N``); a row read from a one-record file
+(a ``.mat`` of a folder, a BIWI pose file) is named by that file
+(``FOLDER/NAME.mat: reason``).
 
 Bad CSV rows
 ------------
@@ -119,23 +122,26 @@ def _open_core(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = Fals
     if dataset is not None and hasattr(dataset, "iter_batches"):  # a dataset reader that streams
 
         def gen_stream():
-            line = 2
+            line = 1
             for b in dataset.iter_batches():
                 yield _with_line(b, line), []
                 line += b.num_rows
         return TableSource(path, _schema(dataset.schema, with_lines), dataset.num_rows, gen_stream, with_lines,
-                           "dataset", system=dataset.system, dataset=True)
+                           "dataset", system=dataset.system, dataset=True, unit="row")
     if dataset is not None:
         system = dataset.attrs.get("system")
+        # one record per file (.mat, BIWI pose files): a row is named by its file
+        row_files = [str(f) for f in dataset["file"]] if dataset.attrs.get("one_record_files") else None
         table = pa.Table.from_pandas(dataset, preserve_index=False)
 
         def gen():
             for start in range(0, max(table.num_rows, 1), batch_size):
                 b = table.slice(start, batch_size).combine_chunks().to_batches()
                 b = b[0] if b else pa.RecordBatch.from_pylist([], schema=table.schema)
-                yield _with_line(b, start + 2), []
+                yield _with_line(b, start + 1), []
         return TableSource(path, _schema(table.schema, with_lines), table.num_rows, gen, with_lines, "dataset",
-                           system=system, dataset=system is not None)
+                           system=system, dataset=system is not None, unit="file" if row_files else "row",
+                           row_files=row_files)
     if path.is_dir():
         raise HpeError(f"{path}: expected a table file, got a folder")
     if path.stat().st_size == 0:
@@ -161,11 +167,11 @@ def _open_parquet(path, batch_size, with_lines):
 
     pf = pq.ParquetFile(path, pre_buffer=False, buffer_size=1 << 20)
     schema = pf.schema_arrow
-    _check_duplicates(path, schema.names)
+    _check_duplicates(path, schema.names, where="")
 
     def gen():
         # one row group at a time, one batch at a time: nothing read is kept
-        line = 2
+        line = 1  # Parquet rows are named by their 1-based row ("FILE: row N")
         f = pq.ParquetFile(path, pre_buffer=False, buffer_size=1 << 20)
         for rg in range(f.num_row_groups):
             for b in f.iter_batches(batch_size=batch_size, row_groups=[rg], use_threads=True):
@@ -174,7 +180,7 @@ def _open_parquet(path, batch_size, with_lines):
     meta = schema.metadata or {}
     system = meta[b"hpe:system"].decode("utf-8", "replace") if b"hpe:system" in meta else None
     return TableSource(path, _schema(schema, with_lines), pf.metadata.num_rows, gen, with_lines, "parquet",
-                       system=system)
+                       system=system, unit="row")
 
 
 
@@ -229,6 +235,7 @@ def _read_dataset(path: Path):
         # the key of each row: sequence + frame, and the RGB frame they label (BIWI's NN/frame_XXXXX_rgb.png)
         out.insert(1, "image", [f"{s}/frame_{int(f):05d}_rgb.png" for s, f in zip(out["sequence"], out["frame"])])
         out.attrs["system"] = "biwi"
+        out.attrs["one_record_files"] = True
         return out
     if path.is_dir():
         raise HpeError(f"{path}: no .mat files, 300W-LP subset folders, DAD-3DHeads annotations or BIWI "

@@ -47,7 +47,7 @@ class Reject:
 
 @dataclass
 class TableSource:
-    """A table read lazily in record batches.
+    """A table read lazily in record batches (:meth:`where` names a row in messages).
 
     ``batches()`` yields pyarrow RecordBatches and raises an :class:`HpeError`
     naming the file, line and reason at the first unreadable row;
@@ -69,10 +69,31 @@ class TableSource:
     #: True when a dataset reader (.mat, 300W-LP, BIWI, DAD-3DHeads) produced the labels: their system is
     #: fixed by the dataset, whatever a command's --system says
     dataset: bool = False
+    #: how a row is named in messages and rejects files: "line" (text: 1-based file line, header = line 1),
+    #: "row" (Parquet, JSON, dataset tables: 1-based row), "file" (one record per file: ``row_files``)
+    unit: str = "line"
+    #: with ``unit == "file"``: the file (relative to ``path`` when it is a folder) that holds each row
+    row_files: list | None = None
 
     @property
     def columns(self) -> list:
         return [n for n in self.schema.names if n != LINE_COL]
+
+    def where(self, n) -> str:
+        """The name of row ``n`` (its ``__line__`` value): ``FILE: line N``, ``FILE: row N`` or ``FILE``.
+
+        One rule for every message and rejects file: text files are numbered by
+        their 1-based line (header = line 1), Parquet/JSON/dataset tables by
+        their 1-based row, and a row read from a one-record file (a ``.mat``
+        of a folder, a BIWI pose file) by that file.
+        """
+        n = int(n)
+        if self.unit == "file":
+            if self.row_files is not None and 1 <= n <= len(self.row_files):
+                name = self.row_files[n - 1]
+                return str(self.path / name) if self.path.is_dir() else f"{self.path}: {name}"
+            return str(self.path)
+        return f"{self.path}: {self.unit} {n}"
 
     def batches_with_rejects(self) -> Iterator:
         import pyarrow as pa
@@ -92,7 +113,7 @@ class TableSource:
         for batch, rejects in self.batches_with_rejects():
             if rejects:
                 r = rejects[0]
-                raise HpeError(f"{self.path}: line {r.line}: {r.reason}")
+                raise HpeError(f"{self.where(r.line)}: {r.reason}")
             yield batch
 
 
@@ -113,12 +134,33 @@ def _with_line(batch, first_line: int):
     return batch.append_column(LINE_COL, lines)
 
 
-def _check_duplicates(path, names):
+def _check_duplicates(path, names, where="line 1: "):
     from collections import Counter
 
     dup = [n for n, c in Counter(names).items() if c > 1]
     if dup:
-        raise HpeError(f"{path}: line 1: duplicate column name(s) {', '.join(map(repr, dup))}: "
+        raise HpeError(f"{path}: {where}duplicate column name(s) {', '.join(map(repr, dup))}: "
                        f"expected each column once")
     if LINE_COL in names:
-        raise HpeError(f"{path}: line 1: column name {LINE_COL!r} is reserved")
+        raise HpeError(f"{path}: {where}column name {LINE_COL!r} is reserved")
+
+
+#: suffixes of tables whose rows are numbered as rows (not text lines)
+_ROW_SUFFIXES = (".parquet", ".pq", ".json", ".mat", ".zip", ".tgz", ".gz", ".tar")
+
+
+def row_name(path, n) -> str:
+    """``TableSource.where`` from a path and a row's ``__line__`` value alone (for code that kept only those).
+
+    A number names a text file's line or another table's row; a name (a
+    ``.mat`` file of a folder) names that file.
+    """
+    p = Path(str(path))
+    try:
+        k = int(n)
+        if float(n) != k:
+            raise ValueError
+    except (TypeError, ValueError):
+        return str(p / str(n)) if p.is_dir() else f"{p}: {n}"
+    unit = "row" if (p.is_dir() or p.suffix.lower() in _ROW_SUFFIXES) else "line"
+    return f"{p}: {unit} {k}"

@@ -252,7 +252,7 @@ def _batches(src, mode, path):
         unread = [r for r in rejects if r.reason in label]
         if len(unread) < len(rejects):
             r = next(r for r in rejects if r.reason not in label)
-            raise HpeError(f"{path}: line {r.line}: {r.reason} ({len(rejects) - len(unread)} unreadable rows in "
+            raise HpeError(f"{src.where(r.line)}: {r.reason} ({len(rejects) - len(unread)} unreadable rows in "
                            "this block; hpe convert --rejects sets them aside)")
         lines = batch.column(LINE_COL).to_numpy()
         yield batch.drop_columns([LINE_COL]), lines, unread

@@ -102,7 +102,7 @@ class _ImageJob:
 
         if name in self.done:
             return
-        where = f"{self.path}: row {row}"
+        where = self.path(row) if callable(self.path) else f"{self.path}: row {row}"  # TableSource.where
         if not _safe_relative(name):
             raise HpeError(f"{where}: expected an image name relative to --images, got {name!r}")
         src = _find_image(self.src, name)
@@ -204,14 +204,15 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     elif image_column is not None:
         raise HpeError("--image-column needs --images and --out-images")
     M = plane_matrix(op, angle)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=path)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src)
     meta = {**system_metadata(system), "hpe:augment": {
         "op": op, "angle_deg": angle, "description": description, "image_size": list(image_size),
         "landmarks": lm_text, "box_from": box_from, "clip": clip,
         "pixel_convention": "pixel centres at integer coordinates; centre ((W-1)/2, (H-1)/2)"}}
     job = None
     if images_dir is not None:
-        job = _ImageJob(images_dir, out_images, M, image_size, interpolation, border, jpeg_quality, overwrite, path)
+        job = _ImageJob(images_dir, out_images, M, image_size, interpolation, border, jpeg_quality, overwrite,
+                        src.where)
     rows = written = n_boxes = n_images = 0
     workers = workers or min(2, os.cpu_count() or 1)
     try:
@@ -293,7 +294,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                 orig = np.flatnonzero(keep)
                 for i, name in enumerate(names):
                     if name is None:
-                        raise HpeError(f"{path}: row {lines[orig[i]]}: empty {img_col}")
+                        raise HpeError(f"{src.where(lines[orig[i]])}: empty {img_col}")
                     job.add(str(name), int(lines[orig[i]]))
             writer.write(out)
             n_boxes += boxes

@@ -82,7 +82,7 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
     resolved = resolve_system(src, source, default=None, option_name="--from")
     source = resolved.system
     mode = label_mode(src.columns, src.path, source)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src)
     summary = ConvertSummary(source=source.name, source_origin=resolved.origin)
     meta = {**system_metadata(target), "hpe:source_system": source.name, "hpe:input": str(src.path)}
     if decoder is not None:

@@ -148,7 +148,7 @@ def _safe_relative(name, row):
     if rel.is_absolute():
         rel = Path(rel.name)
     if ".." in rel.parts or not rel.parts:
-        raise HpeError(f"row {row}: image name {name!r} would be written outside the output folder")
+        raise HpeError(f"{row}: image name {name!r} would be written outside the output folder")
     return rel
 
 
@@ -165,7 +165,7 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     from ..io.transaction import ensure_transaction, note_input, staged_dir
 
     input_path = Path(input_path)
-    src = open_table(input_path)
+    src = open_table(input_path, with_lines=True)
     from ..io.system_meta import output_system, resolve_system
 
     system = output_system(resolve_system(src, system, option_is_output=True))  # file's own, else --system
@@ -174,6 +174,7 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     pose_para = is_mat or {"tdz", "scale"} <= set(src.columns)
     flip = tdy_origin == "bottom" or (tdy_origin == "auto" and pose_para)
     frame, A, angles, reasons = _read_all(src, mode, radians, system)
+    line_no = frame.pop("__line__").to_numpy()  # each row's number in messages and rejects (src.where)
     n = len(frame)
     if n == 0:
         raise HpeError(f"{src.path}: empty table (no rows)")
@@ -184,7 +185,7 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
                        f"to draw on blank canvases; found {', '.join(frame.columns[:12])}")
     img_root = Path(images) if images else (input_path if input_path.is_dir() else input_path.parent)
     outdir = Path(outdir)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src)
 
     # group rows by image, in order of first appearance
     import pandas as pd
@@ -207,7 +208,7 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     # check every input and output before drawing anything
     plan = []
     for name, rows in items:
-        rel = _safe_relative(name, rows[0])
+        rel = _safe_relative(name, src.where(line_no[rows[0]]))
         src_img = None
         if canvas is None:
             src_img = img_root / name
@@ -226,10 +227,10 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     if bad_rows:
         bad_rows.sort()
         if rejects.path is None or strict:  # fail before drawing anything
-            rejects.add({"row": np.array([i for i, _ in bad_rows])}, [why for _, why in bad_rows])
+            rejects.add({"row": line_no[np.array([i for i, _ in bad_rows])]}, [why for _, why in bad_rows])
             rejects.check()
         idx = np.array([i for i, _ in bad_rows])
-        cols = {"row": idx}
+        cols = {"row": line_no[idx]}
         cols.update({c: frame[c].to_numpy()[idx] for c in frame.columns})
         rejects.add(cols, [why for _, why in bad_rows])
     sheet_paths = []
@@ -243,11 +244,11 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
         progress.total = len(plan)
     with ensure_transaction(), staged_dir(outdir, overwrite) as stage:
         return _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, centre, L, from_td, flip,
-                         style, thickness, annotate, A, angles, frame, rejects, bad_rows, progress)
+                         style, thickness, annotate, A, angles, frame, rejects, bad_rows, progress, line_no, src)
 
 
 def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, centre, L, from_td, flip, style,
-              thickness, annotate, A, angles, frame, rejects, bad_rows, progress=None):
+              thickness, annotate, A, angles, frame, rejects, bad_rows, progress=None, line_no=None, src=None):
     from collections import Counter
 
     import cv2
@@ -263,10 +264,12 @@ def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, c
             img = _read_image(src_img)
             if img is None:
                 if rejects.path is None or rejects.strict:
-                    raise HpeError(f"{src_img}: not a readable image (row {rows[0]}; use --rejects FILE to skip it)")
+                    raise HpeError(f"{src_img}: not a readable image ({src.where(line_no[rows[0]])}; use --rejects "
+                                   "FILE to skip it)")
                 why = f"not a readable image: {src_img}"
                 bad_rows.extend((int(i), why) for i in rows)
-                rejects.add({"row": rows, **{c: frame[c].to_numpy()[rows] for c in frame.columns}}, [why] * len(rows))
+                rejects.add({"row": line_no[rows], **{c: frame[c].to_numpy()[rows] for c in frame.columns}},
+                            [why] * len(rows))
                 continue
         else:
             img = g.blank_canvas(*canvas)

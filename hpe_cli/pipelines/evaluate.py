@@ -32,6 +32,7 @@ class Side:
     columns: list
     lines: np.ndarray  # (N,) 1-based file line of each row (header = line 1)
     unreadable: list  # rows the reader could not parse: (line, reason)
+    where: object = None  # names a row number: "FILE: line N" / "FILE: row N" / "FILE" (TableSource.where)
 
     @property
     def n(self) -> int:
@@ -89,7 +90,8 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
             if key_parts else pa.schema([src.schema.field(c) for c in keep]).empty_table()
     by_values = table.column(by).to_numpy() if (by and table is not None and by in table.column_names) else None
     line_arr = np.concatenate(lines) if lines else np.zeros(0, dtype=np.int64)
-    return Side(src.path, system, mode, canonical, ok, rs_all, table, by_values, columns, line_arr, unreadable)
+    return Side(src.path, system, mode, canonical, ok, rs_all, table, by_values, columns, line_arr, unreadable,
+                src.where)
 
 
 def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path):
@@ -129,14 +131,15 @@ def _key_codes(gt_keys, pred_keys, keys):
     return code[:n_g], code[n_g:]
 
 
-def _check_unique(codes, table, keys, path):
+def _check_unique(codes, table, keys, side):
     counts = np.bincount(codes)
     dup = counts[codes] > 1
     if dup.any():
         first = int(np.flatnonzero(dup)[0])
         again = int(np.flatnonzero(codes == codes[first])[1])
         what = ", ".join(f"{k}={table.column(k)[first].as_py()!r}" for k in keys)
-        raise HpeError(f"{path}: row {first + 1}: duplicate key {what} (again at row {again + 1}); "
+        raise HpeError(f"{side.where(side.lines[first])}: duplicate key {what} (again at "
+                       f"{side.where(side.lines[again]).split(': ', 1)[-1]}); "
                        f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
 
 
@@ -149,8 +152,8 @@ def join(pred: Side, gt: Side, keys):
         idx = np.arange(gt.n)
         return idx, idx.copy(), np.zeros(0, dtype=np.int64)
     cg, cp = _key_codes(gt.keys, pred.keys, keys)
-    _check_unique(cg, gt.keys, keys, gt.path)
-    _check_unique(cp, pred.keys, keys, pred.path)
+    _check_unique(cg, gt.keys, keys, gt)
+    _check_unique(cp, pred.keys, keys, pred)
     m = int(max(cg.max(initial=-1), cp.max(initial=-1))) + 1
     pred_pos = np.full(m, -1, dtype=np.int64)
     pred_pos[cp] = np.arange(len(cp))
@@ -217,12 +220,14 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
             ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
             rej.add({"side": np.full(len(ln), name, dtype=object), "input": np.full(len(ln), str(side.path),
                                                                                     dtype=object), "line": ln},
-                    np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln)
+                    np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln,
+                    where=side.where)
     if missing.any():
         rows = gidx[missing]
         rej.add({**key_cols(gt, rows), "side": np.full(len(rows), "gt", dtype=object),
                  "input": np.full(len(rows), str(gt.path), dtype=object), "line": gt.lines[rows]},
-                np.full(len(rows), "missing: no prediction for this ground-truth row", dtype=object))
+                np.full(len(rows), "missing: no prediction for this ground-truth row", dtype=object),
+                where=gt.where(gt.lines[rows[0]]))
     if invalid.any():
         rows = gidx[invalid]
         prow = pidx[invalid]
@@ -230,11 +235,13 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         why = np.where(gt_bad, "invalid: gt " + _reasons(gt, rows), "invalid: prediction " + _reasons(pred, prow))
         rej.add({**key_cols(gt, rows), "side": np.where(gt_bad, "gt", "pred").astype(object),
                  "input": np.where(gt_bad, str(gt.path), str(pred.path)).astype(object),
-                 "line": np.where(gt_bad, gt.lines[rows], pred.lines[prow])}, why.astype(object))
+                 "line": np.where(gt_bad, gt.lines[rows], pred.lines[prow])}, why.astype(object),
+                where=gt.where(gt.lines[rows[0]]) if gt_bad[0] else pred.where(pred.lines[prow[0]]))
     if len(unmatched):
         rej.add({**key_cols(pred, unmatched), "side": np.full(len(unmatched), "pred", dtype=object),
                  "input": np.full(len(unmatched), str(pred.path), dtype=object), "line": pred.lines[unmatched]},
-                np.full(len(unmatched), "unmatched: prediction with no ground-truth row", dtype=object))
+                np.full(len(unmatched), "unmatched: prediction with no ground-truth row", dtype=object),
+                where=pred.where(pred.lines[unmatched[0]]))
     rej.check()  # without --rejects (or with --strict) any set-aside row is an error: nothing is written
 
     gv, pv = gidx[valid], pidx[valid]

@@ -387,7 +387,7 @@ def read_split_file(path):
     dup = t[col].duplicated(keep=False) & (t.groupby(col)["split"].transform("nunique") > 1)
     if dup.any():
         k = int(np.flatnonzero(dup.to_numpy())[0])
-        raise HpeError(f"{path}: row {k + 2}: group {t[col].iloc[k]!r} is in two splits")
+        raise HpeError(f"{path}: line {k + 2}: group {t[col].iloc[k]!r} is in two splits")
     for n in sorted(set(t["split"].tolist())):
         check_split_names([n], str(path))
     return ("subject" if col == "identity" else col), dict(zip(t[col].tolist(), t["split"].tolist()))
@@ -974,16 +974,18 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
         # bad input (unusable rows, missing/unreadable images, boxes outside the frame) follows the rule of every
         # command: without --rejects (or with --strict) it is an error and nothing is written; the layout's own
         # rules, the sampling and the split file are choices, always counted in the summary
+        from ..io.table_source import row_name
+
         bad = np.flatnonzero((reasons != "") & ~np.array([is_choice(r) for r in reasons], dtype=bool))
         if bad.size:
             from ..io.rejects import rejects_rule
 
             k = int(bad[0])
-            first = f"{rows['input'].iat[k]}: row {rows['row'].iat[k]}: {reasons[k]}"
+            first = f"{row_name(rows['input'].iat[k], rows['row'].iat[k])}: {reasons[k]}"
             rejects_rule(int(bad.size), first, has_file=rejects.path is not None, strict=opts.strict)
         if opts.strict and (reasons != "").any():
             k = int(np.flatnonzero(reasons != "")[0])
-            raise HpeError(f"{rows['input'].iat[k]}: row {rows['row'].iat[k]}: {reasons[k]}; "
+            raise HpeError(f"{row_name(rows['input'].iat[k], rows['row'].iat[k])}: {reasons[k]}; "
                            f"{int((reasons != '').sum())} label(s) not exported and --strict given: nothing written")
         rejects.write()
     summary["output"] = str(output)
