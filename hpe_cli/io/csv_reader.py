@@ -139,7 +139,10 @@ class _CsvBlocks:
                     good, _, _ = _split_records(block, line, len(names))
                     block = b"".join(good) if isinstance(good, list) else good
                 try:
-                    t = pcsv.read_csv(pa.py_buffer(block), read_options=pcsv.ReadOptions(column_names=names),
+                    # a small probe is parsed on this thread: no Arrow pool threads start for a file that a
+                    # command may reject a moment later (threads still starting at exit abort the process)
+                    ropts = pcsv.ReadOptions(column_names=names, use_threads=len(block) > (4 << 20))
+                    t = pcsv.read_csv(pa.py_buffer(block), read_options=ropts,
                                       parse_options=pcsv.ParseOptions(newlines_in_values=b'"' in block),
                                       convert_options=pcsv.ConvertOptions(column_types=types))
                     break
