@@ -42,8 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..datasets.jsonfile import load_json
 from ..errors import HpeError
-
 from .run_options import INPUT_FORMATS, active_table_options  # noqa: F401
 
 LINE_COL = "__line__"
@@ -317,20 +317,6 @@ def _celeba(path, batch_size, with_lines):
 
 
 # ------------------------------------------------------------------------------------------- COCO JSON
-def load_json(path: Path):
-    """A JSON file's document (orjson); an unreadable file or invalid JSON is one HpeError naming the file."""
-    try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        raise HpeError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    import orjson
-
-    try:
-        return orjson.loads(data)
-    except ValueError as exc:
-        raise HpeError(f"{path}: not valid JSON ({' '.join(str(exc).split())[:160]})") from None
-
-
 def is_coco(doc) -> bool:
     return isinstance(doc, dict) and isinstance(doc.get("images"), list) and isinstance(doc.get("annotations"), list)
 
@@ -514,13 +500,11 @@ def label_system(src, requested):
     ``.mat`` files always hold ``300w_lp`` angles (``Pose_Para``), BIWI files
     ``biwi``, DAD-3DHeads ``dad3dheads``; a command's ``--system`` then names
     the system its *output* (or captions) use, and the labels are converted.
+    Commands choose systems with :func:`hpe_cli.io.system_meta.resolve_system`.
     """
     if getattr(src, "dataset", False) and src.system:
-        from ..rotation.systems import get_system
+        from .system_meta import file_system
 
-        try:
-            return get_system(src.system)
-        except Exception:  # a dataset system not built in yet (dad3dheads before its TOML lands)
-            return requested
+        return file_system(src) or requested  # None: a dataset system not built in yet
     return requested
 
