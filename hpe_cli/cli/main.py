@@ -208,10 +208,10 @@ def clean_exit(code) -> None:
     for t in threading.enumerate():
         if t is not threading.current_thread() and not t.daemon:
             t.join(timeout=30)
-    try:
+    import contextlib
+
+    with contextlib.suppress(Exception):  # a handler's failure must not change the status
         atexit._run_exitfuncs()
-    except BaseException:  # noqa: BLE001 - a handler's failure must not change the status
-        pass
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()

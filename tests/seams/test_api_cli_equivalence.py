@@ -83,7 +83,7 @@ def test_convert(labels, tmp_path):
 
 
 def test_audit(labels, tmp_path):
-    path, df, pyr = labels
+    path, _, pyr = labels
     flagged = tmp_path / "f.parquet"
     rep = json.loads(run("audit", path, "--system", "300w_lp", "-o", flagged, "--json", "-", "-q").stdout)
     got = pd.read_parquet(flagged)
