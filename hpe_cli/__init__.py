@@ -2,8 +2,8 @@
 
 The Python API (``import hpe_cli as hpe``)
 ------------------------------------------
-Every name below is imported on first use, so ``import hpe_cli`` stays fast and
-never pulls in torch, pandas, pyarrow, SciPy or matplotlib.
+Every name below lives in :mod:`hpe_cli.api` and is imported on first use, so
+``import hpe_cli`` stays fast and never pulls in torch, pandas, pyarrow, SciPy or matplotlib.
 
 Angles cross the API in **role order** ``(pitch, yaw, roll)``, in **degrees**,
 shape ``(N, 3)``, whatever order and units a dataset stores on disk. Matrices
@@ -17,6 +17,8 @@ the 300W-LP active matrix ``A`` (x = subject's left, y = up, z = out of the face
                        into the labels of another (a :class:`~hpe_cli.rotation.Conversion`)
 ``read_labels``        a label table and its rotation system (Parquet metadata, ``.mat``, BIWI)
 ``write_labels``       a label table written atomically, with its system in the metadata
+``convert_file``       ``hpe convert`` on a file (the same pipeline; system from the file's metadata)
+``audit_file``         ``hpe audit`` on a file (the same pipeline), its JSON report
 ``audit``              per-row label checks (gimbal lock, non-canonical, out of range...)
 ``evaluate``           the evaluation report of predictions against ground truth
 ``augment_sample``     labels, landmarks and box of one sample after a flip / rotation / mirror
