@@ -55,7 +55,7 @@ def test_aflw2000_against_itself_in_6drepnet_is_zero(tmp_path):
         assert p["mean"] < 1e-4, name
     rows = pd.read_parquet(out)
     assert len(rows) == n and rows["geodesic"].max() < 1e-4
-    assert {"file", "gt_pitch", "pred_yaw", "err_roll", "geodesic", "maev_left", "maev_down", "maev_front"} <= set(rows)
+    assert {"image", "gt_pitch", "pred_yaw", "err_roll", "geodesic", "maev_left", "maev_down", "maev_front"} <= set(rows)  # the .mat reader's key (image)
 
 
 @needs_data

@@ -96,7 +96,7 @@ def test_bad_images_are_rejects(tmp_path):
     assert "rejected 8" in r.output and "unreadable image" in r.output
     # without --rejects, bad input is an error and nothing is written
     r = run("export", path, "-o", tmp_path / "o2", "--layout", "whenet")
-    assert r.exit_code == 1 and "row 4: no image (file not found)" in r.output and "--rejects" in r.output
+    assert r.exit_code == 1 and "line 4: no image (file not found)" in r.output and "--rejects" in r.output
     assert not (tmp_path / "o2").exists()
 
 

@@ -5,15 +5,16 @@ import click
 
 from .table_options import column_options
 
-from .options import radians_option  # the one spelling of input angle units
-from .options import SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, verbosity_options
+from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, radians_option,
+                      rejects_option, verbosity_options)
 
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
-@click.option("--system", "system", type=SYSTEM, default="300w_lp", show_default=True,
-              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file.")
+@click.option("--system", "system", type=SYSTEM, default=None,
+              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
+                   "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].")
 @click.option("--json", "report", type=click.Path(dir_okay=False, allow_dash=True),
               help="Write the report (counts, settings, example rows) as JSON; '-' prints it.")
 @click.option("--plots", type=click.Path(file_okay=False),
@@ -34,7 +35,9 @@ from .options import SYSTEM, batch_option, echo_summary, output_option, overwrit
                    "image_id, id, path, person_id, face_id, frame, camera, bbox_*).")
 @click.option("--examples", type=click.IntRange(0), default=5, show_default=True,
               help="Example rows per check in the JSON report.")
-@click.option("--strict", is_flag=True, help="Exit with status 1 when any row is flagged.")
+@click.option("--strict", is_flag=True, help="Exit with status 1 when any row is flagged; with --rejects, a "
+                                            "rejected row is an error and nothing is written.")
+@rejects_option
 @click.option("--decoder", type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]), default=None,
               help="Also report how far this published decoder's printed angles are from each rotation "
                    "(max/mean geodesic and per-angle, JSON key 'decoder').")
@@ -44,7 +47,7 @@ from .options import SYSTEM, batch_option, echo_summary, output_option, overwrit
 @column_options
 @click.pass_context
 def audit(ctx, input, system, report, plots, images, output, only_flagged, gimbal_tol, radians, use, keys, examples,
-          strict, decoder, overwrite, batch_size, verbose, quiet):
+          strict, rejects, decoder, overwrite, batch_size, verbose, quiet):
     """Check every row of a label table and count what looks wrong.
 
     INPUT is a .parquet or .csv table with angle columns pitch,yaw,roll
@@ -70,7 +73,9 @@ def audit(ctx, input, system, report, plots, images, output, only_flagged, gimba
                      earlier row; the first occurrence is not counted
 
     The exit status is 0 whatever is found, unless --strict (1 if any row
-    is flagged). Errors (unreadable input, missing columns) exit 1.
+    is flagged). Errors (unreadable input, missing columns) exit 1; rows
+    the reader cannot parse go to --rejects FILE when given (the rest is
+    audited), else the first one is the error.
 
     \b
     Examples:
@@ -81,6 +86,7 @@ def audit(ctx, input, system, report, plots, images, output, only_flagged, gimba
       hpe audit labels.csv --system whenet --gimbal-tol 2 --strict
       hpe audit AFLW2000/ --decoder synergynet --json -
       hpe audit img2pose_preds.csv --system img2pose --json report.json
+      hpe audit messy.csv --rejects unreadable.csv --json report.json
     """
     from ..pipelines.audit import run_audit
 
@@ -89,13 +95,15 @@ def audit(ctx, input, system, report, plots, images, output, only_flagged, gimba
         result = run_audit(input, system, report=report, plots=plots, output=output, only_flagged=only_flagged,
                            near_tol_deg=gimbal_tol, radians=radians, use=use, keys=keys, n_examples=examples,
                            overwrite=overwrite, batch_size=batch_size, progress=bar,
-                           echo=click.echo, decoder=decoder, images=images)
+                           echo=click.echo, decoder=decoder, images=images, rejects_path=rejects,
+                           strict_rejects=strict)
     finally:
         bar.close()
     from ..rotation.audit import CHECKS
 
     flagged = result["details"]["flagged"]
-    lines = [f"audit of {input}: {result['rows']} rows ({result['label_columns']}, system {system.name}), "
+    lines = [f"audit of {input}: {result['rows']} rows ({result['label_columns']}, system {result['system']} "
+             f"from {result['system_origin']}), "
              f"{flagged} flagged",
              "  " + ", ".join(f"{c} {result[c]}" for c in CHECKS)]
     for c in CHECKS:
@@ -107,6 +115,8 @@ def audit(ctx, input, system, report, plots, images, output, only_flagged, gimba
                      f"mean {d['geodesic_deg']['mean']:.3g} deg; |d_yaw| max {d['d_yaw']['max']:.3g}, |d_pitch| max "
                      f"{d['d_pitch']['max']:.3g}, |d_roll| max {d['d_roll']['max']:.3g} deg; "
                      f"{d['rows_off_by_more_than_0.01deg']} rows off by > 0.01 deg; {d['not_decoded']} not decoded")
+    if result["rejected"]:
+        lines.append(f"  {result['rejected']} unreadable row(s) not audited -> {rejects}")
     outs = [str(p) for p in (report if report != "-" else None, output, plots) if p]
     if outs:
         lines.append("  wrote " + ", ".join(outs))

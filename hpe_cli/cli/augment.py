@@ -14,7 +14,8 @@ from .options import (batch_option, deprecated_spellings, radians_option, echo_s
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
-@system_option()
+@system_option(default=None, help="Rotation system of the labels and of OUTPUT: a built-in name or a .toml "
+               "file [default: the file's own (hpe:system metadata, dataset format), else 300w_lp].")
 @image_size_option(help="Width and height of the images, in pixels, as WxH. Optional when the table has "
                   "image_width/image_height or --images is given; a row where these disagree is rejected.")
 @radians_option()
@@ -151,7 +152,7 @@ def augment(input, output, system, image_size, radians, hflip, vflip, rotate, mi
                         description=desc, images_optional=images_optional, radians=radians)
     finally:
         bar.close()
-    lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {system.name} -> {output}",
+    lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {s['system']} -> {output}",
              f"landmarks: {s['landmarks']}; boxes: {s['boxes']}"]
     if verbose:
         lines.append(f"labels read from {s['label_source']}; pixel centres at integers, image centre "

@@ -13,7 +13,9 @@ from .options import (SYSTEM, batch_option, echo_summary, output_option, overwri
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
-@click.option("--from", "source", type=SYSTEM, required=True, help="System of INPUT: built-in name or .toml file.")
+@click.option("--from", "source", type=SYSTEM, default=None,
+              help="System of INPUT: built-in name or .toml file [default: the file's own (hpe:system metadata, "
+                   "dataset format); required for files that name none].")
 @click.option("--to", "target", type=SYSTEM, required=True, help="System to write: built-in name or .toml file.")
 @radians_option()
 @click.option("--decoder", type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]), default=None,
@@ -63,7 +65,7 @@ def convert(input, output, source, target, radians, decoder, rejects, strict, ov
                         batch_size=batch_size, progress=bar, strict=strict, decoder=decoder)
     finally:
         bar.close()
-    lines = [f"{s.written} of {s.rows} rows converted from {source.name} to {target.name} -> {output}",
+    lines = [f"{s.written} of {s.rows} rows converted from {s.source} ({s.source_origin}) to {target.name} -> {output}",
              f"gimbal-locked rows: {s.gimbal_lock}; max round-trip error: {s.max_roundtrip_err:.3g}"]
     if s.rejects:
         lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in sorted(s.rejects.items(), key=lambda x: -x[1]))

@@ -16,8 +16,9 @@ from .options import (SYSTEM, deprecated_spellings, echo_summary, image_size_opt
               help="Output folder (created if missing); images keep their relative names.")
 @click.option("--images", type=click.Path(exists=True, file_okay=False),
               help="Folder the `image` column is relative to (default: INPUT's folder).")
-@click.option("--system", "system", type=SYSTEM, default="300w_lp", show_default=True,
-              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file.")
+@click.option("--system", "system", type=SYSTEM, default=None,
+              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
+                   "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].")
 @click.option("--style", type=click.Choice(["axes", "cube"]), default="axes", show_default=True,
               help="Three axis lines (Hopenet's draw_axis) or the pose cube.")
 @image_size_option("canvas", help="Draw on blank canvases of this size (WxH, e.g. 640x480) instead of reading "
@@ -110,7 +111,8 @@ def draw(input, outdir, images, system, style, canvas, radians, use, length, thi
         echo_summary(lines, quiet)
         return
     lines = [f"drew {s['faces']} faces ({style}) on {s['images']} {'canvases' if canvas else 'images'} -> "
-             + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir))]
+             + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir)),
+             f"labels of {input}: system {s['system']}"]
     if s["rejects"]:
         lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in s["rejects"].items())
                      + (f" -> {rejects}" if rejects else ""))

@@ -46,8 +46,12 @@ def _split_keys(ctx, param, value):
                                     "in the GT system (Parquet metadata hpe:system), err_pitch/yaw/roll (wrapped), "
                                     "geodesic, maev_left/down/front (degrees), frobenius (unitless), "
                                     "pred_rotation_distance (--orthonormalize), image_path (when images are found).")
-@click.option("--pred-system", type=SYSTEM, required=True, help="Rotation system of PRED (name or .toml).")
-@click.option("--gt-system", type=SYSTEM, required=True, help="Rotation system of GT (name or .toml).")
+@click.option("--pred-system", type=SYSTEM, default=None,
+              help="Rotation system of PRED (name or .toml) [default: the file's own; required for files that "
+                   "name none].")
+@click.option("--gt-system", type=SYSTEM, default=None,
+              help="Rotation system of GT (name or .toml) [default: the file's own; required for files that "
+                   "name none].")
 @click.option("--key", "keys", multiple=True, callback=_split_keys, metavar="COL[,COL...]",
               help="Join columns (default: 'image' if both tables have it, else 'file', else row order).")
 @click.option("--join", "join_mode", type=click.Choice(["key", "order"]), default="key", show_default=True,

@@ -60,10 +60,12 @@ class HpeGroup(click.Group):
     def invoke(self, ctx):
         import warnings
 
+        from ..io.system_meta import end_run, start_run
         from ..io.transaction import OutputTransaction
         from . import signals
 
         txn = OutputTransaction()
+        run_token = start_run()
         try:
             with warnings.catch_warnings(), signals.handled():
                 if not os.environ.get("HPE_DEBUG"):
@@ -109,7 +111,11 @@ class HpeGroup(click.Group):
                 msg = (f"internal error {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
                        "(please report it; set HPE_DEBUG=1 for a traceback)")
             _error(msg)
-            ctx.exit(1)
+            from ..errors import HpeError
+
+            ctx.exit(exc.exit_code if isinstance(exc, HpeError) else 1)
+        finally:
+            end_run(run_token)
 
 
 def _message(exc, txn=None) -> str | None:
@@ -185,8 +191,50 @@ def cli():
 
 
 def main():
-    """Entry point (``python -m hpe_cli``)."""
-    cli()
+    """Entry point (``hpe``, ``python -m hpe_cli``): run the command, then :func:`clean_exit` with its status."""
+    try:
+        cli(prog_name="hpe")
+        code = 0
+    except SystemExit as exc:
+        code = exc.code
+    clean_exit(code)
+
+
+def clean_exit(code) -> None:
+    """End the process with ``code`` without tearing down native thread pools.
+
+    Arrow's CPU and I/O pools (started by any threaded CSV/Parquet read) are
+    process-wide C++ objects that Python cannot join. A process that exits
+    through the C runtime while one of their threads is still starting (an
+    early error right after a read, on a loaded machine) runs their static
+    destructors on a joinable ``std::thread``: ``terminate called without an
+    active exception``, exit 134 (apache/arrow#34314, #39862). So: wait for
+    hpe's own non-daemon threads (background writers), run the ``atexit``
+    handlers (executor and multiprocessing shutdown), flush stdout/stderr,
+    and leave with ``os._exit`` -- the exit status is always the command's.
+    """
+    import atexit
+    import sys
+    import threading
+
+    if code is None:
+        code = 0
+    elif not isinstance(code, int):
+        print(code, file=sys.stderr)
+        code = 1
+    for t in threading.enumerate():
+        if t is not threading.current_thread() and not t.daemon:
+            t.join(timeout=30)
+    import contextlib
+
+    with contextlib.suppress(Exception):  # a handler's failure must not change the status
+        atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe (`hpe systems | head`)
+            pass
+    os._exit(code)
 
 
 if __name__ == "__main__":

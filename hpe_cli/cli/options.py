@@ -99,6 +99,14 @@ def system_option(default: str | None = "300w_lp", help: str = "Rotation system 
     return click.option("--system", "system", type=SYSTEM, default=default, show_default=True, help=help)
 
 
+def reinterpret_option(f):
+    """``--reinterpret-as SYSTEM``: read the labels in SYSTEM although the file's own metadata names another."""
+    return click.option("--reinterpret-as", "reinterpret_as", type=SYSTEM, default=None,
+                        help="The file's own system metadata is wrong: read its labels in this system instead "
+                             "(an explicit --system/--from that disagrees with the metadata is otherwise an "
+                             "error).")(f)
+
+
 overwrite_option = click.option("--overwrite", is_flag=True, help="Replace OUTPUT if it exists.")
 rejects_option = click.option("--rejects", type=OutputPath(dir_okay=False),
                               help="Write rows that could not be used here, with a 'reason' column (without "
@@ -132,9 +140,10 @@ def echo_summary(lines, quiet: bool = False) -> None:
     """Print summary lines to stderr unless ``--quiet``; inside a run, once its outputs are committed."""
     if quiet:
         return
+    from ..io.system_meta import summary_lines
     from ..io.transaction import current, printable
 
-    lines = [printable(line) for line in lines]
+    lines = [printable(line) for line in list(lines) + summary_lines()]
 
     def show():
         for line in lines:

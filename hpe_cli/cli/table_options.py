@@ -2,12 +2,11 @@
 that reads a table (see :mod:`hpe_cli.io.columns`). No numpy or pyarrow import here: `hpe --help` stays fast."""
 from __future__ import annotations
 
-import contextvars
 import functools
 
 import click
 
-INPUT_FORMATS = ("whenet", "opal23", "img2pose-biwi", "celeba-pose", "coco")
+from ..io.run_options import INPUT_FORMATS, active_table_options, reset_table_options, set_table_options
 
 
 def _split_names(ctx, param, value):
@@ -43,16 +42,9 @@ def _columns_map(ctx, param, value):
     return value
 
 
-_ACTIVE = contextvars.ContextVar("hpe_table_options", default=None)
-
-
-def active_table_options() -> dict | None:
-    """The ``open_table`` options of the running command (set by :func:`column_options`), or None."""
-    return _ACTIVE.get()
-
-
 def column_options(f):
-    """Click decorator adding ``--columns-map``, ``--delimiter``, ``--no-header``, ``--names``, ``--input-format``.
+    """Click decorator adding ``--columns-map``, ``--delimiter``, ``--no-header``, ``--names``, ``--input-format``
+    and ``--reinterpret-as`` (:func:`hpe_cli.cli.options.reinterpret_option`).
 
     The command function never sees these values: they are held for the
     duration of the command and every :func:`~hpe_cli.io.readers.open_table`
@@ -61,17 +53,23 @@ def column_options(f):
     """
     @functools.wraps(f)
     def wrapper(*args, **kwargs):
+        from ..io.system_meta import reset_reinterpret, set_reinterpret
+
         opts = pop_table_kwargs(kwargs)
         given = any(v not in (None, True) for v in opts.values())
-        token = _ACTIVE.set(opts if given else None)
+        token = set_table_options(opts if given else None)
+        rtoken = set_reinterpret(kwargs.pop("reinterpret_as", None))
         try:
             if opts["columns"]:
                 _check_columns_map(opts["columns"], kwargs)
             return f(*args, **kwargs)
         finally:
-            _ACTIVE.reset(token)
+            reset_reinterpret(rtoken)
+            reset_table_options(token)
 
-    g = wrapper
+    from .options import reinterpret_option
+
+    g = reinterpret_option(wrapper)
     g = click.option("--input-format", type=click.Choice(INPUT_FORMATS), default=None,
                      help="Read INPUT as a named label list: whenet (annotation.txt), opal23, img2pose-biwi, "
                           "celeba-pose (CelebAMask-HQ-pose-anno.txt) or coco (DirectMHP JSON). "
@@ -108,12 +106,12 @@ def _check_columns_map(columns, kwargs):
     if not paths:
         return
     found = set()
-    token = _ACTIVE.set({**_ACTIVE.get(), "columns": None})  # the inputs' own names, before renaming
+    token = set_table_options({**active_table_options(), "columns": None})  # the inputs' own names
     try:
         for p in paths:
             found |= set(open_table(p).columns)
     finally:
-        _ACTIVE.reset(token)
+        reset_table_options(token)
     mapping = parse_columns_map(columns)
     missing = [s for s in mapping if s not in found]
     if missing:

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
-from ..io.columns import load_json
+from .jsonfile import load_json
 
 SYSTEM = "dad3dheads"
 SUBSETS = ("train", "val", "test")

@@ -72,7 +72,9 @@ def mat_files(path) -> list:
 def read_mat_dir(path, landmarks: bool = False):
     """All ``.mat`` files of a folder (or one file) as a label table.
 
-    Columns: ``file`` (name relative to the folder), ``pitch, yaw, roll``
+    Columns: ``file`` (name relative to the folder), ``image`` (the image the
+    file labels: the same name with ``.jpg``, as AFLW2000-3D and 300W-LP ship
+    them; the key ``hpe evaluate`` joins on), ``pitch, yaw, roll``
     (degrees, 300W-LP system), ``tdx, tdy, tdz, scale``; with ``landmarks``
     also ``lm{i}_x, lm{i}_y`` from ``pt2d`` (NaN = invisible) and
     ``lm3d{i}_x, lm3d{i}_y, lm3d{i}_z`` from ``pt3d_68`` when every file has it.
@@ -84,8 +86,11 @@ def read_mat_dir(path, landmarks: bool = False):
     recs = [read_mat(f) for f in files]
     base = path if path.is_dir() else path.parent
     frame = pd.DataFrame(np.stack([r["pose"] for r in recs]), columns=POSE_COLS)
-    frame.insert(0, "file", [str(f.relative_to(base)) for f in files])
+    rel = [f.relative_to(base) for f in files]
+    frame.insert(0, "file", [str(r) for r in rel])
+    frame.insert(1, "image", [r.with_suffix(".jpg").as_posix() for r in rel])
     frame.attrs["system"] = "300w_lp"  # Pose_Para is always 300W-LP's convention
+    frame.attrs["one_record_files"] = True  # a bad row is named by its .mat file
     if not landmarks:
         return frame
     extra = {}
@@ -100,5 +105,5 @@ def read_mat_dir(path, landmarks: bool = False):
             for n, a in enumerate("xyz"):
                 extra[f"lm3d{i}_{a}"] = p3[:, n, i]
     out = pd.concat([frame, pd.DataFrame(extra)], axis=1)
-    out.attrs["system"] = "300w_lp"
+    out.attrs.update(frame.attrs)
     return out

@@ -42,10 +42,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..datasets.jsonfile import load_json
 from ..errors import HpeError
+from .run_options import INPUT_FORMATS, active_table_options  # noqa: F401
 
 LINE_COL = "__line__"
-from ..cli.table_options import INPUT_FORMATS  # noqa: E402
 #: rotation system of the angles each named format holds (None: the list does not say)
 FORMAT_SYSTEMS = {"whenet": "whenet", "opal23": None, "img2pose-biwi": "300w_lp", "celeba-pose": None, "coco": None}
 #: OPAL field names -> hpe column names
@@ -91,7 +92,7 @@ class LenientMap(str):
 
     With several inputs (``hpe evaluate PRED GT``) one map serves them all: an
     input is renamed when it has at least one of the mapped source columns,
-    and left alone when it has none.
+    and left alone when it has none (or already has the target names).
     """
 
 
@@ -111,9 +112,10 @@ def apply_columns_map(src, columns):
         raise HpeError(f"--columns-map: {LINE_COL} is reserved for line numbers")
     missing = [s for s in mapping if s not in names]
     if isinstance(columns, LenientMap):
-        if len(missing) == len(mapping):
+        # an input that already has the hpe name (a .mat folder's image and file) keeps it
+        mapping = {k: v for k, v in mapping.items() if k in names and v not in names}
+        if not mapping:
             return src
-        mapping = {k: v for k, v in mapping.items() if k in names}
         missing = []
     if missing:
         raise HpeError(f"{src.path}: --columns-map names column(s) {', '.join(map(repr, missing))} that the table "
@@ -315,22 +317,15 @@ def _celeba(path, batch_size, with_lines):
 
 
 # ------------------------------------------------------------------------------------------- COCO JSON
-def load_json(path: Path):
-    """A JSON file's document (orjson); an unreadable file or invalid JSON is one HpeError naming the file."""
-    try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        raise HpeError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    import orjson
-
-    try:
-        return orjson.loads(data)
-    except ValueError as exc:
-        raise HpeError(f"{path}: not valid JSON ({' '.join(str(exc).split())[:160]})") from None
-
-
 def is_coco(doc) -> bool:
     return isinstance(doc, dict) and isinstance(doc.get("images"), list) and isinstance(doc.get("annotations"), list)
+
+
+def coco_system(doc):
+    """The system a COCO file written by ``hpe`` names in ``info["hpe:system"]``, else None."""
+    info = doc.get("info") if isinstance(doc, dict) else None
+    name = info.get("hpe:system") if isinstance(info, dict) else None
+    return name if isinstance(name, str) and name else None
 
 
 def coco_frame(doc, path="<coco>"):
@@ -412,7 +407,7 @@ def _frame_source(path, frame, batch_size, with_lines, system=None):
         for b in table.to_batches(max_chunksize=batch_size):
             yield b, []
 
-    return TableSource(Path(path), schema, table.num_rows, batches, with_lines, "json", system=system)
+    return TableSource(Path(path), schema, table.num_rows, batches, with_lines, "json", system=system, unit="row")
 
 
 # ------------------------------------------------------------------------------------------- dispatch
@@ -459,7 +454,7 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
         if fmt == "coco-or-json":
             doc = load_json(path)
             if is_coco(doc):
-                return _frame_source(path, coco_frame(doc, path), batch_size, with_lines)
+                return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
             from ..datasets.dad3dheads import is_dad_metadata
 
             if is_dad_metadata(doc):
@@ -482,7 +477,8 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
     if not path.is_file():
         raise HpeError(f"{path}: --input-format {fmt} reads a file, got a folder")
     if fmt == "coco":
-        return _frame_source(path, coco_frame(load_json(path), path), batch_size, with_lines)
+        doc = load_json(path)
+        return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
     if fmt == "whenet":
         return open_text(path, batch_size, delimiter=",", header=False, names=["image", "yaw", "pitch", "roll"],
                          quoting=False, string_columns=("image",), with_lines=with_lines,
@@ -504,18 +500,11 @@ def label_system(src, requested):
     ``.mat`` files always hold ``300w_lp`` angles (``Pose_Para``), BIWI files
     ``biwi``, DAD-3DHeads ``dad3dheads``; a command's ``--system`` then names
     the system its *output* (or captions) use, and the labels are converted.
+    Commands choose systems with :func:`hpe_cli.io.system_meta.resolve_system`.
     """
     if getattr(src, "dataset", False) and src.system:
-        from ..rotation.systems import get_system
+        from .system_meta import file_system
 
-        try:
-            return get_system(src.system)
-        except Exception:  # a dataset system not built in yet (dad3dheads before its TOML lands)
-            return requested
+        return file_system(src) or requested  # None: a dataset system not built in yet
     return requested
 
-
-# ------------------------------------------------------------------------------------------- click
-# the decorator lives in a module without numpy/pyarrow imports, so `hpe --help` stays fast
-from ..cli.table_options import (active_table_options, column_options, pop_table_kwargs,  # noqa: E402,F401
-                                 table_kwargs)

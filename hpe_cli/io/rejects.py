@@ -41,7 +41,10 @@ class Rejects:
         self.path = check_output(path, overwrite) if path else None
         self.overwrite = overwrite
         self.strict = strict
-        self.source = source
+        # a TableSource names its rows itself (FILE: line N / FILE: row N / FILE); a path gets "line N"
+        self._where = getattr(source, "where", None)
+        self.source = getattr(source, "path", source)
+        self._named = False  # first_where already names the file
         self.first_where: str | None = None
         self._parts: list = []
         self.counts: Counter = Counter()
@@ -49,23 +52,30 @@ class Rejects:
     def __len__(self) -> int:
         return sum(self.counts.values())
 
-    def add(self, columns: dict, reasons, lines=None) -> None:
+    def add(self, columns: dict, reasons, lines=None, where=None) -> None:
         """Add rows: ``columns`` maps name -> 1-D array, ``reasons`` is one string per row.
 
-        ``lines`` (optional): 1-based file line of each row (header = line 1),
-        used to name the first rejected row; otherwise ``columns['line']`` or
-        ``columns['row']`` is.
+        ``lines`` (optional): the rows' ``__line__`` numbers, used to name the
+        first rejected row (through the source's :meth:`~hpe_cli.io.readers.TableSource.where`
+        when ``source`` was a TableSource: ``FILE: line N``, ``FILE: row N`` or
+        ``FILE``); otherwise ``columns['line']`` or ``columns['row']`` is.
+        ``where`` (optional): a callable naming a row number, or the name of
+        the first row as a string, for rows of another table than ``source``.
         """
         reasons = np.asarray(reasons, dtype=object)
         if reasons.size == 0:
             return
         if self.first_where is None:
-            if lines is not None:
-                self.first_where = f"line {int(np.asarray(lines)[0])}: {reasons[0]}"
-            elif "line" in columns:
-                self.first_where = f"line {int(np.asarray(columns['line'])[0])}: {reasons[0]}"
-            elif "row" in columns:
-                self.first_where = f"row {int(np.asarray(columns['row'])[0])}: {reasons[0]}"
+            n = next((int(np.asarray(v)[0]) for v in (lines, columns.get("line"), columns.get("row"))
+                      if v is not None and np.asarray(v).size and _integral(np.asarray(v)[0])), None)
+            locate = where if where is not None else self._where
+            if isinstance(locate, str):
+                self.first_where, self._named = f"{locate}: {reasons[0]}", True
+            elif locate is not None and n is not None:
+                self.first_where, self._named = f"{locate(n)}: {reasons[0]}", True
+            elif n is not None:
+                unit = "line" if (lines is not None or "line" in columns) else "row"
+                self.first_where = f"{unit} {n}: {reasons[0]}"
             else:
                 self.first_where = str(reasons[0])
         self.counts.update(reasons.tolist())
@@ -78,7 +88,7 @@ class Rejects:
     def check(self) -> None:
         """Apply :func:`rejects_rule` (raise if rows were rejected without a file, or with ``strict``)."""
         rejects_rule(len(self), self.first_where, has_file=self.path is not None, strict=self.strict,
-                     source=self.source)
+                     source=None if self._named else self.source)
 
     def finish(self):
         """The end of a command: apply the rule (:meth:`check`), then :meth:`write`."""
@@ -94,3 +104,10 @@ class Rejects:
         frame = pd.concat([pd.DataFrame(p) for p in self._parts], ignore_index=True) if self._parts \
             else pd.DataFrame({"reason": pd.Series([], dtype=str)})
         return write_table(frame, self.path, overwrite=self.overwrite)
+
+
+def _integral(v) -> bool:
+    try:
+        return float(v) == int(v)
+    except (TypeError, ValueError):
+        return False

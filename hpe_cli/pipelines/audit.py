@@ -241,34 +241,47 @@ def _source(input_path, batch_size):
     return open_table(input_path, batch_size, with_lines=True)
 
 
-def _batches(src, mode, path):
+def _batches(src, mode, path, rejects=None):
     """``(batch, lines, label cols)``; a row the reader sets aside fails the audit, naming its line.
 
     A non-numeric label value is not such a row: it is read as NaN and
-    counted as ``non_finite``, like today.
+    counted as ``non_finite``, like today. With a rejects file (``rejects``
+    with a path), the rows the reader sets aside go there instead.
     """
     from ..io.readers import LINE_COL
 
     from ..io import ANGLE_COLS, MATRIX_COLS
 
     label = {f"non-numeric value in {c}" for c in (ANGLE_COLS if mode == "angles" else MATRIX_COLS)}
+    rejects_file = rejects
     for batch, rejects in src.batches_with_rejects():
         unread = [r for r in rejects if r.reason in label]
+        other = [r for r in rejects if r.reason not in label]
+        if other and rejects_file is not None and rejects_file.path is not None:
+            lines = np.array([r.line for r in other], dtype=np.int64)
+            rejects_file.add({"row": lines, "raw": np.array([r.raw for r in other], dtype=object)},
+                             [r.reason for r in other], lines=lines)
+            rejects = unread
         if len(unread) < len(rejects):
             r = next(r for r in rejects if r.reason not in label)
-            raise HpeError(f"{path}: line {r.line}: {r.reason} ({len(rejects) - len(unread)} unreadable rows in "
-                           "this block; hpe convert --rejects sets them aside)")
+            raise HpeError(f"{src.where(r.line)}: {r.reason} ({len(rejects) - len(unread)} unreadable rows in "
+                           "this block; use --rejects FILE to set them aside and audit the rest)")
         lines = batch.column(LINE_COL).to_numpy()
         yield batch.drop_columns([LINE_COL]), lines, unread
 
 
 def run_audit(input_path, system, *, report=None, plots=None, output=None, only_flagged=False,
               near_tol_deg=1.0, radians=False, use="auto", keys=(), n_examples=5, overwrite=False,
-              batch_size=65_536, progress=None, echo=None, decoder=None, workers=None, images=None) -> dict:
+              batch_size=65_536, progress=None, echo=None, decoder=None, workers=None, images=None,
+              rejects_path=None, strict_rejects=False) -> dict:
     """Audit ``input_path`` and write the requested outputs; return the report dict.
 
     Batches are checked and hashed on ``workers`` threads (default: up to 2)
-    while this thread reads and tallies them in order.
+    while this thread reads and tallies them in order. Rows the reader cannot
+    parse (wrong field count, bad quoting) fail the audit naming the first,
+    unless ``rejects_path`` is given: they then go there with their reason, the
+    rest is audited, and the report counts them (``rejected``); with
+    ``strict_rejects`` any such row is still an error and nothing is written.
     """
     import os
 
@@ -287,6 +300,12 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
                 check_output(p, overwrite)
 
     src = _source(input_path, batch_size)
+    from ..io import Rejects
+    from ..io.system_meta import resolve_system
+
+    rejected = Rejects(rejects_path, overwrite, strict=strict_rejects, source=src)
+    resolved = resolve_system(src, system, default="300w_lp")
+    system = resolved.system
     columns = src.columns
     mode = label_mode(columns, src.path, system) if use == "auto" else use
     need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
@@ -363,7 +382,8 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
         if progress is not None:
             progress.update(batch.num_rows)
 
-    in_order(_batches(src, read_mode, src.path), work, finish, workers)
+    in_order(_batches(src, read_mode, src.path, rejected), work, finish, workers)
+    rejected.check()  # with --strict: any set-aside row is an error and nothing is written
 
     counts["duplicates"] = dups.finish()
     if counts["duplicates"]:
@@ -375,8 +395,9 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     examples["duplicates"] = [{"row": int(a), "same_as": int(b)} for a, b in
                               zip(dups.line_of(dups.dup_idx[:n_examples]), dups.line_of(dups.first_idx[:n_examples]))]
 
-    result = {"rows": rows, **counts,
-              "system": system.name, "input": str(src.path), "label_columns": mode,
+    result = {"rows": rows, **counts, "rejected": len(rejected),
+              "system": system.name, "system_origin": resolved.origin, "input": str(src.path),
+              "label_columns": mode,
               "units": "radians" if (radians and mode == "angles") else ("degrees" if mode == "angles" else None),
               "settings": {"near_gimbal_deg": near_tol_deg, "gimbal_lock_tol": system.gimbal_tol,
                            "lock_distance": "|cos| (or |sin| for proper Euler) of the middle angle",
@@ -398,6 +419,7 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
         write_plots(hist, plots, system, {"input": str(src.path), "system": system.name, "rows": rows,
                                           **counts, "flagged": result["details"]["flagged"]},
                     title=f"hpe audit: {src.path.name}", overwrite=overwrite, pictures=pics)
+    rejected.write()
     if report == "-":
         from ..io.writers import json_text
 
@@ -430,6 +452,18 @@ def _system_cols(batch, system, mode, radians, via_system):
             "angles" if values.ndim == 2 else "matrix")
 
 
+class _SkipRejects:
+    """The second pass skips the rows the first one set aside (already in the rejects file)."""
+
+    path = "-"
+
+    def add(self, *args, **kwargs):
+        pass
+
+
+_SKIP_REJECTS = _SkipRejects()
+
+
 def _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians, near_tol_deg,
                    dups, via_system=False):
     """Second pass over the input: every column, then one boolean column per check and 'flagged'."""
@@ -444,7 +478,7 @@ def _write_flagged(input_path, output, only_flagged, overwrite, batch_size, syst
     meta = {**system_metadata(system), "hpe:audit_of": str(src.path)}
     offset = 0
     with TableWriter(output, overwrite, meta) as w:
-        for batch, _, _ in _batches(src, mode, src.path):
+        for batch, _, _ in _batches(src, mode, src.path, _SKIP_REJECTS):
             n = batch.num_rows
             res = _checks(*_system_cols(batch, system, mode, radians, via_system), system, near_tol_deg)
             res["duplicates"] = dups.mask(offset, offset + n)

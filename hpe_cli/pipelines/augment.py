@@ -188,15 +188,16 @@ class _Plan:
         self.mat_base = (path if path.is_dir() else path.parent) if is_mat and "file" in columns else None
 
     def numbers(self, lines):
-        """The row numbers messages and rejects use: CSV lines (header = 1), else 1-based rows."""
-        return lines if self.csv else lines - 1
+        """The row numbers messages and rejects use: CSV lines (header = 1), else 1-based rows (the reader's
+        ``__line__`` already is that number)."""
+        return lines
 
     def where(self, line, file=None) -> str:
         """How messages name a row: ``FILE: line N`` (text), the ``.mat`` file itself (a ``.mat`` folder: one
         record per file), else ``FILE: row N`` (1-based)."""
         if self.mat_base is not None and file is not None:
             return str(self.mat_base / str(file))
-        return f"{self.path}: line {int(line)}" if self.csv else f"{self.path}: row {int(line) - 1}"
+        return self.src.where(line)
 
     def roi_fn(self, roi, size_in):
         """``roi`` (x1, y1, x2, y2) of the original photo shown by the image: a crop shows the sub-rectangle;
@@ -335,7 +336,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         open_table,
         system_metadata,
     )
-    from ..io.columns import label_system
+    from ..io.system_meta import output_system, resolve_system
     from ..io.transaction import ensure_transaction, staged_dir
     from .augment_images import ImageJob, RowImages
     from .inorder import in_order
@@ -343,7 +344,8 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     path = Path(input)
     check_output(output, overwrite)
     src = open_table(path, batch_size, with_lines=True)
-    in_system = label_system(src, system)  # .mat Pose_Para is always 300w_lp; output is in --system
+    res = resolve_system(src, system, option_is_output=True)  # the file's own system, else --system
+    in_system, system = res.system, output_system(res)  # .mat Pose_Para is always 300w_lp; output in --system
     columns = src.columns
     n_lm, perm, lm_text = _plan_landmarks(path, columns, scheme, op)
     box_present = [c for c in BBOX_COLS if c in columns]
@@ -358,7 +360,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     plan = _Plan(path, src, in_system, system, columns, n_lm, perm, bool(box_present), M, op, crop, image_size,
                  has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir, images_optional) if images_dir else None,
                  scale=scale, radians=radians)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=None if plan.mat_base is not None else path)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=None if plan.mat_base is not None else src)
     meta = {**system_metadata(system), "hpe:augment": {
         "op": op, "angle_deg": angle, "crop": list(crop) if crop else None, "scale": scale, "description": description,
         "image_size": list(image_size) if image_size else "from image_width/image_height or the images",
@@ -392,7 +394,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
                            f"({rejects.first_where or 'see the rejects file'})")
         rejects.finish()
     box_text = f"{counts['boxes']} moved ({box_from}{', clipped' if clip else ''})" if box_present else "none in input"
-    return {"rows": counts["rows"], "written": counts["written"], "label_source": plan.label_source,
+    return {"system": system.name, "rows": counts["rows"], "written": counts["written"], "label_source": plan.label_source,
             "landmarks": lm_text, "boxes": box_text, "images": len(job.done) if job else 0,
             "mats": job.mats if job else 0, "rejects": dict(rejects.counts)}
 

@@ -21,6 +21,9 @@ class ConvertSummary:
     gimbal_lock: int = 0
     max_roundtrip_err: float = 0.0
     rejects: dict = field(default_factory=dict)
+    #: the input's system and where it came from ("file metadata", "option", "default")
+    source: str = ""
+    source_origin: str = ""
 
 
 def convert_batch(batch, mode, source, target, radians=False, decoder=None):
@@ -74,9 +77,13 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
     from concurrent.futures import ThreadPoolExecutor
 
     src = open_table(input_path, batch_size, with_lines=True)
+    from ..io.system_meta import resolve_system
+
+    resolved = resolve_system(src, source, default=None, option_name="--from")
+    source = resolved.system
     mode = label_mode(src.columns, src.path, source)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
-    summary = ConvertSummary()
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src)
+    summary = ConvertSummary(source=source.name, source_origin=resolved.origin)
     if progress is not None and src.num_rows:  # Parquet metadata, .mat file counts: the bar has a total
         progress.total = src.num_rows
     meta = {**system_metadata(target), "hpe:source_system": source.name, "hpe:input": str(src.path)}

@@ -271,6 +271,10 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     if worst is not None or sort_by is not None:
         raise HpeError(f"{src.path}: --worst and --sort-by draw the output of `hpe evaluate -o` (columns "
                        "gt_pitch..pred_roll), got a label table")
+    from ..io.system_meta import output_system, resolve_system
+
+    resolved = resolve_system(src, system, option_is_output=True)  # the file's own system, else --system
+    system = output_system(resolved)
     mode = label_mode(src.columns, src.path, system) if use == "auto" else use
     is_mat = input_path.is_dir() or input_path.suffix.lower() == ".mat"
     pose_para = is_mat or {"tdz", "scale"} <= set(src.columns)
@@ -319,6 +323,7 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
         s = _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, centre, L, from_td, flip,
                       style, thickness, annotate, A, angles, book, progress)
         book.finish(s["images"])
+        s["system"] = resolved.describe()  # which system the labels were read in, and where that came from
         return s
 
 

@@ -55,7 +55,7 @@ def flagged_pictures(input_path, examples, plots_dir, system, *, images=None, pe
         The audited table (or ``.mat`` folder).
     examples : dict
         ``{check: [{"row": line, ...}, ...]}``, the audit report's examples (``row`` = the reader's line number:
-        the CSV line, header = 1; 1-based row + 1 otherwise).
+        the CSV line, header = 1; the 1-based row otherwise).
     plots_dir : str or Path
         The ``--plots`` folder; pictures go to its ``pictures/`` sub-folder, staged with the run.
     system : RotationSystem
@@ -131,7 +131,7 @@ def _where(src, frame, i, line) -> str:
     """A row as messages name it: the ``.mat`` file, ``line N`` of a text file, else ``row N`` (1-based)."""
     if Path(src.path).is_dir() and "file" in frame.columns:
         return str(frame["file"].iat[i])
-    return f"line {line}" if src.kind == "csv" else f"row {line - 1}"
+    return src.where(line).split(": ", 1)[-1]  # the reader's __line__ is already that number
 
 
 def _safe(text: str) -> str:

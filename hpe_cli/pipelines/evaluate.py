@@ -250,9 +250,9 @@ def _unreadable_rejects(rej, side, name):
 
 
 def _readers(s, progress=None):
-    gr = SideReader(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, progress)
+    gr = SideReader(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, progress, role="gt")
     pr = SideReader(s.pred_path, s.pred_system, s.use_pred, s.keys, s.by if s.by not in gr.columns else None,
-                    s.radians, s.batch_size, progress, s.orthonormalize)
+                    s.radians, s.batch_size, progress, s.orthonormalize, role="pred")
     return gr, pr
 
 
@@ -333,7 +333,8 @@ def _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, strea
 
     result = {"n": {"gt": n["gt"], "pred": n["pred"], "pairs": counts["pairs"], "missing": n["missing"],
                     "invalid": counts["invalid"], "unmatched_pred": n["unmatched_pred"]},
-              "systems": {"pred": pside.system.name, "gt": gside.system.name}}
+              "systems": {"pred": pside.system.name, "gt": gside.system.name},
+              "system_origin": {"pred": pside.resolved.describe(), "gt": gside.resolved.describe()}}
     if gside.unreadable or pside.unreadable:
         result["n"]["unreadable"] = len(gside.unreadable) + len(pside.unreadable)
     if s.orthonormalize:
@@ -377,8 +378,16 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         from ..report.eval_plots import check_plot_outputs
 
         check_plot_outputs(plots, overwrite)
-    pcols = open_table(pred_path, batch_size).columns
+    from ..io.system_meta import output_system, resolve_system
+
+    psrc = open_table(pred_path, batch_size)
+    pcols = psrc.columns
     gsrc = open_table(gt_path, batch_size)
+    # each side's own system (hpe:system metadata, dataset formats), else its option; a disagreeing option is a
+    # usage error unless --reinterpret-as
+    gres = resolve_system(gsrc, gt_system, default=None, option_name="--gt-system", option_is_output=True)
+    pres = resolve_system(psrc, pred_system, default=None, option_name="--pred-system", option_is_output=True)
+    gt_system, pred_system = output_system(gres), output_system(pres)
     gcols = list(gsrc.columns)
     if "file" in gcols and "image" not in gcols and getattr(gsrc, "dataset", False):
         gcols.append("image")  # the .mat folder's key: see evaluate_join._stem_key_hook

@@ -40,6 +40,7 @@ class Side:
     dist: np.ndarray | None = None  # (N,) distance to the nearest rotation (--orthonormalize)
     image_dir: object = None  # folder of a dataset reader whose images sit next to the labels
     unit: str = "line"  # "row" for Parquet
+    resolved: object = None  # hpe_cli.io.system_meta.Resolved: the system and where it came from
 
     @property
     def n(self) -> int:
@@ -135,12 +136,15 @@ class SideReader:
     """One input table: its system, label columns, keys; :meth:`chunks` streams it."""
 
     def __init__(self, path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None,
-                 orthonormalize=False):
+                 orthonormalize=False, role="gt"):
         from ..io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
-        from ..io.columns import label_system
+        from ..io.system_meta import resolve_system
 
         self.src = src = open_table(path, batch_size, with_lines=True)
-        self.system = label_system(src, system)  # .mat Pose_Para is always 300w_lp, whatever --gt-system says
+        # the file's own system (hpe:system metadata, dataset formats: .mat Pose_Para is 300w_lp), else the option
+        self.resolved = resolve_system(src, system, default=None, option_name=f"--{role}-system",
+                                       option_is_output=True)
+        self.system = self.resolved.system
         self.path = src.path
         columns = list(src.columns)
         self.dataset_stem = "file" in columns and "image" not in columns and getattr(src, "dataset", False)
@@ -176,8 +180,6 @@ class SideReader:
                 batch = _stem_key_hook(batch)
             self.unreadable += [(r.line, r.reason) for r in bad_rows]
             lines = batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64)
-            if self.unit == "row":
-                lines = lines - 1  # the Parquet reader numbers rows as lines after a header
             X, ok, rs, raw, dist = _batch_labels(batch, self.system, self.mode, self.radians, self.orthonormalize)
             n = batch.num_rows
             X = self.system.soa_to_canonical(X)
@@ -198,7 +200,8 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     """
     import pyarrow as pa
 
-    r = SideReader(path, system, use, keys, by, radians, batch_size, progress, orthonormalize)
+    r = SideReader(path, system, use, keys, by, radians, batch_size, progress, orthonormalize,
+                   role=role if role in ("gt", "pred") else "gt")
     parts: dict = {f"c{k}": [] for k in range(9)}
     parts.update(ok=[], reasons=[], raw=[], dist=[], keys=[], by=[], lines=[])
     any_reasons = False
@@ -236,6 +239,7 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     side.dist = cat("dist")
     side.image_dir = r.image_dir
     side.unit = r.unit
+    side.resolved = r.resolved
     return side
 
 

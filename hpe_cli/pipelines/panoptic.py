@@ -207,7 +207,7 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
             if fmt == "table":
                 out = stack.enter_context(TableWriter(output, overwrite, meta))
             else:
-                out = stack.enter_context(_text_writer(fmt, output, overwrite))
+                out = stack.enter_context(_text_writer(fmt, output, overwrite, meta.get("hpe:system")))
             rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
             if parts is not None and current() is not None:  # a run killed from now on leaves these
                 record_temps(parts, current().staged_temps())
@@ -280,12 +280,13 @@ def worker_pool(workers: int = 1, scheduler: str | None = None, resume: bool = F
     return unit_pool(workers if use_parts else 1, scheduler if use_parts else None, warm=WORKER_IMPORTS)
 
 
-def _text_writer(fmt: str, output, overwrite: bool):
+def _text_writer(fmt: str, output, overwrite: bool, system=None):
     """The streaming COCO or WHENet writer (flat memory; units formatted elsewhere are appended as files)."""
     if fmt == "coco":
         from ..io.coco import CocoWriter
 
-        return CocoWriter(output, overwrite, image_size_cols=("image_width", "image_height"))
+        return CocoWriter(output, overwrite, image_size_cols=("image_width", "image_height"),
+                          info={"hpe:system": system} if system else None)  # read back by io.system_meta
     from ..io.whenet_txt import WhenetWriter
 
     return WhenetWriter(output, overwrite)

@@ -22,7 +22,8 @@ def _counts(result) -> str:
     if n.get("orthonormalized") is not None:
         line += f", orthonormalized {n['orthonormalized']}"
     inp = result.get("inputs", {})
-    return line + (f"; systems pred {result['systems']['pred']}, gt {result['systems']['gt']}; key "
+    origin = result.get("system_origin") or {k: v for k, v in result["systems"].items()}
+    return line + (f"; systems pred {origin['pred']}, gt {origin['gt']}; key "
                    f"{inp.get('key', '?')} ({inp.get('paired', '')})")
 
 

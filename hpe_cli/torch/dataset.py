@@ -411,7 +411,7 @@ def _read_parquet(files, source):
     import pandas as pd
     import pyarrow.parquet as pq
 
-    from .. import _system_from_schema
+    from ..io.system_meta import system_from_metadata
 
     tables, offsets, groups, found, col, binary = [], [0], [], None, None, False
     for f, path in enumerate(files):
@@ -427,7 +427,7 @@ def _read_parquet(files, source):
         for g in range(pf.metadata.num_row_groups):
             groups.append((f, g))
             offsets.append(offsets[-1] + pf.metadata.row_group(g).num_rows)
-        found = found or _system_from_schema(schema, path)
+        found = found or system_from_metadata(schema.metadata, path)  # the one rule hpe's commands use
     table = pd.concat(tables, ignore_index=True)
     if "landmarks_x" in table.columns and "landmarks_y" in table.columns and "lm0_x" not in table.columns:
         lens = table["landmarks_x"].map(len)

@@ -30,13 +30,12 @@ def _kind_of_table(schema) -> str:
     return "table"
 
 
-def _table_system(schema, given):
-    from ...rotation.systems import get_system
+def _table_system(src, given):
+    """The table's own system (``hpe:system`` metadata...), else ``--from``, else 300w_lp
+    (:func:`hpe_cli.io.system_meta.resolve_system`, as every command)."""
+    from ...io.system_meta import resolve_system
 
-    if given is not None:
-        return get_system(given)
-    name = (schema.metadata or {}).get(b"hpe:system")
-    return get_system(name.decode() if name else "300w_lp")
+    return resolve_system(src, given, default="300w_lp", option_name="--from").system
 
 
 def _subject_of(stem: str) -> str:
@@ -156,7 +155,7 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
         raise HpeError(f"{path}: expected columns {', '.join(missing)} (an image reference and a head box) "
                        f"to export crops, got {', '.join(cols[:12])}{'...' if len(cols) > 12 else ''}")
     mode = label_mode(cols, path)
-    system = _table_system(src.schema, input_system)
+    system = _table_system(src, input_system)
     kind = _kind_of_table(src.schema)
     n_lm = landmark_count(cols) if landmarks else 0
     keep = [c for c in ["image", "sequence", "camera", "frame", "person_id", "person", "subject", "image_width",

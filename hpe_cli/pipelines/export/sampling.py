@@ -84,7 +84,7 @@ def read_split_file(path):
     dup = t[col].duplicated(keep=False) & (t.groupby(col)["split"].transform("nunique") > 1)
     if dup.any():
         k = int(np.flatnonzero(dup.to_numpy())[0])
-        raise HpeError(f"{path}: row {k + 2}: group {t[col].iloc[k]!r} is in two splits")
+        raise HpeError(f"{path}: line {k + 2}: group {t[col].iloc[k]!r} is in two splits")
     for n in sorted(set(t["split"].tolist())):
         check_split_names([n], str(path))
     return ("subject" if col == "identity" else col), dict(zip(t[col].tolist(), t["split"].tolist()))

@@ -140,8 +140,10 @@ def summary_of(layout, system, inputs, sel, plan, exported, notes_extra, opts) -
 def where(rows, k: int, reason: str) -> str:
     """``FILE: row N: reason`` for a table row, ``FOLDER/NAME.mat: reason`` for a one-record ``.mat`` label; an
     image fault also names the image."""
+    from ...io.table_source import row_name
+
     inp, row = str(rows["input"].iat[k]), str(rows["row"].iat[k])
-    head = f"{Path(inp) / row}" if row.lower().endswith(".mat") else f"{inp}: row {row}"
+    head = f"{Path(inp) / row}" if row.lower().endswith(".mat") else row_name(inp, row)  # line N / row N
     image = str(rows["image"].iat[k])
     if reason.startswith(("no image", "unreadable image")) and image:
         return f"{head}: {reason}: {Path(str(rows['root'].iat[k])) / image}"

@@ -1,0 +1,575 @@
+"""The Python API (``import hpe_cli as hpe``): thin wrappers over the readers and pipelines the CLI runs.
+
+:mod:`hpe_cli` re-exports every name here lazily (``hpe.read_labels`` imports
+this module on first use), so ``import hpe_cli`` stays fast. File-level
+functions (:func:`read_labels`, :func:`convert_file`, :func:`audit_file`) call
+the same reader, system resolution (:func:`hpe_cli.io.system_meta.resolve_system`),
+storage kinds and rejects as ``hpe convert``/``hpe audit``; array functions
+call the same kernels.
+"""
+from __future__ import annotations
+
+STORAGE_KINDS = ("angles", "matrix", "rotvec", "quaternion", "6d")
+
+
+# ---------------------------------------------------------------------------------------------- systems
+def get_system(spec):
+    """A rotation system by name, TOML path, or a ``RotationSystem`` returned as is.
+
+    Parameters
+    ----------
+    spec : str, path or RotationSystem
+        A built-in name (see :func:`systems`), a ``.toml`` system file, or a system.
+
+    Returns
+    -------
+    RotationSystem
+
+    Raises
+    ------
+    ValueError
+        Unknown name or invalid TOML file (``hpe_cli.rotation.SystemError_``).
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> s = hpe.get_system("300w_lp")
+    >>> s.name, s.axes, s.sequence
+    ('300w_lp', 'xyz', 'intrinsic')
+    >>> s.from_angles([[0.0, 90.0, 0.0]]).round(12)[0]
+    array([[ 0.,  0., -1.],
+           [ 0.,  1.,  0.],
+           [ 1.,  0.,  0.]])
+    """
+    from .rotation.systems import get_system as _get
+
+    return _get(spec)
+
+
+def systems() -> dict:
+    """Every built-in rotation system, by name.
+
+    Returns
+    -------
+    dict of str to RotationSystem
+        Read once from ``configs/systems/*.toml``; names sorted.
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> "300w_lp" in hpe.systems() and "6drepnet" in hpe.systems()
+    True
+    >>> hpe.systems()["biwi"].describe()["order"]
+    'extrinsic XYZ, active matrix'
+    """
+    from .rotation.systems import builtin_systems
+
+    return builtin_systems()
+
+
+# -------------------------------------------------------------------------------------------- convert
+def _storage_to_matrix(values, storage: str, quaternion_order: str, sixd_columns=(0, 1)):
+    """Rotation vectors (radians), quaternions or 6-D vectors to matrices (N, 3, 3) (:mod:`hpe_cli.rotation.storage`)."""
+    import numpy as np
+
+    from .rotation import storage as st
+
+    if storage == "rotvec":
+        return st.rotvec_to_matrix(values)
+    if storage == "quaternion":
+        norm = np.linalg.norm(values, axis=-1)
+        if not (np.abs(norm - 1.0) <= 1e-3).all():
+            row = int(np.flatnonzero(~(np.abs(norm - 1.0) <= 1e-3))[0])
+            raise ValueError(f"row {row + 1}: expected a unit quaternion, got norm {norm[row]:.6g}")
+        return st.quaternion_to_matrix(values, order=quaternion_order)
+    return st.sixd_to_matrix(values, sixd_columns)
+
+
+def convert(values, src, dst, storage: str | None = None, *, quaternion_order: str | None = None):
+    """Express rotations given in system ``src`` as labels of system ``dst``.
+
+    Parameters
+    ----------
+    values : array_like
+        ``angles``: shape (N, 3) or (3,), ``(pitch, yaw, roll)`` in degrees, any real values;
+        ``matrix``: shape (N, 3, 3) or (3, 3), ``src``'s stored matrices;
+        ``rotvec``: shape (N, 3), rotation vectors of ``src``'s stored matrix, radians;
+        ``quaternion``: shape (N, 4), unit quaternions of ``src``'s stored matrix;
+        ``6d``: shape (N, 6), two columns of ``src``'s stored matrix (``src.sixd_columns``,
+        default columns 0 and 1 as 6DRepNet), re-orthonormalised by Gram-Schmidt.
+    src, dst : str, path or RotationSystem
+        Source and target systems (see :func:`get_system`).
+    storage : {"angles", "matrix", "rotvec", "quaternion", "6d"}, optional
+        How ``values`` are given. Default: ``matrix`` for (N, 3, 3), ``quaternion``
+        for (N, 4) or (4,), ``6d`` for (N, 6), else ``angles``. Rotation vectors must
+        be asked for, and so must a single (3, 3) input (one matrix or three angle rows).
+    quaternion_order : {"wxyz", "xyzw"}, optional
+        Component order of quaternions (SciPy uses ``xyzw``); default ``src.quaternion_order``
+        (``wxyz`` unless the system says otherwise).
+
+    Returns
+    -------
+    Conversion
+        ``primary``/``secondary`` (N, 3) degrees in (-180, 180], ``matrix`` (N, 3, 3)
+        ``dst``'s stored matrix, ``gimbal_lock`` (N,) bool, ``roundtrip_err`` (N,),
+        ``canonical`` (N, 3, 3). A single input row still gives N = 1.
+
+    Raises
+    ------
+    ValueError
+        Unknown ``storage`` or a shape that does not fit it.
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> c = hpe.convert([10.0, 30.0, -5.0], "300w_lp", "6drepnet")
+    >>> c.primary.round(6)
+    array([[10., 30., -5.]])
+    >>> c.secondary.round(6), c.matrix.shape, c.gimbal_lock
+    (array([[-170.,  150.,  175.]]), (1, 3, 3), array([False]))
+    >>> hpe.convert([1.0, 0.0, 0.0, 0.0], "300w_lp", "300w_lp", storage="quaternion").primary + 0.0
+    array([[0., 0., 0.]])
+    """
+    import numpy as np
+
+    from .rotation.convert import canonical_to_labels
+
+    source, target = get_system(src), get_system(dst)
+    v = np.asarray(values, dtype=np.float64)
+    if storage is None:
+        if v.shape == (3, 3):
+            raise ValueError("a (3, 3) input is three angle rows or one matrix: pass storage='angles' or "
+                             "storage='matrix'")
+        storage = ("matrix" if v.ndim == 3 else "quaternion" if v.shape[-1:] == (4,) else
+                   "6d" if v.shape[-1:] == (6,) else "angles")
+    if storage not in STORAGE_KINDS:
+        raise ValueError(f"expected storage in {', '.join(STORAGE_KINDS)}, got {storage!r}")
+    if quaternion_order is None:
+        quaternion_order = getattr(source, "quaternion_order", "wxyz")
+    if quaternion_order not in ("wxyz", "xyzw"):
+        raise ValueError(f"expected quaternion_order 'wxyz' or 'xyzw', got {quaternion_order!r}")
+    width = {"angles": (3,), "matrix": (3, 3), "rotvec": (3,), "quaternion": (4,), "6d": (6,)}[storage]
+    if v.shape[-len(width):] != width or v.ndim > len(width) + 1:
+        raise ValueError(f"expected {storage} values of shape (N, {', '.join(map(str, width))}), got {v.shape}")
+    v = v.reshape((-1,) + width)
+    if storage == "angles":
+        R = source.from_angles(v)
+    elif storage == "matrix":
+        R = v
+    else:
+        R = _storage_to_matrix(v, storage, quaternion_order, getattr(source, "sixd_columns", (0, 1)))
+    return canonical_to_labels(source.to_canonical(R), target)
+
+
+# ----------------------------------------------------------------------------------------------- I/O
+class LabelTable(tuple):
+    """``(table, system)``: a pandas DataFrame and its RotationSystem (or None). Unpacks as a pair."""
+
+    __slots__ = ()
+
+    def __new__(cls, table, system):
+        return super().__new__(cls, (table, system))
+
+    @property
+    def table(self):
+        return self[0]
+
+    @property
+    def system(self):
+        return self[1]
+
+    def __repr__(self):
+        name = None if self[1] is None else self[1].name
+        return f"LabelTable(rows={len(self[0])}, columns={len(self[0].columns)}, system={name!r})"
+
+
+def read_labels(path, system=None, *, reinterpret_as=None, **reader_options) -> LabelTable:
+    """Read a label table and the rotation system its labels are in.
+
+    Parameters
+    ----------
+    path : str or path
+        ``.parquet``/``.csv`` label table, a folder (or file) of 300W-LP/AFLW2000
+        ``.mat`` files, or BIWI pose files -- anything ``hpe`` commands read.
+    system : str, path or RotationSystem, optional
+        Use this system when the file does not name one (CSV files carry no metadata);
+        one that disagrees with the file's own is an error, as ``--system`` is.
+    reinterpret_as : str, path or RotationSystem, optional
+        The file's metadata is wrong: read the labels in this system (``--reinterpret-as``).
+    **reader_options
+        Passed to :func:`hpe_cli.io.open_table` (e.g. ``batch_size``; ``columns``,
+        ``delimiter``, ``header``, ``input_format`` where supported).
+
+    Returns
+    -------
+    LabelTable
+        ``(table, system)``: a pandas DataFrame with one row per label, and the
+        system as every ``hpe`` command resolves it
+        (:func:`hpe_cli.io.system_meta.resolve_system`): the file's own (Parquet
+        ``hpe:system_definition``/``hpe:system``, COCO ``info``, WHENet
+        ``annotation.txt``, ``300w_lp`` for ``.mat``, ``biwi`` for BIWI), else
+        ``system`` (None when not given). Rows are those ``hpe`` commands read,
+        with the same keys (``image`` for ``.mat`` folders and BIWI).
+
+    Raises
+    ------
+    HpeError
+        Missing or unreadable file, or an unreadable row (one line naming it:
+        ``FILE: line N``, ``FILE: row N`` or ``FILE``).
+    UsageError
+        ``system`` disagrees with the file's own system.
+
+    Examples
+    --------
+    >>> import tempfile, os, hpe_cli as hpe
+    >>> d = tempfile.mkdtemp()
+    >>> p = hpe.write_labels({"pitch": [1.0], "yaw": [2.0], "roll": [3.0]}, os.path.join(d, "l.parquet"),
+    ...                      system="6drepnet")
+    >>> table, system = hpe.read_labels(p)
+    >>> system.name, table["yaw"].tolist()
+    ('6drepnet', [2.0])
+    """
+    import pyarrow as pa
+
+    from .io.readers import open_table
+    from .io.system_meta import file_system, resolve_system
+
+    src = open_table(path, **reader_options)
+    found = None
+    if system is not None or reinterpret_as is not None or file_system(src) is not None:
+        found = resolve_system(src, system, default=None, reinterpret=reinterpret_as).system
+    table = pa.Table.from_batches(list(src.batches()), schema=src.schema)
+    return LabelTable(table.to_pandas(), found)
+
+
+def convert_file(input, output, target, source=None, *, radians: bool = False, rejects=None, strict: bool = False,
+                 overwrite: bool = False, decoder=None, batch_size: int = 65_536):
+    """``hpe convert`` as a function: the same pipeline (:func:`hpe_cli.pipelines.convert.run_convert`).
+
+    Parameters
+    ----------
+    input, output : str or path
+        Any table ``hpe`` reads; a ``.parquet`` or ``.csv`` to write (atomically).
+    target : str, path or RotationSystem
+        The system to write (``--to``).
+    source : str, path or RotationSystem, optional
+        The input's system (``--from``); default: the file's own (an error when it names none).
+    radians, rejects, strict, overwrite, decoder, batch_size
+        As the command's options.
+
+    Returns
+    -------
+    ConvertSummary
+        ``rows``, ``written``, ``gimbal_lock``, ``max_roundtrip_err``, ``rejects`` (reason -> count),
+        ``source`` and ``source_origin`` ("file metadata", "option" or "default").
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.convert import run_convert
+
+    with ensure_transaction():
+        return run_convert(input, output, None if source is None else get_system(source), get_system(target),
+                           radians=radians, rejects_path=rejects, overwrite=overwrite, batch_size=batch_size,
+                           strict=strict, decoder=decoder)
+
+
+def audit_file(input, system=None, *, report=None, output=None, rejects=None, strict: bool = False,
+               overwrite: bool = False, **options) -> dict:
+    """``hpe audit`` as a function: the same pipeline (:func:`hpe_cli.pipelines.audit.run_audit`).
+
+    Returns the JSON report (``rows``, one count per check, ``system``,
+    ``system_origin``, ``rejected``, ``examples``...); ``system`` defaults to
+    the file's own, else ``300w_lp``. ``options``: ``near_tol_deg``, ``radians``,
+    ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``.
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.audit import run_audit
+
+    with ensure_transaction():
+        return run_audit(input, None if system is None else get_system(system), report=report, output=output,
+                         overwrite=overwrite, rejects_path=rejects, strict_rejects=strict, **options)
+
+
+def write_labels(table, path, system=None, *, overwrite: bool = False):
+    """Write a label table atomically (Parquet or CSV by extension), naming its system.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame, pyarrow.Table or dict of str to array_like
+        One row per label (e.g. ``pitch, yaw, roll`` degrees, ``r00..r22``, ``bbox_*``, ``lm{i}_x/y``).
+    path : str or path
+        ``.parquet``/``.pq`` or ``.csv``. Parquet files get ``hpe:system`` and
+        ``hpe:system_definition`` metadata, which :func:`read_labels` reads back.
+    system : str, path or RotationSystem, optional
+        The labels' system.
+    overwrite : bool
+        Replace an existing file (otherwise an ``HpeError``).
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Examples
+    --------
+    >>> import tempfile, os, hpe_cli as hpe
+    >>> p = hpe.write_labels({"pitch": [0.5]}, os.path.join(tempfile.mkdtemp(), "x.csv"))
+    >>> p.name, p.read_text().splitlines()[0]
+    ('x.csv', '"pitch"')
+    """
+    import pyarrow as pa
+
+    from .io.writers import system_metadata, write_table
+
+    if isinstance(table, dict):
+        from .io.layout import arrow_table
+
+        table = arrow_table(table)
+    elif not isinstance(table, pa.Table):
+        table = pa.Table.from_pandas(table, preserve_index=False)
+    meta = None if system is None else system_metadata(get_system(system))
+    return write_table(table, path, overwrite=overwrite, metadata=meta)
+
+
+# --------------------------------------------------------------------------------------------- checks
+def audit(values, system, storage: str | None = None, **options) -> dict:
+    """Check head-pose labels row by row (the checks of ``hpe audit``).
+
+    Parameters
+    ----------
+    values : array_like, shape (N, 3) or (N, 3, 3)
+        ``(pitch, yaw, roll)`` degrees (NaN allowed), or stored matrices.
+    system : str, path or RotationSystem
+    storage : {"angles", "matrix"}, optional
+        Default: ``matrix`` for 3-D input, else ``angles``.
+    **options
+        ``near_tol_deg`` (default 1), ``canonical_tol_deg`` (angles) or ``rotation_tol`` (matrices).
+
+    Returns
+    -------
+    dict
+        ``check -> bool array (N,)`` for ``gimbal_lock, near_gimbal, non_canonical,
+        out_of_range, non_finite, not_rotation, duplicates`` and ``lock_distance`` (N,).
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> r = hpe.audit([[10, 20, 30], [-16.0909, -89.99858, -6.8545], [0, 120, 0], [0, 0, 0]], "300w_lp")
+    >>> r["near_gimbal"].tolist(), r["non_canonical"].tolist()
+    ([False, True, False, False], [False, False, True, False])
+    """
+    import numpy as np
+
+    from .rotation.audit import audit_angles, audit_matrices
+
+    v = np.asarray(values, dtype=np.float64)
+    if storage is None:
+        storage = "matrix" if v.ndim == 3 else "angles"
+    if storage == "angles":
+        return audit_angles(v, system, **options)
+    if storage == "matrix":
+        return audit_matrices(v, system, **options)
+    raise ValueError(f"expected storage 'angles' or 'matrix', got {storage!r}")
+
+
+def evaluate(pred, gt, *, pred_system, gt_system, protocols=None, align: str = "none", columns=None) -> dict:
+    """Evaluate predicted head poses against ground truth (the report of ``hpe evaluate``).
+
+    Parameters
+    ----------
+    pred, gt : array_like, shape (N, 3) or (N, 3, 3)
+        ``(pitch, yaw, roll)`` degrees or stored matrices of ``pred_system`` / ``gt_system``.
+    pred_system, gt_system : str, path or RotationSystem
+    protocols, align, columns
+        See :func:`hpe_cli.metrics.evaluate.evaluate`.
+
+    Returns
+    -------
+    dict
+        The JSON report (MAE per angle, geodesic error, MAEV, ...).
+
+    Raises
+    ------
+    NotImplementedError
+        When this installation has no ``hpe_cli.metrics.evaluate``.
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> pred, gt = [[0.0, 12.0, 1.0], [5.0, -30.0, 0.0]], [[0.0, 10.0, 0.0], [4.0, -33.0, 2.0]]
+    >>> report = hpe.evaluate(pred, gt, pred_system="300w_lp", gt_system="300w_lp")
+    >>> report["n"]["pairs"], round(report["metrics"]["mae_wrapped"]["yaw"], 6)
+    (2, 2.5)
+    """
+    import importlib.util
+
+    if importlib.util.find_spec("hpe_cli.metrics.evaluate") is None:
+        raise NotImplementedError("hpe.evaluate needs hpe_cli.metrics.evaluate, which this installation "
+                                  "does not have; upgrade hpe-cli")
+    from .metrics.evaluate import evaluate as _evaluate
+
+    return _evaluate(pred, gt, pred_system=pred_system, gt_system=gt_system, protocols=protocols,
+                     align=align, columns=columns)
+
+
+# ------------------------------------------------------------------------------------------- geometry
+def augment_sample(pose, landmarks=None, bbox=None, *, op, angle=None, image_size, system="300w_lp",
+                   scheme="auto", box_from: str = "auto", clip: bool = False):
+    """One sample's labels, landmarks and box after a flip, rotation or mirror of its image.
+
+    Parameters
+    ----------
+    pose : array_like, shape (3,) or (3, 3)
+        ``(pitch, yaw, roll)`` in degrees, or the stored matrix, of ``system``.
+    landmarks : array_like, shape (L, 2), optional
+        Pixel coordinates ``(u, v)``, rows going down, pixel centres at integers; NaN = missing.
+    bbox : array_like, shape (4,), optional
+        ``(x, y, w, h)`` pixels.
+    op : {"hflip", "vflip", "hvflip", "rotate", "mirror"} or array_like, shape (2, 2)
+        ``rotate``: counter-clockwise on screen by ``angle`` degrees; ``mirror``: about
+        the line at ``angle`` degrees; or an orthogonal image-plane matrix (x right, y up).
+    angle : float, optional
+        Degrees, for ``rotate`` and ``mirror``.
+    image_size : (W, H)
+        Pixels.
+    system : str, path or RotationSystem
+        System of ``pose`` and of the result.
+    scheme : "auto", str, array_like of int or None
+        Landmark left/right permutation applied after a mirror (``auto``: by count, 68/70/21).
+    box_from, clip
+        See :func:`hpe_cli.geometry.augment.augment_boxes`.
+
+    Returns
+    -------
+    Augmented
+        ``matrix`` (3, 3), ``angles``/``angles_2`` (3,) degrees, ``canonical``,
+        ``gimbal_lock``, ``landmarks`` (L, 2) or None, ``bbox`` (4,) or None.
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> out = hpe.augment_sample([10.0, 30.0, 5.0], [[100.0, 50.0]], op="hflip", image_size=(200, 100),
+    ...                          scheme=[0])
+    >>> out.angles.round(6), out.landmarks
+    (array([ 10., -30.,  -5.]), array([[99., 50.]]))
+    """
+    from .geometry.augment import augment_sample as _a
+
+    return _a(pose, landmarks, bbox, op=op, angle=angle, image_size=image_size, system=system, scheme=scheme,
+              box_from=box_from, clip=clip)
+
+
+def augment_batch(pose, landmarks=None, bbox=None, *, op, angle=None, image_size, system="300w_lp",
+                  scheme="auto", box_from: str = "auto", clip: bool = False):
+    """N samples' labels, landmarks and boxes after flips, rotations or mirrors (vectorised).
+
+    Parameters
+    ----------
+    pose : array_like, shape (N, 3) or (N, 3, 3)
+        ``(pitch, yaw, roll)`` degrees or stored matrices of ``system``.
+    landmarks : array_like, shape (N, L, 2), optional
+    bbox : array_like, shape (N, 4), optional
+    op : str or array_like, shape (2, 2) or (N, 2, 2)
+        As in :func:`augment_sample`; one matrix per row allowed.
+    angle : float or array_like, shape (N,), optional
+        Degrees, one per row allowed.
+    image_size : array_like, shape (2,) or (N, 2)
+    system, scheme, box_from, clip
+        As in :func:`augment_sample`.
+
+    Returns
+    -------
+    Augmented
+        ``matrix`` (N, 3, 3), ``angles``/``angles_2`` (N, 3), ``landmarks`` (N, L, 2), ``bbox`` (N, 4).
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> out = hpe.augment_batch([[20.0, -50.0, 15.0], [0.0, 0.0, 0.0]], op="rotate", angle=[30, 90],
+    ...                         image_size=(450, 450))
+    >>> out.angles.round(3) + 0.0
+    array([[ 43.511, -33.607, -19.343],
+           [  0.   ,   0.   , -90.   ]])
+    """
+    from .geometry.augment import augment_batch as _a
+
+    return _a(pose, landmarks, bbox, op=op, angle=angle, image_size=image_size, system=system, scheme=scheme,
+              box_from=box_from, clip=clip)
+
+
+def draw_axes(image, pose, centre, length=None, *, system="300w_lp", thickness=None):
+    """Draw Hopenet-style pose axes (red: subject's left, green: down, blue: nose) onto an image.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, 3), uint8
+        BGR image, drawn on **in place** (copy it first to keep the original).
+    pose : array_like, shape (3,), (N, 3), (3, 3) or (N, 3, 3)
+        ``(pitch, yaw, roll)`` degrees or stored matrices of ``system``.
+    centre : array_like, shape (2,) or (N, 2)
+        Head centre ``(u, v)`` in pixels, rows going down.
+    length : float, optional
+        Line length in pixels (default: a third of the shorter image side).
+    system : str, path or RotationSystem
+    thickness : int, optional
+        Pixels (default from ``length``).
+
+    Returns
+    -------
+    ndarray
+        ``image``.
+
+    Examples
+    --------
+    >>> import numpy as np, hpe_cli as hpe
+    >>> img = hpe.draw_axes(np.zeros((100, 100, 3), np.uint8), [0.0, 0.0, 0.0], (50, 50), 40, thickness=1)
+    >>> img[50, 85].argmax(), img[85, 50].argmax()  # red (BGR 2) to the right, green (1) downwards
+    (np.int64(2), np.int64(1))
+    """
+    import numpy as np
+
+    from .geometry.draw import render_axes
+
+    sysm = get_system(system)
+    p = np.asarray(pose, dtype=np.float64)
+    R = p.reshape(-1, 3, 3) if p.shape[-2:] == (3, 3) else sysm.from_angles(p.reshape(-1, 3))
+    if length is None:
+        length = min(image.shape[:2]) / 3.0
+    return render_axes(image, sysm.to_canonical(R), np.asarray(centre, dtype=np.float64), length, thickness)
+
+
+def geodesic(a, b, system=None):
+    """The angle of the rotation between two labels, degrees in [0, 180].
+
+    Parameters
+    ----------
+    a, b : array_like, shape (N, 3) / (3,) angles or (N, 3, 3) / (3, 3) matrices
+        Both in the same system. Angles need ``system``; matrices do not (the angle
+        is the same in every system, stored active or transposed).
+    system : str, path or RotationSystem, optional
+        Needed for angle input.
+
+    Returns
+    -------
+    ndarray, shape (N,) (or () for single rotations)
+        ``atan2`` of the skew part's norm and the trace: accurate near 0 and 180 degrees.
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> float(hpe.geodesic([0.0, 30.0, 0.0], [0.0, -60.0, 0.0], system="300w_lp").round(9))
+    90.0
+    """
+    import numpy as np
+
+    from .rotation.distances import geodesic_deg
+
+    def mat(x):
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape[-2:] == (3, 3):
+            return x
+        if system is None:
+            raise ValueError("expected matrices of shape (..., 3, 3), or angles with system=, got angles "
+                             f"of shape {x.shape} and no system")
+        return get_system(system).from_angles(x)
+
+    return geodesic_deg(mat(a), mat(b))

@@ -1,0 +1,102 @@
+"""relabel-panoptic (3 systems) -> audit / convert with no system option -> audit: the system travels with the file.
+
+The labels a relabel writes in system X are read back in X by every command
+without being told (``hpe:system`` metadata): convert's matrices equal the
+relabel's own ``r00..r22`` (geodesic < 1e-6 degrees), audit flags nothing on
+the synthetic sequence, and the convert output audits clean in its new system.
+A COCO file (whenet angles, ``info["hpe:system"]``) is read back the same way.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from hpe_cli.cli.main import cli
+from hpe_cli.rotation import get_system
+from hpe_cli.rotation.distances import geodesic_deg
+
+ROOT = Path(__file__).resolve().parents[2]
+SYNTH = ROOT / "sample_data" / "panoptic_synth"
+PIZZA = Path("/work/shared/realdata/panoptic_160906_pizza1")
+if not PIZZA.exists():
+    PIZZA = ROOT.parent / "shared" / "realdata" / "panoptic_160906_pizza1"
+MAT = [f"r{i}{j}" for i in range(3) for j in range(3)]
+CHECKS = ("gimbal_lock", "near_gimbal", "non_canonical", "out_of_range", "non_finite", "not_rotation", "duplicates")
+
+
+def run(*args, code=0):
+    res = CliRunner().invoke(cli, [str(a) for a in args])
+    assert res.exit_code == code, res.output
+    return res
+
+
+def canonical(frame, system):
+    s = get_system(system)
+    return s.to_canonical(frame[MAT].to_numpy().reshape(-1, 3, 3))
+
+
+@pytest.mark.parametrize("system", ["300w_lp", "scipy_zyx", "6drepnet"])
+def test_relabel_then_audit_and_convert_without_system(tmp_path, system):
+    lab = tmp_path / "labels.parquet"
+    run("relabel-panoptic", SYNTH, "-o", lab, "--system", system, "-q")
+    relabel = pd.read_parquet(lab)
+    # the relabel's matrices are its angles' matrices in X: an independent check of what it wrote
+    R_angles = get_system(system).from_angles(relabel[["pitch", "yaw", "roll"]].to_numpy())
+    assert geodesic_deg(R_angles, relabel[MAT].to_numpy().reshape(-1, 3, 3)).max() < 1e-6
+
+    res = run("audit", lab, "--json", "-")
+    rep = json.loads(res.stdout)
+    assert rep["system"] == system and rep["system_origin"] == "file metadata"
+    assert rep["rows"] == len(relabel) and all(rep[c] == 0 for c in CHECKS), rep
+    assert f"system {system} (file metadata)" in res.stderr
+
+    same = tmp_path / "same.parquet"
+    res = run("convert", lab, "-o", same, "--to", system)
+    assert f"from {system} (file metadata)" in res.stderr
+    back = pd.read_parquet(same)
+    assert geodesic_deg(back[MAT].to_numpy().reshape(-1, 3, 3), relabel[MAT].to_numpy().reshape(-1, 3, 3)).max() < 1e-6
+
+    # convert -> audit: the new file names its new system
+    other = "whenet" if system != "whenet" else "300w_lp"
+    conv = tmp_path / "conv.parquet"
+    run("convert", lab, "-o", conv, "--to", "300w_lp", "-q")
+    c = pd.read_parquet(conv)
+    assert geodesic_deg(canonical(c, "300w_lp"), canonical(relabel, system)).max() < 1e-6
+    rep2 = json.loads(run("audit", conv, "--json", "-", "-q").stdout)
+    assert rep2["system"] == "300w_lp" and rep2["system_origin"] == "file metadata"
+    assert all(rep2[k] == 0 for k in CHECKS if k not in ("non_canonical",)), rep2
+    # an explicit, disagreeing system is a usage error naming both; --reinterpret-as overrides
+    res = run("audit", lab, "--system", other, code=2)
+    assert system in res.output and other in res.output and res.output.count("\n") == 1
+    run("audit", lab, "--system", other, "--reinterpret-as", other, "-q")
+
+
+def test_coco_and_whenet_files_carry_their_system(tmp_path):
+    coco = tmp_path / "train.json"
+    run("relabel-panoptic", SYNTH, "-o", coco, "--format", "coco", "-q")
+    assert json.loads(coco.read_text())["info"]["hpe:system"] == "whenet"
+    rep = json.loads(run("audit", coco, "--json", "-", "-q").stdout)
+    assert rep["system"] == "whenet" and rep["system_origin"] == "file metadata"
+    # rows with no whenet solution (|pitch|, |roll| < 90) are the only flags: the system's documented range
+    assert rep["out_of_range"] == rep["details"]["flagged"]
+    table = tmp_path / "w.parquet"
+    run("relabel-panoptic", SYNTH, "-o", table, "--system", "whenet", "-q")
+    rep_t = json.loads(run("audit", table, "--json", "-", "-q").stdout)
+    assert rep_t["out_of_range"] == rep["out_of_range"] and rep_t["rows"] == rep["rows"]
+    out = tmp_path / "c.parquet"
+    run("convert", coco, "-o", out, "--to", "300w_lp", "-q")
+    ref = pd.read_parquet(table).sort_values(["image", "bbox_x"]).reset_index(drop=True)
+    got = pd.read_parquet(out).sort_values(["image", "bbox_x"]).reset_index(drop=True)
+    assert geodesic_deg(canonical(got, "300w_lp"), canonical(ref, "whenet")).max() < 1e-6
+
+
+@pytest.mark.skipif(not PIZZA.exists(), reason="real Panoptic sample absent")
+def test_real_pizza_scipy_zyx_audits_clean(tmp_path):
+    lab = tmp_path / "pizza.parquet"
+    run("relabel-panoptic", PIZZA, "-o", lab, "--system", "scipy_zyx", "-q")
+    rep = json.loads(run("audit", lab, "--json", "-", "-q").stdout)
+    assert rep["system"] == "scipy_zyx" and rep["details"]["flagged"] == 0 and rep["rows"] > 1000
