@@ -211,7 +211,7 @@ def labels_table(files, sequences, frames, centres, R=None, angles=None, system=
     """
     import pandas as pd
 
-    from ..io.layout import conversion_columns
+    from ..rotation.columns import conversion_columns
     from ..rotation import canonical_to_labels, get_system
 
     biwi = get_system(BIWI_SYSTEM)

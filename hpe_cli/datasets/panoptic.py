@@ -15,7 +15,6 @@ Layout of a sequence folder ``<seq>/``::
 """
 from __future__ import annotations
 
-import json
 import os
 import re
 import tarfile
@@ -27,6 +26,7 @@ import numpy as np
 from ..errors import HpeError
 from .fields import as_int, describe, frame_number_problem, member_problem
 # the calibration reader lives in panoptic_calibration.py; its names are part of this module's API
+from .panoptic_json import _load_json, _parse_json  # noqa: F401
 from .panoptic_calibration import (  # noqa: F401
     ABSURD,
     CAMERA_TYPES,
@@ -499,37 +499,6 @@ def find_calibration(seq_dir) -> Path:
 
 
 # ----------------------------------------------------------------- helpers
-def _load_json(path: Path):
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read()
-    except FileNotFoundError:
-        raise HpeError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise HpeError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    return _parse_json(raw, path)
-
-
-def _parse_json(raw: bytes, path):
-    """orjson (5x faster on face files); the standard library where orjson refuses
-    (NaN/Infinity literals) or to phrase the error."""
-    try:
-        import orjson
-
-        return orjson.loads(raw)
-    except ImportError:
-        pass
-    except ValueError:
-        pass
-    try:
-        return json.loads(raw)
-    except json.JSONDecodeError as exc:
-        raise HpeError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); "
-                       "truncated file?") from None
-    except UnicodeDecodeError as exc:
-        raise HpeError(f"{path}: not valid JSON text ({exc.reason})") from None
-
-
 def _floats(value, n, where, key) -> np.ndarray:
     """A list of ``n`` numbers (null -> NaN); strings, bools, nested lists and objects are refused."""
     if not isinstance(value, list):

@@ -110,7 +110,7 @@ def read_calibration(path, cameras="all") -> Cameras:
     -------
     Cameras
     """
-    from .panoptic import _load_json
+    from .panoptic_json import _load_json
 
     path = Path(path)
     data = _load_json(path)

@@ -188,7 +188,7 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
-    from .readers import Reject, TableSource
+    from .table_source import Reject, TableSource
 
     path = Path(path)
     if not path.is_file():
@@ -398,7 +398,7 @@ def coco_frame(doc, path="<coco>"):
 def _frame_source(path, frame, batch_size, with_lines, system=None):
     import pyarrow as pa
 
-    from .readers import TableSource
+    from .table_source import TableSource
 
     table = pa.Table.from_pandas(frame, preserve_index=False)  # carries __line__
     schema = table.schema if with_lines else table.schema.remove(table.schema.get_field_index(LINE_COL))

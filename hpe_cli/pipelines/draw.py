@@ -9,178 +9,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
-#: 300W-LP/AFLW2000 Pose_Para: line length = this many Basel-Face-Model units times ``scale``.
-#: The model is in micrometres and its origin is the centre of the head (the nose tip is
-#: about 130 mm in front of it, the outer eye corners 43 mm to each side).
-MAT_LENGTH_UNITS = 100_000.0
-#: when a row gives no size: line length as a fraction of min(image width, height)
-DEFAULT_LENGTH_FRACTION = 0.25
-_WRITABLE = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"}
-
-
-def _read_all(src, mode, radians, system, batches=None):
-    """Whole table (or the given ``batches`` of it) as (frame, canonical A, angles for captions in ``system``,
-    reasons, lines).
-
-    A dataset reader's labels (.mat Pose_Para: always 300w_lp) are read in
-    the dataset's own system and only the captions use ``system``.
-    """
-    from ..io.columns import label_system
-
-    out_system, system = system, label_system(src, system)
-    import numpy as np
-    import pyarrow as pa
-
-    from ..io import batch_labels
-    from ..io.readers import LINE_COL
-
-    batches = list(src.batches()) if batches is None else list(batches)
-    lines = None
-    if src.with_lines:
-        lines = np.concatenate([b.column(LINE_COL).to_numpy() for b in batches]) if batches else np.zeros(0, int)
-        batches = [b.drop_columns([LINE_COL]) for b in batches]
-    schema = pa.schema([f for f in src.schema if f.name != LINE_COL], metadata=src.schema.metadata)
-    table = pa.Table.from_batches(batches, schema=schema)
-    if mode not in ("angles", "matrix") or (system.columns and all(c in src.columns for c in system.value_columns)):
-        A, angles, reasons = _read_stored(batches, mode, radians, system)
-        ok = reasons == ""
-        if out_system is not system and ok.any():
-            angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
-        return table.to_pandas(), A, angles, reasons, lines
-    values, reasons = [], []
-    for b in batches:
-        v, r = batch_labels(b, mode, radians)
-        values.append(v)
-        reasons.append(r)
-    shape = (0, 3) if mode == "angles" else (0, 3, 3)
-    values = np.concatenate(values) if values else np.zeros(shape)
-    reasons = np.concatenate(reasons) if reasons else np.zeros(0, dtype=object)
-    ok = reasons == ""
-    A = np.full((len(values), 3, 3), np.nan)
-    angles = np.full((len(values), 3), np.nan)
-    if ok.any():
-        if mode == "angles":
-            A[ok] = system.to_canonical(system.from_angles(values[ok]))
-            angles[ok] = values[ok]
-        else:
-            A[ok] = system.to_canonical(values[ok])
-            angles[ok] = system.to_angles(values[ok])[0]
-        if out_system is not system:
-            angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
-    return table.to_pandas(), A, angles, reasons, lines
-
-
-def _read_stored(batches, mode, radians, system):
-    """(canonical A, angles, reasons) of any storage kind (rotation vectors, quaternions, 6-D, named columns)."""
-    import numpy as np
-
-    from ..io import batch_rotations
-    from ..rotation import soa
-
-    As, angles, reasons = [], [], []
-    for b in batches:
-        X, ok, r = batch_rotations(b, system, mode, radians)
-        R = soa.to_array(X, b.num_rows)
-        a = np.full((b.num_rows, 3, 3), np.nan)
-        g = np.full((b.num_rows, 3), np.nan)
-        if ok.any():
-            a[ok] = system.to_canonical(R[ok])
-            g[ok] = system.to_angles(R[ok])[0]
-        As.append(a)
-        angles.append(g)
-        reasons.append(r if r is not None else np.full(b.num_rows, "", dtype=object))
-    if not As:
-        return np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0, dtype=object)
-    return np.concatenate(As), np.concatenate(angles), np.concatenate(reasons)
-
-
-def _column(frame, name):
-    import numpy as np
-    import pandas as pd
-
-    if name not in frame.columns:
-        return np.full(len(frame), np.nan)
-    return pd.to_numeric(frame[name], errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
-
-
-def face_placement(frame, pose_para: bool, length=None):
-    """Per-row centre ``(N, 2)`` and length ``(N,)`` from the table, NaN where not given.
-
-    Returns ``(centre, length, tdy_rows)``: ``tdy_rows`` marks rows whose centre
-    came from ``tdx, tdy`` (so it may need flipping once the image height is known).
-    """
-    import numpy as np
-
-    bx, by, bw, bh = (_column(frame, c) for c in ("bbox_x", "bbox_y", "bbox_w", "bbox_h"))
-    has_box = np.isfinite(bx) & np.isfinite(by) & np.isfinite(bw) & np.isfinite(bh)
-    tdx, tdy = _column(frame, "tdx"), _column(frame, "tdy")
-    has_td = ~has_box & np.isfinite(tdx) & np.isfinite(tdy)
-    centre = np.full((len(frame), 2), np.nan)
-    centre[has_box] = np.stack([bx + bw / 2, by + bh / 2], axis=1)[has_box]
-    centre[has_td] = np.stack([tdx, tdy], axis=1)[has_td]
-    L = np.full(len(frame), np.nan)
-    L[has_box] = (bh / 2)[has_box]
-    size = _column(frame, "size")
-    L = np.where(~has_box & np.isfinite(size), size, L)
-    if pose_para:
-        L = np.where(~has_box & ~np.isfinite(size), np.abs(_column(frame, "scale")) * MAT_LENGTH_UNITS, L)
-    if length is not None:
-        L = np.full(len(frame), float(length))
-    L = np.where(np.isfinite(L) & (L > 0), L, np.nan)
-    return centre, L, has_td
-
-
-def _image_names(frame):
-    """Image name per row (str), or None when the table names no images."""
-    import math
-    from pathlib import PurePath
-
-    from ..io.images import IMAGE_COLUMNS
-
-    col = next((c for c in IMAGE_COLUMNS if c in frame.columns), None)
-    if col is None:
-        return None
-    out = []
-    for v in frame[col].tolist():
-        if v is None or (isinstance(v, float) and math.isnan(v)):
-            out.append(None)
-            continue
-        p = PurePath(str(v))
-        out.append(str(p.with_suffix(".jpg")) if p.suffix.lower() == ".mat" else str(p))
-    return out
-
-
-def _safe_relative(name, where):
-    from pathlib import Path
-
-    from ..errors import HpeError
-
-    rel = Path(name)
-    if rel.is_absolute():
-        rel = Path(rel.name)
-    if ".." in rel.parts or not rel.parts:
-        raise HpeError(f"{where}: image name {name!r} would be written outside the output folder")
-    return rel
-
-
-def row_namer(src, lines, frame=None):
-    """``f(i)`` naming 0-based row ``i`` of ``src`` as its error messages do: ``FILE: line N`` for text
-    (1-based, header = line 1), the ``.mat`` file itself for a ``.mat`` folder, ``FILE: row N`` (1-based)
-    otherwise."""
-    if frame is not None and Path(src.path).is_dir() and "file" in frame.columns:
-        files = frame["file"].tolist()
-        return lambda i: f"{Path(src.path) / str(files[i])}"
-    if src.kind == "csv" and lines is not None:
-        return lambda i: f"{src.path}: line {int(lines[i])}"
-    return lambda i: f"{src.path}: row {int(i) + 1}"
-
-
-def row_numbers(src, lines, idx):
-    """The numbers :func:`row_namer` prints for 0-based rows ``idx`` (for a rejects file's ``row`` column)."""
-    import numpy as np
-
-    idx = np.asarray(idx, dtype=np.int64)
-    return np.asarray(lines, dtype=np.int64)[idx] if src.kind == "csv" and lines is not None else idx + 1
+from .draw_rows import (  # noqa: F401  (shared with draw_errors and draw_flagged)
+    DEFAULT_LENGTH_FRACTION,
+    MAT_LENGTH_UNITS,
+    _WRITABLE,
+    _column,
+    _image_names,
+    _read_all,
+    _read_image,
+    _read_stored,
+    _safe_relative,
+    _write_image,
+    face_placement,
+    row_namer,
+    row_numbers,
+)
 
 
 def _group_rows(names, usable, limit):
@@ -440,31 +283,6 @@ def check_output_exists(path, overwrite):
 
     if path.exists() and not overwrite:
         raise HpeError(f"{path}: already exists (use --overwrite to replace it)")
-
-
-def _read_image(path):
-    """BGR image or None (see :func:`hpe_cli.io.images.read_image`)."""
-    from ..io.images import read_image
-
-    return read_image(path)
-
-
-def _write_image(img, staged, shown):
-    """Encode ``img`` by ``shown``'s extension (PNG if unknown) into ``staged`` (a file in the staged folder)."""
-    import cv2
-
-    from ..errors import HpeError
-    from ..io.transaction import os_reason
-
-    staged.parent.mkdir(parents=True, exist_ok=True)
-    ext = shown.suffix.lower() if shown.suffix.lower() in _WRITABLE else ".png"
-    ok, buf = cv2.imencode(ext, img)
-    if not ok:
-        raise HpeError(f"{shown}: cannot encode the image as {ext}")
-    try:
-        staged.write_bytes(buf.tobytes())
-    except OSError as exc:
-        raise HpeError(f"{shown}: cannot write: {os_reason(exc)}") from None
 
 
 def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", **kw):

@@ -68,7 +68,7 @@ def _order(frame, sort_by, worst, where):
 def _placement(frame, idx, ref, H, W):
     """Head centre (u, v) and line length for row ``idx``: the table's box/tdx, else the ``.mat`` beside the
     image (Pose_Para tdx, tdy from the bottom, length 100000 * scale), else the image centre."""
-    from .draw import DEFAULT_LENGTH_FRACTION, MAT_LENGTH_UNITS, face_placement
+    from .draw_rows import DEFAULT_LENGTH_FRACTION, MAT_LENGTH_UNITS, face_placement
 
     c, L, _ = face_placement(frame.iloc[[idx]], pose_para=False)
     if np.isfinite(c[0]).all():
@@ -147,7 +147,7 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
     from ..errors import HpeError
     from ..io.images import ImageResolver
     from ..io.transaction import ensure_transaction, staged_dir
-    from .draw import _image_names
+    from .draw_rows import _image_names
 
     rows, system, where = _load(rows, system, where)
     row_name = row_name or (lambda i: f"{where}: row {i + 1}")
@@ -250,7 +250,7 @@ class _Pairs:
 
     def draw(self, img, why, i, rank, ref, stage, out_dir):
         from ..geometry import draw as g
-        from .draw import _write_image
+        from .draw_rows import _write_image
 
         rows, sort_by, gt, pr = self.rows, self.sort_by, self.gt, self.pr
         if img is None:
@@ -294,7 +294,7 @@ def run_draw_errors(input_path, outdir, *, images=None, system=None, worst=None,
     from ..io.readers import LINE_COL
     from ..io.transaction import ensure_transaction
     from ..rotation import get_system
-    from .draw import row_namer, row_numbers
+    from .draw_rows import row_namer, row_numbers
 
     input_path = Path(input_path)
     src = open_table(input_path, with_lines=True)

@@ -73,7 +73,7 @@ def flagged_pictures(input_path, examples, plots_dir, system, *, images=None, pe
     from ..io import label_mode, open_table
     from ..io.images import IMAGE_COLUMNS, ImageResolver, row_ids
     from ..io.transaction import ensure_transaction, note_input, staged_dir
-    from .draw import _image_names, _read_all
+    from .draw_rows import _image_names, _read_all
 
     input_path = Path(input_path)
     root = Path(images) if images else (input_path if input_path.is_dir() else input_path.parent)
@@ -157,7 +157,7 @@ def _draw_one(img, frame, i, A, pose_para, check, staged, shown):
     import cv2
 
     from ..geometry import draw as g
-    from .draw import DEFAULT_LENGTH_FRACTION, _write_image, face_placement
+    from .draw_rows import DEFAULT_LENGTH_FRACTION, _write_image, face_placement
 
     H, W = img.shape[:2]
     if A is not None:

@@ -435,11 +435,12 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         write_page(html, result, frame, overwrite=overwrite, plots=sample.rows(),
                    pictures=worst_pictures(frame, s.images))
     if report == "-":
-        import click
+        import sys
 
         from ..io.writers import json_text
 
-        click.echo(json_text(result))
+        sys.stdout.write(json_text(result) + "\n")
+        sys.stdout.flush()
     elif report:
         write_json(result, report, overwrite=overwrite)
     return result

@@ -53,7 +53,7 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
     plan = pixels.plan_crops(sel, layout, opts)
     todo = np.flatnonzero(sel.reasons == "")
     if todo.size == 0:
-        raise pixels.nothing_left(layout, sel.reasons, np.arange(sel.n), "every label is rejected")
+        raise write.nothing_left(layout, sel.reasons, np.arange(sel.n), "every label is rejected")
     pixels.name_files(sel, layout, plan, todo)
     tasks = pixels.build_tasks(sel, layout, plan, todo)
     splits_used = sorted(set(sel.split[todo].tolist()))

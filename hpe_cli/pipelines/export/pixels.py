@@ -8,7 +8,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import HpeError
 from ...geometry.crop import expand_boxes, pixel_boxes
 from ...io.layout import BBOX_COLS
 from . import workers
@@ -174,12 +173,3 @@ def worker_config(stage, layout, splits_used, opts) -> dict:
     return {"root": str(stage), "split_dirs": split_dirs, "quality": int(opts.quality),
             "pad_value": int(opts.pad_value), "min_inside": float(opts.min_inside),
             "full_frames": layout.full_frames, "pixels": layout.pixels, "made": set()}
-
-
-def nothing_left(layout, reasons, idx, what: str) -> HpeError:
-    """The error for a run where every label of ``idx`` is rejected."""
-    import pandas as pd
-
-    c = pd.Series(reasons[idx]).value_counts()
-    return HpeError(f"--layout {layout.name}: {what}, nothing written "
-                    f"({'; '.join(f'{r}: {k}' for r, k in c.items())})")

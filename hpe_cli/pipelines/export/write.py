@@ -97,8 +97,6 @@ def write_index(stage, layout, sel, plan, px, todo, system, final_root):
     done = np.flatnonzero((sel.reasons == "") & (px.order >= 0))
     done = done[np.argsort(px.order[done], kind="stable")]
     if done.size == 0:
-        from .pixels import nothing_left
-
         raise nothing_left(layout, sel.reasons, todo, "no label could be exported")
     exported = exported_frame(sel, plan, px, done)
     try:  # a split whose every image was unreadable is gone: check again what the trainer needs
@@ -185,3 +183,12 @@ def write_rejects(rejects, sel, opts) -> None:
 def write_summary(stage, summary) -> None:
     with open(stage / "export.json", "w", encoding="utf-8") as fh:
         json.dump(summary, fh, indent=1, default=str)
+
+
+def nothing_left(layout, reasons, idx, what: str) -> HpeError:
+    """The error for a run where every label of ``idx`` is rejected."""
+    import pandas as pd
+
+    c = pd.Series(reasons[idx]).value_counts()
+    return HpeError(f"--layout {layout.name}: {what}, nothing written "
+                    f"({'; '.join(f'{r}: {k}' for r, k in c.items())})")

@@ -1,5 +1,0 @@
-"""Moved to :mod:`hpe_cli.report.eval_plots`; this name stays importable until every caller uses the new one."""
-from ..report.eval_plots import *  # noqa: F403
-from ..report import eval_plots as _m
-
-globals().update({k: getattr(_m, k) for k in dir(_m) if not k.startswith("__")})
