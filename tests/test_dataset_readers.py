@@ -181,7 +181,7 @@ def test_draw_mat_reads_pose_para_as_300w_lp(aflw430, tmp_path, system):
     from hpe_cli.rotation.systems import get_system
 
     src = open_table(aflw430)
-    _, A, angles, _ = _read_all(src, "angles", False, get_system(system))
+    _, A, angles, _, _ = _read_all(src, "angles", False, get_system(system))
     nose = A[0] @ np.array([0.0, 0.0, 1.0])  # canonical: x subject's left, y up, z out of the face
     assert nose[1] > np.sin(np.deg2rad(30))  # about sin(34 deg) upwards
     w = get_system("300w_lp")

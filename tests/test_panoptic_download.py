@@ -279,7 +279,7 @@ def test_coco_and_whenet_stream_with_the_same_content(seqs, tmp_path, fmt, suffi
     if fmt == "coco":
         from hpe_cli.io.coco import write_coco
 
-        write_coco(frame, ref, image_size_cols=("image_width", "image_height"))
+        write_coco(frame, ref, image_size_cols=("image_width", "image_height"), info={"hpe:system": "whenet"})
         assert json.loads(a.read_text()) == json.loads(ref.read_text())
     else:
         from hpe_cli.io.whenet_txt import write_whenet

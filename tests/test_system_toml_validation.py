@@ -84,14 +84,14 @@ def test_every_builtin_round_trips_through_toml(tmp_path):
         assert load_system(f).definition() == s.definition(), name
 
 
-def test_readme_example_system_loads():
+def test_docs_example_system_loads():
     import re
     import tomllib
     from pathlib import Path
 
     from hpe_cli.rotation import system_from_dict
 
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    text = (Path(__file__).resolve().parents[1] / "docs" / "commands" / "systems.md").read_text()
     block = re.search(r"```toml\n(.*?)```", text, re.S).group(1)
-    s = system_from_dict(tomllib.loads(block), "README.md")
+    s = system_from_dict(tomllib.loads(block), "docs/commands/systems.md")
     assert s.storage_kind == "quaternion" and s.value_columns == ["q1", "q2", "q3", "q0"]

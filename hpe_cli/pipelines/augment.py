@@ -66,8 +66,10 @@ def _size_source(columns, image_size, images_dir, path):
     """Which sources give image sizes; a usage error when none does."""
     has_cols = "image_width" in columns and "image_height" in columns
     if not has_cols and image_size is None and images_dir is None:
-        raise HpeError(f"{path}: expected the image size: --image-size W H, image_width/image_height columns "
-                       "or --images (the images themselves); got none")
+        from ..errors import UsageError
+
+        raise UsageError(f"{path}: expected the image size: --image-size WxH, image_width/image_height columns "
+                         "or --images (the images themselves); got none")
     return has_cols
 
 
@@ -370,7 +372,7 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     workers = workers or min(2, os.cpu_count() or 1)
     if bar is not None and src.num_rows is not None:
         bar.total = src.num_rows
-        bar.refresh()
+        getattr(bar, "refresh", lambda: None)()
 
     def perm_of(n):
         name = scheme_for_count(n)

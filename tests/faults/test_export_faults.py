@@ -114,7 +114,7 @@ def test_image_size_differs_from_the_labels(tmp_path):
     path = _sized_table(tmp_path, 1920, 1080)
     res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet")
     line = check_failed(res, must_name=str(path))
-    assert "row 2" in line and "image size 1280x720 differs" in line and "1920x1080" in line
+    assert "line 2" in line and "image size 1280x720 differs" in line and "1920x1080" in line  # CSV: line 2
     assert not (tmp_path / "out").exists()
     res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv", "-q")
     assert res.exit_code == 0, res.output
