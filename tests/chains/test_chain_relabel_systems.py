@@ -100,3 +100,33 @@ def test_real_pizza_scipy_zyx_audits_clean(tmp_path):
     run("relabel-panoptic", PIZZA, "-o", lab, "--system", "scipy_zyx", "-q")
     rep = json.loads(run("audit", lab, "--json", "-", "-q").stdout)
     assert rep["system"] == "scipy_zyx" and rep["details"]["flagged"] == 0 and rep["rows"] > 1000
+
+
+@pytest.mark.skipif(not PIZZA.exists(), reason="real Panoptic sample absent")
+def test_relabel_in_two_systems_then_draw_without_system_draws_the_same_pixels(tmp_path):
+    """relabel-panoptic -> draw with no --system, on the real pizza1 frames: the same heads labelled in 300w_lp and
+    in scipy_zyx draw the very same pictures (draw reads each file in its own system), and reading the scipy_zyx
+    file as 300w_lp (what draw did before the metadata rule) draws different axes."""
+    import cv2
+    import numpy as np
+
+    pics = {}
+    for system in ("300w_lp", "scipy_zyx"):
+        lab = tmp_path / f"{system}.parquet"
+        run("relabel-panoptic", PIZZA, "-o", lab, "--system", system, "--cameras", "00_00,00_08",
+            "--frames", "1147:1148", "-q")
+        out = tmp_path / f"draw_{system}"
+        res = run("draw", lab, "--images", PIZZA, "-o", out)
+        assert f"system {system} (file metadata" in res.stderr, res.stderr
+        pics[system] = {p.relative_to(out): cv2.imread(str(p)) for p in sorted(out.rglob("*.jpg"))}
+    assert pics["300w_lp"] and pics["300w_lp"].keys() == pics["scipy_zyx"].keys()
+    for name, img in pics["300w_lp"].items():
+        other = pics["scipy_zyx"][name]
+        assert img.shape == other.shape
+        # the same lines on the same frame (JPEG noise only)
+        assert np.abs(img.astype(int) - other.astype(int)).mean() < 0.5, name
+    wrong = tmp_path / "wrong"
+    run("draw", tmp_path / "scipy_zyx.parquet", "--images", PIZZA, "-o", wrong, "--reinterpret-as", "300w_lp")
+    diffs = [np.abs(cv2.imread(str(wrong / n)).astype(int) - img.astype(int)).max()
+             for n, img in pics["300w_lp"].items()]
+    assert max(diffs) > 100  # the axes point elsewhere: the seam this rule closes
