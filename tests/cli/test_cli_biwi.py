@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from hpe_cli.cli.main import cli
 from hpe_cli.datasets.biwi import head_boxes, read_biwi_camera, sequence_split, to_rgb_camera
 
-BIWI = Path(__file__).resolve().parents[1] / ".." / "shared" / "realdata" / "biwi"
+BIWI = Path(__file__).resolve().parents[2] / ".." / "shared" / "realdata" / "biwi"
 HPDB = BIWI / "hpdb"
 # rgb.cal of sequence 01 and frame_00003_pose.txt, typed from the files (PROVENANCE §4)
 K_RGB = np.array([[517.679, 0, 320], [0, 517.679, 240.5], [0, 0, 1]])

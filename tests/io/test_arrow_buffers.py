@@ -24,7 +24,7 @@ from hpe_cli.datasets import panoptic as pan
 from hpe_cli.io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow, string_array
 from hpe_cli.pipelines import panoptic as job
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _same(a: pa.Array, b: pa.Array) -> bool:

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from hpe_cli.cli.main import cli
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SYNTH = ROOT / "sample_data" / "panoptic_synth"
 REAL_SAMPLE = ROOT / "sample_data" / "panoptic_160906_pizza1"
 

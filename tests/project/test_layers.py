@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1] / "hpe_cli"
+ROOT = Path(__file__).resolve().parents[2] / "hpe_cli"
 
 FLOOR = {"errors", "data"}
 #: layer -> the hpe_cli layers it may import (besides itself and FLOOR); "api" is hpe_cli/__init__.py and api.py

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from conftest import canonical_A
 from hpe_cli.cli.main import cli
 
-FIX = Path(__file__).resolve().parent / "fixtures" / "conventions"
+FIX = Path(__file__).resolve().parents[1] / "fixtures" / "conventions"
 MATRIX_COLS = [f"r{i}{j}" for i in range(3) for j in range(3)]
 
 

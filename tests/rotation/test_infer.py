@@ -14,7 +14,7 @@ from hpe_cli.rotation import infer as inf
 from hpe_cli.rotation import load_system
 from hpe_cli.rotation.distances import geodesic_deg
 
-FIXTURES = Path(__file__).resolve().parent / "fixtures" / "conventions"
+FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "conventions"
 sys.path.insert(0, str(FIXTURES))
 
 import lp300w  # noqa: E402

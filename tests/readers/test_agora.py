@@ -19,7 +19,7 @@ from hpe_cli.datasets.agora import FACE_COUNT, FACE_FIRST, agora_intrinsics, rea
 from hpe_cli.errors import HpeError
 from hpe_cli.pipelines.agora import Config, relabel_people
 
-DATA = Path(__file__).resolve().parent / "data" / "agora"
+DATA = Path(__file__).resolve().parents[1] / "data" / "agora"
 PKL = DATA / "validation_0_withjv.pkl"
 EXPECTED = json.loads((DATA / "expected.json").read_text())["people"]
 

@@ -18,7 +18,7 @@ from hpe_cli.cli.main import cli
 from hpe_cli.errors import HpeError
 from hpe_cli.io import open_table
 
-REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "realdata"
+REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "realdata"
 
 # one label table in role order; the formats below spell it their own way
 LABELS = pd.DataFrame({

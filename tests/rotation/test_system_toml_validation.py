@@ -91,7 +91,7 @@ def test_docs_example_system_loads():
 
     from hpe_cli.rotation import system_from_dict
 
-    text = (Path(__file__).resolve().parents[1] / "docs" / "commands" / "systems.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "commands" / "systems.md").read_text()
     block = re.search(r"```toml\n(.*?)```", text, re.S).group(1)
     s = system_from_dict(tomllib.loads(block), "docs/commands/systems.md")
     assert s.storage_kind == "quaternion" and s.value_columns == ["q1", "q2", "q3", "q0"]

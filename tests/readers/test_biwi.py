@@ -21,7 +21,7 @@ from hpe_cli.datasets.biwi import (nearest_rotation, read_biwi, read_biwi_tgz, r
 from hpe_cli.errors import HpeError
 from hpe_cli.rotation import convert_angles, convert_matrices, frobenius, get_system
 
-BIWI = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "biwi"
+BIWI = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "biwi"
 needs_data = pytest.mark.skipif(not BIWI.is_dir(), reason="shared/realdata not available")
 F = np.diag([1.0, -1.0, -1.0])
 

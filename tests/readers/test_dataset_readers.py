@@ -19,7 +19,7 @@ from hpe_cli.cli.main import cli
 from hpe_cli.errors import HpeError
 from hpe_cli.io import open_table
 
-REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "realdata"
+REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "realdata"
 W300 = REAL / "300wlp_face3d" / "IBUG_image_008_1_0.mat"
 AFLW = REAL / "aflw2000_prnet"
 

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from hpe_cli.cli.main import cli
 
-DATA = Path(__file__).resolve().parent / "data" / "agora"
+DATA = Path(__file__).resolve().parents[1] / "data" / "agora"
 PKL = DATA / "validation_0_withjv.pkl"
 EXPECTED = json.loads((DATA / "expected.json").read_text())["people"]
 N_PEOPLE = len(EXPECTED)

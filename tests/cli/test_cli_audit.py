@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from hpe_cli.cli.main import cli
 
-REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 KEYS = ["rows", "gimbal_lock", "near_gimbal", "non_canonical", "out_of_range", "non_finite", "not_rotation",
         "duplicates"]
 

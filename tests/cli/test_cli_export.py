@@ -160,7 +160,7 @@ def test_merged_inputs_and_identity_split(tmp_path):
 
 
 def test_agora_table(tmp_path):
-    fixture = Path(__file__).parent / "data" / "agora" / "validation_0_withjv.pkl"
+    fixture = Path(__file__).resolve().parents[1] / "data" / "agora" / "validation_0_withjv.pkl"
     table = tmp_path / "agora.parquet"
     assert run("relabel-agora", fixture, "-o", table, "-q").exit_code == 0
     t = pd.read_parquet(table)

@@ -12,7 +12,7 @@ import hpe_cli as hpe
 from conftest import canonical_A
 from hpe_cli.errors import HpeError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 HEAVY = ("torch", "torchvision", "pandas", "pyarrow", "scipy", "matplotlib", "cv2")
 
 

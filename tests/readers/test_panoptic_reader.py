@@ -8,7 +8,7 @@ import pytest
 from hpe_cli.datasets import panoptic as pan
 from hpe_cli.errors import HpeError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SYNTH = ROOT / "sample_data" / "panoptic_synth"
 
 

@@ -16,7 +16,7 @@ from hpe_cli.geometry.landmark_schemes import SCHEMES
 from hpe_cli.io import BBOX_COLS, LABEL_COLS, MATRIX_COLS, landmark_cols
 from hpe_cli.rotation import get_system
 
-DATA = Path(__file__).resolve().parents[1] / "hpe_cli" / "data"
+DATA = Path(__file__).resolve().parents[2] / "hpe_cli" / "data"
 W, H = 640, 480
 SCALE = 8.0
 

@@ -17,7 +17,7 @@ from hpe_cli.errors import HpeError
 from hpe_cli.pipelines import panoptic as job
 from conftest import sample_data_script
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from hpe_cli.cli.main import cli
 
-REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 AFLW = REALDATA / "aflw2000_prnet"
 needs_data = pytest.mark.skipif(not AFLW.is_dir(), reason="shared/realdata not available")
 

@@ -14,7 +14,7 @@ import pytest
 from hpe_cli.datasets.mat import read_mat, read_mat_dir
 from hpe_cli.errors import HpeError
 
-REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 AFLW = REALDATA / "aflw2000_prnet"
 W300 = REALDATA / "300wlp_face3d"
 

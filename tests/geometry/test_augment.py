@@ -23,7 +23,7 @@ from hpe_cli.geometry.image_ops import opencv_rotation_matrix, warp_image
 from hpe_cli.geometry.landmark_schemes import SCHEMES
 from hpe_cli.rotation import get_system
 
-DATA = Path(__file__).resolve().parents[1] / "hpe_cli" / "data"
+DATA = Path(__file__).resolve().parents[2] / "hpe_cli" / "data"
 W, H = 640, 480
 S = np.diag([-1.0, 1.0, 1.0])
 

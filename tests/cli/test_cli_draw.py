@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from hpe_cli.cli.main import cli
 from hpe_cli.rotation import get_system
 
-REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 AFLW = REALDATA / "aflw2000_prnet"
 RED, GREEN, BLUE, WHITE = (0, 0, 255), (0, 255, 0), (255, 0, 0), (255, 255, 255)
 

@@ -13,7 +13,7 @@ from hpe_cli.pipelines import panoptic as job
 from hpe_cli.pipelines.relabel import fit_faces, label_matrices, legacy_whenet_labels
 from hpe_cli.rotation import canonical_to_labels
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SYNTH = ROOT / "sample_data" / "panoptic_synth"
 
 

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from hpe_cli.datasets import panoptic as pan
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 REALDATA = ROOT.parent / "shared" / "realdata"
 FACE = "hdFace3d/faceRecon3D_hd{:08d}.json"
 LONG_DIR = "hdFace3d/" + "a" * 70 + "/" + "b" * 40  # a member under it is longer than 100 characters

@@ -6,7 +6,7 @@ import pytest
 
 from hpe_cli.geometry.landmark_schemes import (SCHEMES, check_permutation, flip_permutation, scheme_for_count)
 
-DATA = Path(__file__).resolve().parents[1] / "hpe_cli" / "data"
+DATA = Path(__file__).resolve().parents[2] / "hpe_cli" / "data"
 
 
 @pytest.mark.parametrize("name", sorted(SCHEMES))
