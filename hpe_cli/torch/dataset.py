@@ -14,6 +14,7 @@ from .samples import (
     _FALSE,
     _TRUE,
     INTERPOLATIONS,
+    PackedRows,
     PoseOutputs,
     crop_rects,
     crop_rgb,
@@ -192,6 +193,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         self._paths = None if self._image_refs is None else _join_paths(self.images_root, self._image_refs)
         self._place_all()
         self._poses = PoseOutputs(self.canonical, self.system, dtype)
+        self._rows = PackedRows(self._poses, self._placed, *self._tabled(), self._perm)
         self._n = n
         self._pf = None
         self._rg_cache = (None, None)
@@ -221,6 +223,20 @@ class HeadPoseDataset(torch.utils.data.Dataset):
                     if self._rects is not None else np.full((n, 2), np.nan)
         self._placed = place(self.boxes, self.landmarks, origin, scale)
         self._known = known
+
+    def _tabled(self):
+        """Rows whose outputs without a transform are all known here (:class:`PackedRows`), and their widths."""
+        n, S = len(self.canonical), self.size
+        if self._rects is None:
+            return self._known.copy(), np.full(n, np.nan)
+        rects, known = self._rects
+        hw = np.maximum(rects[:, 2:4], 1).astype(np.float64)
+        ok = known.copy()
+        if S is not None:  # transforms.is_uniform, vectorised: a crop resized without an aspect change
+            lo = np.maximum((S - 0.5) / hw[:, 0], (S - 0.5) / hw[:, 1])
+            hi = np.minimum((S + 0.5) / hw[:, 0], (S + 0.5) / hw[:, 1])
+            ok &= lo <= hi + 1e-12
+        return ok, (np.full(n, float(S)) if S is not None else hw[:, 1])
 
     # -------------------------------------------------------------------------------------- images
     def _image_path(self, i) -> Path:
@@ -312,10 +328,11 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             box, lm = flip_geometry(box, lm, width, self._perm)
         return box, lm
 
-    def _prepare(self, i):
+    def _prepare(self, i, flip=None, pixels=None):
         """``(partial output, i, A after the transform (None: the table's), undefined flag, flipped)``."""
-        flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
-        pix, origin, scale, note = self._pixels(i, flip)
+        if flip is None:
+            flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
+        pix, origin, scale, note = self._pixels(i, flip) if pixels is None else pixels
         image = to_tensor(pix)
         canvas = tuple(pix.shape[:2])
         box, lm = self._geometry(i, origin, scale, canvas[1], flip)
@@ -358,12 +375,26 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             result.append(out)
         return result
 
+    def _sample(self, i):
+        """The finished sample dict of row ``i`` when its outputs are tabled, else ``_prepare``'s tuple."""
+        if self.transform is not None:
+            return self._prepare(i)
+        flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
+        pix, origin, scale, note = self._pixels(i, flip)
+        out = None if note is not None else self._rows.sample(i, flip, to_tensor(pix))
+        return self._prepare(i, flip, (pix, origin, scale, note)) if out is None else out
+
     def __getitem__(self, i):
-        return self._finish([self._prepare(self._index(i))])[0]
+        got = self._sample(self._index(i))
+        return got if isinstance(got, dict) else self._finish([got])[0]
 
     def __getitems__(self, indices) -> list:
         """The samples of a batch (``DataLoader`` calls this): their pose outputs are converted in one call."""
-        return self._finish([self._prepare(self._index(i)) for i in indices])
+        got = [self._sample(self._index(i)) for i in indices]
+        todo = [k for k, g in enumerate(got) if not isinstance(g, dict)]
+        for k, out in zip(todo, self._finish([got[k] for k in todo]) if todo else ()):
+            got[k] = out
+        return got
 
 
 def _join_paths(root, refs) -> list:
