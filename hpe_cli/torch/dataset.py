@@ -10,6 +10,7 @@ from torchvision import tv_tensors
 
 from ..errors import HpeError
 from ..rotation.systems import get_system
+from .collate import Sample
 from .samples import (
     _FALSE,
     _TRUE,
@@ -372,7 +373,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             out.update(pose)
             out["pose_undefined"] = (_TRUE if undefined else _FALSE).clone()
             out["index"] = i
-            result.append(out)
+            result.append(Sample(out))
         return result
 
     def _sample(self, i):

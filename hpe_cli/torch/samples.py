@@ -15,6 +15,7 @@ import torch
 
 from ..geometry.augment import box_of_points
 from ..geometry.crop import crop_padded
+from .collate import Sample
 from .transforms import pose_mirror
 
 #: ``interpolation=`` names of :class:`HeadPoseDataset` (``cv2.INTER_*``)
@@ -304,7 +305,7 @@ class PackedRows:
         if not ok[i]:
             return None
         row = torch.from_numpy(values[i].copy())
-        out = {"image": image}
+        out = Sample(image=image)
         box, lm = self.placed
         if box is not None:
             out["box"] = row[21:25]
