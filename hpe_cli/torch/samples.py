@@ -304,15 +304,15 @@ class PackedRows:
         values, locked, ok = table
         if not ok[i]:
             return None
-        row = torch.from_numpy(values[i].copy())
+        r = values[i].copy()  # the sample's own memory; numpy views of it wrapped (cheaper than torch views)
+        wrap, (box, lm) = torch.from_numpy, self.placed
         out = Sample(image=image)
-        box, lm = self.placed
         if box is not None:
-            out["box"] = row[21:25]
+            out["box"] = wrap(r[21:25])
         if lm is not None:
-            out["landmarks"] = row[21 if box is None else 25:].view(-1, 2)
-        out["matrix"], out["angles"], out["canonical"] = row[:9].view(3, 3), row[9:12], row[12:21].view(3, 3)
-        out["gimbal_lock"] = (_TRUE if locked[i] else _FALSE).clone()
-        out["pose_undefined"] = _FALSE.clone()
+            out["landmarks"] = wrap(r[21 if box is None else 25:].reshape(-1, 2))
+        out["matrix"], out["angles"], out["canonical"] = wrap(r[:9].reshape(3, 3)), wrap(r[9:12]), \
+            wrap(r[12:21].reshape(3, 3))
+        out["gimbal_lock"], out["pose_undefined"] = wrap(np.array(locked[i])), wrap(np.array(False))
         out["index"] = i
         return out
