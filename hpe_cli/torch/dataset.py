@@ -302,13 +302,13 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         img = self._decoded(i)
         rect = None
         if self._rects is not None and self._rects[1][i]:
-            rect = self._rects[0][i]
+            rect = self._rects[0][i].tolist()
         pix = crop_rgb(img, rect)
-        origin = (0, 0) if rect is None else (int(rect[1]), int(rect[0]))
+        origin = (0, 0) if rect is None else (rect[1], rect[0])
         scale = note = None
         if self.size is not None:
-            h, w = pix.shape[:2]
-            if not is_uniform((h, w), (self.size, self.size)):
+            h, w = pix.shape[:2]  # rows in the packed tables are uniform (checked in _tabled)
+            if not self._rows.ok[i] and not is_uniform((h, w), (self.size, self.size)):
                 note = aspect_message((h, w), (self.size, self.size), "size= (resize of the crop)")
             pix, scale = resize(pix, self.size, self.interpolation), (self.size / w, self.size / h)
         if flip:
