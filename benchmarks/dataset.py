@@ -170,6 +170,7 @@ def main(argv=None):
     ap.add_argument("--margin", type=float, default=0.25)
     ap.add_argument("--fast-only", action="store_true", help="time the bare loop and the fast path only")
     args = ap.parse_args(argv)
+    imports = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # torch, torchvision, cv2 loaded
     torch.set_num_threads(1)
     cv2.setNumThreads(1)
     with tempfile.TemporaryDirectory() as tmp:
@@ -204,7 +205,8 @@ def main(argv=None):
             print(f"{name:33s} {cells[0]:>15s} {cells[1]:>15s}   {cells[2]:>18s} {cells[3]:>15s}")
     own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-    print(f"peak RSS: this process {own:.0f} MiB, largest worker {kids:.0f} MiB")
+    print(f"peak RSS: this process {own:.0f} MiB ({imports:.0f} MiB after the imports), "
+          f"largest worker {kids:.0f} MiB")
 
 
 if __name__ == "__main__":

@@ -108,7 +108,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
 
     Returns (per item)
     ------------------
-    dict
+    Sample (a ``dict``)
         ``image`` uint8 (3, H, W) RGB (unless ``transform`` converts it; without a
         transform a channels-last view of the decoded pixels), ``matrix`` (3, 3) the
         stored matrix of ``system``, ``angles`` (3,) its primary ``(pitch, yaw, roll)``
@@ -122,8 +122,12 @@ class HeadPoseDataset(torch.utils.data.Dataset):
     too; images are decoded lazily in ``__getitem__``, straight into RGB. The pose
     outputs of a sample whose transform left its pose as it was or mirrored it are
     looked up in tables built once; others are converted per batch (``__getitems__``,
-    which ``DataLoader`` calls). The object is picklable and opens file handles lazily
-    in each ``DataLoader`` worker.
+    which ``DataLoader`` calls). Without a transform, all outputs but the image are one
+    row of a packed table (own or mirrored pose, geometry placed and flipped), copied
+    per sample. Samples are :class:`~hpe_cli.torch.collate.Sample` dicts: ``default_collate``
+    batches them into one storage (one shared-memory segment per batch from a worker,
+    not one per key); the values are the ones ``default_collate`` gives. The object is
+    picklable and opens file handles lazily in each ``DataLoader`` worker.
 
     Examples
     --------
