@@ -73,7 +73,8 @@ for _cand in (Path("/work/shared/realdata/aflw2000_prnet"), REALDATA, ROOT / "sa
 def make_labels(folder: Path, out: Path) -> Path:
     """A Parquet label table of the folder's ``.mat`` files: pose, 68 landmarks (pt3d_68 x, y), their box."""
     table = read_mat_dir(folder, landmarks=True)
-    lm = np.stack([table[[f"lm3d{i}_x", f"lm3d{i}_y"]].to_numpy() for i in range(68)], axis=1)
+    p = "lm3d" if "lm3d0_x" in table.columns else "lm"  # 300W-LP samples may have pt2d only
+    lm = np.stack([table[[f"{p}{i}_x", f"{p}{i}_y"]].to_numpy() for i in range(68)], axis=1)
     keep = ["file", "pitch", "yaw", "roll"]
     frame = table[keep].copy()
     frame["file"] = [str(folder / f).replace(".mat", ".jpg") for f in frame["file"]]

@@ -198,7 +198,8 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         self._paths = None if self._image_refs is None else _join_paths(self.images_root, self._image_refs)
         self._place_all()
         self._poses = PoseOutputs(self.canonical, self.system, dtype)
-        self._rows = PackedRows(self._poses, self._placed, *self._tabled(), self._perm)
+        flips = [f for f, can in ((False, self.hflip < 1), (True, self.hflip > 0)) if can and transform is None]
+        self._rows = PackedRows(self._poses, self._placed, *self._tabled(), self._perm, flips=flips)
         self._n = n
         self._pf = None
         self._rg_cache = (None, None)
@@ -289,10 +290,6 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         if img is None:
             raise HpeError(f"{where}: cannot decode image")
         return img
-
-    def _read_image(self, i):
-        """The whole image as a uint8 (3, H, W) RGB tensor (decoded with OpenCV)."""
-        return to_tensor(crop_rgb(self._decoded(i), None))
 
     # -------------------------------------------------------------------------------------- samples
     def _index(self, i) -> int:
