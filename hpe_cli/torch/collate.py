@@ -13,16 +13,20 @@ point ``torch.utils.data._utils.collate.default_collate_fn_map`` (see
 ``torch.utils.data.default_collate``), so a plain ``DataLoader(dataset, batch_size=...)``
 uses it: the same values, dtypes and shapes as ``default_collate`` gives, but all plain
 tensors and Python ints of the batch live in one storage (each key a contiguous view of
-it), so a batch crosses to the main process as one segment. Other values (TVTensors,
-strings, ...) go through ``default_collate`` key by key, as before.
+it), so a batch crosses to the main process as one segment, and large tensors (the
+images) are copied with numpy (:func:`_copy_numpy`: twice as fast as ``torch.stack``
+for channels-last views). Other values (TVTensors, strings, ...) go through
+``default_collate`` key by key, as before.
 """
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch.utils.data import get_worker_info
 from torch.utils.data._utils.collate import collate, default_collate_fn_map
 
 _ALIGN = 64
+_NUMPY_FROM = 4096  # elements per sample from which numpy copies (below: one torch.stack call)
 
 
 class Sample(dict):
@@ -32,20 +36,40 @@ class Sample(dict):
 
 
 def _plan(batch, key):
-    """``(dtype, shape)`` when ``batch[*][key]`` packs (plain CPU tensors alike, or ints), else None."""
+    """``(dtype, shape)`` of ``batch[0][key]`` when the key packs (plain CPU tensors, or ints), else None.
+
+    Only the types of the other samples' values are checked here; a shape or dtype that
+    differs is caught when they are copied (numpy) or stacked (torch, as ``default_collate``).
+    """
     first = batch[0][key]
     if type(first) is torch.Tensor:
-        if first.device.type != "cpu" or first.is_sparse or first.requires_grad:
+        if first.device.type != "cpu" or first.layout != torch.strided or first.requires_grad:
             return None
-        for s in batch:
-            v = s[key]
-            if type(v) is not torch.Tensor or v.shape != first.shape or v.dtype != first.dtype or \
-                    v.device.type != "cpu":
-                return None
-        return first.dtype, tuple(first.shape)
+        if all(type(s[key]) is torch.Tensor for s in batch):
+            return first.dtype, tuple(first.shape)
+        return None
     if type(first) is int and all(type(s[key]) is int for s in batch):
         return torch.int64, ()
     return None
+
+
+def _copy_numpy(values, view) -> bool:
+    """Copy each tensor into ``view[k]`` with numpy (False: a dtype numpy lacks, nothing copied).
+
+    numpy's strided copy moves a channels-last (3, H, W) view of an HWC image into a
+    contiguous slot about twice as fast as ``torch.stack`` does (62 vs 120 us for a
+    224 x 224 uint8 image, 1 thread); the bytes are the same.
+    """
+    try:
+        dst = view.numpy()
+        src = [v.numpy() for v in values]
+    except (TypeError, RuntimeError):  # e.g. bfloat16, a tensor with the conj/neg bit or needing grad
+        return False
+    if any(a.shape != dst.shape[1:] or a.dtype != dst.dtype for a in src):  # no broadcast, no cast
+        return False
+    for k, a in enumerate(src):
+        np.copyto(dst[k], a)
+    return True
 
 
 def collate_samples(batch, *, collate_fn_map=None):
@@ -80,8 +104,11 @@ def collate_samples(batch, *, collate_fn_map=None):
         values = [s[key] for s in batch]
         if shape == () and type(values[0]) is int:
             view.copy_(torch.tensor(values, dtype=torch.int64))
-        else:
-            torch.stack(values, 0, out=view)
+        elif view[0].numel() < _NUMPY_FROM or not _copy_numpy(values, view):
+            try:
+                torch.stack(values, 0, out=view)
+            except RuntimeError:  # sizes or devices differ: default_collate's own result or error
+                view = collate(values, collate_fn_map=collate_fn_map or default_collate_fn_map)
         out[key] = view
     return out
 

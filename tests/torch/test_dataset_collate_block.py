@@ -55,3 +55,15 @@ def test_collate_block_through_workers_and_with_a_transform():
     for k in want:
         assert _same(got[k], want[k]), k
         assert type(got[k]) is type(want[k]), k
+
+
+def test_collate_block_odd_batches_behave_as_default_collate():
+    big = [Sample(image=torch.zeros(3, 64, 64, dtype=torch.uint8), index=0),
+           Sample(image=torch.zeros(3, 1, 64, dtype=torch.uint8), index=1)]  # numpy would broadcast: must not
+    with pytest.raises(RuntimeError):
+        default_collate([dict(s) for s in big])
+    with pytest.raises(RuntimeError):
+        collate_samples(big)
+    bf = [Sample(x=torch.full((3, 40, 40), k, dtype=torch.bfloat16), s="a") for k in range(3)]  # numpy lacks bf16
+    got, want = collate_samples(bf), default_collate([dict(s) for s in bf])
+    assert got["s"] == want["s"] and got["x"].dtype == torch.bfloat16 and torch.equal(got["x"], want["x"])
