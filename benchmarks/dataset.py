@@ -6,11 +6,17 @@ Both sides read the same AFLW2000-3D JPEGs (450x450) and, per sample,
     decode -> square crop (the label box + ``--margin`` on each side, zeros outside the image)
     -> resize to ``--size`` x ``--size`` (bilinear) -> horizontal flip
 
-The bare loop is ``cv2.imread`` (BGR, HWC numpy), numpy slicing, ``cv2.resize`` and
-``cv2.flip``: no pose, no boxes, no landmarks, no RGB. ``HeadPoseDataset`` does the
-same pixels work and also returns the pose (matrix, angles, canonical, gimbal lock)
-after the flip, the box and the 68 landmarks (moved and re-indexed), as an RGB
-(3, H, W) tensor. Three HeadPoseDataset configurations are timed:
+The bare loop is the floor: the least a loader can do to return what ``HeadPoseDataset``
+returns for the image, and nothing more. It decodes with ``cv2.imread(f, cv2.IMREAD_COLOR_RGB)``
+(the decoder writes RGB; with an OpenCV older than 4.10, ``IMREAD_COLOR`` and one
+``cv2.cvtColor`` of the resized crop), crops with numpy slicing, ``cv2.resize``, ``cv2.flip``
+and returns ``torch.from_numpy(hwc).permute(2, 0, 1)``: the same uint8 RGB pixels in the
+same (3, H, W) channels-last tensor layout as the dataset (checked equal below), so a
+DataLoader's collate does the same copy for both. (An earlier version returned BGR HWC numpy
+arrays in one process, HWC tensors in the DataLoader: not the dataset's output, and a
+different collate copy.) ``HeadPoseDataset`` also returns the pose (matrix, angles,
+canonical, gimbal lock, undefined flag) after the flip, the box and the 68 landmarks
+(moved and re-indexed) and the index. Three HeadPoseDataset configurations are timed:
 
 - ``size=S, hflip=1``: crop, resize and flip in the decode step (OpenCV), the pose from
   the mirrored-pose table: the fast path, same pixels as the bare loop (checked);
@@ -18,7 +24,7 @@ after the flip, the box and the 68 landmarks (moved and re-indexed), as an RGB
 - ``transform=v2.Compose([v2.Resize((S, S)), T.RandomHorizontalFlip(p=1)])`` (torchvision's
   antialiased uint8 resize, a different filter from ``cv2.resize``).
 
-Samples/s are the best of ``--repeat`` passes over ``--items`` items (the 16 (or 4
+Samples/s are the median of ``--repeat`` passes over ``--items`` items (the 16 (or 4
 shipped) images cycled; the files stay in the page cache, so decode is CPU-bound), by
 wall clock and by CPU time (this process + its finished workers: steadier on a shared
 machine). The DataLoader runs use ``num_workers=2``, ``batch_size=16`` and the same items
@@ -29,6 +35,7 @@ Usage::
 
     python benchmarks/dataset.py
     python benchmarks/dataset.py --items 400 --repeat 3 --workers 2
+    python benchmarks/dataset.py --fast-only --items 256 --repeat 7   # the floor and the fast path only
     python benchmarks/dataset.py --images /path/to/AFLW2000   # a folder of .mat + .jpg
 """
 from __future__ import annotations
@@ -66,13 +73,18 @@ for _cand in (Path("/work/shared/realdata/aflw2000_prnet"), REALDATA, ROOT / "sa
 def make_labels(folder: Path, out: Path) -> Path:
     """A Parquet label table of the folder's ``.mat`` files: pose, 68 landmarks (pt3d_68 x, y), their box."""
     table = read_mat_dir(folder, landmarks=True)
-    lm = np.stack([table[[f"lm3d{i}_x", f"lm3d{i}_y"]].to_numpy() for i in range(68)], axis=1)
+    p = "lm3d" if "lm3d0_x" in table.columns else "lm"  # 300W-LP samples may have pt2d only
+    lm = np.stack([table[[f"{p}{i}_x", f"{p}{i}_y"]].to_numpy() for i in range(68)], axis=1)
     keep = ["file", "pitch", "yaw", "roll"]
     frame = table[keep].copy()
     frame["file"] = [str(folder / f).replace(".mat", ".jpg") for f in frame["file"]]
     extra = dict(zip(["bbox_x", "bbox_y", "bbox_w", "bbox_h"], box_of_points(lm)[0].T))
     extra.update({f"lm{i}_{a}": lm[:, i, k] for i in range(68) for k, a in enumerate("xy")})
     return write_labels(pd.concat([frame, pd.DataFrame(extra)], axis=1), out, system="300w_lp")
+
+
+#: OpenCV >= 4.10 decodes straight into RGB, as ``HeadPoseDataset`` does
+RGB = getattr(cv2, "IMREAD_COLOR_RGB", None)
 
 
 def square_crop(box, margin):
@@ -85,7 +97,7 @@ def square_crop(box, margin):
 
 
 class BareLoop(torch.utils.data.Dataset):
-    """cv2.imread -> square crop (zeros outside) -> cv2.resize -> cv2.flip: the floor to beat."""
+    """cv2.imread (RGB) -> square crop (zeros outside) -> cv2.resize -> cv2.flip -> (3, H, W) tensor: the floor."""
 
     def __init__(self, files, boxes, margin, size):
         self.files, self.boxes, self.margin, self.size = list(files), np.asarray(boxes), margin, size
@@ -94,7 +106,7 @@ class BareLoop(torch.utils.data.Dataset):
         return len(self.files)
 
     def sample(self, i):
-        img = cv2.imread(self.files[i], cv2.IMREAD_COLOR)
+        img = cv2.imread(self.files[i], RGB if RGB is not None else cv2.IMREAD_COLOR)
         top, left, side = square_crop(self.boxes[i], self.margin)
         H, W = img.shape[:2]
         t0, l0, t1, l1 = max(top, 0), max(left, 0), min(top + side, H), min(left + side, W)
@@ -103,10 +115,12 @@ class BareLoop(torch.utils.data.Dataset):
         else:
             crop = np.zeros((side, side, 3), np.uint8)
             crop[t0 - top:t1 - top, l0 - left:l1 - left] = img[t0:t1, l0:l1]
-        return cv2.flip(cv2.resize(crop, (self.size, self.size), interpolation=cv2.INTER_LINEAR), 1)
+        pix = cv2.flip(cv2.resize(crop, (self.size, self.size), interpolation=cv2.INTER_LINEAR), 1)
+        if RGB is None:
+            pix = cv2.cvtColor(pix, cv2.COLOR_BGR2RGB)
+        return torch.from_numpy(pix).permute(2, 0, 1)
 
-    def __getitem__(self, i):
-        return torch.from_numpy(self.sample(i))
+    __getitem__ = sample
 
 
 def _cpu():
@@ -116,19 +130,20 @@ def _cpu():
 
 
 def _rates(runs, items, repeat):
-    """``{name: (samples/s by wall clock, by CPU time)}``, each the best of ``repeat`` rounds.
+    """``{name: (samples/s by wall clock, by CPU time)}``, each the median of ``repeat`` rounds.
 
     The runs are interleaved (one of each per round), so a load change on a shared machine
-    hits them all alike.
+    hits them all alike, in an order reversed every other round (what runs second finds
+    warmer caches: ~2% in one process).
     """
-    best = {name: [math.inf, math.inf] for name in runs}
-    for _ in range(repeat):
-        for name, fn in runs.items():
+    times = {name: [] for name in runs}
+    for r in range(repeat):
+        for name in list(runs)[::-1 if r % 2 else 1]:
+            fn = runs[name]
             t0, c0 = time.perf_counter(), _cpu()
             fn()
-            wall, cpu = time.perf_counter() - t0, _cpu() - c0
-            best[name] = [min(best[name][0], wall), min(best[name][1], cpu)]
-    return {name: (items / w, items / c) for name, (w, c) in best.items()}
+            times[name].append((time.perf_counter() - t0, _cpu() - c0))
+    return {name: tuple(items / np.median(t, axis=0)) for name, t in times.items()}
 
 
 def one_process(get, order):
@@ -156,7 +171,9 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, default=16)
     ap.add_argument("--size", type=int, default=224)
     ap.add_argument("--margin", type=float, default=0.25)
+    ap.add_argument("--fast-only", action="store_true", help="time the bare loop and the fast path only")
     args = ap.parse_args(argv)
+    imports = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # torch, torchvision, cv2 loaded
     torch.set_num_threads(1)
     cv2.setNumThreads(1)
     with tempfile.TemporaryDirectory() as tmp:
@@ -170,16 +187,15 @@ def main(argv=None):
         n = len(fused)
         order = [k % n for k in range(args.items)]
         # same pixels: the fused path's crop + resize + flip is the bare loop's, in RGB
-        ref = bare.sample(0)[:, :, ::-1]
-        got = fused[0]["image"].permute(1, 2, 0).numpy()
-        same = np.array_equal(ref, got)
+        ref, got = bare[0], fused[0]["image"]
+        same = ref.shape == got.shape and ref.stride() == got.stride() and torch.equal(ref, got)
         print(f"{n} images from {args.images}, {args.items} items, crop {args.margin:g} square, "
-              f"resize {args.size}, hflip; best of {args.repeat}; torch threads 1, cv2 threads 1")
-        print(f"fast-path pixels equal to the bare loop's (RGB): {same}")
-        configs = (("bare cv2 loop", bare, bare.sample),
+              f"resize {args.size}, hflip; median of {args.repeat}; torch threads 1, cv2 threads 1")
+        print(f"fast-path image tensor equal to the bare loop's (values, shape, strides): {same}")
+        configs = (("bare cv2 loop", bare, bare.__getitem__),
                    ("HeadPoseDataset(size, hflip)", fused, fused.__getitem__),
                    ("HeadPoseDataset(size) + v2 flip", v2flip, v2flip.__getitem__),
-                   ("HeadPoseDataset + v2 Resize,flip", v2ds, v2ds.__getitem__))
+                   ("HeadPoseDataset + v2 Resize,flip", v2ds, v2ds.__getitem__))[:2 if args.fast_only else 4]
         one = _rates({name: one_process(get, order) for name, _, get in configs}, args.items, args.repeat)
         dl = _rates({name: through_loader(ds, order, args.workers, args.batch) for name, ds, _ in configs},
                     args.items, args.repeat)
@@ -192,7 +208,8 @@ def main(argv=None):
             print(f"{name:33s} {cells[0]:>15s} {cells[1]:>15s}   {cells[2]:>18s} {cells[3]:>15s}")
     own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-    print(f"peak RSS: this process {own:.0f} MiB, largest worker {kids:.0f} MiB")
+    print(f"peak RSS: this process {own:.0f} MiB ({imports:.0f} MiB after the imports), "
+          f"largest worker {kids:.0f} MiB")
 
 
 if __name__ == "__main__":

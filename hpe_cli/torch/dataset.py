@@ -10,10 +10,12 @@ from torchvision import tv_tensors
 
 from ..errors import HpeError
 from ..rotation.systems import get_system
+from .collate import Sample
 from .samples import (
     _FALSE,
     _TRUE,
     INTERPOLATIONS,
+    PackedRows,
     PoseOutputs,
     crop_rects,
     crop_rgb,
@@ -106,7 +108,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
 
     Returns (per item)
     ------------------
-    dict
+    Sample (a ``dict``)
         ``image`` uint8 (3, H, W) RGB (unless ``transform`` converts it; without a
         transform a channels-last view of the decoded pixels), ``matrix`` (3, 3) the
         stored matrix of ``system``, ``angles`` (3,) its primary ``(pitch, yaw, roll)``
@@ -120,8 +122,12 @@ class HeadPoseDataset(torch.utils.data.Dataset):
     too; images are decoded lazily in ``__getitem__``, straight into RGB. The pose
     outputs of a sample whose transform left its pose as it was or mirrored it are
     looked up in tables built once; others are converted per batch (``__getitems__``,
-    which ``DataLoader`` calls). The object is picklable and opens file handles lazily
-    in each ``DataLoader`` worker.
+    which ``DataLoader`` calls). Without a transform, all outputs but the image are one
+    row of a packed table (own or mirrored pose, geometry placed and flipped), copied
+    per sample. Samples are :class:`~hpe_cli.torch.collate.Sample` dicts: ``default_collate``
+    batches them into one storage (one shared-memory segment per batch from a worker,
+    not one per key); the values are the ones ``default_collate`` gives. The object is
+    picklable and opens file handles lazily in each ``DataLoader`` worker.
 
     Examples
     --------
@@ -192,6 +198,8 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         self._paths = None if self._image_refs is None else _join_paths(self.images_root, self._image_refs)
         self._place_all()
         self._poses = PoseOutputs(self.canonical, self.system, dtype)
+        flips = [f for f, can in ((False, self.hflip < 1), (True, self.hflip > 0)) if can and transform is None]
+        self._rows = PackedRows(self._poses, self._placed, *self._tabled(), self._perm, flips=flips)
         self._n = n
         self._pf = None
         self._rg_cache = (None, None)
@@ -221,6 +229,20 @@ class HeadPoseDataset(torch.utils.data.Dataset):
                     if self._rects is not None else np.full((n, 2), np.nan)
         self._placed = place(self.boxes, self.landmarks, origin, scale)
         self._known = known
+
+    def _tabled(self):
+        """Rows whose outputs without a transform are all known here (:class:`PackedRows`), and their widths."""
+        n, S = len(self.canonical), self.size
+        if self._rects is None:
+            return self._known.copy(), np.full(n, np.nan)
+        rects, known = self._rects
+        hw = np.maximum(rects[:, 2:4], 1).astype(np.float64)
+        ok = known.copy()
+        if S is not None:  # transforms.is_uniform, vectorised: a crop resized without an aspect change
+            lo = np.maximum((S - 0.5) / hw[:, 0], (S - 0.5) / hw[:, 1])
+            hi = np.minimum((S + 0.5) / hw[:, 0], (S + 0.5) / hw[:, 1])
+            ok &= lo <= hi + 1e-12
+        return ok, (np.full(n, float(S)) if S is not None else hw[:, 1])
 
     # -------------------------------------------------------------------------------------- images
     def _image_path(self, i) -> Path:
@@ -269,10 +291,6 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             raise HpeError(f"{where}: cannot decode image")
         return img
 
-    def _read_image(self, i):
-        """The whole image as a uint8 (3, H, W) RGB tensor (decoded with OpenCV)."""
-        return to_tensor(crop_rgb(self._decoded(i), None))
-
     # -------------------------------------------------------------------------------------- samples
     def _index(self, i) -> int:
         i = int(i)
@@ -285,13 +303,13 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         img = self._decoded(i)
         rect = None
         if self._rects is not None and self._rects[1][i]:
-            rect = self._rects[0][i]
+            rect = self._rects[0][i].tolist()
         pix = crop_rgb(img, rect)
-        origin = (0, 0) if rect is None else (int(rect[1]), int(rect[0]))
+        origin = (0, 0) if rect is None else (rect[1], rect[0])
         scale = note = None
         if self.size is not None:
-            h, w = pix.shape[:2]
-            if not is_uniform((h, w), (self.size, self.size)):
+            h, w = pix.shape[:2]  # rows in the packed tables are uniform (checked in _tabled)
+            if not self._rows.ok[i] and not is_uniform((h, w), (self.size, self.size)):
                 note = aspect_message((h, w), (self.size, self.size), "size= (resize of the crop)")
             pix, scale = resize(pix, self.size, self.interpolation), (self.size / w, self.size / h)
         if flip:
@@ -312,10 +330,11 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             box, lm = flip_geometry(box, lm, width, self._perm)
         return box, lm
 
-    def _prepare(self, i):
+    def _prepare(self, i, flip=None, pixels=None):
         """``(partial output, i, A after the transform (None: the table's), undefined flag, flipped)``."""
-        flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
-        pix, origin, scale, note = self._pixels(i, flip)
+        if flip is None:
+            flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
+        pix, origin, scale, note = self._pixels(i, flip) if pixels is None else pixels
         image = to_tensor(pix)
         canvas = tuple(pix.shape[:2])
         box, lm = self._geometry(i, origin, scale, canvas[1], flip)
@@ -355,15 +374,29 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             out.update(pose)
             out["pose_undefined"] = (_TRUE if undefined else _FALSE).clone()
             out["index"] = i
-            result.append(out)
+            result.append(Sample(out))
         return result
 
+    def _sample(self, i):
+        """The finished sample dict of row ``i`` when its outputs are tabled, else ``_prepare``'s tuple."""
+        if self.transform is not None:
+            return self._prepare(i)
+        flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
+        pix, origin, scale, note = self._pixels(i, flip)
+        out = None if note is not None else self._rows.sample(i, flip, to_tensor(pix))
+        return self._prepare(i, flip, (pix, origin, scale, note)) if out is None else out
+
     def __getitem__(self, i):
-        return self._finish([self._prepare(self._index(i))])[0]
+        got = self._sample(self._index(i))
+        return got if isinstance(got, dict) else self._finish([got])[0]
 
     def __getitems__(self, indices) -> list:
         """The samples of a batch (``DataLoader`` calls this): their pose outputs are converted in one call."""
-        return self._finish([self._prepare(self._index(i)) for i in indices])
+        got = [self._sample(self._index(i)) for i in indices]
+        todo = [k for k, g in enumerate(got) if not isinstance(g, dict)]
+        for k, out in zip(todo, self._finish([got[k] for k in todo]) if todo else ()):
+            got[k] = out
+        return got
 
 
 def _join_paths(root, refs) -> list:

@@ -15,6 +15,7 @@ import torch
 
 from ..geometry.augment import box_of_points
 from ..geometry.crop import crop_padded
+from .collate import Sample
 from .transforms import pose_mirror
 
 #: ``interpolation=`` names of :class:`HeadPoseDataset` (``cv2.INTER_*``)
@@ -247,3 +248,75 @@ class PoseOutputs:
             for n, k in enumerate(miss):
                 found[k] = self._row(conv, n)
         return found
+
+
+class PackedRows:
+    """Every output of a sample but its image, of every row at once: one float table per flip state.
+
+    Row ``i`` of a table holds ``matrix`` (9), ``angles`` (3), ``canonical`` (9), then
+    ``box`` (4) and ``landmarks`` (2L) when present, in the output dtype; the flipped
+    table has the mirrored pose and the geometry after :func:`flip_geometry` (the same
+    float64 operations, vectorised). A sample then costs one row copy and a few views.
+    Tables are not pickled (a spawned worker builds its own on first use).
+
+    Parameters
+    ----------
+    poses : PoseOutputs
+    placed : (boxes (N, 4) or None, landmarks (N, L, 2) or None)
+        Geometry in the crop's (resized) pixels (:func:`place`).
+    ok : ndarray of bool (N,)
+        Rows whose geometry is in ``placed`` and whose resize keeps the aspect ratio.
+    widths : ndarray (N,)
+        Output width of each row (NaN: unknown until decoded, so no flipped row).
+    perm : sequence of int or None
+        Left/right landmark permutation of a flip.
+    flips : sequence of bool
+        Tables to build now (the flip states a sample can have), so that ``DataLoader``
+        workers forked later share them instead of building their own. Others are built
+        on first use. Memory: ``4 * (21 + 4 + 2L)`` bytes per row and table (float32).
+    """
+
+    def __init__(self, poses, placed, ok, widths, perm, flips=()):
+        self.poses, self.placed, self.ok, self.widths, self.perm = poses, placed, ok, widths, perm
+        self._tables = {flip: self._build(flip) for flip in flips}
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_tables"] = {}
+        return state
+
+    def _build(self, flip: bool):
+        packed, locked = self.poses._mirror_table() if flip else self.poses._own
+        box, lm = self.placed
+        ok = self.ok & np.isfinite(self.widths) if flip else self.ok
+        if flip:
+            W = np.where(ok, self.widths, 0.0)
+            if box is not None:
+                box = box.copy()
+                box[:, 0] = W - box[:, 0] - box[:, 2]
+            if lm is not None:
+                lm = lm[:, self.perm]
+                lm[:, :, 0] = (W - 1)[:, None] - lm[:, :, 0]
+        parts = [packed] + [a.reshape(len(a), -1).astype(packed.dtype) for a in (box, lm) if a is not None]
+        return np.ascontiguousarray(np.concatenate(parts, axis=1)), locked, ok
+
+    def sample(self, i: int, flip: bool, image):
+        """The sample dict of row ``i`` (as :class:`HeadPoseDataset` returns it), or None if not tabled."""
+        table = self._tables.get(flip)
+        if table is None:
+            table = self._tables[flip] = self._build(flip)
+        values, locked, ok = table
+        if not ok[i]:
+            return None
+        r = values[i].copy()  # the sample's own memory; numpy views of it wrapped (cheaper than torch views)
+        wrap, (box, lm) = torch.from_numpy, self.placed
+        out = Sample(image=image)
+        if box is not None:
+            out["box"] = wrap(r[21:25])
+        if lm is not None:
+            out["landmarks"] = wrap(r[21 if box is None else 25:].reshape(-1, 2))
+        out["matrix"], out["angles"], out["canonical"] = wrap(r[:9].reshape(3, 3)), wrap(r[9:12]), \
+            wrap(r[12:21].reshape(3, 3))
+        out["gimbal_lock"], out["pose_undefined"] = wrap(np.array(locked[i])), wrap(np.array(False))
+        out["index"] = i
+        return out
