@@ -420,11 +420,13 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
 
         write_eval_plots(plots, sample.rows(), result, gside.system, overwrite=overwrite)
     if html:
+        from pathlib import Path
+
         from ..report.evaluate_page import write_page
 
         frame = worst_rows.frame.to_pandas() if worst_rows.frame is not None else None
         write_page(html, result, frame, overwrite=overwrite, plots=sample.rows(),
-                   pictures=worst_pictures(frame, s.images))
+                   pictures=worst_pictures(frame, s.images, gside.system, Path(gt_path).parent))
     if report == "-":
         import click
 
