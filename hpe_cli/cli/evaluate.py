@@ -16,7 +16,7 @@ from .options import (
 from .table_options import column_options
 
 _PROTOCOL_NAMES = ("hopenet", "fsanet", "6drepnet", "6drepnet360", "6drepnet360-2023", "directmhp",
-                   "directmhp-single", "whenet", "opal23", "opal23-align", "headposeplus", "img2pose", "trinet",
+                   "directmhp-single", "directmhp-v2", "whenet", "opal23", "opal23-align", "headposeplus", "img2pose", "trinet",
                    "opentrack", "dad3dheads")
 
 

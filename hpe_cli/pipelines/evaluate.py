@@ -28,6 +28,7 @@ from .evaluate_join import (  # noqa: F401
     prefetch,
     read_side,
 )
+from .evaluate_dataset import choose_directmhp
 from .evaluate_outputs import (
     Images,
     Sample,
@@ -383,6 +384,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     if "file" in gcols and "image" not in gcols and getattr(gsrc, "dataset", False):
         gcols.append("image")  # the .mat folder's key: see evaluate_join._stem_key_hook
     keys = _choose_keys(list(keys or ()), pcols, gcols, pred_path, gt_path, join_mode)
+    protocols, choice = choose_directmhp(protocols, gsrc)
     if by and by not in gcols and by not in pcols:
         raise HpeError(f"{gt_path}: --by column {by!r} is in neither table; found: {', '.join(gcols[:20])}")
     folder = images or (str(gsrc.path) if getattr(gsrc, "dataset", False) and gsrc.path.is_dir() else None)
@@ -414,6 +416,8 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         streamed = False
     (rep, rep_before, counts, worst_rows, sample) = out
     result = _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed)
+    if choice:
+        result["notes"].insert(0, choice)
     rej.write()
     if plots:
         from ..report.eval_plots import write_eval_plots
