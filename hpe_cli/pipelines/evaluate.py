@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import HpeError
+from .evaluate_dataset import choose_directmhp
 from .evaluate_join import (  # noqa: F401
     DEFAULT_KEYS,
     Chunk,
@@ -28,7 +29,6 @@ from .evaluate_join import (  # noqa: F401
     prefetch,
     read_side,
 )
-from .evaluate_dataset import choose_directmhp
 from .evaluate_outputs import (
     Images,
     Sample,
