@@ -71,7 +71,9 @@ def _split_keys(ctx, param, value):
 @click.option("--json", "report", type=click.Path(dir_okay=False, allow_dash=True),
               help="Write the report as JSON; '-' prints it (the table then goes to stderr).")
 @click.option("--plots", type=click.Path(file_okay=False),
-              help="Folder for error-vs-yaw, geodesic CDF and error histogram PNGs plus index.html.")
+              help="Folder for error-vs-yaw, geodesic CDF and error histogram PNGs plus index.html. Drawn from "
+                   "every pair up to 400,000 pairs, else from every k-th pair (the figures say which); the "
+                   "numbers always use all pairs.")
 @rejects_options
 @click.option("--columns", "use", type=click.Choice(["auto", "angles", "matrix"]), default="auto",
               show_default=True, help="Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).")
