@@ -277,12 +277,13 @@ def _encode(a, b):
     return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), len(enc.dictionary)
 
 
-def _key_codes(gt_keys, pred_keys, keys):
+def _key_codes(gt_keys, pred_keys, keys, stems=None):
     """One int64 code per row of each side (equal codes iff all key columns are equal) and the notes.
 
     Text keys that name files are compared as written; when that matches fewer
     rows than comparing their file stems (``image00050.jpg``, ``AFLW/image00050.mat``
-    and ``image00050`` are one image), the stems are used and a note says so.
+    and ``image00050`` are one image), the stems are used and a note says so. ``stems`` (a set of key
+    columns), when given, makes that choice instead (the partitioned join decides it over the whole files).
     """
     import pyarrow as pa
     import pyarrow.compute as pc
@@ -295,7 +296,11 @@ def _key_codes(gt_keys, pred_keys, keys):
         if a.type != b.type:  # a key read as numbers on one side and text on the other: compare as text
             a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
         c, m = _encode(a, b)
-        if pa.types.is_string(a.type) or pa.types.is_large_string(a.type):
+        if stems is not None:
+            if k in stems:
+                c, m = _encode(_stems(a), _stems(b))
+                notes.append(f"key {k!r} joined on file stems (the two files spell the names differently)")
+        elif pa.types.is_string(a.type) or pa.types.is_large_string(a.type):
             exact = np.isin(c[:n_g], c[n_g:]).sum()
             if exact < min(n_g, len(c) - n_g):
                 cs, ms = _encode(_stems(a), _stems(b))
@@ -329,15 +334,17 @@ def _check_unique(codes, side, keys):
                        f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
 
 
-def join(pred: Side, gt: Side, keys, join_mode="key"):
-    """``(gt_idx, pred_idx, unmatched prediction rows, notes)``; pred_idx is -1 where a GT row has no prediction."""
+def join(pred: Side, gt: Side, keys, join_mode="key", stems=None):
+    """``(gt_idx, pred_idx, unmatched prediction rows, notes)``; pred_idx is -1 where a GT row has no prediction.
+
+    ``stems``: see :func:`_key_codes`."""
     if join_mode == "order":
         if pred.n != gt.n:
             raise JoinUsageError(f"{pred.path}: --join order pairs rows by position and needs equal row counts; "
                                  f"got {pred.n} predictions and {gt.n} ground-truth rows in {gt.path}")
         idx = np.arange(gt.n)
         return idx, idx.copy(), np.zeros(0, dtype=np.int64), ["rows paired by position (--join order)"]
-    cg, cp, notes = _key_codes(gt.keys, pred.keys, keys)
+    cg, cp, notes = _key_codes(gt.keys, pred.keys, keys, stems)
     _check_unique(cg, gt, keys)
     _check_unique(cp, pred, keys)
     m = int(max(cg.max(initial=-1), cp.max(initial=-1))) + 1
