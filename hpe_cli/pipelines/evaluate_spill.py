@@ -38,16 +38,34 @@ def _text(col):
     return col if pa.types.is_string(col.type) else pc.cast(col, pa.string())
 
 
-def key_hash(keys_table, keys) -> np.ndarray:
-    """uint64 hash of each row's key columns, on text file stems (equal keys and equal stems hash alike)."""
+def _hash(arr) -> np.ndarray:
     import pandas as pd
 
+    return pd.util.hash_array(arr.to_numpy(zero_copy_only=False), categorize=False)
+
+
+def key_hashes(keys_table, keys):
+    """``(partition hash, {key: (hash of the text, hash of its file stem)})`` of each row, uint64.
+
+    The partition hash combines the stem hashes of all key columns, so equal keys and equal stems land in
+    the same partition; the per-column hashes let :meth:`Partitions.stem_columns` count matches cheaply.
+    """
     h = np.zeros(keys_table.num_rows, dtype=np.uint64)
+    per = {}
     for k in keys:
-        v = _stems(_text(keys_table.column(k))).to_numpy(zero_copy_only=False)
+        text = _text(keys_table.column(k))
+        hx, hs = _hash(text), _hash(_stems(text))
+        per[k] = (hx, hs)
         with np.errstate(over="ignore"):
-            h = h * np.uint64(1_000_003) ^ pd.util.hash_array(v, categorize=False)
-    return h
+            h = h * np.uint64(1_000_003) ^ hs
+    return h, per
+
+
+def _count_in(a, b) -> int:
+    """How many values of ``a`` occur in ``b`` (sorted search: numpy's hash-based isin is slow on uint64)."""
+    bs = np.sort(b)
+    i = np.minimum(np.searchsorted(bs, a), len(bs) - 1)
+    return int(np.count_nonzero(bs[i] == a))
 
 
 def partitions_for(n_rows: int, partition_rows: int) -> int:
@@ -72,10 +90,12 @@ class _SideSpill:
         self.writers: list = [None] * K
         self.schema = None
 
-    def _table(self, c):
+    def _table(self, c, per):
         import pyarrow as pa
 
         cols = {f"{_PFX}c{k}": c.canonical[k] for k in range(9)}
+        for j, (hx, hs) in enumerate(per.values()):
+            cols[f"{_PFX}hx{j}"], cols[f"{_PFX}hs{j}"] = hx, hs
         cols[f"{_PFX}ok"] = c.ok
         cols[f"{_PFX}reason"] = pa.array(np.full(c.n, "", dtype=object) if c.reasons is None else
                                          c.reasons.astype(str), pa.string())
@@ -102,9 +122,9 @@ class _SideSpill:
 
         if not c.n:
             return
-        t = self._table(c)
-        part = (key_hash(c.keys, keys) % np.uint64(self.K)).astype(np.int64) if self.K > 1 \
-            else np.zeros(c.n, dtype=np.int64)
+        h, per = key_hashes(c.keys, keys)
+        t = self._table(c, per)
+        part = (h % np.uint64(self.K)).astype(np.int64) if self.K > 1 else np.zeros(c.n, dtype=np.int64)
         order = np.argsort(part, kind="stable")
         bounds = np.searchsorted(part[order], np.arange(self.K + 1))
         for k in range(self.K):
@@ -193,31 +213,32 @@ class Partitions:
                 self.p.side(k, self._empty_keys(self.pr, self.p, self.g)))
 
     def stem_columns(self) -> set:
-        """Key columns compared on file stems: decided over all partitions as the in-memory join decides."""
+        """Key columns compared on file stems, decided over all partitions as the in-memory join decides
+        (:func:`~hpe_cli.pipelines.evaluate_join._key_codes`: stems when they match more GT rows than the
+        text as written), counted on the 64-bit hashes written with each row."""
         import pyarrow as pa
 
-        from .evaluate_join import _encode
+        def text_key(schema, k):
+            t = schema.field(k).type
+            return pa.types.is_dictionary(t) and t.value_type or t
 
+        if self.g.schema is None or self.p.schema is None:
+            return set()
         tally = {k: [0, 0, 0, 0] for k in self.keys}  # exact matches, stem matches, gt rows, pred rows
+        check = [j for j, k in enumerate(self.keys) if text_key(self.g.schema, k) != text_key(self.p.schema, k)
+                 or pa.types.is_string(text_key(self.g.schema, k))
+                 or pa.types.is_large_string(text_key(self.g.schema, k))]
         for i in range(self.K):
             tg, tp = self.g.table(i), self.p.table(i)
-            for k in self.keys:
-                a = _text(tg.column(k)) if tg is not None else None
-                b = _text(tp.column(k)) if tp is not None else None
-                n_g, n_p = (len(a) if a is not None else 0), (len(b) if b is not None else 0)
-                tally[k][2] += n_g
-                tally[k][3] += n_p
+            n_g, n_p = (tg.num_rows if tg is not None else 0), (tp.num_rows if tp is not None else 0)
+            for j in check:
+                t = tally[self.keys[j]]
+                t[2] += n_g
+                t[3] += n_p
                 if not n_g or not n_p:
                     continue
-                ta, tb = tg.column(k).type, tp.column(k).type
-                ta = ta.value_type if pa.types.is_dictionary(ta) else ta
-                tb = tb.value_type if pa.types.is_dictionary(tb) else tb
-                if ta == tb and not (pa.types.is_string(ta) or pa.types.is_large_string(ta)):
-                    continue
-                c, _ = _encode(a, b)
-                tally[k][0] += int(np.isin(c[:n_g], c[n_g:]).sum())
-                cs, _ = _encode(_stems(a), _stems(b))
-                tally[k][1] += int(np.isin(cs[:n_g], cs[n_g:]).sum())
+                for m, col in ((0, f"{_PFX}hx{j}"), (1, f"{_PFX}hs{j}")):
+                    t[m] += _count_in(tg.column(col).to_numpy(), tp.column(col).to_numpy())
         return {k for k, (ex, st, ng, npr) in tally.items() if ex < min(ng, npr) and st > ex}
 
     def cleanup(self):
