@@ -341,7 +341,7 @@ def _run_spill(s, rej, writer):
         def pairs(first: bool):
             for k in range(parts.K):
                 gt, pred = parts.sides(k)
-                gidx, pidx, unmatched, nt = join(pred, gt, s.keys, "key", stems)
+                gidx, pidx, unmatched, nt = join(pred, gt, s.keys, "key", stems, parts.codes(gt, pred, stems))
                 notes.update(nt)
                 if first:
                     valid, missing, invalid = _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols)

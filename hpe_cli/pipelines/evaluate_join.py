@@ -334,17 +334,23 @@ def _check_unique(codes, side, keys):
                        f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
 
 
-def join(pred: Side, gt: Side, keys, join_mode="key", stems=None):
+def join(pred: Side, gt: Side, keys, join_mode="key", stems=None, codes=None):
     """``(gt_idx, pred_idx, unmatched prediction rows, notes)``; pred_idx is -1 where a GT row has no prediction.
 
-    ``stems``: see :func:`_key_codes`."""
+    ``stems``: see :func:`_key_codes`; ``codes``: the ``(gt, pred)`` key codes when the caller has them
+    (the partitioned join, from verified key hashes)."""
     if join_mode == "order":
         if pred.n != gt.n:
             raise JoinUsageError(f"{pred.path}: --join order pairs rows by position and needs equal row counts; "
                                  f"got {pred.n} predictions and {gt.n} ground-truth rows in {gt.path}")
         idx = np.arange(gt.n)
         return idx, idx.copy(), np.zeros(0, dtype=np.int64), ["rows paired by position (--join order)"]
-    cg, cp, notes = _key_codes(gt.keys, pred.keys, keys, stems)
+    if codes is not None:
+        cg, cp = codes
+        notes = [f"key {k!r} joined on file stems (the two files spell the names differently)"
+                 for k in keys if k in (stems or ())]
+    else:
+        cg, cp, notes = _key_codes(gt.keys, pred.keys, keys, stems)
     _check_unique(cg, gt, keys)
     _check_unique(cp, pred, keys)
     m = int(max(cg.max(initial=-1), cp.max(initial=-1))) + 1

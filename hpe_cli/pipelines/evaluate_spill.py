@@ -175,6 +175,8 @@ class _SideSpill:
                 side.raw = np.column_stack([col(f"{_PFX}raw{i}") for i in range(3)])
             if f"{_PFX}dist" in t.column_names:
                 side.dist = col(f"{_PFX}dist")
+            side.hashes = {j: (col(f"{_PFX}hx{j}"), col(f"{_PFX}hs{j}")) for j in range(len(r.keep))
+                           if f"{_PFX}hx{j}" in t.column_names}
         side.image_dir, side.unit = r.image_dir, r.unit
         return side
 
@@ -240,6 +242,47 @@ class Partitions:
                 for m, col in ((0, f"{_PFX}hx{j}"), (1, f"{_PFX}hs{j}")):
                     t[m] += _count_in(tg.column(col).to_numpy(), tp.column(col).to_numpy())
         return {k for k, (ex, st, ng, npr) in tally.items() if ex < min(ng, npr) and st > ex}
+
+    def codes(self, gt, pred, stems):
+        """``(gt codes, pred codes)`` of one partition from the key hashes, every match verified on the keys
+        themselves; None (use the string join) when a key is not text on both sides, when one side has
+        equal hashes twice (a duplicate, which the string join names) or when a match is a hash collision."""
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        def is_text(schema, k):
+            return pa.types.is_string(schema.field(k).type)
+
+        if not (gt.n and pred.n) or not all(is_text(self.g.schema, k) and is_text(self.p.schema, k)
+                                            for k in self.keys):
+            return None
+        if len(getattr(gt, "hashes", {})) < len(self.keys) or len(getattr(pred, "hashes", {})) < len(self.keys):
+            return None
+        hg, hp = np.zeros(gt.n, dtype=np.uint64), np.zeros(pred.n, dtype=np.uint64)
+        for j, k in enumerate(self.keys):
+            w = 1 if k in stems else 0
+            with np.errstate(over="ignore"):
+                hg = hg * np.uint64(1_000_003) ^ gt.hashes[j][w]
+                hp = hp * np.uint64(1_000_003) ^ pred.hashes[j][w]
+        _, inv = np.unique(np.concatenate([hg, hp]), return_inverse=True)
+        inv = inv.reshape(-1).astype(np.int64)
+        cg, cp = inv[:gt.n], inv[gt.n:]
+        if np.bincount(cg).max() > 1 or np.bincount(cp).max() > 1:
+            return None
+        pos = np.full(int(inv.max()) + 1, -1, dtype=np.int64)
+        pos[cp] = np.arange(pred.n)
+        gi = np.flatnonzero(pos[cg] >= 0)
+        pi = pos[cg[gi]]
+        for k in self.keys:
+            a, b = gt.keys.column(k), pred.keys.column(k)
+            a, b = (a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
+                    b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b)
+            a, b = a.take(pa.array(gi)), b.take(pa.array(pi))
+            if k in stems:
+                a, b = _stems(a), _stems(b)
+            if len(gi) and not pc.all(pc.equal(a, b)).as_py():
+                return None
+        return cg, cp
 
     def cleanup(self):
         for s in (self.g, self.p):

@@ -4,7 +4,6 @@ Both golden sets, predictions shuffled, partitions forced small (a few rows each
 partition files; also --by, --yaw-bins, --align mean, opal23-align (a second pass), missing / unmatched /
 invalid rows, keys spelled differently (file stems) and duplicates found across the whole file.
 """
-import json
 import math
 from pathlib import Path
 
@@ -93,4 +92,42 @@ def test_duplicate_key_found_across_the_whole_file(tmp_path):
     with pytest.raises(HpeError, match=r"duplicate key image='s\d+' \(again at line 2002\)"):
         run_evaluate(p, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=50)
     assert not list(tmp_path.glob("*.parquet"))
-    json.dumps({})  # keep the import used
+
+
+def test_hash_collisions_fall_back_to_the_string_join(tmp_path, monkeypatch):
+    """Key hashes only propose matches: equal hashes on one side, or a match whose keys differ, make the
+    partition use the string join, so the report is the same."""
+    import numpy as np
+
+    from hpe_cli.pipelines import evaluate_spill as es
+
+    pred = tmp_path / "pred.csv"
+    pd.read_csv(GOLD / "syn" / "pred.csv").sample(frac=1.0, random_state=3).to_csv(pred, index=False)
+    want = _both(tmp_path, pred, GOLD / "syn" / "gt.csv")
+    calls = {"hash": 0, "none": 0}
+    codes = es.Partitions.codes
+
+    def counted(self, gt, p, stems):
+        out = codes(self, gt, p, stems)
+        calls["hash" if out is not None else "none"] += 1
+        return out
+
+    monkeypatch.setattr(es.Partitions, "codes", counted)
+    side = es._SideSpill.side
+
+    def rolled(self, k, empty_keys):  # every prediction's hash moved to the next row: all matches wrong
+        out = side(self, k, empty_keys)
+        if self.name == "pred" and out.n > 1:
+            out.hashes = {j: (np.roll(hx, 1), np.roll(hs, 1)) for j, (hx, hs) in out.hashes.items()}
+        return out
+
+    r = run_evaluate(pred, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
+    assert calls["hash"] > 0 and calls["none"] == 0  # the hash join is the normal path
+    monkeypatch.setattr(es._SideSpill, "side", rolled)
+    calls.update(hash=0, none=0)
+    r2 = run_evaluate(pred, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
+    assert calls["none"] > 0 and calls["hash"] == 0
+    monkeypatch.setattr(es, "_hash", lambda arr: np.zeros(len(arr), dtype=np.uint64))  # every key collides
+    r3 = run_evaluate(pred, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
+    for rep in (r, r2, r3):
+        _close({k: want[k] for k in ("metrics", "protocols", "n")}, {k: rep[k] for k in ("metrics", "protocols", "n")})
