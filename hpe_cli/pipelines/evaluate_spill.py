@@ -53,8 +53,12 @@ def key_hashes(keys_table, keys):
     h = np.zeros(keys_table.num_rows, dtype=np.uint64)
     per = {}
     for k in keys:
+        import pyarrow.compute as pc
+
         text = _text(keys_table.column(k))
-        hx, hs = _hash(text), _hash(_stems(text))
+        stems = _stems(text)
+        hx = _hash(text)
+        hs = hx if pc.all(pc.equal(text, stems)).as_py() is not False else _hash(stems)  # no folder or suffix
         per[k] = (hx, hs)
         with np.errstate(over="ignore"):
             h = h * np.uint64(1_000_003) ^ hs
@@ -239,8 +243,10 @@ class Partitions:
                 t[3] += n_p
                 if not n_g or not n_p:
                     continue
-                for m, col in ((0, f"{_PFX}hx{j}"), (1, f"{_PFX}hs{j}")):
-                    t[m] += _count_in(tg.column(col).to_numpy(), tp.column(col).to_numpy())
+                exact = _count_in(tg.column(f"{_PFX}hx{j}").to_numpy(), tp.column(f"{_PFX}hx{j}").to_numpy())
+                t[0] += exact
+                t[1] += exact if exact == min(n_g, n_p) else \
+                    _count_in(tg.column(f"{_PFX}hs{j}").to_numpy(), tp.column(f"{_PFX}hs{j}").to_numpy())
         return {k for k, (ex, st, ng, npr) in tally.items() if ex < min(ng, npr) and st > ex}
 
     def codes(self, gt, pred, stems):
