@@ -1,6 +1,6 @@
 """`hpe evaluate` at scale: time and peak RSS next to the floor, in the same run.
 
-    python benchmarks/evaluate.py [--rows 2000000] [--protocol NAME ...] [--shuffled]
+    python benchmarks/evaluate.py [--rows 2000000] [--protocol NAME ...] [--shuffled] [--json-only]
 
 Two Parquet tables of N pairs (string key 'image', pitch/yaw/roll; GT in
 300w_lp, predictions in 6drepnet, the same rotation turned by ~5 degrees).
@@ -112,6 +112,7 @@ def main():
     ap.add_argument("--protocol", action="append", default=None,
                     help="protocols to run (default: 6drepnet360); 'all' for every protocol")
     ap.add_argument("--shuffled", action="store_true", help="predictions in random order (external hash join)")
+    ap.add_argument("--json-only", action="store_true", help="skip the run that also writes the per-row output")
     args = ap.parse_args()
     n = args.rows
     protocols = args.protocol or ["6drepnet360"]
@@ -127,8 +128,9 @@ def main():
         t_floor = time.perf_counter() - t
         print(f"  floor (pyarrow stream + numpy geodesic)  {t_floor:7.2f} s  {n / t_floor / 1e6:6.2f} M pairs/s  "
               f"peak RSS {int(out[2]):,} MB  (geodesic mean {float(out[1]):.3f})")
-        for label, extra in (("hpe evaluate --json", []), ("hpe evaluate --json -o rows.parquet",
-                                                           ["-o", str(folder / "errors.parquet")])):
+        runs = (("hpe evaluate --json", []), ("hpe evaluate --json -o rows.parquet",
+                                               ["-o", str(folder / "errors.parquet")]))
+        for label, extra in runs[:1] if args.json_only else runs:
             cmd = [sys.executable, "-c", HPE, "evaluate", str(folder / "pred.parquet"), str(folder / "gt.parquet"),
                    "--pred-system", "6drepnet", "--gt-system", "300w_lp", "--json", str(folder / "report.json"),
                    "-q", "--overwrite", *extra]
