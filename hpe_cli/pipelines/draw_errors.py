@@ -161,12 +161,14 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
 
 
 def render_worst(rows, *, images, worst=None, sort_by="geodesic", system=None, progress=None, on_missing="canvas",
-                 thickness=None, where=None, skipped=None, row_name=None):
+                 thickness=None, where=None, skipped=None, row_name=None, crop=None):
     """The pictures :func:`draw_worst` writes, as arrays, without writing anything (the evaluate page embeds them).
 
     Same parameters as :func:`draw_worst` (no ``out_dir``). Yields ``(rank, row, image, key, caption, stem)`` for
     each drawn row: ``rank`` 0 = worst, ``row`` the 0-based row of ``rows``, ``image`` a BGR ``uint8`` array, ``stem`` the image's file stem. Image files
     come in rank order, then the frames of each video (decoded once), so one picture is in memory at a time.
+    ``crop(image, row)`` -> ``(part, (x0, y0))`` cuts each picture before drawing (the evaluate page: around
+    the face of a large frame); the poses are drawn at the row's centre moved by ``(x0, y0)``.
     """
     from ..errors import HpeError
     from ..io.images import ImageResolver
@@ -192,7 +194,10 @@ def render_worst(rows, *, images, worst=None, sort_by="geodesic", system=None, p
         if img is None and on_missing == "skip":
             skipped.append((i, why))
             continue
-        img, key, caption = job.draw(img, why, i, refs[rank])
+        off = (0, 0)
+        if crop is not None and img is not None:
+            img, off = crop(img, i)
+        img, key, caption = job.draw(img, why, i, refs[rank], off)
         yield rank, i, img, key, caption, Path(str(names[i] or f"row{i + 1}")).stem
         if progress is not None:
             progress.update(1)
@@ -267,7 +272,7 @@ class _Pairs:
         self.A_gt[ok] = system.to_canonical(system.from_angles(self.gt[ok]))
         self.A_pr[ok] = system.to_canonical(system.from_angles(self.pr[ok]))
 
-    def draw(self, img, why, i, ref):
+    def draw(self, img, why, i, ref, offset=(0, 0)):
         from ..geometry import draw as g
 
         rows, sort_by, gt, pr = self.rows, self.sort_by, self.gt, self.pr
@@ -281,7 +286,8 @@ class _Pairs:
         if sort_by != "geodesic" and "geodesic" in rows.columns:
             corner.append(f"geodesic {float(rows['geodesic'].iat[i]):.2f} deg")
         if self.ok[i]:
-            centre, length = _placement(rows, i, ref, H, W)
+            centre, length = _placement(rows, i, ref, H + offset[1], W + offset[0])
+            centre = np.asarray(centre, dtype=np.float64) - np.asarray(offset, dtype=np.float64)
             render_pair(img, self.A_gt[i], self.A_pr[i], centre, length, corner, self.thickness)
         else:
             g.render_caption(img, "angles missing", (4, H - 6), height_px=14)

@@ -40,6 +40,8 @@ from .evaluate_outputs import (
 )
 
 ANGLES = ("pitch", "yaw", "roll")
+#: GT columns carried to the worst rows (with --report) to place and crop their pictures
+PLACEMENT = ("bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "size")
 
 
 def _add_rejects(rej, side, name, rows, reasons, keycols):
@@ -218,7 +220,11 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 t = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
                 if writer is not None:
                     writer.write(t)
-                worst.add(t)
+                if worst.n:  # the face box of each row places its picture (not in the per-row output)
+                    for c in PLACEMENT:
+                        if g.keys is not None and c in g.keys.column_names and c not in t.column_names:
+                            t = t.append_column(c, g.keys.column(c))
+                    worst.add(t)
         rep = acc.report()
         rep_before = before.report() if before is not None else None
     finally:
@@ -260,7 +266,8 @@ def _unreadable_rejects(rej, side, name):
 
 
 def _readers(s, progress=None):
-    gr = SideReader(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, progress)
+    gr = SideReader(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, progress,
+                    extra=PLACEMENT if s.html else ())
     pr = SideReader(s.pred_path, s.pred_system, s.use_pred, s.keys, s.by if s.by not in gr.columns else None,
                     s.radians, s.batch_size, progress, s.orthonormalize)
     return gr, pr

@@ -135,7 +135,7 @@ class SideReader:
     """One input table: its system, label columns, keys; :meth:`chunks` streams it."""
 
     def __init__(self, path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None,
-                 orthonormalize=False):
+                 orthonormalize=False, extra=()):
         from ..io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
         from ..io.columns import label_system
 
@@ -156,8 +156,8 @@ class SideReader:
             missing = [c for c in need if c not in columns]
             if missing and not native:
                 raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {use}")
-        self.keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else []))
-                     if c in columns]
+        self.keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else [])
+                                              + list(extra)) if c in columns]  # extra: carried (face boxes)
         self.by = by if by and by in columns else None
         self.radians, self.progress, self.orthonormalize = radians, progress, orthonormalize
         self.unreadable: list = []

@@ -139,7 +139,7 @@ def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 48
         return None
     out: list = [None] * len(frame)
     for _, i, img, _, _, _ in render_worst(frame, images=root, sort_by="geodesic", system=system, on_missing="skip",
-                                           where="worst rows"):
+                                           where="worst rows", crop=lambda im, i: _around_face(im, frame.iloc[i])):
         scale = max_side / max(img.shape[:2])
         if scale < 1:
             img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
@@ -147,6 +147,23 @@ def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 48
         if ok:
             out[i] = "data:image/jpeg;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
     return out
+
+
+def _around_face(img, row):
+    """``(part, (x0, y0))``: the part of a large frame around the row's face box (3 box heights wide, as the
+    audit page crops) and its top-left corner; the whole image when the row has no box or the image is small."""
+    try:
+        x, y, w, h = (float(row[c]) for c in ("bbox_x", "bbox_y", "bbox_w", "bbox_h"))
+    except (KeyError, TypeError, ValueError):
+        return img, (0, 0)
+    H, W = img.shape[:2]
+    if not np.isfinite([x, y, w, h]).all() or max(H, W) <= 640:
+        return img, (0, 0)
+    half = max(3 * h / 2, 80.0)
+    cx, cy = x + w / 2, y + h / 2
+    x0, x1 = int(max(0, cx - half)), int(min(W, cx + half))
+    y0, y1 = int(max(0, cy - half)), int(min(H, cy + half))
+    return (img[y0:y1, x0:x1], (x0, y0)) if x1 - x0 > 8 and y1 - y0 > 8 else (img, (0, 0))
 
 
 def empty_rows(keys):
