@@ -5,9 +5,11 @@ Each side is read batch by batch (:class:`SideReader`); a batch becomes a
 angles as written (when the side holds angles), key and ``--by`` columns.
 Pairing is by key columns only: when both files list the same keys in the same
 order the chunks are paired as they stream (memory flat in the number of
-pairs, keys verified chunk by chunk); otherwise both sides are held in memory
-and joined with Arrow dictionary encoding. Row order is used only with
-``--join order`` and equal row counts.
+pairs, keys verified chunk by chunk); otherwise both sides are partitioned by
+a hash of the key on disk and each partition joined here with Arrow dictionary
+encoding or verified key hashes (:mod:`hpe_cli.pipelines.evaluate_spill`; :func:`read_side`
++ :func:`join` whole in memory is the reference it is tested against). Row order
+is used only with ``--join order`` and equal row counts.
 """
 from __future__ import annotations
 
