@@ -17,7 +17,7 @@ from .options import (
 from .table_options import column_options
 
 _PROTOCOL_NAMES = ("hopenet", "fsanet", "6drepnet", "6drepnet360", "6drepnet360-2023", "directmhp",
-                   "directmhp-single", "whenet", "opal23", "opal23-align", "headposeplus", "img2pose", "trinet",
+                   "directmhp-single", "directmhp-v2", "whenet", "opal23", "opal23-align", "headposeplus", "img2pose", "trinet",
                    "opentrack", "dad3dheads")
 
 
@@ -76,7 +76,9 @@ def _split_keys(ctx, param, value):
 @click.option("--json", "report", type=click.Path(dir_okay=False, allow_dash=True),
               help="Write the report as JSON; '-' prints it (the table then goes to stderr).")
 @click.option("--plots", type=click.Path(file_okay=False),
-              help="Folder for error-vs-yaw, geodesic CDF and error histogram PNGs plus index.html.")
+              help="Folder for error-vs-yaw, geodesic CDF and error histogram PNGs plus index.html. Drawn from "
+                   "every pair up to 400,000 pairs, else from every k-th pair (the figures say which); the "
+                   "numbers always use all pairs.")
 @rejects_options
 @click.option("--columns", "use", type=click.Choice(["auto", "angles", "matrix"]), default="auto",
               show_default=True, help="Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).")

@@ -124,7 +124,7 @@ def _groups(values):
 def _plain(u):
     if isinstance(u, np.generic):
         u = u.item()
-    if isinstance(u, float) and u != u:
+    if isinstance(u, float) and np.isnan(u):
         return "NaN"
     return u if isinstance(u, (str, int, float, bool)) or u is None else str(u)
 

@@ -125,16 +125,24 @@ def _log(M) -> np.ndarray:
     return Rotation.from_matrix(M).as_rotvec()
 
 
+def opal23_near(ann, pred):
+    """``(P_i A_i^T of the rows within 90 degrees of the identity, mask of those rows)``."""
+    deltas = np.matmul(pred, np.transpose(ann, (0, 2, 1)))
+    near = np.linalg.norm(_log(deltas), axis=1) < np.pi / 2
+    return deltas[near], near
+
+
 def opal23_near_deltas(ann, pred) -> np.ndarray:
     """``P_i A_i^T`` of the rows within 90 degrees of the identity: what opal23's mean is taken over."""
-    deltas = np.matmul(pred, np.transpose(ann, (0, 2, 1)))
-    return deltas[np.linalg.norm(_log(deltas), axis=1) < np.pi / 2]
+    return opal23_near(ann, pred)[0]
 
 
-def opal23_karcher(deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20) -> np.ndarray:
+def opal23_karcher(deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20,
+                   start: int = 0) -> np.ndarray:
     """opal23's ``_compute_mean_rotation`` (test/evaluator.py:111-126) over ``deltas`` (any array-like, e.g. a memmap).
 
-    Started at the first delta, ``mean <- mean @ exp(mean displacement)`` until
+    Started at delta ``start`` (the peer starts at the first row of its file: a caller that spills the
+    deltas in another order names that row), ``mean <- mean @ exp(mean displacement)`` until
     the mean displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the
     sums run chunk by chunk, so a memory-mapped spill of any length works.
     """
@@ -143,7 +151,7 @@ def opal23_karcher(deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: in
     n = len(deltas)
     if not n:
         return np.eye(3)
-    mean = np.array(deltas[0], dtype=np.float64)
+    mean = np.array(deltas[start], dtype=np.float64)
     for _ in range(max_iter):
         total = np.zeros(3)
         for a in range(0, n, chunk):

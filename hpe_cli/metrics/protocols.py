@@ -412,7 +412,11 @@ PROTOCOLS = {p.name: p for p in (
     Protocol("6drepnet360-2023", "6drepnet", "SUPERSEDED: min(|d|, |d+-360|, |d+-180|); vmae", "none",
              "thohemp/6DRepNet360@5b0622d sixdrepnet360/test.py:188-193 (superseded by 9c1cfaf, 2024-05-29)", sixdrepnet360_2023,
              (_FLIPS, "superseded by the 3-term minimum in 9c1cfaf; kept only to reproduce 2023 numbers")),
-    Protocol("directmhp", "whenet", "|d| as written, yaw wrapped; back |GT yaw| > 90 (v2)", "none",
+    Protocol("directmhp", "whenet", "single or v2 by the GT dataset; v2 (|GT yaw| > 90) when it is not known",
+             "none", "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-356: directmhp-single for .mat folders, AFLW2000, "
+             "300W-LP, BIWI; directmhp-v2 for CMU Panoptic, AGORA", directmhp,
+             ("pitch and roll are not wrapped: " + _BRANCH,)),
+    Protocol("directmhp-v2", "whenet", "|d| as written, yaw wrapped; back |GT yaw| > 90 (v2)", "none",
              "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-278 mean_absolute_error_calculate_v2 (CMU, AGORA)",
              directmhp, ("pitch and roll are not wrapped: " + _BRANCH,)),
     Protocol("directmhp-single", "whenet", "|d| as written, yaw wrapped; back |GT yaw| > 99", "none",

@@ -6,7 +6,8 @@ top-left corner says which is which, and the error (``--sort-by`` column, and th
 the top-right corner. One PNG per row, named ``<rank>_<image stem>.png`` (rank 1 = worst), so two rows of one
 image never share an output file.
 
-:func:`draw_worst` is the function a report calls; :func:`run_draw_errors` is ``hpe draw``'s job.
+:func:`draw_worst` writes the PNGs, :func:`render_worst` yields the same pictures as arrays (the evaluate
+page embeds them); :func:`run_draw_errors` is ``hpe draw``'s job.
 """
 from __future__ import annotations
 
@@ -144,9 +145,33 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
         (:func:`key_columns`), ``path`` the written PNG (a :class:`~pathlib.Path` in ``out_dir``),
         ``caption`` one line (key, error, both angle triples).
     """
+    from ..io.transaction import ensure_transaction, staged_dir
+    from .draw_rows import _write_image
+
+    out_dir = Path(out_dir)
+    done = {}
+    with ensure_transaction(), staged_dir(out_dir, overwrite) as stage:
+        for rank, _, img, key, caption, stem in render_worst(
+                rows, images=images, worst=worst, sort_by=sort_by, system=system, progress=progress,
+                on_missing=on_missing, thickness=thickness, where=where, skipped=skipped, row_name=row_name):
+            rel = Path(f"{rank + 1:04d}_{_safe_stem(stem)}.png")
+            _write_image(img, stage / rel, out_dir / rel)
+            done[rank] = (key, out_dir / rel, caption)
+    return [done[k] for k in sorted(done)]
+
+
+def render_worst(rows, *, images, worst=None, sort_by="geodesic", system=None, progress=None, on_missing="canvas",
+                 thickness=None, where=None, skipped=None, row_name=None, crop=None):
+    """The pictures :func:`draw_worst` writes, as arrays, without writing anything (the evaluate page embeds them).
+
+    Same parameters as :func:`draw_worst` (no ``out_dir``). Yields ``(rank, row, image, key, caption, stem)`` for
+    each drawn row: ``rank`` 0 = worst, ``row`` the 0-based row of ``rows``, ``image`` a BGR ``uint8`` array, ``stem`` the image's file stem. Image files
+    come in rank order, then the frames of each video (decoded once), so one picture is in memory at a time.
+    ``crop(image, row)`` -> ``(part, (x0, y0))`` cuts each picture before drawing (the evaluate page: around
+    the face of a large frame); the poses are drawn at the row's centre moved by ``(x0, y0)``.
+    """
     from ..errors import HpeError
     from ..io.images import ImageResolver
-    from ..io.transaction import ensure_transaction, staged_dir
     from .draw_rows import _image_names
 
     rows, system, where = _load(rows, system, where)
@@ -156,27 +181,26 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
     names = _image_names(rows) or [None] * len(rows)
     job = _Pairs(rows, system, sort_by, names, thickness)
     refs = _find_all(rows, names, order, images, on_missing, skipped, row_name)
-    out_dir = Path(out_dir)
     if progress is not None:
         progress.total = len(order)
         progress.refresh()
-    done = {}
     found = [k for k, r in enumerate(refs) if r is not None]
-    with ensure_transaction(), staged_dir(out_dir, overwrite) as stage:
-        # one picture in memory at a time: files in rank order, then each video's frames, decoded once
-        missing = ((k, None, "image not found") for k, r in enumerate(refs) if r is None and on_missing == "canvas")
-        pictures = ((found[k], img, why) for k, img, why in ImageResolver.read([refs[k] for k in found]))
-        for rank, img, why in itertools.chain(missing, pictures):
-            i = int(order[rank])
-            if img is None and on_missing == "error":
-                raise HpeError(f"{row_name(i)}: {why}")
-            if img is None and on_missing == "skip":
-                skipped.append((i, why))
-                continue
-            done[rank] = job.draw(img, why, i, rank, refs[rank], stage, out_dir)
-            if progress is not None:
-                progress.update(1)
-    return [done[k] for k in sorted(done)]
+    missing = ((k, None, "image not found") for k, r in enumerate(refs) if r is None and on_missing == "canvas")
+    pictures = ((found[k], img, why) for k, img, why in ImageResolver.read([refs[k] for k in found]))
+    for rank, img, why in itertools.chain(missing, pictures):
+        i = int(order[rank])
+        if img is None and on_missing == "error":
+            raise HpeError(f"{row_name(i)}: {why}")
+        if img is None and on_missing == "skip":
+            skipped.append((i, why))
+            continue
+        off = (0, 0)
+        if crop is not None and img is not None:
+            img, off = crop(img, i)
+        img, key, caption = job.draw(img, why, i, refs[rank], off)
+        yield rank, i, img, key, caption, Path(str(names[i] or f"row{i + 1}")).stem
+        if progress is not None:
+            progress.update(1)
 
 
 def _find_all(rows, names, order, images, on_missing, skipped, row_name):
@@ -234,7 +258,7 @@ def _load(rows, system, where):
 
 
 class _Pairs:
-    """Draws one row of evaluate's output: both poses, legend, error; writes ``<rank>_<stem>.png``."""
+    """Draws one row of evaluate's output: both poses, legend, error (the caller writes or embeds it)."""
 
     def __init__(self, rows, system, sort_by, names, thickness):
         self.rows, self.system, self.sort_by, self.names, self.thickness = rows, system, sort_by, names, thickness
@@ -248,9 +272,8 @@ class _Pairs:
         self.A_gt[ok] = system.to_canonical(system.from_angles(self.gt[ok]))
         self.A_pr[ok] = system.to_canonical(system.from_angles(self.pr[ok]))
 
-    def draw(self, img, why, i, rank, ref, stage, out_dir):
+    def draw(self, img, why, i, ref, offset=(0, 0)):
         from ..geometry import draw as g
-        from .draw_rows import _write_image
 
         rows, sort_by, gt, pr = self.rows, self.sort_by, self.gt, self.pr
         if img is None:
@@ -263,17 +286,15 @@ class _Pairs:
         if sort_by != "geodesic" and "geodesic" in rows.columns:
             corner.append(f"geodesic {float(rows['geodesic'].iat[i]):.2f} deg")
         if self.ok[i]:
-            centre, length = _placement(rows, i, ref, H, W)
+            centre, length = _placement(rows, i, ref, H + offset[1], W + offset[0])
+            centre = np.asarray(centre, dtype=np.float64) - np.asarray(offset, dtype=np.float64)
             render_pair(img, self.A_gt[i], self.A_pr[i], centre, length, corner, self.thickness)
         else:
             g.render_caption(img, "angles missing", (4, H - 6), height_px=14)
-        stem = Path(str(self.names[i] or f"row{i + 1}")).stem
-        rel = Path(f"{rank + 1:04d}_{_safe_stem(stem)}.png")
-        _write_image(img, stage / rel, out_dir / rel)
         caption = (f"{', '.join(map(str, key))}: {sort_by} {err:.2f}; gt (p, y, r) = "
                    f"({gt[i, 0]:.1f}, {gt[i, 1]:.1f}, {gt[i, 2]:.1f}), pred = "
                    f"({pr[i, 0]:.1f}, {pr[i, 1]:.1f}, {pr[i, 2]:.1f}) deg in {self.system.name}")
-        return key, out_dir / rel, caption
+        return img, key, caption
 
 
 def _safe_stem(stem: str) -> str:

@@ -6,7 +6,8 @@ read (:func:`hpe_cli.pipelines.evaluate_join.lockstep`, keys verified chunk by
 chunk), every metric is summed per group (:class:`hpe_cli.metrics.stream.Accumulator`),
 the geodesic errors are spilled as float32 for exact medians and percentiles,
 and the per-row output is written chunk by chunk. Files in different orders
-are joined in memory (Arrow dictionary encoding) and then scored the same way.
+are hashed by key into partition files and joined one partition at a time
+(:mod:`hpe_cli.pipelines.evaluate_spill`), then scored the same way.
 Global estimates (``--align mean``, opal23's alignment) take one extra pass.
 """
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import HpeError
+from .evaluate_dataset import choose_directmhp
 from .evaluate_join import (  # noqa: F401
     DEFAULT_KEYS,
     Chunk,
@@ -38,6 +40,8 @@ from .evaluate_outputs import (
 )
 
 ANGLES = ("pitch", "yaw", "roll")
+#: GT columns carried to the worst rows (with --report) to place and crop their pictures
+PLACEMENT = ("bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "size")
 
 
 def _add_rejects(rej, side, name, rows, reasons, keycols):
@@ -139,6 +143,7 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
     if not (need_mean or need_opal):
         return {}
     M, n = np.zeros((3, 3)), 0
+    first, written = (np.iinfo(np.int64).max, 0), 0
     fd, path = tempfile.mkstemp(prefix="hpe_eval_opal23_", suffix=".bin")
     try:
         with os.fdopen(fd, "wb") as f:
@@ -155,14 +160,21 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
                 if need_opal and g.n:
                     pair = PosePair(P, G, gsys, _raw(g, p, gsys, psys))
                     Po, Go, _ = _opal23_mats(pair)
-                    np.ascontiguousarray(pa_.opal23_near_deltas(Go, Po)).tofile(f)
+                    deltas, near = pa_.opal23_near(Go, Po)
+                    if near.any():  # the peer starts at its file's first row: the smallest GT line
+                        ln = g.lines[near]
+                        j = int(np.argmin(ln))
+                        if ln[j] < first[0]:
+                            first = (int(ln[j]), written + j)
+                    written += len(deltas)
+                    np.ascontiguousarray(deltas).tofile(f)
         out = {}
         if need_mean:
             out["Q"] = project_to_so3(M / n) if n else np.eye(3)
         if need_opal:
             size = os.path.getsize(path)
             deltas = np.memmap(path, dtype=np.float64, mode="r").reshape(-1, 3, 3) if size else np.zeros((0, 3, 3))
-            out["opal23_mean"] = pa_.opal23_karcher(deltas)
+            out["opal23_mean"] = pa_.opal23_karcher(deltas, start=first[1])
             del deltas
         return out
     finally:
@@ -208,7 +220,11 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 t = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
                 if writer is not None:
                     writer.write(t)
-                worst.add(t)
+                if worst.n:  # the face box of each row places its picture (not in the per-row output)
+                    for c in PLACEMENT:
+                        if g.keys is not None and c in g.keys.column_names and c not in t.column_names:
+                            t = t.append_column(c, g.keys.column(c))
+                    worst.add(t)
         rep = acc.report()
         rep_before = before.report() if before is not None else None
     finally:
@@ -250,7 +266,8 @@ def _unreadable_rejects(rej, side, name):
 
 
 def _readers(s, progress=None):
-    gr = SideReader(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, progress, role="gt")
+    gr = SideReader(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, progress,
+                    extra=PLACEMENT if s.html else (), role="gt")
     pr = SideReader(s.pred_path, s.pred_system, s.use_pred, s.keys, s.by if s.by not in gr.columns else None,
                     s.radians, s.batch_size, progress, s.orthonormalize, role="pred")
     return gr, pr
@@ -281,9 +298,9 @@ def _run_stream(s, rej, writer):
 
 def _run_memory(s, rej, writer):
     """Read both sides whole, join them by key, then score the pairs in chunks."""
-    gt = read_side(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, s.progress)
+    gt = read_side(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, s.progress, role="gt")
     pred = read_side(s.pred_path, s.pred_system, s.use_pred, s.keys, s.by if s.by not in gt.columns else None,
-                     s.radians, s.batch_size, s.progress, orthonormalize=s.orthonormalize)
+                     s.radians, s.batch_size, s.progress, role="pred", orthonormalize=s.orthonormalize)
     if pred.n == 0 and not pred.unreadable:
         raise HpeError(f"{pred.path}: no prediction rows (the file has a header only)")
     gidx, pidx, unmatched, notes = join(pred, gt, s.keys, s.join_mode)
@@ -303,11 +320,62 @@ def _run_memory(s, rej, writer):
     return out, glob, n, notes, gt, pred
 
 
+def _valid(gt, pred, gidx, pidx):
+    p_ok = np.where(pidx < 0, False, pred.ok[np.maximum(pidx, 0)])
+    return (pidx >= 0) & gt.ok[gidx] & p_ok
+
+
+def _run_spill(s, rej, writer):
+    """Key join of files in different orders: both sides hashed into partition files, joined one at a time
+    (:mod:`hpe_cli.pipelines.evaluate_spill`); memory flat in the number of pairs."""
+    from .evaluate_spill import Partitions
+
+    gr, pr = _readers(s, s.progress)
+    s.gside, s.pside = gr, pr
+    parts = Partitions(gr, pr, s.keys, getattr(s, "partition_rows", None)).fill()
+    try:
+        if pr.n == 0 and not pr.unreadable:
+            raise HpeError(f"{pr.path}: no prediction rows (the file has a header only)")
+        for side, name in ((gr, "gt"), (pr, "pred")):
+            _unreadable_rejects(rej, side, name)
+        stems = parts.stem_columns()
+        tally = {"missing": 0, "unmatched_pred": 0, "invalid": 0}
+        notes: set = set()
+
+        def key_cols(side, rows):
+            return {k: side.keys.column(k).take(rows).to_numpy(zero_copy_only=False) for k in s.keys}
+
+        def pairs(first: bool):
+            for k in range(parts.K):
+                gt, pred = parts.sides(k)
+                gidx, pidx, unmatched, nt = join(pred, gt, s.keys, "key", stems, parts.codes(gt, pred, stems))
+                notes.update(nt)
+                if first:
+                    valid, missing, invalid = _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols)
+                    tally["missing"] += int(missing.sum())
+                    tally["invalid"] += int(invalid.sum())
+                    tally["unmatched_pred"] += len(unmatched)
+                else:
+                    valid = _valid(gt, pred, gidx, pidx)
+                yield from _memory_pairs(gt, pred, gidx[valid], pidx[valid], s.batch_size)
+                del gt, pred, gidx, pidx
+
+        glob = _globals(s, lambda: pairs(False), gr.system, pr.system)
+        out = _score(s, pairs(True), rej, gr.system, pr.system, glob, writer, False)
+    finally:
+        parts.cleanup()
+    out[2]["invalid"] = tally["invalid"]
+    n = {"gt": gr.n, "pred": pr.n, "missing": tally["missing"], "unmatched_pred": tally["unmatched_pred"]}
+    s.partitions = parts.K
+    return out, glob, n, sorted(notes), gr, pr
+
+
 def _run(s, writer, stream: bool):
     from ..io import Rejects
 
     rej = Rejects(s.rejects, s.overwrite, strict=s.strict, source=None)
-    out, glob, n, notes, gside, pside = (_run_stream if stream else _run_memory)(s, rej, writer)
+    run = _run_stream if stream else (_run_memory if getattr(s, "join_engine", "spill") == "memory" else _run_spill)
+    out, glob, n, notes, gside, pside = run(s, rej, writer)
     rej.check()  # without --rejects (or with --strict) any set-aside row is an error: nothing is written
     if pside.n == 0 and not pside.unreadable:
         raise HpeError(f"{pside.path}: no prediction rows (the file has a header only)")
@@ -350,7 +418,9 @@ def _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, strea
     if s.yaw_bins:
         result["yaw_bins"] = rep["yaw_bins"]
     result["inputs"] = {"pred": str(pside.path), "gt": str(gside.path), "key": s.keys or "row order",
-                        "join": s.join_mode, "paired": "streamed in file order" if streamed else "joined in memory",
+                        "join": s.join_mode, "paired": "streamed in file order" if streamed else
+                        "joined in memory" if getattr(s, "join_engine", "spill") == "memory" else
+                        f"joined by key in {s.partitions} partition(s) on disk (external hash join)",
                         "columns": {"pred": pside.mode, "gt": gside.mode}}
     result["notes"] = list(notes) + [f"{name}: {note}" for name in s.protocols for note in PROTOCOLS[name].notes]
     if rej.counts:
@@ -361,8 +431,14 @@ def _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, strea
 def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, keys=(), protocols=None,
                  align="none", by=None, yaw_bins=None, report=None, plots=None, rejects=None, use_pred="auto",
                  use_gt="auto", radians=False, overwrite=False, batch_size=262_144, progress=None,
-                 strict=False, join_mode="key", orthonormalize=False, html=None, worst=12, images=None) -> dict:
-    """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report."""
+                 strict=False, join_mode="key", orthonormalize=False, html=None, worst=12, images=None,
+                 join_engine="spill", partition_rows=None) -> dict:
+    """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report.
+
+    Files in different orders are joined by an external hash join (``join_engine="spill"``, partitions of
+    about ``partition_rows`` rows, :mod:`hpe_cli.pipelines.evaluate_spill`) or, with ``"memory"``, whole in
+    memory (the reference the partitioned join is tested against).
+    """
     from ..io import TableWriter, open_table, system_metadata, write_json
     from ..io.writers import check_report_outputs
     from ..metrics.evaluate import check_protocols
@@ -392,6 +468,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     if "file" in gcols and "image" not in gcols and getattr(gsrc, "dataset", False):
         gcols.append("image")  # the .mat folder's key: see evaluate_join._stem_key_hook
     keys = _choose_keys(list(keys or ()), pcols, gcols, pred_path, gt_path, join_mode)
+    protocols, choice = choose_directmhp(protocols, gsrc)
     if by and by not in gcols and by not in pcols:
         raise HpeError(f"{gt_path}: --by column {by!r} is in neither table; found: {', '.join(gcols[:20])}")
     folder = images or (str(gsrc.path) if getattr(gsrc, "dataset", False) and gsrc.path.is_dir() else None)
@@ -399,7 +476,7 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
                   protocols=protocols, align=align, by=by, yaw_bins=yaw_bins, rejects=rejects, use_pred=use_pred,
                   use_gt=use_gt, radians=radians, overwrite=overwrite, batch_size=batch_size, progress=progress,
                   strict=strict, join_mode=join_mode, orthonormalize=orthonormalize, html=html, worst=worst,
-                  images=Images(folder) if folder else None)
+                  images=Images(folder) if folder else None, join_engine=join_engine, partition_rows=partition_rows)
     meta = {**system_metadata(gt_system), "hpe:evaluate_pred_system": pred_system.name,
             "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution of each "
                                  "rotation; pred after --align); err_* "
@@ -423,17 +500,21 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         streamed = False
     (rep, rep_before, counts, worst_rows, sample) = out
     result = _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed)
+    if choice:
+        result["notes"].insert(0, choice)
     rej.write()
     if plots:
         from ..report.eval_plots import write_eval_plots
 
         write_eval_plots(plots, sample.rows(), result, gside.system, overwrite=overwrite)
     if html:
+        from pathlib import Path
+
         from ..report.evaluate_page import write_page
 
         frame = worst_rows.frame.to_pandas() if worst_rows.frame is not None else None
         write_page(html, result, frame, overwrite=overwrite, plots=sample.rows(),
-                   pictures=worst_pictures(frame, s.images))
+                   pictures=worst_pictures(frame, s.images, gside.system, Path(gt_path).parent))
     if report == "-":
         import sys
 

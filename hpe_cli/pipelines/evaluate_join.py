@@ -5,9 +5,11 @@ Each side is read batch by batch (:class:`SideReader`); a batch becomes a
 angles as written (when the side holds angles), key and ``--by`` columns.
 Pairing is by key columns only: when both files list the same keys in the same
 order the chunks are paired as they stream (memory flat in the number of
-pairs, keys verified chunk by chunk); otherwise both sides are held in memory
-and joined with Arrow dictionary encoding. Row order is used only with
-``--join order`` and equal row counts.
+pairs, keys verified chunk by chunk); otherwise both sides are partitioned by
+a hash of the key on disk and each partition joined here with Arrow dictionary
+encoding or verified key hashes (:mod:`hpe_cli.pipelines.evaluate_spill`; :func:`read_side`
++ :func:`join` whole in memory is the reference it is tested against). Row order
+is used only with ``--join order`` and equal row counts.
 """
 from __future__ import annotations
 
@@ -136,7 +138,7 @@ class SideReader:
     """One input table: its system, label columns, keys; :meth:`chunks` streams it."""
 
     def __init__(self, path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None,
-                 orthonormalize=False, role="gt"):
+                 orthonormalize=False, extra=(), role="gt"):
         from ..io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
         from ..io.system_meta import resolve_system
 
@@ -160,8 +162,8 @@ class SideReader:
             missing = [c for c in need if c not in columns]
             if missing and not native:
                 raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {use}")
-        self.keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else []))
-                     if c in columns]
+        self.keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else [])
+                                              + list(extra)) if c in columns]  # extra: carried (face boxes)
         self.by = by if by and by in columns else None
         self.radians, self.progress, self.orthonormalize = radians, progress, orthonormalize
         self.unreadable: list = []
@@ -281,12 +283,13 @@ def _encode(a, b):
     return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), len(enc.dictionary)
 
 
-def _key_codes(gt_keys, pred_keys, keys):
+def _key_codes(gt_keys, pred_keys, keys, stems=None):
     """One int64 code per row of each side (equal codes iff all key columns are equal) and the notes.
 
     Text keys that name files are compared as written; when that matches fewer
     rows than comparing their file stems (``image00050.jpg``, ``AFLW/image00050.mat``
-    and ``image00050`` are one image), the stems are used and a note says so.
+    and ``image00050`` are one image), the stems are used and a note says so. ``stems`` (a set of key
+    columns), when given, makes that choice instead (the partitioned join decides it over the whole files).
     """
     import pyarrow as pa
     import pyarrow.compute as pc
@@ -299,7 +302,11 @@ def _key_codes(gt_keys, pred_keys, keys):
         if a.type != b.type:  # a key read as numbers on one side and text on the other: compare as text
             a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
         c, m = _encode(a, b)
-        if pa.types.is_string(a.type) or pa.types.is_large_string(a.type):
+        if stems is not None:
+            if k in stems:
+                c, m = _encode(_stems(a), _stems(b))
+                notes.append(f"key {k!r} joined on file stems (the two files spell the names differently)")
+        elif pa.types.is_string(a.type) or pa.types.is_large_string(a.type):
             exact = np.isin(c[:n_g], c[n_g:]).sum()
             if exact < min(n_g, len(c) - n_g):
                 cs, ms = _encode(_stems(a), _stems(b))
@@ -333,15 +340,23 @@ def _check_unique(codes, side, keys):
                        f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
 
 
-def join(pred: Side, gt: Side, keys, join_mode="key"):
-    """``(gt_idx, pred_idx, unmatched prediction rows, notes)``; pred_idx is -1 where a GT row has no prediction."""
+def join(pred: Side, gt: Side, keys, join_mode="key", stems=None, codes=None):
+    """``(gt_idx, pred_idx, unmatched prediction rows, notes)``; pred_idx is -1 where a GT row has no prediction.
+
+    ``stems``: see :func:`_key_codes`; ``codes``: the ``(gt, pred)`` key codes when the caller has them
+    (the partitioned join, from verified key hashes)."""
     if join_mode == "order":
         if pred.n != gt.n:
             raise JoinUsageError(f"{pred.path}: --join order pairs rows by position and needs equal row counts; "
                                  f"got {pred.n} predictions and {gt.n} ground-truth rows in {gt.path}")
         idx = np.arange(gt.n)
         return idx, idx.copy(), np.zeros(0, dtype=np.int64), ["rows paired by position (--join order)"]
-    cg, cp, notes = _key_codes(gt.keys, pred.keys, keys)
+    if codes is not None:
+        cg, cp = codes
+        notes = [f"key {k!r} joined on file stems (the two files spell the names differently)"
+                 for k in keys if k in (stems or ())]
+    else:
+        cg, cp, notes = _key_codes(gt.keys, pred.keys, keys, stems)
     _check_unique(cg, gt, keys)
     _check_unique(cp, pred, keys)
     m = int(max(cg.max(initial=-1), cp.max(initial=-1))) + 1

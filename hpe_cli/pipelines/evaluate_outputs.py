@@ -1,5 +1,5 @@
 """``hpe evaluate`` outputs kept in flat memory: the per-row table of a chunk, the worst rows, a plot sample,
-the image files by stem, and the pictures of the worst rows (drawn by ``hpe draw`` when it can)."""
+the image files by stem, and the pictures of the worst rows (drawn by ``hpe draw``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -118,38 +118,52 @@ class Images:
         return pc.if_else(pc.is_null(idx), "", out)
 
 
-def worst_pictures(frame, images):
-    """GT and prediction drawn on the face for each worst row (data URIs), via ``hpe draw``'s ``draw_worst``.
+def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 480):
+    """GT and prediction drawn on the face for each worst row, as JPEG data URIs (None where no image is found).
 
-    Guarded: without ``hpe_cli.pipelines.draw.draw_worst`` (or when it cannot
-    run) the page embeds no pictures and lists the image paths instead.
+    Drawn by ``hpe draw``'s :func:`~hpe_cli.pipelines.draw_errors.render_worst` (the pictures ``draw_worst``
+    writes, kept in memory: nothing is staged or written); images found by :mod:`hpe_cli.io.images` under
+    ``images`` (``--images`` or the GT folder), else ``fallback_root``, ``.mat`` + ``.jpg`` folders and
+    Panoptic layouts included. ``system`` is the GT system (the angles of ``frame``).
     """
+    import base64
+
+    import cv2
+
+    from .draw_errors import render_worst
+
     if frame is None or not len(frame):
         return None
-    try:
-        from .draw import draw_worst
-    except (ImportError, AttributeError):
+    root = images.folder if images is not None else fallback_root
+    if root is None:
         return None
-    import shutil
-    import tempfile
-    from pathlib import Path
+    out: list = [None] * len(frame)
+    for _, i, img, _, _, _ in render_worst(frame, images=root, sort_by="geodesic", system=system, on_missing="skip",
+                                           where="worst rows", crop=lambda im, i: _around_face(im, frame.iloc[i])):
+        scale = max_side / max(img.shape[:2])
+        if scale < 1:
+            img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 85])
+        if ok:
+            out[i] = "data:image/jpeg;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
+    return out
 
-    from ..report.evaluate_page import data_uri
 
-    out = tempfile.mkdtemp(prefix="hpe_eval_worst_")
+def _around_face(img, row):
+    """``(part, (x0, y0))``: the part of a large frame around the row's face box (3 box heights wide, as the
+    audit page crops) and its top-left corner; the whole image when the row has no box or the image is small."""
     try:
-        try:
-            res = draw_worst(frame, images=images.folder if images is not None else None, out_dir=out,
-                             worst=len(frame), sort_by="geodesic")
-        except (ImportError, AttributeError):
-            return None
-        if isinstance(res, (list, tuple)) and len(res) == len(frame):
-            paths = [Path(p) if p else None for p in res]
-        else:
-            paths = sorted(p for p in Path(out).rglob("*") if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
-        return [data_uri(p) if p is not None and p.is_file() else None for p in paths]
-    finally:
-        shutil.rmtree(out, ignore_errors=True)
+        x, y, w, h = (float(row[c]) for c in ("bbox_x", "bbox_y", "bbox_w", "bbox_h"))
+    except (KeyError, TypeError, ValueError):
+        return img, (0, 0)
+    H, W = img.shape[:2]
+    if not np.isfinite([x, y, w, h]).all() or max(H, W) <= 640:
+        return img, (0, 0)
+    half = max(3 * h / 2, 80.0)
+    cx, cy = x + w / 2, y + h / 2
+    x0, x1 = int(max(0, cx - half)), int(min(W, cx + half))
+    y0, y1 = int(max(0, cy - half)), int(min(H, cy + half))
+    return (img[y0:y1, x0:x1], (x0, y0)) if x1 - x0 > 8 and y1 - y0 > 8 else (img, (0, 0))
 
 
 def empty_rows(keys):

@@ -1,8 +1,10 @@
 """``hpe evaluate --plots``: error against GT yaw, geodesic CDF, error histograms and an HTML page.
 
 Every file is written atomically (:class:`hpe_cli.io.writers.AtomicFile`).
-Scatter plots show at most :data:`MAX_POINTS` rows (a fixed-seed sample);
-bin medians use every row.
+``rows`` is what ``hpe evaluate`` keeps for plots: every pair up to 400,000 pairs, beyond that every k-th pair
+(``rows.step``, k a power of two; :class:`hpe_cli.pipelines.evaluate_outputs.Sample`), and the figures say so.
+Scatter plots show at most :data:`MAX_POINTS` of those rows (a fixed-seed sample); bin medians, the CDF and
+the histograms use every row handed in. The report's numbers always use all pairs.
 """
 from __future__ import annotations
 
@@ -61,6 +63,12 @@ def _bin_medians(x, y, edges):
     return np.asarray(centres), np.asarray(med)
 
 
+def _drawn(rows) -> str:
+    """What the figures are drawn from: all pairs, or every k-th pair (a sample)."""
+    step = getattr(rows, "step", 1)
+    return f"{rows.n} pairs" if step == 1 else f"sample: every {step}-th pair, {rows.n} pairs"
+
+
 def write_eval_plots(folder, rows, report: dict, gt_system, overwrite: bool = False) -> dict:
     """Write the three figures and ``index.html`` into ``folder`` (created if missing)."""
     from matplotlib.figure import Figure
@@ -90,8 +98,8 @@ def write_eval_plots(folder, rows, report: dict, gt_system, overwrite: bool = Fa
         ax.set_xlim(lo, hi)
         ax.set_xlabel(f"GT yaw (degrees, {gt_system.name})")
         ax.set_ylabel(f"{name} (degrees)")
-    fig.suptitle(f"errors against GT yaw ({n} pairs{', points: sample of %d' % len(pick) if n > MAX_POINTS else ''})",
-                 fontsize=10)
+    points = f", points: sample of {len(pick)}" if n > MAX_POINTS else ""
+    fig.suptitle(f"errors against GT yaw ({_drawn(rows)}{points})", fontsize=10)
     fig.tight_layout()
     _save(fig, paths["error_vs_yaw"], overwrite)
 
@@ -106,7 +114,7 @@ def write_eval_plots(folder, rows, report: dict, gt_system, overwrite: bool = Fa
     ax.set_ylim(0, 1)
     ax.set_xlabel("geodesic error (degrees)")
     ax.set_ylabel("fraction of pairs within")
-    ax.set_title("geodesic error CDF", fontsize=10)
+    ax.set_title(f"geodesic error CDF ({_drawn(rows)})", fontsize=10)
     fig.tight_layout()
     _save(fig, paths["geodesic_cdf"], overwrite)
 
@@ -117,6 +125,8 @@ def write_eval_plots(folder, rows, report: dict, gt_system, overwrite: bool = Fa
             ax.hist(rows.mae_wrapped[:, k], bins=np.linspace(0, 180, 181), color="#3b6ea8", log=True)
         ax.set_xlim(0, 180)
         ax.set_xlabel(f"{a} error (degrees, wrapped, {gt_system.name})")
+        if k == 1:
+            ax.set_title(_drawn(rows), fontsize=9)
         ax.set_ylabel("pairs")
     fig.tight_layout()
     _save(fig, paths["error_hist"], overwrite)

@@ -173,7 +173,8 @@ def _worst(frame, pictures) -> str:
     cols = list(frame.columns)
     keys = [c for c in cols if c not in {"gt_pitch", "gt_yaw", "gt_roll", "pred_pitch", "pred_yaw", "pred_roll",
                                          "err_pitch", "err_yaw", "err_roll", "geodesic", "maev_left", "maev_down",
-                                         "maev_front", "frobenius", "image_path", "pred_rotation_distance"}]
+                                         "maev_front", "frobenius", "image_path", "pred_rotation_distance",
+                                         "bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "size"}]
     head = ["#"] + [html.escape(k) for k in keys] + ["GT p / y / r (deg)", "pred p / y / r (deg)",
                                                      "err p / y / r (deg)", "geodesic (deg)", "frobenius (unitless)",
                                                      "picture"]

@@ -2,9 +2,9 @@
 
 The page must show every protocol with its source, the ``--by`` and
 ``--yaw-bins`` tables, the row counts, units per column (DAD-3DHeads'
-Frobenius unitless), the plots and the worst rows; with ``hpe draw``'s
-``draw_worst`` available the worst rows carry their pictures (here a stand-in
-``draw_worst`` draws them, so this test does not depend on the draw work).
+Frobenius unitless), the plots and the worst rows, each with its picture
+(ground truth and prediction drawn on the face by ``hpe draw``'s
+``render_worst``, the pictures ``draw_worst`` writes, embedded in the page).
 """
 import shutil
 import subprocess
@@ -31,29 +31,9 @@ def _browser():
     return None
 
 
-def _stub_draw_worst(rows, *, images, out_dir, worst, sort_by):
-    """Stand-in for hpe_cli.pipelines.draw.draw_worst: the source image with two labels, one file per row."""
-    import cv2
-
-    paths = []
-    frame = rows.sort_values(sort_by, ascending=False).head(worst)
-    for i, r in enumerate(frame.itertuples()):
-        img = cv2.imread(r.image_path)
-        cv2.putText(img, f"GT yaw {r.gt_yaw:.0f}", (5, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 200, 0), 2)
-        cv2.putText(img, f"pred yaw {r.pred_yaw:.0f}", (5, 45), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 230), 2)
-        p = Path(out_dir) / f"{i:03d}.jpg"
-        cv2.imwrite(str(p), img)
-        paths.append(str(p))
-    return paths
-
-
-def _make_page(tmp_path, monkeypatch=None, worst=6):
+def _make_page(tmp_path, worst=6):
     pred = tmp_path / "shuffled.csv"
     pd.read_csv(PRED).sample(frac=1.0, random_state=11).to_csv(pred, index=False)
-    if monkeypatch is not None:
-        from hpe_cli.pipelines import draw
-
-        monkeypatch.setattr(draw, "draw_worst", _stub_draw_worst, raising=False)
     page = tmp_path / "page.html"
     r = CliRunner().invoke(cli, ["evaluate", str(pred), str(AFLW), "--pred-system", "300w_lp", "--gt-system",
                                  "300w_lp", "--report", str(page), "--by", "image", "--yaw-bins", "30",
@@ -72,16 +52,40 @@ def test_page_content(tmp_path):
     assert "By image" in text and "By GT yaw" in text and "[-30, 0)" in text
     assert "dad3dheads (unitless)" in text and "<sub>F</sub></td><td>unitless" in text
     assert "Worst 6 rows" in text and text.count("<img") >= 3  # the three plots
-    assert "aflw2000_prnet/image00514.jpg" in text  # the worst row (a 180-degree turn) names its image
+    worst = text.index("<h2>Worst 6 rows")
+    assert text.index("image00514", worst) < text.index("image00475", worst)  # the 180-degree turn is first
+    assert text.count('class="pic"') == 6  # one embedded picture per worst row
     # the terminal shows the same tables
     assert "by image" in out and "by GT yaw" in out and "source PinataFarms/DAD-3DHeads@" in out
 
 
-def test_page_in_headless_chromium_with_pictures(tmp_path, monkeypatch):
+def test_worst_pictures_are_the_drawn_faces(tmp_path):
+    """Each worst row's picture is its own face (the source JPEG) with the two poses drawn over it."""
+    import base64
+    import re
+
+    import cv2
+
+    page, _ = _make_page(tmp_path, worst=4)
+    text = page.read_text()
+    body = text[text.index("<h2>Worst 4 rows"):]
+    names = re.findall(r"<td>(image\d{5})(?:\.\w+)?</td>", body)  # the key as the GT reader gives it
+    pics = re.findall(r'class="pic" src="data:image/jpeg;base64,([^"]+)"', body)
+    assert len(names) == len(pics) == 4
+    for name, b64 in zip(names, pics):
+        drawn = cv2.imdecode(np.frombuffer(base64.b64decode(b64), np.uint8), cv2.IMREAD_COLOR)
+        raw = cv2.imread(str(AFLW / f"{name}.jpg"))
+        raw = cv2.resize(raw, (drawn.shape[1], drawn.shape[0]), interpolation=cv2.INTER_AREA)
+        diff = np.abs(drawn.astype(int) - raw.astype(int)).max(axis=2)
+        assert np.median(diff) < 12, name  # the same photo underneath
+        assert (diff > 80).mean() > 0.002, name  # with lines drawn over it
+
+
+def test_page_in_headless_chromium_with_pictures(tmp_path):
     browser = _browser()
     if browser is None:
         pytest.skip("no chromium installed (apt-get install -y chromium)")
-    page, _ = _make_page(tmp_path, monkeypatch)
+    page, _ = _make_page(tmp_path)
     text = page.read_text()
     assert text.count('class="pic"') == 6  # every worst row has its picture
     shot = tmp_path / "shot.png"

@@ -123,7 +123,7 @@ def test_image_size_disagreement_is_a_reject_never_a_transform(tmp_path):
     # no size anywhere: a usage error
     t.drop(columns=["image_width", "image_height"]).to_parquet(tmp_path / "nosize.parquet")
     res = run(tmp_path / "nosize.parquet", "-o", tmp_path / "o4.parquet", "--hflip")
-    assert res.exit_code == 1 and "expected the image size" in res.output
+    assert res.exit_code == 2 and "expected the image size" in res.output
 
 
 def _images(tmp_path, names, w=W, h=H):

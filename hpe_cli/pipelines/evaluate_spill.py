@@ -1,0 +1,299 @@
+"""External hash join of ``hpe evaluate``'s two inputs when they do not list the keys in the same order.
+
+Both sides are streamed once (:class:`~hpe_cli.pipelines.evaluate_join.SideReader`) and every row is written
+to one of ``K`` partition files (Arrow IPC, in a temporary folder) chosen by a hash of its key, so rows with
+equal keys (also equal file stems, see :func:`~hpe_cli.pipelines.evaluate_join._key_codes`) land in the same
+partition. ``K`` is chosen from the row count so that one partition of both sides is about
+:data:`PARTITION_ROWS` rows (~100 MB on disk). The partitions are then joined one at a time with the in-memory
+join (:func:`~hpe_cli.pipelines.evaluate_join.join`), so memory is flat in the number of pairs, and a key that
+appears twice anywhere in a file is found in its partition. Whether text keys are compared as written or on
+their file stems is decided over the whole files first, as the in-memory join decides it.
+"""
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+
+import numpy as np
+
+from .evaluate_join import Side, _stems
+
+#: rows of one side per partition (about 130 bytes each on disk, ~550 bytes each while a partition is joined)
+PARTITION_ROWS = 400_000
+#: at most this many partition files per side open at once
+MAX_PARTITIONS = 400
+_PFX = "__hpe_"
+
+
+def _text(col):
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if isinstance(col, pa.ChunkedArray):
+        col = col.combine_chunks()
+    if pa.types.is_dictionary(col.type):
+        col = col.cast(col.type.value_type)
+    return col if pa.types.is_string(col.type) else pc.cast(col, pa.string())
+
+
+def _hash(arr) -> np.ndarray:
+    import pandas as pd
+
+    return pd.util.hash_array(arr.to_numpy(zero_copy_only=False), categorize=False)
+
+
+def key_hashes(keys_table, keys):
+    """``(partition hash, {key: (hash of the text, hash of its file stem)})`` of each row, uint64.
+
+    The partition hash combines the stem hashes of all key columns, so equal keys and equal stems land in
+    the same partition; the per-column hashes let :meth:`Partitions.stem_columns` count matches cheaply.
+    """
+    h = np.zeros(keys_table.num_rows, dtype=np.uint64)
+    per = {}
+    for k in keys:
+        import pyarrow.compute as pc
+
+        text = _text(keys_table.column(k))
+        stems = _stems(text)
+        hx = _hash(text)
+        hs = hx if pc.all(pc.equal(text, stems)).as_py() is not False else _hash(stems)  # no folder or suffix
+        per[k] = (hx, hs)
+        with np.errstate(over="ignore"):
+            h = h * np.uint64(1_000_003) ^ hs
+    return h, per
+
+
+def _count_in(a, b) -> int:
+    """How many values of ``a`` occur in ``b`` (sorted search: numpy's hash-based isin is slow on uint64)."""
+    bs = np.sort(b)
+    i = np.minimum(np.searchsorted(bs, a), len(bs) - 1)
+    return int(np.count_nonzero(bs[i] == a))
+
+
+def partitions_for(n_rows: int, partition_rows: int) -> int:
+    return int(min(MAX_PARTITIONS, max(1, math.ceil(n_rows / max(1, partition_rows)))))
+
+
+def estimate_rows(src) -> int:
+    """Rows of a table: its own count when the reader knows it, else from the file size (~30 bytes a row)."""
+    if getattr(src, "num_rows", None) is not None:
+        return int(src.num_rows)
+    try:
+        return int(os.path.getsize(src.path) // 30) if os.path.isfile(src.path) else 1
+    except OSError:
+        return 1
+
+
+class _SideSpill:
+    """The partition files of one side."""
+
+    def __init__(self, folder, name, reader, K):
+        self.folder, self.name, self.reader, self.K = folder, name, reader, K
+        self.writers: list = [None] * K
+        self.schema = None
+
+    def _table(self, c, per):
+        import pyarrow as pa
+
+        cols = {f"{_PFX}c{k}": c.canonical[k] for k in range(9)}
+        for j, (hx, hs) in enumerate(per.values()):
+            cols[f"{_PFX}hx{j}"], cols[f"{_PFX}hs{j}"] = hx, hs
+        cols[f"{_PFX}ok"] = c.ok
+        cols[f"{_PFX}reason"] = pa.array(np.full(c.n, "", dtype=object) if c.reasons is None else
+                                         c.reasons.astype(str), pa.string())
+        if c.raw is not None:
+            for k in range(3):
+                cols[f"{_PFX}raw{k}"] = c.raw[:, k]
+        if c.dist is not None:
+            cols[f"{_PFX}dist"] = c.dist
+        cols[f"{_PFX}line"] = c.lines
+        if c.keys is not None:
+            for name in c.keys.column_names:
+                col = c.keys.column(name)
+                col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
+                cols[name] = col.cast(col.type.value_type) if pa.types.is_dictionary(col.type) else col
+        t = pa.table(cols)
+        if self.schema is None:
+            self.schema = t.schema
+        elif t.schema != self.schema:
+            t = t.cast(self.schema)
+        return t
+
+    def add(self, c, keys):
+        import pyarrow as pa
+
+        if not c.n:
+            return
+        h, per = key_hashes(c.keys, keys)
+        t = self._table(c, per)
+        part = (h % np.uint64(self.K)).astype(np.int64) if self.K > 1 else np.zeros(c.n, dtype=np.int64)
+        order = np.argsort(part, kind="stable")
+        bounds = np.searchsorted(part[order], np.arange(self.K + 1))
+        for k in range(self.K):
+            a, b = bounds[k], bounds[k + 1]
+            if a == b:
+                continue
+            if self.writers[k] is None:
+                self.writers[k] = pa.ipc.new_file(self._path(k), self.schema)
+            self.writers[k].write_table(t.take(pa.array(order[a:b])))
+
+    def _path(self, k):
+        return os.path.join(self.folder, f"{self.name}_{k:04d}.arrow")
+
+    def close(self):
+        for w in self.writers:
+            if w is not None:
+                w.close()
+        self.writers = [None] * self.K
+
+    def table(self, k):
+        """Partition ``k`` as a pyarrow Table (memory-mapped), or None when it holds no row."""
+        import pyarrow as pa
+
+        p = self._path(k)
+        if not os.path.exists(p):
+            return None
+        return pa.ipc.open_file(pa.memory_map(p)).read_all()
+
+    def side(self, k, empty_keys):
+        """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate_join.Side` (empty when it holds no row)."""
+        r = self.reader
+        t = self.table(k)
+        if t is None:
+            z = np.zeros(0)
+            side = Side(r.path, r.system, r.mode, [z] * 9, np.zeros(0, dtype=bool), None, empty_keys,
+                        np.zeros(0, dtype=object) if r.by else None, r.columns, np.zeros(0, dtype=np.int64), [])
+        else:
+            def col(name):
+                return t.column(name).to_numpy()
+
+            reasons = t.column(f"{_PFX}reason").to_numpy(zero_copy_only=False).astype(object)
+            keys = t.select([n for n in t.column_names if not n.startswith(_PFX)])
+            keys = keys.select(r.keep) if r.keep else None
+            by = keys.column(r.by).to_numpy(zero_copy_only=False) if r.by else None
+            side = Side(r.path, r.system, r.mode, [col(f"{_PFX}c{i}") for i in range(9)], col(f"{_PFX}ok"),
+                        reasons if (reasons != "").any() else None, keys, by, r.columns, col(f"{_PFX}line"), [])
+            if f"{_PFX}raw0" in t.column_names:
+                side.raw = np.column_stack([col(f"{_PFX}raw{i}") for i in range(3)])
+            if f"{_PFX}dist" in t.column_names:
+                side.dist = col(f"{_PFX}dist")
+            side.hashes = {j: (col(f"{_PFX}hx{j}"), col(f"{_PFX}hs{j}")) for j in range(len(r.keep))
+                           if f"{_PFX}hx{j}" in t.column_names}
+        side.image_dir, side.unit = r.image_dir, r.unit
+        return side
+
+
+class Partitions:
+    """Both sides written to ``K`` partition files each; :meth:`sides` gives one partition at a time."""
+
+    def __init__(self, gr, pr, keys, partition_rows=None):
+        self.gr, self.pr, self.keys = gr, pr, list(keys)
+        rows = max(estimate_rows(gr.src), estimate_rows(pr.src))
+        self.K = partitions_for(rows, partition_rows or PARTITION_ROWS)
+        self.folder = tempfile.mkdtemp(prefix="hpe_eval_join_")
+        self.g, self.p = _SideSpill(self.folder, "gt", gr, self.K), _SideSpill(self.folder, "pred", pr, self.K)
+
+    def fill(self):
+        try:
+            for spill, reader in ((self.g, self.gr), (self.p, self.pr)):
+                for c in reader.chunks():
+                    spill.add(c, self.keys)
+                spill.close()
+        except BaseException:
+            self.cleanup()
+            raise
+        return self
+
+    def _empty_keys(self, reader, spill, other):
+        import pyarrow as pa
+
+        schema = spill.schema or other.schema
+        fields = [schema.field(c) if schema is not None and c in schema.names else pa.field(c, pa.string())
+                  for c in reader.keep]
+        return pa.schema(fields).empty_table()
+
+    def sides(self, k):
+        return (self.g.side(k, self._empty_keys(self.gr, self.g, self.p)),
+                self.p.side(k, self._empty_keys(self.pr, self.p, self.g)))
+
+    def stem_columns(self) -> set:
+        """Key columns compared on file stems, decided over all partitions as the in-memory join decides
+        (:func:`~hpe_cli.pipelines.evaluate_join._key_codes`: stems when they match more GT rows than the
+        text as written), counted on the 64-bit hashes written with each row."""
+        import pyarrow as pa
+
+        def text_key(schema, k):
+            t = schema.field(k).type
+            return pa.types.is_dictionary(t) and t.value_type or t
+
+        if self.g.schema is None or self.p.schema is None:
+            return set()
+        tally = {k: [0, 0, 0, 0] for k in self.keys}  # exact matches, stem matches, gt rows, pred rows
+        check = [j for j, k in enumerate(self.keys) if text_key(self.g.schema, k) != text_key(self.p.schema, k)
+                 or pa.types.is_string(text_key(self.g.schema, k))
+                 or pa.types.is_large_string(text_key(self.g.schema, k))]
+        for i in range(self.K):
+            tg, tp = self.g.table(i), self.p.table(i)
+            n_g, n_p = (tg.num_rows if tg is not None else 0), (tp.num_rows if tp is not None else 0)
+            for j in check:
+                t = tally[self.keys[j]]
+                t[2] += n_g
+                t[3] += n_p
+                if not n_g or not n_p:
+                    continue
+                exact = _count_in(tg.column(f"{_PFX}hx{j}").to_numpy(), tp.column(f"{_PFX}hx{j}").to_numpy())
+                t[0] += exact
+                t[1] += exact if exact == min(n_g, n_p) else \
+                    _count_in(tg.column(f"{_PFX}hs{j}").to_numpy(), tp.column(f"{_PFX}hs{j}").to_numpy())
+        return {k for k, (ex, st, ng, npr) in tally.items() if ex < min(ng, npr) and st > ex}
+
+    def codes(self, gt, pred, stems):
+        """``(gt codes, pred codes)`` of one partition from the key hashes, every match verified on the keys
+        themselves; None (use the string join) when a key is not text on both sides, when one side has
+        equal hashes twice (a duplicate, which the string join names) or when a match is a hash collision."""
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        def is_text(schema, k):
+            return pa.types.is_string(schema.field(k).type)
+
+        if not (gt.n and pred.n) or not all(is_text(self.g.schema, k) and is_text(self.p.schema, k)
+                                            for k in self.keys):
+            return None
+        if len(getattr(gt, "hashes", {})) < len(self.keys) or len(getattr(pred, "hashes", {})) < len(self.keys):
+            return None
+        hg, hp = np.zeros(gt.n, dtype=np.uint64), np.zeros(pred.n, dtype=np.uint64)
+        for j, k in enumerate(self.keys):
+            w = 1 if k in stems else 0
+            with np.errstate(over="ignore"):
+                hg = hg * np.uint64(1_000_003) ^ gt.hashes[j][w]
+                hp = hp * np.uint64(1_000_003) ^ pred.hashes[j][w]
+        _, inv = np.unique(np.concatenate([hg, hp]), return_inverse=True)
+        inv = inv.reshape(-1).astype(np.int64)
+        cg, cp = inv[:gt.n], inv[gt.n:]
+        if np.bincount(cg).max() > 1 or np.bincount(cp).max() > 1:
+            return None
+        pos = np.full(int(inv.max()) + 1, -1, dtype=np.int64)
+        pos[cp] = np.arange(pred.n)
+        gi = np.flatnonzero(pos[cg] >= 0)
+        pi = pos[cg[gi]]
+        for k in self.keys:
+            a, b = gt.keys.column(k), pred.keys.column(k)
+            a, b = (a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
+                    b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b)
+            a, b = a.take(pa.array(gi)), b.take(pa.array(pi))
+            if k in stems:
+                a, b = _stems(a), _stems(b)
+            if len(gi) and not pc.all(pc.equal(a, b)).as_py():
+                return None
+        return cg, cp
+
+    def cleanup(self):
+        for s in (self.g, self.p):
+            try:
+                s.close()
+            except Exception:  # noqa: BLE001, S110 - closing after a failure: the folder goes anyway
+                pass
+        shutil.rmtree(self.folder, ignore_errors=True)
