@@ -1,4 +1,5 @@
 """Root pytest configuration: collect hpe_cli/torch (doctests) only when the optional torch extra is installed."""
+
 import importlib.util
 
 collect_ignore_glob = []

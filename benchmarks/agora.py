@@ -19,6 +19,7 @@ Usage::
     python benchmarks/agora.py                  # 1000 copies (14000 people)
     python benchmarks/agora.py --copies 100 --loop-people 500
 """
+
 from __future__ import annotations
 
 import argparse
@@ -119,8 +120,10 @@ def main(argv=None) -> None:
     print(f"{'  read_agora (unpickle + flatten)':<44}{N:>9}{t_read:>10.2f}{N / t_read:>12.0f}")
     print(f"{'  relabel_people (vectorised)':<44}{N:>9}{t_vec:>10.2f}{N / t_vec:>12.0f}")
     print(f"{'per-person loop, DirectMHP style':<44}{n:>9}{t_loop:>10.2f}{n / t_loop:>12.0f}")
-    print(f"speed-up of the labelling step: {(N / t_vec) / (n / t_loop):.1f}x  "
-          f"(labelled: job {stats.labelled} of {N}; loop {n_loop} of its {n})")
+    print(
+        f"speed-up of the labelling step: {(N / t_vec) / (n / t_loop):.1f}x  "
+        f"(labelled: job {stats.labelled} of {N}; loop {n_loop} of its {n})"
+    )
 
 
 if __name__ == "__main__":

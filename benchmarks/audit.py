@@ -11,6 +11,7 @@ naive baseline (one ``from_angles``/``to_angles`` call and a Python set
 lookup per row) run in the same process. The counts of both must agree on
 the subset.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,18 +27,20 @@ import pandas as pd
 def make_table(n: int, seed: int = 0) -> pd.DataFrame:
     """Random 300W-LP-like labels with a sprinkle of every problem the audit looks for."""
     rng = np.random.default_rng(seed)
-    df = pd.DataFrame({
-        "image": [f"img{i:08d}.jpg" for i in range(n)],
-        "pitch": rng.normal(0, 25, n).clip(-89, 89),
-        "yaw": rng.uniform(-99, 99, n),
-        "roll": rng.normal(0, 15, n),
-    })
+    df = pd.DataFrame(
+        {
+            "image": [f"img{i:08d}.jpg" for i in range(n)],
+            "pitch": rng.normal(0, 25, n).clip(-89, 89),
+            "yaw": rng.uniform(-99, 99, n),
+            "roll": rng.normal(0, 15, n),
+        }
+    )
     k = max(1, n // 1000)
     idx = rng.choice(n, size=4 * k, replace=False)
     df.loc[idx[:k], "yaw"] = 89.99858  # gimbal lock
-    df.loc[idx[k:2 * k], "pitch"] = np.nan  # non-finite
-    df.loc[idx[2 * k:3 * k], "roll"] = 200.0  # out of range
-    src = idx[3 * k:]
+    df.loc[idx[k : 2 * k], "pitch"] = np.nan  # non-finite
+    df.loc[idx[2 * k : 3 * k], "roll"] = 200.0  # out of range
+    src = idx[3 * k :]
     dst = (src + 1) % n
     df.loc[dst, ["image", "pitch", "yaw", "roll"]] = df.loc[src, ["image", "pitch", "yaw", "roll"]].to_numpy()
     return df
@@ -47,8 +50,9 @@ def naive_audit(df: pd.DataFrame, system, near_tol_deg: float = 1.0) -> dict:
     """One row at a time: what a straightforward loop would do (the baseline)."""
     from hpe_cli.rotation.euler import wrap_180
 
-    counts = dict.fromkeys(["gimbal_lock", "near_gimbal", "non_canonical", "out_of_range", "non_finite",
-                            "not_rotation", "duplicates"], 0)
+    counts = dict.fromkeys(
+        ["gimbal_lock", "near_gimbal", "non_canonical", "out_of_range", "non_finite", "not_rotation", "duplicates"], 0
+    )
     seen = set()
     sin_tol = np.sin(np.deg2rad(near_tol_deg))
     for img, p, y, r in df[["image", "pitch", "yaw", "roll"]].itertuples(index=False):
@@ -95,19 +99,25 @@ def main(argv=None) -> int:
         df = make_table(args.rows)
         df.to_parquet(tmp / "big.parquet", index=False)
         df.to_csv(tmp / "big.csv", index=False)
-        rep, _ = timed("hpe audit parquet (json report)", args.rows,
-                       lambda: run_audit(tmp / "big.parquet", system, report=tmp / "r1.json"))
-        timed("hpe audit csv (json report)", args.rows,
-              lambda: run_audit(tmp / "big.csv", system, report=tmp / "r2.json"))
-        timed("hpe audit parquet (+ -o flags.parquet, --plots)", args.rows,
-              lambda: run_audit(tmp / "big.parquet", system, output=tmp / "f.parquet", plots=tmp / "plots"))
+        rep, _ = timed(
+            "hpe audit parquet (json report)",
+            args.rows,
+            lambda: run_audit(tmp / "big.parquet", system, report=tmp / "r1.json"),
+        )
+        timed(
+            "hpe audit csv (json report)", args.rows, lambda: run_audit(tmp / "big.csv", system, report=tmp / "r2.json")
+        )
+        timed(
+            "hpe audit parquet (+ -o flags.parquet, --plots)",
+            args.rows,
+            lambda: run_audit(tmp / "big.parquet", system, output=tmp / "f.parquet", plots=tmp / "plots"),
+        )
         print("  counts:", {k: rep[k] for k in keys})
 
-        sub = df.iloc[:args.baseline_rows]
+        sub = df.iloc[: args.baseline_rows]
         sub.to_parquet(tmp / "sub.parquet", index=False)
         naive, t_naive = timed("naive per-row loop (baseline)", len(sub), lambda: naive_audit(sub, system))
-        fast, t_fast = timed("hpe audit on the same subset", len(sub),
-                             lambda: run_audit(tmp / "sub.parquet", system))
+        fast, t_fast = timed("hpe audit on the same subset", len(sub), lambda: run_audit(tmp / "sub.parquet", system))
         same = all(naive[k] == fast[k] for k in keys)
         print(f"  subset counts agree: {same}; speed-up {t_naive / t_fast:,.0f}x")
         return 0 if same else 1

@@ -9,6 +9,7 @@ Prints rows/s for
 - the same through :func:`augment_sample` one row at a time, on ``--loop-rows`` rows
   (the baseline; a full 1M-row loop would take minutes).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -46,8 +47,10 @@ def main(argv=None):
     for op, ang in (("hflip", None), ("rotate", angles), ("mirror", angles)):
         t = time.perf_counter()
         augment_batch(pyr, op=op, angle=ang, image_size=(450, 450))
-        print(f"  batch, labels only, {op:<7}{' (per-row angles)' if ang is not None else '                 '}"
-              f"{_rate(n, time.perf_counter() - t)}")
+        print(
+            f"  batch, labels only, {op:<7}{' (per-row angles)' if ang is not None else '                 '}"
+            f"{_rate(n, time.perf_counter() - t)}"
+        )
 
     for op in ("hflip", "rotate"):
         spent = 0.0
@@ -56,8 +59,9 @@ def main(argv=None):
             m = min(args.chunk, n - done)
             p, lm, box = _data(m, rng)  # not timed
             t = time.perf_counter()
-            augment_batch(p, lm, box, op=op, angle=angles[done:done + m] if op == "rotate" else None,
-                          image_size=(450, 450))
+            augment_batch(
+                p, lm, box, op=op, angle=angles[done : done + m] if op == "rotate" else None, image_size=(450, 450)
+            )
             spent += time.perf_counter() - t
             done += m
         print(f"  batch, labels+68 lm+box, {op:<7} (chunks of {args.chunk:,})   {_rate(n, spent)}")
@@ -67,11 +71,14 @@ def main(argv=None):
     for op in ("hflip", "rotate"):
         t = time.perf_counter()
         for i in range(k):
-            augment_sample(p[i], lm[i], box[i], op=op, angle=float(angles[i]) if op == "rotate" else None,
-                           image_size=(450, 450))
+            augment_sample(
+                p[i], lm[i], box[i], op=op, angle=float(angles[i]) if op == "rotate" else None, image_size=(450, 450)
+            )
         dt = time.perf_counter() - t
-        print(f"  per-row loop (baseline), labels+68 lm+box, {op:<7}  {_rate(k, dt)}"
-              f"  -> {n:,} rows would take {n * dt / k:.0f} s")
+        print(
+            f"  per-row loop (baseline), labels+68 lm+box, {op:<7}  {_rate(k, dt)}"
+            f"  -> {n:,} rows would take {n * dt / k:.0f} s"
+        )
 
 
 if __name__ == "__main__":

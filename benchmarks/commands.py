@@ -26,6 +26,7 @@ Usage::
     nice python benchmarks/commands.py                      # 1M and 10M rows
     nice python benchmarks/commands.py --rows 200000        # quick look
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,7 +42,7 @@ import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
 
 ROOT = Path(__file__).resolve().parents[1]
-HPE = [sys.executable, "-c", "from hpe_cli.cli.main import cli; cli(prog_name=\"hpe\")"]
+HPE = [sys.executable, "-c", 'from hpe_cli.cli.main import cli; cli(prog_name="hpe")']
 
 FLOOR = r"""
 import sys, numpy as np, pyarrow as pa, pyarrow.parquet as pq, pyarrow.csv as pcsv
@@ -103,8 +104,11 @@ def make_views(path: Path, n: int, n_lm: int = 70):
     w = None
     for lo in range(0, n, chunk):
         m = min(chunk, n - lo)
-        cols = {"image": pa.array([f"171204_pose1/hdImgs/00_{k % 31:02d}/00_{k % 31:02d}_{k // 155:08d}.jpg"
-                                   for k in range(lo, lo + m)])}
+        cols = {
+            "image": pa.array(
+                [f"171204_pose1/hdImgs/00_{k % 31:02d}/00_{k % 31:02d}_{k // 155:08d}.jpg" for k in range(lo, lo + m)]
+            )
+        }
         for c in ("bbox_x", "bbox_y", "bbox_w", "bbox_h", "pitch", "yaw", "roll"):
             cols[c] = rng.uniform(0, 500, m) if c.startswith("bbox") else rng.uniform(-90, 90, m)
         cols["image_width"] = np.full(m, 1920)
@@ -133,8 +137,12 @@ def make_inputs(tmp: Path, n: int):
         pyr = np.c_[rng.uniform(-89, 89, m), rng.uniform(-99, 99, m), rng.uniform(-89, 89, m)]
         ta = pa.table({"id": np.arange(lo, lo + m), "pitch": pyr[:, 0], "yaw": pyr[:, 1], "roll": pyr[:, 2]})
         R = system.from_angles(pyr).reshape(m, 9)
-        tm = pa.table({"id": np.arange(lo, lo + m),
-                       **{f"r{i}{j}": np.ascontiguousarray(R[:, 3 * i + j]) for i in range(3) for j in range(3)}})
+        tm = pa.table(
+            {
+                "id": np.arange(lo, lo + m),
+                **{f"r{i}{j}": np.ascontiguousarray(R[:, 3 * i + j]) for i in range(3) for j in range(3)},
+            }
+        )
         if wa is None:
             wa = pq.ParquetWriter(tmp / "angles.parquet", ta.schema)
             wm = pq.ParquetWriter(tmp / "matrix.parquet", tm.schema)
@@ -151,63 +159,158 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rows", type=int, nargs="*", default=[1_000_000, 10_000_000])
     ap.add_argument("--repeat", type=int, default=1, help="runs per measurement (best time, worst memory)")
-    ap.add_argument("--views", type=int, nargs="*", default=[775_000],
-                    help="rows of the writer benchmark (775,000 = 5,000 Panoptic frames x 5 people x 31 cameras)")
-    ap.add_argument("--frames", type=int, nargs="*", default=[5_000, 20_000],
-                    help="Panoptic frames for relabel-panoptic (benchmarks/panoptic.py: 1 process and --workers 2, "
-                         "landmarks off); none skips it")
-    ap.add_argument("--formats-frames", type=int, default=5_000,
-                    help="frames for relabel-panoptic's output formats (Parquet, COCO, WHENet; landmarks on); 0 skips")
+    ap.add_argument(
+        "--views",
+        type=int,
+        nargs="*",
+        default=[775_000],
+        help="rows of the writer benchmark (775,000 = 5,000 Panoptic frames x 5 people x 31 cameras)",
+    )
+    ap.add_argument(
+        "--frames",
+        type=int,
+        nargs="*",
+        default=[5_000, 20_000],
+        help="Panoptic frames for relabel-panoptic (benchmarks/panoptic.py: 1 process and --workers 2, "
+        "landmarks off); none skips it",
+    )
+    ap.add_argument(
+        "--formats-frames",
+        type=int,
+        default=5_000,
+        help="frames for relabel-panoptic's output formats (Parquet, COCO, WHENet; landmarks on); 0 skips",
+    )
     args = ap.parse_args()
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     for n in args.views:
         with tempfile.TemporaryDirectory(dir=os.environ.get("HPE_BENCH_TMP")) as tmp:
             tmp = Path(tmp)
             make_views(tmp / "views.parquet", n)
-            print(f"\nwriters, {n:,} relabel-like rows (image, box, angles, size, 70 landmarks), streamed in "
-                  "batches of 65,536; floor = hpe's Parquet writer on the same batches")
-            res = {fmt: best([sys.executable, "-c", WRITER, str(tmp / "views.parquet"), str(tmp / f"o.{fmt}"), fmt],
-                             env, args.repeat) for fmt in ("parquet", "coco", "whenet")}
+            print(
+                f"\nwriters, {n:,} relabel-like rows (image, box, angles, size, 70 landmarks), streamed in "
+                "batches of 65,536; floor = hpe's Parquet writer on the same batches"
+            )
+            res = {
+                fmt: best(
+                    [sys.executable, "-c", WRITER, str(tmp / "views.parquet"), str(tmp / f"o.{fmt}"), fmt],
+                    env,
+                    args.repeat,
+                )
+                for fmt in ("parquet", "coco", "whenet")
+            }
             tp, _, cp = res["parquet"]
             for fmt, (t, mb, c) in res.items():
-                print(f"  {fmt:<8} {t:7.2f} s ({t / tp:4.2f}x)  cpu {c:7.2f} s ({c / cp:4.2f}x)  peak {mb:5.0f} MB",
-                      flush=True)
+                print(
+                    f"  {fmt:<8} {t:7.2f} s ({t / tp:4.2f}x)  cpu {c:7.2f} s ({c / cp:4.2f}x)  peak {mb:5.0f} MB",
+                    flush=True,
+                )
     out_width = 1 + 3 + 3 + 9 + 2  # id, pitch..roll, pitch_2.., r00..r22, gimbal_lock, roundtrip_err
     for n in args.rows:
         with tempfile.TemporaryDirectory(dir=os.environ.get("HPE_BENCH_TMP")) as tmp:
             tmp = Path(tmp)
             make_inputs(tmp, n)
             o = tmp / "out.parquet"
-            floor_cmd = lambda inp, width, kind="rw": [sys.executable, "-c", FLOOR, str(tmp / inp), str(o),  # noqa
-                                                       str(width), kind]
-            jobs = [
-                ("convert angles (Parquet)", HPE + ["convert", tmp / "angles.parquet", "-o", o, "--from", "300w_lp",
-                                                    "--to", "scipy_zyx", "-q", "--overwrite"],
-                 floor_cmd("angles.parquet", out_width)),
-                ("convert matrices (Parquet)", HPE + ["convert", tmp / "matrix.parquet", "-o", o, "--from",
-                                                      "300w_lp", "--to", "scipy_zyx", "-q", "--overwrite"],
-                 floor_cmd("matrix.parquet", out_width)),
-                ("convert angles (CSV in)", HPE + ["convert", tmp / "angles.csv", "-o", o, "--from", "300w_lp",
-                                                   "--to", "scipy_zyx", "-q", "--overwrite"],
-                 floor_cmd("angles.csv", out_width)),
-                ("audit (JSON report)", HPE + ["audit", tmp / "angles.parquet", "--json", tmp / "r.json", "-q",
-                                               "--overwrite"],
-                 floor_cmd("angles.parquet", 0, "read")),
-                ("augment --hflip (labels)", HPE + ["augment", tmp / "angles.parquet", "-o", o, "--image-size",
-                                                    "450", "450", "--hflip", "-q", "--overwrite"],
-                 floor_cmd("angles.parquet", out_width)),
+            floor_cmd = lambda inp, width, kind="rw": [
+                sys.executable,
+                "-c",
+                FLOOR,
+                str(tmp / inp),
+                str(o),  # noqa
+                str(width),
+                kind,
             ]
-            print(f"\n{n:,} rows (Parquet in, Parquet out unless noted); wall and CPU (user+sys) seconds, best of "
-                  f"{args.repeat}; RSS is each process's peak; the load average is printed because a shared "
-                  "machine inflates wall times")
-            print(f"  {'command':<28} {'hpe s':>7} {'floor s':>7} {'ratio':>6} {'hpe cpu':>7} {'floor cpu':>9} "
-                  f"{'cpu ratio':>9} {'hpe MB':>7} {'floor MB':>8}  load")
+            jobs = [
+                (
+                    "convert angles (Parquet)",
+                    HPE
+                    + [
+                        "convert",
+                        tmp / "angles.parquet",
+                        "-o",
+                        o,
+                        "--from",
+                        "300w_lp",
+                        "--to",
+                        "scipy_zyx",
+                        "-q",
+                        "--overwrite",
+                    ],
+                    floor_cmd("angles.parquet", out_width),
+                ),
+                (
+                    "convert matrices (Parquet)",
+                    HPE
+                    + [
+                        "convert",
+                        tmp / "matrix.parquet",
+                        "-o",
+                        o,
+                        "--from",
+                        "300w_lp",
+                        "--to",
+                        "scipy_zyx",
+                        "-q",
+                        "--overwrite",
+                    ],
+                    floor_cmd("matrix.parquet", out_width),
+                ),
+                (
+                    "convert angles (CSV in)",
+                    HPE
+                    + [
+                        "convert",
+                        tmp / "angles.csv",
+                        "-o",
+                        o,
+                        "--from",
+                        "300w_lp",
+                        "--to",
+                        "scipy_zyx",
+                        "-q",
+                        "--overwrite",
+                    ],
+                    floor_cmd("angles.csv", out_width),
+                ),
+                (
+                    "audit (JSON report)",
+                    HPE + ["audit", tmp / "angles.parquet", "--json", tmp / "r.json", "-q", "--overwrite"],
+                    floor_cmd("angles.parquet", 0, "read"),
+                ),
+                (
+                    "augment --hflip (labels)",
+                    HPE
+                    + [
+                        "augment",
+                        tmp / "angles.parquet",
+                        "-o",
+                        o,
+                        "--image-size",
+                        "450",
+                        "450",
+                        "--hflip",
+                        "-q",
+                        "--overwrite",
+                    ],
+                    floor_cmd("angles.parquet", out_width),
+                ),
+            ]
+            print(
+                f"\n{n:,} rows (Parquet in, Parquet out unless noted); wall and CPU (user+sys) seconds, best of "
+                f"{args.repeat}; RSS is each process's peak; the load average is printed because a shared "
+                "machine inflates wall times"
+            )
+            print(
+                f"  {'command':<28} {'hpe s':>7} {'floor s':>7} {'ratio':>6} {'hpe cpu':>7} {'floor cpu':>9} "
+                f"{'cpu ratio':>9} {'hpe MB':>7} {'floor MB':>8}  load"
+            )
             for name, cmd, fcmd in jobs:
                 th, mh, ch = best([str(c) for c in cmd], env, args.repeat)
                 tf, mf, cf = best(fcmd, env, args.repeat)
-                print(f"  {name:<28} {th:7.2f} {tf:7.2f} {th / tf:6.2f} {ch:7.2f} {cf:9.2f} {ch / cf:9.2f} "
-                      f"{mh:7.0f} {mf:8.0f}  {os.getloadavg()[0]:.1f}", flush=True)
-
+                print(
+                    f"  {name:<28} {th:7.2f} {tf:7.2f} {th / tf:6.2f} {ch:7.2f} {cf:9.2f} {ch / cf:9.2f} "
+                    f"{mh:7.0f} {mf:8.0f}  {os.getloadavg()[0]:.1f}",
+                    flush=True,
+                )
 
     if args.frames or args.formats_frames:
         sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -5,6 +5,7 @@
 Targets (issue 2): matrix -> both solutions >= 5M rows/s; end to end <= 0.5x
 SciPy's time and <= 1.5x the read+write floor of a table of the same width.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -81,8 +82,12 @@ def main():
         def floor():  # the encoding hpe's writer uses: floats plain, the rest snappy + dictionary
             t = floor_table()
             floats = {f.name for f in t.schema if pa.types.is_floating(f.type)}
-            pq.write_table(t, tmp / "floor.parquet", use_dictionary=[n for n in t.schema.names if n not in floats],
-                           compression={n: ("none" if n in floats else "snappy") for n in t.schema.names})
+            pq.write_table(
+                t,
+                tmp / "floor.parquet",
+                use_dictionary=[n for n in t.schema.names if n not in floats],
+                compression={n: ("none" if n in floats else "snappy") for n in t.schema.names},
+            )
 
         def scipy_job():  # the same job written with SciPy: one solution, no lock flag
             t = pq.read_table(inp)
@@ -111,8 +116,10 @@ def main():
         line("SciPy job (one solution, no lock flag)", n, t_scipy)
         t_hpe = best_of(hpe_job)
         line("hpe convert 300w_lp -> scipy_zyx", n, t_hpe, t_scipy)
-        print(f"  hpe / SciPy = {t_hpe / t_scipy:.2f} (target <= 0.5);  hpe / floor = {t_hpe / t_floor:.2f} "
-              f"(target <= 1.5; {t_hpe / t_plain:.2f} against the defaults floor)")
+        print(
+            f"  hpe / SciPy = {t_hpe / t_scipy:.2f} (target <= 0.5);  hpe / floor = {t_hpe / t_floor:.2f} "
+            f"(target <= 1.5; {t_hpe / t_plain:.2f} against the defaults floor)"
+        )
 
 
 if __name__ == "__main__":

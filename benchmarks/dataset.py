@@ -38,6 +38,7 @@ Usage::
     python benchmarks/dataset.py --fast-only --items 256 --repeat 7   # the floor and the fast path only
     python benchmarks/dataset.py --images /path/to/AFLW2000   # a folder of .mat + .jpg
 """
+
 from __future__ import annotations
 
 import argparse
@@ -114,7 +115,7 @@ class BareLoop(torch.utils.data.Dataset):
             crop = img[t0:t1, l0:l1]
         else:
             crop = np.zeros((side, side, 3), np.uint8)
-            crop[t0 - top:t1 - top, l0 - left:l1 - left] = img[t0:t1, l0:l1]
+            crop[t0 - top : t1 - top, l0 - left : l1 - left] = img[t0:t1, l0:l1]
         pix = cv2.flip(cv2.resize(crop, (self.size, self.size), interpolation=cv2.INTER_LINEAR), 1)
         if RGB is None:
             pix = cv2.cvtColor(pix, cv2.COLOR_BGR2RGB)
@@ -138,7 +139,7 @@ def _rates(runs, items, repeat):
     """
     times = {name: [] for name in runs}
     for r in range(repeat):
-        for name in list(runs)[::-1 if r % 2 else 1]:
+        for name in list(runs)[:: -1 if r % 2 else 1]:
             fn = runs[name]
             t0, c0 = time.perf_counter(), _cpu()
             fn()
@@ -150,15 +151,18 @@ def one_process(get, order):
     def run():
         for k in order:
             get(k)
+
     return run
 
 
 def through_loader(ds, order, workers, batch):
     def run():
-        loader = torch.utils.data.DataLoader(ds, batch_size=batch, sampler=order, num_workers=workers,
-                                             persistent_workers=False)
+        loader = torch.utils.data.DataLoader(
+            ds, batch_size=batch, sampler=order, num_workers=workers, persistent_workers=False
+        )
         for _ in loader:
             pass
+
     return run
 
 
@@ -181,35 +185,44 @@ def main(argv=None):
         flip = T.RandomHorizontalFlip(p=1.0, scheme="ibug68")
         fused = HeadPoseDataset(labels, crop=args.margin, size=args.size, hflip=1.0, flip_scheme="ibug68")
         v2flip = HeadPoseDataset(labels, crop=args.margin, size=args.size, transform=flip)
-        v2ds = HeadPoseDataset(labels, crop=args.margin,
-                               transform=v2.Compose([v2.Resize((args.size, args.size)), flip]))
+        v2ds = HeadPoseDataset(
+            labels, crop=args.margin, transform=v2.Compose([v2.Resize((args.size, args.size)), flip])
+        )
         bare = BareLoop(fused._image_refs, fused.boxes, args.margin, args.size)
         n = len(fused)
         order = [k % n for k in range(args.items)]
         # same pixels: the fused path's crop + resize + flip is the bare loop's, in RGB
         ref, got = bare[0], fused[0]["image"]
         same = ref.shape == got.shape and ref.stride() == got.stride() and torch.equal(ref, got)
-        print(f"{n} images from {args.images}, {args.items} items, crop {args.margin:g} square, "
-              f"resize {args.size}, hflip; median of {args.repeat}; torch threads 1, cv2 threads 1")
+        print(
+            f"{n} images from {args.images}, {args.items} items, crop {args.margin:g} square, "
+            f"resize {args.size}, hflip; median of {args.repeat}; torch threads 1, cv2 threads 1"
+        )
         print(f"fast-path image tensor equal to the bare loop's (values, shape, strides): {same}")
-        configs = (("bare cv2 loop", bare, bare.__getitem__),
-                   ("HeadPoseDataset(size, hflip)", fused, fused.__getitem__),
-                   ("HeadPoseDataset(size) + v2 flip", v2flip, v2flip.__getitem__),
-                   ("HeadPoseDataset + v2 Resize,flip", v2ds, v2ds.__getitem__))[:2 if args.fast_only else 4]
+        configs = (
+            ("bare cv2 loop", bare, bare.__getitem__),
+            ("HeadPoseDataset(size, hflip)", fused, fused.__getitem__),
+            ("HeadPoseDataset(size) + v2 flip", v2flip, v2flip.__getitem__),
+            ("HeadPoseDataset + v2 Resize,flip", v2ds, v2ds.__getitem__),
+        )[: 2 if args.fast_only else 4]
         one = _rates({name: one_process(get, order) for name, _, get in configs}, args.items, args.repeat)
-        dl = _rates({name: through_loader(ds, order, args.workers, args.batch) for name, ds, _ in configs},
-                    args.items, args.repeat)
+        dl = _rates(
+            {name: through_loader(ds, order, args.workers, args.batch) for name, ds, _ in configs},
+            args.items,
+            args.repeat,
+        )
         rows = [(name, one[name], dl[name]) for name, _, _ in configs]
         base = rows[0]
-        print(f"samples/s (x bare loop)  {'1 process: wall':>19s} {'CPU':>14s}   "
-              f"{f'DataLoader({args.workers}): wall':>22s} {'CPU':>14s}")
+        print(
+            f"samples/s (x bare loop)  {'1 process: wall':>19s} {'CPU':>14s}   "
+            f"{f'DataLoader({args.workers}): wall':>22s} {'CPU':>14s}"
+        )
         for name, one, dl in rows:
             cells = [f"{v:7.0f} ({v / b:4.2f}x)" for v, b in zip(one + dl, base[1] + base[2])]
             print(f"{name:33s} {cells[0]:>15s} {cells[1]:>15s}   {cells[2]:>18s} {cells[3]:>15s}")
     own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-    print(f"peak RSS: this process {own:.0f} MiB ({imports:.0f} MiB after the imports), "
-          f"largest worker {kids:.0f} MiB")
+    print(f"peak RSS: this process {own:.0f} MiB ({imports:.0f} MiB after the imports), largest worker {kids:.0f} MiB")
 
 
 if __name__ == "__main__":

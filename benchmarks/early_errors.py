@@ -11,6 +11,7 @@ down. Prints the count of each exit code and exits 1 if any run ended otherwise.
     PYTHONPATH=. python benchmarks/early_errors.py            # 2,000 runs
     PYTHONPATH=. python benchmarks/early_errors.py -n 200 -j 4
 """
+
 from __future__ import annotations
 
 import argparse
@@ -32,8 +33,7 @@ def make_inputs(d: Path) -> dict:
     bad = d / "labels_no_roll.csv"
     bad.write_text("image,pitch,yaw\na.jpg,1,2\nb.jpg,3,4\n")
     good = d / "labels.csv"
-    good.write_text("image,pitch,yaw,roll,bbox_x,bbox_y,bbox_w,bbox_h\na.jpg,1,2,3,0,0,10,10\n"
-                    "b.jpg,3,4,5,0,0,10,10\n")
+    good.write_text("image,pitch,yaw,roll,bbox_x,bbox_y,bbox_w,bbox_h\na.jpg,1,2,3,0,0,10,10\nb.jpg,3,4,5,0,0,10,10\n")
     existing = d / "existing.parquet"
     existing.write_bytes(b"not yours")
     return {"bad": bad, "good": good, "existing": existing, "missing": d / "no_such_file.csv", "dir": d}
@@ -47,8 +47,10 @@ def cases(f: dict) -> list:
     return [
         ("convert missing column", ["convert", bad, "-o", out, "--from", "300w_lp", "--to", "6drepnet"]),
         ("convert existing output", ["convert", bad, "-o", existing, "--from", "300w_lp", "--to", "6drepnet"]),
-        ("convert existing output, good input", ["convert", good, "-o", existing, "--from", "300w_lp", "--to",
-                                                 "6drepnet"]),
+        (
+            "convert existing output, good input",
+            ["convert", good, "-o", existing, "--from", "300w_lp", "--to", "6drepnet"],
+        ),
         ("convert bad system", ["convert", good, "-o", out, "--from", "nope", "--to", "6drepnet"]),
         ("convert missing file", ["convert", missing, "-o", out, "--from", "300w_lp", "--to", "6drepnet"]),
         ("audit missing column", ["audit", bad]),
@@ -60,18 +62,26 @@ def cases(f: dict) -> list:
         ("augment missing column", ["augment", bad, "-o", out, "--image-size", "64", "64", "--hflip"]),
         ("augment existing output", ["augment", good, "-o", existing, "--image-size", "64", "64", "--hflip"]),
         ("evaluate missing column", ["evaluate", bad, good, "--pred-system", "300w_lp", "--gt-system", "300w_lp"]),
-        ("evaluate missing file", ["evaluate", missing, good, "--pred-system", "300w_lp", "--gt-system",
-                                   "300w_lp"]),
+        ("evaluate missing file", ["evaluate", missing, good, "--pred-system", "300w_lp", "--gt-system", "300w_lp"]),
         ("export missing column", ["export", bad, "-o", str(d / "ex"), "--layout", "hf"]),
-        ("relabel-panoptic existing output", ["relabel-panoptic", str(ROOT / "sample_data" / "panoptic_synth"),
-                                              "-o", existing]),
+        (
+            "relabel-panoptic existing output",
+            ["relabel-panoptic", str(ROOT / "sample_data" / "panoptic_synth"), "-o", existing],
+        ),
     ]
 
 
 def run_one(argv, timeout=120) -> tuple:
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    p = subprocess.run([sys.executable, "-m", "hpe_cli", *argv], capture_output=True, text=True, env=env,
-                       timeout=timeout, cwd=str(ROOT), check=False)
+    p = subprocess.run(
+        [sys.executable, "-m", "hpe_cli", *argv],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=timeout,
+        cwd=str(ROOT),
+        check=False,
+    )
     return p.returncode, p.stderr
 
 
@@ -114,9 +124,11 @@ def main() -> int:
         counts = run(a.n, a.jobs, Path(tmp))
     dt = time.perf_counter() - t0
     unexpected = counts.pop("unexpected")
-    print(f"{a.n} early-error runs under load in {dt:.0f} s: "
-          + ", ".join(f"exit {k}: {v}" for k, v in sorted(counts.items()))
-          + f"; unexpected status or message: {unexpected}")
+    print(
+        f"{a.n} early-error runs under load in {dt:.0f} s: "
+        + ", ".join(f"exit {k}: {v}" for k, v in sorted(counts.items()))
+        + f"; unexpected status or message: {unexpected}"
+    )
     return 0 if set(counts) <= {1, 2} and not unexpected else 1
 
 

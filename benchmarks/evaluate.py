@@ -17,6 +17,7 @@ Peak RSS is each child's VmHWM (/proc/self/status). Keep N small on a shared
 machine (2M pairs take about a minute); the issue's target is 30M pairs with
 peak RSS < 1 GB and time within 1.5x of the floor.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -109,8 +110,12 @@ HPE = textwrap.dedent("""
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rows", type=int, default=2_000_000)
-    ap.add_argument("--protocol", action="append", default=None,
-                    help="protocols to run (default: 6drepnet360); 'all' for every protocol")
+    ap.add_argument(
+        "--protocol",
+        action="append",
+        default=None,
+        help="protocols to run (default: 6drepnet360); 'all' for every protocol",
+    )
     ap.add_argument("--shuffled", action="store_true", help="predictions in random order (external hash join)")
     ap.add_argument("--json-only", action="store_true", help="skip the run that also writes the per-row output")
     args = ap.parse_args()
@@ -120,20 +125,45 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         make_tables(n, folder, args.shuffled)
-        print(f"hpe evaluate, {n:,} pairs, predictions {'shuffled' if args.shuffled else 'in GT order'}, "
-              f"protocols {protocols}")
+        print(
+            f"hpe evaluate, {n:,} pairs, predictions {'shuffled' if args.shuffled else 'in GT order'}, "
+            f"protocols {protocols}"
+        )
         t = time.perf_counter()
-        out = subprocess.run([sys.executable, "-c", FLOOR, str(folder / "gt.parquet"), str(folder / "pred.parquet")],
-                             check=True, capture_output=True, text=True, env=env).stdout.split()
+        out = subprocess.run(
+            [sys.executable, "-c", FLOOR, str(folder / "gt.parquet"), str(folder / "pred.parquet")],
+            check=True,
+            capture_output=True,
+            text=True,
+            env=env,
+        ).stdout.split()
         t_floor = time.perf_counter() - t
-        print(f"  floor (pyarrow stream + numpy geodesic)  {t_floor:7.2f} s  {n / t_floor / 1e6:6.2f} M pairs/s  "
-              f"peak RSS {int(out[2]):,} MB  (geodesic mean {float(out[1]):.3f})")
-        runs = (("hpe evaluate --json", []), ("hpe evaluate --json -o rows.parquet",
-                                               ["-o", str(folder / "errors.parquet")]))
+        print(
+            f"  floor (pyarrow stream + numpy geodesic)  {t_floor:7.2f} s  {n / t_floor / 1e6:6.2f} M pairs/s  "
+            f"peak RSS {int(out[2]):,} MB  (geodesic mean {float(out[1]):.3f})"
+        )
+        runs = (
+            ("hpe evaluate --json", []),
+            ("hpe evaluate --json -o rows.parquet", ["-o", str(folder / "errors.parquet")]),
+        )
         for label, extra in runs[:1] if args.json_only else runs:
-            cmd = [sys.executable, "-c", HPE, "evaluate", str(folder / "pred.parquet"), str(folder / "gt.parquet"),
-                   "--pred-system", "6drepnet", "--gt-system", "300w_lp", "--json", str(folder / "report.json"),
-                   "-q", "--overwrite", *extra]
+            cmd = [
+                sys.executable,
+                "-c",
+                HPE,
+                "evaluate",
+                str(folder / "pred.parquet"),
+                str(folder / "gt.parquet"),
+                "--pred-system",
+                "6drepnet",
+                "--gt-system",
+                "300w_lp",
+                "--json",
+                str(folder / "report.json"),
+                "-q",
+                "--overwrite",
+                *extra,
+            ]
             if "all" not in protocols:
                 for p in protocols:
                     cmd += ["--protocol", p]
@@ -144,9 +174,11 @@ def main():
             rep = json.loads((folder / "report.json").read_text())
             assert rep["n"]["pairs"] == n, rep["n"]
             g = rep["metrics"]["geodesic"]
-            print(f"  {label:<40} {t_hpe:7.2f} s  {n / t_hpe / 1e6:6.2f} M pairs/s  peak RSS {hwm:,} MB  "
-                  f"({t_hpe / t_floor:.2f}x the floor; {rep['inputs']['paired']}; geodesic mean {g['mean']:.3f}, "
-                  f"median {g['median']:.3f})")
+            print(
+                f"  {label:<40} {t_hpe:7.2f} s  {n / t_hpe / 1e6:6.2f} M pairs/s  peak RSS {hwm:,} MB  "
+                f"({t_hpe / t_floor:.2f}x the floor; {rep['inputs']['paired']}; geodesic mean {g['mean']:.3f}, "
+                f"median {g['median']:.3f})"
+            )
 
 
 if __name__ == "__main__":

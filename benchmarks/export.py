@@ -17,6 +17,7 @@ Usage::
     python benchmarks/export.py                     # 200 frames x 3 heads, size 224
     python benchmarks/export.py --images 1000 --heads 4 --size 112
 """
+
 from __future__ import annotations
 
 import argparse
@@ -47,10 +48,22 @@ def make_data(folder: Path, n_images: int, heads: int, seed: int = 0):
         cv2.imwrite(str(folder / "img" / f"{i:06d}.jpg"), img, [cv2.IMWRITE_JPEG_QUALITY, 90])
         for h in range(heads):
             x = 1800 if h == heads - 1 else 100 + 400 * h
-            rows.append({"image": f"img/{i:06d}.jpg", "sequence": "bench", "camera": f"00_{h:02d}", "frame": i,
-                         "person_id": h, "bbox_x": float(x), "bbox_y": 300.0 + 10 * h, "bbox_w": 180.0,
-                         "bbox_h": 180.0, "pitch": float(rng.uniform(-60, 60)), "yaw": float(rng.uniform(-80, 80)),
-                         "roll": float(rng.uniform(-40, 40))})
+            rows.append(
+                {
+                    "image": f"img/{i:06d}.jpg",
+                    "sequence": "bench",
+                    "camera": f"00_{h:02d}",
+                    "frame": i,
+                    "person_id": h,
+                    "bbox_x": float(x),
+                    "bbox_y": 300.0 + 10 * h,
+                    "bbox_w": 180.0,
+                    "bbox_h": 180.0,
+                    "pitch": float(rng.uniform(-60, 60)),
+                    "yaw": float(rng.uniform(-80, 80)),
+                    "roll": float(rng.uniform(-40, 40)),
+                }
+            )
     pd.DataFrame(rows).to_parquet(folder / "labels.parquet")
     return folder / "labels.parquet", rows
 
@@ -70,7 +83,7 @@ def floor_loop(folder: Path, rows, size: int, out: Path) -> float:
             img = cv2.imdecode(np.frombuffer(fh.read(), np.uint8), cv2.IMREAD_COLOR)
         for r in heads:
             x0, y0 = int(r["bbox_x"]), int(r["bbox_y"])
-            crop = img[max(y0, 0):y0 + 180, max(x0, 0):x0 + 180]
+            crop = img[max(y0, 0) : y0 + 180, max(x0, 0) : x0 + 180]
             crop = cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA)
             ok, buf = cv2.imencode(".jpg", crop, [cv2.IMWRITE_JPEG_QUALITY, 95])
             buf.tofile(str(out / f"{k}.jpg"))
@@ -81,20 +94,44 @@ def floor_loop(folder: Path, rows, size: int, out: Path) -> float:
 def run_hpe(labels: Path, images: Path, out: Path, size: int, workers: int):
     """One ``hpe export`` in a fresh process: (seconds with start-up and imports, seconds of the command alone
     after its modules are imported, peak RSS in KB)."""
-    code = ("import time; t00 = time.perf_counter(); import resource, sys\n"
-            "from hpe_cli.cli.main import cli; import hpe_cli.pipelines.export, hpe_cli.cli.export, pandas, pyarrow, "
-            "pyarrow.parquet, cv2, scipy.io\n"
-            "t0 = time.perf_counter()\n"
-            "try:\n    cli(sys.argv[1:])\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
-            "t1 = time.perf_counter()\n"
-            "hwm = [int(l.split()[1]) for l in open('/proc/self/status') if l.startswith('VmHWM')][0]\n"
-            "rss = max(hwm, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
-            "print(t1 - t00, t1 - t0, rss)")
+    code = (
+        "import time; t00 = time.perf_counter(); import resource, sys\n"
+        "from hpe_cli.cli.main import cli; import hpe_cli.pipelines.export, hpe_cli.cli.export, pandas, pyarrow, "
+        "pyarrow.parquet, cv2, scipy.io\n"
+        "t0 = time.perf_counter()\n"
+        "try:\n    cli(sys.argv[1:])\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
+        "t1 = time.perf_counter()\n"
+        "hwm = [int(l.split()[1]) for l in open('/proc/self/status') if l.startswith('VmHWM')][0]\n"
+        "rss = max(hwm, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+        "print(t1 - t00, t1 - t0, rss)"
+    )
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     t_start = time.perf_counter()
-    r = subprocess.run([sys.executable, "-c", code, "export", str(labels), "-o", str(out), "--layout", "whenet",
-                        "--images", str(images), "--square", "--size", str(size), "--workers", str(workers), "-q"],
-                       capture_output=True, text=True, env=env, check=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            code,
+            "export",
+            str(labels),
+            "-o",
+            str(out),
+            "--layout",
+            "whenet",
+            "--images",
+            str(images),
+            "--square",
+            "--size",
+            str(size),
+            "--workers",
+            str(workers),
+            "-q",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    )
     wall = time.perf_counter() - t_start
     _, dt, rss = r.stdout.split()
     return wall, float(dt), int(rss)
@@ -117,12 +154,17 @@ def main():
         runs = [(w, *run_hpe(labels, tmp / "data", tmp / f"out{w}", args.size, w)) for w in (1, 2)]
         t2 = floor_loop(tmp / "data", rows, args.size, tmp / "floor2")
         t_floor = (t1 + t2) / 2
-        print(f"floor   bare imdecode+resize+imencode loop: {n / t_floor:8.1f} crops/s  ({t1:.2f} s and {t2:.2f} s, "
-              f"peak RSS {rss0 / 1024:.0f} MB)")
+        print(
+            f"floor   bare imdecode+resize+imencode loop: {n / t_floor:8.1f} crops/s  ({t1:.2f} s and {t2:.2f} s, "
+            f"peak RSS {rss0 / 1024:.0f} MB)"
+        )
         for w, wall, dt, rss in runs:
-            print(f"hpe export --workers {w}:  {n / wall:8.1f} crops/s with start-up ({wall:.2f} s, "
-                  f"{wall / t_floor:.2f}x the floor); command alone {n / dt:8.1f} crops/s ({dt:.2f} s, "
-                  f"{dt / t_floor:.2f}x); peak RSS {rss / 1024:.0f} MB")
+            print(
+                f"hpe export --workers {w}:  {n / wall:8.1f} crops/s with start-up ({wall:.2f} s, "
+                f"{wall / t_floor:.2f}x the floor); command alone {n / dt:8.1f} crops/s ({dt:.2f} s, "
+                f"{dt / t_floor:.2f}x); peak RSS {rss / 1024:.0f} MB"
+            )
+
 
 if __name__ == "__main__":
     main()

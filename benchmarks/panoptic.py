@@ -24,6 +24,7 @@ Usage::
     python benchmarks/panoptic.py --frames 5000 --repeat 7 --formats-frames 5000
     python benchmarks/panoptic.py --frames 2000 --video-frames 300 --repeat 1
 """
+
 from __future__ import annotations
 
 import argparse
@@ -84,8 +85,9 @@ def sample_data_script():
 
 def run_mode(mode: str, seq: Path, out: Path, fmt: str = "table", landmarks: bool = False) -> dict:
     code = RUNNER.format(root=str(ROOT))
-    r = subprocess.run([sys.executable, "-c", code, mode, str(seq), str(out), fmt, str(int(landmarks))],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-c", code, mode, str(seq), str(out), fmt, str(int(landmarks))], capture_output=True, text=True
+    )
     if r.returncode:
         raise SystemExit(f"{mode} failed:\n{r.stderr}")
     return json.loads(r.stdout.strip().splitlines()[-1])
@@ -115,23 +117,26 @@ def _sequence(n_frames: int, tmp: Path) -> Path:
         t = time.perf_counter()
         gen.make_synthetic(seq, n_frames, 5, 31, special=False)
         gen.pack_tar(seq)
-        print(f"\n{n_frames} frames x 5 people x 31 cameras (hdFace3d.tar, "
-              f"{(seq / 'hdFace3d.tar').stat().st_size / 1e6:.0f} MB, built in {time.perf_counter() - t:.0f} s)")
+        print(
+            f"\n{n_frames} frames x 5 people x 31 cameras (hdFace3d.tar, "
+            f"{(seq / 'hdFace3d.tar').stat().st_size / 1e6:.0f} MB, built in {time.perf_counter() - t:.0f} s)"
+        )
     return seq
 
 
 def bench_labels(n_frames: int, tmp: Path, repeat: int, dask: bool) -> None:
     seq = _sequence(n_frames, tmp)
-    modes = [("floor", "floor: orjson parse of the tar"), ("single", "hpe, 1 process"),
-             ("workers2", "hpe --workers 2")]
+    modes = [("floor", "floor: orjson parse of the tar"), ("single", "hpe, 1 process"), ("workers2", "hpe --workers 2")]
     if dask:
         modes.append(("dask2", "hpe --scheduler local (2 workers)"))
     runs = {m: [] for m, _ in modes}
     for _ in range(repeat):
         for mode, _ in modes:
             runs[mode].append(run_mode(mode, seq, tmp / f"out_{mode}.parquet"))
-    print(f"\n{n_frames} frames, landmarks off, Parquet out; medians of {repeat} rounds (ratio: per round, "
-          "over the 1-process run of that round)")
+    print(
+        f"\n{n_frames} frames, landmarks off, Parquet out; medians of {repeat} rounds (ratio: per round, "
+        "over the 1-process run of that round)"
+    )
     print(f"  {'run':34s} {'views/s':>10s} {'seconds':>8s} {'x 1 proc':>8s} {'peak RSS MB':>12s} {'worker MB':>10s}")
     for mode, label in modes:
         rs = runs[mode]
@@ -139,10 +144,14 @@ def bench_labels(n_frames: int, tmp: Path, repeat: int, dask: bool) -> None:
         ratio = ""
         if mode not in ("floor", "single"):
             ratio = f"{_median([a['seconds'] / b['seconds'] for a, b in zip(runs['single'], rs)]):.2f}"
-            ratio += f" ({min(a['seconds'] / b['seconds'] for a, b in zip(runs['single'], rs)):.2f}-" \
-                     f"{max(a['seconds'] / b['seconds'] for a, b in zip(runs['single'], rs)):.2f})"
-        print(f"  {label:34s} {rate:10,.0f} {_median([r['seconds'] for r in rs]):8.2f} {ratio:>8s} "
-              f"{max(r['rss_mb'] for r in rs):12.0f} {max(r['worker_rss_mb'] for r in rs):10.0f}")
+            ratio += (
+                f" ({min(a['seconds'] / b['seconds'] for a, b in zip(runs['single'], rs)):.2f}-"
+                f"{max(a['seconds'] / b['seconds'] for a, b in zip(runs['single'], rs)):.2f})"
+            )
+        print(
+            f"  {label:34s} {rate:10,.0f} {_median([r['seconds'] for r in rs]):8.2f} {ratio:>8s} "
+            f"{max(r['rss_mb'] for r in rs):12.0f} {max(r['worker_rss_mb'] for r in rs):10.0f}"
+        )
     outs = [tmp / f"out_{m}.parquet" for m, _ in modes if m != "floor"]
     same = len({_digest(o) for o in outs}) == 1
     print(f"  outputs byte-identical across the runs: {same}")
@@ -156,18 +165,24 @@ def bench_formats(n_frames: int, tmp: Path, repeat: int) -> None:
     for _ in range(repeat):
         for fmt, mode in combos:
             runs[(fmt, mode)].append(run_mode(mode, seq, tmp / f"fmt_{mode}{suffix[fmt]}", fmt, landmarks=True))
-    print(f"\n{n_frames} frames, landmarks on, each output format; medians of {repeat} rounds (x Parquet: per "
-          "round, over the Parquet run with the same workers)")
-    print(f"  {'format':8s} {'run':10s} {'seconds':>8s} {'x Parquet':>16s} {'user s':>7s} {'sys s':>6s} "
-          f"{'peak MB':>8s} {'output MB':>10s}")
+    print(
+        f"\n{n_frames} frames, landmarks on, each output format; medians of {repeat} rounds (x Parquet: per "
+        "round, over the Parquet run with the same workers)"
+    )
+    print(
+        f"  {'format':8s} {'run':10s} {'seconds':>8s} {'x Parquet':>16s} {'user s':>7s} {'sys s':>6s} "
+        f"{'peak MB':>8s} {'output MB':>10s}"
+    )
     for fmt, mode in combos:
         rs, base = runs[(fmt, mode)], runs[("table", mode)]
         q = [a["seconds"] / b["seconds"] for a, b in zip(rs, base)]
         size = (tmp / f"fmt_{mode}{suffix[fmt]}").stat().st_size / 1e6
-        print(f"  {fmt:8s} {mode:10s} {_median([r['seconds'] for r in rs]):8.2f} "
-              f"{_median(q):6.2f} ({min(q):.2f}-{max(q):.2f}) {_median([r['user'] for r in rs]):7.2f} "
-              f"{_median([r['sys'] for r in rs]):6.2f} {max(max(r['rss_mb'], r['worker_rss_mb']) for r in rs):8.0f} "
-              f"{size:10.0f}")
+        print(
+            f"  {fmt:8s} {mode:10s} {_median([r['seconds'] for r in rs]):8.2f} "
+            f"{_median(q):6.2f} ({min(q):.2f}-{max(q):.2f}) {_median([r['user'] for r in rs]):7.2f} "
+            f"{_median([r['sys'] for r in rs]):6.2f} {max(max(r['rss_mb'], r['worker_rss_mb']) for r in rs):8.0f} "
+            f"{size:10.0f}"
+        )
     for fmt in ("coco", "whenet"):
         a, b = (tmp / f"fmt_{m}{suffix[fmt]}" for m in ("single", "workers2"))
         print(f"  {fmt}: 1 process and --workers 2 byte-identical: {_digest(a) == _digest(b)}")
@@ -199,8 +214,10 @@ def bench_video(n_frames: int, size, tmp: Path) -> None:
         t = time.perf_counter()
         got = sum(img is not None for _, img, _ in VideoFrames(path).read(want))
         dt = time.perf_counter() - t
-        print(f"  {'VideoFrames.read(every ' + str(step) + ')':40s} {n_frames / dt:8.0f} video frames/s "
-              f"({got / dt:.0f} returned/s, {n_frames / dt / bare:.2f}x the bare loop)")
+        print(
+            f"  {'VideoFrames.read(every ' + str(step) + ')':40s} {n_frames / dt:8.0f} video frames/s "
+            f"({got / dt:.0f} returned/s, {n_frames / dt / bare:.2f}x the bare loop)"
+        )
 
 
 def main(argv=None) -> None:
@@ -208,11 +225,16 @@ def main(argv=None) -> None:
     ap.add_argument("--frames", type=int, nargs="*", default=[20000, 5000])
     ap.add_argument("--repeat", type=int, default=5, help="rounds of every mode (medians are printed)")
     ap.add_argument("--dask", action="store_true", help="also run on a 2-worker Dask LocalCluster")
-    ap.add_argument("--formats-frames", type=int, default=5000,
-                    help="frames of the output-format comparison (landmarks on); 0 skips it")
+    ap.add_argument(
+        "--formats-frames",
+        type=int,
+        default=5000,
+        help="frames of the output-format comparison (landmarks on); 0 skips it",
+    )
     ap.add_argument("--formats-repeat", type=int, default=3)
-    ap.add_argument("--workdir", help="keep the generated sequences here (reused by later runs) instead of a "
-                    "temporary folder")
+    ap.add_argument(
+        "--workdir", help="keep the generated sequences here (reused by later runs) instead of a temporary folder"
+    )
     ap.add_argument("--video-frames", type=int, default=600)
     ap.add_argument("--video-size", default="1920x1080")
     a = ap.parse_args(argv)

@@ -24,6 +24,7 @@ Usage::
     python benchmarks/relabel.py                 # 2000 frames x 5 people x 31 cameras
     python benchmarks/relabel.py --frames 200 --loop-frames 10
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,9 +36,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from panoptic import sample_data_script  # benchmarks/panoptic.py, beside this file
-
 
 
 # ---------------------------------------------------------- WHENet-style loop
@@ -67,7 +66,7 @@ def _project(X, K, R, t, d):
     x = R @ X + t
     x = x[:2] / x[2]
     r = (x * x).sum(0)
-    f = 1 + d[0] * r + d[1] * r * r + d[4] * r ** 3
+    f = 1 + d[0] * r + d[1] * r * r + d[4] * r**3
     xd = x[0] * f + 2 * d[2] * x[0] * x[1] + d[3] * (r + 2 * x[0] ** 2)
     yd = x[1] * f + 2 * d[3] * x[0] * x[1] + d[2] * (r + 2 * x[1] ** 2)
     return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]])
@@ -82,8 +81,10 @@ def _inverse_rotate_zyx(M):
     y0 = np.arcsin(-M[0, 2])
     y1 = np.pi - y0
     c0, c1 = np.cos(y0), np.cos(y1)
-    return (np.array((np.arctan2(M[1, 2] / c0, M[2, 2] / c0), y0, np.arctan2(M[0, 1] / c0, M[0, 0] / c0))),
-            np.array((np.arctan2(M[1, 2] / c1, M[2, 2] / c1), y1, np.arctan2(M[0, 1] / c1, M[0, 0] / c1))))
+    return (
+        np.array((np.arctan2(M[1, 2] / c0, M[2, 2] / c0), y0, np.arctan2(M[0, 1] / c0, M[0, 0] / c0))),
+        np.array((np.arctan2(M[1, 2] / c1, M[2, 2] / c1), y1, np.arctan2(M[0, 1] / c1, M[0, 0] / c1))),
+    )
 
 
 def _select_euler(two):
@@ -120,20 +121,29 @@ def loop_relabel(seq_dir, frames: list, cams: list, sphere, ref, pairs):
                 if use.sum() < 7:
                     continue
                 rot, trans, err, s = _align(ref[:, kp_model[use]], face3d[:, kp[use]])
-                rmse = float(np.sqrt((err ** 2).mean()))
+                rmse = float(np.sqrt((err**2).mean()))
                 if rmse > 2.0:
                     continue
                 uv = _project(np.concatenate([s * rot @ sphere + trans, face3d], axis=1), K, R, t, d)
-                helmet = uv[:, :sphere.shape[1]]
+                helmet = uv[:, : sphere.shape[1]]
                 x0, y0 = max(helmet[0].min(), 0), max(helmet[1].min(), 0)
                 x1, y1 = min(helmet[0].max(), w), min(helmet[1].max(), h)
                 ok, (pitch, yaw, roll) = _select_euler(np.rad2deg(_inverse_rotate_zyx(R @ rot @ E)))
                 bw, bh = x1 - x0, y1 - y0
                 if ok and bw > 0 and bh > 0 and max(bw / bh, bh / bw) <= 2:
                     A = E @ R @ rot
-                    rows.append({"frame": frame, "camera": cam["name"], "person_id": person["id"],
-                                 "bbox": (x0, y0, bw, bh), "pyr": (pitch, -yaw, -roll), "A": A, "rmse": rmse,
-                                 "lm": uv[:, sphere.shape[1]:].T})
+                    rows.append(
+                        {
+                            "frame": frame,
+                            "camera": cam["name"],
+                            "person_id": person["id"],
+                            "bbox": (x0, y0, bw, bh),
+                            "pyr": (pitch, -yaw, -roll),
+                            "A": A,
+                            "rmse": rmse,
+                            "lm": uv[:, sphere.shape[1] :].T,
+                        }
+                    )
     return rows
 
 
@@ -158,8 +168,11 @@ def main(argv=None) -> None:
         if not (seq / "hdFace3d").is_dir():
             t0 = time.perf_counter()
             gen.make_synthetic(seq, a.frames, a.people, a.cameras, special=False)
-            print(f"built {seq}: {a.frames} frames x {a.people} people x {a.cameras} cameras "
-                  f"in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+            print(
+                f"built {seq}: {a.frames} frames x {a.people} people x {a.cameras} cameras "
+                f"in {time.perf_counter() - t0:.1f} s",
+                file=sys.stderr,
+            )
         p = job.plan(seq)
         views = len(p.frames) * a.people * len(p.cameras)
         cfg = job.Config(system="300w_lp", preset="whenet")
@@ -175,10 +188,20 @@ def main(argv=None) -> None:
 
         # 2. the loop, on the first frames
         c = p.cameras
-        cams = [{"name": c.names[i], "K": c.K[i], "R": c.R[i], "t": c.t[i][:, None], "dist": c.dist[i],
-                 "width": c.width[i], "height": c.height[i]} for i in range(len(c))]
+        cams = [
+            {
+                "name": c.names[i],
+                "K": c.K[i],
+                "R": c.R[i],
+                "t": c.t[i][:, None],
+                "dist": c.dist[i],
+                "width": c.width[i],
+                "height": c.height[i],
+            }
+            for i in range(len(c))
+        ]
         sphere = helmet_points(22).T
-        loop_frames = list(p.frames)[:a.loop_frames]
+        loop_frames = list(p.frames)[: a.loop_frames]
         t0, c0 = time.perf_counter(), time.process_time()
         n_loop = len(loop_relabel(seq, loop_frames, cams, sphere, reference_head().T, panoptic_pairs()))
         t_loop, c_loop = time.perf_counter() - t0, time.process_time() - c0
@@ -186,19 +209,29 @@ def main(argv=None) -> None:
 
     rate_vec, rate_loop = views / t_vec, loop_views / t_loop
     cpu_vec, cpu_loop = views / c_vec, loop_views / c_loop
-    print(f"sequence: {len(p.frames)} frames x {a.people} people x {len(p.cameras)} cameras = {views} views"
-          f" (workers: {a.workers})")
+    print(
+        f"sequence: {len(p.frames)} frames x {a.people} people x {len(p.cameras)} cameras = {views} views"
+        f" (workers: {a.workers})"
+    )
     print(f"{'method':<36}{'views':>9}{'wall s':>9}{'views/s':>10}{'CPU s':>9}{'views/CPU-s':>13}")
-    print(f"{'hpe relabel-panoptic (vectorised)':<36}{views:>9}{t_vec:>9.2f}{rate_vec:>10.0f}{c_vec:>9.2f}"
-          f"{cpu_vec:>13.0f}")
-    print(f"{'per-face loop, WHENet style':<36}{loop_views:>9}{t_loop:>9.2f}{rate_loop:>10.0f}{c_loop:>9.2f}"
-          f"{cpu_loop:>13.0f}")
-    per_cpu = f", {cpu_vec / cpu_loop:.1f}x per CPU-second" if a.workers == 1 else \
-        " (with --workers > 1 the CPU columns and the peak RSS leave out the worker processes)"
-    print(f"speed-up: {rate_vec / rate_loop:.1f}x wall-clock{per_cpu}; labelled: vectorised {stats.labelled} "
-          f"of {views}, loop {n_loop} of {loop_views}")
-    print(f"peak RSS: {rss_half:.0f} MB after {len(half.frames)} frames, {rss_all:.0f} MB after "
-          f"{len(p.frames)} frames")
+    print(
+        f"{'hpe relabel-panoptic (vectorised)':<36}{views:>9}{t_vec:>9.2f}{rate_vec:>10.0f}{c_vec:>9.2f}"
+        f"{cpu_vec:>13.0f}"
+    )
+    print(
+        f"{'per-face loop, WHENet style':<36}{loop_views:>9}{t_loop:>9.2f}{rate_loop:>10.0f}{c_loop:>9.2f}"
+        f"{cpu_loop:>13.0f}"
+    )
+    per_cpu = (
+        f", {cpu_vec / cpu_loop:.1f}x per CPU-second"
+        if a.workers == 1
+        else " (with --workers > 1 the CPU columns and the peak RSS leave out the worker processes)"
+    )
+    print(
+        f"speed-up: {rate_vec / rate_loop:.1f}x wall-clock{per_cpu}; labelled: vectorised {stats.labelled} "
+        f"of {views}, loop {n_loop} of {loop_views}"
+    )
+    print(f"peak RSS: {rss_half:.0f} MB after {len(half.frames)} frames, {rss_all:.0f} MB after {len(p.frames)} frames")
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ Prints rows/s of hpe's rotvec/quaternion/6-D kernels and SciPy's equivalents, th
 img2pose (rx, ry, rz) -> 300w_lp end to end next to the floor (pyarrow read + write of the output's
 width), and the peak RSS of the process.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -15,13 +16,12 @@ from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
+from convert import best_of  # benchmarks/convert.py, beside this file
 from scipy.spatial.transform import Rotation
 
 from hpe_cli.pipelines.convert import run_convert
 from hpe_cli.rotation import get_system
 from hpe_cli.rotation import storage as st
-
-from convert import best_of  # benchmarks/convert.py, beside this file
 
 
 def line(name, rows, seconds):
@@ -50,12 +50,15 @@ def main():
         src = Path(tmp) / "rv.parquet"
         pq.write_table(pa.table({"rx": rv[:, 0], "ry": rv[:, 1], "rz": rv[:, 2]}), src, compression="none")
         out = Path(tmp) / "out.parquet"
-        t = best_of(lambda: run_convert(src, out, get_system("img2pose"), get_system("300w_lp"), overwrite=True), repeat=2)
+        t = best_of(
+            lambda: run_convert(src, out, get_system("img2pose"), get_system("300w_lp"), overwrite=True), repeat=2
+        )
         width = pq.read_table(out)
 
         def floor():
             pq.read_table(src)
             pq.write_table(width, Path(tmp) / "floor.parquet", compression="none", use_dictionary=False)
+
         tf = best_of(floor, repeat=2)
         print(f"end to end, {n:,} rows, rotvec (img2pose) -> 300w_lp")
         line("hpe convert", n, t)

@@ -17,6 +17,7 @@ Usage::
     python benchmarks/tar_index.py                     # 5000 and 20000 members
     python benchmarks/tar_index.py --members 2000 --keep /tmp/tars
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,8 +32,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hpe_cli.datasets import panoptic as pan  # noqa: E402
 from panoptic import sample_data_script  # noqa: E402  (benchmarks/panoptic.py, beside this file)
+
+from hpe_cli.datasets import panoptic as pan  # noqa: E402
 
 
 def build(root: Path, n: int) -> Path:
@@ -79,10 +81,14 @@ def main():
             print(f"{n:,} members ({size:.0f} MB), median of 5 runs")
             t_slow = median_time(pan._tar_frames_tarfile, tar)
             t_fast = median_time(pan.tar_frames, tar)
-            for label, t, fn in (("floor: tarfile (_tar_frames_tarfile)", t_slow, pan._tar_frames_tarfile),
-                                 ("hpe tar_frames (header scanner)", t_fast, pan.tar_frames)):
-                print(f"  {label:<40} {t * 1e3:8.1f} ms  {t / n * 1e6:6.1f} us/member  "
-                      f"peak alloc {peak_alloc(fn, tar):5.1f} MB")
+            for label, t, fn in (
+                ("floor: tarfile (_tar_frames_tarfile)", t_slow, pan._tar_frames_tarfile),
+                ("hpe tar_frames (header scanner)", t_fast, pan.tar_frames),
+            ):
+                print(
+                    f"  {label:<40} {t * 1e3:8.1f} ms  {t / n * 1e6:6.1f} us/member  "
+                    f"peak alloc {peak_alloc(fn, tar):5.1f} MB"
+                )
             print(f"  speed-up {t_slow / t_fast:.1f}x")
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 

@@ -17,6 +17,7 @@ Usage::
     python benchmarks/text_formats.py            # 2,000,000 lines
     python benchmarks/text_formats.py --lines 200000
 """
+
 from __future__ import annotations
 
 import argparse
@@ -49,9 +50,12 @@ def main():
         ang = rng.uniform(-90, 90, size=(args.lines, 3))
         with open(p, "w") as fh:
             for start in range(0, args.lines, 100_000):
-                chunk = ang[start:start + 100_000]
-                fh.write("".join(f"seq/{start + i:08d}.jpg,{y!r},{q!r},{r!r}\n"
-                                 for i, (y, q, r) in enumerate(chunk.tolist())))
+                chunk = ang[start : start + 100_000]
+                fh.write(
+                    "".join(
+                        f"seq/{start + i:08d}.jpg,{y!r},{q!r},{r!r}\n" for i, (y, q, r) in enumerate(chunk.tolist())
+                    )
+                )
                 fh.write("\n")
         size = p.stat().st_size / 1e6
         print(f"{args.lines} lines, {size:.0f} MB; start RSS {rss_mb():.0f} MB")
@@ -60,10 +64,14 @@ def main():
         floor = time.perf_counter() - t
         n_floor = tab.num_rows
         del tab
-        print(f"floor  pyarrow.csv.read_csv        {floor:7.2f} s  {n_floor / floor / 1e6:6.2f} M rows/s  "
-              f"peak RSS {rss_mb():.0f} MB")
-        for label, kw in (("hpe    open_table(with_lines)", {}),
-                          ("hpe    + --columns-map", {"columns": "Y=yaw,P=pitch,R=roll"})):
+        print(
+            f"floor  pyarrow.csv.read_csv        {floor:7.2f} s  {n_floor / floor / 1e6:6.2f} M rows/s  "
+            f"peak RSS {rss_mb():.0f} MB"
+        )
+        for label, kw in (
+            ("hpe    open_table(with_lines)", {}),
+            ("hpe    + --columns-map", {"columns": "Y=yaw,P=pitch,R=roll"}),
+        ):
             t = time.perf_counter()
             n = 0
             last = 0
@@ -71,8 +79,10 @@ def main():
                 n += b.num_rows
                 last = b.column(b.schema.get_field_index("__line__"))[-1].as_py()
             dt = time.perf_counter() - t
-            print(f"{label:30s} {dt:7.2f} s  {n / dt / 1e6:6.2f} M rows/s  peak RSS {rss_mb():.0f} MB "
-                  f"({n} rows, last line {last})")
+            print(
+                f"{label:30s} {dt:7.2f} s  {n / dt / 1e6:6.2f} M rows/s  peak RSS {rss_mb():.0f} MB "
+                f"({n} rows, last line {last})"
+            )
 
 
 if __name__ == "__main__":

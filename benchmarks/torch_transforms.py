@@ -19,6 +19,7 @@ Usage::
     python benchmarks/torch_transforms.py
     python benchmarks/torch_transforms.py --batch 64 --repeat 5
 """
+
 from __future__ import annotations
 
 import argparse
@@ -58,14 +59,23 @@ def _time(fn, repeat, device):
 def run(device, batch, size, repeat):
     g = torch.Generator().manual_seed(0)
     images = tv_tensors.Image(torch.randint(0, 256, (batch, 3, size, size), dtype=torch.uint8, generator=g)).to(device)
-    boxes = tv_tensors.BoundingBoxes(torch.tensor([[40.0, 40.0, 140.0, 150.0]]).repeat(batch, 1), format="XYWH",
-                                     canvas_size=(size, size), device=device)
-    points = tv_tensors.KeyPoints(torch.rand(batch, 68, 2, generator=g) * (size - 1), canvas_size=(size, size),
-                                  device=device)
+    boxes = tv_tensors.BoundingBoxes(
+        torch.tensor([[40.0, 40.0, 140.0, 150.0]]).repeat(batch, 1),
+        format="XYWH",
+        canvas_size=(size, size),
+        device=device,
+    )
+    points = tv_tensors.KeyPoints(
+        torch.rand(batch, 68, 2, generator=g) * (size - 1), canvas_size=(size, size), device=device
+    )
     pyr = torch.empty(batch, 3).uniform_(-60, 60, generator=g).double()
     pose = HeadPose(angles_to_canonical(pyr, "300w_lp").float(), canvas_size=(size, size), device=device)
-    steps = [T.RandomHorizontalFlip(p=1.0, scheme="ibug68"), v2.RandomRotation(30),
-             v2.RandomResizedCrop(size, scale=(0.6, 1.0), ratio=(1.0, 1.0)), v2.ToDtype(torch.float32, scale=True)]
+    steps = [
+        T.RandomHorizontalFlip(p=1.0, scheme="ibug68"),
+        v2.RandomRotation(30),
+        v2.RandomResizedCrop(size, scale=(0.6, 1.0), ratio=(1.0, 1.0)),
+        v2.ToDtype(torch.float32, scale=True),
+    ]
     pipe = v2.Compose(steps)
     floor = _time(lambda: pipe(images, boxes, points), repeat, device)
     with_pose = _time(lambda: pipe(images, boxes, points, pose), repeat, device)
@@ -75,10 +85,14 @@ def run(device, batch, size, repeat):
     pose_kernels = _time(lambda: pipe(tiny, pose), repeat, device) - box_only
     print(f"{device:4s}  {batch}x3x{size}x{size} uint8 + boxes + 68 keypoints")
     print(f"      v2 pipeline without poses (floor)   {floor * 1e3:9.2f} ms  ({batch / floor:8.0f} images/s)")
-    print(f"      v2 pipeline with HeadPose           {with_pose * 1e3:9.2f} ms  "
-          f"(overhead {100 * (with_pose - floor) / floor:+.1f} %)")
-    print(f"      the {batch} poses' kernels alone       {pose_kernels * 1e3:9.2f} ms  "
-          f"(pipeline on 1 box + poses minus 1 box alone)")
+    print(
+        f"      v2 pipeline with HeadPose           {with_pose * 1e3:9.2f} ms  "
+        f"(overhead {100 * (with_pose - floor) / floor:+.1f} %)"
+    )
+    print(
+        f"      the {batch} poses' kernels alone       {pose_kernels * 1e3:9.2f} ms  "
+        f"(pipeline on 1 box + poses minus 1 box alone)"
+    )
 
 
 def main(argv=None):
@@ -95,8 +109,9 @@ def main(argv=None):
     else:
         print("cuda  not available: skipped")
     pyr = np.random.default_rng(0).uniform(-60, 60, (args.batch, 3))
-    t = _time(lambda: augment_batch(pyr, op="rotate", angle=30.0, image_size=(args.size, args.size)), args.repeat,
-              "cpu")
+    t = _time(
+        lambda: augment_batch(pyr, op="rotate", angle=30.0, image_size=(args.size, args.size)), args.repeat, "cpu"
+    )
     print(f"numpy augment_batch labels only ({args.batch} rows)   {t * 1e3:9.2f} ms")
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
 

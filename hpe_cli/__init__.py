@@ -29,13 +29,29 @@ the 300W-LP active matrix ``A`` (x = subject's left, y = up, z = out of the face
 
 The optional tensor side (``pip install hpe-cli[torch]``) lives in :mod:`hpe_cli.torch`.
 """
+
 from __future__ import annotations
 
 __version__ = "0.1.0"
 
 #: the public API, in :mod:`hpe_cli.api`; resolved lazily by :func:`__getattr__`
-_API = ("get_system", "systems", "convert", "read_labels", "write_labels", "audit", "evaluate", "augment_sample",
-        "augment_batch", "draw_axes", "geodesic", "LabelTable", "STORAGE_KINDS", "convert_file", "audit_file")
+_API = (
+    "get_system",
+    "systems",
+    "convert",
+    "read_labels",
+    "write_labels",
+    "audit",
+    "evaluate",
+    "augment_sample",
+    "augment_batch",
+    "draw_axes",
+    "geodesic",
+    "LabelTable",
+    "STORAGE_KINDS",
+    "convert_file",
+    "audit_file",
+)
 
 #: names resolved lazily by :func:`__getattr__`: name -> (module, attribute)
 _LAZY = {

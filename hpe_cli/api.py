@@ -7,6 +7,7 @@ the same reader, system resolution (:func:`hpe_cli.io.system_meta.resolve_system
 storage kinds and rejects as ``hpe convert``/``hpe audit``; array functions
 call the same kernels.
 """
+
 from __future__ import annotations
 
 STORAGE_KINDS = ("angles", "matrix", "rotvec", "quaternion", "6d")
@@ -138,10 +139,18 @@ def convert(values, src, dst, storage: str | None = None, *, quaternion_order: s
     v = np.asarray(values, dtype=np.float64)
     if storage is None:
         if v.shape == (3, 3):
-            raise ValueError("a (3, 3) input is three angle rows or one matrix: pass storage='angles' or "
-                             "storage='matrix'")
-        storage = ("matrix" if v.ndim == 3 else "quaternion" if v.shape[-1:] == (4,) else
-                   "6d" if v.shape[-1:] == (6,) else "angles")
+            raise ValueError(
+                "a (3, 3) input is three angle rows or one matrix: pass storage='angles' or storage='matrix'"
+            )
+        storage = (
+            "matrix"
+            if v.ndim == 3
+            else "quaternion"
+            if v.shape[-1:] == (4,)
+            else "6d"
+            if v.shape[-1:] == (6,)
+            else "angles"
+        )
     if storage not in STORAGE_KINDS:
         raise ValueError(f"expected storage in {', '.join(STORAGE_KINDS)}, got {storage!r}")
     if quaternion_order is None:
@@ -149,7 +158,7 @@ def convert(values, src, dst, storage: str | None = None, *, quaternion_order: s
     if quaternion_order not in ("wxyz", "xyzw"):
         raise ValueError(f"expected quaternion_order 'wxyz' or 'xyzw', got {quaternion_order!r}")
     width = {"angles": (3,), "matrix": (3, 3), "rotvec": (3,), "quaternion": (4,), "6d": (6,)}[storage]
-    if v.shape[-len(width):] != width or v.ndim > len(width) + 1:
+    if v.shape[-len(width) :] != width or v.ndim > len(width) + 1:
         raise ValueError(f"expected {storage} values of shape (N, {', '.join(map(str, width))}), got {v.shape}")
     v = v.reshape((-1,) + width)
     if storage == "angles":
@@ -242,8 +251,19 @@ def read_labels(path, system=None, *, reinterpret_as=None, **reader_options) -> 
     return LabelTable(table.to_pandas(), found)
 
 
-def convert_file(input, output, target, source=None, *, radians: bool = False, rejects=None, strict: bool = False,
-                 overwrite: bool = False, decoder=None, batch_size: int = 65_536):
+def convert_file(
+    input,
+    output,
+    target,
+    source=None,
+    *,
+    radians: bool = False,
+    rejects=None,
+    strict: bool = False,
+    overwrite: bool = False,
+    decoder=None,
+    batch_size: int = 65_536,
+):
     """``hpe convert`` as a function: the same pipeline (:func:`hpe_cli.pipelines.convert.run_convert`).
 
     Parameters
@@ -267,13 +287,31 @@ def convert_file(input, output, target, source=None, *, radians: bool = False, r
     from .pipelines.convert import run_convert
 
     with ensure_transaction():
-        return run_convert(input, output, None if source is None else get_system(source), get_system(target),
-                           radians=radians, rejects_path=rejects, overwrite=overwrite, batch_size=batch_size,
-                           strict=strict, decoder=decoder)
+        return run_convert(
+            input,
+            output,
+            None if source is None else get_system(source),
+            get_system(target),
+            radians=radians,
+            rejects_path=rejects,
+            overwrite=overwrite,
+            batch_size=batch_size,
+            strict=strict,
+            decoder=decoder,
+        )
 
 
-def audit_file(input, system=None, *, report=None, output=None, rejects=None, strict: bool = False,
-               overwrite: bool = False, **options) -> dict:
+def audit_file(
+    input,
+    system=None,
+    *,
+    report=None,
+    output=None,
+    rejects=None,
+    strict: bool = False,
+    overwrite: bool = False,
+    **options,
+) -> dict:
     """``hpe audit`` as a function: the same pipeline (:func:`hpe_cli.pipelines.audit.run_audit`).
 
     Returns the JSON report (``rows``, one count per check, ``system``,
@@ -285,8 +323,16 @@ def audit_file(input, system=None, *, report=None, output=None, rejects=None, st
     from .pipelines.audit import run_audit
 
     with ensure_transaction():
-        return run_audit(input, None if system is None else get_system(system), report=report, output=output,
-                         overwrite=overwrite, rejects_path=rejects, strict_rejects=strict, **options)
+        return run_audit(
+            input,
+            None if system is None else get_system(system),
+            report=report,
+            output=output,
+            overwrite=overwrite,
+            rejects_path=rejects,
+            strict_rejects=strict,
+            **options,
+        )
 
 
 def write_labels(table, path, system=None, *, overwrite: bool = False):
@@ -403,17 +449,30 @@ def evaluate(pred, gt, *, pred_system, gt_system, protocols=None, align: str = "
     import importlib.util
 
     if importlib.util.find_spec("hpe_cli.metrics.evaluate") is None:
-        raise NotImplementedError("hpe.evaluate needs hpe_cli.metrics.evaluate, which this installation "
-                                  "does not have; upgrade hpe-cli")
+        raise NotImplementedError(
+            "hpe.evaluate needs hpe_cli.metrics.evaluate, which this installation does not have; upgrade hpe-cli"
+        )
     from .metrics.evaluate import evaluate as _evaluate
 
-    return _evaluate(pred, gt, pred_system=pred_system, gt_system=gt_system, protocols=protocols,
-                     align=align, columns=columns)
+    return _evaluate(
+        pred, gt, pred_system=pred_system, gt_system=gt_system, protocols=protocols, align=align, columns=columns
+    )
 
 
 # ------------------------------------------------------------------------------------------- geometry
-def augment_sample(pose, landmarks=None, bbox=None, *, op, angle=None, image_size, system="300w_lp",
-                   scheme="auto", box_from: str = "auto", clip: bool = False):
+def augment_sample(
+    pose,
+    landmarks=None,
+    bbox=None,
+    *,
+    op,
+    angle=None,
+    image_size,
+    system="300w_lp",
+    scheme="auto",
+    box_from: str = "auto",
+    clip: bool = False,
+):
     """One sample's labels, landmarks and box after a flip, rotation or mirror of its image.
 
     Parameters
@@ -454,12 +513,33 @@ def augment_sample(pose, landmarks=None, bbox=None, *, op, angle=None, image_siz
     """
     from .geometry.augment import augment_sample as _a
 
-    return _a(pose, landmarks, bbox, op=op, angle=angle, image_size=image_size, system=system, scheme=scheme,
-              box_from=box_from, clip=clip)
+    return _a(
+        pose,
+        landmarks,
+        bbox,
+        op=op,
+        angle=angle,
+        image_size=image_size,
+        system=system,
+        scheme=scheme,
+        box_from=box_from,
+        clip=clip,
+    )
 
 
-def augment_batch(pose, landmarks=None, bbox=None, *, op, angle=None, image_size, system="300w_lp",
-                  scheme="auto", box_from: str = "auto", clip: bool = False):
+def augment_batch(
+    pose,
+    landmarks=None,
+    bbox=None,
+    *,
+    op,
+    angle=None,
+    image_size,
+    system="300w_lp",
+    scheme="auto",
+    box_from: str = "auto",
+    clip: bool = False,
+):
     """N samples' labels, landmarks and boxes after flips, rotations or mirrors (vectorised).
 
     Parameters
@@ -492,8 +572,18 @@ def augment_batch(pose, landmarks=None, bbox=None, *, op, angle=None, image_size
     """
     from .geometry.augment import augment_batch as _a
 
-    return _a(pose, landmarks, bbox, op=op, angle=angle, image_size=image_size, system=system, scheme=scheme,
-              box_from=box_from, clip=clip)
+    return _a(
+        pose,
+        landmarks,
+        bbox,
+        op=op,
+        angle=angle,
+        image_size=image_size,
+        system=system,
+        scheme=scheme,
+        box_from=box_from,
+        clip=clip,
+    )
 
 
 def draw_axes(image, pose, centre, length=None, *, system="300w_lp", thickness=None):
@@ -568,8 +658,10 @@ def geodesic(a, b, system=None):
         if x.shape[-2:] == (3, 3):
             return x
         if system is None:
-            raise ValueError("expected matrices of shape (..., 3, 3), or angles with system=, got angles "
-                             f"of shape {x.shape} and no system")
+            raise ValueError(
+                "expected matrices of shape (..., 3, 3), or angles with system=, got angles "
+                f"of shape {x.shape} and no system"
+            )
         return get_system(system).from_angles(x)
 
     return geodesic_deg(mat(a), mat(b))

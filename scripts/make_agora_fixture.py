@@ -22,6 +22,7 @@ It writes ``validation_0_withjv.pkl`` (pandas pickle, protocol 4) and
 ``expected.json`` (per person: image, person index, target whenet angles,
 expected status) and is deterministic.
 """
+
 from __future__ import annotations
 
 import json
@@ -34,7 +35,7 @@ from scipy.spatial.transform import Rotation
 
 ROOT = Path(__file__).resolve().parents[1]
 REF = json.loads((ROOT / "hpe_cli" / "data" / "whenet_reference_head.json").read_text())
-HEAD = np.asarray(REF["points"], dtype=np.float64)                       # (58, 3), head units ~ cm
+HEAD = np.asarray(REF["points"], dtype=np.float64)  # (58, 3), head units ~ cm
 F51 = np.asarray(REF["agora_face51_pairs"]["face51"])
 H13 = np.asarray(REF["agora_face51_pairs"]["head"])
 IBUG = np.load(ROOT / "hpe_cli" / "data" / "reference_3d_68_points_trans.npy").astype(np.float64)
@@ -101,9 +102,30 @@ def face_points_head_units():
 def main(out_dir: Path) -> None:
     rng = np.random.default_rng(20240611)
     face51 = face_points_head_units()
-    rows = {name: {k: [] for k in ("X", "Y", "Z", "Yaw", "gender", "kid", "age", "occlusion", "isValid",
-                                   "gt_path_smplx", "gt_joints_2d", "gt_joints_3d", "cam_j3d", "camR", "camT",
-                                   "camK")} for name, *_ in IMAGES}
+    rows = {
+        name: {
+            k: []
+            for k in (
+                "X",
+                "Y",
+                "Z",
+                "Yaw",
+                "gender",
+                "kid",
+                "age",
+                "occlusion",
+                "isValid",
+                "gt_path_smplx",
+                "gt_joints_2d",
+                "gt_joints_3d",
+                "cam_j3d",
+                "camR",
+                "camT",
+                "camK",
+            )
+        }
+        for name, *_ in IMAGES
+    }
     expected = []
     for k, (img, target, centre, body_yaw, occ, valid, spoil, status) in enumerate(PEOPLE):
         name, focal, cam_pitch, cam_yaw = IMAGES[img]
@@ -111,14 +133,15 @@ def main(out_dir: Path) -> None:
         # AGORA's camR: camera pitch, camera yaw, then the body's own yaw (all about OpenCV axes)
         camR = rot_x(cam_pitch) @ rot_y(-cam_yaw) @ rot_y(body_yaw - 90.0)
         A = canonical(*target)
-        R_head = camR.T @ E @ A          # so that E @ camR @ R_head = A
-        scale = 0.0095 + 0.001 * rng.random()   # metres per head unit
+        R_head = camR.T @ E @ A  # so that E @ camR @ R_head = A
+        scale = 0.0095 + 0.001 * rng.random()  # metres per head unit
         head_in_body = np.array([0.02, -0.55, 0.03]) + 0.02 * rng.standard_normal(3)
         camT = np.asarray(centre) - camR @ head_in_body
         joints = np.empty((N_JOINTS, 3))
         # body joints: a rough column below the head (y down in the body frame)
-        joints[:76] = head_in_body + np.column_stack([0.15 * rng.standard_normal(76),
-                                                      np.linspace(0.1, 1.4, 76), 0.05 * rng.standard_normal(76)])
+        joints[:76] = head_in_body + np.column_stack(
+            [0.15 * rng.standard_normal(76), np.linspace(0.1, 1.4, 76), 0.05 * rng.standard_normal(76)]
+        )
         face = scale * face51 @ R_head.T + head_in_body
         if spoil == "few":
             face[F51[:7]] = np.nan
@@ -145,23 +168,52 @@ def main(out_dir: Path) -> None:
         r["camR"].append(camR)
         r["camT"].append(camT.reshape(3, 1))
         r["camK"].append(K)
-        expected.append({"image": name, "row": img, "person": len(r["isValid"]) - 1, "target": list(target),
-                         "status": status})
+        expected.append(
+            {"image": name, "row": img, "person": len(r["isValid"]) - 1, "target": list(target), "status": status}
+        )
     records = []
     for name, focal, cam_pitch, cam_yaw in IMAGES:
         rec = {"imgPath": name, "camX": 0.0, "camY": 0.0, "camZ": 170.0, "camYaw": cam_yaw}
         rec.update(rows[name])
         records.append(rec)
-    cols = ["imgPath", "X", "Y", "Z", "Yaw", "camX", "camY", "camZ", "camYaw", "gender", "kid", "age", "occlusion",
-            "isValid", "gt_path_smplx", "gt_joints_2d", "gt_joints_3d", "cam_j3d", "camR", "camT", "camK"]
+    cols = [
+        "imgPath",
+        "X",
+        "Y",
+        "Z",
+        "Yaw",
+        "camX",
+        "camY",
+        "camZ",
+        "camYaw",
+        "gender",
+        "kid",
+        "age",
+        "occlusion",
+        "isValid",
+        "gt_path_smplx",
+        "gt_joints_2d",
+        "gt_joints_3d",
+        "cam_j3d",
+        "camR",
+        "camT",
+        "camK",
+    ]
     df = pd.DataFrame(records)[cols]
     out_dir.mkdir(parents=True, exist_ok=True)
     df.to_pickle(out_dir / "validation_0_withjv.pkl", protocol=4)
-    (out_dir / "expected.json").write_text(json.dumps({
-        "image_size": [W, H],
-        "note": "target: (pitch, yaw, roll) degrees with A = Rx(p).T @ Ry(y).T @ Rz(r).T the head as the camera "
+    (out_dir / "expected.json").write_text(
+        json.dumps(
+            {
+                "image_size": [W, H],
+                "note": "target: (pitch, yaw, roll) degrees with A = Rx(p).T @ Ry(y).T @ Rz(r).T the head as the camera "
                 "sees it; when |pitch| < 90 and |roll| < 90 it is also the whenet (DirectMHP) label",
-        "people": expected}, indent=1) + "\n")
+                "people": expected,
+            },
+            indent=1,
+        )
+        + "\n"
+    )
     print(f"wrote {out_dir / 'validation_0_withjv.pkl'} ({len(df)} images, {len(expected)} people)")
 
 

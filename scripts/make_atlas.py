@@ -16,6 +16,7 @@ Run it from the repository root (CI runs it through ``tests/docs/test_docs_build
     python scripts/make_atlas.py                 # into docs/
     python scripts/make_atlas.py --docs /tmp/d   # into another docs folder
 """
+
 from __future__ import annotations
 
 import argparse
@@ -113,8 +114,18 @@ def picture(s, work: Path, out_png: Path) -> list[str]:
     import cv2
 
     label_csv = work / f"label_{s.name}.csv"
-    hpe("convert", str(ROOT / "sample_data" / "aflw2000"), "-o", str(label_csv), "--from", "300w_lp",
-        "--to", s.name, "-q", "--overwrite")
+    hpe(
+        "convert",
+        str(ROOT / "sample_data" / "aflw2000"),
+        "-o",
+        str(label_csv),
+        "--from",
+        "300w_lp",
+        "--to",
+        s.name,
+        "-q",
+        "--overwrite",
+    )
     row = next(r for r in _rows(label_csv) if r["file"].startswith(FACE))
     label = [float(row[k]) for k in ("pitch", "yaw", "roll")]
     poses = [label, [STEP, 0, 0], [0, STEP, 0], [0, 0, STEP]]
@@ -133,8 +144,22 @@ def picture(s, work: Path, out_png: Path) -> list[str]:
     stored = work / f"stored_{s.name}.csv"
     hpe("convert", str(poses_csv), "-o", str(stored), "--from", s.name, "--to", s.name, "-q", "--overwrite")
     drawn = work / f"drawn_{s.name}"
-    hpe("draw", str(stored), "-o", str(drawn), "--images", str(images), "--system", s.name, "--columns", "matrix",
-        "--thickness", "3", "-q", "--overwrite")
+    hpe(
+        "draw",
+        str(stored),
+        "-o",
+        str(drawn),
+        "--images",
+        str(images),
+        "--system",
+        s.name,
+        "--columns",
+        "matrix",
+        "--thickness",
+        "3",
+        "-q",
+        "--overwrite",
+    )
     values = s.value_columns if s.storage_kind != "angles" else []
     captions, tiles = [], []
     heads = ["its label", f"+{STEP:g} pitch", f"+{STEP:g} yaw", f"+{STEP:g} roll"]
@@ -147,8 +172,10 @@ def picture(s, work: Path, out_png: Path) -> list[str]:
         cv2.putText(bar, ang, (6, 48), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (60, 60, 60), 1, cv2.LINE_AA)
         tiles.append(np.vstack([bar, img]))
         vals = ", ".join(f"{c} {float(r[c]):.3f}" for c in values) if values else ""
-        captions.append(f"{heads[k]}: pitch {float(r['pitch']):.2f}, yaw {float(r['yaw']):.2f}, "
-                        f"roll {float(r['roll']):.2f}" + (f" (stored: {vals})" if vals else ""))
+        captions.append(
+            f"{heads[k]}: pitch {float(r['pitch']):.2f}, yaw {float(r['yaw']):.2f}, "
+            f"roll {float(r['roll']):.2f}" + (f" (stored: {vals})" if vals else "")
+        )
     sheet = np.hstack([np.hstack([t, np.full((t.shape[0], 4, 3), 255, np.uint8)]) for t in tiles])[:, :-4]
     out_png.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(out_png), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 9])
@@ -205,8 +232,7 @@ def build(docs: Path) -> Path:
             d = s.describe()
             table.append(f"| [`{name}`](#{name.replace('_', '_')}) | {s.storage_kind} | {nose_direction(s)} |")
             words = "\n".join(f"- **{k}**: {v}" for k, v in d.items())
-            lines = [f"## {name}", "", s.description, "", words, "",
-                     f"$$ {S} $$", "", f"$$ {rel} $$", ""]
+            lines = [f"## {name}", "", s.description, "", words, "", f"$$ {S} $$", "", f"$$ {rel} $$", ""]
             if s.notes:
                 lines += [f"Notes: {s.notes}", ""]
             src = _clean(s.source)

@@ -32,6 +32,7 @@ Usage::
     python scripts/make_sample_data.py --out DIR --frames 2000 --people 5 --cameras 31 --plain
     python scripts/make_sample_data.py --out DIR --frames 20000 --plain --tar --videos --video-size 192x108
 """
+
 from __future__ import annotations
 
 import argparse
@@ -110,13 +111,31 @@ def dome_cameras(n: int, rng) -> list:
         target = np.array([0.0, -140.0, 0.0]) + rng.uniform(-15, 15, 3)
         R, t = _look_at(C, target, rng.uniform(-2, 2))
         f = rng.uniform(1400, 1650)
-        K = [[round(f, 2), 0, round(rng.uniform(938, 950), 3)],
-             [0, round(f * rng.uniform(0.996, 0.998), 2), round(rng.uniform(555, 566), 3)], [0, 0, 1]]
-        dist = [rng.uniform(-0.29, -0.22), rng.uniform(0.18, 0.21), rng.uniform(-6e-4, 2e-4),
-                rng.uniform(-2e-4, 1e-3), rng.uniform(-0.06, 0.03)]
-        cams.append({"name": f"00_{i:02d}", "type": "hd", "resolution": [1920, 1080], "panel": 0, "node": i,
-                     "K": K, "distCoef": [round(float(d), 6) for d in dist],
-                     "R": R.tolist(), "t": [[float(v)] for v in t]})
+        K = [
+            [round(f, 2), 0, round(rng.uniform(938, 950), 3)],
+            [0, round(f * rng.uniform(0.996, 0.998), 2), round(rng.uniform(555, 566), 3)],
+            [0, 0, 1],
+        ]
+        dist = [
+            rng.uniform(-0.29, -0.22),
+            rng.uniform(0.18, 0.21),
+            rng.uniform(-6e-4, 2e-4),
+            rng.uniform(-2e-4, 1e-3),
+            rng.uniform(-0.06, 0.03),
+        ]
+        cams.append(
+            {
+                "name": f"00_{i:02d}",
+                "type": "hd",
+                "resolution": [1920, 1080],
+                "panel": 0,
+                "node": i,
+                "K": K,
+                "distCoef": [round(float(d), 6) for d in dist],
+                "R": R.tolist(),
+                "t": [[float(v)] for v in t],
+            }
+        )
     return cams
 
 
@@ -141,12 +160,24 @@ def _ry_cam(a):
 def other_cameras(rng) -> list:
     """One VGA and one Kinect camera, so that the default ``hd`` selection matters."""
     out = []
-    for name, typ, res, f, panel in (("01_01", "vga", [640, 480], 745.0, 1), ("50_01", "kinect-color",
-                                                                               [1920, 1080], 1060.0, 50)):
+    for name, typ, res, f, panel in (
+        ("01_01", "vga", [640, 480], 745.0, 1),
+        ("50_01", "kinect-color", [1920, 1080], 1060.0, 50),
+    ):
         R, t = _look_at(np.array([0.0, -250.0, 270.0]), np.array([0.0, -140.0, 0.0]), 0.0)
-        out.append({"name": name, "type": typ, "resolution": res, "panel": panel, "node": 1,
-                    "K": [[f, 0, res[0] / 2], [0, f, res[1] / 2], [0, 0, 1]], "distCoef": [-0.3, 0.1, 0, 0, 0],
-                    "R": R.tolist(), "t": [[float(v)] for v in t]})
+        out.append(
+            {
+                "name": name,
+                "type": typ,
+                "resolution": res,
+                "panel": panel,
+                "node": 1,
+                "K": [[f, 0, res[0] / 2], [0, f, res[1] / 2], [0, 0, 1]],
+                "distCoef": [-0.3, 0.1, 0, 0, 0],
+                "R": R.tolist(),
+                "t": [[float(v)] for v in t],
+            }
+        )
     return out
 
 
@@ -187,9 +218,17 @@ def person_params(n: int, rng) -> list:
         ang = 2 * np.pi * k / n + rng.uniform(-0.3, 0.3)
         r = rng.uniform(30, 70)
         centre = np.array([r * np.cos(ang), rng.uniform(-170, -145), r * np.sin(ang)])
-        out.append((rng.uniform(-np.pi, np.pi), rng.uniform(0.15, 0.35) * rng.choice([-1, 1]),
-                    np.deg2rad(rng.uniform(15, 45)), np.deg2rad(rng.uniform(5, 30)), rng.uniform(0, 6),
-                    centre, rng.uniform(0.88, 1.0)))
+        out.append(
+            (
+                rng.uniform(-np.pi, np.pi),
+                rng.uniform(0.15, 0.35) * rng.choice([-1, 1]),
+                np.deg2rad(rng.uniform(15, 45)),
+                np.deg2rad(rng.uniform(5, 30)),
+                rng.uniform(0, 6),
+                centre,
+                rng.uniform(0.88, 1.0),
+            )
+        )
     return out
 
 
@@ -205,8 +244,15 @@ def _num(v: float) -> float:
     return float(v)  # json writes repr(), which round-trips float64 exactly
 
 
-def make_synthetic(out_dir, n_frames: int = 24, n_people: int = 3, n_cameras: int = 5, seed: int = 20240611,
-                   first_frame: int = 100, special: bool = True) -> dict:
+def make_synthetic(
+    out_dir,
+    n_frames: int = 24,
+    n_people: int = 3,
+    n_cameras: int = 5,
+    seed: int = 20240611,
+    first_frame: int = 100,
+    special: bool = True,
+) -> dict:
     """Write a synthetic Panoptic sequence into ``out_dir``.
 
     Parameters
@@ -263,29 +309,47 @@ def make_synthetic(out_dir, n_frames: int = 24, n_people: int = 3, n_cameras: in
             elif special and fi == 6 and k == 0:
                 score[pairs[:8]] = 0.05
                 expect, note = "too few confident points", "6 confident pairs (one short)"
-            person = {"id": pid, "face70": {
-                "landmarks": [_num(v) for v in lm.reshape(-1)],
-                "averageScore": [round(float(v), 6) for v in score],
-                "averageReproError": [round(float(v), 6) for v in rng.uniform(1.0, 3.5, 70)],
-                "visibility": _visibility(nodes, rng)}}
+            person = {
+                "id": pid,
+                "face70": {
+                    "landmarks": [_num(v) for v in lm.reshape(-1)],
+                    "averageScore": [round(float(v), 6) for v in score],
+                    "averageReproError": [round(float(v), 6) for v in rng.uniform(1.0, 3.5, 70)],
+                    "visibility": _visibility(nodes, rng),
+                },
+            }
             if special and fi % 4 == 1:
                 person["face70"]["someFutureField"] = 1  # readers must ignore unknown fields
             people.append(person)
-            heads.append({"frame": frame, "person_id": pid, "scale": s, "t_x": t[0], "t_y": t[1], "t_z": t[2],
-                          **{f"head_r{i}{j}": R[i, j] for i in range(3) for j in range(3)},
-                          "n_confident_pairs": int((score[pairs] > 0.1).sum()), "expected": expect, "note": note})
+            heads.append(
+                {
+                    "frame": frame,
+                    "person_id": pid,
+                    "scale": s,
+                    "t_x": t[0],
+                    "t_y": t[1],
+                    "t_z": t[2],
+                    **{f"head_r{i}{j}": R[i, j] for i in range(3) for j in range(3)},
+                    "n_confident_pairs": int((score[pairs] > 0.1).sum()),
+                    "expected": expect,
+                    "note": note,
+                }
+            )
         doc = {"version": 0.5, "people": people}
         if not special or fi % 2:
-            doc = {"version": 0.7, "univTime": round(1000.0 + frame / 29.97, 3), "fpsType": "hd_29_97",
-                   "people": people}
+            doc = {
+                "version": 0.7,
+                "univTime": round(1000.0 + frame / 29.97, 3),
+                "fpsType": "hd_29_97",
+                "people": people,
+            }
         (out / "hdFace3d" / f"faceRecon3D_hd{frame:08d}.json").write_text(json.dumps(doc))
     if special:
         with open(out / "ground_truth.csv", "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=list(heads[0]), lineterminator="\n")
             w.writeheader()
             for row in heads:
-                w.writerow({k: (repr(float(v)) if isinstance(v, (float, np.floating)) else v)
-                            for k, v in row.items()})
+                w.writerow({k: (repr(float(v)) if isinstance(v, (float, np.floating)) else v) for k, v in row.items()})
     return {"heads": heads, "frames": frames, "cameras": cams}
 
 
@@ -302,8 +366,8 @@ def encode_frame_number(k: int, width: int = 192, height: int = 108) -> np.ndarr
     img[y0:y1, 0:bw] = 255
     for b in range(BITS):
         on = (int(k) >> (BITS - 1 - b)) & 1
-        img[y0:y1, (b + 1) * bw:(b + 2) * bw] = 255 if on else 0
-    img[y0:y1, (BITS + 1) * bw:(BITS + 2) * bw] = 0
+        img[y0:y1, (b + 1) * bw : (b + 2) * bw] = 255 if on else 0
+    img[y0:y1, (BITS + 1) * bw : (BITS + 2) * bw] = 0
     return img
 
 
@@ -315,7 +379,7 @@ def decode_frame_number(img) -> int:
     k = 0
     for b in range(BITS):
         x = (b + 1) * bw + bw // 2
-        k = (k << 1) | int(img[y - 2:y + 3, x - 2:x + 3].mean() > 128)
+        k = (k << 1) | int(img[y - 2 : y + 3, x - 2 : x + 3].mean() > 128)
     return k
 
 
@@ -335,8 +399,11 @@ def pack_tar(seq_dir, remove: bool = True, duplicate: int | None = None) -> Path
             files.append(face_dir / f"faceRecon3D_hd{duplicate:08d}.json")
         for i, p in enumerate(files):
             data = p.read_bytes()
-            name = f"hdFace3d/{p.name}" if i < len(files) - (duplicate is not None) \
+            name = (
+                f"hdFace3d/{p.name}"
+                if i < len(files) - (duplicate is not None)
                 else f"hdFace3d/faceRecon3D_hd{duplicate}.json"
+            )
             info = tarfile.TarInfo(name)
             info.size, info.mtime, info.mode = len(data), 0, 0o644
             tf.addfile(info, io.BytesIO(data))
@@ -389,22 +456,27 @@ def copy_real(dst, src=REAL, frames=REAL_FRAMES) -> bool:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default=str(ROOT / "sample_data"), help="sample_data folder, or the sequence "
-                    "folder itself with --plain")
+    ap.add_argument(
+        "--out",
+        default=str(ROOT / "sample_data"),
+        help="sample_data folder, or the sequence folder itself with --plain",
+    )
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--people", type=int, default=3)
     ap.add_argument("--cameras", type=int, default=5)
     ap.add_argument("--seed", type=int, default=20240611)
-    ap.add_argument("--plain", action="store_true", help="only a plain synthetic sequence in --out (no edge "
-                    "cases, no real frames), e.g. for benchmarks")
+    ap.add_argument(
+        "--plain",
+        action="store_true",
+        help="only a plain synthetic sequence in --out (no edge cases, no real frames), e.g. for benchmarks",
+    )
     ap.add_argument("--first-frame", type=int, default=100)
     ap.add_argument("--tar", action="store_true", help="pack hdFace3d/ into hdFace3d.tar (with --plain)")
     ap.add_argument("--videos", action="store_true", help="write hdVideos/hd_00_XX.mp4 (with --plain)")
     ap.add_argument("--video-size", default="192x108", help="WxH of the videos")
     a = ap.parse_args(argv)
     if a.plain:
-        info = make_synthetic(a.out, a.frames, a.people, a.cameras, a.seed, first_frame=a.first_frame,
-                              special=False)
+        info = make_synthetic(a.out, a.frames, a.people, a.cameras, a.seed, first_frame=a.first_frame, special=False)
         if a.videos:
             w, h = (int(v) for v in a.video_size.lower().split("x"))
             write_videos(a.out, max(info["frames"]), (w, h))

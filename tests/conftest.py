@@ -32,8 +32,11 @@ def canonical_A(pyr_deg):
     """SPEC §2's expanded 300W-LP matrix, written out independently of the package."""
     p, y, r = np.deg2rad(np.asarray(pyr_deg, dtype=float)).T
     cp, sp, cy, sy, cr, sr = np.cos(p), np.sin(p), np.cos(y), np.sin(y), np.cos(r), np.sin(r)
-    return np.stack([
-        np.stack([cy * cr, cy * sr, -sy], -1),
-        np.stack([-cp * sr + sp * sy * cr, cp * cr + sp * sy * sr, sp * cy], -1),
-        np.stack([sp * sr + cp * sy * cr, -sp * cr + cp * sy * sr, cp * cy], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([cy * cr, cy * sr, -sy], -1),
+            np.stack([-cp * sr + sp * sy * cr, cp * cr + sp * sy * sr, sp * cy], -1),
+            np.stack([sp * sr + cp * sy * cr, -sp * cr + cp * sy * sr, cp * cy], -1),
+        ],
+        -2,
+    )

@@ -1,53 +1,126 @@
 """``hpe audit``: per-row checks of a label table, a JSON report, plots and a flagged table."""
+
 from __future__ import annotations
 
 import click
 
+from .options import (
+    SYSTEM,
+    batch_option,
+    echo_summary,
+    output_option,
+    overwrite_option,
+    progress,
+    radians_option,
+    rejects_option,
+    verbosity_options,
+)
 from .table_options import column_options
-
-from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, radians_option,
-                      rejects_option, verbosity_options)
-
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
-@click.option("--system", "system", type=SYSTEM, default=None,
-              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
-                   "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].")
-@click.option("--json", "report", type=click.Path(dir_okay=False, allow_dash=True),
-              help="Write the report (counts, settings, example rows) as JSON; '-' prints it.")
-@click.option("--plots", type=click.Path(file_okay=False),
-              help="Folder for yaw/pitch/roll histograms, a yaw-pitch coverage map (PNG) and index.html.")
-@click.option("--images", type=click.Path(exists=True, file_okay=False),
-              help="With --plots: folder of the images, to draw the first flagged rows of each check on the page "
-                   "(default: INPUT's folder; a .mat folder holds its images).")
-@output_option(required=False, help="Write the table with one boolean column per check plus 'flagged' "
-                                    "(.parquet or .csv).")
+@click.option(
+    "--system",
+    "system",
+    type=SYSTEM,
+    default=None,
+    help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
+    "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].",
+)
+@click.option(
+    "--json",
+    "report",
+    type=click.Path(dir_okay=False, allow_dash=True),
+    help="Write the report (counts, settings, example rows) as JSON; '-' prints it.",
+)
+@click.option(
+    "--plots",
+    type=click.Path(file_okay=False),
+    help="Folder for yaw/pitch/roll histograms, a yaw-pitch coverage map (PNG) and index.html.",
+)
+@click.option(
+    "--images",
+    type=click.Path(exists=True, file_okay=False),
+    help="With --plots: folder of the images, to draw the first flagged rows of each check on the page "
+    "(default: INPUT's folder; a .mat folder holds its images).",
+)
+@output_option(
+    required=False, help="Write the table with one boolean column per check plus 'flagged' (.parquet or .csv)."
+)
 @click.option("--only-flagged", is_flag=True, help="With -o, write only the rows with at least one flag.")
-@click.option("--gimbal-tol", type=click.FloatRange(0, 90), default=1.0, show_default=True,
-              help="near_gimbal: the middle angle within this many degrees of its gimbal lock.")
+@click.option(
+    "--gimbal-tol",
+    type=click.FloatRange(0, 90),
+    default=1.0,
+    show_default=True,
+    help="near_gimbal: the middle angle within this many degrees of its gimbal lock.",
+)
 @radians_option()
-@click.option("--columns", "use", type=click.Choice(["auto", "angles", "matrix"]), default="auto",
-              show_default=True, help="Audit pitch,yaw,roll or r00..r22 (auto: angles when present).")
-@click.option("--key", "keys", multiple=True, metavar="COLUMN",
-              help="Column identifying a sample for 'duplicates' (repeatable; default: any of file, image, "
-                   "image_id, id, path, person_id, face_id, frame, camera, bbox_*).")
-@click.option("--examples", type=click.IntRange(0), default=5, show_default=True,
-              help="Example rows per check in the JSON report.")
-@click.option("--strict", is_flag=True, help="Exit with status 1 when any row is flagged; with --rejects, a "
-                                            "rejected row is an error and nothing is written.")
+@click.option(
+    "--columns",
+    "use",
+    type=click.Choice(["auto", "angles", "matrix"]),
+    default="auto",
+    show_default=True,
+    help="Audit pitch,yaw,roll or r00..r22 (auto: angles when present).",
+)
+@click.option(
+    "--key",
+    "keys",
+    multiple=True,
+    metavar="COLUMN",
+    help="Column identifying a sample for 'duplicates' (repeatable; default: any of file, image, "
+    "image_id, id, path, person_id, face_id, frame, camera, bbox_*).",
+)
+@click.option(
+    "--examples",
+    type=click.IntRange(0),
+    default=5,
+    show_default=True,
+    help="Example rows per check in the JSON report.",
+)
+@click.option(
+    "--strict",
+    is_flag=True,
+    help="Exit with status 1 when any row is flagged; with --rejects, a "
+    "rejected row is an error and nothing is written.",
+)
 @rejects_option
-@click.option("--decoder", type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]), default=None,
-              help="Also report how far this published decoder's printed angles are from each rotation "
-                   "(max/mean geodesic and per-angle, JSON key 'decoder').")
+@click.option(
+    "--decoder",
+    type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]),
+    default=None,
+    help="Also report how far this published decoder's printed angles are from each rotation "
+    "(max/mean geodesic and per-angle, JSON key 'decoder').",
+)
 @overwrite_option
 @batch_option
 @verbosity_options
 @column_options
 @click.pass_context
-def audit(ctx, input, system, report, plots, images, output, only_flagged, gimbal_tol, radians, use, keys, examples,
-          strict, rejects, decoder, overwrite, batch_size, verbose, quiet):
+def audit(
+    ctx,
+    input,
+    system,
+    report,
+    plots,
+    images,
+    output,
+    only_flagged,
+    gimbal_tol,
+    radians,
+    use,
+    keys,
+    examples,
+    strict,
+    rejects,
+    decoder,
+    overwrite,
+    batch_size,
+    verbose,
+    quiet,
+):
     """Check every row of a label table and count what looks wrong.
 
     INPUT is a .parquet or .csv table with angle columns pitch,yaw,roll
@@ -92,29 +165,49 @@ def audit(ctx, input, system, report, plots, images, output, only_flagged, gimba
 
     bar = progress(desc="audit", quiet=quiet)
     try:
-        result = run_audit(input, system, report=report, plots=plots, output=output, only_flagged=only_flagged,
-                           near_tol_deg=gimbal_tol, radians=radians, use=use, keys=keys, n_examples=examples,
-                           overwrite=overwrite, batch_size=batch_size, progress=bar,
-                           echo=click.echo, decoder=decoder, images=images, rejects_path=rejects,
-                           strict_rejects=strict)
+        result = run_audit(
+            input,
+            system,
+            report=report,
+            plots=plots,
+            output=output,
+            only_flagged=only_flagged,
+            near_tol_deg=gimbal_tol,
+            radians=radians,
+            use=use,
+            keys=keys,
+            n_examples=examples,
+            overwrite=overwrite,
+            batch_size=batch_size,
+            progress=bar,
+            echo=click.echo,
+            decoder=decoder,
+            images=images,
+            rejects_path=rejects,
+            strict_rejects=strict,
+        )
     finally:
         bar.close()
     from ..rotation.audit import CHECKS
 
     flagged = result["details"]["flagged"]
-    lines = [f"audit of {input}: {result['rows']} rows ({result['label_columns']}, system {result['system']} "
-             f"from {result['system_origin']}), "
-             f"{flagged} flagged",
-             "  " + ", ".join(f"{c} {result[c]}" for c in CHECKS)]
+    lines = [
+        f"audit of {input}: {result['rows']} rows ({result['label_columns']}, system {result['system']} "
+        f"from {result['system_origin']}), "
+        f"{flagged} flagged",
+        "  " + ", ".join(f"{c} {result[c]}" for c in CHECKS),
+    ]
     for c in CHECKS:
         if verbose and result["examples"].get(c):
             lines.append(f"  e.g. {c}: rows " + ", ".join(str(e["row"]) for e in result["examples"][c]))
     if "decoder" in result:
         d = result["decoder"]
-        lines.append(f"  decoder {d['decoder']} vs {d['reference_system']}: geodesic max {d['geodesic_deg']['max']:.3g} "
-                     f"mean {d['geodesic_deg']['mean']:.3g} deg; |d_yaw| max {d['d_yaw']['max']:.3g}, |d_pitch| max "
-                     f"{d['d_pitch']['max']:.3g}, |d_roll| max {d['d_roll']['max']:.3g} deg; "
-                     f"{d['rows_off_by_more_than_0.01deg']} rows off by > 0.01 deg; {d['not_decoded']} not decoded")
+        lines.append(
+            f"  decoder {d['decoder']} vs {d['reference_system']}: geodesic max {d['geodesic_deg']['max']:.3g} "
+            f"mean {d['geodesic_deg']['mean']:.3g} deg; |d_yaw| max {d['d_yaw']['max']:.3g}, |d_pitch| max "
+            f"{d['d_pitch']['max']:.3g}, |d_roll| max {d['d_roll']['max']:.3g} deg; "
+            f"{d['rows_off_by_more_than_0.01deg']} rows off by > 0.01 deg; {d['not_decoded']} not decoded"
+        )
     if result["rejected"]:
         lines.append(f"  {result['rejected']} unreadable row(s) not audited -> {rejects}")
     outs = [str(p) for p in (report if report != "-" else None, output, plots) if p]

@@ -1,66 +1,157 @@
 """``hpe augment``: rotate or mirror a labelled dataset (labels, landmarks, boxes, images)."""
+
 from __future__ import annotations
 
 import click
 
 from ..pipelines.augment import AGREE_TOL, IMAGE_COLUMNS, run_augment  # noqa: F401  (re-exported)
+from .options import (
+    batch_option,
+    deprecated_spellings,
+    echo_summary,
+    image_size_option,
+    output_option,
+    overwrite_option,
+    progress,
+    radians_option,
+    rejects_options,
+    system_option,
+    verbosity_options,
+)
 from .table_options import column_options
-from .options import (batch_option, deprecated_spellings, radians_option, echo_summary, image_size_option, output_option,
-                      overwrite_option, progress, rejects_options, system_option, verbosity_options)
-
 
 
 @deprecated_spellings("image-size")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
-@system_option(default=None, help="Rotation system of the labels and of OUTPUT: a built-in name or a .toml "
-               "file [default: the file's own (hpe:system metadata, dataset format), else 300w_lp].")
-@image_size_option(help="Width and height of the images, in pixels, as WxH. Optional when the table has "
-                  "image_width/image_height or --images is given; a row where these disagree is rejected.")
+@system_option(
+    default=None,
+    help="Rotation system of the labels and of OUTPUT: a built-in name or a .toml "
+    "file [default: the file's own (hpe:system metadata, dataset format), else 300w_lp].",
+)
+@image_size_option(
+    help="Width and height of the images, in pixels, as WxH. Optional when the table has "
+    "image_width/image_height or --images is given; a row where these disagree is rejected."
+)
 @radians_option()
 @click.option("--hflip", is_flag=True, help="Mirror left-right (with --vflip: both, a rotation by 180).")
 @click.option("--vflip", is_flag=True, help="Mirror top-bottom.")
-@click.option("--rotate", type=float, metavar="DEG",
-              help="Rotate counter-clockwise on screen by DEG degrees about the image centre (OpenCV's sign).")
-@click.option("--mirror-line", type=float, metavar="DEG",
-              help="Mirror about the line through the image centre at DEG degrees counter-clockwise from the "
-                   "horizontal (90 = --hflip, 0 = --vflip).")
-@click.option("--crop", nargs=4, type=float, default=None, metavar="X Y W H",
-              help="Cut the W x H rectangle whose top-left pixel is (X, Y) (whole pixels); labels keep their "
-                   "rotation, every position moves by (-X, -Y).")
-@click.option("--scale", "zoom", type=click.FloatRange(0, min_open=True), default=None, metavar="S",
-              help="Resize by S (W*S and H*S must be whole pixels): positions scale about the image's top-left "
-                   "edge as cv2.resize maps them; size and Pose_Para scale multiply by S.")
-@click.option("--landmarks", "scheme", type=click.Choice(["auto", "ibug68", "face70", "aflw21", "none"]),
-              default="auto", show_default=True,
-              help="Left/right scheme of the lm{i}_x/lm{i}_y columns, re-indexed after a mirror. auto: by count "
-                   "(68, 70, 21). none: leave the landmark columns unchanged.")
-@click.option("--box-from", type=click.Choice(["auto", "landmarks", "corners"]), default="auto", show_default=True,
-              help="New box: the moved corners (exact for flips and 90-degree turns), or the box of the moved "
-                   "landmarks. auto: corners when exact, else landmarks, else corners.")
+@click.option(
+    "--rotate",
+    type=float,
+    metavar="DEG",
+    help="Rotate counter-clockwise on screen by DEG degrees about the image centre (OpenCV's sign).",
+)
+@click.option(
+    "--mirror-line",
+    type=float,
+    metavar="DEG",
+    help="Mirror about the line through the image centre at DEG degrees counter-clockwise from the "
+    "horizontal (90 = --hflip, 0 = --vflip).",
+)
+@click.option(
+    "--crop",
+    nargs=4,
+    type=float,
+    default=None,
+    metavar="X Y W H",
+    help="Cut the W x H rectangle whose top-left pixel is (X, Y) (whole pixels); labels keep their "
+    "rotation, every position moves by (-X, -Y).",
+)
+@click.option(
+    "--scale",
+    "zoom",
+    type=click.FloatRange(0, min_open=True),
+    default=None,
+    metavar="S",
+    help="Resize by S (W*S and H*S must be whole pixels): positions scale about the image's top-left "
+    "edge as cv2.resize maps them; size and Pose_Para scale multiply by S.",
+)
+@click.option(
+    "--landmarks",
+    "scheme",
+    type=click.Choice(["auto", "ibug68", "face70", "aflw21", "none"]),
+    default="auto",
+    show_default=True,
+    help="Left/right scheme of the lm{i}_x/lm{i}_y columns, re-indexed after a mirror. auto: by count "
+    "(68, 70, 21). none: leave the landmark columns unchanged.",
+)
+@click.option(
+    "--box-from",
+    type=click.Choice(["auto", "landmarks", "corners"]),
+    default="auto",
+    show_default=True,
+    help="New box: the moved corners (exact for flips and 90-degree turns), or the box of the moved "
+    "landmarks. auto: corners when exact, else landmarks, else corners.",
+)
 @click.option("--clip", is_flag=True, help="Clip boxes to the pixel centres [0, W-1] x [0, H-1].")
-@click.option("--images", "images_dir", type=click.Path(exists=True, file_okay=False),
-              help="Folder of the input images (names from the image column, relative to it; default for a "
-                   ".mat folder: the folder); alone, it gives each row's image size.")
-@click.option("--out-images", "out_images", type=click.Path(file_okay=False),
-              help="Folder for the transformed images (same relative names); created if missing.")
-@click.option("--image-column", help=f"Column with image file names. Default: the first of {', '.join(IMAGE_COLUMNS)}; "
-                                     "a .mat name is matched to the image with the same stem.")
-@click.option("--interpolation", type=click.Choice(["linear", "cubic", "nearest", "area", "lanczos"]),
-              default="linear", show_default=True, help="Resampling for rotations and oblique mirrors.")
-@click.option("--border", type=click.Choice(["constant", "replicate", "reflect", "reflect101", "wrap"]),
-              default="constant", show_default=True, help="Fill of pixels that come from outside the image.")
+@click.option(
+    "--images",
+    "images_dir",
+    type=click.Path(exists=True, file_okay=False),
+    help="Folder of the input images (names from the image column, relative to it; default for a "
+    ".mat folder: the folder); alone, it gives each row's image size.",
+)
+@click.option(
+    "--out-images",
+    "out_images",
+    type=click.Path(file_okay=False),
+    help="Folder for the transformed images (same relative names); created if missing.",
+)
+@click.option(
+    "--image-column",
+    help=f"Column with image file names. Default: the first of {', '.join(IMAGE_COLUMNS)}; "
+    "a .mat name is matched to the image with the same stem.",
+)
+@click.option(
+    "--interpolation",
+    type=click.Choice(["linear", "cubic", "nearest", "area", "lanczos"]),
+    default="linear",
+    show_default=True,
+    help="Resampling for rotations and oblique mirrors.",
+)
+@click.option(
+    "--border",
+    type=click.Choice(["constant", "replicate", "reflect", "reflect101", "wrap"]),
+    default="constant",
+    show_default=True,
+    help="Fill of pixels that come from outside the image.",
+)
 @click.option("--jpeg-quality", type=click.IntRange(1, 100), default=95, show_default=True)
 @rejects_options
 @overwrite_option
 @batch_option
 @verbosity_options
 @column_options
-def augment(input, output, system, image_size, radians, hflip, vflip, rotate, mirror_line, crop, zoom, scheme, box_from, clip,
-            images_dir,
-            out_images, image_column, interpolation, border, jpeg_quality, rejects, strict, overwrite, batch_size,
-            verbose, quiet):
+def augment(
+    input,
+    output,
+    system,
+    image_size,
+    radians,
+    hflip,
+    vflip,
+    rotate,
+    mirror_line,
+    crop,
+    zoom,
+    scheme,
+    box_from,
+    clip,
+    images_dir,
+    out_images,
+    image_column,
+    interpolation,
+    border,
+    jpeg_quality,
+    rejects,
+    strict,
+    overwrite,
+    batch_size,
+    verbose,
+    quiet,
+):
     """Rotate, mirror, crop or resize a head-pose dataset: labels, landmarks, boxes and images.
 
     INPUT is a .parquet/.csv label table (or a folder of .mat files) with
@@ -108,12 +199,22 @@ def augment(input, output, system, image_size, radians, hflip, vflip, rotate, mi
       hpe augment AFLW2000/ -o c.parquet --crop 50 50 350 350 --images AFLW2000/ --out-images c/   # + .mat files
       hpe augment labels.parquet -o half.parquet --scale 0.5 --images frames/ --out-images half/
     """
-    chosen = [name for name, on in (("--hflip", hflip), ("--vflip", vflip), ("--rotate", rotate is not None),
-                                    ("--mirror-line", mirror_line is not None), ("--crop", crop is not None),
-                                    ("--scale", zoom is not None)) if on]
+    chosen = [
+        name
+        for name, on in (
+            ("--hflip", hflip),
+            ("--vflip", vflip),
+            ("--rotate", rotate is not None),
+            ("--mirror-line", mirror_line is not None),
+            ("--crop", crop is not None),
+            ("--scale", zoom is not None),
+        )
+        if on
+    ]
     if not chosen:
-        raise click.UsageError("expected one of --hflip, --vflip, --rotate DEG, --mirror-line DEG, --crop X Y W H, --scale S; "
-                               "got none")
+        raise click.UsageError(
+            "expected one of --hflip, --vflip, --rotate DEG, --mirror-line DEG, --crop X Y W H, --scale S; got none"
+        )
     if len(chosen) > 1 and sorted(chosen) != ["--hflip", "--vflip"]:
         raise click.UsageError(f"expected one augmentation (or --hflip with --vflip), got {' and '.join(chosen)}")
     if hflip and vflip:
@@ -124,8 +225,9 @@ def augment(input, output, system, image_size, radians, hflip, vflip, rotate, mi
         op, angle, desc = "rotate", rotate, f"rotate {rotate:g} deg counter-clockwise"
     elif crop is not None:
         if any(v != int(v) for v in crop) or crop[2] < 1 or crop[3] < 1:
-            raise click.BadParameter(f"expected whole pixels and W, H >= 1, got {' '.join(f'{v:g}' for v in crop)}",
-                                     param_hint="--crop")
+            raise click.BadParameter(
+                f"expected whole pixels and W, H >= 1, got {' '.join(f'{v:g}' for v in crop)}", param_hint="--crop"
+            )
         crop = tuple(int(v) for v in crop)
         op, angle, desc = "crop", None, f"crop {crop[2]}x{crop[3]} at ({crop[0]}, {crop[1]})"
     elif zoom is not None:
@@ -145,28 +247,63 @@ def augment(input, output, system, image_size, radians, hflip, vflip, rotate, mi
             images_dir, images_optional = input, out_images is None
     bar = progress(desc="augment", quiet=quiet)
     try:
-        s = run_augment(input, output, system, tuple(image_size) if image_size else None, op, angle, crop=crop, scale=zoom, scheme=scheme, box_from=box_from,
-                        clip=clip, images_dir=images_dir, out_images=out_images, image_column=image_column,
-                        interpolation=interpolation, border=border, jpeg_quality=jpeg_quality, rejects_path=rejects,
-                        strict=strict, overwrite=overwrite, batch_size=batch_size, bar=bar, verbose=verbose,
-                        description=desc, images_optional=images_optional, radians=radians)
+        s = run_augment(
+            input,
+            output,
+            system,
+            tuple(image_size) if image_size else None,
+            op,
+            angle,
+            crop=crop,
+            scale=zoom,
+            scheme=scheme,
+            box_from=box_from,
+            clip=clip,
+            images_dir=images_dir,
+            out_images=out_images,
+            image_column=image_column,
+            interpolation=interpolation,
+            border=border,
+            jpeg_quality=jpeg_quality,
+            rejects_path=rejects,
+            strict=strict,
+            overwrite=overwrite,
+            batch_size=batch_size,
+            bar=bar,
+            verbose=verbose,
+            description=desc,
+            images_optional=images_optional,
+            radians=radians,
+        )
     finally:
         bar.close()
-    lines = [f"{s['written']} of {s['rows']} rows augmented ({desc}) in {s['system']} -> {output}",
-             f"landmarks: {s['landmarks']}; boxes: {s['boxes']}"]
+    lines = [
+        f"{s['written']} of {s['rows']} rows augmented ({desc}) in {s['system']} -> {output}",
+        f"landmarks: {s['landmarks']}; boxes: {s['boxes']}",
+    ]
     if verbose:
-        lines.append(f"labels read from {s['label_source']}; pixel centres at integers, image centre "
-                     + (f"({(image_size[0] - 1) / 2:g}, {(image_size[1] - 1) / 2:g})" if image_size else
-                        "((W-1)/2, (H-1)/2) of each image"))
+        lines.append(
+            f"labels read from {s['label_source']}; pixel centres at integers, image centre "
+            + (
+                f"({(image_size[0] - 1) / 2:g}, {(image_size[1] - 1) / 2:g})"
+                if image_size
+                else "((W-1)/2, (H-1)/2) of each image"
+            )
+        )
     if out_images is not None:
-        lines.append(f"images: {s['images']} written -> {out_images}"
-                     + (f"; {s['mats']} .mat files written back beside them" if s.get("mats") else ""))
+        lines.append(
+            f"images: {s['images']} written -> {out_images}"
+            + (f"; {s['mats']} .mat files written back beside them" if s.get("mats") else "")
+        )
     if s["rejects"]:
         from collections import Counter
 
         kinds = Counter()  # "image not found: PATH" -> "image not found" (the file keeps each row's reason)
         for r, n in s["rejects"].items():
             kinds[r.split(": ", 1)[0]] += n
-        lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in kinds.most_common())
-                     + (f" -> {rejects}" if rejects else " (use --rejects FILE to keep them)"))
+        lines.append(
+            "rejected: "
+            + "; ".join(f"{n} {r}" for r, n in kinds.most_common())
+            + (f" -> {rejects}" if rejects else " (use --rejects FILE to keep them)")
+        )
     echo_summary(lines, quiet)

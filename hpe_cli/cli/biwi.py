@@ -1,4 +1,5 @@
 """``hpe biwi``: BIWI Kinect Head Pose labels as shipped -> a label table."""
+
 from __future__ import annotations
 
 import click
@@ -28,27 +29,68 @@ def _fractions(ctx, param, value):
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
-@click.option("--camera", type=click.Choice(["depth", "rgb"]), default="depth", show_default=True,
-              help="Labels in the depth camera (as annotated) or the RGB camera (applies each sequence's rgb.cal).")
-@click.option("--calibration", type=click.Path(exists=True, file_okay=False),
-              help="Folder with NN/rgb.cal and NN/depth.cal (hpdb/); default: INPUT.")
-@click.option("--head-size", type=click.FloatRange(1, 1000), default=200.0, show_default=True,
-              help="Diameter (mm) of the sphere around the head centre projected for the boxes.")
-@click.option("--system", "system", type=SYSTEM, default="biwi", show_default=True,
-              help="Rotation system of the output labels.")
-@click.option("--protocol", type=click.Choice(["all", "hopenet-99"]), default="all", show_default=True,
-              help="Test subset: every frame, or Hopenet/6DRepNet's |300W-LP angles| <= 99.")
-@click.option("--split", callback=_fractions, metavar="F1,F2[,F3]",
-              help="Deterministic split of the sequences (never one sequence in two splits), e.g. 0.7,0.3; "
-                   "adds a 'split' column.")
+@click.option(
+    "--camera",
+    type=click.Choice(["depth", "rgb"]),
+    default="depth",
+    show_default=True,
+    help="Labels in the depth camera (as annotated) or the RGB camera (applies each sequence's rgb.cal).",
+)
+@click.option(
+    "--calibration",
+    type=click.Path(exists=True, file_okay=False),
+    help="Folder with NN/rgb.cal and NN/depth.cal (hpdb/); default: INPUT.",
+)
+@click.option(
+    "--head-size",
+    type=click.FloatRange(1, 1000),
+    default=200.0,
+    show_default=True,
+    help="Diameter (mm) of the sphere around the head centre projected for the boxes.",
+)
+@click.option(
+    "--system", "system", type=SYSTEM, default="biwi", show_default=True, help="Rotation system of the output labels."
+)
+@click.option(
+    "--protocol",
+    type=click.Choice(["all", "hopenet-99"]),
+    default="all",
+    show_default=True,
+    help="Test subset: every frame, or Hopenet/6DRepNet's |300W-LP angles| <= 99.",
+)
+@click.option(
+    "--split",
+    callback=_fractions,
+    metavar="F1,F2[,F3]",
+    help="Deterministic split of the sequences (never one sequence in two splits), e.g. 0.7,0.3; "
+    "adds a 'split' column.",
+)
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the sequence shuffle.")
-@click.option("--split-lists", type=click.Path(file_okay=False),
-              help="Write <split>_sequences.txt (one sequence per line) into this folder.")
+@click.option(
+    "--split-lists",
+    type=click.Path(file_okay=False),
+    help="Write <split>_sequences.txt (one sequence per line) into this folder.",
+)
 @rejects_options
 @overwrite_option
 @verbosity_options
-def biwi(input, output, camera, calibration, head_size, system, protocol, split, seed, split_lists, rejects, strict,
-         overwrite, verbose, quiet):
+def biwi(
+    input,
+    output,
+    camera,
+    calibration,
+    head_size,
+    system,
+    protocol,
+    split,
+    seed,
+    split_lists,
+    rejects,
+    strict,
+    overwrite,
+    verbose,
+    quiet,
+):
     """Read BIWI Kinect Head Pose labels (hpdb/ pose.txt, db_annotations/ .bin or db_annotations.tgz).
 
     Writes one row per frame: the label in --system (matrix r00..r22 and
@@ -76,16 +118,34 @@ def biwi(input, output, camera, calibration, head_size, system, protocol, split,
     """
     from ..pipelines.biwi import run_biwi
 
-    s = run_biwi(input, output, camera=camera, calibration=calibration, head_size=head_size, system=system,
-                 protocol=protocol, split=split, seed=seed, split_lists=split_lists, overwrite=overwrite,
-                 rejects_path=rejects, strict=strict)
+    s = run_biwi(
+        input,
+        output,
+        camera=camera,
+        calibration=calibration,
+        head_size=head_size,
+        system=system,
+        protocol=protocol,
+        split=split,
+        seed=seed,
+        split_lists=split_lists,
+        overwrite=overwrite,
+        rejects_path=rejects,
+        strict=strict,
+    )
     lines = [f"{s['rows']} frames of {s['sequences']} sequences ({camera} camera, {system.name}) -> {output}"]
     if s["dropped"]:
         lines.append(f"protocol {protocol}: {s['dropped']} frames left out")
     if s["splits"]:
-        lines.append("split (sequences): " + ", ".join(f"{k} {v}" for k, v in s["splits"].items())
-                     + (f" -> {', '.join(s['lists'])}" if s["lists"] else ""))
+        lines.append(
+            "split (sequences): "
+            + ", ".join(f"{k} {v}" for k, v in s["splits"].items())
+            + (f" -> {', '.join(s['lists'])}" if s["lists"] else "")
+        )
     if s["rejected"]:
-        lines.append(f"rejected {s['rejected']} frames: "
-                     + "; ".join(f"{v} {k}" for k, v in s["rejects_per_reason"].items()) + f" -> {rejects}")
+        lines.append(
+            f"rejected {s['rejected']} frames: "
+            + "; ".join(f"{v} {k}" for k, v in s["rejects_per_reason"].items())
+            + f" -> {rejects}"
+        )
     echo_summary(lines, quiet)

@@ -1,26 +1,43 @@
 """``hpe convert``: labels from one rotation system to another."""
+
 from __future__ import annotations
 
 import click
 
+from .options import (
+    SYSTEM,
+    batch_option,
+    echo_summary,
+    output_option,
+    overwrite_option,
+    progress,
+    radians_option,  # the one spelling of input angle units
+    rejects_options,
+    verbosity_options,
+)
 from .table_options import column_options
-
-from .options import radians_option  # the one spelling of input angle units
-from .options import (SYSTEM, batch_option, echo_summary, output_option, overwrite_option, progress, rejects_options,
-                      verbosity_options)
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
-@click.option("--from", "source", type=SYSTEM, default=None,
-              help="System of INPUT: built-in name or .toml file [default: the file's own (hpe:system metadata, "
-                   "dataset format); required for files that name none].")
+@click.option(
+    "--from",
+    "source",
+    type=SYSTEM,
+    default=None,
+    help="System of INPUT: built-in name or .toml file [default: the file's own (hpe:system metadata, "
+    "dataset format); required for files that name none].",
+)
 @click.option("--to", "target", type=SYSTEM, required=True, help="System to write: built-in name or .toml file.")
 @radians_option()
-@click.option("--decoder", type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]), default=None,
-              help="Also write what this published decoder prints for each rotation (decoder_pitch, decoder_yaw, "
-                   "decoder_roll, decoder_ok), beside the exact angles. `hpe audit --decoder` measures the gap.")
+@click.option(
+    "--decoder",
+    type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]),
+    default=None,
+    help="Also write what this published decoder prints for each rotation (decoder_pitch, decoder_yaw, "
+    "decoder_roll, decoder_ok), beside the exact angles. `hpe audit --decoder` measures the gap.",
+)
 @rejects_options
 @overwrite_option
 @batch_option
@@ -61,13 +78,29 @@ def convert(input, output, source, target, radians, decoder, rejects, strict, ov
     try:
         from ..pipelines.convert import run_convert
 
-        s = run_convert(input, output, source, target, radians=radians, rejects_path=rejects, overwrite=overwrite,
-                        batch_size=batch_size, progress=bar, strict=strict, decoder=decoder)
+        s = run_convert(
+            input,
+            output,
+            source,
+            target,
+            radians=radians,
+            rejects_path=rejects,
+            overwrite=overwrite,
+            batch_size=batch_size,
+            progress=bar,
+            strict=strict,
+            decoder=decoder,
+        )
     finally:
         bar.close()
-    lines = [f"{s.written} of {s.rows} rows converted from {s.source} ({s.source_origin}) to {target.name} -> {output}",
-             f"gimbal-locked rows: {s.gimbal_lock}; max round-trip error: {s.max_roundtrip_err:.3g}"]
+    lines = [
+        f"{s.written} of {s.rows} rows converted from {s.source} ({s.source_origin}) to {target.name} -> {output}",
+        f"gimbal-locked rows: {s.gimbal_lock}; max round-trip error: {s.max_roundtrip_err:.3g}",
+    ]
     if s.rejects:
-        lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in sorted(s.rejects.items(), key=lambda x: -x[1]))
-                     + f" -> {rejects}")
+        lines.append(
+            "rejected: "
+            + "; ".join(f"{n} {r}" for r, n in sorted(s.rejects.items(), key=lambda x: -x[1]))
+            + f" -> {rejects}"
+        )
     echo_summary(lines, quiet)

@@ -1,54 +1,134 @@
 """``hpe draw``: draw pose axes or a pose cube onto images (or blank canvases)."""
+
 from __future__ import annotations
 
 import click
 
+from .options import (
+    SYSTEM,
+    deprecated_spellings,
+    echo_summary,
+    image_size_option,
+    overwrite_option,
+    progress,
+    radians_option,  # the one spelling of input angle units
+    rejects_options,
+    verbosity_options,
+)
 from .table_options import column_options
 
-from .options import radians_option  # the one spelling of input angle units
-from .options import (SYSTEM, deprecated_spellings, echo_summary, image_size_option, overwrite_option, progress,
-                      rejects_options, verbosity_options)
 
 @deprecated_spellings("canvas", "image-size")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
-@click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), required=True,
-              help="Output folder (created if missing); images keep their relative names.")
-@click.option("--images", type=click.Path(exists=True, file_okay=False),
-              help="Folder the `image` column is relative to (default: INPUT's folder).")
-@click.option("--system", "system", type=SYSTEM, default=None,
-              help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
-                   "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].")
-@click.option("--style", type=click.Choice(["axes", "cube"]), default="axes", show_default=True,
-              help="Three axis lines (Hopenet's draw_axis) or the pose cube.")
-@image_size_option("canvas", help="Draw on blank canvases of this size (WxH, e.g. 640x480) instead of reading "
-                  "images. The old --canvas WxH still works, with a warning.")
+@click.option(
+    "-o",
+    "--output",
+    "outdir",
+    type=click.Path(file_okay=False),
+    required=True,
+    help="Output folder (created if missing); images keep their relative names.",
+)
+@click.option(
+    "--images",
+    type=click.Path(exists=True, file_okay=False),
+    help="Folder the `image` column is relative to (default: INPUT's folder).",
+)
+@click.option(
+    "--system",
+    "system",
+    type=SYSTEM,
+    default=None,
+    help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
+    "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].",
+)
+@click.option(
+    "--style",
+    type=click.Choice(["axes", "cube"]),
+    default="axes",
+    show_default=True,
+    help="Three axis lines (Hopenet's draw_axis) or the pose cube.",
+)
+@image_size_option(
+    "canvas",
+    help="Draw on blank canvases of this size (WxH, e.g. 640x480) instead of reading "
+    "images. The old --canvas WxH still works, with a warning.",
+)
 @radians_option()
-@click.option("--columns", "use", type=click.Choice(["auto", "angles", "matrix"]), default="auto",
-              show_default=True, help="Draw from pitch,yaw,roll or r00..r22 (auto: angles when present).")
-@click.option("--length", type=click.FloatRange(0, min_open=True),
-              help="Line length in pixels for every face (overrides bbox_h/2, size and scale).")
+@click.option(
+    "--columns",
+    "use",
+    type=click.Choice(["auto", "angles", "matrix"]),
+    default="auto",
+    show_default=True,
+    help="Draw from pitch,yaw,roll or r00..r22 (auto: angles when present).",
+)
+@click.option(
+    "--length",
+    type=click.FloatRange(0, min_open=True),
+    help="Line length in pixels for every face (overrides bbox_h/2, size and scale).",
+)
 @click.option("--thickness", type=click.IntRange(1, 50), help="Line thickness in pixels (default: from the length).")
-@click.option("--tdy-origin", type=click.Choice(["auto", "top", "bottom"]), default="auto", show_default=True,
-              help="tdy is measured from the image top (pixel row) or from the bottom row (300W-LP Pose_Para: "
-                   "row = height - 1 - tdy). auto: bottom for .mat input or tables with tdz and scale columns.")
+@click.option(
+    "--tdy-origin",
+    type=click.Choice(["auto", "top", "bottom"]),
+    default="auto",
+    show_default=True,
+    help="tdy is measured from the image top (pixel row) or from the bottom row (300W-LP Pose_Para: "
+    "row = height - 1 - tdy). auto: bottom for .mat input or tables with tdz and scale columns.",
+)
 @click.option("--annotate", is_flag=True, help="Write the angles (in --system) above each face.")
 @click.option("--grid", is_flag=True, help="Write contact sheets (contact_sheet_001.png, ...) instead of images.")
-@click.option("--grid-cols", type=click.IntRange(1, 64), default=6, show_default=True,
-              help="Tiles per row (a sheet holds cols x cols tiles).")
+@click.option(
+    "--grid-cols",
+    type=click.IntRange(1, 64),
+    default=6,
+    show_default=True,
+    help="Tiles per row (a sheet holds cols x cols tiles).",
+)
 @click.option("--tile", type=click.IntRange(32, 2048), default=256, show_default=True, help="Tile size, pixels.")
 @click.option("--limit", type=click.IntRange(1), help="Draw at most this many images.")
-@click.option("--worst", type=click.IntRange(1), metavar="N",
-              help="With `hpe evaluate -o` output: draw only the N rows with the largest --sort-by error.")
-@click.option("--sort-by", "sort_by", metavar="COLUMN",
-              help="With `hpe evaluate -o` output: the error column to rank rows by, largest first "
-                   "[default: geodesic].")
+@click.option(
+    "--worst",
+    type=click.IntRange(1),
+    metavar="N",
+    help="With `hpe evaluate -o` output: draw only the N rows with the largest --sort-by error.",
+)
+@click.option(
+    "--sort-by",
+    "sort_by",
+    metavar="COLUMN",
+    help="With `hpe evaluate -o` output: the error column to rank rows by, largest first [default: geodesic].",
+)
 @rejects_options
 @overwrite_option
 @verbosity_options
 @column_options
-def draw(input, outdir, images, system, style, canvas, radians, use, length, thickness, tdy_origin, annotate,
-         grid, grid_cols, tile, limit, worst, sort_by, rejects, strict, overwrite, verbose, quiet):
+def draw(
+    input,
+    outdir,
+    images,
+    system,
+    style,
+    canvas,
+    radians,
+    use,
+    length,
+    thickness,
+    tdy_origin,
+    annotate,
+    grid,
+    grid_cols,
+    tile,
+    limit,
+    worst,
+    sort_by,
+    rejects,
+    strict,
+    overwrite,
+    verbose,
+    quiet,
+):
     """Draw head poses onto their images.
 
     INPUT is a .parquet or .csv label table (angles pitch,yaw,roll in degrees,
@@ -97,25 +177,52 @@ def draw(input, outdir, images, system, style, canvas, radians, use, length, thi
 
     bar = progress(desc="draw", quiet=quiet, unit="images")
     try:
-        s = run_draw(input, outdir, images=images, system=system, style=style, canvas=canvas, radians=radians,
-                     use=use, length=length, thickness=thickness, tdy_origin=tdy_origin, annotate=annotate,
-                     grid=grid, grid_cols=grid_cols, tile=tile, limit=limit, rejects_path=rejects,
-                     overwrite=overwrite, progress=bar, strict=strict, worst=worst, sort_by=sort_by)
+        s = run_draw(
+            input,
+            outdir,
+            images=images,
+            system=system,
+            style=style,
+            canvas=canvas,
+            radians=radians,
+            use=use,
+            length=length,
+            thickness=thickness,
+            tdy_origin=tdy_origin,
+            annotate=annotate,
+            grid=grid,
+            grid_cols=grid_cols,
+            tile=tile,
+            limit=limit,
+            rejects_path=rejects,
+            overwrite=overwrite,
+            progress=bar,
+            strict=strict,
+            worst=worst,
+            sort_by=sort_by,
+        )
     finally:
         bar.close()
     if "drawn" in s:
-        lines = [(f"drew ground truth (solid) and prediction (dashed) of {s['faces']} rows, worst "
-                  f"{sort_by or 'geodesic'} first, angles in {s['system']} ({s['system_source']}) -> {outdir}")]
+        lines = [
+            (
+                f"drew ground truth (solid) and prediction (dashed) of {s['faces']} rows, worst "
+                f"{sort_by or 'geodesic'} first, angles in {s['system']} ({s['system_source']}) -> {outdir}"
+            )
+        ]
         if s["rejects"]:
             lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in s["rejects"].items()) + f" -> {rejects}")
         echo_summary(lines, quiet)
         return
-    lines = [f"drew {s['faces']} faces ({style}) on {s['images']} {'canvases' if canvas else 'images'} -> "
-             + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir)),
-             f"labels of {input}: system {s['system']}"]
+    lines = [
+        f"drew {s['faces']} faces ({style}) on {s['images']} {'canvases' if canvas else 'images'} -> "
+        + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir)),
+        f"labels of {input}: system {s['system']}",
+    ]
     if s["rejects"]:
-        lines.append("rejected: " + "; ".join(f"{n} {r}" for r, n in s["rejects"].items())
-                     + (f" -> {rejects}" if rejects else ""))
+        lines.append(
+            "rejected: "
+            + "; ".join(f"{n} {r}" for r, n in s["rejects"].items())
+            + (f" -> {rejects}" if rejects else "")
+        )
     echo_summary(lines, quiet)
-
-

@@ -1,4 +1,5 @@
 """``hpe evaluate``: score head-pose predictions against ground truth, every published protocol by name."""
+
 from __future__ import annotations
 
 import click
@@ -16,9 +17,24 @@ from .options import (
 )
 from .table_options import column_options
 
-_PROTOCOL_NAMES = ("hopenet", "fsanet", "6drepnet", "6drepnet360", "6drepnet360-2023", "directmhp",
-                   "directmhp-single", "directmhp-v2", "whenet", "opal23", "opal23-align", "headposeplus", "img2pose", "trinet",
-                   "opentrack", "dad3dheads")
+_PROTOCOL_NAMES = (
+    "hopenet",
+    "fsanet",
+    "6drepnet",
+    "6drepnet360",
+    "6drepnet360-2023",
+    "directmhp",
+    "directmhp-single",
+    "directmhp-v2",
+    "whenet",
+    "opal23",
+    "opal23-align",
+    "headposeplus",
+    "img2pose",
+    "trinet",
+    "opentrack",
+    "dad3dheads",
+)
 
 
 def _protocol_help() -> str:
@@ -42,46 +58,109 @@ def _split_keys(ctx, param, value):
 @click.command(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110})
 @click.argument("pred", type=click.Path(exists=True))
 @click.argument("gt", type=click.Path(exists=True))
-@output_option(required=False, help="Per-pair errors (.parquet or .csv): key columns, gt_/pred_ pitch,yaw,roll "
-                                    "in the GT system (Parquet metadata hpe:system), err_pitch/yaw/roll (wrapped), "
-                                    "geodesic, maev_left/down/front (degrees), frobenius (unitless), "
-                                    "pred_rotation_distance (--orthonormalize), image_path (when images are found).")
-@click.option("--pred-system", type=SYSTEM, default=None,
-              help="Rotation system of PRED (name or .toml) [default: the file's own; required for files that "
-                   "name none].")
-@click.option("--gt-system", type=SYSTEM, default=None,
-              help="Rotation system of GT (name or .toml) [default: the file's own; required for files that "
-                   "name none].")
-@click.option("--key", "keys", multiple=True, callback=_split_keys, metavar="COL[,COL...]",
-              help="Join columns (default: 'image' if both tables have it, else 'file', else row order).")
-@click.option("--join", "join_mode", type=click.Choice(["key", "order"]), default="key", show_default=True,
-              help="key: pair rows by --key columns only; order: pair by position (needs equal row counts).")
-@click.option("--protocol", "protocols", multiple=True, type=click.Choice(_PROTOCOL_NAMES + ("all",)),
-              help="Published protocol to reproduce (repeatable; default: all).")
-@click.option("--align", type=click.Choice(["none", "mean"]), default="none", show_default=True,
-              help="mean: remove hpe's chordal-mean rotation offset over all pairs first (not opal23's "
-                   "alignment: that is --protocol opal23-align, a Karcher mean without rows > 90 deg off).")
-@click.option("--orthonormalize", is_flag=True,
-              help="Replace prediction matrices/vectors that are not rotations by the nearest rotation (SVD, "
-                   "det +1); the distance goes to the per-row output. Off: such rows are rejected.")
-@click.option("--report", "html", type=click.Path(dir_okay=False),
-              help="Write an HTML page: protocols with sources, --by and --yaw-bins tables, counts, worst rows.")
-@click.option("--worst", type=click.IntRange(min=0), default=12, show_default=True,
-              help="Rows shown in the report's worst-rows table (largest geodesic error).")
-@click.option("--images", type=click.Path(file_okay=False, exists=True),
-              help="Folder with the GT images (default: the GT folder when it holds .mat + .jpg).")
+@output_option(
+    required=False,
+    help="Per-pair errors (.parquet or .csv): key columns, gt_/pred_ pitch,yaw,roll "
+    "in the GT system (Parquet metadata hpe:system), err_pitch/yaw/roll (wrapped), "
+    "geodesic, maev_left/down/front (degrees), frobenius (unitless), "
+    "pred_rotation_distance (--orthonormalize), image_path (when images are found).",
+)
+@click.option(
+    "--pred-system",
+    type=SYSTEM,
+    default=None,
+    help="Rotation system of PRED (name or .toml) [default: the file's own; required for files that name none].",
+)
+@click.option(
+    "--gt-system",
+    type=SYSTEM,
+    default=None,
+    help="Rotation system of GT (name or .toml) [default: the file's own; required for files that name none].",
+)
+@click.option(
+    "--key",
+    "keys",
+    multiple=True,
+    callback=_split_keys,
+    metavar="COL[,COL...]",
+    help="Join columns (default: 'image' if both tables have it, else 'file', else row order).",
+)
+@click.option(
+    "--join",
+    "join_mode",
+    type=click.Choice(["key", "order"]),
+    default="key",
+    show_default=True,
+    help="key: pair rows by --key columns only; order: pair by position (needs equal row counts).",
+)
+@click.option(
+    "--protocol",
+    "protocols",
+    multiple=True,
+    type=click.Choice(_PROTOCOL_NAMES + ("all",)),
+    help="Published protocol to reproduce (repeatable; default: all).",
+)
+@click.option(
+    "--align",
+    type=click.Choice(["none", "mean"]),
+    default="none",
+    show_default=True,
+    help="mean: remove hpe's chordal-mean rotation offset over all pairs first (not opal23's "
+    "alignment: that is --protocol opal23-align, a Karcher mean without rows > 90 deg off).",
+)
+@click.option(
+    "--orthonormalize",
+    is_flag=True,
+    help="Replace prediction matrices/vectors that are not rotations by the nearest rotation (SVD, "
+    "det +1); the distance goes to the per-row output. Off: such rows are rejected.",
+)
+@click.option(
+    "--report",
+    "html",
+    type=click.Path(dir_okay=False),
+    help="Write an HTML page: protocols with sources, --by and --yaw-bins tables, counts, worst rows.",
+)
+@click.option(
+    "--worst",
+    type=click.IntRange(min=0),
+    default=12,
+    show_default=True,
+    help="Rows shown in the report's worst-rows table (largest geodesic error).",
+)
+@click.option(
+    "--images",
+    type=click.Path(file_okay=False, exists=True),
+    help="Folder with the GT images (default: the GT folder when it holds .mat + .jpg).",
+)
 @click.option("--by", metavar="COL", help="Also report every metric per value of this column.")
-@click.option("--yaw-bins", type=click.FloatRange(min=0, min_open=True), metavar="DEG",
-              help="Also report every metric per GT-yaw bin of this width.")
-@click.option("--json", "report", type=click.Path(dir_okay=False, allow_dash=True),
-              help="Write the report as JSON; '-' prints it (the table then goes to stderr).")
-@click.option("--plots", type=click.Path(file_okay=False),
-              help="Folder for error-vs-yaw, geodesic CDF and error histogram PNGs plus index.html. Drawn from "
-                   "every pair up to 400,000 pairs, else from every k-th pair (the figures say which); the "
-                   "numbers always use all pairs.")
+@click.option(
+    "--yaw-bins",
+    type=click.FloatRange(min=0, min_open=True),
+    metavar="DEG",
+    help="Also report every metric per GT-yaw bin of this width.",
+)
+@click.option(
+    "--json",
+    "report",
+    type=click.Path(dir_okay=False, allow_dash=True),
+    help="Write the report as JSON; '-' prints it (the table then goes to stderr).",
+)
+@click.option(
+    "--plots",
+    type=click.Path(file_okay=False),
+    help="Folder for error-vs-yaw, geodesic CDF and error histogram PNGs plus index.html. Drawn from "
+    "every pair up to 400,000 pairs, else from every k-th pair (the figures say which); the "
+    "numbers always use all pairs.",
+)
 @rejects_options
-@click.option("--columns", "use", type=click.Choice(["auto", "angles", "matrix"]), default="auto",
-              show_default=True, help="Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).")
+@click.option(
+    "--columns",
+    "use",
+    type=click.Choice(["auto", "angles", "matrix"]),
+    default="auto",
+    show_default=True,
+    help="Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).",
+)
 @click.option("--pred-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for PRED.")
 @click.option("--gt-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for GT.")
 @radians_option()
@@ -89,9 +168,35 @@ def _split_keys(ctx, param, value):
 @batch_option
 @verbosity_options
 @column_options
-def evaluate(pred, gt, output, pred_system, gt_system, keys, join_mode, protocols, align, orthonormalize, html, worst,
-             images, by, yaw_bins, report, plots, rejects, use, pred_columns, gt_columns, radians, overwrite,
-             batch_size, verbose, quiet, strict):
+def evaluate(
+    pred,
+    gt,
+    output,
+    pred_system,
+    gt_system,
+    keys,
+    join_mode,
+    protocols,
+    align,
+    orthonormalize,
+    html,
+    worst,
+    images,
+    by,
+    yaw_bins,
+    report,
+    plots,
+    rejects,
+    use,
+    pred_columns,
+    gt_columns,
+    radians,
+    overwrite,
+    batch_size,
+    verbose,
+    quiet,
+    strict,
+):
     """Score predictions PRED against ground truth GT, each in its own system.
 
     PRED and GT are any tables hpe reads (.parquet, .csv, a folder of .mat
@@ -140,12 +245,33 @@ def evaluate(pred, gt, output, pred_system, gt_system, keys, join_mode, protocol
 
     bar = progress(total=known_rows(pred, gt), desc="evaluate", quiet=quiet)  # both tables' rows, when known
     try:
-        result = run_evaluate(pred, gt, pred_system=pred_system, gt_system=gt_system, output=output, keys=keys,
-                              protocols=protos, align=align, by=by, yaw_bins=yaw_bins, report=report, plots=plots,
-                              rejects=rejects, use_pred=pred_columns or use, use_gt=gt_columns or use,
-                              radians=radians, overwrite=overwrite, batch_size=batch_size, progress=bar,
-                              strict=strict, join_mode=join_mode, orthonormalize=orthonormalize, html=html,
-                              worst=worst, images=images)
+        result = run_evaluate(
+            pred,
+            gt,
+            pred_system=pred_system,
+            gt_system=gt_system,
+            output=output,
+            keys=keys,
+            protocols=protos,
+            align=align,
+            by=by,
+            yaw_bins=yaw_bins,
+            report=report,
+            plots=plots,
+            rejects=rejects,
+            use_pred=pred_columns or use,
+            use_gt=gt_columns or use,
+            radians=radians,
+            overwrite=overwrite,
+            batch_size=batch_size,
+            progress=bar,
+            strict=strict,
+            join_mode=join_mode,
+            orthonormalize=orthonormalize,
+            html=html,
+            worst=worst,
+            images=images,
+        )
     except JoinUsageError as exc:
         raise click.UsageError(str(exc)) from None
     finally:

@@ -1,4 +1,5 @@
 """``hpe export``: training-ready datasets in the exact layout each trainer reads."""
+
 from __future__ import annotations
 
 import click
@@ -20,57 +21,146 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("labels", nargs=-1, required=True, type=click.Path(exists=True))
 @click.option("-o", "--output", "output", required=True, type=click.Path(), help="Output folder (OUT_DIR).")
-@click.option("--layout", required=True, type=click.Choice(LAYOUTS),
-              help="whenet (crops + annotation.txt), 6drepnet (images + .mat + file list of stems; --form crops: "
-                   "crops + list), directmhp (frames, COCO JSON, YOLO labels, data.yaml; needs a train and a val "
-                   "split), fsanet (.npz), hf (Parquet + dataset card).")
-@click.option("--form", type=click.Choice(["mat", "crops"]), default=None,
-              help="6drepnet only: mat (default; <split>/<stem>.jpg + <stem>.mat + files.txt of stems, what the "
-                   "Pose_300W_LP/AFLW2000 classes of 6DRepNet, 6DRepNet360 and Hopenet read), or crops "
-                   "(256 x 256 crops + files_<split>.txt 'name.jpg pitch yaw roll', DirectMHP's 6DRepNet fork).")
-@click.option("--trainer", type=click.Choice(["hopenet", "6drepnet", "6drepnet360"]), default=None,
-              help="6drepnet only: whose range rule applies. hopenet: every angle in [-99, 99) (its 66 bins); "
-                   "6drepnet: |angle| <= 99 (its create_filename_list.py; its training class itself reads any "
-                   "angle); 6drepnet360: full range [default: 6drepnet with --form mat, no rule with --form crops].")
-@click.option("--images", multiple=True, type=click.Path(exists=True, file_okay=False),
-              help="Where image paths resolve (once for all inputs, or once per input) "
-                   "[default: each table's folder; a .mat folder itself].")
-@click.option("--system", "system", type=SYSTEM, default=None,
-              help="Label system of the hf layout [default: 300w_lp]; the other layouts fix their trainer's.")
-@click.option("--from", "input_system", type=SYSTEM, default=None,
-              help="System of the input tables' angles [default: the table's hpe:system metadata, else 300w_lp].")
+@click.option(
+    "--layout",
+    required=True,
+    type=click.Choice(LAYOUTS),
+    help="whenet (crops + annotation.txt), 6drepnet (images + .mat + file list of stems; --form crops: "
+    "crops + list), directmhp (frames, COCO JSON, YOLO labels, data.yaml; needs a train and a val "
+    "split), fsanet (.npz), hf (Parquet + dataset card).",
+)
+@click.option(
+    "--form",
+    type=click.Choice(["mat", "crops"]),
+    default=None,
+    help="6drepnet only: mat (default; <split>/<stem>.jpg + <stem>.mat + files.txt of stems, what the "
+    "Pose_300W_LP/AFLW2000 classes of 6DRepNet, 6DRepNet360 and Hopenet read), or crops "
+    "(256 x 256 crops + files_<split>.txt 'name.jpg pitch yaw roll', DirectMHP's 6DRepNet fork).",
+)
+@click.option(
+    "--trainer",
+    type=click.Choice(["hopenet", "6drepnet", "6drepnet360"]),
+    default=None,
+    help="6drepnet only: whose range rule applies. hopenet: every angle in [-99, 99) (its 66 bins); "
+    "6drepnet: |angle| <= 99 (its create_filename_list.py; its training class itself reads any "
+    "angle); 6drepnet360: full range [default: 6drepnet with --form mat, no rule with --form crops].",
+)
+@click.option(
+    "--images",
+    multiple=True,
+    type=click.Path(exists=True, file_okay=False),
+    help="Where image paths resolve (once for all inputs, or once per input) "
+    "[default: each table's folder; a .mat folder itself].",
+)
+@click.option(
+    "--system",
+    "system",
+    type=SYSTEM,
+    default=None,
+    help="Label system of the hf layout [default: 300w_lp]; the other layouts fix their trainer's.",
+)
+@click.option(
+    "--from",
+    "input_system",
+    type=SYSTEM,
+    default=None,
+    help="System of the input tables' angles [default: the table's hpe:system metadata, else 300w_lp].",
+)
 @radians_option()
-@click.option("--crop-scale", type=click.FloatRange(0, min_open=True), default=None,
-              help="Enlarge each head box by this factor about its centre [default: 1].")
-@click.option("--square/--no-square", default=None, help="Square crops (side = the box's longer side) "
-              "[default: square for fsanet].")
-@click.option("--size", type=click.IntRange(1), default=None,
-              help="Resize crops to SIZE (SIZE x SIZE when square, else width SIZE) [default: none; 64 for fsanet].")
+@click.option(
+    "--crop-scale",
+    type=click.FloatRange(0, min_open=True),
+    default=None,
+    help="Enlarge each head box by this factor about its centre [default: 1].",
+)
+@click.option(
+    "--square/--no-square",
+    default=None,
+    help="Square crops (side = the box's longer side) [default: square for fsanet].",
+)
+@click.option(
+    "--size",
+    type=click.IntRange(1),
+    default=None,
+    help="Resize crops to SIZE (SIZE x SIZE when square, else width SIZE) [default: none; 64 for fsanet].",
+)
 @click.option("--quality", type=click.IntRange(1, 100), default=95, show_default=True, help="JPEG quality.")
-@click.option("--pad-value", type=click.IntRange(0, 255), default=0, show_default=True,
-              help="Constant for the parts of a crop outside the frame.")
-@click.option("--min-inside", type=click.FloatRange(0, 1), default=0.5, show_default=True,
-              help="Reject a head whose box is less than this fraction inside the image.")
-@click.option("--split", "split", default=None, metavar="COL:FRACTIONS",
-              help="Group split, e.g. sequence:0.8,0.2 or subject:train=0.7,val=0.1,test=0.2 "
-                   "(COL: sequence, subject, identity = 300W-LP NAME of NAME_k, person_id, camera, source).")
-@click.option("--split-file", type=click.Path(exists=True, dir_okay=False),
-              help="Explicit split: a CSV with a group column (e.g. sequence) and split.")
-@click.option("--min-change", type=click.FloatRange(0), default=None, metavar="DEG",
-              help="Per (sequence, person, camera): keep a sample only if it turned more than DEG degrees "
-                   "(geodesic) from the last kept one.")
+@click.option(
+    "--pad-value",
+    type=click.IntRange(0, 255),
+    default=0,
+    show_default=True,
+    help="Constant for the parts of a crop outside the frame.",
+)
+@click.option(
+    "--min-inside",
+    type=click.FloatRange(0, 1),
+    default=0.5,
+    show_default=True,
+    help="Reject a head whose box is less than this fraction inside the image.",
+)
+@click.option(
+    "--split",
+    "split",
+    default=None,
+    metavar="COL:FRACTIONS",
+    help="Group split, e.g. sequence:0.8,0.2 or subject:train=0.7,val=0.1,test=0.2 "
+    "(COL: sequence, subject, identity = 300W-LP NAME of NAME_k, person_id, camera, source).",
+)
+@click.option(
+    "--split-file",
+    type=click.Path(exists=True, dir_okay=False),
+    help="Explicit split: a CSV with a group column (e.g. sequence) and split.",
+)
+@click.option(
+    "--min-change",
+    type=click.FloatRange(0),
+    default=None,
+    metavar="DEG",
+    help="Per (sequence, person, camera): keep a sample only if it turned more than DEG degrees "
+    "(geodesic) from the last kept one.",
+)
 @click.option("--balance", default=None, metavar="yaw:BIN:MAX", help="At most MAX samples per BIN-degree yaw bin.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for --balance and --split.")
-@click.option("--drop-images-with-rejects", is_flag=True,
-              help="Drop a whole image when any head in it is rejected (DirectMHP's rule).")
+@click.option(
+    "--drop-images-with-rejects",
+    is_flag=True,
+    help="Drop a whole image when any head in it is rejected (DirectMHP's rule).",
+)
 @click.option("--workers", type=click.IntRange(1), default=1, show_default=True, help="Worker processes.")
 @column_options
 @rejects_options
 @overwrite_option
 @verbosity_options
-def export(labels, output, layout, form, trainer, images, system, input_system, radians, crop_scale, square, size, quality,
-           pad_value, min_inside, split, split_file, min_change, balance, seed, drop_images_with_rejects, workers,
-           rejects, strict, overwrite, verbose, quiet):
+def export(
+    labels,
+    output,
+    layout,
+    form,
+    trainer,
+    images,
+    system,
+    input_system,
+    radians,
+    crop_scale,
+    square,
+    size,
+    quality,
+    pad_value,
+    min_inside,
+    split,
+    split_file,
+    min_change,
+    balance,
+    seed,
+    drop_images_with_rejects,
+    workers,
+    rejects,
+    strict,
+    overwrite,
+    verbose,
+    quiet,
+):
     """Export labels as a training-ready dataset in a trainer's own layout.
 
     LABELS: tables with an image reference and a head box (hpe relabel-panoptic/relabel-agora output, or any
@@ -99,24 +189,54 @@ def export(labels, output, layout, form, trainer, images, system, input_system, 
 
     fixed = get_layout(layout, form=form).system
     if fixed is not None and system is not None and system.name != fixed:
-        raise click.UsageError(f"--layout {layout} stores labels in the {fixed} system its trainer expects; "
-                               f"--system {system.name} cannot be used with it")
+        raise click.UsageError(
+            f"--layout {layout} stores labels in the {fixed} system its trainer expects; "
+            f"--system {system.name} cannot be used with it"
+        )
     if form is not None and layout != "6drepnet":
         raise click.UsageError("--form applies to --layout 6drepnet only")
     if trainer is not None and layout != "6drepnet":
-        raise click.UsageError("--trainer applies to --layout 6drepnet only (the layout Hopenet, 6DRepNet and "
-                               "6DRepNet360 share)")
-    opts = ExportOptions(layout=layout, images=tuple(images), system=system, input_system=input_system, radians=radians, form=form, trainer=trainer,
-                         crop_scale=crop_scale, square=square, size=size, quality=quality, pad_value=pad_value,
-                         min_inside=min_inside, split=split, split_file=split_file, min_change=min_change,
-                         balance=balance, seed=seed, drop_images_with_rejects=drop_images_with_rejects,
-                         workers=workers, overwrite=overwrite, rejects=rejects, strict=strict, quiet=quiet)
-    s = run_export(list(labels), output, opts,
-                   progress=lambda total: progress(total, desc="export", quiet=quiet, unit="crops"))
-    lines = [f"exported {s['exported']} of {s['labels']} labels ({s['layout']}, {s['system']}) -> {s['output']}",
-             "per split: " + ", ".join(f"{k} {v}" for k, v in s["per_split"].items())]
+        raise click.UsageError(
+            "--trainer applies to --layout 6drepnet only (the layout Hopenet, 6DRepNet and 6DRepNet360 share)"
+        )
+    opts = ExportOptions(
+        layout=layout,
+        images=tuple(images),
+        system=system,
+        input_system=input_system,
+        radians=radians,
+        form=form,
+        trainer=trainer,
+        crop_scale=crop_scale,
+        square=square,
+        size=size,
+        quality=quality,
+        pad_value=pad_value,
+        min_inside=min_inside,
+        split=split,
+        split_file=split_file,
+        min_change=min_change,
+        balance=balance,
+        seed=seed,
+        drop_images_with_rejects=drop_images_with_rejects,
+        workers=workers,
+        overwrite=overwrite,
+        rejects=rejects,
+        strict=strict,
+        quiet=quiet,
+    )
+    s = run_export(
+        list(labels), output, opts, progress=lambda total: progress(total, desc="export", quiet=quiet, unit="crops")
+    )
+    lines = [
+        f"exported {s['exported']} of {s['labels']} labels ({s['layout']}, {s['system']}) -> {s['output']}",
+        "per split: " + ", ".join(f"{k} {v}" for k, v in s["per_split"].items()),
+    ]
     if s["rejected"]:
-        lines.append(f"rejected {s['rejected']}: " + "; ".join(f"{v} {k}" for k, v in s["rejects_per_reason"].items())
-                     + (f" -> {rejects}" if rejects else ""))
+        lines.append(
+            f"rejected {s['rejected']}: "
+            + "; ".join(f"{v} {k}" for k, v in s["rejects_per_reason"].items())
+            + (f" -> {rejects}" if rejects else "")
+        )
     lines += s["notes"]
     echo_summary(lines, quiet)

@@ -1,4 +1,5 @@
 """``hpe infer``: find the rotation system a piece of code or a dataset uses."""
+
 from __future__ import annotations
 
 import click
@@ -12,8 +13,9 @@ ROLE_NAMES = ("pitch", "yaw", "roll")
 def _roles(value: str, opt: str) -> list:
     roles = [v.strip().lower() for v in value.split(",")]
     if sorted(roles) != sorted(ROLE_NAMES):
-        raise click.BadParameter(f"expected the three roles pitch, yaw, roll in some order, got {value!r}",
-                                 param_hint=opt)
+        raise click.BadParameter(
+            f"expected the three roles pitch, yaw, roll in some order, got {value!r}", param_hint=opt
+        )
     return roles
 
 
@@ -25,8 +27,9 @@ def _angle_columns(value: str):
         roles.append(role.strip().lower())
         cols.append(col.strip() or role.strip())
     if sorted(roles) != sorted(ROLE_NAMES):
-        raise click.BadParameter(f"expected pitch, yaw, roll (optionally ROLE=COLUMN), got {value!r}",
-                                 param_hint="--angles")
+        raise click.BadParameter(
+            f"expected pitch, yaw, roll (optionally ROLE=COLUMN), got {value!r}", param_hint="--angles"
+        )
     return roles, cols
 
 
@@ -54,12 +57,14 @@ def _stored_rotations(value: str | None):
         return None
     kind, sep, cols = value.partition(":")
     if kind not in kinds or not sep:
-        raise click.BadParameter(f"expected KIND:COLUMNS with KIND one of {', '.join(kinds)}, got {value!r}",
-                                 param_hint="--rotations")
+        raise click.BadParameter(
+            f"expected KIND:COLUMNS with KIND one of {', '.join(kinds)}, got {value!r}", param_hint="--rotations"
+        )
     names = [c.strip() for c in cols.split(",") if c.strip()]
     if len(names) != kinds[kind]:
-        raise click.BadParameter(f"expected {kinds[kind]} columns for {kind}, got {len(names)}",
-                                 param_hint="--rotations")
+        raise click.BadParameter(
+            f"expected {kinds[kind]} columns for {kind}, got {len(names)}", param_hint="--rotations"
+        )
     return kind, names
 
 
@@ -77,55 +82,153 @@ def _positive_seconds(ctx, param, value):
 @deprecated_spellings("units")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("data", required=False, type=click.Path(exists=True))
-@click.option("--callable", "builder", metavar="FILE.py:FUNC",
-              help="A function angles -> 3x3 matrix (a file path or a module path, then :FUNC).")
+@click.option(
+    "--callable",
+    "builder",
+    metavar="FILE.py:FUNC",
+    help="A function angles -> 3x3 matrix (a file path or a module path, then :FUNC).",
+)
 @click.option("--decoder", metavar="FILE.py:FUNC", help="A function 3x3 matrix -> three angles.")
-@click.option("--returns", type=click.Choice(["angles", "stored"]), default="angles", show_default=True,
-              help="--decoder returns three angles, or stored values (a rotation vector, quaternion, 6-D vector "
-                   "or 9 matrix entries): then find which storage form and whether of the matrix or its transpose.")
-@click.option("--args", "args_", default="pitch,yaw,roll", show_default=True,
-              help="Role of each positional argument (--callable) or returned angle (--decoder).")
+@click.option(
+    "--returns",
+    type=click.Choice(["angles", "stored"]),
+    default="angles",
+    show_default=True,
+    help="--decoder returns three angles, or stored values (a rotation vector, quaternion, 6-D vector "
+    "or 9 matrix entries): then find which storage form and whether of the matrix or its transpose.",
+)
+@click.option(
+    "--args",
+    "args_",
+    default="pitch,yaw,roll",
+    show_default=True,
+    help="Role of each positional argument (--callable) or returned angle (--decoder).",
+)
 @click.option("--packed", is_flag=True, help="--callable takes one sequence of the three angles.")
-@click.option("--radians/--degrees", "radians", default=None,
-              help="Angle units of the code (default --radians) or of DATA's angle columns (default --degrees). "
-                   "The old --units rad|deg still works, with a warning.")
-@click.option("--angles", default="pitch,yaw,roll", show_default=True,
-              help="DATA's angle columns, in storage order: ROLE or ROLE=COLUMN.")
-@click.option("--matrix", "matrix_cols", default=None, metavar="COLS",
-              help="DATA's matrix columns: r00..r22 (a prefix) or 9 comma-separated names.")
-@click.option("--rotations", "rotation_cols", default=None, metavar="KIND:COLS",
-              help="DATA's rotations as stored values instead of r00..r22: rotvec:rx,ry,rz (radians), "
-                   "quaternion-wxyz:qw,qx,qy,qz, quaternion-xyzw:..., or 6d:six columns (matrix columns 0, 1). "
-                   "Default: rx,ry,rz or qw,qx,qy,qz when present and r00..r22 are not.")
-@click.option("--landmarks3d", default=None, metavar="PREFIX",
-              help="DATA's 68 3-D landmark columns PREFIX{i}_x/_y/_z (AFLW2000 .mat: lm3d).")
-@click.option("--landmark-frame", type=click.Choice(["image", "canonical", "opencv"]), default="image",
-              show_default=True, help="Axes of the 3-D landmarks: image = x right, y down, z towards the camera; "
-              "canonical = y up; opencv = y down, z away from the camera.")
-@click.option("--tol", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Largest Frobenius error counted as equal (default 1e-6 for code, 1e-4 for tables).")
-@click.option("--samples", type=click.IntRange(16, 100_000), default=None,
-              help="Samples to call the code on (default 64 for --callable, 256 for --decoder).")
+@click.option(
+    "--radians/--degrees",
+    "radians",
+    default=None,
+    help="Angle units of the code (default --radians) or of DATA's angle columns (default --degrees). "
+    "The old --units rad|deg still works, with a warning.",
+)
+@click.option(
+    "--angles",
+    default="pitch,yaw,roll",
+    show_default=True,
+    help="DATA's angle columns, in storage order: ROLE or ROLE=COLUMN.",
+)
+@click.option(
+    "--matrix",
+    "matrix_cols",
+    default=None,
+    metavar="COLS",
+    help="DATA's matrix columns: r00..r22 (a prefix) or 9 comma-separated names.",
+)
+@click.option(
+    "--rotations",
+    "rotation_cols",
+    default=None,
+    metavar="KIND:COLS",
+    help="DATA's rotations as stored values instead of r00..r22: rotvec:rx,ry,rz (radians), "
+    "quaternion-wxyz:qw,qx,qy,qz, quaternion-xyzw:..., or 6d:six columns (matrix columns 0, 1). "
+    "Default: rx,ry,rz or qw,qx,qy,qz when present and r00..r22 are not.",
+)
+@click.option(
+    "--landmarks3d",
+    default=None,
+    metavar="PREFIX",
+    help="DATA's 68 3-D landmark columns PREFIX{i}_x/_y/_z (AFLW2000 .mat: lm3d).",
+)
+@click.option(
+    "--landmark-frame",
+    type=click.Choice(["image", "canonical", "opencv"]),
+    default="image",
+    show_default=True,
+    help="Axes of the 3-D landmarks: image = x right, y down, z towards the camera; "
+    "canonical = y up; opencv = y down, z away from the camera.",
+)
+@click.option(
+    "--tol",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Largest Frobenius error counted as equal (default 1e-6 for code, 1e-4 for tables).",
+)
+@click.option(
+    "--samples",
+    type=click.IntRange(16, 100_000),
+    default=None,
+    help="Samples to call the code on (default 64 for --callable, 256 for --decoder).",
+)
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed of the samples.")
 @click.option("--name", default=None, help="Name of a custom system written with -o.")
-@click.option("--frame", "frame_of", type=SYSTEM, default=None,
-              help="For a custom answer: take the frame from this system (code cannot reveal its frame).")
-@click.option("--storage", type=click.Choice(["active", "transposed"]), default="active", show_default=True,
-              help="For a custom answer: what the matrix means (code cannot reveal it).")
+@click.option(
+    "--frame",
+    "frame_of",
+    type=SYSTEM,
+    default=None,
+    help="For a custom answer: take the frame from this system (code cannot reveal its frame).",
+)
+@click.option(
+    "--storage",
+    type=click.Choice(["active", "transposed"]),
+    default="active",
+    show_default=True,
+    help="For a custom answer: what the matrix means (code cannot reveal it).",
+)
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write the full report.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
-              help="Write the matched system as a .toml file (for `hpe convert --from`).")
-@click.option("--path", "import_path", multiple=True, type=click.Path(exists=True, file_okay=False),
-              help="Folder to import module:FUNC from (a repository root); repeatable.")
-@click.option("--timeout", type=float, callback=_positive_seconds, default=60.0, show_default=True,
-              help="Seconds the code of --callable/--decoder may run (it runs in a separate process).")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Write the matched system as a .toml file (for `hpe convert --from`).",
+)
+@click.option(
+    "--path",
+    "import_path",
+    multiple=True,
+    type=click.Path(exists=True, file_okay=False),
+    help="Folder to import module:FUNC from (a repository root); repeatable.",
+)
+@click.option(
+    "--timeout",
+    type=float,
+    callback=_positive_seconds,
+    default=60.0,
+    show_default=True,
+    help="Seconds the code of --callable/--decoder may run (it runs in a separate process).",
+)
 @overwrite_option
 @verbosity_options
 @column_options
-def infer(data, builder, decoder, returns, args_, packed, radians, angles, matrix_cols, rotation_cols, landmarks3d,
-          landmark_frame, tol,
-          samples, seed, name, frame_of, storage, json_path, output, overwrite, verbose, quiet, timeout,
-          import_path):
+def infer(
+    data,
+    builder,
+    decoder,
+    returns,
+    args_,
+    packed,
+    radians,
+    angles,
+    matrix_cols,
+    rotation_cols,
+    landmarks3d,
+    landmark_frame,
+    tol,
+    samples,
+    seed,
+    name,
+    frame_of,
+    storage,
+    json_path,
+    output,
+    overwrite,
+    verbose,
+    quiet,
+    timeout,
+    import_path,
+):
     """Find which rotation system a function or a dataset uses.
 
     With --callable, call the function on well-spread angles and find the
@@ -178,15 +281,36 @@ def infer(data, builder, decoder, returns, args_, packed, radians, angles, matri
     if json_path is not None:
         check_output(json_path, overwrite)
     spec = builder or decoder
-    rep = run_infer(data=data, spec=spec, builder=bool(builder), returns=returns,
-                    roles=_roles(args_, "--args") if spec else None, packed=packed, units=units,
-                    angle_columns=None if spec else _angle_columns(angles),
-                    matrix=_matrix_columns(matrix_cols), rotations=_stored_rotations(rotation_cols),
-                    landmarks3d=landmarks3d, landmark_frame=landmark_frame, tol=tol, samples=samples, seed=seed,
-                    name=name, frame=frame_of.frame if frame_of is not None else None, storage=storage,
-                    timeout=timeout, import_path=import_path)
-    _, written = finish(rep, spec or str(data), json_path=json_path, output=output, overwrite=overwrite,
-                        echo=None if quiet else click.echo)
+    rep = run_infer(
+        data=data,
+        spec=spec,
+        builder=bool(builder),
+        returns=returns,
+        roles=_roles(args_, "--args") if spec else None,
+        packed=packed,
+        units=units,
+        angle_columns=None if spec else _angle_columns(angles),
+        matrix=_matrix_columns(matrix_cols),
+        rotations=_stored_rotations(rotation_cols),
+        landmarks3d=landmarks3d,
+        landmark_frame=landmark_frame,
+        tol=tol,
+        samples=samples,
+        seed=seed,
+        name=name,
+        frame=frame_of.frame if frame_of is not None else None,
+        storage=storage,
+        timeout=timeout,
+        import_path=import_path,
+    )
+    _, written = finish(
+        rep,
+        spec or str(data),
+        json_path=json_path,
+        output=output,
+        overwrite=overwrite,
+        echo=None if quiet else click.echo,
+    )
     if written and not quiet:
         from .options import echo_summary
 

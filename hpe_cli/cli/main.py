@@ -1,4 +1,5 @@
 """The ``hpe`` command group. Subcommands are imported only when used, so ``hpe --help`` stays fast."""
+
 from __future__ import annotations
 
 import importlib
@@ -108,8 +109,10 @@ class HpeGroup(click.Group):
             if msg is None:  # a bug: never show a traceback unless asked to
                 if os.environ.get("HPE_DEBUG"):
                     raise
-                msg = (f"internal error {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
-                       "(please report it; set HPE_DEBUG=1 for a traceback)")
+                msg = (
+                    f"internal error {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
+                    "(please report it; set HPE_DEBUG=1 for a traceback)"
+                )
             _error(msg)
             from ..errors import HpeError
 
@@ -149,8 +152,21 @@ def _message(exc, txn=None) -> str | None:
 
 
 #: libraries whose errors, in a run with one input, come from reading that input
-_READER_MODULES = {"pyarrow", "pandas", "scipy", "json", "orjson", "pickle", "_pickle", "tarfile", "zipfile", "gzip",
-                   "zlib", "h5py", "numpy"}
+_READER_MODULES = {
+    "pyarrow",
+    "pandas",
+    "scipy",
+    "json",
+    "orjson",
+    "pickle",
+    "_pickle",
+    "tarfile",
+    "zipfile",
+    "gzip",
+    "zlib",
+    "h5py",
+    "numpy",
+}
 
 
 def _utf8(path) -> bool:

@@ -1,4 +1,5 @@
 """Options shared by every command, defined once so names stay consistent."""
+
 from __future__ import annotations
 
 import sys
@@ -94,32 +95,46 @@ def output_option(required: bool = True, help: str = "Output table (.parquet or 
     return click.option("-o", "--output", type=OutputPath(dir_okay=False), required=required, help=help)
 
 
-def system_option(default: str | None = "300w_lp", help: str = "Rotation system of the labels: a built-in name "
-                  "(see `hpe systems`) or a .toml file."):
+def system_option(
+    default: str | None = "300w_lp",
+    help: str = "Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file.",
+):
     return click.option("--system", "system", type=SYSTEM, default=default, show_default=True, help=help)
 
 
 def reinterpret_option(f):
     """``--reinterpret-as SYSTEM``: read the labels in SYSTEM although the file's own metadata names another."""
-    return click.option("--reinterpret-as", "reinterpret_as", type=SYSTEM, default=None,
-                        help="The file's own system metadata is wrong: read its labels in this system instead "
-                             "(an explicit --system/--from that disagrees with the metadata is otherwise an "
-                             "error).")(f)
+    return click.option(
+        "--reinterpret-as",
+        "reinterpret_as",
+        type=SYSTEM,
+        default=None,
+        help="The file's own system metadata is wrong: read its labels in this system instead "
+        "(an explicit --system/--from that disagrees with the metadata is otherwise an "
+        "error).",
+    )(f)
 
 
 overwrite_option = click.option("--overwrite", is_flag=True, help="Replace OUTPUT if it exists.")
-rejects_option = click.option("--rejects", type=OutputPath(dir_okay=False),
-                              help="Write rows that could not be used here, with a 'reason' column (without "
-                                   "it, any such row makes the command exit 1 and write nothing).")
-strict_option = click.option("--strict", is_flag=True,
-                             help="Exit 1 and write nothing if any row is rejected (even with --rejects).")
+rejects_option = click.option(
+    "--rejects",
+    type=OutputPath(dir_okay=False),
+    help="Write rows that could not be used here, with a 'reason' column (without "
+    "it, any such row makes the command exit 1 and write nothing).",
+)
+strict_option = click.option(
+    "--strict", is_flag=True, help="Exit 1 and write nothing if any row is rejected (even with --rejects)."
+)
 
 
 def rejects_options(f):
     """``--rejects FILE`` and ``--strict``: every command that sets rows aside has both."""
     return rejects_option(strict_option(f))
-batch_option = click.option("--batch-size", type=click.IntRange(1), default=65_536, show_default=True,
-                            help="Rows per streamed batch.")
+
+
+batch_option = click.option(
+    "--batch-size", type=click.IntRange(1), default=65_536, show_default=True, help="Rows per streamed batch."
+)
 
 
 def verbosity_options(f):
@@ -132,8 +147,16 @@ def progress(total=None, desc: str = "", quiet: bool = False, unit: str = "rows"
     """A tqdm bar on stderr; off with ``--quiet``, and when stderr is not a terminal (logs, CI)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, disable=True if quiet else None, file=sys.stderr,
-                dynamic_ncols=True, leave=False)
+    return tqdm(
+        total=total,
+        desc=desc,
+        unit=unit,
+        unit_scale=True,
+        disable=True if quiet else None,
+        file=sys.stderr,
+        dynamic_ncols=True,
+        leave=False,
+    )
 
 
 def echo_summary(lines, quiet: bool = False) -> None:
@@ -177,6 +200,7 @@ def non_negative_or_inf(ctx, param, value):
 
 # --------------------------------------------------------------------------------------------------------------
 # One spelling per idea (image sizes, angle units, fit thresholds), with the old spellings as warned aliases.
+
 
 class ImageSize(click.ParamType):
     """``WxH`` in pixels (``1920x1080``), returned as ``(W, H)``; a usage error otherwise."""
@@ -235,8 +259,10 @@ class Length(click.ParamType):
             self.fail(f"expected a length >= 0 such as 2, 2cm, 0.02m or 20mm (or inf), got {value!r}", param, ctx)
         unit = m.group(2) or self.default
         if m.group(2) is None and 0 < number < 0.1 and self.default == "cm":
-            _warn(f"{value} is read as {number:g} cm ({number * 10:g} mm): this option is in centimetres; "
-                  f"write {value}m for metres")
+            _warn(
+                f"{value} is read as {number:g} cm ({number * 10:g} mm): this option is in centimetres; "
+                f"write {value}m for metres"
+            )
         return number * self._scale[unit] / self._scale[self.unit]
 
 
@@ -244,9 +270,13 @@ def max_rmse_option(unit: str, default_cm: float, note: str):
     """``--max-rmse``: a fit threshold in centimetres everywhere (unit suffixes accepted), given to the command in
     ``unit`` (what its pipeline uses)."""
     return click.option(
-        "--max-rmse", type=Length(unit=unit), default=None, metavar="CM",
+        "--max-rmse",
+        type=Length(unit=unit),
+        default=None,
+        metavar="CM",
         help=f"Reject faces whose fit RMSE is above this, in centimetres; a unit suffix is accepted (2cm, 0.02m, "
-             f"20mm). 'inf' labels every fit. [default: {default_cm:g} cm: {note}]")
+        f"20mm). 'inf' labels every fit. [default: {default_cm:g} cm: {note}]",
+    )
 
 
 def _warn(msg: str) -> None:
@@ -264,11 +294,17 @@ def _rewrite_deprecated(args, names):
         a = str(a)
         if "canvas" in names and (a == "--canvas" or a.startswith("--canvas=")):
             _warn("--canvas is deprecated; use --image-size WxH")
-            out.append("--image-size" + a[len("--canvas"):])
-        elif "image-size" in names and a == "--image-size" and i + 2 < len(args) \
-                and str(args[i + 1]).isdigit() and str(args[i + 2]).isdigit():
-            _warn(f"--image-size {args[i + 1]} {args[i + 2]} is deprecated; use --image-size "
-                  f"{args[i + 1]}x{args[i + 2]}")
+            out.append("--image-size" + a[len("--canvas") :])
+        elif (
+            "image-size" in names
+            and a == "--image-size"
+            and i + 2 < len(args)
+            and str(args[i + 1]).isdigit()
+            and str(args[i + 2]).isdigit()
+        ):
+            _warn(
+                f"--image-size {args[i + 1]} {args[i + 2]} is deprecated; use --image-size {args[i + 1]}x{args[i + 2]}"
+            )
             out += ["--image-size", f"{args[i + 1]}x{args[i + 2]}"]
             i += 2
         elif "units" in names and (a == "--units" or a.startswith("--units=")):
@@ -277,8 +313,10 @@ def _rewrite_deprecated(args, names):
                 i += 1
             flag = {"rad": "--radians", "deg": "--degrees"}.get(value)
             if flag is None:
-                raise click.UsageError(f"Invalid value for '--units': expected rad or deg, got {value!r} "
-                                       "(deprecated: use --radians or --degrees)")
+                raise click.UsageError(
+                    f"Invalid value for '--units': expected rad or deg, got {value!r} "
+                    "(deprecated: use --radians or --degrees)"
+                )
             _warn(f"--units {value} is deprecated; use {flag}")
             out.append(flag)
         else:
@@ -290,6 +328,7 @@ def _rewrite_deprecated(args, names):
 def deprecated_spellings(*names):
     """Let ``command`` accept old spellings (``image-size``: ``--image-size W H``; ``canvas``: ``--canvas WxH``;
     ``units``: ``--units rad|deg``), each rewritten with a warning on stderr before parsing."""
+
     def deco(command):
         parse = command.parse_args
 
@@ -298,6 +337,7 @@ def deprecated_spellings(*names):
 
         command.parse_args = parse_args
         return command
+
     return deco
 
 

@@ -1,11 +1,23 @@
 """``hpe relabel-agora``: head-pose labels from AGORA ground-truth dataframes."""
+
 from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, non_negative_or_inf, deprecated_spellings, echo_summary, format_from_suffix,
-                      image_size_option, max_rmse_option, output_option, overwrite_option, progress, rejects_options,
-                      verbosity_options)
+from .options import (
+    SYSTEM,
+    deprecated_spellings,
+    echo_summary,
+    format_from_suffix,
+    image_size_option,
+    max_rmse_option,
+    non_negative_or_inf,
+    output_option,
+    overwrite_option,
+    progress,
+    rejects_options,
+    verbosity_options,
+)
 
 FORMATS = ("table", "coco", "whenet")
 
@@ -14,37 +26,89 @@ FORMATS = ("table", "coco", "whenet")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("dataframes", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
 @output_option(help="Output: a .parquet/.csv table, or with --format coco a .json, with --format whenet a .txt.")
-@click.option("--system", "system", type=SYSTEM, default=None,
-              help="Rotation system of the labels: built-in name or .toml file "
-                   "[default: 300w_lp; whenet for --format coco/whenet, which store DirectMHP's/WHENet's angles].")
-@click.option("--format", "fmt", type=click.Choice(FORMATS), default=None,
-              help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
-                   "[default: from OUTPUT's extension].")
-@image_size_option(default="3840x2160", show_default=True,
-                   help="Size of the images the labels are for. AGORA renders 3840x2160 and ships 1280x720 copies; "
-                   "camK (and so the boxes and 2-D points) is rescaled from the size the dataframe was built for "
-                   "(read from camK's principal point, which AGORA puts at the image centre).")
-@click.option("--preset", type=click.Choice(["directmhp", "whenet"]), default="directmhp", show_default=True,
-              help="Helmet radius and box rule: directmhp (radius 18, aspect < 1.5, each side < 70% of the "
-                   "image) or whenet (radius 22, aspect <= 2).")
+@click.option(
+    "--system",
+    "system",
+    type=SYSTEM,
+    default=None,
+    help="Rotation system of the labels: built-in name or .toml file "
+    "[default: 300w_lp; whenet for --format coco/whenet, which store DirectMHP's/WHENet's angles].",
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(FORMATS),
+    default=None,
+    help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
+    "[default: from OUTPUT's extension].",
+)
+@image_size_option(
+    default="3840x2160",
+    show_default=True,
+    help="Size of the images the labels are for. AGORA renders 3840x2160 and ships 1280x720 copies; "
+    "camK (and so the boxes and 2-D points) is rescaled from the size the dataframe was built for "
+    "(read from camK's principal point, which AGORA puts at the image centre).",
+)
+@click.option(
+    "--preset",
+    type=click.Choice(["directmhp", "whenet"]),
+    default="directmhp",
+    show_default=True,
+    help="Helmet radius and box rule: directmhp (radius 18, aspect < 1.5, each side < 70% of the "
+    "image) or whenet (radius 22, aspect <= 2).",
+)
 @max_rmse_option("m", 2, "DirectMHP used no threshold: inf")
-@click.option("--max-occlusion", type=float, default=90.0, show_default=True, callback=non_negative_or_inf,
-              metavar="PCT", help="Label only people with occlusion < PCT percent (DirectMHP: 90).")
-@click.option("--legacy-whenet", is_flag=True,
-              help="Label with DirectMHP's chain, which is WHENet's (compound, Z-Y-X decomposition, "
-                   "select_euler, negation), and drop what it drops; adds legacy_pitch/yaw/roll columns.")
-@click.option("--frame", "label_frame", type=click.Choice(["camera", "crop"]), default="camera",
-              show_default=True,
-              help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
-                   "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.")
-@click.option("--trust-pickle", is_flag=True,
-              help="Load any pickle, even one that asks for more than a pandas DataFrame needs. A pickle can run "
-                   "code: only for files you trust.")
+@click.option(
+    "--max-occlusion",
+    type=float,
+    default=90.0,
+    show_default=True,
+    callback=non_negative_or_inf,
+    metavar="PCT",
+    help="Label only people with occlusion < PCT percent (DirectMHP: 90).",
+)
+@click.option(
+    "--legacy-whenet",
+    is_flag=True,
+    help="Label with DirectMHP's chain, which is WHENet's (compound, Z-Y-X decomposition, "
+    "select_euler, negation), and drop what it drops; adds legacy_pitch/yaw/roll columns.",
+)
+@click.option(
+    "--frame",
+    "label_frame",
+    type=click.Choice(["camera", "crop"]),
+    default="camera",
+    show_default=True,
+    help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
+    "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.",
+)
+@click.option(
+    "--trust-pickle",
+    is_flag=True,
+    help="Load any pickle, even one that asks for more than a pandas DataFrame needs. A pickle can run "
+    "code: only for files you trust.",
+)
 @rejects_options
 @overwrite_option
 @verbosity_options
-def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse, max_occlusion, legacy_whenet,
-                  label_frame, trust_pickle, rejects, strict, overwrite, verbose, quiet):
+def relabel_agora(
+    dataframes,
+    output,
+    system,
+    fmt,
+    image_size,
+    preset,
+    max_rmse,
+    max_occlusion,
+    legacy_whenet,
+    label_frame,
+    trust_pickle,
+    rejects,
+    strict,
+    overwrite,
+    verbose,
+    quiet,
+):
     """Relabel AGORA: one head-pose label per person, from SMPL-X face joints.
 
     DATAFRAMES are AGORA ground-truth dataframes (*_withjv.pkl, pandas
@@ -99,13 +163,21 @@ def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse,
 
     fmt = fmt or format_from_suffix(output)
     if fmt != "table" and system is not None and system.name != "whenet":
-        raise click.UsageError(f"--format {fmt} stores DirectMHP/WHENet angles, which are in the whenet system; "
-                               f"got --system {system.name} (use --format table for other systems)")
+        raise click.UsageError(
+            f"--format {fmt} stores DirectMHP/WHENet angles, which are in the whenet system; "
+            f"got --system {system.name} (use --format table for other systems)"
+        )
     system = system or SYSTEM.convert("whenet" if fmt != "table" else "300w_lp", None, None)
-    cfg = job.Config(system=system, image_size=image_size,
-                     max_rmse=job.DEFAULT_MAX_RMSE if max_rmse is None else max_rmse,
-                     max_occlusion=max_occlusion, legacy=legacy_whenet, preset=preset, frame=label_frame,
-                     trust_pickle=trust_pickle)
+    cfg = job.Config(
+        system=system,
+        image_size=image_size,
+        max_rmse=job.DEFAULT_MAX_RMSE if max_rmse is None else max_rmse,
+        max_occlusion=max_occlusion,
+        legacy=legacy_whenet,
+        preset=preset,
+        frame=label_frame,
+        trust_pickle=trust_pickle,
+    )
     bar = progress(total=len(dataframes), desc="relabel-agora", quiet=quiet, unit="files")
     try:
         stats = job.write_outputs(list(dataframes), cfg, output, fmt, rejects, overwrite, bar)
@@ -114,7 +186,13 @@ def relabel_agora(dataframes, output, system, fmt, image_size, preset, max_rmse,
     if strict:  # any face/view not labelled fails the run (nothing is committed)
         from ..io.rejects import rejects_rule
 
-        first = next(iter(getattr(stats, "reasons", None) or getattr(stats, "face_reasons", None) or
-                          getattr(stats, "view_reasons", {})), None)
+        first = next(
+            iter(
+                getattr(stats, "reasons", None)
+                or getattr(stats, "face_reasons", None)
+                or getattr(stats, "view_reasons", {})
+            ),
+            None,
+        )
         rejects_rule(sum(stats.reasons.values()), first, has_file=True, strict=True)
     echo_summary(stats.summary(cfg, output, rejects, verbose), quiet)

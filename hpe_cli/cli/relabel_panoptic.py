@@ -1,11 +1,20 @@
 """``hpe relabel-panoptic``: head-pose labels from CMU Panoptic 3-D face landmarks."""
+
 from __future__ import annotations
 
 import click
 
-from .options import (SYSTEM, format_from_suffix, echo_summary, max_rmse_option, output_option,
-                      overwrite_option, progress, rejects_options,
-                      verbosity_options)
+from .options import (
+    SYSTEM,
+    echo_summary,
+    format_from_suffix,
+    max_rmse_option,
+    output_option,
+    overwrite_option,
+    progress,
+    rejects_options,
+    verbosity_options,
+)
 
 FORMATS = ("table", "coco", "whenet")
 
@@ -13,57 +22,138 @@ FORMATS = ("table", "coco", "whenet")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("seq_dirs", nargs=-1, required=True, type=click.Path(exists=True, file_okay=False))
 @output_option(help="Output: a .parquet/.csv table, or with --format coco a .json, with --format whenet a .txt.")
-@click.option("--calibration", type=click.Path(exists=True, dir_okay=False),
-              help="Calibration JSON [default: SEQ_DIR/calibration_<seq>.json].")
-@click.option("--system", "system", type=SYSTEM, default=None,
-              help="Rotation system of the labels: built-in name or .toml file "
-                   "[default: 300w_lp; whenet for --format coco/whenet, which store WHENet's angles].")
-@click.option("--preset", type=click.Choice(["whenet", "directmhp"]), default="whenet", show_default=True,
-              help="Helmet radius and box rule: whenet (radius 22, aspect <= 2) or directmhp (radius 18, "
-                   "aspect < 1.5, each side < 70% of the image).")
-@click.option("--format", "fmt", type=click.Choice(FORMATS), default=None,
-              help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
-                   "[default: from OUTPUT's extension].")
-@click.option("--cameras", default="hd", show_default=True,
-              help="hd (all 31 HD cameras), whenet-haggling (WHENet's 20-camera subset for the haggling "
-                   "sequences), or comma-separated camera names such as 00_00,00_08.")
-@click.option("--every", type=click.IntRange(1), default=1, show_default=True,
-              help="Frame step: keep frame numbers start, start+N, ... (looked up by number).")
-@click.option("--frames", "frame_range", default=None, metavar="A:B",
-              help="Only frames A <= frame < B (either side may be empty).")
-@click.option("--min-change", type=click.FloatRange(0, 180, min_open=True), default=None, metavar="DEG",
-              help="Keep a label only if it differs by at least DEG degrees (geodesic) from the last label "
-                   "kept for the same sequence, person and camera; the others go to the rejects.")
-@click.option("--all-views", is_flag=True,
-              help="Keep a face in a frame only if every selected camera labels it.")
-@click.option("--frame", "label_frame", type=click.Choice(["camera", "crop"]), default="camera",
-              show_default=True,
-              help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
-                   "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.")
+@click.option(
+    "--calibration",
+    type=click.Path(exists=True, dir_okay=False),
+    help="Calibration JSON [default: SEQ_DIR/calibration_<seq>.json].",
+)
+@click.option(
+    "--system",
+    "system",
+    type=SYSTEM,
+    default=None,
+    help="Rotation system of the labels: built-in name or .toml file "
+    "[default: 300w_lp; whenet for --format coco/whenet, which store WHENet's angles].",
+)
+@click.option(
+    "--preset",
+    type=click.Choice(["whenet", "directmhp"]),
+    default="whenet",
+    show_default=True,
+    help="Helmet radius and box rule: whenet (radius 22, aspect <= 2) or directmhp (radius 18, "
+    "aspect < 1.5, each side < 70% of the image).",
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(FORMATS),
+    default=None,
+    help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
+    "[default: from OUTPUT's extension].",
+)
+@click.option(
+    "--cameras",
+    default="hd",
+    show_default=True,
+    help="hd (all 31 HD cameras), whenet-haggling (WHENet's 20-camera subset for the haggling "
+    "sequences), or comma-separated camera names such as 00_00,00_08.",
+)
+@click.option(
+    "--every",
+    type=click.IntRange(1),
+    default=1,
+    show_default=True,
+    help="Frame step: keep frame numbers start, start+N, ... (looked up by number).",
+)
+@click.option(
+    "--frames",
+    "frame_range",
+    default=None,
+    metavar="A:B",
+    help="Only frames A <= frame < B (either side may be empty).",
+)
+@click.option(
+    "--min-change",
+    type=click.FloatRange(0, 180, min_open=True),
+    default=None,
+    metavar="DEG",
+    help="Keep a label only if it differs by at least DEG degrees (geodesic) from the last label "
+    "kept for the same sequence, person and camera; the others go to the rejects.",
+)
+@click.option("--all-views", is_flag=True, help="Keep a face in a frame only if every selected camera labels it.")
+@click.option(
+    "--frame",
+    "label_frame",
+    type=click.Choice(["camera", "crop"]),
+    default="camera",
+    show_default=True,
+    help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
+    "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.",
+)
 @click.option("--no-landmarks", is_flag=True, help="Leave out the 140 projected landmark columns (faster).")
-@click.option("--workers", type=click.IntRange(1), default=1, show_default=True,
-              help="Worker processes; each computes units of 64 frames and writes its own parts.")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Run the units on a Dask distributed scheduler (tcp://host:8786), or 'local' for a "
-                   "LocalCluster of --workers processes. Needs the dask extra.")
-@click.option("--resume", is_flag=True,
-              help="Keep the finished units of an interrupted run with the same inputs and options "
-                   "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
-                   "Give it on the first run too: a run without --resume removes its parts when interrupted. "
-                   "A changed input is refused, naming the file: calibration files are compared by their "
-                   "contents, face files and hdFace3d.tar by size, modification time and inode. The temp files "
-                   "of the run it resumes (killed by kill -9 or a power cut) are removed.")
-@max_rmse_option("cm", 2, "consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones to 2.8-6.7 cm; "
-                             "WHENet used no threshold: inf")
-@click.option("--legacy-whenet", is_flag=True,
-              help="Label with WHENet's own chain (compound, Z-Y-X decomposition, select_euler, negation) "
-                   "and drop what it drops; adds legacy_pitch/yaw/roll columns.")
+@click.option(
+    "--workers",
+    type=click.IntRange(1),
+    default=1,
+    show_default=True,
+    help="Worker processes; each computes units of 64 frames and writes its own parts.",
+)
+@click.option(
+    "--scheduler",
+    default=None,
+    metavar="ADDRESS",
+    help="Run the units on a Dask distributed scheduler (tcp://host:8786), or 'local' for a "
+    "LocalCluster of --workers processes. Needs the dask extra.",
+)
+@click.option(
+    "--resume",
+    is_flag=True,
+    help="Keep the finished units of an interrupted run with the same inputs and options "
+    "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
+    "Give it on the first run too: a run without --resume removes its parts when interrupted. "
+    "A changed input is refused, naming the file: calibration files are compared by their "
+    "contents, face files and hdFace3d.tar by size, modification time and inode. The temp files "
+    "of the run it resumes (killed by kill -9 or a power cut) are removed.",
+)
+@max_rmse_option(
+    "cm",
+    2,
+    "consistent faces of 160906_pizza1 fit to 0.6-1.3 cm, broken ones to 2.8-6.7 cm; WHENet used no threshold: inf",
+)
+@click.option(
+    "--legacy-whenet",
+    is_flag=True,
+    help="Label with WHENet's own chain (compound, Z-Y-X decomposition, select_euler, negation) "
+    "and drop what it drops; adds legacy_pitch/yaw/roll columns.",
+)
 @rejects_options
 @overwrite_option
 @verbosity_options
-def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras, every, frame_range, min_change,
-                     all_views, label_frame, no_landmarks, workers, scheduler, resume, max_rmse, legacy_whenet,
-                     rejects, strict, overwrite, verbose, quiet):
+def relabel_panoptic(
+    seq_dirs,
+    output,
+    calibration,
+    system,
+    preset,
+    fmt,
+    cameras,
+    every,
+    frame_range,
+    min_change,
+    all_views,
+    label_frame,
+    no_landmarks,
+    workers,
+    scheduler,
+    resume,
+    max_rmse,
+    legacy_whenet,
+    rejects,
+    strict,
+    overwrite,
+    verbose,
+    quiet,
+):
     """Relabel CMU Panoptic sequences: one head-pose label per face per camera.
 
     Each SEQ_DIR holds calibration_<seq>.json and hdFace3d/faceRecon3D_hd*.json
@@ -110,8 +200,10 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
 
     fmt = fmt or format_from_suffix(output)
     if fmt != "table" and system is not None and system.name != "whenet":
-        raise click.UsageError(f"--format {fmt} stores WHENet/DirectMHP angles, which are in the whenet system; "
-                               f"got --system {system.name} (use --format table for other systems)")
+        raise click.UsageError(
+            f"--format {fmt} stores WHENet/DirectMHP angles, which are in the whenet system; "
+            f"got --system {system.name} (use --format table for other systems)"
+        )
     system = system or SYSTEM.convert("whenet" if fmt != "table" else "300w_lp", None, None)
     try:
         frames = job.parse_frames(frame_range)
@@ -126,20 +218,51 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
         for p in plans:  # no output may replace a file the run reads
             for path in {str(p.calibration), *(f.path for f in p.frames.values())}:
                 note_input(path)
-        cfg = job.Config(system=system, preset=preset, max_rmse=max_rmse, legacy=legacy_whenet,
-                         landmarks=not no_landmarks, frame=label_frame, all_views=all_views, min_change=min_change)
+        cfg = job.Config(
+            system=system,
+            preset=preset,
+            max_rmse=max_rmse,
+            legacy=legacy_whenet,
+            landmarks=not no_landmarks,
+            frame=label_frame,
+            all_views=all_views,
+            min_change=min_change,
+        )
         if verbose:
             for plan in plans:
-                echo_summary([(f"{plan.sequence}: calibration {plan.calibration} ({len(plan.cameras)} cameras: "
-                              f"{', '.join(plan.cameras.names[:6])}{' ...' if len(plan.cameras) > 6 else ''}); "
-                              f"frames: {len(plan.frames)} selected of {plan.available} face files, "
-                              f"{len(plan.chunks)} units")], quiet)
-        bar = progress(total=sum(len(p.frames) + sum(map(len, p.skipped)) for p in plans), desc="relabel-panoptic",
-                       quiet=quiet, unit="frames")
+                echo_summary(
+                    [
+                        (
+                            f"{plan.sequence}: calibration {plan.calibration} ({len(plan.cameras)} cameras: "
+                            f"{', '.join(plan.cameras.names[:6])}{' ...' if len(plan.cameras) > 6 else ''}); "
+                            f"frames: {len(plan.frames)} selected of {plan.available} face files, "
+                            f"{len(plan.chunks)} units"
+                        )
+                    ],
+                    quiet,
+                )
+        bar = progress(
+            total=sum(len(p.frames) + sum(map(len, p.skipped)) for p in plans),
+            desc="relabel-panoptic",
+            quiet=quiet,
+            unit="frames",
+        )
         per_seq: list = []
         try:
-            stats = job.write_outputs(plans, cfg, output, fmt, rejects, overwrite, workers, bar, scheduler=scheduler,
-                                      resume=resume, per_sequence=per_seq, pool=pool)
+            stats = job.write_outputs(
+                plans,
+                cfg,
+                output,
+                fmt,
+                rejects,
+                overwrite,
+                workers,
+                bar,
+                scheduler=scheduler,
+                resume=resume,
+                per_sequence=per_seq,
+                pool=pool,
+            )
         finally:
             bar.close()
     if strict:  # any face/view not labelled fails the run (nothing is committed); sampling asked for does not
@@ -153,6 +276,5 @@ def relabel_panoptic(seq_dirs, output, calibration, system, preset, fmt, cameras
     for plan, st in zip(plans, per_seq):
         lines += st.summary(plan, cfg, output, rejects)
     if len(plans) > 1:
-        lines += stats.summary(None, cfg, output, rejects, n_cameras="N",
-                               title=f"total over {len(plans)} sequences")
+        lines += stats.summary(None, cfg, output, rejects, n_cameras="N", title=f"total over {len(plans)} sequences")
     echo_summary(lines, quiet)

@@ -7,6 +7,7 @@ Worker processes forked from this one inherit the handlers; there they
 restore the default action and re-raise the signal, so a worker never runs
 the parent's cleanup.
 """
+
 from __future__ import annotations
 
 import os
@@ -65,8 +66,11 @@ def _note_complete(signum, frame=None) -> None:
         return
     _noted = True
     try:
-        os.write(2, f"hpe: {signal.Signals(signum).name} received after the outputs were committed; "
-                    "the run is complete\n".encode())
+        os.write(
+            2,
+            f"hpe: {signal.Signals(signum).name} received after the outputs were committed; "
+            "the run is complete\n".encode(),
+        )
     except OSError:
         pass
 
@@ -96,6 +100,7 @@ reported = False
 def _arm_watchdog(signum: int) -> None:
     """If the orderly cleanup hangs (a pool's lock taken when the signal landed, a thread join at exit),
     remove the staged outputs, stop the workers and exit 128+signum anyway."""
+
     def force():
         from ..io import transaction
 

@@ -1,4 +1,5 @@
 """``hpe systems``: list the rotation systems."""
+
 from __future__ import annotations
 
 import click
@@ -7,9 +8,13 @@ import click
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("extra", nargs=-1, type=click.Path(exists=True, dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print every system's full definition as JSON.")
-@click.option("-v", "--verbose", is_flag=True,
-              help="Also show each system's source (the code or document it follows), its storage kind and "
-                   "columns, its frame in words (and whether it is left-handed) and how it was verified.")
+@click.option(
+    "-v",
+    "--verbose",
+    is_flag=True,
+    help="Also show each system's source (the code or document it follows), its storage kind and "
+    "columns, its frame in words (and whether it is left-handed) and how it was verified.",
+)
 def systems(extra, as_json, verbose):
     """List the built-in rotation systems (and any EXTRA .toml files).
 
@@ -44,7 +49,7 @@ def systems(extra, as_json, verbose):
             click.echo(f"  source   {s.source or '(none given)'}")
             click.echo(f"  verified {s.verified or '(not stated)'}")
             for n, e in enumerate(s.examples):
-                what = (f"angles {e['angles']}" if "angles" in e else f"300W-LP angles {e['canonical_angles']}")
-                to = (f"values {e['values']}" if "values" in e else f"matrix {e.get('matrix')}")
+                what = f"angles {e['angles']}" if "angles" in e else f"300W-LP angles {e['canonical_angles']}"
+                to = f"values {e['values']}" if "values" in e else f"matrix {e.get('matrix')}"
                 click.echo(f"  example  {what} -> {to}")
         click.echo("")

@@ -1,5 +1,6 @@
 """``column_options``: the --columns-map/--delimiter/--no-header/--names/--input-format options of every command
 that reads a table (see :mod:`hpe_cli.io.columns`). No numpy or pyarrow import here: `hpe --help` stays fast."""
+
 from __future__ import annotations
 
 import functools
@@ -24,7 +25,7 @@ def _delimiter(ctx, param, value):
     if value is None:
         return None
     v = {"\\t": "\t", "tab": "\t", "space": " ", "semicolon": ";", "comma": ","}.get(value, value)
-    if len(v) != 1 or v in "\r\n\"":
+    if len(v) != 1 or v in '\r\n"':
         raise click.BadParameter(f"expected one character such as ';' or '\\t' (or tab, space), got {value!r}")
     return v
 
@@ -51,6 +52,7 @@ def column_options(f):
     call that passes no table options of its own uses them, so adding this
     one decorator is all a command needs.
     """
+
     @functools.wraps(f)
     def wrapper(*args, **kwargs):
         from ..io.system_meta import reset_reinterpret, set_reinterpret
@@ -70,18 +72,35 @@ def column_options(f):
     from .options import reinterpret_option
 
     g = reinterpret_option(wrapper)
-    g = click.option("--input-format", type=click.Choice(INPUT_FORMATS), default=None,
-                     help="Read INPUT as a named label list: whenet (annotation.txt), opal23, img2pose-biwi, "
-                          "celeba-pose (CelebAMask-HQ-pose-anno.txt) or coco (DirectMHP JSON). "
-                          "COCO .json and annotation.txt are recognised without it.")(g)
-    g = click.option("--names", callback=_split_names, metavar="A,B,...",
-                     help="Column names of a headerless file, in order (with --no-header).")(g)
+    g = click.option(
+        "--input-format",
+        type=click.Choice(INPUT_FORMATS),
+        default=None,
+        help="Read INPUT as a named label list: whenet (annotation.txt), opal23, img2pose-biwi, "
+        "celeba-pose (CelebAMask-HQ-pose-anno.txt) or coco (DirectMHP JSON). "
+        "COCO .json and annotation.txt are recognised without it.",
+    )(g)
+    g = click.option(
+        "--names",
+        callback=_split_names,
+        metavar="A,B,...",
+        help="Column names of a headerless file, in order (with --no-header).",
+    )(g)
     g = click.option("--no-header", is_flag=True, help="INPUT has no header line (name columns with --names).")(g)
-    g = click.option("--delimiter", callback=_delimiter, metavar="CHAR",
-                     help="Field delimiter of a text INPUT (e.g. ';', tab, space); any file suffix.")(g)
-    g = click.option("--columns-map", "columns_map", callback=_columns_map, metavar="NAME=SOURCE,...",
-                     help="Rename INPUT columns to hpe's names, e.g. pitch=Pitch,yaw=Yaw,roll=Roll "
-                          "(also r00..r22, rx,ry,rz, qw..qz, image, bbox_x.., person, ...).")(g)
+    g = click.option(
+        "--delimiter",
+        callback=_delimiter,
+        metavar="CHAR",
+        help="Field delimiter of a text INPUT (e.g. ';', tab, space); any file suffix.",
+    )(g)
+    g = click.option(
+        "--columns-map",
+        "columns_map",
+        callback=_columns_map,
+        metavar="NAME=SOURCE,...",
+        help="Rename INPUT columns to hpe's names, e.g. pitch=Pitch,yaw=Yaw,roll=Roll "
+        "(also r00..r22, rx,ry,rz, qw..qz, image, bbox_x.., person, ...).",
+    )(g)
     return g
 
 
@@ -100,7 +119,7 @@ def _check_columns_map(columns, kwargs):
     paths = []
     for name in _INPUT_ARGS:
         v = kwargs.get(name)
-        for p in (v if isinstance(v, (list, tuple)) else [v]):
+        for p in v if isinstance(v, (list, tuple)) else [v]:
             if isinstance(p, (str, Path)) and Path(p).exists():
                 paths.append(p)
     if not paths:
@@ -115,17 +134,29 @@ def _check_columns_map(columns, kwargs):
     mapping = parse_columns_map(columns)
     missing = [s for s in mapping if s not in found]
     if missing:
-        raise HpeError(f"{paths[0]}: --columns-map names column(s) {', '.join(map(repr, missing))} that no input "
-                       f"has; found {', '.join(sorted(found))[:300]}")
+        raise HpeError(
+            f"{paths[0]}: --columns-map names column(s) {', '.join(map(repr, missing))} that no input "
+            f"has; found {', '.join(sorted(found))[:300]}"
+        )
 
 
 def table_kwargs(columns_map=None, delimiter=None, no_header=False, names=None, input_format=None) -> dict:
     """``open_table`` keyword arguments from :func:`column_options` values."""
-    return {"columns": columns_map, "delimiter": delimiter, "header": not no_header, "names": names,
-            "input_format": input_format}
+    return {
+        "columns": columns_map,
+        "delimiter": delimiter,
+        "header": not no_header,
+        "names": names,
+        "input_format": input_format,
+    }
 
 
 def pop_table_kwargs(kwargs: dict) -> dict:
     """Remove the :func:`column_options` values from a command's kwargs and return ``open_table`` kwargs."""
-    return table_kwargs(kwargs.pop("columns_map", None), kwargs.pop("delimiter", None),
-                        kwargs.pop("no_header", False), kwargs.pop("names", None), kwargs.pop("input_format", None))
+    return table_kwargs(
+        kwargs.pop("columns_map", None),
+        kwargs.pop("delimiter", None),
+        kwargs.pop("no_header", False),
+        kwargs.pop("names", None),
+        kwargs.pop("input_format", None),
+    )

@@ -42,6 +42,7 @@ A person that fails gets the reason, starting with the field, in
 :attr:`AgoraPeople.reason` (and no label), never an exception; ``hpe
 relabel-agora`` without ``--rejects`` refuses the file on such a person.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -61,8 +62,7 @@ CAMERA_COLS = ("cam_j3d", "camR", "camT", "camK")
 #: AGORA's render camera (``agora_evaluation/projection.py``): a 36 x 20.25 mm sensor, principal point at the centre
 SENSOR_MM = (36.0, 20.25)
 #: AGORA's focal lengths (mm) by scene, matched on the image name in this order; otherwise 28 mm
-SCENE_FOCAL_MM = (("hdri", 50.0), ("cam00", 18.0), ("cam01", 18.0), ("cam02", 18.0), ("cam03", 18.0),
-                  ("ag2", 28.0))
+SCENE_FOCAL_MM = (("hdri", 50.0), ("cam00", 18.0), ("cam01", 18.0), ("cam02", 18.0), ("cam03", 18.0), ("ag2", 28.0))
 DEFAULT_FOCAL_MM = 28.0
 #: AGORA's full-resolution images
 AGORA_SIZE = (3840, 2160)
@@ -72,40 +72,68 @@ CAM_R_TOL = 1e-6
 MAX_JOINT = 1e6
 
 #: the globals a pandas DataFrame pickle may name (module, name), after pandas' own renames of old paths
-SAFE_GLOBALS = frozenset({
-    ("builtins", "slice"), ("builtins", "bytearray"), ("builtins", "complex"), ("builtins", "set"),
-    ("builtins", "frozenset"), ("builtins", "range"), ("builtins", "object"),
-    ("copyreg", "_reconstructor"),
-    ("numpy", "ndarray"), ("numpy", "dtype"), ("numpy", "bool_"),
-    ("numpy._core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "scalar"),
-    ("numpy._core.numeric", "_frombuffer"),
-    ("numpy.core.multiarray", "_reconstruct"), ("numpy.core.multiarray", "scalar"),
-    ("numpy.core.numeric", "_frombuffer"),
-    ("pandas", "DataFrame"), ("pandas", "Series"), ("pandas", "Index"), ("pandas", "RangeIndex"),
-    ("pandas", "StringDtype"),
-    ("pandas.core.frame", "DataFrame"), ("pandas.core.series", "Series"),
-    ("pandas.core.indexes.base", "_new_Index"), ("pandas.core.indexes.base", "Index"),
-    ("pandas.core.indexes.range", "RangeIndex"), ("pandas.core.indexes.numeric", "Int64Index"),
-    ("pandas.core.indexes.numeric", "Float64Index"), ("pandas.core.indexes.numeric", "UInt64Index"),
-    ("pandas.core.internals.managers", "BlockManager"), ("pandas.core.internals.managers", "SingleBlockManager"),
-    ("pandas.core.internals.blocks", "new_block"), ("pandas.core.internals.blocks", "Block"),
-    ("pandas.core.internals.blocks", "ObjectBlock"), ("pandas.core.internals.blocks", "FloatBlock"),
-    ("pandas.core.internals.blocks", "IntBlock"), ("pandas.core.internals.blocks", "BoolBlock"),
-    ("pandas.core.internals.blocks", "NumpyBlock"),
-    ("pandas._libs.internals", "_unpickle_block"),
-    ("pandas.arrays", "ArrowStringArray"), ("pandas.arrays", "StringArray"),
-    ("pandas.core.arrays.string_", "StringDtype"), ("pandas.core.arrays.string_", "StringArray"),
-    ("pandas.core.arrays.string_arrow", "ArrowStringArray"),
-    ("pyarrow.lib", "_restore_array"), ("pyarrow.lib", "py_buffer"), ("pyarrow.lib", "type_for_alias"),
-})
+SAFE_GLOBALS = frozenset(
+    {
+        ("builtins", "slice"),
+        ("builtins", "bytearray"),
+        ("builtins", "complex"),
+        ("builtins", "set"),
+        ("builtins", "frozenset"),
+        ("builtins", "range"),
+        ("builtins", "object"),
+        ("copyreg", "_reconstructor"),
+        ("numpy", "ndarray"),
+        ("numpy", "dtype"),
+        ("numpy", "bool_"),
+        ("numpy._core.multiarray", "_reconstruct"),
+        ("numpy._core.multiarray", "scalar"),
+        ("numpy._core.numeric", "_frombuffer"),
+        ("numpy.core.multiarray", "_reconstruct"),
+        ("numpy.core.multiarray", "scalar"),
+        ("numpy.core.numeric", "_frombuffer"),
+        ("pandas", "DataFrame"),
+        ("pandas", "Series"),
+        ("pandas", "Index"),
+        ("pandas", "RangeIndex"),
+        ("pandas", "StringDtype"),
+        ("pandas.core.frame", "DataFrame"),
+        ("pandas.core.series", "Series"),
+        ("pandas.core.indexes.base", "_new_Index"),
+        ("pandas.core.indexes.base", "Index"),
+        ("pandas.core.indexes.range", "RangeIndex"),
+        ("pandas.core.indexes.numeric", "Int64Index"),
+        ("pandas.core.indexes.numeric", "Float64Index"),
+        ("pandas.core.indexes.numeric", "UInt64Index"),
+        ("pandas.core.internals.managers", "BlockManager"),
+        ("pandas.core.internals.managers", "SingleBlockManager"),
+        ("pandas.core.internals.blocks", "new_block"),
+        ("pandas.core.internals.blocks", "Block"),
+        ("pandas.core.internals.blocks", "ObjectBlock"),
+        ("pandas.core.internals.blocks", "FloatBlock"),
+        ("pandas.core.internals.blocks", "IntBlock"),
+        ("pandas.core.internals.blocks", "BoolBlock"),
+        ("pandas.core.internals.blocks", "NumpyBlock"),
+        ("pandas._libs.internals", "_unpickle_block"),
+        ("pandas.arrays", "ArrowStringArray"),
+        ("pandas.arrays", "StringArray"),
+        ("pandas.core.arrays.string_", "StringDtype"),
+        ("pandas.core.arrays.string_", "StringArray"),
+        ("pandas.core.arrays.string_arrow", "ArrowStringArray"),
+        ("pyarrow.lib", "_restore_array"),
+        ("pyarrow.lib", "py_buffer"),
+        ("pyarrow.lib", "type_for_alias"),
+    }
+)
 
 #: how to turn a trusted AGORA pickle into Parquet once (nested lists instead of numpy arrays)
-TO_PARQUET = ("python -c \"import sys, numpy as np, pandas as pd; "
-              "f = lambda v: v.tolist() if isinstance(v, np.ndarray) else [f(x) for x in v] "
-              "if isinstance(v, (list, tuple)) else v; "
-              "df = pd.read_pickle(sys.argv[1]); "
-              "df = df.apply(lambda c: c.map(f) if c.dtype == object else c); "
-              "df.to_parquet(sys.argv[2])\" IN.pkl OUT.parquet")
+TO_PARQUET = (
+    'python -c "import sys, numpy as np, pandas as pd; '
+    "f = lambda v: v.tolist() if isinstance(v, np.ndarray) else [f(x) for x in v] "
+    "if isinstance(v, (list, tuple)) else v; "
+    "df = pd.read_pickle(sys.argv[1]); "
+    "df = df.apply(lambda c: c.map(f) if c.dtype == object else c); "
+    'df.to_parquet(sys.argv[2])" IN.pkl OUT.parquet'
+)
 
 
 @dataclass
@@ -181,10 +209,11 @@ def _restricted_unpickler(fh, path):
         def find_class(self, module, name):
             module, name = renames.get((module, name), (module, name))
             if (module, name) not in SAFE_GLOBALS:
-                raise HpeError(f"{path}: refused to load the pickle: it asks for {module}.{name}, which is not "
-                               "part of a pandas DataFrame (a pickle can run code). If you trust the file, "
-                               "pass --trust-pickle, or convert it once to Parquet and give the .parquet: "
-                               + TO_PARQUET)
+                raise HpeError(
+                    f"{path}: refused to load the pickle: it asks for {module}.{name}, which is not "
+                    "part of a pandas DataFrame (a pickle can run code). If you trust the file, "
+                    "pass --trust-pickle, or convert it once to Parquet and give the .parquet: " + TO_PARQUET
+                )
             import importlib
             import warnings
 
@@ -223,13 +252,17 @@ def load_dataframe(path, trust: bool = False):
                 with open(path, "rb") as fh:
                     df = _restricted_unpickler(fh, path).load()
         else:
-            raise HpeError(f"{path}: expected an AGORA dataframe as a pandas pickle or Parquet file, got "
-                           "neither (checked by content)")
+            raise HpeError(
+                f"{path}: expected an AGORA dataframe as a pandas pickle or Parquet file, got "
+                "neither (checked by content)"
+            )
     except HpeError:
         raise
     except Exception as exc:  # unpickling raises anything: EOFError, UnpicklingError, TypeError...
-        raise HpeError(f"{path}: cannot load the {'Parquet file' if kind == 'parquet' else 'pickle'} "
-                       f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
+        raise HpeError(
+            f"{path}: cannot load the {'Parquet file' if kind == 'parquet' else 'pickle'} "
+            f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})"
+        ) from None
     if not isinstance(df, pd.DataFrame):
         raise HpeError(f"{path}: expected a pandas DataFrame (AGORA *_withjv.pkl), got {type(df).__name__}")
     return df
@@ -245,8 +278,10 @@ def check_columns(df, path) -> str:
         return "body"
     if "gt_joints_3d" in df.columns:
         return "camera"
-    raise HpeError(f"{path}: missing column {missing[0]!r} (and no 'gt_joints_3d' to use instead; "
-                   "expected an AGORA *_withjv.pkl ground-truth dataframe)")
+    raise HpeError(
+        f"{path}: missing column {missing[0]!r} (and no 'gt_joints_3d' to use instead; "
+        "expected an AGORA *_withjv.pkl ground-truth dataframe)"
+    )
 
 
 def agora_intrinsics(images, width: int, height: int) -> np.ndarray:
@@ -312,7 +347,7 @@ def _person_arrays(path, col, flat, rows, persons, shape, want):
             arr, got = None, f"got shape {arr.shape}"
         if arr is None:
             raise HpeError(f"{_where(path, rows, persons, n)}: {col}: expected {want}, {got}")
-        out.append(arr[FACE_FIRST:FACE_FIRST + FACE_COUNT] if not fixed else arr)
+        out.append(arr[FACE_FIRST : FACE_FIRST + FACE_COUNT] if not fixed else arr)
     return np.stack(out)
 
 
@@ -357,8 +392,10 @@ def _person_occlusion(path, flat, rows, persons) -> np.ndarray:
         elif isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_)):
             out[n] = float(v)
         else:
-            raise HpeError(f"{_where(path, rows, persons, n)}: occlusion: expected a percentage (a number "
-                           f"0-100), got {describe(v)}")
+            raise HpeError(
+                f"{_where(path, rows, persons, n)}: occlusion: expected a percentage (a number "
+                f"0-100), got {describe(v)}"
+            )
     return out
 
 
@@ -412,8 +449,10 @@ def _validate(people) -> np.ndarray:
         mark(fin & ortho & ~proper, "camR determinant is not +1 (a reflection; expected a rotation matrix)")
         tfin = np.isfinite(people.cam_t).all(axis=1)
         mark(~tfin, "camT not finite (expected a translation in metres)")
-        mark(tfin & ~(np.abs(people.cam_t) < MAX_JOINT).all(axis=1),
-             "camT |value| >= 1e6 (expected a translation in metres)")
+        mark(
+            tfin & ~(np.abs(people.cam_t) < MAX_JOINT).all(axis=1),
+            "camT |value| >= 1e6 (expected a translation in metres)",
+        )
         K = people.K
         if people.frame == "body":
             kfin = np.isfinite(K).all(axis=(1, 2))
@@ -421,8 +460,10 @@ def _validate(people) -> np.ndarray:
             mark(kfin & ~((K[:, 0, 0] > 0) & (K[:, 1, 1] > 0)), "camK focal length not positive (expected fx, fy > 0)")
             pinhole = (K[:, 2, 0] == 0) & (K[:, 2, 1] == 0) & (K[:, 2, 2] == 1) & (K[:, 1, 0] == 0)
             mark(kfin & ~pinhole, "camK not a pinhole matrix (expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]])")
-            mark(kfin & ~((K[:, 0, 2] > 0) & (K[:, 1, 2] > 0)),
-                 "camK principal point not positive (expected cx, cy > 0: AGORA puts it at the image centre)")
+            mark(
+                kfin & ~((K[:, 0, 2] > 0) & (K[:, 1, 2] > 0)),
+                "camK principal point not positive (expected cx, cy > 0: AGORA puts it at the image centre)",
+            )
         f = people.face3d
         jbad = (np.abs(f) >= MAX_JOINT).any(axis=(1, 2))  # inf included; NaN is a missing point, fit_faces' job
         mark(jbad, "face joints infinite or |value| >= 1e6")
@@ -472,8 +513,10 @@ def read_agora(path, df=None, trust: bool = False) -> AgoraPeople:
             k = int(np.flatnonzero(lens != counts)[0])
             got = "" if isinstance(raw[k], (list, tuple, np.ndarray)) else f" ({describe(raw[k])})"
             iv = "" if isinstance(raw_valid[k], (list, tuple, np.ndarray)) else f", which is {describe(raw_valid[k])}"
-            raise HpeError(f"{path}: row {k}: column {col!r} has {lens[k]} entries{got}, expected {counts[k]} "
-                           f"(one per person, as in isValid{iv})")
+            raise HpeError(
+                f"{path}: row {k}: column {col!r} has {lens[k]} entries{got}, expected {counts[k]} "
+                f"(one per person, as in isValid{iv})"
+            )
         return list(chain.from_iterable(cells))
 
     valid = _person_flags(path, list(chain.from_iterable(valid_cells)), row, person)
@@ -529,9 +572,11 @@ def intrinsics_for_size(people: AgoraPeople, width: int, height: int):
         bad &= reason == ""  # already rejected at the door
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise HpeError(f"{people.source}: row {people.row[k]}: camK's principal point ({cx[k]:g}, {cy[k]:g}) "
-                       f"is not at the centre of a {width}x{height} image nor of any image with that aspect "
-                       "ratio; expected --image-size to match the images the dataframe was built for")
+        raise HpeError(
+            f"{people.source}: row {people.row[k]}: camK's principal point ({cx[k]:g}, {cy[k]:g}) "
+            f"is not at the centre of a {width}x{height} image nor of any image with that aspect "
+            "ratio; expected --image-size to match the images the dataframe was built for"
+        )
     S = np.zeros((n, 3, 3))
     S[:, 0, 0], S[:, 1, 1], S[:, 2, 2] = sx, sy, 1.0
     return S @ K, np.stack([sx, sy], axis=1)

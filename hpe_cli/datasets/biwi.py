@@ -41,6 +41,7 @@ any reading of ``R.T``; the tests check this. The yaw sign was also checked by
 eye on frames 01/166 (yaw -1.4) and 01/175 (yaw +6.6): the nose moves to the
 image left.
 """
+
 from __future__ import annotations
 
 import re
@@ -108,8 +109,9 @@ def read_pose_txt(path):
     M = v[:9].reshape(3, 3)
     err = np.linalg.norm(M @ M.T - np.eye(3))
     if err > POSE_TXT_TOL or np.linalg.det(M) < 0:
-        raise HpeError(f"{path}: expected a rotation matrix, got ||R R^T - I|| = {err:.3g}, "
-                       f"det = {np.linalg.det(M):.4g}")
+        raise HpeError(
+            f"{path}: expected a rotation matrix, got ||R R^T - I|| = {err:.3g}, det = {np.linalg.det(M):.4g}"
+        )
     why = centre_problem(v[9:])
     if why:
         raise HpeError(f"{path}: {why}")
@@ -120,8 +122,10 @@ def centre_problem(c) -> str:
     """'' for a head centre (mm, depth camera) in front of the camera and nearer than :data:`MAX_CENTRE_MM`."""
     c = np.asarray(c, dtype=np.float64)
     if not (c[2] > 0 and np.abs(c).max() <= MAX_CENTRE_MM):
-        return (f"head centre: expected a point in front of the camera (z > 0) within {MAX_CENTRE_MM:g} mm, "
-                f"got ({c[0]:g}, {c[1]:g}, {c[2]:g}) mm")
+        return (
+            f"head centre: expected a point in front of the camera (z > 0) within {MAX_CENTRE_MM:g} mm, "
+            f"got ({c[0]:g}, {c[1]:g}, {c[2]:g}) mm"
+        )
     return ""
 
 
@@ -174,8 +178,11 @@ def read_calibration(path) -> dict:
     if not (w > 0 and h > 0 and float(w).is_integer() and float(h).is_integer() and max(w, h) <= 1e5):
         raise HpeError(f"{path}: width, height: expected positive whole numbers of pixels, got {w:g}, {h:g}")
     K, dist, R, t = v[:9].reshape(3, 3), v[9:13], v[13:22].reshape(3, 3), v[22:25]
-    for why in (intrinsics_problem(K, w, h), distortion_problem(dist, K, w, h, "distortion"),
-                rotation_problem(R, "R", POSE_TXT_TOL)):
+    for why in (
+        intrinsics_problem(K, w, h),
+        distortion_problem(dist, K, w, h, "distortion"),
+        rotation_problem(R, "R", POSE_TXT_TOL),
+    ):
         if why:
             raise HpeError(f"{path}: {why}")
     if np.abs(t).max() > MAX_CENTRE_MM:
@@ -197,8 +204,10 @@ def _refuse_duplicates(keys, names, where) -> None:
     seen: dict = {}
     for key, name in zip(keys, names):
         if key in seen:
-            raise HpeError(f"{where}: {seen[key]} and {name} are both sequence {key[0]} frame {key[1]}; keep one "
-                           "(its rows would be duplicated)")
+            raise HpeError(
+                f"{where}: {seen[key]} and {name} are both sequence {key[0]} frame {key[1]}; keep one "
+                "(its rows would be duplicated)"
+            )
         seen[key] = name
 
 
@@ -211,8 +220,8 @@ def labels_table(files, sequences, frames, centres, R=None, angles=None, system=
     """
     import pandas as pd
 
-    from ..rotation.columns import conversion_columns
     from ..rotation import canonical_to_labels, get_system
+    from ..rotation.columns import conversion_columns
 
     biwi = get_system(BIWI_SYSTEM)
     stored = np.asarray(R, dtype=np.float64) if R is not None else biwi.from_angles(angles)
@@ -295,8 +304,9 @@ def read_biwi(path, system=BIWI_SYSTEM, kind: str = "auto", bad: list | None = N
     _all_rejected(path, keep, bad)
     names, seqs, frames = [names[k] for k in keep], [recs[k][1] for k in keep], [recs[k][2] for k in keep]
     if kinds == {"txt"}:
-        return labels_table(names, seqs, frames, np.stack([p[1] for p in values]),
-                            R=np.stack([p[0] for p in values]), system=system)
+        return labels_table(
+            names, seqs, frames, np.stack([p[1] for p in values]), R=np.stack([p[0] for p in values]), system=system
+        )
     vals = np.stack(values)
     return labels_table(names, seqs, frames, vals[:, :3], angles=vals[:, 3:], system=system)
 
@@ -306,8 +316,7 @@ def frame_reject(name, sequence, frame, exc, where) -> dict:
     error without its ``where: `` prefix) and the whole one-line ``message`` (``FILE: reason``)."""
     msg = str(exc)
     head = f"{where}: "
-    return {"file": name, "sequence": sequence, "frame": int(frame),
-            "reason": msg.removeprefix(head), "message": msg}
+    return {"file": name, "sequence": sequence, "frame": int(frame), "reason": msg.removeprefix(head), "message": msg}
 
 
 def _all_rejected(path, keep, bad) -> None:
@@ -336,8 +345,10 @@ def read_biwi_tgz(path, system=BIWI_SYSTEM, bad: list | None = None):
                 if parsed is None or parsed[2] != "bin":
                     continue
                 if m.name in seen_members:
-                    raise HpeError(f"{path}: member {m.name} appears twice in the archive (its rows would be "
-                                   "duplicated); repack it with one copy")
+                    raise HpeError(
+                        f"{path}: member {m.name} appears twice in the archive (its rows would be "
+                        "duplicated); repack it with one copy"
+                    )
                 seen_members.add(m.name)
                 try:
                     if m.size != 24:  # checked from the header, before reading the member
@@ -359,8 +370,14 @@ def read_biwi_tgz(path, system=BIWI_SYSTEM, bad: list | None = None):
     _refuse_duplicates(list(zip(seqs, frames)), names, path)
     order = sorted(range(len(names)), key=lambda k: (seqs[k], frames[k]))
     v = np.stack(vals)[order]
-    return labels_table([names[k] for k in order], [seqs[k] for k in order], [frames[k] for k in order],
-                        v[:, :3], angles=v[:, 3:], system=system)
+    return labels_table(
+        [names[k] for k in order],
+        [seqs[k] for k in order],
+        [frames[k] for k in order],
+        v[:, :3],
+        angles=v[:, 3:],
+        system=system,
+    )
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -442,8 +459,14 @@ def _find_calibration(root: Path, sequence: str, name: str):
     return hit
 
 
-def read_biwi_camera(path, camera: str = "depth", calibration=None, head_size_mm: float = HEAD_SIZE_MM,
-                     system=BIWI_SYSTEM, bad: list | None = None):
+def read_biwi_camera(
+    path,
+    camera: str = "depth",
+    calibration=None,
+    head_size_mm: float = HEAD_SIZE_MM,
+    system=BIWI_SYSTEM,
+    bad: list | None = None,
+):
     """BIWI labels in the depth or RGB camera, with head-centre boxes.
 
     Parameters
@@ -491,22 +514,26 @@ def read_biwi_camera(path, camera: str = "depth", calibration=None, head_size_mm
         calp = _find_calibration(root, seq, cal_name)
         if calp is None:
             if camera == "rgb":
-                raise HpeError(f"{root}: no {seq}/rgb.cal for sequence {seq} (--camera rgb needs hpdb/NN/rgb.cal; "
-                               "point --calibration at the hpdb folder)")
+                raise HpeError(
+                    f"{root}: no {seq}/rgb.cal for sequence {seq} (--camera rgb needs hpdb/NN/rgb.cal; "
+                    "point --calibration at the hpdb folder)"
+                )
             continue
         cal = read_calibration(calp)
         if camera == "rgb":
             R[rows], centres[rows] = to_rgb_camera(R[rows], centres[rows], cal)
         K_rows[rows] = cal["K"]
         dist_rows[rows] = cal["dist"]
-    out = labels_table(base["file"].tolist(), seqs.tolist(), base["frame"].to_numpy(), centres, R=R,
-                       system=get_system(system))
+    out = labels_table(
+        base["file"].tolist(), seqs.tolist(), base["frame"].to_numpy(), centres, R=R, system=get_system(system)
+    )
     boxes = np.full((len(out), 4), np.nan)
     uv = np.full((len(out), 2), np.nan)
     for key in {(tuple(k.ravel()), tuple(d)) for k, d in zip(K_rows, dist_rows)}:
         rows = np.all(K_rows.reshape(-1, 9) == np.array(key[0]), axis=1) & np.all(dist_rows == np.array(key[1]), axis=1)
-        boxes[rows], uv[rows] = head_boxes(centres[rows], np.array(key[0]).reshape(3, 3), np.array(key[1]),
-                                           head_size_mm)
+        boxes[rows], uv[rows] = head_boxes(
+            centres[rows], np.array(key[0]).reshape(3, 3), np.array(key[1]), head_size_mm
+        )
     suffix = "rgb.png" if camera == "rgb" else "depth.bin"
     out["camera"] = camera
     out["image"] = [f"{s}/frame_{int(f):05d}_{suffix}" for s, f in zip(out["sequence"], out["frame"])]
@@ -560,8 +587,9 @@ def sequence_split(sequences, fractions=(0.7, 0.3), seed: int = 0, names=("train
     if fr.ndim != 1 or fr.size < 2 or (fr < 0).any() or not np.isclose(fr.sum(), 1.0):
         raise HpeError(f"--split: expected fractions >= 0 that sum to 1, got {','.join(f'{f:g}' for f in fr)}")
     if len(names) != fr.size:
-        names = tuple(["train", "val", "test"][:fr.size]) if fr.size <= 3 else \
-            tuple(f"split{i}" for i in range(fr.size))
+        names = (
+            tuple(["train", "val", "test"][: fr.size]) if fr.size <= 3 else tuple(f"split{i}" for i in range(fr.size))
+        )
     uniq = sorted({str(s) for s in sequences})
     perm = [uniq[i] for i in np.random.default_rng(seed).permutation(len(uniq))]
     cuts = np.round(np.cumsum(fr) * len(uniq)).astype(int)

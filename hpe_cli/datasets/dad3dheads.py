@@ -22,6 +22,7 @@ dataset's benchmark compares predictions with
 ``s``, so the two agree exactly when the model-view matrix has no scale
 (``mv_scale`` = 1, which the column lets you check).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -39,8 +40,7 @@ ATTRIBUTES = ("quality", "gender", "expression", "age", "occlusions", "pose", "s
 
 def is_dad_metadata(doc) -> bool:
     """A ``<subset>.json`` list: objects with ``item_id`` and ``bbox``."""
-    return isinstance(doc, list) and bool(doc) and isinstance(doc[0], dict) and "item_id" in doc[0] \
-        and "bbox" in doc[0]
+    return isinstance(doc, list) and bool(doc) and isinstance(doc[0], dict) and "item_id" in doc[0] and "bbox" in doc[0]
 
 
 def model_view_to_matrix(mv) -> tuple:
@@ -92,8 +92,7 @@ def _item_fields(it: dict, where: str, subset: str):
     image = it.get("img_path", f"{subset}/images/{iid}.png")
     if not isinstance(image, str) or not image or member_problem(image):
         why = member_problem(image) if isinstance(image, str) and image else ""
-        raise HpeError(f"{where}: img_path: expected a relative image path, got "
-                       f"{why or describe(image)}")
+        raise HpeError(f"{where}: img_path: expected a relative image path, got {why or describe(image)}")
     box = np.full(4, np.nan)
     b = it.get("bbox")
     if b is not None:
@@ -146,8 +145,10 @@ def read_dad3dheads(path, with_lines: bool = False):
     path = Path(path)
     metas = _metadata_files(path)
     if not metas:
-        raise HpeError(f"{path}: expected a DAD-3DHeads folder (train/train.json, val/val.json, ... or "
-                       "<subset>.json with annotations/<ID>.json)")
+        raise HpeError(
+            f"{path}: expected a DAD-3DHeads folder (train/train.json, val/val.json, ... or "
+            "<subset>.json with annotations/<ID>.json)"
+        )
     frames = []
     for subset, meta in metas:
         items = load_json(meta)

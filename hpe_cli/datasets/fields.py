@@ -25,6 +25,7 @@ Camera data
   corners; BIWI's Kinect cameras have no distortion. A coefficient that the image cannot check
   (unknown size) is bounded by :data:`MAX_RADIAL` instead.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -56,8 +57,14 @@ def _describe(value) -> str:
     if isinstance(value, (bytes, bytearray)):
         return f"bytes {bytes(value[:20])!r}"
     if isinstance(value, np.ndarray):
-        kind = {"U": "str", "S": "bytes", "O": "objects", "V": "structs (a MATLAB struct)", "c": "complex numbers",
-                "b": "bools"}.get(value.dtype.kind, str(value.dtype))
+        kind = {
+            "U": "str",
+            "S": "bytes",
+            "O": "objects",
+            "V": "structs (a MATLAB struct)",
+            "c": "complex numbers",
+            "b": "bools",
+        }.get(value.dtype.kind, str(value.dtype))
         return f"a {value.shape} array of {kind}"
     if isinstance(value, (list, tuple)):
         inner = {type(v).__name__ for v in value[:50]}
@@ -79,9 +86,15 @@ def as_numbers(value, shape=None, min_size: int = 0):
         try:
             with np.errstate(all="ignore"):
                 raw = np.asarray(value)
-            if raw.dtype.kind in "fiu" or raw.dtype.kind == "O" and raw.size and all(
+            if (
+                raw.dtype.kind in "fiu"
+                or raw.dtype.kind == "O"
+                and raw.size
+                and all(
                     isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
-                    for v in raw.reshape(-1).tolist()):
+                    for v in raw.reshape(-1).tolist()
+                )
+            ):
                 arr = raw.astype(np.float64)
         except (ValueError, TypeError, OverflowError, RecursionError, MemoryError):
             arr = None
@@ -148,8 +161,9 @@ def rotation_problem(R, field: str = "R", tol: float = ROTATION_TOL) -> str:
         err = float(np.linalg.norm(R @ R.T - np.eye(3)))
         det = float(np.linalg.det(R))
     if not err <= tol:
-        return (f"{field}: expected a rotation matrix (orthonormal, det +1), got ||R R^T - I|| = {err:.3g} "
-                f"(det {det:.4g})")
+        return (
+            f"{field}: expected a rotation matrix (orthonormal, det +1), got ||R R^T - I|| = {err:.3g} (det {det:.4g})"
+        )
     if det < 0:
         return f"{field}: expected a rotation matrix (det +1), got det {det:.4g} (a reflection)"
     return ""
@@ -168,8 +182,10 @@ def intrinsics_problem(K, width=None, height=None, field: str = "K") -> str:
     if width is not None and height is not None:
         cx, cy = K[0, 2], K[1, 2]
         if not (0 <= cx <= width and 0 <= cy <= height):
-            return (f"{field}: expected the principal point inside the {int(width)}x{int(height)} image, "
-                    f"got ({cx:g}, {cy:g})")
+            return (
+                f"{field}: expected the principal point inside the {int(width)}x{int(height)} image, "
+                f"got ({cx:g}, {cy:g})"
+            )
     return ""
 
 
@@ -183,8 +199,13 @@ def distortion_problem(dist, K=None, width=None, height=None, field: str = "dist
     d = np.asarray(dist, dtype=np.float64).reshape(1, -1)
     if K is None or width is None or height is None:
         return distortion_problems(d, None, None, None, field)[0]
-    return distortion_problems(d, np.asarray(K, dtype=np.float64)[None], np.array([width], dtype=np.float64),
-                               np.array([height], dtype=np.float64), field)[0]
+    return distortion_problems(
+        d,
+        np.asarray(K, dtype=np.float64)[None],
+        np.array([width], dtype=np.float64),
+        np.array([height], dtype=np.float64),
+        field,
+    )[0]
 
 
 def distortion_problems(dist, K=None, width=None, height=None, field: str = "distCoef") -> list:
@@ -212,8 +233,8 @@ def distortion_problems(dist, K=None, width=None, height=None, field: str = "dis
                 r_max = np.maximum(r_max, np.sqrt(x * x + y * y))
             r = r_max[:, None] * np.linspace(0.0, 1.0, 65)[None]
             r2 = r * r
-            g = 1 + k1[:, None] * r2 + k2[:, None] * r2 ** 2 + k3[:, None] * r2 ** 3
-            slope = 1 + 3 * k1[:, None] * r2 + 5 * k2[:, None] * r2 ** 2 + 7 * k3[:, None] * r2 ** 3
+            g = 1 + k1[:, None] * r2 + k2[:, None] * r2**2 + k3[:, None] * r2**3
+            slope = 1 + 3 * k1[:, None] * r2 + 5 * k2[:, None] * r2**2 + 7 * k3[:, None] * r2**3
             lo, hi = RADIAL_FACTOR
             out_range = ~((g >= lo) & (g <= hi))
             bad_shape = out_range.any(axis=1) & np.isfinite(r_max)
@@ -230,15 +251,21 @@ def distortion_problems(dist, K=None, width=None, height=None, field: str = "dis
         elif radial_big[c]:
             out[c] = f"{field}: expected radial coefficients |k1|, |k2|, |k3| <= {MAX_RADIAL:g} (a real lens), got {v}"
         elif tang_big[c]:
-            out[c] = (f"{field}: expected tangential coefficients |p1|, |p2| <= {MAX_TANGENTIAL:g} (a real lens is "
-                      f"decentred by ~1e-3), got p1 {v[2]:g}, p2 {v[3]:g}")
+            out[c] = (
+                f"{field}: expected tangential coefficients |p1|, |p2| <= {MAX_TANGENTIAL:g} (a real lens is "
+                f"decentred by ~1e-3), got p1 {v[2]:g}, p2 {v[3]:g}"
+            )
         elif bad_shape[c]:
-            out[c] = (f"{field}: expected a lens model that scales image radii by {RADIAL_FACTOR[0]:g} to "
-                      f"{RADIAL_FACTOR[1]:g}, got a factor of {g_at[c]:.3g} at normalised radius {r_at[c]:.3g} "
-                      f"(inside the image; coefficients {v})")
+            out[c] = (
+                f"{field}: expected a lens model that scales image radii by {RADIAL_FACTOR[0]:g} to "
+                f"{RADIAL_FACTOR[1]:g}, got a factor of {g_at[c]:.3g} at normalised radius {r_at[c]:.3g} "
+                f"(inside the image; coefficients {v})"
+            )
         else:
-            out[c] = (f"{field}: expected a lens model that is one-to-one over the image, got one that folds back "
-                      f"at normalised radius {r_fold[c]:.3g} (coefficients {v})")
+            out[c] = (
+                f"{field}: expected a lens model that is one-to-one over the image, got one that folds back "
+                f"at normalised radius {r_fold[c]:.3g} (coefficients {v})"
+            )
     return out
 
 

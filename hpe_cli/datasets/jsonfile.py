@@ -1,4 +1,5 @@
 """Reading a JSON file for the dataset readers (no table machinery: ``io`` builds on ``datasets``, not back)."""
+
 from __future__ import annotations
 
 from pathlib import Path

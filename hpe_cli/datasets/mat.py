@@ -4,6 +4,7 @@
 tdz, scale. ``pt2d`` is 2x68 (300W-LP) or 2x21 (AFLW2000, -1 marks an invisible
 point, returned here as NaN). ``pt3d_68`` is 3x68: image x, image y, depth.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -29,11 +30,11 @@ def read_mat(path, fileobj=None) -> dict:
 
     path = Path(path)
     try:
-        m = scipy.io.loadmat(fileobj if fileobj is not None else path,
-                             variable_names=["Pose_Para", "pt2d", "pt3d_68"])
+        m = scipy.io.loadmat(fileobj if fileobj is not None else path, variable_names=["Pose_Para", "pt2d", "pt3d_68"])
     except Exception as exc:  # scipy raises many types for truncated/corrupt files
         raise HpeError(f"{path}: not a readable MATLAB .mat file ({' '.join(str(exc).split())[:160]})") from None
     from .mat_fields import check_fields
+
     m = check_fields(m, path)  # field types checked at the door (cell arrays, structs, char arrays)
     if "Pose_Para" not in m:
         if fileobj is not None:

@@ -6,6 +6,7 @@ logical as a bool array. Only real numeric arrays are labels; anything else is r
 line naming the file and the variable (``x.mat: Pose_Para: expected a 1x7 numeric array, got a cell
 array``), before :mod:`hpe_cli.datasets.mat` converts the values.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -58,8 +59,9 @@ def check_fields(m: dict, path) -> dict:
         if not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu":
             raise HpeError(f"{path}: {key}: expected {want}, got {matlab_kind(v)}")
         arr = v.astype(np.float64)
-        if key == "Pose_Para" and (arr.size < least or arr.size > 7 or arr.ndim > 2 or
-                                   (arr.ndim == 2 and min(arr.shape) != 1)):
+        if key == "Pose_Para" and (
+            arr.size < least or arr.size > 7 or arr.ndim > 2 or (arr.ndim == 2 and min(arr.shape) != 1)
+        ):
             raise HpeError(f"{path}: {key}: expected {want}, got shape {arr.shape}")
         if key != "Pose_Para" and arr.ndim != 2:
             raise HpeError(f"{path}: {key}: expected {want}, got shape {arr.shape}")

@@ -13,6 +13,7 @@ Layout of a sequence folder ``<seq>/``::
                                           scripts/hdImgsExtractor.sh numbers them from 0)
     hdVideos/hd_00_XX.mp4                (the videos; see panoptic_video.py)
 """
+
 from __future__ import annotations
 
 import os
@@ -25,8 +26,6 @@ import numpy as np
 
 from ..errors import HpeError
 from .fields import as_int, describe, frame_number_problem, member_problem
-# the calibration reader lives in panoptic_calibration.py; its names are part of this module's API
-from .panoptic_json import _load_json, _parse_json  # noqa: F401
 from .panoptic_calibration import (  # noqa: F401
     ABSURD,
     CAMERA_TYPES,
@@ -34,6 +33,9 @@ from .panoptic_calibration import (  # noqa: F401
     Cameras,
     read_calibration,
 )
+
+# the calibration reader lives in panoptic_calibration.py; its names are part of this module's API
+from .panoptic_json import _load_json, _parse_json  # noqa: F401
 
 FACE_DIR = "hdFace3d"
 FACE_RE = re.compile(r"^faceRecon3D_hd(\d+)\.json$")
@@ -139,7 +141,7 @@ def _tar_frames_fast(tar_path):
         if member_problem(name):
             return None  # _tar_frames_tarfile refuses it with the message
         if not is_dir:
-            m = match(name[name.rfind("/") + 1:])  # the base name, as _tar_frames_tarfile matches it
+            m = match(name[name.rfind("/") + 1 :])  # the base name, as _tar_frames_tarfile matches it
             if m:
                 if frame_number_problem(m[1]):
                     return None
@@ -154,7 +156,7 @@ def _tar_frames_fast(tar_path):
 #: typeflags of the plain case: regular file ("0", or NUL in old tars) and directory ("5")
 _FILE, _OLD_FILE, _DIR = ord("0"), 0, ord("5")
 #: magic + version of a POSIX ustar header and of a GNU tar header, as 8-byte words
-_MAGICS = np.frombuffer(b"ustar\x0000" b"ustar  \x00", dtype=np.uint64)
+_MAGICS = np.frombuffer(b"ustar\x0000ustar  \x00", dtype=np.uint64)
 #: where the header's number fields (all those tarfile reads, TarInfo.frombuf) start when bytes
 #: 100:156 (mode uid gid size mtime chksum) and 329:345 (devmajor devminor) are put side by side
 _FIELD_STARTS = np.array([8, 16, 24, 36, 48, 56, 64])
@@ -230,7 +232,7 @@ def _scan_plain_tar(path, chunk: int = 4096):
                 if size < 0 or kind not in (_FILE, _OLD_FILE, _DIR):
                     return None
                 i = head.find(0, 0, 100)
-                name = head[:i if i >= 0 else 100].decode(enc, "surrogateescape")
+                name = head[: i if i >= 0 else 100].decode(enc, "surrogateescape")
                 is_dir = kind == _DIR or (kind == _OLD_FILE and name.endswith("/"))  # V7: a file "x/" is a dir
                 if is_dir:
                     if size:
@@ -238,7 +240,7 @@ def _scan_plain_tar(path, chunk: int = 4096):
                     name = name.rstrip("/")
                 if head[345]:  # a ustar prefix (tarfile joins GNU headers' bytes 345:500 too)
                     i = head.find(0, 345, 500)
-                    name = head[345:i if i >= 0 else 500].decode(enc, "surrogateescape") + "/" + name
+                    name = head[345 : i if i >= 0 else 500].decode(enc, "surrogateescape") + "/" + name
                     if is_dir:
                         name = name.rstrip("/")
                 members.append((name, is_dir, off + _BLOCK, size))
@@ -280,8 +282,9 @@ def _plain_headers(heads: list) -> bool:
     good = chk == rest + 8 * ord(" ")  # the chksum field counts as 8 spaces
     if not good.all():  # some old tars summed signed bytes; tarfile accepts both sums
         signed = h.view(np.int8)
-        good |= chk == (signed.sum(axis=1, dtype=np.int64) - signed[:, 148:156].sum(axis=1, dtype=np.int64)
-                        + 8 * ord(" "))
+        good |= chk == (
+            signed.sum(axis=1, dtype=np.int64) - signed[:, 148:156].sum(axis=1, dtype=np.int64) + 8 * ord(" ")
+        )
     return bool(good.all())
 
 
@@ -299,19 +302,27 @@ def _tar_frames_tarfile(tar_path) -> dict:
                     if not frames:
                         raise HpeError(f"{tar_path}: not a readable tar archive ({exc})") from None
                     if size - tf.offset >= tarfile.BLOCKSIZE:  # a whole header is there but unreadable
-                        raise HpeError(f"{tar_path}: unreadable member header at byte {tf.offset} ({exc}); "
-                                       "the frames after it cannot be found (corrupt download?)") from None
+                        raise HpeError(
+                            f"{tar_path}: unreadable member header at byte {tf.offset} ({exc}); "
+                            "the frames after it cannot be found (corrupt download?)"
+                        ) from None
                     break  # cut inside the last header: the members before it are indexed
                 if info is None:  # end of the archive, or a header tarfile cannot read
                     if size - tf.offset < tarfile.BLOCKSIZE and _nonzero_after(tar_path, tf.offset):
-                        raise HpeError(f"{tar_path}: the archive ends inside a member header at byte {tf.offset} "
-                                       "(truncated download); the frames after it cannot be found")
+                        raise HpeError(
+                            f"{tar_path}: the archive ends inside a member header at byte {tf.offset} "
+                            "(truncated download); the frames after it cannot be found"
+                        )
                     if _nonzero_after(tar_path, tf.offset):
-                        raise HpeError(f"{tar_path}: unreadable member header at byte {tf.offset}; the frames "
-                                       "after it cannot be found (corrupt download?)")
+                        raise HpeError(
+                            f"{tar_path}: unreadable member header at byte {tf.offset}; the frames "
+                            "after it cannot be found (corrupt download?)"
+                        )
                     if tf.offset == size and frames and not any(r.truncated for r in frames.values()):
-                        raise HpeError(f"{tar_path}: ends at byte {size} without tar's end-of-archive blocks "
-                                       "(truncated download?); frames after the last member may be missing")
+                        raise HpeError(
+                            f"{tar_path}: ends at byte {size} without tar's end-of-archive blocks "
+                            "(truncated download?); frames after the last member may be missing"
+                        )
                     break
                 if member_problem(info.name):
                     raise HpeError(f"{tar_path}: member {info.name!r}: refused: {member_problem(info.name)}")
@@ -325,8 +336,9 @@ def _tar_frames_tarfile(tar_path) -> dict:
                 k = int(m.group(1))
                 if k in frames:
                     raise HpeError(f"{tar_path}: members {frames[k].member} and {info.name} are both frame {k}")
-                frames[k] = FaceRef(str(tar_path), info.name, info.offset_data, info.size,
-                                    info.offset_data + info.size > size)
+                frames[k] = FaceRef(
+                    str(tar_path), info.name, info.offset_data, info.size, info.offset_data + info.size > size
+                )
     except tarfile.ReadError as exc:
         raise HpeError(f"{tar_path}: not a readable tar archive ({exc})") from None
     except OSError as exc:
@@ -424,15 +436,16 @@ def read_face_frame(path) -> dict:
         if not isinstance(person, dict):
             raise HpeError(f"{where}: expected an object with id and face70, got {describe(person)}")
         try:
-            pid, why = as_int(person["id"], -2**63, 2**63 - 1)
+            pid, why = as_int(person["id"], -(2**63), 2**63 - 1)
             if pid is None:
                 raise HpeError(f"{where}: id: expected an integer, {why}")
             ids[i] = pid
             where = f"{path}: person {i} (id {ids[i]})"
             face = person["face70"]
             if not isinstance(face, dict):
-                raise HpeError(f"{where}: face70: expected an object with landmarks and averageScore, got "
-                               f"{describe(face)}")
+                raise HpeError(
+                    f"{where}: face70: expected an object with landmarks and averageScore, got {describe(face)}"
+                )
             lm[i] = _floats(face["landmarks"], 3 * N_FACE70, where, "landmarks").reshape(N_FACE70, 3)
             score[i] = _floats(face["averageScore"], N_FACE70, where, "averageScore")
             if face.get("averageReproError") is not None:
@@ -444,9 +457,15 @@ def read_face_frame(path) -> dict:
     t = data.get("univTime")
     if m and frame_number_problem(m.group(1)):
         raise HpeError(f"{path}: {frame_number_problem(m.group(1))}")
-    return {"frame": int(m.group(1)) if m else -1, "version": data.get("version"),
-            "univTime": float(t) if isinstance(t, float) or (isinstance(t, int) and abs(t) < 2**53) else float("nan"),
-            "person_id": ids, "landmarks": lm, "score": score, "reproj_error": rep}
+    return {
+        "frame": int(m.group(1)) if m else -1,
+        "version": data.get("version"),
+        "univTime": float(t) if isinstance(t, float) or (isinstance(t, int) and abs(t) < 2**53) else float("nan"),
+        "person_id": ids,
+        "landmarks": lm,
+        "score": score,
+        "reproj_error": rep,
+    }
 
 
 def read_face_frames(paths: dict) -> dict:
@@ -464,18 +483,27 @@ def read_face_frames(paths: dict) -> dict:
     unreadable = []
     for frame, p in paths.items():
         if isinstance(p, FaceRef) and p.truncated:
-            unreadable.append((int(frame), "truncated face file",
-                               f"{p.member}: {p.size} bytes declared, the archive ends first"))
+            unreadable.append(
+                (int(frame), "truncated face file", f"{p.member}: {p.size} bytes declared, the archive ends first")
+            )
             continue
         f = read_face_frame(p)
         parts.append((np.full(len(f["person_id"]), int(frame), dtype=np.int64), f))
     if not parts:
-        return {"frame": np.zeros(0, np.int64), "person_id": np.zeros(0, np.int64),
-                "landmarks": np.zeros((0, N_FACE70, 3)), "score": np.zeros((0, N_FACE70)), "unreadable": unreadable}
-    return {"unreadable": unreadable, "frame": np.concatenate([fr for fr, _ in parts]),
-            "person_id": np.concatenate([f["person_id"] for _, f in parts]),
-            "landmarks": np.concatenate([f["landmarks"] for _, f in parts]),
-            "score": np.concatenate([f["score"] for _, f in parts])}
+        return {
+            "frame": np.zeros(0, np.int64),
+            "person_id": np.zeros(0, np.int64),
+            "landmarks": np.zeros((0, N_FACE70, 3)),
+            "score": np.zeros((0, N_FACE70)),
+            "unreadable": unreadable,
+        }
+    return {
+        "unreadable": unreadable,
+        "frame": np.concatenate([fr for fr, _ in parts]),
+        "person_id": np.concatenate([f["person_id"] for _, f in parts]),
+        "landmarks": np.concatenate([f["landmarks"] for _, f in parts]),
+        "score": np.concatenate([f["score"] for _, f in parts]),
+    }
 
 
 def image_path(camera: str, frame: int, camera_type: str = "hd") -> str:
@@ -494,8 +522,9 @@ def find_calibration(seq_dir) -> Path:
         return found[0]
     if not found:
         raise HpeError(f"{seq_dir}: no calibration_<seq>.json (use --calibration FILE)")
-    raise HpeError(f"{seq_dir}: several calibration files ({', '.join(p.name for p in found)}); "
-                   "choose one with --calibration FILE")
+    raise HpeError(
+        f"{seq_dir}: several calibration files ({', '.join(p.name for p in found)}); choose one with --calibration FILE"
+    )
 
 
 # ----------------------------------------------------------------- helpers

@@ -7,6 +7,7 @@ pinhole matrix with positive focal lengths and the principal point inside the im
 (:func:`hpe_cli.datasets.fields.distortion_problems`, bound stated there); ``resolution``, ``panel``,
 ``node`` integers. Failures are one line: ``FILE: camera I (NAME): FIELD: expected X, got Y``.
 """
+
 from __future__ import annotations
 
 import re
@@ -65,9 +66,13 @@ class Cameras:
 
     def take(self, idx) -> Cameras:
         idx = np.asarray(idx, dtype=np.intp)
-        return Cameras(*(getattr(self, f)[idx] for f in
-                         ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")),
-                       source=self.source)
+        return Cameras(
+            *(
+                getattr(self, f)[idx]
+                for f in ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")
+            ),
+            source=self.source,
+        )
 
     def select(self, spec="hd") -> Cameras:
         """Cameras by type (``hd``, ``vga``, ``kinect-color``, ``all``) or by names.
@@ -89,8 +94,10 @@ class Cameras:
                 chosen.append(index[item])
             else:
                 known = ", ".join(list(self.names[:4]) + ["..."]) if len(self) > 4 else ", ".join(self.names)
-                raise HpeError(f"{self.source}: expected a camera name ({known}) or a type "
-                               f"({', '.join(CAMERA_TYPES)}, all), got {item!r}")
+                raise HpeError(
+                    f"{self.source}: expected a camera name ({known}) or a type "
+                    f"({', '.join(CAMERA_TYPES)}, all), got {item!r}"
+                )
         chosen = list(dict.fromkeys(chosen))
         if not chosen:
             raise HpeError(f"{self.source}: no camera matches {spec!r}")
@@ -116,8 +123,11 @@ def read_calibration(path, cameras="all") -> Cameras:
     data = _load_json(path)
     cams = data.get("cameras") if isinstance(data, dict) else None
     if not isinstance(cams, list):
-        got = type(data).__name__ if not isinstance(data, dict) else \
-            "keys " + ", ".join(repr(k)[:30] for k in list(data)[:6])
+        got = (
+            type(data).__name__
+            if not isinstance(data, dict)
+            else "keys " + ", ".join(repr(k)[:30] for k in list(data)[:6])
+        )
         raise HpeError(f"{path}: expected an object with a 'cameras' list, got {got}")
     cols = {k: [] for k in ("names", "types", "panel", "node", "width", "height", "K", "dist", "R", "t")}
     seen: dict = {}
@@ -133,17 +143,25 @@ def read_calibration(path, cameras="all") -> Cameras:
         raise HpeError(f"{path}: the calibration lists no cameras")
     from .fields import distortion_problems
 
-    bad = distortion_problems(np.stack(cols["dist"]), np.stack(cols["K"]), np.asarray(cols["width"]),
-                              np.asarray(cols["height"]))  # what the lens model does inside each image
+    bad = distortion_problems(
+        np.stack(cols["dist"]), np.stack(cols["K"]), np.asarray(cols["width"]), np.asarray(cols["height"])
+    )  # what the lens model does inside each image
     for i, why in enumerate(bad):
         if why:
             raise HpeError(f"{path}: camera {i} ({cols['names'][i]}): {why}")
     out = Cameras(
-        names=np.asarray(cols["names"], dtype=object), types=np.asarray(cols["types"], dtype=object),
-        panel=np.asarray(cols["panel"], dtype=np.int64), node=np.asarray(cols["node"], dtype=np.int64),
-        width=np.asarray(cols["width"], dtype=np.int64), height=np.asarray(cols["height"], dtype=np.int64),
-        K=np.stack(cols["K"]), dist=np.stack(cols["dist"]), R=np.stack(cols["R"]), t=np.stack(cols["t"]),
-        source=str(path))
+        names=np.asarray(cols["names"], dtype=object),
+        types=np.asarray(cols["types"], dtype=object),
+        panel=np.asarray(cols["panel"], dtype=np.int64),
+        node=np.asarray(cols["node"], dtype=np.int64),
+        width=np.asarray(cols["width"], dtype=np.int64),
+        height=np.asarray(cols["height"], dtype=np.int64),
+        K=np.stack(cols["K"]),
+        dist=np.stack(cols["dist"]),
+        R=np.stack(cols["R"]),
+        t=np.stack(cols["t"]),
+        source=str(path),
+    )
     return out if cameras == "all" else out.select(cameras)
 
 
@@ -168,8 +186,10 @@ def _camera(cam, i: int, path) -> tuple:
             raise HpeError(f"{where}: missing key {key!r}")
     name = cam["name"]
     if not isinstance(name, str) or not NAME_RE.match(name) or name in (".", ".."):
-        raise HpeError(f"{where}: name: expected a camera name of letters, digits, '_', '-' or '.', got "
-                       f"{describe(name) if not isinstance(name, str) else repr(name)} (names become image paths)")
+        raise HpeError(
+            f"{where}: name: expected a camera name of letters, digits, '_', '-' or '.', got "
+            f"{describe(name) if not isinstance(name, str) else repr(name)} (names become image paths)"
+        )
     where = f"{path}: camera {i} ({name})"
 
     def numbers(key, shape, size=None):
@@ -193,8 +213,9 @@ def _camera(cam, i: int, path) -> tuple:
     if not np.isfinite(d).all():
         raise HpeError(f"{where}: expected finite K, R, t and distCoef, got NaN or inf in distCoef")
     if d.size > 5 and np.any(d[5:] != 0):
-        raise HpeError(f"{where}: distCoef: only the 5-coefficient OpenCV model is supported, got {d.size} "
-                       "non-zero coefficients")
+        raise HpeError(
+            f"{where}: distCoef: only the 5-coefficient OpenCV model is supported, got {d.size} non-zero coefficients"
+        )
     d = np.concatenate([d, np.zeros(5)])[:5]
     res = cam.get("resolution")
     if not isinstance(res, (list, tuple)) or len(res) != 2:
@@ -205,11 +226,12 @@ def _camera(cam, i: int, path) -> tuple:
     if w <= 0 or h <= 0:
         raise HpeError(f"{where}: expected a positive resolution, got {w}x{h}")
     if not (np.abs(R @ R.T - np.eye(3)).max() <= 1e-4 and np.linalg.det(R) > 0):
-        raise HpeError(f"{where}: expected R to be a rotation (orthonormal, det +1), got det "
-                       f"{np.linalg.det(R):.6g}, ||R R^T - I|| = {np.linalg.norm(R @ R.T - np.eye(3)):.3g}")
+        raise HpeError(
+            f"{where}: expected R to be a rotation (orthonormal, det +1), got det "
+            f"{np.linalg.det(R):.6g}, ||R R^T - I|| = {np.linalg.norm(R @ R.T - np.eye(3)):.3g}"
+        )
     if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
-        raise HpeError(f"{where}: expected K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, "
-                       f"got {K.tolist()}")
+        raise HpeError(f"{where}: expected K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {K.tolist()}")
     if not (0 <= K[0, 2] <= w and 0 <= K[1, 2] <= h):
         raise HpeError(f"{where}: {intrinsics_problem(K, w, h)}")
     if not (np.abs(t) < ABSURD).all():
@@ -219,7 +241,7 @@ def _camera(cam, i: int, path) -> tuple:
         raise HpeError(f"{where}: type: expected a string (hd, vga, kinect-color), got {describe(typ)}")
     ids = []
     for key in ("panel", "node"):
-        v, why = as_int(cam.get(key, -1), -2**31, 2**31 - 1)
+        v, why = as_int(cam.get(key, -1), -(2**31), 2**31 - 1)
         if v is None:
             raise HpeError(f"{where}: {key}: expected an integer, {why}")
         ids.append(v)

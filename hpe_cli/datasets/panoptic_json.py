@@ -1,4 +1,5 @@
 """Reading the Panoptic toolbox's JSON files (calibration, face files): orjson, the standard library's messages."""
+
 from __future__ import annotations
 
 import json
@@ -32,7 +33,8 @@ def _parse_json(raw: bytes, path):
     try:
         return json.loads(raw)
     except json.JSONDecodeError as exc:
-        raise HpeError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); "
-                       "truncated file?") from None
+        raise HpeError(
+            f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); truncated file?"
+        ) from None
     except UnicodeDecodeError as exc:
         raise HpeError(f"{path}: not valid JSON text ({exc.reason})") from None

@@ -9,6 +9,7 @@ decodes a video once, sequentially: it ``grab()``s the frames it does not
 need (demuxed and decoded but not converted) and ``retrieve()``s only the
 ones asked for.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -76,8 +77,9 @@ class VideoFrames:
             finally:
                 cap.release()
             if not ok or image is None:
-                raise HpeError(f"{self.path}: no decodable frame to check against the calibration's "
-                               f"{want[0]}x{want[1]}")
+                raise HpeError(
+                    f"{self.path}: no decodable frame to check against the calibration's {want[0]}x{want[1]}"
+                )
             got = (image.shape[1], image.shape[0])
         if want is not None:
             self._compare(got, want)
@@ -85,9 +87,11 @@ class VideoFrames:
 
     def _compare(self, got, want) -> None:
         if tuple(got) != tuple(want):
-            raise HpeError(f"{self.path}: frames are {got[0]}x{got[1]} pixels, but the calibration gives "
-                           f"{want[0]}x{want[1]} for this camera; expected the camera's full-resolution video "
-                           "(crops and projections would use the wrong pixels)")
+            raise HpeError(
+                f"{self.path}: frames are {got[0]}x{got[1]} pixels, but the calibration gives "
+                f"{want[0]}x{want[1]} for this camera; expected the camera's full-resolution video "
+                "(crops and projections would use the wrong pixels)"
+            )
 
     def frame_count(self) -> int:
         """The container's frame count (may be approximate; :meth:`read` does not rely on it)."""
@@ -112,8 +116,9 @@ class VideoFrames:
         cap = cv2.VideoCapture(str(self.path))
         if not cap.isOpened():
             cap.release()
-            raise HpeError(f"{self.path}: cannot open the video {self.path.name} (truncated, or not a video "
-                           "OpenCV can decode)")
+            raise HpeError(
+                f"{self.path}: cannot open the video {self.path.name} (truncated, or not a video OpenCV can decode)"
+            )
         return cap
 
     def read(self, frame_numbers):

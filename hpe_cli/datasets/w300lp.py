@@ -23,6 +23,7 @@ landmarks projected into the image), the keys face-alignment code reads with
 only with ``pt2d=True``. The landmark folder has no ``_Flip`` subsets, so
 mirrored rows have no landmark columns (NaN).
 """
+
 from __future__ import annotations
 
 import io
@@ -114,8 +115,10 @@ def _check_members(path, names) -> None:
         if why:
             raise HpeError(f"{path}: member {n!r}: refused: {why}")
         if n in seen:
-            raise HpeError(f"{path}: member {n} appears twice in the archive (its rows would be duplicated); "
-                           "repack it with one copy")
+            raise HpeError(
+                f"{path}: member {n} appears twice in the archive (its rows would be duplicated); "
+                "repack it with one copy"
+            )
         seen.add(n)
 
 
@@ -190,12 +193,14 @@ class _Source:
 def _table(rows, poses, lms, path, pt2d_rows=None):
     import pandas as pd
 
-    frame = pd.DataFrame({
-        "file": [r[2] for r in rows],
-        "image": [str(PurePosixPath(r[2]).with_suffix(".jpg")) for r in rows],
-        "subset": [r[0] for r in rows],
-        "flipped": np.array([r[1] for r in rows], dtype=bool),
-    })
+    frame = pd.DataFrame(
+        {
+            "file": [r[2] for r in rows],
+            "image": [str(PurePosixPath(r[2]).with_suffix(".jpg")) for r in rows],
+            "subset": [r[0] for r in rows],
+            "flipped": np.array([r[1] for r in rows], dtype=bool),
+        }
+    )
     ident = [split_name(PurePosixPath(r[2]).stem) for r in rows]
     frame["identity"] = [i[0] for i in ident]
     frame["k"] = np.array([i[1] for i in ident], dtype=np.int64)
@@ -217,7 +222,7 @@ def _table(rows, poses, lms, path, pt2d_rows=None):
         p3 = np.full((len(rows), 68, d), np.nan)
         for n, l in enumerate(lms):
             if l is not None and l["pts_3d"] is not None:
-                p3[n, :, :l["pts_3d"].shape[1]] = l["pts_3d"]
+                p3[n, :, : l["pts_3d"].shape[1]] = l["pts_3d"]
         for i in range(68):
             for a, ax in enumerate("xyz"[:d]):
                 extra[f"lm3d{i}_{ax}"] = p3[:, i, a]
@@ -226,7 +231,7 @@ def _table(rows, poses, lms, path, pt2d_rows=None):
         q = np.full((len(rows), 2, L), np.nan)
         for n, p in enumerate(pt2d_rows):
             if p is not None:
-                q[n, :, :p.shape[1]] = p
+                q[n, :, : p.shape[1]] = p
         for i in range(L):
             extra[f"pt2d{i}_x"], extra[f"pt2d{i}_y"] = q[:, 0, i], q[:, 1, i]
     if extra:
@@ -272,11 +277,15 @@ class W300LPStream:
 
         rows_all = self.src.rows
         for start in range(0, len(rows_all), self.chunk):
-            rows = rows_all[start:start + self.chunk]
+            rows = rows_all[start : start + self.chunk]
             poses, _, lms = self.src.read(rows, self.landmarks)
             f = _table(rows, poses, lms, self.path)
-            cols = [pa.array(f[n].to_numpy(), type=fd.type) if n in f.columns else
-                    pa.array(np.full(len(f), np.nan), type=fd.type) for n, fd in zip(self.names, self.fields)]
+            cols = [
+                pa.array(f[n].to_numpy(), type=fd.type)
+                if n in f.columns
+                else pa.array(np.full(len(f), np.nan), type=fd.type)
+                for n, fd in zip(self.names, self.fields)
+            ]
             yield pa.RecordBatch.from_arrays(cols, schema=self.schema)
 
 
@@ -302,8 +311,15 @@ def open_w300lp(path, landmarks: bool = True, chunk: int = 2048) -> W300LPStream
     if landmarks and src.pts:
         names += [f"lm{i}_{a}" for i in range(68) for a in "xy"]
         names += [f"lm3d{i}_{a}" for i in range(68) for a in "xyz"[:dims3]]
-    fields = [pa.field(n, pa.string()) if n in ("file", "image", "subset", "identity") else
-              pa.field(n, pa.bool_()) if n == "flipped" else pa.field(n, pa.int64()) if n == "k" else
-              pa.field(n, pa.float64()) for n in names]
+    fields = [
+        pa.field(n, pa.string())
+        if n in ("file", "image", "subset", "identity")
+        else pa.field(n, pa.bool_())
+        if n == "flipped"
+        else pa.field(n, pa.int64())
+        if n == "k"
+        else pa.field(n, pa.float64())
+        for n in names
+    ]
     schema = pa.schema(fields, metadata={b"hpe:system": SYSTEM.encode()})
     return W300LPStream(src, schema, names, fields, max(1, int(chunk)), landmarks, Path(path))

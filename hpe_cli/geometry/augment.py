@@ -34,6 +34,7 @@ image shows them.
 Everything is vectorised: leading dimensions broadcast (one op for all rows,
 or one matrix per row).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -85,8 +86,7 @@ def plane_matrix(op: str, angle=None) -> np.ndarray:
     if op in ("hflip", "vflip", "hvflip"):
         if angle is not None:
             raise ValueError(f"op {op!r} takes no angle, got {angle!r}")
-        return {"hflip": np.diag([-1.0, 1.0]), "vflip": np.diag([1.0, -1.0]),
-                "hvflip": np.diag([-1.0, -1.0])}[op]
+        return {"hflip": np.diag([-1.0, 1.0]), "vflip": np.diag([1.0, -1.0]), "hvflip": np.diag([-1.0, -1.0])}[op]
     if op not in OPS:
         raise ValueError(f"expected op in {', '.join(OPS)}, got {op!r}")
     if angle is None:
@@ -107,8 +107,9 @@ def _check_plane(M) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"expected image-plane matrices of shape (..., 2, 2), got {M.shape}")
     err = np.abs(M @ np.swapaxes(M, -1, -2) - np.eye(2)).max(initial=0.0)
     if not np.isfinite(M).all() or err > 1e-9:
-        raise ValueError("expected orthogonal image-plane matrices (rotations or mirrors, no scaling), "
-                         f"got |M M^T - I| = {err:.3g}")
+        raise ValueError(
+            f"expected orthogonal image-plane matrices (rotations or mirrors, no scaling), got |M M^T - I| = {err:.3g}"
+        )
     det = M[..., 0, 0] * M[..., 1, 1] - M[..., 0, 1] * M[..., 1, 0]
     return M, det
 
@@ -219,8 +220,7 @@ def move_point(u, v, P) -> tuple:
     """One point per row ``(u, v)`` (each shape (N,)) moved by pixel affines ``P`` (N, 2, 3) or (2, 3)."""
     P = np.asarray(P, dtype=np.float64)
     u, v = np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64)
-    return (P[..., 0, 0] * u + P[..., 0, 1] * v + P[..., 0, 2],
-            P[..., 1, 0] * u + P[..., 1, 1] * v + P[..., 1, 2])
+    return (P[..., 0, 0] * u + P[..., 0, 1] * v + P[..., 0, 2], P[..., 1, 0] * u + P[..., 1, 1] * v + P[..., 1, 2])
 
 
 def move_td(tdx, tdy, P, h_in, h_out, from_bottom) -> tuple:
@@ -247,8 +247,15 @@ def move_points(points, P, mirror=False, perm=None) -> np.ndarray:
 
 def move_boxes(boxes, P, M, out_size, points=None, box_from: str = "auto", clip: bool = False) -> np.ndarray:
     """Boxes (..., 4) moved by pixel affines ``P``; see :func:`augment_boxes` (``out_size`` = output ``(W, H)``)."""
-    return _move_boxes(np.asarray(boxes, dtype=np.float64), np.asarray(P, dtype=np.float64),
-                       _check_plane(M)[0], _image_size(out_size), points, box_from, clip)
+    return _move_boxes(
+        np.asarray(boxes, dtype=np.float64),
+        np.asarray(P, dtype=np.float64),
+        _check_plane(M)[0],
+        _image_size(out_size),
+        points,
+        box_from,
+        clip,
+    )
 
 
 def _apply_affine(P, pts):
@@ -283,8 +290,10 @@ def augment_points(points, M, image_size, perm=None) -> np.ndarray:
     mirror = det < 0
     if mirror.any():
         if perm is None:
-            raise ValueError(f"a mirror needs a left/right permutation for the {pts.shape[-2]} landmarks "
-                             "(see hpe_cli.geometry.landmark_schemes), got none")
+            raise ValueError(
+                f"a mirror needs a left/right permutation for the {pts.shape[-2]} landmarks "
+                "(see hpe_cli.geometry.landmark_schemes), got none"
+            )
         perm = flip_permutation(perm, pts.shape[-2])
     return _move_points(pts, _affine(M, _image_size(image_size)), mirror, perm)
 
@@ -366,8 +375,10 @@ def augment_boxes(boxes, M, image_size, points=None, box_from: str = "auto", cli
 
 def _move_boxes(b, P, M, wh, points, box_from, clip):
     x, y, w, h = (b[..., i] for i in range(4))
-    corners = np.stack([np.stack([x, y], -1), np.stack([x + w, y], -1),
-                        np.stack([x, y + h], -1), np.stack([x + w, y + h], -1)], axis=-2)
+    corners = np.stack(
+        [np.stack([x, y], -1), np.stack([x + w, y], -1), np.stack([x, y + h], -1), np.stack([x + w, y + h], -1)],
+        axis=-2,
+    )
     moved = _apply_affine(P, corners)
     lo, hi = moved.min(axis=-2), moved.max(axis=-2)
     out = np.concatenate([lo, hi - lo], axis=-1)
@@ -421,8 +432,19 @@ def _resolve_perm(scheme, n_landmarks):
     return flip_permutation(scheme, n_landmarks)
 
 
-def augment_batch(pose, landmarks=None, bbox=None, *, op, angle=None, image_size, system="300w_lp",
-                  scheme="auto", box_from: str = "auto", clip: bool = False) -> Augmented:
+def augment_batch(
+    pose,
+    landmarks=None,
+    bbox=None,
+    *,
+    op,
+    angle=None,
+    image_size,
+    system="300w_lp",
+    scheme="auto",
+    box_from: str = "auto",
+    clip: bool = False,
+) -> Augmented:
     """Augment N samples at once: labels, landmarks and boxes.
 
     Parameters
@@ -489,8 +511,10 @@ def augment_batch(pose, landmarks=None, bbox=None, *, op, angle=None, image_size
         mirror = det < 0
         perm = _resolve_perm(scheme, lm.shape[1])
         if perm is None and mirror.any():
-            raise ValueError(f"a mirror needs a left/right permutation for the {lm.shape[1]} landmarks: "
-                             "pass scheme= a name or an index array, got none")
+            raise ValueError(
+                f"a mirror needs a left/right permutation for the {lm.shape[1]} landmarks: "
+                "pass scheme= a name or an index array, got none"
+            )
         lm_out = _move_points(lm, P, mirror, perm)
     box_out = None
     if bbox is not None:
@@ -503,8 +527,19 @@ def augment_batch(pose, landmarks=None, bbox=None, *, op, angle=None, image_size
     return Augmented(conv.matrix, conv.primary, conv.secondary, conv.canonical, conv.gimbal_lock, lm_out, box_out)
 
 
-def augment_sample(pose, landmarks=None, bbox=None, *, op, angle=None, image_size, system="300w_lp",
-                   scheme="auto", box_from: str = "auto", clip: bool = False) -> Augmented:
+def augment_sample(
+    pose,
+    landmarks=None,
+    bbox=None,
+    *,
+    op,
+    angle=None,
+    image_size,
+    system="300w_lp",
+    scheme="auto",
+    box_from: str = "auto",
+    clip: bool = False,
+) -> Augmented:
     """Augment one sample (for a training pipeline's per-sample transform).
 
     Parameters
@@ -536,7 +571,24 @@ def augment_sample(pose, landmarks=None, bbox=None, *, op, angle=None, image_siz
         raise ValueError(f"expected a scalar angle, got shape {np.shape(angle)}")
     lm = None if landmarks is None else np.asarray(landmarks, dtype=np.float64)[None]
     b = None if bbox is None else np.asarray(bbox, dtype=np.float64)[None]
-    out = augment_batch(pose[None], lm, b, op=op, angle=angle, image_size=image_size, system=system,
-                        scheme=scheme, box_from=box_from, clip=clip)
-    return Augmented(out.matrix[0], out.angles[0], out.angles_2[0], out.canonical[0], out.gimbal_lock[0],
-                     None if out.landmarks is None else out.landmarks[0], None if out.bbox is None else out.bbox[0])
+    out = augment_batch(
+        pose[None],
+        lm,
+        b,
+        op=op,
+        angle=angle,
+        image_size=image_size,
+        system=system,
+        scheme=scheme,
+        box_from=box_from,
+        clip=clip,
+    )
+    return Augmented(
+        out.matrix[0],
+        out.angles[0],
+        out.angles_2[0],
+        out.canonical[0],
+        out.gimbal_lock[0],
+        None if out.landmarks is None else out.landmarks[0],
+        None if out.bbox is None else out.bbox[0],
+    )

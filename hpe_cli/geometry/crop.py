@@ -6,6 +6,7 @@ in that interval. A crop box in *pixel* form is ``(x0, y0, x1, y1)`` integers,
 ``x1``/``y1`` exclusive, and may reach outside the frame: the part outside is
 padded with a constant (:func:`crop_padded`).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -85,7 +86,7 @@ def crop_padded(image: np.ndarray, box, value=0) -> np.ndarray:
     out = np.full((y1 - y0, x1 - x0) + image.shape[2:], value, dtype=image.dtype)
     sx0, sy0, sx1, sy1 = max(x0, 0), max(y0, 0), min(x1, W), min(y1, H)
     if sx1 > sx0 and sy1 > sy0:
-        out[sy0 - y0:sy1 - y0, sx0 - x0:sx1 - x0] = image[sy0:sy1, sx0:sx1]
+        out[sy0 - y0 : sy1 - y0, sx0 - x0 : sx1 - x0] = image[sy0:sy1, sx0:sx1]
     return out
 
 

@@ -38,6 +38,7 @@ Rendering
 ``render_*`` draw onto a BGR ``uint8`` image with OpenCV (anti-aliased,
 sub-pixel endpoints). They loop over the faces of one image only.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -263,11 +264,13 @@ def render_legend(img, entries, height_px: float = 14.0):
     import cv2
 
     scale = max(0.3, h / 22.0)
-    text_w = max(cv2.getTextSize(f"{label} ({style})", cv2.FONT_HERSHEY_SIMPLEX, scale,
-                                 max(1, int(round(scale * 1.5))))[0][0] for label, style in entries)
+    text_w = max(
+        cv2.getTextSize(f"{label} ({style})", cv2.FONT_HERSHEY_SIMPLEX, scale, max(1, int(round(scale * 1.5))))[0][0]
+        for label, style in entries
+    )
     box_w, box_h = int(1.2 * h + sample + text_w + 4), int(rows * 1.6 * h + 0.6 * h)
     H, W = img.shape[:2]
-    sub = img[0:min(H, box_h), 0:min(W, box_w)]
+    sub = img[0 : min(H, box_h), 0 : min(W, box_w)]
     sub[:] = (sub.astype(np.float32) * 0.35).astype(np.uint8)  # darken behind the legend
     for k, (label, style) in enumerate(entries):
         y = (k + 0.8) * 1.6 * h
@@ -298,8 +301,14 @@ def render_cube(img, A, centre, length, thickness=None, anchor: str = "centre"):
         th = max(1, t // 2)
         for e in np.flatnonzero(~visible[n]):
             k0, k1 = CUBE_EDGES[e]
-            _dashed(img, corners[n, k0], corners[n, k1], CUBE_KIND_COLOURS[CUBE_EDGE_KIND[e]], th,
-                    dash=max(3.0, 2.0 * th + 2))
+            _dashed(
+                img,
+                corners[n, k0],
+                corners[n, k1],
+                CUBE_KIND_COLOURS[CUBE_EDGE_KIND[e]],
+                th,
+                dash=max(3.0, 2.0 * th + 2),
+            )
         vis = np.flatnonzero(visible[n])
         for e in vis[np.argsort(edge_depth[n, vis], kind="stable")]:
             k0, k1 = CUBE_EDGES[e]
@@ -316,8 +325,11 @@ def render_caption(img, text, origin, height_px: float = 14.0, colour=(255, 255,
     (tw, tht), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, th)
     H, W = img.shape[:2]
     u = int(round(min(max(float(origin[0]), 2.0), max(2.0, W - tw - 2.0)))) if np.isfinite(origin[0]) else 2
-    v = int(round(min(max(float(origin[1]), tht + 2.0), max(tht + 2.0, H - base - 2.0)))) \
-        if np.isfinite(origin[1]) else tht + 2
+    v = (
+        int(round(min(max(float(origin[1]), tht + 2.0), max(tht + 2.0, H - base - 2.0))))
+        if np.isfinite(origin[1])
+        else tht + 2
+    )
     # a thicker stroke also widens OpenCV's glyph advance, so outline by offsetting instead
     for du, dv in ((-1, -1), (-1, 1), (1, -1), (1, 1), (0, 2), (0, -2), (2, 0), (-2, 0)):
         cv2.putText(img, text, (u + du, v + dv), cv2.FONT_HERSHEY_SIMPLEX, scale, outline, th, cv2.LINE_AA)
@@ -357,8 +369,8 @@ def contact_sheet(tiles, cols: int, tile: int = 256, captions=None, background: 
         nh, nw = max(1, int(round(h * s))), max(1, int(round(w * s)))
         small = cv2.resize(im, (nw, nh), interpolation=cv2.INTER_AREA if s < 1 else cv2.INTER_LINEAR)
         r0, c0 = (i // cols) * tile + (tile - nh) // 2, (i % cols) * tile + (tile - nw) // 2
-        sheet[r0:r0 + nh, c0:c0 + nw] = small
+        sheet[r0 : r0 + nh, c0 : c0 + nw] = small
         if captions is not None and captions[i]:
-            cell = sheet[(i // cols) * tile:(i // cols + 1) * tile, (i % cols) * tile:(i % cols + 1) * tile]
+            cell = sheet[(i // cols) * tile : (i // cols + 1) * tile, (i % cols) * tile : (i % cols + 1) * tile]
             render_caption(cell, str(captions[i])[:40], (4, tile - 4), height_px=max(9.0, tile / 20.0))
     return sheet

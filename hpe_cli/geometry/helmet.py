@@ -15,6 +15,7 @@ own sanity rule. Every row gets a reason when it is rejected, in this order:
   box is empty;
 - ``"box rejected"``: the preset's aspect-ratio or size rule fails.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -44,8 +45,9 @@ def helmet_points(radius, offset=(0, 5, -5)) -> np.ndarray:
     """
     theta = np.deg2rad(np.arange(0, 360, 10, dtype=np.float64))[:, None]
     phi = np.deg2rad(np.arange(0, 180, 10, dtype=np.float64))[None, :]
-    pts = np.stack(np.broadcast_arrays(np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi),
-                                       np.cos(phi) + 0 * theta), axis=-1).reshape(-1, 3)
+    pts = np.stack(
+        np.broadcast_arrays(np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi) + 0 * theta), axis=-1
+    ).reshape(-1, 3)
     return float(radius) * pts + np.asarray(offset, dtype=np.float64)
 
 
@@ -62,8 +64,9 @@ def _per_row(a, n: int, tail: tuple) -> np.ndarray:
     return a
 
 
-def helmet_boxes(scale, R, t, K, dist, cam_R, cam_t, width, height, preset="whenet", *,
-                 return_centre: bool = False) -> dict:
+def helmet_boxes(
+    scale, R, t, K, dist, cam_R, cam_t, width, height, preset="whenet", *, return_centre: bool = False
+) -> dict:
     """Head boxes of fitted faces seen by cameras (SPEC §6).
 
     Parameters
@@ -102,8 +105,11 @@ def helmet_boxes(scale, R, t, K, dist, cam_R, cam_t, width, height, preset="when
     t = _per_row(t, n, (3,))
     K = _per_row(K, n, (3, 3))
     dist = np.asarray(dist, dtype=np.float64)
-    dist = _per_row(dist if dist.shape[-1] == 5 else np.concatenate(
-        [dist, np.zeros(dist.shape[:-1] + (5 - dist.shape[-1],))], -1), n, (5,))
+    dist = _per_row(
+        dist if dist.shape[-1] == 5 else np.concatenate([dist, np.zeros(dist.shape[:-1] + (5 - dist.shape[-1],))], -1),
+        n,
+        (5,),
+    )
     cam_R = _per_row(cam_R, n, (3, 3))
     cam_t = _per_row(cam_t, n, (3,))
     W = np.broadcast_to(np.asarray(width, dtype=np.float64), (n,))
@@ -122,8 +128,7 @@ def helmet_boxes(scale, R, t, K, dist, cam_R, cam_t, width, height, preset="when
     # c = cam_R @ (scale * R @ offset + t) + cam_t
     G = scale[:, None, None] * (cam_R @ R)
     M = p.radius * G
-    c = np.einsum("nij,nj->ni", G, np.broadcast_to(centre_ref, (n, 3))) \
-        + np.einsum("nij,nj->ni", cam_R, t) + cam_t
+    c = np.einsum("nij,nj->ni", G, np.broadcast_to(centre_ref, (n, 3))) + np.einsum("nij,nj->ni", cam_R, t) + cam_t
     # the lens model's valid field depends on the camera only: evaluate it per distinct camera
     _, first, inv = np.unique(dist @ _HASH, return_index=True, return_inverse=True)
     r2_max = max_valid_r2(dist[first])[inv.reshape(-1)]
@@ -154,13 +159,14 @@ def helmet_boxes(scale, R, t, K, dist, cam_R, cam_t, width, height, preset="when
     if FAST and fast.any():
         fi = np.flatnonzero(fast)
         for s in range(0, len(fi), FAST_BLOCK_ROWS):
-            idx = fi[s:s + FAST_BLOCK_ROWS]
-            lo[idx], hi[idx] = _fast_extremes(Mf32[idx], cf32[idx], dist32[idx], K[idx], cam_R[idx] @ R[idx],
-                                              c[idx], rho[idx], dist[idx])
+            idx = fi[s : s + FAST_BLOCK_ROWS]
+            lo[idx], hi[idx] = _fast_extremes(
+                Mf32[idx], cf32[idx], dist32[idx], K[idx], cam_R[idx] @ R[idx], c[idx], rho[idx], dist[idx]
+            )
     slow = np.flatnonzero(~fast) if FAST else np.arange(n)
     ct, st, sp, cp = (a.astype(DTYPE) for a in (ct, st, sp, cp))
     for s in range(0, len(slow), BLOCK_ROWS):
-        sl = slow[s:s + BLOCK_ROWS]
+        sl = slow[s : s + BLOCK_ROWS]
         m, cc, d, k = Mf32[sl], cf32[sl], dist32[sl], K[sl]
         b = m.shape[0]
         planes = []
@@ -312,14 +318,21 @@ def _table():
     pole, ring = near0[..., :1], near0[..., 1:].reshape(per10, nphi, 36, 17)
     # bin (10 k + t0) sees the neighbourhood of bin t0 turned by k steps of theta
     ring_all = np.stack([np.roll(ring, k, axis=2) for k in range(36)], 0)  # (36, per10, nphi, 36, 17)
-    near = np.concatenate([np.broadcast_to(pole, (36,) + pole.shape), ring_all.reshape(36, per10, nphi, -1)],
-                          -1).reshape(nt * nphi, -1)
+    near = np.concatenate(
+        [np.broadcast_to(pole, (36,) + pole.shape), ring_all.reshape(36, per10, nphi, -1)], -1
+    ).reshape(nt * nphi, -1)
     counts = near.sum(1)
-    _TABLE.update(indices=np.nonzero(near)[1].astype(np.int32),
-                  offsets=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64), counts=counts.astype(np.int64),
-                  nt=nt, nphi=nphi,
-                  ct=np.cos(th).astype(DTYPE), st=np.sin(th).astype(DTYPE), sp=np.sin(ph).astype(DTYPE),
-                  cp=np.cos(ph).astype(DTYPE))
+    _TABLE.update(
+        indices=np.nonzero(near)[1].astype(np.int32),
+        offsets=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        counts=counts.astype(np.int64),
+        nt=nt,
+        nphi=nphi,
+        ct=np.cos(th).astype(DTYPE),
+        st=np.sin(th).astype(DTYPE),
+        sp=np.sin(ph).astype(DTYPE),
+        cp=np.cos(ph).astype(DTYPE),
+    )
     _TABLE["sp"][0] = 0.0  # the pole exactly (the slow path computes it as m2 + c)
     _TABLE["cp"][0] = 1.0
     return _TABLE
@@ -388,10 +401,10 @@ def _fast_extremes(M, c32, d32, K, Rtot, c, rho, d64):
     lo = np.empty((b, 2))
     hi = np.empty((b, 2))
     ends = [int(seg[e + 1, 0]) if e < 3 else total for e in range(4)]
-    xmax = np.maximum.reduceat(xd[seg[0, 0]:ends[0]], seg[0] - seg[0, 0])
-    xmin = np.minimum.reduceat(xd[seg[1, 0]:ends[1]], seg[1] - seg[1, 0])
-    ymax = np.maximum.reduceat(yd[seg[2, 0]:ends[2]], seg[2] - seg[2, 0])
-    ymin = np.minimum.reduceat(yd[seg[3, 0]:ends[3]], seg[3] - seg[3, 0])
+    xmax = np.maximum.reduceat(xd[seg[0, 0] : ends[0]], seg[0] - seg[0, 0])
+    xmin = np.minimum.reduceat(xd[seg[1, 0] : ends[1]], seg[1] - seg[1, 0])
+    ymax = np.maximum.reduceat(yd[seg[2, 0] : ends[2]], seg[2] - seg[2, 0])
+    ymin = np.minimum.reduceat(yd[seg[3, 0] : ends[3]], seg[3] - seg[3, 0])
     _extremes(xmin, xmax, K[:, 0, 0], K[:, 0, 2], lo[:, 0], hi[:, 0])
     _extremes(ymin, ymax, K[:, 1, 1], K[:, 1, 2], lo[:, 1], hi[:, 1])
     return lo, hi

@@ -7,6 +7,7 @@ moves image content exactly where the landmarks go. The three flips use
 ``cv2.flip`` (no interpolation); the output keeps the input's size, so corners
 of a rotated image are cut and filled with the border value.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,10 +23,20 @@ _FLIP_CODES = {(-1.0, 1.0): 1, (1.0, -1.0): 0, (-1.0, -1.0): -1}
 def _cv_flags():
     import cv2
 
-    interp = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "nearest": cv2.INTER_NEAREST,
-              "area": cv2.INTER_AREA, "lanczos": cv2.INTER_LANCZOS4}
-    border = {"constant": cv2.BORDER_CONSTANT, "replicate": cv2.BORDER_REPLICATE, "reflect": cv2.BORDER_REFLECT,
-              "reflect101": cv2.BORDER_REFLECT_101, "wrap": cv2.BORDER_WRAP}
+    interp = {
+        "linear": cv2.INTER_LINEAR,
+        "cubic": cv2.INTER_CUBIC,
+        "nearest": cv2.INTER_NEAREST,
+        "area": cv2.INTER_AREA,
+        "lanczos": cv2.INTER_LANCZOS4,
+    }
+    border = {
+        "constant": cv2.BORDER_CONSTANT,
+        "replicate": cv2.BORDER_REPLICATE,
+        "reflect": cv2.BORDER_REFLECT,
+        "reflect101": cv2.BORDER_REFLECT_101,
+        "wrap": cv2.BORDER_WRAP,
+    }
     return interp, border
 
 
@@ -73,8 +84,9 @@ def warp_image(image, M, interpolation: str = "linear", border: str = "constant"
     if np.ndim(border_value) == 0:
         border_value = (float(border_value),) * 4
     P = pixel_affine(M, (w, h))
-    return cv2.warpAffine(img, P, (w, h), flags=interp[interpolation], borderMode=borders[border],
-                          borderValue=tuple(border_value))
+    return cv2.warpAffine(
+        img, P, (w, h), flags=interp[interpolation], borderMode=borders[border], borderValue=tuple(border_value)
+    )
 
 
 def opencv_rotation_matrix(phi_deg: float, image_size) -> np.ndarray:

@@ -18,6 +18,7 @@ Schemes
     The 21 AFLW points (0-based; AFLW2000-3D ``pt2d``): brows 0-5, eyes 6-11
     (corner, centre, corner), ears 12 and 16, nose 13-15, mouth 17-19, chin 20.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,12 +32,12 @@ def _from_pairs(n: int, pairs) -> np.ndarray:
 
 
 _IBUG68_PAIRS = (
-    [(i, 16 - i) for i in range(8)]                                  # jaw; 8 is the chin
-    + [(17 + i, 26 - i) for i in range(5)]                           # brows
-    + [(31, 35), (32, 34)]                                           # nostrils; 27-30 and 33 on the midline
-    + [(36, 45), (37, 44), (38, 43), (39, 42), (40, 47), (41, 46)]   # eyes
-    + [(48, 54), (49, 53), (50, 52), (55, 59), (56, 58)]             # outer lips; 51, 57 on the midline
-    + [(60, 64), (61, 63), (65, 67)]                                 # inner lips; 62, 66 on the midline
+    [(i, 16 - i) for i in range(8)]  # jaw; 8 is the chin
+    + [(17 + i, 26 - i) for i in range(5)]  # brows
+    + [(31, 35), (32, 34)]  # nostrils; 27-30 and 33 on the midline
+    + [(36, 45), (37, 44), (38, 43), (39, 42), (40, 47), (41, 46)]  # eyes
+    + [(48, 54), (49, 53), (50, 52), (55, 59), (56, 58)]  # outer lips; 51, 57 on the midline
+    + [(60, 64), (61, 63), (65, 67)]  # inner lips; 62, 66 on the midline
 )
 _AFLW21_PAIRS = [(0, 5), (1, 4), (2, 3), (6, 11), (7, 10), (8, 9), (12, 16), (13, 15), (17, 19)]
 

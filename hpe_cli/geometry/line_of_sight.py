@@ -15,6 +15,7 @@ The angle of ``Q`` (the angle between the optical axis and the ray) is the
 neuralnet-tracker-traincode's ``scripts/dsprocess_panoptic.py``) makes the
 same correction. Pure numpy.
 """
+
 from __future__ import annotations
 
 import numpy as np

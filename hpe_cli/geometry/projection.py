@@ -16,6 +16,7 @@ WHENet and DirectMHP copy overwrites ``x`` with ``xd`` before it computes
 ``yd`` (SPEC §6); :func:`project_points_panoptic_toolbox` keeps that bug for
 comparisons only.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -49,8 +50,7 @@ def camera_points(X, R, t) -> np.ndarray:
     R = np.asarray(R, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64)
     x0, x1, x2 = X[..., 0], X[..., 1], X[..., 2]
-    return np.stack([R[..., i, 0] * x0 + R[..., i, 1] * x1 + R[..., i, 2] * x2 + t[..., i] for i in range(3)],
-                    axis=-1)
+    return np.stack([R[..., i, 0] * x0 + R[..., i, 1] * x1 + R[..., i, 2] * x2 + t[..., i] for i in range(3)], axis=-1)
 
 
 def distort(x, y, dist):
@@ -119,7 +119,7 @@ def project_points_panoptic_toolbox(X, K, dist, R, t):
         x = Xc[..., 0] / z
         y = Xc[..., 1] / z
     r2 = x * x + y * y
-    f = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 ** 3
+    f = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2**3
     x = x * f + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     y = y * f + 2.0 * p2 * x * y + p1 * (r2 + 2.0 * y * y)
     u = K[..., 0, 0] * x + K[..., 0, 1] * y + K[..., 0, 2]

@@ -5,6 +5,7 @@ The numbers live in ``hpe_cli/data/whenet_reference_head.json`` (see the
 frame (x: subject's left, y: up, z: out of the face) in WHENet's own units,
 about 1 unit per cm: the nose tip (point 52) is at (0, 0, 6.76).
 """
+
 from __future__ import annotations
 
 import json
@@ -82,8 +83,11 @@ class HelmetPreset:
 
     def describe(self) -> str:
         op = "<=" if self.aspect_inclusive else "<"
-        side = f"each side < {self.max_side_fraction:g} x image" if self.check_height \
+        side = (
+            f"each side < {self.max_side_fraction:g} x image"
+            if self.check_height
             else f"width < {self.max_side_fraction:g} x image width"
+        )
         return f"radius {self.radius:g}, aspect {op} {self.max_aspect:g}, {side}"
 
 
@@ -99,7 +103,12 @@ def helmet_preset(name: str = "whenet") -> HelmetPreset:
         aspect, inclusive = float(p["max_aspect"]), True
     else:
         aspect, inclusive = float(p["max_aspect_exclusive"]), False
-    return HelmetPreset(name=name, radius=float(p["radius"]), offset=tuple(float(v) for v in p["offset"]),
-                        max_aspect=aspect, aspect_inclusive=inclusive,
-                        max_side_fraction=float(p.get("max_side_fraction", 1.0)),
-                        check_height="max_side_fraction" in p)
+    return HelmetPreset(
+        name=name,
+        radius=float(p["radius"]),
+        offset=tuple(float(v) for v in p["offset"]),
+        max_aspect=aspect,
+        aspect_inclusive=inclusive,
+        max_side_fraction=float(p.get("max_side_fraction", 1.0)),
+        check_height="max_side_fraction" in p,
+    )

@@ -6,6 +6,7 @@ cross-covariance, force a proper rotation with the sign of the determinant,
 then read the scale off the singular values. Every face of a whole chunk of
 frames is fitted in one ``numpy.linalg.svd`` call on an ``(N, 3, 3)`` stack.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -33,6 +33,7 @@ depth, which grows towards the camera (the nose tip has the largest depth):
 a left-handed frame. Negating y gives the canonical frame; see
 :data:`LANDMARK_FRAMES`.
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -45,9 +46,9 @@ POOR_FIT_RMSE = 0.3
 
 #: per-axis signs mapping landmark coordinates to the canonical frame
 LANDMARK_FRAMES = {
-    "image": (1.0, -1.0, 1.0),       # x right, y down, z towards the camera (AFLW2000-3D pt3d_68)
-    "canonical": (1.0, 1.0, 1.0),    # x right, y up, z towards the camera (300W-LP / BFM)
-    "opencv": (1.0, -1.0, -1.0),     # x right, y down, z away from the camera
+    "image": (1.0, -1.0, 1.0),  # x right, y down, z towards the camera (AFLW2000-3D pt3d_68)
+    "canonical": (1.0, 1.0, 1.0),  # x right, y up, z towards the camera (300W-LP / BFM)
+    "opencv": (1.0, -1.0, -1.0),  # x right, y down, z away from the camera
 }
 
 

@@ -5,6 +5,7 @@ File writes release the GIL, so on a machine with a spare core the write of
 batch *k* overlaps the formatting of batch *k + 1*. At most ``depth`` writes
 and ``max_bytes`` bytes are queued, so memory stays bounded.
 """
+
 from __future__ import annotations
 
 

@@ -10,6 +10,7 @@ batches and writes each batch's annotations at once (floats by ``orjson``),
 so memory does not grow with the number of rows (only with the number of
 distinct images, whose ids must be remembered).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -28,8 +29,10 @@ MISSING_POINT = -1.0
 def _finite(v, col, path, offset):
     bad = np.flatnonzero(~np.isfinite(v))
     if bad.size:
-        raise HpeError(f"{path}: row {offset + bad[0]}: expected a finite {col}, got {v[bad[0]]} "
-                       f"({bad.size} such rows in this batch)")
+        raise HpeError(
+            f"{path}: row {offset + bad[0]}: expected a finite {col}, got {v[bad[0]]} "
+            f"({bad.size} such rows in this batch)"
+        )
     return v
 
 
@@ -41,8 +44,7 @@ def _column(frame, col):
 
 
 def _names(frame):
-    return list(frame.schema.names) if hasattr(frame, "schema") and not hasattr(frame, "iloc") \
-        else list(frame.columns)
+    return list(frame.schema.names) if hasattr(frame, "schema") and not hasattr(frame, "iloc") else list(frame.columns)
 
 
 def _strings(frame, col) -> list:
@@ -119,13 +121,14 @@ def annotations_text(frame, image_ids, first_id: int, *, path="<coco>", offset: 
     image_ids = np.asarray(image_ids, dtype=np.int64)
     texts = []
     for lo in range(0, len(frame), CHUNK_ROWS):
-        part = frame.iloc[lo:lo + CHUNK_ROWS] if hasattr(frame, "iloc") else frame.slice(lo, CHUNK_ROWS)
+        part = frame.iloc[lo : lo + CHUNK_ROWS] if hasattr(frame, "iloc") else frame.slice(lo, CHUNK_ROWS)
         n, off = len(part), offset + lo
         box = np.stack([_finite(_column(part, c), c, path, off) for c in BBOX_COLS], axis=1)
         if (box[:, 2:] < 0).any():
             bad = int(np.flatnonzero((box[:, 2:] < 0).any(1))[0])
-            raise HpeError(f"{path}: row {off + bad}: expected bbox_w, bbox_h >= 0, "
-                           f"got {box[bad, 2]:g}, {box[bad, 3]:g}")
+            raise HpeError(
+                f"{path}: row {off + bad}: expected bbox_w, bbox_h >= 0, got {box[bad, 2]:g}, {box[bad, 3]:g}"
+            )
         ang = np.stack([_finite(_column(part, c), c, path, off) for c in ANGLE_COLS], axis=1)
         if n_lm:  # (n, 2, n_lm): face2d_pts = [[x0, x1, ...], [y0, y1, ...]]
             pts = np.empty((n, 2, n_lm))
@@ -137,7 +140,7 @@ def annotations_text(frame, image_ids, first_id: int, *, path="<coco>", offset: 
         else:
             pts = [[]] * n  # orjson writes the same empty list for every row
         area = np.round(box[:, 2] * box[:, 3], 4).tolist()
-        ids = image_ids[lo:lo + n].tolist()
+        ids = image_ids[lo : lo + n].tolist()
         k0 = first_id + lo
         # one dict per row (about 1 us, a tenth of what formatting its floats costs), keys in coco_dict's order;
         # the cyclic garbage collector is paused meanwhile (these dicts hold no cycles, and its passes over
@@ -145,9 +148,20 @@ def annotations_text(frame, image_ids, first_id: int, *, path="<coco>", offset: 
         paused = gc.isenabled()
         gc.disable()
         try:
-            rows = [{"image_id": i, "id": k, "category_id": 1, "bbox": b, "euler_angles": a, "face2d_pts": p,
-                     "area": ar, "iscrowd": 0, "segmentation": []}
-                    for i, k, b, a, p, ar in zip(ids, range(k0, k0 + n), box, ang, pts, area)]
+            rows = [
+                {
+                    "image_id": i,
+                    "id": k,
+                    "category_id": 1,
+                    "bbox": b,
+                    "euler_angles": a,
+                    "face2d_pts": p,
+                    "area": ar,
+                    "iscrowd": 0,
+                    "segmentation": [],
+                }
+                for i, k, b, a, p, ar in zip(ids, range(k0, k0 + n), box, ang, pts, area)
+            ]
         finally:
             if paused:
                 gc.enable()
@@ -174,8 +188,16 @@ class CocoWriter(StreamWriter):
 
     separator = b","
 
-    def __init__(self, path, overwrite: bool = False, *, width=None, height=None, info: dict | None = None,
-                 image_size_cols=("image_width", "image_height")):
+    def __init__(
+        self,
+        path,
+        overwrite: bool = False,
+        *,
+        width=None,
+        height=None,
+        info: dict | None = None,
+        image_size_cols=("image_width", "image_height"),
+    ):
         super().__init__(path, overwrite)
         self.width, self.height, self.info = width, height, dict(info or {})
         self.size_cols = tuple(image_size_cols)
@@ -202,7 +224,7 @@ class CocoWriter(StreamWriter):
         if missing:
             raise HpeError(f"{self.path}: expected columns {', '.join(missing)} in the label table")
         for lo in range(0, len(frame), self.CHUNK):
-            part = frame.iloc[lo:lo + self.CHUNK] if hasattr(frame, "iloc") else frame.slice(lo, self.CHUNK)
+            part = frame.iloc[lo : lo + self.CHUNK] if hasattr(frame, "iloc") else frame.slice(lo, self.CHUNK)
             off = self.rows
             ids = self.image_ids(part, off)
             self.append_text(annotations_text(part, ids, off + 1, path=self.path, offset=off), len(part))
@@ -220,8 +242,7 @@ class CocoWriter(StreamWriter):
             elif given is not None:
                 sizes.append(np.full(n, int(given), dtype=np.int64))
             else:
-                raise HpeError(f"{self.path}: expected an {col} column or an image size for the COCO "
-                               "'images' entries")
+                raise HpeError(f"{self.path}: expected an {col} column or an image size for the COCO 'images' entries")
         return sizes
 
     def image_ids(self, frame, offset: int = 0) -> np.ndarray:
@@ -239,8 +260,10 @@ class CocoWriter(StreamWriter):
             if differ.any():
                 bad = int(np.flatnonzero(differ)[0])
                 a, b = sorted((int(v[first[codes[bad]]]), int(v[bad])))
-                raise HpeError(f"{self.path}: row {offset + bad}: expected one {col} per image "
-                               f"({files[codes[bad]]}), got {a} and {b}")
+                raise HpeError(
+                    f"{self.path}: row {offset + bad}: expected one {col} per image "
+                    f"({files[codes[bad]]}), got {a} and {b}"
+                )
         images = self.images
         ids = np.empty(len(files), dtype=np.int64)
         for c, (f, w, h) in enumerate(zip(files, sizes[0][first].tolist(), sizes[1][first].tolist())):
@@ -250,14 +273,23 @@ class CocoWriter(StreamWriter):
             elif e[1] != w or e[2] != h:
                 col = self.size_cols[0] if e[1] != w else self.size_cols[1]
                 a, b = (e[1], w) if e[1] != w else (e[2], h)
-                raise HpeError(f"{self.path}: row {offset + int(first[c])}: expected one {col} per image ({f}), "
-                               f"got {min(a, b):g} and {max(a, b):g}")
+                raise HpeError(
+                    f"{self.path}: row {offset + int(first[c])}: expected one {col} per image ({f}), "
+                    f"got {min(a, b):g} and {max(a, b):g}"
+                )
             ids[c] = e[0]
         return ids[codes]
 
 
-def coco_dict(frame, *, width=None, height=None, info: dict | None = None, path="<coco>",
-              image_size_cols=("image_width", "image_height")) -> dict:
+def coco_dict(
+    frame,
+    *,
+    width=None,
+    height=None,
+    info: dict | None = None,
+    path="<coco>",
+    image_size_cols=("image_width", "image_height"),
+) -> dict:
     """The COCO dictionary of a label table, as :func:`write_coco` writes it (small tables, tests)."""
     import tempfile
 
@@ -270,8 +302,17 @@ def coco_dict(frame, *, width=None, height=None, info: dict | None = None, path=
     return {k: doc[k] for k in ("info", "licenses", "images", "annotations", "categories")}
 
 
-def write_coco(frame, path, overwrite: bool = False, *, width=None, height=None, info: dict | None = None,
-               image_size_cols=("image_width", "image_height"), batch_size: int = 65536):
+def write_coco(
+    frame,
+    path,
+    overwrite: bool = False,
+    *,
+    width=None,
+    height=None,
+    info: dict | None = None,
+    image_size_cols=("image_width", "image_height"),
+    batch_size: int = 65536,
+):
     """Write a label table as DirectMHP-style COCO JSON, atomically.
 
     Parameters
@@ -302,8 +343,7 @@ def write_coco(frame, path, overwrite: bool = False, *, width=None, height=None,
     ``annotations`` in the file (a streaming writer learns them as it goes);
     COCO readers look both up by key, so the order of keys is immaterial.
     """
-    with CocoWriter(path, overwrite, width=width, height=height, info=info,
-                    image_size_cols=image_size_cols) as w:
+    with CocoWriter(path, overwrite, width=width, height=height, info=info, image_size_cols=image_size_cols) as w:
         for part in _parts(frame, batch_size):
             w.write(part)
     return Path(path)
@@ -312,7 +352,7 @@ def write_coco(frame, path, overwrite: bool = False, *, width=None, height=None,
 def _parts(frame, batch_size):
     if hasattr(frame, "iloc"):
         for lo in range(0, len(frame), batch_size):
-            yield frame.iloc[lo:lo + batch_size]
+            yield frame.iloc[lo : lo + batch_size]
     elif hasattr(frame, "to_batches"):
         yield from frame.to_batches(max_chunksize=batch_size)
     elif hasattr(frame, "schema"):

@@ -34,6 +34,7 @@ Every row keeps its 1-based file line (header = line 1) in ``__line__`` when
 asked (``with_lines=True``), so rejects can name it; for COCO JSON the number
 is the 1-based position of the annotation in ``annotations``.
 """
+
 from __future__ import annotations
 
 import re
@@ -118,13 +119,16 @@ def apply_columns_map(src, columns):
             return src
         missing = []
     if missing:
-        raise HpeError(f"{src.path}: --columns-map names column(s) {', '.join(map(repr, missing))} that the table "
-                       f"does not have; found {', '.join(n for n in names if n != LINE_COL)}")
+        raise HpeError(
+            f"{src.path}: --columns-map names column(s) {', '.join(map(repr, missing))} that the table "
+            f"does not have; found {', '.join(n for n in names if n != LINE_COL)}"
+        )
     new = [mapping.get(n, n) for n in names]
     dup = sorted({n for n in new if new.count(n) > 1})
     if dup:
-        raise HpeError(f"{src.path}: --columns-map would give two columns named {', '.join(dup)} "
-                       f"(rename or drop the existing one)")
+        raise HpeError(
+            f"{src.path}: --columns-map would give two columns named {', '.join(dup)} (rename or drop the existing one)"
+        )
     schema = pa.schema([f.with_name(n) for f, n in zip(src.schema, new)], metadata=src.schema.metadata)
     inner = src._batches
 
@@ -164,9 +168,20 @@ def _line_numbers(first_line: int, start: int, count: int, skipped: list) -> np.
     return k + np.searchsorted(gaps, k, side="right")
 
 
-def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: bool = True, names=None,
-              skip_lines: int = 0, comment_prefixes=(), quoting: bool = True, string_columns=(),
-              with_lines: bool = False, system=None):
+def open_text(
+    path,
+    batch_size: int = 262_144,
+    *,
+    delimiter: str = ",",
+    header: bool = True,
+    names=None,
+    skip_lines: int = 0,
+    comment_prefixes=(),
+    quoting: bool = True,
+    string_columns=(),
+    with_lines: bool = False,
+    system=None,
+):
     """Stream a delimited text table.
 
     Parameters
@@ -195,7 +210,7 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
         raise HpeError(f"{path}: no such file")
     if path.stat().st_size == 0:
         raise HpeError(f"{path}: empty file")
-    if delimiter is None or len(delimiter) != 1 or delimiter in "\r\n\"":
+    if delimiter is None or len(delimiter) != 1 or delimiter in '\r\n"':
         raise HpeError(f"--delimiter: expected one character such as ',' ';' or '\\t', got {delimiter!r}")
     if names is not None:
         names = [str(n).strip() for n in names]
@@ -215,11 +230,20 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
                 bad.append((int(row.number), row.expected_columns, row.actual_columns, text))
         return "skip"
 
-    read_opts = pcsv.ReadOptions(use_threads=False, block_size=1 << 22, skip_rows=skip_lines,
-                                 column_names=None if header else names,
-                                 autogenerate_column_names=(not header and names is None))
-    parse_opts = pcsv.ParseOptions(delimiter=delimiter, ignore_empty_lines=False, invalid_row_handler=handler,
-                                   quote_char='"' if quoting else False, newlines_in_values=False)
+    read_opts = pcsv.ReadOptions(
+        use_threads=False,
+        block_size=1 << 22,
+        skip_rows=skip_lines,
+        column_names=None if header else names,
+        autogenerate_column_names=(not header and names is None),
+    )
+    parse_opts = pcsv.ParseOptions(
+        delimiter=delimiter,
+        ignore_empty_lines=False,
+        invalid_row_handler=handler,
+        quote_char='"' if quoting else False,
+        newlines_in_values=False,
+    )
     string_columns = list(string_columns)
 
     def make_reader():
@@ -228,8 +252,12 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
         types = {c: pa.string() for c in string_columns if c in cols}
         skipped.clear()  # the probe parsed the first block too
         bad.clear()
-        return pcsv.open_csv(path, read_options=read_opts, parse_options=parse_opts,
-                             convert_options=pcsv.ConvertOptions(column_types=types, strings_can_be_null=True))
+        return pcsv.open_csv(
+            path,
+            read_options=read_opts,
+            parse_options=parse_opts,
+            convert_options=pcsv.ConvertOptions(column_types=types, strings_can_be_null=True),
+        )
 
     try:
         reader = make_reader()
@@ -239,8 +267,10 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
     if header:
         hdr = list(schema.names)
         if len(set(hdr)) != len(hdr):
-            raise HpeError(f"{path}: line {skip_lines + 1}: the header names a column twice "
-                           f"({', '.join(sorted({h for h in hdr if hdr.count(h) > 1}))})")
+            raise HpeError(
+                f"{path}: line {skip_lines + 1}: the header names a column twice "
+                f"({', '.join(sorted({h for h in hdr if hdr.count(h) > 1}))})"
+            )
     first_line = skip_lines + (2 if header else 1)
     base_schema = schema
     schema = schema.append(pa.field(LINE_COL, pa.int64())) if with_lines else schema
@@ -248,8 +278,10 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
     first_reader = [reader]
 
     def take_rejects():
-        out = [Reject(line, f"expected {want} fields separated by {delimiter!r}, got {got}", text[:200])
-               for line, want, got, text in bad]
+        out = [
+            Reject(line, f"expected {want} fields separated by {delimiter!r}, got {got}", text[:200])
+            for line, want, got, text in bad
+        ]
         bad.clear()
         return out
 
@@ -280,8 +312,10 @@ def open_text(path, batch_size: int = 262_144, *, delimiter: str = ",", header: 
 def _opal23(path, batch_size, with_lines):
     first = _first_lines(path, 2)
     if not first or not first[0].startswith("#;"):
-        raise HpeError(f"{path}: line 1: expected OPAL's header '#;image;...;yaw;pitch;roll', "
-                       f"got {(first[0] if first else '')[:80]!r}")
+        raise HpeError(
+            f"{path}: line 1: expected OPAL's header '#;image;...;yaw;pitch;roll', "
+            f"got {(first[0] if first else '')[:80]!r}"
+        )
     fields = [f.strip() for f in first[0].split(";")[1:]]
     base = [_OPAL_NAMES.get(f, f) for f in fields]
     if len(base) >= 2 and base[-2] == "pt_x" and base[-1].startswith("pt_y"):
@@ -289,16 +323,26 @@ def _opal23(path, batch_size, with_lines):
         data = [ln for ln in _first_lines(path, 50)[1:] if ln and not ln.startswith(("@", "#"))]
         n_extra = (len(data[0].split(";")) - len(base)) if data else 0
         if n_extra < 0 or n_extra % 2:
-            raise HpeError(f"{path}: line 2: expected {len(base)} fields then x;y landmark pairs, "
-                           f"got {len(base) + n_extra} fields")
+            raise HpeError(
+                f"{path}: line 2: expected {len(base)} fields then x;y landmark pairs, got {len(base) + n_extra} fields"
+            )
         base += [f"lm{i}_{a}" for i in range(n_extra // 2) for a in "xy"]
     for need in ("image", "yaw", "pitch", "roll"):
         if need not in base:
-            raise HpeError(f"{path}: line 1: expected a field named {need!r} in OPAL's header, "
-                           f"got {';'.join(fields)}")
-    return open_text(path, batch_size, delimiter=";", header=False, names=base, skip_lines=1,
-                     comment_prefixes=("@", "#"), quoting=False, string_columns=("image", "identity"),
-                     with_lines=with_lines, system=FORMAT_SYSTEMS["opal23"])
+            raise HpeError(f"{path}: line 1: expected a field named {need!r} in OPAL's header, got {';'.join(fields)}")
+    return open_text(
+        path,
+        batch_size,
+        delimiter=";",
+        header=False,
+        names=base,
+        skip_lines=1,
+        comment_prefixes=("@", "#"),
+        quoting=False,
+        string_columns=("image", "identity"),
+        with_lines=with_lines,
+        system=FORMAT_SYSTEMS["opal23"],
+    )
 
 
 def _celeba(path, batch_size, with_lines):
@@ -311,9 +355,18 @@ def _celeba(path, batch_size, with_lines):
     if not ok:
         got = " / ".join(first)[:80]
         raise HpeError(f"{path}: line 1: expected CelebAMask-HQ's count line then 'Yaw Pitch Raw', got {got!r}")
-    return open_text(path, batch_size, delimiter=" ", header=False, names=["image", "yaw", "pitch", "roll"],
-                     skip_lines=2, quoting=False, string_columns=("image",), with_lines=with_lines,
-                     system=FORMAT_SYSTEMS["celeba-pose"])
+    return open_text(
+        path,
+        batch_size,
+        delimiter=" ",
+        header=False,
+        names=["image", "yaw", "pitch", "roll"],
+        skip_lines=2,
+        quoting=False,
+        string_columns=("image",),
+        with_lines=with_lines,
+        system=FORMAT_SYSTEMS["celeba-pose"],
+    )
 
 
 # ------------------------------------------------------------------------------------------- COCO JSON
@@ -432,8 +485,16 @@ def sniff_format(path) -> str | None:
     return None
 
 
-def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimiter=None, header: bool = True,
-                   names=None, with_lines: bool = False):
+def open_formatted(
+    path,
+    batch_size: int = 262_144,
+    *,
+    input_format=None,
+    delimiter=None,
+    header: bool = True,
+    names=None,
+    with_lines: bool = False,
+):
     """Open ``path`` as a named input format or delimited text; None when neither applies.
 
     With ``input_format=None`` the format is sniffed (``.json`` with COCO keys,
@@ -446,8 +507,10 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
     if input_format is not None and input_format not in INPUT_FORMATS:
         raise HpeError(f"--input-format: expected one of {', '.join(INPUT_FORMATS)}, got {input_format!r}")
     if input_format is not None and (delimiter is not None or not header or names):
-        raise HpeError(f"--input-format {input_format} fixes the delimiter and the column names; "
-                       "drop --delimiter/--no-header/--names (use --columns-map to rename)")
+        raise HpeError(
+            f"--input-format {input_format} fixes the delimiter and the column names; "
+            "drop --delimiter/--no-header/--names (use --columns-map to rename)"
+        )
     fmt = input_format
     if fmt is None and delimiter is None and header and not names:
         fmt = sniff_format(path)
@@ -459,9 +522,11 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
 
             if is_dad_metadata(doc):
                 return None  # a dataset reader takes it
-            raise HpeError(f"{path}: expected COCO JSON (an object with 'images' and 'annotations'), "
-                           f"got {type(doc).__name__} with keys "
-                           f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}")
+            raise HpeError(
+                f"{path}: expected COCO JSON (an object with 'images' and 'annotations'), "
+                f"got {type(doc).__name__} with keys "
+                f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}"
+            )
     if fmt is None:
         if delimiter is None and header and not names:
             return None
@@ -472,21 +537,44 @@ def open_formatted(path, batch_size: int = 262_144, *, input_format=None, delimi
         if names and header:
             raise HpeError("--names goes with --no-header (with a header line, use --columns-map to rename)")
         delim = delimiter if delimiter is not None else ("\t" if path.suffix.lower() == ".tsv" else ",")
-        return open_text(path, batch_size, delimiter=delim, header=header, names=names,
-                         string_columns=("image", "file"), with_lines=with_lines)
+        return open_text(
+            path,
+            batch_size,
+            delimiter=delim,
+            header=header,
+            names=names,
+            string_columns=("image", "file"),
+            with_lines=with_lines,
+        )
     if not path.is_file():
         raise HpeError(f"{path}: --input-format {fmt} reads a file, got a folder")
     if fmt == "coco":
         doc = load_json(path)
         return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
     if fmt == "whenet":
-        return open_text(path, batch_size, delimiter=",", header=False, names=["image", "yaw", "pitch", "roll"],
-                         quoting=False, string_columns=("image",), with_lines=with_lines,
-                         system=FORMAT_SYSTEMS["whenet"])
+        return open_text(
+            path,
+            batch_size,
+            delimiter=",",
+            header=False,
+            names=["image", "yaw", "pitch", "roll"],
+            quoting=False,
+            string_columns=("image",),
+            with_lines=with_lines,
+            system=FORMAT_SYSTEMS["whenet"],
+        )
     if fmt == "img2pose-biwi":
-        return open_text(path, batch_size, delimiter=" ", header=False, names=["image", "pitch", "yaw", "roll"],
-                         quoting=False, string_columns=("image",), with_lines=with_lines,
-                         system=FORMAT_SYSTEMS["img2pose-biwi"])
+        return open_text(
+            path,
+            batch_size,
+            delimiter=" ",
+            header=False,
+            names=["image", "pitch", "yaw", "roll"],
+            quoting=False,
+            string_columns=("image",),
+            with_lines=with_lines,
+            system=FORMAT_SYSTEMS["img2pose-biwi"],
+        )
     if fmt == "celeba-pose":
         return _celeba(path, batch_size, with_lines)
     if fmt == "opal23":
@@ -507,4 +595,3 @@ def label_system(src, requested):
 
         return file_system(src) or requested  # None: a dataset system not built in yet
     return requested
-

@@ -1,6 +1,7 @@
 """The CSV fast path: blocks of whole records parsed by pyarrow, bad records set aside with their file line.
 
 See :mod:`hpe_cli.io.readers` for the row numbering and the reject rules."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -37,6 +38,7 @@ def open_csv(path, batch_size, with_lines, block_size):
                 continue
             for k, b in enumerate(table.to_batches(max_chunksize=batch_size)):
                 yield b, (rejects if k == 0 else [])
+
     return TableSource(path, _schema(schema, with_lines), None, gen, with_lines, "csv")
 
 
@@ -92,7 +94,7 @@ class _CsvBlocks:
         cut = first.find(b"\n")
         if cut < 0:
             cut = len(first) - 1
-        header, self._rest = first[:cut + 1], first[cut + 1:]
+        header, self._rest = first[: cut + 1], first[cut + 1 :]
         self._line = 2
         return header, 2
 
@@ -116,7 +118,7 @@ class _CsvBlocks:
                 if cut < 0:
                     self._rest = data
                     continue
-                block, self._rest = data[:cut + 1], data[cut + 1:]
+                block, self._rest = data[: cut + 1], data[cut + 1 :]
             nnl = block.count(b"\n")
             yield block, self._line, nnl
             self._line += nnl
@@ -142,9 +144,12 @@ class _CsvBlocks:
                     # a small probe is parsed on this thread: no Arrow pool threads start for a file that a
                     # command may reject a moment later (threads still starting at exit abort the process)
                     ropts = pcsv.ReadOptions(column_names=names, use_threads=len(block) > (4 << 20))
-                    t = pcsv.read_csv(pa.py_buffer(block), read_options=ropts,
-                                      parse_options=pcsv.ParseOptions(newlines_in_values=b'"' in block),
-                                      convert_options=pcsv.ConvertOptions(column_types=types))
+                    t = pcsv.read_csv(
+                        pa.py_buffer(block),
+                        read_options=ropts,
+                        parse_options=pcsv.ParseOptions(newlines_in_values=b'"' in block),
+                        convert_options=pcsv.ConvertOptions(column_types=types),
+                    )
                     break
                 except pa.ArrowInvalid:
                     t = None
@@ -227,10 +232,9 @@ def _split_records(block: bytes, first_line: int, ncols: int):
     keep = ~empty & ~bad
     if bad.any():
         for i in np.flatnonzero(bad):
-            raw = block[starts[i]:ends[i]]
-            rejects.append(Reject(int(line_no[i]), f"expected {ncols} fields, got {int(nfields[i])}",
-                                  _raw_text(raw)))
-        good = [block[s:e + 1] for s, e in zip(starts[keep], ends[keep])]
+            raw = block[starts[i] : ends[i]]
+            rejects.append(Reject(int(line_no[i]), f"expected {ncols} fields, got {int(nfields[i])}", _raw_text(raw)))
+        good = [block[s : e + 1] for s, e in zip(starts[keep], ends[keep])]
         good = [g if g.endswith(b"\n") else g + b"\n" for g in good]
         return good, line_no[keep], rejects
     return block, line_no[keep], rejects
@@ -277,8 +281,7 @@ def _split_quoted(block: bytes, first_line: int, ncols: int):
                 rejects.append(Reject(first_line + i, "unclosed quote", _raw_text(line)))
                 i += 1
             else:
-                rejects.append(Reject(first_line + i, f"expected {ncols} fields, got {len(fields)}",
-                                      _raw_text(line)))
+                rejects.append(Reject(first_line + i, f"expected {ncols} fields, got {len(fields)}", _raw_text(line)))
                 i += 1
             continue
         good.append(rec + b"\n")
@@ -306,8 +309,11 @@ def _parse_block(path, block: bytes, first_line: int, schema, nnl=None):
     names = schema.names
     nlines = (block.count(b"\n") if nnl is None else nnl) + (0 if block.endswith(b"\n") else 1)
     try:
-        table = pcsv.read_csv(pa.py_buffer(block), read_options=pcsv.ReadOptions(column_names=names),
-                              convert_options=pcsv.ConvertOptions(column_types=schema))
+        table = pcsv.read_csv(
+            pa.py_buffer(block),
+            read_options=pcsv.ReadOptions(column_names=names),
+            convert_options=pcsv.ConvertOptions(column_types=schema),
+        )
         if table.num_rows == nlines:  # a short or long row raised ArrowInvalid: slow path
             lines = np.arange(first_line, first_line + nlines, dtype=np.int64)
             return table.append_column(LINE_COL, pa.array(lines)), []
@@ -320,8 +326,12 @@ def _parse_block(path, block: bytes, first_line: int, schema, nnl=None):
     quoted = b'"' in data
     popts = pcsv.ParseOptions(newlines_in_values=quoted)
     try:
-        table = pcsv.read_csv(pa.py_buffer(data), read_options=pcsv.ReadOptions(column_names=names),
-                              parse_options=popts, convert_options=pcsv.ConvertOptions(column_types=schema))
+        table = pcsv.read_csv(
+            pa.py_buffer(data),
+            read_options=pcsv.ReadOptions(column_names=names),
+            parse_options=popts,
+            convert_options=pcsv.ConvertOptions(column_types=schema),
+        )
         if table.num_rows != lines.size:
             raise ValueError("record count mismatch")
     except (pa.ArrowInvalid, ValueError):
@@ -335,10 +345,12 @@ def _parse_block_slow(data: bytes, lines, schema, names, quoted):
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
-    raw = pcsv.read_csv(pa.py_buffer(data),
-                        read_options=pcsv.ReadOptions(column_names=names, use_threads=True),
-                        parse_options=pcsv.ParseOptions(newlines_in_values=quoted, ignore_empty_lines=True),
-                        convert_options=pcsv.ConvertOptions(column_types={n: pa.binary() for n in names}))
+    raw = pcsv.read_csv(
+        pa.py_buffer(data),
+        read_options=pcsv.ReadOptions(column_names=names, use_threads=True),
+        parse_options=pcsv.ParseOptions(newlines_in_values=quoted, ignore_empty_lines=True),
+        convert_options=pcsv.ConvertOptions(column_types={n: pa.binary() for n in names}),
+    )
     if raw.num_rows != lines.size:
         raise HpeError(f"cannot split lines {lines[0]}-{lines[-1]} into records consistently")
     n = raw.num_rows
@@ -404,8 +416,10 @@ def _convert_column(col, typ, name):
     null |= np.asarray(s.is_null().to_numpy(zero_copy_only=False), dtype=bool)
     s = pc.if_else(pa.array(null | bad), pa.scalar(None, pa.string()), s)
     if pa.types.is_floating(typ) or pa.types.is_integer(typ):
-        nodigit = ~np.asarray(pc.match_substring_regex(s, r"[0-9]|(?i:nan|inf)").fill_null(True)
-                              .to_numpy(zero_copy_only=False), dtype=bool)
+        nodigit = ~np.asarray(
+            pc.match_substring_regex(s, r"[0-9]|(?i:nan|inf)").fill_null(True).to_numpy(zero_copy_only=False),
+            dtype=bool,
+        )
         if nodigit.any():
             bad |= nodigit
             s = pc.if_else(pa.array(nodigit), pa.scalar(None, pa.string()), s)

@@ -19,6 +19,7 @@ A table row names its image in one of these ways, all resolved here:
 :func:`resolve_image`, :func:`video_path` and :func:`jpeg_size` keep the signatures of
 ``hpe_cli.pipelines.export`` (a superset of what they find), so export can call them from here.
 """
+
 from __future__ import annotations
 
 import re
@@ -33,13 +34,20 @@ IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 IMAGE_COLUMNS = ("image", "image_path", "img_path", "file_name", "filename", "file", "path")
 
 #: Panoptic camera types: (image folder, video folder, video prefix)
-_PANOPTIC = {"hd": ("hdImgs", "hdVideos", "hd_"), "vga": ("vgaImgs", "vgaVideos", "vga_"),
-             "kinect": ("kinectImgs", "kinectVideos", "kinect_")}
+_PANOPTIC = {
+    "hd": ("hdImgs", "hdVideos", "hd_"),
+    "vga": ("vgaImgs", "vgaVideos", "vga_"),
+    "kinect": ("kinectImgs", "kinectVideos", "kinect_"),
+}
 _CAM = r"(?P<cam>\d\d_\d\d)"
 #: extracted-frame names of the toolbox (``hdImgs/00_08/00_08_00001147.jpg``) and of the mirrors
 #: (``hdImgs/hd_00_08/00001147.jpg``)
-_PANOPTIC_NAME = re.compile(r"(?:^|/)(?P<dir>hdImgs|vgaImgs|kinectImgs)/(?:(?:hd_|vga_|kinect_)?" + _CAM
-                            + r")/(?:(?P=cam)_)?(?P<frame>\d{1,9})\.(?:jpe?g|png)$", re.IGNORECASE)
+_PANOPTIC_NAME = re.compile(
+    r"(?:^|/)(?P<dir>hdImgs|vgaImgs|kinectImgs)/(?:(?:hd_|vga_|kinect_)?"
+    + _CAM
+    + r")/(?:(?P=cam)_)?(?P<frame>\d{1,9})\.(?:jpe?g|png)$",
+    re.IGNORECASE,
+)
 _CAM_RE = re.compile(r"^\d\d_\d\d$")
 
 
@@ -67,8 +75,11 @@ def panoptic_view(name: str):
 def _panoptic_frames(base: Path, kind: str, camera: str, frame: int):
     img_dir, _, prefix = _PANOPTIC[kind]
     root = base / img_dir
-    return (root / camera / f"{camera}_{frame:08d}.jpg", root / f"{prefix}{camera}" / f"{frame:08d}.jpg",
-            root / camera / f"{frame:08d}.jpg")
+    return (
+        root / camera / f"{camera}_{frame:08d}.jpg",
+        root / f"{prefix}{camera}" / f"{frame:08d}.jpg",
+        root / camera / f"{frame:08d}.jpg",
+    )
 
 
 def _bases(root, sequence) -> tuple:
@@ -177,10 +188,10 @@ def jpeg_size(data: bytes):
         if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
             i += 2
             continue
-        seg = int.from_bytes(data[i + 2:i + 4], "big")
+        seg = int.from_bytes(data[i + 2 : i + 4], "big")
         if marker in (0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF):
-            h = int.from_bytes(data[i + 5:i + 7], "big")
-            w = int.from_bytes(data[i + 7:i + 9], "big")
+            h = int.from_bytes(data[i + 5 : i + 7], "big")
+            w = int.from_bytes(data[i + 7 : i + 9], "big")
             return (w, h) if w > 0 and h > 0 else None
         i += 2 + seg
     return None
@@ -318,10 +329,25 @@ def row_ids(frame):
             return [""] * n
         return ["" if v is None or pd.isna(v) else str(v) for v in frame[col].tolist()]
 
-    frames = pd.to_numeric(frame["frame"], errors="coerce").fillna(-1).astype(np.int64).tolist() \
-        if "frame" in frame.columns else [-1] * n
+    frames = (
+        pd.to_numeric(frame["frame"], errors="coerce").fillna(-1).astype(np.int64).tolist()
+        if "frame" in frame.columns
+        else [-1] * n
+    )
     return text("sequence"), text("camera"), frames
 
 
-__all__ = ["IMAGE_COLUMNS", "IMAGE_SUFFIXES", "ImageRef", "ImageResolver", "camera_type", "image_size", "jpeg_size",
-           "panoptic_view", "read_image", "resolve_image", "row_ids", "video_path"]
+__all__ = [
+    "IMAGE_COLUMNS",
+    "IMAGE_SUFFIXES",
+    "ImageRef",
+    "ImageResolver",
+    "camera_type",
+    "image_size",
+    "jpeg_size",
+    "panoptic_view",
+    "read_image",
+    "resolve_image",
+    "row_ids",
+    "video_path",
+]

@@ -3,13 +3,13 @@
 Shared by every command that reads labels, so that "missing column",
 "non-numeric" and "non-finite" mean the same thing everywhere.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from ..errors import HpeError
 from .layout import ANGLE_COLS, MATRIX_COLS
-
 
 #: angles beyond this many degrees are rejected (a unit or storage mistake, and float precision is gone)
 MAX_ANGLE = 1e6
@@ -33,8 +33,13 @@ def _numeric(batch, name):
     import pyarrow.compute as pc
 
     col = batch.column(batch.schema.get_field_index(name))
-    numeric = (pa.types.is_integer(col.type) or pa.types.is_floating(col.type) or pa.types.is_boolean(col.type)
-               or pa.types.is_decimal(col.type) or pa.types.is_null(col.type))
+    numeric = (
+        pa.types.is_integer(col.type)
+        or pa.types.is_floating(col.type)
+        or pa.types.is_boolean(col.type)
+        or pa.types.is_decimal(col.type)
+        or pa.types.is_null(col.type)
+    )
     if numeric:
         if col.null_count == 0 and pa.types.is_float64(col.type):
             values = col.to_numpy()
@@ -43,8 +48,11 @@ def _numeric(batch, name):
         bad = ~np.isfinite(values)
         if not bad.any():
             return values, bad, None
-        null = np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool) if col.null_count else \
-            np.zeros(len(values), dtype=bool)
+        null = (
+            np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)
+            if col.null_count
+            else np.zeros(len(values), dtype=bool)
+        )
         non_numeric = np.zeros(len(values), dtype=bool)
     else:
         import pandas as pd
@@ -131,6 +139,7 @@ def batch_labels(batch, mode: str, radians: bool = False):
 # ---------------------------------------------------------------- storage kinds
 # (kept apart from the numeric extraction above: every storage kind is read here the same way)
 
+
 def _native(system, columns) -> bool:
     """True when ``columns`` hold the system's own declared value columns."""
     if system is None or (system.storage_kind == "angles" and not system.columns):
@@ -162,12 +171,16 @@ def label_mode(columns, path="input", system=None) -> str:
     own = ""
     if system is not None and (system.storage_kind != "angles" or system.columns):
         missing_own = [c for c in system.value_columns if c not in cols]
-        own = (f"{system.name}'s {system.storage_kind} columns {','.join(system.value_columns)} "
-               f"(missing {','.join(missing_own)}), or ")
+        own = (
+            f"{system.name}'s {system.storage_kind} columns {','.join(system.value_columns)} "
+            f"(missing {','.join(missing_own)}), or "
+        )
     missing = [c for c in ANGLE_COLS if c not in cols]
-    raise HpeError(f"{path}: missing column(s) {', '.join(missing)}: expected {own}angle columns pitch,yaw,roll "
-                   f"(degrees) or matrix columns r00..r22; found {', '.join(list(columns)[:12]) or 'no columns'}"
-                   f"{columns_map_hint(columns)}")
+    raise HpeError(
+        f"{path}: missing column(s) {', '.join(missing)}: expected {own}angle columns pitch,yaw,roll "
+        f"(degrees) or matrix columns r00..r22; found {', '.join(list(columns)[:12]) or 'no columns'}"
+        f"{columns_map_hint(columns)}"
+    )
 
 
 def columns_map_hint(columns) -> str:
@@ -254,8 +267,14 @@ def batch_rotations(batch, system, mode: str, radians: bool = False):
         if not ok.all():
             cols = [np.where(ok, c, 0.0) for c in cols]
         X = system.soa_from_angles(*cols)
-        return [[np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) if isinstance(v, float) else v
-                 for v in row] for row in X], ok, reasons
+        return (
+            [
+                [np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) if isinstance(v, float) else v for v in row]
+                for row in X
+            ],
+            ok,
+            reasons,
+        )
     if mode == "matrix" and not (native and system.storage_kind == "matrix"):
         cols, ok, reasons = label_columns_fast(batch, "matrix")
         if not ok.all():

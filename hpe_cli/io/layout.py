@@ -1,4 +1,5 @@
 """The label table layout shared by every command."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -41,7 +42,7 @@ def string_array(values):
     offsets = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(lengths, out=offsets[1:])
     typ = pa.string()
-    if offsets[-1] >= 2 ** 31:
+    if offsets[-1] >= 2**31:
         typ = pa.large_string()
     else:
         offsets = offsets.astype(np.int32)
@@ -51,8 +52,9 @@ def string_array(values):
         ok = np.ones(n, dtype=bool)
         ok[nulls] = False
         validity = pa.py_buffer(np.packbits(ok, bitorder="little"))
-    arr = pa.Array.from_buffers(typ, n, [validity, pa.py_buffer(offsets), pa.py_buffer(b"".join(data))],
-                                null_count=len(nulls))
+    arr = pa.Array.from_buffers(
+        typ, n, [validity, pa.py_buffer(offsets), pa.py_buffer(b"".join(data))], null_count=len(nulls)
+    )
     return arr.cast(pa.string()) if typ != pa.string() else arr
 
 
@@ -74,8 +76,9 @@ def numpy_to_arrow(v):
         typ = pa.from_numpy_dtype(v.dtype)
         return pa.Array.from_buffers(typ, len(v), [None, pa.py_buffer(v)], null_count=0)
     if v.ndim == 1 and v.dtype == bool:
-        return pa.Array.from_buffers(pa.bool_(), len(v), [None, pa.py_buffer(np.packbits(v, bitorder="little"))],
-                                     null_count=0)
+        return pa.Array.from_buffers(
+            pa.bool_(), len(v), [None, pa.py_buffer(np.packbits(v, bitorder="little"))], null_count=0
+        )
     if v.ndim == 1 and v.dtype == object:
         return string_array(v)
     return pa.array(v)
@@ -101,11 +104,14 @@ def arrow_to_numpy(col, dtype=None) -> np.ndarray:
             parts.append(np.asarray(ch.to_numpy(zero_copy_only=False)))
             continue
         np_type = np.dtype(ch.type.to_pandas_dtype())
-        v = np.frombuffer(ch.buffers()[1], dtype=np_type, count=len(ch), offset=ch.offset * np_type.itemsize) \
-            if len(ch) else np.empty(0, dtype=np_type)
+        v = (
+            np.frombuffer(ch.buffers()[1], dtype=np_type, count=len(ch), offset=ch.offset * np_type.itemsize)
+            if len(ch)
+            else np.empty(0, dtype=np_type)
+        )
         if ch.null_count:
             bits = np.unpackbits(np.frombuffer(ch.buffers()[0], dtype=np.uint8), bitorder="little")
-            valid = bits[ch.offset:ch.offset + len(ch)].astype(bool)
+            valid = bits[ch.offset : ch.offset + len(ch)].astype(bool)
             v = v.astype(np.float64) if np_type.kind != "f" else v.copy()
             v[~valid] = np.nan
         parts.append(v)

@@ -1,4 +1,5 @@
 """Short reasons for OS errors and printable file names, for one-line messages that name the user's path."""
+
 from __future__ import annotations
 
 import errno

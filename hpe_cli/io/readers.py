@@ -23,6 +23,7 @@ always read as float64, so "non-numeric value in pitch" means the same on line
 3 as on line 30,000,000; other columns take the type pyarrow infers from the
 first block (a later value that does not fit it is a reject saying so).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -69,8 +70,17 @@ def sniff(path: Path) -> str:
 _NOT_TEXT = (".parquet", ".pq", ".mat", ".zip", ".tgz", ".gz", ".tar", ".npz", ".pkl", ".pickle")
 
 
-def open_table(path, batch_size: int = DEFAULT_BATCH, columns=None, delimiter=None, header: bool = True,
-               input_format=None, names=None, with_lines: bool = False, block_size: int | None = None) -> TableSource:
+def open_table(
+    path,
+    batch_size: int = DEFAULT_BATCH,
+    columns=None,
+    delimiter=None,
+    header: bool = True,
+    input_format=None,
+    names=None,
+    with_lines: bool = False,
+    block_size: int | None = None,
+) -> TableSource:
     """Open a label table for streaming.
 
     ``columns`` renames columns (``"pitch=Pitch,yaw=Yaw"`` or ``{"pitch": "Pitch"}``);
@@ -95,15 +105,23 @@ def open_table(path, batch_size: int = DEFAULT_BATCH, columns=None, delimiter=No
                 from .columns import LenientMap
 
                 columns = LenientMap(columns)
-    src = open_formatted(path, batch_size, input_format=input_format, delimiter=delimiter, header=header,
-                         names=names, with_lines=with_lines)
+    src = open_formatted(
+        path,
+        batch_size,
+        input_format=input_format,
+        delimiter=delimiter,
+        header=header,
+        names=names,
+        with_lines=with_lines,
+    )
     if src is None:
         src = _open_core(path, batch_size, with_lines=with_lines, block_size=block_size or CSV_BLOCK)
     return apply_columns_map(src, columns)
 
 
-def _open_core(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = False,
-               block_size: int = CSV_BLOCK) -> TableSource:
+def _open_core(
+    path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = False, block_size: int = CSV_BLOCK
+) -> TableSource:
     """Open a label table for streaming.
 
     ``path`` may be Parquet, CSV (recognised by content, not by extension), a
@@ -126,8 +144,18 @@ def _open_core(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = Fals
             for b in dataset.iter_batches():
                 yield _with_line(b, line), []
                 line += b.num_rows
-        return TableSource(path, _schema(dataset.schema, with_lines), dataset.num_rows, gen_stream, with_lines,
-                           "dataset", system=dataset.system, dataset=True, unit="row")
+
+        return TableSource(
+            path,
+            _schema(dataset.schema, with_lines),
+            dataset.num_rows,
+            gen_stream,
+            with_lines,
+            "dataset",
+            system=dataset.system,
+            dataset=True,
+            unit="row",
+        )
     if dataset is not None:
         system = dataset.attrs.get("system")
         # one record per file (.mat, BIWI pose files): a row is named by its file
@@ -139,9 +167,19 @@ def _open_core(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = Fals
                 b = table.slice(start, batch_size).combine_chunks().to_batches()
                 b = b[0] if b else pa.RecordBatch.from_pylist([], schema=table.schema)
                 yield _with_line(b, start + 1), []
-        return TableSource(path, _schema(table.schema, with_lines), table.num_rows, gen, with_lines, "dataset",
-                           system=system, dataset=system is not None, unit="file" if row_files else "row",
-                           row_files=row_files)
+
+        return TableSource(
+            path,
+            _schema(table.schema, with_lines),
+            table.num_rows,
+            gen,
+            with_lines,
+            "dataset",
+            system=system,
+            dataset=system is not None,
+            unit="file" if row_files else "row",
+            row_files=row_files,
+        )
     if path.is_dir():
         raise HpeError(f"{path}: expected a table file, got a folder")
     if path.stat().st_size == 0:
@@ -154,11 +192,14 @@ def _open_core(path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = Fals
             return _open_csv(path, batch_size, with_lines, block_size)
     except (pa.ArrowInvalid, OSError) as exc:
         raise HpeError(f"{path}: cannot read: {_one_line(exc)}") from None
-    what = {"pickle": "a Python pickle (hpe never loads pickles as tables; AGORA dataframes go to "
-                      "'hpe relabel-agora')",
-            "zip": "a zip archive", "gzip": "a gzip file (decompress it first)", "json": "JSON",
-            "mat": "a MATLAB .mat file (give the .mat file or its folder with a .mat name)",
-            "utf16": "UTF-16 text (save it as UTF-8)"}[kind]
+    what = {
+        "pickle": "a Python pickle (hpe never loads pickles as tables; AGORA dataframes go to 'hpe relabel-agora')",
+        "zip": "a zip archive",
+        "gzip": "a gzip file (decompress it first)",
+        "json": "JSON",
+        "mat": "a MATLAB .mat file (give the .mat file or its folder with a .mat name)",
+        "utf16": "UTF-16 text (save it as UTF-8)",
+    }[kind]
     raise HpeError(f"{path}: expected a Parquet or CSV table, got {what}")
 
 
@@ -177,11 +218,12 @@ def _open_parquet(path, batch_size, with_lines):
             for b in f.iter_batches(batch_size=batch_size, row_groups=[rg], use_threads=True):
                 yield (_with_line(b, line) if with_lines else b), []
                 line += b.num_rows
+
     meta = schema.metadata or {}
     system = meta[b"hpe:system"].decode("utf-8", "replace") if b"hpe:system" in meta else None
-    return TableSource(path, _schema(schema, with_lines), pf.metadata.num_rows, gen, with_lines, "parquet",
-                       system=system, unit="row")
-
+    return TableSource(
+        path, _schema(schema, with_lines), pf.metadata.num_rows, gen, with_lines, "parquet", system=system, unit="row"
+    )
 
 
 def _open_csv(path, batch_size, with_lines, block_size):
@@ -212,8 +254,9 @@ def _read_dataset(path: Path):
         if is_w300lp_zip(path):
             return open_w300lp(path)
         raise HpeError(f"{path}: expected a 300W-LP zip with AFW/HELEN/IBUG/LFPW .mat members")
-    is_biwi_file = path.is_file() and (name.endswith((".tgz", ".tar.gz")) or
-                                       (name.startswith("frame_") and name.endswith(("_pose.txt", "_pose.bin"))))
+    is_biwi_file = path.is_file() and (
+        name.endswith((".tgz", ".tar.gz")) or (name.startswith("frame_") and name.endswith(("_pose.txt", "_pose.bin")))
+    )
     if path.is_dir() and any(path.glob("*.mat")):
         from ..datasets.mat import read_mat_dir
 
@@ -238,8 +281,10 @@ def _read_dataset(path: Path):
         out.attrs["one_record_files"] = True
         return out
     if path.is_dir():
-        raise HpeError(f"{path}: no .mat files, 300W-LP subset folders, DAD-3DHeads annotations or BIWI "
-                       "frame_XXXXX_pose.txt/.bin files found")
+        raise HpeError(
+            f"{path}: no .mat files, 300W-LP subset folders, DAD-3DHeads annotations or BIWI "
+            "frame_XXXXX_pose.txt/.bin files found"
+        )
     return None
 
 

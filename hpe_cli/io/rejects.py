@@ -1,4 +1,5 @@
 """The rejects file: every input row that was not labelled, with its reason."""
+
 from __future__ import annotations
 
 from collections import Counter
@@ -24,8 +25,10 @@ def rejects_rule(count: int, first: str | None, *, has_file: bool, strict: bool,
     if strict:
         raise HpeError(f"{head}{count} row(s) rejected and --strict given: nothing written")
     if not has_file:
-        raise HpeError(f"{head}{count} row(s) cannot be used: nothing written "
-                       "(use --rejects FILE to set them aside and write the rest)")
+        raise HpeError(
+            f"{head}{count} row(s) cannot be used: nothing written "
+            "(use --rejects FILE to set them aside and write the rest)"
+        )
 
 
 class Rejects:
@@ -66,8 +69,14 @@ class Rejects:
         if reasons.size == 0:
             return
         if self.first_where is None:
-            n = next((int(np.asarray(v)[0]) for v in (lines, columns.get("line"), columns.get("row"))
-                      if v is not None and np.asarray(v).size and _integral(np.asarray(v)[0])), None)
+            n = next(
+                (
+                    int(np.asarray(v)[0])
+                    for v in (lines, columns.get("line"), columns.get("row"))
+                    if v is not None and np.asarray(v).size and _integral(np.asarray(v)[0])
+                ),
+                None,
+            )
             locate = where if where is not None else self._where
             if isinstance(locate, str):
                 self.first_where, self._named = f"{locate}: {reasons[0]}", True
@@ -87,8 +96,13 @@ class Rejects:
 
     def check(self) -> None:
         """Apply :func:`rejects_rule` (raise if rows were rejected without a file, or with ``strict``)."""
-        rejects_rule(len(self), self.first_where, has_file=self.path is not None, strict=self.strict,
-                     source=None if self._named else self.source)
+        rejects_rule(
+            len(self),
+            self.first_where,
+            has_file=self.path is not None,
+            strict=self.strict,
+            source=None if self._named else self.source,
+        )
 
     def finish(self):
         """The end of a command: apply the rule (:meth:`check`), then :meth:`write`."""
@@ -101,8 +115,11 @@ class Rejects:
             return None
         import pandas as pd
 
-        frame = pd.concat([pd.DataFrame(p) for p in self._parts], ignore_index=True) if self._parts \
+        frame = (
+            pd.concat([pd.DataFrame(p) for p in self._parts], ignore_index=True)
+            if self._parts
             else pd.DataFrame({"reason": pd.Series([], dtype=str)})
+        )
         return write_table(frame, self.path, overwrite=self.overwrite)
 
 

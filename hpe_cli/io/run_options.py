@@ -5,6 +5,7 @@ The CLI's ``--columns-map/--delimiter/--no-header/--names/--input-format``
 duration of a command, and every :func:`~hpe_cli.io.readers.open_table` call
 that passes no table options of its own uses them.
 """
+
 from __future__ import annotations
 
 import contextvars

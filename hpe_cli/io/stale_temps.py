@@ -1,6 +1,7 @@
 """Temps of runs that were killed: each run ``flock``s the temps it stages (the kernel drops the lock when
 the process is gone, ``kill -9`` included); a later run staging into the same folder removes the temps that
 are old and unlocked (:func:`_sweep`), so a killed run does not leave its ``.hpe-*.tmp`` files for ever."""
+
 from __future__ import annotations
 
 import os

@@ -20,6 +20,7 @@ converted exactly (through the rotation matrix) into the option's.
 metadata"``, ``"option"`` or ``"default"``); every resolution made during a
 command run is kept (:func:`resolutions`) so the command's summary can say it.
 """
+
 from __future__ import annotations
 
 import contextvars
@@ -95,8 +96,10 @@ def system_from_metadata(metadata, path="input"):
     """The RotationSystem a schema's metadata names (``hpe:system_definition``, else ``hpe:system``), or None."""
     from ..rotation.systems import SystemError_, system_from_dict
 
-    meta = {(k.decode() if isinstance(k, bytes) else k): (v.decode("utf-8", "replace") if isinstance(v, bytes) else v)
-            for k, v in (metadata or {}).items()}
+    meta = {
+        (k.decode() if isinstance(k, bytes) else k): (v.decode("utf-8", "replace") if isinstance(v, bytes) else v)
+        for k, v in (metadata or {}).items()
+    }
     if "hpe:system_definition" in meta:
         import json
 
@@ -126,8 +129,10 @@ def _named(name, path, what):
     try:
         return get_system(name)
     except SystemError_:
-        raise HpeError(f"{path}: {what} names system {name!r}, which this hpe does not know "
-                       "(pass --reinterpret-as SYSTEM to read the labels in another one)") from None
+        raise HpeError(
+            f"{path}: {what} names system {name!r}, which this hpe does not know "
+            "(pass --reinterpret-as SYSTEM to read the labels in another one)"
+        ) from None
 
 
 def file_system(src):
@@ -152,8 +157,15 @@ def _same(a, b) -> bool:
     return a is b or (a is not None and b is not None and a.name == b.name)
 
 
-def resolve_system(src, option=None, *, default="300w_lp", option_name: str = "--system",
-                   option_is_output: bool = False, reinterpret=None) -> Resolved:
+def resolve_system(
+    src,
+    option=None,
+    *,
+    default="300w_lp",
+    option_name: str = "--system",
+    option_is_output: bool = False,
+    reinterpret=None,
+) -> Resolved:
     """The system to read ``src``'s labels in, and where it came from.
 
     Parameters
@@ -206,8 +218,9 @@ def resolve_system(src, option=None, *, default="300w_lp", option_name: str = "-
         else:
             raise UsageError(f"{path}: the file names no rotation system: expected {option_name} SYSTEM")
     elif dataset and rein is not None and not _same(rein, own):
-        raise UsageError(f"{path}: --reinterpret-as {rein.name} does not apply: the file's format fixes its "
-                         f"system ({own.name})")
+        raise UsageError(
+            f"{path}: --reinterpret-as {rein.name} does not apply: the file's format fixes its system ({own.name})"
+        )
     elif opt is None and rein is None:
         res = Resolved(own, FILE, path)
     elif opt is None or _same(opt, own):
@@ -223,8 +236,10 @@ def resolve_system(src, option=None, *, default="300w_lp", option_name: str = "-
     else:
         where = "format" if dataset else "metadata"
         hint = "" if dataset else f", or pass --reinterpret-as {opt.name} if the file's metadata is wrong"
-        raise UsageError(f"{path}: {option_name} {opt.name} disagrees with the file's own system {own.name} "
-                         f"(its {where}): drop {option_name}{hint}")
+        raise UsageError(
+            f"{path}: {option_name} {opt.name} disagrees with the file's own system {own.name} "
+            f"(its {where}): drop {option_name}{hint}"
+        )
     if out is not None or (option_is_output and opt is not None):
         res = Resolved(res.system, res.origin, res.path, out or opt, res.note)
     made = _MADE.get()

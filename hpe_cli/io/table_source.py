@@ -1,4 +1,5 @@
 """The streamed table every reader returns (:class:`TableSource`), its rejects and row numbering."""
+
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
@@ -32,8 +33,9 @@ def is_float_column(name: str, floats=None) -> bool:
     """Columns always read as float64 from CSV: label, box and landmark (``lm{i}_x/y/z``) columns."""
     import re
 
-    return name in (floats if floats is not None else _float_columns()) or \
-        re.fullmatch(r"lm\d+_[xyz]", name) is not None
+    return (
+        name in (floats if floats is not None else _float_columns()) or re.fullmatch(r"lm\d+_[xyz]", name) is not None
+    )
 
 
 @dataclass
@@ -139,8 +141,9 @@ def _check_duplicates(path, names, where="line 1: "):
 
     dup = [n for n, c in Counter(names).items() if c > 1]
     if dup:
-        raise HpeError(f"{path}: {where}duplicate column name(s) {', '.join(map(repr, dup))}: "
-                       f"expected each column once")
+        raise HpeError(
+            f"{path}: {where}duplicate column name(s) {', '.join(map(repr, dup))}: expected each column once"
+        )
     if LINE_COL in names:
         raise HpeError(f"{path}: {where}column name {LINE_COL!r} is reserved")
 

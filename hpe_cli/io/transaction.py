@@ -34,6 +34,7 @@ Rules enforced here, for every command:
 
 Without a transaction, each writer commits its own output atomically.
 """
+
 from __future__ import annotations
 
 import contextvars
@@ -50,8 +51,16 @@ from . import os_errors
 from .os_errors import os_reason, printable
 from .stale_temps import SWEEP_AGE, _lock, _sweep  # noqa: F401 - SWEEP_AGE for tests
 
-__all__ = ["OutputTransaction", "current", "ensure_transaction", "staged_dir", "note_input", "os_reason",
-           "printable", "TEMP_PREFIX"]
+__all__ = [
+    "OutputTransaction",
+    "current",
+    "ensure_transaction",
+    "staged_dir",
+    "note_input",
+    "os_reason",
+    "printable",
+    "TEMP_PREFIX",
+]
 
 TEMP_PREFIX = os_errors.TEMP_PREFIX
 _current: contextvars.ContextVar = contextvars.ContextVar("hpe_output_transaction", default=None)
@@ -121,6 +130,7 @@ def _section():
         if not _critical and _pending is not None:
             exc, _pending = _pending, None
             raise exc
+
 
 def _real(path) -> str:
     return os.path.realpath(os.fspath(path))
@@ -383,8 +393,10 @@ class OutputTransaction:
                 else:
                     self._check_inputs(s.item)
                     if s.target.exists() and not s.overwrite:
-                        raise HpeError(f"{s.target}: already exists (another run created it meanwhile; "
-                                       "use --overwrite to replace it)")
+                        raise HpeError(
+                            f"{s.target}: already exists (another run created it meanwhile; "
+                            "use --overwrite to replace it)"
+                        )
                     plans.append((s, [(s.tmp, s.target)]))
             for s, pairs in plans:
                 if s.is_dir:
@@ -466,8 +478,10 @@ class OutputTransaction:
 def _collision(out: _Item, other: _Item, kind: str) -> str:
     what = out.label or "the output"
     against = f"{other.label} {other.shown}" if other.label else f"the {kind} {other.shown}"
-    return (f"{out.shown}: {what} must differ from {against} (the same file after links); "
-            "refusing to write it, with or without --overwrite")
+    return (
+        f"{out.shown}: {what} must differ from {against} (the same file after links); "
+        "refusing to write it, with or without --overwrite"
+    )
 
 
 def _remove(p: Path) -> None:
@@ -503,8 +517,9 @@ def _place(src: Path, dst: Path, overwrite: bool, undo: list, backups: list) -> 
         try:
             os.link(src, dst)  # fails if dst exists, whoever created it
         except FileExistsError:
-            raise HpeError(f"{dst}: already exists (another run created it meanwhile; "
-                           "use --overwrite to replace it)") from None
+            raise HpeError(
+                f"{dst}: already exists (another run created it meanwhile; use --overwrite to replace it)"
+            ) from None
         except OSError as exc:
             if exc.errno not in _NO_LINKS:
                 raise
@@ -517,8 +532,9 @@ def _place(src: Path, dst: Path, overwrite: bool, undo: list, backups: list) -> 
         undo.append(lambda: os.unlink(dst))
         os.unlink(src)
     except FileExistsError:
-        raise HpeError(f"{dst}: already exists (another run created it meanwhile; "
-                       "use --overwrite to replace it)") from None
+        raise HpeError(
+            f"{dst}: already exists (another run created it meanwhile; use --overwrite to replace it)"
+        ) from None
     except OSError as exc:
         exc.hpe_target = dst
         raise

@@ -4,6 +4,7 @@ Radians read as degrees give labels that are silently almost frontal. Degrees da
 than a handful of rows is within +-pi (3.14 degrees) is implausible, so the run says so on stderr once its outputs
 are committed (the check is per run: it needs every row, and rows stream in batches).
 """
+
 from __future__ import annotations
 
 import sys
@@ -31,8 +32,10 @@ class UnitsWatch:
         if self.rows <= MIN_ROWS or self.largest > np.pi:
             return None
         where = f"{self.inputs[0]}: " if len(self.inputs) == 1 else ""
-        return (f"Warning: {where}every angle read as degrees is within +-pi (largest |value| {self.largest:.3g}, "
-                f"more than {MIN_ROWS} rows): if these are radians, add --radians")
+        return (
+            f"Warning: {where}every angle read as degrees is within +-pi (largest |value| {self.largest:.3g}, "
+            f"more than {MIN_ROWS} rows): if these are radians, add --radians"
+        )
 
     def report(self) -> None:
         msg = self.message()

@@ -13,6 +13,7 @@ no landmark: WHENet's images are already crops of the head box. Its angles are
 the ``whenet`` system (300W-LP matrix, yaw in (-180, 180], |pitch| and |roll|
 < 90).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -40,8 +41,9 @@ def whenet_lines(frame, path="<annotation.txt>", offset: int = 0) -> list:
     images = _strings(frame, "image")
     for k, im in enumerate(images):
         if "," in im or "\n" in im or "\r" in im:
-            raise HpeError(f"{path}: row {offset + k}: expected an image path without commas or line breaks, "
-                           f"got {im!r}")
+            raise HpeError(
+                f"{path}: row {offset + k}: expected an image path without commas or line breaks, got {im!r}"
+            )
     cols = []
     for c in WHENET_FIELDS[1:]:
         v = _column(frame, c)

@@ -3,6 +3,7 @@
 Output goes to a temporary file next to the target and is renamed into place
 only when everything succeeded, so a failure never leaves a half-written file.
 """
+
 from __future__ import annotations
 
 import json
@@ -78,8 +79,7 @@ class AtomicFile:
 
 def _mentions(exc, tmp) -> bool:
     name = Path(tmp).name
-    return name in str(getattr(exc, "filename", "") or "") or name in str(exc) or \
-        getattr(exc, "filename", None) is None
+    return name in str(getattr(exc, "filename", "") or "") or name in str(exc) or getattr(exc, "filename", None) is None
 
 
 def _reason(exc) -> str:
@@ -126,7 +126,11 @@ class TableWriter:
             except OSError as exc:
                 raise HpeError(f"{self.path}: cannot write: {_reason(exc)}") from None
         if batch.schema != self._schema:
-            batch = batch.cast(self._schema) if isinstance(batch, pa.Table) else pa.Table.from_batches([batch]).cast(self._schema)
+            batch = (
+                batch.cast(self._schema)
+                if isinstance(batch, pa.Table)
+                else pa.Table.from_batches([batch]).cast(self._schema)
+            )
         try:
             self._writer.write(batch)
         except OSError as exc:
@@ -135,15 +139,18 @@ class TableWriter:
 
     def _open(self, schema):
         if self.fmt == "parquet":
-            import pyarrow.parquet as pq
-
             import pyarrow as pa
+            import pyarrow.parquet as pq
 
             # continuous floats neither repeat (dictionary pages) nor compress (snappy finds
             # nothing in float64 mantissas): both cost write time for no gain
             floats = {f.name for f in schema if pa.types.is_floating(f.type)}
-            return pq.ParquetWriter(self._where(), schema, use_dictionary=[n for n in schema.names if n not in floats],
-                                    compression={n: ("none" if n in floats else "snappy") for n in schema.names})
+            return pq.ParquetWriter(
+                self._where(),
+                schema,
+                use_dictionary=[n for n in schema.names if n not in floats],
+                compression={n: ("none" if n in floats else "snappy") for n in schema.names},
+            )
         import pyarrow.csv as pcsv
 
         return pcsv.CSVWriter(self._where(), schema)

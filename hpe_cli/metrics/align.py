@@ -12,6 +12,7 @@ geodesic (Karcher) mean and leaves out the rows more than 90 degrees from
 the identity; that one is the ``opal23-align`` protocol. The two agree for a
 constant offset with small symmetric noise and no far-off rows.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -5,6 +5,7 @@
 :func:`compute_rows` and sums the results with :class:`hpe_cli.metrics.stream.Accumulator`; both give the same
 report blocks (tested in ``tests/evaluate/test_evaluate_streaming.py``).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -62,8 +63,16 @@ def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None) -> Pai
     p1, p2 = pair.angles(gt_system, "pred")
     best, _ = re_.best_of_two_error(p1, p2, g)
     protos = {name: PROTOCOLS[name].func(pair) for name in check_protocols(protocols)}
-    return PairRows(re_.geodesic_deg(pair.P, pair.G), re_.maev_deg(pair.P, pair.G), re_.frobenius(pair.P, pair.G),
-                    re_.wrapped_error(p1, g), best, g, p1, protos)
+    return PairRows(
+        re_.geodesic_deg(pair.P, pair.G),
+        re_.maev_deg(pair.P, pair.G),
+        re_.frobenius(pair.P, pair.G),
+        re_.wrapped_error(p1, g),
+        best,
+        g,
+        p1,
+        protos,
+    )
 
 
 def _f(x) -> float | None:
@@ -84,8 +93,13 @@ def metrics_summary(rows: PairRows, subset=None) -> dict:
     n = len(geo)
     if n:
         q = np.percentile(geo, [50, 90, 95])
-        geodesic = {"mean": float(geo.mean()), "median": float(q[0]), "p90": float(q[1]), "p95": float(q[2]),
-                    "max": float(geo.max())}
+        geodesic = {
+            "mean": float(geo.mean()),
+            "median": float(q[0]),
+            "p90": float(q[1]),
+            "p95": float(q[2]),
+            "max": float(geo.max()),
+        }
         geodesic.update({f"within_{t}": float((geo <= t).mean()) for t in WITHIN})
     else:
         geodesic = {k: None for k in ("mean", "median", "p90", "p95", "max")}
@@ -94,16 +108,23 @@ def metrics_summary(rows: PairRows, subset=None) -> dict:
     maev = {a: (float(mv[:, k].mean()) if n else None) for k, a in enumerate(re_.AXES)}
     maev["mean"] = float(mv.mean()) if n else None
     fro = sel(rows.frobenius)
-    return {"geodesic": geodesic, "maev": maev, "frobenius": {"mean": float(fro.mean()) if n else None},
-            "mae_wrapped": _angle_means(sel(rows.mae_wrapped)),
-            "mae_best_of_two": _angle_means(sel(rows.mae_best_of_two))}
+    return {
+        "geodesic": geodesic,
+        "maev": maev,
+        "frobenius": {"mean": float(fro.mean()) if n else None},
+        "mae_wrapped": _angle_means(sel(rows.mae_wrapped)),
+        "mae_best_of_two": _angle_means(sel(rows.mae_best_of_two)),
+    }
 
 
 def summary(rows: PairRows, subset=None) -> dict:
     """``{"n", "metrics", "protocols"}`` over ``subset``."""
     n = rows.n if subset is None else int(np.count_nonzero(subset))
-    return {"n": n, "metrics": metrics_summary(rows, subset),
-            "protocols": {name: summarize(pr, subset, name) for name, pr in rows.protocols.items()}}
+    return {
+        "n": n,
+        "metrics": metrics_summary(rows, subset),
+        "protocols": {name: summarize(pr, subset, name) for name, pr in rows.protocols.items()},
+    }
 
 
 def yaw_bin_edges(gt_system, width: float) -> np.ndarray:
@@ -129,8 +150,18 @@ def _plain(u):
     return u if isinstance(u, (str, int, float, bool)) or u is None else str(u)
 
 
-def evaluate_canonical(P, G, *, gt_system, protocols=None, align: str = "none", by=None, by_name: str = "by",
-                       yaw_bins: float | None = None, raw=None):
+def evaluate_canonical(
+    P,
+    G,
+    *,
+    gt_system,
+    protocols=None,
+    align: str = "none",
+    by=None,
+    by_name: str = "by",
+    yaw_bins: float | None = None,
+    raw=None,
+):
     """Score canonical rotations ``P`` against ``G``; return ``(report_part, rows)``.
 
     ``report_part`` holds ``metrics``, ``protocols``, ``align`` and, when
@@ -154,11 +185,17 @@ def evaluate_canonical(P, G, *, gt_system, protocols=None, align: str = "none", 
         angle = float(re_.geodesic_deg(Q[None], np.eye(3)[None])[0])
         P = remove_offset(P, Q)
         raw = {k: v for k, v in (raw or {}).items() if k != "pred"}  # the aligned predictions have no written angles
-        out["align"] = {"method": "mean", "offset_deg": angle,
-                        "offset_angles": dict(zip(ANGLES, map(float, qp[0]))),
-                        "offset_matrix_canonical": Q.tolist(), "gt_system": gt_system.name,
-                        "before": {"metrics": metrics_summary(before),
-                                   "protocols": {k: summarize(v, None, k) for k, v in before.protocols.items()}}}
+        out["align"] = {
+            "method": "mean",
+            "offset_deg": angle,
+            "offset_angles": dict(zip(ANGLES, map(float, qp[0]))),
+            "offset_matrix_canonical": Q.tolist(),
+            "gt_system": gt_system.name,
+            "before": {
+                "metrics": metrics_summary(before),
+                "protocols": {k: summarize(v, None, k) for k, v in before.protocols.items()},
+            },
+        }
     else:
         out["align"] = {"method": "none"}
     rows = compute_rows(P, G, gt_system, protocols, raw)
@@ -167,14 +204,14 @@ def evaluate_canonical(P, G, *, gt_system, protocols=None, align: str = "none", 
     out["protocols"] = s["protocols"]
     if by is not None:
         codes, labels = _groups(by)
-        out["by"] = {"column": by_name,
-                     "groups": {str(lab): summary(rows, codes == k) for k, lab in enumerate(labels)}}
+        out["by"] = {"column": by_name, "groups": {str(lab): summary(rows, codes == k) for k, lab in enumerate(labels)}}
     if yaw_bins:
         edges = yaw_bin_edges(gt_system, float(yaw_bins))
         y = rows.gt_angles[:, 1]
         idx = np.clip(np.searchsorted(edges, y, side="right") - 1, 0, len(edges) - 2)
-        out["yaw_bins"] = [{"lo": float(edges[k]), "hi": float(edges[k + 1]), **summary(rows, idx == k)}
-                           for k in range(len(edges) - 1)]
+        out["yaw_bins"] = [
+            {"lo": float(edges[k]), "hi": float(edges[k + 1]), **summary(rows, idx == k)} for k in range(len(edges) - 1)
+        ]
     return out, rows
 
 
@@ -256,7 +293,9 @@ def evaluate(pred, gt, *, pred_system, gt_system, protocols=None, align: str = "
         if a.ndim == 2 and a.shape[1] == 3 and (cp if side == "pred" else cg) in (None, "angles"):
             raw[side] = (sysm, a[ok])  # angles as written: the raw-angle protocols compare these
     part, _ = evaluate_canonical(P, G, gt_system=gs, protocols=protocols, align=align, raw=raw)
-    report = {"n": {"gt": n_g, "pred": n_p, "pairs": int(ok.sum()), "missing": 0, "invalid": int((~ok).sum())},
-              "systems": {"pred": ps.name, "gt": gs.name}}
+    report = {
+        "n": {"gt": n_g, "pred": n_p, "pairs": int(ok.sum()), "missing": 0, "invalid": int((~ok).sum())},
+        "systems": {"pred": ps.name, "gt": gs.name},
+    }
     report.update(part)
     return report

@@ -5,6 +5,7 @@ Each function reproduces a few named lines of a peer's current code (the
 ``Rotation`` the same SciPy call is made here, so the numbers agree to the
 last bits; everything runs on whole columns (no loop per row).
 """
+
 from __future__ import annotations
 
 import warnings
@@ -137,8 +138,9 @@ def opal23_near_deltas(ann, pred) -> np.ndarray:
     return opal23_near(ann, pred)[0]
 
 
-def opal23_karcher(deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20,
-                   start: int = 0) -> np.ndarray:
+def opal23_karcher(
+    deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20, start: int = 0
+) -> np.ndarray:
     """opal23's ``_compute_mean_rotation`` (test/evaluator.py:111-126) over ``deltas`` (any array-like, e.g. a memmap).
 
     Started at delta ``start`` (the peer starts at the first row of its file: a caller that spills the
@@ -155,7 +157,7 @@ def opal23_karcher(deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: in
     for _ in range(max_iter):
         total = np.zeros(3)
         for a in range(0, n, chunk):
-            total += _log(np.matmul(mean.T, np.asarray(deltas[a:a + chunk]))).sum(axis=0)
+            total += _log(np.matmul(mean.T, np.asarray(deltas[a : a + chunk]))).sum(axis=0)
         d = total / n
         if np.linalg.norm(d) < tol:
             break

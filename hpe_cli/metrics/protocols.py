@@ -13,6 +13,7 @@ group, a yaw bin) are made by :func:`summarize`.
 Every protocol's ``source`` names ``repo@commit file:lines`` of the code it
 reproduces (see :data:`PROTOCOLS`).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -132,12 +133,19 @@ def _same_angles(a, b) -> bool:
     key = (a.name, b.name)
     if key not in _SAME:
         rng = np.random.default_rng(0)
-        t = np.concatenate([rng.uniform(-180, 180, (1900, 3)),
-                            np.c_[rng.uniform(-180, 180, 100), np.repeat([90.0, -90.0], 50), rng.uniform(-180, 180, 100)]])
+        t = np.concatenate(
+            [
+                rng.uniform(-180, 180, (1900, 3)),
+                np.c_[rng.uniform(-180, 180, 100), np.repeat([90.0, -90.0], 50), rng.uniform(-180, 180, 100)],
+            ]
+        )
         Xa = a.soa_to_canonical(a.soa_from_angles(t[:, 0], t[:, 1], t[:, 2]))
         Xb = b.soa_to_canonical(b.soa_from_angles(t[:, 0], t[:, 1], t[:, 2]))
-        _SAME[key] = all(np.allclose(np.broadcast_to(Xa[i][j], (len(t),)), np.broadcast_to(Xb[i][j], (len(t),)),
-                                     atol=1e-12, rtol=0) for i in range(3) for j in range(3))
+        _SAME[key] = all(
+            np.allclose(np.broadcast_to(Xa[i][j], (len(t),)), np.broadcast_to(Xb[i][j], (len(t),)), atol=1e-12, rtol=0)
+            for i in range(3)
+            for j in range(3)
+        )
     return _SAME[key]
 
 
@@ -286,8 +294,9 @@ def whenet(pair: PosePair) -> ProtocolRows:
     "wrapped MAE", as quoted in opal23_headpose@78c0c45 test/evaluator.py:56-59.
     """
     p, g, rx = _written_pair(pair, "whenet")
-    return ProtocolRows(re_.wrapped_error(p, g), np.ones(pair.n, dtype=bool),
-                        splits={"narrow": np.abs(g[:, 1]) <= 90.0}, reexpressed=rx)
+    return ProtocolRows(
+        re_.wrapped_error(p, g), np.ones(pair.n, dtype=bool), splits={"narrow": np.abs(g[:, 1]) <= 90.0}, reexpressed=rx
+    )
 
 
 def _opal23_mats(pair):
@@ -303,8 +312,12 @@ def opal23(pair: PosePair) -> ProtocolRows:
     does, whatever the dataset (here: the 300w_lp angles as written).
     """
     P, G, rx = _opal23_mats(pair)
-    return ProtocolRows(pa_.opal23_mae(G, P), np.ones(pair.n, dtype=bool),
-                        scalars={"geodesic": pa_.opal23_geodesic(G, P)}, reexpressed=rx)
+    return ProtocolRows(
+        pa_.opal23_mae(G, P),
+        np.ones(pair.n, dtype=bool),
+        scalars={"geodesic": pa_.opal23_geodesic(G, P)},
+        reexpressed=rx,
+    )
 
 
 def opal23_align(pair: PosePair) -> ProtocolRows:
@@ -319,9 +332,13 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
     Pa, _ = pa_.opal23_align(G, P, mean=pair.context.get("opal23_mean"))
     d = np.matmul(P, np.transpose(G, (0, 2, 1)))
     left_out = np.linalg.norm(pa_._log(d), axis=1) >= np.pi / 2 if len(d) else np.zeros(0, dtype=bool)
-    return ProtocolRows(pa_.opal23_mae(G, Pa), np.ones(pair.n, dtype=bool),
-                        scalars={"geodesic": pa_.opal23_geodesic(G, Pa)},
-                        counts={"left_out_of_mean": left_out}, reexpressed=rx)
+    return ProtocolRows(
+        pa_.opal23_mae(G, Pa),
+        np.ones(pair.n, dtype=bool),
+        scalars={"geodesic": pa_.opal23_geodesic(G, Pa)},
+        counts={"left_out_of_mean": left_out},
+        reexpressed=rx,
+    )
 
 
 def headposeplus(pair: PosePair) -> ProtocolRows:
@@ -336,9 +353,15 @@ def headposeplus(pair: PosePair) -> ProtocolRows:
     p, _ = pair.angles("biwi", "pred")
     g, _ = pair.angles("biwi", "gt")
     py, gy, rx = _written_pair(pair, "300w_lp")
-    return ProtocolRows(re_.abs_error(p, g), np.ones(pair.n, dtype=bool),
-                        vectors={"pyr": (("pitch", "yaw", "roll"), re_.abs_error(p, g)),
-                                 "ypr": (("pitch", "yaw", "roll"), re_.abs_error(py, gy))}, reexpressed=rx)
+    return ProtocolRows(
+        re_.abs_error(p, g),
+        np.ones(pair.n, dtype=bool),
+        vectors={
+            "pyr": (("pitch", "yaw", "roll"), re_.abs_error(p, g)),
+            "ypr": (("pitch", "yaw", "roll"), re_.abs_error(py, gy)),
+        },
+        reexpressed=rx,
+    )
 
 
 def img2pose(pair: PosePair) -> ProtocolRows:
@@ -365,8 +388,7 @@ def trinet(pair: PosePair) -> ProtocolRows:
     T = pair.stored("trinet", "pred")
     Tg = pair.stored("trinet", "gt")
     e = pa_.min_wrapped(pa_.trinet_euler(T), pa_.trinet_euler(Tg), True)
-    return ProtocolRows(e, np.ones(pair.n, dtype=bool),
-                        vectors={"vmae": (re_.AXES, pa_.column_acos_deg(T, Tg))})
+    return ProtocolRows(e, np.ones(pair.n, dtype=bool), vectors={"vmae": (re_.AXES, pa_.column_acos_deg(T, Tg))})
 
 
 def opentrack(pair: PosePair) -> ProtocolRows:
@@ -380,8 +402,12 @@ def opentrack(pair: PosePair) -> ProtocolRows:
     a = pa_.opentrack_euler(pair.stored("trinet", "pred"))
     b = pa_.opentrack_euler(pair.stored("trinet", "gt"))
     e, nan = pa_.opentrack_errors(a, b)
-    return ProtocolRows(e, np.ones(pair.n, dtype=bool), scalars={"geodesic": re_.geodesic_deg(pair.P, pair.G)},
-                        counts={"peer_nan_rows": nan})
+    return ProtocolRows(
+        e,
+        np.ones(pair.n, dtype=bool),
+        scalars={"geodesic": re_.geodesic_deg(pair.P, pair.G)},
+        counts={"peer_nan_rows": nan},
+    )
 
 
 def dad3dheads(pair: PosePair) -> ProtocolRows:
@@ -395,58 +421,159 @@ def dad3dheads(pair: PosePair) -> ProtocolRows:
 
 
 _FLIPS = "the +-180 terms forgive a prediction whose angle is off by 180 degrees, so flipped answers are hidden"
-_BRANCH = "plain |d| of Euler angles compares solution branches: a correct rotation stated with the other " \
-          "solution (or past the system's range) scores a large error"
+_BRANCH = (
+    "plain |d| of Euler angles compares solution branches: a correct rotation stated with the other "
+    "solution (or past the system's range) scores a large error"
+)
 
-PROTOCOLS = {p.name: p for p in (
-    Protocol("hopenet", "300w_lp", "|d| per angle as written, no wrap", "none",
-             "natanielruiz/deep-head-pose@f7bbb99 code/test_hopenet.py:104-106,124-127,143-145", hopenet, (_BRANCH,)),
-    Protocol("fsanet", "300w_lp", "|d| per angle as written, no wrap", "GT |pitch|,|yaw|,|roll| <= 99",
-             "shamangary/FSA-Net@4361d0e training_and_testing/FSANET_test.py:88-101,444-448", fsanet, (_BRANCH,)),
-    Protocol("6drepnet", "6drepnet", "min(|d|, |d+-360|, |d+-180|); pred Euler from its matrix",
-             "GT |pitch|,|yaw|,|roll| <= 99",
-             "thohemp/6DRepNet@464b2ba sixdrepnet/test.py:113-142,162-164; utils.py:165-184; "
-             "create_filename_list.py:53", sixdrepnet, (_FLIPS,)),
-    Protocol("6drepnet360", "6drepnet", "min(|d|, |d+-360|); vmae = axis angles", "none",
-             "thohemp/6DRepNet360@b06e4fe sixdrepnet360/test.py:164-193 (3 terms since 9c1cfaf)", sixdrepnet360),
-    Protocol("6drepnet360-2023", "6drepnet", "SUPERSEDED: min(|d|, |d+-360|, |d+-180|); vmae", "none",
-             "thohemp/6DRepNet360@5b0622d sixdrepnet360/test.py:188-193 (superseded by 9c1cfaf, 2024-05-29)", sixdrepnet360_2023,
-             (_FLIPS, "superseded by the 3-term minimum in 9c1cfaf; kept only to reproduce 2023 numbers")),
-    Protocol("directmhp", "whenet", "single or v2 by the GT dataset; v2 (|GT yaw| > 90) when it is not known",
-             "none", "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-356: directmhp-single for .mat folders, AFLW2000, "
-             "300W-LP, BIWI; directmhp-v2 for CMU Panoptic, AGORA", directmhp,
-             ("pitch and roll are not wrapped: " + _BRANCH,)),
-    Protocol("directmhp-v2", "whenet", "|d| as written, yaw wrapped; back |GT yaw| > 90 (v2)", "none",
-             "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-278 mean_absolute_error_calculate_v2 (CMU, AGORA)",
-             directmhp, ("pitch and roll are not wrapped: " + _BRANCH,)),
-    Protocol("directmhp-single", "whenet", "|d| as written, yaw wrapped; back |GT yaw| > 99", "none",
-             "hnuzhy/DirectMHP@a51b06b utils/mae.py:281-356 mean_absolute_error_calculate_single "
-             "(AFLW2000, 300W-LP, BIWI)", directmhp_single, ("pitch and roll are not wrapped: " + _BRANCH,)),
-    Protocol("whenet", "whenet", "min(e, 360-e) per angle as written; narrow |GT yaw|<=90", "none",
-             "WHENet paper (no script published); pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:56-59",
-             whenet),
-    Protocol("opal23", "300w_lp -> from_euler('XYZ', [p, -y, r])", "better of two solutions, wrapped; geodesic",
-             "none", "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:51-93", opal23),
-    Protocol("opal23-align", "300w_lp -> from_euler('XYZ', [p, -y, r])",
-             "opal23 after its Karcher-mean alignment (rows > 90 deg off left out of the mean)", "none",
-             "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:95-129 align_predictions, then 51-93",
-             opal23_align),
-    Protocol("headposeplus", "300w_lp (ypr) + scipy xyz (pyr)", "|d| per angle in pyr and ypr", "none",
-             "kuhnkeF/headposeplus@b94d162 hpp/calc_error.py:14-18,40-70", headposeplus, (_BRANCH,)),
-    Protocol("img2pose", "img2pose -> convert_to_aflw", "|d| of convert_to_aflw Euler angles vs Pose_Para",
-             "GT |pitch|,|yaw|,|roll| <= 99",
-             "vitoralbiero/img2pose@fd5473e evaluation/jupyter_notebooks/aflw_2000_3d_evaluation.ipynb"
-             ":112-118,276,324 (lines of the .ipynb JSON: convert_to_aflw, the 99 skip, pose_mae)", img2pose, (_BRANCH,)),
-    Protocol("trinet", "trinet", "min(|d|, |d+-360|, |d+-180|) of W300_R2EulerAngles; vmae", "none",
-             "chuzcjoe/TriNet@d2689de computeMAE.py:84-89,92-197", trinet, (_FLIPS,)),
-    Protocol("opentrack", "trinet (XYZ of [p, -y, r])", "arccos(cos a cos b + sin a sin b) per angle; geodesic",
-             "none", "opentrack/neuralnet-tracker-traincode@8d2478c trackertraincode/eval.py:337-354; "
-             "utils.py:41-62", opentrack,
-             ("the peer's arccos is not clipped (NaN rows, counted in peer_nan_rows); hpe clips it to [-1, 1]",)),
-    Protocol("dad3dheads", "any", "||I - P G^T||_F (unitless)", "none",
-             "PinataFarms/DAD-3DHeads@4fc16a2 dad_3dheads_benchmark/benchmark.py:79-83", dad3dheads,
-             units="unitless"),
-)}
+PROTOCOLS = {
+    p.name: p
+    for p in (
+        Protocol(
+            "hopenet",
+            "300w_lp",
+            "|d| per angle as written, no wrap",
+            "none",
+            "natanielruiz/deep-head-pose@f7bbb99 code/test_hopenet.py:104-106,124-127,143-145",
+            hopenet,
+            (_BRANCH,),
+        ),
+        Protocol(
+            "fsanet",
+            "300w_lp",
+            "|d| per angle as written, no wrap",
+            "GT |pitch|,|yaw|,|roll| <= 99",
+            "shamangary/FSA-Net@4361d0e training_and_testing/FSANET_test.py:88-101,444-448",
+            fsanet,
+            (_BRANCH,),
+        ),
+        Protocol(
+            "6drepnet",
+            "6drepnet",
+            "min(|d|, |d+-360|, |d+-180|); pred Euler from its matrix",
+            "GT |pitch|,|yaw|,|roll| <= 99",
+            "thohemp/6DRepNet@464b2ba sixdrepnet/test.py:113-142,162-164; utils.py:165-184; create_filename_list.py:53",
+            sixdrepnet,
+            (_FLIPS,),
+        ),
+        Protocol(
+            "6drepnet360",
+            "6drepnet",
+            "min(|d|, |d+-360|); vmae = axis angles",
+            "none",
+            "thohemp/6DRepNet360@b06e4fe sixdrepnet360/test.py:164-193 (3 terms since 9c1cfaf)",
+            sixdrepnet360,
+        ),
+        Protocol(
+            "6drepnet360-2023",
+            "6drepnet",
+            "SUPERSEDED: min(|d|, |d+-360|, |d+-180|); vmae",
+            "none",
+            "thohemp/6DRepNet360@5b0622d sixdrepnet360/test.py:188-193 (superseded by 9c1cfaf, 2024-05-29)",
+            sixdrepnet360_2023,
+            (_FLIPS, "superseded by the 3-term minimum in 9c1cfaf; kept only to reproduce 2023 numbers"),
+        ),
+        Protocol(
+            "directmhp",
+            "whenet",
+            "single or v2 by the GT dataset; v2 (|GT yaw| > 90) when it is not known",
+            "none",
+            "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-356: directmhp-single for .mat folders, AFLW2000, "
+            "300W-LP, BIWI; directmhp-v2 for CMU Panoptic, AGORA",
+            directmhp,
+            ("pitch and roll are not wrapped: " + _BRANCH,),
+        ),
+        Protocol(
+            "directmhp-v2",
+            "whenet",
+            "|d| as written, yaw wrapped; back |GT yaw| > 90 (v2)",
+            "none",
+            "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-278 mean_absolute_error_calculate_v2 (CMU, AGORA)",
+            directmhp,
+            ("pitch and roll are not wrapped: " + _BRANCH,),
+        ),
+        Protocol(
+            "directmhp-single",
+            "whenet",
+            "|d| as written, yaw wrapped; back |GT yaw| > 99",
+            "none",
+            "hnuzhy/DirectMHP@a51b06b utils/mae.py:281-356 mean_absolute_error_calculate_single "
+            "(AFLW2000, 300W-LP, BIWI)",
+            directmhp_single,
+            ("pitch and roll are not wrapped: " + _BRANCH,),
+        ),
+        Protocol(
+            "whenet",
+            "whenet",
+            "min(e, 360-e) per angle as written; narrow |GT yaw|<=90",
+            "none",
+            "WHENet paper (no script published); pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:56-59",
+            whenet,
+        ),
+        Protocol(
+            "opal23",
+            "300w_lp -> from_euler('XYZ', [p, -y, r])",
+            "better of two solutions, wrapped; geodesic",
+            "none",
+            "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:51-93",
+            opal23,
+        ),
+        Protocol(
+            "opal23-align",
+            "300w_lp -> from_euler('XYZ', [p, -y, r])",
+            "opal23 after its Karcher-mean alignment (rows > 90 deg off left out of the mean)",
+            "none",
+            "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:95-129 align_predictions, then 51-93",
+            opal23_align,
+        ),
+        Protocol(
+            "headposeplus",
+            "300w_lp (ypr) + scipy xyz (pyr)",
+            "|d| per angle in pyr and ypr",
+            "none",
+            "kuhnkeF/headposeplus@b94d162 hpp/calc_error.py:14-18,40-70",
+            headposeplus,
+            (_BRANCH,),
+        ),
+        Protocol(
+            "img2pose",
+            "img2pose -> convert_to_aflw",
+            "|d| of convert_to_aflw Euler angles vs Pose_Para",
+            "GT |pitch|,|yaw|,|roll| <= 99",
+            "vitoralbiero/img2pose@fd5473e evaluation/jupyter_notebooks/aflw_2000_3d_evaluation.ipynb"
+            ":112-118,276,324 (lines of the .ipynb JSON: convert_to_aflw, the 99 skip, pose_mae)",
+            img2pose,
+            (_BRANCH,),
+        ),
+        Protocol(
+            "trinet",
+            "trinet",
+            "min(|d|, |d+-360|, |d+-180|) of W300_R2EulerAngles; vmae",
+            "none",
+            "chuzcjoe/TriNet@d2689de computeMAE.py:84-89,92-197",
+            trinet,
+            (_FLIPS,),
+        ),
+        Protocol(
+            "opentrack",
+            "trinet (XYZ of [p, -y, r])",
+            "arccos(cos a cos b + sin a sin b) per angle; geodesic",
+            "none",
+            "opentrack/neuralnet-tracker-traincode@8d2478c trackertraincode/eval.py:337-354; utils.py:41-62",
+            opentrack,
+            ("the peer's arccos is not clipped (NaN rows, counted in peer_nan_rows); hpe clips it to [-1, 1]",),
+        ),
+        Protocol(
+            "dad3dheads",
+            "any",
+            "||I - P G^T||_F (unitless)",
+            "none",
+            "PinataFarms/DAD-3DHeads@4fc16a2 dad_3dheads_benchmark/benchmark.py:79-83",
+            dad3dheads,
+            units="unitless",
+        ),
+    )
+}
 
 
 def protocol_names() -> list:
@@ -475,8 +602,9 @@ def summarize(rows: ProtocolRows, subset=None, name: str = "") -> dict:
     out = _angles_summary(rows.err, mask, rows.angle_labels)
     out["dropped"] = int((subset & ~rows.keep).sum())
     if rows.angle_labels != ("pitch", "yaw", "roll"):
-        out.update({"pitch": out[rows.angle_labels[0]], "yaw": out[rows.angle_labels[1]],
-                    "roll": out[rows.angle_labels[2]]})
+        out.update(
+            {"pitch": out[rows.angle_labels[0]], "yaw": out[rows.angle_labels[1]], "roll": out[rows.angle_labels[2]]}
+        )
     for k, m in rows.splits.items():
         out[k] = _angles_summary(rows.err, mask & m, rows.angle_labels)
     for k, v in rows.scalars.items():

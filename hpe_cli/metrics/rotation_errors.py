@@ -15,6 +15,7 @@ Identities used (and tested):
   for the left, bottom and front column vectors) and 6DRepNet360's "VMAE"
   Vec1..Vec3 (``sixdrepnet360/test.py``).
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -8,6 +8,7 @@ grouping). :meth:`Accumulator.report` turns them into the same report blocks
 as :func:`hpe_cli.metrics.evaluate.summary`; medians and percentiles are
 exact over the spilled float32 errors (float32 rounding: < 1e-6 relative).
 """
+
 from __future__ import annotations
 
 import os
@@ -212,7 +213,7 @@ class Accumulator:
         order = np.argsort(c, kind="stable")
         bounds = np.searchsorted(c[order], np.arange(n_groups + 1))
         for g in range(n_groups):
-            sel = order[bounds[g]:bounds[g + 1]]
+            sel = order[bounds[g] : bounds[g + 1]]
             if len(sel):
                 q = np.percentile(np.asarray(geo[np.sort(sel)], dtype=np.float32), [50, 90, 95])
                 out[g] = tuple(float(x) for x in q)
@@ -222,8 +223,14 @@ class Accumulator:
         n = G.count(("n",), g)
         geo = {"mean": G.mean(("geo",), g)}
         med = quant.get(g) if quant else None
-        geo.update({"median": med[0] if med else None, "p90": med[1] if med else None,
-                    "p95": med[2] if med else None, "max": float(G.max[g]) if n else None})
+        geo.update(
+            {
+                "median": med[0] if med else None,
+                "p90": med[1] if med else None,
+                "p95": med[2] if med else None,
+                "max": float(G.max[g]) if n else None,
+            }
+        )
         geo.update({f"within_{t}": (G.count(("within", t), g) / n if n else None) for t in WITHIN})
         maev = {a: G.mean(("maev", a), g) for a in AXES}
         maev["mean"] = _avg(list(maev.values()))
@@ -232,8 +239,7 @@ class Accumulator:
             e = {a: G.mean((blk, a), g) for a in ANGLES}
             e["mean"] = _avg(list(e.values())) if n else None
             metrics[blk] = e
-        return {"n": n, "metrics": metrics, "protocols": {name: self._protocol(G, g, name) for name in
-                                                          self.protocols}}
+        return {"n": n, "metrics": metrics, "protocols": {name: self._protocol(G, g, name) for name in self.protocols}}
 
     def _protocol(self, G: _Grouping, g: int, name: str) -> dict:
         from .protocols import PROTOCOLS
@@ -286,8 +292,10 @@ class Accumulator:
             out["by_groups"] = {str(lab): self._block(self.by, self.by_labels[lab], q) for lab in labels}
         if self.bins is not None:
             q = self._quantiles(self._load("bin"), self.bins.n) if self.percentiles else {}
-            out["yaw_bins"] = [{"lo": float(self.edges[k]), "hi": float(self.edges[k + 1]),
-                                **self._block(self.bins, k, q)} for k in range(self.bins.n)]
+            out["yaw_bins"] = [
+                {"lo": float(self.edges[k]), "hi": float(self.edges[k + 1]), **self._block(self.bins, k, q)}
+                for k in range(self.bins.n)
+            ]
         return out
 
     def close(self):

@@ -9,6 +9,7 @@ of the image). Every person that gets no label is a reject with a reason.
 Everything is vectorised over the people of a dataframe; dataframes are
 processed one at a time so memory stays bounded by the largest one.
 """
+
 from __future__ import annotations
 
 from collections import Counter
@@ -25,8 +26,17 @@ from .relabel import LEGACY_COLS, fit_faces, relabel_views, summary_tail, view_l
 DEFAULT_MAX_RMSE = 0.02
 #: DirectMHP keeps people with occlusion < 90 (percent)
 DEFAULT_MAX_OCCLUSION = 90.0
-REASON_ORDER = ("bad input", "occluded", "invalid", "too few confident points", "bad fit", "behind camera", "outside image",
-                "box rejected", "dropped by legacy rule")
+REASON_ORDER = (
+    "bad input",
+    "occluded",
+    "invalid",
+    "too few confident points",
+    "bad fit",
+    "behind camera",
+    "outside image",
+    "box rejected",
+    "dropped by legacy rule",
+)
 
 
 @dataclass
@@ -71,12 +81,26 @@ def relabel_people(people: ag.AgoraPeople, cfg: Config) -> dict:
     if door is not None and (door != "").any():
         fit["reason"][door != ""] = "bad input"
         fit["detail"][door != ""] = door[door != ""]
-    cam = {"K": K, "dist": np.zeros((n, 5)), "R": people.cam_R, "t": people.cam_t,
-           "width": np.full(n, float(W)), "height": np.full(n, float(H))}
+    cam = {
+        "K": K,
+        "dist": np.zeros((n, 5)),
+        "R": people.cam_R,
+        "t": people.cam_t,
+        "width": np.full(n, float(W)),
+        "height": np.full(n, float(H)),
+    }
     # rows without a fit carry NaN through the projection; their reason is already set
     with np.errstate(invalid="ignore", divide="ignore"):
-        v = relabel_views(fit, np.arange(n), cam, cfg.system, preset=cfg.preset, legacy=cfg.legacy,
-                          landmarks=people.face3d, frame=cfg.frame)
+        v = relabel_views(
+            fit,
+            np.arange(n),
+            cam,
+            cfg.system,
+            preset=cfg.preset,
+            legacy=cfg.legacy,
+            landmarks=people.face3d,
+            frame=cfg.frame,
+        )
     ok = v["ok"]
     source = people.source.name
     table = {
@@ -92,15 +116,29 @@ def relabel_people(people: ag.AgoraPeople, cfg: Config) -> dict:
     bad = ~ok
     rejects = {
         "source": np.full(int(bad.sum()), source, dtype=object),
-        "row": people.row[bad], "person": people.person[bad], "image": people.image[bad],
-        "reason": v["reason"][bad], "detail": v["detail"][bad],
-        "occlusion": occ[bad], "isValid": people.valid[bad],
-        "fit_rmse": fit["rmse"][bad], "n_pairs": fit["n_pairs"][bad], "scale": fit["scale"][bad],
+        "row": people.row[bad],
+        "person": people.person[bad],
+        "image": people.image[bad],
+        "reason": v["reason"][bad],
+        "detail": v["detail"][bad],
+        "occlusion": occ[bad],
+        "isValid": people.valid[bad],
+        "fit_rmse": fit["rmse"][bad],
+        "n_pairs": fit["n_pairs"][bad],
+        "scale": fit["scale"][bad],
     }
     considered = int(np.isin(v["reason"], ("", "dropped by legacy rule")).sum()) if cfg.legacy else 0
     fitted = np.isfinite(fit["rmse"]) & ~occluded & ~invalid
-    return {"table": table, "rejects": rejects, "fit_rmse": fit["rmse"][fitted], "legacy_considered": considered,
-            "people": n, "images": people.images, "frame": people.frame, "k_scale": factor}
+    return {
+        "table": table,
+        "rejects": rejects,
+        "fit_rmse": fit["rmse"][fitted],
+        "legacy_considered": considered,
+        "people": n,
+        "images": people.images,
+        "frame": people.frame,
+        "k_scale": factor,
+    }
 
 
 class Stats:
@@ -127,24 +165,35 @@ class Stats:
             self.out_of_range += int((~system.in_range(pyr)).sum())
             self.gimbal += int(np.sum(t["gimbal_lock"]))
         ks = np.unique(np.round(res["k_scale"], 6), axis=0) if len(res["k_scale"]) else np.zeros((0, 2))
-        scaled = "" if res["frame"] == "camera" or not len(ks) or np.allclose(ks, 1.0) else \
-            f"; camK rescaled by {', '.join(f'{a:g}' for a in np.unique(ks[:, 0]))}"
-        frame = "camera frame (gt_joints_3d, AGORA's intrinsics)" if res["frame"] == "camera" else \
-            "body frame (cam_j3d, camR, camT, camK)"
-        self.per_file.append(f"{path}: {res['images']} images, {res['people']} people, {len(t['row'])} labelled; "
-                             f"{frame}{scaled}")
+        scaled = (
+            ""
+            if res["frame"] == "camera" or not len(ks) or np.allclose(ks, 1.0)
+            else f"; camK rescaled by {', '.join(f'{a:g}' for a in np.unique(ks[:, 0]))}"
+        )
+        frame = (
+            "camera frame (gt_joints_3d, AGORA's intrinsics)"
+            if res["frame"] == "camera"
+            else "body frame (cam_j3d, camR, camT, camK)"
+        )
+        self.per_file.append(
+            f"{path}: {res['images']} images, {res['people']} people, {len(t['row'])} labelled; {frame}{scaled}"
+        )
 
     def summary(self, cfg: Config, output, rejects_path, verbose: int = 0) -> list:
         sysname = getattr(cfg.system, "name", cfg.system)
         lines = list(self.per_file) if verbose else []
-        lines.append(f"{self.people} people in {self.images} images from {self.files} dataframe"
-                     f"{'s' if self.files != 1 else ''} (image size {cfg.image_size[0]}x{cfg.image_size[1]})")
+        lines.append(
+            f"{self.people} people in {self.images} images from {self.files} dataframe"
+            f"{'s' if self.files != 1 else ''} (image size {cfg.image_size[0]}x{cfg.image_size[1]})"
+        )
         rmse = np.concatenate(self.rmse) if self.rmse else np.zeros(0)
         if rmse.size:
             q = np.quantile(rmse, [0.5, 0.95])
             gate = "off" if cfg.max_rmse is None or not np.isfinite(cfg.max_rmse) else f"{100 * cfg.max_rmse:g}"
-            lines.append(f"fit RMSE (cm) of {rmse.size} fitted faces: median {100 * q[0]:.2f}, p95 {100 * q[1]:.2f}, "
-                         f"max {100 * rmse.max():.2f} (--max-rmse {gate})")  # the option is in cm, as in Panoptic
+            lines.append(
+                f"fit RMSE (cm) of {rmse.size} fitted faces: median {100 * q[0]:.2f}, p95 {100 * q[1]:.2f}, "
+                f"max {100 * rmse.max():.2f} (--max-rmse {gate})"
+            )  # the option is in cm, as in Panoptic
         pct = 100.0 * self.labelled / self.people if self.people else 0.0
         lines.append(f"labelled {self.labelled} of {self.people} people ({pct:.1f}%) in {sysname} -> {output}")
         rej = sum(self.reasons.values())
@@ -152,11 +201,17 @@ class Stats:
             order = {r: k for k, r in enumerate(REASON_ORDER)}
             parts = "; ".join(f"{self.reasons[r]} {r}" for r in sorted(self.reasons, key=lambda r: order.get(r, 99)))
             lines.append(f"not labelled {rej}: {parts}" + (f" -> {rejects_path}" if rejects_path else ""))
-        lines += summary_tail(cfg.legacy, self.reasons["dropped by legacy rule"], self.legacy_considered,
-                              self.out_of_range, self.gimbal, sysname, "people", "DirectMHP")
+        lines += summary_tail(
+            cfg.legacy,
+            self.reasons["dropped by legacy rule"],
+            self.legacy_considered,
+            self.out_of_range,
+            self.gimbal,
+            sysname,
+            "people",
+            "DirectMHP",
+        )
         return lines
-
-
 
 
 def check_inputs(paths) -> None:
@@ -174,14 +229,18 @@ def check_inputs(paths) -> None:
             raise HpeError(f"{p}: cannot read ({exc.strerror or exc})") from None
         ident = (st.st_dev, st.st_ino)
         if ident in by_inode:
-            raise HpeError(f"{by_inode[ident]} and {p}: the same dataframe given twice (its people would be "
-                           "labelled twice, with the same keys); give it once")
+            raise HpeError(
+                f"{by_inode[ident]} and {p}: the same dataframe given twice (its people would be "
+                "labelled twice, with the same keys); give it once"
+            )
         by_inode[ident] = p
         name = os.path.basename(os.fspath(p))
         if name in by_name:
-            raise HpeError(f"{by_name[name]} and {p}: two dataframes named {name!r}; the output's source column "
-                           "holds the file name, so their people would have the same keys (source, row, person); "
-                           "rename one")
+            raise HpeError(
+                f"{by_name[name]} and {p}: two dataframes named {name!r}; the output's source column "
+                "holds the file name, so their people would have the same keys (source, row, person); "
+                "rename one"
+            )
         by_name[name] = p
 
 
@@ -191,22 +250,36 @@ def bad_input_rule(people: ag.AgoraPeople) -> None:
     bad = np.flatnonzero(people.reason != "") if people.reason is not None else []
     if len(bad):
         k = int(bad[0])
-        raise HpeError(f"{people.source}: row {people.row[k]}, person {people.person[k]}: {people.reason[k]}; "
-                       f"{len(bad)} person(s) with invalid input: nothing written (use --rejects FILE to set "
-                       "them aside and write the rest)")
+        raise HpeError(
+            f"{people.source}: row {people.row[k]}, person {people.person[k]}: {people.reason[k]}; "
+            f"{len(bad)} person(s) with invalid input: nothing written (use --rejects FILE to set "
+            "them aside and write the rest)"
+        )
 
 
 def _reject_schema():
     import pyarrow as pa
 
-    return pa.schema([("source", pa.string()), ("row", pa.int64()), ("person", pa.int64()), ("image", pa.string()),
-                      ("reason", pa.string()), ("detail", pa.string()), ("occlusion", pa.float64()),
-                      ("isValid", pa.bool_()), ("fit_rmse", pa.float64()), ("n_pairs", pa.int64()),
-                      ("scale", pa.float64())])
+    return pa.schema(
+        [
+            ("source", pa.string()),
+            ("row", pa.int64()),
+            ("person", pa.int64()),
+            ("image", pa.string()),
+            ("reason", pa.string()),
+            ("detail", pa.string()),
+            ("occlusion", pa.float64()),
+            ("isValid", pa.bool_()),
+            ("fit_rmse", pa.float64()),
+            ("n_pairs", pa.int64()),
+            ("scale", pa.float64()),
+        ]
+    )
 
 
-def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=None, overwrite: bool = False,
-                  bar=None) -> Stats:
+def write_outputs(
+    paths, cfg: Config, output, fmt: str = "table", rejects_path=None, overwrite: bool = False, bar=None
+) -> Stats:
     """Relabel every dataframe of ``paths`` and write the outputs atomically.
 
     ``fmt`` is ``table`` (Parquet/CSV, streamed one dataframe at a time),
@@ -223,12 +296,18 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
     system = get_system(cfg.system)
     cfg.system = system
     stats = Stats()
-    about = {"source": "agora", "dataframes": [str(p) for p in paths], "preset": cfg.preset,
-             "image_size": list(cfg.image_size), "max_occlusion": cfg.max_occlusion,
-             "max_rmse_m": cfg.max_rmse if cfg.max_rmse is not None and np.isfinite(cfg.max_rmse) else None,
-             "legacy_whenet": cfg.legacy,
-             "label": "A = E @ camR @ R_head, E = diag(1, -1, -1)" if cfg.frame == "camera" else
-             "A = E @ Q.T @ camR @ R_head, Q: optical axis -> ray to the head centre (SPEC 10)"}
+    about = {
+        "source": "agora",
+        "dataframes": [str(p) for p in paths],
+        "preset": cfg.preset,
+        "image_size": list(cfg.image_size),
+        "max_occlusion": cfg.max_occlusion,
+        "max_rmse_m": cfg.max_rmse if cfg.max_rmse is not None and np.isfinite(cfg.max_rmse) else None,
+        "legacy_whenet": cfg.legacy,
+        "label": "A = E @ camR @ R_head, E = diag(1, -1, -1)"
+        if cfg.frame == "camera"
+        else "A = E @ Q.T @ camR @ R_head, Q: optical axis -> ray to the head centre (SPEC 10)",
+    }
     meta = {**system_metadata(system), "hpe:relabel": json.dumps(about)}
     rschema = _reject_schema()
     check_inputs(paths)
@@ -238,9 +317,17 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
         elif fmt == "coco":  # streamed: memory flat in the number of people
             from ..io.coco import CocoWriter
 
-            out = stack.enter_context(CocoWriter(output, overwrite, info={
-                "description": "AGORA head-pose labels (hpe relabel-agora)", "hpe:system": system.name,
-                "hpe:relabel": about}))
+            out = stack.enter_context(
+                CocoWriter(
+                    output,
+                    overwrite,
+                    info={
+                        "description": "AGORA head-pose labels (hpe relabel-agora)",
+                        "hpe:system": system.name,
+                        "hpe:relabel": about,
+                    },
+                )
+            )
         elif fmt == "whenet":
             from ..io.whenet_txt import WhenetWriter
 
@@ -263,6 +350,15 @@ def write_outputs(paths, cfg: Config, output, fmt: str = "table", rejects_path=N
     return stats
 
 
-__all__ = ["Config", "Stats", "relabel_people", "write_outputs", "check_inputs", "bad_input_rule",
-           "DEFAULT_MAX_RMSE", "DEFAULT_MAX_OCCLUSION",
-           "LEGACY_COLS", "REASON_ORDER"]
+__all__ = [
+    "Config",
+    "Stats",
+    "relabel_people",
+    "write_outputs",
+    "check_inputs",
+    "bad_input_rule",
+    "DEFAULT_MAX_RMSE",
+    "DEFAULT_MAX_OCCLUSION",
+    "LEGACY_COLS",
+    "REASON_ORDER",
+]

@@ -8,6 +8,7 @@ written in a second pass that recomputes each batch's flags.
 Row numbers in the report are 1-based file lines (header = line 1; for
 Parquet, the line the row would have in a CSV with a header).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,8 +17,21 @@ from ..errors import HpeError
 from .inorder import in_order
 
 #: columns that identify a sample, used (when present) in the ``duplicates`` key
-ID_COLUMNS = ("file", "image", "image_id", "id", "path", "person_id", "face_id", "frame", "camera",
-              "bbox_x", "bbox_y", "bbox_w", "bbox_h")
+ID_COLUMNS = (
+    "file",
+    "image",
+    "image_id",
+    "id",
+    "path",
+    "person_id",
+    "face_id",
+    "frame",
+    "camera",
+    "bbox_x",
+    "bbox_y",
+    "bbox_w",
+    "bbox_h",
+)
 _SEED = 0x9E3779B97F4A7C15
 _STR_MULT = np.uint64(0x100000001B3)  # FNV-style odd multiplier for the polynomial string hash
 _NULL_WORD = np.uint64(0x6A09E667F3BCC909)
@@ -109,8 +123,9 @@ def _key_words(batch, name):
     t = col.type
     if pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_boolean(t):
         return _words(pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False))
-    if not (pa.types.is_string(t) or pa.types.is_large_string(t) or pa.types.is_binary(t)
-            or pa.types.is_large_binary(t)):
+    if not (
+        pa.types.is_string(t) or pa.types.is_large_string(t) or pa.types.is_binary(t) or pa.types.is_large_binary(t)
+    ):
         col = pc.cast(col, pa.string())
     return string_hashes(col)
 
@@ -206,7 +221,7 @@ class _Duplicates:
         del S, same
         idx = []
         for lo in range(0, len(H), 1 << 20):
-            chunk = H[lo:lo + (1 << 20)]
+            chunk = H[lo : lo + (1 << 20)]
             pos = np.minimum(np.searchsorted(dupvals, chunk), len(dupvals) - 1)
             idx.append(np.flatnonzero(dupvals[pos] == chunk) + lo)
         idx = np.concatenate(idx)
@@ -248,9 +263,8 @@ def _batches(src, mode, path, rejects=None):
     counted as ``non_finite``, like today. With a rejects file (``rejects``
     with a path), the rows the reader sets aside go there instead.
     """
-    from ..io.readers import LINE_COL
-
     from ..io import ANGLE_COLS, MATRIX_COLS
+    from ..io.readers import LINE_COL
 
     label = {f"non-numeric value in {c}" for c in (ANGLE_COLS if mode == "angles" else MATRIX_COLS)}
     rejects_file = rejects
@@ -259,21 +273,45 @@ def _batches(src, mode, path, rejects=None):
         other = [r for r in rejects if r.reason not in label]
         if other and rejects_file is not None and rejects_file.path is not None:
             lines = np.array([r.line for r in other], dtype=np.int64)
-            rejects_file.add({"row": lines, "raw": np.array([r.raw for r in other], dtype=object)},
-                             [r.reason for r in other], lines=lines)
+            rejects_file.add(
+                {"row": lines, "raw": np.array([r.raw for r in other], dtype=object)},
+                [r.reason for r in other],
+                lines=lines,
+            )
             rejects = unread
         if len(unread) < len(rejects):
             r = next(r for r in rejects if r.reason not in label)
-            raise HpeError(f"{src.where(r.line)}: {r.reason} ({len(rejects) - len(unread)} unreadable rows in "
-                           "this block; use --rejects FILE to set them aside and audit the rest)")
+            raise HpeError(
+                f"{src.where(r.line)}: {r.reason} ({len(rejects) - len(unread)} unreadable rows in "
+                "this block; use --rejects FILE to set them aside and audit the rest)"
+            )
         lines = batch.column(LINE_COL).to_numpy()
         yield batch.drop_columns([LINE_COL]), lines, unread
 
 
-def run_audit(input_path, system, *, report=None, plots=None, output=None, only_flagged=False,
-              near_tol_deg=1.0, radians=False, use="auto", keys=(), n_examples=5, overwrite=False,
-              batch_size=65_536, progress=None, echo=None, decoder=None, workers=None, images=None,
-              rejects_path=None, strict_rejects=False) -> dict:
+def run_audit(
+    input_path,
+    system,
+    *,
+    report=None,
+    plots=None,
+    output=None,
+    only_flagged=False,
+    near_tol_deg=1.0,
+    radians=False,
+    use="auto",
+    keys=(),
+    n_examples=5,
+    overwrite=False,
+    batch_size=65_536,
+    progress=None,
+    echo=None,
+    decoder=None,
+    workers=None,
+    images=None,
+    rejects_path=None,
+    strict_rejects=False,
+) -> dict:
     """Audit ``input_path`` and write the requested outputs; return the report dict.
 
     Batches are checked and hashed on ``workers`` threads (default: up to 2)
@@ -286,10 +324,9 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     import os
 
     from ..io import ANGLE_COLS, MATRIX_COLS, check_output, label_mode, write_json
+    from ..io.writers import check_report_outputs
     from ..report.plots import AngleHistograms, plot_files, write_plots
     from ..rotation.audit import CHECKS
-
-    from ..io.writers import check_report_outputs
 
     check_report_outputs(report, output, overwrite)
     if plots:
@@ -310,8 +347,11 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     mode = label_mode(columns, src.path, system) if use == "auto" else use
     need = ANGLE_COLS if mode == "angles" else MATRIX_COLS
     # the system's own columns (rotvec, quaternion, 6-D, 4x4, named angles): read through the system
-    via_system = use == "auto" and (system.storage_kind != "angles" or bool(system.columns)) and \
-        all(c in columns for c in system.value_columns)
+    via_system = (
+        use == "auto"
+        and (system.storage_kind != "angles" or bool(system.columns))
+        and all(c in columns for c in system.value_columns)
+    )
     if via_system:
         need = list(system.value_columns)
     tally = None
@@ -325,8 +365,10 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
     if keys:
         bad = [k for k in keys if k not in columns]
         if bad:
-            raise HpeError(f"{src.path}: --key column(s) {', '.join(bad)} not in the table; "
-                           f"expected some of: {', '.join(columns[:20])}")
+            raise HpeError(
+                f"{src.path}: --key column(s) {', '.join(bad)} not in the table; "
+                f"expected some of: {', '.join(columns[:20])}"
+            )
         key_cols = list(dict.fromkeys(keys))
     else:
         key_cols = [c for c in ID_COLUMNS if c in columns]
@@ -363,8 +405,7 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
         eff, cols, res, any_flag, hashes = future.result()
         if tally is not None:
             values = np.stack(cols, axis=-1)
-            tally.add(system.to_canonical(system.from_angles(values) if eff == "angles"
-                                          else values.reshape(-1, 3, 3)))
+            tally.add(system.to_canonical(system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3)))
         for c in CHECKS[:-1]:
             m = res[c]
             counts[c] += int(np.count_nonzero(m))
@@ -392,33 +433,66 @@ def run_audit(input_path, system, *, report=None, plots=None, output=None, only_
         flagged += int(np.count_nonzero(~bits))
     if unread_examples:
         examples["non_finite"] = sorted(examples["non_finite"] + unread_examples, key=lambda e: e["row"])[:n_examples]
-    examples["duplicates"] = [{"row": int(a), "same_as": int(b)} for a, b in
-                              zip(dups.line_of(dups.dup_idx[:n_examples]), dups.line_of(dups.first_idx[:n_examples]))]
+    examples["duplicates"] = [
+        {"row": int(a), "same_as": int(b)}
+        for a, b in zip(dups.line_of(dups.dup_idx[:n_examples]), dups.line_of(dups.first_idx[:n_examples]))
+    ]
 
-    result = {"rows": rows, **counts, "rejected": len(rejected),
-              "system": system.name, "system_origin": resolved.origin, "input": str(src.path),
-              "label_columns": mode,
-              "units": "radians" if (radians and mode == "angles") else ("degrees" if mode == "angles" else None),
-              "settings": {"near_gimbal_deg": near_tol_deg, "gimbal_lock_tol": system.gimbal_tol,
-                           "lock_distance": "|cos| (or |sin| for proper Euler) of the middle angle",
-                           "duplicate_key": (list(need) + key_cols)},
-              "details": {"flagged": flagged, "near_gimbal_not_locked": near_not_locked},
-              "examples": examples}
+    result = {
+        "rows": rows,
+        **counts,
+        "rejected": len(rejected),
+        "system": system.name,
+        "system_origin": resolved.origin,
+        "input": str(src.path),
+        "label_columns": mode,
+        "units": "radians" if (radians and mode == "angles") else ("degrees" if mode == "angles" else None),
+        "settings": {
+            "near_gimbal_deg": near_tol_deg,
+            "gimbal_lock_tol": system.gimbal_tol,
+            "lock_distance": "|cos| (or |sin| for proper Euler) of the middle angle",
+            "duplicate_key": (list(need) + key_cols),
+        },
+        "details": {"flagged": flagged, "near_gimbal_not_locked": near_not_locked},
+        "examples": examples,
+    }
     if tally is not None:
         result["decoder"] = tally.result()
 
     if output:
-        _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians,
-                       near_tol_deg, dups, via_system)
+        _write_flagged(
+            input_path,
+            output,
+            only_flagged,
+            overwrite,
+            batch_size,
+            system,
+            mode,
+            radians,
+            near_tol_deg,
+            dups,
+            via_system,
+        )
     if plots:
         from .draw_flagged import flagged_pictures
 
         # the first flagged rows of each check, drawn on their images, for the page
-        pics = flagged_pictures(src.path, examples, plots, system, images=images, radians=radians,
-                                overwrite=overwrite)
-        write_plots(hist, plots, system, {"input": str(src.path), "system": system.name, "rows": rows,
-                                          **counts, "flagged": result["details"]["flagged"]},
-                    title=f"hpe audit: {src.path.name}", overwrite=overwrite, pictures=pics)
+        pics = flagged_pictures(src.path, examples, plots, system, images=images, radians=radians, overwrite=overwrite)
+        write_plots(
+            hist,
+            plots,
+            system,
+            {
+                "input": str(src.path),
+                "system": system.name,
+                "rows": rows,
+                **counts,
+                "flagged": result["details"]["flagged"],
+            },
+            title=f"hpe audit: {src.path.name}",
+            overwrite=overwrite,
+            pictures=pics,
+        )
     rejected.write()
     if report == "-":
         from ..io.writers import json_text
@@ -448,8 +522,10 @@ def _system_cols(batch, system, mode, radians, via_system):
     from ..io.labels import label_values
 
     values = label_values(batch, system, mode, radians)
-    return ([np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T],
-            "angles" if values.ndim == 2 else "matrix")
+    return (
+        [np.ascontiguousarray(c) for c in values.reshape(len(values), -1).T],
+        "angles" if values.ndim == 2 else "matrix",
+    )
 
 
 class _SkipRejects:
@@ -464,8 +540,9 @@ class _SkipRejects:
 _SKIP_REJECTS = _SkipRejects()
 
 
-def _write_flagged(input_path, output, only_flagged, overwrite, batch_size, system, mode, radians, near_tol_deg,
-                   dups, via_system=False):
+def _write_flagged(
+    input_path, output, only_flagged, overwrite, batch_size, system, mode, radians, near_tol_deg, dups, via_system=False
+):
     """Second pass over the input: every column, then one boolean column per check and 'flagged'."""
     import pyarrow as pa
 

@@ -1,4 +1,5 @@
 """``hpe augment`` as a streaming job: read batches, move labels/landmarks/boxes (and images), write."""
+
 from __future__ import annotations
 
 import contextlib
@@ -24,15 +25,19 @@ def _batches_or_empty(src):
         any_batch = True
         yield batch, read_rejects
     if not any_batch:
-        yield pa.RecordBatch.from_pydict({f.name: pa.array([], type=f.type) for f in src.schema},
-                                         schema=src.schema), []
+        yield pa.RecordBatch.from_pydict({f.name: pa.array([], type=f.type) for f in src.schema}, schema=src.schema), []
 
 
 def _is_numeric_type(t) -> bool:
     import pyarrow as pa
 
-    return pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_decimal(t) or pa.types.is_null(t) \
+    return (
+        pa.types.is_integer(t)
+        or pa.types.is_floating(t)
+        or pa.types.is_decimal(t)
+        or pa.types.is_null(t)
         or pa.types.is_boolean(t)
+    )
 
 
 def _plan_landmarks(path, columns, scheme, op):
@@ -50,15 +55,21 @@ def _plan_landmarks(path, columns, scheme, op):
             return 0, None, "none in input"
         name = scheme_for_count(n)
         if name is None and mirror:
-            raise HpeError(f"{path}: {n} landmarks (lm0_x..lm{n - 1}_y) match no built-in scheme "
-                           f"(ibug68, face70, aflw21), and a mirror must re-index them; "
-                           "use --landmarks none to leave them unchanged")
-        return n, (None if name is None else flip_permutation(name)), \
-            f"{n} moved" + (f", scheme {name}" if name else "")
+            raise HpeError(
+                f"{path}: {n} landmarks (lm0_x..lm{n - 1}_y) match no built-in scheme "
+                f"(ibug68, face70, aflw21), and a mirror must re-index them; "
+                "use --landmarks none to leave them unchanged"
+            )
+        return (
+            n,
+            (None if name is None else flip_permutation(name)),
+            f"{n} moved" + (f", scheme {name}" if name else ""),
+        )
     want = SCHEMES[scheme].size
     if n != want:
-        raise HpeError(f"{path}: --landmarks {scheme} expects {want} landmark column pairs lm0_x..lm{want - 1}_y, "
-                       f"got {n}")
+        raise HpeError(
+            f"{path}: --landmarks {scheme} expects {want} landmark column pairs lm0_x..lm{want - 1}_y, got {n}"
+        )
     return n, flip_permutation(scheme), f"{n} moved, scheme {scheme}"
 
 
@@ -68,8 +79,10 @@ def _size_source(columns, image_size, images_dir, path):
     if not has_cols and image_size is None and images_dir is None:
         from ..errors import UsageError
 
-        raise UsageError(f"{path}: expected the image size: --image-size WxH, image_width/image_height columns "
-                         "or --images (the images themselves); got none")
+        raise UsageError(
+            f"{path}: expected the image size: --image-size WxH, image_width/image_height columns "
+            "or --images (the images themselves); got none"
+        )
     return has_cols
 
 
@@ -108,11 +121,11 @@ def row_sizes(batch, image_size, has_cols, pics, names, ids):
     for _, v in reversed(labelled):
         wh = np.where(np.isfinite(v).all(1, keepdims=True), v, wh)
     for k, (na, va) in enumerate(labelled):
-        for nb, vb in labelled[k + 1:]:
+        for nb, vb in labelled[k + 1 :]:
             both = np.isfinite(va).all(1) & np.isfinite(vb).all(1) & (reasons == "")
             bad = both & (va != vb).any(1)
             for i in np.flatnonzero(bad):
-                reasons[i] = (f"image size: {na} is {va[i, 0]:g}x{va[i, 1]:g}, {nb} says {vb[i, 0]:g}x{vb[i, 1]:g}")
+                reasons[i] = f"image size: {na} is {va[i, 0]:g}x{va[i, 1]:g}, {nb} says {vb[i, 0]:g}x{vb[i, 1]:g}"
     none = ~np.isfinite(wh).all(1) & (reasons == "")
     reasons[none] = "no image size (image_width/image_height empty; give --image-size or --images)"
     bad = (reasons == "") & ((wh < 1) | (wh != np.round(wh))).any(1)
@@ -130,8 +143,10 @@ def _image_column(path, columns, images_dir, out_images, image_column):
         return None
     img_col = image_column or next((c for c in IMAGE_COLUMNS if c in columns), None)
     if img_col is None or img_col not in columns:
-        raise HpeError(f"{path}: expected an image column ({image_column or ', '.join(IMAGE_COLUMNS)}) "
-                       "to go with --images, got none")
+        raise HpeError(
+            f"{path}: expected an image column ({image_column or ', '.join(IMAGE_COLUMNS)}) "
+            "to go with --images, got none"
+        )
     return img_col
 
 
@@ -144,14 +159,19 @@ def _pixel_transform(op, M, wh, crop, scale=None):
     safe = np.where(np.isfinite(wh), wh, 1.0)
     if op == "crop":
         x, y, cw, ch = crop
-        return (np.broadcast_to(crop_affine(x, y), (n, 2, 3)), np.broadcast_to(np.array([cw, ch], float), wh.shape),
-                reasons)
+        return (
+            np.broadcast_to(crop_affine(x, y), (n, 2, 3)),
+            np.broadcast_to(np.array([cw, ch], float), wh.shape),
+            reasons,
+        )
     if op == "scale":
         out = np.round(safe * scale)
         whole = (np.abs(safe * scale - out) < 1e-6).all(1) & (out >= 1).all(1)
         for i in np.flatnonzero(~whole):
-            reasons[i] = (f"scale: {safe[i, 0]:g}x{safe[i, 1]:g} times {scale:g} is not a whole number of pixels "
-                          "(the aspect would change)")
+            reasons[i] = (
+                f"scale: {safe[i, 0]:g}x{safe[i, 1]:g} times {scale:g} is not a whole number of pixels "
+                "(the aspect would change)"
+            )
         out = np.where(whole[:, None], out, safe)
         P = np.zeros((n, 2, 3))
         P[:, 0, 0] = P[:, 1, 1] = scale
@@ -163,15 +183,37 @@ def _pixel_transform(op, M, wh, crop, scale=None):
 class _Plan:
     """What every batch needs: the label reader, the landmark/box/size columns, the transform."""
 
-    def __init__(self, path, src, in_system, system, columns, n_lm, perm, has_box, M, op, crop, image_size,
-                 has_cols, box_from, clip, pose_para, img_col, pics, scale=None, radians=False):
+    def __init__(
+        self,
+        path,
+        src,
+        in_system,
+        system,
+        columns,
+        n_lm,
+        perm,
+        has_box,
+        M,
+        op,
+        crop,
+        image_size,
+        has_cols,
+        box_from,
+        clip,
+        pose_para,
+        img_col,
+        pics,
+        scale=None,
+        radians=False,
+    ):
         from ..io import MATRIX_COLS, landmark_cols
         from ..io.labels import label_mode
 
         self.path, self.src, self.in_system, self.system = path, src, in_system, system
         self.mode = label_mode(columns, path, in_system)  # the system's own columns, else angles, else r00..r22
         self.stored_kind = self.mode not in ("angles", "matrix") or bool(
-            in_system.columns and all(c in columns for c in in_system.value_columns))
+            in_system.columns and all(c in columns for c in in_system.value_columns)
+        )
         self.cross_check = self.mode == "angles" and not self.stored_kind and all(c in columns for c in MATRIX_COLS)
         self.n_lm, self.perm, self.lm_names, self.has_box = n_lm, perm, landmark_cols(n_lm), has_box
         self.M, self.op, self.crop, self.image_size, self.has_cols = M, op, crop, image_size, has_cols
@@ -180,11 +222,15 @@ class _Plan:
         self.scale = scale
         self.radians = radians
         self.zoom = scale if op == "scale" else 1.0  # lengths in pixels (size, Pose_Para scale) change by this
-        self.zoom_cols = [c for c in ("size", "scale") if c in columns and (c == "size" or pose_para)] \
-            if op == "scale" else []
+        self.zoom_cols = (
+            [c for c in ("size", "scale") if c in columns and (c == "size" or pose_para)] if op == "scale" else []
+        )
         self.mirror = bool(np.linalg.det(M) < 0)
-        self.label_source = ("pitch,yaw,roll" + (" (checked against r00..r22)" if self.cross_check else "")
-                             if self.mode == "angles" else "r00..r22")
+        self.label_source = (
+            "pitch,yaw,roll" + (" (checked against r00..r22)" if self.cross_check else "")
+            if self.mode == "angles"
+            else "r00..r22"
+        )
         self.csv = src.kind == "csv"
         is_mat = path.is_dir() or path.suffix.lower() == ".mat"
         self.mat_base = (path if path.is_dir() else path.parent) if is_mat and "file" in columns else None
@@ -259,13 +305,18 @@ class _Plan:
         names = ids = None
         if self.pics is not None:
             names = [None if v is None else str(v) for v in batch.column(self.img_col).to_pylist()]
-            ids = row_ids(batch.select([c for c in ("sequence", "camera", "frame") if c in batch.schema.names])
-                          .to_pandas())
+            ids = row_ids(
+                batch.select([c for c in ("sequence", "camera", "frame") if c in batch.schema.names]).to_pandas()
+            )
         wh, refs, size_reasons = row_sizes(batch, self.image_size, self.has_cols, self.pics, names, ids)
         reasons = np.where(reasons == "", size_reasons, reasons)
         extra = {}  # landmarks and boxes: NaN means missing and is kept; only non-numbers reject a row
-        for c in (self.lm_names + (BBOX_COLS if self.has_box else []) + (["tdx", "tdy"] if self.has_td else [])
-                  + self.zoom_cols):
+        for c in (
+            self.lm_names
+            + (BBOX_COLS if self.has_box else [])
+            + (["tdx", "tdy"] if self.has_td else [])
+            + self.zoom_cols
+        ):
             v, r = numeric_column(batch, c)
             extra[c] = v
             if not _is_numeric_type(batch.schema.field(c).type):  # only text can hold non-numbers
@@ -291,8 +342,9 @@ class _Plan:
             boxes = int(np.isfinite(box_new).all(axis=1).sum())
             new.update({c: box_new[:, i] for i, c in enumerate(BBOX_COLS)})
         if self.has_td:
-            new["tdx"], new["tdy"] = move_td(extra["tdx"][keep], extra["tdy"][keep], Pk, wh[keep, 1], out_k[:, 1],
-                                             self.pose_para)
+            new["tdx"], new["tdy"] = move_td(
+                extra["tdx"][keep], extra["tdy"][keep], Pk, wh[keep, 1], out_k[:, 1], self.pose_para
+            )
         for c in self.zoom_cols:
             new[c] = extra[c][keep] * self.zoom
         if self.has_cols:
@@ -312,11 +364,36 @@ class _Plan:
         return batch, lines, reasons, keep, out, boxes, (refs, names, P, wh, wh_out, A2_full, files)
 
 
-def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", box_from="auto", clip=False,
-                images_dir=None, out_images=None, image_column=None, interpolation="linear", border="constant",
-                jpeg_quality=95, rejects_path=None, overwrite=False, batch_size=65_536, bar=None, verbose=0,
-                description="", workers=None, strict=False, crop=None, scale=None, images_optional=False,
-                radians=False):
+def run_augment(
+    input,
+    output,
+    system,
+    image_size,
+    op,
+    angle,
+    *,
+    scheme="auto",
+    box_from="auto",
+    clip=False,
+    images_dir=None,
+    out_images=None,
+    image_column=None,
+    interpolation="linear",
+    border="constant",
+    jpeg_quality=95,
+    rejects_path=None,
+    overwrite=False,
+    batch_size=65_536,
+    bar=None,
+    verbose=0,
+    description="",
+    workers=None,
+    strict=False,
+    crop=None,
+    scale=None,
+    images_optional=False,
+    radians=False,
+):
     """Augment a label table (and optionally its images). Returns a summary dict.
 
     ``image_size`` (``(W, H)`` or None) is checked against the table's ``image_width/image_height`` and the
@@ -356,18 +433,50 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
     has_cols = _size_source(columns, image_size, images_dir, path)
     img_col = _image_column(path, columns, images_dir, out_images, image_column)
     M = plane_matrix(op, angle) if op not in ("crop", "scale") else np.eye(2)
-    mat_input = bool(getattr(src, "dataset", False)) and (path.is_dir() or path.suffix.lower() == ".mat") \
+    mat_input = (
+        bool(getattr(src, "dataset", False))
+        and (path.is_dir() or path.suffix.lower() == ".mat")
         and out_images is not None
+    )
     pose_para = (path.is_dir() or path.suffix.lower() == ".mat") or {"tdz", "scale"} <= set(columns)
-    plan = _Plan(path, src, in_system, system, columns, n_lm, perm, bool(box_present), M, op, crop, image_size,
-                 has_cols, box_from, clip, pose_para, img_col, RowImages(images_dir, images_optional) if images_dir else None,
-                 scale=scale, radians=radians)
+    plan = _Plan(
+        path,
+        src,
+        in_system,
+        system,
+        columns,
+        n_lm,
+        perm,
+        bool(box_present),
+        M,
+        op,
+        crop,
+        image_size,
+        has_cols,
+        box_from,
+        clip,
+        pose_para,
+        img_col,
+        RowImages(images_dir, images_optional) if images_dir else None,
+        scale=scale,
+        radians=radians,
+    )
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=None if plan.mat_base is not None else src)
-    meta = {**system_metadata(system), "hpe:augment": {
-        "op": op, "angle_deg": angle, "crop": list(crop) if crop else None, "scale": scale, "description": description,
-        "image_size": list(image_size) if image_size else "from image_width/image_height or the images",
-        "landmarks": lm_text, "box_from": box_from, "clip": clip,
-        "pixel_convention": "pixel centres at integer coordinates; centre ((W-1)/2, (H-1)/2)"}}
+    meta = {
+        **system_metadata(system),
+        "hpe:augment": {
+            "op": op,
+            "angle_deg": angle,
+            "crop": list(crop) if crop else None,
+            "scale": scale,
+            "description": description,
+            "image_size": list(image_size) if image_size else "from image_width/image_height or the images",
+            "landmarks": lm_text,
+            "box_from": box_from,
+            "clip": clip,
+            "pixel_convention": "pixel centres at integer coordinates; centre ((W-1)/2, (H-1)/2)",
+        },
+    }
     counts = {"rows": 0, "written": 0, "boxes": 0}
     workers = workers or min(2, os.cpu_count() or 1)
     if bar is not None and src.num_rows is not None:
@@ -382,8 +491,16 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         job = None
         if out_images is not None:
             stage = stack.enter_context(staged_dir(out_images, overwrite))
-            job = ImageJob(stage, Path(out_images), interpolation, border, jpeg_quality, overwrite,
-                           mat_dir=path if mat_input else None, perm_of=perm_of)
+            job = ImageJob(
+                stage,
+                Path(out_images),
+                interpolation,
+                border,
+                jpeg_quality,
+                overwrite,
+                mat_dir=path if mat_input else None,
+                perm_of=perm_of,
+            )
         writer = stack.enter_context(TableWriter(output, overwrite, meta))
 
         def finish(_, read_rejects, future):
@@ -392,13 +509,23 @@ def run_augment(input, output, system, image_size, op, angle, *, scheme="auto", 
         in_order(_batches_or_empty(src), plan.work, finish, workers)
         rejects.check()  # without --rejects (or with --strict) any bad row fails the run: nothing is written
         if counts["rows"] and not counts["written"]:
-            raise HpeError(f"{path}: nothing augmented: all {counts['rows']} row(s) rejected "
-                           f"({rejects.first_where or 'see the rejects file'})")
+            raise HpeError(
+                f"{path}: nothing augmented: all {counts['rows']} row(s) rejected "
+                f"({rejects.first_where or 'see the rejects file'})"
+            )
         rejects.finish()
     box_text = f"{counts['boxes']} moved ({box_from}{', clipped' if clip else ''})" if box_present else "none in input"
-    return {"system": system.name, "rows": counts["rows"], "written": counts["written"], "label_source": plan.label_source,
-            "landmarks": lm_text, "boxes": box_text, "images": len(job.done) if job else 0,
-            "mats": job.mats if job else 0, "rejects": dict(rejects.counts)}
+    return {
+        "system": system.name,
+        "rows": counts["rows"],
+        "written": counts["written"],
+        "label_source": plan.label_source,
+        "landmarks": lm_text,
+        "boxes": box_text,
+        "images": len(job.done) if job else 0,
+        "mats": job.mats if job else 0,
+        "rejects": dict(rejects.counts),
+    }
 
 
 def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan):
@@ -406,8 +533,11 @@ def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan)
     batch, lines, reasons, keep, out, boxes, extra = result
     if read_rejects:
         read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
-        rejects.add({"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
-                    [r.reason for r in read_rejects], lines=read_lines)
+        rejects.add(
+            {"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
+            [r.reason for r in read_rejects],
+            lines=read_lines,
+        )
         counts["rows"] += len(read_rejects)
     if not keep.all():
         drop = ~keep
@@ -427,8 +557,18 @@ def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan)
             if job.mat_dir is not None and files is not None:
                 base = job.mat_dir if job.mat_dir.is_dir() else job.mat_dir.parent
                 mat = (base / files[i], A2[i], plan.roi_fn, plan.zoom)
-            rows.append((names[i] or "", plan.where(lines[i], files[i] if files else None), refs[i], P[i], wh_in[i],
-                         wh_out[i], plan.mirror, mat))
+            rows.append(
+                (
+                    names[i] or "",
+                    plan.where(lines[i], files[i] if files else None),
+                    refs[i],
+                    P[i],
+                    wh_in[i],
+                    wh_out[i],
+                    plan.mirror,
+                    mat,
+                )
+            )
         # the image work is the slow part: move the bar per row as its picture is done
         job.add_rows(rows, tick=bar.update if bar is not None else None)
     writer.write(out)
@@ -437,4 +577,3 @@ def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan)
     counts["written"] += int(keep.sum())
     if bar is not None:
         bar.update(batch.num_rows - (int(keep.sum()) if job is not None else 0))
-

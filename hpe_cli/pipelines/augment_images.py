@@ -4,6 +4,7 @@
 Images are written into a staged folder (:func:`hpe_cli.io.transaction.staged_dir`) that the run commits as
 a whole with the table: a failure, also halfway through the commit, leaves none of them in place.
 """
+
 from __future__ import annotations
 
 from pathlib import Path, PurePath
@@ -62,8 +63,9 @@ def output_name(name: str, ref) -> PurePath:
 class ImageJob:
     """Warp each picture once into the staged folder; write ``.mat`` files back when the input is a ``.mat`` folder."""
 
-    def __init__(self, stage: Path, out_dir: Path, interpolation, border, jpeg_quality, overwrite, mat_dir=None,
-                 perm_of=None):
+    def __init__(
+        self, stage: Path, out_dir: Path, interpolation, border, jpeg_quality, overwrite, mat_dir=None, perm_of=None
+    ):
         self.stage, self.dst = Path(stage), Path(out_dir)
         self.interp, self.border, self.quality, self.overwrite = interpolation, border, jpeg_quality, overwrite
         self.mat_dir, self.perm_of = mat_dir, perm_of
@@ -105,9 +107,11 @@ class ImageJob:
         key = str(rel)
         if key in self.done:
             if self.done[key][0] != ref.key:
-                raise HpeError(f"{where}: image {name!r} ({ref}) would be written to {self.dst / rel}, as the image "
-                               f"of {self.done[key][1]} ({self.done[key][0]}) is: two different pictures for one "
-                               "output file")
+                raise HpeError(
+                    f"{where}: image {name!r} ({ref}) would be written to {self.dst / rel}, as the image "
+                    f"of {self.done[key][1]} ({self.done[key][0]}) is: two different pictures for one "
+                    "output file"
+                )
             new = False
         else:
             final = self.dst / rel
@@ -154,8 +158,7 @@ class ImageJob:
         try:
             m = scipy.io.loadmat(src_mat)
         except Exception as exc:  # noqa: BLE001 - scipy raises many types for a damaged file
-            raise HpeError(f"{src_mat}: not a readable MATLAB .mat file ({' '.join(str(exc).split())[:120]})") \
-                from None
+            raise HpeError(f"{src_mat}: not a readable MATLAB .mat file ({' '.join(str(exc).split())[:120]})") from None
         m = {k: v for k, v in m.items() if not k.startswith("__")}
         s = get_system("300w_lp")
         pose = np.asarray(m["Pose_Para"], dtype=np.float64).reshape(-1).copy()
@@ -190,8 +193,9 @@ class ImageJob:
         """(2, L) points moved by P, re-indexed after a mirror; ``invisible`` marks points (x = -1) kept as is."""
         from ..geometry.augment import move_point
 
-        hidden = (pts[0] == invisible) | (pts[1] == invisible) if invisible is not None else np.zeros(pts.shape[1],
-                                                                                                        bool)
+        hidden = (
+            (pts[0] == invisible) | (pts[1] == invisible) if invisible is not None else np.zeros(pts.shape[1], bool)
+        )
         u, v = move_point(pts[0], pts[1], P)
         out = np.vstack([u, v])
         out[:, hidden] = pts[:, hidden]
@@ -224,8 +228,9 @@ def _warp(img, P, size_out, interpolation, border):
         # a resize: cv2.resize has the same pixel-centre mapping; area averaging when shrinking
         flag = cv2.INTER_AREA if A[0, 0] < 1 and interpolation == "linear" else interp[interpolation]
         return cv2.resize(img, (W, H), interpolation=flag)
-    return cv2.warpAffine(img, P, (W, H), flags=interp[interpolation], borderMode=borders[border],
-                          borderValue=(0, 0, 0, 0))
+    return cv2.warpAffine(
+        img, P, (W, H), flags=interp[interpolation], borderMode=borders[border], borderValue=(0, 0, 0, 0)
+    )
 
 
 __all__ = ["ImageJob", "RowImages", "output_name"]

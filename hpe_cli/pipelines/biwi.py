@@ -1,12 +1,26 @@
 """``hpe biwi``: BIWI labels in the depth or RGB camera, with head boxes, a protocol subset and sequence splits."""
+
 from __future__ import annotations
 
 from pathlib import Path
 
 
-def run_biwi(input_path, output, *, camera="depth", calibration=None, head_size=200.0, system="biwi",
-             protocol="all", split=None, seed=0, split_lists=None, overwrite=False, rejects_path=None,
-             strict=False) -> dict:
+def run_biwi(
+    input_path,
+    output,
+    *,
+    camera="depth",
+    calibration=None,
+    head_size=200.0,
+    system="biwi",
+    protocol="all",
+    split=None,
+    seed=0,
+    split_lists=None,
+    overwrite=False,
+    rejects_path=None,
+    strict=False,
+) -> dict:
     """Read BIWI, write the label table (and the split's sequence lists); return a summary dict.
 
     A frame whose pose file is unreadable or invalid goes to ``rejects_path``
@@ -28,12 +42,18 @@ def run_biwi(input_path, output, *, camera="depth", calibration=None, head_size=
     rejects = Rejects(rejects_path, overwrite, strict=strict)
     sysobj = get_system(system)
     bad: list = []
-    frame = read_biwi_camera(input_path, camera=camera, calibration=calibration, head_size_mm=head_size,
-                             system=sysobj, bad=bad)
+    frame = read_biwi_camera(
+        input_path, camera=camera, calibration=calibration, head_size_mm=head_size, system=sysobj, bad=bad
+    )
     if bad:
         rejects.first_where = bad[0]["message"]  # FILE: reason (each frame is its own file)
-        rejects.add({c: np.array([b[c] for b in bad], dtype=np.int64 if c == "frame" else object)
-                     for c in ("file", "sequence", "frame")}, [b["reason"] for b in bad])
+        rejects.add(
+            {
+                c: np.array([b[c] for b in bad], dtype=np.int64 if c == "frame" else object)
+                for c in ("file", "sequence", "frame")
+            },
+            [b["reason"] for b in bad],
+        )
     rejects.check()  # before anything is written
     keep = protocol_mask(frame, protocol)
     frame = frame[keep].reset_index(drop=True)
@@ -49,9 +69,15 @@ def run_biwi(input_path, output, *, camera="depth", calibration=None, head_size=
         d = Path(split_lists)
         for name, seqs in splits.items():  # refuse existing lists before writing anything
             check_output(d / f"{name}_sequences.txt", overwrite)
-    meta = {**system_metadata(sysobj), "hpe:biwi": {
-        "camera": camera, "head_size_mm": head_size, "protocol": protocol,
-        "split": None if splits is None else {"fractions": list(split), "seed": seed, "sequences": splits}}}
+    meta = {
+        **system_metadata(sysobj),
+        "hpe:biwi": {
+            "camera": camera,
+            "head_size_mm": head_size,
+            "protocol": protocol,
+            "split": None if splits is None else {"fractions": list(split), "seed": seed, "sequences": splits},
+        },
+    }
     import json
 
     meta["hpe:biwi"] = json.dumps(meta["hpe:biwi"])
@@ -64,7 +90,13 @@ def run_biwi(input_path, output, *, camera="depth", calibration=None, head_size=
             with AtomicFile(p, overwrite) as tmp:
                 tmp.write_text("".join(f"{s}\n" for s in seqs), encoding="utf-8")
             lists.append(str(p))
-    return {"rows": len(frame), "dropped": int((~keep).sum()), "sequences": int(frame["sequence"].nunique()),
-            "splits": {k: len(v) for k, v in (splits or {}).items()}, "lists": lists,
-            "boxes": int(np.isfinite(frame["bbox_w"]).sum()), "rejected": len(rejects),
-            "rejects_per_reason": dict(rejects.counts)}
+    return {
+        "rows": len(frame),
+        "dropped": int((~keep).sum()),
+        "sequences": int(frame["sequence"].nunique()),
+        "splits": {k: len(v) for k, v in (splits or {}).items()},
+        "lists": lists,
+        "boxes": int(np.isfinite(frame["bbox_w"]).sum()),
+        "rejected": len(rejects),
+        "rejects_per_reason": dict(rejects.counts),
+    }

@@ -1,4 +1,5 @@
 """``hpe convert`` as a streaming job: read batches, convert, write atomically."""
+
 from __future__ import annotations
 
 import os
@@ -7,9 +8,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import HpeError
+from ..io import (
+    LABEL_COLS,
+    Rejects,
+    TableWriter,
+    batch_rotations,
+    label_mode,
+    open_table,
+    rotation_value_columns,
+    system_metadata,
+)
 from ..io.readers import LINE_COL
-from ..io import (LABEL_COLS, Rejects, TableWriter, batch_rotations, label_mode, open_table, rotation_value_columns,
-                  system_metadata)
 from ..rotation import soa
 from ..rotation.convert import soa_labels
 
@@ -54,16 +63,34 @@ def convert_batch(batch, mode, source, target, radians=False, decoder=None):
     kept = batch.select(keep)
     if not ok.all():
         kept = kept.filter(pa.array(ok))
-    new = labels["primary"] + labels["secondary"] + soa.columns(labels["matrix"], n) + \
-        [labels["gimbal_lock"], labels["roundtrip_err"]] + list(extra.values())
+    new = (
+        labels["primary"]
+        + labels["secondary"]
+        + soa.columns(labels["matrix"], n)
+        + [labels["gimbal_lock"], labels["roundtrip_err"]]
+        + list(extra.values())
+    )
     names = keep + LABEL_COLS + [c for c in extra if c not in LABEL_COLS]
-    new = new[:len(LABEL_COLS)] + [v for c, v in extra.items() if c not in LABEL_COLS]
+    new = new[: len(LABEL_COLS)] + [v for c, v in extra.items() if c not in LABEL_COLS]
     arrays = list(kept.columns) + [pa.array(np.asarray(v)) for v in new]
     return pa.RecordBatch.from_arrays(arrays, names=names), reasons, labels
 
 
-def run_convert(input_path, output, source, target, *, radians=False, rejects_path=None, overwrite=False,
-                batch_size=65_536, progress=None, workers=None, strict=False, decoder=None) -> ConvertSummary:
+def run_convert(
+    input_path,
+    output,
+    source,
+    target,
+    *,
+    radians=False,
+    rejects_path=None,
+    overwrite=False,
+    batch_size=65_536,
+    progress=None,
+    workers=None,
+    strict=False,
+    decoder=None,
+) -> ConvertSummary:
     """Convert every row of ``input_path`` from ``source`` to ``target`` into ``output``.
 
     Bad rows go to ``rejects_path`` when given; otherwise (or with
@@ -97,14 +124,22 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
         lines = batch.column(LINE_COL).to_numpy()
         if read_rejects:
             read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
-            rejects.add({"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
-                        [r.reason for r in read_rejects], lines=read_lines)
+            rejects.add(
+                {"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
+                [r.reason for r in read_rejects],
+                lines=read_lines,
+            )
             summary.rows += len(read_rejects)
         if len(bad):
             cols = {"row": lines[bad]}
             if rejects.path is not None:
-                cols.update({n: batch.column(n).take(bad).to_numpy(zero_copy_only=False) for n in batch.schema.names
-                             if n != LINE_COL})
+                cols.update(
+                    {
+                        n: batch.column(n).take(bad).to_numpy(zero_copy_only=False)
+                        for n in batch.schema.names
+                        if n != LINE_COL
+                    }
+                )
             rejects.add(cols, reasons[bad], lines=lines[bad])
         summary.rows += batch.num_rows
         if out.num_rows or writer.rows == 0:
@@ -120,8 +155,9 @@ def run_convert(input_path, output, source, target, *, radians=False, rejects_pa
         pending = deque()
         try:
             for batch, read_rejects in src.batches_with_rejects():
-                pending.append((batch, read_rejects,
-                                pool.submit(convert_batch, batch, mode, source, target, radians, decoder)))
+                pending.append(
+                    (batch, read_rejects, pool.submit(convert_batch, batch, mode, source, target, radians, decoder))
+                )
                 if len(pending) > workers:
                     finish(*pending.popleft(), writer)
             while pending:

@@ -9,6 +9,7 @@ taken in submission order (:func:`~hpe_cli.pipelines.pools.in_order`), so the
 output does not depend on which worker ran what. ``address="local"`` starts a ``LocalCluster`` of ``workers`` single-threaded
 processes (for testing and single machines). Dask is imported lazily.
 """
+
 from __future__ import annotations
 
 from contextlib import contextmanager
@@ -56,13 +57,14 @@ def probe(address: str, seconds: float | None = None) -> None:
         try:
             data = conn.recv(1)
         except TimeoutError:
-            raise HpeError(f"--scheduler {address}: accepts connections but sent nothing within {seconds:g} s "
-                           "(is it a Dask scheduler?)") from None
+            raise HpeError(
+                f"--scheduler {address}: accepts connections but sent nothing within {seconds:g} s "
+                "(is it a Dask scheduler?)"
+            ) from None
         except OSError as exc:
             raise HpeError(f"--scheduler {address}: cannot connect ({os_reason(exc)})") from None
         if not data:
-            raise HpeError(f"--scheduler {address}: closed the connection without answering "
-                           "(is it a Dask scheduler?)")
+            raise HpeError(f"--scheduler {address}: closed the connection without answering (is it a Dask scheduler?)")
 
 
 def _quiet_resource_tracker() -> None:
@@ -109,8 +111,13 @@ def _client(address: str, workers: int):
         raise HpeError("--scheduler needs Dask distributed: pip install 'hpe[dask]'") from None
     if address == "local":
         _quiet_resource_tracker()
-        cluster = LocalCluster(n_workers=max(1, int(workers)), threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=50)
+        cluster = LocalCluster(
+            n_workers=max(1, int(workers)),
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=50,
+        )
         return Client(cluster), cluster
     try:
         return Client(address, timeout=f"{CONNECT_SECONDS:g}s"), None

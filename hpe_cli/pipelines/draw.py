@@ -5,14 +5,15 @@ The images (or contact sheets) are written into a staged folder
 when the run commits: a failure leaves no image behind, and a rerun never
 meets images of a failed run.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
 
 from .draw_rows import (  # noqa: F401  (shared with draw_errors and draw_flagged)
+    _WRITABLE,
     DEFAULT_LENGTH_FRACTION,
     MAT_LENGTH_UNITS,
-    _WRITABLE,
     _column,
     _image_names,
     _read_all,
@@ -73,9 +74,11 @@ def plan_images(items, *, img_root, outdir, canvas, frame, where, overwrite, che
             if ref is not None and other[2] is not None and other[2].key == ref.key:
                 other[3] = np.sort(np.concatenate([other[3], rows]))
                 continue
-            raise HpeError(f"{where(i0)}: image {name!r} would be written to {outdir / rel}, as "
-                           f"{other[0]!r} of {where(int(other[3][0])).split(': ', 1)[-1]} is: two different "
-                           "pictures for one output file (give the images distinct names)")
+            raise HpeError(
+                f"{where(i0)}: image {name!r} would be written to {outdir / rel}, as "
+                f"{other[0]!r} of {where(int(other[3][0])).split(': ', 1)[-1]} is: two different "
+                "pictures for one output file (give the images distinct names)"
+            )
         dst = outdir / rel
         if ref is not None and ref.path is not None and dst.resolve() == Path(ref.path).resolve():
             raise HpeError(f"{dst}: refusing to overwrite an input image (choose another output folder)")
@@ -87,10 +90,31 @@ def plan_images(items, *, img_root, outdir, canvas, frame, where, overwrite, che
     return plan, bad_rows
 
 
-def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=None, radians=False, use="auto",
-             length=None, thickness=None, tdy_origin="auto", annotate=False, grid=False, grid_cols=6, tile=256,
-             limit=None, rejects_path=None, overwrite=False, progress=None, strict=False, worst=None,
-             sort_by=None) -> dict:
+def run_draw(
+    input_path,
+    outdir,
+    *,
+    images=None,
+    system,
+    style="axes",
+    canvas=None,
+    radians=False,
+    use="auto",
+    length=None,
+    thickness=None,
+    tdy_origin="auto",
+    annotate=False,
+    grid=False,
+    grid_cols=6,
+    tile=256,
+    limit=None,
+    rejects_path=None,
+    overwrite=False,
+    progress=None,
+    strict=False,
+    worst=None,
+    sort_by=None,
+) -> dict:
     """Draw every row of ``input_path``; return counts (``faces``, ``images``, ``sheets``, ``rejects``).
 
     A table written by ``hpe evaluate -o`` (``gt_*`` and ``pred_*`` columns) is drawn by
@@ -108,12 +132,24 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     from .draw_errors import is_errors_table, run_draw_errors
 
     if is_errors_table(src.columns):
-        return run_draw_errors(input_path, outdir, images=images, system=system, worst=worst,
-                               sort_by=sort_by or "geodesic", overwrite=overwrite, progress=progress,
-                               thickness=thickness, rejects_path=rejects_path, strict=strict)
+        return run_draw_errors(
+            input_path,
+            outdir,
+            images=images,
+            system=system,
+            worst=worst,
+            sort_by=sort_by or "geodesic",
+            overwrite=overwrite,
+            progress=progress,
+            thickness=thickness,
+            rejects_path=rejects_path,
+            strict=strict,
+        )
     if worst is not None or sort_by is not None:
-        raise HpeError(f"{src.path}: --worst and --sort-by draw the output of `hpe evaluate -o` (columns "
-                       "gt_pitch..pred_roll), got a label table")
+        raise HpeError(
+            f"{src.path}: --worst and --sort-by draw the output of `hpe evaluate -o` (columns "
+            "gt_pitch..pred_roll), got a label table"
+        )
     from ..io.system_meta import output_system, resolve_system
 
     resolved = resolve_system(src, system, option_is_output=True)  # the file's own system, else --system
@@ -130,8 +166,10 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     centre, L, from_td = face_placement(frame, pose_para, length)
     names = _image_names(frame)
     if names is None and canvas is None:
-        raise HpeError(f"{src.path}: expected an `image` (or `file`) column naming the images, or --image-size WxH "
-                       f"to draw on blank canvases; found {', '.join(frame.columns[:12])}")
+        raise HpeError(
+            f"{src.path}: expected an `image` (or `file`) column naming the images, or --image-size WxH "
+            f"to draw on blank canvases; found {', '.join(frame.columns[:12])}"
+        )
     img_root = Path(images) if images else (input_path if input_path.is_dir() else input_path.parent)
     outdir = Path(outdir)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
@@ -147,8 +185,16 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
     items = _group_rows(name_arr, usable, limit)
 
     # check every input and output before drawing anything
-    plan, missing = plan_images(items, img_root=img_root, outdir=outdir, canvas=canvas, frame=frame, where=where,
-                                overwrite=overwrite, check_exists=not grid)
+    plan, missing = plan_images(
+        items,
+        img_root=img_root,
+        outdir=outdir,
+        canvas=canvas,
+        frame=frame,
+        where=where,
+        overwrite=overwrite,
+        check_exists=not grid,
+    )
     bad_rows += missing
     book = _Book(rejects, frame, src, lines, where)
     book.add(bad_rows, before_drawing=True)
@@ -163,8 +209,27 @@ def run_draw(input_path, outdir, *, images=None, system, style="axes", canvas=No
         progress.total = len(plan)
         progress.refresh()
     with ensure_transaction(), staged_dir(outdir, overwrite) as stage:
-        s = _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, centre, L, from_td, flip,
-                      style, thickness, annotate, A, angles, book, progress)
+        s = _draw_all(
+            plan,
+            stage,
+            outdir,
+            grid,
+            grid_cols,
+            tile,
+            sheet_paths,
+            canvas,
+            centre,
+            L,
+            from_td,
+            flip,
+            style,
+            thickness,
+            annotate,
+            A,
+            angles,
+            book,
+            progress,
+        )
         book.finish(s["images"])
         s["system"] = resolved.describe()  # which system the labels were read in, and where that came from
         return s
@@ -189,8 +254,11 @@ class _Book:
         if self.rejects.path is None or self.rejects.strict:  # fail before drawing anything
             from ..errors import HpeError
 
-            extra = f" ({len(bad) - 1} more; use --rejects FILE to skip them)" if len(bad) > 1 else \
-                " (use --rejects FILE to skip it)"
+            extra = (
+                f" ({len(bad) - 1} more; use --rejects FILE to skip them)"
+                if len(bad) > 1
+                else " (use --rejects FILE to skip it)"
+            )
             raise HpeError(f"{self.where(idx[0])}: {why[0]}{extra if not self.rejects.strict else ''}")
         cols = {c: self.frame[c].to_numpy()[idx] for c in self.frame.columns}
         if Path(self.src.path).is_dir() and "file" in cols:  # a .mat file is one record: named as messages do
@@ -203,8 +271,10 @@ class _Book:
         from ..errors import HpeError
 
         if drawn == 0 and self.rows:
-            raise HpeError(f"{self.src.path}: nothing drawn: all {len(self.rows)} row(s) rejected "
-                           f"(first: {self.where(self.rows[0][0]).split(': ', 1)[-1]}: {self.rows[0][1]})")
+            raise HpeError(
+                f"{self.src.path}: nothing drawn: all {len(self.rows)} row(s) rejected "
+                f"(first: {self.where(self.rows[0][0]).split(': ', 1)[-1]}: {self.rows[0][1]})"
+            )
         self.rejects.finish()
 
 
@@ -221,8 +291,27 @@ def pictures(plan, canvas):
         yield plan[k], img, why
 
 
-def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, centre, L, from_td, flip, style,
-              thickness, annotate, A, angles, book, progress=None):
+def _draw_all(
+    plan,
+    stage,
+    outdir,
+    grid,
+    grid_cols,
+    tile,
+    sheet_paths,
+    canvas,
+    centre,
+    L,
+    from_td,
+    flip,
+    style,
+    thickness,
+    annotate,
+    A,
+    angles,
+    book,
+    progress=None,
+):
     from collections import Counter
 
     import cv2
@@ -253,15 +342,23 @@ def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, c
                 p, y, rr = angles[i]
                 above = (1.15 if style == "axes" else 1.8) * Lr[k]
                 ink = ((0, 0, 0), (255, 255, 255)) if ref is None else ((255, 255, 255), (0, 0, 0))
-                g.render_caption(img, f"p {p:.1f} y {y:.1f} r {rr:.1f}", (c[k, 0] - Lr[k], c[k, 1] - above),
-                                 height_px=float(np.clip(Lr[k] / 6, 12.0, 0.05 * max(H, W) + 12.0)),
-                                 colour=ink[0], outline=ink[1])
+                g.render_caption(
+                    img,
+                    f"p {p:.1f} y {y:.1f} r {rr:.1f}",
+                    (c[k, 0] - Lr[k], c[k, 1] - above),
+                    height_px=float(np.clip(Lr[k] / 6, 12.0, 0.05 * max(H, W) + 12.0)),
+                    colour=ink[0],
+                    outline=ink[1],
+                )
         faces += len(rows)
         drawn += 1
         if grid:
             s = tile / max(H, W)
-            tiles.append(cv2.resize(img, (max(1, int(W * s)), max(1, int(H * s))), interpolation=cv2.INTER_AREA)
-                         if s < 1 else img)
+            tiles.append(
+                cv2.resize(img, (max(1, int(W * s)), max(1, int(H * s))), interpolation=cv2.INTER_AREA)
+                if s < 1
+                else img
+            )
             captions.append(str(rel))
         else:
             _write_image(img, stage / rel, outdir / rel)
@@ -274,8 +371,12 @@ def _draw_all(plan, stage, outdir, grid, grid_cols, tile, sheet_paths, canvas, c
             if tiles[part]:
                 sheet = g.contact_sheet(tiles[part], grid_cols, tile, captions[part])
                 _write_image(sheet, stage / p.relative_to(outdir), p)
-    return {"faces": faces, "images": drawn, "sheets": len(sheet_paths) if tiles else 0,
-            "rejects": dict(Counter(why.split(":")[0] for _, why in book.rows))}
+    return {
+        "faces": faces,
+        "images": drawn,
+        "sheets": len(sheet_paths) if tiles else 0,
+        "rejects": dict(Counter(why.split(":")[0] for _, why in book.rows)),
+    }
 
 
 def check_output_exists(path, overwrite):

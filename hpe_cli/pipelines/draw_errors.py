@@ -9,6 +9,7 @@ image never share an output file.
 :func:`draw_worst` writes the PNGs, :func:`render_worst` yields the same pictures as arrays (the evaluate
 page embeds them); :func:`run_draw_errors` is ``hpe draw``'s job.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -18,8 +19,17 @@ import numpy as np
 
 #: columns ``hpe evaluate -o`` writes besides its key columns
 ANGLE_COLUMNS = ("gt_pitch", "gt_yaw", "gt_roll", "pred_pitch", "pred_yaw", "pred_roll")
-_EVAL_COLUMNS = set(ANGLE_COLUMNS) | {"err_pitch", "err_yaw", "err_roll", "geodesic", "maev_left", "maev_down",
-                                      "maev_front", "frobenius", "row"}
+_EVAL_COLUMNS = set(ANGLE_COLUMNS) | {
+    "err_pitch",
+    "err_yaw",
+    "err_roll",
+    "geodesic",
+    "maev_left",
+    "maev_down",
+    "maev_front",
+    "frobenius",
+    "row",
+}
 _PLACEMENT = {"bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "tdz", "size", "scale"}
 GT_STYLE = "solid"
 PRED_STYLE = "dashed"
@@ -56,8 +66,10 @@ def _order(frame, sort_by, worst, where):
 
     if sort_by not in frame.columns:
         numeric = [c for c in frame.columns if pd.api.types.is_numeric_dtype(frame[c])]
-        raise HpeError(f"{where}: --sort-by {sort_by!r}: expected one of the numeric columns "
-                       f"{', '.join(numeric)}, got no column of that name")
+        raise HpeError(
+            f"{where}: --sort-by {sort_by!r}: expected one of the numeric columns "
+            f"{', '.join(numeric)}, got no column of that name"
+        )
 
     v = pd.to_numeric(frame[sort_by], errors="coerce").to_numpy(np.float64)
     if np.isnan(v).all() and len(v):
@@ -86,8 +98,9 @@ def _placement(frame, idx, ref, H, W):
                 pose = None
             if pose is not None and np.isfinite(pose[3:5]).all():
                 L0 = abs(pose[6]) * MAT_LENGTH_UNITS if np.isfinite(pose[6]) and pose[6] != 0 else np.nan
-                return np.array([pose[3], H - 1 - pose[4]]), (L0 if np.isfinite(L0) else
-                                                               DEFAULT_LENGTH_FRACTION * min(H, W))
+                return np.array([pose[3], H - 1 - pose[4]]), (
+                    L0 if np.isfinite(L0) else DEFAULT_LENGTH_FRACTION * min(H, W)
+                )
     return np.array([W / 2.0, H / 2.0]), DEFAULT_LENGTH_FRACTION * min(H, W)
 
 
@@ -108,8 +121,22 @@ def render_pair(img, A_gt, A_pred, centre, length, corner_text, thickness=None):
     return img
 
 
-def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=None, overwrite=False,
-               progress=None, on_missing="canvas", thickness=None, where=None, skipped=None, row_name=None):
+def draw_worst(
+    rows,
+    *,
+    images,
+    out_dir,
+    worst=None,
+    sort_by="geodesic",
+    system=None,
+    overwrite=False,
+    progress=None,
+    on_missing="canvas",
+    thickness=None,
+    where=None,
+    skipped=None,
+    row_name=None,
+):
     """Draw the worst rows of ``hpe evaluate -o``'s output, ground truth and prediction on the same face.
 
     Parameters
@@ -152,16 +179,39 @@ def draw_worst(rows, *, images, out_dir, worst=None, sort_by="geodesic", system=
     done = {}
     with ensure_transaction(), staged_dir(out_dir, overwrite) as stage:
         for rank, _, img, key, caption, stem in render_worst(
-                rows, images=images, worst=worst, sort_by=sort_by, system=system, progress=progress,
-                on_missing=on_missing, thickness=thickness, where=where, skipped=skipped, row_name=row_name):
+            rows,
+            images=images,
+            worst=worst,
+            sort_by=sort_by,
+            system=system,
+            progress=progress,
+            on_missing=on_missing,
+            thickness=thickness,
+            where=where,
+            skipped=skipped,
+            row_name=row_name,
+        ):
             rel = Path(f"{rank + 1:04d}_{_safe_stem(stem)}.png")
             _write_image(img, stage / rel, out_dir / rel)
             done[rank] = (key, out_dir / rel, caption)
     return [done[k] for k in sorted(done)]
 
 
-def render_worst(rows, *, images, worst=None, sort_by="geodesic", system=None, progress=None, on_missing="canvas",
-                 thickness=None, where=None, skipped=None, row_name=None, crop=None):
+def render_worst(
+    rows,
+    *,
+    images,
+    worst=None,
+    sort_by="geodesic",
+    system=None,
+    progress=None,
+    on_missing="canvas",
+    thickness=None,
+    where=None,
+    skipped=None,
+    row_name=None,
+    crop=None,
+):
     """The pictures :func:`draw_worst` writes, as arrays, without writing anything (the evaluate page embeds them).
 
     Same parameters as :func:`draw_worst` (no ``out_dir``). Yields ``(rank, row, image, key, caption, stem)`` for
@@ -252,8 +302,10 @@ def _load(rows, system, where):
     system = get_system(system) if isinstance(system, str) else system
     missing = [c for c in ANGLE_COLUMNS if c not in rows.columns]
     if missing:
-        raise HpeError(f"{where}: expected hpe evaluate's per-row output with {', '.join(ANGLE_COLUMNS)}, "
-                       f"missing {', '.join(missing)}")
+        raise HpeError(
+            f"{where}: expected hpe evaluate's per-row output with {', '.join(ANGLE_COLUMNS)}, "
+            f"missing {', '.join(missing)}"
+        )
     return rows, system, where
 
 
@@ -291,9 +343,11 @@ class _Pairs:
             render_pair(img, self.A_gt[i], self.A_pr[i], centre, length, corner, self.thickness)
         else:
             g.render_caption(img, "angles missing", (4, H - 6), height_px=14)
-        caption = (f"{', '.join(map(str, key))}: {sort_by} {err:.2f}; gt (p, y, r) = "
-                   f"({gt[i, 0]:.1f}, {gt[i, 1]:.1f}, {gt[i, 2]:.1f}), pred = "
-                   f"({pr[i, 0]:.1f}, {pr[i, 1]:.1f}, {pr[i, 2]:.1f}) deg in {self.system.name}")
+        caption = (
+            f"{', '.join(map(str, key))}: {sort_by} {err:.2f}; gt (p, y, r) = "
+            f"({gt[i, 0]:.1f}, {gt[i, 1]:.1f}, {gt[i, 2]:.1f}), pred = "
+            f"({pr[i, 0]:.1f}, {pr[i, 1]:.1f}, {pr[i, 2]:.1f}) deg in {self.system.name}"
+        )
         return img, key, caption
 
 
@@ -303,8 +357,20 @@ def _safe_stem(stem: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", stem)[:80] or "image"
 
 
-def run_draw_errors(input_path, outdir, *, images=None, system=None, worst=None, sort_by="geodesic",
-                    overwrite=False, progress=None, thickness=None, rejects_path=None, strict=False) -> dict:
+def run_draw_errors(
+    input_path,
+    outdir,
+    *,
+    images=None,
+    system=None,
+    worst=None,
+    sort_by="geodesic",
+    overwrite=False,
+    progress=None,
+    thickness=None,
+    rejects_path=None,
+    strict=False,
+) -> dict:
     """``hpe draw`` on evaluate's output: a row whose image is missing is a reject (an error without ``--rejects``
     or with ``strict``); a run that draws nothing exits 1. Rows are named as the input numbers them."""
     import pyarrow as pa
@@ -335,22 +401,44 @@ def run_draw_errors(input_path, outdir, *, images=None, system=None, worst=None,
     skip = rejects_path is not None and not strict
     skipped: list = []
     with ensure_transaction():
-        res = draw_worst(frame, images=images or input_path.parent, out_dir=outdir, worst=worst, sort_by=sort_by,
-                         system=system, overwrite=overwrite, progress=progress,
-                         on_missing="skip" if skip else "error", thickness=thickness, where=str(input_path),
-                         skipped=skipped, row_name=where)
+        res = draw_worst(
+            frame,
+            images=images or input_path.parent,
+            out_dir=outdir,
+            worst=worst,
+            sort_by=sort_by,
+            system=system,
+            overwrite=overwrite,
+            progress=progress,
+            on_missing="skip" if skip else "error",
+            thickness=thickness,
+            where=str(input_path),
+            skipped=skipped,
+            row_name=where,
+        )
         if skipped:
             skipped.sort()
             idx = np.array([i for i, _ in skipped], dtype=np.int64)
             why = [w for _, w in skipped]
             if not res:
-                raise HpeError(f"{input_path}: nothing drawn: all {len(idx)} row(s) rejected "
-                               f"(first: {where(int(idx[0])).split(': ', 1)[-1]}: {why[0]})")
-            rejects.add({"row": row_numbers(src, lines, idx), **{c: frame[c].to_numpy()[idx] for c in frame.columns}},
-                        why, lines=np.asarray(lines)[idx] if src.kind == "csv" and lines is not None else None)
+                raise HpeError(
+                    f"{input_path}: nothing drawn: all {len(idx)} row(s) rejected "
+                    f"(first: {where(int(idx[0])).split(': ', 1)[-1]}: {why[0]})"
+                )
+            rejects.add(
+                {"row": row_numbers(src, lines, idx), **{c: frame[c].to_numpy()[idx] for c in frame.columns}},
+                why,
+                lines=np.asarray(lines)[idx] if src.kind == "csv" and lines is not None else None,
+            )
         rejects.finish()
     from collections import Counter
 
-    return {"faces": len(res), "images": len(res), "sheets": 0,
-            "rejects": dict(Counter(w.split(":")[0] for _, w in skipped)), "system": system.name,
-            "system_source": source, "drawn": res}
+    return {
+        "faces": len(res),
+        "images": len(res),
+        "sheets": 0,
+        "rejects": dict(Counter(w.split(":")[0] for _, w in skipped)),
+        "system": system.name,
+        "system_source": source,
+        "drawn": res,
+    }

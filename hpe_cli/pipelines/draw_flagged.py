@@ -7,6 +7,7 @@ the check's name in the top-left corner, shrunk to at most :data:`MAX_SIDE` pixe
 ``pictures/<check>_<k>.png`` in the plots folder. Images are found by :class:`hpe_cli.io.images.ImageResolver`
 (``--images``, a ``.mat`` folder's own ``.jpg``, Panoptic frame layouts and videos).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -45,8 +46,9 @@ def _pick(src, lines):
             yield batch.filter(keep)
 
 
-def flagged_pictures(input_path, examples, plots_dir, system, *, images=None, per_check=PER_CHECK,
-                     radians=False, overwrite=False):
+def flagged_pictures(
+    input_path, examples, plots_dir, system, *, images=None, per_check=PER_CHECK, radians=False, overwrite=False
+):
     """Draw the first ``per_check`` flagged rows of each check; return what the page shows.
 
     Parameters
@@ -85,8 +87,9 @@ def flagged_pictures(input_path, examples, plots_dir, system, *, images=None, pe
     if not any(c in src.columns for c in IMAGE_COLUMNS):  # no image names: no pictures (and no second read)
         return result
     mode = label_mode(src.columns, src.path, system)
-    frame, A, _, reasons, lines = _read_all(src, mode, radians, system,
-                                            batches=_pick(src, {n for v in wanted.values() for n in v}))
+    frame, A, _, reasons, lines = _read_all(
+        src, mode, radians, system, batches=_pick(src, {n for v in wanted.values() for n in v})
+    )
     names = _image_names(frame)
     if names is None or not len(frame):
         return result
@@ -121,8 +124,12 @@ def flagged_pictures(input_path, examples, plots_dir, system, *, images=None, pe
             _draw_one(img, frame, i, A[i] if ok else None, pose_para, check, stage / rel, out_dir / rel)
             label = "" if ok else f" (label not drawn: {reasons[i] or 'not finite'})"
             shown = "" if input_path.is_dir() else f" ({names[i]})"
-            drawn[j] = {"check": check, "where": where, "path": f"{PICTURE_DIR}/{rel.name}",
-                        "caption": f"{check}: {where}{shown}{label}"}
+            drawn[j] = {
+                "check": check,
+                "where": where,
+                "path": f"{PICTURE_DIR}/{rel.name}",
+                "caption": f"{check}: {where}{shown}{label}",
+            }
     result["pictures"] = [drawn[j] for j in sorted(drawn)]
     return result
 

@@ -2,6 +2,7 @@
 row is named in messages, and reading/writing the pictures. Shared by :mod:`.draw` (label tables),
 :mod:`.draw_errors` (``hpe evaluate -o`` output) and :mod:`.draw_flagged` (the audit page's pictures).
 """
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -10,6 +10,7 @@ are hashed by key into partition files and joined one partition at a time
 (:mod:`hpe_cli.pipelines.evaluate_spill`), then scored the same way.
 Global estimates (``--align mean``, opal23's alignment) take one extra pass.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -52,9 +53,15 @@ def _add_rejects(rej, side, name, rows, reasons, keycols):
     if rej.first_where is None:
         rej.first_where = f"{_where(side, rows[0])}: {reasons[0]}".replace(f"{side.path}: ", "", 0)
         rej.source = side.path
-    rej.add({**keycols, "side": np.full(len(rows), name, dtype=object),
-             "input": np.full(len(rows), str(side.path), dtype=object), unit: side.lines[rows]},
-            np.asarray(reasons, dtype=object))
+    rej.add(
+        {
+            **keycols,
+            "side": np.full(len(rows), name, dtype=object),
+            "input": np.full(len(rows), str(side.path), dtype=object),
+            unit: side.lines[rows],
+        },
+        np.asarray(reasons, dtype=object),
+    )
 
 
 def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
@@ -68,44 +75,91 @@ def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
             ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
             if rej.first_where is None:
                 rej.first_where, rej.source = f"line {ln[0]}: unreadable {name} row: {side.unreadable[0][1]}", side.path
-            rej.add({"side": np.full(len(ln), name, dtype=object),
-                     "input": np.full(len(ln), str(side.path), dtype=object), "line": ln},
-                    np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln)
+            rej.add(
+                {
+                    "side": np.full(len(ln), name, dtype=object),
+                    "input": np.full(len(ln), str(side.path), dtype=object),
+                    "line": ln,
+                },
+                np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object),
+                lines=ln,
+            )
     rows = gidx[missing]
-    _add_rejects(rej, gt, "gt", rows, np.full(len(rows), "missing: no prediction for this ground-truth row",
-                                              dtype=object), key_cols(gt, rows))
+    _add_rejects(
+        rej,
+        gt,
+        "gt",
+        rows,
+        np.full(len(rows), "missing: no prediction for this ground-truth row", dtype=object),
+        key_cols(gt, rows),
+    )
     rows, prow = gidx[invalid], pidx[invalid]
     gt_bad = ~gt.ok[rows]
-    _add_rejects(rej, gt, "gt", rows[gt_bad], ("invalid: gt " + _reasons(gt, rows[gt_bad])).astype(object),
-                 key_cols(gt, rows[gt_bad]))
-    _add_rejects(rej, pred, "pred", prow[~gt_bad], ("invalid: prediction " + _reasons(pred, prow[~gt_bad]))
-                 .astype(object), key_cols(pred, prow[~gt_bad]))
-    _add_rejects(rej, pred, "pred", unmatched, np.full(len(unmatched), "unmatched: prediction with no "
-                                                       "ground-truth row", dtype=object), key_cols(pred, unmatched))
+    _add_rejects(
+        rej,
+        gt,
+        "gt",
+        rows[gt_bad],
+        ("invalid: gt " + _reasons(gt, rows[gt_bad])).astype(object),
+        key_cols(gt, rows[gt_bad]),
+    )
+    _add_rejects(
+        rej,
+        pred,
+        "pred",
+        prow[~gt_bad],
+        ("invalid: prediction " + _reasons(pred, prow[~gt_bad])).astype(object),
+        key_cols(pred, prow[~gt_bad]),
+    )
+    _add_rejects(
+        rej,
+        pred,
+        "pred",
+        unmatched,
+        np.full(len(unmatched), "unmatched: prediction with no ground-truth row", dtype=object),
+        key_cols(pred, unmatched),
+    )
     return valid, missing, invalid
 
 
 def _take(c: Chunk, idx) -> Chunk:
     """Rows ``idx`` (int array or bool mask) of a chunk."""
+
     def t(x):
         return None if x is None else x[idx]
+
     keys = None
     if c.keys is not None:
         keys = c.keys.filter(idx) if np.asarray(idx).dtype == bool else c.keys.take(idx)
-    return Chunk([x[idx] for x in c.canonical], c.ok[idx], t(c.reasons), t(c.raw), t(c.dist), keys, t(c.by),
-                 c.lines[idx])
+    return Chunk(
+        [x[idx] for x in c.canonical], c.ok[idx], t(c.reasons), t(c.raw), t(c.dist), keys, t(c.by), c.lines[idx]
+    )
 
 
 def _memory_pairs(gt, pred, gv, pv, batch_size):
     """Chunks of the joined valid pairs (in GT order) from two sides held in memory."""
     for a in range(0, len(gv), batch_size):
-        gi, pi = gv[a:a + batch_size], pv[a:a + batch_size]
-        g = Chunk([x[gi] for x in gt.canonical], gt.ok[gi], None, None if gt.raw is None else gt.raw[gi],
-                  None, None if gt.keys is None else gt.keys.take(gi), None if gt.by is None else gt.by[gi],
-                  gt.lines[gi])
-        p = Chunk([x[pi] for x in pred.canonical], pred.ok[pi], None, None if pred.raw is None else pred.raw[pi],
-                  None if pred.dist is None else pred.dist[pi], None, None if pred.by is None else pred.by[pi],
-                  pred.lines[pi])
+        gi, pi = gv[a : a + batch_size], pv[a : a + batch_size]
+        g = Chunk(
+            [x[gi] for x in gt.canonical],
+            gt.ok[gi],
+            None,
+            None if gt.raw is None else gt.raw[gi],
+            None,
+            None if gt.keys is None else gt.keys.take(gi),
+            None if gt.by is None else gt.by[gi],
+            gt.lines[gi],
+        )
+        p = Chunk(
+            [x[pi] for x in pred.canonical],
+            pred.ok[pi],
+            None,
+            None if pred.raw is None else pred.raw[pi],
+            None if pred.dist is None else pred.dist[pi],
+            None,
+            None if pred.by is None else pred.by[pi],
+            pred.lines[pi],
+        )
         yield g, p
 
 
@@ -251,8 +305,15 @@ def _stream_rejects(rej, s, g: Chunk, p: Chunk, bad):
             lines = c.lines[m]
             if rej.first_where is None:
                 rej.first_where, rej.source = f"{unit} {int(lines[0])}: {reasons[0]}", side.path
-            rej.add({**keycols(c, m), "side": np.full(len(lines), name, dtype=object),
-                     "input": np.full(len(lines), str(side.path), dtype=object), unit: lines}, reasons)
+            rej.add(
+                {
+                    **keycols(c, m),
+                    "side": np.full(len(lines), name, dtype=object),
+                    "input": np.full(len(lines), str(side.path), dtype=object),
+                    unit: lines,
+                },
+                reasons,
+            )
 
 
 def _unreadable_rejects(rej, side, name):
@@ -260,16 +321,42 @@ def _unreadable_rejects(rej, side, name):
         ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
         if rej.first_where is None:
             rej.first_where, rej.source = f"line {ln[0]}: unreadable {name} row: {side.unreadable[0][1]}", side.path
-        rej.add({"side": np.full(len(ln), name, dtype=object),
-                 "input": np.full(len(ln), str(side.path), dtype=object), "line": ln},
-                np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln)
+        rej.add(
+            {
+                "side": np.full(len(ln), name, dtype=object),
+                "input": np.full(len(ln), str(side.path), dtype=object),
+                "line": ln,
+            },
+            np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object),
+            lines=ln,
+        )
 
 
 def _readers(s, progress=None):
-    gr = SideReader(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, progress,
-                    extra=PLACEMENT if s.html else (), role="gt")
-    pr = SideReader(s.pred_path, s.pred_system, s.use_pred, s.keys, s.by if s.by not in gr.columns else None,
-                    s.radians, s.batch_size, progress, s.orthonormalize, role="pred")
+    gr = SideReader(
+        s.gt_path,
+        s.gt_system,
+        s.use_gt,
+        s.keys,
+        s.by,
+        s.radians,
+        s.batch_size,
+        progress,
+        extra=PLACEMENT if s.html else (),
+        role="gt",
+    )
+    pr = SideReader(
+        s.pred_path,
+        s.pred_system,
+        s.use_pred,
+        s.keys,
+        s.by if s.by not in gr.columns else None,
+        s.radians,
+        s.batch_size,
+        progress,
+        s.orthonormalize,
+        role="pred",
+    )
     return gr, pr
 
 
@@ -284,12 +371,15 @@ def _run_stream(s, rej, writer):
     gr, pr = _readers(s, s.progress)
     s.gside, s.pside = gr, pr
     glob = _globals(s, factory, gr.system, pr.system)
-    out = _score(s, prefetch(lockstep(gr, pr, s.keys, s.join_mode, notes)), rej, gr.system, pr.system, glob,
-                 writer, True)
+    out = _score(
+        s, prefetch(lockstep(gr, pr, s.keys, s.join_mode, notes)), rej, gr.system, pr.system, glob, writer, True
+    )
     if s.join_mode == "order" and (gr.unreadable or pr.unreadable):
         side = gr if gr.unreadable else pr
-        raise HpeError(f"{side.path}: line {side.unreadable[0][0]}: unreadable row ({side.unreadable[0][1]}): "
-                       "rows cannot be paired by position (--join order) once one is skipped")
+        raise HpeError(
+            f"{side.path}: line {side.unreadable[0][0]}: unreadable row ({side.unreadable[0][1]}): "
+            "rows cannot be paired by position (--join order) once one is skipped"
+        )
     for side, name in ((gr, "gt"), (pr, "pred")):
         _unreadable_rejects(rej, side, name)
     n = {"gt": gr.n, "pred": pr.n, "missing": 0, "unmatched_pred": 0}
@@ -299,8 +389,18 @@ def _run_stream(s, rej, writer):
 def _run_memory(s, rej, writer):
     """Read both sides whole, join them by key, then score the pairs in chunks."""
     gt = read_side(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, s.progress, role="gt")
-    pred = read_side(s.pred_path, s.pred_system, s.use_pred, s.keys, s.by if s.by not in gt.columns else None,
-                     s.radians, s.batch_size, s.progress, role="pred", orthonormalize=s.orthonormalize)
+    pred = read_side(
+        s.pred_path,
+        s.pred_system,
+        s.use_pred,
+        s.keys,
+        s.by if s.by not in gt.columns else None,
+        s.radians,
+        s.batch_size,
+        s.progress,
+        role="pred",
+        orthonormalize=s.orthonormalize,
+    )
     if pred.n == 0 and not pred.unreadable:
         raise HpeError(f"{pred.path}: no prediction rows (the file has a header only)")
     gidx, pidx, unmatched, notes = join(pred, gt, s.keys, s.join_mode)
@@ -313,8 +413,7 @@ def _run_memory(s, rej, writer):
     valid, missing, invalid = _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols)
     gv, pv = gidx[valid], pidx[valid]
     glob = _globals(s, lambda: _memory_pairs(gt, pred, gv, pv, s.batch_size), gt.system, pred.system)
-    out = _score(s, _memory_pairs(gt, pred, gv, pv, s.batch_size), rej, gt.system, pred.system, glob, writer,
-                 False)
+    out = _score(s, _memory_pairs(gt, pred, gv, pv, s.batch_size), rej, gt.system, pred.system, glob, writer, False)
     out[2]["invalid"] = int(invalid.sum())
     n = {"gt": gt.n, "pred": pred.n, "missing": int(missing.sum()), "unmatched_pred": len(unmatched)}
     return out, glob, n, notes, gt, pred
@@ -389,50 +488,98 @@ def _align_block(glob, rep_before, gsys) -> dict:
 
     Q = glob["Q"]
     qp, _, _, _ = gsys.to_angles(gsys.from_canonical(Q[None]))
-    return {"method": "mean", "offset_deg": float(re_.geodesic_deg(Q[None], np.eye(3)[None])[0]),
-            "offset_angles": dict(zip(ANGLES, map(float, qp[0]))), "offset_matrix_canonical": Q.tolist(),
-            "gt_system": gsys.name, "estimate": "hpe chordal mean over all pairs (not opal23's Karcher mean)",
-            "before": {"metrics": rep_before["metrics"], "protocols": rep_before["protocols"]}}
+    return {
+        "method": "mean",
+        "offset_deg": float(re_.geodesic_deg(Q[None], np.eye(3)[None])[0]),
+        "offset_angles": dict(zip(ANGLES, map(float, qp[0]))),
+        "offset_matrix_canonical": Q.tolist(),
+        "gt_system": gsys.name,
+        "estimate": "hpe chordal mean over all pairs (not opal23's Karcher mean)",
+        "before": {"metrics": rep_before["metrics"], "protocols": rep_before["protocols"]},
+    }
 
 
 def _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed) -> dict:
     """The report dict of one run."""
     from ..metrics.protocols import PROTOCOLS
 
-    result = {"n": {"gt": n["gt"], "pred": n["pred"], "pairs": counts["pairs"], "missing": n["missing"],
-                    "invalid": counts["invalid"], "unmatched_pred": n["unmatched_pred"]},
-              "systems": {"pred": pside.system.name, "gt": gside.system.name},
-              "system_origin": {"pred": pside.resolved.describe(), "gt": gside.resolved.describe()}}
+    result = {
+        "n": {
+            "gt": n["gt"],
+            "pred": n["pred"],
+            "pairs": counts["pairs"],
+            "missing": n["missing"],
+            "invalid": counts["invalid"],
+            "unmatched_pred": n["unmatched_pred"],
+        },
+        "systems": {"pred": pside.system.name, "gt": gside.system.name},
+        "system_origin": {"pred": pside.resolved.describe(), "gt": gside.resolved.describe()},
+    }
     if gside.unreadable or pside.unreadable:
         result["n"]["unreadable"] = len(gside.unreadable) + len(pside.unreadable)
     if s.orthonormalize:
         result["n"]["orthonormalized"] = counts.get("orthonormalized", 0)
-        result["orthonormalize"] = {"method": "nearest rotation (SVD, det +1) of each prediction matrix",
-                                    "max_distance": counts.get("dist_max"),
-                                    "mean_distance": counts["dist_sum"] / counts["pairs"] if counts.get("pairs")
-                                    and "dist_sum" in counts else None}
+        result["orthonormalize"] = {
+            "method": "nearest rotation (SVD, det +1) of each prediction matrix",
+            "max_distance": counts.get("dist_max"),
+            "mean_distance": counts["dist_sum"] / counts["pairs"]
+            if counts.get("pairs") and "dist_sum" in counts
+            else None,
+        }
     result["align"] = _align_block(glob, rep_before, gside.system) if s.align == "mean" else {"method": "none"}
     result["metrics"], result["protocols"] = rep["metrics"], rep["protocols"]
     if s.by:
         result["by"] = {"column": s.by, "groups": rep["by_groups"]}
     if s.yaw_bins:
         result["yaw_bins"] = rep["yaw_bins"]
-    result["inputs"] = {"pred": str(pside.path), "gt": str(gside.path), "key": s.keys or "row order",
-                        "join": s.join_mode, "paired": "streamed in file order" if streamed else
-                        "joined in memory" if getattr(s, "join_engine", "spill") == "memory" else
-                        f"joined by key in {s.partitions} partition(s) on disk (external hash join)",
-                        "columns": {"pred": pside.mode, "gt": gside.mode}}
+    result["inputs"] = {
+        "pred": str(pside.path),
+        "gt": str(gside.path),
+        "key": s.keys or "row order",
+        "join": s.join_mode,
+        "paired": "streamed in file order"
+        if streamed
+        else "joined in memory"
+        if getattr(s, "join_engine", "spill") == "memory"
+        else f"joined by key in {s.partitions} partition(s) on disk (external hash join)",
+        "columns": {"pred": pside.mode, "gt": gside.mode},
+    }
     result["notes"] = list(notes) + [f"{name}: {note}" for name in s.protocols for note in PROTOCOLS[name].notes]
     if rej.counts:
         result["rejects"] = dict(rej.counts)
     return result
 
 
-def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, keys=(), protocols=None,
-                 align="none", by=None, yaw_bins=None, report=None, plots=None, rejects=None, use_pred="auto",
-                 use_gt="auto", radians=False, overwrite=False, batch_size=262_144, progress=None,
-                 strict=False, join_mode="key", orthonormalize=False, html=None, worst=12, images=None,
-                 join_engine="spill", partition_rows=None) -> dict:
+def run_evaluate(
+    pred_path,
+    gt_path,
+    *,
+    pred_system,
+    gt_system,
+    output=None,
+    keys=(),
+    protocols=None,
+    align="none",
+    by=None,
+    yaw_bins=None,
+    report=None,
+    plots=None,
+    rejects=None,
+    use_pred="auto",
+    use_gt="auto",
+    radians=False,
+    overwrite=False,
+    batch_size=262_144,
+    progress=None,
+    strict=False,
+    join_mode="key",
+    orthonormalize=False,
+    html=None,
+    worst=12,
+    images=None,
+    join_engine="spill",
+    partition_rows=None,
+) -> dict:
     """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report.
 
     Files in different orders are joined by an external hash join (``join_engine="spill"``, partitions of
@@ -472,16 +619,40 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     if by and by not in gcols and by not in pcols:
         raise HpeError(f"{gt_path}: --by column {by!r} is in neither table; found: {', '.join(gcols[:20])}")
     folder = images or (str(gsrc.path) if getattr(gsrc, "dataset", False) and gsrc.path.is_dir() else None)
-    s = _Settings(pred_path=pred_path, gt_path=gt_path, pred_system=pred_system, gt_system=gt_system, keys=keys,
-                  protocols=protocols, align=align, by=by, yaw_bins=yaw_bins, rejects=rejects, use_pred=use_pred,
-                  use_gt=use_gt, radians=radians, overwrite=overwrite, batch_size=batch_size, progress=progress,
-                  strict=strict, join_mode=join_mode, orthonormalize=orthonormalize, html=html, worst=worst,
-                  images=Images(folder) if folder else None, join_engine=join_engine, partition_rows=partition_rows)
-    meta = {**system_metadata(gt_system), "hpe:evaluate_pred_system": pred_system.name,
-            "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution of each "
-                                 "rotation; pred after --align); err_* "
-                                 "are wrapped |pred - gt| in [0, 180]; geodesic and maev_* in degrees; frobenius "
-                                 "unitless"}
+    s = _Settings(
+        pred_path=pred_path,
+        gt_path=gt_path,
+        pred_system=pred_system,
+        gt_system=gt_system,
+        keys=keys,
+        protocols=protocols,
+        align=align,
+        by=by,
+        yaw_bins=yaw_bins,
+        rejects=rejects,
+        use_pred=use_pred,
+        use_gt=use_gt,
+        radians=radians,
+        overwrite=overwrite,
+        batch_size=batch_size,
+        progress=progress,
+        strict=strict,
+        join_mode=join_mode,
+        orthonormalize=orthonormalize,
+        html=html,
+        worst=worst,
+        images=Images(folder) if folder else None,
+        join_engine=join_engine,
+        partition_rows=partition_rows,
+    )
+    meta = {
+        **system_metadata(gt_system),
+        "hpe:evaluate_pred_system": pred_system.name,
+        "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution of each "
+        "rotation; pred after --align); err_* "
+        "are wrapped |pred - gt| in [0, 180]; geodesic and maev_* in degrees; frobenius "
+        "unitless",
+    }
 
     def attempt(stream):
         if output:
@@ -513,8 +684,14 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
         from ..report.evaluate_page import write_page
 
         frame = worst_rows.frame.to_pandas() if worst_rows.frame is not None else None
-        write_page(html, result, frame, overwrite=overwrite, plots=sample.rows(),
-                   pictures=worst_pictures(frame, s.images, gside.system, Path(gt_path).parent))
+        write_page(
+            html,
+            result,
+            frame,
+            overwrite=overwrite,
+            plots=sample.rows(),
+            pictures=worst_pictures(frame, s.images, gside.system, Path(gt_path).parent),
+        )
     if report == "-":
         import sys
 
@@ -525,5 +702,3 @@ def run_evaluate(pred_path, gt_path, *, pred_system, gt_system, output=None, key
     elif report:
         write_json(result, report, overwrite=overwrite)
     return result
-
-

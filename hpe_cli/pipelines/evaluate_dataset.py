@@ -5,11 +5,17 @@ DirectMHP has two scorers (hnuzhy/DirectMHP@a51b06b utils/mae.py): ``mean_absolu
 (lines 162-278, CMU Panoptic, AGORA: split at 90). ``--protocol directmhp`` runs the one the peer runs on the GT's
 dataset; ``directmhp-single`` / ``directmhp-v2`` name one explicitly.
 """
+
 from __future__ import annotations
 
 #: dataset -> DirectMHP variant
-_VARIANT = {"AFLW2000-3D / 300W-LP (.mat labels)": "directmhp-single", "300W-LP": "directmhp-single",
-            "BIWI": "directmhp-single", "CMU Panoptic": "directmhp-v2", "AGORA": "directmhp-v2"}
+_VARIANT = {
+    "AFLW2000-3D / 300W-LP (.mat labels)": "directmhp-single",
+    "300W-LP": "directmhp-single",
+    "BIWI": "directmhp-single",
+    "CMU Panoptic": "directmhp-v2",
+    "AGORA": "directmhp-v2",
+}
 
 
 def gt_dataset(src) -> tuple:
@@ -55,10 +61,15 @@ def choose_directmhp(protocols: list, src) -> tuple:
         return protocols, None
     name, how = gt_dataset(src)
     if name is None:
-        return protocols, ("directmhp: GT dataset not recognised: DirectMHP's v2 scorer (back = |GT yaw| > 90, "
-                           "mae.py:162-278); name directmhp-single for AFLW2000, 300W-LP or BIWI labels")
+        return protocols, (
+            "directmhp: GT dataset not recognised: DirectMHP's v2 scorer (back = |GT yaw| > 90, "
+            "mae.py:162-278); name directmhp-single for AFLW2000, 300W-LP or BIWI labels"
+        )
     variant = _VARIANT[name]
-    split = "99, mean_absolute_error_calculate_single" if variant == "directmhp-single" else \
-        "90, mean_absolute_error_calculate_v2"
+    split = (
+        "99, mean_absolute_error_calculate_single"
+        if variant == "directmhp-single"
+        else "90, mean_absolute_error_calculate_v2"
+    )
     out = list(dict.fromkeys(variant if p == "directmhp" else p for p in protocols))
     return out, f"directmhp: GT is {name} ({how}): {variant} (back = |GT yaw| > {split})"

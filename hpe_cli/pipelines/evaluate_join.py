@@ -11,6 +11,7 @@ encoding or verified key hashes (:mod:`hpe_cli.pipelines.evaluate_spill`; :func:
 + :func:`join` whole in memory is the reference it is tested against). Row order
 is used only with ``--join order`` and equal row counts.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -71,8 +72,9 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
             cols, ok, reasons = label_columns_fast(batch, "angles", radians)
         raw = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1)
         X = system.soa_from_angles(raw[:, 0], raw[:, 1], raw[:, 2])
-        X = [[np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) if np.ndim(v) == 0 else v for v in row]
-             for row in X]
+        X = [
+            [np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) if np.ndim(v) == 0 else v for v in row] for row in X
+        ]
         return X, ok, reasons, raw, None
     if orthonormalize and (mode == "matrix" or system.storage_kind == "matrix"):
         from ..metrics.align import project_to_so3_batch
@@ -80,6 +82,7 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
         names = system.value_columns if (native and system.storage_kind == "matrix") else None
         if names is None:
             from ..io import MATRIX_COLS
+
             names = MATRIX_COLS
         cols, ok, reasons = _value_columns(batch, names)
         M = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1).reshape(n, 3, 3)
@@ -129,23 +132,42 @@ class Chunk:
     def slice(self, a: int, b: int) -> Chunk:
         def cut(x):
             return None if x is None else x[a:b]
-        return Chunk([c[a:b] for c in self.canonical], self.ok[a:b], cut(self.reasons), cut(self.raw),
-                     cut(self.dist), None if self.keys is None else self.keys.slice(a, b - a), cut(self.by),
-                     self.lines[a:b])
+
+        return Chunk(
+            [c[a:b] for c in self.canonical],
+            self.ok[a:b],
+            cut(self.reasons),
+            cut(self.raw),
+            cut(self.dist),
+            None if self.keys is None else self.keys.slice(a, b - a),
+            cut(self.by),
+            self.lines[a:b],
+        )
 
 
 class SideReader:
     """One input table: its system, label columns, keys; :meth:`chunks` streams it."""
 
-    def __init__(self, path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None,
-                 orthonormalize=False, extra=(), role="gt"):
+    def __init__(
+        self,
+        path,
+        system,
+        use: str,
+        keys,
+        by,
+        radians: bool,
+        batch_size: int,
+        progress=None,
+        orthonormalize=False,
+        extra=(),
+        role="gt",
+    ):
         from ..io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
         from ..io.system_meta import resolve_system
 
         self.src = src = open_table(path, batch_size, with_lines=True)
         # the file's own system (hpe:system metadata, dataset formats: .mat Pose_Para is 300w_lp), else the option
-        self.resolved = resolve_system(src, system, default=None, option_name=f"--{role}-system",
-                                       option_is_output=True)
+        self.resolved = resolve_system(src, system, default=None, option_name=f"--{role}-system", option_is_output=True)
         self.system = self.resolved.system
         self.path = src.path
         columns = list(src.columns)
@@ -162,8 +184,11 @@ class SideReader:
             missing = [c for c in need if c not in columns]
             if missing and not native:
                 raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {use}")
-        self.keep = [c for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else [])
-                                              + list(extra)) if c in columns]  # extra: carried (face boxes)
+        self.keep = [
+            c
+            for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else []) + list(extra))
+            if c in columns
+        ]  # extra: carried (face boxes)
         self.by = by if by and by in columns else None
         self.radians, self.progress, self.orthonormalize = radians, progress, orthonormalize
         self.unreadable: list = []
@@ -193,8 +218,9 @@ class SideReader:
             yield Chunk(soa.columns(X, n), ok, rs, raw, dist, keys, by, lines)
 
 
-def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None, role="input",
-              orthonormalize=False) -> Side:
+def read_side(
+    path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None, role="input", orthonormalize=False
+) -> Side:
     """Read one table whole into a :class:`Side` (for the in-memory key join).
 
     Each field is gathered as a list of chunk arrays and concatenated (and its
@@ -202,8 +228,18 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
     """
     import pyarrow as pa
 
-    r = SideReader(path, system, use, keys, by, radians, batch_size, progress, orthonormalize,
-                   role=role if role in ("gt", "pred") else "gt")
+    r = SideReader(
+        path,
+        system,
+        use,
+        keys,
+        by,
+        radians,
+        batch_size,
+        progress,
+        orthonormalize,
+        role=role if role in ("gt", "pred") else "gt",
+    )
     parts: dict = {f"c{k}": [] for k in range(9)}
     parts.update(ok=[], reasons=[], raw=[], dist=[], keys=[], by=[], lines=[])
     any_reasons = False
@@ -231,8 +267,9 @@ def read_side(path, system, use: str, keys, by, radians: bool, batch_size: int, 
         if parts["keys"]:
             table = pa.Table.from_batches(parts["keys"])
         else:
-            table = pa.schema([r.src.schema.field(c) if c in r.src.schema.names else pa.field(c, pa.string())
-                               for c in r.keep]).empty_table()
+            table = pa.schema(
+                [r.src.schema.field(c) if c in r.src.schema.names else pa.field(c, pa.string()) for c in r.keep]
+            ).empty_table()
     parts["keys"] = None
     by_values = cat("by") if r.by else None
     lines = cat("lines", np.zeros(0, dtype=np.int64))
@@ -258,15 +295,18 @@ def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path, join_mode="key"):
         for side_cols, p in ((gt_cols, gt_path), (pred_cols, pred_path)):
             bad = [k for k in keys if k not in side_cols]
             if bad:
-                raise HpeError(f"{p}: --key column(s) {', '.join(bad)} not in the table; "
-                               f"found: {', '.join(side_cols[:20])}")
+                raise HpeError(
+                    f"{p}: --key column(s) {', '.join(bad)} not in the table; found: {', '.join(side_cols[:20])}"
+                )
         return list(keys)
     for k in DEFAULT_KEYS:
         if k in pred_cols and k in gt_cols:
             return [k]
-    raise JoinUsageError(f"{pred_path}: no key column shared with {gt_path} (looked for {', '.join(DEFAULT_KEYS)}; "
-                         f"prediction columns: {', '.join(pred_cols[:12])}); give --key COL[,COL...], or "
-                         "--join order to pair rows by position (only with equal row counts)")
+    raise JoinUsageError(
+        f"{pred_path}: no key column shared with {gt_path} (looked for {', '.join(DEFAULT_KEYS)}; "
+        f"prediction columns: {', '.join(pred_cols[:12])}); give --key COL[,COL...], or "
+        "--join order to pair rows by position (only with equal row counts)"
+    )
 
 
 def _stems(arr):
@@ -336,8 +376,10 @@ def _check_unique(codes, side, keys):
         again = int(np.flatnonzero(codes == codes[first])[1])
         what = ", ".join(f"{k}={side.keys.column(k)[first].as_py()!r}" for k in keys)
         unit = side.unit
-        raise HpeError(f"{_where(side, first)}: duplicate key {what} (again at {unit} {int(side.lines[again])}); "
-                       f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id")
+        raise HpeError(
+            f"{_where(side, first)}: duplicate key {what} (again at {unit} {int(side.lines[again])}); "
+            f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id"
+        )
 
 
 def join(pred: Side, gt: Side, keys, join_mode="key", stems=None, codes=None):
@@ -347,14 +389,19 @@ def join(pred: Side, gt: Side, keys, join_mode="key", stems=None, codes=None):
     (the partitioned join, from verified key hashes)."""
     if join_mode == "order":
         if pred.n != gt.n:
-            raise JoinUsageError(f"{pred.path}: --join order pairs rows by position and needs equal row counts; "
-                                 f"got {pred.n} predictions and {gt.n} ground-truth rows in {gt.path}")
+            raise JoinUsageError(
+                f"{pred.path}: --join order pairs rows by position and needs equal row counts; "
+                f"got {pred.n} predictions and {gt.n} ground-truth rows in {gt.path}"
+            )
         idx = np.arange(gt.n)
         return idx, idx.copy(), np.zeros(0, dtype=np.int64), ["rows paired by position (--join order)"]
     if codes is not None:
         cg, cp = codes
-        notes = [f"key {k!r} joined on file stems (the two files spell the names differently)"
-                 for k in keys if k in (stems or ())]
+        notes = [
+            f"key {k!r} joined on file stems (the two files spell the names differently)"
+            for k in keys
+            if k in (stems or ())
+        ]
     else:
         cg, cp, notes = _key_codes(gt.keys, pred.keys, keys, stems)
     _check_unique(cg, gt, keys)
@@ -381,9 +428,15 @@ def _add_rejects(rej, side, name, rows, reasons, keycols):
     if rej.first_where is None:
         rej.first_where = f"{_where(side, rows[0])}: {reasons[0]}".replace(f"{side.path}: ", "", 0)
         rej.source = side.path
-    rej.add({**keycols, "side": np.full(len(rows), name, dtype=object),
-             "input": np.full(len(rows), str(side.path), dtype=object), unit: side.lines[rows]},
-            np.asarray(reasons, dtype=object))
+    rej.add(
+        {
+            **keycols,
+            "side": np.full(len(rows), name, dtype=object),
+            "input": np.full(len(rows), str(side.path), dtype=object),
+            unit: side.lines[rows],
+        },
+        np.asarray(reasons, dtype=object),
+    )
 
 
 def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
@@ -397,20 +450,50 @@ def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
             ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
             if rej.first_where is None:
                 rej.first_where, rej.source = f"line {ln[0]}: unreadable {name} row: {side.unreadable[0][1]}", side.path
-            rej.add({"side": np.full(len(ln), name, dtype=object),
-                     "input": np.full(len(ln), str(side.path), dtype=object), "line": ln},
-                    np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object), lines=ln)
+            rej.add(
+                {
+                    "side": np.full(len(ln), name, dtype=object),
+                    "input": np.full(len(ln), str(side.path), dtype=object),
+                    "line": ln,
+                },
+                np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object),
+                lines=ln,
+            )
     rows = gidx[missing]
-    _add_rejects(rej, gt, "gt", rows, np.full(len(rows), "missing: no prediction for this ground-truth row",
-                                              dtype=object), key_cols(gt, rows))
+    _add_rejects(
+        rej,
+        gt,
+        "gt",
+        rows,
+        np.full(len(rows), "missing: no prediction for this ground-truth row", dtype=object),
+        key_cols(gt, rows),
+    )
     rows, prow = gidx[invalid], pidx[invalid]
     gt_bad = ~gt.ok[rows]
-    _add_rejects(rej, gt, "gt", rows[gt_bad], ("invalid: gt " + _reasons(gt, rows[gt_bad])).astype(object),
-                 key_cols(gt, rows[gt_bad]))
-    _add_rejects(rej, pred, "pred", prow[~gt_bad], ("invalid: prediction " + _reasons(pred, prow[~gt_bad]))
-                 .astype(object), key_cols(pred, prow[~gt_bad]))
-    _add_rejects(rej, pred, "pred", unmatched, np.full(len(unmatched), "unmatched: prediction with no "
-                                                       "ground-truth row", dtype=object), key_cols(pred, unmatched))
+    _add_rejects(
+        rej,
+        gt,
+        "gt",
+        rows[gt_bad],
+        ("invalid: gt " + _reasons(gt, rows[gt_bad])).astype(object),
+        key_cols(gt, rows[gt_bad]),
+    )
+    _add_rejects(
+        rej,
+        pred,
+        "pred",
+        prow[~gt_bad],
+        ("invalid: prediction " + _reasons(pred, prow[~gt_bad])).astype(object),
+        key_cols(pred, prow[~gt_bad]),
+    )
+    _add_rejects(
+        rej,
+        pred,
+        "pred",
+        unmatched,
+        np.full(len(unmatched), "unmatched: prediction with no ground-truth row", dtype=object),
+        key_cols(pred, unmatched),
+    )
     return valid, missing, invalid
 
 
@@ -419,8 +502,6 @@ def _gather(side, idx):
     if len(idx) == side.n and (idx[0] == 0 if len(idx) else True) and np.all(np.diff(idx) == 1):
         return [[side.canonical[3 * i + j] for j in range(3)] for i in range(3)]
     return [[side.canonical[3 * i + j][idx] for j in range(3)] for i in range(3)]
-
-
 
 
 class Unaligned(Exception):
@@ -476,15 +557,21 @@ def lockstep(gr: SideReader, pr: SideReader, keys, join_mode: str, notes: set):
         if keys:
             _same_keys(g, p, keys, notes)
         yield g, p
-    if (gbuf is not None and gbuf.n) or (pbuf is not None and pbuf.n) or next(gi, None) is not None \
-            or next(pi, None) is not None:
+    if (
+        (gbuf is not None and gbuf.n)
+        or (pbuf is not None and pbuf.n)
+        or next(gi, None) is not None
+        or next(pi, None) is not None
+    ):
         if join_mode == "order":
             for _ in gi:
                 pass
             for _ in pi:
                 pass
-            raise JoinUsageError(f"{pr.path}: --join order pairs rows by position and needs equal row counts; "
-                                 f"got {pr.n} predictions and {gr.n} ground-truth rows in {gr.path}")
+            raise JoinUsageError(
+                f"{pr.path}: --join order pairs rows by position and needs equal row counts; "
+                f"got {pr.n} predictions and {gr.n} ground-truth rows in {gr.path}"
+            )
         raise Unaligned("row counts")
 
 

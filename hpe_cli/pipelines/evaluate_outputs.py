@@ -1,5 +1,6 @@
 """``hpe evaluate`` outputs kept in flat memory: the per-row table of a chunk, the worst rows, a plot sample,
 the image files by stem, and the pictures of the worst rows (drawn by ``hpe draw``)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -24,7 +25,7 @@ class Worst:
             return
         if table.num_rows > self.n:
             geo = table.column("geodesic").to_numpy()
-            table = table.take(pa.array(np.argpartition(-geo, self.n - 1)[:self.n]))
+            table = table.take(pa.array(np.argpartition(-geo, self.n - 1)[: self.n]))
         t = table if self.frame is None else pa.concat_tables([self.frame, table], promote_options="permissive")
         order = pc.sort_indices(t, sort_keys=[("geodesic", "descending")])
         self.frame = t.take(order).slice(0, self.n)
@@ -113,8 +114,11 @@ class Images:
             names = names.combine_chunks()
         stems = _stems(pc.cast(names, pa.string()))
         idx = pc.index_in(stems, value_set=pa.array(list(self.by_stem), pa.string()))
-        out = pa.array(list(self.by_stem.values()), pa.string()).take(pc.fill_null(idx, 0)) if self.by_stem \
+        out = (
+            pa.array(list(self.by_stem.values()), pa.string()).take(pc.fill_null(idx, 0))
+            if self.by_stem
             else pa.nulls(len(stems), pa.string())
+        )
         return pc.if_else(pc.is_null(idx), "", out)
 
 
@@ -138,8 +142,15 @@ def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 48
     if root is None:
         return None
     out: list = [None] * len(frame)
-    for _, i, img, _, _, _ in render_worst(frame, images=root, sort_by="geodesic", system=system, on_missing="skip",
-                                           where="worst rows", crop=lambda im, i: _around_face(im, frame.iloc[i])):
+    for _, i, img, _, _, _ in render_worst(
+        frame,
+        images=root,
+        sort_by="geodesic",
+        system=system,
+        on_missing="skip",
+        where="worst rows",
+        crop=lambda im, i: _around_face(im, frame.iloc[i]),
+    ):
         scale = max_side / max(img.shape[:2])
         if scale < 1:
             img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)

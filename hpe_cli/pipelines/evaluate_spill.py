@@ -9,6 +9,7 @@ join (:func:`~hpe_cli.pipelines.evaluate_join.join`), so memory is flat in the n
 appears twice anywhere in a file is found in its partition. Whether text keys are compared as written or on
 their file stems is decided over the whole files first, as the in-memory join decides it.
 """
+
 from __future__ import annotations
 
 import math
@@ -101,8 +102,9 @@ class _SideSpill:
         for j, (hx, hs) in enumerate(per.values()):
             cols[f"{_PFX}hx{j}"], cols[f"{_PFX}hs{j}"] = hx, hs
         cols[f"{_PFX}ok"] = c.ok
-        cols[f"{_PFX}reason"] = pa.array(np.full(c.n, "", dtype=object) if c.reasons is None else
-                                         c.reasons.astype(str), pa.string())
+        cols[f"{_PFX}reason"] = pa.array(
+            np.full(c.n, "", dtype=object) if c.reasons is None else c.reasons.astype(str), pa.string()
+        )
         if c.raw is not None:
             for k in range(3):
                 cols[f"{_PFX}raw{k}"] = c.raw[:, k]
@@ -163,9 +165,21 @@ class _SideSpill:
         t = self.table(k)
         if t is None:
             z = np.zeros(0)
-            side = Side(r.path, r.system, r.mode, [z] * 9, np.zeros(0, dtype=bool), None, empty_keys,
-                        np.zeros(0, dtype=object) if r.by else None, r.columns, np.zeros(0, dtype=np.int64), [])
+            side = Side(
+                r.path,
+                r.system,
+                r.mode,
+                [z] * 9,
+                np.zeros(0, dtype=bool),
+                None,
+                empty_keys,
+                np.zeros(0, dtype=object) if r.by else None,
+                r.columns,
+                np.zeros(0, dtype=np.int64),
+                [],
+            )
         else:
+
             def col(name):
                 return t.column(name).to_numpy()
 
@@ -173,14 +187,28 @@ class _SideSpill:
             keys = t.select([n for n in t.column_names if not n.startswith(_PFX)])
             keys = keys.select(r.keep) if r.keep else None
             by = keys.column(r.by).to_numpy(zero_copy_only=False) if r.by else None
-            side = Side(r.path, r.system, r.mode, [col(f"{_PFX}c{i}") for i in range(9)], col(f"{_PFX}ok"),
-                        reasons if (reasons != "").any() else None, keys, by, r.columns, col(f"{_PFX}line"), [])
+            side = Side(
+                r.path,
+                r.system,
+                r.mode,
+                [col(f"{_PFX}c{i}") for i in range(9)],
+                col(f"{_PFX}ok"),
+                reasons if (reasons != "").any() else None,
+                keys,
+                by,
+                r.columns,
+                col(f"{_PFX}line"),
+                [],
+            )
             if f"{_PFX}raw0" in t.column_names:
                 side.raw = np.column_stack([col(f"{_PFX}raw{i}") for i in range(3)])
             if f"{_PFX}dist" in t.column_names:
                 side.dist = col(f"{_PFX}dist")
-            side.hashes = {j: (col(f"{_PFX}hx{j}"), col(f"{_PFX}hs{j}")) for j in range(len(r.keep))
-                           if f"{_PFX}hx{j}" in t.column_names}
+            side.hashes = {
+                j: (col(f"{_PFX}hx{j}"), col(f"{_PFX}hs{j}"))
+                for j in range(len(r.keep))
+                if f"{_PFX}hx{j}" in t.column_names
+            }
         side.image_dir, side.unit = r.image_dir, r.unit
         return side
 
@@ -210,13 +238,17 @@ class Partitions:
         import pyarrow as pa
 
         schema = spill.schema or other.schema
-        fields = [schema.field(c) if schema is not None and c in schema.names else pa.field(c, pa.string())
-                  for c in reader.keep]
+        fields = [
+            schema.field(c) if schema is not None and c in schema.names else pa.field(c, pa.string())
+            for c in reader.keep
+        ]
         return pa.schema(fields).empty_table()
 
     def sides(self, k):
-        return (self.g.side(k, self._empty_keys(self.gr, self.g, self.p)),
-                self.p.side(k, self._empty_keys(self.pr, self.p, self.g)))
+        return (
+            self.g.side(k, self._empty_keys(self.gr, self.g, self.p)),
+            self.p.side(k, self._empty_keys(self.pr, self.p, self.g)),
+        )
 
     def stem_columns(self) -> set:
         """Key columns compared on file stems, decided over all partitions as the in-memory join decides
@@ -231,9 +263,13 @@ class Partitions:
         if self.g.schema is None or self.p.schema is None:
             return set()
         tally = {k: [0, 0, 0, 0] for k in self.keys}  # exact matches, stem matches, gt rows, pred rows
-        check = [j for j, k in enumerate(self.keys) if text_key(self.g.schema, k) != text_key(self.p.schema, k)
-                 or pa.types.is_string(text_key(self.g.schema, k))
-                 or pa.types.is_large_string(text_key(self.g.schema, k))]
+        check = [
+            j
+            for j, k in enumerate(self.keys)
+            if text_key(self.g.schema, k) != text_key(self.p.schema, k)
+            or pa.types.is_string(text_key(self.g.schema, k))
+            or pa.types.is_large_string(text_key(self.g.schema, k))
+        ]
         for i in range(self.K):
             tg, tp = self.g.table(i), self.p.table(i)
             n_g, n_p = (tg.num_rows if tg is not None else 0), (tp.num_rows if tp is not None else 0)
@@ -245,8 +281,11 @@ class Partitions:
                     continue
                 exact = _count_in(tg.column(f"{_PFX}hx{j}").to_numpy(), tp.column(f"{_PFX}hx{j}").to_numpy())
                 t[0] += exact
-                t[1] += exact if exact == min(n_g, n_p) else \
-                    _count_in(tg.column(f"{_PFX}hs{j}").to_numpy(), tp.column(f"{_PFX}hs{j}").to_numpy())
+                t[1] += (
+                    exact
+                    if exact == min(n_g, n_p)
+                    else _count_in(tg.column(f"{_PFX}hs{j}").to_numpy(), tp.column(f"{_PFX}hs{j}").to_numpy())
+                )
         return {k for k, (ex, st, ng, npr) in tally.items() if ex < min(ng, npr) and st > ex}
 
     def codes(self, gt, pred, stems):
@@ -259,8 +298,7 @@ class Partitions:
         def is_text(schema, k):
             return pa.types.is_string(schema.field(k).type)
 
-        if not (gt.n and pred.n) or not all(is_text(self.g.schema, k) and is_text(self.p.schema, k)
-                                            for k in self.keys):
+        if not (gt.n and pred.n) or not all(is_text(self.g.schema, k) and is_text(self.p.schema, k) for k in self.keys):
             return None
         if len(getattr(gt, "hashes", {})) < len(self.keys) or len(getattr(pred, "hashes", {})) < len(self.keys):
             return None
@@ -272,7 +310,7 @@ class Partitions:
                 hp = hp * np.uint64(1_000_003) ^ pred.hashes[j][w]
         _, inv = np.unique(np.concatenate([hg, hp]), return_inverse=True)
         inv = inv.reshape(-1).astype(np.int64)
-        cg, cp = inv[:gt.n], inv[gt.n:]
+        cg, cp = inv[: gt.n], inv[gt.n :]
         if np.bincount(cg).max() > 1 or np.bincount(cp).max() > 1:
             return None
         pos = np.full(int(inv.max()) + 1, -1, dtype=np.int64)
@@ -281,8 +319,10 @@ class Partitions:
         pi = pos[cg[gi]]
         for k in self.keys:
             a, b = gt.keys.column(k), pred.keys.column(k)
-            a, b = (a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
-                    b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b)
+            a, b = (
+                a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
+                b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b,
+            )
             a, b = a.take(pa.array(gi)), b.take(pa.array(pi))
             if k in stems:
                 a, b = _stems(a), _stems(b)

@@ -5,6 +5,7 @@ and :func:`finish`; the code search itself runs in a child process
 (:mod:`hpe_cli.pipelines.infer_code`, which also loads the user's callable:
 :func:`~hpe_cli.pipelines.infer_code.load_callable`).
 """
+
 from __future__ import annotations
 
 from ..errors import HpeError
@@ -86,8 +87,10 @@ def numeric(frame, cols, path):
 
     missing = [c for c in cols if c not in frame.columns]
     if missing:
-        raise HpeError(f"{path}: missing column(s) {', '.join(missing[:6])}{' ...' if len(missing) > 6 else ''}; "
-                       f"expected {', '.join(cols[:3])}{' ...' if len(cols) > 3 else ''}")
+        raise HpeError(
+            f"{path}: missing column(s) {', '.join(missing[:6])}{' ...' if len(missing) > 6 else ''}; "
+            f"expected {', '.join(cols[:3])}{' ...' if len(cols) > 3 else ''}"
+        )
     try:
         return frame[cols].to_numpy(dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -100,9 +103,11 @@ def report_lines(rep: dict) -> list:
     echo = lines.append
     if rep["mode"] == "landmarks":
         m = rep["matched"]
-        echo(f"best: {rep['best']} ({rep['fit']}; RMS residual {rep['rms_residual_deg']:.2f} deg, median "
-             f"{rep['median_residual_deg']:.2f} deg over {rep['samples']} faces; next candidate "
-             f"{rep['separation']:.1f}x worse)")
+        echo(
+            f"best: {rep['best']} ({rep['fit']}; RMS residual {rep['rms_residual_deg']:.2f} deg, median "
+            f"{rep['median_residual_deg']:.2f} deg over {rep['samples']} faces; next candidate "
+            f"{rep['separation']:.1f}x worse)"
+        )
         echo(f"  {m['formula']}")
         echo("  built-in readings of the labels (RMS / max residual, deg):")
         for h in rep["hypotheses"]:
@@ -120,20 +125,26 @@ def report_lines(rep: dict) -> list:
         if m["transpose_of"]:
             echo(f"  (the transpose of the matrix of {', '.join(m['transpose_of'])})")
         if rep.get("also_matches"):
-            echo(f"  also reproduced by built-in: {', '.join(rep['also_matches']['names'])} "
-                 "(same matrix from the same angles)")
+            echo(
+                f"  also reproduced by built-in: {', '.join(rep['also_matches']['names'])} "
+                "(same matrix from the same angles)"
+            )
         if rep.get("selection"):
             echo(f"  solution kept by the decoder: {rep['selection']['rule']}")
         if rep.get("near_lock"):
-            echo(f"  {rep['near_lock']['count']} samples near gimbal lock handled differently "
-                 f"(max error {rep['near_lock']['max_error']:.2g})")
+            echo(
+                f"  {rep['near_lock']['count']} samples near gimbal lock handled differently "
+                f"(max error {rep['near_lock']['max_error']:.2g})"
+            )
         if rep.get("ambiguous"):
             echo(f"  warning: {rep['ambiguous']}")
     else:
         m = rep["best_partial"]
         names = f" ({', '.join(m['builtins'])})" if m["builtins"] else ""
-        echo(f"no exact fit. best partial fit: {m['formula']}{names}: {m['explained']} of {rep['samples']} "
-             f"samples explained, median error {m['median_error']:.3g}")
+        echo(
+            f"no exact fit. best partial fit: {m['formula']}{names}: {m['explained']} of {rep['samples']} "
+            f"samples explained, median error {m['median_error']:.3g}"
+        )
         if "breaks" in m:
             echo(f"  {m['breaks']['summary']}")
     for e in rep.get("runners_up", [])[:3]:
@@ -141,8 +152,9 @@ def report_lines(rep: dict) -> list:
     return lines
 
 
-def infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_frame, tol, seed, name, frame,
-                storage, stored=None) -> dict:
+def infer_data(
+    data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_frame, tol, seed, name, frame, storage, stored=None
+) -> dict:
     """The table search (matrix or stored rotation columns) or the landmark ranking (3-D landmark columns)."""
     import numpy as np
 
@@ -153,9 +165,18 @@ def infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_f
             R = stored_to_matrices(stored[0], numeric(frame_df, stored[1], data))
         else:
             R = numeric(frame_df, mcols, data).reshape(-1, 3, 3)
-        rep = inf.infer_table(pyr, R, roles=roles, units="degrees" if units == "deg" else "radians",
-                               tol=tol or inf.DATA_TOL, source=str(data), name=name, frame=frame, storage=storage,
-                               seed=seed)
+        rep = inf.infer_table(
+            pyr,
+            R,
+            roles=roles,
+            units="degrees" if units == "deg" else "radians",
+            tol=tol or inf.DATA_TOL,
+            source=str(data),
+            name=name,
+            frame=frame,
+            storage=storage,
+            seed=seed,
+        )
         if stored is not None:
             rep["rotation_columns"] = {"kind": stored[0], "columns": list(stored[1])}
         return rep
@@ -165,17 +186,49 @@ def infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_f
     P = numeric(frame_df, lcols, data).reshape(-1, 68, 3)
     fit = fit_template(to_canonical_points(P, landmark_frame))
     ids = frame_df["file"].astype(str).tolist() if "file" in frame_df.columns else None
-    rep = inf.infer_landmarks(pyr, fit["R"], roles=roles, source=str(data), row_ids=ids, fit_rmse=fit["rmse_rel"],
-                              fit_rmse_limit=POOR_FIT_RMSE, seed=seed, name=name)
-    rep["template"] = {"source": "hpe_cli/data/reference_3d_68_points_trans.npy (DirectMHP mean iBUG-68), "
-                                 "frame x right, y down, z into the head", "landmark_frame": landmark_frame,
-                       "median_fit_rmse_template_units": float(np.nanmedian(fit["rmse_rel"]))}
+    rep = inf.infer_landmarks(
+        pyr,
+        fit["R"],
+        roles=roles,
+        source=str(data),
+        row_ids=ids,
+        fit_rmse=fit["rmse_rel"],
+        fit_rmse_limit=POOR_FIT_RMSE,
+        seed=seed,
+        name=name,
+    )
+    rep["template"] = {
+        "source": "hpe_cli/data/reference_3d_68_points_trans.npy (DirectMHP mean iBUG-68), "
+        "frame x right, y down, z into the head",
+        "landmark_frame": landmark_frame,
+        "median_fit_rmse_template_units": float(np.nanmedian(fit["rmse_rel"])),
+    }
     return rep
 
 
-def run_infer(*, data=None, spec=None, builder=False, returns="angles", roles=ROLE_NAMES, packed=False, units=None,
-              angle_columns=None, matrix=None, rotations=None, landmarks3d=None, landmark_frame="image", tol=None,
-              samples=None, seed=0, name=None, frame=None, storage="active", timeout=None, import_path=()) -> dict:
+def run_infer(
+    *,
+    data=None,
+    spec=None,
+    builder=False,
+    returns="angles",
+    roles=ROLE_NAMES,
+    packed=False,
+    units=None,
+    angle_columns=None,
+    matrix=None,
+    rotations=None,
+    landmarks3d=None,
+    landmark_frame="image",
+    tol=None,
+    samples=None,
+    seed=0,
+    name=None,
+    frame=None,
+    storage="active",
+    timeout=None,
+    import_path=(),
+) -> dict:
     """The infer report of user code (``spec``: ``FILE.py:FUNC`` or ``module:FUNC``) or of a data table.
 
     Parameters mirror ``hpe infer``'s options; ``angle_columns`` is ``(roles, columns)`` of
@@ -201,9 +254,22 @@ def run_infer(*, data=None, spec=None, builder=False, returns="angles", roles=RO
             note_input(path)  # -o/--json may never be the user's own code
         u = "degrees" if units == "deg" else "radians"
         rep, toml, system_name = run_code_inference(
-            spec, builder=builder, roles=list(roles), units=u, packed=packed, samples=samples,
-            timeout=DEFAULT_TIMEOUT if timeout is None else timeout, tol=tol or inf.CODE_TOL, seed=seed,
-            source=spec, name=name, frame=frame, storage=storage, import_path=list(import_path), returns=returns)
+            spec,
+            builder=builder,
+            roles=list(roles),
+            units=u,
+            packed=packed,
+            samples=samples,
+            timeout=DEFAULT_TIMEOUT if timeout is None else timeout,
+            tol=tol or inf.CODE_TOL,
+            seed=seed,
+            source=spec,
+            name=name,
+            frame=frame,
+            storage=storage,
+            import_path=list(import_path),
+            returns=returns,
+        )
         if rep["fit"] != "exact" and units is None and returns == "angles":
             rep["hint"] = "no fit with the default --radians; try --degrees"
         rep["_system_toml"], rep["_system_name"] = toml, system_name
@@ -221,12 +287,28 @@ def run_infer(*, data=None, spec=None, builder=False, returns="angles", roles=RO
         stored = stored_rotations(rotations, frame_df.columns)
     if landmarks3d is None and mcols is None and stored is None:
         if "lm3d0_x" not in frame_df.columns:
-            raise HpeError(f"{data}: found neither matrix columns r00..r22, stored rotations (rx,ry,rz or "
-                           "qw,qx,qy,qz) nor 3-D landmarks lm3d0_x..; use --matrix, --rotations or --landmarks3d")
+            raise HpeError(
+                f"{data}: found neither matrix columns r00..r22, stored rotations (rx,ry,rz or "
+                "qw,qx,qy,qz) nor 3-D landmarks lm3d0_x..; use --matrix, --rotations or --landmarks3d"
+            )
         landmarks3d = "lm3d"
     try:
-        rep = infer_data(data, frame_df, pyr, roles, units, mcols, landmarks3d, landmark_frame, tol, seed,
-                         name, frame, storage, stored)
+        rep = infer_data(
+            data,
+            frame_df,
+            pyr,
+            roles,
+            units,
+            mcols,
+            landmarks3d,
+            landmark_frame,
+            tol,
+            seed,
+            name,
+            frame,
+            storage,
+            stored,
+        )
     except ValueError as exc:
         raise HpeError(f"{data}: {exc}") from None
     system = rep.get("_system")
@@ -263,10 +345,14 @@ def finish(rep: dict, what: str, *, json_path=None, output=None, overwrite=False
             txn.commit()
         tail = "; nothing written to " + output if output else ""
         if rep["mode"] == "landmarks":
-            raise HpeError(f"{what}: no system explains the landmarks clearly ({rep['fit']}: best {rep['best']}, "
-                           f"RMS residual {rep['rms_residual_deg']:.2f} deg){tail}")
-        raise HpeError(f"{what}: no rotation system reproduces it exactly (best partial fit "
-                       f"{rep['best_partial']['formula']}, max error {rep['max_error']:.3g}){tail}")
+            raise HpeError(
+                f"{what}: no system explains the landmarks clearly ({rep['fit']}: best {rep['best']}, "
+                f"RMS residual {rep['rms_residual_deg']:.2f} deg){tail}"
+            )
+        raise HpeError(
+            f"{what}: no rotation system reproduces it exactly (best partial fit "
+            f"{rep['best_partial']['formula']}, max error {rep['max_error']:.3g}){tail}"
+        )
     written = None
     if output is not None:
         with AtomicFile(output, overwrite) as tmp:

@@ -13,6 +13,7 @@ timeout) the whole group is killed, so processes the code forked or started
 (``subprocess.Popen(["sleep", "3600"])``) do not outlive ``hpe``. (A process that
 leaves the group on purpose, ``setsid``, is beyond this.)
 """
+
 from __future__ import annotations
 
 import signal
@@ -47,8 +48,12 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
         else:
             rep = inf.infer_decoder(inf.as_decoder(func, roles, units), n=samples or 256, **kw)
         system = rep.get("_system")
-        msg = ("ok", inf.report_json(rep), system.to_toml() if system is not None else None,
-               system.name if system is not None else None)
+        msg = (
+            "ok",
+            inf.report_json(rep),
+            system.to_toml() if system is not None else None,
+            system.name if system is not None else None,
+        )
     except HpeError as exc:
         msg = ("error", str(exc))
     except inf.CallError as exc:
@@ -75,8 +80,17 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
     os._exit(status)  # skip the user's atexit handlers and non-daemon threads
 
 
-def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: bool = False, samples=None,
-                       timeout: float = DEFAULT_TIMEOUT, **kw) -> tuple:
+def run_code_inference(
+    spec: str,
+    *,
+    builder: bool,
+    roles,
+    units: str,
+    packed: bool = False,
+    samples=None,
+    timeout: float = DEFAULT_TIMEOUT,
+    **kw,
+) -> tuple:
     """Run the search on ``spec`` (``FILE.py:FUNC`` or ``module:FUNC``) in a child process.
 
     Returns ``(report, system_toml, system_name)``: the JSON report of
@@ -94,8 +108,12 @@ def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: b
 
     ctx = mp.get_context("spawn")
     recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(send, spec, builder, roles, units, packed, samples, kw), daemon=True,
-                       name="hpe-infer-user-code")
+    proc = ctx.Process(
+        target=_child,
+        args=(send, spec, builder, roles, units, packed, samples, kw),
+        daemon=True,
+        name="hpe-infer-user-code",
+    )
     proc.start()
     send.close()
     ready = False
@@ -123,8 +141,10 @@ def run_code_inference(spec: str, *, builder: bool, roles, units: str, packed: b
             proc.join(5)
             code = proc.exitcode
             if code == _NO_CHANNEL:
-                raise HpeError(f"{spec}: the code closed the pipe hpe reads its answer from (it closes file "
-                               "descriptors it did not open), so it returned nothing")
+                raise HpeError(
+                    f"{spec}: the code closed the pipe hpe reads its answer from (it closes file "
+                    "descriptors it did not open), so it returned nothing"
+                )
             if code is not None and code < 0:
                 try:
                     name = signal.Signals(-code).name
@@ -212,8 +232,9 @@ def load_callable(spec: str, path=None):
                 raise HpeError(f"{target}: no such file")
             found = module_name_of(file)
             top = found[1].split(".")[0] if found else None
-            if found is not None and (top not in sys.modules or
-                                      str(found[0]) in str(getattr(sys.modules[top], "__path__", ""))):
+            if found is not None and (
+                top not in sys.modules or str(found[0]) in str(getattr(sys.modules[top], "__path__", ""))
+            ):
                 root, dotted = found
                 for folder in (str(root), str(file.resolve().parent)):
                     if folder not in sys.path:
@@ -239,8 +260,9 @@ def load_callable(spec: str, path=None):
         hint = ""
         if "relative import" in str(exc):
             hint = " (the file is not inside a package: give module:FUNC with --path ROOT)"
-        raise HpeError(f"{target}: import failed: {type(exc).__name__}: "
-                       f"{' '.join(str(exc).split())[:200]}{hint}") from None
+        raise HpeError(
+            f"{target}: import failed: {type(exc).__name__}: {' '.join(str(exc).split())[:200]}{hint}"
+        ) from None
     obj = module
     for part in attr.split("."):
         if not hasattr(obj, part):

@@ -1,4 +1,5 @@
 """Overlapped read / compute / write: compute on a few threads, consume results in input order."""
+
 from __future__ import annotations
 
 

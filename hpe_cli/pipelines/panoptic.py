@@ -8,6 +8,7 @@ and the summary), :mod:`.panoptic_parts` (units, their part files, the
 outputs (:func:`write_outputs`) and re-exports the others' public names.
 Memory stays bounded by a few chunks whatever the sequence length.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -87,9 +88,21 @@ def format_unit(task: dict) -> int:
     return t.num_rows
 
 
-def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None, overwrite: bool = False,
-                  workers: int = 1, bar=None, *, scheduler: str | None = None, resume: bool = False,
-                  per_sequence: list | None = None, pool=None) -> Stats:
+def write_outputs(
+    p,
+    cfg: Config,
+    output,
+    fmt: str = "table",
+    rejects_path=None,
+    overwrite: bool = False,
+    workers: int = 1,
+    bar=None,
+    *,
+    scheduler: str | None = None,
+    resume: bool = False,
+    per_sequence: list | None = None,
+    pool=None,
+) -> Stats:
     """Run the job and write its outputs atomically; return the total :class:`Stats`.
 
     ``p`` is one :class:`Plan` or a list of them (several sequences). The
@@ -133,14 +146,25 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     seq_stats = [Stats() for _ in plans]
     relabel = {"source": "cmu_panoptic"}
     if len(plans) == 1:
-        relabel.update(sequence=plans[0].sequence, calibration=str(plans[0].calibration),
-                       cameras=list(map(str, plans[0].cameras.names)))
+        relabel.update(
+            sequence=plans[0].sequence,
+            calibration=str(plans[0].calibration),
+            cameras=list(map(str, plans[0].cameras.names)),
+        )
     else:
-        relabel.update(sequences=[q.sequence for q in plans], calibrations=[str(q.calibration) for q in plans],
-                       cameras=[list(map(str, q.cameras.names)) for q in plans])
-    relabel.update({"preset": cfg.preset,
-                    "max_rmse": cfg.max_rmse if cfg.max_rmse is not None and np.isfinite(cfg.max_rmse) else None,
-                    "legacy_whenet": cfg.legacy, "label": "A = E @ R_cam @ R_head, E = diag(1, -1, -1)"})
+        relabel.update(
+            sequences=[q.sequence for q in plans],
+            calibrations=[str(q.calibration) for q in plans],
+            cameras=[list(map(str, q.cameras.names)) for q in plans],
+        )
+    relabel.update(
+        {
+            "preset": cfg.preset,
+            "max_rmse": cfg.max_rmse if cfg.max_rmse is not None and np.isfinite(cfg.max_rmse) else None,
+            "legacy_whenet": cfg.legacy,
+            "label": "A = E @ R_cam @ R_head, E = diag(1, -1, -1)",
+        }
+    )
     if cfg.frame == "crop":
         relabel["label"] = "A = E @ Q.T @ R_cam @ R_head, Q: optical axis -> ray to the head centre (SPEC 10)"
     for k in ("all_views", "min_change"):
@@ -202,8 +226,7 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
     try:
         with ExitStack() as stack:
             # the pool first: its workers start (and import what a unit needs) while the writers are set up
-            pool = stack.enter_context(borrow(pool) if pool is not None else
-                                       worker_pool(workers, scheduler, resume))
+            pool = stack.enter_context(borrow(pool) if pool is not None else worker_pool(workers, scheduler, resume))
             if fmt == "table":
                 out = stack.enter_context(TableWriter(output, overwrite, meta))
             else:
@@ -232,9 +255,15 @@ def write_outputs(p, cfg: Config, output, fmt: str = "table", rejects_path=None,
                     if kept is not None:  # --min-change dropped rows: the worker formats what is kept
                         labels = stem + ".kept.arrow"
                         _write_part(labels, kept)
-                    job2 = {"fmt": fmt, "labels": labels, "text": f"{stem}.{fmt}.text", "path": str(output),
-                            "offset": registered, "first_id": registered + 1,
-                            "image_ids": out.image_ids(t, registered) if fmt == "coco" else None}
+                    job2 = {
+                        "fmt": fmt,
+                        "labels": labels,
+                        "text": f"{stem}.{fmt}.text",
+                        "path": str(output),
+                        "offset": registered,
+                        "first_id": registered + 1,
+                        "image_ids": out.image_ids(t, registered) if fmt == "coco" else None,
+                    }
                     registered += t.num_rows
                     formatting.append((pool.submit(format_unit, job2), job2["text"], t.num_rows, stem))
                     append_formatted(ahead)
@@ -285,8 +314,12 @@ def _text_writer(fmt: str, output, overwrite: bool, system=None):
     if fmt == "coco":
         from ..io.coco import CocoWriter
 
-        return CocoWriter(output, overwrite, image_size_cols=("image_width", "image_height"),
-                          info={"hpe:system": system} if system else None)  # read back by io.system_meta
+        return CocoWriter(
+            output,
+            overwrite,
+            image_size_cols=("image_width", "image_height"),
+            info={"hpe:system": system} if system else None,
+        )  # read back by io.system_meta
     from ..io.whenet_txt import WhenetWriter
 
     return WhenetWriter(output, overwrite)

@@ -1,5 +1,6 @@
 """Units and their part files: what a worker computes and writes, what ``--resume`` keeps, and
 ``--min-change`` (the one rule that crosses units, applied by the parent in order)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,9 +15,19 @@ from .panoptic_stats import unit_stats
 def _reject_schema():
     import pyarrow as pa
 
-    return pa.schema([("sequence", pa.string()), ("frame", pa.int64()), ("person_id", pa.int64()),
-                      ("camera", pa.string()), ("reason", pa.string()), ("detail", pa.string()),
-                      ("fit_rmse", pa.float64()), ("n_pairs", pa.int64()), ("scale", pa.float64())])
+    return pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("frame", pa.int64()),
+            ("person_id", pa.int64()),
+            ("camera", pa.string()),
+            ("reason", pa.string()),
+            ("detail", pa.string()),
+            ("fit_rmse", pa.float64()),
+            ("n_pairs", pa.int64()),
+            ("scale", pa.float64()),
+        ]
+    )
 
 
 # ------------------------------------------------------------------- units
@@ -29,15 +40,22 @@ def unit_task(plans: list, cfg: Config, unit: tuple, parts_dir) -> dict:
     """Everything a worker needs for one unit (small and picklable)."""
     si, ci = unit
     p = plans[si]
-    return {"chunk": p.chunks[ci], "cameras": p.cameras, "sequence": p.sequence, "cfg": cfg,
-            "skipped": p.skipped[ci] if ci < len(p.skipped) else None, "every": p.every,
-            "stem": str(Path(parts_dir) / f"{si:04d}-{ci:06d}") if parts_dir is not None else None}
+    return {
+        "chunk": p.chunks[ci],
+        "cameras": p.cameras,
+        "sequence": p.sequence,
+        "cfg": cfg,
+        "skipped": p.skipped[ci] if ci < len(p.skipped) else None,
+        "every": p.every,
+        "stem": str(Path(parts_dir) / f"{si:04d}-{ci:06d}") if parts_dir is not None else None,
+    }
 
 
 def compute(task: dict) -> dict:
     """:func:`process_chunk` of one :func:`unit_task`."""
-    return process_chunk(task["chunk"], task["cameras"], task["sequence"], task["cfg"], task.get("skipped"),
-                         task.get("every", 1))
+    return process_chunk(
+        task["chunk"], task["cameras"], task["sequence"], task["cfg"], task.get("skipped"), task.get("every", 1)
+    )
 
 
 def run_unit(task: dict) -> dict:
@@ -109,15 +127,18 @@ class MinChange:
             return table, None
         drop = ~keep
         t_drop = table.filter(pa.array(drop))
-        rej = {"sequence": t_drop.column("sequence"), "frame": t_drop.column("frame"),
-               "person_id": t_drop.column("person_id"), "camera": t_drop.column("camera"),
-               "reason": pa.array(["below --min-change"] * int(drop.sum()), pa.string()),
-               "detail": pa.array([f"{a:.3g} deg since frame {f}" for a, f in zip(angle[drop], since[drop])],
-                                  pa.string()),
-               "fit_rmse": t_drop.column("fit_rmse"), "n_pairs": t_drop.column("n_pairs"),
-               "scale": t_drop.column("scale")}
+        rej = {
+            "sequence": t_drop.column("sequence"),
+            "frame": t_drop.column("frame"),
+            "person_id": t_drop.column("person_id"),
+            "camera": t_drop.column("camera"),
+            "reason": pa.array(["below --min-change"] * int(drop.sum()), pa.string()),
+            "detail": pa.array([f"{a:.3g} deg since frame {f}" for a, f in zip(angle[drop], since[drop])], pa.string()),
+            "fit_rmse": t_drop.column("fit_rmse"),
+            "n_pairs": t_drop.column("n_pairs"),
+            "scale": t_drop.column("scale"),
+        }
         return table.filter(pa.array(keep)), pa.Table.from_pydict(rej).cast(schema)
-
 
 
 def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:
@@ -131,14 +152,19 @@ def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:
         h.update(str([len(c) for c in p.chunks]).encode())
         h.update(f"every={p.every}:{[sorted(s) for s in p.skipped]}".encode())
     sysname = getattr(cfg.system, "name", cfg.system)
-    return {"hpe_parts": 2, "format": fmt, "config": repr({**cfg.__dict__, "system": sysname,
-                                                           "min_change": None}), "plans": h.hexdigest(),
-            "inputs": input_signatures(plans)}
+    return {
+        "hpe_parts": 2,
+        "format": fmt,
+        "config": repr({**cfg.__dict__, "system": sysname, "min_change": None}),
+        "plans": h.hexdigest(),
+        "inputs": input_signatures(plans),
+    }
 
 
 #: how ``--resume`` tells that an input changed (stated in messages and in ``--help``)
-HOW_COMPARED = ("calibration files by their contents (SHA-256), face files and hdFace3d.tar by size, "
-                "modification time and inode")
+HOW_COMPARED = (
+    "calibration files by their contents (SHA-256), face files and hdFace3d.tar by size, modification time and inode"
+)
 
 
 def input_signatures(plans: list) -> dict:
@@ -183,12 +209,19 @@ def _mismatch(d: Path, old: dict, fp: dict) -> str:
     a, b = old.get("inputs", {}), fp["inputs"]
     for path in b:
         if path in a and a[path] != b[path]:
-            how = ("its contents differ" if b[path].startswith("sha256:") else
-                   "it is gone" if b[path] == "missing" else "its size, modification time or inode differ")
+            how = (
+                "its contents differ"
+                if b[path].startswith("sha256:")
+                else "it is gone"
+                if b[path] == "missing"
+                else "its size, modification time or inode differ"
+            )
             n = sum(1 for q in b if q in a and a[q] != b[q])
             more = f" (and {n - 1} more inputs)" if n > 1 else ""
-            return (f"{path}: changed since the interrupted run whose parts are in {d} ({how}){more}; "
-                    f"--resume compares {HOW_COMPARED}; {again}")
+            return (
+                f"{path}: changed since the interrupted run whose parts are in {d} ({how}){more}; "
+                f"--resume compares {HOW_COMPARED}; {again}"
+            )
     return f"{d}: its parts were made with other inputs or options (here: other sequences, cameras or frames); {again}"
 
 
@@ -270,8 +303,10 @@ def lock_parts(d: Path, output) -> None:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise HpeError(f"{output}: another hpe run is writing this output now (its parts are in {d}); "
-                           "wait for it to end, or choose another output") from None
+            raise HpeError(
+                f"{output}: another hpe run is writing this output now (its parts are in {d}); "
+                "wait for it to end, or choose another output"
+            ) from None
         try:
             same = os.stat(d).st_ino == os.fstat(fd).st_ino
         except FileNotFoundError:
@@ -342,8 +377,7 @@ def check_done(tasks: list) -> None:
         marker = Path(stem + ".json")
         if not marker.exists():
             continue
-        fix = (f"delete {Path(stem).name}.* in {Path(stem).parent} to compute that unit again, or run without "
-               "--resume")
+        fix = f"delete {Path(stem).name}.* in {Path(stem).parent} to compute that unit again, or run without --resume"
         try:
             json.loads(marker.read_text())
         except (OSError, ValueError) as exc:
@@ -373,4 +407,3 @@ def _write_part(path, table) -> None:
     with pa.OSFile(tmp, "wb") as sink, pa.ipc.new_file(sink, table.schema) as w:
         w.write_table(table)
     os.replace(tmp, path)
-

@@ -6,6 +6,7 @@ views in the rejects); :func:`process_chunk` turns a chunk of frames into a
 table of labelled views and a table of rejected ones (pure: no output, no
 printing).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -24,8 +25,9 @@ REJECT_COLS = ["sequence", "frame", "person_id", "camera", "reason", "detail", "
 #: WHENet's 20 HD cameras for the haggling sequences: ``without_top`` in
 #: Ascend-Research/HeadPoseEstimation-WHENet ``prepare_images.py`` (nodes of panel 0;
 #: the cameras it skips look down from the top of the dome)
-WHENET_HAGGLING = tuple(f"00_{i:02d}" for i in (0, 3, 5, 8, 9, 11, 12, 14, 15, 16, 18, 20, 21, 22, 23, 24, 25,
-                                                 26, 27, 29))
+WHENET_HAGGLING = tuple(
+    f"00_{i:02d}" for i in (0, 3, 5, 8, 9, 11, 12, 14, 15, 16, 18, 20, 21, 22, 23, 24, 25, 26, 27, 29)
+)
 CAMERA_PRESETS = {"whenet-haggling": ",".join(WHENET_HAGGLING)}
 
 
@@ -80,8 +82,9 @@ def parse_frames(spec: str | None) -> tuple:
     return (a, b)
 
 
-def plan(seq_dir, calibration=None, cameras="hd", every: int = 1, frames=(None, None),
-         chunk_frames: int = CHUNK_FRAMES) -> Plan:
+def plan(
+    seq_dir, calibration=None, cameras="hd", every: int = 1, frames=(None, None), chunk_frames: int = CHUNK_FRAMES
+) -> Plan:
     """Resolve the calibration, cameras and frames of a sequence folder.
 
     Frames are looked up by number: with ``every = N`` the frames kept are
@@ -98,11 +101,16 @@ def plan(seq_dir, calibration=None, cameras="hd", every: int = 1, frames=(None, 
     cams = pan.read_calibration(calib, cameras)
     wrong = [f"{n} ({t})" for n, t in zip(cams.names, cams.types) if t != "hd"]
     if wrong:
-        raise HpeError(f"{calib}: hdFace3d frames are HD frames; expected hd cameras, got "
-                       f"{', '.join(wrong[:3])}{' ...' if len(wrong) > 3 else ''} (other types run on another clock)")
+        raise HpeError(
+            f"{calib}: hdFace3d frames are HD frames; expected hd cameras, got "
+            f"{', '.join(wrong[:3])}{' ...' if len(wrong) > 3 else ''} (other types run on another clock)"
+        )
     m = calib.name
-    sequence = m[len("calibration_"):-len(".json")] if m.startswith("calibration_") and m.endswith(".json") \
+    sequence = (
+        m[len("calibration_") : -len(".json")]
+        if m.startswith("calibration_") and m.endswith(".json")
         else seq_dir.resolve().name
+    )
     available = pan.face_sources(seq_dir)
     if not available:
         raise HpeError(f"{seq_dir}: no {pan.FACE_DIR}/faceRecon3D_hd*.json files")
@@ -121,18 +129,19 @@ def plan(seq_dir, calibration=None, cameras="hd", every: int = 1, frames=(None, 
     grid = max(0, (last - start) // every + 1) if last >= start else 0
     selected = {int(f): available[int(f)] for f in chosen}
     if not selected:
-        raise HpeError(f"{seq_dir}: no face frame matches --frames {a if a is not None else ''}:"
-                       f"{b if b is not None else ''} --every {every} (frames {keys[0]}..{keys[-1]} exist)")
+        raise HpeError(
+            f"{seq_dir}: no face frame matches --frames {a if a is not None else ''}:"
+            f"{b if b is not None else ''} --every {every} (frames {keys[0]}..{keys[-1]} exist)"
+        )
     items = list(selected.items())
-    chunks = [dict(items[i:i + chunk_frames]) for i in range(0, len(items), chunk_frames)]
+    chunks = [dict(items[i : i + chunk_frames]) for i in range(0, len(items), chunk_frames)]
     # each skipped frame goes with the chunk whose frames surround it (the first chunk for those before it)
     starts = np.asarray([next(iter(c)) for c in chunks], dtype=np.int64)
     owner = np.maximum(np.searchsorted(starts, off_grid, side="right") - 1, 0)
     skipped: list = [{} for _ in chunks]
     for f, k in zip(off_grid.tolist(), owner.tolist()):
         skipped[k][int(f)] = available[int(f)]
-    return Plan(seq_dir, sequence, calib, cams, selected, len(available), grid - len(selected), chunks,
-                every, skipped)
+    return Plan(seq_dir, sequence, calib, cams, selected, len(available), grid - len(selected), chunks, every, skipped)
 
 
 def find_sequences(paths) -> list:
@@ -142,14 +151,15 @@ def find_sequences(paths) -> list:
     for p in map(Path, paths):
         if not p.is_dir():
             raise HpeError(f"{p}: not a folder")
-        if pan.is_sequence(p) or (p / pan.FACE_DIR).is_dir() or (p / pan.FACE_TAR).is_file() \
-                or p.name == pan.FACE_DIR:
+        if pan.is_sequence(p) or (p / pan.FACE_DIR).is_dir() or (p / pan.FACE_TAR).is_file() or p.name == pan.FACE_DIR:
             out.append(p)
             continue
         subs = sorted(q for q in p.iterdir() if q.is_dir() and pan.is_sequence(q))
         if not subs:
-            raise HpeError(f"{p}: neither a sequence (calibration_<seq>.json with hdFace3d/ or hdFace3d.tar) "
-                           "nor a folder of sequences")
+            raise HpeError(
+                f"{p}: neither a sequence (calibration_<seq>.json with hdFace3d/ or hdFace3d.tar) "
+                "nor a folder of sequences"
+            )
         out += subs
     seen: dict = {}
     for p in out:
@@ -160,8 +170,9 @@ def find_sequences(paths) -> list:
     return out
 
 
-def plan_many(paths, calibration=None, cameras="hd", every: int = 1, frames=(None, None),
-              chunk_frames: int = CHUNK_FRAMES) -> list:
+def plan_many(
+    paths, calibration=None, cameras="hd", every: int = 1, frames=(None, None), chunk_frames: int = CHUNK_FRAMES
+) -> list:
     """:func:`plan` for every sequence of :func:`find_sequences` (``--calibration`` only with one)."""
     seqs = find_sequences(paths)
     if calibration and len(seqs) > 1:
@@ -175,8 +186,9 @@ def plan_many(paths, calibration=None, cameras="hd", every: int = 1, frames=(Non
     return plans
 
 
-def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config, skipped: dict | None = None,
-                  every: int = 1) -> dict:
+def process_chunk(
+    paths: dict, cams: pan.Cameras, sequence: str, cfg: Config, skipped: dict | None = None, every: int = 1
+) -> dict:
     """Relabel one chunk of frames seen by all ``cams``; list the views of the ``skipped`` frames
     (frame -> face file, skipped by ``--every``) as rejects.
 
@@ -194,27 +206,51 @@ def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config, sk
     data = pan.read_face_frames(paths)
     n = len(data["frame"])
     C = len(cams)
-    fit = fit_faces(data["landmarks"], data["score"], panoptic_pairs(), conf_min=cfg.conf_min,
-                    min_pair_count=cfg.min_pairs, max_rmse=cfg.max_rmse)
+    fit = fit_faces(
+        data["landmarks"],
+        data["score"],
+        panoptic_pairs(),
+        conf_min=cfg.conf_min,
+        min_pair_count=cfg.min_pairs,
+        max_rmse=cfg.max_rmse,
+    )
     face = np.repeat(np.arange(n), C)
     ci = np.tile(np.arange(C), n)
-    cam = {"K": cams.K[ci], "dist": cams.dist[ci], "R": cams.R[ci], "t": cams.t[ci],
-           "width": cams.width[ci], "height": cams.height[ci]}
-    v = relabel_views(fit, face, cam, cfg.system, preset=cfg.preset, legacy=cfg.legacy,
-                      landmarks=data["landmarks"] if cfg.landmarks else None, frame=cfg.frame)
+    cam = {
+        "K": cams.K[ci],
+        "dist": cams.dist[ci],
+        "R": cams.R[ci],
+        "t": cams.t[ci],
+        "width": cams.width[ci],
+        "height": cams.height[ci],
+    }
+    v = relabel_views(
+        fit,
+        face,
+        cam,
+        cfg.system,
+        preset=cfg.preset,
+        legacy=cfg.legacy,
+        landmarks=data["landmarks"] if cfg.landmarks else None,
+        frame=cfg.frame,
+    )
     ok = v["ok"]
     if cfg.all_views and n:
         seen = ok.reshape(n, C).sum(1)
         drop = np.repeat((seen > 0) & (seen < C), C) & ok
         if drop.any():
             v["reason"][drop] = "not seen by every camera"
-            v["detail"][drop] = np.repeat(np.asarray([f"{k} of {C} cameras label this face" for k in seen],
-                                                     dtype=object), C)[drop]
+            v["detail"][drop] = np.repeat(
+                np.asarray([f"{k} of {C} cameras label this face" for k in seen], dtype=object), C
+            )[drop]
             keep = ~drop[ok]
             conv = v["conversion"]
-            v["conversion"] = type(conv)(*(getattr(conv, f)[keep] for f in
-                                           ("primary", "secondary", "matrix", "gimbal_lock", "roundtrip_err",
-                                            "canonical")))
+            v["conversion"] = type(conv)(
+                *(
+                    getattr(conv, f)[keep]
+                    for f in ("primary", "secondary", "matrix", "gimbal_lock", "roundtrip_err", "canonical")
+                )
+            )
             ok = ok & ~drop
             v["ok"] = ok
     fo, co = face[ok], ci[ok]
@@ -246,9 +282,17 @@ def process_chunk(paths: dict, cams: pan.Cameras, sequence: str, cfg: Config, sk
     }
     fitted = np.isfinite(fit["rmse"])
     legacy_considered = int(np.isin(v["reason"], ("", "dropped by legacy rule")).sum()) if cfg.legacy else 0
-    res = {"table": table, "rejects": rejects, "faces": n, "fit_rmse": fit["rmse"][fitted],
-           "face_reasons": fit["reason"], "views": n * C, "legacy_considered": legacy_considered,
-           "frames": len(paths), "unreadable": u}
+    res = {
+        "table": table,
+        "rejects": rejects,
+        "faces": n,
+        "fit_rmse": fit["rmse"][fitted],
+        "face_reasons": fit["reason"],
+        "views": n * C,
+        "legacy_considered": legacy_considered,
+        "frames": len(paths),
+        "unreadable": u,
+    }
     if skipped:
         _add_skipped(res, skipped, cams, sequence, every)
     return res
@@ -269,9 +313,10 @@ def _add_skipped(res: dict, skipped: dict, cams: pan.Cameras, sequence: str, eve
     unread = data["unreadable"]
     u = len(unread)
     frames = np.concatenate([data["frame"][face], np.asarray([f for f, _, _ in unread], dtype=np.int64)])
-    detail = np.asarray([f"--every {every}: frame {f} is not on the grid of frames kept" for f in frames.tolist()],
-                        dtype=object)
-    detail[n * C:] = [d for _, _, d in unread]
+    detail = np.asarray(
+        [f"--every {every}: frame {f} is not on the grid of frames kept" for f in frames.tolist()], dtype=object
+    )
+    detail[n * C :] = [d for _, _, d in unread]
     add = {
         "sequence": np.full(n * C + u, sequence, dtype=object),
         "frame": frames,
@@ -286,8 +331,9 @@ def _add_skipped(res: dict, skipped: dict, cams: pan.Cameras, sequence: str, eve
     rej = res["rejects"]
     for k in rej:
         rej[k] = np.concatenate([np.asarray(rej[k], dtype=add[k].dtype), add[k]])
-    res["face_reasons"] = np.concatenate([np.asarray(res["face_reasons"], dtype=object),
-                                          np.full(n, SKIPPED, dtype=object)])
+    res["face_reasons"] = np.concatenate(
+        [np.asarray(res["face_reasons"], dtype=object), np.full(n, SKIPPED, dtype=object)]
+    )
     res["faces"] += n
     res["views"] += n * C
     res["frames"] += len(skipped)
@@ -312,5 +358,6 @@ def _image_paths(cams: pan.Cameras, ci, frames):
     names = string_array([f"{f:08d}.jpg" for f in uniq.tolist()])
     n = len(ci)
     empty = pa.StringArray.from_buffers(n, pa.py_buffer(np.zeros(n + 1, dtype=np.int32)), pa.py_buffer(b""))
-    return pc.binary_join_element_wise(prefix.take(numpy_to_arrow(ci)), names.take(numpy_to_arrow(inv.reshape(-1))),
-                                       empty)
+    return pc.binary_join_element_wise(
+        prefix.take(numpy_to_arrow(ci)), names.take(numpy_to_arrow(inv.reshape(-1))), empty
+    )

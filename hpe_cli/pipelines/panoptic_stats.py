@@ -1,5 +1,6 @@
 """Counts of a Panoptic relabelling run: per unit (plain JSON, so a unit's counts survive in its part) and
 for the end-of-run summary (every face and view accounted for)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,8 +33,12 @@ class RmseStats:
 
     def to_dict(self) -> dict:
         nz = np.flatnonzero(self.counts)
-        return {"bins": nz.tolist(), "counts": self.counts[nz].tolist(), "n": self.n,
-                "max": self.max if np.isfinite(self.max) else None}
+        return {
+            "bins": nz.tolist(),
+            "counts": self.counts[nz].tolist(),
+            "n": self.n,
+            "max": self.max if np.isfinite(self.max) else None,
+        }
 
     @classmethod
     def from_dict(cls, d: dict) -> RmseStats:
@@ -65,12 +70,21 @@ def unit_stats(res: dict, cfg: Config) -> dict:
         gimbal = int(np.sum(t["gimbal_lock"]))
     rm = RmseStats()
     rm.add(res["fit_rmse"])
-    return {"frames": res["frames"], "faces": res["faces"], "views": res["views"], "labelled": len(t["frame"]),
-            "legacy_considered": res["legacy_considered"], "out_of_range": out_of_range, "gimbal": gimbal,
-            "unreadable": res.get("unreadable", 0), "skipped_frames": res.get("skipped_frames", 0),
-            "every": res.get("every", 1),
-            "view_reasons": dict(Counter(r for r in res["rejects"]["reason"].tolist())),
-            "face_reasons": dict(Counter(r for r in res["face_reasons"].tolist() if r)), "rmse": rm.to_dict()}
+    return {
+        "frames": res["frames"],
+        "faces": res["faces"],
+        "views": res["views"],
+        "labelled": len(t["frame"]),
+        "legacy_considered": res["legacy_considered"],
+        "out_of_range": out_of_range,
+        "gimbal": gimbal,
+        "unreadable": res.get("unreadable", 0),
+        "skipped_frames": res.get("skipped_frames", 0),
+        "every": res.get("every", 1),
+        "view_reasons": dict(Counter(r for r in res["rejects"]["reason"].tolist())),
+        "face_reasons": dict(Counter(r for r in res["face_reasons"].tolist() if r)),
+        "rmse": rm.to_dict(),
+    }
 
 
 class Stats:
@@ -92,8 +106,17 @@ class Stats:
 
     def add_unit(self, u: dict) -> None:
         """Add a :func:`unit_stats` dict."""
-        for k in ("frames", "faces", "views", "labelled", "legacy_considered", "out_of_range", "gimbal",
-                  "unreadable", "skipped_frames"):
+        for k in (
+            "frames",
+            "faces",
+            "views",
+            "labelled",
+            "legacy_considered",
+            "out_of_range",
+            "gimbal",
+            "unreadable",
+            "skipped_frames",
+        ):
             setattr(self, k, getattr(self, k) + int(u.get(k, 0)))
         self.view_reasons.update(u["view_reasons"])
         self.face_reasons.update(u["face_reasons"])
@@ -107,16 +130,26 @@ class Stats:
             self.view_reasons[reason] += n
 
     def merge(self, other: Stats) -> None:
-        for k in ("frames", "faces", "views", "labelled", "legacy_considered", "out_of_range", "gimbal",
-                  "unreadable", "skipped_frames"):
+        for k in (
+            "frames",
+            "faces",
+            "views",
+            "labelled",
+            "legacy_considered",
+            "out_of_range",
+            "gimbal",
+            "unreadable",
+            "skipped_frames",
+        ):
             setattr(self, k, getattr(self, k) + getattr(other, k))
         self.view_reasons.update(other.view_reasons)
         self.face_reasons.update(other.face_reasons)
         self.rmse.merge(other.rmse)
         self.every = max(self.every, other.every)
 
-    def summary(self, p: Plan | None, cfg: Config, output, rejects_path, n_cameras: int | None = None,
-                title: str | None = None) -> list:
+    def summary(
+        self, p: Plan | None, cfg: Config, output, rejects_path, n_cameras: int | None = None, title: str | None = None
+    ) -> list:
         sysname = getattr(cfg.system, "name", cfg.system)
         if p is not None:
             nums = list(p.frames)
@@ -135,21 +168,32 @@ class Stats:
         skipped = self.face_reasons[SKIPPED]
         fitted = self.faces - few - broken - skipped
         gate = "off" if cfg.max_rmse is None or not np.isfinite(cfg.max_rmse) else f"{cfg.max_rmse:g}"
-        lines.append(f"faces: {fitted} fitted; {few} with too few confident points; "
-                     f"{self.face_reasons['bad fit']} bad fits (--max-rmse {gate})"
-                     + (f"; {broken} with bad landmarks (infinite or absurd)" if broken else "")
-                     + (f"; {skipped} in frames skipped by --every (not fitted)" if skipped else ""))
+        lines.append(
+            f"faces: {fitted} fitted; {few} with too few confident points; "
+            f"{self.face_reasons['bad fit']} bad fits (--max-rmse {gate})"
+            + (f"; {broken} with bad landmarks (infinite or absurd)" if broken else "")
+            + (f"; {skipped} in frames skipped by --every (not fitted)" if skipped else "")
+        )
         if self.rmse.n:
-            lines.append(f"fit RMSE (cm) of fitted faces: median {self.rmse.quantile(0.5):.2f}, "
-                         f"p95 {self.rmse.quantile(0.95):.2f}, p99 {self.rmse.quantile(0.99):.2f}, "
-                         f"max {self.rmse.max:.2f}")
+            lines.append(
+                f"fit RMSE (cm) of fitted faces: median {self.rmse.quantile(0.5):.2f}, "
+                f"p95 {self.rmse.quantile(0.95):.2f}, p99 {self.rmse.quantile(0.99):.2f}, "
+                f"max {self.rmse.max:.2f}"
+            )
         pct = 100.0 * self.labelled / self.views if self.views else 0.0
         lines.append(f"labelled {self.labelled} of {self.views} views ({pct:.1f}%) in {sysname} -> {output}")
         rej = sum(self.view_reasons.values())
         if rej:
             parts = "; ".join(f"{n} {r}" for r, n in sorted(self.view_reasons.items(), key=lambda x: -x[1]))
             lines.append(f"rejected {rej} views: {parts}" + (f" -> {rejects_path}" if rejects_path else ""))
-        lines += summary_tail(cfg.legacy, self.view_reasons["dropped by legacy rule"], self.legacy_considered,
-                              self.out_of_range, self.gimbal, sysname, "views", "WHENet")
+        lines += summary_tail(
+            cfg.legacy,
+            self.view_reasons["dropped by legacy rule"],
+            self.legacy_considered,
+            self.out_of_range,
+            self.gimbal,
+            sysname,
+            "views",
+            "WHENet",
+        )
         return lines
-

@@ -9,6 +9,7 @@ number in flight and yields the results in input order, so a job can chain
 stages (compute a unit, then format it) on one pool and still write its
 output in order. No scheduling of our own: the engines schedule.
 """
+
 from __future__ import annotations
 
 from contextlib import contextmanager
@@ -154,8 +155,9 @@ def unit_pool(workers: int = 1, scheduler: str | None = None, warm=()):
         import os
         from concurrent.futures import ProcessPoolExecutor
 
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp_context(), initializer=_worker_init,
-                                 initargs=(tuple(warm), os.getpid())) as ex:
+        with ProcessPoolExecutor(
+            max_workers=workers, mp_context=mp_context(), initializer=_worker_init, initargs=(tuple(warm), os.getpid())
+        ) as ex:
             ex.workers = workers
             for _ in range(workers):  # start every worker now (each runs the initializer, then this no-op)
                 ex.submit(_import_all, ())
@@ -210,8 +212,10 @@ class _Checked:
 def _died():
     from ..errors import HpeError
 
-    return HpeError("a worker process died while computing a unit (killed, out of memory or crashed); "
-                    "nothing was written: run again (with --resume to keep the finished units)")
+    return HpeError(
+        "a worker process died while computing a unit (killed, out of memory or crashed); "
+        "nothing was written: run again (with --resume to keep the finished units)"
+    )
 
 
 class _Borrowed(_Tracking):

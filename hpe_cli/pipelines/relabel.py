@@ -11,6 +11,7 @@ From 3-D face landmarks to labels, in three vectorised steps:
    rotation system, the helmet box, the projected 2-D landmarks, WHENet's
    legacy chain if asked for, and the reason when a view is rejected.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -36,8 +37,15 @@ VIEW_BLOCK = 256
 #: a landmark coordinate beyond this (world units) is not a face
 ABSURD_COORD = 1e6
 
-REASONS = ("bad landmarks", "too few confident points", "bad fit", "behind camera", "outside image", "box rejected",
-           "dropped by legacy rule")
+REASONS = (
+    "bad landmarks",
+    "too few confident points",
+    "bad fit",
+    "behind camera",
+    "outside image",
+    "box rejected",
+    "dropped by legacy rule",
+)
 
 
 def label_matrices(R_head, cam_R) -> np.ndarray:
@@ -114,8 +122,15 @@ def legacy_whenet_labels(R_head, cam_R):
     return pyr, ok1 | ok2
 
 
-def fit_faces(points, confidence=None, pairs=None, *, conf_min: float | None = None,
-              min_pair_count: int | None = None, max_rmse: float | None = DEFAULT_MAX_RMSE) -> dict:
+def fit_faces(
+    points,
+    confidence=None,
+    pairs=None,
+    *,
+    conf_min: float | None = None,
+    min_pair_count: int | None = None,
+    max_rmse: float | None = DEFAULT_MAX_RMSE,
+) -> dict:
     """Fit WHENet's reference head to many faces and gate the fits.
 
     Parameters
@@ -181,8 +196,9 @@ def fit_faces(points, confidence=None, pairs=None, *, conf_min: float | None = N
     return fit
 
 
-def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy: bool = False,
-                  landmarks=None, frame: str = "camera") -> dict:
+def relabel_views(
+    fit: dict, face, cam: dict, system, *, preset="whenet", legacy: bool = False, landmarks=None, frame: str = "camera"
+) -> dict:
     """Labels, boxes and 2-D landmarks of (face, camera) views.
 
     Parameters
@@ -221,8 +237,18 @@ def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy
 
     face = np.asarray(face, dtype=np.intp)
     Rh = fit["R"][face]
-    box = helmet_boxes(fit["scale"][face], Rh, fit["t"][face], cam["K"], cam["dist"], cam["R"], cam["t"],
-                       cam["width"], cam["height"], preset=preset)
+    box = helmet_boxes(
+        fit["scale"][face],
+        Rh,
+        fit["t"][face],
+        cam["K"],
+        cam["dist"],
+        cam["R"],
+        cam["t"],
+        cam["width"],
+        cam["height"],
+        preset=preset,
+    )
     reason = fit["reason"][face].copy()
     detail = fit["detail"][face].copy()
     face_ok = reason == ""
@@ -237,8 +263,9 @@ def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy
 
         off = np.asarray(helmet_preset(preset).offset, dtype=np.float64)
         world = fit["scale"][face, None] * (Rh @ off) + fit["t"][face]
-        centre = np.einsum("nij,nj->ni", np.broadcast_to(cam["R"], (len(face), 3, 3)), world) \
-            + np.broadcast_to(np.asarray(cam["t"], dtype=np.float64).reshape(-1, 3), (len(face), 3))
+        centre = np.einsum("nij,nj->ni", np.broadcast_to(cam["R"], (len(face), 3, 3)), world) + np.broadcast_to(
+            np.asarray(cam["t"], dtype=np.float64).reshape(-1, 3), (len(face), 3)
+        )
         A, out["ray_angle"] = camera_to_crop_labels(A, centre)
         out["A"] = A
     elif frame != "camera":
@@ -265,8 +292,9 @@ def relabel_views(fit: dict, face, cam: dict, system, *, preset="whenet", legacy
         # blocks of views keep the temporaries small enough to stay in cache
         for s in range(0, len(face), VIEW_BLOCK):
             sl = slice(s, s + VIEW_BLOCK)
-            b_uv, z = project_points(landmarks[face[sl]], cam["K"][sl, None], cam["dist"][sl, None],
-                                     cam["R"][sl, None], cam["t"][sl, None])
+            b_uv, z = project_points(
+                landmarks[face[sl]], cam["K"][sl, None], cam["dist"][sl, None], cam["R"][sl, None], cam["t"][sl, None]
+            )
             b_uv[z <= 0] = np.nan
             uv[sl] = b_uv
         out["lm2d"] = uv
@@ -308,16 +336,19 @@ def view_label_columns(views: dict, fit: dict, fit_index, legacy: bool) -> dict:
     return cols
 
 
-def summary_tail(legacy: bool, dropped: int, considered: int, out_of_range: int, gimbal: int, sysname: str,
-                 unit: str, dropper: str) -> list:
+def summary_tail(
+    legacy: bool, dropped: int, considered: int, out_of_range: int, gimbal: int, sysname: str, unit: str, dropper: str
+) -> list:
     """The closing summary lines shared by the relabel pipelines (legacy share, range, lock)."""
     lines = []
     if legacy:
         share = 100.0 * dropped / considered if considered else 0.0
         lines.append(f"WHENet's legacy rule dropped {dropped} of {considered} {unit} ({share:.1f}%)")
     if out_of_range:
-        lines.append(f"{out_of_range} labels lie outside {sysname}'s declared range "
-                     f"(for whenet: no triple with |pitch| < 90 and |roll| < 90; {dropper} would drop them)")
+        lines.append(
+            f"{out_of_range} labels lie outside {sysname}'s declared range "
+            f"(for whenet: no triple with |pitch| < 90 and |roll| < 90; {dropper} would drop them)"
+        )
     if gimbal:
         lines.append(f"{gimbal} labels are within the gimbal-lock tolerance (see gimbal_lock)")
     return lines

@@ -6,6 +6,7 @@ Every file is written atomically (:class:`hpe_cli.io.writers.AtomicFile`).
 Scatter plots show at most :data:`MAX_POINTS` of those rows (a fixed-seed sample); bin medians, the CDF and
 the histograms use every row handed in. The report's numbers always use all pairs.
 """
+
 from __future__ import annotations
 
 import html
@@ -16,8 +17,12 @@ import numpy as np
 from ..io.writers import AtomicFile
 
 MAX_POINTS = 20_000
-EVAL_PLOT_FILES = {"error_vs_yaw": "error_vs_yaw.png", "geodesic_cdf": "geodesic_cdf.png",
-                   "error_hist": "error_hist.png", "html": "index.html"}
+EVAL_PLOT_FILES = {
+    "error_vs_yaw": "error_vs_yaw.png",
+    "geodesic_cdf": "geodesic_cdf.png",
+    "error_hist": "error_hist.png",
+    "html": "index.html",
+}
 
 
 def eval_plot_files(folder) -> dict:
@@ -56,7 +61,7 @@ def _bin_medians(x, y, edges):
     si, sy = idx[order], y[order]
     bounds = np.searchsorted(si, np.arange(len(edges)))
     for k in range(len(edges) - 1):
-        seg = sy[bounds[k]:bounds[k + 1]]
+        seg = sy[bounds[k] : bounds[k + 1]]
         if seg.size:
             centres.append(0.5 * (edges[k] + edges[k + 1]))
             med.append(float(np.median(seg)))
@@ -85,13 +90,20 @@ def write_eval_plots(folder, rows, report: dict, gt_system, overwrite: bool = Fa
     edges = np.linspace(lo, hi, max(2, int(round((hi - lo) / 5.0)) + 1))
 
     fig = Figure(figsize=(11, 7))
-    series = [("geodesic", rows.geodesic)] + [(f"{a} error (wrapped)", rows.mae_wrapped[:, k])
-                                              for k, a in enumerate(("pitch", "yaw", "roll"))]
+    series = [("geodesic", rows.geodesic)] + [
+        (f"{a} error (wrapped)", rows.mae_wrapped[:, k]) for k, a in enumerate(("pitch", "yaw", "roll"))
+    ]
     for k, (name, err) in enumerate(series):
         ax = fig.add_subplot(2, 2, k + 1)
         if n:
-            ax.scatter(yaw[pick], err[pick], s=(3 if len(pick) > 2000 else 14), alpha=(0.3 if len(pick) > 2000 else 0.7),
-                       color="#3b6ea8", linewidths=0)
+            ax.scatter(
+                yaw[pick],
+                err[pick],
+                s=(3 if len(pick) > 2000 else 14),
+                alpha=(0.3 if len(pick) > 2000 else 0.7),
+                color="#3b6ea8",
+                linewidths=0,
+            )
             c, m = _bin_medians(yaw, err, edges)
             ax.plot(c, m, color="#c0392b", linewidth=1.5, label="median per 5-degree bin")
             ax.legend(fontsize=8, loc="upper left")
@@ -153,18 +165,36 @@ def _page(report: dict, paths: dict) -> str:
         mrows.append(f"<tr><th>{name}</th><td>" + ", ".join(f"{k} {_fmt(v)}" for k, v in block.items()) + "</td></tr>")
     prows = []
     for name, p in report.get("protocols", {}).items():
-        prows.append("<tr>" + "".join(f"<td>{_fmt(x)}</td>" for x in
-                                      (name, p.get("n"), p.get("dropped"), p.get("pitch"), p.get("yaw"),
-                                       p.get("roll"), p.get("mean"), p.get("source"),
-                                       "; ".join(p.get("notes", [])))) + "</tr>")
-    imgs = "\n".join(f'<figure><img src="{html.escape(paths[k].name)}" alt="{k}"><figcaption>{k}</figcaption></figure>'
-                     for k in ("error_vs_yaw", "geodesic_cdf", "error_hist"))
+        prows.append(
+            "<tr>"
+            + "".join(
+                f"<td>{_fmt(x)}</td>"
+                for x in (
+                    name,
+                    p.get("n"),
+                    p.get("dropped"),
+                    p.get("pitch"),
+                    p.get("yaw"),
+                    p.get("roll"),
+                    p.get("mean"),
+                    p.get("source"),
+                    "; ".join(p.get("notes", [])),
+                )
+            )
+            + "</tr>"
+        )
+    imgs = "\n".join(
+        f'<figure><img src="{html.escape(paths[k].name)}" alt="{k}"><figcaption>{k}</figcaption></figure>'
+        for k in ("error_vs_yaw", "geodesic_cdf", "error_hist")
+    )
     sysline = html.escape(f"pred system {report['systems']['pred']}, GT system {report['systems']['gt']}")
     al = report.get("align", {})
     align = ""
     if al.get("method") == "mean":
-        align = f"<p>aligned: constant offset of {al['offset_deg']:.3f} degrees removed " \
-                f"({html.escape(', '.join(f'{k} {v:.3f}' for k, v in al['offset_angles'].items()))})</p>"
+        align = (
+            f"<p>aligned: constant offset of {al['offset_deg']:.3f} degrees removed "
+            f"({html.escape(', '.join(f'{k} {v:.3f}' for k, v in al['offset_angles'].items()))})</p>"
+        )
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>hpe evaluate</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:90em}} table{{border-collapse:collapse;margin:1em 0}}
@@ -172,9 +202,9 @@ th,td{{border:1px solid #ccc;padding:.2em .6em;text-align:left}}
 figure{{display:inline-block;margin:.5em}} img{{max-width:60em}}</style></head>
 <body><h1>hpe evaluate</h1><p>{sysline}</p>{align}
 <table>{counts}</table>
-<h2>Metrics (degrees; frobenius unitless)</h2><table>{''.join(mrows)}</table>
+<h2>Metrics (degrees; frobenius unitless)</h2><table>{"".join(mrows)}</table>
 <h2>Protocols</h2><table><tr><th>protocol</th><th>n</th><th>dropped</th><th>pitch</th><th>yaw</th><th>roll</th>
-<th>mean</th><th>source</th><th>notes</th></tr>{''.join(prows)}</table>
+<th>mean</th><th>source</th><th>notes</th></tr>{"".join(prows)}</table>
 {imgs}
 </body></html>
 """

@@ -7,6 +7,7 @@ rows (with the pictures of GT and prediction drawn on the face when the
 caller supplies them). Figures and pictures are embedded as data URIs, so the
 page is one file; it is written atomically.
 """
+
 from __future__ import annotations
 
 import base64
@@ -56,12 +57,20 @@ def _counts(result) -> str:
 def _metrics(m) -> str:
     rows = []
     g = m["geodesic"]
-    rows.append(["geodesic", "deg", _f(g["mean"]), f"median {_f(g['median'])}, p90 {_f(g['p90'])}, p95 "
-                 f"{_f(g['p95'])}, max {_f(g['max'])}; within 5/10/15/30 deg: "
-                 + " / ".join(_f(g[f"within_{t}"]) for t in (5, 10, 15, 30))])
+    rows.append(
+        [
+            "geodesic",
+            "deg",
+            _f(g["mean"]),
+            f"median {_f(g['median'])}, p90 {_f(g['p90'])}, p95 "
+            f"{_f(g['p95'])}, max {_f(g['max'])}; within 5/10/15/30 deg: "
+            + " / ".join(_f(g[f"within_{t}"]) for t in (5, 10, 15, 30)),
+        ]
+    )
     mv = m["maev"]
-    rows.append(["maev (axis angles)", "deg", _f(mv["mean"]), ", ".join(f"{a} {_f(mv[a])}" for a in
-                                                                   ("left", "down", "front"))])
+    rows.append(
+        ["maev (axis angles)", "deg", _f(mv["mean"]), ", ".join(f"{a} {_f(mv[a])}" for a in ("left", "down", "front"))]
+    )
     rows.append(["frobenius ||I - P G<sup>T</sup>||<sub>F</sub>", "unitless", _f(m["frobenius"]["mean"]), ""])
     for k in ("mae_wrapped", "mae_best_of_two"):
         e = m[k]
@@ -91,24 +100,59 @@ def _protocols(protocols) -> str:
         rx = p.get("re_expressed")
         rxs = ", ".join(f"{s} {_f(v)}" for s, v in rx.items()) if rx else "&ndash;"
         notes = "".join(f'<div class="note">{html.escape(x)}</div>' for x in p.get("notes", []))
-        rows.append([f"<b>{html.escape(name)}</b>", html.escape(unit), *ang, mean, _f(p.get("n")),
-                     _f(p.get("dropped")), rxs, _extras(p),
-                     f'<code>{html.escape(p.get("source", ""))}</code>{notes}'])
-    return _table(["protocol", "unit", "pitch", "yaw", "roll", "mean", "n", "dropped", "re-expressed", "extras",
-                   "source (repo@commit file:lines)"], rows, "protocols")
+        rows.append(
+            [
+                f"<b>{html.escape(name)}</b>",
+                html.escape(unit),
+                *ang,
+                mean,
+                _f(p.get("n")),
+                _f(p.get("dropped")),
+                rxs,
+                _extras(p),
+                f"<code>{html.escape(p.get('source', ''))}</code>{notes}",
+            ]
+        )
+    return _table(
+        [
+            "protocol",
+            "unit",
+            "pitch",
+            "yaw",
+            "roll",
+            "mean",
+            "n",
+            "dropped",
+            "re-expressed",
+            "extras",
+            "source (repo@commit file:lines)",
+        ],
+        rows,
+        "protocols",
+    )
 
 
 def _group_table(label, groups, protocols) -> str:
     names = list(protocols)
-    head = [html.escape(label), "n", "geodesic mean (deg)", "median", "p90", "mae_wrapped (deg)", "maev (deg)"] + \
-        [f"{html.escape(n)} ({'unitless' if protocols[n].get('units') == 'unitless' else 'deg'})" for n in names]
+    head = [html.escape(label), "n", "geodesic mean (deg)", "median", "p90", "mae_wrapped (deg)", "maev (deg)"] + [
+        f"{html.escape(n)} ({'unitless' if protocols[n].get('units') == 'unitless' else 'deg'})" for n in names
+    ]
     rows = []
     groups = list(groups)
     for key, s in groups[:MAX_GROUPS]:
         g = s["metrics"]["geodesic"]
-        rows.append([html.escape(str(key)), _f(s["n"]), _f(g["mean"]), _f(g["median"]), _f(g["p90"]),
-                     _f(s["metrics"]["mae_wrapped"]["mean"]), _f(s["metrics"]["maev"]["mean"])] +
-                    [_f(s["protocols"][n].get("mean")) for n in names])
+        rows.append(
+            [
+                html.escape(str(key)),
+                _f(s["n"]),
+                _f(g["mean"]),
+                _f(g["median"]),
+                _f(g["p90"]),
+                _f(s["metrics"]["mae_wrapped"]["mean"]),
+                _f(s["metrics"]["maev"]["mean"]),
+            ]
+            + [_f(s["protocols"][n].get("mean")) for n in names]
+        )
     more = len(groups) - MAX_GROUPS
     note = f"<p class='note'>{more:,} more groups: see the JSON report</p>" if more > 0 else ""
     return _table(head, rows, "groups") + note
@@ -160,10 +204,15 @@ def _figures(sample, gt_system_name) -> str:
     ax.legend()
     ax.set_title("per-angle error histogram")
     figs.append(("per-angle errors", _png(fig)))
-    note = "" if getattr(sample, "step", 1) == 1 else \
-        f"<p class='note'>plots drawn from every {sample.step}-th pair ({sample.n:,} pairs); numbers use all pairs</p>"
-    return note + "".join(f'<figure><img src="{src}" alt="{html.escape(t)}"><figcaption>{html.escape(t)}'
-                          f'</figcaption></figure>' for t, src in figs)
+    note = (
+        ""
+        if getattr(sample, "step", 1) == 1
+        else f"<p class='note'>plots drawn from every {sample.step}-th pair ({sample.n:,} pairs); numbers use all pairs</p>"
+    )
+    return note + "".join(
+        f'<figure><img src="{src}" alt="{html.escape(t)}"><figcaption>{html.escape(t)}</figcaption></figure>'
+        for t, src in figs
+    )
 
 
 def _worst(frame, pictures) -> str:
@@ -171,23 +220,67 @@ def _worst(frame, pictures) -> str:
     if frame is None or not len(frame):
         return "<p>no rows</p>"
     cols = list(frame.columns)
-    keys = [c for c in cols if c not in {"gt_pitch", "gt_yaw", "gt_roll", "pred_pitch", "pred_yaw", "pred_roll",
-                                         "err_pitch", "err_yaw", "err_roll", "geodesic", "maev_left", "maev_down",
-                                         "maev_front", "frobenius", "image_path", "pred_rotation_distance",
-                                         "bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "size"}]
-    head = ["#"] + [html.escape(k) for k in keys] + ["GT p / y / r (deg)", "pred p / y / r (deg)",
-                                                     "err p / y / r (deg)", "geodesic (deg)", "frobenius (unitless)",
-                                                     "picture"]
+    keys = [
+        c
+        for c in cols
+        if c
+        not in {
+            "gt_pitch",
+            "gt_yaw",
+            "gt_roll",
+            "pred_pitch",
+            "pred_yaw",
+            "pred_roll",
+            "err_pitch",
+            "err_yaw",
+            "err_roll",
+            "geodesic",
+            "maev_left",
+            "maev_down",
+            "maev_front",
+            "frobenius",
+            "image_path",
+            "pred_rotation_distance",
+            "bbox_x",
+            "bbox_y",
+            "bbox_w",
+            "bbox_h",
+            "tdx",
+            "tdy",
+            "size",
+        }
+    ]
+    head = (
+        ["#"]
+        + [html.escape(k) for k in keys]
+        + [
+            "GT p / y / r (deg)",
+            "pred p / y / r (deg)",
+            "err p / y / r (deg)",
+            "geodesic (deg)",
+            "frobenius (unitless)",
+            "picture",
+        ]
+    )
     rows = []
     for i in range(len(frame)):
         r = frame.iloc[i]
         pic = pictures[i] if pictures and i < len(pictures) and pictures[i] else None
-        img = f'<img class="pic" src="{pic}" alt="row {i + 1}">' if pic else \
-            (f"<span class='note'>{html.escape(str(r['image_path']))}</span>" if "image_path" in cols and
-             r["image_path"] else "&ndash;")
-        rows.append([str(i + 1)] + [_f(r[k]) for k in keys] +
-                    [" / ".join(_f(float(r[f"{s}_{a}"]), 1) for a in ANGLES) for s in ("gt", "pred", "err")] +
-                    [f"<b>{_f(float(r['geodesic']))}</b>", _f(float(r["frobenius"]), 4), img])
+        img = (
+            f'<img class="pic" src="{pic}" alt="row {i + 1}">'
+            if pic
+            else (
+                f"<span class='note'>{html.escape(str(r['image_path']))}</span>"
+                if "image_path" in cols and r["image_path"]
+                else "&ndash;"
+            )
+        )
+        rows.append(
+            [str(i + 1)]
+            + [_f(r[k]) for k in keys]
+            + [" / ".join(_f(float(r[f"{s}_{a}"]), 1) for a in ANGLES) for s in ("gt", "pred", "err")]
+            + [f"<b>{_f(float(r['geodesic']))}</b>", _f(float(r["frobenius"]), 4), img]
+        )
     return _table(head, rows, "worst")
 
 
@@ -202,43 +295,69 @@ figure{display:inline-block;margin:.4em} figure img{max-width:36em}"""
 
 def page_html(result: dict, worst=None, pictures=None, sample=None) -> str:
     """The page as a string (see the module docstring)."""
-    sysline = (f"predictions <code>{html.escape(result['inputs']['pred'])}</code> ({html.escape(result['systems']['pred'])})"
-               f" against ground truth <code>{html.escape(result['inputs']['gt'])}</code> "
-               f"({html.escape(result['systems']['gt'])}); key: {html.escape(str(result['inputs']['key']))}, "
-               f"{html.escape(result['inputs'].get('paired', ''))}")
+    sysline = (
+        f"predictions <code>{html.escape(result['inputs']['pred'])}</code> ({html.escape(result['systems']['pred'])})"
+        f" against ground truth <code>{html.escape(result['inputs']['gt'])}</code> "
+        f"({html.escape(result['systems']['gt'])}); key: {html.escape(str(result['inputs']['key']))}, "
+        f"{html.escape(result['inputs'].get('paired', ''))}"
+    )
     al = result.get("align", {})
     align = ""
     if al.get("method") == "mean":
-        align = (f"<p>aligned (--align mean, {html.escape(al.get('estimate', ''))}): removed "
-                 f"{al['offset_deg']:.3f} deg (" + ", ".join(f"{k} {v:.3f}" for k, v in al["offset_angles"].items())
-                 + f" in {html.escape(al['gt_system'])})</p>")
-    parts = [f"<h1>hpe evaluate</h1><p>{sysline}</p>{align}", "<h2>Rows</h2>", _counts(result),
-             "<h2>Metrics</h2>", _metrics(result["metrics"]),
-             ("<h2>Protocols</h2><p class='note'>each reproduces its peer's current evaluation code, named with "
-             "repo@commit file:lines; raw-angle protocols compare the angles as written</p>"),
-             _protocols(result.get("protocols", {}))]
+        align = (
+            f"<p>aligned (--align mean, {html.escape(al.get('estimate', ''))}): removed "
+            f"{al['offset_deg']:.3f} deg ("
+            + ", ".join(f"{k} {v:.3f}" for k, v in al["offset_angles"].items())
+            + f" in {html.escape(al['gt_system'])})</p>"
+        )
+    parts = [
+        f"<h1>hpe evaluate</h1><p>{sysline}</p>{align}",
+        "<h2>Rows</h2>",
+        _counts(result),
+        "<h2>Metrics</h2>",
+        _metrics(result["metrics"]),
+        (
+            "<h2>Protocols</h2><p class='note'>each reproduces its peer's current evaluation code, named with "
+            "repo@commit file:lines; raw-angle protocols compare the angles as written</p>"
+        ),
+        _protocols(result.get("protocols", {})),
+    ]
     if result.get("by"):
         by = result["by"]
-        parts += [f"<h2>By {html.escape(by['column'])}</h2>",
-                  _group_table(by["column"], by["groups"].items(), result["protocols"])]
+        parts += [
+            f"<h2>By {html.escape(by['column'])}</h2>",
+            _group_table(by["column"], by["groups"].items(), result["protocols"]),
+        ]
     if result.get("yaw_bins"):
-        parts += ["<h2>By GT yaw</h2>",
-                  _group_table("GT yaw (deg)", [(f"[{b['lo']:g}, {b['hi']:g})", b) for b in result["yaw_bins"]],
-                               result["protocols"])]
+        parts += [
+            "<h2>By GT yaw</h2>",
+            _group_table(
+                "GT yaw (deg)", [(f"[{b['lo']:g}, {b['hi']:g})", b) for b in result["yaw_bins"]], result["protocols"]
+            ),
+        ]
     figs = _figures(sample, result["systems"]["gt"])
     if figs:
         parts += ["<h2>Plots</h2>", figs]
     if worst is not None:
-        parts += [f"<h2>Worst {len(worst)} rows (largest geodesic error)</h2>",
-                  "<p class='note'>angles in the GT system; pictures: GT and prediction drawn on the face</p>"
-                  if pictures and any(pictures) else "", _worst(worst, pictures)]
+        parts += [
+            f"<h2>Worst {len(worst)} rows (largest geodesic error)</h2>",
+            "<p class='note'>angles in the GT system; pictures: GT and prediction drawn on the face</p>"
+            if pictures and any(pictures)
+            else "",
+            _worst(worst, pictures),
+        ]
     notes = result.get("notes", [])
     if notes or result.get("rejects"):
-        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes) +
-                     "".join(f"<li>rejected: {html.escape(k)}: {v}</li>" for k, v in result.get("rejects", {}).items())
-                     + "</ul>")
-    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>hpe evaluate</title>'
-            f"<style>{CSS}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
+        parts.append(
+            "<h2>Notes</h2><ul>"
+            + "".join(f"<li>{html.escape(n)}</li>" for n in notes)
+            + "".join(f"<li>rejected: {html.escape(k)}: {v}</li>" for k, v in result.get("rejects", {}).items())
+            + "</ul>"
+        )
+    return (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>hpe evaluate</title>'
+        f"<style>{CSS}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n"
+    )
 
 
 def write_page(path, result: dict, worst=None, *, overwrite: bool = False, plots=None, pictures=None) -> None:

@@ -1,4 +1,5 @@
 """The terminal summary of ``hpe evaluate``: the same content as the HTML page, as aligned text lines."""
+
 from __future__ import annotations
 
 ANGLES = ("pitch", "yaw", "roll")
@@ -15,27 +16,34 @@ def _v(x, w=8, d=3):
 
 def _counts(result) -> str:
     n = result["n"]
-    line = (f"pairs {n['pairs']} of {n['gt']} GT rows ({n['pred']} predictions): missing {n['missing']}, "
-            f"invalid {n['invalid']}, unmatched predictions {n.get('unmatched_pred', 0)}")
+    line = (
+        f"pairs {n['pairs']} of {n['gt']} GT rows ({n['pred']} predictions): missing {n['missing']}, "
+        f"invalid {n['invalid']}, unmatched predictions {n.get('unmatched_pred', 0)}"
+    )
     if n.get("unreadable"):
         line += f", unreadable {n['unreadable']}"
     if n.get("orthonormalized") is not None:
         line += f", orthonormalized {n['orthonormalized']}"
     inp = result.get("inputs", {})
     origin = result.get("system_origin") or {k: v for k, v in result["systems"].items()}
-    return line + (f"; systems pred {origin['pred']}, gt {origin['gt']}; key "
-                   f"{inp.get('key', '?')} ({inp.get('paired', '')})")
+    return line + (
+        f"; systems pred {origin['pred']}, gt {origin['gt']}; key {inp.get('key', '?')} ({inp.get('paired', '')})"
+    )
 
 
 def _metrics(m) -> list:
     g = m["geodesic"]
-    out = [f"{'metric':<17}{'unit':<9}{'pitch':>8}{'yaw':>8}{'roll':>8}{'mean':>8}   detail",
-           f"{'geodesic':<17}{'deg':<9}{'':>24}{_v(g['mean'])}   median {_v(g['median'], 0)}, p90 {_v(g['p90'], 0)}, "
-           f"p95 {_v(g['p95'], 0)}, max {_v(g['max'], 0)}; within 5/10/15/30: "
-           + "/".join(_v(g[f"within_{t}"], 0) for t in (5, 10, 15, 30))]
+    out = [
+        f"{'metric':<17}{'unit':<9}{'pitch':>8}{'yaw':>8}{'roll':>8}{'mean':>8}   detail",
+        f"{'geodesic':<17}{'deg':<9}{'':>24}{_v(g['mean'])}   median {_v(g['median'], 0)}, p90 {_v(g['p90'], 0)}, "
+        f"p95 {_v(g['p95'], 0)}, max {_v(g['max'], 0)}; within 5/10/15/30: "
+        + "/".join(_v(g[f"within_{t}"], 0) for t in (5, 10, 15, 30)),
+    ]
     mv = m["maev"]
-    out.append(f"{'maev':<17}{'deg':<9}{'':>24}{_v(mv['mean'])}   left {_v(mv['left'], 0)}, down "
-               f"{_v(mv['down'], 0)}, front {_v(mv['front'], 0)}")
+    out.append(
+        f"{'maev':<17}{'deg':<9}{'':>24}{_v(mv['mean'])}   left {_v(mv['left'], 0)}, down "
+        f"{_v(mv['down'], 0)}, front {_v(mv['front'], 0)}"
+    )
     out.append(f"{'frobenius':<17}{'unitless':<9}{'':>24}{_v(m['frobenius']['mean'], 8, 4)}   ||I - P G^T||_F")
     for k in ("mae_wrapped", "mae_best_of_two"):
         e = m[k]
@@ -64,8 +72,10 @@ def _protocols(protocols) -> list:
     for name, p in protocols.items():
         unit = p.get("units", "deg")
         d = 4 if unit == "unitless" else 3
-        out.append(f"{name:<17}{unit:<9}{_v(p.get('pitch'))}{_v(p.get('yaw'))}{_v(p.get('roll'))}"
-                   f"{_v(p.get('mean'), 8, d)}{p['n']:>9}{p['dropped']:>9}   {_extras(p)}")
+        out.append(
+            f"{name:<17}{unit:<9}{_v(p.get('pitch'))}{_v(p.get('yaw'))}{_v(p.get('roll'))}"
+            f"{_v(p.get('mean'), 8, d)}{p['n']:>9}{p['dropped']:>9}   {_extras(p)}"
+        )
         out.append(f"{'':<17}source {p.get('source', '')}")
     return out
 
@@ -73,15 +83,18 @@ def _protocols(protocols) -> list:
 def _groups(title, groups, protocols) -> list:
     names = list(protocols)
     w = max([len(title)] + [len(str(k)) for k, _ in groups] + [6]) + 2
-    head = f"{title:<{w}}{'n':>9}{'geo mean':>10}{'median':>9}{'p90':>9}{'mae_wr':>9}" + \
-        "".join(f"{n[:10]:>11}" for n in names)
+    head = f"{title:<{w}}{'n':>9}{'geo mean':>10}{'median':>9}{'p90':>9}{'mae_wr':>9}" + "".join(
+        f"{n[:10]:>11}" for n in names
+    )
     out = [head]
     more = len(groups) - MAX_GROUPS
     for k, s in groups[:MAX_GROUPS]:
         g = s["metrics"]["geodesic"]
-        out.append(f"{k!s:<{w}}{s['n']:>9}{_v(g['mean'], 10)}{_v(g['median'], 9)}{_v(g['p90'], 9)}"
-                   f"{_v(s['metrics']['mae_wrapped']['mean'], 9)}" +
-                   "".join(_v(s["protocols"][n].get("mean"), 11) for n in names))
+        out.append(
+            f"{k!s:<{w}}{s['n']:>9}{_v(g['mean'], 10)}{_v(g['median'], 9)}{_v(g['p90'], 9)}"
+            f"{_v(s['metrics']['mae_wrapped']['mean'], 9)}"
+            + "".join(_v(s["protocols"][n].get("mean"), 11) for n in names)
+        )
     if more > 0:
         out.append(f"... {more} more groups (all of them in --json and --report)")
     return out
@@ -93,9 +106,11 @@ def summary_lines(result: dict) -> list:
     al = result.get("align", {})
     if al.get("method") == "mean":
         a = al["offset_angles"]
-        lines.append(f"aligned (hpe chordal mean, not opal23's): removed a constant offset of {al['offset_deg']:.3f}"
-                     f" deg (pitch {a['pitch']:.3f}, yaw {a['yaw']:.3f}, roll {a['roll']:.3f} in {al['gt_system']});"
-                     f" geodesic mean before {al['before']['metrics']['geodesic']['mean'] or 0:.3f}")
+        lines.append(
+            f"aligned (hpe chordal mean, not opal23's): removed a constant offset of {al['offset_deg']:.3f}"
+            f" deg (pitch {a['pitch']:.3f}, yaw {a['yaw']:.3f}, roll {a['roll']:.3f} in {al['gt_system']});"
+            f" geodesic mean before {al['before']['metrics']['geodesic']['mean'] or 0:.3f}"
+        )
     lines += _metrics(result["metrics"])
     if result.get("protocols"):
         lines += _protocols(result["protocols"])
@@ -104,8 +119,7 @@ def summary_lines(result: dict) -> list:
         lines += _groups(result["by"]["column"], list(result["by"]["groups"].items()), result["protocols"])
     if result.get("yaw_bins"):
         lines.append("by GT yaw (degrees; dad3dheads unitless):")
-        lines += _groups("GT yaw", [(f"[{b['lo']:g},{b['hi']:g})", b) for b in result["yaw_bins"]],
-                         result["protocols"])
+        lines += _groups("GT yaw", [(f"[{b['lo']:g},{b['hi']:g})", b) for b in result["yaw_bins"]], result["protocols"])
     for note in result.get("notes", []):
         lines.append(f"note: {note}")
     if result.get("rejects"):

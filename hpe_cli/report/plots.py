@@ -5,6 +5,7 @@ table of any length is plotted in constant memory. Every file is staged in
 the run's output transaction (committed with the run's other outputs, or
 alone when there is none).
 """
+
 from __future__ import annotations
 
 import html
@@ -19,8 +20,13 @@ EDGES_1D = np.linspace(-180.0, 180.0, 361)
 #: coverage-map bin edges, degrees: 2-degree bins
 EDGES_2D = np.linspace(-180.0, 180.0, 181)
 
-PLOT_FILES = {"yaw": "yaw_hist.png", "pitch": "pitch_hist.png", "roll": "roll_hist.png",
-              "coverage": "yaw_pitch_coverage.png", "html": "index.html"}
+PLOT_FILES = {
+    "yaw": "yaw_hist.png",
+    "pitch": "pitch_hist.png",
+    "roll": "roll_hist.png",
+    "coverage": "yaw_pitch_coverage.png",
+    "html": "index.html",
+}
 
 
 class AngleHistograms:
@@ -63,8 +69,15 @@ def plot_files(folder) -> dict:
     return {k: folder / v for k, v in PLOT_FILES.items()}
 
 
-def write_plots(hist: AngleHistograms, folder, system, summary: dict, title: str = "hpe audit",
-                overwrite: bool = False, pictures=None) -> dict:
+def write_plots(
+    hist: AngleHistograms,
+    folder,
+    system,
+    summary: dict,
+    title: str = "hpe audit",
+    overwrite: bool = False,
+    pictures=None,
+) -> dict:
     """Write the three histograms, the coverage map and ``index.html``.
 
     Parameters
@@ -136,16 +149,22 @@ def _gallery(pictures) -> str:
     if not pictures or not (pictures.get("pictures") or pictures.get("missing")):
         return ""
     e = html.escape
-    parts = ["<h2>Flagged rows, drawn</h2>",
-             ("<p>The first rows of each check on their images: red points to the subject's left, green from "
-              "forehead to chin, blue out of the nose. Each picture links to its PNG.</p>")]
+    parts = [
+        "<h2>Flagged rows, drawn</h2>",
+        (
+            "<p>The first rows of each check on their images: red points to the subject's left, green from "
+            "forehead to chin, blue out of the nose. Each picture links to its PNG.</p>"
+        ),
+    ]
     by_check: dict = {}
     for p in pictures.get("pictures", []):
         by_check.setdefault(p["check"], []).append(p)
     for check, pics in by_check.items():
-        figs = "\n".join(f'<figure><a href="{e(p["path"])}"><img class="row" src="{e(p["path"])}" '
-                         f'alt="{e(p["caption"])}"></a><figcaption>{e(p["caption"])}</figcaption></figure>'
-                         for p in pics)
+        figs = "\n".join(
+            f'<figure><a href="{e(p["path"])}"><img class="row" src="{e(p["path"])}" '
+            f'alt="{e(p["caption"])}"></a><figcaption>{e(p["caption"])}</figcaption></figure>'
+            for p in pics
+        )
         parts.append(f'<h3 id="check-{e(check)}">{e(check)}</h3>\n{figs}')
     missing = pictures.get("missing", [])
     if missing:
@@ -162,8 +181,10 @@ def _page(title, summary, paths, pictures=None) -> str:
         return f'<a href="#check-{html.escape(str(k))}">{text}</a>' if k in drawn else text
 
     rows = "\n".join(f"<tr><th>{html.escape(str(k))}</th><td>{cell(k, v)}</td></tr>" for k, v in summary.items())
-    imgs = "\n".join(f'<figure><img src="{html.escape(paths[k].name)}" alt="{k}"><figcaption>{k}</figcaption></figure>'
-                     for k in ("yaw", "pitch", "roll", "coverage"))
+    imgs = "\n".join(
+        f'<figure><img src="{html.escape(paths[k].name)}" alt="{k}"><figcaption>{k}</figcaption></figure>'
+        for k in ("yaw", "pitch", "roll", "coverage")
+    )
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:75em}} table{{border-collapse:collapse}}

@@ -38,6 +38,7 @@ Every check answers one yes/no question per row. The names are the keys of
     earlier row; the first occurrence is not flagged. See
     :func:`duplicate_first`.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -67,8 +68,9 @@ def _range_mask(pyr, system: RotationSystem) -> np.ndarray:
     return outside | ~system.in_range(pyr)
 
 
-def audit_angles(pyr_deg, system, near_tol_deg: float = NEAR_GIMBAL_DEG,
-                 canonical_tol_deg: float = CANONICAL_TOL_DEG) -> dict:
+def audit_angles(
+    pyr_deg, system, near_tol_deg: float = NEAR_GIMBAL_DEG, canonical_tol_deg: float = CANONICAL_TOL_DEG
+) -> dict:
     """Check angle labels.
 
     Parameters
@@ -192,8 +194,14 @@ def duplicate_first(keys) -> np.ndarray:
     return first
 
 
-def audit_columns(cols, system, mode: str, near_tol_deg: float = NEAR_GIMBAL_DEG,
-                  canonical_tol_deg: float = CANONICAL_TOL_DEG, rotation_tol: float = ROTATION_TOL) -> dict:
+def audit_columns(
+    cols,
+    system,
+    mode: str,
+    near_tol_deg: float = NEAR_GIMBAL_DEG,
+    canonical_tol_deg: float = CANONICAL_TOL_DEG,
+    rotation_tol: float = ROTATION_TOL,
+) -> dict:
     """The checks of :func:`audit_angles` / :func:`audit_matrices` on label columns (structure of arrays).
 
     Parameters

@@ -1,4 +1,5 @@
 """Validation of rotation matrices. Nothing here "fixes" its input."""
+
 from __future__ import annotations
 
 import numpy as np

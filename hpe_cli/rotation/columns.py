@@ -3,6 +3,7 @@
 Pure numpy: the dataset readers build their tables with these, and :mod:`hpe_cli.io.layout` re-exports them
 with the rest of the table layout.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,5 @@
 """Conversion between rotation systems through the canonical 300W-LP matrix."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,8 +42,14 @@ def canonical_to_labels(A, target) -> Conversion:
     A = np.asarray(A, dtype=np.float64)
     n = A.shape[0]
     cols = soa_labels(soa.from_array(A), target, n)
-    return Conversion(np.stack(cols["primary"], -1), np.stack(cols["secondary"], -1),
-                      soa.to_array(cols["matrix"], n), cols["gimbal_lock"], cols["roundtrip_err"], A)
+    return Conversion(
+        np.stack(cols["primary"], -1),
+        np.stack(cols["secondary"], -1),
+        soa.to_array(cols["matrix"], n),
+        cols["gimbal_lock"],
+        cols["roundtrip_err"],
+        A,
+    )
 
 
 def soa_labels(A, target: RotationSystem, n: int) -> dict:
@@ -55,8 +62,13 @@ def soa_labels(A, target: RotationSystem, n: int) -> dict:
     R = target.soa_from_canonical(A)
     p1, p2, locked, _ = target.soa_to_angles(R)
     rebuilt = target.soa_to_canonical(target.soa_from_angles(*p1))
-    return {"primary": p1, "secondary": p2, "matrix": R, "gimbal_lock": locked,
-            "roundtrip_err": soa.frobenius(A, rebuilt) * np.ones(n)}
+    return {
+        "primary": p1,
+        "secondary": p2,
+        "matrix": R,
+        "gimbal_lock": locked,
+        "roundtrip_err": soa.frobenius(A, rebuilt) * np.ones(n),
+    }
 
 
 def convert_matrices(R, source, target) -> Conversion:

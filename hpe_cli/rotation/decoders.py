@@ -22,6 +22,7 @@ angles in role order ``(pitch, yaw, roll)``, degrees.
   solution with ``|pitch| < 90`` and ``|roll| < 90``; yaw wrapped only above
   180; rows with neither are returned as -999 and ``ok = False``).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -50,8 +51,9 @@ def _synergynet(A):
     # else-branch of the published code: z = 0; R20 == -1 -> x = pi/2, y = atan2(R01, R02);
     # otherwise (R20 == +1) x = -pi/2, y = atan2(-R01, -R02)
     x = np.where(lock_neg, np.pi / 2, np.where(lock_pos, -np.pi / 2, x))
-    y = np.where(lock_neg, np.arctan2(A[:, 0, 1], A[:, 0, 2]),
-                 np.where(lock_pos, np.arctan2(-A[:, 0, 1], -A[:, 0, 2]), y))
+    y = np.where(
+        lock_neg, np.arctan2(A[:, 0, 1], A[:, 0, 2]), np.where(lock_pos, np.arctan2(-A[:, 0, 1], -A[:, 0, 2]), y)
+    )
     z = np.where(lock_neg | lock_pos, 0.0, z)
     yaw, pitch, roll = x * _DEG, y * _DEG, z * _DEG
     pyr = np.stack([pitch, yaw, roll], -1)
@@ -104,14 +106,24 @@ def _directmhp(M):
 
 
 DECODERS = {
-    "synergynet": Decoder("synergynet", "choyingw/SynergyNet utils/inference.py (matrix2angle_corr)", "300w_lp",
-                          "SynergyNet matrix2angle_corr: yaw = asin(R20) with pitch/roll from another system's "
-                          "indices"),
-    "3ddfa_v2": Decoder("3ddfa_v2", "cleardusk/3DDFA_V2 utils/pose.py (matrix2angle)", "3ddfa_v2",
-                        "3DDFA_V2 matrix2angle: the 3ddfa_v2 split, roll forced to 0 when |R20| > 0.998"),
-    "directmhp": Decoder("directmhp", "hnuzhy/DirectMHP exps/CMU/hpe_utils.py (inverse_rotate_zyx, select_euler)",
-                         "whenet", "DirectMHP full-range decoder: both solutions, the first with |pitch|, |roll| < 90; "
-                         "lock at |M02| > 0.9999999"),
+    "synergynet": Decoder(
+        "synergynet",
+        "choyingw/SynergyNet utils/inference.py (matrix2angle_corr)",
+        "300w_lp",
+        "SynergyNet matrix2angle_corr: yaw = asin(R20) with pitch/roll from another system's indices",
+    ),
+    "3ddfa_v2": Decoder(
+        "3ddfa_v2",
+        "cleardusk/3DDFA_V2 utils/pose.py (matrix2angle)",
+        "3ddfa_v2",
+        "3DDFA_V2 matrix2angle: the 3ddfa_v2 split, roll forced to 0 when |R20| > 0.998",
+    ),
+    "directmhp": Decoder(
+        "directmhp",
+        "hnuzhy/DirectMHP exps/CMU/hpe_utils.py (inverse_rotate_zyx, select_euler)",
+        "whenet",
+        "DirectMHP full-range decoder: both solutions, the first with |pitch|, |roll| < 90; lock at |M02| > 0.9999999",
+    ),
 }
 _FUNCS = {"synergynet": _synergynet, "3ddfa_v2": _tddfa_v2, "directmhp": _directmhp}
 
@@ -136,8 +148,12 @@ def decode(name: str, A):
 def decoder_columns(name: str, A) -> dict:
     """``decoder_pitch, decoder_yaw, decoder_roll, decoder_ok`` columns for ``A``."""
     pyr, ok = decode(name, A)
-    return {"decoder_pitch": pyr[:, 0], "decoder_yaw": pyr[:, 1], "decoder_roll": pyr[:, 2],
-            "decoder_ok": ok.astype(bool)}
+    return {
+        "decoder_pitch": pyr[:, 0],
+        "decoder_yaw": pyr[:, 1],
+        "decoder_roll": pyr[:, 2],
+        "decoder_ok": ok.astype(bool),
+    }
 
 
 def decoder_errors(name: str, A):
@@ -210,11 +226,17 @@ class DecoderTally:
 
     def result(self) -> dict:
         d = self.decoder
-        out = {"decoder": d.name, "source": d.source, "reference_system": d.reference, "rows": self.rows,
-               "decoded": self.decoded, "not_decoded": self.rows - self.decoded,
-               "rows_off_by_more_than_0.01deg": self.off,
-               "note": "geodesic_deg: angle between the rotation and the one the printed angles denote in the "
-                       "reference system; d_*: differences from the reference system's exact angles (degrees)"}
+        out = {
+            "decoder": d.name,
+            "source": d.source,
+            "reference_system": d.reference,
+            "rows": self.rows,
+            "decoded": self.decoded,
+            "not_decoded": self.rows - self.decoded,
+            "rows_off_by_more_than_0.01deg": self.off,
+            "note": "geodesic_deg: angle between the rotation and the one the printed angles denote in the "
+            "reference system; d_*: differences from the reference system's exact angles (degrees)",
+        }
         for k in self.KEYS:
             out[k] = {"max": self.max[k], "mean": self.sum[k] / self.decoded if self.decoded else 0.0}
         return out

@@ -1,4 +1,5 @@
 """Distances between rotations (SPEC §9). Compare matrices, never angles."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -4,6 +4,7 @@ All functions take angles in radians (any shape ``S``) and return ``S + (3, 3)``
 arrays. They are right-handed and active: ``rx(a) @ v`` turns ``v`` by ``a``
 counter-clockwise about +x seen from +x. A left-handed turn is ``rx(-a)``.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -33,6 +33,7 @@ are decomposed with ``a = sigma * c`` (each half of the observable sum), as
 the method paper does. Callers flag rows inside their own, larger,
 ``gimbal_tol`` as locked.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -57,10 +58,6 @@ def parse_seq(seq: str) -> tuple[int, int, int]:
     if len(s) != 3 or any(ch not in _AXIS for ch in s) or s[0] == s[1] or s[1] == s[2]:
         raise ValueError(f"expected an Euler sequence such as 'xyz' or 'zxz', got {seq!r}")
     return _AXIS[s[0]], _AXIS[s[1]], _AXIS[s[2]]
-
-
-
-
 
 
 def _wrap(x, half):

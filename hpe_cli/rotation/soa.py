@@ -7,6 +7,7 @@ are the same in every row (the 0s and 1s of elemental rotations and of frame
 changes). Products skip zero terms and unit factors, so an elemental product
 or a signed-permutation frame change costs only the multiplications it needs.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -12,6 +12,7 @@ returns float64 arrays; matrices are active rotations ``(N, 3, 3)``.
   ``det = +1``.
 - **matrix4**: the rotation block ``M[:3, :3]`` of a 4x4 homogeneous matrix.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -54,9 +55,11 @@ def _soa_from_products(xx, yy, zz, xy, xz, yz, sx, sy, sz):
     """``I + [s]x + (symmetric part)`` as nested lists ``X[row][col]`` of 1-D arrays: the matrix both Rodrigues' formula
     (``s = sin(t) v / t``, products scaled by ``(1 - cos t) / t^2``) and the quaternion formula (``s = w v * 2/|q|^2``,
     products scaled by ``2/|q|^2``) reduce to."""
-    return [[1.0 - (yy + zz), xy - sz, xz + sy],
-            [xy + sz, 1.0 - (xx + zz), yz - sx],
-            [xz - sy, yz + sx, 1.0 - (xx + yy)]]
+    return [
+        [1.0 - (yy + zz), xy - sz, xz + sy],
+        [xy + sz, 1.0 - (xx + zz), yz - sx],
+        [xz - sy, yz + sx, 1.0 - (xx + yy)],
+    ]
 
 
 def _soa_to_array(X, shape):
@@ -111,8 +114,11 @@ def quaternion_to_matrix(q, order: str = "wxyz") -> np.ndarray:
     _check_order(order)
     q = _as_batch(q, 4, "quaternions")
     flat = q.reshape(-1, 4)
-    cols = (flat[:, 0], flat[:, 1], flat[:, 2], flat[:, 3]) if order == "wxyz" else \
-        (flat[:, 3], flat[:, 0], flat[:, 1], flat[:, 2])
+    cols = (
+        (flat[:, 0], flat[:, 1], flat[:, 2], flat[:, 3])
+        if order == "wxyz"
+        else (flat[:, 3], flat[:, 0], flat[:, 1], flat[:, 2])
+    )
     return _soa_to_array(quaternion_to_soa(*cols), q.shape[:-1])
 
 

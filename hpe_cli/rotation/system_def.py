@@ -27,6 +27,7 @@ columns, ``sixd_columns``). Their file column names are ``value_columns``
 (defaults per kind, renamed by a ``[columns]`` table). A system that stores no
 angles and declares no turns reports the 300W-LP angles of the same rotation.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -177,38 +178,52 @@ class RotationSystem:
                 continue
             B = np.asarray(F, dtype=float)
             if B.shape != (3, 3) or not np.isfinite(B).all() or not np.allclose(B @ B.T, np.eye(3), atol=1e-9):
-                raise SystemError_(f"system {self.name!r}: {key}: expected an orthonormal 3x3 matrix "
-                                   f"(det +1 or -1), got {_fmt(F)}")
+                raise SystemError_(
+                    f"system {self.name!r}: {key}: expected an orthonormal 3x3 matrix (det +1 or -1), got {_fmt(F)}"
+                )
         if np.linalg.det(self.B) * np.linalg.det(self.M) < 0:
-            raise SystemError_(f"system {self.name!r}: model_frame: expected det(frame) * det(model_frame) = +1 "
-                               f"(a proper rotation), got {np.linalg.det(self.B) * np.linalg.det(self.M):+.0f}")
+            raise SystemError_(
+                f"system {self.name!r}: model_frame: expected det(frame) * det(model_frame) = +1 "
+                f"(a proper rotation), got {np.linalg.det(self.B) * np.linalg.det(self.M):+.0f}"
+            )
         if len(self.turns) != 3 or sorted(t.angle for t in self.turns) != sorted(ROLES):
             raise SystemError_(f"system {self.name!r}: expected three turns, one each for pitch, yaw, roll")
         for t in self.turns:
             if t.axis not in ("x", "y", "z") or t.hand not in ("right", "left"):
                 raise SystemError_(f"system {self.name!r}: bad turn {t}: axis must be x/y/z, hand right/left")
         _euler.parse_seq(self.axes)
-        for attr, allowed in (("sequence", ("intrinsic", "extrinsic")), ("storage", ("active", "transposed")),
-                              ("units", ("degrees", "radians")), ("selection", SELECTIONS),
-                              ("storage_kind", STORAGE_KINDS), ("matrix_layout", MATRIX_LAYOUTS),
-                              ("quaternion_order", ("wxyz", "xyzw")), ("angle_frame", ("system", "canonical"))):
+        for attr, allowed in (
+            ("sequence", ("intrinsic", "extrinsic")),
+            ("storage", ("active", "transposed")),
+            ("units", ("degrees", "radians")),
+            ("selection", SELECTIONS),
+            ("storage_kind", STORAGE_KINDS),
+            ("matrix_layout", MATRIX_LAYOUTS),
+            ("quaternion_order", ("wxyz", "xyzw")),
+            ("angle_frame", ("system", "canonical")),
+        ):
             if getattr(self, attr) not in allowed:
-                raise SystemError_(f"system {self.name!r}: {attr}: expected one of {', '.join(allowed)}, "
-                                   f"got {getattr(self, attr)!r}")
+                raise SystemError_(
+                    f"system {self.name!r}: {attr}: expected one of {', '.join(allowed)}, got {getattr(self, attr)!r}"
+                )
         if sorted(self.order) != sorted(ROLES):
-            raise SystemError_(f"system {self.name!r}: order: expected a permutation of {', '.join(ROLES)}, "
-                               f"got {list(self.order)}")
+            raise SystemError_(
+                f"system {self.name!r}: order: expected a permutation of {', '.join(ROLES)}, got {list(self.order)}"
+            )
         g = self.gimbal_tol
         if not isinstance(g, (int, float)) or not np.isfinite(g) or g < 0 or g >= 1:
             raise SystemError_(f"system {self.name!r}: gimbal_tol: expected a number in [0, 1), got {g!r}")
         for role, rng in self.ranges.items():
             if role not in ROLES:
-                raise SystemError_(f"system {self.name!r}: ranges.{role}: expected a key among "
-                                   f"{', '.join(ROLES)}, got {role!r}")
+                raise SystemError_(
+                    f"system {self.name!r}: ranges.{role}: expected a key among {', '.join(ROLES)}, got {role!r}"
+                )
             lo, hi = rng
             if not (np.isfinite(lo) and np.isfinite(hi)) or lo >= hi:
-                raise SystemError_(f"system {self.name!r}: ranges.{role}: expected [low, high] with finite "
-                                   f"low < high (degrees), got [{lo!r}, {hi!r}]")
+                raise SystemError_(
+                    f"system {self.name!r}: ranges.{role}: expected [low, high] with finite "
+                    f"low < high (degrees), got [{lo!r}, {hi!r}]"
+                )
         try:
             from .storage import _check_pair
 
@@ -218,8 +233,10 @@ class RotationSystem:
         names = self.value_names
         for key, col in self.columns.items():
             if key not in names:
-                raise SystemError_(f"system {self.name!r}: columns.{key}: expected a key among "
-                                   f"{', '.join(names)} (storage_kind {self.storage_kind}), got {key!r}")
+                raise SystemError_(
+                    f"system {self.name!r}: columns.{key}: expected a key among "
+                    f"{', '.join(names)} (storage_kind {self.storage_kind}), got {key!r}"
+                )
             if not isinstance(col, str) or not col:
                 raise SystemError_(f"system {self.name!r}: columns.{key}: expected a column name, got {col!r}")
         vc = self.value_columns
@@ -299,9 +316,11 @@ class RotationSystem:
             norm = np.linalg.norm(v, axis=-1)
             bad = ~(np.abs(norm - 1.0) <= 1e-3)
             flag(bad, "not a unit quaternion (norm differs from 1 by more than 1e-3)")
-            R = st.quaternion_to_matrix(np.where(bad[:, None], [1.0, 0, 0, 0], v), "wxyz") \
-                if self.quaternion_order == "wxyz" else \
-                st.quaternion_to_matrix(np.where(bad[:, None], [0, 0, 0, 1.0], v), "xyzw")
+            R = (
+                st.quaternion_to_matrix(np.where(bad[:, None], [1.0, 0, 0, 0], v), "wxyz")
+                if self.quaternion_order == "wxyz"
+                else st.quaternion_to_matrix(np.where(bad[:, None], [0, 0, 0, 1.0], v), "xyzw")
+            )
         elif kind == "6d":
             R = st.sixd_to_matrix(v, self.sixd_columns)
             flag(~np.isfinite(R).all(axis=(1, 2)), "degenerate 6-D vector (zero or parallel columns)")
@@ -357,8 +376,12 @@ class RotationSystem:
         R = np.asarray(R, dtype=np.float64)
         shape = R.shape[:-2]
         p1, p2, locked, lock = self.soa_to_angles(_soa.from_array(R.reshape(-1, 3, 3)))
-        return (np.stack(p1, -1).reshape(shape + (3,)), np.stack(p2, -1).reshape(shape + (3,)),
-                locked.reshape(shape), lock.reshape(shape))
+        return (
+            np.stack(p1, -1).reshape(shape + (3,)),
+            np.stack(p2, -1).reshape(shape + (3,)),
+            locked.reshape(shape),
+            lock.reshape(shape),
+        )
 
     def to_canonical(self, R_stored) -> np.ndarray:
         """Map stored matrices to the canonical 300W-LP matrix ``A``."""
@@ -464,10 +487,14 @@ class RotationSystem:
         """The four defining parts (and storage details), in words."""
         turns = ", then ".join(f"{t.angle} about {t.axis} ({t.hand}-handed)" for t in self.turns)
         fw = self.frame_words()
-        rng = ", ".join(f"{r} [{lo:g}, {hi:g}]" for r, (lo, hi) in
-                        ((r, self.ranges.get(r, (-180, 180))) for r in ROLES))
-        hand = ("right-handed (det +1)" if self.proper_frame else
-                "LEFT-HANDED (det -1, improper; the system matrix B A B^T is still a proper rotation)")
+        rng = ", ".join(
+            f"{r} [{lo:g}, {hi:g}]" for r, (lo, hi) in ((r, self.ranges.get(r, (-180, 180))) for r in ROLES)
+        )
+        hand = (
+            "right-handed (det +1)"
+            if self.proper_frame
+            else "LEFT-HANDED (det -1, improper; the system matrix B A B^T is still a proper rotation)"
+        )
         frame = f"x: {fw['x']}; y: {fw['y']}; z: {fw['z']}; {hand}"
         if self.model_frame is not None:
             mw = self.frame_words(self.model_frame)
@@ -479,7 +506,7 @@ class RotationSystem:
             "axes": turns,
             "range": rng + f"; primary solution: {self.selection}",
             "order": f"{self.sequence} {self.axes.upper()}, "
-                     f"{'active' if self.storage == 'active' else 'transposed (passive)'} matrix",
+            f"{'active' if self.storage == 'active' else 'transposed (passive)'} matrix",
             "storage": self.storage_words(),
         }
         return out
@@ -495,11 +522,15 @@ class RotationSystem:
         if k == "rotvec":
             return f"rotation vector (axis * angle, radians), columns {cols}"
         if k == "quaternion":
-            return (f"unit quaternion, {'scalar first' if self.quaternion_order == 'wxyz' else 'scalar last'} "
-                    f"({self.quaternion_order}; written with w >= 0), columns {cols}")
+            return (
+                f"unit quaternion, {'scalar first' if self.quaternion_order == 'wxyz' else 'scalar last'} "
+                f"({self.quaternion_order}; written with w >= 0), columns {cols}"
+            )
         i, j = self.sixd_columns
-        return (f"6-D: matrix column {i} then column {j} (Gram-Schmidt on input, third column by cross product), "
-                f"columns {cols}")
+        return (
+            f"6-D: matrix column {i} then column {j} (Gram-Schmidt on input, third column by cross product), "
+            f"columns {cols}"
+        )
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -547,7 +578,9 @@ class RotationSystem:
         lines += [
             f'storage = "{self.storage}"',
             "order = [" + ", ".join(f'"{o}"' for o in self.order) + "]",
-            f'units = "{self.units}"', f'selection = "{self.selection}"', f"gimbal_tol = {self.gimbal_tol!r}",
+            f'units = "{self.units}"',
+            f'selection = "{self.selection}"',
+            f"gimbal_tol = {self.gimbal_tol!r}",
             f'storage_kind = "{self.storage_kind}"',
         ]
         if self.storage_kind == "matrix":

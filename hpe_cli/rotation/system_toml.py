@@ -7,6 +7,7 @@ every array and string, and integers within TOML's 64-bit range, so a huge numbe
 a huge array or a deeply nested value is one line, quickly, never a hang or an
 internal error.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -32,9 +33,29 @@ LIMITS = {"bytes": 1 << 20, "depth": 6, "items": 256, "chars": 20_000}
 _INT64 = (-(1 << 63), (1 << 63) - 1)
 
 
-_TOP_KEYS = {"name", "description", "notes", "source", "verified", "frame", "model_frame", "turns", "sequence",
-             "storage", "order", "units", "ranges", "selection", "gimbal_tol", "storage_kind", "matrix_layout",
-             "quaternion_order", "sixd_columns", "columns", "examples"}
+_TOP_KEYS = {
+    "name",
+    "description",
+    "notes",
+    "source",
+    "verified",
+    "frame",
+    "model_frame",
+    "turns",
+    "sequence",
+    "storage",
+    "order",
+    "units",
+    "ranges",
+    "selection",
+    "gimbal_tol",
+    "storage_kind",
+    "matrix_layout",
+    "quaternion_order",
+    "sixd_columns",
+    "columns",
+    "examples",
+}
 _TURN_KEYS = {"angle", "axis", "hand"}
 _EXAMPLE_KEYS = {"angles", "canonical_angles", "matrix", "values", "note"}
 
@@ -59,8 +80,11 @@ def _number(v):
 
 
 def _matrix3(v, where):
-    ok = isinstance(v, (list, tuple)) and len(v) == 3 and all(
-        isinstance(r, (list, tuple)) and len(r) == 3 and all(_number(x) for x in r) for r in v)
+    ok = (
+        isinstance(v, (list, tuple))
+        and len(v) == 3
+        and all(isinstance(r, (list, tuple)) and len(r) == 3 and all(_number(x) for x in r) for r in v)
+    )
     _expect(ok, where, "a 3x3 array of numbers", v)
     return tuple(tuple(float(x) for x in r) for r in v)
 
@@ -77,12 +101,29 @@ def system_from_dict(d: dict, source: str = "<dict>") -> RotationSystem:
     _expect(isinstance(d, dict), source, "a table of system keys", type(d).__name__)
     for key in d:
         if key not in _TOP_KEYS:
-            raise SystemError_(f"{source}: {key}: unknown key{_closest(key, _TOP_KEYS)}; expected one of "
-                               f"{', '.join(sorted(_TOP_KEYS))}")
-    _expect(isinstance(d.get("name"), str) and d.get("name", "").strip() != "", f"{source}: name",
-            "a non-empty string", d.get("name"))
-    for key in ("description", "notes", "source", "verified", "sequence", "storage", "units", "selection",
-                "storage_kind", "matrix_layout", "quaternion_order"):
+            raise SystemError_(
+                f"{source}: {key}: unknown key{_closest(key, _TOP_KEYS)}; expected one of "
+                f"{', '.join(sorted(_TOP_KEYS))}"
+            )
+    _expect(
+        isinstance(d.get("name"), str) and d.get("name", "").strip() != "",
+        f"{source}: name",
+        "a non-empty string",
+        d.get("name"),
+    )
+    for key in (
+        "description",
+        "notes",
+        "source",
+        "verified",
+        "sequence",
+        "storage",
+        "units",
+        "selection",
+        "storage_kind",
+        "matrix_layout",
+        "quaternion_order",
+    ):
         if key in d:
             _expect(isinstance(d[key], str), f"{source}: {key}", "a string", d[key])
     kind = d.get("storage_kind", "angles")
@@ -92,23 +133,39 @@ def system_from_dict(d: dict, source: str = "<dict>") -> RotationSystem:
 
     raw_turns = d.get("turns")
     if raw_turns is None:
-        _expect(kind != "angles", f"{source}: turns", "three [[turns]] tables (angle, axis, hand) for a system "
-                "that stores angles", None)
+        _expect(
+            kind != "angles",
+            f"{source}: turns",
+            "three [[turns]] tables (angle, axis, hand) for a system that stores angles",
+            None,
+        )
         turns, angle_frame, sequence = CANONICAL_TURNS, "canonical", "intrinsic"
-        _expect("sequence" not in d, f"{source}: sequence", "no sequence when there are no [[turns]]", d.get("sequence"))
+        _expect(
+            "sequence" not in d, f"{source}: sequence", "no sequence when there are no [[turns]]", d.get("sequence")
+        )
     else:
-        _expect(isinstance(raw_turns, list) and len(raw_turns) == 3 and all(isinstance(t, dict) for t in raw_turns),
-                f"{source}: turns", "three [[turns]] tables", raw_turns)
+        _expect(
+            isinstance(raw_turns, list) and len(raw_turns) == 3 and all(isinstance(t, dict) for t in raw_turns),
+            f"{source}: turns",
+            "three [[turns]] tables",
+            raw_turns,
+        )
         turns = []
         for n, t in enumerate(raw_turns):
             for key in t:
                 if key not in _TURN_KEYS:
-                    raise SystemError_(f"{source}: turns[{n}].{key}: unknown key{_closest(key, _TURN_KEYS)}; "
-                                       f"expected angle, axis, hand")
+                    raise SystemError_(
+                        f"{source}: turns[{n}].{key}: unknown key{_closest(key, _TURN_KEYS)}; "
+                        f"expected angle, axis, hand"
+                    )
             _expect(t.get("angle") in ROLES, f"{source}: turns[{n}].angle", "pitch, yaw or roll", t.get("angle"))
             axis = t.get("axis")
-            _expect(isinstance(axis, str) and axis.lower() in ("x", "y", "z"), f"{source}: turns[{n}].axis",
-                    "x, y or z", axis)
+            _expect(
+                isinstance(axis, str) and axis.lower() in ("x", "y", "z"),
+                f"{source}: turns[{n}].axis",
+                "x, y or z",
+                axis,
+            )
             hand = t.get("hand", "right")
             _expect(hand in ("right", "left"), f"{source}: turns[{n}].hand", "right or left", hand)
             turns.append(Turn(t["angle"], axis.lower(), hand))
@@ -117,8 +174,10 @@ def system_from_dict(d: dict, source: str = "<dict>") -> RotationSystem:
         try:
             _euler.parse_seq("".join(t.axis for t in turns))
         except ValueError:
-            raise SystemError_(f"{source}: turns: expected axes forming an Euler sequence (no axis twice in a row), "
-                               f"got {''.join(t.axis for t in turns)}") from None
+            raise SystemError_(
+                f"{source}: turns: expected axes forming an Euler sequence (no axis twice in a row), "
+                f"got {''.join(t.axis for t in turns)}"
+            ) from None
         turns, angle_frame, sequence = tuple(turns), "system", d.get("sequence", "intrinsic")
 
     ranges = {}
@@ -135,29 +194,54 @@ def system_from_dict(d: dict, source: str = "<dict>") -> RotationSystem:
         ranges[k] = (lo, hi)
 
     g = d.get("gimbal_tol", GIMBAL_TOL)
-    _expect(_number(g) and np.isfinite(g) and 0 <= g < 1, f"{source}: gimbal_tol",
-            "a number in [0, 1) (|cos| of the middle turn)", g)
+    _expect(
+        _number(g) and np.isfinite(g) and 0 <= g < 1,
+        f"{source}: gimbal_tol",
+        "a number in [0, 1) (|cos| of the middle turn)",
+        g,
+    )
     order = d.get("order", list(ROLES))
-    _expect(isinstance(order, list) and sorted(map(str, order)) == sorted(ROLES), f"{source}: order",
-            "a permutation of pitch, yaw, roll", order)
+    _expect(
+        isinstance(order, list) and sorted(map(str, order)) == sorted(ROLES),
+        f"{source}: order",
+        "a permutation of pitch, yaw, roll",
+        order,
+    )
     six = d.get("sixd_columns", [0, 1])
-    _expect(isinstance(six, list) and len(six) == 2 and all(isinstance(c, int) and not isinstance(c, bool)
-                                                           and 0 <= c <= 2 for c in six) and six[0] != six[1],
-            f"{source}: sixd_columns", "two different matrix columns out of 0, 1, 2", six)
+    _expect(
+        isinstance(six, list)
+        and len(six) == 2
+        and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 2 for c in six)
+        and six[0] != six[1],
+        f"{source}: sixd_columns",
+        "two different matrix columns out of 0, 1, 2",
+        six,
+    )
     cols = d.get("columns", {})
-    _expect(isinstance(cols, dict), f"{source}: columns", "a [columns] table of name = \"file column\"", cols)
+    _expect(isinstance(cols, dict), f"{source}: columns", 'a [columns] table of name = "file column"', cols)
     raw_examples = d.get("examples", [])
-    _expect(isinstance(raw_examples, list) and all(isinstance(e, dict) for e in raw_examples),
-            f"{source}: examples", "[[examples]] tables", raw_examples)
+    _expect(
+        isinstance(raw_examples, list) and all(isinstance(e, dict) for e in raw_examples),
+        f"{source}: examples",
+        "[[examples]] tables",
+        raw_examples,
+    )
     for n, e in enumerate(raw_examples):
         for key in e:
             if key not in _EXAMPLE_KEYS:
-                raise SystemError_(f"{source}: examples[{n}].{key}: unknown key{_closest(key, _EXAMPLE_KEYS)}; "
-                                   f"expected {', '.join(sorted(_EXAMPLE_KEYS))}")
+                raise SystemError_(
+                    f"{source}: examples[{n}].{key}: unknown key{_closest(key, _EXAMPLE_KEYS)}; "
+                    f"expected {', '.join(sorted(_EXAMPLE_KEYS))}"
+                )
     for key in ("sequence", "storage", "units", "selection", "matrix_layout", "quaternion_order"):
-        allowed = {"sequence": ("intrinsic", "extrinsic"), "storage": ("active", "transposed"),
-                   "units": ("degrees", "radians"), "selection": SELECTIONS, "matrix_layout": MATRIX_LAYOUTS,
-                   "quaternion_order": ("wxyz", "xyzw")}[key]
+        allowed = {
+            "sequence": ("intrinsic", "extrinsic"),
+            "storage": ("active", "transposed"),
+            "units": ("degrees", "radians"),
+            "selection": SELECTIONS,
+            "matrix_layout": MATRIX_LAYOUTS,
+            "quaternion_order": ("wxyz", "xyzw"),
+        }[key]
         if key in d:
             _expect(d[key] in allowed, f"{source}: {key}", "one of " + ", ".join(allowed), d[key])
     try:
@@ -202,15 +286,24 @@ def example_matrix(system: RotationSystem, example: dict, where: str = "example"
     """The stored matrix an example's angles build (``angles``: the system's; ``canonical_angles``: 300W-LP)."""
     if "angles" in example:
         a = example["angles"]
-        _expect(isinstance(a, list) and len(a) == 3 and all(_number(x) for x in a), f"{where}.angles",
-                "[pitch, yaw, roll] in degrees", a)
+        _expect(
+            isinstance(a, list) and len(a) == 3 and all(_number(x) for x in a),
+            f"{where}.angles",
+            "[pitch, yaw, roll] in degrees",
+            a,
+        )
         return system.from_angles(np.array([a], dtype=float))[0]
     if "canonical_angles" in example:
         a = example["canonical_angles"]
-        _expect(isinstance(a, list) and len(a) == 3 and all(_number(x) for x in a), f"{where}.canonical_angles",
-                "[pitch, yaw, roll] in degrees (300W-LP)", a)
-        A = RotationSystem("_canonical", "", ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0)), CANONICAL_TURNS) \
-            .from_angles(np.array([a], dtype=float))
+        _expect(
+            isinstance(a, list) and len(a) == 3 and all(_number(x) for x in a),
+            f"{where}.canonical_angles",
+            "[pitch, yaw, roll] in degrees (300W-LP)",
+            a,
+        )
+        A = RotationSystem("_canonical", "", ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0)), CANONICAL_TURNS).from_angles(
+            np.array([a], dtype=float)
+        )
         return system.from_canonical(A)[0]
     raise SystemError_(f"{where}: expected angles or canonical_angles, got neither")
 
@@ -221,19 +314,23 @@ def check_example(system: RotationSystem, example: dict, where: str) -> None:
     if "matrix" in example:
         M = np.array(_matrix3(example["matrix"], f"{where}.matrix"))
         if not np.abs(M - R).max() <= EXAMPLE_TOL:
-            raise SystemError_(f"{where}.matrix: expected {_fmt(np.round(R, 6).tolist())} from the angles, "
-                               f"got {_fmt(M.tolist())}")
+            raise SystemError_(
+                f"{where}.matrix: expected {_fmt(np.round(R, 6).tolist())} from the angles, got {_fmt(M.tolist())}"
+            )
     if "values" in example:
         v = example["values"]
         _expect(isinstance(v, list) and all(_number(x) for x in v), f"{where}.values", "a list of numbers", v)
         if system.storage_kind == "angles":
-            raise SystemError_(f"{where}.values: expected no values for storage_kind angles (use angles), "
-                               f"got {_fmt(v)}")
+            raise SystemError_(
+                f"{where}.values: expected no values for storage_kind angles (use angles), got {_fmt(v)}"
+            )
         want = system.matrix_to_values(R[None])[0]
         got = np.asarray(v, dtype=float)
         if got.shape != want.shape or not np.abs(got - want).max() <= EXAMPLE_TOL:
-            raise SystemError_(f"{where}.values: expected {_fmt(np.round(want, 6).tolist())} "
-                               f"({', '.join(system.value_columns)}) from the angles, got {_fmt(v)}")
+            raise SystemError_(
+                f"{where}.values: expected {_fmt(np.round(want, 6).tolist())} "
+                f"({', '.join(system.value_columns)}) from the angles, got {_fmt(v)}"
+            )
 
 
 def _where(path, keys) -> str:
@@ -246,21 +343,19 @@ def _check_limits(data, path) -> None:
     while stack:
         keys, value, depth = stack.pop()
         if depth > LIMITS["depth"]:
-            raise SystemError_(f"{_where(path, keys)}: expected at most {LIMITS['depth']} levels of nesting, "
-                               f"got more")
+            raise SystemError_(f"{_where(path, keys)}: expected at most {LIMITS['depth']} levels of nesting, got more")
         if isinstance(value, dict):
             stack.extend((keys + (k,), v, depth + 1) for k, v in value.items())
         elif isinstance(value, list):
             if len(value) > LIMITS["items"]:
-                raise SystemError_(f"{_where(path, keys)}: expected at most {LIMITS['items']} items, "
-                                   f"got {len(value)}")
+                raise SystemError_(f"{_where(path, keys)}: expected at most {LIMITS['items']} items, got {len(value)}")
             stack.extend((keys + (n,), v, depth + 1) for n, v in enumerate(value))
         elif isinstance(value, str) and len(value) > LIMITS["chars"]:
-            raise SystemError_(f"{_where(path, keys)}: expected at most {LIMITS['chars']} characters, "
-                               f"got {len(value)}")
+            raise SystemError_(f"{_where(path, keys)}: expected at most {LIMITS['chars']} characters, got {len(value)}")
         elif isinstance(value, int) and not isinstance(value, bool) and not _INT64[0] <= value <= _INT64[1]:
-            raise SystemError_(f"{_where(path, keys)}: expected a 64-bit integer (TOML), got a "
-                               f"{len(str(abs(value)))}-digit number")
+            raise SystemError_(
+                f"{_where(path, keys)}: expected a 64-bit integer (TOML), got a {len(str(abs(value)))}-digit number"
+            )
 
 
 def _line_key(line: str, table: str):
@@ -327,13 +422,16 @@ def read_system_file(path) -> RotationSystem:
     except FileNotFoundError:
         raise SystemError_(f"{path}: no such system file") from None
     except RecursionError:
-        raise SystemError_(f"{path}: {_deepest_key(text)}: expected at most {LIMITS['depth']} levels of "
-                           "nesting, got too many to parse") from None
+        raise SystemError_(
+            f"{path}: {_deepest_key(text)}: expected at most {LIMITS['depth']} levels of nesting, got too many to parse"
+        ) from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a > 4300-digit int
         big = re.search(r"\d{4300,}", text) if not isinstance(exc, tomllib.TOMLDecodeError) else None
         if big is not None:
-            raise SystemError_(f"{path}: {_key_at(text, big.start())}: expected a 64-bit integer (TOML), got a "
-                               f"{len(big.group())}-digit number") from None
+            raise SystemError_(
+                f"{path}: {_key_at(text, big.start())}: expected a 64-bit integer (TOML), got a "
+                f"{len(big.group())}-digit number"
+            ) from None
         raise SystemError_(f"{path}: not valid TOML ({' '.join(str(exc).split())[:200]})") from None
     _check_limits(data, path)
     return system_from_dict(data, str(path))

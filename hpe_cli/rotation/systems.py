@@ -4,6 +4,7 @@
 as data) and :mod:`hpe_cli.rotation.system_toml` reads and validates system files;
 both are re-exported here, the import path of every public name.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -40,8 +41,10 @@ def load_system(path) -> RotationSystem:
     builtin = builtin_systems().get(system.name)
     if builtin is not None and builtin.definition() != system.definition():
         diff = [k for k, v in system.definition().items() if builtin.definition().get(k) != v]
-        raise SystemError_(f"{path}: name: expected a name that is not a built-in system's, or the built-in's "
-                           f"definition; got {system.name!r} with a different {', '.join(diff)}")
+        raise SystemError_(
+            f"{path}: name: expected a name that is not a built-in system's, or the built-in's "
+            f"definition; got {system.name!r} with a different {', '.join(diff)}"
+        )
     return system
 
 

@@ -15,38 +15,39 @@ Examples
 >>> ht.canonical_to_angles(A, "300w_lp")[0].round(decimals=6)
 tensor([[ 10., -40.,   5.]], dtype=torch.float64)
 """
+
 from . import transforms
 from .dataset import HeadPoseDataset
 from .losses import geodesic, geodesic_loss, maev
 from .rotation import (
-                       angles_to_canonical,
-                       canonical_to_angles,
-                       elemental,
-                       from_canonical,
-                       from_matrix,
-                       matrix_to_sixd,
-                       sixd_to_matrix,
-                       to_canonical,
-                       to_matrix,
+    angles_to_canonical,
+    canonical_to_angles,
+    elemental,
+    from_canonical,
+    from_matrix,
+    matrix_to_sixd,
+    sixd_to_matrix,
+    to_canonical,
+    to_matrix,
 )
 from .transforms import HeadPose, PermuteLandmarks, UndefinedPoseError
 
 __all__ = [
-                       "HeadPose",
-                       "HeadPoseDataset",
-                       "PermuteLandmarks",
-                       "UndefinedPoseError",
-                       "angles_to_canonical",
-                       "canonical_to_angles",
-                       "elemental",
-                       "from_canonical",
-                       "from_matrix",
-                       "geodesic",
-                       "geodesic_loss",
-                       "maev",
-                       "matrix_to_sixd",
-                       "sixd_to_matrix",
-                       "to_canonical",
-                       "to_matrix",
-                       "transforms",
+    "HeadPose",
+    "HeadPoseDataset",
+    "PermuteLandmarks",
+    "UndefinedPoseError",
+    "angles_to_canonical",
+    "canonical_to_angles",
+    "elemental",
+    "from_canonical",
+    "from_matrix",
+    "geodesic",
+    "geodesic_loss",
+    "maev",
+    "matrix_to_sixd",
+    "sixd_to_matrix",
+    "to_canonical",
+    "to_matrix",
+    "transforms",
 ]

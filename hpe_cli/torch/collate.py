@@ -18,6 +18,7 @@ images) are copied with numpy (:func:`_copy_numpy`: twice as fast as ``torch.sta
 for channels-last views). Other values (TVTensors, strings, ...) go through
 ``default_collate`` key by key, as before.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -100,7 +101,7 @@ def collate_samples(batch, *, collate_fn_map=None):
             out[key] = collate([s[key] for s in batch], collate_fn_map=collate_fn_map or default_collate_fn_map)
             continue
         offset, size, dtype, shape = plans[key]
-        view = buf[offset:offset + size].view(dtype).view(n, *shape)
+        view = buf[offset : offset + size].view(dtype).view(n, *shape)
         values = [s[key] for s in batch]
         if shape == () and type(values[0]) is int:
             view.copy_(torch.tensor(values, dtype=torch.int64))

@@ -1,4 +1,5 @@
 """``HeadPoseDataset``: an ``hpe`` label table (or ``.mat`` folder, or exported Parquet) as a PyTorch Dataset."""
+
 from __future__ import annotations
 
 import os
@@ -144,9 +145,24 @@ class HeadPoseDataset(torch.utils.data.Dataset):
     (3, 64, 64)
     """
 
-    def __init__(self, labels, images=None, system="300w_lp", *, label_system=None, crop=None, square=True,
-                 size=None, interpolation="linear", hflip=0.0, flip_scheme="auto", transform=None, landmarks="lm",
-                 on_undefined="raise", dtype=torch.float32):
+    def __init__(
+        self,
+        labels,
+        images=None,
+        system="300w_lp",
+        *,
+        label_system=None,
+        crop=None,
+        square=True,
+        size=None,
+        interpolation="linear",
+        hflip=0.0,
+        flip_scheme="auto",
+        transform=None,
+        landmarks="lm",
+        on_undefined="raise",
+        dtype=torch.float32,
+    ):
         self.system = get_system(system)
         self.crop = None if crop is None else float(crop)
         self.square = bool(square)
@@ -172,8 +188,9 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         self.source = source
         self.canonical = _canonical(table, src_system, source)
         n = len(table)
-        self.images_root = Path(images) if images is not None else (
-            Path(source) if Path(source).is_dir() else Path(source).parent)
+        self.images_root = (
+            Path(images) if images is not None else (Path(source) if Path(source).is_dir() else Path(source).parent)
+        )
         self._parquet = None
         self._image_refs = None
         col = next((c for c in IMAGE_COLUMNS if c in table.columns), None)
@@ -189,8 +206,9 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         if self.crop is not None:
             points = self.landmarks if landmarks is not None else _landmarks(table, "lm")
             if self.boxes is None and points is None:
-                raise HpeError(f"{source}: crop= needs bbox_x, bbox_y, bbox_w, bbox_h or landmark columns, "
-                               "found neither")
+                raise HpeError(
+                    f"{source}: crop= needs bbox_x, bbox_y, bbox_w, bbox_h or landmark columns, found neither"
+                )
             self._rects = crop_rects(self.boxes, points, self.crop, self.square)
         self._perm = None
         if self.hflip > 0 and self.landmarks is not None:
@@ -225,8 +243,11 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         scale = None
         if self.size is not None:
             with np.errstate(divide="ignore"):
-                scale = np.where(known[:, None], self.size / np.maximum(rects[:, [3, 2]], 1), np.nan) \
-                    if self._rects is not None else np.full((n, 2), np.nan)
+                scale = (
+                    np.where(known[:, None], self.size / np.maximum(rects[:, [3, 2]], 1), np.nan)
+                    if self._rects is not None
+                    else np.full((n, 2), np.nan)
+                )
         self._placed = place(self.boxes, self.landmarks, origin, scale)
         self._known = known
 
@@ -323,8 +344,12 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             box, lm = None if box is None else box[i], None if lm is None else lm[i]
         else:
             sc = None if scale is None else np.array([scale])
-            box, lm = place(None if box is None else self.boxes[i:i + 1],
-                            None if lm is None else self.landmarks[i:i + 1], np.array([origin], float), sc)
+            box, lm = place(
+                None if box is None else self.boxes[i : i + 1],
+                None if lm is None else self.landmarks[i : i + 1],
+                np.array([origin], float),
+                sc,
+            )
             box, lm = None if box is None else box[0], None if lm is None else lm[0]
         if flip:
             box, lm = flip_geometry(box, lm, width, self._perm)
@@ -340,7 +365,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         box, lm = self._geometry(i, origin, scale, canvas[1], flip)
         pose = None
         if note is not None or self.transform is not None:
-            A = self._poses.mirrored(i) if flip else self._poses.A[i:i + 1]
+            A = self._poses.mirrored(i) if flip else self._poses.A[i : i + 1]
             pose = HeadPose(A, canvas_size=canvas, on_undefined=self.on_undefined)
             if note is not None:
                 pose = no_exact_pose(pose, note)
@@ -421,8 +446,12 @@ def _load_table(labels, landmarks):
         raise HpeError(f"{path}: no such file or folder")
     if path.is_file() and path.suffix.lower() == ".txt":
         return _read_list_file(path) + (None,)
-    if path.is_dir() and not any(path.glob("*.mat")) and (path / "data").is_dir() and \
-            any((path / "data").glob("*.parquet")):
+    if (
+        path.is_dir()
+        and not any(path.glob("*.mat"))
+        and (path / "data").is_dir()
+        and any((path / "data").glob("*.parquet"))
+    ):
         return _read_parquet(sorted((path / "data").glob("*.parquet")), path)
     if (path.is_dir() and any(path.glob("*.mat"))) or path.suffix.lower() == ".mat":
         from ..datasets.mat import read_mat_dir
@@ -502,15 +531,18 @@ def _read_list_file(path):
         except ValueError:
             n, ln = next((n, ln) for n, ln in rows if not _floats(ln[1:]))
             raise HpeError(f"{path}: row {n}: expected '<name>.jpg pitch yaw roll', got {' '.join(ln)!r}") from None
-        split = path.stem[len("files_"):] if path.stem.startswith("files_") else ""
+        split = path.stem[len("files_") :] if path.stem.startswith("files_") else ""
         base = path.parent / split if split and (path.parent / split).is_dir() else path.parent
-        table = pd.DataFrame({"file": [str(base / ln[0]) for _, ln in rows],
-                              "pitch": ang[:, 0], "yaw": ang[:, 1], "roll": ang[:, 2]})
+        table = pd.DataFrame(
+            {"file": [str(base / ln[0]) for _, ln in rows], "pitch": ang[:, 0], "yaw": ang[:, 1], "roll": ang[:, 2]}
+        )
         return table, get_system("whenet"), str(path)
     if widths != {1}:
         n, ln = next((n, ln) for n, ln in rows if len(ln) != len(rows[0][1]))
-        raise HpeError(f"{path}: row {n}: expected one name per line (mat form) or '<name>.jpg pitch yaw roll' "
-                       f"(crops form), got {' '.join(ln)!r}")
+        raise HpeError(
+            f"{path}: row {n}: expected one name per line (mat form) or '<name>.jpg pitch yaw roll' "
+            f"(crops form), got {' '.join(ln)!r}"
+        )
     recs, names = [], []
     for n, ln in rows:
         mat = path.parent / (ln[0] + ".mat")
@@ -557,8 +589,10 @@ def _canonical(table, system, source) -> np.ndarray:
         values = table[MATRIX_COLS].to_numpy(dtype=np.float64, na_value=np.nan).reshape(-1, 3, 3)
         R = values
     else:
-        raise HpeError(f"{source}: expected angle columns pitch, yaw, roll (degrees) or matrix columns r00..r22, "
-                       f"found {', '.join(map(str, list(table.columns)[:12]))}")
+        raise HpeError(
+            f"{source}: expected angle columns pitch, yaw, roll (degrees) or matrix columns r00..r22, "
+            f"found {', '.join(map(str, list(table.columns)[:12]))}"
+        )
     bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
     if bad.any():
         row = int(np.flatnonzero(bad)[0])

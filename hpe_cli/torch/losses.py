@@ -1,4 +1,5 @@
 """Losses and metrics on rotation matrices (tensors, differentiable, any device)."""
+
 from __future__ import annotations
 
 import math

@@ -21,6 +21,7 @@ CUDA batch stays on the GPU without synchronisation.
 :func:`from_matrix` is differentiable away from gimbal lock (angles are not
 defined smoothly there).
 """
+
 from __future__ import annotations
 
 import math
@@ -283,8 +284,7 @@ def from_matrix(R, system, gimbal_tol: float | None = None):
         ok1 = (p1[0].abs() < 90) & (p1[2].abs() < 90)
         ok2 = (p2[0].abs() < 90) & (p2[2].abs() < 90)
         swap = ~ok1 & ok2
-        p1, p2 = ([torch.where(swap, y, x) for x, y in zip(p1, p2)],
-                  [torch.where(swap, x, y) for x, y in zip(p1, p2)])
+        p1, p2 = ([torch.where(swap, y, x) for x, y in zip(p1, p2)], [torch.where(swap, x, y) for x, y in zip(p1, p2)])
     tol = system.gimbal_tol if gimbal_tol is None else gimbal_tol
     return torch.stack(p1, -1), torch.stack(p2, -1), lock < tol, lock
 

@@ -8,6 +8,7 @@ horizontal flip) on first use. ``__getitem__`` then decodes the JPEG straight in
 with a view (a padded copy only when the crop leaves the image), optionally resizes
 with ``cv2.resize`` and wraps the HWC array as a (3, H, W) tensor without a copy.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -76,8 +77,15 @@ def place(boxes, points, origin, scale):
         box = np.array(boxes, dtype=np.float64)
         box[:, :2] -= origin
         if scale is not None:
-            box = np.stack([(box[:, 0] + 0.5) * scale[:, 0] - 0.5, (box[:, 1] + 0.5) * scale[:, 1] - 0.5,
-                            box[:, 2] * scale[:, 0], box[:, 3] * scale[:, 1]], axis=1)
+            box = np.stack(
+                [
+                    (box[:, 0] + 0.5) * scale[:, 0] - 0.5,
+                    (box[:, 1] + 0.5) * scale[:, 1] - 0.5,
+                    box[:, 2] * scale[:, 0],
+                    box[:, 3] * scale[:, 1],
+                ],
+                axis=1,
+            )
     if points is not None:
         lm = points - origin[:, None]
         if scale is not None:
@@ -147,8 +155,9 @@ def resize(pix, size: int, interpolation: str):
 
     flag = _FLAGS.get(interpolation)
     if flag is None:
-        flag = _FLAGS[interpolation] = getattr(cv2, "INTER_LANCZOS4" if interpolation == "lanczos"
-                                               else f"INTER_{interpolation.upper()}")
+        flag = _FLAGS[interpolation] = getattr(
+            cv2, "INTER_LANCZOS4" if interpolation == "lanczos" else f"INTER_{interpolation.upper()}"
+        )
     return cv2.resize(pix, (size, size), interpolation=flag)
 
 
@@ -192,8 +201,11 @@ class PoseOutputs:
     def _convert(self, A: np.ndarray) -> dict:
         """``(packed, locked)``: matrix, primary angles, canonical (N, 21) in the output dtype; gimbal-lock flags."""
         A = np.asarray(A, dtype=np.float64)
-        out = {"matrix": np.full(A.shape, np.nan), "angles": np.full(A.shape[:-1], np.nan),
-               "gimbal_lock": np.zeros(len(A), bool)}
+        out = {
+            "matrix": np.full(A.shape, np.nan),
+            "angles": np.full(A.shape[:-1], np.nan),
+            "gimbal_lock": np.zeros(len(A), bool),
+        }
         good = np.isfinite(A).all(axis=(1, 2))  # a dropped pose (NaN) stays NaN, unlocked
         if good.any():
             R = self.system.from_canonical(A[good])
@@ -207,14 +219,18 @@ class PoseOutputs:
         """One row of a packed table ``(N, 21)`` (matrix, angles, canonical) as tensors of its own memory."""
         packed, locked = table
         row = torch.from_numpy(packed[i].copy())
-        return {"matrix": row[:9].view(3, 3), "angles": row[9:12], "canonical": row[12:].view(3, 3),
-                "gimbal_lock": (_TRUE if locked[i] else _FALSE).clone()}
+        return {
+            "matrix": row[:9].view(3, 3),
+            "angles": row[9:12],
+            "canonical": row[12:].view(3, 3),
+            "gimbal_lock": (_TRUE if locked[i] else _FALSE).clone(),
+        }
 
     def mirrored(self, i: int) -> torch.Tensor:
         """Canonical matrix (1, 3, 3) of row ``i`` after a horizontal flip (from a table built on first use)."""
         if self._mirror_A is None:
             self._mirror_A = pose_mirror(self.A, True)
-        return self._mirror_A[i:i + 1]
+        return self._mirror_A[i : i + 1]
 
     def _mirror_table(self):
         if self._mirror is None:
@@ -314,9 +330,12 @@ class PackedRows:
         if box is not None:
             out["box"] = wrap(r[21:25])
         if lm is not None:
-            out["landmarks"] = wrap(r[21 if box is None else 25:].reshape(-1, 2))
-        out["matrix"], out["angles"], out["canonical"] = wrap(r[:9].reshape(3, 3)), wrap(r[9:12]), \
-            wrap(r[12:21].reshape(3, 3))
+            out["landmarks"] = wrap(r[21 if box is None else 25 :].reshape(-1, 2))
+        out["matrix"], out["angles"], out["canonical"] = (
+            wrap(r[:9].reshape(3, 3)),
+            wrap(r[9:12]),
+            wrap(r[12:21].reshape(3, 3)),
+        )
         out["gimbal_lock"], out["pose_undefined"] = wrap(np.array(locked[i])), wrap(np.array(False))
         out["index"] = i
         return out

@@ -63,6 +63,7 @@ by that constant half-pixel rotation offset, ``(I - M) @ (0.5, 0.5)``.
 
 All kernels are batched tensor products on the pose's own device: no host transfers.
 """
+
 from __future__ import annotations
 
 import math
@@ -141,8 +142,9 @@ class HeadPose(tv_tensors.TVTensor):
     undefined: bool
 
     @classmethod
-    def _wrap(cls, tensor: torch.Tensor, *, canvas_size=None, on_undefined="raise", undefined=False,
-              check_dims: bool = True) -> HeadPose:
+    def _wrap(
+        cls, tensor: torch.Tensor, *, canvas_size=None, on_undefined="raise", undefined=False, check_dims: bool = True
+    ) -> HeadPose:
         if check_dims and tensor.shape[-2:] != (3, 3):
             raise ValueError(f"expected canonical rotation matrices of shape (..., 3, 3), got {tuple(tensor.shape)}")
         pose = tensor.as_subclass(cls)
@@ -153,12 +155,24 @@ class HeadPose(tv_tensors.TVTensor):
 
     @classmethod
     def wrap(cls, tensor: torch.Tensor, like: HeadPose, **kwargs: Any) -> HeadPose:
-        return cls._wrap(tensor, canvas_size=kwargs.get("canvas_size", like.canvas_size),
-                         on_undefined=kwargs.get("on_undefined", _policy(like)),
-                         undefined=kwargs.get("undefined", getattr(like, "undefined", False)))
+        return cls._wrap(
+            tensor,
+            canvas_size=kwargs.get("canvas_size", like.canvas_size),
+            on_undefined=kwargs.get("on_undefined", _policy(like)),
+            undefined=kwargs.get("undefined", getattr(like, "undefined", False)),
+        )
 
-    def __new__(cls, data, *, canvas_size=None, on_undefined=None, undefined=None, dtype=None, device=None,  # noqa: PYI034
-                requires_grad=None) -> HeadPose:
+    def __new__(
+        cls,
+        data,
+        *,
+        canvas_size=None,
+        on_undefined=None,
+        undefined=None,
+        dtype=None,
+        device=None,  # noqa: PYI034
+        requires_grad=None,
+    ) -> HeadPose:
         tensor = cls._to_tensor(data, dtype=dtype, device=device, requires_grad=requires_grad)
         if not tensor.is_floating_point():
             tensor = tensor.to(torch.get_default_dtype())
@@ -174,8 +188,15 @@ class HeadPose(tv_tensors.TVTensor):
 
         flat, _ = tree_flatten(args + (tuple(kwargs.values()) if kwargs else ()))
         like = next((x for x in flat if isinstance(x, HeadPose)), None)
-        meta = {} if like is None else {"canvas_size": like.canvas_size, "on_undefined": _policy(like),
-                                        "undefined": getattr(like, "undefined", False)}
+        meta = (
+            {}
+            if like is None
+            else {
+                "canvas_size": like.canvas_size,
+                "on_undefined": _policy(like),
+                "undefined": getattr(like, "undefined", False),
+            }
+        )
         if isinstance(output, torch.Tensor) and not isinstance(output, HeadPose):
             output = HeadPose._wrap(output, check_dims=False, **meta)
         elif isinstance(output, (tuple, list)):
@@ -183,8 +204,9 @@ class HeadPose(tv_tensors.TVTensor):
         return output
 
     def __repr__(self, *, tensor_contents: Any = None) -> str:
-        return self._make_repr(canvas_size=self.canvas_size, on_undefined=_policy(self),
-                               undefined=getattr(self, "undefined", False))
+        return self._make_repr(
+            canvas_size=self.canvas_size, on_undefined=_policy(self), undefined=getattr(self, "undefined", False)
+        )
 
 
 def _policy(x) -> str:
@@ -203,8 +225,9 @@ def no_exact_pose(pose, message: str, canvas_size=None):
         raise UndefinedPoseError(f"{message} (or set on_undefined='drop' or 'keep' to train through it)")
     raw = _raw(pose)
     data = torch.full_like(raw, float("nan")) if policy == "drop" else raw.clone()
-    return HeadPose._wrap(data, canvas_size=pose.canvas_size if canvas_size is None else canvas_size,
-                          on_undefined=policy, undefined=True)
+    return HeadPose._wrap(
+        data, canvas_size=pose.canvas_size if canvas_size is None else canvas_size, on_undefined=policy, undefined=True
+    )
 
 
 # ------------------------------------------------------------------------------------------ the maths
@@ -266,8 +289,9 @@ def _rotate(pose, angle, interpolation=None, expand=False, center=None, fill=Non
     # F.rotate turns the image counter-clockwise on screen by ``angle`` (torchvision's documented sign)
     size = None
     if pose.canvas_size is not None:
-        _, size = F.rotate_keypoints(torch.zeros(1, 2), canvas_size=pose.canvas_size, angle=angle, expand=expand,
-                                     center=center)
+        _, size = F.rotate_keypoints(
+            torch.zeros(1, 2), canvas_size=pose.canvas_size, angle=angle, expand=expand, center=center
+        )
     return tv_tensors.wrap(pose_rotate(_raw(pose), angle), like=pose, canvas_size=size or pose.canvas_size)
 
 
@@ -282,8 +306,11 @@ def _shear_is_zero(shear) -> bool:
 @F.register_kernel(F.affine, HeadPose)
 def _affine(pose, angle, translate=None, scale=1.0, shear=None, interpolation=None, fill=None, center=None, **kw):
     if not _shear_is_zero(shear):
-        return no_exact_pose(pose, f"a sheared face has no exact head pose: expected shear 0 with HeadPose, got "
-                                   f"{shear} (use v2.RandomAffine(..., shear=None))")
+        return no_exact_pose(
+            pose,
+            f"a sheared face has no exact head pose: expected shear 0 with HeadPose, got "
+            f"{shear} (use v2.RandomAffine(..., shear=None))",
+        )
     if not float(scale) > 0:
         return no_exact_pose(pose, f"expected a positive affine scale, got {scale}")
     # F.affine's angle is clockwise-positive in its matrix for points (it is F.rotate's angle negated... and
@@ -301,9 +328,11 @@ def is_uniform(old, new) -> bool:
 
 def aspect_message(old, new, what) -> str:
     (h0, w0), (h1, w1) = old, new
-    return (f"{what} from {w0}x{h0} to {w1}x{h1} changes the aspect ratio (x{w1 / w0:.4g} wide, x{h1 / h0:.4g} "
-            "high): a squashed face has no exact head pose; crop a region of the output's aspect ratio first "
-            "(e.g. RandomResizedCrop(size, ratio=(1, 1)) for square outputs, or Resize(shorter_side))")
+    return (
+        f"{what} from {w0}x{h0} to {w1}x{h1} changes the aspect ratio (x{w1 / w0:.4g} wide, x{h1 / h0:.4g} "
+        "high): a squashed face has no exact head pose; crop a region of the output's aspect ratio first "
+        "(e.g. RandomResizedCrop(size, ratio=(1, 1)) for square outputs, or Resize(shorter_side))"
+    )
 
 
 def _scaled(pose, old, new, what):
@@ -318,8 +347,11 @@ def _resize(pose, size, interpolation=None, max_size=None, antialias=None, **kwa
     if pose.canvas_size is None:
         if size is not None and (isinstance(size, int) or len(size) == 1):
             return tv_tensors.wrap(_raw(pose).clone(), like=pose)  # keeps the aspect ratio
-        return no_exact_pose(pose, "resizing to (H, W) needs HeadPose(..., canvas_size=(H, W)) to check that the "
-                                   "aspect ratio is kept, got a HeadPose without canvas_size")
+        return no_exact_pose(
+            pose,
+            "resizing to (H, W) needs HeadPose(..., canvas_size=(H, W)) to check that the "
+            "aspect ratio is kept, got a HeadPose without canvas_size",
+        )
     new = _dummy_canvas(F.resize_keypoints, pose, size=size, max_size=max_size)
     return _scaled(pose, pose.canvas_size, new, "resize")
 
@@ -339,8 +371,11 @@ def _crop(pose, top, left, height, width, **kwargs):
 def _center_crop(pose, output_size, **kwargs):
     new = _dummy_canvas(F.center_crop_keypoints, pose, output_size=output_size)
     if new is None:
-        h, w = (output_size, output_size) if isinstance(output_size, int) else (
-            (output_size[0], output_size[0]) if len(output_size) == 1 else output_size)
+        h, w = (
+            (output_size, output_size)
+            if isinstance(output_size, int)
+            else ((output_size[0], output_size[0]) if len(output_size) == 1 else output_size)
+        )
         new = (int(h), int(w))
     return tv_tensors.wrap(_raw(pose).clone(), like=pose, canvas_size=new)
 
@@ -349,25 +384,33 @@ def _center_crop(pose, output_size, **kwargs):
 def _pad(pose, padding, fill=None, padding_mode="constant", **kwargs):
     new = _dummy_canvas(F.pad_keypoints, pose, padding=padding)
     if padding_mode != "constant":
-        return no_exact_pose(pose, f"padding_mode {padding_mode!r} copies mirrored or repeated faces into the "
-                                   "image; expected 'constant' with HeadPose", canvas_size=new)
+        return no_exact_pose(
+            pose,
+            f"padding_mode {padding_mode!r} copies mirrored or repeated faces into the "
+            "image; expected 'constant' with HeadPose",
+            canvas_size=new,
+        )
     return tv_tensors.wrap(_raw(pose).clone(), like=pose, canvas_size=new)
 
 
 def _message(name, why):
-    return (f"{name} has no exact head-pose meaning ({why}); remove it from a pipeline that carries a HeadPose, "
-            "or apply it to the image alone after the geometric steps")
+    return (
+        f"{name} has no exact head-pose meaning ({why}); remove it from a pipeline that carries a HeadPose, "
+        "or apply it to the image alone after the geometric steps"
+    )
 
 
 def _undefined(name, why):
     def kernel(pose, *args, **kwargs):  # the canvas keeps its size (perspective, elastic)
         return no_exact_pose(pose, _message(name, why))
+
     return kernel
 
 
 def _never(name, why):
     def kernel(pose, *args, **kwargs):
         raise UndefinedPoseError(_message(name, why))
+
     return kernel
 
 
@@ -386,9 +429,11 @@ def _perm_for(scheme, n):
     if isinstance(scheme, str) and scheme == "auto":
         name = scheme_for_count(n)
         if name is None:
-            raise ValueError(f"a mirror needs a left/right permutation for {n} landmarks: pass scheme= a name "
-                             "('ibug68', 'face70', 'aflw21') or an index array, got 'auto' and no scheme has "
-                             f"{n} points")
+            raise ValueError(
+                f"a mirror needs a left/right permutation for {n} landmarks: pass scheme= a name "
+                "('ibug68', 'face70', 'aflw21') or an index array, got 'auto' and no scheme has "
+                f"{n} points"
+            )
         return np.asarray(flip_permutation(name))
     return np.asarray(flip_permutation(scheme, n))
 

@@ -1,6 +1,7 @@
 """Chains on the real AFLW2000-3D sample: .mat folder -> augment (hflip, rotate, crop) -> .mat -> convert, and
 -> draw. Oracles: SciPy composes the expected rotation, OpenCV moves the points (getRotationMatrix2D, flip,
 slicing), scipy.io reads the written files."""
+
 import shutil
 
 import cv2
@@ -58,10 +59,16 @@ def expected(how, A, pts, size):
     return A, pts - np.array([[x], [y]]), (w, h)
 
 
-@pytest.mark.parametrize("how,args", [(("hflip", None), ["--hflip"]), (("rotate", 30.0), ["--rotate", 30]),
-                                      (("crop", (60, 40, 330, 360)), ["--crop", 60, 40, 330, 360]),
-                                      (("scale", 0.5), ["--scale", 0.5])],
-                         ids=["hflip", "rotate30", "crop", "half"])
+@pytest.mark.parametrize(
+    "how,args",
+    [
+        (("hflip", None), ["--hflip"]),
+        (("rotate", 30.0), ["--rotate", 30]),
+        (("crop", (60, 40, 330, 360)), ["--crop", 60, 40, 330, 360]),
+        (("scale", 0.5), ["--scale", 0.5]),
+    ],
+    ids=["hflip", "rotate30", "crop", "half"],
+)
 def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
     out = tmp_path / "out"
     res = cli_run("augment", aflw, "-o", tmp_path / "aug.parquet", *args, "--images", aflw, "--out-images", out)
@@ -106,14 +113,19 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
         c0 = np.array([[p0[3]], [H0 - 1 - p0[4]]])
         _, c1, _ = expected(how, A0, c0, (W0, H0))
         p1 = m1["Pose_Para"].reshape(-1)
-        assert np.allclose([p1[3], H1 - 1 - p1[4]], c1[:, 0], atol=1e-6) and np.allclose(p1[5], p0[5]) and np.isclose(p1[6], p0[6] * zoom)
+        assert (
+            np.allclose([p1[3], H1 - 1 - p1[4]], c1[:, 0], atol=1e-6)
+            and np.allclose(p1[5], p0[5])
+            and np.isclose(p1[6], p0[6] * zoom)
+        )
         # roi: the region of the original photo; a crop shows a sub-rectangle of it
         roi0, roi1 = m0["roi"].reshape(-1).astype(float), m1["roi"].reshape(-1)
         if how[0] == "crop":
             x, y, w, h = how[1]
             sx, sy = (roi0[2] - roi0[0]) / W0, (roi0[3] - roi0[1]) / H0
-            assert np.allclose(roi1, [roi0[0] + x * sx, roi0[1] + y * sy, roi0[0] + (x + w) * sx,
-                                      roi0[1] + (y + h) * sy])
+            assert np.allclose(
+                roi1, [roi0[0] + x * sx, roi0[1] + y * sy, roi0[0] + (x + w) * sx, roi0[1] + (y + h) * sy]
+            )
         else:
             assert np.allclose(roi1, roi0)
         # the image: OpenCV's own operation on the input (JPEG re-encoding: compare loosely)
@@ -127,9 +139,11 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
             ref = cv2.resize(img0, (W1, H1), interpolation=cv2.INTER_AREA)
         else:
             x, y, w, h = how[1]
-            ref = img0[y:y + h, x:x + w]
+            ref = img0[y : y + h, x : x + w]
         assert np.abs(img1.astype(int) - ref.astype(int)).mean() < 3
-    assert hidden > 0  # the sample has invisible points: they were kept    # -> draw the written-back folder: lines from the moved centre, ends where SciPy puts them, inside the image
+    assert (
+        hidden > 0
+    )  # the sample has invisible points: they were kept    # -> draw the written-back folder: lines from the moved centre, ends where SciPy puts them, inside the image
     res = cli_run("draw", out, "-o", tmp_path / "drawn", "--thickness", "3")
     assert res.exit_code == 0, res.output
     for s in STEMS:
@@ -146,8 +160,9 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
             q = c + 0.85 * (e - c)  # on the line, away from its anti-aliased cap
             if not (3 <= q[0] < W1 - 3 and 3 <= q[1] < H1 - 3) or np.hypot(*(e - c)) < 30:
                 continue
-            if any(np.hypot(*(q - (c + t * (ends[j] - c)))) < 8 for j in range(i + 1, 3) for t in
-                   np.linspace(0, 1, 50)):
+            if any(
+                np.hypot(*(q - (c + t * (ends[j] - c)))) < 8 for j in range(i + 1, 3) for t in np.linspace(0, 1, 50)
+            ):
                 continue  # a later line is drawn over this point
             inside += 1
             px = img[round(q[1]), round(q[0])].astype(int)
@@ -157,10 +172,24 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
 
 def test_mat_folder_augment_without_image_sizes_uses_the_images(aflw, tmp_path):
     # AFLW2000 tables have no image_width/image_height: the images give 450x450
-    res = cli_run("augment", aflw, "-o", tmp_path / "a.parquet", "--rotate", 10, "--images", aflw, "--out-images",
-                  tmp_path / "o")
+    res = cli_run(
+        "augment", aflw, "-o", tmp_path / "a.parquet", "--rotate", 10, "--images", aflw, "--out-images", tmp_path / "o"
+    )
     assert res.exit_code == 0, res.output
-    res = cli_run("augment", aflw, "-o", tmp_path / "b.parquet", "--rotate", 10, "--images", aflw, "--out-images",
-                  tmp_path / "o2", "--image-size", 400, 450)
+    res = cli_run(
+        "augment",
+        aflw,
+        "-o",
+        tmp_path / "b.parquet",
+        "--rotate",
+        10,
+        "--images",
+        aflw,
+        "--out-images",
+        tmp_path / "o2",
+        "--image-size",
+        400,
+        450,
+    )
     assert res.exit_code == 1 and "the image is 450x450, --image-size says 400x450" in res.output
     assert not (tmp_path / "o2").exists()

@@ -3,6 +3,7 @@
 Oracles: the geodesic ranking against SciPy, and the pixels: each prediction line ends in a dot of its axis
 colour where SciPy's matrix puts it (centre and length from the .mat Pose_Para read with scipy.io).
 """
+
 from pathlib import Path
 
 import cv2
@@ -33,8 +34,21 @@ def errors(realdata, tmp_path):
     if not GOLDEN.exists():
         pytest.skip("golden predictions not available")
     out = tmp_path / "errors.parquet"
-    res = CliRunner().invoke(cli, ["evaluate", str(GOLDEN / "pred.csv"), str(GOLDEN / "gt.csv"), "--pred-system",
-                                   "300w_lp", "--gt-system", "300w_lp", "-o", str(out)], catch_exceptions=False)
+    res = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(GOLDEN / "pred.csv"),
+            str(GOLDEN / "gt.csv"),
+            "--pred-system",
+            "300w_lp",
+            "--gt-system",
+            "300w_lp",
+            "-o",
+            str(out),
+        ],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 0, res.output
     return out
 
@@ -42,8 +56,11 @@ def errors(realdata, tmp_path):
 def test_evaluate_then_draw_worst(realdata, errors, tmp_path):
     aflw = realdata / "aflw2000_prnet"
     out = tmp_path / "worst"
-    res = CliRunner().invoke(cli, ["draw", str(errors), "-o", str(out), "--images", str(aflw), "--worst", "5",
-                                   "--thickness", "2"], catch_exceptions=False)
+    res = CliRunner().invoke(
+        cli,
+        ["draw", str(errors), "-o", str(out), "--images", str(aflw), "--worst", "5", "--thickness", "2"],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 0, res.output
     assert "300w_lp (file metadata)" in res.output
     gt = pd.read_csv(GOLDEN / "gt.csv").set_index("image")
@@ -79,17 +96,29 @@ def test_evaluate_then_draw_worst(realdata, errors, tmp_path):
 def test_draw_worst_api_and_bad_sort_column(realdata, errors, tmp_path):
     from hpe_cli.pipelines.draw import draw_worst
 
-    got = draw_worst(errors, images=realdata / "aflw2000_prnet", out_dir=tmp_path / "api", worst=3,
-                     sort_by="err_pitch")
+    got = draw_worst(errors, images=realdata / "aflw2000_prnet", out_dir=tmp_path / "api", worst=3, sort_by="err_pitch")
     t = pd.read_parquet(errors)
     want = t.sort_values("err_pitch", ascending=False)["image"].tolist()[:3]
     assert [k for k, _, _ in got] == [(w,) for w in want]
     assert all(p.is_file() and p.parent == tmp_path / "api" for _, p, _ in got)
     assert "err_pitch" in got[0][2] and want[0] in got[0][2]
-    res = CliRunner().invoke(cli, ["draw", str(errors), "-o", str(tmp_path / "x"), "--images",
-                                   str(realdata / "aflw2000_prnet"), "--sort-by", "nope"], catch_exceptions=False)
+    res = CliRunner().invoke(
+        cli,
+        [
+            "draw",
+            str(errors),
+            "-o",
+            str(tmp_path / "x"),
+            "--images",
+            str(realdata / "aflw2000_prnet"),
+            "--sort-by",
+            "nope",
+        ],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 1 and "--sort-by 'nope'" in res.output and len(res.output.strip().splitlines()) == 1
     assert not (tmp_path / "x").exists()
-    res = CliRunner().invoke(cli, ["draw", str(errors), "-o", str(tmp_path / "y"), "--images", str(tmp_path)],
-                             catch_exceptions=False)
+    res = CliRunner().invoke(
+        cli, ["draw", str(errors), "-o", str(tmp_path / "y"), "--images", str(tmp_path)], catch_exceptions=False
+    )
     assert res.exit_code == 1 and "image not found" in res.output and not (tmp_path / "y").exists()

@@ -1,5 +1,6 @@
 """evaluate -> draw --worst --rejects on the real AFLW2000 sample: missing images listed with their reason (rows
 numbered as the input numbers them), the rest drawn; every image missing exits 1 and writes nothing."""
+
 import shutil
 from pathlib import Path
 
@@ -21,8 +22,21 @@ def errors(realdata, tmp_path):
     if not GOLDEN.exists():
         pytest.skip("golden predictions not available")
     out = tmp_path / "errors.parquet"
-    res = CliRunner().invoke(cli, ["evaluate", str(GOLDEN / "pred.csv"), str(GOLDEN / "gt.csv"), "--pred-system",
-                                   "300w_lp", "--gt-system", "300w_lp", "-o", str(out)], catch_exceptions=False)
+    res = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(GOLDEN / "pred.csv"),
+            str(GOLDEN / "gt.csv"),
+            "--pred-system",
+            "300w_lp",
+            "--gt-system",
+            "300w_lp",
+            "-o",
+            str(out),
+        ],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 0, res.output
     return out
 
@@ -49,8 +63,9 @@ def test_missing_images_are_rejects_the_rest_drawn(realdata, errors, tmp_path, k
     res = _draw(src, "-o", out, "--images", imgs, "--worst", 5, "--rejects", tmp_path / "rej.csv")
     assert res.exit_code == 0, res.output
     assert "rejected: 2 image not found" in res.output
-    assert sorted(p.name for p in out.iterdir()) == [f"{k + 2:04d}_{Path(n).stem}.png"
-                                                     for k, n in enumerate(worst[1:4])]
+    assert sorted(p.name for p in out.iterdir()) == [
+        f"{k + 2:04d}_{Path(n).stem}.png" for k, n in enumerate(worst[1:4])
+    ]
     rej = pd.read_csv(tmp_path / "rej.csv")
     assert sorted(rej["image"]) == sorted([worst[0], worst[4]])
     assert all(r.startswith("image not found") for r in rej["reason"])

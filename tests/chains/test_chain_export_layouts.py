@@ -13,6 +13,7 @@ pizza1 sample relabelled by ``hpe relabel-panoptic``. Oracles, all independent o
 
 Each export is moved to another folder before it is read (a moved export must still load).
 """
+
 from __future__ import annotations
 
 import glob
@@ -37,8 +38,9 @@ REALDATA = ROOT.parent / "shared" / "realdata"
 PIZZA = REALDATA / "panoptic_160906_pizza1"
 AFLW = REALDATA / "aflw2000_prnet"
 W300 = REALDATA / "300wlp_face3d"
-pytestmark = pytest.mark.skipif(not (PIZZA.exists() and AFLW.exists() and W300.exists()),
-                                reason="shared/realdata is not available")
+pytestmark = pytest.mark.skipif(
+    not (PIZZA.exists() and AFLW.exists() and W300.exists()), reason="shared/realdata is not available"
+)
 CAMS = "00_00,00_08,00_15,00_23"  # the pizza1 cameras with JPEGs in the sample
 
 
@@ -87,7 +89,10 @@ def pizza_truth(t):
         pts = pts[np.isfinite(pts).all(1)]
         src = PIZZA / "hdImgs" / f"hd_{row.camera}" / f"{int(row.frame):08d}.jpg"  # this copy's layout
         out[(row.camera, int(row.person_id), int(row.frame))] = (
-            get_R(*np.deg2rad([row.pitch, row.yaw, row.roll])), pts, src)
+            get_R(*np.deg2rad([row.pitch, row.yaw, row.roll])),
+            pts,
+            src,
+        )
     return out
 
 
@@ -124,10 +129,14 @@ def same_pixels(src_img, src_pts, dst_img, dst_pts, half=4, tol=14.0):
     b = cv2.cvtColor(dst_img, cv2.COLOR_BGR2GRAY).astype(np.float64)
     diffs = []
     for (xs, ys), (xd, yd) in zip(np.round(src_pts).astype(int), np.round(dst_pts).astype(int)):
-        if (half <= xs < a.shape[1] - half and half <= ys < a.shape[0] - half and half <= xd < b.shape[1] - half
-                and half <= yd < b.shape[0] - half):
-            pa = a[ys - half:ys + half + 1, xs - half:xs + half + 1]
-            pb = b[yd - half:yd + half + 1, xd - half:xd + half + 1]
+        if (
+            half <= xs < a.shape[1] - half
+            and half <= ys < a.shape[0] - half
+            and half <= xd < b.shape[1] - half
+            and half <= yd < b.shape[0] - half
+        ):
+            pa = a[ys - half : ys + half + 1, xs - half : xs + half + 1]
+            pb = b[yd - half : yd + half + 1, xd - half : xd + half + 1]
             diffs.append(np.abs(pa - pb).mean())
     assert diffs, "no landmark inside both images"
     assert float(np.median(diffs)) < tol, diffs
@@ -183,8 +192,19 @@ def check_mat_items(items, truth, src_cache):
 @pytest.mark.parametrize("trainer", [None, "hopenet", "6drepnet360"])
 def test_6drepnet_mat_read_by_its_loaders(tmp_path, pizza, truth, trainer):
     args = ["--trainer", trainer] if trainer else []
-    out, summary, rej = export(tmp_path, [AFLW, W300, pizza[0]], "--layout", "6drepnet", "--images", AFLW,
-                               "--images", W300, "--images", PIZZA, *args)
+    out, summary, rej = export(
+        tmp_path,
+        [AFLW, W300, pizza[0]],
+        "--layout",
+        "6drepnet",
+        "--images",
+        AFLW,
+        "--images",
+        W300,
+        "--images",
+        PIZZA,
+        *args,
+    )
     assert summary["form"] == "mat" and summary["trainer"] == (trainer or "6drepnet")
     items = list(read_sixdrepnet_mat(out / "train", out / "train" / "files.txt", hopenet=trainer == "hopenet"))
     assert check_mat_items(items, truth, {}) == summary["exported"] > 17
@@ -277,8 +297,9 @@ def directmhp_load(yaml_file, task):
 
 
 def test_directmhp_read_by_its_loader_after_a_move(tmp_path, pizza, truth, monkeypatch):
-    out, summary, _ = export(tmp_path, [pizza[0]], "--layout", "directmhp", "--images", PIZZA,
-                             "--split", "camera:train=0.75,val=0.25")
+    out, summary, _ = export(
+        tmp_path, [pizza[0]], "--layout", "directmhp", "--images", PIZZA, "--split", "camera:train=0.75,val=0.25"
+    )
     monkeypatch.chdir(out)  # path: . -- DirectMHP's check_dataset joins it to the working folder
     n = 0
     for task in ("train", "val"):
@@ -298,8 +319,11 @@ def test_directmhp_read_by_its_loader_after_a_move(tmp_path, pizza, truth, monke
                 p, yw, r = (line[5] - 0.5) * 180, (line[6] - 0.5) * 360, (line[7] - 0.5) * 180
                 np.testing.assert_allclose([p, yw, r], a["euler_angles"], atol=2e-4)
                 R = get_R(*np.deg2rad(a["euler_angles"]))
-                cands = [v for key, v in truth.items() if isinstance(key, tuple) and key[0] == f"00_{node:02d}"
-                         and key[2] == frame]
+                cands = [
+                    v
+                    for key, v in truth.items()
+                    if isinstance(key, tuple) and key[0] == f"00_{node:02d}" and key[2] == frame
+                ]
                 assert min(geodesic_deg(R, v[0]) for v in cands) < 1e-6
                 pts = np.array(a["face2d_pts"], dtype=float).T
                 vis = (pts != -1).all(1)
@@ -327,7 +351,7 @@ def test_fsanet_read_by_fsanet_and_6drepnet_biwi(tmp_path, pizza, truth):
         x0, y0, x1, y1 = crops[["crop_x0", "crop_y0", "crop_x1", "crop_y1"]].iloc[k]
         s = cv2.imread(str(src))
         pad = cv2.copyMakeBorder(s, 400, 400, 400, 400, cv2.BORDER_CONSTANT, value=0)
-        ref = cv2.resize(pad[y0 + 400:y1 + 400, x0 + 400:x1 + 400], (64, 64), interpolation=cv2.INTER_AREA)
+        ref = cv2.resize(pad[y0 + 400 : y1 + 400, x0 + 400 : x1 + 400], (64, 64), interpolation=cv2.INTER_AREA)
         assert np.abs(ref.astype(float) - image[k].astype(float)).mean() < 8  # BGR, as FSA-Net's cv2.imread
 
 
@@ -345,8 +369,9 @@ def read_hf_parquet(folder):
 
 
 def test_hf_pose_dataset(tmp_path, pizza, truth):
-    out, summary, _ = export(tmp_path, [AFLW, W300, pizza[0]], "--layout", "hf", "--images", AFLW,
-                             "--images", W300, "--images", PIZZA)
+    out, summary, _ = export(
+        tmp_path, [AFLW, W300, pizza[0]], "--layout", "hf", "--images", AFLW, "--images", W300, "--images", PIZZA
+    )
     card = (out / "README.md").read_text()
     head = card.split("---")[1]
     assert "image-classification" not in head and "keypoint-detection" in head and "pose-estimation" in head

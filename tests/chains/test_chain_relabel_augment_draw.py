@@ -1,6 +1,7 @@
 """relabel-panoptic -> augment (crop, hflip) with the real pizza1 frames -> draw (no --image-size: the sizes come
 from image_width/image_height and the images). Oracles: the crop is slicing, the flip is cv2.flip; landmarks and
 boxes move by the same pixels; the drawn lines start at the moved box centres."""
+
 import cv2
 import numpy as np
 import pandas as pd
@@ -30,8 +31,9 @@ def pizza(realdata, tmp_path):
 def test_relabel_augment_draw(pizza, tmp_path, op):
     seq, labels = pizza
     args = ["--crop", *CROP] if op == "crop" else ["--hflip"]
-    res = cli_run("augment", labels, "-o", tmp_path / "aug.parquet", *args, "--images", seq, "--out-images",
-                  tmp_path / "imgs")
+    res = cli_run(
+        "augment", labels, "-o", tmp_path / "aug.parquet", *args, "--images", seq, "--out-images", tmp_path / "imgs"
+    )
     assert res.exit_code == 0, res.output
     a, b = pd.read_parquet(labels), pd.read_parquet(tmp_path / "aug.parquet")
     assert len(a) == len(b) and (b["image"] == a["image"]).all()
@@ -48,11 +50,12 @@ def test_relabel_augment_draw(pizza, tmp_path, op):
     for name in a["image"].unique():
         cam = name.split("/")[1]
         src = cv2.imread(str(seq / "hdImgs" / f"hd_{cam}" / "00001147.jpg"))
-        ref = src[y:y + h, x:x + w] if op == "crop" else cv2.flip(src, 1)
+        ref = src[y : y + h, x : x + w] if op == "crop" else cv2.flip(src, 1)
         got = cv2.imread(str(tmp_path / "imgs" / name))
         assert got.shape == ref.shape and np.abs(got.astype(int) - ref.astype(int)).mean() < 2.5
-    res = cli_run("draw", tmp_path / "aug.parquet", "-o", tmp_path / "drawn", "--images", tmp_path / "imgs",
-                  "--thickness", "4")
+    res = cli_run(
+        "draw", tmp_path / "aug.parquet", "-o", tmp_path / "drawn", "--images", tmp_path / "imgs", "--thickness", "4"
+    )
     assert res.exit_code == 0, res.output
     checked = 0
     for _, r in b.iterrows():
@@ -63,6 +66,6 @@ def test_relabel_augment_draw(pizza, tmp_path, op):
         before = cv2.imread(str(tmp_path / "imgs" / r.image)).astype(int)
         after = cv2.imread(str(tmp_path / "drawn" / r.image)).astype(int)
         iu, iv = round(u), round(v)
-        assert np.abs(after[iv - 2:iv + 3, iu - 2:iu + 3] - before[iv - 2:iv + 3, iu - 2:iu + 3]).max() > 60
+        assert np.abs(after[iv - 2 : iv + 3, iu - 2 : iu + 3] - before[iv - 2 : iv + 3, iu - 2 : iu + 3]).max() > 60
         checked += 1
     assert checked >= 3

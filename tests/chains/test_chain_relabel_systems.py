@@ -6,6 +6,7 @@ relabel's own ``r00..r22`` (geodesic < 1e-6 degrees), audit flags nothing on
 the synthetic sequence, and the convert output audits clean in its new system.
 A COCO file (whenet angles, ``info["hpe:system"]``) is read back the same way.
 """
+
 from __future__ import annotations
 
 import json
@@ -113,8 +114,19 @@ def test_relabel_in_two_systems_then_draw_without_system_draws_the_same_pixels(t
     pics = {}
     for system in ("300w_lp", "scipy_zyx"):
         lab = tmp_path / f"{system}.parquet"
-        run("relabel-panoptic", PIZZA, "-o", lab, "--system", system, "--cameras", "00_00,00_08",
-            "--frames", "1147:1148", "-q")
+        run(
+            "relabel-panoptic",
+            PIZZA,
+            "-o",
+            lab,
+            "--system",
+            system,
+            "--cameras",
+            "00_00,00_08",
+            "--frames",
+            "1147:1148",
+            "-q",
+        )
         out = tmp_path / f"draw_{system}"
         res = run("draw", lab, "--images", PIZZA, "-o", out)
         assert f"system {system} (file metadata" in res.stderr, res.stderr
@@ -127,6 +139,7 @@ def test_relabel_in_two_systems_then_draw_without_system_draws_the_same_pixels(t
         assert np.abs(img.astype(int) - other.astype(int)).mean() < 0.5, name
     wrong = tmp_path / "wrong"
     run("draw", tmp_path / "scipy_zyx.parquet", "--images", PIZZA, "-o", wrong, "--reinterpret-as", "300w_lp")
-    diffs = [np.abs(cv2.imread(str(wrong / n)).astype(int) - img.astype(int)).max()
-             for n, img in pics["300w_lp"].items()]
+    diffs = [
+        np.abs(cv2.imread(str(wrong / n)).astype(int) - img.astype(int)).max() for n, img in pics["300w_lp"].items()
+    ]
     assert max(diffs) > 100  # the axes point elsewhere: the seam this rule closes

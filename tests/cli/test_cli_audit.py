@@ -1,4 +1,5 @@
 """``hpe audit`` end to end (CliRunner)."""
+
 import json
 from pathlib import Path
 
@@ -11,8 +12,16 @@ from scipy.spatial.transform import Rotation
 from hpe_cli.cli.main import cli
 
 REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
-KEYS = ["rows", "gimbal_lock", "near_gimbal", "non_canonical", "out_of_range", "non_finite", "not_rotation",
-        "duplicates"]
+KEYS = [
+    "rows",
+    "gimbal_lock",
+    "near_gimbal",
+    "non_canonical",
+    "out_of_range",
+    "non_finite",
+    "not_rotation",
+    "duplicates",
+]
 
 ROWS = [  # file, pitch, yaw, roll -> expected flags
     ("HELEN_2375918801_1_14.jpg", -16.0909, -89.99858, -6.8545, {"gimbal_lock", "near_gimbal"}),
@@ -96,8 +105,9 @@ def test_plots(table, tmp_path):
 
 
 def test_matrix_input_and_radians(tmp_path):
-    A = np.swapaxes(Rotation.from_euler("ZYX", [[30, 20, 10], [-6.8545, -89.99858, -16.0909]],
-                                        degrees=True).as_matrix(), 1, 2)  # 300W-LP A (SPEC §2)
+    A = np.swapaxes(
+        Rotation.from_euler("ZYX", [[30, 20, 10], [-6.8545, -89.99858, -16.0909]], degrees=True).as_matrix(), 1, 2
+    )  # 300W-LP A (SPEC §2)
     bad = np.diag([1.0, 1.0, -1.0])
     M = np.concatenate([A, bad[None]]).reshape(-1, 9)
     df = pd.DataFrame(M, columns=[f"r{i}{j}" for i in range(3) for j in range(3)])
@@ -146,8 +156,9 @@ def test_empty_table(tmp_path):
 def test_batches_do_not_change_results(tmp_path):
     rng = np.random.default_rng(0)
     n = 2000
-    df = pd.DataFrame({"pitch": rng.uniform(-180, 180, n), "yaw": rng.uniform(-95, 95, n),
-                       "roll": rng.uniform(-180, 180, n)})
+    df = pd.DataFrame(
+        {"pitch": rng.uniform(-180, 180, n), "yaw": rng.uniform(-95, 95, n), "roll": rng.uniform(-180, 180, n)}
+    )
     df.loc[1500:1509] = df.loc[0:9].to_numpy()  # duplicates across batches
     p = tmp_path / "r.parquet"
     df.to_parquet(p)

@@ -1,4 +1,5 @@
 """hpe audit --decoder and audit of other storage kinds (real AFLW2000 labels)."""
+
 import json
 
 import numpy as np
@@ -13,15 +14,17 @@ from hpe_cli.cli.main import cli
 
 def test_audit_decoder_on_real_aflw2000(tmp_path, realdata):
     out = tmp_path / "r.json"
-    res = CliRunner().invoke(cli, ["audit", str(realdata / "aflw2000_prnet"), "--decoder", "synergynet",
-                                   "--json", str(out)])
+    res = CliRunner().invoke(
+        cli, ["audit", str(realdata / "aflw2000_prnet"), "--decoder", "synergynet", "--json", str(out)]
+    )
     assert res.exit_code == 0, res.output
     d = json.loads(out.read_text())["decoder"]
     assert d["reference_system"] == "300w_lp" and d["rows"] == 16 and d["decoded"] == 16
     # SynergyNet keeps 300W-LP pitch and roll exactly; its yaw is 3DDFA's asin(R20)
     assert d["d_pitch"]["max"] < 1e-9 and d["d_roll"]["max"] < 1e-9
-    pp = np.array([sio.loadmat(f)["Pose_Para"][0, :3] for f in sorted((realdata / "aflw2000_prnet").glob("*.mat"))],
-                  dtype=float)
+    pp = np.array(
+        [sio.loadmat(f)["Pose_Para"][0, :3] for f in sorted((realdata / "aflw2000_prnet").glob("*.mat"))], dtype=float
+    )
     A = canonical_A(np.rad2deg(pp))
     want = np.abs(np.rad2deg(np.arcsin(A[:, 2, 0])) - np.rad2deg(pp[:, 1])).max()
     assert abs(d["d_yaw"]["max"] - want) < 1e-9 and d["d_yaw"]["max"] > 1
@@ -44,8 +47,21 @@ def test_audit_rotvec_several_batches_and_flagged_output(tmp_path):
     src = tmp_path / "rv.csv"
     pd.DataFrame({"rx": rv[:, 0], "ry": rv[:, 1], "rz": rv[:, 2]}).to_csv(src, index=False)
     out = tmp_path / "f.csv"
-    res = CliRunner().invoke(cli, ["audit", str(src), "--system", "img2pose", "--batch-size", "7", "-o", str(out),
-                                   "--json", str(tmp_path / "r.json")])
+    res = CliRunner().invoke(
+        cli,
+        [
+            "audit",
+            str(src),
+            "--system",
+            "img2pose",
+            "--batch-size",
+            "7",
+            "-o",
+            str(out),
+            "--json",
+            str(tmp_path / "r.json"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     rep = json.loads((tmp_path / "r.json").read_text())
     assert rep["label_columns"] == "rotvec" and rep["rows"] == 50 and rep["not_rotation"] == 0

@@ -1,4 +1,5 @@
 """``hpe augment`` end to end: tables, physics of the written labels, images to the pixel, errors."""
+
 import hashlib
 import json
 from pathlib import Path
@@ -48,9 +49,17 @@ def make_table(n=40, seed=0):
     centre = rng.uniform(200, 400, (n, 2))
     lm = project(canonical_A(pyr), centre)
     lo, hi = lm.min(axis=1), lm.max(axis=1)
-    df = pd.DataFrame({"id": [f"s{i:03d}" for i in range(n)], "subject": np.arange(n) % 7,
-                       "pitch": pyr[:, 0], "yaw": pyr[:, 1], "roll": pyr[:, 2],
-                       "cx": centre[:, 0], "cy": centre[:, 1]})
+    df = pd.DataFrame(
+        {
+            "id": [f"s{i:03d}" for i in range(n)],
+            "subject": np.arange(n) % 7,
+            "pitch": pyr[:, 0],
+            "yaw": pyr[:, 1],
+            "roll": pyr[:, 2],
+            "cx": centre[:, 0],
+            "cy": centre[:, 1],
+        }
+    )
     flat = lm.reshape(n, -1)
     df = pd.concat([df, pd.DataFrame(flat, columns=landmark_cols(68))], axis=1)
     for c, v in zip(BBOX_COLS, [lo[:, 0] - 5, lo[:, 1] - 5, hi[:, 0] - lo[:, 0] + 10, hi[:, 1] - lo[:, 1] + 10]):
@@ -79,10 +88,16 @@ def pixel_map(kind, angle=None):
     return cv2.getRotationMatrix2D((cx, cy), angle, 1.0)
 
 
-@pytest.mark.parametrize("args,kind,angle", [(["--hflip"], "hflip", None), (["--vflip"], "vflip", None),
-                                             (["--hflip", "--vflip"], "both", None),
-                                             (["--rotate", "-37.5"], "rotate", -37.5),
-                                             (["--rotate", "200"], "rotate", 200.0)])
+@pytest.mark.parametrize(
+    "args,kind,angle",
+    [
+        (["--hflip"], "hflip", None),
+        (["--vflip"], "vflip", None),
+        (["--hflip", "--vflip"], "both", None),
+        (["--rotate", "-37.5"], "rotate", -37.5),
+        (["--rotate", "200"], "rotate", 200.0),
+    ],
+)
 def test_written_labels_reproduce_the_written_landmarks(tmp_path, args, kind, angle):
     """Physical: the face projected with the OUTPUT angles lands on the OUTPUT landmarks, for every row."""
     df = make_table()
@@ -105,8 +120,8 @@ def test_written_labels_reproduce_the_written_landmarks(tmp_path, args, kind, an
     # pass-through columns, column order
     for c in ("id", "subject", "cx", "cy", "note"):
         assert o[c].tolist() == df[c].tolist()
-    assert list(o.columns[:len(df.columns)]) == list(df.columns)
-    assert list(o.columns[len(df.columns):]) == [c for c in LABEL_COLS if c not in df.columns]
+    assert list(o.columns[: len(df.columns)]) == list(df.columns)
+    assert list(o.columns[len(df.columns) :]) == [c for c in LABEL_COLS if c not in df.columns]
     meta = pq.read_schema(out).metadata
     assert meta[b"hpe:system"] == b"300w_lp"
     assert json.loads(meta[b"hpe:augment"])["image_size"] == [W, H]
@@ -126,15 +141,20 @@ def test_boxes_follow_the_rule(tmp_path):
     lm = lms(r)
     np.testing.assert_allclose(r["bbox_x"], lm[..., 0].min(axis=1), atol=1e-9)
     np.testing.assert_allclose(r["bbox_h"], lm[..., 1].max(axis=1) - lm[..., 1].min(axis=1), atol=1e-9)
-    assert run(tmp_path / "in.parquet", "-o", tmp_path / "c.parquet", "--image-size", 300, 300, "--rotate", 33,
-               "--clip").exit_code == 0
+    assert (
+        run(
+            tmp_path / "in.parquet", "-o", tmp_path / "c.parquet", "--image-size", 300, 300, "--rotate", 33, "--clip"
+        ).exit_code
+        == 0
+    )
     c = pd.read_parquet(tmp_path / "c.parquet")
     assert (c["bbox_x"] >= 0).all() and (c["bbox_x"] + c["bbox_w"] <= 299 + 1e-9).all()
 
 
 def test_spec_examples_through_the_cli(tmp_path):
-    pd.DataFrame({"pitch": [20.0, 0.0], "yaw": [-50.0, 0.0], "roll": [15.0, 0.0]}).to_csv(tmp_path / "a.csv",
-                                                                                        index=False)
+    pd.DataFrame({"pitch": [20.0, 0.0], "yaw": [-50.0, 0.0], "roll": [15.0, 0.0]}).to_csv(
+        tmp_path / "a.csv", index=False
+    )
     assert run(tmp_path / "a.csv", "-o", tmp_path / "r.csv", "--image-size", 450, 450, "--rotate", 30).exit_code == 0
     r = pd.read_csv(tmp_path / "r.csv")
     np.testing.assert_allclose(r.loc[0, ["pitch", "yaw", "roll"]].astype(float), [43.511, -33.607, -19.343], atol=5e-4)
@@ -149,8 +169,18 @@ def test_matrix_only_input_in_another_system(tmp_path):
     pyr = rng.uniform(-80, 80, (12, 3))
     R = sysm.from_angles(pyr)
     pd.DataFrame(R.reshape(-1, 9), columns=MATRIX_COLS).to_parquet(tmp_path / "m.parquet")
-    res = run(tmp_path / "m.parquet", "-o", tmp_path / "o.parquet", "--system", "6drepnet", "--image-size", W, H,
-              "--mirror-line", 25)
+    res = run(
+        tmp_path / "m.parquet",
+        "-o",
+        tmp_path / "o.parquet",
+        "--system",
+        "6drepnet",
+        "--image-size",
+        W,
+        H,
+        "--mirror-line",
+        25,
+    )
     assert res.exit_code == 0, res.output
     o = pd.read_parquet(tmp_path / "o.parquet")
     assert all(c in o.columns for c in LABEL_COLS)
@@ -172,7 +202,7 @@ def _dots_image(pts, w, h, sigma=1.6):
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
     img = np.zeros((h, w))
     for x, y in pts:
-        img += np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * sigma ** 2))
+        img += np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * sigma**2))
     g = np.clip(img * 250, 0, 255).astype(np.uint8)
     return np.dstack([g, g // 2, 255 - g])  # 3 channels, BGR
 
@@ -181,8 +211,8 @@ def _locate(img, pts, r=7):
     out = []
     for x, y in pts:
         x0, y0 = int(round(x)), int(round(y))
-        win = img[y0 - r:y0 + r + 1, x0 - r:x0 + r + 1].astype(float)
-        gy, gx = np.mgrid[y0 - r:y0 + r + 1, x0 - r:x0 + r + 1]
+        win = img[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1].astype(float)
+        gy, gx = np.mgrid[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1]
         out.append([(win * gx).sum() / win.sum(), (win * gy).sum() / win.sum()])
     return np.array(out)
 
@@ -199,12 +229,30 @@ def test_images_agree_with_landmarks_to_the_pixel(tmp_path, args):
         pts[15:, 0] = 40 + 16 * np.arange(6) + rng.uniform(-2, 2, 6)  # 21 well-separated points
         name = f"sub/im{i}.png"
         cv2.imwrite(str(tmp_path / "imgs" / name), _dots_image(pts, w, h))
-        rows.append({"image": name, "pitch": 10.0 * i, "yaw": -20.0, "roll": 5.0,
-                     **{c: v for c, v in zip(landmark_cols(21), pts.reshape(-1))}})
+        rows.append(
+            {
+                "image": name,
+                "pitch": 10.0 * i,
+                "yaw": -20.0,
+                "roll": 5.0,
+                **{c: v for c, v in zip(landmark_cols(21), pts.reshape(-1))},
+            }
+        )
     rows.append(dict(rows[0]))  # a second face in the same image: the image is written once
     pd.DataFrame(rows).to_csv(tmp_path / "in.csv", index=False)
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "out.csv", "--image-size", w, h, *args,
-              "--images", tmp_path / "imgs", "--out-images", tmp_path / "aug")
+    res = run(
+        tmp_path / "in.csv",
+        "-o",
+        tmp_path / "out.csv",
+        "--image-size",
+        w,
+        h,
+        *args,
+        "--images",
+        tmp_path / "imgs",
+        "--out-images",
+        tmp_path / "aug",
+    )
     assert res.exit_code == 0, res.output
     assert "images: 3 written" in res.output
     o = pd.read_csv(tmp_path / "out.csv")
@@ -218,8 +266,19 @@ def test_images_agree_with_landmarks_to_the_pixel(tmp_path, args):
         assert np.abs(found - pts[inside]).max() < 0.05
     assert not any(p.name.startswith(".hpe-augment") for p in (tmp_path / "aug").iterdir())
     # --overwrite is needed a second time
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "out2.csv", "--image-size", w, h, *args,
-              "--images", tmp_path / "imgs", "--out-images", tmp_path / "aug")
+    res = run(
+        tmp_path / "in.csv",
+        "-o",
+        tmp_path / "out2.csv",
+        "--image-size",
+        w,
+        h,
+        *args,
+        "--images",
+        tmp_path / "imgs",
+        "--out-images",
+        tmp_path / "aug",
+    )
     assert res.exit_code == 1 and "already exists" in res.output
     assert not (tmp_path / "out2.csv").exists()
 
@@ -228,8 +287,19 @@ def test_real_aflw2000_hflip_with_images(tmp_path, realdata):
     from hpe_cli.datasets.mat import read_mat_dir
 
     src = realdata / "aflw2000_prnet"
-    res = run(src, "-o", tmp_path / "f.parquet", "--image-size", 450, 450, "--hflip", "--images", src,
-              "--out-images", tmp_path / "img")
+    res = run(
+        src,
+        "-o",
+        tmp_path / "f.parquet",
+        "--image-size",
+        450,
+        450,
+        "--hflip",
+        "--images",
+        src,
+        "--out-images",
+        tmp_path / "img",
+    )
     assert res.exit_code == 0, res.output
     f = pd.read_parquet(tmp_path / "f.parquet")
     d = read_mat_dir(src)
@@ -254,8 +324,19 @@ def test_landmarks_none_and_rejects(tmp_path):
     df = make_table(6)
     df.loc[1, "pitch"] = np.nan
     df.to_csv(tmp_path / "in.csv", index=False)
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--vflip", "--landmarks", "none",
-              "--rejects", tmp_path / "rej.csv")
+    res = run(
+        tmp_path / "in.csv",
+        "-o",
+        tmp_path / "o.csv",
+        "--image-size",
+        W,
+        H,
+        "--vflip",
+        "--landmarks",
+        "none",
+        "--rejects",
+        tmp_path / "rej.csv",
+    )
     assert res.exit_code == 0, res.output
     o = pd.read_csv(tmp_path / "o.csv")
     assert len(o) == 5
@@ -272,21 +353,34 @@ def test_matrix_checks(tmp_path):
     df.loc[1, "r00"] = 3.0  # not a rotation
     df.loc[2, "yaw"] = 25.0  # angles and matrix disagree
     df.to_parquet(tmp_path / "in.parquet")
-    res = run(tmp_path / "in.parquet", "-o", tmp_path / "o.parquet", "--image-size", W, H, "--rotate", 10,
-              "--rejects", tmp_path / "rej.parquet")
+    res = run(
+        tmp_path / "in.parquet",
+        "-o",
+        tmp_path / "o.parquet",
+        "--image-size",
+        W,
+        H,
+        "--rotate",
+        10,
+        "--rejects",
+        tmp_path / "rej.parquet",
+    )
     assert res.exit_code == 0, res.output
     assert len(pd.read_parquet(tmp_path / "o.parquet")) == 1
     reasons = sorted(pd.read_parquet(tmp_path / "rej.parquet")["reason"])
     assert reasons == ["angles and r00..r22 disagree", "not a rotation: not orthonormal"]
 
 
-@pytest.mark.parametrize("args,code,msg", [
-    ([], 2, "expected one of --hflip"),
-    (["--hflip", "--rotate", "3"], 2, "expected one augmentation"),
-    (["--rotate", "nan"], 2, "finite"),
-    (["--hflip", "--out-images", "o"], 2, "--out-images needs --images"),
-    (["--hflip", "--landmarks", "aflw21"], 1, "--landmarks aflw21 expects 21"),
-])
+@pytest.mark.parametrize(
+    "args,code,msg",
+    [
+        ([], 2, "expected one of --hflip"),
+        (["--hflip", "--rotate", "3"], 2, "expected one augmentation"),
+        (["--rotate", "nan"], 2, "finite"),
+        (["--hflip", "--out-images", "o"], 2, "--out-images needs --images"),
+        (["--hflip", "--landmarks", "aflw21"], 1, "--landmarks aflw21 expects 21"),
+    ],
+)
 def test_usage_and_input_errors(tmp_path, args, code, msg):
     make_table(3).to_csv(tmp_path / "in.csv", index=False)
     res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, *args)
@@ -301,16 +395,27 @@ def test_table_errors(tmp_path):
     res = run(tmp_path / "bad.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--hflip")
     assert res.exit_code == 1 and "expected angle columns pitch,yaw,roll" in res.output
     # text in a number column rejects that row only
-    t = pd.DataFrame({"pitch": ["1", "abc"], "yaw": [2.0, 2.0], "roll": [3.0, 3.0], "lm0_x": ["1", "x"],
-                      "lm0_y": [1.0, np.nan]})
+    t = pd.DataFrame(
+        {"pitch": ["1", "abc"], "yaw": [2.0, 2.0], "roll": [3.0, 3.0], "lm0_x": ["1", "x"], "lm0_y": [1.0, np.nan]}
+    )
     t.to_csv(tmp_path / "text.csv", index=False)
     # without --rejects a bad row fails the run, naming the file line (header = line 1), as in every command
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5)
     assert res.exit_code == 1, res.output
     assert "text.csv: line 3: non-numeric value in pitch; 1 row(s) cannot be used" in res.output
     assert not (tmp_path / "t.csv").exists()
-    res = run(tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5,
-              "--rejects", tmp_path / "r.csv")
+    res = run(
+        tmp_path / "text.csv",
+        "-o",
+        tmp_path / "t.csv",
+        "--image-size",
+        W,
+        H,
+        "--rotate",
+        5,
+        "--rejects",
+        tmp_path / "r.csv",
+    )
     assert res.exit_code == 0, res.output
     assert "1 of 2 rows" in res.output and "non-numeric value in pitch" in res.output
     assert pd.read_csv(tmp_path / "r.csv")["row"].tolist() == [3]
@@ -318,8 +423,19 @@ def test_table_errors(tmp_path):
     t.to_csv(tmp_path / "text.csv", index=False)
     res = run(tmp_path / "text.csv", "-o", tmp_path / "t2.csv", "--image-size", W, H, "--rotate", 5)
     assert res.exit_code == 1 and "line 3: non-numeric value in lm0_x" in res.output
-    res = run(tmp_path / "text.csv", "-o", tmp_path / "t2.csv", "--image-size", W, H, "--rotate", 5,
-              "--rejects", tmp_path / "r2.csv", "--strict")
+    res = run(
+        tmp_path / "text.csv",
+        "-o",
+        tmp_path / "t2.csv",
+        "--image-size",
+        W,
+        H,
+        "--rotate",
+        5,
+        "--rejects",
+        tmp_path / "r2.csv",
+        "--strict",
+    )
     assert res.exit_code == 1 and "--strict" in res.output and not (tmp_path / "t2.csv").exists()
     df = make_table(2)[["pitch", "yaw", "roll"] + landmark_cols(5)]
     df.to_csv(tmp_path / "five.csv", index=False)
@@ -328,15 +444,20 @@ def test_table_errors(tmp_path):
     assert run(tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--rotate", 5).exit_code == 0
     res = run(tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--rotate", 5)
     assert res.exit_code == 1 and "already exists" in res.output
-    assert run(tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--rotate", 5,
-               "--overwrite").exit_code == 0
+    assert (
+        run(
+            tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--rotate", 5, "--overwrite"
+        ).exit_code
+        == 0
+    )
 
 
 def test_image_errors_leave_nothing_behind(tmp_path):
     (tmp_path / "imgs").mkdir()
     cv2.imwrite(str(tmp_path / "imgs" / "a.png"), np.zeros((20, 30, 3), np.uint8))
-    pd.DataFrame({"image": ["a.png", "missing.png"], "pitch": [0.0, 0], "yaw": [0.0, 0], "roll": [0.0, 0]}) \
-        .to_csv(tmp_path / "in.csv", index=False)
+    pd.DataFrame({"image": ["a.png", "missing.png"], "pitch": [0.0, 0], "yaw": [0.0, 0], "roll": [0.0, 0]}).to_csv(
+        tmp_path / "in.csv", index=False
+    )
     base = [tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", tmp_path / "imgs"]
     res = run(*base, "--image-size", 30, 20, "--out-images", tmp_path / "out")
     assert res.exit_code == 1 and "line 3: image not found" in res.output and "missing.png" in res.output
@@ -367,8 +488,9 @@ def test_threaded_pipeline_same_output_and_rejects(tmp_path):
     outs = []
     for workers, bs in ((1, 1000), (2, 7)):
         out, rej = tmp_path / f"o{workers}.parquet", tmp_path / f"r{workers}.csv"
-        s = run_augment(src, out, get_system("300w_lp"), (W, H), "rotate", 20.0, rejects_path=rej, batch_size=bs,
-                        workers=workers)
+        s = run_augment(
+            src, out, get_system("300w_lp"), (W, H), "rotate", 20.0, rejects_path=rej, batch_size=bs, workers=workers
+        )
         assert s["rows"] == 50 and s["written"] == 47
         outs.append((pd.read_parquet(out), pd.read_csv(rej)))
     pd.testing.assert_frame_equal(outs[0][0], outs[1][0])

@@ -1,4 +1,5 @@
 """hpe biwi: RGB camera, head boxes, protocols, sequence splits (real BIWI samples where present)."""
+
 from __future__ import annotations
 
 import shutil
@@ -16,8 +17,9 @@ BIWI = Path(__file__).resolve().parents[2] / ".." / "shared" / "realdata" / "biw
 HPDB = BIWI / "hpdb"
 # rgb.cal of sequence 01 and frame_00003_pose.txt, typed from the files (PROVENANCE §4)
 K_RGB = np.array([[517.679, 0, 320], [0, 517.679, 240.5], [0, 0, 1]])
-R_CAL = np.array([[0.999947, 0.00432361, 0.00929419], [-0.00446314, 0.999877, 0.0150443],
-                  [-0.009228, -0.015085, 0.999844]])
+R_CAL = np.array(
+    [[0.999947, 0.00432361, 0.00929419], [-0.00446314, 0.999877, 0.0150443], [-0.009228, -0.015085, 0.999844]]
+)
 T_CAL = np.array([-24.0198, 5.8896, -13.2308])
 R3 = np.array([[0.997978, 0.0272944, 0.0574071], [-0.0346956, 0.990621, 0.132163], [-0.0532613, -0.133887, 0.989564]])
 C3 = np.array([51.9358, 38.2631, 881.756])
@@ -38,10 +40,10 @@ def test_rgb_camera_frame3_by_hand():
     uv = (K_RGB @ c)[:2] / c[2]  # on the bridge of the nose in frame_00003_rgb.png (checked by eye)
     np.testing.assert_allclose(t[["center_u", "center_v"]].to_numpy()[0], uv, atol=2e-3)
     np.testing.assert_allclose(uv, [341.65, 274.63], atol=0.01)
-    uv = (K_RGB @ t[["center_x", "center_y", "center_z"]].to_numpy()[0])
+    uv = K_RGB @ t[["center_x", "center_y", "center_z"]].to_numpy()[0]
     uv = uv[:2] / uv[2]
     c = t[["center_x", "center_y", "center_z"]].to_numpy()[0]
-    side = 2 * 517.679 * 100 / np.sqrt(c @ c - 100 ** 2)  # 200 mm sphere
+    side = 2 * 517.679 * 100 / np.sqrt(c @ c - 100**2)  # 200 mm sphere
     np.testing.assert_allclose(t[["bbox_w", "bbox_h"]].to_numpy()[0], [side, side], atol=1e-9)
     np.testing.assert_allclose(t["bbox_x"].to_numpy()[0], uv[0] - side / 2, atol=1e-6)
     assert t.loc[0, "image"] == "01/frame_00003_rgb.png"
@@ -50,9 +52,10 @@ def test_rgb_camera_frame3_by_hand():
 def test_depth_camera_keeps_labels_and_uses_depth_cal():
     need_hpdb()
     t = read_biwi_camera(HPDB, camera="depth")
-    np.testing.assert_allclose(t[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy().reshape(3, 3), R3,
-                               atol=2e-6)
-    uv = (np.array([[575.816, 0, 320], [0, 575.816, 240], [0, 0, 1]]) @ C3)
+    np.testing.assert_allclose(
+        t[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy().reshape(3, 3), R3, atol=2e-6
+    )
+    uv = np.array([[575.816, 0, 320], [0, 575.816, 240], [0, 0, 1]]) @ C3
     np.testing.assert_allclose(t[["center_u", "center_v"]].to_numpy()[0], uv[:2] / uv[2], atol=1e-6)
 
 
@@ -86,8 +89,24 @@ def test_cli_biwi_split_lists_and_protocol(tmp_path):
     if not tgz.exists():
         pytest.skip("real BIWI annotations absent")
     out, lists = tmp_path / "b.parquet", tmp_path / "splits"
-    r = CliRunner().invoke(cli, ["biwi", str(tgz), "-o", str(out), "--split", "0.7,0.3", "--split-lists",
-                                 str(lists), "--protocol", "hopenet-99", "--system", "300w_lp", "-q"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "biwi",
+            str(tgz),
+            "-o",
+            str(out),
+            "--split",
+            "0.7,0.3",
+            "--split-lists",
+            str(lists),
+            "--protocol",
+            "hopenet-99",
+            "--system",
+            "300w_lp",
+            "-q",
+        ],
+    )
     assert r.exit_code == 0, r.output
     f = pd.read_parquet(out)
     assert len(f) == 15677  # no official frame is beyond +-99 deg
@@ -112,8 +131,20 @@ def test_cli_biwi_rgb_without_calibration(tmp_path):
     r = CliRunner().invoke(cli, ["biwi", str(tmp_path / "ann"), "-o", str(tmp_path / "o.csv"), "--camera", "rgb"])
     assert r.exit_code == 1 and "rgb.cal" in r.output and len(r.output.strip().splitlines()) == 1
     if HPDB.exists():
-        r = CliRunner().invoke(cli, ["biwi", str(tmp_path / "ann"), "-o", str(tmp_path / "o.csv"), "--camera", "rgb",
-                                     "--calibration", str(HPDB), "-q"])
+        r = CliRunner().invoke(
+            cli,
+            [
+                "biwi",
+                str(tmp_path / "ann"),
+                "-o",
+                str(tmp_path / "o.csv"),
+                "--camera",
+                "rgb",
+                "--calibration",
+                str(HPDB),
+                "-q",
+            ],
+        )
         assert r.exit_code == 0, r.output
         f = pd.read_csv(tmp_path / "o.csv")
         # frame 166's head box (checked by eye on frame_00166_rgb.png) lies inside the 640x480 image
@@ -150,9 +181,11 @@ def test_cli_biwi_rejects_damaged_frames(tmp_path):
     assert sorted(labels["file"].tolist() + rejects["file"].tolist()) == frames
     assert len(labels) + len(rejects) == len(frames) and not set(labels["file"]) & set(rejects["file"])
     why = dict(zip(rejects["file"], rejects["reason"]))
-    assert why == {"01/frame_00006_pose.bin": "expected 24 bytes (6 float32), got 10",
-                   "02/frame_00348_pose.bin": why["02/frame_00348_pose.bin"],
-                   "03/frame_00562_pose.bin": "yaw: expected degrees within +-90 (a Z-Y-X split), got 120"}
+    assert why == {
+        "01/frame_00006_pose.bin": "expected 24 bytes (6 float32), got 10",
+        "02/frame_00348_pose.bin": why["02/frame_00348_pose.bin"],
+        "03/frame_00562_pose.bin": "yaw: expected degrees within +-90 (a Z-Y-X split), got 120",
+    }
     assert why["02/frame_00348_pose.bin"].startswith("expected finite values")
     assert rejects.set_index("file").loc["03/frame_00562_pose.bin", ["sequence", "frame"]].tolist() == ["03", 562]
     whole = read_biwi_camera(BIWI / "db_annotations_subset", system="300w_lp").set_index("file").loc[labels["file"]]

@@ -1,4 +1,5 @@
 """hpe convert, end to end with CliRunner: formats, real .mat files, bad input, exit codes."""
+
 import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
@@ -21,8 +22,15 @@ def run(*args):
 def labels(tmp_path):
     rng = np.random.default_rng(0)
     n = 500
-    df = pd.DataFrame({"image": [f"img{i}.jpg" for i in range(n)], "pitch": rng.uniform(-179, 179, n),
-                       "yaw": rng.uniform(-90, 90, n), "roll": rng.uniform(-179, 179, n), "score": rng.random(n)})
+    df = pd.DataFrame(
+        {
+            "image": [f"img{i}.jpg" for i in range(n)],
+            "pitch": rng.uniform(-179, 179, n),
+            "yaw": rng.uniform(-90, 90, n),
+            "roll": rng.uniform(-179, 179, n),
+            "score": rng.random(n),
+        }
+    )
     path = tmp_path / "labels.csv"
     df.to_csv(path, index=False)
     return path, df
@@ -64,13 +72,21 @@ def test_matrix_input_and_back(tmp_path, labels):
     A = canonical_A(df[["pitch", "yaw", "roll"]].to_numpy())
     assert np.abs(got[MATRIX_COLS].to_numpy().reshape(-1, 3, 3) - A).max() < 1e-12
     ok = np.abs(df["yaw"]) < 89.9  # input was already solution 1 of 300w_lp
-    assert np.abs(got.loc[ok, ["pitch", "yaw", "roll"]].to_numpy() - df.loc[ok, ["pitch", "yaw", "roll"]].to_numpy()).max() < 1e-9
+    assert (
+        np.abs(got.loc[ok, ["pitch", "yaw", "roll"]].to_numpy() - df.loc[ok, ["pitch", "yaw", "roll"]].to_numpy()).max()
+        < 1e-9
+    )
 
 
 def test_radians_and_custom_toml(tmp_path):
     sysfile = tmp_path / "mine.toml"
-    sysfile.write_text('name = "mine"\nsequence = "extrinsic"\n' + "".join(
-        f'[[turns]]\nangle = "{r}"\naxis = "{a}"\nhand = "right"\n' for r, a in [("roll", "z"), ("yaw", "x"), ("pitch", "y")]))
+    sysfile.write_text(
+        'name = "mine"\nsequence = "extrinsic"\n'
+        + "".join(
+            f'[[turns]]\nangle = "{r}"\naxis = "{a}"\nhand = "right"\n'
+            for r, a in [("roll", "z"), ("yaw", "x"), ("pitch", "y")]
+        )
+    )
     df = pd.DataFrame({"pitch": [0.1, -0.5], "yaw": [0.3, 1.2], "roll": [-0.2, 2.0]})
     src = tmp_path / "rad.csv"
     df.to_csv(src, index=False)
@@ -97,8 +113,9 @@ def test_real_mat_folder(tmp_path, realdata):
 
 
 def test_rejects_file_and_fail_without_it(tmp_path):
-    df = pd.DataFrame({"id": range(5), "pitch": [1, 2, np.nan, 4, 5], "yaw": ["1", "x", "3", "4", "inf"],
-                       "roll": [0, 0, 0, 0, 0]})
+    df = pd.DataFrame(
+        {"id": range(5), "pitch": [1, 2, np.nan, 4, 5], "yaw": ["1", "x", "3", "4", "inf"], "roll": [0, 0, 0, 0, 0]}
+    )
     src = tmp_path / "bad.csv"
     df.to_csv(src, index=False)
     out = tmp_path / "o.parquet"
@@ -143,11 +160,14 @@ def test_overwrite_and_usage_errors(tmp_path, labels):
     assert res.exit_code == 1 and "expected an output ending in .parquet or .csv" in res.output
 
 
-@pytest.mark.parametrize("content,msg", [
-    ("", "empty file"),
-    ("a,b\n1,2\n", "missing column(s) pitch, yaw, roll"),
-    ("pitch,yaw,roll\n", "empty table"),
-])
+@pytest.mark.parametrize(
+    "content,msg",
+    [
+        ("", "empty file"),
+        ("a,b\n1,2\n", "missing column(s) pitch, yaw, roll"),
+        ("pitch,yaw,roll\n", "empty table"),
+    ],
+)
 def test_bad_files(tmp_path, content, msg):
     src = tmp_path / "in.csv"
     src.write_text(content)
@@ -215,13 +235,17 @@ def test_duplicate_column_names_are_an_error(tmp_path):
 
 def test_bad_rows_of_every_kind_go_to_rejects_with_their_lines(tmp_path):
     src = tmp_path / "b.csv"
-    src.write_bytes(b"pitch,yaw,roll,image\n1,2,3,a\n1,2\n4,x,6,b\n7,8,9,caf\xe9\n1e300,0,0,c\n5,5,5,\"q\n")
+    src.write_bytes(b'pitch,yaw,roll,image\n1,2,3,a\n1,2\n4,x,6,b\n7,8,9,caf\xe9\n1e300,0,0,c\n5,5,5,"q\n')
     rej = tmp_path / "r.csv"
     res = run(src, "-o", tmp_path / "o.parquet", "--from", "300w_lp", "--to", "whenet", "--rejects", rej, "-q")
     assert res.exit_code == 0, res.output
     r = pd.read_csv(rej).sort_values("row")
     assert r["row"].tolist() == [3, 4, 5, 6, 7]
-    assert r["reason"].tolist() == ["expected 4 fields, got 2", "non-numeric value in yaw",
-                                    "undecodable bytes in image (not UTF-8)",
-                                    "absurd angle in pitch: |value| > 1e+06 degrees", "unclosed quote"]
+    assert r["reason"].tolist() == [
+        "expected 4 fields, got 2",
+        "non-numeric value in yaw",
+        "undecodable bytes in image (not UTF-8)",
+        "absurd angle in pitch: |value| > 1e+06 degrees",
+        "unclosed quote",
+    ]
     assert pd.read_parquet(tmp_path / "o.parquet")["image"].tolist() == ["a"]

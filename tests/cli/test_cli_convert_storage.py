@@ -1,4 +1,5 @@
 """hpe convert on every storage kind, input and output (SciPy as the oracle)."""
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -25,8 +26,9 @@ def test_rotvec_in_300wlp_out(tmp_path, pyr):
     A = canonical_A(pyr)
     rv = Rotation.from_matrix(F @ A @ F).as_rotvec()  # img2pose's rotation vectors
     src = tmp_path / "rv.csv"
-    pd.DataFrame({"img": range(len(rv)), "rx": rv[:, 0], "ry": rv[:, 1], "rz": rv[:, 2],
-                  "tz": 1.0}).to_csv(src, index=False)
+    pd.DataFrame({"img": range(len(rv)), "rx": rv[:, 0], "ry": rv[:, 1], "rz": rv[:, 2], "tz": 1.0}).to_csv(
+        src, index=False
+    )
     out = tmp_path / "o.csv"
     res = run(src, "-o", out, "--from", "img2pose", "--to", "300w_lp")
     assert res.exit_code == 0, res.output
@@ -37,8 +39,10 @@ def test_rotvec_in_300wlp_out(tmp_path, pyr):
 
 def test_300wlp_to_quaternion_user_system(tmp_path, pyr):
     sysf = tmp_path / "quat.toml"
-    sysf.write_text('name = "my_quat"\nstorage_kind = "quaternion"\nquaternion_order = "xyzw"\n'
-                    'frame = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]\n[columns]\nqx = "QX"\nqy = "QY"\nqz = "QZ"\nqw = "QW"\n')
+    sysf.write_text(
+        'name = "my_quat"\nstorage_kind = "quaternion"\nquaternion_order = "xyzw"\n'
+        'frame = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]\n[columns]\nqx = "QX"\nqy = "QY"\nqz = "QZ"\nqw = "QW"\n'
+    )
     src = tmp_path / "l.csv"
     pd.DataFrame({"pitch": pyr[:, 0], "yaw": pyr[:, 1], "roll": pyr[:, 2]}).to_csv(src, index=False)
     out = tmp_path / "q.parquet"
@@ -63,13 +67,18 @@ def test_6d_and_4x4_and_named_angle_columns(tmp_path, pyr):
     pd.DataFrame({"pitch": pyr[:, 0], "yaw": pyr[:, 1], "roll": pyr[:, 2]}).to_csv(src, index=False)
     A = canonical_A(pyr)
     for target, cols, ref in [
-        ("6drepnet_6d", [f"sixd_{i}" for i in range(6)], np.concatenate([A.transpose(0, 2, 1)[:, :, 0],
-                                                                          A.transpose(0, 2, 1)[:, :, 1]], 1)),
+        (
+            "6drepnet_6d",
+            [f"sixd_{i}" for i in range(6)],
+            np.concatenate([A.transpose(0, 2, 1)[:, :, 0], A.transpose(0, 2, 1)[:, :, 1]], 1),
+        ),
         ("mediapipe", [f"m{i}{j}" for i in range(3) for j in range(3)], A.reshape(-1, 9)),
-        ("trinet", ["left_x", "left_y", "left_z", "down_x", "down_y", "down_z", "front_x", "front_y", "front_z"],
-         (np.diag([1.0, -1, 1]) @ A @ np.diag([1.0, -1, 1])).transpose(0, 2, 1).reshape(-1, 9)),
-        ("openface", ["pose_Rx", "pose_Ry", "pose_Rz"],
-         Rotation.from_matrix(F @ A @ F).as_euler("XYZ")),
+        (
+            "trinet",
+            ["left_x", "left_y", "left_z", "down_x", "down_y", "down_z", "front_x", "front_y", "front_z"],
+            (np.diag([1.0, -1, 1]) @ A @ np.diag([1.0, -1, 1])).transpose(0, 2, 1).reshape(-1, 9),
+        ),
+        ("openface", ["pose_Rx", "pose_Ry", "pose_Rz"], Rotation.from_matrix(F @ A @ F).as_euler("XYZ")),
     ]:
         out = tmp_path / f"{target}.csv"
         res = run(src, "-o", out, "--from", "300w_lp", "--to", target, "--overwrite")
@@ -82,8 +91,9 @@ def test_bad_quaternion_and_missing_columns(tmp_path):
     sysf = tmp_path / "q.toml"
     sysf.write_text('name = "q"\nstorage_kind = "quaternion"\n')
     src = tmp_path / "q.csv"
-    pd.DataFrame({"qw": [1.0, 2.0, 0.0], "qx": [0, 0, 0.0], "qy": [0, 0, 0.0], "qz": [0, 0, 0.0]}).to_csv(src,
-                                                                                                         index=False)
+    pd.DataFrame({"qw": [1.0, 2.0, 0.0], "qx": [0, 0, 0.0], "qy": [0, 0, 0.0], "qz": [0, 0, 0.0]}).to_csv(
+        src, index=False
+    )
     rej = tmp_path / "rej.csv"
     res = run(src, "-o", tmp_path / "o.csv", "--from", sysf, "--to", "300w_lp", "--rejects", rej)
     assert res.exit_code == 0, res.output
@@ -97,11 +107,14 @@ def test_bad_quaternion_and_missing_columns(tmp_path):
 
 def test_decoder_columns(tmp_path, realdata):
     out = tmp_path / "d.csv"
-    res = run(realdata / "aflw2000_prnet", "-o", out, "--from", "300w_lp", "--to", "3ddfa_v2",
-              "--decoder", "3ddfa_v2")
+    res = run(realdata / "aflw2000_prnet", "-o", out, "--from", "300w_lp", "--to", "3ddfa_v2", "--decoder", "3ddfa_v2")
     assert res.exit_code == 0, res.output
     got = pd.read_csv(out)
     # no AFLW2000 sample is past 86.4 deg of yaw: matrix2angle prints the exact 3ddfa_v2 angles
-    assert np.abs(got[["decoder_pitch", "decoder_yaw", "decoder_roll"]].to_numpy()
-                  - got[["pitch", "yaw", "roll"]].to_numpy()).max() < 1e-9
+    assert (
+        np.abs(
+            got[["decoder_pitch", "decoder_yaw", "decoder_roll"]].to_numpy() - got[["pitch", "yaw", "roll"]].to_numpy()
+        ).max()
+        < 1e-9
+    )
     assert got["decoder_ok"].all()

@@ -1,4 +1,5 @@
 """``hpe draw`` end to end (CliRunner), on canvases, synthetic images and the real AFLW2000 files."""
+
 from pathlib import Path
 
 import cv2
@@ -25,8 +26,17 @@ def px(img, u, v):
 
 def test_canvas_colours_and_names(tmp_path):
     t = tmp_path / "poses.csv"
-    pd.DataFrame({"image": ["a.png", "b.png"], "tdx": [100, 100], "tdy": [100, 100], "size": [80, 80],
-                  "pitch": [0.0, 0.0], "yaw": [0.0, 89.999], "roll": [0.0, 0.0]}).to_csv(t, index=False)
+    pd.DataFrame(
+        {
+            "image": ["a.png", "b.png"],
+            "tdx": [100, 100],
+            "tdy": [100, 100],
+            "size": [80, 80],
+            "pitch": [0.0, 0.0],
+            "yaw": [0.0, 89.999],
+            "roll": [0.0, 0.0],
+        }
+    ).to_csv(t, index=False)
     res = run(t, "-o", tmp_path / "out", "--canvas", "200x200", "--thickness", "5")
     assert res.exit_code == 0, res.output
     a = cv2.imread(str(tmp_path / "out" / "a.png"))
@@ -47,8 +57,18 @@ def test_bbox_centre_relative_names_and_inputs_untouched(tmp_path):
     root = _images(tmp_path)
     before = (root / "sub" / "a.png").read_bytes()
     t = tmp_path / "l.parquet"
-    pd.DataFrame({"image": ["sub/a.png"], "bbox_x": [40.0], "bbox_y": [20.0], "bbox_w": [80.0], "bbox_h": [80.0],
-                  "pitch": [0.0], "yaw": [0.0], "roll": [0.0]}).to_parquet(t)
+    pd.DataFrame(
+        {
+            "image": ["sub/a.png"],
+            "bbox_x": [40.0],
+            "bbox_y": [20.0],
+            "bbox_w": [80.0],
+            "bbox_h": [80.0],
+            "pitch": [0.0],
+            "yaw": [0.0],
+            "roll": [0.0],
+        }
+    ).to_parquet(t)
     out = tmp_path / "drawn"
     res = run(t, "-o", out, "--images", root, "--thickness", "5")
     assert res.exit_code == 0, res.output
@@ -93,14 +113,41 @@ def test_matrix_of_another_system_draws_the_same(tmp_path):
     ang.to_csv(tmp_path / "ang.csv", index=False)
     s6 = get_system("6drepnet")
     G = s6.from_canonical(get_system("whenet").to_canonical(get_system("whenet").from_angles(pyr)))
-    mat = pd.concat([base, pd.DataFrame(G.reshape(-1, 9), columns=[f"r{i}{j}" for i in range(3) for j in range(3)])],
-                    axis=1)
+    mat = pd.concat(
+        [base, pd.DataFrame(G.reshape(-1, 9), columns=[f"r{i}{j}" for i in range(3) for j in range(3)])], axis=1
+    )
     mat.to_csv(tmp_path / "mat.csv", index=False)
     for style in ("axes", "cube"):
-        assert run(tmp_path / "ang.csv", "-o", tmp_path / f"a_{style}", "--canvas", "128x128", "--system", "whenet",
-                   "--style", style, "-q").exit_code == 0
-        assert run(tmp_path / "mat.csv", "-o", tmp_path / f"m_{style}", "--canvas", "128x128", "--system",
-                   "6drepnet", "--style", style, "-q").exit_code == 0
+        assert (
+            run(
+                tmp_path / "ang.csv",
+                "-o",
+                tmp_path / f"a_{style}",
+                "--canvas",
+                "128x128",
+                "--system",
+                "whenet",
+                "--style",
+                style,
+                "-q",
+            ).exit_code
+            == 0
+        )
+        assert (
+            run(
+                tmp_path / "mat.csv",
+                "-o",
+                tmp_path / f"m_{style}",
+                "--canvas",
+                "128x128",
+                "--system",
+                "6drepnet",
+                "--style",
+                style,
+                "-q",
+            ).exit_code
+            == 0
+        )
         for i in range(4):
             a = cv2.imread(str(tmp_path / f"a_{style}" / f"{i}.png")).astype(int)
             m = cv2.imread(str(tmp_path / f"m_{style}" / f"{i}.png")).astype(int)
@@ -109,10 +156,23 @@ def test_matrix_of_another_system_draws_the_same(tmp_path):
 
 def test_cube_turned_away(tmp_path):
     t = tmp_path / "p.csv"
-    pd.DataFrame({"image": ["front.png", "back.png"], "tdx": 100, "tdy": 100, "size": 50, "pitch": [0, 0],
-                  "yaw": [0, 180], "roll": [0, 0]}).to_csv(t, index=False)
-    assert run(t, "-o", tmp_path / "o", "--canvas", "200x200", "--system", "whenet", "--style", "cube",
-               "--thickness", "5").exit_code == 0
+    pd.DataFrame(
+        {
+            "image": ["front.png", "back.png"],
+            "tdx": 100,
+            "tdy": 100,
+            "size": 50,
+            "pitch": [0, 0],
+            "yaw": [0, 180],
+            "roll": [0, 0],
+        }
+    ).to_csv(t, index=False)
+    assert (
+        run(
+            t, "-o", tmp_path / "o", "--canvas", "200x200", "--system", "whenet", "--style", "cube", "--thickness", "5"
+        ).exit_code
+        == 0
+    )
     front, back = (cv2.imread(str(tmp_path / "o" / n)) for n in ("front.png", "back.png"))
     assert px(front, 100, 50) == GREEN  # the face-front square
     assert px(back, 100, 50) == RED  # seen from behind: the back square hides it
@@ -120,8 +180,9 @@ def test_cube_turned_away(tmp_path):
 
 def test_grid(tmp_path):
     t = tmp_path / "p.csv"
-    pd.DataFrame({"image": [f"{i}.png" for i in range(5)], "pitch": 0, "yaw": np.linspace(-80, 80, 5),
-                  "roll": 0}).to_csv(t, index=False)
+    pd.DataFrame(
+        {"image": [f"{i}.png" for i in range(5)], "pitch": 0, "yaw": np.linspace(-80, 80, 5), "roll": 0}
+    ).to_csv(t, index=False)
     res = run(t, "-o", tmp_path / "g", "--canvas", "100x100", "--grid", "--grid-cols", "2", "--tile", "64", "-q")
     assert res.exit_code == 0, res.output
     names = sorted(p.name for p in (tmp_path / "g").iterdir())
@@ -172,8 +233,9 @@ def test_mat_folder(tmp_path):
     assert res.exit_code == 0, res.output
     assert len(list((tmp_path / "o").glob("*.jpg"))) == 16
     # the centre is (tdx, H - 1 - tdy): image00050 has tdx 229.71, tdy 209.54, H 450, roll 5.6 deg
-    res = run(AFLW / "image00050.mat", "-o", tmp_path / "c", "--canvas", "450x450", "--length", "60",
-              "--thickness", "7", "-q")
+    res = run(
+        AFLW / "image00050.mat", "-o", tmp_path / "c", "--canvas", "450x450", "--length", "60", "--thickness", "7", "-q"
+    )
     assert res.exit_code == 0, res.output
     img = cv2.imread(str(tmp_path / "c" / "image00050.jpg")).astype(int)
     u, v = 229.71, 449 - 209.54

@@ -1,4 +1,5 @@
 """``hpe evaluate`` end to end (CliRunner): real AFLW2000 samples, outputs, breakdowns, bad input."""
+
 import json
 from pathlib import Path
 
@@ -15,9 +16,13 @@ AFLW = REALDATA / "aflw2000_prnet"
 needs_data = pytest.mark.skipif(not AFLW.is_dir(), reason="shared/realdata not available")
 
 JSON_KEYS = {"n", "systems", "metrics", "protocols", "align"}
-METRIC_KEYS = {"geodesic": {"mean", "median", "p90", "p95", "max", "within_5", "within_10", "within_15", "within_30"},
-               "maev": {"left", "down", "front", "mean"}, "frobenius": {"mean"},
-               "mae_wrapped": {"pitch", "yaw", "roll", "mean"}, "mae_best_of_two": {"pitch", "yaw", "roll", "mean"}}
+METRIC_KEYS = {
+    "geodesic": {"mean", "median", "p90", "p95", "max", "within_5", "within_10", "within_15", "within_30"},
+    "maev": {"left", "down", "front", "mean"},
+    "frobenius": {"mean"},
+    "mae_wrapped": {"pitch", "yaw", "roll", "mean"},
+    "mae_best_of_two": {"pitch", "yaw", "roll", "mean"},
+}
 
 
 def run(*args):
@@ -26,9 +31,15 @@ def run(*args):
 
 def _gt_table(tmp_path, n=40, seed=0, name="gt.csv"):
     rng = np.random.default_rng(seed)
-    df = pd.DataFrame({"image": [f"img{i:03d}.jpg" for i in range(n)],
-                       "pitch": rng.uniform(-60, 60, n), "yaw": rng.uniform(-85, 85, n),
-                       "roll": rng.uniform(-60, 60, n), "sequence": np.where(np.arange(n) % 2, "a", "b")})
+    df = pd.DataFrame(
+        {
+            "image": [f"img{i:03d}.jpg" for i in range(n)],
+            "pitch": rng.uniform(-60, 60, n),
+            "yaw": rng.uniform(-85, 85, n),
+            "roll": rng.uniform(-60, 60, n),
+            "sequence": np.where(np.arange(n) % 2, "a", "b"),
+        }
+    )
     path = tmp_path / name
     df.to_csv(path, index=False)
     return path, df
@@ -37,8 +48,9 @@ def _gt_table(tmp_path, n=40, seed=0, name="gt.csv"):
 @needs_data
 def test_aflw2000_against_itself_in_6drepnet_is_zero(tmp_path):
     conv = tmp_path / "pred6d.parquet"
-    r = CliRunner().invoke(cli, ["convert", str(AFLW), "-o", str(conv), "--from", "300w_lp", "--to", "6drepnet"],
-                           catch_exceptions=False)
+    r = CliRunner().invoke(
+        cli, ["convert", str(AFLW), "-o", str(conv), "--from", "300w_lp", "--to", "6drepnet"], catch_exceptions=False
+    )
     assert r.exit_code == 0, r.output
     out, rep = tmp_path / "err.parquet", tmp_path / "rep.json"
     r = run(conv, AFLW, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "-o", out, "--json", rep)
@@ -55,14 +67,17 @@ def test_aflw2000_against_itself_in_6drepnet_is_zero(tmp_path):
         assert p["mean"] < 1e-4, name
     rows = pd.read_parquet(out)
     assert len(rows) == n and rows["geodesic"].max() < 1e-4
-    assert {"image", "gt_pitch", "pred_yaw", "err_roll", "geodesic", "maev_left", "maev_down", "maev_front"} <= set(rows)  # the .mat reader's key (image)
+    assert {"image", "gt_pitch", "pred_yaw", "err_roll", "geodesic", "maev_left", "maev_down", "maev_front"} <= set(
+        rows
+    )  # the .mat reader's key (image)
 
 
 @needs_data
 def test_aflw2000_with_yaw_sign_flipped_gives_large_errors(tmp_path):
     conv = tmp_path / "pred6d.parquet"
-    CliRunner().invoke(cli, ["convert", str(AFLW), "-o", str(conv), "--from", "300w_lp", "--to", "6drepnet"],
-                       catch_exceptions=False)
+    CliRunner().invoke(
+        cli, ["convert", str(AFLW), "-o", str(conv), "--from", "300w_lp", "--to", "6drepnet"], catch_exceptions=False
+    )
     df = pd.read_parquet(conv)[["file", "pitch", "yaw", "roll"]]
     df["yaw"] = -df["yaw"]
     flipped = tmp_path / "flipped.csv"
@@ -89,8 +104,26 @@ def test_json_keys_stdout_table_plots_breakdowns(tmp_path):
     p = p.sample(frac=1.0, random_state=1)  # another row order: the join is on 'image'
     p.to_csv(pred, index=False)
     rep, plots = tmp_path / "rep.json", tmp_path / "plots"
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--json", rep, "--plots", plots,
-            "--by", "sequence", "--yaw-bins", "30", "--protocol", "hopenet", "--protocol", "6drepnet")
+    r = run(
+        pred,
+        gt,
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "--json",
+        rep,
+        "--plots",
+        plots,
+        "--by",
+        "sequence",
+        "--yaw-bins",
+        "30",
+        "--protocol",
+        "hopenet",
+        "--protocol",
+        "6drepnet",
+    )
     assert r.exit_code == 0, r.output
     report = json.loads(rep.read_text())
     assert JSON_KEYS <= set(report)
@@ -115,13 +148,26 @@ def test_missing_invalid_unmatched_counted_and_rejected(tmp_path):
     p = df.copy()
     p = p[p["image"] != "img003.jpg"]  # missing prediction
     p.loc[p["image"] == "img005.jpg", "pitch"] = np.nan  # invalid prediction
-    p = pd.concat([p, pd.DataFrame({"image": ["extra.jpg"], "pitch": [1.0], "yaw": [2.0], "roll": [3.0],
-                                    "sequence": ["a"]})])
+    p = pd.concat(
+        [p, pd.DataFrame({"image": ["extra.jpg"], "pitch": [1.0], "yaw": [2.0], "roll": [3.0], "sequence": ["a"]})]
+    )
     pred = tmp_path / "pred.csv"
     p.to_csv(pred, index=False)
     rej, rep = tmp_path / "rej.csv", tmp_path / "rep.json"
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--rejects", rej, "--json", rep,
-            "--protocol", "hopenet")
+    r = run(
+        pred,
+        gt,
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "--rejects",
+        rej,
+        "--json",
+        rep,
+        "--protocol",
+        "hopenet",
+    )
     assert r.exit_code == 0, r.output
     n = json.loads(rep.read_text())["n"]
     assert n == {"gt": 10, "pred": 10, "pairs": 8, "missing": 1, "invalid": 1, "unmatched_pred": 1}
@@ -138,8 +184,19 @@ def test_missing_invalid_unmatched_counted_and_rejected(tmp_path):
     r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", out, "--protocol", "hopenet")
     assert r.exit_code == 1 and "--rejects" in r.output and not out.exists()
     assert len(r.output.strip().splitlines()) == 1
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", out, "--rejects",
-            tmp_path / "r2.csv", "--strict")
+    r = run(
+        pred,
+        gt,
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "-o",
+        out,
+        "--rejects",
+        tmp_path / "r2.csv",
+        "--strict",
+    )
     assert r.exit_code == 1 and not out.exists()
 
 
@@ -155,8 +212,23 @@ def test_matrix_columns_non_rotation_is_invalid(tmp_path):
     pred = tmp_path / "pred.parquet"
     m.to_parquet(pred)
     rej = tmp_path / "rej.csv"
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--pred-columns", "matrix",
-            "--rejects", rej, "--json", "-", "-q", "--protocol", "hopenet")
+    r = run(
+        pred,
+        gt,
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "--pred-columns",
+        "matrix",
+        "--rejects",
+        rej,
+        "--json",
+        "-",
+        "-q",
+        "--protocol",
+        "hopenet",
+    )
     assert r.exit_code == 0, r.output
     rep = json.loads(r.output)
     assert rep["n"]["invalid"] == 2 and rep["n"]["pairs"] == 4
@@ -167,8 +239,15 @@ def test_matrix_columns_non_rotation_is_invalid(tmp_path):
 
 def test_key_option_and_multi_person(tmp_path):
     rng = np.random.default_rng(3)
-    df = pd.DataFrame({"image": ["a", "a", "b", "b"], "person_id": [0, 1, 0, 1],
-                       "pitch": rng.uniform(-30, 30, 4), "yaw": rng.uniform(-30, 30, 4), "roll": rng.uniform(-30, 30, 4)})
+    df = pd.DataFrame(
+        {
+            "image": ["a", "a", "b", "b"],
+            "person_id": [0, 1, 0, 1],
+            "pitch": rng.uniform(-30, 30, 4),
+            "yaw": rng.uniform(-30, 30, 4),
+            "roll": rng.uniform(-30, 30, 4),
+        }
+    )
     gt = tmp_path / "gt.csv"
     df.to_csv(gt, index=False)
     pred = tmp_path / "pred.csv"
@@ -176,8 +255,21 @@ def test_key_option_and_multi_person(tmp_path):
     r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp")
     assert r.exit_code == 1
     assert "duplicate key" in r.output and "image='a'" in r.output
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--key", "image,person_id",
-            "--json", "-", "-q", "--protocol", "hopenet")
+    r = run(
+        pred,
+        gt,
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "--key",
+        "image,person_id",
+        "--json",
+        "-",
+        "-q",
+        "--protocol",
+        "hopenet",
+    )
     assert r.exit_code == 0, r.output
     assert json.loads(r.output)["metrics"]["geodesic"]["max"] < 1e-9
 
@@ -189,8 +281,21 @@ def test_row_order_join_and_count_mismatch(tmp_path):
     # no shared key: a usage error unless --join order says so (issue 20: joins by key only)
     r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-q", "--protocol", "hopenet")
     assert r.exit_code == 2 and "--key" in r.output and "--join order" in r.output
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--json", "-", "-q",
-            "--protocol", "hopenet", "--join", "order")
+    r = run(
+        pred,
+        gt,
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "--json",
+        "-",
+        "-q",
+        "--protocol",
+        "hopenet",
+        "--join",
+        "order",
+    )
     assert r.exit_code == 0, r.output
     assert json.loads(r.output)["inputs"]["key"] == "row order"
     df[["pitch", "yaw", "roll"]].iloc[:7].to_csv(pred, index=False)
@@ -222,9 +327,8 @@ def test_bad_input_errors(tmp_path):
 def test_different_systems_and_align(tmp_path):
     """A whenet prediction scored on 300w_lp GT with a constant 10-degree offset removed by --align mean."""
     gt, df = _gt_table(tmp_path, n=60)
-    from hpe_cli.rotation.systems import get_system
-
     from conftest import canonical_A
+    from hpe_cli.rotation.systems import get_system
 
     Q = Rotation.from_euler("y", 10, degrees=True).as_matrix()
     A = Q @ canonical_A(df[["pitch", "yaw", "roll"]].to_numpy())
@@ -243,17 +347,26 @@ def test_different_systems_and_align(tmp_path):
 def test_help_has_examples_and_sources():
     r = CliRunner().invoke(cli, ["evaluate", "--help"])
     assert r.exit_code == 0
-    for s in ("Examples:", "test_hopenet.py", "FSANET_test.py", "sixdrepnet/test.py", "sixdrepnet360/test.py",
-              "utils/mae.py", "evaluator.py", "calc_error.py", "aflw_2000_3d_evaluation.ipynb", "benchmark.py"):
+    for s in (
+        "Examples:",
+        "test_hopenet.py",
+        "FSANET_test.py",
+        "sixdrepnet/test.py",
+        "sixdrepnet360/test.py",
+        "utils/mae.py",
+        "evaluator.py",
+        "calc_error.py",
+        "aflw_2000_3d_evaluation.ipynb",
+        "benchmark.py",
+    ):
         assert s in r.output, s
 
 
 @pytest.mark.parametrize("name", ["img2pose", "6drepnet_6d", "trinet"])
 def test_prediction_in_a_native_storage_kind(tmp_path, name):
     """Rotation vectors, 6-D and vector-column systems are read through their own columns (auto)."""
-    from hpe_cli.rotation.systems import get_system
-
     from conftest import canonical_A
+    from hpe_cli.rotation.systems import get_system
 
     gt, df = _gt_table(tmp_path, n=12)
     s = get_system(name)

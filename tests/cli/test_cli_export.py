@@ -1,4 +1,5 @@
 """``hpe export`` through click: help, usage errors, bad input, staging, merged inputs."""
+
 import json
 from pathlib import Path
 
@@ -8,9 +9,8 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
-
 from conftest import REALDATA
+from hpe_cli.cli.main import cli
 
 AFLW = REALDATA / "aflw2000_prnet"
 
@@ -28,9 +28,22 @@ def make_set(tmp_path, n_images=3, heads=2, size=(120, 160)):
         img = rng.integers(0, 255, size + (3,), dtype=np.uint8)
         cv2.imwrite(str(tmp_path / "img" / f"f{i}.jpg"), img)
         for h in range(heads):
-            rows.append({"image": f"img/f{i}.jpg", "sequence": f"s{i % 2}", "camera": "", "frame": i,
-                         "person_id": h, "bbox_x": 10 + 60 * h, "bbox_y": 20, "bbox_w": 40, "bbox_h": 50,
-                         "pitch": 10.0 * h, "yaw": 20.0 * i - 30, "roll": 5.0})
+            rows.append(
+                {
+                    "image": f"img/f{i}.jpg",
+                    "sequence": f"s{i % 2}",
+                    "camera": "",
+                    "frame": i,
+                    "person_id": h,
+                    "bbox_x": 10 + 60 * h,
+                    "bbox_y": 20,
+                    "bbox_w": 40,
+                    "bbox_h": 50,
+                    "pitch": 10.0 * h,
+                    "yaw": 20.0 * i - 30,
+                    "roll": 5.0,
+                }
+            )
     path = tmp_path / "labels.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
     return path
@@ -110,7 +123,7 @@ def test_everything_rejected_writes_nothing(tmp_path):
     r = run("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
     assert r.exit_code == 1 and "every label is rejected" in r.output and "Traceback" not in r.output
     assert not (tmp_path / "o").exists() and not (tmp_path / "r.csv").exists()
-    for p in tmp_path / "img", :
+    for p in (tmp_path / "img",):
         (p / "f0.jpg").unlink()
     r = run("export", path, "-o", tmp_path / "o", "--layout", "hf", "--rejects", tmp_path / "r.csv")
     assert r.exit_code == 0  # hf keeps any rotation: only the missing image is rejected
@@ -135,8 +148,20 @@ def test_split_file_and_min_change_and_balance(tmp_path):
     s = json.loads((out / "export.json").read_text())
     assert s["per_split"] == {"test": 3, "train": 3}
     sf.write_text("sequence,split\ns0,train\n")
-    r = run("export", path, "-o", out, "--layout", "hf", "--split-file", sf, "--overwrite", "--rejects",
-            tmp_path / "r.csv", "-q")
+    r = run(
+        "export",
+        path,
+        "-o",
+        out,
+        "--layout",
+        "hf",
+        "--split-file",
+        sf,
+        "--overwrite",
+        "--rejects",
+        tmp_path / "r.csv",
+        "-q",
+    )
     assert r.exit_code == 0
     assert (pd.read_csv(tmp_path / "r.csv")["reason"] == "sequence not listed in --split-file").sum() == 3
     # balance: yaws -30,-10,10,30,50,70 in 40-degree bins from -180: [-60,-20) [-20,20) [20,60) [60,100),
@@ -150,8 +175,22 @@ def test_split_file_and_min_change_and_balance(tmp_path):
 def test_merged_inputs_and_identity_split(tmp_path):
     path = make_set(tmp_path)
     out = tmp_path / "o"
-    r = run("export", AFLW, path, "-o", out, "--layout", "fsanet", "--images", AFLW, "--images", tmp_path,
-            "--split", "identity:0.5,0.5", "-q")
+    r = run(
+        "export",
+        AFLW,
+        path,
+        "-o",
+        out,
+        "--layout",
+        "fsanet",
+        "--images",
+        AFLW,
+        "--images",
+        tmp_path,
+        "--split",
+        "identity:0.5,0.5",
+        "-q",
+    )
     assert r.exit_code == 0, r.output
     crops = pd.read_csv(out / "crops.csv")
     assert set(crops["source"]) == {"aflw2000_prnet", "labels"}
@@ -198,9 +237,23 @@ def test_video_source_through_panoptic_video(tmp_path, monkeypatch):
     mod = types.ModuleType("hpe_cli.datasets.panoptic_video")
     mod.VideoFrames = VideoFrames
     monkeypatch.setitem(sys.modules, "hpe_cli.datasets.panoptic_video", mod)
-    rows = [{"image": f"hdImgs/00_03/00_03_{f:08d}.jpg", "sequence": "seqA", "camera": "00_03", "frame": f,
-             "person_id": 1, "bbox_x": 10.0, "bbox_y": 10.0, "bbox_w": 40.0, "bbox_h": 40.0, "pitch": 0.0,
-             "yaw": 5.0 * f, "roll": 0.0} for f in (12, 11, 13)]
+    rows = [
+        {
+            "image": f"hdImgs/00_03/00_03_{f:08d}.jpg",
+            "sequence": "seqA",
+            "camera": "00_03",
+            "frame": f,
+            "person_id": 1,
+            "bbox_x": 10.0,
+            "bbox_y": 10.0,
+            "bbox_w": 40.0,
+            "bbox_h": 40.0,
+            "pitch": 0.0,
+            "yaw": 5.0 * f,
+            "roll": 0.0,
+        }
+        for f in (12, 11, 13)
+    ]
     path = tmp_path / "t.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
     (tmp_path / "hdVideos").mkdir()
@@ -209,8 +262,9 @@ def test_video_source_through_panoptic_video(tmp_path, monkeypatch):
     assert calls == [("hd_00_03.mp4", [11, 12, 13])]  # one video, frames ascending, decoded once
     assert s["exported"] == 2
     rej = pd.read_csv(tmp_path / "r.csv")
-    assert rej["reason"].tolist() == ["no image (video " + str(tmp_path / "hdVideos" / "hd_00_03.mp4")
-                                      + " frame 13: past the end of the video)"]
+    assert rej["reason"].tolist() == [
+        "no image (video " + str(tmp_path / "hdVideos" / "hd_00_03.mp4") + " frame 13: past the end of the video)"
+    ]
     crop = cv2.imread(str(tmp_path / "o" / "train" / "seqA" / "00_03_1_00000011.jpg"))
     assert crop.shape == (40, 40, 3) and abs(float(crop.mean()) - 11) < 2
 
@@ -225,9 +279,23 @@ def test_video_source_real_reader(tmp_path):
     for k in range(5):
         vw.write(np.full((120, 160, 3), 40 * k, np.uint8))
     vw.release()
-    rows = [{"image": f"hdImgs/00_05/00_05_{f:08d}.jpg", "sequence": "", "camera": "00_05", "frame": f,
-             "person_id": 0, "bbox_x": 20.0, "bbox_y": 20.0, "bbox_w": 50.0, "bbox_h": 50.0, "pitch": 0.0,
-             "yaw": 10.0 * f, "roll": 0.0} for f in (3, 1, 9)]
+    rows = [
+        {
+            "image": f"hdImgs/00_05/00_05_{f:08d}.jpg",
+            "sequence": "",
+            "camera": "00_05",
+            "frame": f,
+            "person_id": 0,
+            "bbox_x": 20.0,
+            "bbox_y": 20.0,
+            "bbox_w": 50.0,
+            "bbox_h": 50.0,
+            "pitch": 0.0,
+            "yaw": 10.0 * f,
+            "roll": 0.0,
+        }
+        for f in (3, 1, 9)
+    ]
     path = tmp_path / "t.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
     r = run("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
@@ -238,8 +306,9 @@ def test_video_source_real_reader(tmp_path):
     rej = pd.read_csv(tmp_path / "r.csv")
     assert len(rej) == 1 and "past the end" in rej["reason"].iloc[0]
     # pixel layouts get a video's crops through the worker's spill file
-    r = run("export", path, "-o", tmp_path / "f", "--layout", "fsanet", "--rejects", tmp_path / "r2.csv",
-            "--workers", "2")
+    r = run(
+        "export", path, "-o", tmp_path / "f", "--layout", "fsanet", "--rejects", tmp_path / "r2.csv", "--workers", "2"
+    )
     assert r.exit_code == 0, r.output
     d = np.load(tmp_path / "f" / "train.npz")
     assert d["image"].shape == (2, 64, 64, 3)
@@ -272,7 +341,6 @@ def test_w300lp_root_identity_groups(tmp_path):
     pose = scipy.io.loadmat(src.with_suffix(".mat"))["Pose_Para"][0][:3]
     for f in (out / crops["split"].iloc[0]).glob("*.mat"):
         np.testing.assert_allclose(scipy.io.loadmat(f)["Pose_Para"][0][:3], pose, atol=1e-6)
-
 
 
 def test_radians_table_exports_the_same_rotations(tmp_path):

@@ -1,4 +1,5 @@
 """``hpe infer`` end to end: code, decoders, tables, landmarks, and the system file it writes."""
+
 import json
 import sys
 from pathlib import Path
@@ -32,13 +33,16 @@ def test_help_has_examples():
     assert res.exit_code == 0 and "Examples:" in res.output and "hpe infer --callable" in res.output
 
 
-@pytest.mark.parametrize("args, best", [
-    ([f"--callable={FIX}/sixdrepnet.py:get_R", "--args", "pitch,yaw,roll"], "6drepnet"),
-    ([f"--callable={FIX}/lp300w.py:pose_matrix"], "300w_lp"),
-    ([f"--callable={FIX}/scipy_style.py:euler_zyx", "--args", "yaw,pitch,roll", "--units", "deg"], "scipy_zyx"),
-    ([f"--decoder={FIX}/tddfa_v2.py:matrix2angle", "--args", "yaw,pitch,roll"], "3ddfa_v2"),
-    ([f"--decoder={FIX}/lp300w.py:full_range_from_matrix", "--args", "yaw,pitch,roll", "--units", "deg"], "whenet"),
-])
+@pytest.mark.parametrize(
+    "args, best",
+    [
+        ([f"--callable={FIX}/sixdrepnet.py:get_R", "--args", "pitch,yaw,roll"], "6drepnet"),
+        ([f"--callable={FIX}/lp300w.py:pose_matrix"], "300w_lp"),
+        ([f"--callable={FIX}/scipy_style.py:euler_zyx", "--args", "yaw,pitch,roll", "--units", "deg"], "scipy_zyx"),
+        ([f"--decoder={FIX}/tddfa_v2.py:matrix2angle", "--args", "yaw,pitch,roll"], "3ddfa_v2"),
+        ([f"--decoder={FIX}/lp300w.py:full_range_from_matrix", "--args", "yaw,pitch,roll", "--units", "deg"], "whenet"),
+    ],
+)
 def test_builtins_are_named(tmp_path, args, best):
     rep, res = report(tmp_path, *args)
     assert rep["best"] == best and rep["fit"] == "exact" and rep["max_error"] < 1e-12
@@ -48,14 +52,26 @@ def test_builtins_are_named(tmp_path, args, best):
 
 def test_custom_system_file_reproduces_the_callable_through_convert(tmp_path):
     sys_path = tmp_path / "made_up.toml"
-    rep, res = report(tmp_path, "--callable", f"{FIX}/made_up.py:made_up", "--args", "roll,pitch,yaw", "--units",
-                      "deg", "-o", sys_path, "--name", "made_up")
+    rep, res = report(
+        tmp_path,
+        "--callable",
+        f"{FIX}/made_up.py:made_up",
+        "--args",
+        "roll,pitch,yaw",
+        "--units",
+        "deg",
+        "-o",
+        sys_path,
+        "--name",
+        "made_up",
+    )
     assert rep["best"] == "custom" and sys_path.exists()
     pyr = np.random.default_rng(0).uniform(-180, 180, (40, 3))
     pd.DataFrame(pyr, columns=["pitch", "yaw", "roll"]).to_csv(tmp_path / "in.csv", index=False)
     out = tmp_path / "out.csv"
-    res = CliRunner().invoke(cli, ["convert", str(tmp_path / "in.csv"), "-o", str(out), "--from", str(sys_path),
-                                   "--to", str(sys_path)])
+    res = CliRunner().invoke(
+        cli, ["convert", str(tmp_path / "in.csv"), "-o", str(out), "--from", str(sys_path), "--to", str(sys_path)]
+    )
     assert res.exit_code == 0, res.output
     got = pd.read_csv(out)[MATRIX_COLS].to_numpy().reshape(-1, 3, 3)
     sys.path.insert(0, str(FIX))
@@ -66,8 +82,21 @@ def test_custom_system_file_reproduces_the_callable_through_convert(tmp_path):
 
 def test_custom_frame_and_storage_options(tmp_path):
     sys_path = tmp_path / "s.toml"
-    run("--callable", f"{FIX}/made_up.py:made_up", "--args", "roll,pitch,yaw", "--units", "deg", "-o", sys_path,
-        "--frame", "opencv", "--storage", "transposed", "-q")
+    run(
+        "--callable",
+        f"{FIX}/made_up.py:made_up",
+        "--args",
+        "roll,pitch,yaw",
+        "--units",
+        "deg",
+        "-o",
+        sys_path,
+        "--frame",
+        "opencv",
+        "--storage",
+        "transposed",
+        "-q",
+    )
     text = sys_path.read_text()
     assert 'storage = "transposed"' in text and "[0, -1, 0]" in text
 
@@ -84,8 +113,9 @@ def test_module_path_and_refuse_overwrite(tmp_path, monkeypatch):
 
 def test_synergynet_no_exact_fit(tmp_path):
     out = tmp_path / "s.toml"
-    rep, res = report(tmp_path, "--decoder", f"{FIX}/synergynet.py:matrix2angle_corr", "--args", "yaw,pitch,roll",
-                      "-o", out, code=1)
+    rep, res = report(
+        tmp_path, "--decoder", f"{FIX}/synergynet.py:matrix2angle_corr", "--args", "yaw,pitch,roll", "-o", out, code=1
+    )
     assert rep["fit"] == "none" and rep["best"] == "none" and not out.exists()
     assert "no exact fit" in res.output and "breaks when" in res.output
     assert "Error:" in res.output and "nothing written" in res.output
@@ -97,18 +127,21 @@ def test_wrong_units_hint(tmp_path):
     assert rep["fit"] == "none" and "--degrees" in rep["hint"]
 
 
-@pytest.mark.parametrize("args, code, text", [
-    ([], 2, "exactly one of"),
-    (["--callable", "x.py:f", "--decoder", "y.py:g"], 2, "exactly one of"),
-    (["--callable", f"{FIX}/lp300w.py:pose_matrix", "--args", "pitch,yaw"], 2, "three roles"),
-    (["--callable", f"{FIX}/lp300w.py:nothing"], 1, "has no attribute"),
-    (["--callable", f"{FIX}/missing.py:f"], 1, "no such file"),
-    (["--callable", f"{FIX}/broken.py:NOT_CALLABLE"], 1, "expected a callable"),
-    (["--callable", f"{FIX}/broken.py:scaled"], 1, "not orthonormal"),
-    (["--callable", f"{FIX}/broken.py:raises"], 1, "model weights not found"),
-    (["--callable", "no_such_module_xyz:f"], 1, "import failed"),
-    (["--callable", f"{FIX}/lp300w.py:pose_matrix", "-o", "x.json"], 2, ".toml"),
-])
+@pytest.mark.parametrize(
+    "args, code, text",
+    [
+        ([], 2, "exactly one of"),
+        (["--callable", "x.py:f", "--decoder", "y.py:g"], 2, "exactly one of"),
+        (["--callable", f"{FIX}/lp300w.py:pose_matrix", "--args", "pitch,yaw"], 2, "three roles"),
+        (["--callable", f"{FIX}/lp300w.py:nothing"], 1, "has no attribute"),
+        (["--callable", f"{FIX}/missing.py:f"], 1, "no such file"),
+        (["--callable", f"{FIX}/broken.py:NOT_CALLABLE"], 1, "expected a callable"),
+        (["--callable", f"{FIX}/broken.py:scaled"], 1, "not orthonormal"),
+        (["--callable", f"{FIX}/broken.py:raises"], 1, "model weights not found"),
+        (["--callable", "no_such_module_xyz:f"], 1, "import failed"),
+        (["--callable", f"{FIX}/lp300w.py:pose_matrix", "-o", "x.json"], 2, ".toml"),
+    ],
+)
 def test_usage_and_user_errors(args, code, text):
     res = run(*args)
     assert res.exit_code == code and text in res.output, res.output
@@ -120,11 +153,18 @@ def test_table_with_matrices(tmp_path):
     R = Rotation.from_euler("ZYX", pyr[:, [1, 0, 2]], degrees=True).as_matrix()  # SciPy yaw, pitch, roll
     df = pd.DataFrame(np.c_[pyr, R.reshape(-1, 9)], columns=["p", "y", "r", *[f"m{k}" for k in range(9)]])
     df.to_csv(tmp_path / "t.csv", index=False)
-    rep, _ = report(tmp_path, tmp_path / "t.csv", "--angles", "yaw=y,pitch=p,roll=r",
-                    "--matrix", ",".join(f"m{k}" for k in range(9)))
+    rep, _ = report(
+        tmp_path,
+        tmp_path / "t.csv",
+        "--angles",
+        "yaw=y,pitch=p,roll=r",
+        "--matrix",
+        ",".join(f"m{k}" for k in range(9)),
+    )
     assert rep["best"] == "scipy_zyx" and rep["mode"] == "table"
-    rad = pd.DataFrame(np.c_[np.deg2rad(pyr), canonical_A(pyr).reshape(-1, 9)],
-                       columns=["pitch", "yaw", "roll", *MATRIX_COLS])
+    rad = pd.DataFrame(
+        np.c_[np.deg2rad(pyr), canonical_A(pyr).reshape(-1, 9)], columns=["pitch", "yaw", "roll", *MATRIX_COLS]
+    )
     rad.to_parquet(tmp_path / "t.parquet")
     rep, _ = report(tmp_path, tmp_path / "t.parquet", "--units", "rad", "--matrix", "r00..r22")
     assert rep["best"] == "300w_lp"
@@ -169,12 +209,12 @@ def test_aflw2000_landmarks(tmp_path, realdata):
 
 # a repository layout written at test time (pytest's doctest collection would import these files on its own)
 PKG_FILES = {
-    'pkg_repo/headpose/__init__.py': '',
-    'pkg_repo/headpose/geometry/__init__.py': '',
-    'pkg_repo/headpose/geometry/build.py': '"""A module deep in a package with a parent-relative import: get_R = Rz(r) Ry(y) Rx(p) (6DRepNet\'s, per SPEC)."""\nfrom ..rotations import rx, ry, rz\n\n\ndef get_R(pitch, yaw, roll):\n    return rz(roll) @ ry(yaw) @ rx(pitch)\n\n\ndef hopenet_like(pitch, yaw, roll):\n    """300W-LP\'s A (the matrix Hopenet\'s draw_axis projects): left-handed X-Y-Z."""\n    return (rz(roll) @ ry(yaw) @ rx(pitch)).T\n',
-    'pkg_repo/headpose/rotations.py': '"""Elemental rotations of a small package (imported with ``from ..rotations import``)."""\nimport numpy as np\n\n\ndef rx(a):\n    c, s = np.cos(a), np.sin(a)\n    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])\n\n\ndef ry(a):\n    c, s = np.cos(a), np.sin(a)\n    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])\n\n\ndef rz(a):\n    c, s = np.cos(a), np.sin(a)\n    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])\n',
-    'tddfa_repo/utils/functions.py': '"""Helpers a sibling module imports relatively (layout of 3DDFA_V2\'s utils/, which has no __init__.py)."""\nimport math\n\n\ndef safe_cos(x):\n    return math.cos(x)\n',
-    'tddfa_repo/utils/pose.py': '"""A 3DDFA_V2-style decoder in a folder without __init__.py that imports its sibling relatively.\n\nSame layout as 3DDFA_V2\'s utils/pose.py (``from .functions import ...``); the\ndecoder itself is written from SPEC section 3 (yaw, pitch, roll in radians).\n"""\nimport math\n\nfrom .functions import safe_cos\n\n\ndef matrix2angle(R):\n    s = R[2][0]\n    if s > 0.998:\n        return math.pi / 2, math.atan2(-R[0][1], -R[0][2]), 0.0\n    if s < -0.998:\n        return -math.pi / 2, math.atan2(R[0][1], R[0][2]), 0.0\n    yaw = math.asin(s)\n    c = safe_cos(yaw)\n    return yaw, math.atan2(R[2][1] / c, R[2][2] / c), math.atan2(R[1][0] / c, R[0][0] / c)\n',
+    "pkg_repo/headpose/__init__.py": "",
+    "pkg_repo/headpose/geometry/__init__.py": "",
+    "pkg_repo/headpose/geometry/build.py": '"""A module deep in a package with a parent-relative import: get_R = Rz(r) Ry(y) Rx(p) (6DRepNet\'s, per SPEC)."""\nfrom ..rotations import rx, ry, rz\n\n\ndef get_R(pitch, yaw, roll):\n    return rz(roll) @ ry(yaw) @ rx(pitch)\n\n\ndef hopenet_like(pitch, yaw, roll):\n    """300W-LP\'s A (the matrix Hopenet\'s draw_axis projects): left-handed X-Y-Z."""\n    return (rz(roll) @ ry(yaw) @ rx(pitch)).T\n',
+    "pkg_repo/headpose/rotations.py": '"""Elemental rotations of a small package (imported with ``from ..rotations import``)."""\nimport numpy as np\n\n\ndef rx(a):\n    c, s = np.cos(a), np.sin(a)\n    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])\n\n\ndef ry(a):\n    c, s = np.cos(a), np.sin(a)\n    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])\n\n\ndef rz(a):\n    c, s = np.cos(a), np.sin(a)\n    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])\n',
+    "tddfa_repo/utils/functions.py": '"""Helpers a sibling module imports relatively (layout of 3DDFA_V2\'s utils/, which has no __init__.py)."""\nimport math\n\n\ndef safe_cos(x):\n    return math.cos(x)\n',
+    "tddfa_repo/utils/pose.py": '"""A 3DDFA_V2-style decoder in a folder without __init__.py that imports its sibling relatively.\n\nSame layout as 3DDFA_V2\'s utils/pose.py (``from .functions import ...``); the\ndecoder itself is written from SPEC section 3 (yaw, pitch, roll in radians).\n"""\nimport math\n\nfrom .functions import safe_cos\n\n\ndef matrix2angle(R):\n    s = R[2][0]\n    if s > 0.998:\n        return math.pi / 2, math.atan2(-R[0][1], -R[0][2]), 0.0\n    if s < -0.998:\n        return -math.pi / 2, math.atan2(R[0][1], R[0][2]), 0.0\n    yaw = math.asin(s)\n    c = safe_cos(yaw)\n    return yaw, math.atan2(R[2][1] / c, R[2][2] / c), math.atan2(R[1][0] / c, R[0][0] / c)\n',
 }
 
 
@@ -190,14 +230,14 @@ def PKG(tmp_path):
 
 def test_file_inside_folder_with_relative_import(tmp_path, PKG):
     """3DDFA_V2's utils/pose.py layout: `from .functions import` in a folder without __init__.py."""
-    rep, res = report(tmp_path, "--decoder", f"{PKG}/tddfa_repo/utils/pose.py:matrix2angle",
-                      "--args", "yaw,pitch,roll")
+    rep, res = report(tmp_path, "--decoder", f"{PKG}/tddfa_repo/utils/pose.py:matrix2angle", "--args", "yaw,pitch,roll")
     assert rep["best"] == "3ddfa_v2", res.output
 
 
 def test_module_with_path_root(tmp_path, PKG):
-    rep, res = report(tmp_path, "--decoder", "utils.pose:matrix2angle", "--path", f"{PKG}/tddfa_repo",
-                      "--args", "yaw,pitch,roll")
+    rep, res = report(
+        tmp_path, "--decoder", "utils.pose:matrix2angle", "--path", f"{PKG}/tddfa_repo", "--args", "yaw,pitch,roll"
+    )
     assert rep["best"] == "3ddfa_v2", res.output
 
 
@@ -213,11 +253,14 @@ def test_lists_every_builtin_reproducing_the_function(tmp_path, PKG):
     assert "also reproduced by built-in" in res.output and "whenet" in res.output
 
 
-@pytest.mark.parametrize("func, kind, order, storage, same", [
-    ("to_rotvec", "rotvec", None, "active", "img2pose"),
-    ("to_quat_inverse", "quaternion", "xyzw", "transposed", None),
-    ("to_6d", "6d", [0, 1], "active", "6drepnet_6d"),
-])
+@pytest.mark.parametrize(
+    "func, kind, order, storage, same",
+    [
+        ("to_rotvec", "rotvec", None, "active", "img2pose"),
+        ("to_quat_inverse", "quaternion", "xyzw", "transposed", None),
+        ("to_6d", "6d", [0, 1], "active", "6drepnet_6d"),
+    ],
+)
 def test_decoder_returning_stored_values(tmp_path, func, kind, order, storage, same):
     out = tmp_path / "found.toml"
     rep, res = report(tmp_path, "--decoder", f"{FIX}/stored_values.py:{func}", "--returns", "stored", "-o", out)
@@ -241,8 +284,9 @@ def test_written_system_loads_back_even_when_it_differs_from_the_builtin(tmp_pat
     assert 'name = "6drepnet_as_inferred"' in out.read_text()
     labels = tmp_path / "l.csv"
     pd.DataFrame({"pitch": [10.0], "yaw": [20.0], "roll": [30.0]}).to_csv(labels, index=False)
-    res = CliRunner().invoke(cli, ["convert", str(labels), "-o", str(tmp_path / "o.csv"), "--from", str(out),
-                                   "--to", "6drepnet", "-q"])
+    res = CliRunner().invoke(
+        cli, ["convert", str(labels), "-o", str(tmp_path / "o.csv"), "--from", str(out), "--to", "6drepnet", "-q"]
+    )
     assert res.exit_code == 0, res.output
 
 
@@ -276,8 +320,9 @@ def test_data_table_with_stored_rotation_vectors_and_quaternions(tmp_path):
     frame.to_csv(src, index=False)
     for extra in ([], ["--rotations", "quaternion-xyzw:qx,qy,qz,qw"]):
         report = tmp_path / f"r{len(extra)}.json"
-        res = CliRunner().invoke(cli, ["infer", str(src), "--angles", "pitch,yaw,roll", *extra, "--json", str(report),
-                                       "-q"])
+        res = CliRunner().invoke(
+            cli, ["infer", str(src), "--angles", "pitch,yaw,roll", *extra, "--json", str(report), "-q"]
+        )
         assert res.exit_code == 0, res.output
         rep = json.loads(report.read_text())
         assert rep["fit"] == "exact" and rep["best"] in ("opencv", "img2pose"), rep.get("best")

@@ -1,4 +1,5 @@
 """``hpe relabel-agora`` end to end on the synthetic AGORA fixture."""
+
 from __future__ import annotations
 
 import json
@@ -37,9 +38,29 @@ def test_table_and_rejects(tmp_path):
     assert PKL.read_bytes() == before  # input untouched
     t = pq.read_table(out)
     cols = t.column_names
-    for c in ("source", "row", "person", "image", "bbox_x", "bbox_h", "pitch", "yaw", "roll", "pitch_2", "r22",
-              "gimbal_lock", "roundtrip_err", "fit_rmse", "n_pairs", "scale", "occlusion", "image_width",
-              "image_height", "lm0_x", "lm50_y"):
+    for c in (
+        "source",
+        "row",
+        "person",
+        "image",
+        "bbox_x",
+        "bbox_h",
+        "pitch",
+        "yaw",
+        "roll",
+        "pitch_2",
+        "r22",
+        "gimbal_lock",
+        "roundtrip_err",
+        "fit_rmse",
+        "n_pairs",
+        "scale",
+        "occlusion",
+        "image_width",
+        "image_height",
+        "lm0_x",
+        "lm50_y",
+    ):
         assert c in cols
     assert "lm51_x" not in cols
     assert t.num_rows == N_OK
@@ -48,8 +69,15 @@ def test_table_and_rejects(tmp_path):
     assert json.loads(meta[b"hpe:relabel"])["source"] == "agora"
     rj = pd.read_csv(rej)
     assert len(rj) + t.num_rows == N_PEOPLE
-    assert set(rj["reason"]) == {"occluded", "invalid", "too few confident points", "bad fit", "behind camera",
-                                 "outside image", "box rejected"}
+    assert set(rj["reason"]) == {
+        "occluded",
+        "invalid",
+        "too few confident points",
+        "bad fit",
+        "behind camera",
+        "outside image",
+        "box rejected",
+    }
     # the summary names every reason and its count
     assert f"labelled {N_OK} of {N_PEOPLE} people" in r.output
     assert "2 box rejected" in r.output and "1 occluded" in r.output and str(rej) in r.output
@@ -137,8 +165,10 @@ def test_missing_column_is_one_line(tmp_path):
     out = tmp_path / "x.parquet"
     r = run(bad, "-o", out)
     assert r.exit_code == 1
-    assert r.output.strip() == f"Error: {bad}: missing column 'occlusion' (expected an AGORA *_withjv.pkl " \
-                               "ground-truth dataframe)"
+    assert (
+        r.output.strip() == f"Error: {bad}: missing column 'occlusion' (expected an AGORA *_withjv.pkl "
+        "ground-truth dataframe)"
+    )
     assert not out.exists() and list(tmp_path.iterdir()) == [bad]
 
 
@@ -161,8 +191,9 @@ def test_frame_crop_rotates_by_the_ray_angle(tmp_path):
     assert r.exit_code == 0, r.output
     ta, tb = pq.read_table(a).to_pandas(), pq.read_table(b).to_pandas()
     assert list(ta["person"]) == list(tb["person"]) and "ray_angle" in tb and "ray_angle" not in ta
-    np.testing.assert_array_equal(ta[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]], tb[["bbox_x", "bbox_y", "bbox_w",
-                                                                                      "bbox_h"]])
+    np.testing.assert_array_equal(
+        ta[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]], tb[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]]
+    )
     mat = lambda t: t[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy().reshape(-1, 3, 3)  # noqa: E731
     rv = Rotation.from_matrix(mat(tb) @ np.swapaxes(mat(ta), 1, 2)).as_rotvec()
     # A' A^T = E Q^T E: a rotation by the ray angle about an axis in the image plane (SPEC §10)

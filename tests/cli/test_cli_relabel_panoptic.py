@@ -1,4 +1,5 @@
 """``hpe relabel-panoptic`` through click's CliRunner."""
+
 import json
 import shutil
 from pathlib import Path
@@ -33,16 +34,44 @@ def test_table_output_and_accounting(tmp_path):
     t = pq.read_table(out)
     cols = t.column_names
     assert cols[:5] == ["sequence", "frame", "camera", "person_id", "image"]
-    for c in ["bbox_x", "bbox_y", "bbox_w", "bbox_h", "pitch", "yaw", "roll", "pitch_2", "yaw_2", "roll_2",
-              "r00", "r22", "gimbal_lock", "roundtrip_err", "fit_rmse", "n_pairs", "scale", "lm0_x", "lm69_y"]:
+    for c in [
+        "bbox_x",
+        "bbox_y",
+        "bbox_w",
+        "bbox_h",
+        "pitch",
+        "yaw",
+        "roll",
+        "pitch_2",
+        "yaw_2",
+        "roll_2",
+        "r00",
+        "r22",
+        "gimbal_lock",
+        "roundtrip_err",
+        "fit_rmse",
+        "n_pairs",
+        "scale",
+        "lm0_x",
+        "lm69_y",
+    ]:
         assert c in cols, c
     assert "lm70_x" not in cols and "legacy_yaw" not in cols
     meta = t.schema.metadata
     assert meta[b"hpe:system"] == b"300w_lp" and b"hpe:relabel" in meta
     df = t.to_pandas()
     rj = pd.read_csv(rej)
-    assert list(rj.columns) == ["sequence", "frame", "person_id", "camera", "reason", "detail", "fit_rmse",
-                                "n_pairs", "scale"]
+    assert list(rj.columns) == [
+        "sequence",
+        "frame",
+        "person_id",
+        "camera",
+        "reason",
+        "detail",
+        "fit_rmse",
+        "n_pairs",
+        "scale",
+    ]
     gt = pd.read_csv(SYNTH / "ground_truth.csv")
     assert len(df) + len(rj) == len(gt) * 7  # every face in every HD camera, once
     assert set(rj.reason) == {"too few confident points", "behind camera", "outside image"}
@@ -69,8 +98,7 @@ def test_options_cameras_frames_every_workers(tmp_path):
     assert r.exit_code == 0, r.output
     df = pd.read_parquet(a)
     assert set(df.camera) == {"00_00", "00_02"} and sorted(set(df.frame)) == [100, 102, 106, 108]
-    r = run(SYNTH, "-o", b, "--cameras", "00_00,00_02", "--frames", "100:110", "--every", "2", "-q",
-            "--workers", "2")
+    r = run(SYNTH, "-o", b, "--cameras", "00_00,00_02", "--frames", "100:110", "--every", "2", "-q", "--workers", "2")
     assert r.exit_code == 0, r.output
     pd.testing.assert_frame_equal(df, pd.read_parquet(b))
 

@@ -1,4 +1,5 @@
 """hpe systems: every system with its four parts, in words and as data."""
+
 import json
 
 from click.testing import CliRunner
@@ -19,8 +20,10 @@ def test_text_listing():
 
 def test_json_listing_and_extra_file(tmp_path):
     f = tmp_path / "mine.toml"
-    f.write_text('name = "mine"\n' + "".join(f'[[turns]]\nangle = "{r}"\naxis = "{a}"\n'
-                                             for r, a in [("yaw", "z"), ("pitch", "y"), ("roll", "x")]))
+    f.write_text(
+        'name = "mine"\n'
+        + "".join(f'[[turns]]\nangle = "{r}"\naxis = "{a}"\n' for r, a in [("yaw", "z"), ("pitch", "y"), ("roll", "x")])
+    )
     res = CliRunner().invoke(cli, ["systems", "--json", str(f)])
     assert res.exit_code == 0
     data = {d["name"]: d for d in json.loads(res.output)}
@@ -41,8 +44,7 @@ def test_verbose_shows_source_storage_frame_verification():
     block = res.output.split("\ntrinet\n")[1].split("\n\n")[0]
     assert "LEFT-HANDED" in block and "computeMAE.py" in block and "left_x" in block
     assert "  verified" in block and "  source" in block and "  example" in block
-    for name in ("img2pose", "aflw", "openface", "mediapipe", "dad3dheads", "openvino_adas", "synhead",
-                 "6drepnet_6d"):
+    for name in ("img2pose", "aflw", "openface", "mediapipe", "dad3dheads", "openvino_adas", "synhead", "6drepnet_6d"):
         assert f"\n{name}\n" in "\n" + res.output
     assert "documented, unverified on data" in res.output
     assert "rotation vector" in res.output and "6-D: matrix column 0 then column 1" in res.output
@@ -50,8 +52,11 @@ def test_verbose_shows_source_storage_frame_verification():
 
 def test_bad_user_file_is_a_usage_error(tmp_path):
     f = tmp_path / "bad.toml"
-    f.write_text('name = "mine"\ngimbal_tol = -1\n' + "".join(
-        f'[[turns]]\nangle = "{r}"\naxis = "{a}"\n' for r, a in [("yaw", "z"), ("pitch", "y"), ("roll", "x")]))
-    res = CliRunner().invoke(cli, ["convert", str(f), "-o", str(tmp_path / "o.csv"), "--from", str(f),
-                                   "--to", "300w_lp"])
+    f.write_text(
+        'name = "mine"\ngimbal_tol = -1\n'
+        + "".join(f'[[turns]]\nangle = "{r}"\naxis = "{a}"\n' for r, a in [("yaw", "z"), ("pitch", "y"), ("roll", "x")])
+    )
+    res = CliRunner().invoke(
+        cli, ["convert", str(f), "-o", str(tmp_path / "o.csv"), "--from", str(f), "--to", "300w_lp"]
+    )
     assert res.exit_code == 2 and "gimbal_tol: expected a number in [0, 1)" in res.output and "got -1" in res.output

@@ -11,6 +11,7 @@ per page that holds links to the repository's ``sample_data``, ``tests`` and ``c
     python tests/docs/doc_examples.py --update   # run them and rewrite the output blocks
     python tests/docs/doc_examples.py --update systems.md   # one page
 """
+
 from __future__ import annotations
 
 import os
@@ -24,8 +25,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
-MARK = re.compile(r"<!-- hpe-example( realdata)? -->\n```bash\n(.*?)```\n"
-                  r"(?:\n<!-- hpe-output -->\n```text\n(.*?)```\n)?", re.S)
+MARK = re.compile(
+    r"<!-- hpe-example( realdata)? -->\n```bash\n(.*?)```\n"
+    r"(?:\n<!-- hpe-output -->\n```text\n(.*?)```\n)?",
+    re.S,
+)
 
 
 @dataclass
@@ -60,8 +64,7 @@ def commands(block: str) -> list[str]:
 
 def examples(page: Path) -> list[Example]:
     text = page.read_text(encoding="utf-8")
-    return [Example(page, commands(m.group(2)), m.group(3), bool(m.group(1)), m.span())
-            for m in MARK.finditer(text)]
+    return [Example(page, commands(m.group(2)), m.group(3), bool(m.group(1)), m.span()) for m in MARK.finditer(text)]
 
 
 def pages() -> list[Path]:

@@ -1,4 +1,5 @@
 """One spelling per idea across every command: names, metavars, types and help of the shared options."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -13,8 +14,18 @@ from hpe_cli.cli.main import COMMANDS, cli
 ROOT = Path(__file__).resolve().parents[2]
 NAMES = list(COMMANDS)
 #: commands that read rows (a table, a dataset's files): each needs --rejects and --strict
-ROW_READERS = ["convert", "audit", "draw", "augment", "evaluate", "export", "relabel-panoptic", "relabel-agora",
-               "biwi", "infer"]
+ROW_READERS = [
+    "convert",
+    "audit",
+    "draw",
+    "augment",
+    "evaluate",
+    "export",
+    "relabel-panoptic",
+    "relabel-agora",
+    "biwi",
+    "infer",
+]
 #: commands that read angle tables (degrees by default): each needs --radians
 ANGLE_READERS = ["convert", "audit", "draw", "augment", "evaluate", "export", "infer"]
 #: commands that read no rows / no angle table, with why (a new command must be put in one list or the other)
@@ -116,9 +127,20 @@ def test_max_rmse_is_centimetres_everywhere():
     assert found["relabel-agora"].type.unit == "m"  # AGORA's pipeline works in metres: converted at the door
 
 
-@pytest.mark.parametrize("value,unit,expected", [
-    ("2", "cm", 2.0), ("2cm", "cm", 2.0), ("0.02m", "cm", 2.0), ("20mm", "cm", 2.0), ("2", "m", 0.02),
-    ("0.02m", "m", 0.02), ("3.5 cm", "m", 0.035), ("inf", "m", float("inf")), ("INF", "cm", float("inf"))])
+@pytest.mark.parametrize(
+    "value,unit,expected",
+    [
+        ("2", "cm", 2.0),
+        ("2cm", "cm", 2.0),
+        ("0.02m", "cm", 2.0),
+        ("20mm", "cm", 2.0),
+        ("2", "m", 0.02),
+        ("0.02m", "m", 0.02),
+        ("3.5 cm", "m", 0.035),
+        ("inf", "m", float("inf")),
+        ("INF", "cm", float("inf")),
+    ],
+)
 def test_length_units(value, unit, expected):
     assert opt.Length(unit=unit).convert(value, None, None) == pytest.approx(expected)
 
@@ -129,8 +151,20 @@ def test_length_rejects_bad_values(value):
         opt.Length().convert(value, None, None)
 
 
-@pytest.mark.parametrize("option", ["--overwrite", "-q", "-v", "--columns-map", "--delimiter", "--no-header",
-                                    "--names", "--input-format", "--batch-size"])
+@pytest.mark.parametrize(
+    "option",
+    [
+        "--overwrite",
+        "-q",
+        "-v",
+        "--columns-map",
+        "--delimiter",
+        "--no-header",
+        "--names",
+        "--input-format",
+        "--batch-size",
+    ],
+)
 def test_shared_option_help_is_identical(option):
     found = shared(option)
     assert len(found) >= 2
@@ -156,14 +190,24 @@ def test_deprecated_image_size_forms_warn_and_work(tmp_path):
     r = _run("augment", ROOT / "sample_data/aflw2000", "-o", out, "--image-size", "450", "450", "--hflip", "-q")
     assert r.exit_code == 0, r.output
     assert "deprecated" in r.stderr and "--image-size 450x450" in r.stderr
-    r2 = _run("augment", ROOT / "sample_data/aflw2000", "-o", tmp_path / "b.parquet", "--image-size", "450x450", "--hflip",
-              "-q")
+    r2 = _run(
+        "augment",
+        ROOT / "sample_data/aflw2000",
+        "-o",
+        tmp_path / "b.parquet",
+        "--image-size",
+        "450x450",
+        "--hflip",
+        "-q",
+    )
     assert r2.exit_code == 0 and "deprecated" not in r2.stderr
     assert out.read_bytes()[-200:] != b"" and (tmp_path / "b.parquet").stat().st_size == out.stat().st_size
 
 
 def test_deprecated_canvas_warns_and_draws(tmp_path):
-    r = _run("draw", ROOT / "sample_data/labels_300wlp.csv", "-o", tmp_path / "c", "--canvas", "64x48", "--limit", "2", "-q")
+    r = _run(
+        "draw", ROOT / "sample_data/labels_300wlp.csv", "-o", tmp_path / "c", "--canvas", "64x48", "--limit", "2", "-q"
+    )
     assert r.exit_code == 0, r.output
     assert "--canvas is deprecated" in r.stderr
     import cv2
@@ -183,10 +227,26 @@ def test_deprecated_units_maps_to_radians(tmp_path):
 
 
 def test_max_rmse_suffix_reaches_the_pipeline(tmp_path):
-    a = _run("relabel-panoptic", ROOT / "sample_data/panoptic_160906_pizza1", "-o", tmp_path / "a.parquet", "--rejects",
-             tmp_path / "ra.csv", "--max-rmse", "0.01m")
-    b = _run("relabel-panoptic", ROOT / "sample_data/panoptic_160906_pizza1", "-o", tmp_path / "b.parquet", "--rejects",
-             tmp_path / "rb.csv", "--max-rmse", "1")
+    a = _run(
+        "relabel-panoptic",
+        ROOT / "sample_data/panoptic_160906_pizza1",
+        "-o",
+        tmp_path / "a.parquet",
+        "--rejects",
+        tmp_path / "ra.csv",
+        "--max-rmse",
+        "0.01m",
+    )
+    b = _run(
+        "relabel-panoptic",
+        ROOT / "sample_data/panoptic_160906_pizza1",
+        "-o",
+        tmp_path / "b.parquet",
+        "--rejects",
+        tmp_path / "rb.csv",
+        "--max-rmse",
+        "1",
+    )
     assert a.exit_code == 0 and b.exit_code == 0
     assert "(--max-rmse 1)" in a.stderr and "(--max-rmse 1)" in b.stderr
     assert (tmp_path / "a.parquet").read_bytes() == (tmp_path / "b.parquet").read_bytes()
@@ -195,13 +255,13 @@ def test_max_rmse_suffix_reaches_the_pipeline(tmp_path):
 def test_agora_max_rmse_in_centimetres(tmp_path):
     pkl = ROOT / "tests/data/agora/validation_0_withjv.pkl"
     a = _run("relabel-agora", pkl, "-o", tmp_path / "a.parquet", "--rejects", tmp_path / "ra.csv", "--max-rmse", "2")
-    b = _run("relabel-agora", pkl, "-o", tmp_path / "b.parquet", "--rejects", tmp_path / "rb.csv", "--max-rmse",
-             "0.02m")
+    b = _run(
+        "relabel-agora", pkl, "-o", tmp_path / "b.parquet", "--rejects", tmp_path / "rb.csv", "--max-rmse", "0.02m"
+    )
     assert a.exit_code == 0 and b.exit_code == 0, a.output
     assert (tmp_path / "a.parquet").read_bytes() == (tmp_path / "b.parquet").read_bytes()
     assert "fit RMSE (cm)" in a.stderr and "(--max-rmse 2)" in a.stderr
-    c = _run("relabel-agora", pkl, "-o", tmp_path / "c.parquet", "--rejects", tmp_path / "rc.csv", "--max-rmse",
-             "0.02")
+    c = _run("relabel-agora", pkl, "-o", tmp_path / "c.parquet", "--rejects", tmp_path / "rc.csv", "--max-rmse", "0.02")
     assert c.exit_code == 0 and "write 0.02m for metres" in c.stderr
 
 
@@ -215,11 +275,21 @@ def test_augment_radians_equals_degrees(tmp_path):
     df.to_csv(tmp_path / "deg.csv", index=False)
     rad.to_csv(tmp_path / "rad.csv", index=False)
     a = _run("augment", tmp_path / "deg.csv", "-o", tmp_path / "a.parquet", "--image-size", "512x512", "--rotate", 20)
-    b = _run("augment", tmp_path / "rad.csv", "-o", tmp_path / "b.parquet", "--image-size", "512x512", "--rotate", 20,
-             "--radians")
+    b = _run(
+        "augment",
+        tmp_path / "rad.csv",
+        "-o",
+        tmp_path / "b.parquet",
+        "--image-size",
+        "512x512",
+        "--rotate",
+        20,
+        "--radians",
+    )
     assert a.exit_code == 0 and b.exit_code == 0, b.output
     A, B = pd.read_parquet(tmp_path / "a.parquet"), pd.read_parquet(tmp_path / "b.parquet")
     cols = [f"r{i}{j}" for i in range(3) for j in range(3)]
     np.testing.assert_allclose(B[cols].to_numpy(), A[cols].to_numpy(), atol=1e-12)
-    np.testing.assert_allclose(B[["pitch", "yaw", "roll"]].to_numpy(), A[["pitch", "yaw", "roll"]].to_numpy(),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        B[["pitch", "yaw", "roll"]].to_numpy(), A[["pitch", "yaw", "roll"]].to_numpy(), atol=1e-9
+    )

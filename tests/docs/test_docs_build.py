@@ -5,6 +5,7 @@ The atlas (``docs/atlas.md`` and ``docs/img/atlas/*.png``) is made by ``scripts/
 the pictures and formulas in the built site always come from the current code. The build imports no torch (the
 torch API reference is read from the source): a ``torch`` that cannot be imported is put first on the path.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -40,19 +41,32 @@ def built(tmp_path_factory):
     no_torch = tmp / "no_torch" / "torch"
     no_torch.mkdir(parents=True)
     (no_torch / "__init__.py").write_text("raise ImportError('the docs build must not import torch')\n")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp / "no_torch"), str(ROOT)]),
-               NO_MKDOCS_2_WARNING="1")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp / "no_torch"), str(ROOT)]), NO_MKDOCS_2_WARNING="1")
     site = tmp / "site"
-    p = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(tmp / "mkdocs.yml"),
-                        "-d", str(site)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    p = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(tmp / "mkdocs.yml"), "-d", str(site)],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     return p, site, docs, atlas
 
 
 def test_mkdocs_build_strict(built):
     p, site, _, _ = built
     assert p.returncode == 0, p.stdout + p.stderr
-    for page in ("index.html", "atlas/index.html", "maths/index.html", "commands/convert/index.html",
-                 "api/python/index.html", "api/torch/index.html", "guarantees/index.html", "performance/index.html"):
+    for page in (
+        "index.html",
+        "atlas/index.html",
+        "maths/index.html",
+        "commands/convert/index.html",
+        "api/python/index.html",
+        "api/torch/index.html",
+        "guarantees/index.html",
+        "performance/index.html",
+    ):
         assert (site / page).is_file(), page
 
 
@@ -71,8 +85,9 @@ def test_atlas_has_every_builtin_system(built):
 def test_committed_atlas_is_current(built):
     """docs/atlas.md in the repository is what the script writes now (rerun scripts/make_atlas.py if not)."""
     _, _, _, atlas = built
-    assert (ROOT / "docs" / "atlas.md").read_text(encoding="utf-8") == atlas.read_text(encoding="utf-8"), \
+    assert (ROOT / "docs" / "atlas.md").read_text(encoding="utf-8") == atlas.read_text(encoding="utf-8"), (
         "docs/atlas.md is stale: run python scripts/make_atlas.py"
+    )
 
 
 def test_api_reference_rendered(built):

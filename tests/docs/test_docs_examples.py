@@ -6,6 +6,7 @@ and print what the page shows under ``<!-- hpe-output -->`` (refresh with
 the README is parsed by the real command (options, choices and value types are checked; only paths that do not
 exist on this machine are allowed to fail), so no page shows an option that does not exist.
 """
+
 from __future__ import annotations
 
 import re
@@ -30,7 +31,8 @@ def test_marked_examples_run_and_print_what_the_page_shows(page):
         if ex.output is not None:
             assert dx.normalise(out) == dx.normalise(ex.output), (
                 f"{page.name}: the output shown under {ex.commands[0]!r} is stale; "
-                "run python tests/docs/doc_examples.py --update")
+                "run python tests/docs/doc_examples.py --update"
+            )
 
 
 def _fenced(text):
@@ -72,8 +74,7 @@ def test_every_command_line_in_the_docs_parses():
 
     seen, bad = 0, []
     for where, line in _all_command_lines():
-        line = re.sub(r"\s[12]?>\s*\S+|\|.*$|\$\{?\w+\}?", lambda m: " X" if m.group(0).startswith("$") else "",
-                      line)
+        line = re.sub(r"\s[12]?>\s*\S+|\|.*$|\$\{?\w+\}?", lambda m: " X" if m.group(0).startswith("$") else "", line)
         if re.search(r"--canvas|--units|--image-size \d+ \d+", line):
             bad.append(f"{where}: {line}: a deprecated spelling")
         try:

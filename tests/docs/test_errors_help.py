@@ -1,5 +1,6 @@
 """Errors that help: one-line usage errors, system names matched case-insensitively with "did you mean",
 a --columns-map hint for capitalised or renamed angle columns, a warning for radians read as degrees."""
+
 from __future__ import annotations
 
 import subprocess
@@ -27,19 +28,23 @@ def hpe(*args):
     import os
 
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "hpe_cli", *map(str, args)], capture_output=True, text=True,
-                          env=env, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "hpe_cli", *map(str, args)], capture_output=True, text=True, env=env, timeout=120
+    )
 
 
-@pytest.mark.parametrize("args", [
-    ["convert", LABELS, "-o", "x.csv", "--from", "300wlp", "--to", "6drepnet"],
-    ["convert", LABELS, "-o", "x.csv", "--frm", "300w_lp"],
-    ["draw", LABELS, "-o", "d", "--image-size", "640x"],
-    ["augment", LABELS, "-o", "x.csv", "--hflip"],
-    ["relabel-panoptic", ROOT / "sample_data" / "panoptic_synth", "-o", "x.parquet", "--max-rmse", "2km"],
-    ["conver"],
-    ["--bogus"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["convert", LABELS, "-o", "x.csv", "--from", "300wlp", "--to", "6drepnet"],
+        ["convert", LABELS, "-o", "x.csv", "--frm", "300w_lp"],
+        ["draw", LABELS, "-o", "d", "--image-size", "640x"],
+        ["augment", LABELS, "-o", "x.csv", "--hflip"],
+        ["relabel-panoptic", ROOT / "sample_data" / "panoptic_synth", "-o", "x.parquet", "--max-rmse", "2km"],
+        ["conver"],
+        ["--bogus"],
+    ],
+)
 def test_usage_errors_are_one_line_exit_2(args, tmp_path):
     p = hpe(*args)
     assert p.returncode == 2, p.stderr
@@ -55,8 +60,16 @@ def test_did_you_mean_300w_lp(tmp_path):
     assert not (tmp_path / "x.csv").exists()
 
 
-@pytest.mark.parametrize("typo,meant", [("whennet", "whenet"), ("6d-repnet", "6drepnet"), ("300-W-LP", "300w_lp"),
-                                        ("openvino", "openvino_adas"), ("scipy-zyx", "scipy_zyx")])
+@pytest.mark.parametrize(
+    "typo,meant",
+    [
+        ("whennet", "whenet"),
+        ("6d-repnet", "6drepnet"),
+        ("300-W-LP", "300w_lp"),
+        ("openvino", "openvino_adas"),
+        ("scipy-zyx", "scipy_zyx"),
+    ],
+)
 def test_did_you_mean_near_misses(typo, meant, tmp_path):
     r = run("convert", LABELS, "-o", tmp_path / "x.csv", "--from", "300w_lp", "--to", typo)
     assert r.exit_code == 2 and f"did you mean {meant}" in r.output, r.output
@@ -85,8 +98,9 @@ def _capitalised(tmp_path, header=("Pitch", "Yaw", "Roll")):
     return path
 
 
-@pytest.mark.parametrize("command", [["convert", "--from", "300w_lp", "--to", "6drepnet"], ["audit"],
-                                     ["draw", "--image-size", "64x64"]])
+@pytest.mark.parametrize(
+    "command", [["convert", "--from", "300w_lp", "--to", "6drepnet"], ["audit"], ["draw", "--image-size", "64x64"]]
+)
 def test_capitalised_columns_get_a_columns_map_hint(command, tmp_path):
     src = _capitalised(tmp_path)
     r = run(command[0], src, "-o", tmp_path / ("o.csv" if command[0] != "draw" else "d"), *command[1:])
@@ -95,34 +109,55 @@ def test_capitalised_columns_get_a_columns_map_hint(command, tmp_path):
     assert len(r.output.strip().splitlines()) == 1
     # and the hint works as written
     if command[0] == "convert":
-        ok = run("convert", src, "-o", tmp_path / "ok.csv", *command[1:], "--columns-map",
-                 "pitch=Pitch,yaw=Yaw,roll=Roll", "-q")
+        ok = run(
+            "convert",
+            src,
+            "-o",
+            tmp_path / "ok.csv",
+            *command[1:],
+            "--columns-map",
+            "pitch=Pitch,yaw=Yaw,roll=Roll",
+            "-q",
+        )
         assert ok.exit_code == 0, ok.output
 
 
-@pytest.mark.parametrize("columns,hint", [
-    (["image", "Pitch", "Yaw", "Roll"], "; rename them with --columns-map pitch=Pitch,yaw=Yaw,roll=Roll"),
-    (["PITCH", "YAW", "ROLL"], "; rename them with --columns-map pitch=PITCH,yaw=YAW,roll=ROLL"),
-    (["head_pitch", "head_yaw", "roll"], "; rename them with --columns-map pitch=head_pitch,yaw=head_yaw"),
-    (["pitch_deg", "yaw_deg", "roll_deg"], "; rename them with --columns-map pitch=pitch_deg,yaw=yaw_deg,roll=roll_deg"),
-    (["image", "a", "b", "c"], ""),
-    (["Pitch", "Yaw"], ""),  # roll nowhere: renaming two would not help
-])
+@pytest.mark.parametrize(
+    "columns,hint",
+    [
+        (["image", "Pitch", "Yaw", "Roll"], "; rename them with --columns-map pitch=Pitch,yaw=Yaw,roll=Roll"),
+        (["PITCH", "YAW", "ROLL"], "; rename them with --columns-map pitch=PITCH,yaw=YAW,roll=ROLL"),
+        (["head_pitch", "head_yaw", "roll"], "; rename them with --columns-map pitch=head_pitch,yaw=head_yaw"),
+        (
+            ["pitch_deg", "yaw_deg", "roll_deg"],
+            "; rename them with --columns-map pitch=pitch_deg,yaw=yaw_deg,roll=roll_deg",
+        ),
+        (["image", "a", "b", "c"], ""),
+        (["Pitch", "Yaw"], ""),  # roll nowhere: renaming two would not help
+    ],
+)
 def test_columns_map_hint(columns, hint):
     assert columns_map_hint(columns) == hint
 
 
 def _radians_file(tmp_path, n=40, suffix=".csv"):
     rng = np.random.default_rng(1)
-    df = pd.DataFrame({"image": [f"{i}.jpg" for i in range(n)], "pitch": rng.uniform(-1, 1, n),
-                       "yaw": rng.uniform(-3, 3, n), "roll": rng.uniform(-0.5, 0.5, n)})
+    df = pd.DataFrame(
+        {
+            "image": [f"{i}.jpg" for i in range(n)],
+            "pitch": rng.uniform(-1, 1, n),
+            "yaw": rng.uniform(-3, 3, n),
+            "roll": rng.uniform(-0.5, 0.5, n),
+        }
+    )
     path = tmp_path / f"rad{suffix}"
     (df.to_csv(path, index=False) if suffix == ".csv" else df.to_parquet(path))
     return path
 
 
-@pytest.mark.parametrize("command", [["convert", "--from", "300w_lp", "--to", "6drepnet"], ["audit"],
-                                     ["evaluate-self"]])
+@pytest.mark.parametrize(
+    "command", [["convert", "--from", "300w_lp", "--to", "6drepnet"], ["audit"], ["evaluate-self"]]
+)
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
 def test_radians_read_as_degrees_warn(command, suffix, tmp_path):
     src = _radians_file(tmp_path, suffix=suffix)

@@ -1,4 +1,5 @@
 """``hpe evaluate`` joins by key only: shuffled predictions score the same, row order needs ``--join order``."""
+
 import json
 from pathlib import Path
 
@@ -15,8 +16,23 @@ pytestmark = pytest.mark.skipif(not (AFLW.is_dir() and PRED.is_file()), reason="
 
 
 def _eval(pred, gt, *args):
-    r = CliRunner().invoke(cli, ["evaluate", str(pred), str(gt), "--pred-system", "300w_lp", "--gt-system",
-                                 "300w_lp", "--json", "-", "-q", *map(str, args)], catch_exceptions=False)
+    r = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(pred),
+            str(gt),
+            "--pred-system",
+            "300w_lp",
+            "--gt-system",
+            "300w_lp",
+            "--json",
+            "-",
+            "-q",
+            *map(str, args),
+        ],
+        catch_exceptions=False,
+    )
     return r, (json.loads(r.output) if r.exit_code == 0 else None)
 
 

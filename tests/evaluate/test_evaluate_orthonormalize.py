@@ -1,4 +1,5 @@
 """``hpe evaluate --orthonormalize``: raw network matrices (TriNet's vectors) projected to the nearest rotation."""
+
 import json
 
 import numpy as np
@@ -28,9 +29,23 @@ def _files(tmp_path, n=60, seed=3):
 
 
 def _run(tmp_path, *args):
-    return CliRunner().invoke(cli, ["evaluate", str(tmp_path / "pred.csv"), str(tmp_path / "gt.csv"),
-                                    "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--columns", "matrix",
-                                    "-q", *map(str, args)], catch_exceptions=False)
+    return CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(tmp_path / "pred.csv"),
+            str(tmp_path / "gt.csv"),
+            "--pred-system",
+            "300w_lp",
+            "--gt-system",
+            "300w_lp",
+            "--columns",
+            "matrix",
+            "-q",
+            *map(str, args),
+        ],
+        catch_exceptions=False,
+    )
 
 
 def test_off_by_default_rows_rejected_with_reason(tmp_path):

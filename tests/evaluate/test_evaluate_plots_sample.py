@@ -1,4 +1,5 @@
 """``--plots`` says when it is drawn from a sample (every k-th pair past 400,000 pairs) and uses every kept row."""
+
 from types import SimpleNamespace
 
 import numpy as np
@@ -9,8 +10,12 @@ from hpe_cli.report.eval_plots import _drawn
 
 def _rows(n, start):
     yaw = np.arange(start, start + n, dtype=np.float64)
-    return SimpleNamespace(n=n, gt_angles=np.column_stack([yaw * 0, yaw, yaw * 0]), geodesic=yaw,
-                           mae_wrapped=np.column_stack([yaw, yaw, yaw]))
+    return SimpleNamespace(
+        n=n,
+        gt_angles=np.column_stack([yaw * 0, yaw, yaw * 0]),
+        geodesic=yaw,
+        mae_wrapped=np.column_stack([yaw, yaw, yaw]),
+    )
 
 
 def test_sample_keeps_every_kth_pair_and_says_so():

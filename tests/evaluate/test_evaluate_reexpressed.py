@@ -1,4 +1,5 @@
 """Raw-angle protocols use the angles as written; a side given in another system is converted and counted."""
+
 import json
 from pathlib import Path
 
@@ -16,9 +17,26 @@ A = ["pitch", "yaw", "roll"]
 
 
 def _report(pred, gt, psys):
-    r = CliRunner().invoke(cli, ["evaluate", str(pred), str(gt), "--pred-system", psys, "--gt-system", "300w_lp",
-                                 "--json", "-", "-q", "--protocol", "hopenet", "--protocol", "opal23"],
-                           catch_exceptions=False)
+    r = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(pred),
+            str(gt),
+            "--pred-system",
+            psys,
+            "--gt-system",
+            "300w_lp",
+            "--json",
+            "-",
+            "-q",
+            "--protocol",
+            "hopenet",
+            "--protocol",
+            "opal23",
+        ],
+        catch_exceptions=False,
+    )
     assert r.exit_code == 0, r.output
     return json.loads(r.output)
 

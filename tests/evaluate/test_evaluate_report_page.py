@@ -6,6 +6,7 @@ Frobenius unitless), the plots and the worst rows, each with its picture
 (ground truth and prediction drawn on the face by ``hpe draw``'s
 ``render_worst``, the pictures ``draw_worst`` writes, embedded in the page).
 """
+
 import shutil
 import subprocess
 from pathlib import Path
@@ -35,9 +36,27 @@ def _make_page(tmp_path, worst=6):
     pred = tmp_path / "shuffled.csv"
     pd.read_csv(PRED).sample(frac=1.0, random_state=11).to_csv(pred, index=False)
     page = tmp_path / "page.html"
-    r = CliRunner().invoke(cli, ["evaluate", str(pred), str(AFLW), "--pred-system", "300w_lp", "--gt-system",
-                                 "300w_lp", "--report", str(page), "--by", "image", "--yaw-bins", "30",
-                                 "--worst", str(worst)], catch_exceptions=False)
+    r = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(pred),
+            str(AFLW),
+            "--pred-system",
+            "300w_lp",
+            "--gt-system",
+            "300w_lp",
+            "--report",
+            str(page),
+            "--by",
+            "image",
+            "--yaw-bins",
+            "30",
+            "--worst",
+            str(worst),
+        ],
+        catch_exceptions=False,
+    )
     assert r.exit_code == 0, r.output
     return page, r.output
 
@@ -68,7 +87,7 @@ def test_worst_pictures_are_the_drawn_faces(tmp_path):
 
     page, _ = _make_page(tmp_path, worst=4)
     text = page.read_text()
-    body = text[text.index("<h2>Worst 4 rows"):]
+    body = text[text.index("<h2>Worst 4 rows") :]
     names = re.findall(r"<td>(image\d{5})(?:\.\w+)?</td>", body)  # the key as the GT reader gives it
     pics = re.findall(r'class="pic" src="data:image/jpeg;base64,([^"]+)"', body)
     assert len(names) == len(pics) == 4
@@ -89,9 +108,22 @@ def test_page_in_headless_chromium_with_pictures(tmp_path):
     text = page.read_text()
     assert text.count('class="pic"') == 6  # every worst row has its picture
     shot = tmp_path / "shot.png"
-    r = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                        "--hide-scrollbars", "--window-size=1400,5200", f"--screenshot={shot}", page.as_uri()],
-                       capture_output=True, timeout=120, check=False)
+    r = subprocess.run(
+        [
+            browser,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--hide-scrollbars",
+            "--window-size=1400,5200",
+            f"--screenshot={shot}",
+            page.as_uri(),
+        ],
+        capture_output=True,
+        timeout=120,
+        check=False,
+    )
     assert shot.is_file() and shot.stat().st_size > 50_000, r.stderr[-500:]
     import cv2
 

@@ -1,6 +1,7 @@
 """``hpe evaluate --report`` on labels from ``hpe relabel-panoptic`` (real pizza1 frames, hdImgs/hd_00_XX/ layout):
 every worst row has its picture, cut around the face box of the 1920x1080 frame with the poses drawn on it,
 and ``--protocol directmhp`` picks DirectMHP's v2 scorer for CMU Panoptic."""
+
 import base64
 import re
 from pathlib import Path
@@ -19,8 +20,11 @@ pytestmark = pytest.mark.skipif(not (SEQ / "hdImgs").is_dir(), reason="shared Pa
 
 def test_panoptic_worst_rows_pictured_around_the_faces(tmp_path):
     labels = tmp_path / "pizza.parquet"
-    r = CliRunner().invoke(cli, ["relabel-panoptic", str(SEQ), "-o", str(labels), "--cameras", "00_00,00_08",
-                                 "--frames", "1147:1148"], catch_exceptions=False)
+    r = CliRunner().invoke(
+        cli,
+        ["relabel-panoptic", str(SEQ), "-o", str(labels), "--cameras", "00_00,00_08", "--frames", "1147:1148"],
+        catch_exceptions=False,
+    )
     assert r.exit_code == 0, r.output
     t = pd.read_parquet(labels)
     pred = t[["sequence", "camera", "frame", "person_id", "pitch", "yaw", "roll"]].copy()
@@ -28,10 +32,29 @@ def test_panoptic_worst_rows_pictured_around_the_faces(tmp_path):
     p = tmp_path / "pred.csv"
     pred.sample(frac=1.0, random_state=2).to_csv(p, index=False)
     page = tmp_path / "r.html"
-    r = CliRunner().invoke(cli, ["evaluate", str(p), str(labels), "--pred-system", "300w_lp", "--gt-system",
-                                 "300w_lp", "--key", "sequence,camera,frame,person_id", "--images", str(SEQ),
-                                 "--report", str(page), "--worst", "5", "--protocol", "directmhp"],
-                           catch_exceptions=False)
+    r = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(p),
+            str(labels),
+            "--pred-system",
+            "300w_lp",
+            "--gt-system",
+            "300w_lp",
+            "--key",
+            "sequence,camera,frame,person_id",
+            "--images",
+            str(SEQ),
+            "--report",
+            str(page),
+            "--worst",
+            "5",
+            "--protocol",
+            "directmhp",
+        ],
+        catch_exceptions=False,
+    )
     assert r.exit_code == 0, r.output
     assert "directmhp: GT is CMU Panoptic" in r.output
     text = page.read_text()

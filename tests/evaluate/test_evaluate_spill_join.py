@@ -4,6 +4,7 @@ Both golden sets, predictions shuffled, partitions forced small (a few rows each
 partition files; also --by, --yaw-bins, --align mean, opal23-align (a second pass), missing / unmatched /
 invalid rows, keys spelled differently (file stems) and duplicates found across the whole file.
 """
+
 import math
 from pathlib import Path
 
@@ -40,8 +41,19 @@ def _both(tmp_path, pred, gt, **kw):
     for engine in ("memory", "spill"):
         o = tmp_path / f"{engine}.parquet"
         rej = tmp_path / f"{engine}_rejects.csv"
-        rep = run_evaluate(pred, gt, pred_system=S, gt_system=S, output=o, rejects=rej, batch_size=97,
-                           join_engine=engine, partition_rows=7, overwrite=True, **kw)
+        rep = run_evaluate(
+            pred,
+            gt,
+            pred_system=S,
+            gt_system=S,
+            output=o,
+            rejects=rej,
+            batch_size=97,
+            join_engine=engine,
+            partition_rows=7,
+            overwrite=True,
+            **kw,
+        )
         rows = pq.read_table(o).to_pandas().sort_values("image").reset_index(drop=True)
         rj = pd.read_csv(rej) if rej.exists() else None
         out[engine] = (rep, rows, rj)
@@ -52,8 +64,9 @@ def _both(tmp_path, pred, gt, **kw):
     pd.testing.assert_frame_equal(om, os_, check_exact=False, rtol=1e-12, atol=1e-12)
     if jm is not None:
         key = [c for c in ("side", "line", "reason") if c in jm.columns]
-        pd.testing.assert_frame_equal(jm.sort_values(key).reset_index(drop=True),
-                                      js.sort_values(key).reset_index(drop=True))
+        pd.testing.assert_frame_equal(
+            jm.sort_values(key).reset_index(drop=True), js.sort_values(key).reset_index(drop=True)
+        )
     return rs
 
 

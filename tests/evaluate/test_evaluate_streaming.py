@@ -1,4 +1,5 @@
 """Streamed scoring (chunks, sums, float32 spill) equals the whole-array computation, on the golden syn set."""
+
 import json
 import math
 from pathlib import Path
@@ -50,25 +51,54 @@ def test_accumulator_in_chunks_equals_whole_arrays():
     with acc:
         for a in range(0, len(gt), 317):
             sl = slice(a, a + 317)
-            rows = compute_rows([[x[sl] for x in r] for r in P], [[x[sl] for x in r] for r in G], s, names,
-                                {k: (v[0], v[1][sl]) for k, v in raw.items()})
+            rows = compute_rows(
+                [[x[sl] for x in r] for r in P],
+                [[x[sl] for x in r] for r in G],
+                s,
+                names,
+                {k: (v[0], v[1][sl]) for k, v in raw.items()},
+            )
             acc.add(rows, by[sl])
         rep = acc.report()
     protos = {k: v for k, v in part["protocols"].items() if k in names}
-    _close({"metrics": part["metrics"], "protocols": protos}, {"metrics": rep["metrics"], "protocols": rep["protocols"]})
+    _close(
+        {"metrics": part["metrics"], "protocols": protos}, {"metrics": rep["metrics"], "protocols": rep["protocols"]}
+    )
     for g in ("a", "b"):
         want = part["by"]["groups"][g]
-        _close({"metrics": want["metrics"], "n": want["n"]}, {"metrics": rep["by_groups"][g]["metrics"],
-                                                              "n": rep["by_groups"][g]["n"]})
+        _close(
+            {"metrics": want["metrics"], "n": want["n"]},
+            {"metrics": rep["by_groups"][g]["metrics"], "n": rep["by_groups"][g]["n"]},
+        )
     for w, h in zip(part["yaw_bins"], rep["yaw_bins"]):
         _close(w["metrics"], h["metrics"])
 
 
 def _run(tmp_path, pred, *args):
     rep = tmp_path / f"{pred.stem}.json"
-    r = CliRunner().invoke(cli, ["evaluate", str(pred), str(SYN / "gt.csv"), "--pred-system", "300w_lp",
-                                 "--gt-system", "300w_lp", "--json", str(rep), "-q", "--batch-size", "256",
-                                 "--by", "group", "--yaw-bins", "45", *args], catch_exceptions=False)
+    r = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(pred),
+            str(SYN / "gt.csv"),
+            "--pred-system",
+            "300w_lp",
+            "--gt-system",
+            "300w_lp",
+            "--json",
+            str(rep),
+            "-q",
+            "--batch-size",
+            "256",
+            "--by",
+            "group",
+            "--yaw-bins",
+            "45",
+            *args,
+        ],
+        catch_exceptions=False,
+    )
     assert r.exit_code == 0, r.output
     return json.loads(rep.read_text())
 

@@ -21,6 +21,7 @@ Two places where hpe deliberately differs, each checked below:
   front/back split is empty (utils/mae.py:149, 157). hpe reports the empty
   split as ``n = 0`` with no means.
 """
+
 import json
 import math
 from pathlib import Path
@@ -40,8 +41,21 @@ pytestmark = pytest.mark.skipif(not GOLDEN.is_dir(), reason="shared/golden/evalu
 
 def _run(tmp_path, tag, pred, gt, *args):
     rep = tmp_path / f"{tag}.json"
-    r = CliRunner().invoke(cli, ["evaluate", str(pred), str(gt), "--json", str(rep), "-q",
-                                 "--rejects", str(tmp_path / f"{tag}_rejects.csv"), *args], catch_exceptions=False)
+    r = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(pred),
+            str(gt),
+            "--json",
+            str(rep),
+            "-q",
+            "--rejects",
+            str(tmp_path / f"{tag}_rejects.csv"),
+            *args,
+        ],
+        catch_exceptions=False,
+    )
     assert r.exit_code == 0, r.output
     return json.loads(rep.read_text())
 
@@ -52,21 +66,78 @@ def reports(request, tmp_path_factory):
     d = GOLDEN / request.param
     tmp = tmp_path_factory.mktemp(request.param)
     out = {}
-    out["angles"] = _run(tmp, "angles", d / "pred.csv", d / "gt.csv", "--pred-system", "300w_lp", "--gt-system",
-                         "300w_lp", *[a for p in ("hopenet", "fsanet", "headposeplus", "opal23", "opal23-align",
-                                                  "trinet", "opentrack", "dad3dheads") for a in ("--protocol", p)])
-    out["6d"] = _run(tmp, "6d", d / "pred_6d.csv", d / "gt.csv", "--pred-system", "6drepnet", "--pred-columns",
-                     "matrix", "--gt-system", "300w_lp", "--protocol", "6drepnet", "--protocol", "6drepnet360")
-    out["rotvec"] = _run(tmp, "rotvec", d / "pred_rotvec.csv", d / "gt.csv", "--pred-system", "img2pose",
-                         "--gt-system", "300w_lp", "--protocol", "img2pose")
+    out["angles"] = _run(
+        tmp,
+        "angles",
+        d / "pred.csv",
+        d / "gt.csv",
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        *[
+            a
+            for p in (
+                "hopenet",
+                "fsanet",
+                "headposeplus",
+                "opal23",
+                "opal23-align",
+                "trinet",
+                "opentrack",
+                "dad3dheads",
+            )
+            for a in ("--protocol", p)
+        ],
+    )
+    out["6d"] = _run(
+        tmp,
+        "6d",
+        d / "pred_6d.csv",
+        d / "gt.csv",
+        "--pred-system",
+        "6drepnet",
+        "--pred-columns",
+        "matrix",
+        "--gt-system",
+        "300w_lp",
+        "--protocol",
+        "6drepnet",
+        "--protocol",
+        "6drepnet360",
+    )
+    out["rotvec"] = _run(
+        tmp,
+        "rotvec",
+        d / "pred_rotvec.csv",
+        d / "gt.csv",
+        "--pred-system",
+        "img2pose",
+        "--gt-system",
+        "300w_lp",
+        "--protocol",
+        "img2pose",
+    )
     # DirectMHP compares only the rows where both sides have a whenet (|pitch|, |roll| < 90) solution:
     # classes.csv marks them; the others never reach its mae.py
     keep = pd.read_csv(d / "classes.csv").query("whenet_pair == 1")["image"]
     for name in ("gtw", "predw"):
         t = pd.read_csv(d / f"{name}.csv")
         t[t["image"].isin(keep)].to_csv(tmp / f"{name}.csv", index=False)
-    out["whenet"] = _run(tmp, "whenet", tmp / "predw.csv", tmp / "gtw.csv", "--pred-system", "whenet",
-                         "--gt-system", "whenet", "--protocol", "directmhp", "--protocol", "directmhp-single")
+    out["whenet"] = _run(
+        tmp,
+        "whenet",
+        tmp / "predw.csv",
+        tmp / "gtw.csv",
+        "--pred-system",
+        "whenet",
+        "--gt-system",
+        "whenet",
+        "--protocol",
+        "directmhp",
+        "--protocol",
+        "directmhp-single",
+    )
     golden = {g["protocol"].replace("_", "-"): g for g in json.loads((d / "golden.json").read_text())["golden"]}
     return request.param, out, golden
 
@@ -88,8 +159,21 @@ def _compare(name, where, want, got, tol):
     assert abs(got - want) <= tol, (name, where, want, got)
 
 
-@pytest.mark.parametrize("name", ["hopenet", "fsanet", "headposeplus", "6drepnet", "6drepnet360", "img2pose",
-                                  "opal23", "opal23-align", "trinet", "dad3dheads"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "hopenet",
+        "fsanet",
+        "headposeplus",
+        "6drepnet",
+        "6drepnet360",
+        "img2pose",
+        "opal23",
+        "opal23-align",
+        "trinet",
+        "dad3dheads",
+    ],
+)
 def test_protocol_equals_golden(reports, name):
     _, out, golden = reports
     tol = 1e-4 if name in FLOAT32_PEERS else 1e-6

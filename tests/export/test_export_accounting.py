@@ -1,5 +1,6 @@
 """Every sampling rule of ``hpe export`` lists what it skips in the rejects, with its reason: labels + rejects =
 input rows, and each input row is in exactly one of them."""
+
 from __future__ import annotations
 
 import json
@@ -32,9 +33,20 @@ def table(tmp_path_factory):
         name = f"img/{seq}_{person}_{frame}.jpg"
         cv2.imwrite(str(d / name), rng.integers(0, 255, (100, 120, 3), dtype=np.uint8))
         yaw = -40.0 + (2 if person == 0 else 12) * frame + (150 if k in (5, 17) else 0)
-        row = {"image": name, "sequence": seq, "person_id": person, "frame": frame, "camera": "",
-               "bbox_x": 30.0, "bbox_y": 20.0, "bbox_w": 50.0, "bbox_h": 60.0,
-               "pitch": 5.0, "yaw": yaw, "roll": -3.0 if k != 9 else 120.0}
+        row = {
+            "image": name,
+            "sequence": seq,
+            "person_id": person,
+            "frame": frame,
+            "camera": "",
+            "bbox_x": 30.0,
+            "bbox_y": 20.0,
+            "bbox_w": 50.0,
+            "bbox_h": 60.0,
+            "pitch": 5.0,
+            "yaw": yaw,
+            "roll": -3.0 if k != 9 else 120.0,
+        }
         for i in range(5):
             row[f"lm{i}_x"], row[f"lm{i}_y"] = 40.0 + 7 * i, 40.0 + 5 * i
         rows.append(row)

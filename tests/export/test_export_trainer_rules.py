@@ -1,4 +1,5 @@
 """``--layout 6drepnet --trainer``: each trainer's own range rule, checked against its own code's arithmetic."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,8 +36,10 @@ def test_rules_match_the_trainers_code(angles):
         assert full[k] == ""
 
 
-@pytest.mark.parametrize("edge,hopenet,sixdrepnet", [(-99.0, True, True), (98.999, True, True), (99.0, False, True),
-                                                     (-99.001, False, False), (99.001, False, False)])
+@pytest.mark.parametrize(
+    "edge,hopenet,sixdrepnet",
+    [(-99.0, True, True), (98.999, True, True), (99.0, False, True), (-99.001, False, False), (99.001, False, False)],
+)
 def test_edges(edge, hopenet, sixdrepnet):
     a = np.array([[0.0, edge, 0.0]])
     assert (get_layout("6drepnet", trainer="hopenet").label_reasons(a)[0] == "") == hopenet
@@ -57,8 +60,9 @@ def test_cli_trainer_usage(tmp_path):
     from hpe_cli.cli.main import cli
 
     (tmp_path / "t.csv").write_text("image,bbox_x,bbox_y,bbox_w,bbox_h,pitch,yaw,roll\n")
-    r = CliRunner().invoke(cli, ["export", str(tmp_path / "t.csv"), "-o", str(tmp_path / "o"), "--layout", "hf",
-                                 "--trainer", "hopenet"])
+    r = CliRunner().invoke(
+        cli, ["export", str(tmp_path / "t.csv"), "-o", str(tmp_path / "o"), "--layout", "hf", "--trainer", "hopenet"]
+    )
     assert r.exit_code == 2 and "--trainer applies to --layout 6drepnet only" in r.output
     r = CliRunner().invoke(cli, ["export", "--help"])
     assert "--trainer [hopenet|6drepnet|6drepnet360]" in r.output and "--trainer hopenet" in r.output

@@ -1,6 +1,7 @@
 """Shared helpers of the fault-injection suite: one small valid run per command, and the checks every
 fault must pass (exit code, one error line naming the file, no traceback, no partial output or temp
 files, inputs unchanged)."""
+
 from __future__ import annotations
 
 import hashlib
@@ -33,8 +34,9 @@ def run(*args, **kw):
 def run_sub(*args, timeout=120, **kw):
     """``python -m hpe_cli ARGS`` in a subprocess (stdout, stderr as bytes)."""
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    return subprocess.run([sys.executable, "-m", "hpe_cli", *map(os.fsencode, args)], capture_output=True, env=env,
-                          timeout=timeout, **kw)
+    return subprocess.run(
+        [sys.executable, "-m", "hpe_cli", *map(os.fsencode, args)], capture_output=True, env=env, timeout=timeout, **kw
+    )
 
 
 def tree(folder: Path) -> dict:
@@ -103,10 +105,25 @@ class Case:
     # each builder returns (inputs, {option: default output path}, args(outs) -> list)
     def _convert(self, t):
         src = t / "in.csv"
-        pd.DataFrame({"id": [1, 2, 3], "pitch": [1.0, 2, 3], "yaw": [10.0, -20, 30], "roll": [0.0, 5, -5]}) \
-            .to_csv(src, index=False)
-        return [src], {"-o": t / "out.csv", "--rejects": t / "rej.csv"}, lambda o: [
-            "convert", src, "-o", o["-o"], "--from", "300w_lp", "--to", "6drepnet", "--rejects", o["--rejects"]]
+        pd.DataFrame({"id": [1, 2, 3], "pitch": [1.0, 2, 3], "yaw": [10.0, -20, 30], "roll": [0.0, 5, -5]}).to_csv(
+            src, index=False
+        )
+        return (
+            [src],
+            {"-o": t / "out.csv", "--rejects": t / "rej.csv"},
+            lambda o: [
+                "convert",
+                src,
+                "-o",
+                o["-o"],
+                "--from",
+                "300w_lp",
+                "--to",
+                "6drepnet",
+                "--rejects",
+                o["--rejects"],
+            ],
+        )
 
     def _systems(self, t):
         return [], {}, lambda o: ["systems"]
@@ -114,75 +131,169 @@ class Case:
     def _relabel_panoptic(self, t):
         seq = t / "seq"
         shutil.copytree(SYNTH, seq)
-        return [seq / f"calibration_{SYNTH.name}.json"], {"-o": t / "labels.csv", "--rejects": t / "rej.csv"}, \
-            lambda o: ["relabel-panoptic", seq, "-o", o["-o"], "--rejects", o["--rejects"], "--frames", "100:103", "-q"]
+        return (
+            [seq / f"calibration_{SYNTH.name}.json"],
+            {"-o": t / "labels.csv", "--rejects": t / "rej.csv"},
+            lambda o: [
+                "relabel-panoptic",
+                seq,
+                "-o",
+                o["-o"],
+                "--rejects",
+                o["--rejects"],
+                "--frames",
+                "100:103",
+                "-q",
+            ],
+        )
 
     def _relabel_agora(self, t):
         pkl = t / "agora.pkl"
         shutil.copy(AGORA_PKL, pkl)
-        return [pkl], {"-o": t / "labels.csv", "--rejects": t / "rej.csv"}, \
-            lambda o: ["relabel-agora", pkl, "-o", o["-o"], "--rejects", o["--rejects"], "-q"]
+        return (
+            [pkl],
+            {"-o": t / "labels.csv", "--rejects": t / "rej.csv"},
+            lambda o: ["relabel-agora", pkl, "-o", o["-o"], "--rejects", o["--rejects"], "-q"],
+        )
 
     def _audit(self, t):
         src = t / "in.csv"
         pd.DataFrame({"pitch": [1.0, 2, 3], "yaw": [10.0, -20, 30], "roll": [0.0, 5, -5]}).to_csv(src, index=False)
         # --plots (slow: matplotlib) has its own tests in test_outputs.py
-        return [src], {"-o": t / "flags.csv", "--json": t / "report.json"}, lambda o: [
-            "audit", src, "-o", o["-o"], "--json", o["--json"], "-q"]
+        return (
+            [src],
+            {"-o": t / "flags.csv", "--json": t / "report.json"},
+            lambda o: ["audit", src, "-o", o["-o"], "--json", o["--json"], "-q"],
+        )
 
     def _draw(self, t):
         make_images(t / "imgs", ["a.png", "b.png"])
         src = t / "in.csv"
-        pd.DataFrame({"image": ["a.png", "b.png"], "pitch": [1.0, 2], "yaw": [10.0, -20], "roll": [0.0, 5]}) \
-            .to_csv(src, index=False)
-        return [src, t / "imgs" / "a.png", t / "imgs" / "b.png"], {"-o": t / "drawn", "--rejects": t / "rej.csv"}, \
-            lambda o: ["draw", src, "-o", o["-o"], "--images", t / "imgs", "--rejects", o["--rejects"], "-q"]
+        pd.DataFrame({"image": ["a.png", "b.png"], "pitch": [1.0, 2], "yaw": [10.0, -20], "roll": [0.0, 5]}).to_csv(
+            src, index=False
+        )
+        return (
+            [src, t / "imgs" / "a.png", t / "imgs" / "b.png"],
+            {"-o": t / "drawn", "--rejects": t / "rej.csv"},
+            lambda o: ["draw", src, "-o", o["-o"], "--images", t / "imgs", "--rejects", o["--rejects"], "-q"],
+        )
 
     def _augment(self, t):
         make_images(t / "imgs", ["a.png", "b.png"])
         src = t / "in.csv"
-        pd.DataFrame({"image": ["a.png", "b.png"], "pitch": [1.0, 2], "yaw": [10.0, -20], "roll": [0.0, 5]}) \
-            .to_csv(src, index=False)
-        return [src, t / "imgs" / "a.png"], {"-o": t / "aug.csv", "--rejects": t / "rej.csv",
-                                             "--out-images": t / "augimgs"}, \
-            lambda o: ["augment", src, "-o", o["-o"], "--image-size", "40x30", "--hflip", "--images", t / "imgs",
-                       "--out-images", o["--out-images"], "--rejects", o["--rejects"], "-q"]
+        pd.DataFrame({"image": ["a.png", "b.png"], "pitch": [1.0, 2], "yaw": [10.0, -20], "roll": [0.0, 5]}).to_csv(
+            src, index=False
+        )
+        return (
+            [src, t / "imgs" / "a.png"],
+            {"-o": t / "aug.csv", "--rejects": t / "rej.csv", "--out-images": t / "augimgs"},
+            lambda o: [
+                "augment",
+                src,
+                "-o",
+                o["-o"],
+                "--image-size",
+                "40x30",
+                "--hflip",
+                "--images",
+                t / "imgs",
+                "--out-images",
+                o["--out-images"],
+                "--rejects",
+                o["--rejects"],
+                "-q",
+            ],
+        )
 
     def _infer(self, t):
         code = t / "lp.py"
         shutil.copy(FIX / "lp300w.py", code)
         func = _first_function(code)
-        return [code], {"-o": t / "sys.toml", "--json": t / "report.json"}, lambda o: [
-            "infer", "--callable", f"{code}:{func}", "-o", o["-o"], "--json", o["--json"], "-q"]
-
+        return (
+            [code],
+            {"-o": t / "sys.toml", "--json": t / "report.json"},
+            lambda o: ["infer", "--callable", f"{code}:{func}", "-o", o["-o"], "--json", o["--json"], "-q"],
+        )
 
     def _evaluate(self, t):
         pred, gt = t / "pred.csv", t / "gt.csv"
-        base = {"image": [f"i{k}.jpg" for k in range(4)], "pitch": [1.0, 2, 3, 4], "yaw": [10.0, -20, 30, 5],
-                "roll": [0.0, 5, -5, 2]}
+        base = {
+            "image": [f"i{k}.jpg" for k in range(4)],
+            "pitch": [1.0, 2, 3, 4],
+            "yaw": [10.0, -20, 30, 5],
+            "roll": [0.0, 5, -5, 2],
+        }
         pd.DataFrame(base).to_csv(gt, index=False)
         pd.DataFrame({**base, "yaw": [11.0, -21, 29, 5]}).to_csv(pred, index=False)
-        return [pred, gt], {"-o": t / "errors.csv", "--json": t / "report.json", "--rejects": t / "rej.csv"}, \
-            lambda o: ["evaluate", pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", o["-o"],
-                       "--json", o["--json"], "--rejects", o["--rejects"], "-q"]
+        return (
+            [pred, gt],
+            {"-o": t / "errors.csv", "--json": t / "report.json", "--rejects": t / "rej.csv"},
+            lambda o: [
+                "evaluate",
+                pred,
+                gt,
+                "--pred-system",
+                "300w_lp",
+                "--gt-system",
+                "300w_lp",
+                "-o",
+                o["-o"],
+                "--json",
+                o["--json"],
+                "--rejects",
+                o["--rejects"],
+                "-q",
+            ],
+        )
 
     def _export(self, t):
         make_images(t / "img", ["f0.jpg", "f1.jpg"], size=(160, 120))
-        rows = [{"image": f"img/f{i}.jpg", "sequence": "s0", "camera": "", "frame": i, "person_id": 0,
-                 "bbox_x": 10, "bbox_y": 20, "bbox_w": 40, "bbox_h": 50, "pitch": 5.0, "yaw": 20.0 * i - 10,
-                 "roll": 5.0} for i in range(2)]
+        rows = [
+            {
+                "image": f"img/f{i}.jpg",
+                "sequence": "s0",
+                "camera": "",
+                "frame": i,
+                "person_id": 0,
+                "bbox_x": 10,
+                "bbox_y": 20,
+                "bbox_w": 40,
+                "bbox_h": 50,
+                "pitch": 5.0,
+                "yaw": 20.0 * i - 10,
+                "roll": 5.0,
+            }
+            for i in range(2)
+        ]
         src = t / "labels.csv"
         pd.DataFrame(rows).to_csv(src, index=False)
-        return [src, t / "img" / "f0.jpg"], {"-o": t / "exported", "--rejects": t / "rej.csv"}, \
-            lambda o: ["export", src, "-o", o["-o"], "--layout", "whenet", "--images", t, "--rejects",
-                       o["--rejects"], "-q"]
+        return (
+            [src, t / "img" / "f0.jpg"],
+            {"-o": t / "exported", "--rejects": t / "rej.csv"},
+            lambda o: [
+                "export",
+                src,
+                "-o",
+                o["-o"],
+                "--layout",
+                "whenet",
+                "--images",
+                t,
+                "--rejects",
+                o["--rejects"],
+                "-q",
+            ],
+        )
 
 
 def _first_function(path: Path) -> str:
     import ast
 
-    return next(n.name for n in ast.parse(path.read_text()).body if isinstance(n, ast.FunctionDef)
-                and not n.name.startswith("_"))
+    return next(
+        n.name
+        for n in ast.parse(path.read_text()).body
+        if isinstance(n, ast.FunctionDef) and not n.name.startswith("_")
+    )
 
 
 COMMANDS = ["convert", "relabel-panoptic", "relabel-agora", "audit", "draw", "augment", "infer", "evaluate", "export"]
@@ -193,4 +304,5 @@ WRITING = COMMANDS  # every command that writes files (systems only prints)
 def case_factory(tmp_path):
     def make(name):
         return Case(name, tmp_path)
+
     return make

@@ -1,6 +1,7 @@
 """The output transaction commits several files as a whole, also when the commit itself fails halfway
 (the N-th placement fails: an injected error, a target name that became a folder, a read-only folder):
 the files already placed are undone (new ones removed, replaced ones restored) and nothing staged is left."""
+
 from __future__ import annotations
 
 import errno
@@ -156,9 +157,26 @@ def test_kill9_of_a_plain_run_then_another_run_cleans_up(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "hpe_cli", "convert", str(src), "-o", str(out / "a.csv"),
-                             "--from", "300w_lp", "--to", "6drepnet", "--batch-size", "2000"], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "hpe_cli",
+            "convert",
+            str(src),
+            "-o",
+            str(out / "a.csv"),
+            "--from",
+            "300w_lp",
+            "--to",
+            "6drepnet",
+            "--batch-size",
+            "2000",
+        ],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     end = time.monotonic() + 60
     while time.monotonic() < end and proc.poll() is None and not temp_files(out):
         time.sleep(0.005)
@@ -169,8 +187,25 @@ def test_kill9_of_a_plain_run_then_another_run_cleans_up(tmp_path):
     old = time.time() - 2 * tx.SWEEP_AGE
     for p in left:
         os.utime(p, (old, old))
-    res = subprocess.run([sys.executable, "-m", "hpe_cli", "convert", str(src), "-o", str(out / "b.csv"),
-                          "--from", "300w_lp", "--to", "6drepnet", "-q"], env=env, capture_output=True, timeout=120)
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "hpe_cli",
+            "convert",
+            str(src),
+            "-o",
+            str(out / "b.csv"),
+            "--from",
+            "300w_lp",
+            "--to",
+            "6drepnet",
+            "-q",
+        ],
+        env=env,
+        capture_output=True,
+        timeout=120,
+    )
     assert res.returncode == 0, res.stderr
     assert sorted(os.listdir(out)) == ["b.csv"]
 
@@ -207,8 +242,20 @@ def test_augment_out_images_commit_failing_halfway_leaves_nothing(tmp_path):
     import unittest.mock
 
     with unittest.mock.patch.object(tx, "_place", place):
-        res = run("augment", t, "-o", tmp_path / "a.csv", "--image-size", "80", "60", "--hflip", "--images", imgs,
-                  "--out-images", out)
+        res = run(
+            "augment",
+            t,
+            "-o",
+            tmp_path / "a.csv",
+            "--image-size",
+            "80",
+            "60",
+            "--hflip",
+            "--images",
+            imgs,
+            "--out-images",
+            out,
+        )
     assert res.exit_code == 1 and "c.jpg" in res.output, res.output
     assert sorted(os.listdir(out)) == ["c.jpg"] and (out / "c.jpg").is_dir()  # only the other process's folder
     assert not (tmp_path / "a.csv").exists() and not temp_files(tmp_path)

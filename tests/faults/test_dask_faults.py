@@ -1,6 +1,7 @@
 """Dask under faults: ``--scheduler`` addresses that refuse, or accept and never answer, fail in seconds with
 one line (no Dask import needed for that); SIGTERM during a LocalCluster run ends with exactly one line
 (no ``resource_tracker`` KeyError tracebacks, no distributed log lines), nothing written, no process left."""
+
 from __future__ import annotations
 
 import os
@@ -55,9 +56,25 @@ def test_sigterm_during_a_local_cluster_run(tmp_path):
     dst = tmp_path / "out"
     dst.mkdir()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "hpe_cli", "relabel-panoptic", str(seq), "-o",
-                             str(dst / "o.parquet"), "--scheduler", "local", "--workers", "2", "-q"],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "hpe_cli",
+            "relabel-panoptic",
+            str(seq),
+            "-o",
+            str(dst / "o.parquet"),
+            "--scheduler",
+            "local",
+            "--workers",
+            "2",
+            "-q",
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     parts = dst / ".o.parquet.hpe-parts"
     end = time.monotonic() + 90
     while time.monotonic() < end and proc.poll() is None:

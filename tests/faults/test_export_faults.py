@@ -4,6 +4,7 @@ Without ``--rejects``: one error line naming the ``.mat`` label and the image, e
 unchanged. With ``--rejects``: the head is a reject naming the image and the reason, the rest is exported.
 Never ``internal error`` (was ``invalid literal for int() ... 'image00081.mat'`` and an OpenCV assertion).
 """
+
 from __future__ import annotations
 
 import shutil
@@ -21,8 +22,13 @@ FAULTS = {
     "png-named-jpg": None,  # a valid image of another format under a .jpg name is fine (decoded by content)
     "missing": lambda p: p.unlink(),
 }
-REASON = {"zero-byte": "unreadable image (empty file)", "truncated": "truncated JPEG", "text": "unreadable image",
-          "truncated-header": "unreadable image", "missing": "no image (file not found)"}
+REASON = {
+    "zero-byte": "unreadable image (empty file)",
+    "truncated": "truncated JPEG",
+    "text": "unreadable image",
+    "truncated-header": "unreadable image",
+    "missing": "no image (file not found)",
+}
 LAYOUTS = ["whenet", "6drepnet", "fsanet", "hf", "directmhp"]
 
 
@@ -101,8 +107,21 @@ def _sized_table(tmp_path, width, height):
     (tmp_path / "img").mkdir()
     cv2.imwrite(str(tmp_path / "img" / "a.jpg"), np.full((720, 1280, 3), 90, np.uint8))
     cv2.imwrite(str(tmp_path / "img" / "b.jpg"), np.full((1080, 1920, 3), 90, np.uint8))
-    rows = [{"image": f"img/{n}.jpg", "image_width": width, "image_height": height, "bbox_x": 100.0,
-             "bbox_y": 100.0, "bbox_w": 80.0, "bbox_h": 90.0, "pitch": 1.0, "yaw": 2.0, "roll": 3.0} for n in "ab"]
+    rows = [
+        {
+            "image": f"img/{n}.jpg",
+            "image_width": width,
+            "image_height": height,
+            "bbox_x": 100.0,
+            "bbox_y": 100.0,
+            "bbox_w": 80.0,
+            "bbox_h": 90.0,
+            "pitch": 1.0,
+            "yaw": 2.0,
+            "roll": 3.0,
+        }
+        for n in "ab"
+    ]
     path = tmp_path / "t.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
     return path
@@ -140,9 +159,25 @@ def test_video_frames_smaller_than_the_calibration(tmp_path, monkeypatch):
     mod = types.ModuleType("hpe_cli.datasets.panoptic_video")
     mod.VideoFrames = VideoFrames
     monkeypatch.setitem(sys.modules, "hpe_cli.datasets.panoptic_video", mod)
-    rows = [{"image": f"hdImgs/00_03/00_03_{f:08d}.jpg", "sequence": "", "camera": "00_03", "frame": f,
-             "person_id": 1, "image_width": 1920, "image_height": 1080, "bbox_x": 10.0, "bbox_y": 10.0,
-             "bbox_w": 40.0, "bbox_h": 40.0, "pitch": 0.0, "yaw": 5.0, "roll": 0.0} for f in (3, 4)]
+    rows = [
+        {
+            "image": f"hdImgs/00_03/00_03_{f:08d}.jpg",
+            "sequence": "",
+            "camera": "00_03",
+            "frame": f,
+            "person_id": 1,
+            "image_width": 1920,
+            "image_height": 1080,
+            "bbox_x": 10.0,
+            "bbox_y": 10.0,
+            "bbox_w": 40.0,
+            "bbox_h": 40.0,
+            "pitch": 0.0,
+            "yaw": 5.0,
+            "roll": 0.0,
+        }
+        for f in (3, 4)
+    ]
     path = tmp_path / "t.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
     (tmp_path / "hdVideos").mkdir()

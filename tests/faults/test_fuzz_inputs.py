@@ -4,12 +4,12 @@ Every run must end with exit 0, 1 or 2; no traceback; at most one error line, na
 no temp files; no output after a failure; the input unchanged; and, after exit 0, every input row is
 either in the output or in the rejects (rows out + rejects = rows in).
 """
+
 from __future__ import annotations
 
 import csv
 import hashlib
 import io
-import os
 import shutil
 import tarfile
 import tempfile
@@ -33,13 +33,12 @@ def mutation(draw, size: int):
     """('truncate', n) or ('flip', [(offset, xor byte), ...])."""
     if draw(st.booleans()):
         return ("truncate", draw(st.integers(0, max(0, size - 1))))
-    return ("flip", draw(st.lists(st.tuples(st.integers(0, size - 1), st.integers(1, 255)), min_size=1,
-                                  max_size=6)))
+    return ("flip", draw(st.lists(st.tuples(st.integers(0, size - 1), st.integers(1, 255)), min_size=1, max_size=6)))
 
 
 def mutate(data: bytes, m) -> bytes:
     if m[0] == "truncate":
-        return data[:m[1]]
+        return data[: m[1]]
     b = bytearray(data)
     for off, x in m[1]:
         b[off] ^= x
@@ -83,8 +82,10 @@ def _rows(path: Path) -> int:
     return pq.read_metadata(path).num_rows if path.suffix == ".parquet" else len(pd.read_csv(path))
 
 
-BASE_CSV = ("id,pitch,yaw,roll,note\n" + "".join(f"{i},{i % 40 - 20}.5,{3 * i % 170 - 85},{i % 30 - 15},n{i}\n"
-                                                 for i in range(40))).encode()
+BASE_CSV = (
+    "id,pitch,yaw,roll,note\n"
+    + "".join(f"{i},{i % 40 - 20}.5,{3 * i % 170 - 85},{i % 30 - 15},n{i}\n" for i in range(40))
+).encode()
 
 
 @FUZZ
@@ -198,8 +199,11 @@ def test_fuzz_panoptic_json_relabel(data, which):
         d = Path(d)
         seq = d / SYNTH.name
         shutil.copytree(SYNTH, seq)
-        target = seq / f"calibration_{SYNTH.name}.json" if which == "calibration" else \
-            sorted((seq / "hdFace3d").glob("*.json"))[0]
+        target = (
+            seq / f"calibration_{SYNTH.name}.json"
+            if which == "calibration"
+            else sorted((seq / "hdFace3d").glob("*.json"))[0]
+        )
         raw = target.read_bytes()
         target.write_bytes(mutate(raw, data.draw(mutation(len(raw)))))
         h = _hash(target)

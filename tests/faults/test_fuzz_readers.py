@@ -7,6 +7,7 @@ accept the file (the value was usable after all, or it becomes a per-record reje
 the field) or raise ``HpeError`` whose one line names the file, the record and the field -- never any
 other exception.
 """
+
 from __future__ import annotations
 
 import io
@@ -31,11 +32,21 @@ REALDATA = ROOT.parent / "shared" / "realdata"
 FUZZ = settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
 
 # ------------------------------------------------------------------ values of the wrong kind
-scalars = st.one_of(st.none(), st.booleans(), st.text(max_size=6), st.integers(-10**30, 10**30),
-                    st.floats(allow_nan=True, allow_infinity=True), st.just(""), st.just("no"), st.just("1.5"))
-nested = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=4),
-                                                      st.dictionaries(st.text(max_size=3), inner, max_size=2)),
-                      max_leaves=8)
+scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.text(max_size=6),
+    st.integers(-(10**30), 10**30),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.just(""),
+    st.just("no"),
+    st.just("1.5"),
+)
+nested = st.recursive(
+    scalars,
+    lambda inner: st.one_of(st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=3), inner, max_size=2)),
+    max_leaves=8,
+)
 json_values = nested.filter(lambda v: _jsonable(v))
 #: standard JSON only (no NaN/Infinity literals): for readers whose JSON parser refuses those as a whole
 strict_json_values = nested.filter(lambda v: _jsonable(v, strict=True))
@@ -98,8 +109,13 @@ def agora_df():
 
 
 @FUZZ
-@given(col=st.sampled_from(AGORA_PERSON_COLS + ["imgPath"]), row=st.integers(0, 2), person=st.integers(0, 3),
-       whole=st.booleans(), value=bad_values)
+@given(
+    col=st.sampled_from(AGORA_PERSON_COLS + ["imgPath"]),
+    row=st.integers(0, 2),
+    person=st.integers(0, 3),
+    whole=st.booleans(),
+    value=bad_values,
+)
 def test_agora_fields(agora_df, col, row, person, whole, value):
     from hpe_cli.datasets.agora import read_agora
     from hpe_cli.pipelines.agora import Config, relabel_people
@@ -134,10 +150,24 @@ def _mat_values():
     cell[0, :] = [np.array([[0.1]])] * 7
     nested_cell = np.empty((1, 2), dtype=object)
     nested_cell[0, 0], nested_cell[0, 1] = cell, "text"
-    return st.one_of(st.sampled_from([cell, nested_cell, {"pitch": 0.1, "yaw": np.zeros(3)}, "abcdefg", "",
-                                      np.ones((1, 7), dtype=bool), np.ones((1, 7)) * 1j, np.zeros((0, 0)),
-                                      np.zeros((3, 3)), np.zeros((1, 40)), np.array([[1.0, 2.0]])]),
-                     arrays().filter(lambda a: a.dtype.kind != "O" or a.size))
+    return st.one_of(
+        st.sampled_from(
+            [
+                cell,
+                nested_cell,
+                {"pitch": 0.1, "yaw": np.zeros(3)},
+                "abcdefg",
+                "",
+                np.ones((1, 7), dtype=bool),
+                np.ones((1, 7)) * 1j,
+                np.zeros((0, 0)),
+                np.zeros((3, 3)),
+                np.zeros((1, 40)),
+                np.array([[1.0, 2.0]]),
+            ]
+        ),
+        arrays().filter(lambda a: a.dtype.kind != "O" or a.size),
+    )
 
 
 @FUZZ
@@ -189,8 +219,12 @@ CAMERA_FIELDS = ["name", "type", "K", "R", "t", "distCoef", "resolution", "panel
 
 
 @FUZZ
-@given(field=st.sampled_from(CAMERA_FIELDS), cam=st.integers(0, 8), value=json_values,
-       where=st.sampled_from(["field", "element", "camera"]))
+@given(
+    field=st.sampled_from(CAMERA_FIELDS),
+    cam=st.integers(0, 8),
+    value=json_values,
+    where=st.sampled_from(["field", "element", "camera"]),
+)
 def test_panoptic_calibration_fields(field, cam, value, where):
     from hpe_cli.datasets.panoptic import read_calibration
 
@@ -215,8 +249,17 @@ def test_panoptic_calibration_fields(field, cam, value, where):
             _one_line_naming(exc, path, [f"camera {cam % len(doc['cameras'])}", "camera "], fields)
 
 
-FACE_TARGETS = ["person", "id", "face70", "landmarks", "averageScore", "averageReproError", "landmark", "score",
-                "people"]
+FACE_TARGETS = [
+    "person",
+    "id",
+    "face70",
+    "landmarks",
+    "averageScore",
+    "averageReproError",
+    "landmark",
+    "score",
+    "people",
+]
 
 
 @FUZZ
@@ -247,8 +290,12 @@ def test_panoptic_face_fields(target, index, value):
         try:
             f = read_face_frame(path)
         except HpeError as exc:
-            _one_line_naming(exc, path, ["person 0", "people"],
-                             ["id", "face70", "landmarks", "averageScore", "averageReproError", "people", "expected"])
+            _one_line_naming(
+                exc,
+                path,
+                ["person 0", "people"],
+                ["id", "face70", "landmarks", "averageScore", "averageReproError", "people", "expected"],
+            )
             return
         assert f["landmarks"].dtype == np.float64 and f["landmarks"].shape[1:] == (70, 3)
 
@@ -274,9 +321,12 @@ def test_panoptic_frame_numbers_in_names(digits):
 
 
 # ------------------------------------------------------------------ BIWI
-BAD_TOKENS = st.one_of(st.sampled_from(["nan", "inf", "-inf", "1e400", "abc", "1,5", "0x10", "True", "--1", "1e30",
-                                         "-1e30", "0", "-700", "1e-320"]),
-                       st.floats(allow_nan=True, allow_infinity=True).map(repr))
+BAD_TOKENS = st.one_of(
+    st.sampled_from(
+        ["nan", "inf", "-inf", "1e400", "abc", "1,5", "0x10", "True", "--1", "1e30", "-1e30", "0", "-700", "1e-320"]
+    ),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+)
 
 
 def _biwi_file(name):
@@ -287,8 +337,12 @@ def _biwi_file(name):
 
 
 @FUZZ
-@given(which=st.sampled_from(["frame_00003_pose.txt", "rgb.cal", "depth.cal"]), index=st.integers(0, 30),
-       token=BAD_TOKENS, drop=st.booleans())
+@given(
+    which=st.sampled_from(["frame_00003_pose.txt", "rgb.cal", "depth.cal"]),
+    index=st.integers(0, 30),
+    token=BAD_TOKENS,
+    drop=st.booleans(),
+)
 def test_biwi_text_fields(which, index, token, drop):
     from hpe_cli.datasets.biwi import read_calibration, read_pose_txt
 
@@ -308,8 +362,9 @@ def test_biwi_text_fields(which, index, token, drop):
         try:
             reader(path)
         except HpeError as exc:
-            _one_line_naming(exc, path, None, ["number", "rotation", "centre", "K", "distortion", "R", "t", "width",
-                                               "finite"])
+            _one_line_naming(
+                exc, path, None, ["number", "rotation", "centre", "K", "distortion", "R", "t", "width", "finite"]
+            )
 
 
 @FUZZ
@@ -339,11 +394,25 @@ def test_biwi_bin_fields(index, value):
 
 
 @FUZZ
-@given(names=st.lists(st.sampled_from(["01/frame_00004_pose.bin", "./01/frame_00004_pose.bin",
-                                       "../01/frame_00005_pose.bin", "/01/frame_00006_pose.bin",
-                                       "01/../../frame_00007_pose.bin", "02/frame_00004_pose.bin",
-                                       "01/frame_99999999999999999999_pose.bin", "x/02/frame_00004_pose.bin",
-                                       "readme.txt"]), min_size=1, max_size=5))
+@given(
+    names=st.lists(
+        st.sampled_from(
+            [
+                "01/frame_00004_pose.bin",
+                "./01/frame_00004_pose.bin",
+                "../01/frame_00005_pose.bin",
+                "/01/frame_00006_pose.bin",
+                "01/../../frame_00007_pose.bin",
+                "02/frame_00004_pose.bin",
+                "01/frame_99999999999999999999_pose.bin",
+                "x/02/frame_00004_pose.bin",
+                "readme.txt",
+            ]
+        ),
+        min_size=1,
+        max_size=5,
+    )
+)
 def test_biwi_tgz_member_names(names):
     from hpe_cli.datasets.biwi import read_biwi_tgz
 
@@ -380,9 +449,16 @@ def test_dad3dheads_fields(field, value, element):
     with tempfile.TemporaryDirectory() as d:
         sub = Path(d) / "val"
         (sub / "annotations").mkdir(parents=True)
-        items = [{"item_id": f"item{k:03d}", "annotation_path": f"annotations/item{k:03d}.json",
-                  "img_path": f"images/item{k:03d}.png", "bbox": [10.0, 20.0, 30.0, 40.0],
-                  "attributes": {"quality": "hq", "pose": "frontal"}} for k in range(2)]
+        items = [
+            {
+                "item_id": f"item{k:03d}",
+                "annotation_path": f"annotations/item{k:03d}.json",
+                "img_path": f"images/item{k:03d}.png",
+                "bbox": [10.0, 20.0, 30.0, 40.0],
+                "attributes": {"quality": "hq", "pose": "frontal"},
+            }
+            for k in range(2)
+        ]
         mv = [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, -5.0], [0, 0, 0, 1.0]]
         ann = {"model_view_matrix": mv}
         if field == "model_view_matrix":
@@ -398,8 +474,13 @@ def test_dad3dheads_fields(field, value, element):
             items[1][field] = value
         (sub / "val.json").write_text(json.dumps(items))
         for k in range(2):
-            (sub / "annotations" / f"item{k:03d}.json").write_text(json.dumps(ann if k == 1 else {"model_view_matrix": [
-                [1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, -5.0], [0, 0, 0, 1.0]]}))
+            (sub / "annotations" / f"item{k:03d}.json").write_text(
+                json.dumps(
+                    ann
+                    if k == 1
+                    else {"model_view_matrix": [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, -5.0], [0, 0, 0, 1.0]]}
+                )
+            )
         try:
             read_dad3dheads(sub)
         except HpeError as exc:
@@ -423,15 +504,18 @@ def video_bytes(tmp_path_factory):
 
 
 @FUZZ
-@given(cut=st.booleans(), where=st.integers(0, 10**6), flips=st.lists(st.tuples(st.integers(0, 10**6),
-                                                                             st.integers(1, 255)), max_size=6),
-       expected=st.sampled_from([(192, 108), (1920, 1080), None]))
+@given(
+    cut=st.booleans(),
+    where=st.integers(0, 10**6),
+    flips=st.lists(st.tuples(st.integers(0, 10**6), st.integers(1, 255)), max_size=6),
+    expected=st.sampled_from([(192, 108), (1920, 1080), None]),
+)
 def test_video_bytes(video_bytes, cut, where, flips, expected):
     from hpe_cli.datasets.panoptic_video import VideoFrames
 
     data = bytearray(video_bytes)
     if cut:
-        data = data[:where % len(data)]
+        data = data[: where % len(data)]
     else:
         for off, x in flips:
             data[off % len(data)] ^= x

@@ -1,6 +1,7 @@
 """Image names from tables under --images: a name that leaves the folder (``../``) is one clear error line
 (draw: it would be written outside the output folder; augment and export: the name leaves --images);
 a symbolic link inside --images is followed (datasets are often link farms); a dangling one is a reject."""
+
 from __future__ import annotations
 
 import os
@@ -31,8 +32,20 @@ def test_augment_refuses_a_name_leaving_images(tmp_path):
     imgs = _setup(tmp_path)
     t = tmp_path / "t.csv"
     t.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\n../secret.jpg,4,5,6\n")
-    res = run("augment", t, "-o", tmp_path / "a.csv", "--image-size", "80", "60", "--hflip", "--images", imgs,
-              "--out-images", tmp_path / "ai")
+    res = run(
+        "augment",
+        t,
+        "-o",
+        tmp_path / "a.csv",
+        "--image-size",
+        "80",
+        "60",
+        "--hflip",
+        "--images",
+        imgs,
+        "--out-images",
+        tmp_path / "ai",
+    )
     line = check_failed(res, must_name=t)
     assert "../secret.jpg" in line
     assert not (tmp_path / "a.csv").exists() and not (tmp_path / "ai").exists()
@@ -53,8 +66,9 @@ def test_export_refuses_a_name_leaving_images(tmp_path):
     export): one line without --rejects, a reject naming the name with it."""
     imgs = _setup(tmp_path)
     t = tmp_path / "t.csv"
-    t.write_text("image,pitch,yaw,roll,bbox_x,bbox_y,bbox_w,bbox_h\na.jpg,1,2,3,10,10,40,40\n"
-                 "../secret.jpg,4,5,6,10,10,40,40\n")
+    t.write_text(
+        "image,pitch,yaw,roll,bbox_x,bbox_y,bbox_w,bbox_h\na.jpg,1,2,3,10,10,40,40\n../secret.jpg,4,5,6,10,10,40,40\n"
+    )
     res = run("export", t, "--images", imgs, "--layout", "hf", "-o", tmp_path / "out")
     line = check_failed(res, must_name=t)
     assert "../secret.jpg" in line and "leaves the --images folder" in line, line

@@ -5,6 +5,7 @@ User code runs in its own process group: whatever it starts (a fork, ``sleep 360
 ``--timeout`` takes positive finite seconds only. A system TOML with huge numbers, huge arrays or
 deep nesting is one ``FILE: key: expected X, got Y`` line, quickly.
 """
+
 from __future__ import annotations
 
 import os
@@ -24,7 +25,8 @@ def good(p, y, r):
 """
 
 CODES = {
-    "popen_sleep": ("""
+    "popen_sleep": (
+        """
 import subprocess
 STARTED = []
 def f(p, y, r):
@@ -32,8 +34,11 @@ def f(p, y, r):
         STARTED.append(subprocess.Popen(["sleep", "3600"]))
         open(PIDS, "a").write(f"{STARTED[0].pid}\\n")
     return good(p, y, r)
-""", 0),
-    "fork": ("""
+""",
+        0,
+    ),
+    "fork": (
+        """
 import os, time
 FORKED = []
 def f(p, y, r):
@@ -45,15 +50,20 @@ def f(p, y, r):
         FORKED.append(pid)
         open(PIDS, "a").write(f"{pid}\\n")
     return good(p, y, r)
-""", 0),
-    "spawn_then_loop": ("""
+""",
+        0,
+    ),
+    "spawn_then_loop": (
+        """
 import subprocess
 def f(p, y, r):
     proc = subprocess.Popen(["sleep", "3600"])
     open(PIDS, "a").write(f"{proc.pid}\\n")
     while True:
         pass
-""", 1),
+""",
+        1,
+    ),
 }
 
 
@@ -95,12 +105,15 @@ def test_nothing_the_code_starts_outlives_hpe(tmp_path, kind):
 
 @pytest.mark.parametrize("first", [3, 0])
 def test_closing_file_descriptors_is_one_clean_line(tmp_path, first):
-    code, _ = _user(tmp_path, f"""
+    code, _ = _user(
+        tmp_path,
+        f"""
 import os
 def f(p, y, r):
     os.closerange({first}, 4096)
     return good(p, y, r)
-""")
+""",
+    )
     res = run_sub("infer", "--callable", f"{code}:f", "--timeout", "10")
     err = res.stderr.decode()
     assert res.returncode == 1, err
@@ -111,11 +124,14 @@ def f(p, y, r):
 
 def test_code_that_writes_files_does_not_change_the_answer(tmp_path):
     out = tmp_path / "s.toml"
-    code, _ = _user(tmp_path, f"""
+    code, _ = _user(
+        tmp_path,
+        f"""
 def f(p, y, r):
-    open({str(tmp_path / 'junk.txt')!r}, "a").write("x")
+    open({str(tmp_path / "junk.txt")!r}, "a").write("x")
     return good(p, y, r)
-""")
+""",
+    )
     res = run_sub("infer", "--callable", f"{code}:f", "-o", out)
     assert res.returncode == 0, res.stderr.decode()
     assert (tmp_path / "junk.txt").exists() and "300w_lp" in res.stdout.decode() + out.read_text()
@@ -131,23 +147,39 @@ def test_timeout_takes_positive_finite_seconds(tmp_path, value):
 # ------------------------------------------------------------------------------------ hostile system files
 TURNS = "".join(f'[[turns]]\nangle = "{a}"\naxis = "{x}"\n' for a, x in (("pitch", "x"), ("yaw", "y"), ("roll", "z")))
 HOSTILE = {
-    "int_5000_digits": ('name = "x"\nframe = [[1' + "0" * 5000 + ", 0, 0], [0, 1, 0], [0, 0, 1]]\n" + TURNS,
-                        "frame: expected a 64-bit integer (TOML), got a 5001-digit number"),
-    "int_400_digits": ('name = "x"\n' + TURNS + "[ranges]\npitch = [-1, 1" + "0" * 400 + "]\n",
-                       "ranges.pitch.1: expected a 64-bit integer (TOML), got a 401-digit number"),
-    "int_past_64_bits": ('name = "x"\ngimbal_tol = 99999999999999999999999\n' + TURNS,
-                         "gimbal_tol: expected a 64-bit integer (TOML), got a 23-digit number"),
-    "float_overflow": ('name = "x"\n' + TURNS + "[ranges]\npitch = [-1e400, 1e400]\n",
-                       "ranges.pitch: expected finite numbers, got [-Infinity, Infinity]"),
-    "huge_array": ('name = "x"\norder = [' + ",".join(['"pitch"'] * 100_000) + "]\n" + TURNS,
-                   "order: expected at most 256 items, got 100000"),
+    "int_5000_digits": (
+        'name = "x"\nframe = [[1' + "0" * 5000 + ", 0, 0], [0, 1, 0], [0, 0, 1]]\n" + TURNS,
+        "frame: expected a 64-bit integer (TOML), got a 5001-digit number",
+    ),
+    "int_400_digits": (
+        'name = "x"\n' + TURNS + "[ranges]\npitch = [-1, 1" + "0" * 400 + "]\n",
+        "ranges.pitch.1: expected a 64-bit integer (TOML), got a 401-digit number",
+    ),
+    "int_past_64_bits": (
+        'name = "x"\ngimbal_tol = 99999999999999999999999\n' + TURNS,
+        "gimbal_tol: expected a 64-bit integer (TOML), got a 23-digit number",
+    ),
+    "float_overflow": (
+        'name = "x"\n' + TURNS + "[ranges]\npitch = [-1e400, 1e400]\n",
+        "ranges.pitch: expected finite numbers, got [-Infinity, Infinity]",
+    ),
+    "huge_array": (
+        'name = "x"\norder = [' + ",".join(['"pitch"'] * 100_000) + "]\n" + TURNS,
+        "order: expected at most 256 items, got 100000",
+    ),
     "huge_file": ('name = "' + "x" * 2_000_000 + '"\n' + TURNS, "file: expected a system file of at most"),
-    "deep_array": ('name = "x"\nframe = ' + "[" * 50_000 + "]" * 50_000 + "\n" + TURNS,
-                   "frame: expected at most 6 levels of nesting"),
-    "deep_table": ('name = "x"\n' + TURNS + "[columns]\na = " + "{b = " * 3000 + "1" + "}" * 3000 + "\n",
-                   "columns.a: expected at most 6 levels of nesting"),
-    "nested_in_limits": ('name = "x"\n' + TURNS + "[columns]\na = [[[[[[[1]]]]]]]\n",
-                         "columns.a.0.0.0.0.0: expected at most 6 levels of nesting, got more"),
+    "deep_array": (
+        'name = "x"\nframe = ' + "[" * 50_000 + "]" * 50_000 + "\n" + TURNS,
+        "frame: expected at most 6 levels of nesting",
+    ),
+    "deep_table": (
+        'name = "x"\n' + TURNS + "[columns]\na = " + "{b = " * 3000 + "1" + "}" * 3000 + "\n",
+        "columns.a: expected at most 6 levels of nesting",
+    ),
+    "nested_in_limits": (
+        'name = "x"\n' + TURNS + "[columns]\na = [[[[[[[1]]]]]]]\n",
+        "columns.a.0.0.0.0.0: expected at most 6 levels of nesting, got more",
+    ),
 }
 
 

@@ -1,6 +1,7 @@
 """``hpe infer --callable/--decoder`` runs the user's code in a child process: whatever the code does
 (hang, sys.exit, os._exit, crash, exception), hpe answers with one error line and exit 1, writes
 nothing, and leaves no process behind."""
+
 from __future__ import annotations
 
 import multiprocessing
@@ -29,8 +30,7 @@ def test_user_code_cannot_escape(tmp_path, kind, mode):
     code = tmp_path / "user.py"
     code.write_text(textwrap.dedent(body).replace("(p, y, r)", "(R)" if mode == "--decoder" else "(p, y, r)"))
     snap = tree(tmp_path)
-    res = run("infer", mode, f"{code}:f", "--timeout", "1", "-o", tmp_path / "s.toml", "--json",
-              tmp_path / "r.json")
+    res = run("infer", mode, f"{code}:f", "--timeout", "1", "-o", tmp_path / "s.toml", "--json", tmp_path / "r.json")
     line = check_failed(res, str(code))
     assert expected in line, line
     assert tree(tmp_path) == snap and not temp_files(tmp_path)

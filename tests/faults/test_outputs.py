@@ -3,6 +3,7 @@
 Each case asserts exit code, one error line naming the user's file (never a temp file), no traceback,
 nothing written (no partial output, no temp files) and inputs unchanged.
 """
+
 from __future__ import annotations
 
 import errno
@@ -140,8 +141,7 @@ def test_os_error_creating_an_output_names_it(case_factory, cmd, code, monkeypat
     monkeypatch.undo()
     line = check_failed(res)
     assert str(folder) in line
-    reason = {errno.EACCES: "permission denied", errno.EROFS: "read-only file system",
-              errno.ENOSPC: "disk full"}[code]
+    reason = {errno.EACCES: "permission denied", errno.EROFS: "read-only file system", errno.ENOSPC: "disk full"}[code]
     assert reason in line, line
     assert tree(case.tmp) == snap
 

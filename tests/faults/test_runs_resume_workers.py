@@ -6,6 +6,7 @@
 - a damaged or missing part is named (not ``internal error ArrowInvalid``, not blamed on the rejects file);
 - ``kill -9`` of one worker: one clear error line, nothing written.
 """
+
 from __future__ import annotations
 
 import os
@@ -59,8 +60,12 @@ def _args(seq, out, rej):
 
 
 def _start_and_kill(seq, out, rej, parts_needed=2):
-    proc = subprocess.Popen([sys.executable, "-m", "hpe_cli", *_args(seq, out, rej)], env=ENV,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hpe_cli", *_args(seq, out, rej)],
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     parts = out.parent / f".{out.name}.hpe-parts"
     end = time.monotonic() + 60
     while time.monotonic() < end and proc.poll() is None:
@@ -110,10 +115,14 @@ def test_resume_refuses_an_edited_calibration_and_names_damaged_parts(tmp_path):
     original = cal.read_bytes()
     cal.write_bytes(original.replace(b'"K"', b'"K" ', 1) if b'"K"' in original else original + b" ")
     res = run(*_args(seq, out, rej))
-    assert res.exit_code == 1 and str(cal) in res.output and "changed since the interrupted run" in res.output \
-        and "contents" in res.output, res.output
+    assert (
+        res.exit_code == 1
+        and str(cal) in res.output
+        and "changed since the interrupted run" in res.output
+        and "contents" in res.output
+    ), res.output
     cal.write_bytes(original)
-    labels = Path(str(done[0])[:-len(".json")] + ".labels.arrow")
+    labels = Path(str(done[0])[: -len(".json")] + ".labels.arrow")
     labels.write_bytes(labels.read_bytes()[:100])  # cut short
     res = run(*_args(seq, out, rej))
     assert res.exit_code == 1 and str(labels) in res.output and "damaged part" in res.output, res.output
@@ -132,8 +141,12 @@ def test_a_killed_worker_is_one_clear_error(tmp_path):
     dst = tmp_path / "out"
     dst.mkdir()
     out = dst / "o.parquet"
-    proc = subprocess.Popen([sys.executable, "-m", "hpe_cli", "relabel-panoptic", str(seq), "-o", str(out),
-                             "--workers", "2", "-q"], env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hpe_cli", "relabel-panoptic", str(seq), "-o", str(out), "--workers", "2", "-q"],
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     parts = dst / ".o.parquet.hpe-parts"
     end = time.monotonic() + 60
     while time.monotonic() < end and proc.poll() is None:
@@ -163,9 +176,15 @@ def test_two_runs_writing_one_output_at_once(tmp_path, extra):
     dst = tmp_path / "out"
     dst.mkdir()
     out = dst / "o.parquet"
-    procs = [subprocess.Popen([sys.executable, "-m", "hpe_cli", "relabel-panoptic", str(seq), "-o", str(out),
-                               "-q", *extra], env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-             for _ in range(2)]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "hpe_cli", "relabel-panoptic", str(seq), "-o", str(out), "-q", *extra],
+            env=ENV,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        for _ in range(2)
+    ]
     results = [(p.wait(timeout=120), p.stderr.read().decode()) for p in procs]
     assert sorted(c for c, _ in results) == [0, 1], results
     err = next(e for c, e in results if c)

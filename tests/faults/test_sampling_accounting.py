@@ -1,5 +1,6 @@
 """Every sampling rule of relabel-panoptic accounts for what it skips: labels + rejects = every view of the
 frames in range, row for row (the oracle is the unsampled run: its labelled and rejected views together)."""
+
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
@@ -14,8 +15,9 @@ KEY = ["sequence", "frame", "person_id", "camera"]
 
 def _relabel(tmp_path, name, *args):
     o, r = tmp_path / f"{name}.parquet", tmp_path / f"{name}.csv"
-    res = CliRunner().invoke(cli, ["relabel-panoptic", str(SYNTH), "-o", str(o), "--rejects", str(r),
-                                   "--no-landmarks", *map(str, args)])
+    res = CliRunner().invoke(
+        cli, ["relabel-panoptic", str(SYNTH), "-o", str(o), "--rejects", str(r), "--no-landmarks", *map(str, args)]
+    )
     assert res.exit_code == 0, res.output
     t = pq.read_table(o).to_pandas()
     rj = pd.read_csv(r, dtype={"camera": str, "sequence": str})
@@ -30,9 +32,17 @@ def everything(tmp_path_factory):
     return set(map(tuple, views.to_numpy().tolist()))
 
 
-@pytest.mark.parametrize("rule", [["--every", "2"], ["--every", "3", "--workers", "2"], ["--every", "5", "--resume"],
-                                  ["--min-change", "5"], ["--all-views"],
-                                  ["--every", "2", "--min-change", "3", "--all-views"]])
+@pytest.mark.parametrize(
+    "rule",
+    [
+        ["--every", "2"],
+        ["--every", "3", "--workers", "2"],
+        ["--every", "5", "--resume"],
+        ["--min-change", "5"],
+        ["--all-views"],
+        ["--every", "2", "--min-change", "3", "--all-views"],
+    ],
+)
 def test_labels_plus_rejects_are_every_view(tmp_path, everything, rule):
     t, rj, out = _relabel(tmp_path, "s", *rule)
     both = pd.concat([t[KEY], rj[KEY]])
@@ -52,7 +62,21 @@ def test_labels_plus_rejects_are_every_view(tmp_path, everything, rule):
 
 def test_strict_ignores_the_sampling_asked_for(tmp_path):
     o = tmp_path / "o.parquet"
-    res = CliRunner().invoke(cli, ["relabel-panoptic", str(SYNTH), "-o", str(o), "--every", "2", "--strict",
-                                   "--frames", "100:101", "--cameras", "00_00"])
+    res = CliRunner().invoke(
+        cli,
+        [
+            "relabel-panoptic",
+            str(SYNTH),
+            "-o",
+            str(o),
+            "--every",
+            "2",
+            "--strict",
+            "--frames",
+            "100:101",
+            "--cameras",
+            "00_00",
+        ],
+    )
     # frame 100 alone: whatever it rejects is a real failure, never the (absent) skipped frames
     assert "skipped by --every" not in res.output

@@ -2,6 +2,7 @@
 file (face file, calibration, empty face folder), for one process and for workers; nothing is written.
 (Decision: a sequence that cannot be read is an input error, not rows in the rejects: a dataset silently
 missing a sequence is worse than no dataset. Faces and views that cannot be labelled stay rejects.)"""
+
 from __future__ import annotations
 
 import os
@@ -42,7 +43,6 @@ def test_one_broken_sequence_fails_the_run_naming_it(tmp_path, how, workers):
     bad = _break(root, how)
     out = tmp_path / "out"
     out.mkdir()
-    res = run("relabel-panoptic", root, "-o", out / "o.parquet", "--rejects", out / "r.csv", "--workers", workers,
-              "-q")
+    res = run("relabel-panoptic", root, "-o", out / "o.parquet", "--rejects", out / "r.csv", "--workers", workers, "-q")
     check_failed(res, must_name=bad)
     assert os.listdir(out) == []

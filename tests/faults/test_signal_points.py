@@ -4,6 +4,7 @@ exits 0 and, if the signal came while hpe could still speak, says so. Never a mi
 
 The signal is sent when the run reaches a point seen from outside: its temp files appear, the first or both
 targets appear, plus small delays; the points are many, the run is short (40,000 rows)."""
+
 from __future__ import annotations
 
 import json
@@ -50,17 +51,21 @@ def _both(names):
 POINTS = [(_first_temp, 0.0), (_temps, 0.0), (_one_target, 0.0), (_both, 0.0)]
 
 
-@pytest.mark.parametrize("sig,points", [(signal.SIGTERM, POINTS), (signal.SIGINT, POINTS[:1] + POINTS[-1:])],
-                         ids=["SIGTERM", "SIGINT"])
+@pytest.mark.parametrize(
+    "sig,points", [(signal.SIGTERM, POINTS), (signal.SIGINT, POINTS[:1] + POINTS[-1:])], ids=["SIGTERM", "SIGINT"]
+)
 def test_signal_at_many_points_of_audit(tmp_path, table, sig, points):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     outcomes = []
     for k, (trigger, delay) in enumerate(points):
         d = tmp_path / f"run{k}"
         d.mkdir()
-        proc = subprocess.Popen([sys.executable, "-m", "hpe_cli", "audit", str(table), "-o", str(d / "a.csv"),
-                                 "--json", str(d / "r.json")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                env=env)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "hpe_cli", "audit", str(table), "-o", str(d / "a.csv"), "--json", str(d / "r.json")],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env,
+        )
         sent = False
         while proc.poll() is None:
             if trigger(os.listdir(d)):

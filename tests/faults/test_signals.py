@@ -4,9 +4,9 @@ SIGTERM, SIGHUP and SIGINT sent mid-run: exit 128+signal, one line ``Error: inte
 temp file or folder left, no output, no worker process left behind. Two runs creating one output
 without --overwrite: exactly one succeeds.
 """
+
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import signal
@@ -27,8 +27,9 @@ SIGNALS = [signal.SIGTERM, signal.SIGHUP, signal.SIGINT]
 
 def _popen(*args):
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    return subprocess.Popen([sys.executable, "-m", "hpe_cli", *map(str, args)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=env)
+    return subprocess.Popen(
+        [sys.executable, "-m", "hpe_cli", *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env
+    )
 
 
 def _children(pid: int) -> set:
@@ -69,12 +70,13 @@ def _interrupt(proc, sig, folder, snap, children=()):
         _, err = proc.communicate(timeout=60)
     except subprocess.TimeoutExpired:
         alive = proc.poll() is None
-        info = {c: open(f"/proc/{c}/cmdline").read().replace("\0", " ")[:80] for c in _children(proc.pid)
-                if _alive(c)}
+        info = {c: open(f"/proc/{c}/cmdline").read().replace("\0", " ")[:80] for c in _children(proc.pid) if _alive(c)}
         left = [c for c in children if _alive(c)]
         proc.kill()
-        pytest.fail(f"no exit 60 s after {signal.Signals(sig).name}: parent alive={alive}, its children={info}, "
-                    f"workers alive={left}")
+        pytest.fail(
+            f"no exit 60 s after {signal.Signals(sig).name}: parent alive={alive}, its children={info}, "
+            f"workers alive={left}"
+        )
     assert proc.returncode == 128 + sig, err
     lines = err.decode(errors="replace").strip().splitlines()
     assert lines == [f"Error: interrupted ({signal.Signals(sig).name})"], err
@@ -89,8 +91,10 @@ def big_parquet(tmp_path_factory):
     path = tmp_path_factory.mktemp("big") / "big.parquet"
     rng = np.random.default_rng(0)
     n = 400_000
-    pq.write_table(pa.table({"pitch": rng.uniform(-80, 80, n), "yaw": rng.uniform(-80, 80, n),
-                             "roll": rng.uniform(-80, 80, n)}), path)
+    pq.write_table(
+        pa.table({"pitch": rng.uniform(-80, 80, n), "yaw": rng.uniform(-80, 80, n), "roll": rng.uniform(-80, 80, n)}),
+        path,
+    )
     return path
 
 
@@ -99,8 +103,20 @@ def test_signal_mid_convert(tmp_path, big_parquet, sig):
     src = tmp_path / "in.parquet"
     shutil.copy(big_parquet, src)
     snap = tree(tmp_path)
-    proc = _popen("convert", src, "-o", tmp_path / "out.csv", "--from", "300w_lp", "--to", "6drepnet",
-                  "--batch-size", "2000", "--rejects", tmp_path / "rej.csv")
+    proc = _popen(
+        "convert",
+        src,
+        "-o",
+        tmp_path / "out.csv",
+        "--from",
+        "300w_lp",
+        "--to",
+        "6drepnet",
+        "--batch-size",
+        "2000",
+        "--rejects",
+        tmp_path / "rej.csv",
+    )
     if not _wait_for(lambda: temp_files(tmp_path), proc):
         pytest.fail("the run ended before it was interrupted: " + proc.communicate()[1].decode())
     _interrupt(proc, sig, tmp_path, snap)
@@ -122,8 +138,9 @@ def test_signal_stops_relabel_workers(tmp_path, sig, output):
     """Parquet, and COCO whose text the workers make in a second task per unit (parts and text parts)."""
     seq = _long_sequence(tmp_path)
     snap = tree(tmp_path)
-    proc = _popen("relabel-panoptic", seq, "-o", tmp_path / output, "--workers", "2",
-                  "--rejects", tmp_path / "rej.csv", "-q")
+    proc = _popen(
+        "relabel-panoptic", seq, "-o", tmp_path / output, "--workers", "2", "--rejects", tmp_path / "rej.csv", "-q"
+    )
     parts = tmp_path / f".{output}.hpe-parts"
     if not _wait_for(lambda: len(_children(proc.pid)) >= 2 and parts.is_dir() and any(parts.iterdir()), proc):
         pytest.fail("no workers or parts seen: " + proc.communicate()[1].decode())
@@ -171,9 +188,25 @@ def test_file_size_limit_is_a_clean_error(tmp_path, big_parquet):
         resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
 
     env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONDONTWRITEBYTECODE": "1"}
-    res = subprocess.run([sys.executable, "-m", "hpe_cli", "convert", str(src), "-o", str(tmp_path / "o.csv"),
-                          "--from", "300w_lp", "--to", "6drepnet"], capture_output=True, env=env,
-                         preexec_fn=limit, timeout=120)
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "hpe_cli",
+            "convert",
+            str(src),
+            "-o",
+            str(tmp_path / "o.csv"),
+            "--from",
+            "300w_lp",
+            "--to",
+            "6drepnet",
+        ],
+        capture_output=True,
+        env=env,
+        preexec_fn=limit,
+        timeout=120,
+    )
     err = res.stderr.decode()
     assert res.returncode == 1, err
     assert err.strip().count("\n") == 0 and str(tmp_path / "o.csv") in err and "too large" in err, err

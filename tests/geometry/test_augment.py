@@ -6,6 +6,7 @@ head under the augmented label must land exactly on the augmented landmarks
 (after re-indexing), for every label, every system and every augmentation. The
 common shortcuts fail that test. Images are checked to the pixel with dots.
 """
+
 import json
 from pathlib import Path
 
@@ -17,8 +18,15 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from conftest import canonical_A
-from hpe_cli.geometry.augment import (augment_batch, augment_boxes, augment_canonical, augment_points,
-                                      augment_sample, pixel_affine, plane_matrix)
+from hpe_cli.geometry.augment import (
+    augment_batch,
+    augment_boxes,
+    augment_canonical,
+    augment_points,
+    augment_sample,
+    pixel_affine,
+    plane_matrix,
+)
 from hpe_cli.geometry.image_ops import opencv_rotation_matrix, warp_image
 from hpe_cli.geometry.landmark_schemes import SCHEMES
 from hpe_cli.rotation import get_system
@@ -71,8 +79,10 @@ def A_of(pyr):
 
 
 ANGLE = st.floats(-180, 180, allow_nan=False)
-OPS = st.one_of(st.sampled_from([("hflip", None), ("vflip", None), ("hvflip", None)]),
-                st.tuples(st.sampled_from(["rotate", "mirror"]), st.floats(-720, 720, allow_nan=False)))
+OPS = st.one_of(
+    st.sampled_from([("hflip", None), ("vflip", None), ("hvflip", None)]),
+    st.tuples(st.sampled_from(["rotate", "mirror"]), st.floats(-720, 720, allow_nan=False)),
+)
 SYSTEMS = ["300w_lp", "6drepnet", "scipy_zyx", "opencv", "whenet", "3ddfa_v2"]
 
 
@@ -179,8 +189,10 @@ def test_vflip_shortcut_fails(pyr):
 def test_roll_shortcut_for_rotation_fails(pyr, phi):
     p, y, r = pyr
     A = A_of(pyr)
-    assert physical_error(A, augment_sample(pyr, op="rotate", angle=phi, image_size=(W, H)).canonical,
-                          "rotate", phi) < 1e-9
+    assert (
+        physical_error(A, augment_sample(pyr, op="rotate", angle=phi, image_size=(W, H)).canonical, "rotate", phi)
+        < 1e-9
+    )
     for sign in (1, -1):
         assert physical_error(A, A_of([p, y, r + sign * phi]), "rotate", phi) > 5
 
@@ -194,20 +206,28 @@ def test_roll_shortcut_only_holds_for_frontal_faces():
 @pytest.mark.parametrize("size", [(W, H), (121, 96), (96, 121), (7, 7)])
 @pytest.mark.parametrize("phi", [0.0, 30.0, -137.25, 90.0, 180.0])
 def test_pixel_affine_is_opencvs_rotation_about_the_pixel_centre(size, phi):
-    np.testing.assert_allclose(pixel_affine(plane_matrix("rotate", phi), size), opencv_rotation_matrix(phi, size),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        pixel_affine(plane_matrix("rotate", phi), size), opencv_rotation_matrix(phi, size), atol=1e-12
+    )
     w, h = size
     # and OpenCV's own call, spelled out
-    np.testing.assert_allclose(opencv_rotation_matrix(phi, size),
-                               cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), phi, 1.0), atol=0)
+    np.testing.assert_allclose(
+        opencv_rotation_matrix(phi, size), cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), phi, 1.0), atol=0
+    )
 
 
 def test_hflip_maps_x_to_w_minus_1_minus_x():
     pts = np.array([[0.0, 0.0], [W - 1.0, H - 1.0], [10.25, 20.5]])
-    np.testing.assert_allclose(augment_points(pts, plane_matrix("hflip"), (W, H), [0, 1, 2]),
-                               [[W - 1, 0], [0, H - 1], [W - 11.25, 20.5]], atol=1e-12)
-    np.testing.assert_allclose(augment_points(pts, plane_matrix("vflip"), (W, H), [0, 1, 2]),
-                               [[0, H - 1], [W - 1, 0], [10.25, H - 21.5]], atol=1e-12)
+    np.testing.assert_allclose(
+        augment_points(pts, plane_matrix("hflip"), (W, H), [0, 1, 2]),
+        [[W - 1, 0], [0, H - 1], [W - 11.25, 20.5]],
+        atol=1e-12,
+    )
+    np.testing.assert_allclose(
+        augment_points(pts, plane_matrix("vflip"), (W, H), [0, 1, 2]),
+        [[0, H - 1], [W - 1, 0], [10.25, H - 21.5]],
+        atol=1e-12,
+    )
 
 
 def test_rotation_is_counter_clockwise_on_screen():
@@ -218,8 +238,9 @@ def test_rotation_is_counter_clockwise_on_screen():
 
 
 def _grid_points(w, h, rng, margin=12, step=20):
-    g = np.array([(x, y) for x in np.arange(margin, w - margin, step) for y in np.arange(margin, h - margin, step)],
-                 dtype=float)
+    g = np.array(
+        [(x, y) for x in np.arange(margin, w - margin, step) for y in np.arange(margin, h - margin, step)], dtype=float
+    )
     return g + rng.uniform(-2, 2, g.shape)
 
 
@@ -227,7 +248,7 @@ def _render(pts, w, h, sigma=1.6):
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
     img = np.zeros((h, w))
     for x, y in pts:
-        img += np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * sigma ** 2))
+        img += np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * sigma**2))
     return img
 
 
@@ -236,14 +257,23 @@ def _locate(img, pts, r=7):
     out = []
     for x, y in pts:
         x0, y0 = int(round(x)), int(round(y))
-        win = img[y0 - r:y0 + r + 1, x0 - r:x0 + r + 1].astype(float)
-        gy, gx = np.mgrid[y0 - r:y0 + r + 1, x0 - r:x0 + r + 1]
+        win = img[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1].astype(float)
+        gy, gx = np.mgrid[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1]
         out.append([(win * gx).sum() / win.sum(), (win * gy).sum() / win.sum()])
     return np.array(out)
 
 
-PIXEL_OPS = [("hflip", None), ("vflip", None), ("hvflip", None), ("rotate", 30.0), ("rotate", 90.0),
-             ("rotate", -137.3), ("mirror", 20.0), ("mirror", 45.0), ("mirror", -61.0)]
+PIXEL_OPS = [
+    ("hflip", None),
+    ("vflip", None),
+    ("hvflip", None),
+    ("rotate", 30.0),
+    ("rotate", 90.0),
+    ("rotate", -137.3),
+    ("mirror", 20.0),
+    ("mirror", 45.0),
+    ("mirror", -61.0),
+]
 
 
 @pytest.mark.parametrize("size", [(121, 96), (100, 81)])
@@ -278,8 +308,9 @@ def test_warp_image_keeps_channels_and_flips_exactly():
     np.testing.assert_array_equal(warp_image(img, plane_matrix("rotate", 180)), img[::-1, ::-1])
     np.testing.assert_array_equal(warp_image(img, plane_matrix("rotate", 360)), img)
     sq = img[:, :9]
-    np.testing.assert_array_equal(warp_image(sq, plane_matrix("rotate", 90)),
-                                  cv2.rotate(sq, cv2.ROTATE_90_COUNTERCLOCKWISE))
+    np.testing.assert_array_equal(
+        warp_image(sq, plane_matrix("rotate", 90)), cv2.rotate(sq, cv2.ROTATE_90_COUNTERCLOCKWISE)
+    )
     with pytest.raises(ValueError, match="interpolation"):
         warp_image(img, plane_matrix("rotate", 10), interpolation="bogus")
 
@@ -293,14 +324,16 @@ def test_flip_moves_the_box_exactly():
     lm = np.array([[[15.0, 25.0], [30.0, 50.0]]])
     lm2 = augment_points(lm, plane_matrix("hflip"), (W, H), [1, 0])
     np.testing.assert_allclose(augment_boxes(box, plane_matrix("hflip"), (W, H), lm2), [[W - 1 - 40, 20, 30, 40]])
-    np.testing.assert_allclose(augment_boxes(box, plane_matrix("hflip"), (W, H), lm2, "landmarks"),
-                               [[W - 31, 25, 15, 25]])
+    np.testing.assert_allclose(
+        augment_boxes(box, plane_matrix("hflip"), (W, H), lm2, "landmarks"), [[W - 31, 25, 15, 25]]
+    )
 
 
 def test_rotation_box_is_the_box_of_the_rotated_landmarks_or_corners():
     box = np.array([[100.0, 100.0, 50.0, 50.0], [100.0, 100.0, 50.0, 50.0]])
-    lm = np.array([[[110.0, 110.0], [140.0, 130.0], [np.nan, np.nan]],
-                   [[np.nan, np.nan], [np.nan, np.nan], [np.nan, np.nan]]])
+    lm = np.array(
+        [[[110.0, 110.0], [140.0, 130.0], [np.nan, np.nan]], [[np.nan, np.nan], [np.nan, np.nan], [np.nan, np.nan]]]
+    )
     M = plane_matrix("rotate", 45)
     lm2 = augment_points(lm, M, (W, H))
     out = augment_boxes(box, M, (W, H), lm2)
@@ -319,8 +352,10 @@ def test_clip_and_missing_boxes():
     assert np.isnan(out[1]).all()
     # clipping commutes with a flip: [0, W-1] maps to itself
     f = plane_matrix("hflip")
-    np.testing.assert_allclose(augment_boxes(augment_boxes(box[:1], f, (W, H)), np.eye(2), (W, H), clip=True),
-                               augment_boxes(augment_boxes(box[:1], np.eye(2), (W, H), clip=True), f, (W, H)))
+    np.testing.assert_allclose(
+        augment_boxes(augment_boxes(box[:1], f, (W, H)), np.eye(2), (W, H), clip=True),
+        augment_boxes(augment_boxes(box[:1], np.eye(2), (W, H), clip=True), f, (W, H)),
+    )
 
 
 # ---------------------------------------------------------------------------------- batch API and errors
@@ -345,8 +380,9 @@ def test_batch_equals_per_sample_with_per_row_angles():
     Ms = np.stack([plane_matrix("rotate", 10), plane_matrix("mirror", 10)])
     out = augment_batch(pyr[:2], lm[:2], op=Ms, image_size=(W, H))
     assert np.isfinite(out.angles).all()
-    np.testing.assert_allclose(out.landmarks[1], augment_points(lm[1], Ms[1], (W, H), SCHEMES["ibug68"]),
-                               equal_nan=True)
+    np.testing.assert_allclose(
+        out.landmarks[1], augment_points(lm[1], Ms[1], (W, H), SCHEMES["ibug68"]), equal_nan=True
+    )
 
 
 def test_matrix_input_and_identity():

@@ -1,4 +1,5 @@
 """Drawing geometry (hpe_cli.geometry.draw) against Hopenet's and 6DRepNet's formulas and rendered pixels."""
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -91,8 +92,9 @@ def test_same_drawing_from_every_system(system):
     A = canonical(pyr)
     s = get_system(system)
     A2 = s.to_canonical(s.from_canonical(A))  # the other system's stored matrix, mapped back
-    np.testing.assert_allclose(g.axis_endpoints(A2, np.zeros((20, 2)), 50), g.axis_endpoints(A, np.zeros((20, 2)), 50),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        g.axis_endpoints(A2, np.zeros((20, 2)), 50), g.axis_endpoints(A, np.zeros((20, 2)), 50), atol=1e-9
+    )
 
 
 def test_visibility_front_and_back():
@@ -141,8 +143,11 @@ def _edge_pixel(img, row, col):
 
 def test_cube_turned_away_shows_the_back_square():
     # frontal and turned away project to the same square; only visibility tells them apart
-    for pyr, system, colour in (([0, 0, 0], "300w_lp", g.GREEN), ([0, 180, 0], "whenet", g.RED),
-                                ([180, 0, 180], "300w_lp", g.RED)):
+    for pyr, system, colour in (
+        ([0, 0, 0], "300w_lp", g.GREEN),
+        ([0, 180, 0], "whenet", g.RED),
+        ([180, 0, 180], "300w_lp", g.RED),
+    ):
         img = g.blank_canvas(200, 200)
         g.render_cube(img, canonical([pyr], system), [[100, 100]], 50, thickness=5)
         assert _edge_pixel(img, 50, 100) == colour, (pyr, system)  # top edge

@@ -5,6 +5,7 @@ grid (``helmet_points``) projected in float64 with OpenCV's model (``project_poi
 clamped. The fast path must give the same box to 0.5 px (it gives the slow path's float32 box
 exactly) and the same reasons, over random heads in front of the real pizza1 HD cameras.
 """
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -83,5 +84,5 @@ def test_table_neighbourhoods_cover_the_grid():
         t_c, p_c = np.deg2rad((ti + 0.5) * H.FAST_BIN), np.deg2rad((pi + 0.5) * H.FAST_BIN)
         c = np.array([np.cos(t_c) * np.sin(p_c), np.sin(t_c) * np.sin(p_c), np.cos(p_c)])
         want = np.flatnonzero(U @ c >= np.cos(np.deg2rad(H.FAST_NEIGHBOURHOOD + H.FAST_BIN)))
-        got = T["indices"][T["offsets"][b]:T["offsets"][b + 1]]
+        got = T["indices"][T["offsets"][b] : T["offsets"][b + 1]]
         np.testing.assert_array_equal(np.sort(got), want)

@@ -1,10 +1,11 @@
 """Left/right landmark permutations, checked against 3-D and real 2-D landmark data."""
+
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hpe_cli.geometry.landmark_schemes import (SCHEMES, check_permutation, flip_permutation, scheme_for_count)
+from hpe_cli.geometry.landmark_schemes import SCHEMES, check_permutation, flip_permutation, scheme_for_count
 
 DATA = Path(__file__).resolve().parents[2] / "hpe_cli" / "data"
 

@@ -7,8 +7,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.geometry.line_of_sight import camera_to_crop_labels, ray_rotation
 from conftest import sample_data_script
+from hpe_cli.geometry.line_of_sight import camera_to_crop_labels, ray_rotation
 
 E = np.diag([1.0, -1.0, -1.0])
 
@@ -39,8 +39,11 @@ def test_on_axis_is_identity_and_crop_label_formula():
     Q, _ = ray_rotation(c)
     # SPEC §10: A' = E Q^T C.R R_H, and a head on the ray is seen frontally by the crop camera
     np.testing.assert_allclose(A2, E @ np.swapaxes(Q, 1, 2) @ camR @ Rh, atol=1e-12)
-    np.testing.assert_allclose(np.swapaxes(Q, 1, 2) @ (c / np.linalg.norm(c, axis=1, keepdims=True))[..., None],
-                               np.broadcast_to([[0.0], [0.0], [1.0]], (20, 3, 1)), atol=1e-12)
+    np.testing.assert_allclose(
+        np.swapaxes(Q, 1, 2) @ (c / np.linalg.norm(c, axis=1, keepdims=True))[..., None],
+        np.broadcast_to([[0.0], [0.0], [1.0]], (20, 3, 1)),
+        atol=1e-12,
+    )
     np.testing.assert_allclose(np.linalg.det(A2), 1.0)
 
 

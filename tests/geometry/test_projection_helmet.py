@@ -1,4 +1,5 @@
 """Projection against cv2.projectPoints; helmet points and boxes against a naive per-point oracle."""
+
 import cv2
 import numpy as np
 import pytest
@@ -16,8 +17,7 @@ D0 = np.array([-0.2224, 0.1992, 8.7e-5, 9.8e-4, 0.0238])
 
 
 def _cv2(X, K, d, R, t):
-    uv, _ = cv2.projectPoints(X.reshape(-1, 3).astype(np.float64), cv2.Rodrigues(R)[0], t.astype(np.float64),
-                              K, d)
+    uv, _ = cv2.projectPoints(X.reshape(-1, 3).astype(np.float64), cv2.Rodrigues(R)[0], t.astype(np.float64), K, d)
     return uv.reshape(X.shape[:-1] + (2,))
 
 
@@ -27,8 +27,13 @@ def test_project_points_equals_opencv(seed):
     R = Rotation.random(random_state=seed).as_matrix()
     t = rng.normal(size=3) * 50
     d = np.concatenate([rng.uniform(-0.4, 0.4, 2), rng.uniform(-0.01, 0.01, 2), rng.uniform(-0.1, 0.1, 1)])
-    K = np.array([[rng.uniform(300, 3000), 0.0, rng.uniform(0, 2000)],
-                  [0, rng.uniform(300, 3000), rng.uniform(0, 2000)], [0, 0, 1]])
+    K = np.array(
+        [
+            [rng.uniform(300, 3000), 0.0, rng.uniform(0, 2000)],
+            [0, rng.uniform(300, 3000), rng.uniform(0, 2000)],
+            [0, 0, 1],
+        ]
+    )
     # points in front of the camera, within about 40 degrees of the axis
     Xc = np.concatenate([rng.uniform(-0.8, 0.8, (64, 2)), np.ones((64, 1))], 1) * rng.uniform(50, 500, (64, 1))
     X = (Xc - t) @ R  # camera -> world
@@ -62,7 +67,7 @@ def test_panoptic_toolbox_bug_is_the_reused_x():
     assert np.abs(good[:, 0] - bad[:, 0]).max() < 1e-9  # x is right in both
     x, y = X[:, 0] / X[:, 2], X[:, 1] / X[:, 2]
     r2 = x * x + y * y
-    xd = x * (1 + D0[0] * r2 + D0[1] * r2 ** 2 + D0[4] * r2 ** 3) + 2 * D0[2] * x * y + D0[3] * (r2 + 2 * x * x)
+    xd = x * (1 + D0[0] * r2 + D0[1] * r2**2 + D0[4] * r2**3) + 2 * D0[2] * x * y + D0[3] * (r2 + 2 * x * x)
     np.testing.assert_allclose(bad[:, 1] - good[:, 1], K0[1, 1] * 2 * D0[3] * y * (xd - x), atol=1e-9)
     assert np.abs(bad[:2, 1] - good[:2, 1]).min() > 1e-3  # visible off-centre, zero at the centre
     assert bad[2, 1] == pytest.approx(good[2, 1])
@@ -84,8 +89,9 @@ def test_helmet_points():
     # WHENet's get_sphere order: theta outer (0..350), phi inner (0..170); offset (0, 5, -5)
     np.testing.assert_allclose(pts[0], [0, 5, 22 - 5])
     th, ph = np.deg2rad(10), np.deg2rad(20)
-    np.testing.assert_allclose(pts[18 + 2], 22 * np.array([np.cos(th) * np.sin(ph), np.sin(th) * np.sin(ph),
-                                                           np.cos(ph)]) + [0, 5, -5])
+    np.testing.assert_allclose(
+        pts[18 + 2], 22 * np.array([np.cos(th) * np.sin(ph), np.sin(th) * np.sin(ph), np.cos(ph)]) + [0, 5, -5]
+    )
     np.testing.assert_allclose(np.linalg.norm(pts - [0, 5, -5], axis=1), 22)
     assert np.allclose(helmet_points(18, (0, 0, 0)).mean(0)[:2], 0, atol=1e-12)
 
@@ -93,8 +99,13 @@ def test_helmet_points():
 def test_presets():
     w, d = helmet_preset("whenet"), helmet_preset("directmhp")
     assert (w.radius, w.max_aspect, w.aspect_inclusive, w.check_height) == (22, 2.0, True, False)
-    assert (d.radius, d.max_aspect, d.aspect_inclusive, d.max_side_fraction, d.check_height) == (18, 1.5, False,
-                                                                                                  0.7, True)
+    assert (d.radius, d.max_aspect, d.aspect_inclusive, d.max_side_fraction, d.check_height) == (
+        18,
+        1.5,
+        False,
+        0.7,
+        True,
+    )
     with pytest.raises(ValueError, match="helmet preset"):
         helmet_preset("hopenet")
 
@@ -146,14 +157,16 @@ def test_helmet_reasons():
     # a helmet centre that lands on pixel (1900, 560), just inside the right border
     xn = cv2.undistortPoints(np.array([[[1900.0, 560.0]]]), K0, D0)[0, 0]
     edge = np.array([xn[0] * 295, xn[1] * 295 + 5, 300.0])  # t = centre - R @ (0, 5, -5)
-    t = np.array([
-        [0, 0, 300.0],      # centred: ok
-        [0, 0, -300.0],     # behind the camera
-        [0, 0, 10.0],       # the camera is inside the helmet
-        [5000, 0, 300.0],   # far to the side, in front: outside the image
-        edge,               # box cut in half by the border: aspect ~1.9
-        [np.nan] * 3,       # no fit
-    ])
+    t = np.array(
+        [
+            [0, 0, 300.0],  # centred: ok
+            [0, 0, -300.0],  # behind the camera
+            [0, 0, 10.0],  # the camera is inside the helmet
+            [5000, 0, 300.0],  # far to the side, in front: outside the image
+            edge,  # box cut in half by the border: aspect ~1.9
+            [np.nan] * 3,  # no fit
+        ]
+    )
     s = np.array([1, 1, 1, 1, 1, np.nan])
     out = helmet_boxes(s, R, t, K0, D0, cR, ct, 1920, 1080)
     assert list(out["reason"]) == ["", "behind camera", "behind camera", "outside image", "", "no fit"]
@@ -165,7 +178,17 @@ def test_helmet_reasons():
     close = helmet_boxes([1.0], R[:1], [[0, 0, 60.0]], K0, D0, cR, ct, 1920, 1080, preset="directmhp")
     assert close["reason"][0] == "box rejected" and "0.7" in close["detail"][0]
     # per-row cameras and image sizes
-    per_row = helmet_boxes(s[:1].repeat(2), R[:2], t[[0, 0]], np.stack([K0, K0]), np.stack([D0, D0]),
-                           np.stack([cR, cR]), np.stack([ct, ct]), [1920, 640], [1080, 480], return_centre=True)
+    per_row = helmet_boxes(
+        s[:1].repeat(2),
+        R[:2],
+        t[[0, 0]],
+        np.stack([K0, K0]),
+        np.stack([D0, D0]),
+        np.stack([cR, cR]),
+        np.stack([ct, ct]),
+        [1920, 640],
+        [1080, 480],
+        return_centre=True,
+    )
     assert per_row["ok"][0] and not per_row["ok"][1]  # the head centre is outside a 640x480 image
     np.testing.assert_allclose(per_row["centre"][0], _cv2(np.array([[0, -5.0, 295.0]]), K0, D0, cR, ct)[0])

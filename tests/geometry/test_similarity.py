@@ -1,4 +1,5 @@
 """Batched similarity fit against exact transforms, SciPy's Kabsch solver and the real Panoptic faces."""
+
 import json
 
 import numpy as np
@@ -77,11 +78,11 @@ def test_mask_nan_and_too_few_pairs():
     src = rng.normal(size=(4, 6, 3))
     R = Rotation.random(4, random_state=6).as_matrix()
     dst = _apply(np.ones(4), R, np.zeros((4, 3)), src)
-    dst[0, 0] = [100, 100, 100]   # an outlier, masked out below
-    dst[1, 1] = np.nan            # non-finite: unusable without being masked
+    dst[0, 0] = [100, 100, 100]  # an outlier, masked out below
+    dst[1, 1] = np.nan  # non-finite: unusable without being masked
     mask = np.ones((4, 6), bool)
     mask[0, 0] = False
-    mask[2, 2:] = False            # 2 pairs only
+    mask[2, 2:] = False  # 2 pairs only
     src[3] = src[3, :1] + np.outer(np.arange(6), [1.0, 2, 3])  # collinear source
     fit = fit_similarity(src, dst, mask)
     assert list(fit["n_pairs"]) == [5, 5, 2, 6]

@@ -1,5 +1,6 @@
 """hpe audit --plots with images: the page shows the first flagged rows of each check drawn on their images and
 links to the PNGs; checked on the real AFLW2000 sample, in headless chromium when it is installed."""
+
 import re
 import shutil
 import subprocess
@@ -70,12 +71,25 @@ def test_aflw2000_page_shows_flagged_rows_drawn(realdata, tmp_path):
     if shutil.which("chromium") is None:
         pytest.skip("chromium not installed: the browser check is skipped")
     shot = tmp_path / "shot.png"
-    subprocess.run(["chromium", "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                    "--no-first-run", f"--screenshot={shot}", "--window-size=1200,2600", page.as_uri()],
-                   capture_output=True, timeout=120, check=False)
+    subprocess.run(
+        [
+            "chromium",
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--no-first-run",
+            f"--screenshot={shot}",
+            "--window-size=1200,2600",
+            page.as_uri(),
+        ],
+        capture_output=True,
+        timeout=120,
+        check=False,
+    )
     img = cv2.imread(str(shot))
     assert img is not None
-    bottom = img[int(img.shape[0] * 0.75):].astype(int)  # the gallery: photos, not a white page
+    bottom = img[int(img.shape[0] * 0.75) :].astype(int)  # the gallery: photos, not a white page
     colourful = (bottom.max(axis=2) - bottom.min(axis=2)) > 40
     assert colourful.mean() > 0.05
 
@@ -98,8 +112,11 @@ def test_panoptic_page_pictures_around_the_faces(realdata, tmp_path):
     picture is the part of the 1920x1080 frame around the face's box, with the axes drawn from its centre."""
     seq = realdata / "panoptic_160906_pizza1"
     labels = tmp_path / "pizza.parquet"
-    res = CliRunner().invoke(cli, ["relabel-panoptic", str(seq), "-o", str(labels), "--cameras", "00_00,00_08",
-                                   "--frames", "1147:1148"], catch_exceptions=False)
+    res = CliRunner().invoke(
+        cli,
+        ["relabel-panoptic", str(seq), "-o", str(labels), "--cameras", "00_00,00_08", "--frames", "1147:1148"],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 0, res.output
     out = tmp_path / "plots"
     res = _audit(labels, "--plots", out, "--images", seq, "--gimbal-tol", 89)  # every row is near_gimbal

@@ -1,4 +1,5 @@
 """Property tests: the pixel affines of every augmentation equal OpenCV's own matrices, over the full angle range."""
+
 import cv2
 import numpy as np
 from hypothesis import given

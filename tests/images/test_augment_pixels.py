@@ -1,5 +1,6 @@
 """hpe augment against independent oracles: cv2 moves a blob drawn at each landmark / head centre, SciPy composes
 the rotation; image sizes are checked, the image commit is atomic, collisions are named."""
+
 import os
 
 import cv2
@@ -30,11 +31,11 @@ def geodesic(A, B):
 
 def blob(u, v, w=W, h=H, sigma=1.5):
     yy, xx = np.mgrid[0:h, 0:w]
-    return np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * sigma ** 2)).astype(np.float32)
+    return np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * sigma**2)).astype(np.float32)
 
 
 def centroid(img):
-    yy, xx = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+    yy, xx = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
     m = img.sum()
     return (xx * img).sum() / m, (yy * img).sum() / m
 
@@ -49,15 +50,21 @@ def cv2_transform(img, how):
         return cv2.warpAffine(img, P, (img.shape[1], img.shape[0]), flags=cv2.INTER_LINEAR)
     if kind == "scale":
         h, w = img.shape[:2]
-        return cv2.resize(img, (round(w * arg), round(h * arg)),
-                          interpolation=cv2.INTER_AREA if arg < 1 else cv2.INTER_LINEAR)
+        return cv2.resize(
+            img, (round(w * arg), round(h * arg)), interpolation=cv2.INTER_AREA if arg < 1 else cv2.INTER_LINEAR
+        )
     x, y, w, h = arg
-    return img[y:y + h, x:x + w]
+    return img[y : y + h, x : x + w]
 
 
-CASES = [(("hflip", None), ["--hflip"]), (("rotate", 33.0), ["--rotate", "33"]),
-         (("rotate", -120.0), ["--rotate", "-120"]), (("crop", (20, 10, 100, 90)), ["--crop", 20, 10, 100, 90]),
-         (("scale", 0.5), ["--scale", "0.5"]), (("scale", 2.0), ["--scale", "2"])]
+CASES = [
+    (("hflip", None), ["--hflip"]),
+    (("rotate", 33.0), ["--rotate", "33"]),
+    (("rotate", -120.0), ["--rotate", "-120"]),
+    (("crop", (20, 10, 100, 90)), ["--crop", 20, 10, 100, 90]),
+    (("scale", 0.5), ["--scale", "0.5"]),
+    (("scale", 2.0), ["--scale", "2"]),
+]
 
 
 @pytest.mark.parametrize("how,args", CASES, ids=["hflip", "rot33", "rot-120", "crop", "half", "double"])
@@ -66,15 +73,30 @@ def test_landmarks_and_tdx_tdy_land_on_the_moved_pixels(tmp_path, how, args):
     n_lm = 21  # AFLW's 21 points: a mirror re-indexes them with its left/right pairs
     lm = np.column_stack([rng.uniform(50, 110, n_lm), rng.uniform(40, 80, n_lm)])
     td = np.array([70.3, 41.7])  # Pose_Para: tdy counts from the bottom row
-    row = {"image": "a.png", "pitch": 10.0, "yaw": -35.0, "roll": 20.0, "tdx": td[0], "tdy": td[1], "tdz": 0.0,
-           "scale": 0.001, "image_width": W, "image_height": H}
+    row = {
+        "image": "a.png",
+        "pitch": 10.0,
+        "yaw": -35.0,
+        "roll": 20.0,
+        "tdx": td[0],
+        "tdy": td[1],
+        "tdz": 0.0,
+        "scale": 0.001,
+        "image_width": W,
+        "image_height": H,
+    }
     row.update({f"lm{i}_{a}": lm[i, k] for i in range(n_lm) for k, a in enumerate("xy")})
     pd.DataFrame([row]).to_parquet(tmp_path / "in.parquet")
     res = run(tmp_path / "in.parquet", "-o", tmp_path / "out.parquet", *args)
     assert res.exit_code == 0, res.output
     out = pd.read_parquet(tmp_path / "out.parquet").iloc[0]
-    wo, ho = (how[1][2], how[1][3]) if how[0] == "crop" else (round(W * how[1]), round(H * how[1])) \
-        if how[0] == "scale" else (W, H)
+    wo, ho = (
+        (how[1][2], how[1][3])
+        if how[0] == "crop"
+        else (round(W * how[1]), round(H * how[1]))
+        if how[0] == "scale"
+        else (W, H)
+    )
     assert (out.image_width, out.image_height) == (wo, ho)
     perm = flip_permutation("aflw21") if how[0] == "hflip" else np.arange(n_lm)
     for i in range(n_lm):
@@ -98,15 +120,38 @@ def test_landmarks_and_tdx_tdy_land_on_the_moved_pixels(tmp_path, how, args):
 
 def test_image_size_disagreement_is_a_reject_never_a_transform(tmp_path):
     """README case: --image-size 450 450 on labels of 1920x1080 frames rejected every row (boxes were at x = -656)."""
-    t = pd.DataFrame({"image": ["a.jpg", "b.jpg"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0, "bbox_x": [100.0, 5.0],
-                      "bbox_y": 50.0, "bbox_w": 80.0, "bbox_h": 80.0, "image_width": [1920, 450],
-                      "image_height": [1080, 450]})
+    t = pd.DataFrame(
+        {
+            "image": ["a.jpg", "b.jpg"],
+            "pitch": 0.0,
+            "yaw": 0.0,
+            "roll": 0.0,
+            "bbox_x": [100.0, 5.0],
+            "bbox_y": 50.0,
+            "bbox_w": 80.0,
+            "bbox_h": 80.0,
+            "image_width": [1920, 450],
+            "image_height": [1080, 450],
+        }
+    )
     t.to_parquet(tmp_path / "in.parquet")
     res = run(tmp_path / "in.parquet", "-o", tmp_path / "o.parquet", "--image-size", 450, 450, "--hflip")
-    assert res.exit_code == 1 and "row 1: image size: image_width/image_height is 1920x1080, --image-size says " \
-        "450x450" in res.output and not (tmp_path / "o.parquet").exists()
-    res = run(tmp_path / "in.parquet", "-o", tmp_path / "o.parquet", "--image-size", 450, 450, "--hflip",
-              "--rejects", tmp_path / "rej.csv")
+    assert (
+        res.exit_code == 1
+        and "row 1: image size: image_width/image_height is 1920x1080, --image-size says 450x450" in res.output
+        and not (tmp_path / "o.parquet").exists()
+    )
+    res = run(
+        tmp_path / "in.parquet",
+        "-o",
+        tmp_path / "o.parquet",
+        "--image-size",
+        450,
+        450,
+        "--hflip",
+        "--rejects",
+        tmp_path / "rej.csv",
+    )
     assert res.exit_code == 0, res.output
     o = pd.read_parquet(tmp_path / "o.parquet")
     assert o["bbox_x"].tolist() == [449 - 5 - 80.0] and pd.read_csv(tmp_path / "rej.csv")["row"].tolist() == [1]
@@ -116,8 +161,17 @@ def test_image_size_disagreement_is_a_reject_never_a_transform(tmp_path):
     assert pd.read_parquet(tmp_path / "o2.parquet")["bbox_x"].tolist() == [1919 - 100 - 80.0, 449 - 5 - 80.0]
     # every row rejected: exit 1 even with --rejects, nothing written
     t.iloc[:1].to_parquet(tmp_path / "one.parquet")
-    res = run(tmp_path / "one.parquet", "-o", tmp_path / "o3.parquet", "--image-size", 450, 450, "--hflip",
-              "--rejects", tmp_path / "rej3.csv")
+    res = run(
+        tmp_path / "one.parquet",
+        "-o",
+        tmp_path / "o3.parquet",
+        "--image-size",
+        450,
+        450,
+        "--hflip",
+        "--rejects",
+        tmp_path / "rej3.csv",
+    )
     assert res.exit_code == 1 and "all 1 row(s) rejected" in res.output
     assert not (tmp_path / "o3.parquet").exists() and not (tmp_path / "rej3.csv").exists()
     # no size anywhere: a usage error
@@ -139,32 +193,76 @@ def _images(tmp_path, names, w=W, h=H):
 def test_sizes_from_the_images_and_pixels_match_cv2(tmp_path):
     root = _images(tmp_path, ["a.png", "sub/b.png"])
     cv2.imwrite(str(root / "big.png"), np.zeros((100, 200, 3), np.uint8))
-    pd.DataFrame({"image": ["a.png", "sub/b.png", "big.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0,
-                  "bbox_x": 10.0, "bbox_y": 10.0, "bbox_w": 20.0, "bbox_h": 20.0}).to_csv(tmp_path / "in.csv",
-                                                                                          index=False)
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--rotate", 90, "--images", root, "--out-images",
-              tmp_path / "out")
+    pd.DataFrame(
+        {
+            "image": ["a.png", "sub/b.png", "big.png"],
+            "pitch": 0.0,
+            "yaw": 0.0,
+            "roll": 0.0,
+            "bbox_x": 10.0,
+            "bbox_y": 10.0,
+            "bbox_w": 20.0,
+            "bbox_h": 20.0,
+        }
+    ).to_csv(tmp_path / "in.csv", index=False)
+    res = run(
+        tmp_path / "in.csv",
+        "-o",
+        tmp_path / "o.csv",
+        "--rotate",
+        90,
+        "--images",
+        root,
+        "--out-images",
+        tmp_path / "out",
+    )
     assert res.exit_code == 0, res.output
     for n in ("a.png", "sub/b.png"):
-        assert np.array_equal(cv2.imread(str(tmp_path / "out" / n)), cv2_transform(cv2.imread(str(root / n)),
-                                                                                      ("rotate", 90.0)))
+        assert np.array_equal(
+            cv2.imread(str(tmp_path / "out" / n)), cv2_transform(cv2.imread(str(root / n)), ("rotate", 90.0))
+        )
     o = pd.read_csv(tmp_path / "o.csv")
     # 90 degrees about ((W-1)/2, (H-1)/2) of each image's own size: 160x120 and 200x100 move the box differently
     assert o["bbox_x"].tolist()[:2] == [10.0 + 20, 10.0 + 20] and o["bbox_x"].tolist()[2] != o["bbox_x"].tolist()[0]
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "o2.csv", "--rotate", 90, "--images", root, "--out-images",
-              tmp_path / "out2", "--image-size", W, H)
+    res = run(
+        tmp_path / "in.csv",
+        "-o",
+        tmp_path / "o2.csv",
+        "--rotate",
+        90,
+        "--images",
+        root,
+        "--out-images",
+        tmp_path / "out2",
+        "--image-size",
+        W,
+        H,
+    )
     assert res.exit_code == 1 and "line 4: image size: the image is 200x100, --image-size says 160x120" in res.output
 
 
 def test_commit_failing_halfway_places_nothing(tmp_path):
     """One target name is an existing folder: the commit fails, and no image (nor the table) is placed."""
     root = _images(tmp_path, ["a.png", "b.png", "c.png"])
-    pd.DataFrame({"image": ["a.png", "b.png", "c.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}) \
-        .to_csv(tmp_path / "in.csv", index=False)
+    pd.DataFrame({"image": ["a.png", "b.png", "c.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}).to_csv(
+        tmp_path / "in.csv", index=False
+    )
     out = tmp_path / "out"
     (out / "c.png").mkdir(parents=True)  # sorts last: a.png and b.png would be placed before it fails
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root, "--out-images", out,
-              "--image-size", W, H, "--overwrite")
+    res = run(
+        tmp_path / "in.csv",
+        "-o",
+        tmp_path / "o.csv",
+        "--hflip",
+        "--images",
+        root,
+        "--out-images",
+        out,
+        "--image-size",
+        W,
+        H,
+        "--overwrite",
+    )
     assert res.exit_code == 1 and "c.png" in res.output and "folder" in res.output
     assert sorted(os.listdir(out)) == ["c.png"] and not (tmp_path / "o.csv").exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staged leftovers
@@ -172,17 +270,31 @@ def test_commit_failing_halfway_places_nothing(tmp_path):
 
 def test_two_rows_one_output_image(tmp_path):
     root = _images(tmp_path, ["a.png", "x/a.png"])
-    pd.DataFrame({"image": ["a.png", "a.png", str(root / "x" / "a.png")], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}) \
-        .to_csv(tmp_path / "in.csv", index=False)
+    pd.DataFrame(
+        {"image": ["a.png", "a.png", str(root / "x" / "a.png")], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}
+    ).to_csv(tmp_path / "in.csv", index=False)
     # two faces of one picture: transformed once; an absolute name whose base name is taken: an error naming both
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root, "--out-images",
-              tmp_path / "out", "--image-size", W, H)
+    res = run(
+        tmp_path / "in.csv",
+        "-o",
+        tmp_path / "o.csv",
+        "--hflip",
+        "--images",
+        root,
+        "--out-images",
+        tmp_path / "out",
+        "--image-size",
+        W,
+        H,
+    )
     assert res.exit_code == 1 and "line 4" in res.output and "line 2" in res.output
     assert not (tmp_path / "out").exists() and not (tmp_path / "o.csv").exists()
-    pd.DataFrame({"image": ["a.png", "a.png"], "pitch": 0.0, "yaw": 0.0, "roll": [0.0, 5.0]}) \
-        .to_csv(tmp_path / "in2.csv", index=False)
-    res = run(tmp_path / "in2.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root, "--out-images",
-              tmp_path / "out")
+    pd.DataFrame({"image": ["a.png", "a.png"], "pitch": 0.0, "yaw": 0.0, "roll": [0.0, 5.0]}).to_csv(
+        tmp_path / "in2.csv", index=False
+    )
+    res = run(
+        tmp_path / "in2.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root, "--out-images", tmp_path / "out"
+    )
     assert res.exit_code == 0 and os.listdir(tmp_path / "out") == ["a.png"]
 
 
@@ -193,8 +305,9 @@ def test_commit_failing_after_some_images_were_placed_undoes_them(tmp_path, monk
     from hpe_cli.io import transaction
 
     root = _images(tmp_path, ["a.png", "b.png", "c.png"])
-    pd.DataFrame({"image": ["a.png", "b.png", "c.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}) \
-        .to_csv(tmp_path / "in.csv", index=False)
+    pd.DataFrame({"image": ["a.png", "b.png", "c.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}).to_csv(
+        tmp_path / "in.csv", index=False
+    )
     real, calls = transaction._place, []
 
     def place(src, dst, *a):
@@ -207,8 +320,19 @@ def test_commit_failing_after_some_images_were_placed_undoes_them(tmp_path, monk
 
     monkeypatch.setattr(transaction, "_place", place)
     out = tmp_path / "out"
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root, "--out-images", out,
-              "--image-size", W, H)
+    res = run(
+        tmp_path / "in.csv",
+        "-o",
+        tmp_path / "o.csv",
+        "--hflip",
+        "--images",
+        root,
+        "--out-images",
+        out,
+        "--image-size",
+        W,
+        H,
+    )
     assert "a.png" in calls and "b.png" in calls and "c.png" in calls
     assert res.exit_code == 1 and "c.png: cannot write: input/output error" in res.output
     assert not out.exists() or os.listdir(out) == []
@@ -233,11 +357,21 @@ def test_progress_bars_have_totals_and_move_per_image(tmp_path):
     from hpe_cli.rotation import get_system
 
     root = _images(tmp_path, ["a.png", "b.png", "c.png"])
-    pd.DataFrame({"image": ["a.png", "b.png", "c.png", "a.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}) \
-        .to_parquet(tmp_path / "in.parquet")
+    pd.DataFrame({"image": ["a.png", "b.png", "c.png", "a.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}).to_parquet(
+        tmp_path / "in.parquet"
+    )
     bar = _Bar()
-    run_augment(tmp_path / "in.parquet", tmp_path / "o.parquet", get_system("300w_lp"), (W, H), "hflip", None,
-                images_dir=root, out_images=tmp_path / "out", bar=bar)
+    run_augment(
+        tmp_path / "in.parquet",
+        tmp_path / "o.parquet",
+        get_system("300w_lp"),
+        (W, H),
+        "hflip",
+        None,
+        images_dir=root,
+        out_images=tmp_path / "out",
+        bar=bar,
+    )
     assert bar.total == 4 and bar.n == 4 and bar.steps.count(1) >= 4  # one step per row's image
     bar = _Bar()
     run_draw(tmp_path / "in.parquet", tmp_path / "drawn", images=root, system=get_system("300w_lp"), progress=bar)
@@ -246,8 +380,18 @@ def test_progress_bars_have_totals_and_move_per_image(tmp_path):
 
 def test_images_alone_give_the_sizes(tmp_path):
     root = _images(tmp_path, ["a.png"])
-    pd.DataFrame({"image": ["a.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0, "bbox_x": 10.0, "bbox_y": 5.0,
-                  "bbox_w": 20.0, "bbox_h": 20.0}).to_csv(tmp_path / "in.csv", index=False)
+    pd.DataFrame(
+        {
+            "image": ["a.png"],
+            "pitch": 0.0,
+            "yaw": 0.0,
+            "roll": 0.0,
+            "bbox_x": 10.0,
+            "bbox_y": 5.0,
+            "bbox_w": 20.0,
+            "bbox_h": 20.0,
+        }
+    ).to_csv(tmp_path / "in.csv", index=False)
     res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root)
     assert res.exit_code == 0, res.output
     assert pd.read_csv(tmp_path / "o.csv")["bbox_x"].tolist() == [W - 1 - 10.0 - 20.0]

@@ -1,5 +1,6 @@
 """hpe augment: video frames decoded once per video, in frame order (the reader draw uses); a .mat folder's bad
 rows named by their .mat file, in messages and in the rejects file."""
+
 import shutil
 
 import cv2
@@ -32,9 +33,18 @@ def test_video_frames_decoded_once_per_video_in_order(tmp_path, monkeypatch):
     rows = [(cam, f) for cam in ("00_03", "00_07") for f in (1, 3, 6, 7)]
     rng = np.random.default_rng(0)
     rows = [rows[k] for k in rng.permutation(len(rows))]
-    pd.DataFrame({"image": [f"hdImgs/{c}/{c}_{f:08d}.jpg" for c, f in rows], "camera": [c for c, _ in rows],
-                  "frame": [f for _, f in rows], "pitch": 0.0, "yaw": 10.0, "roll": 0.0,
-                  "tdx": 10.0, "tdy": 20.0}).to_parquet(tmp_path / "l.parquet")
+    pd.DataFrame(
+        {
+            "image": [f"hdImgs/{c}/{c}_{f:08d}.jpg" for c, f in rows],
+            "camera": [c for c, _ in rows],
+            "frame": [f for _, f in rows],
+            "pitch": 0.0,
+            "yaw": 10.0,
+            "roll": 0.0,
+            "tdx": 10.0,
+            "tdy": 20.0,
+        }
+    ).to_parquet(tmp_path / "l.parquet")
     calls = []
     real = panoptic_video.VideoFrames.read
 
@@ -44,8 +54,16 @@ def test_video_frames_decoded_once_per_video_in_order(tmp_path, monkeypatch):
         yield from real(self, frames)
 
     monkeypatch.setattr(panoptic_video.VideoFrames, "read", spy)
-    res = run(tmp_path / "l.parquet", "-o", tmp_path / "o.parquet", "--hflip", "--images", tmp_path / "seq",
-              "--out-images", tmp_path / "out")
+    res = run(
+        tmp_path / "l.parquet",
+        "-o",
+        tmp_path / "o.parquet",
+        "--hflip",
+        "--images",
+        tmp_path / "seq",
+        "--out-images",
+        tmp_path / "out",
+    )
     assert res.exit_code == 0, res.output
     assert sorted(calls) == [("hd_00_03.mp4", [1, 3, 6, 7]), ("hd_00_07.mp4", [1, 3, 6, 7])]
     for c, f in rows:
@@ -74,8 +92,9 @@ def test_mat_folder_rows_named_by_their_mat_file(mat3, tmp_path):
     line = res.output.strip().splitlines()[-1]
     assert line.startswith(f"Error: {mat3 / 'image00251.mat'}: image not found"), line
     assert "row " not in line
-    res = run(mat3, "-o", tmp_path / "a.parquet", "--hflip", "--out-images", tmp_path / "o",
-              "--rejects", tmp_path / "rej.csv")
+    res = run(
+        mat3, "-o", tmp_path / "a.parquet", "--hflip", "--out-images", tmp_path / "o", "--rejects", tmp_path / "rej.csv"
+    )
     assert res.exit_code == 0, res.output
     rej = pd.read_csv(tmp_path / "rej.csv")
     assert rej["file"].tolist() == [str(mat3 / "image00251.mat")] and "row" not in rej.columns
@@ -85,8 +104,19 @@ def test_mat_folder_rows_named_by_their_mat_file(mat3, tmp_path):
 
 def test_mat_folder_size_disagreement_named_by_mat_file(mat3, tmp_path):
     (mat3 / "image00251.mat").unlink()
-    res = run(mat3, "-o", tmp_path / "a.parquet", "--hflip", "--image-size", 400, 450, "--images", mat3,
-              "--rejects", tmp_path / "rej.parquet")
+    res = run(
+        mat3,
+        "-o",
+        tmp_path / "a.parquet",
+        "--hflip",
+        "--image-size",
+        400,
+        450,
+        "--images",
+        mat3,
+        "--rejects",
+        tmp_path / "rej.parquet",
+    )
     assert res.exit_code == 1
     line = res.output.strip().splitlines()[-1]
     assert f"({mat3 / 'image00050.mat'}: image size: the image is 450x450, --image-size says 400x450)" in line
@@ -94,8 +124,11 @@ def test_mat_folder_size_disagreement_named_by_mat_file(mat3, tmp_path):
 
 
 def test_draw_mat_folder_rejects_named_by_mat_file(mat3, tmp_path):
-    res = CliRunner().invoke(cli, ["draw", str(mat3), "-o", str(tmp_path / "d"), "--rejects",
-                                   str(tmp_path / "rej.csv")], catch_exceptions=False)
+    res = CliRunner().invoke(
+        cli,
+        ["draw", str(mat3), "-o", str(tmp_path / "d"), "--rejects", str(tmp_path / "rej.csv")],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 0, res.output
     rej = pd.read_csv(tmp_path / "rej.csv")
     assert rej["file"].tolist() == [str(mat3 / "image00251.mat")] and "row" not in rej.columns

@@ -40,8 +40,9 @@ def test_panoptic_names_parse():
     assert panoptic_view("images/a.jpg") is None
 
 
-@pytest.mark.parametrize("stored", ["hdImgs/00_08/00_08_00000012.jpg", "hdImgs/hd_00_08/00000012.jpg",
-                                    "hdImgs/00_08/00000012.jpg"])
+@pytest.mark.parametrize(
+    "stored", ["hdImgs/00_08/00_08_00000012.jpg", "hdImgs/hd_00_08/00000012.jpg", "hdImgs/00_08/00000012.jpg"]
+)
 def test_every_hd_frame_layout(tmp_path, stored):
     want = _img(tmp_path / stored)
     # by the toolbox name relabel writes, and by camera/frame ids alone
@@ -100,12 +101,29 @@ def test_draw_real_panoptic_folder(realdata, tmp_path):
     seq = realdata / "panoptic_160906_pizza1"
     labels = tmp_path / "pizza.parquet"
     runner = CliRunner()
-    res = runner.invoke(cli, ["relabel-panoptic", str(seq), "-o", str(labels), "--cameras", "00_00,00_08,00_01",
-                              "--frames", "1147:1148"], catch_exceptions=False)
+    res = runner.invoke(
+        cli,
+        ["relabel-panoptic", str(seq), "-o", str(labels), "--cameras", "00_00,00_08,00_01", "--frames", "1147:1148"],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 0, res.output
     out = tmp_path / "drawn"
-    res = runner.invoke(cli, ["draw", str(labels), "--images", str(seq), "-o", str(out), "--rejects",
-                              str(tmp_path / "rej.csv"), "--thickness", "3"], catch_exceptions=False)
+    res = runner.invoke(
+        cli,
+        [
+            "draw",
+            str(labels),
+            "--images",
+            str(seq),
+            "-o",
+            str(out),
+            "--rejects",
+            str(tmp_path / "rej.csv"),
+            "--thickness",
+            "3",
+        ],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 0, res.output
     t = pd.read_parquet(labels)
     drawn = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.jpg"))
@@ -121,11 +139,14 @@ def test_draw_real_panoptic_folder(realdata, tmp_path):
         for _, r in t[t["camera"] == cam].iterrows():
             u, v = int(r.bbox_x + r.bbox_w / 2), int(r.bbox_y + r.bbox_h / 2)
             assert 0 <= u < 1920 and 0 <= v < 1080
-            assert np.abs(new[v - 3:v + 4, u - 3:u + 4] - orig[v - 3:v + 4, u - 3:u + 4]).max() > 60
+            assert np.abs(new[v - 3 : v + 4, u - 3 : u + 4] - orig[v - 3 : v + 4, u - 3 : u + 4]).max() > 60
     none = tmp_path / "none.parquet"
     t[t["camera"] == "00_01"].to_parquet(none)
-    res = runner.invoke(cli, ["draw", str(none), "--images", str(seq), "-o", str(tmp_path / "d2"), "--rejects",
-                              str(tmp_path / "rej2.csv")], catch_exceptions=False)
+    res = runner.invoke(
+        cli,
+        ["draw", str(none), "--images", str(seq), "-o", str(tmp_path / "d2"), "--rejects", str(tmp_path / "rej2.csv")],
+        catch_exceptions=False,
+    )
     assert res.exit_code == 1 and "nothing drawn" in res.output
     assert not (tmp_path / "d2").exists() and not (tmp_path / "rej2.csv").exists()
 
@@ -137,11 +158,19 @@ def _draw(*args):
 def test_draw_video_frames(tmp_path):
     """Rows naming extracted frames that only exist in hdVideos/ are drawn from the video."""
     _video(tmp_path / "seq" / "hdVideos" / "hd_00_03.mp4", n=6, w=96, h=64)
-    pd.DataFrame({"image": ["hdImgs/00_03/00_03_00000001.jpg", "hdImgs/00_03/00_03_00000004.jpg"],
-                  "camera": ["00_03", "00_03"], "frame": [1, 4], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}) \
-        .to_parquet(tmp_path / "l.parquet")
-    res = _draw(tmp_path / "l.parquet", "-o", tmp_path / "d", "--images", tmp_path / "seq", "--length", 20,
-                "--thickness", 3)
+    pd.DataFrame(
+        {
+            "image": ["hdImgs/00_03/00_03_00000001.jpg", "hdImgs/00_03/00_03_00000004.jpg"],
+            "camera": ["00_03", "00_03"],
+            "frame": [1, 4],
+            "pitch": 0.0,
+            "yaw": 0.0,
+            "roll": 0.0,
+        }
+    ).to_parquet(tmp_path / "l.parquet")
+    res = _draw(
+        tmp_path / "l.parquet", "-o", tmp_path / "d", "--images", tmp_path / "seq", "--length", 20, "--thickness", 3
+    )
     assert res.exit_code == 0, res.output
     for f in (1, 4):
         img = cv2.imread(str(tmp_path / "d" / "hdImgs" / "00_03" / f"00_03_{f:08d}.jpg"))
@@ -154,8 +183,17 @@ def test_draw_same_picture_by_two_names_and_two_pictures_for_one_name(tmp_path):
     a = _img(tmp_path / "imgs" / "face.jpg")
     _img(tmp_path / "other" / "face.jpg", value=30)
     (tmp_path / "imgs" / "face.mat").write_bytes(b"")
-    t = pd.DataFrame({"image": ["face.jpg", "face.mat"], "tdx": [20.0, 44.0], "tdy": 24.0, "size": 10.0,
-                      "pitch": 0.0, "yaw": 0.0, "roll": 0.0})
+    t = pd.DataFrame(
+        {
+            "image": ["face.jpg", "face.mat"],
+            "tdx": [20.0, 44.0],
+            "tdy": 24.0,
+            "size": 10.0,
+            "pitch": 0.0,
+            "yaw": 0.0,
+            "roll": 0.0,
+        }
+    )
     t.to_csv(tmp_path / "l.csv", index=False)
     # face.mat names the same picture as face.jpg: both faces on one image
     res = _draw(tmp_path / "l.csv", "-o", tmp_path / "d", "--images", tmp_path / "imgs", "--thickness", 2)

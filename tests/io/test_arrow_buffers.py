@@ -4,6 +4,7 @@ The oracle is pyarrow's own conversion (``pa.array`` / ``to_numpy``), which
 the buffer-built arrays must equal value for value and type for type; the
 image paths are checked against ``datasets.panoptic.image_path``.
 """
+
 from __future__ import annotations
 
 import subprocess
@@ -15,11 +16,11 @@ from types import SimpleNamespace
 import numpy as np
 import pyarrow as pa
 import pytest
-from conftest import sample_data_script
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from conftest import sample_data_script
 from hpe_cli.datasets import panoptic as pan
 from hpe_cli.io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow, string_array
 from hpe_cli.pipelines import panoptic as job
@@ -53,10 +54,27 @@ def test_string_array_leaves_other_objects_to_pa_array():
 
 
 @settings(max_examples=150, deadline=None)
-@given(hnp.arrays(st.sampled_from([np.float64, np.float32, np.int64, np.int32, np.int16, np.int8, np.uint8,
-                                   np.uint16, np.uint32, np.uint64, np.bool_]),
-                  st.integers(0, 50)),
-       st.integers(1, 3))
+@given(
+    hnp.arrays(
+        st.sampled_from(
+            [
+                np.float64,
+                np.float32,
+                np.int64,
+                np.int32,
+                np.int16,
+                np.int8,
+                np.uint8,
+                np.uint16,
+                np.uint32,
+                np.uint64,
+                np.bool_,
+            ]
+        ),
+        st.integers(0, 50),
+    ),
+    st.integers(1, 3),
+)
 def test_numpy_to_arrow_is_pa_array(v, step):
     v = v[::step]  # strided views too
     assert _same(numpy_to_arrow(v), pa.array(v))
@@ -65,12 +83,14 @@ def test_numpy_to_arrow_is_pa_array(v, step):
 
 
 @settings(max_examples=150, deadline=None)
-@given(st.lists(st.one_of(st.none(), st.floats(allow_nan=True), st.integers(-2 ** 40, 2 ** 40).map(float)),
-                max_size=30),
-       st.integers(0, 5), st.sampled_from(["float64", "float32", "int64"]))
+@given(
+    st.lists(st.one_of(st.none(), st.floats(allow_nan=True), st.integers(-(2**40), 2**40).map(float)), max_size=30),
+    st.integers(0, 5),
+    st.sampled_from(["float64", "float32", "int64"]),
+)
 def test_arrow_to_numpy_is_to_numpy(values, cut, typ):
     if typ == "int64":  # exact in float64 (a safe cast refuses others, as the oracle does)
-        values = [None if x is None or not np.isfinite(x) else int(x) % 2 ** 40 for x in values]
+        values = [None if x is None or not np.isfinite(x) else int(x) % 2**40 for x in values]
     arr = pa.array(values, type=getattr(pa, typ)()).slice(min(cut, len(values)))
     chunked = pa.chunked_array([arr, arr.slice(len(arr) // 2)], type=arr.type)
     for col in (arr, chunked):
@@ -84,11 +104,13 @@ def test_arrow_to_numpy_is_to_numpy(values, cut, typ):
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.tuples(st.integers(0, 4), st.integers(0, 10 ** 9)), max_size=60))
+@given(st.lists(st.tuples(st.integers(0, 4), st.integers(0, 10**9)), max_size=60))
 def test_image_paths_are_panoptic_paths(rows):
     # _image_paths reads only a camera's name and type
-    cams = SimpleNamespace(names=np.array(["00_00", "00_08", "01_01", "50_01", "30"], dtype=object),
-                           types=np.array(["hd", "hd", "vga", "kinect-color", "hd"], dtype=object))
+    cams = SimpleNamespace(
+        names=np.array(["00_00", "00_08", "01_01", "50_01", "30"], dtype=object),
+        types=np.array(["hd", "hd", "vga", "kinect-color", "hd"], dtype=object),
+    )
     ci = np.array([c for c, _ in rows], dtype=np.int64)
     frames = np.array([f for _, f in rows], dtype=np.int64)
     got = job._image_paths(cams, ci, frames)

@@ -1,4 +1,5 @@
 """io.background.BackgroundFile: order, appended files (kernel copy and buffered fallback), errors, abort."""
+
 import errno
 import os
 
@@ -97,8 +98,7 @@ class _Slow:
         self.closed = True
 
 
-@pytest.mark.parametrize("depth,max_bytes,sizes", [(8, 100, [40] * 10), (3, 10 ** 6, [5] * 10),
-                                                    (8, 100, [250, 10, 10])])
+@pytest.mark.parametrize("depth,max_bytes,sizes", [(8, 100, [40] * 10), (3, 10**6, [5] * 10), (8, 100, [250, 10, 10])])
 def test_the_queue_is_bounded_in_writes_and_bytes(depth, max_bytes, sizes):
     """At most ``depth`` writes and ``max_bytes`` bytes wait (a bigger write goes alone), and order is kept."""
     import threading

@@ -3,6 +3,7 @@
 Each fixture file is written here from the format's description (the loader
 code named in hpe_cli/io/columns.py), then read back with open_table.
 """
+
 from __future__ import annotations
 
 import json
@@ -21,12 +22,18 @@ from hpe_cli.io import open_table
 REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "realdata"
 
 # one label table in role order; the formats below spell it their own way
-LABELS = pd.DataFrame({
-    "image": ["seq/a 1.jpg", "seq/b.jpg", "c.png"],
-    "bbox_x": [10.0, 20.5, 0.0], "bbox_y": [5.0, 6.0, 7.25], "bbox_w": [100.0, 50.0, 64.0],
-    "bbox_h": [101.0, 52.0, 64.0],
-    "pitch": [-12.5, 30.25, 0.0], "yaw": [45.0, -170.5, 89.9], "roll": [3.0, -7.75, 1e-3],
-})
+LABELS = pd.DataFrame(
+    {
+        "image": ["seq/a 1.jpg", "seq/b.jpg", "c.png"],
+        "bbox_x": [10.0, 20.5, 0.0],
+        "bbox_y": [5.0, 6.0, 7.25],
+        "bbox_w": [100.0, 50.0, 64.0],
+        "bbox_h": [101.0, 52.0, 64.0],
+        "pitch": [-12.5, 30.25, 0.0],
+        "yaw": [45.0, -170.5, 89.9],
+        "roll": [3.0, -7.75, 1e-3],
+    }
+)
 
 
 def read(path, **kw):
@@ -74,8 +81,10 @@ def test_whenet_blank_lines_keep_file_lines(tmp_path):
 def test_opal23_panoptic_layout(tmp_path):
     p = tmp_path / "panoptic_ann_test.txt"
     lines = ["#;image;x_min;y_min;w;h;yaw;pitch;roll", "@;panoptic"]
-    lines += [";".join([r.image] + [fmt(v) for v in (r.bbox_x, r.bbox_y, r.bbox_w, r.bbox_h, r.yaw, r.pitch, r.roll)])
-              for r in LABELS.itertuples()]
+    lines += [
+        ";".join([r.image] + [fmt(v) for v in (r.bbox_x, r.bbox_y, r.bbox_w, r.bbox_h, r.yaw, r.pitch, r.roll)])
+        for r in LABELS.itertuples()
+    ]
     p.write_text("\n".join(lines) + "\n")
     src, f = read(p)  # sniffed from the '#;' header
     same_labels(f, ("pitch", "yaw", "roll", "bbox_x", "bbox_y", "bbox_w", "bbox_h"))
@@ -108,8 +117,9 @@ def test_img2pose_biwi_matches_real_biwi_label():
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "BIWI_annotations.txt"
         # the first line of vitoralbiero/img2pose evaluation/jupyter_notebooks/BIWI_annotations.txt
-        p.write_text("../../datasets/BIWI/01/frame_00003_rgb.png 7.607222981354766 3.290994605902283 "
-                     "-1.5666319048416875\n")
+        p.write_text(
+            "../../datasets/BIWI/01/frame_00003_rgb.png 7.607222981354766 3.290994605902283 -1.5666319048416875\n"
+        )
         src, f = read(p)  # recognised by its name
     assert src.system == "300w_lp"
     t = read_biwi(pose)
@@ -146,10 +156,14 @@ def test_coco_directmhp_schema(tmp_path):
 
 
 def test_coco_hand_written_two_heads_one_image(tmp_path):
-    doc = {"images": [{"file_name": "00_00_00001147.jpg", "id": 10, "width": 1920, "height": 1080}],
-           "annotations": [{"image_id": 10, "id": 7, "bbox": [1, 2, 3, 4], "euler_angles": [10, 20, 30]},
-                           {"image_id": 10, "id": 8, "bbox": [5, 6, 7, 8], "euler_angles": [-1, -2, -3]}],
-           "categories": [{"id": 1, "name": "person"}]}
+    doc = {
+        "images": [{"file_name": "00_00_00001147.jpg", "id": 10, "width": 1920, "height": 1080}],
+        "annotations": [
+            {"image_id": 10, "id": 7, "bbox": [1, 2, 3, 4], "euler_angles": [10, 20, 30]},
+            {"image_id": 10, "id": 8, "bbox": [5, 6, 7, 8], "euler_angles": [-1, -2, -3]},
+        ],
+        "categories": [{"id": 1, "name": "person"}],
+    }
     p = tmp_path / "x.json"
     p.write_text(json.dumps(doc))
     _, f = read(p, input_format="coco")
@@ -161,8 +175,10 @@ def test_coco_hand_written_two_heads_one_image(tmp_path):
 # ------------------------------------------------------------------------------------------------ generic text
 def test_semicolon_header_and_columns_map(tmp_path):
     p = tmp_path / "list.txt"
-    p.write_text("File;Pitch;Yaw;Roll\n" + "".join(
-        f"{r.image};{fmt(r.pitch)};{fmt(r.yaw)};{fmt(r.roll)}\n" for r in LABELS.itertuples()))
+    p.write_text(
+        "File;Pitch;Yaw;Roll\n"
+        + "".join(f"{r.image};{fmt(r.pitch)};{fmt(r.yaw)};{fmt(r.roll)}\n" for r in LABELS.itertuples())
+    )
     _, f = read(p, delimiter=";", columns="image=File,pitch=Pitch,yaw=Yaw,roll=Roll")
     same_labels(f)
     assert list(f["__line__"]) == [2, 3, 4]
@@ -193,12 +209,15 @@ def test_tab_separated(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------ bad input
-@pytest.mark.parametrize("text,kw,msg", [
-    ("a.jpg,1,2,3\nb.jpg,4,5\n", {"input_format": "whenet"}, "line 2: expected 4 fields"),
-    ("#;image;yaw;pitch;roll\nx.jpg;1;2\n", {"input_format": "opal23"}, "line 2: expected 4 fields"),
-    ("nonsense\n", {"input_format": "opal23"}, "line 1: expected OPAL's header"),
-    ("5\nYaw Pitch Roll\n", {"input_format": "celeba-pose"}, "line 1: expected CelebAMask-HQ"),
-])
+@pytest.mark.parametrize(
+    "text,kw,msg",
+    [
+        ("a.jpg,1,2,3\nb.jpg,4,5\n", {"input_format": "whenet"}, "line 2: expected 4 fields"),
+        ("#;image;yaw;pitch;roll\nx.jpg;1;2\n", {"input_format": "opal23"}, "line 2: expected 4 fields"),
+        ("nonsense\n", {"input_format": "opal23"}, "line 1: expected OPAL's header"),
+        ("5\nYaw Pitch Roll\n", {"input_format": "celeba-pose"}, "line 1: expected CelebAMask-HQ"),
+    ],
+)
 def test_bad_lines_name_file_and_line(tmp_path, text, kw, msg):
     p = tmp_path / "in.txt"
     p.write_text(text)
@@ -232,15 +251,35 @@ def test_cli_convert_with_column_options(tmp_path):
     p = tmp_path / "list.txt"
     p.write_text("".join(f"{r.image};{fmt(r.yaw)};{fmt(r.pitch)};{fmt(r.roll)}\n" for r in LABELS.itertuples()))
     out = tmp_path / "o.csv"
-    r = CliRunner().invoke(cli, ["convert", str(p), "-o", str(out), "--from", "300w_lp", "--to", "300w_lp",
-                                 "--delimiter", ";", "--no-header", "--names", "image,yaw,pitch,roll", "-q"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "convert",
+            str(p),
+            "-o",
+            str(out),
+            "--from",
+            "300w_lp",
+            "--to",
+            "300w_lp",
+            "--delimiter",
+            ";",
+            "--no-header",
+            "--names",
+            "image,yaw,pitch,roll",
+            "-q",
+        ],
+    )
     assert r.exit_code == 0, r.output
     f = pd.read_csv(out)
     from hpe_cli.rotation.systems import get_system
 
     s = get_system("300w_lp")  # yaw -170.5 comes back as the other Euler solution: compare matrices
-    np.testing.assert_allclose(s.from_angles(f[["pitch", "yaw", "roll"]].to_numpy()),
-                               s.from_angles(LABELS[["pitch", "yaw", "roll"]].to_numpy()), atol=1e-12)
+    np.testing.assert_allclose(
+        s.from_angles(f[["pitch", "yaw", "roll"]].to_numpy()),
+        s.from_angles(LABELS[["pitch", "yaw", "roll"]].to_numpy()),
+        atol=1e-12,
+    )
 
 
 def test_cli_audit_reads_annotation_txt(tmp_path):
@@ -253,14 +292,42 @@ def test_cli_audit_reads_annotation_txt(tmp_path):
 def test_cli_usage_errors(tmp_path):
     p = tmp_path / "t.csv"
     LABELS.to_csv(p, index=False)
-    r = CliRunner().invoke(cli, ["convert", str(p), "-o", str(tmp_path / "o.csv"), "--from", "300w_lp",
-                                 "--to", "whenet", "--delimiter", "ab"])
+    r = CliRunner().invoke(
+        cli,
+        ["convert", str(p), "-o", str(tmp_path / "o.csv"), "--from", "300w_lp", "--to", "whenet", "--delimiter", "ab"],
+    )
     assert r.exit_code == 2
-    r = CliRunner().invoke(cli, ["convert", str(p), "-o", str(tmp_path / "o.csv"), "--from", "300w_lp",
-                                 "--to", "whenet", "--columns-map", "pitch"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "convert",
+            str(p),
+            "-o",
+            str(tmp_path / "o.csv"),
+            "--from",
+            "300w_lp",
+            "--to",
+            "whenet",
+            "--columns-map",
+            "pitch",
+        ],
+    )
     assert r.exit_code == 2
-    r = CliRunner().invoke(cli, ["convert", str(p), "-o", str(tmp_path / "o.csv"), "--from", "300w_lp",
-                                 "--to", "whenet", "--columns-map", "pitch=Nope"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "convert",
+            str(p),
+            "-o",
+            str(tmp_path / "o.csv"),
+            "--from",
+            "300w_lp",
+            "--to",
+            "whenet",
+            "--columns-map",
+            "pitch=Nope",
+        ],
+    )
     assert r.exit_code == 1 and "Nope" in r.output
 
 
@@ -276,8 +343,9 @@ def test_cli_bad_line_is_a_reject_with_its_line(tmp_path):
     p = tmp_path / "annotation.txt"
     p.write_text("a.jpg,1,2,3\n\nb.jpg,4,5\nc.jpg,7,x,9\nd.jpg,1,1,1\n")
     out, rej = tmp_path / "o.csv", tmp_path / "rej.csv"
-    r = CliRunner().invoke(cli, ["convert", str(p), "-o", str(out), "--from", "whenet", "--to", "whenet",
-                                 "--rejects", str(rej), "-q"])
+    r = CliRunner().invoke(
+        cli, ["convert", str(p), "-o", str(out), "--from", "whenet", "--to", "whenet", "--rejects", str(rej), "-q"]
+    )
     assert r.exit_code == 0, r.output
     assert list(pd.read_csv(out)["image"]) == ["a.jpg", "d.jpg"]
     rj = pd.read_csv(rej)
@@ -298,8 +366,25 @@ def test_cli_evaluate_two_inputs_share_the_options(tmp_path):
     pred = tmp_path / "annotation.txt"  # WHENet layout: image,yaw,pitch,roll; PROVENANCE: 34.45, 4.69, 7.25
     pred.write_text("image00430.mat,4.69,34.45,7.25\n")
     rep = tmp_path / "r.json"
-    r = CliRunner().invoke(cli, ["evaluate", str(pred), str(gt), "--pred-system", "whenet", "--gt-system", "300w_lp",
-                                 "--key", "file", "--columns-map", "file=image", "--json", str(rep), "-q"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(pred),
+            str(gt),
+            "--pred-system",
+            "whenet",
+            "--gt-system",
+            "300w_lp",
+            "--key",
+            "file",
+            "--columns-map",
+            "file=image",
+            "--json",
+            str(rep),
+            "-q",
+        ],
+    )
     assert r.exit_code == 0, r.output
     doc = json.loads(rep.read_text())
     assert doc["metrics"]["geodesic"]["max"] < 0.01  # the printed 2-decimal angles of the same rotation

@@ -4,6 +4,7 @@ Oracles: the trainers' own formulas written out here (6DRepNet ``utils.get_R``, 
 normalisation and image-id scheme, FSA-Net's ``np.load`` keys), SPEC §2's 300W-LP matrix (``canonical_A``),
 and physical consistency (the projected landmarks fall inside each crop).
 """
+
 import json
 from pathlib import Path
 
@@ -14,9 +15,8 @@ import pytest
 import scipy.io
 from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
-
 from conftest import REALDATA, canonical_A
+from hpe_cli.cli.main import cli
 
 PIZZA = REALDATA / "panoptic_160906_pizza1"
 AFLW = REALDATA / "aflw2000_prnet"
@@ -89,8 +89,20 @@ def get_R_6drepnet(pitch, yaw, roll):
 def test_whenet_layout_read_back(pizza, tmp_path):
     path, t = pizza
     out = tmp_path / "w"
-    r = run("export", path, "-o", out, "--layout", "whenet", "--images", PIZZA, "--rejects", tmp_path / "rej.csv",
-            "--crop-scale", "1.2")
+    r = run(
+        "export",
+        path,
+        "-o",
+        out,
+        "--layout",
+        "whenet",
+        "--images",
+        PIZZA,
+        "--rejects",
+        tmp_path / "rej.csv",
+        "--crop-scale",
+        "1.2",
+    )
     assert r.exit_code == 0, r.output
     # WHENet's reader: lines "relative/path.jpg,yaw,pitch,roll", paths relative to the dataset folder
     lines = (out / "train" / "annotation.txt").read_text().splitlines()
@@ -171,19 +183,30 @@ def test_6drepnet_mat_form_on_aflw2000(tmp_path):
         np.testing.assert_allclose(pt2d - pt2d[:, :1], vis - vis[:, :1], atol=1e-9)
         dx, dy = np.round(pt2d[:, 0] - vis[:, 0]).astype(int)
         u, v = int(round(vis[0, 0])), int(round(vis[1, 0]))
-        a = src[v - 3:v + 4, u - 3:u + 4].astype(float)
-        b = img[v + dy - 3:v + dy + 4, u + dx - 3:u + dx + 4].astype(float)
+        a = src[v - 3 : v + 4, u - 3 : u + 4].astype(float)
+        b = img[v + dy - 3 : v + dy + 4, u + dx - 3 : u + dx + 4].astype(float)
         assert np.abs(a - b).mean() < 12
 
 
 # --------------------------------------------------------------------------------------------- directmhp
 def test_directmhp_layout(pizza, tmp_path):
-    from hpe_cli.io.export.directmhp import SEQ_NAMES
 
     path, t = pizza
     out = tmp_path / "d"
-    r = run("export", path, "-o", out, "--layout", "directmhp", "--images", PIZZA, "--rejects", tmp_path / "r.csv",
-            "--split", DMHP_SPLIT)
+    r = run(
+        "export",
+        path,
+        "-o",
+        out,
+        "--layout",
+        "directmhp",
+        "--images",
+        PIZZA,
+        "--rejects",
+        tmp_path / "r.csv",
+        "--split",
+        DMHP_SPLIT,
+    )
     assert r.exit_code == 0, r.output
     A = table_A(t)
     idx = lookup(t)
@@ -237,12 +260,30 @@ def test_directmhp_drop_images_with_rejects(pizza, tmp_path):
     path = tmp_path / "t.parquet"
     t.to_parquet(path)
     out = tmp_path / "d"
-    r = run("export", path, "-o", out, "--layout", "directmhp", "--images", PIZZA, "--drop-images-with-rejects",
-            "--rejects", tmp_path / "r.csv", "--split", DMHP_SPLIT)
+    r = run(
+        "export",
+        path,
+        "-o",
+        out,
+        "--layout",
+        "directmhp",
+        "--images",
+        PIZZA,
+        "--drop-images-with-rejects",
+        "--rejects",
+        tmp_path / "r.csv",
+        "--split",
+        DMHP_SPLIT,
+    )
     assert r.exit_code == 0, r.output
     rej = pd.read_csv(tmp_path / "r.csv")
-    coco = {"images": [im for s in ("train", "val") for im in
-                       json.loads((out / "annotations" / f"coco_style_{s}.json").read_text())["images"]]}
+    coco = {
+        "images": [
+            im
+            for s in ("train", "val")
+            for im in json.loads((out / "annotations" / f"coco_style_{s}.json").read_text())["images"]
+        ]
+    }
     dropped = rej[rej["reason"].str.startswith("image dropped")]
     rule = rej[rej["reason"].str.startswith("DirectMHP normalisation")]
     # no exported image has a rejected (normalisation) head
@@ -277,7 +318,7 @@ def test_fsanet_npz(pizza, tmp_path):
     src = cv2.imread(str(PIZZA / "hdImgs" / f"hd_{cam}" / f"{frame:08d}.jpg"))
     x0, y0, x1, y1 = int(c.crop_x0), int(c.crop_y0), int(c.crop_x1), int(c.crop_y1)
     pad = cv2.copyMakeBorder(src, 500, 500, 500, 500, cv2.BORDER_CONSTANT, value=0)
-    ref = cv2.resize(pad[y0 + 500:y1 + 500, x0 + 500:x1 + 500], (64, 64), interpolation=cv2.INTER_AREA)
+    ref = cv2.resize(pad[y0 + 500 : y1 + 500, x0 + 500 : x1 + 500], (64, 64), interpolation=cv2.INTER_AREA)
     assert np.abs(ref.astype(float) - img[0].astype(float)).mean() < 1.0
 
 
@@ -287,8 +328,9 @@ def test_hf_parquet_image_feature(pizza, tmp_path):
 
     path, t = pizza
     out = tmp_path / "h"
-    r = export(path, out, "--layout", "hf", "--system", "6drepnet", "--split", "camera:0.5,0.5", "--min-change", "1",
-               "-q")
+    r = export(
+        path, out, "--layout", "hf", "--system", "6drepnet", "--split", "camera:0.5,0.5", "--min-change", "1", "-q"
+    )
     assert r.exit_code == 0, r.output
     card = (out / "README.md").read_text()
     assert card.startswith("---\n") and "dtype: image" in card and "6drepnet" in card and "min-change" in card
@@ -343,10 +385,16 @@ def test_read_back_through_open_table(pizza, tmp_path):
     np.testing.assert_allclose(back[["pitch", "yaw", "roll"]].to_numpy(float), want, atol=1e-12)
     coco = json.loads((tmp_path / "d" / "annotations" / "coco_style_train.json").read_text())
     back = _open_or_skip(tmp_path / "d" / "annotations" / "coco_style_train.json")
-    np.testing.assert_allclose(back[["pitch", "yaw", "roll"]].to_numpy(float),
-                               np.array([a["euler_angles"] for a in coco["annotations"]]), atol=1e-12)
-    np.testing.assert_allclose(back[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]].to_numpy(float),
-                               np.array([a["bbox"] for a in coco["annotations"]]), atol=1e-9)
+    np.testing.assert_allclose(
+        back[["pitch", "yaw", "roll"]].to_numpy(float),
+        np.array([a["euler_angles"] for a in coco["annotations"]]),
+        atol=1e-12,
+    )
+    np.testing.assert_allclose(
+        back[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]].to_numpy(float),
+        np.array([a["bbox"] for a in coco["annotations"]]),
+        atol=1e-9,
+    )
 
 
 def test_coco_export_is_an_export_input(pizza, tmp_path):

@@ -19,9 +19,22 @@ def make_set(tmp_path):
     for i in range(3):
         cv2.imwrite(str(tmp_path / "img" / f"f{i}.jpg"), rng.integers(0, 255, (120, 160, 3), dtype=np.uint8))
         for h in range(2):
-            rows.append({"image": f"img/f{i}.jpg", "sequence": f"s{i % 2}", "camera": "", "frame": i,
-                         "person_id": h, "bbox_x": 10 + 60 * h, "bbox_y": 20, "bbox_w": 40, "bbox_h": 50,
-                         "pitch": 10.0 * h - 20, "yaw": 25.0 * i - 30, "roll": 5.0 - 3 * h})
+            rows.append(
+                {
+                    "image": f"img/f{i}.jpg",
+                    "sequence": f"s{i % 2}",
+                    "camera": "",
+                    "frame": i,
+                    "person_id": h,
+                    "bbox_x": 10 + 60 * h,
+                    "bbox_y": 20,
+                    "bbox_w": 40,
+                    "bbox_h": 50,
+                    "pitch": 10.0 * h - 20,
+                    "yaw": 25.0 * i - 30,
+                    "roll": 5.0 - 3 * h,
+                }
+            )
     path = tmp_path / "labels.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
     return path, pd.DataFrame(rows)

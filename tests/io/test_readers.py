@@ -2,6 +2,7 @@
 
 Oracle for line numbers: the test writes the file record by record and counts the newlines it wrote itself.
 """
+
 import numpy as np
 import pandas as pd
 import pyarrow as pa
@@ -66,7 +67,9 @@ def test_bad_rows_anywhere_are_rejects_with_lines(tmp_path, block, where):
     assert table.schema.field("pitch").type == pa.float64() and table.schema.field("image").type == pa.string()
     assert "two\nlines" in table["image"].to_pylist()
     raw = {r.reason: r.raw for r in rej}
-    assert raw["expected 4 fields, got 2"] == "1,2" and raw["undecodable bytes in image (not UTF-8)"].startswith("1,2,3")
+    assert raw["expected 4 fields, got 2"] == "1,2" and raw["undecodable bytes in image (not UTF-8)"].startswith(
+        "1,2,3"
+    )
 
 
 def test_string_column_stays_string_and_types_do_not_depend_on_block(tmp_path):
@@ -113,7 +116,9 @@ def test_encodings(tmp_path):
     p = tmp_path / "crlf.csv"
     p.write_bytes(b"pitch,yaw,roll\r\n1,2,3\r\n\r\n4,x,6\r\n7,8,9\r\n")
     table, rej = collect(p, block_size=8)
-    assert table[LINE_COL].to_pylist() == [2, 5] and [(r.line, r.reason) for r in rej] == [(4, "non-numeric value in yaw")]
+    assert table[LINE_COL].to_pylist() == [2, 5] and [(r.line, r.reason) for r in rej] == [
+        (4, "non-numeric value in yaw")
+    ]
 
 
 def test_sniffed_by_content(tmp_path):
@@ -129,8 +134,11 @@ def test_sniffed_by_content(tmp_path):
 
 def test_parquet_lines_and_batches(tmp_path):
     n = 1000
-    pq.write_table(pa.table({"pitch": np.arange(n, dtype=float), "yaw": np.zeros(n), "roll": np.zeros(n)}),
-                   tmp_path / "p.parquet", row_group_size=300)
+    pq.write_table(
+        pa.table({"pitch": np.arange(n, dtype=float), "yaw": np.zeros(n), "roll": np.zeros(n)}),
+        tmp_path / "p.parquet",
+        row_group_size=300,
+    )
     src = open_table(tmp_path / "p.parquet", batch_size=128, with_lines=True)
     lines = np.concatenate([b.column(LINE_COL).to_numpy() for b in src.batches()])
     assert np.array_equal(lines, np.arange(1, n + 1))  # Parquet rows are 1-based rows
@@ -159,5 +167,6 @@ def test_memory_does_not_grow_with_rows(tmp_path):
         def run():
             for _ in open_table(p, batch_size=4096, block_size=1 << 16).batches():
                 pass
+
         peaks.append(_peak_traced(run))
     assert peaks[1] < 1.5 * peaks[0] + (1 << 20)

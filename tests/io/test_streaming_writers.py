@@ -4,6 +4,7 @@ The oracles below are copies of the previous implementations (json.dump of one d
 table; one str(float) line per row), kept here verbatim in substance. Both outputs are parsed and compared
 value for value; WHENet's text is also compared byte for byte.
 """
+
 import json
 
 import numpy as np
@@ -46,13 +47,31 @@ def old_coco_dict(frame, width=None, height=None, info=None):
         pts = [[] for _ in range(len(frame))]
     area = np.round(box[:, 2] * box[:, 3], 4).tolist()
     image_ids = (codes + 1).tolist()
-    images = [{"file_name": str(f), "height": int(h), "width": int(w), "id": i + 1}
-              for i, (f, w, h) in enumerate(zip(names.tolist(), sizes[0].tolist(), sizes[1].tolist()))]
-    anns = [{"image_id": image_ids[k], "id": k + 1, "category_id": 1, "bbox": box.tolist()[k],
-             "euler_angles": ang.tolist()[k], "face2d_pts": pts[k], "area": area[k], "iscrowd": 0,
-             "segmentation": []} for k in range(len(frame))]
-    return {"info": dict(info or {}), "licenses": [], "images": images, "annotations": anns,
-            "categories": [{"supercategory": "person", "id": 1, "name": "person"}]}
+    images = [
+        {"file_name": str(f), "height": int(h), "width": int(w), "id": i + 1}
+        for i, (f, w, h) in enumerate(zip(names.tolist(), sizes[0].tolist(), sizes[1].tolist()))
+    ]
+    anns = [
+        {
+            "image_id": image_ids[k],
+            "id": k + 1,
+            "category_id": 1,
+            "bbox": box.tolist()[k],
+            "euler_angles": ang.tolist()[k],
+            "face2d_pts": pts[k],
+            "area": area[k],
+            "iscrowd": 0,
+            "segmentation": [],
+        }
+        for k in range(len(frame))
+    ]
+    return {
+        "info": dict(info or {}),
+        "licenses": [],
+        "images": images,
+        "annotations": anns,
+        "categories": [{"supercategory": "person", "id": 1, "name": "person"}],
+    }
 
 
 def old_whenet_text(frame):
@@ -84,8 +103,11 @@ def test_coco_value_for_value(tmp_path, n_lm):
     info = {"description": "x", "n": 3}
     out = tmp_path / "c.json"
     # batches of three kinds: pandas slices, Arrow record batches, an Arrow table
-    parts = [df.iloc[:1000], pa.RecordBatch.from_pandas(df.iloc[1000:2500], preserve_index=False),
-             pa.Table.from_pandas(df.iloc[2500:], preserve_index=False)]
+    parts = [
+        df.iloc[:1000],
+        pa.RecordBatch.from_pandas(df.iloc[1000:2500], preserve_index=False),
+        pa.Table.from_pandas(df.iloc[2500:], preserve_index=False),
+    ]
     with CocoWriter(out, info=info) as w:
         for p in parts:
             w.write(p)
@@ -99,8 +121,7 @@ def test_whenet_byte_for_byte(tmp_path):
     df = table(3000, 0)
     write_whenet(df, tmp_path / "a.txt", batch_size=999)
     assert (tmp_path / "a.txt").read_text() == old_whenet_text(df)
-    write_whenet(iter([pa.Table.from_pandas(df.iloc[:10], preserve_index=False), df.iloc[10:]]),
-                 tmp_path / "b.txt")
+    write_whenet(iter([pa.Table.from_pandas(df.iloc[:10], preserve_index=False), df.iloc[10:]]), tmp_path / "b.txt")
     assert (tmp_path / "b.txt").read_text() == old_whenet_text(df)
 
 

@@ -1,4 +1,5 @@
 """COCO (DirectMHP schema) and WHENet annotation.txt writers."""
+
 from __future__ import annotations
 
 import json
@@ -16,13 +17,19 @@ from hpe_cli.io.whenet_txt import read_whenet, write_whenet
 
 
 def _table(n_lm=3):
-    t = pd.DataFrame({
-        "image": ["a/img1.png", "b/img2.png", "a/img1.png"],
-        "bbox_x": [10.0, 20.0, 300.0], "bbox_y": [5.0, 6.0, 7.0], "bbox_w": [40.0, 50.0, 60.0],
-        "bbox_h": [44.0, 55.0, 66.0],
-        "pitch": [1.5, -20.25, 30.0], "yaw": [2.5, 150.0, -45.0], "roll": [3.5, 10.0, -5.0],
-        "extra": ["x", "y", "z"],
-    })
+    t = pd.DataFrame(
+        {
+            "image": ["a/img1.png", "b/img2.png", "a/img1.png"],
+            "bbox_x": [10.0, 20.0, 300.0],
+            "bbox_y": [5.0, 6.0, 7.0],
+            "bbox_w": [40.0, 50.0, 60.0],
+            "bbox_h": [44.0, 55.0, 66.0],
+            "pitch": [1.5, -20.25, 30.0],
+            "yaw": [2.5, 150.0, -45.0],
+            "roll": [3.5, 10.0, -5.0],
+            "extra": ["x", "y", "z"],
+        }
+    )
     for i in range(n_lm):
         t[f"lm{i}_x"] = [100.0 + i, 200.0 + i, 300.0 + i]
         t[f"lm{i}_y"] = [110.0 + i, 210.0 + i, 310.0 + i]
@@ -32,6 +39,7 @@ def _table(n_lm=3):
 def _strict_load(path):
     def no_constant(name):
         raise AssertionError(f"non-standard JSON constant {name}")
+
     return json.loads(path.read_text(encoding="utf-8"), parse_constant=no_constant)
 
 
@@ -52,8 +60,17 @@ def test_coco_schema(tmp_path):
     assert [a["id"] for a in anns] == [1, 2, 3]
     assert [a["image_id"] for a in anns] == [1, 2, 1]
     for a in anns:
-        assert set(a) == {"image_id", "id", "category_id", "bbox", "euler_angles", "face2d_pts", "area",
-                          "iscrowd", "segmentation"}
+        assert set(a) == {
+            "image_id",
+            "id",
+            "category_id",
+            "bbox",
+            "euler_angles",
+            "face2d_pts",
+            "area",
+            "iscrowd",
+            "segmentation",
+        }
         assert a["category_id"] == 1 and a["iscrowd"] == 0 and a["segmentation"] == []
     a = anns[1]
     assert a["bbox"] == [20.0, 6.0, 50.0, 55.0]
@@ -123,8 +140,7 @@ def test_whenet_lines_match_whenets_format(tmp_path):
     t = _table()
     out = tmp_path / "annotation.txt"
     write_whenet(t, out)
-    expected = "".join(_whenet_line(i, y, p, r) for i, p, y, r in
-                       zip(t["image"], t["pitch"], t["yaw"], t["roll"]))
+    expected = "".join(_whenet_line(i, y, p, r) for i, p, y, r in zip(t["image"], t["pitch"], t["yaw"], t["roll"]))
     assert out.read_text(encoding="utf-8") == expected
     assert out.read_text().splitlines()[1] == "b/img2.png,150.0,-20.25,10.0"  # yaw first
 
@@ -157,8 +173,14 @@ def test_read_whenet_rejects_garbage(tmp_path):
 @given(st.lists(st.tuples(st.floats(-180, 180), st.floats(-90, 90), st.floats(-90, 90)), min_size=1, max_size=8))
 def test_whenet_roundtrip_exact(tmp_path_factory, rows):
     a = np.asarray(rows)
-    t = pd.DataFrame({"image": [f"s/{k:02d}_0_{k:08d}.jpg" for k in range(len(a))],
-                      "yaw": a[:, 0], "pitch": a[:, 1], "roll": a[:, 2]})
+    t = pd.DataFrame(
+        {
+            "image": [f"s/{k:02d}_0_{k:08d}.jpg" for k in range(len(a))],
+            "yaw": a[:, 0],
+            "pitch": a[:, 1],
+            "roll": a[:, 2],
+        }
+    )
     out = tmp_path_factory.mktemp("w") / "annotation.txt"
     write_whenet(t, out)
     back = read_whenet(out)

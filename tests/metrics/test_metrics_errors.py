@@ -1,16 +1,16 @@
 """Core metrics against SciPy and closed-form identities (hpe_cli.metrics.rotation_errors, align, evaluate)."""
+
 import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from conftest import canonical_A
 from hpe_cli.metrics import rotation_errors as re_
 from hpe_cli.metrics.align import mean_offset
 from hpe_cli.metrics.evaluate import evaluate
 from hpe_cli.rotation.systems import get_system
-
-from conftest import canonical_A
 
 
 def _random(n, seed):
@@ -120,8 +120,9 @@ def test_align_mean_recovers_constant_offset():
     angle = np.rad2deg(Rotation.from_matrix(Q).magnitude())
     assert r["align"]["offset_deg"] == pytest.approx(angle, abs=0.15)
     assert r["metrics"]["geodesic"]["mean"] < r["align"]["before"]["metrics"]["geodesic"]["mean"] - 3
-    exact = evaluate(P, G, pred_system="300w_lp", gt_system="300w_lp", protocols=["hopenet"], align="mean",
-                     columns="matrix")
+    exact = evaluate(
+        P, G, pred_system="300w_lp", gt_system="300w_lp", protocols=["hopenet"], align="mean", columns="matrix"
+    )
     assert exact["metrics"]["geodesic"]["max"] < 1e-6
     assert exact["protocols"]["hopenet"]["mean"] < 1e-6
     # the offset in GT-system angles rebuilds Q

@@ -10,9 +10,10 @@ The synthetic set has flipped answers (yaw + 180 and sign-flipped yaw),
 back-facing heads (|yaw| > 90 in the WHENet system), rows at gimbal lock
 (yaw = +-90 in 300W-LP) and GT past +-99.
 """
-import cv2
+
 import warnings
 
+import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -90,8 +91,16 @@ def data():
     rows = compute_rows(P, G, get_system("300w_lp"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # SciPy warns at gimbal lock
-        oracle = {"p300": _xyz_int_300wlp(P), "g300": _xyz_int_300wlp(G), "p6": _sixd(P), "g6": _sixd(G),
-                  "pw": _whenet(P), "gw": _whenet(G), "pb": _biwi(P), "gb": _biwi(G)}
+        oracle = {
+            "p300": _xyz_int_300wlp(P),
+            "g300": _xyz_int_300wlp(G),
+            "p6": _sixd(P),
+            "g6": _sixd(G),
+            "pw": _whenet(P),
+            "gw": _whenet(G),
+            "pb": _biwi(P),
+            "gb": _biwi(G),
+        }
     free = ~(_locked(P) | _locked(G))
     return P, G, rows, oracle, free
 
@@ -125,8 +134,10 @@ def test_fsanet(data):
 
 
 def _sixd_min(p, g):
-    return np.min(np.stack([np.abs(g - p), np.abs(p + 360 - g), np.abs(p - 360 - g), np.abs(p + 180 - g),
-                            np.abs(p - 180 - g)]), axis=0)
+    return np.min(
+        np.stack([np.abs(g - p), np.abs(p + 360 - g), np.abs(p - 360 - g), np.abs(p + 180 - g), np.abs(p - 180 - g)]),
+        axis=0,
+    )
 
 
 def test_6drepnet(data):
@@ -169,8 +180,9 @@ def test_whenet(data):
 def test_headposeplus(data):
     P, G, rows, o, free = data
     _check(rows, "headposeplus", np.abs(o["pb"] - o["gb"]), np.ones(len(G), bool), free)
-    np.testing.assert_allclose(rows.protocols["headposeplus"].vectors["ypr"][1][free],
-                               np.abs(o["p300"] - o["g300"])[free], atol=1e-7)
+    np.testing.assert_allclose(
+        rows.protocols["headposeplus"].vectors["ypr"][1][free], np.abs(o["p300"] - o["g300"])[free], atol=1e-7
+    )
 
 
 def test_headposeplus_pyr_is_scipy_xyz_of_the_rotation(data):

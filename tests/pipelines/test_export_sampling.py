@@ -1,4 +1,5 @@
 """Splits, --min-change and --balance against small hand-computed cases; crop maths."""
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -7,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from hpe_cli.errors import HpeError
 from hpe_cli.geometry.crop import crop_padded, expand_boxes, inside_fraction, pixel_boxes, points_to_crop
-from hpe_cli.pipelines.export import (assign_splits, balance_keep, min_change_keep, parse_balance, parse_split)
+from hpe_cli.pipelines.export import assign_splits, balance_keep, min_change_keep, parse_balance, parse_split
 
 
 def yaw_mats(yaws):
@@ -28,8 +29,9 @@ def test_min_change_hand_case():
     keep = min_change_keep(keys2, np.array([1, 1, 2, 2]), yaw_mats([0, 0, 2, 10]), 5.0, np.ones(4, bool))
     assert keep.tolist() == [True, True, False, True]
     # a rejected row is neither kept nor used as the reference
-    keep = min_change_keep(np.array(["a"] * 3), np.array([1, 2, 3]), yaw_mats([0, 8, 9]), 5.0,
-                           np.array([True, False, True]))
+    keep = min_change_keep(
+        np.array(["a"] * 3), np.array([1, 2, 3]), yaw_mats([0, 8, 9]), 5.0, np.array([True, False, True])
+    )
     assert keep.tolist() == [True, False, True]
 
 
@@ -115,8 +117,14 @@ def test_crop_maths():
 
 
 @settings(max_examples=40)
-@given(st.integers(-60, 100), st.integers(-60, 80), st.integers(1, 90), st.integers(1, 90),
-       st.integers(0, 79), st.integers(0, 59))
+@given(
+    st.integers(-60, 100),
+    st.integers(-60, 80),
+    st.integers(1, 90),
+    st.integers(1, 90),
+    st.integers(0, 79),
+    st.integers(0, 59),
+)
 def test_crop_points_follow_pixels(x0, y0, w, h, u, v):
     """A frame pixel inside the crop box sits in the crop at points_to_crop of its coordinates."""
     img = np.random.default_rng(0).integers(1, 255, (60, 80), dtype=np.uint8)
@@ -134,11 +142,23 @@ def test_crop_names_unique_and_split_names_checked():
 
     from hpe_cli.io.export.base import crop_names
 
-    rows = pd.DataFrame({"source": "s", "image": ["a/x.jpg", "a/x.jpg", "b/y.jpg", "q", "q"],
-                         "camera": ["", "", "", "00_01", "00_01"], "sequence": ["", "", "", "seq", "seq"],
-                         "frame": [-1, -1, -1, 7, 7], "person_id": [-1, -1, -1, 2, 2]})
-    assert crop_names(rows).tolist() == ["a__x_0", "a__x_1", "b__y", "seq/00_01_2_00000007",
-                                         "seq/00_01_2_00000007_dup1"]
+    rows = pd.DataFrame(
+        {
+            "source": "s",
+            "image": ["a/x.jpg", "a/x.jpg", "b/y.jpg", "q", "q"],
+            "camera": ["", "", "", "00_01", "00_01"],
+            "sequence": ["", "", "", "seq", "seq"],
+            "frame": [-1, -1, -1, 7, 7],
+            "person_id": [-1, -1, -1, 2, 2],
+        }
+    )
+    assert crop_names(rows).tolist() == [
+        "a__x_0",
+        "a__x_1",
+        "b__y",
+        "seq/00_01_2_00000007",
+        "seq/00_01_2_00000007_dup1",
+    ]
     with pytest.raises(HpeError):
         parse_split("sequence:tr/ain=0.5,val=0.5")
     with pytest.raises(HpeError):

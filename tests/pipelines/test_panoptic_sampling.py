@@ -2,6 +2,7 @@
 
 Oracles: WHENet's camera list written out here, hand counts, and --min-change re-done independently
 (a plain loop with SciPy's rotation magnitudes over the unsampled labels)."""
+
 import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
@@ -42,7 +43,9 @@ def test_whenet_haggling_cameras_and_all_views(seq, tmp_path):
     assert (sizes == 20).all() and len(sizes) >= 1
     dropped = r[r["reason"] == "not seen by every camera"]
     assert len(dropped) > 0 and dropped["detail"].str.contains(r"of 20 cameras").all()
-    faces = set(map(tuple, t[["frame", "person_id"]].to_numpy())) | set(map(tuple, r[["frame", "person_id"]].to_numpy()))
+    faces = set(map(tuple, t[["frame", "person_id"]].to_numpy())) | set(
+        map(tuple, r[["frame", "person_id"]].to_numpy())
+    )
     assert len(t) + len(r) == len(faces) * 20  # every view accounted for
 
 

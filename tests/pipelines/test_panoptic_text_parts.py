@@ -5,17 +5,17 @@ and, independently, ``json`` parsing of the COCO document checked against the Pa
 Several sequences and many small units (4 frames each) so ids cross unit and sequence boundaries; with
 ``--min-change`` (units formatted from the rows it keeps), with ``--resume``, and on a Dask ``LocalCluster``.
 """
+
 import json
 from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from conftest import sample_data_script
 
+from conftest import sample_data_script
 from hpe_cli.errors import HpeError
 from hpe_cli.pipelines import panoptic as job
-
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,5 @@
 """run_audit at scale-ish against independent oracles: pandas' duplicated() and the array checks."""
+
 import numpy as np
 import pandas as pd
 import pyarrow as pa
@@ -15,8 +16,8 @@ def test_string_hashes_equal_iff_equal():
     words = list(dict.fromkeys(words))
     arr = pa.array(words + words[:100] + [None, None])
     h = string_hashes(arr)
-    assert len(np.unique(h[:len(words)])) == len(words)  # no collision among distinct strings
-    assert np.array_equal(h[len(words):len(words) + 100], h[:100])
+    assert len(np.unique(h[: len(words)])) == len(words)  # no collision among distinct strings
+    assert np.array_equal(h[len(words) : len(words) + 100], h[:100])
     assert h[-1] == h[-2]
     # slices (non-zero offsets) and large_string give the same hashes
     assert np.array_equal(string_hashes(arr.slice(7, 50)), h[7:57])

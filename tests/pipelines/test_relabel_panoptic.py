@@ -1,4 +1,5 @@
 """The relabel core and the Panoptic job: known ground truth, WHENet's legacy chain, and the real frames."""
+
 import csv
 import json
 from pathlib import Path
@@ -15,7 +16,6 @@ from hpe_cli.rotation import canonical_to_labels
 
 ROOT = Path(__file__).resolve().parents[2]
 SYNTH = ROOT / "sample_data" / "panoptic_synth"
-
 
 
 def _scipy_300wlp(A):
@@ -65,8 +65,14 @@ def test_legacy_chain_equals_corrected_labels_on_kept_rows():
     assert np.minimum(d, 360 - d).max() < 1e-9
     # a dropped row really has no triple with |pitch| < 90 and |roll| < 90
     both = _scipy_300wlp(A[~kept])
-    other = np.stack([both[:, 0] - np.sign(both[:, 0]) * 180, np.sign(both[:, 1]) * 180 - both[:, 1],
-                      both[:, 2] - np.sign(both[:, 2]) * 180], -1)
+    other = np.stack(
+        [
+            both[:, 0] - np.sign(both[:, 0]) * 180,
+            np.sign(both[:, 1]) * 180 - both[:, 1],
+            both[:, 2] - np.sign(both[:, 2]) * 180,
+        ],
+        -1,
+    )
     bad1 = (np.abs(both[:, 0]) >= 90) | (np.abs(both[:, 2]) >= 90)
     bad2 = (np.abs(other[:, 0]) >= 90) | (np.abs(other[:, 2]) >= 90)
     assert np.all(bad1 & bad2)
@@ -87,9 +93,9 @@ def test_fit_faces_thresholds():
     lm = np.zeros((4, 70, 3))
     lm[:, f70] = reference_head()[head] * 0.95 + [10, -150, 20]
     score = np.full((4, 70), 0.5)
-    score[1, f70[:7]] = 0.1     # exactly 0.1 is not confident: 7 pairs left, fitted
-    score[2, f70[:8]] = 0.05    # 6 pairs left: rejected
-    lm[3, f70[:8]] = np.nan     # NaN landmarks are unusable too
+    score[1, f70[:7]] = 0.1  # exactly 0.1 is not confident: 7 pairs left, fitted
+    score[2, f70[:8]] = 0.05  # 6 pairs left: rejected
+    lm[3, f70[:8]] = np.nan  # NaN landmarks are unusable too
     fit = fit_faces(lm, score, (f70, head))
     assert list(fit["n_pairs"]) == [14, 7, 6, 6]
     assert list(fit["reason"]) == ["", "", "too few confident points", "too few confident points"]
@@ -248,11 +254,13 @@ def test_real_labels_agree_with_face_geometry(realdata):
     assert worst_x < 10 and worst_z < 10
     # the projected landmarks are OpenCV's projection of the 3-D ones
     import cv2
+
     n = 7
     lm = faces[(int(table["frame"][n]), int(table["person_id"][n]))]
     c = cal[table["camera"][n]]
-    uv = cv2.projectPoints(lm, cv2.Rodrigues(np.array(c["R"]))[0], np.array(c["t"], float), np.array(c["K"]),
-                           np.array(c["distCoef"]))[0][:, 0]
+    uv = cv2.projectPoints(
+        lm, cv2.Rodrigues(np.array(c["R"]))[0], np.array(c["t"], float), np.array(c["K"]), np.array(c["distCoef"])
+    )[0][:, 0]
     got = np.stack([[table[f"lm{i}_x"][n], table[f"lm{i}_y"][n]] for i in range(70)])
     np.testing.assert_allclose(got, uv, atol=1e-6)
 

@@ -1,4 +1,5 @@
 """The top-level Python API (``import hpe_cli as hpe``): lazy, and the same answers as SciPy and the core."""
+
 import os
 import subprocess
 import sys
@@ -18,8 +19,9 @@ HEAVY = ("torch", "torchvision", "pandas", "pyarrow", "scipy", "matplotlib", "cv
 
 def _python(code):
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    return subprocess.run([sys.executable, "-X", "importtime", "-c", code], capture_output=True, text=True, env=env,
-                          check=True)
+    return subprocess.run(
+        [sys.executable, "-X", "importtime", "-c", code], capture_output=True, text=True, env=env, check=True
+    )
 
 
 def test_import_is_lazy():
@@ -57,16 +59,22 @@ def test_convert_every_storage_kind_against_scipy():
     assert np.abs(back[:, [1, 0, 2]] - ref.primary).max() < 1e-9
     R = hpe.get_system("300w_lp").from_angles(pyr)
     rot = Rotation.from_matrix(R)
-    for values, storage, kw in [(R, None, {}), (rot.as_rotvec(), "rotvec", {}),
-                                (rot.as_quat()[:, [3, 0, 1, 2]], None, {}),
-                                (rot.as_quat(), "quaternion", {"quaternion_order": "xyzw"})]:
+    for values, storage, kw in [
+        (R, None, {}),
+        (rot.as_rotvec(), "rotvec", {}),
+        (rot.as_quat()[:, [3, 0, 1, 2]], None, {}),
+        (rot.as_quat(), "quaternion", {"quaternion_order": "xyzw"}),
+    ]:
         c = hpe.convert(values, "300w_lp", "scipy_zyx", storage=storage, **kw)
         assert np.abs(c.matrix - ref.matrix).max() < 1e-12
     # 6-D: 6DRepNet's network output for the 300W-LP label (20, -50, 15) (the example in 6drepnet_6d.toml)
     d6 = [0.620885153, 0.166365675, 0.766044443, -0.496285454, 0.839862101, 0.21984631]
     c6 = hpe.convert([d6], "6drepnet_6d", "300w_lp")
     assert np.abs(c6.primary - [[20, -50, 15]]).max() < 1e-6
-    assert np.abs(hpe.convert(np.array(d6) * 3.0, "6drepnet_6d", "300w_lp", storage="6d").primary - c6.primary).max() < 1e-9
+    assert (
+        np.abs(hpe.convert(np.array(d6) * 3.0, "6drepnet_6d", "300w_lp", storage="6d").primary - c6.primary).max()
+        < 1e-9
+    )
     with pytest.raises(ValueError, match="unit quaternion"):
         hpe.convert([[2.0, 0, 0, 0]], "300w_lp", "biwi")
     one = hpe.convert(pyr[0], "300w_lp", "scipy_zyx")
@@ -117,7 +125,9 @@ def test_audit_geodesic_draw():
     with pytest.raises(ValueError, match="system="):
         hpe.geodesic([0, 0, 0], [0, 1, 0])
     img = np.zeros((64, 64, 3), np.uint8)
-    hpe.draw_axes(img, [[0.0, 90.0, 0.0]], (32, 32), 20, thickness=1)  # 300W-LP yaw 90: A[:, 2] = (-1, 0, 0), the nose line points to image left
+    hpe.draw_axes(
+        img, [[0.0, 90.0, 0.0]], (32, 32), 20, thickness=1
+    )  # 300W-LP yaw 90: A[:, 2] = (-1, 0, 0), the nose line points to image left
     assert img[32, 14, 0] > 100 and img[32, 50].max() == 0  # blue channel, left of the centre only
 
 
@@ -135,8 +145,9 @@ def _test_evaluate_missing(monkeypatch):
     import importlib.util
 
     real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec",
-                        lambda name, *a: None if name == "hpe_cli.metrics.evaluate" else real(name, *a))
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "hpe_cli.metrics.evaluate" else real(name, *a)
+    )
     with pytest.raises(NotImplementedError, match="hpe_cli.metrics.evaluate"):
         hpe.evaluate([[0, 0, 0]], [[0, 0, 0]], pred_system="300w_lp", gt_system="300w_lp")
 

@@ -8,6 +8,7 @@ counts as importing ``P.name`` when that is a module (else ``P``). The rules (no
 - only ``cli`` imports ``click``; nothing outside ``torch`` imports ``hpe_cli.torch``;
 - no import cycles between modules.
 """
+
 from __future__ import annotations
 
 import ast
@@ -62,7 +63,7 @@ def _imports(name: str, path: Path):
                 yield node.lineno, alias.name
         elif isinstance(node, ast.ImportFrom):
             if node.level:
-                pkg = base[:len(base) - node.level + 1]
+                pkg = base[: len(base) - node.level + 1]
                 target = ".".join(pkg + ([node.module] if node.module else []))
             else:
                 target = node.module
@@ -102,14 +103,22 @@ def test_every_layer_imports_only_the_layers_below_it():
 
 @pytest.mark.parametrize("package", sorted(ONLY_IN))
 def test_third_party_packages_stay_in_their_layer(package):
-    bad = [f"{_where(name, line)}: {target}" for name, edges in GRAPH.items() for line, target in edges
-           if target.split(".")[0] == package and _layer(name) not in ONLY_IN[package]]
+    bad = [
+        f"{_where(name, line)}: {target}"
+        for name, edges in GRAPH.items()
+        for line, target in edges
+        if target.split(".")[0] == package and _layer(name) not in ONLY_IN[package]
+    ]
     assert not bad, f"{package} imported outside {', '.join(sorted(ONLY_IN[package]))}:\n" + "\n".join(bad)
 
 
 def test_torch_is_imported_by_nothing_else():
-    bad = [f"{_where(name, line)}: {target}" for name, edges in GRAPH.items() for line, target in edges
-           if _layer(target) == "torch" and _layer(name) != "torch"]
+    bad = [
+        f"{_where(name, line)}: {target}"
+        for name, edges in GRAPH.items()
+        for line, target in edges
+        if _layer(target) == "torch" and _layer(name) != "torch"
+    ]
     assert not bad, "hpe_cli.torch imported outside it:\n" + "\n".join(bad)
 
 
@@ -161,6 +170,9 @@ def test_the_rules_cover_every_layer():
 
 def test_no_source_module_over_600_lines():
     """Files small enough to hold in one's head: every hpe_cli module is at most 600 lines."""
-    big = {str(p.relative_to(ROOT.parent)): n for p in ROOT.rglob("*.py")
-           if (n := len(p.read_text(encoding="utf-8").splitlines())) > 600}
+    big = {
+        str(p.relative_to(ROOT.parent)): n
+        for p in ROOT.rglob("*.py")
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > 600
+    }
     assert not big, f"split these modules by responsibility: {big}"

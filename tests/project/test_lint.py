@@ -1,4 +1,5 @@
 """ruff's lint rules and its formatter pass on the whole repository (configured in pyproject.toml)."""
+
 import shutil
 import subprocess
 import sys

@@ -1,4 +1,5 @@
 """Every package under ``hpe_cli/`` is listed in pyproject.toml, so a non-editable install (CI's) ships it."""
+
 import tomllib
 from pathlib import Path
 

@@ -5,6 +5,7 @@ SPEC §2's two-solution formulas, AGORA's own conventions (``camR @ cam_j3d +
 camT = gt_joints_3d``; 1280x720 pixels are 4K pixels times 720/2160), and
 physics (where the nose goes in the image).
 """
+
 from __future__ import annotations
 
 import json
@@ -60,15 +61,35 @@ def _by_key(table):
 
 # ------------------------------------------------------------------- fixture
 def test_fixture_has_agoras_layout(df):
-    for col in ("imgPath", "X", "Y", "Z", "Yaw", "camX", "camY", "camZ", "camYaw", "gender", "kid", "occlusion",
-                "isValid", "gt_joints_2d", "gt_joints_3d", "cam_j3d", "camR", "camT", "camK"):
+    for col in (
+        "imgPath",
+        "X",
+        "Y",
+        "Z",
+        "Yaw",
+        "camX",
+        "camY",
+        "camZ",
+        "camYaw",
+        "gender",
+        "kid",
+        "occlusion",
+        "isValid",
+        "gt_joints_2d",
+        "gt_joints_3d",
+        "cam_j3d",
+        "camR",
+        "camT",
+        "camK",
+    ):
         assert col in df.columns
     for _, row in df.iterrows():
         n = len(row["isValid"])
         for col in ("occlusion", "gt_joints_2d", "gt_joints_3d", "cam_j3d", "camR", "camT", "camK", "X", "Yaw"):
             assert len(row[col]) == n
-        for j2, j3, cj, R, t, K in zip(row["gt_joints_2d"], row["gt_joints_3d"], row["cam_j3d"], row["camR"],
-                                        row["camT"], row["camK"]):
+        for j2, j3, cj, R, t, K in zip(
+            row["gt_joints_2d"], row["gt_joints_3d"], row["cam_j3d"], row["camR"], row["camT"], row["camK"]
+        ):
             assert j2.shape == (127, 2) and j3.shape == (127, 3) and cj.shape == (127, 3)
             assert R.shape == (3, 3) and t.shape == (3, 1) and K.shape == (3, 3)
             # AGORA's own relation between DirectMHP's columns and its camera-frame joints
@@ -84,7 +105,7 @@ def test_read_agora_flattens_people(people, df):
     assert list(people.person) == list(range(5)) * 2 + list(range(4))
     k = 7
     r, p = people.row[k], people.person[k]
-    np.testing.assert_array_equal(people.face3d[k], df["cam_j3d"][r][p][FACE_FIRST:FACE_FIRST + FACE_COUNT])
+    np.testing.assert_array_equal(people.face3d[k], df["cam_j3d"][r][p][FACE_FIRST : FACE_FIRST + FACE_COUNT])
     np.testing.assert_array_equal(people.cam_t[k], df["camT"][r][p][:, 0])
     assert people.image[k] == df["imgPath"][r]
     assert people.occlusion[3] == 95.0 and not people.valid[3]
@@ -145,7 +166,7 @@ def test_nose_turns_with_yaw_and_box_holds_the_face(people):
 def test_landmarks_are_agoras_2d_joints(people, df):
     t = relabel_people(people, Config(system="300w_lp"))["table"]
     for k, (r, p) in enumerate(zip(t["row"], t["person"])):
-        j2 = df["gt_joints_2d"][r][p][FACE_FIRST:FACE_FIRST + FACE_COUNT]
+        j2 = df["gt_joints_2d"][r][p][FACE_FIRST : FACE_FIRST + FACE_COUNT]
         np.testing.assert_allclose(t["lm5_x"][k], j2[5, 0], atol=1e-6)
         np.testing.assert_allclose(t["lm50_y"][k], j2[50, 1], atol=1e-6)
 
@@ -163,7 +184,7 @@ def test_720p_is_4k_times_one_third(people, df):
             assert small[c][kb] == pytest.approx(big[c][ka] / 3.0, abs=1e-6)
         r, p = key
         # AGORA's docs: 1280x720 joints = 4K joints * 720 / 2160
-        j2 = df["gt_joints_2d"][r][p][FACE_FIRST:FACE_FIRST + FACE_COUNT] * (720 / 2160)
+        j2 = df["gt_joints_2d"][r][p][FACE_FIRST : FACE_FIRST + FACE_COUNT] * (720 / 2160)
         assert small["lm7_x"][kb] == pytest.approx(j2[7, 0], abs=1e-6)
 
 
@@ -184,8 +205,7 @@ def test_camera_frame_fallback_gives_the_same_labels(df, tmp_path, people):
 
 
 def test_agora_intrinsics_by_scene():
-    K = agora_intrinsics(["x_hdri_50mm_1.png", "ag_trainset_archviz_cam01_2.png", "ag2_x.png", "plain.png"],
-                         3840, 2160)
+    K = agora_intrinsics(["x_hdri_50mm_1.png", "ag_trainset_archviz_cam01_2.png", "ag2_x.png", "plain.png"], 3840, 2160)
     np.testing.assert_allclose(K[:, 0, 0], np.array([50, 18, 28, 28]) / 36 * 3840)
     np.testing.assert_allclose(K[:, 1, 1], np.array([50, 18, 28, 28]) / 20.25 * 2160)
     np.testing.assert_allclose(K[:, :2, 2], [[1920, 1080]] * 4)
@@ -197,8 +217,9 @@ def test_wrong_aspect_image_size(people):
         relabel_people(people, Config(image_size=(1000, 1000)))
 
 
-@pytest.mark.parametrize("drop, name", [(["occlusion"], "occlusion"), (["imgPath"], "imgPath"),
-                                        (["camK", "gt_joints_3d"], "camK")])
+@pytest.mark.parametrize(
+    "drop, name", [(["occlusion"], "occlusion"), (["imgPath"], "imgPath"), (["camK", "gt_joints_3d"], "camK")]
+)
 def test_missing_column(df, tmp_path, drop, name):
     f = tmp_path / "bad_withjv.pkl"
     df.drop(columns=drop).to_pickle(f)
@@ -235,7 +256,9 @@ def test_wrong_joint_shape(df, tmp_path):
     bad.at[2, "cam_j3d"] = lst
     f = tmp_path / "short.pkl"
     bad.to_pickle(f)
-    with pytest.raises(HpeError, match=r"short.pkl: row 2, person 1: cam_j3d: expected a \(J, 3\) array .*got shape \(100, 3\)"):
+    with pytest.raises(
+        HpeError, match=r"short.pkl: row 2, person 1: cam_j3d: expected a \(J, 3\) array .*got shape \(100, 3\)"
+    ):
         read_agora(f)
 
 

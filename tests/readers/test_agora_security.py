@@ -1,4 +1,5 @@
 """AGORA dataframes from untrusted files: restricted unpickling, Parquet, and validation at the door."""
+
 from __future__ import annotations
 
 import os
@@ -63,7 +64,9 @@ def test_parquet_conversion_one_liner_and_same_labels(tmp_path):
         if k == "source":  # the file's name
             continue
         x, y = np.asarray(a["table"][k]), np.asarray(b["table"][k])
-        assert x.shape == y.shape and (np.array_equal(x, y) if x.dtype == object else np.allclose(x, y, equal_nan=True)), k
+        assert x.shape == y.shape and (
+            np.array_equal(x, y) if x.dtype == object else np.allclose(x, y, equal_nan=True)
+        ), k
     assert list(a["rejects"]["reason"]) == list(b["rejects"]["reason"])
 
 
@@ -75,18 +78,23 @@ def _broken(tmp_path, edit):
     return path
 
 
-@pytest.mark.parametrize("edit, why", [
-    (lambda df: df.at[0, "camR"].__setitem__(0, 2 * np.eye(3)), "camR not orthonormal"),
-    (lambda df: df.at[0, "camR"].__setitem__(0, np.diag([1.0, 1.0, -1.0])), "camR determinant is not +1"),
-    (lambda df: df.at[0, "camR"].__setitem__(0, np.full((3, 3), np.nan)), "camR not finite"),
-    (lambda df: df.at[0, "camK"].__setitem__(0, np.zeros((3, 3))), "camK focal length not positive"),
-    (lambda df: df.at[0, "camT"].__setitem__(0, np.array([np.inf, 0, 0])), "camT not finite"),
-    (lambda df: df.at[0, "cam_j3d"].__setitem__(0, np.full_like(df.at[0, "cam_j3d"][0], 1e308)),
-     "face joints infinite or |value| >= 1e6"),
-    (lambda df: df.__setitem__("imgPath", ["../../etc/passwd"] + list(df["imgPath"][1:])), "'..'"),
-    (lambda df: df.__setitem__("imgPath", ["/etc/passwd"] + list(df["imgPath"][1:])), "absolute image path"),
-    (lambda df: df.__setitem__("imgPath", ["a\x00b.png"] + list(df["imgPath"][1:])), "NUL"),
-])
+@pytest.mark.parametrize(
+    "edit, why",
+    [
+        (lambda df: df.at[0, "camR"].__setitem__(0, 2 * np.eye(3)), "camR not orthonormal"),
+        (lambda df: df.at[0, "camR"].__setitem__(0, np.diag([1.0, 1.0, -1.0])), "camR determinant is not +1"),
+        (lambda df: df.at[0, "camR"].__setitem__(0, np.full((3, 3), np.nan)), "camR not finite"),
+        (lambda df: df.at[0, "camK"].__setitem__(0, np.zeros((3, 3))), "camK focal length not positive"),
+        (lambda df: df.at[0, "camT"].__setitem__(0, np.array([np.inf, 0, 0])), "camT not finite"),
+        (
+            lambda df: df.at[0, "cam_j3d"].__setitem__(0, np.full_like(df.at[0, "cam_j3d"][0], 1e308)),
+            "face joints infinite or |value| >= 1e6",
+        ),
+        (lambda df: df.__setitem__("imgPath", ["../../etc/passwd"] + list(df["imgPath"][1:])), "'..'"),
+        (lambda df: df.__setitem__("imgPath", ["/etc/passwd"] + list(df["imgPath"][1:])), "absolute image path"),
+        (lambda df: df.__setitem__("imgPath", ["a\x00b.png"] + list(df["imgPath"][1:])), "NUL"),
+    ],
+)
 def test_bad_geometry_and_names_are_rejected_per_person(tmp_path, edit, why):
     path = _broken(tmp_path, edit)
     good = relabel_people(read_agora(FIXTURE), Config(system="whenet"))

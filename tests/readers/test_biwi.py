@@ -4,6 +4,7 @@ Oracles: the numbers printed in PROVENANCE.md, SciPy's ``Rotation``, Hopenet's
 BIWI formula (re-typed here from its published equations), and physics (which
 way the nose turns).
 """
+
 from __future__ import annotations
 
 import shutil
@@ -16,8 +17,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.datasets.biwi import (nearest_rotation, read_biwi, read_biwi_tgz, read_calibration, read_pose_bin,
-                                   read_pose_txt)
+from hpe_cli.datasets.biwi import (
+    nearest_rotation,
+    read_biwi,
+    read_biwi_tgz,
+    read_calibration,
+    read_pose_bin,
+    read_pose_txt,
+)
 from hpe_cli.errors import HpeError
 from hpe_cli.rotation import convert_angles, convert_matrices, frobenius, get_system
 
@@ -25,8 +32,7 @@ BIWI = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "biwi"
 needs_data = pytest.mark.skipif(not BIWI.is_dir(), reason="shared/realdata not available")
 F = np.diag([1.0, -1.0, -1.0])
 
-R3 = np.array([[0.997978, 0.0272944, 0.0574071], [-0.0346956, 0.990621, 0.132163],
-               [-0.0532613, -0.133887, 0.989564]])
+R3 = np.array([[0.997978, 0.0272944, 0.0574071], [-0.0346956, 0.990621, 0.132163], [-0.0532613, -0.133887, 0.989564]])
 T3 = np.array([51.9358, 38.2631, 881.756])
 
 
@@ -82,13 +88,13 @@ def test_hopenet_reader_gives_300wlp_angles_of_biwi_matrix(rows):
 def test_biwi_signs_are_physical():
     biwi = get_system("biwi")
     nose_model = np.array([0.0, 0.0, -1.0])  # the model's nose points at the camera (-z, camera frame)
-    top_model = np.array([0.0, -1.0, 0.0])   # the top of the head is up (-y)
+    top_model = np.array([0.0, -1.0, 0.0])  # the top of the head is up (-y)
     yaw = biwi.from_angles([[0, 30, 0]])[0] @ nose_model
     pitch = biwi.from_angles([[30, 0, 0]])[0] @ nose_model
     roll = biwi.from_angles([[0, 0, 30]])[0] @ top_model
-    assert yaw[0] < -0.4      # positive yaw: nose to the image left, as in 300W-LP
-    assert pitch[1] > 0.4     # positive BIWI pitch: nose down (y down), opposite to 300W-LP
-    assert roll[0] > 0.4      # positive roll: head top to the image right, as in 300W-LP
+    assert yaw[0] < -0.4  # positive yaw: nose to the image left, as in 300W-LP
+    assert pitch[1] > 0.4  # positive BIWI pitch: nose down (y down), opposite to 300W-LP
+    assert roll[0] > 0.4  # positive roll: head top to the image right, as in 300W-LP
     p, y, r = convert_angles([[30, 0, 0], [0, 30, 0], [0, 0, 30]], "biwi", "300w_lp").primary
     np.testing.assert_allclose([p, y, r], [[-30, 0, 0], [0, 30, 0], [0, 0, 30]], atol=1e-12)
 
@@ -158,8 +164,11 @@ def test_tgz_reader(tgz):
     assert not ((t["sequence"] == "01") & (t["frame"] == 3)).any()
     first = t.iloc[0]
     assert first["file"] == "01/frame_00004_pose.bin"
-    np.testing.assert_allclose(first[["center_x", "center_y", "center_z", "pitch", "yaw", "roll"]].to_numpy(float),
-                               [51.85, 38.57, 881.65, -7.79, 3.60, -2.44], atol=0.006)
+    np.testing.assert_allclose(
+        first[["center_x", "center_y", "center_z", "pitch", "yaw", "roll"]].to_numpy(float),
+        [51.85, 38.57, 881.65, -7.79, 3.60, -2.44],
+        atol=0.006,
+    )
     for col, lo, hi in (("pitch", -84.35, 53.55), ("yaw", -66.95, 76.89), ("roll", -69.62, 63.37)):
         assert t[col].min() == pytest.approx(lo, abs=0.006) and t[col].max() == pytest.approx(hi, abs=0.006)
     ext = t.set_index("file")
@@ -291,8 +300,9 @@ def test_bad_frames_collected_not_raised(tmp_path):
     bad = []
     t = read_biwi(tmp_path / "hpdb", bad=bad)
     assert list(t["file"]) == ["01/frame_00003_pose.txt"]
-    np.testing.assert_allclose(t[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy().reshape(3, 3),
-                               nearest_rotation(R3), atol=1e-12)
+    np.testing.assert_allclose(
+        t[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy().reshape(3, 3), nearest_rotation(R3), atol=1e-12
+    )
     assert [b["file"] for b in bad] == ["01/frame_00004_pose.txt", "01/frame_00005_pose.txt"]
     assert bad[0]["reason"].startswith("expected a rotation matrix") and bad[0]["frame"] == 4
     assert bad[0]["message"] == f"{hp / 'frame_00004_pose.txt'}: {bad[0]['reason']}"
@@ -322,4 +332,5 @@ def test_tgz_bad_member_collected_unread(tmp_path, monkeypatch):
     t = read_biwi_tgz(path, bad=bad)
     assert list(t["file"]) == ["01/frame_00004_pose.bin"] and calls == ["01/frame_00004_pose.bin"]
     assert [(b["file"], b["frame"], b["reason"]) for b in bad] == [
-        ("01/frame_00003_pose.bin", 3, "expected 24 bytes (6 float32), got 4194304")]
+        ("01/frame_00003_pose.bin", 3, "expected 24 bytes (6 float32), got 4194304")
+    ]

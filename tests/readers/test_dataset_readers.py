@@ -1,5 +1,6 @@
 """Dataset readers as shipped: 300W-LP root/zip/landmarks, DAD-3DHeads, TableSource.system, and the
 .mat-is-always-300w_lp fix in draw/augment."""
+
 from __future__ import annotations
 
 import json
@@ -56,8 +57,11 @@ def w300_root(tmp_path):
 def test_w300lp_root(w300_root):
     src, f = table(w300_root)
     assert src.system == "300w_lp"
-    assert list(f["file"]) == ["IBUG/IBUG_image_008_1_0.mat", "IBUG/IBUG_image_008_1_1.mat",
-                               "IBUG_Flip/IBUG_image_008_1_0.mat"]
+    assert list(f["file"]) == [
+        "IBUG/IBUG_image_008_1_0.mat",
+        "IBUG/IBUG_image_008_1_1.mat",
+        "IBUG_Flip/IBUG_image_008_1_0.mat",
+    ]
     assert list(f["subset"]) == ["IBUG"] * 3 and list(f["flipped"]) == [False, False, True]
     assert list(f["identity"]) == ["IBUG_image_008_1"] * 3 and list(f["k"]) == [0, 1, 0]
     # PROVENANCE: Pose_Para in degrees pitch -7.58, yaw -44.01, roll 3.21
@@ -106,14 +110,32 @@ def _dad_tree(root: Path, rots, scales):
         mv = np.eye(4)
         mv[:3, :3] = s * (np.diag([1.0, -1.0, -1.0]) @ R_cv)  # OpenGL camera = OpenCV camera with y, z flipped
         mv[:3, 3] = [0.01 * n, 0.02, -0.5]
-        (sub / "annotations" / f"{iid}.json").write_text(json.dumps(
-            {"vertices": [[0.0, 0.0, 0.0]] * 3, "model_view_matrix": mv.tolist(),
-             "projection_matrix": np.eye(4).tolist()}))
-        items.append({"item_id": iid, "annotation_path": f"val/annotations/{iid}.json",
-                      "img_path": f"val/images/{iid}.png",
-                      "bbox": [10 + n, 20, 30, 40],
-                      "attributes": {"quality": "hq", "gender": "female", "expression": "false", "age": "young",
-                                     "occlusions": "false", "pose": "front", "standard light": "true"}})
+        (sub / "annotations" / f"{iid}.json").write_text(
+            json.dumps(
+                {
+                    "vertices": [[0.0, 0.0, 0.0]] * 3,
+                    "model_view_matrix": mv.tolist(),
+                    "projection_matrix": np.eye(4).tolist(),
+                }
+            )
+        )
+        items.append(
+            {
+                "item_id": iid,
+                "annotation_path": f"val/annotations/{iid}.json",
+                "img_path": f"val/images/{iid}.png",
+                "bbox": [10 + n, 20, 30, 40],
+                "attributes": {
+                    "quality": "hq",
+                    "gender": "female",
+                    "expression": "false",
+                    "age": "young",
+                    "occlusions": "false",
+                    "pose": "front",
+                    "standard light": "true",
+                },
+            }
+        )
     (sub / "val.json").write_text(json.dumps(items))
     return sub
 
@@ -203,8 +225,23 @@ def test_augment_rotate0_mat_gives_target_system_angles(aflw430, tmp_path):
     from hpe_cli.rotation.systems import get_system
 
     out = tmp_path / "aug.csv"
-    r = CliRunner().invoke(cli, ["augment", str(aflw430), "-o", str(out), "--system", "3ddfa_v2", "--rotate", "0",
-                                 "--image-size", "450", "450", "-q"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "augment",
+            str(aflw430),
+            "-o",
+            str(out),
+            "--system",
+            "3ddfa_v2",
+            "--rotate",
+            "0",
+            "--image-size",
+            "450",
+            "450",
+            "-q",
+        ],
+    )
     assert r.exit_code == 0, r.output
     f = pd.read_csv(out)
     pose = np.rad2deg(scipy.io.loadmat(aflw430 / "image00430.mat")["Pose_Para"][0, :3])
@@ -236,8 +273,9 @@ def test_dad3dheads_converts_with_the_builtin_system(tmp_path):
     rots = Rotation.from_euler("xyz", [[10, -20, 5], [-40, 30, 100]], degrees=True).as_matrix()
     _dad_tree(tmp_path, rots, [1.0, 1.0])
     out = tmp_path / "o.csv"
-    r = CliRunner().invoke(cli, ["convert", str(tmp_path), "-o", str(out), "--from", "dad3dheads", "--to", "300w_lp",
-                                 "-q"])
+    r = CliRunner().invoke(
+        cli, ["convert", str(tmp_path), "-o", str(out), "--from", "dad3dheads", "--to", "300w_lp", "-q"]
+    )
     assert r.exit_code == 0, r.output
     f = pd.read_csv(out)
     w = get_system("300w_lp")
@@ -255,10 +293,26 @@ def test_evaluate_mat_gt_is_300w_lp_whatever_gt_system(aflw430, tmp_path):
     pose = np.rad2deg(scipy.io.loadmat(aflw430 / "image00430.mat")["Pose_Para"][0, :3].astype(np.float64))
     pred = tmp_path / "pred.csv"
     pd.DataFrame({"file": ["image00430.mat"], "pitch": [pose[0]], "yaw": [pose[1]], "roll": [pose[2]]}).to_csv(
-        pred, index=False)
+        pred, index=False
+    )
     for gsys in ("300w_lp", "3ddfa_v2"):
         rep = tmp_path / f"{gsys}.json"
-        r = CliRunner().invoke(cli, ["evaluate", str(pred), str(aflw430), "--pred-system", "300w_lp",
-                                     "--gt-system", gsys, "--key", "file", "--json", str(rep), "-q"])
+        r = CliRunner().invoke(
+            cli,
+            [
+                "evaluate",
+                str(pred),
+                str(aflw430),
+                "--pred-system",
+                "300w_lp",
+                "--gt-system",
+                gsys,
+                "--key",
+                "file",
+                "--json",
+                str(rep),
+                "-q",
+            ],
+        )
         assert r.exit_code == 0, r.output
         assert json.loads(rep.read_text())["metrics"]["geodesic"]["max"] < 1e-6

@@ -3,6 +3,7 @@
 The oracle is PROVENANCE.md's table (values read independently with scipy and
 printed to 2 decimals) and the visibility counts given there per file.
 """
+
 from __future__ import annotations
 
 import shutil
@@ -79,8 +80,9 @@ def test_read_mat_dir_table():
     frame = read_mat_dir(AFLW, landmarks=True)
     assert len(frame) == 16
     assert list(frame["file"]) == [f"{n}.mat" for n in sorted(AFLW_TABLE)]
-    np.testing.assert_allclose(frame[["pitch", "yaw", "roll"]].to_numpy(),
-                               [AFLW_TABLE[n][:3] for n in sorted(AFLW_TABLE)], atol=0.006)
+    np.testing.assert_allclose(
+        frame[["pitch", "yaw", "roll"]].to_numpy(), [AFLW_TABLE[n][:3] for n in sorted(AFLW_TABLE)], atol=0.006
+    )
     lm = frame[[f"lm{i}_x" for i in range(21)]].to_numpy()
     assert (np.isfinite(lm).sum(1) == [AFLW_TABLE[n][6] for n in sorted(AFLW_TABLE)]).all()
     assert "lm67_x" not in frame and "lm3d67_z" in frame

@@ -1,6 +1,7 @@
 """Panoptic as downloaded: hdFace3d.tar in place, hdVideos, several sequences, units with parts
 (workers, resume, Dask), sampling rules and geometry validation. Oracles: the extracted folder,
 frames that encode their own number, an uninterrupted single-process run, and hand counts."""
+
 import json
 import shutil
 from pathlib import Path
@@ -10,15 +11,14 @@ import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
 
+from conftest import sample_data_script
 from hpe_cli.cli.main import cli
 from hpe_cli.datasets import panoptic as pan
 from hpe_cli.datasets.panoptic_video import VideoFrames
 from hpe_cli.errors import HpeError
 from hpe_cli.pipelines import panoptic as job
-from conftest import sample_data_script
 
 ROOT = Path(__file__).resolve().parents[2]
-
 
 
 GEN = sample_data_script()
@@ -65,8 +65,11 @@ def test_duplicate_frames_name_both(seqs, tmp_path):
         pan.face_frames(seq)
     (seq / "hdFace3d" / "faceRecon3D_hd6.json").unlink()
     GEN.pack_tar(seq, duplicate=6)
-    with pytest.raises(HpeError, match=r"members hdFace3d/faceRecon3D_hd00000006\.json and "
-                                       r"hdFace3d/faceRecon3D_hd6\.json are both frame 6"):
+    with pytest.raises(
+        HpeError,
+        match=r"members hdFace3d/faceRecon3D_hd00000006\.json and "
+        r"hdFace3d/faceRecon3D_hd6\.json are both frame 6",
+    ):
         pan.tar_frames(seq / "hdFace3d.tar")
     out = _run(["relabel-panoptic", str(seq), "-o", str(tmp_path / "o.parquet")], expect=1)
     assert "both frame 6" in out and "Traceback" not in out
@@ -80,7 +83,7 @@ def test_truncated_tar_rejects_the_cut_frame(seqs, tmp_path):
     last = max(frames)
     ref = frames[last]
     data = tar.read_bytes()
-    tar.write_bytes(data[:ref.offset + ref.size // 2])  # cut inside the last member's data
+    tar.write_bytes(data[: ref.offset + ref.size // 2])  # cut inside the last member's data
     cut = pan.tar_frames(tar)
     assert cut[last].truncated and not any(r.truncated for k, r in cut.items() if k != last)
     o, rj = tmp_path / "o.parquet", tmp_path / "r.csv"
@@ -108,8 +111,16 @@ def test_several_sequences_and_a_root(seqs, tmp_path):
     one = _read(_one(seqs / "multi" / "seqB", tmp_path))
     sub = t.filter(np.asarray(t.column("sequence").to_pylist()) == "seqB")
     assert sub.equals(one)
-    out = _run(["relabel-panoptic", str(seqs / "multi" / "seqA"), str(seqs / "multi" / "seqA"), "-o",
-                str(tmp_path / "3.parquet")], expect=1)
+    out = _run(
+        [
+            "relabel-panoptic",
+            str(seqs / "multi" / "seqA"),
+            str(seqs / "multi" / "seqA"),
+            "-o",
+            str(tmp_path / "3.parquet"),
+        ],
+        expect=1,
+    )
     assert "given twice" in out
 
 
@@ -163,8 +174,7 @@ def test_same_bytes_on_a_local_dask_cluster(seqs, tmp_path):
     seq = seqs / "multi" / "seqB"
     a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
     _run(["relabel-panoptic", str(seq), "-o", str(a), "-q", "--no-landmarks"])
-    _run(["relabel-panoptic", str(seq), "-o", str(b), "-q", "--no-landmarks", "--scheduler", "local",
-          "--workers", "2"])
+    _run(["relabel-panoptic", str(seq), "-o", str(b), "-q", "--no-landmarks", "--scheduler", "local", "--workers", "2"])
     assert a.read_bytes() == b.read_bytes()
 
 
@@ -201,7 +211,7 @@ def test_video_frames_are_hd_frame_numbers(video_seq):
 def test_truncated_or_missing_video_rejects_every_frame(video_seq, tmp_path):
     p = tmp_path / "hd_00_00.mp4"
     data = pan.hd_video_path(video_seq, "00_00").read_bytes()
-    p.write_bytes(data[:len(data) // 2])
+    p.write_bytes(data[: len(data) // 2])
     got = list(VideoFrames(p).read([1, 2]))
     assert [(f, img) for f, img, _ in got] == [(1, None), (2, None)]
     assert "cannot open the video hd_00_00.mp4" in got[0][2]
@@ -237,13 +247,16 @@ def _calib(tmp_path, mutate):
     return p
 
 
-@pytest.mark.parametrize("mutate,message", [
-    (lambda cams: cams[1].update(name=cams[0]["name"]), r"camera 0 and camera 1 are both named '00_00'"),
-    (lambda cams: cams[0].update(K=[[0, 0, 0], [0, 0, 0], [0, 0, 0]]), r"camera 0 \(00_00\): expected K ="),
-    (lambda cams: cams[0].update(resolution=[0, 0]), r"camera 0 \(00_00\): expected a positive resolution"),
-    (lambda cams: cams[0].update(name="../../etc"), r"expected a camera name .* got '../../etc'"),
-    (lambda cams: cams[0].update(R=[[2, 0, 0], [0, 2, 0], [0, 0, 2]]), r"expected R to be a rotation"),
-])
+@pytest.mark.parametrize(
+    "mutate,message",
+    [
+        (lambda cams: cams[1].update(name=cams[0]["name"]), r"camera 0 and camera 1 are both named '00_00'"),
+        (lambda cams: cams[0].update(K=[[0, 0, 0], [0, 0, 0], [0, 0, 0]]), r"camera 0 \(00_00\): expected K ="),
+        (lambda cams: cams[0].update(resolution=[0, 0]), r"camera 0 \(00_00\): expected a positive resolution"),
+        (lambda cams: cams[0].update(name="../../etc"), r"expected a camera name .* got '../../etc'"),
+        (lambda cams: cams[0].update(R=[[2, 0, 0], [0, 2, 0], [0, 0, 2]]), r"expected R to be a rotation"),
+    ],
+)
 def test_calibration_validation(tmp_path, mutate, message):
     with pytest.raises(HpeError, match=message):
         pan.read_calibration(_calib(tmp_path, mutate))
@@ -295,15 +308,15 @@ def test_corrupt_header_in_the_middle_is_an_error(seqs, tmp_path):
     mid = refs[len(refs) // 2]
     data = bytearray(tar.read_bytes())
     header = mid.offset - 512
-    data[header:header + 512] = b"\x7f" * 512  # garbage where a member header was
+    data[header : header + 512] = b"\x7f" * 512  # garbage where a member header was
     tar.write_bytes(bytes(data))
     with pytest.raises(HpeError, match=r"unreadable member header at byte \d+"):
         pan.tar_frames(tar)
     # cut inside the last member's header: an error, not a silently missing frame
-    tar.write_bytes((seqs / "tar" / "seqA" / "hdFace3d.tar").read_bytes()[:refs[-1].offset - 300])
+    tar.write_bytes((seqs / "tar" / "seqA" / "hdFace3d.tar").read_bytes()[: refs[-1].offset - 300])
     with pytest.raises(HpeError, match=r"ends inside a member header at byte \d+ \(truncated download\)"):
         pan.tar_frames(tar)
     # cut exactly after a member: no end-of-archive blocks
-    tar.write_bytes((seqs / "tar" / "seqA" / "hdFace3d.tar").read_bytes()[:refs[-1].offset - 512])
+    tar.write_bytes((seqs / "tar" / "seqA" / "hdFace3d.tar").read_bytes()[: refs[-1].offset - 512])
     with pytest.raises(HpeError, match="without tar's end-of-archive blocks"):
         pan.tar_frames(tar)

@@ -1,4 +1,5 @@
 """CMU Panoptic readers: the real 160906_pizza1 files, the synthetic sample, and broken files."""
+
 import json
 from pathlib import Path
 
@@ -73,9 +74,22 @@ def test_image_path():
 
 # ---------------------------------------------------------------- bad files
 def _face_doc(n=1):
-    return {"version": 0.7, "univTime": 1.0, "people": [
-        {"id": i, "face70": {"landmarks": [float(v) for v in range(210)], "averageScore": [0.5] * 70,
-                             "averageReproError": [1.0] * 70, "visibility": [[0]] * 70}} for i in range(n)]}
+    return {
+        "version": 0.7,
+        "univTime": 1.0,
+        "people": [
+            {
+                "id": i,
+                "face70": {
+                    "landmarks": [float(v) for v in range(210)],
+                    "averageScore": [0.5] * 70,
+                    "averageReproError": [1.0] * 70,
+                    "visibility": [[0]] * 70,
+                },
+            }
+            for i in range(n)
+        ],
+    }
 
 
 def _write(tmp_path, name, text):
@@ -90,17 +104,22 @@ def test_truncated_json(tmp_path):
         pan.read_face_frame(p)
 
 
-@pytest.mark.parametrize("mutate, message", [
-    (lambda d: d.pop("people"), "expected an object with a 'people' list"),
-    (lambda d: d["people"][0].pop("face70"), r"person 0 \(id 0\): missing key 'face70'"),
-    (lambda d: d["people"][0]["face70"].pop("landmarks"), "missing key 'landmarks'"),
-    (lambda d: d["people"][0]["face70"].pop("averageScore"), "missing key 'averageScore'"),
-    (lambda d: d["people"][0].pop("id"), "person 0: missing key 'id'"),
-    (lambda d: d["people"][0]["face70"].__setitem__("landmarks", [1.0] * 209),
-     "expected 210 landmarks values, got 209"),
-    (lambda d: d["people"][0]["face70"].__setitem__("averageScore", "high"), "expected averageScore to be a list"),
-    (lambda d: d["people"][1].__setitem__("id", 0), "person ids repeat"),
-])
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda d: d.pop("people"), "expected an object with a 'people' list"),
+        (lambda d: d["people"][0].pop("face70"), r"person 0 \(id 0\): missing key 'face70'"),
+        (lambda d: d["people"][0]["face70"].pop("landmarks"), "missing key 'landmarks'"),
+        (lambda d: d["people"][0]["face70"].pop("averageScore"), "missing key 'averageScore'"),
+        (lambda d: d["people"][0].pop("id"), "person 0: missing key 'id'"),
+        (
+            lambda d: d["people"][0]["face70"].__setitem__("landmarks", [1.0] * 209),
+            "expected 210 landmarks values, got 209",
+        ),
+        (lambda d: d["people"][0]["face70"].__setitem__("averageScore", "high"), "expected averageScore to be a list"),
+        (lambda d: d["people"][1].__setitem__("id", 0), "person ids repeat"),
+    ],
+)
 def test_missing_or_bad_keys(tmp_path, mutate, message):
     doc = _face_doc(2)
     mutate(doc)
@@ -129,9 +148,18 @@ def test_empty_people_and_missing_reproj(tmp_path):
 
 
 def test_bad_calibration(tmp_path):
-    good = {"name": "00_00", "type": "hd", "resolution": [1920, 1080], "panel": 0, "node": 0,
-            "K": [[1000, 0, 960], [0, 1000, 540], [0, 0, 1]], "distCoef": [0, 0, 0, 0, 0],
-            "R": np.eye(3).tolist(), "t": [[0], [0], [0]], "someNewField": 3}
+    good = {
+        "name": "00_00",
+        "type": "hd",
+        "resolution": [1920, 1080],
+        "panel": 0,
+        "node": 0,
+        "K": [[1000, 0, 960], [0, 1000, 540], [0, 0, 1]],
+        "distCoef": [0, 0, 0, 0, 0],
+        "R": np.eye(3).tolist(),
+        "t": [[0], [0], [0]],
+        "someNewField": 3,
+    }
     p = _write(tmp_path, "calibration_x.json", {"cameras": [good]})
     assert len(pan.read_calibration(p)) == 1  # unknown fields are ignored
     cases = [

@@ -6,6 +6,7 @@ on archives written by ``tarfile`` in ustar/GNU/pax formats, on hand-made header
 archives with random truncations and byte flips (Hypothesis): either both paths give the same
 dict, or both raise the same message; the fast path either agrees or gives up (None).
 """
+
 from __future__ import annotations
 
 import gzip
@@ -73,14 +74,17 @@ def face_json(k: int, n: int = 300) -> bytes:
 
 
 # ------------------------------------------------------------------ real data
-@pytest.mark.parametrize("fmt,plain", [("gnu", True), ("oldgnu", True), ("ustar", True), ("posix", None),
-                                       ("v7", False)])
+@pytest.mark.parametrize(
+    "fmt,plain", [("gnu", True), ("oldgnu", True), ("ustar", True), ("posix", None), ("v7", False)]
+)
 def test_real_panoptic_faces_packed_by_gnu_tar(tmp_path, fmt, plain):
     src = REALDATA / "panoptic_160906_pizza1" / "hdFace3d"
     if not src.is_dir():
         pytest.skip("../shared/realdata/panoptic_160906_pizza1 is not available")
-    if shutil.which("tar") is None or b"GNU tar" not in subprocess.run(["tar", "--version"],
-                                                                       capture_output=True).stdout:
+    if (
+        shutil.which("tar") is None
+        or b"GNU tar" not in subprocess.run(["tar", "--version"], capture_output=True).stdout
+    ):
         pytest.skip("GNU tar is not installed")
     seq = tmp_path / "seq"
     shutil.copytree(src, seq / "hdFace3d")
@@ -108,21 +112,38 @@ def test_real_biwi_gnu_tar_members(tmp_path):
 
 # ------------------------------------------------------------ tarfile formats
 def _mixed_entries():
-    return [("hdFace3d", None), ("hdFace3d/readme.txt", b"not a face\n"),
-            (FACE.format(5), face_json(5)), ("other/faceRecon3D_hd00000003.json", face_json(3, 700)),
-            (FACE.format(4), face_json(4, 512)), ("hdFace3d/faceRecon3D_hd00000009.json.bak", b"{}"),
-            ("hdFace3d/sub/", None), (FACE.format(7), b""), (FACE.format(6), face_json(6, 2000))]
+    return [
+        ("hdFace3d", None),
+        ("hdFace3d/readme.txt", b"not a face\n"),
+        (FACE.format(5), face_json(5)),
+        ("other/faceRecon3D_hd00000003.json", face_json(3, 700)),
+        (FACE.format(4), face_json(4, 512)),
+        ("hdFace3d/faceRecon3D_hd00000009.json.bak", b"{}"),
+        ("hdFace3d/sub/", None),
+        (FACE.format(7), b""),
+        (FACE.format(6), face_json(6, 2000)),
+    ]
 
 
 def _long_entries():
-    return _mixed_entries() + [(LONG_DIR, None), (LONG_DIR + "/faceRecon3D_hd00000011.json", face_json(11)),
-                               ("hdFace3d/" + "c" * 95 + ".txt", b"x" * 10)]
+    return _mixed_entries() + [
+        (LONG_DIR, None),
+        (LONG_DIR + "/faceRecon3D_hd00000011.json", face_json(11)),
+        ("hdFace3d/" + "c" * 95 + ".txt", b"x" * 10),
+    ]
 
 
-@pytest.mark.parametrize("fmt,long,plain", [
-    (tarfile.USTAR_FORMAT, False, True), (tarfile.USTAR_FORMAT, True, True),  # long names: the ustar prefix
-    (tarfile.GNU_FORMAT, False, True), (tarfile.GNU_FORMAT, True, False),  # GNU long-name records: tarfile
-    (tarfile.PAX_FORMAT, False, True), (tarfile.PAX_FORMAT, True, False)])  # pax records: tarfile
+@pytest.mark.parametrize(
+    "fmt,long,plain",
+    [
+        (tarfile.USTAR_FORMAT, False, True),
+        (tarfile.USTAR_FORMAT, True, True),  # long names: the ustar prefix
+        (tarfile.GNU_FORMAT, False, True),
+        (tarfile.GNU_FORMAT, True, False),  # GNU long-name records: tarfile
+        (tarfile.PAX_FORMAT, False, True),
+        (tarfile.PAX_FORMAT, True, False),
+    ],
+)  # pax records: tarfile
 def test_tarfile_formats(tmp_path, fmt, long, plain):
     tar = write_tar(tmp_path / "hdFace3d.tar", _long_entries() if long else _mixed_entries(), fmt)
     status, frames = check_same(tar, fast_taken=plain)
@@ -157,36 +178,40 @@ def _patched(tar: Path, member: int, changes: dict, signed: bool = False) -> Pat
     """Rewrite header number ``member`` (0-based) with {offset: bytes}, checksum recomputed."""
     data = bytearray(tar.read_bytes())
     off = [m[2] - 512 for m in members_of(tar)][member]
-    head = data[off:off + 512]
+    head = data[off : off + 512]
     for at, value in changes.items():
-        head[at:at + len(value)] = value
-    data[off:off + 512] = _chksum(head, signed)
+        head[at : at + len(value)] = value
+    data[off : off + 512] = _chksum(head, signed)
     tar.write_bytes(bytes(data))
     return tar
 
 
 def _plain(tmp_path):
-    return write_tar(tmp_path / "hdFace3d.tar", [("hdFace3d", None)] + [(FACE.format(k), face_json(k))
-                                                                        for k in (1, 2, 3)])
+    return write_tar(
+        tmp_path / "hdFace3d.tar", [("hdFace3d", None)] + [(FACE.format(k), face_json(k)) for k in (1, 2, 3)]
+    )
 
 
-@pytest.mark.parametrize("member,changes,signed,plain", [
-    (1, {0: "hdFace3d/é/faceRecon3D_hd00000001.json".encode() + b"\0"}, False, True),  # utf-8 name
-    (1, {0: b"hdFace3d/\xff\xfe/faceRecon3D_hd00000001.json\0"}, False, True),  # surrogateescape
-    (1, {0: b"hdFace3d/\xff/faceRecon3D_hd00000001.json\0"}, True, True),  # signed checksum (old tars)
-    (1, {100: b"000644 \0", 108: b"000000 \0"}, False, True),  # bsdtar's digits, space, NUL
-    (1, {124: b"00000000454 "}, False, True),  # size ended by a space
-    (1, {100: b"   644 \0"}, False, False),  # leading spaces: tarfile's business
-    (1, {100: b"0006 44\0"}, False, False),  # not a number for tarfile: unreadable header
-    (2, {124: b"\x80" + bytes(10) + b"\x01"}, False, False),  # base-256 size
-    (2, {156: b"2"}, False, False),  # a symlink
-    (2, {156: b"\0"}, False, True),  # an old-style regular file
-    (0, {156: b"\0", 0: b"hdFace3d/\0"}, False, True),  # V7: a file named "x/" is a directory
-    (0, {124: b"00000000001\0"}, False, False),  # a directory with data
-    (2, {257: b"ustar\0\0\0"}, False, False),  # other magic
-    (2, {345: b"deep/prefix\0"}, False, True),  # a ustar prefix
-    (3, {124: b"77777777777\0"}, False, False),  # a size past the end of the file
-])
+@pytest.mark.parametrize(
+    "member,changes,signed,plain",
+    [
+        (1, {0: "hdFace3d/é/faceRecon3D_hd00000001.json".encode() + b"\0"}, False, True),  # utf-8 name
+        (1, {0: b"hdFace3d/\xff\xfe/faceRecon3D_hd00000001.json\0"}, False, True),  # surrogateescape
+        (1, {0: b"hdFace3d/\xff/faceRecon3D_hd00000001.json\0"}, True, True),  # signed checksum (old tars)
+        (1, {100: b"000644 \0", 108: b"000000 \0"}, False, True),  # bsdtar's digits, space, NUL
+        (1, {124: b"00000000454 "}, False, True),  # size ended by a space
+        (1, {100: b"   644 \0"}, False, False),  # leading spaces: tarfile's business
+        (1, {100: b"0006 44\0"}, False, False),  # not a number for tarfile: unreadable header
+        (2, {124: b"\x80" + bytes(10) + b"\x01"}, False, False),  # base-256 size
+        (2, {156: b"2"}, False, False),  # a symlink
+        (2, {156: b"\0"}, False, True),  # an old-style regular file
+        (0, {156: b"\0", 0: b"hdFace3d/\0"}, False, True),  # V7: a file named "x/" is a directory
+        (0, {124: b"00000000001\0"}, False, False),  # a directory with data
+        (2, {257: b"ustar\0\0\0"}, False, False),  # other magic
+        (2, {345: b"deep/prefix\0"}, False, True),  # a ustar prefix
+        (3, {124: b"77777777777\0"}, False, False),  # a size past the end of the file
+    ],
+)
 def test_hand_made_headers(tmp_path, member, changes, signed, plain):
     tar = _patched(_plain(tmp_path), member, changes, signed)
     check_same(tar, fast_taken=plain)
@@ -195,8 +220,9 @@ def test_hand_made_headers(tmp_path, member, changes, signed, plain):
 def test_directory_with_a_size_falls_back(tmp_path):
     # tarfile reads the next header right after a directory's, whatever its size says: here the
     # size (512) would skip the empty member after it, and the walk would land on a valid header
-    tar = write_tar(tmp_path / "hdFace3d.tar", [("hdFace3d", None), (FACE.format(1), b""),
-                                                (FACE.format(2), face_json(2))])
+    tar = write_tar(
+        tmp_path / "hdFace3d.tar", [("hdFace3d", None), (FACE.format(1), b""), (FACE.format(2), face_json(2))]
+    )
     _patched(tar, 0, {124: b"00000001000\0"})
     assert list(check_same(tar, fast_taken=False)[1]) == [1, 2]
 
@@ -207,12 +233,12 @@ def test_damaged_archives_fall_back_with_the_same_errors(tmp_path):
     refs = list(pan.tar_frames(tar).values())
     end = refs[-1].offset + 512  # the first end-of-archive block
     cases = {
-        "one zero block": (data[:end + 512], True),
+        "one zero block": (data[: end + 512], True),
         "no end blocks": (data[:end], False),
-        "cut in the last member": (data[:refs[-1].offset + 100], False),
-        "cut in a header": (data[:refs[-1].offset - 200], False),
+        "cut in the last member": (data[: refs[-1].offset + 100], False),
+        "cut in a header": (data[: refs[-1].offset - 200], False),
         "garbage after the end": (data + b"x", False),
-        "bad checksum": (data[:refs[1].offset - 512 + 150] + b"9" + data[refs[1].offset - 512 + 151:], False),
+        "bad checksum": (data[: refs[1].offset - 512 + 150] + b"9" + data[refs[1].offset - 512 + 151 :], False),
         "empty": (b"", False),
         "not a tar": (b"not a tar at all" * 100, False),
         "zeros only": (bytes(4096), True),
@@ -228,20 +254,33 @@ def test_damaged_archives_fall_back_with_the_same_errors(tmp_path):
 _NAMES = st.one_of(
     st.builds(lambda k, w: f"hdFace3d/faceRecon3D_hd{k:0{w}d}.json", st.integers(0, 40), st.sampled_from([1, 8])),
     st.builds(lambda k: f"{LONG_DIR}/faceRecon3D_hd{k:08d}.json", st.integers(0, 40)),
-    st.sampled_from(["hdFace3d/readme.txt", "faceRecon3D_hd00000001.json", "hdFace3d/é.json",
-                     "hdFace3d/" + "d" * 120 + "/faceRecon3D_hd00000002.json"]))
+    st.sampled_from(
+        [
+            "hdFace3d/readme.txt",
+            "faceRecon3D_hd00000001.json",
+            "hdFace3d/é.json",
+            "hdFace3d/" + "d" * 120 + "/faceRecon3D_hd00000002.json",
+        ]
+    ),
+)
 _ENTRY = st.tuples(_NAMES, st.one_of(st.none(), st.integers(0, 2000)))
 _MUTATION = st.one_of(
     st.just(None),
     st.tuples(st.just("truncate"), st.floats(0, 1)),
     st.tuples(st.just("flip"), st.lists(st.tuples(st.floats(0, 1), st.integers(1, 255)), min_size=1, max_size=4)),
-    st.tuples(st.just("flip header"), st.lists(st.tuples(st.integers(0, 8), st.integers(0, 511),
-                                                         st.integers(1, 255)), min_size=1, max_size=3)))
+    st.tuples(
+        st.just("flip header"),
+        st.lists(st.tuples(st.integers(0, 8), st.integers(0, 511), st.integers(1, 255)), min_size=1, max_size=3),
+    ),
+)
 
 
 @settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
-@given(entries=st.lists(_ENTRY, max_size=9), fmt=st.sampled_from([tarfile.USTAR_FORMAT, tarfile.GNU_FORMAT,
-                                                                  tarfile.PAX_FORMAT]), mutation=_MUTATION)
+@given(
+    entries=st.lists(_ENTRY, max_size=9),
+    fmt=st.sampled_from([tarfile.USTAR_FORMAT, tarfile.GNU_FORMAT, tarfile.PAX_FORMAT]),
+    mutation=_MUTATION,
+)
 def test_random_archives_agree_with_tarfile(tmp_path_factory, entries, fmt, mutation):
     tar = tmp_path_factory.mktemp("prop") / "hdFace3d.tar"
     try:
@@ -251,7 +290,7 @@ def test_random_archives_agree_with_tarfile(tmp_path_factory, entries, fmt, muta
     data = bytearray(tar.read_bytes())
     if mutation is not None and data:
         if mutation[0] == "truncate":
-            data = data[:int(mutation[1] * len(data))]
+            data = data[: int(mutation[1] * len(data))]
         elif mutation[0] == "flip":
             for at, x in mutation[1]:
                 data[min(int(at * len(data)), len(data) - 1)] ^= x

@@ -4,13 +4,14 @@ Oracles: the real files (``tests/data/agora``, ``sample_data``, ``../shared/real
 unchanged; each damaged copy ends in one line naming the file, the record and the field (exit 1), or in
 a reject whose reason names the field -- never a traceback, an ``internal error`` or a silent acceptance.
 """
+
 from __future__ import annotations
 
 import importlib.util
 import io
-import re
 import json
 import os
+import re
 import shutil
 import tarfile
 from pathlib import Path
@@ -22,7 +23,8 @@ import scipy.io
 from click.testing import CliRunner
 
 from hpe_cli.cli.main import cli
-from hpe_cli.datasets import biwi, panoptic as pan
+from hpe_cli.datasets import biwi
+from hpe_cli.datasets import panoptic as pan
 from hpe_cli.datasets.fields import MAX_TANGENTIAL, distortion_problem, distortion_problems
 from hpe_cli.datasets.panoptic_video import VideoFrames
 from hpe_cli.errors import HpeError
@@ -65,21 +67,27 @@ def set_person(col, row, person, value):
         cell = list(df.at[row, col])
         cell[person] = value
         df.at[row, col] = cell
+
     return edit
 
 
-@pytest.mark.parametrize("edit, message", [
-    (set_person("cam_j3d", 1, 0, "abc"), "row 1, person 0: cam_j3d: expected a (J, 3) array of numbers"),
-    (set_person("cam_j3d", 2, 3, np.full((127, 3), "x")), "row 2, person 3: cam_j3d: expected a (J, 3) array"),
-    (set_person("occlusion", 1, 2, "abc"), "row 1, person 2: occlusion: expected a percentage (a number 0-100), "
-                                           "got str 'abc'"),
-    (set_person("isValid", 0, 1, "no"), "row 0, person 1: isValid: expected True or False, got str 'no'"),
-    (set_person("camR", 1, 0, [[1, 0], [0, 1, 0]]), "row 1, person 0: camR: expected a (3, 3) array of numbers"),
-    (set_person("camT", 1, 4, None), "row 1, person 4: camT: expected 3 numbers"),
-    (set_person("camK", 2, 0, {"fx": 1}), "row 2, person 0: camK: expected a (3, 3) array of numbers, got a dict"),
-    (lambda df: df.__setitem__("imgPath", ["a.png", None, "c.png"]), "row 1: imgPath: expected a string"),
-    (lambda df: df.at.__setitem__((1, "occlusion"), "abc"), "row 1: column 'occlusion' has 1 entries (str 'abc')"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (set_person("cam_j3d", 1, 0, "abc"), "row 1, person 0: cam_j3d: expected a (J, 3) array of numbers"),
+        (set_person("cam_j3d", 2, 3, np.full((127, 3), "x")), "row 2, person 3: cam_j3d: expected a (J, 3) array"),
+        (
+            set_person("occlusion", 1, 2, "abc"),
+            "row 1, person 2: occlusion: expected a percentage (a number 0-100), got str 'abc'",
+        ),
+        (set_person("isValid", 0, 1, "no"), "row 0, person 1: isValid: expected True or False, got str 'no'"),
+        (set_person("camR", 1, 0, [[1, 0], [0, 1, 0]]), "row 1, person 0: camR: expected a (3, 3) array of numbers"),
+        (set_person("camT", 1, 4, None), "row 1, person 4: camT: expected 3 numbers"),
+        (set_person("camK", 2, 0, {"fx": 1}), "row 2, person 0: camK: expected a (3, 3) array of numbers, got a dict"),
+        (lambda df: df.__setitem__("imgPath", ["a.png", None, "c.png"]), "row 1: imgPath: expected a string"),
+        (lambda df: df.at.__setitem__((1, "occlusion"), "abc"), "row 1: column 'occlusion' has 1 entries (str 'abc')"),
+    ],
+)
 def test_agora_malformed_fields_name_file_row_person_field(tmp_path, edit, message):
     path = agora_copy(tmp_path, edit)
     res = run("relabel-agora", path, "-o", tmp_path / "o.csv", "--rejects", tmp_path / "r.csv", "-q")
@@ -87,13 +95,16 @@ def test_agora_malformed_fields_name_file_row_person_field(tmp_path, edit, messa
     assert not (tmp_path / "o.csv").exists() and not (tmp_path / "r.csv").exists()
 
 
-@pytest.mark.parametrize("edit, detail", [
-    (set_person("camR", 1, 0, 2 * np.eye(3)), "camR not orthonormal"),
-    (set_person("camK", 1, 0, np.zeros((3, 3))), "camK focal length not positive"),
-    (set_person("camK", 1, 0, np.array([[1000.0, 0, 0], [0, 1000, 0], [0, 0, 1]])), "camK principal point"),
-    (set_person("camK", 1, 0, np.array([[1000.0, 0, 960], [0, 1000, 540], [0, 0, 0]])), "camK not a pinhole"),
-    (set_person("occlusion", 1, 0, 250.0), "occlusion out of range"),
-])
+@pytest.mark.parametrize(
+    "edit, detail",
+    [
+        (set_person("camR", 1, 0, 2 * np.eye(3)), "camR not orthonormal"),
+        (set_person("camK", 1, 0, np.zeros((3, 3))), "camK focal length not positive"),
+        (set_person("camK", 1, 0, np.array([[1000.0, 0, 0], [0, 1000, 0], [0, 0, 1]])), "camK principal point"),
+        (set_person("camK", 1, 0, np.array([[1000.0, 0, 960], [0, 1000, 540], [0, 0, 0]])), "camK not a pinhole"),
+        (set_person("occlusion", 1, 0, 250.0), "occlusion out of range"),
+    ],
+)
 def test_agora_invalid_values_refused_or_rejected(tmp_path, edit, detail):
     path = agora_copy(tmp_path, edit)
     # without --rejects: an error naming the file, the person and the field; nothing written
@@ -145,18 +156,23 @@ def _cell():
     return c
 
 
-@pytest.mark.parametrize("key, value, got", [
-    ("Pose_Para", _cell(), "got a cell array (1, 7)"),
-    ("Pose_Para", {"pitch": 0.1, "yaw": 0.2}, "got a struct"),
-    ("Pose_Para", "abcdefg", "got a char array"),
-    ("Pose_Para", np.zeros((3, 3)), "got shape (3, 3)"),
-    ("pt2d", "xy", "got a char array"),
-    ("pt3d_68", _cell(), "got a cell array"),
-])
+@pytest.mark.parametrize(
+    "key, value, got",
+    [
+        ("Pose_Para", _cell(), "got a cell array (1, 7)"),
+        ("Pose_Para", {"pitch": 0.1, "yaw": 0.2}, "got a struct"),
+        ("Pose_Para", "abcdefg", "got a char array"),
+        ("Pose_Para", np.zeros((3, 3)), "got shape (3, 3)"),
+        ("pt2d", "xy", "got a char array"),
+        ("pt3d_68", _cell(), "got a cell array"),
+    ],
+)
 def test_mat_fields_named_with_the_mat_file(tmp_path, key, value, got):
     folder, bad = mat_folder(tmp_path, key, value)
-    for cmd in (["convert", folder, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet"],
-                ["audit", folder]):
+    for cmd in (
+        ["convert", folder, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet"],
+        ["audit", folder],
+    ):
         one_error(run(*cmd, "-q"), f"{bad}: {key}: expected", got)
 
 
@@ -169,25 +185,39 @@ def calib_copy(tmp_path, edit):
     return path
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda c: c[1].update(name=None), "camera 1: name: expected a camera name of letters, digits, '_', '-' or '.', "
-                                       "got None"),
-    (lambda c: c[1].update(name=""), "camera 1: name: expected a camera name"),
-    (lambda c: c[1].update(name=7), "camera 1: name: expected a camera name"),
-    (lambda c: c[2].update(distCoef=[1e10, 0, 0, 0, 0]), "camera 2 (00_02): distCoef: expected radial coefficients"),
-    (lambda c: c[2].update(distCoef=[0, 0, 0.5, 0, 0]), "distCoef: expected tangential coefficients |p1|, |p2| <= 0.1"),
-    (lambda c: c[2].update(distCoef=[-3.0, 0, 0, 0, 0]), "distCoef: expected a lens model that"),
-    (lambda c: c[2].update(distCoef=["a", 0, 0, 0, 0]), "distCoef: expected numbers, got a list"),
-    (lambda c: c[0].update(K=[[0, 0, 0], [0, 0, 0], [0, 0, 0]]), "camera 0 (00_00): expected K ="),
-    (lambda c: c[0].update(K=[[1000, 0, 5000], [0, 1000, 540], [0, 0, 1]]), "K: expected the principal point inside"),
-    (lambda c: c[0].update(R=[[2, 0, 0], [0, 2, 0], [0, 0, 2]]), "expected R to be a rotation"),
-    (lambda c: c[0].update(R=[[1, 0, 0], [0, 1, 0], [0, 0, -1]]), "expected R to be a rotation"),
-    (lambda c: c[0].update(t="far"), "camera 0 (00_00): t: expected numbers, got str 'far'"),
-    (lambda c: c[0].update(resolution=["1920", "1080"]), "resolution: expected [width, height] as integers"),
-    (lambda c: c[0].update(panel="abc"), "panel: expected an integer, got str 'abc'"),
-    (lambda c: c[0].update(type=None), "type: expected a string"),
-    (lambda c: c.__setitem__(3, "00_03"), "camera 3: expected an object"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (
+            lambda c: c[1].update(name=None),
+            "camera 1: name: expected a camera name of letters, digits, '_', '-' or '.', got None",
+        ),
+        (lambda c: c[1].update(name=""), "camera 1: name: expected a camera name"),
+        (lambda c: c[1].update(name=7), "camera 1: name: expected a camera name"),
+        (
+            lambda c: c[2].update(distCoef=[1e10, 0, 0, 0, 0]),
+            "camera 2 (00_02): distCoef: expected radial coefficients",
+        ),
+        (
+            lambda c: c[2].update(distCoef=[0, 0, 0.5, 0, 0]),
+            "distCoef: expected tangential coefficients |p1|, |p2| <= 0.1",
+        ),
+        (lambda c: c[2].update(distCoef=[-3.0, 0, 0, 0, 0]), "distCoef: expected a lens model that"),
+        (lambda c: c[2].update(distCoef=["a", 0, 0, 0, 0]), "distCoef: expected numbers, got a list"),
+        (lambda c: c[0].update(K=[[0, 0, 0], [0, 0, 0], [0, 0, 0]]), "camera 0 (00_00): expected K ="),
+        (
+            lambda c: c[0].update(K=[[1000, 0, 5000], [0, 1000, 540], [0, 0, 1]]),
+            "K: expected the principal point inside",
+        ),
+        (lambda c: c[0].update(R=[[2, 0, 0], [0, 2, 0], [0, 0, 2]]), "expected R to be a rotation"),
+        (lambda c: c[0].update(R=[[1, 0, 0], [0, 1, 0], [0, 0, -1]]), "expected R to be a rotation"),
+        (lambda c: c[0].update(t="far"), "camera 0 (00_00): t: expected numbers, got str 'far'"),
+        (lambda c: c[0].update(resolution=["1920", "1080"]), "resolution: expected [width, height] as integers"),
+        (lambda c: c[0].update(panel="abc"), "panel: expected an integer, got str 'abc'"),
+        (lambda c: c[0].update(type=None), "type: expected a string"),
+        (lambda c: c.__setitem__(3, "00_03"), "camera 3: expected an object"),
+    ],
+)
 def test_panoptic_calibration_checked_as_what_it_is(tmp_path, edit, message):
     path = calib_copy(tmp_path, edit)
     with pytest.raises(HpeError) as err:
@@ -227,8 +257,14 @@ def test_huge_frame_number_is_one_line(tmp_path):
     one_error(run("relabel-panoptic", seq, "-o", tmp_path / "o.csv", "-q"), huge, "frame number", "out of range")
 
 
-@pytest.mark.parametrize("member", ["../x/faceRecon3D_hd00000001.json", "/abs/faceRecon3D_hd00000001.json",
-                                    "hdFace3d/../../faceRecon3D_hd00000001.json"])
+@pytest.mark.parametrize(
+    "member",
+    [
+        "../x/faceRecon3D_hd00000001.json",
+        "/abs/faceRecon3D_hd00000001.json",
+        "hdFace3d/../../faceRecon3D_hd00000001.json",
+    ],
+)
 def test_face_tar_traversal_refused(tmp_path, member):
     src = sorted((SYNTH / "hdFace3d").iterdir())[0]
     tar = tmp_path / "hdFace3d.tar"
@@ -244,11 +280,14 @@ def test_face_tar_traversal_refused(tmp_path, member):
         assert str(tar) in str(err.value) and repr(member) in str(err.value)
 
 
-@pytest.mark.parametrize("value, message", [
-    ("abc", "person 0: id: expected an integer, got str 'abc'"),
-    (1e30, "person 0: id: expected an integer"),
-    (True, "person 0: id: expected an integer, got bool True"),
-])
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        ("abc", "person 0: id: expected an integer, got str 'abc'"),
+        (1e30, "person 0: id: expected an integer"),
+        (True, "person 0: id: expected an integer, got bool True"),
+    ],
+)
 def test_face_person_id(tmp_path, value, message):
     doc = json.loads(sorted((SYNTH / "hdFace3d").iterdir())[0].read_text())
     doc["people"][0]["id"] = value
@@ -258,11 +297,14 @@ def test_face_person_id(tmp_path, value, message):
         pan.read_face_frame(path)
 
 
-@pytest.mark.parametrize("value, message", [
-    ("1.5", r"person 0 \(id \d+\): landmarks: expected numbers \(or null\), got str '1.5' at index 4"),
-    (True, r"landmarks: expected numbers \(or null\), got bool True at index 4"),
-    ([1.0, 2.0], r"landmarks: expected numbers \(or null\), got a list"),
-])
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        ("1.5", r"person 0 \(id \d+\): landmarks: expected numbers \(or null\), got str '1.5' at index 4"),
+        (True, r"landmarks: expected numbers \(or null\), got bool True at index 4"),
+        ([1.0, 2.0], r"landmarks: expected numbers \(or null\), got a list"),
+    ],
+)
 def test_face_landmark_values(tmp_path, value, message):
     doc = json.loads(sorted((SYNTH / "hdFace3d").iterdir())[0].read_text())
     doc["people"][0]["face70"]["landmarks"][4] = value
@@ -286,15 +328,22 @@ def make_tgz(path, members):
     return path
 
 
-@pytest.mark.parametrize("names, message", [
-    (["01/frame_00004_pose.bin", "01/frame_00005_pose.bin", "01/frame_00004_pose.bin"],
-     "member 01/frame_00004_pose.bin appears twice"),
-    (["01/frame_00004_pose.bin", "./01/frame_00004_pose.bin"],
-     "01/frame_00004_pose.bin and ./01/frame_00004_pose.bin are both sequence 01 frame 4"),
-    (["01/frame_00004_pose.bin", "../01/frame_00005_pose.bin"], "member '../01/frame_00005_pose.bin': refused"),
-    (["/01/frame_00004_pose.bin"], "member '/01/frame_00004_pose.bin': refused: an absolute name"),
-    (["01/frame_99999999999999999999_pose.bin"], "frame number 99999999999999999999 is out of range"),
-])
+@pytest.mark.parametrize(
+    "names, message",
+    [
+        (
+            ["01/frame_00004_pose.bin", "01/frame_00005_pose.bin", "01/frame_00004_pose.bin"],
+            "member 01/frame_00004_pose.bin appears twice",
+        ),
+        (
+            ["01/frame_00004_pose.bin", "./01/frame_00004_pose.bin"],
+            "01/frame_00004_pose.bin and ./01/frame_00004_pose.bin are both sequence 01 frame 4",
+        ),
+        (["01/frame_00004_pose.bin", "../01/frame_00005_pose.bin"], "member '../01/frame_00005_pose.bin': refused"),
+        (["/01/frame_00004_pose.bin"], "member '/01/frame_00004_pose.bin': refused: an absolute name"),
+        (["01/frame_99999999999999999999_pose.bin"], "frame number 99999999999999999999 is out of range"),
+    ],
+)
 def test_biwi_tgz_duplicates_and_traversal(tmp_path, names, message):
     tgz = make_tgz(tmp_path / "db_annotations.tgz", [(n, bin_payload()) for n in names])
     one_error(run("biwi", tgz, "-o", tmp_path / "o.csv", "-q"), tgz, message)
@@ -305,17 +354,22 @@ def test_biwi_folder_duplicate_frames_name_both(tmp_path):
     for sub in ("a/01", "b/01"):
         (tmp_path / sub).mkdir(parents=True)
         (tmp_path / sub / "frame_00004_pose.bin").write_bytes(bin_payload())
-    with pytest.raises(HpeError, match="a/01/frame_00004_pose.bin and b/01/frame_00004_pose.bin are both sequence "
-                                       "01 frame 4"):
+    with pytest.raises(
+        HpeError, match="a/01/frame_00004_pose.bin and b/01/frame_00004_pose.bin are both sequence 01 frame 4"
+    ):
         biwi.read_biwi(tmp_path)
 
 
-@pytest.mark.parametrize("payload, message", [
-    (bin_payload(centre=(50, 40, -880)), "head centre: expected a point in front of the camera"),
-    (bin_payload(centre=(5e5, 40, 880)), "head centre: expected a point in front of the camera"),
-    (bin_payload(angles=(-7, 200, -2)), "yaw: expected degrees within +-90"),
-    (bin_payload(angles=(1e30, 3, -2)), "pitch: expected degrees within +-180"),
-], ids=["behind", "far", "yaw", "pitch"])
+@pytest.mark.parametrize(
+    "payload, message",
+    [
+        (bin_payload(centre=(50, 40, -880)), "head centre: expected a point in front of the camera"),
+        (bin_payload(centre=(5e5, 40, 880)), "head centre: expected a point in front of the camera"),
+        (bin_payload(angles=(-7, 200, -2)), "yaw: expected degrees within +-90"),
+        (bin_payload(angles=(1e30, 3, -2)), "pitch: expected degrees within +-180"),
+    ],
+    ids=["behind", "far", "yaw", "pitch"],
+)
 def test_biwi_bin_ranges(tmp_path, payload, message):
     (tmp_path / "01").mkdir()
     path = tmp_path / "01" / "frame_00004_pose.bin"
@@ -325,14 +379,17 @@ def test_biwi_bin_ranges(tmp_path, payload, message):
 
 
 @needs_real
-@pytest.mark.parametrize("edit, message", [
-    (lambda v: v.__setitem__(slice(0, 9), [0] * 9), "K: expected positive focal lengths"),
-    (lambda v: v.__setitem__(2, 5000), "K: expected the principal point inside the 640x480 image"),
-    (lambda v: v.__setitem__(9, 1e10), "distortion: expected radial coefficients"),
-    (lambda v: v.__setitem__(slice(13, 22), [2, 0, 0, 0, 2, 0, 0, 0, 2]), "R: expected a rotation matrix"),
-    (lambda v: v.__setitem__(25, 640.5), "width, height: expected positive whole numbers"),
-    (lambda v: v.__setitem__(26, 0), "width, height: expected positive whole numbers"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda v: v.__setitem__(slice(0, 9), [0] * 9), "K: expected positive focal lengths"),
+        (lambda v: v.__setitem__(2, 5000), "K: expected the principal point inside the 640x480 image"),
+        (lambda v: v.__setitem__(9, 1e10), "distortion: expected radial coefficients"),
+        (lambda v: v.__setitem__(slice(13, 22), [2, 0, 0, 0, 2, 0, 0, 0, 2]), "R: expected a rotation matrix"),
+        (lambda v: v.__setitem__(25, 640.5), "width, height: expected positive whole numbers"),
+        (lambda v: v.__setitem__(26, 0), "width, height: expected positive whole numbers"),
+    ],
+)
 def test_biwi_calibration_checked(tmp_path, edit, message):
     v = [float(x) for x in (REAL / "biwi" / "hpdb" / "01" / "rgb.cal").read_text().split()]
     edit(v)
@@ -386,13 +443,16 @@ def test_video_size_checked_against_calibration(small_video):
 
 
 # ================================================================== DAD-3DHeads
-@pytest.mark.parametrize("field, value, message", [
-    ("bbox", [1, "2", 3, 4], "item 1: bbox: expected [x, y, w, h] (4 numbers)"),
-    ("item_id", None, "item 1: item_id: expected a non-empty string, got None"),
-    ("item_id", "../../etc", "item 1: item_id: expected a file name"),
-    ("img_path", "../../etc/passwd", "item 1: img_path: expected a relative image path"),
-    ("attributes", ["a"], "item 1: attributes: expected an object"),
-])
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("bbox", [1, "2", 3, 4], "item 1: bbox: expected [x, y, w, h] (4 numbers)"),
+        ("item_id", None, "item 1: item_id: expected a non-empty string, got None"),
+        ("item_id", "../../etc", "item 1: item_id: expected a file name"),
+        ("img_path", "../../etc/passwd", "item 1: img_path: expected a relative image path"),
+        ("attributes", ["a"], "item 1: attributes: expected an object"),
+    ],
+)
 def test_dad3dheads_item_fields(tmp_path, field, value, message):
     from hpe_cli.datasets.dad3dheads import read_dad3dheads
 
@@ -407,11 +467,14 @@ def test_dad3dheads_item_fields(tmp_path, field, value, message):
 
 
 # ================================================================== 300W-LP zip members
-@pytest.mark.parametrize("extra, message", [
-    ("300W_LP/IBUG/../../evil_0.mat", "member '300W_LP/IBUG/../../evil_0.mat': refused: a name with '..'"),
-    ("/300W_LP/IBUG/IBUG_x_0.mat", "member '/300W_LP/IBUG/IBUG_x_0.mat': refused: an absolute name"),
-    ("300W_LP/IBUG/IBUG_image_008_1_0.mat", "member 300W_LP/IBUG/IBUG_image_008_1_0.mat appears twice"),
-])
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        ("300W_LP/IBUG/../../evil_0.mat", "member '300W_LP/IBUG/../../evil_0.mat': refused: a name with '..'"),
+        ("/300W_LP/IBUG/IBUG_x_0.mat", "member '/300W_LP/IBUG/IBUG_x_0.mat': refused: an absolute name"),
+        ("300W_LP/IBUG/IBUG_image_008_1_0.mat", "member 300W_LP/IBUG/IBUG_image_008_1_0.mat appears twice"),
+    ],
+)
 def test_w300lp_zip_members(tmp_path, extra, message):
     import warnings
     import zipfile
@@ -425,6 +488,5 @@ def test_w300lp_zip_members(tmp_path, extra, message):
         with zipfile.ZipFile(arc, "w") as z:
             z.writestr("300W_LP/IBUG/IBUG_image_008_1_0.mat", src.read_bytes())
             z.writestr(extra, src.read_bytes())
-    one_error(run("convert", arc, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet", "-q"),
-              arc, message)
+    one_error(run("convert", arc, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet", "-q"), arc, message)
     assert not (tmp_path / "o.csv").exists()

@@ -1,4 +1,5 @@
 """Pure audit checks (hpe_cli.rotation.audit) against SciPy and SPEC.md's worked examples."""
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -104,8 +105,14 @@ def test_matrix_checks():
     nan[1, 1] = np.nan
     R = np.stack([good, helen, whenet_bad, refl, scaled, nan])
     res = audit_matrices(R, "300w_lp")
-    assert [flags(res, i) for i in range(6)] == [set(), {"gimbal_lock", "near_gimbal"}, set(), {"not_rotation"},
-                                                 {"not_rotation"}, {"non_finite"}]
+    assert [flags(res, i) for i in range(6)] == [
+        set(),
+        {"gimbal_lock", "near_gimbal"},
+        set(),
+        {"not_rotation"},
+        {"not_rotation"},
+        {"non_finite"},
+    ]
     assert not res["non_canonical"].any()
     resw = audit_matrices(R[:3], "whenet")
     assert flags(resw, 2) == {"out_of_range"}
@@ -121,8 +128,12 @@ def test_matrix_input_of_another_system():
 
 
 def test_proper_euler_lock_is_sin_of_middle_angle():
-    zxz = system_from_dict({"name": "zxz", "turns": [{"angle": "yaw", "axis": "z"}, {"angle": "pitch", "axis": "x"},
-                                                      {"angle": "roll", "axis": "z"}]})
+    zxz = system_from_dict(
+        {
+            "name": "zxz",
+            "turns": [{"angle": "yaw", "axis": "z"}, {"angle": "pitch", "axis": "x"}, {"angle": "roll", "axis": "z"}],
+        }
+    )
     res = audit_angles([[0.5, 10, 20], [30, 10, 20], [179.5, 5, 5]], zxz)
     assert res["near_gimbal"].tolist() == [True, False, True]
 

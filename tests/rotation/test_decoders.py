@@ -1,4 +1,5 @@
 """Legacy decoders against per-row transcriptions of the published code (math module, as written there)."""
+
 import math
 
 import numpy as np
@@ -60,10 +61,10 @@ def directmhp_row(M):  # hnuzhy/DirectMHP exps/CMU/hpe_utils.py inverse_rotate_z
         z1 = np.arctan2(M[0, 1] / cy1, M[0, 0] / cy1)
         sets = np.array((x0, y0, z0)), np.array((x1, y1, z1))
     (pitch, yaw, roll), (pitch2, yaw2, roll2) = np.rad2deg(sets[0]), np.rad2deg(sets[1])
-    if yaw > 180.:
-        yaw = yaw - 360.
-    if yaw2 > 180.:
-        yaw2 = yaw2 - 360.
+    if yaw > 180.0:
+        yaw = yaw - 360.0
+    if yaw2 > 180.0:
+        yaw2 = yaw2 - 360.0
     if abs(roll) < 90 and abs(pitch) < 90:
         return True, [pitch, yaw, roll]
     elif abs(roll2) < 90 and abs(pitch2) < 90:
@@ -73,14 +74,28 @@ def directmhp_row(M):  # hnuzhy/DirectMHP exps/CMU/hpe_utils.py inverse_rotate_z
 
 def matrices():
     rng = np.random.default_rng(11)
-    pyr = np.concatenate([rng.uniform(-180, 180, (400, 3)),
-                          [[10, 90, 5], [10, -90, 5], [0, 86.5, 0], [0, 86.3, 3], [20, -86.45, 3], [0, 0, 0],
-                           [-16.0909, -89.99858, -6.8545], [100, 10, 20], [30, 150, -20]]])
+    pyr = np.concatenate(
+        [
+            rng.uniform(-180, 180, (400, 3)),
+            [
+                [10, 90, 5],
+                [10, -90, 5],
+                [0, 86.5, 0],
+                [0, 86.3, 3],
+                [20, -86.45, 3],
+                [0, 0, 0],
+                [-16.0909, -89.99858, -6.8545],
+                [100, 10, 20],
+                [30, 150, -20],
+            ],
+        ]
+    )
     return canonical_A(pyr)
 
 
-@pytest.mark.parametrize("name,row,order", [("synergynet", synergynet_row, [1, 0, 2]),
-                                            ("3ddfa_v2", tddfa_row, [1, 0, 2])])
+@pytest.mark.parametrize(
+    "name,row,order", [("synergynet", synergynet_row, [1, 0, 2]), ("3ddfa_v2", tddfa_row, [1, 0, 2])]
+)
 def test_decoder_reproduces_published_code(name, row, order):
     A = matrices()
     pyr, ok = decode(name, A)

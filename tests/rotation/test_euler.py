@@ -1,4 +1,5 @@
 """Generic Euler kernels against SciPy's Rotation (independent oracle), both solutions, gimbal lock."""
+
 import numpy as np
 import pytest
 from hypothesis import given

@@ -1,4 +1,5 @@
 """The system search of hpe_cli.rotation.infer against SciPy, SPEC §2-3 formulas and the real AFLW2000 files."""
+
 import sys
 from pathlib import Path
 
@@ -105,8 +106,9 @@ def test_3ddfa_v2_decoder_spec_anchors():
 def test_3ddfa_v2_decoder_is_found_despite_its_gimbal_branch():
     R = inf.random_rotations(200, seed=5)
     # add rotations inside matrix2angle's |R[2,0]| > 0.998 branch, where it forces roll to 0
-    near = Rotation.from_euler("ZYX", np.c_[np.linspace(-170, 170, 8), np.r_[[87.5] * 4, [-88.0] * 4],
-                                             np.linspace(-60, 60, 8)], degrees=True).as_matrix()
+    near = Rotation.from_euler(
+        "ZYX", np.c_[np.linspace(-170, 170, 8), np.r_[[87.5] * 4, [-88.0] * 4], np.linspace(-60, 60, 8)], degrees=True
+    ).as_matrix()
     rep = decoder(tddfa_v2.matrix2angle, rotations=np.concatenate([R, near]))
     assert rep["fit"] == "exact" and rep["best"] == "3ddfa_v2"
     assert rep["near_lock"]["count"] >= 6 and rep["near_lock"]["max_error"] > 1e-3
@@ -228,8 +230,8 @@ def test_table_many_rows_checks_leaders_on_every_row():
 # ----------------------------------------------------------------------------- landmarks
 def test_reference_template_frame_is_canonical():
     t = reference_template()
-    assert t[0, 0] < 0 < t[16, 0]            # point 0 (subject's right jaw) on the image left
-    assert t[8, 1] < t[27, 1] < t[19, 1]     # chin below the nose bridge below the brows: y up
+    assert t[0, 0] < 0 < t[16, 0]  # point 0 (subject's right jaw) on the image left
+    assert t[8, 1] < t[27, 1] < t[19, 1]  # chin below the nose bridge below the brows: y up
     assert t[30, 2] > t[0, 2] and t[30, 2] > t[16, 2]  # nose tip towards the camera: z out of the face
 
 
@@ -271,6 +273,7 @@ def test_decoder_selection_is_read_from_its_outputs():
         a = Rotation.from_matrix(G).as_euler("ZYX")  # (roll, yaw, pitch) with |yaw| <= 90
         b = np.array([a[0] + np.pi, np.pi - a[1], a[2] + np.pi])
         b = (b + np.pi) % (2 * np.pi) - np.pi
+
         def ok(e):
             return abs(e[2]) < np.pi / 2 and abs(e[0]) < np.pi / 2
 

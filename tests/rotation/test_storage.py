@@ -1,23 +1,36 @@
 """Storage kernels against SciPy's Rotation (rotvec, quaternion both orders, matrix) and hand formulas (6-D)."""
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.rotation.storage import (canonical_quaternion, matrix4_to_matrix, matrix_to_matrix4, matrix_to_quaternion,
-                                      matrix_to_rotvec, matrix_to_sixd, quaternion_to_matrix, rotvec_to_matrix,
-                                      sixd_to_matrix)
+from hpe_cli.rotation.storage import (
+    canonical_quaternion,
+    matrix4_to_matrix,
+    matrix_to_matrix4,
+    matrix_to_quaternion,
+    matrix_to_rotvec,
+    matrix_to_sixd,
+    quaternion_to_matrix,
+    rotvec_to_matrix,
+    sixd_to_matrix,
+)
 
 RNG = np.random.default_rng(12)
 RAND = Rotation.random(2000, random_state=5)
 # near 0, near pi, exactly pi, exactly identity
-SPECIAL = Rotation.from_rotvec(np.concatenate([
-    np.array([[0, 0, 0], [1e-12, 0, 0], [0, 1e-7, -1e-7], [np.pi, 0, 0], [0, np.pi, 0], [0, 0, np.pi]]),
-    RNG.normal(size=(50, 3)) * 1e-6,
-    (lambda v: v / np.linalg.norm(v, axis=1, keepdims=True) * (np.pi - 1e-9))(RNG.normal(size=(50, 3))),
-    (lambda v: v / np.linalg.norm(v, axis=1, keepdims=True) * (np.pi - 1e-4))(RNG.normal(size=(50, 3))),
-]))
+SPECIAL = Rotation.from_rotvec(
+    np.concatenate(
+        [
+            np.array([[0, 0, 0], [1e-12, 0, 0], [0, 1e-7, -1e-7], [np.pi, 0, 0], [0, np.pi, 0], [0, 0, np.pi]]),
+            RNG.normal(size=(50, 3)) * 1e-6,
+            (lambda v: v / np.linalg.norm(v, axis=1, keepdims=True) * (np.pi - 1e-9))(RNG.normal(size=(50, 3))),
+            (lambda v: v / np.linalg.norm(v, axis=1, keepdims=True) * (np.pi - 1e-4))(RNG.normal(size=(50, 3))),
+        ]
+    )
+)
 
 
 def same_rotation(R1, R2):
@@ -54,8 +67,12 @@ def test_quaternion_against_scipy(order, rots):
     assert (w >= 0).all()
     ref = q * np.where(q[:, 0 if order == "wxyz" else 3] < 0, -1, 1)[:, None]
     assert np.abs(np.abs(mine) - np.abs(ref)).max() < 1e-14
-    assert same_rotation(Rotation.from_quat(mine if order == "xyzw" else mine[:, [1, 2, 3, 0]]).as_matrix(),
-                         rots.as_matrix()) < 1e-14
+    assert (
+        same_rotation(
+            Rotation.from_quat(mine if order == "xyzw" else mine[:, [1, 2, 3, 0]]).as_matrix(), rots.as_matrix()
+        )
+        < 1e-14
+    )
 
 
 def test_quaternion_normalises_and_canonicalises():
@@ -101,8 +118,10 @@ angle = st.floats(-np.pi, np.pi, allow_nan=False)
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)).filter(lambda v: np.linalg.norm(v) > 1e-6),
-       st.one_of(angle, st.sampled_from([0.0, 1e-12, np.pi, np.pi - 1e-10])))
+@given(
+    st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)).filter(lambda v: np.linalg.norm(v) > 1e-6),
+    st.one_of(angle, st.sampled_from([0.0, 1e-12, np.pi, np.pi - 1e-10])),
+)
 def test_rotvec_quaternion_property(axis, theta):
     v = np.asarray(axis) / np.linalg.norm(axis) * theta
     ref = Rotation.from_rotvec(v).as_matrix()

@@ -1,4 +1,5 @@
 """Built-in systems against SPEC §2-3 relations, the worked examples and SciPy (24 conventions)."""
+
 import itertools
 
 import numpy as np
@@ -8,8 +9,18 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from conftest import canonical_A
-from hpe_cli.rotation import (canonical_to_labels, convert_angles, frobenius, get_system, rx, ry, rz,
-                              system_from_dict, system_names, SystemError_)
+from hpe_cli.rotation import (
+    SystemError_,
+    canonical_to_labels,
+    convert_angles,
+    frobenius,
+    get_system,
+    rx,
+    ry,
+    rz,
+    system_from_dict,
+    system_names,
+)
 from hpe_cli.rotation.distances import angle_diff_deg, geodesic_deg
 
 BUILTINS = ["300w_lp", "whenet", "6drepnet", "3ddfa_v2", "scipy_zyx", "opencv"]
@@ -18,7 +29,8 @@ F = np.diag([1.0, -1, -1])
 
 deg = st.floats(-180, 180, allow_nan=False).filter(lambda v: v > -180)
 near_lock = st.sampled_from([90.0, -90.0]).flatmap(
-    lambda y: st.sampled_from([0.0, 1e-9, 1e-6, 1e-3, 0.5]).map(lambda d: y - np.sign(y) * d))
+    lambda y: st.sampled_from([0.0, 1e-9, 1e-6, 1e-3, 0.5]).map(lambda d: y - np.sign(y) * d)
+)
 pyr_full = st.tuples(deg, deg, deg)
 pyr_lock = st.tuples(deg, near_lock, deg)
 pyr_any = st.one_of(pyr_full, pyr_lock)
@@ -140,8 +152,13 @@ def test_whenet_selection():
 def test_generic_systems_match_scipy_24(seq, extrinsic):
     """A user-declared right-handed system for each of SciPy's 24 conventions."""
     roles = ["yaw", "pitch", "roll"]
-    s = system_from_dict({"name": f"g_{seq}_{extrinsic}", "sequence": "extrinsic" if extrinsic else "intrinsic",
-                          "turns": [{"angle": r, "axis": a, "hand": "right"} for r, a in zip(roles, seq)]})
+    s = system_from_dict(
+        {
+            "name": f"g_{seq}_{extrinsic}",
+            "sequence": "extrinsic" if extrinsic else "intrinsic",
+            "turns": [{"angle": r, "axis": a, "hand": "right"} for r, a in zip(roles, seq)],
+        }
+    )
     rng = np.random.default_rng(3)
     ang = rng.uniform(-180, 180, (400, 3))  # in turn order
     sp_seq = seq if extrinsic else seq.upper()
@@ -173,12 +190,16 @@ def test_bad_system_files(tmp_path):
         get_system(str(f))
     with pytest.raises(SystemError_, match="expected a system name"):
         get_system("no_such_system")
-    f.write_text('name="r"\nframe=[[1,0,0],[0,1,0],[0,0,-1]]\n' + "".join(
-        f'[[turns]]\nangle="{r}"\naxis="{a}"\n' for r, a in zip(["pitch", "yaw", "roll"], "xyz")))
+    f.write_text(
+        'name="r"\nframe=[[1,0,0],[0,1,0],[0,0,-1]]\n'
+        + "".join(f'[[turns]]\nangle="{r}"\naxis="{a}"\n' for r, a in zip(["pitch", "yaw", "roll"], "xyz"))
+    )
     s = get_system(str(f))  # improper frames are allowed: B A B^T is still a rotation
     assert not s.proper_frame and "LEFT-HANDED" in s.describe()["frame"]
-    f.write_text('name="r"\nframe=[[1,0,0],[0,1,0],[0,0,2]]\n' + "".join(
-        f'[[turns]]\nangle="{r}"\naxis="{a}"\n' for r, a in zip(["pitch", "yaw", "roll"], "xyz")))
+    f.write_text(
+        'name="r"\nframe=[[1,0,0],[0,1,0],[0,0,2]]\n'
+        + "".join(f'[[turns]]\nangle="{r}"\naxis="{a}"\n' for r, a in zip(["pitch", "yaw", "roll"], "xyz"))
+    )
     with pytest.raises(SystemError_, match="frame: expected an orthonormal"):
         get_system(str(f))
 

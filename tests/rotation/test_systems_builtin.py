@@ -1,4 +1,5 @@
 """The nine new built-in systems: worked examples rebuilt by hand/SciPy, round trips, improper frames, real data."""
+
 import math
 
 import numpy as np
@@ -18,9 +19,19 @@ D = np.diag([1.0, -1, 1])
 d2r = np.deg2rad
 
 
-def Rx(a): c, s = math.cos(a), math.sin(a); return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])  # noqa: E704
-def Ry(a): c, s = math.cos(a), math.sin(a); return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])  # noqa: E704
-def Rz(a): c, s = math.cos(a), math.sin(a); return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])  # noqa: E704
+def Rx(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])  # noqa: E704
+
+
+def Ry(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])  # noqa: E704
+
+
+def Rz(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])  # noqa: E704
 
 
 def img2pose_rotvec(p, y, r):
@@ -35,14 +46,14 @@ def hand_matrix(name, p, y, r):
     A = canonical_A([[p, y, r]])[0]
     return {
         "img2pose": Rotation.from_rotvec(img2pose_rotvec(P, Y, R)).as_matrix(),
-        "trinet": Rx(P) @ Ry(-Y) @ Rz(R),              # TriNet W300_EulerAngles2Vectors
-        "aflw": Ry(-Y) @ Rx(P) @ Rz(-R),               # TriNet AFLW_EulerAngles2RotationMatrix
-        "openface": Rx(P) @ Ry(Y) @ Rz(R),             # OpenFace R = Rx Ry Rz (its own angles)
-        "mediapipe": A,                                # rotation block = A
-        "dad3dheads": F @ A,                           # diag(1,-1,-1) @ MV[:3,:3], MV block = A
-        "openvino_adas": Rz(Y) @ Ry(P) @ Rx(-R),       # model card: Rz(y) Ry(p) Rx(r) with roll clockwise
-        "synhead": canonical_A([[p, -y, r]])[0],       # 300W-LP with yaw negated
-        "6drepnet_6d": A.T,                            # G = get_R(p, y, r) = A.T
+        "trinet": Rx(P) @ Ry(-Y) @ Rz(R),  # TriNet W300_EulerAngles2Vectors
+        "aflw": Ry(-Y) @ Rx(P) @ Rz(-R),  # TriNet AFLW_EulerAngles2RotationMatrix
+        "openface": Rx(P) @ Ry(Y) @ Rz(R),  # OpenFace R = Rx Ry Rz (its own angles)
+        "mediapipe": A,  # rotation block = A
+        "dad3dheads": F @ A,  # diag(1,-1,-1) @ MV[:3,:3], MV block = A
+        "openvino_adas": Rz(Y) @ Ry(P) @ Rx(-R),  # model card: Rz(y) Ry(p) Rx(r) with roll clockwise
+        "synhead": canonical_A([[p, -y, r]])[0],  # 300W-LP with yaw negated
+        "6drepnet_6d": A.T,  # G = get_R(p, y, r) = A.T
     }[name]
 
 
@@ -115,7 +126,8 @@ def test_aflw_versus_hopenet_reading():
 ALL = list(system_names())
 deg = st.floats(-180, 180, allow_nan=False).filter(lambda v: v > -180)
 near_lock = st.sampled_from([90.0, -90.0]).flatmap(
-    lambda y: st.sampled_from([0.0, 1e-9, 1e-6, 1e-3]).map(lambda d: y - np.sign(y) * d))
+    lambda y: st.sampled_from([0.0, 1e-9, 1e-6, 1e-3]).map(lambda d: y - np.sign(y) * d)
+)
 pyr_any = st.one_of(st.tuples(deg, deg, deg), st.tuples(deg, near_lock, deg))
 
 
@@ -142,8 +154,11 @@ def test_real_aflw2000_through_new_systems(realdata):
     A = canonical_A(np.rad2deg(pp))
     for name in NEW:
         c = canonical_to_labels(A, name)
-        ref = np.stack([hand_matrix(name, *np.rad2deg(x)) for x in pp]) if get_system(name).angle_frame == \
-            "canonical" or name in ("trinet", "synhead") else None
+        ref = (
+            np.stack([hand_matrix(name, *np.rad2deg(x)) for x in pp])
+            if get_system(name).angle_frame == "canonical" or name in ("trinet", "synhead")
+            else None
+        )
         if name == "trinet":  # TriNet's vectors of Pose_Para (W300 class) are exactly hpe's trinet matrix
             ref = np.stack([Rx(p) @ Ry(-y) @ Rz(r) for p, y, r in pp])
         if name == "synhead":

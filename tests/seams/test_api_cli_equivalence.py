@@ -4,6 +4,7 @@ For read_labels, convert, audit, evaluate, augment and draw: call the API
 function and the ``hpe`` command on the same labels and compare the outputs
 (rotations as matrices, geodesic < 1e-6 degrees; pixels exactly).
 """
+
 from __future__ import annotations
 
 import json
@@ -93,8 +94,9 @@ def test_audit(labels, tmp_path):
         assert rep[check] == int(api[check].sum()), check
     assert api["gimbal_lock"][3] and api["non_canonical"][4]
     rep2 = hpe.audit_file(path, "300w_lp")
-    assert {k: rep2[k] for k in ("rows", "non_canonical", "near_gimbal")} == \
-        {k: rep[k] for k in ("rows", "non_canonical", "near_gimbal")}
+    assert {k: rep2[k] for k in ("rows", "non_canonical", "near_gimbal")} == {
+        k: rep[k] for k in ("rows", "non_canonical", "near_gimbal")
+    }
 
 
 def test_evaluate(labels, tmp_path):
@@ -106,8 +108,9 @@ def test_evaluate(labels, tmp_path):
     pred = pred.sample(frac=1.0, random_state=1)  # the CLI joins on image, not row order
     pp = tmp_path / "pred.csv"
     pred.to_csv(pp, index=False)
-    rep = json.loads(run("evaluate", pp, path, "--pred-system", "300w_lp", "--gt-system", "300w_lp",
-                         "--json", "-", "-q").stdout)
+    rep = json.loads(
+        run("evaluate", pp, path, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--json", "-", "-q").stdout
+    )
     api = hpe.evaluate(noisy, pyr, pred_system="300w_lp", gt_system="300w_lp")
     assert rep["n"]["pairs"] == api["n"]["pairs"] == len(df)
     for k in ("pitch", "yaw", "roll"):

@@ -7,6 +7,7 @@ augment, evaluate, export, relabel-panoptic) at least 50 times in fresh
 clean exit, ~1 run in 5 of the convert case ended in ``terminate called without
 an active exception`` (exit 134).
 """
+
 from __future__ import annotations
 
 import importlib.util

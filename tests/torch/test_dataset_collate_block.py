@@ -1,4 +1,5 @@
 """HeadPoseDataset batches: one storage per batch, values equal to torch's default_collate key by key."""
+
 import pytest
 
 torch = pytest.importorskip("torch")
@@ -58,8 +59,10 @@ def test_collate_block_through_workers_and_with_a_transform():
 
 
 def test_collate_block_odd_batches_behave_as_default_collate():
-    big = [Sample(image=torch.zeros(3, 64, 64, dtype=torch.uint8), index=0),
-           Sample(image=torch.zeros(3, 1, 64, dtype=torch.uint8), index=1)]  # numpy would broadcast: must not
+    big = [
+        Sample(image=torch.zeros(3, 64, 64, dtype=torch.uint8), index=0),
+        Sample(image=torch.zeros(3, 1, 64, dtype=torch.uint8), index=1),
+    ]  # numpy would broadcast: must not
     with pytest.raises(RuntimeError):
         default_collate([dict(s) for s in big])
     with pytest.raises(RuntimeError):

@@ -1,4 +1,5 @@
 """HeadPoseDataset fast path (size=, hflip=, cached pose tables, __getitems__) and the on_undefined policy."""
+
 import cv2
 import numpy as np
 import pandas as pd
@@ -36,7 +37,8 @@ def _labels(tmp_path, n=8, w=96, h=80):
     df = pd.DataFrame({"file": names})
     df[["pitch", "yaw", "roll"]] = rng.uniform(-70, 70, (n, 3))
     df[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]] = np.column_stack(
-        [rng.uniform(-5, 40, n), rng.uniform(-5, 30, n), rng.uniform(20, 50, n), rng.uniform(20, 50, n)])
+        [rng.uniform(-5, 40, n), rng.uniform(-5, 30, n), rng.uniform(20, 50, n), rng.uniform(20, 50, n)]
+    )
     lm = rng.uniform(10, 60, (n, 5, 2))
     for i in range(5):
         df[f"lm{i}_x"], df[f"lm{i}_y"] = lm[:, i, 0], lm[:, i, 1]
@@ -60,9 +62,11 @@ def test_policy_on_a_pose_tensor_raise_drop_keep_and_the_flag_persists():
     assert later.clone().undefined and HeadPose(later).undefined
     ok = F.resize(HeadPose(A, canvas_size=(64, 64), on_undefined="drop"), [32, 32])
     assert not ok.undefined and torch.equal(ok.as_subclass(torch.Tensor), A)
-    for op in (lambda p: F.affine(p, 0.0, [0, 0], 1.0, [10.0, 0.0]),
-               lambda p: F.perspective(p, [[0, 0], [63, 0], [63, 63], [0, 63]], [[3, 1], [60, 0], [63, 63], [0, 60]]),
-               lambda p: F.pad(p, [2], padding_mode="reflect")):
+    for op in (
+        lambda p: F.affine(p, 0.0, [0, 0], 1.0, [10.0, 0.0]),
+        lambda p: F.perspective(p, [[0, 0], [63, 0], [63, 63], [0, 63]], [[3, 1], [60, 0], [63, 63], [0, 60]]),
+        lambda p: F.pad(p, [2], padding_mode="reflect"),
+    ):
         assert op(HeadPose(A, canvas_size=(64, 64), on_undefined="keep")).undefined
         with pytest.raises(UndefinedPoseError):
             op(HeadPose(A, canvas_size=(64, 64)))
@@ -117,8 +121,9 @@ def test_landmarks_none_switches_off_the_output_only():
 def test_size_and_hflip_equal_the_v2_flip_and_the_oracles(tmp_path):
     path, df, lm = _labels(tmp_path)
     fast = HeadPoseDataset(path, system="6drepnet", crop=0.3, size=48, hflip=1.0, flip_scheme=PERM)
-    slow = HeadPoseDataset(path, system="6drepnet", crop=0.3, size=48,
-                           transform=T.RandomHorizontalFlip(p=1.0, scheme=PERM))
+    slow = HeadPoseDataset(
+        path, system="6drepnet", crop=0.3, size=48, transform=T.RandomHorizontalFlip(p=1.0, scheme=PERM)
+    )
     plain = HeadPoseDataset(path, system="6drepnet", crop=0.3, size=48)
     s300, s6d = get_system("300w_lp"), get_system("6drepnet")
     for k in range(len(df)):
@@ -133,7 +138,7 @@ def test_size_and_hflip_equal_the_v2_flip_and_the_oracles(tmp_path):
         assert np.abs(a["matrix"].double().numpy() - R).max() < 1e-6
         # landmarks: cv2.resize's pixel-centre mapping into the crop, then x -> 47 - x and re-indexed
         top, left, hh, ww = fast._rects[0][k]
-        ref = points_to_crop(lm[k:k + 1], [[left, top, left + ww, top + hh]], size=(48, 48))[0]
+        ref = points_to_crop(lm[k : k + 1], [[left, top, left + ww, top + hh]], size=(48, 48))[0]
         ref = ref[PERM] * [-1, 1] + [47, 0]
         assert np.abs(a["landmarks"].double().numpy() - ref).max() < 1e-5
     # the crop resized by OpenCV: the pixels of a bare cv2 loop
@@ -141,14 +146,15 @@ def test_size_and_hflip_equal_the_v2_flip_and_the_oracles(tmp_path):
     top, left, hh, ww = plain._rects[0][3]
     pad = np.zeros((hh, ww, 3), np.uint8)
     y0, x0, y1, x1 = max(top, 0), max(left, 0), min(top + hh, 80), min(left + ww, 96)
-    pad[y0 - top:y1 - top, x0 - left:x1 - left] = img[y0:y1, x0:x1]
+    pad[y0 - top : y1 - top, x0 - left : x1 - left] = img[y0:y1, x0:x1]
     assert np.array_equal(plain[3]["image"].permute(1, 2, 0).numpy(), cv2.resize(pad, (48, 48)))
 
 
 def test_getitems_batches_equal_single_items_for_random_rotations(tmp_path):
     path, _, _ = _labels(tmp_path)
-    ds = HeadPoseDataset(path, system="biwi", crop=0.2, size=40, hflip=0.5, flip_scheme=PERM,
-                         transform=v2.RandomRotation(35))
+    ds = HeadPoseDataset(
+        path, system="biwi", crop=0.2, size=40, hflip=0.5, flip_scheme=PERM, transform=v2.RandomRotation(35)
+    )
     torch.manual_seed(3)
     batch = ds.__getitems__(list(range(8)))
     torch.manual_seed(3)
@@ -191,8 +197,12 @@ def test_size_of_a_non_square_crop_follows_the_policy(tmp_path):
 
 def test_bad_arguments(tmp_path):
     path, _, _ = _labels(tmp_path, n=1)
-    for kw, msg in (({"on_undefined": "skip"}, "on_undefined"), ({"hflip": 1.5}, "hflip"),
-                    ({"size": 0}, "size"), ({"interpolation": "bilinear"}, "interpolation")):
+    for kw, msg in (
+        ({"on_undefined": "skip"}, "on_undefined"),
+        ({"hflip": 1.5}, "hflip"),
+        ({"size": 0}, "size"),
+        ({"interpolation": "bilinear"}, "interpolation"),
+    ):
         with pytest.raises(ValueError, match=msg):
             HeadPoseDataset(path, **kw)
     with pytest.raises(ValueError, match="permutation"):

@@ -1,4 +1,5 @@
 """HeadPoseDataset's packed per-row outputs (no transform) equal the per-sample path exactly, key for key."""
+
 import cv2
 import numpy as np
 import pandas as pd
@@ -23,8 +24,9 @@ def _labels(tmp_path, n=10):
     df = pd.DataFrame({"file": names})
     df[["pitch", "yaw", "roll"]] = rng.uniform(-89, 89, (n, 3))
     df.loc[0, ["pitch", "yaw", "roll"]] = [90.0, 10.0, 5.0]  # gimbal lock
-    box = np.column_stack([rng.uniform(-5, 40, n), rng.uniform(-5, 30, n), rng.uniform(20, 50, n),
-                           rng.uniform(20, 50, n)])
+    box = np.column_stack(
+        [rng.uniform(-5, 40, n), rng.uniform(-5, 30, n), rng.uniform(20, 50, n), rng.uniform(20, 50, n)]
+    )
     box[3] = np.nan  # no box: the landmarks' box
     df[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]] = box
     lm = rng.uniform(10, 60, (n, 5, 2))
@@ -39,23 +41,36 @@ def _same(a, b):
     for k in a:
         if isinstance(a[k], torch.Tensor):
             assert a[k].dtype == b[k].dtype and a[k].shape == b[k].shape, k
-            assert torch.equal(a[k], b[k]) or (a[k].isnan() == b[k].isnan()).all() and torch.equal(
-                a[k].nan_to_num(), b[k].nan_to_num()), k
+            assert (
+                torch.equal(a[k], b[k])
+                or (a[k].isnan() == b[k].isnan()).all()
+                and torch.equal(a[k].nan_to_num(), b[k].nan_to_num())
+            ), k
             if k == "image":
                 assert a[k].stride() == b[k].stride()
         else:
             assert a[k] == b[k], k
 
 
-@pytest.mark.parametrize("kw", [{"crop": 0.2}, {"crop": 0.2, "size": 48}, {"crop": 0.1, "square": False},
-                                {"crop": 0.1, "square": False, "size": 40, "on_undefined": "keep"}, {},
-                                {"crop": 0.3, "size": 32, "dtype": torch.float64}, {"crop": 0.2, "landmarks": None}])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"crop": 0.2},
+        {"crop": 0.2, "size": 48},
+        {"crop": 0.1, "square": False},
+        {"crop": 0.1, "square": False, "size": 40, "on_undefined": "keep"},
+        {},
+        {"crop": 0.3, "size": 32, "dtype": torch.float64},
+        {"crop": 0.2, "landmarks": None},
+    ],
+)
 @pytest.mark.parametrize("flip", [False, True])
 def test_packed_rows_equal_the_per_sample_path(tmp_path, kw, flip):
     kw = dict(kw)
     expect = 0 if not kw and flip else None if "size" in kw and kw.get("square") is False else 10
-    ds = HeadPoseDataset(_labels(tmp_path), crop=kw.pop("crop", None), hflip=float(flip),
-                         flip_scheme=[4, 3, 2, 1, 0], **kw)
+    ds = HeadPoseDataset(
+        _labels(tmp_path), crop=kw.pop("crop", None), hflip=float(flip), flip_scheme=[4, 3, 2, 1, 0], **kw
+    )
     tabled = 0
     for i in range(len(ds)):
         slow = ds._finish([ds._prepare(i, flip)])[0]

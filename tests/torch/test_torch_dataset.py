@@ -1,4 +1,5 @@
 """HeadPoseDataset: label tables, .mat folders, Parquet with image bytes; crops; DataLoader with 2 workers."""
+
 import pickle
 
 import cv2
@@ -101,8 +102,14 @@ def test_dataloader_with_two_workers_and_a_v2_transform(tmp_path):
 
     names = _images(tmp_path, n=8)
     path = write_labels(_table(names), tmp_path / "labels.parquet", system="300w_lp")
-    pipe = v2.Compose([T.RandomHorizontalFlip(p=1.0, scheme=[4, 3, 2, 1, 0]), v2.Resize(32),
-                       v2.CenterCrop(32), v2.ToDtype(torch.float32, scale=True)])
+    pipe = v2.Compose(
+        [
+            T.RandomHorizontalFlip(p=1.0, scheme=[4, 3, 2, 1, 0]),
+            v2.Resize(32),
+            v2.CenterCrop(32),
+            v2.ToDtype(torch.float32, scale=True),
+        ]
+    )
     ds = HeadPoseDataset(path, transform=pipe)
     pickle.loads(pickle.dumps(ds))
     loader = torch.utils.data.DataLoader(ds, batch_size=4, num_workers=2)
@@ -142,16 +149,19 @@ def test_hf_export_folder_shards_landmark_lists_and_card(tmp_path):
     img_type = pa.struct([pa.field("bytes", pa.binary()), pa.field("path", pa.string())])
     for shard, rows in enumerate([[0, 1, 2], [3, 4]]):
         part = df.loc[rows]
-        cols = {"image": pa.array([{"bytes": (tmp_path / names[k]).read_bytes(), "path": names[k]} for k in rows],
-                                  img_type)}
+        cols = {
+            "image": pa.array([{"bytes": (tmp_path / names[k]).read_bytes(), "path": names[k]} for k in rows], img_type)
+        }
         for c in ["pitch", "yaw", "roll", "bbox_x", "bbox_y", "bbox_w", "bbox_h"]:
             cols[c] = pa.array(part[c].to_numpy(float))
         for a in "xy":
-            cols[f"landmarks_{a}"] = pa.array(list(part[[f"lm{i}_{a}" for i in range(5)]].to_numpy(float)),
-                                              pa.list_(pa.float64()))
+            cols[f"landmarks_{a}"] = pa.array(
+                list(part[[f"lm{i}_{a}" for i in range(5)]].to_numpy(float)), pa.list_(pa.float64())
+            )
         pq.write_table(pa.table(cols), tmp_path / "hf" / "data" / f"train-{shard:05d}-of-00002.parquet")
-    (tmp_path / "hf" / "README.md").write_text("---\n---\n`pitch`, `yaw`, `roll` (degrees) and the matrix "
-                                               "`r00..r22` are in the rotation system `6drepnet`:\n")
+    (tmp_path / "hf" / "README.md").write_text(
+        "---\n---\n`pitch`, `yaw`, `roll` (degrees) and the matrix `r00..r22` are in the rotation system `6drepnet`:\n"
+    )
     ds = HeadPoseDataset(tmp_path / "hf", system="6drepnet")
     assert ds.label_system.name == "6drepnet" and len(ds) == 5
     for k in (4, 1, 3):

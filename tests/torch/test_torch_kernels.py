@@ -1,4 +1,5 @@
 """hpe_cli.torch kernels against the numpy core (SciPy for 6-D and geodesic), random and gimbal-lock rotations."""
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -10,8 +11,19 @@ pytest.importorskip("torchvision")
 from scipy.spatial.transform import Rotation  # noqa: E402
 
 from hpe_cli.rotation import builtin_systems, geodesic_deg  # noqa: E402
-from hpe_cli.torch import (angles_to_canonical, canonical_to_angles, from_canonical, from_matrix, geodesic,  # noqa: E402
-                           geodesic_loss, maev, matrix_to_sixd, sixd_to_matrix, to_canonical, to_matrix)
+from hpe_cli.torch import (  # noqa: E402
+    angles_to_canonical,
+    canonical_to_angles,
+    from_canonical,
+    from_matrix,
+    geodesic,
+    geodesic_loss,
+    maev,
+    matrix_to_sixd,
+    sixd_to_matrix,
+    to_canonical,
+    to_matrix,
+)
 
 SYSTEMS = sorted(builtin_systems())
 ROLE = {"pitch": 0, "yaw": 1, "roll": 2}
@@ -69,8 +81,13 @@ def test_kernels_float32_to_1e6(name):
     assert np.abs(s.from_angles(q2.double().numpy()) - R).max() < 1e-6
 
 
-@given(st.floats(-180, 180), st.floats(-180, 180), st.floats(-180, 180),
-       st.sampled_from(SYSTEMS), st.sampled_from([0.0, 1e-12, 1e-7, 1e-3, None]))
+@given(
+    st.floats(-180, 180),
+    st.floats(-180, 180),
+    st.floats(-180, 180),
+    st.sampled_from(SYSTEMS),
+    st.sampled_from([0.0, 1e-12, 1e-7, 1e-3, None]),
+)
 def test_property_from_matrix_equals_numpy(p, y, r, name, lock_off):
     s = builtin_systems()[name]
     pyr = np.array([[p, y, r]])
@@ -113,8 +130,9 @@ def test_geodesic_matches_numpy_and_is_accurate_at_0_and_180():
     d = torch.rad2deg(geodesic(torch.tensor(R1), torch.tensor(R2))).numpy()
     assert np.abs(d - geodesic_deg(R1, R2)).max() < 1e-10
     for angle in (1e-7, 180 - 1e-6):
-        R = torch.tensor(Rotation.from_rotvec([0.3, -0.5, 0.81] / np.linalg.norm([0.3, -0.5, 0.81])
-                                               * np.deg2rad(angle)).as_matrix())[None]
+        R = torch.tensor(
+            Rotation.from_rotvec([0.3, -0.5, 0.81] / np.linalg.norm([0.3, -0.5, 0.81]) * np.deg2rad(angle)).as_matrix()
+        )[None]
         got = torch.rad2deg(geodesic(torch.eye(3, dtype=torch.float64)[None], R)).item()
         assert abs(got - angle) < 1e-9
 

@@ -3,6 +3,7 @@
 Oracles: ``augment_batch`` (the numpy maths of SPEC §5); torchvision's own keypoint kernels moving the real
 ``pt3d_68`` landmarks of AFLW2000-3D, which the transformed pose must reproduce by orthographic projection.
 """
+
 import numpy as np
 import pytest
 
@@ -37,13 +38,16 @@ PYR = np.random.default_rng(0).uniform([-60, -89, -60], [60, 89, 60], (16, 3))
 PYR[0] = [10.0, 90.0, 20.0]  # at gimbal lock
 
 
-@pytest.mark.parametrize("fn, op, angle", [
-    (F.horizontal_flip, "hflip", None),
-    (F.vertical_flip, "vflip", None),
-    (lambda p: F.rotate(p, 37.5), "rotate", 37.5),
-    (lambda p: F.rotate(p, -90.0, expand=True), "rotate", -90.0),
-    (lambda p: F.affine(p, 25.0, [7.0, -3.0], 1.3, [0.0, 0.0]), "rotate", -25.0),  # F.affine turns clockwise
-])
+@pytest.mark.parametrize(
+    "fn, op, angle",
+    [
+        (F.horizontal_flip, "hflip", None),
+        (F.vertical_flip, "vflip", None),
+        (lambda p: F.rotate(p, 37.5), "rotate", 37.5),
+        (lambda p: F.rotate(p, -90.0, expand=True), "rotate", -90.0),
+        (lambda p: F.affine(p, 25.0, [7.0, -3.0], 1.3, [0.0, 0.0]), "rotate", -25.0),  # F.affine turns clockwise
+    ],
+)
 def test_pose_kernels_equal_augment_batch(fn, op, angle):
     ref = augment_batch(PYR, op=op, angle=angle, image_size=(W, H))
     got = fn(_pose(PYR))
@@ -107,18 +111,27 @@ def test_exact_operations_keep_or_move_the_pose_and_canvas():
     _, same = v2.Compose([v2.ColorJitter(0.5, 0.5, 0.5), v2.GaussianBlur(3), v2.Grayscale(3)])(img, pose)
     assert torch.equal(same.as_subclass(torch.Tensor), A)
     # 90-degree turns and flips stay exact (signed permutations, no rounding)
-    assert torch.equal(F.rotate(F.rotate(F.rotate(F.rotate(pose, 90.0), 90.0), 90.0), 90.0).as_subclass(torch.Tensor), A)
+    assert torch.equal(
+        F.rotate(F.rotate(F.rotate(F.rotate(pose, 90.0), 90.0), 90.0), 90.0).as_subclass(torch.Tensor), A
+    )
     assert torch.equal(F.horizontal_flip(F.horizontal_flip(pose)).as_subclass(torch.Tensor), A)
 
 
 def test_batch_of_images_with_poses_through_compose():
-    pipe = v2.Compose([T.RandomHorizontalFlip(p=1.0), v2.RandomRotation((20, 20)),
-                       v2.RandomResizedCrop(32, scale=(0.5, 0.9), ratio=(1.0, 1.0)), v2.ToDtype(torch.float32, scale=True)])
+    pipe = v2.Compose(
+        [
+            T.RandomHorizontalFlip(p=1.0),
+            v2.RandomRotation((20, 20)),
+            v2.RandomResizedCrop(32, scale=(0.5, 0.9), ratio=(1.0, 1.0)),
+            v2.ToDtype(torch.float32, scale=True),
+        ]
+    )
     img = tv_tensors.Image(torch.randint(0, 255, (16, 3, H, W), dtype=torch.uint8))
     out_img, pose = pipe(img, _pose(PYR))
     assert out_img.shape == (16, 3, 32, 32) and out_img.dtype == torch.float32
-    ref = augment_batch(augment_batch(PYR, op="hflip", image_size=(W, H)).angles, op="rotate", angle=20.0,
-                        image_size=(W, H))
+    ref = augment_batch(
+        augment_batch(PYR, op="hflip", image_size=(W, H)).angles, op="rotate", angle=20.0, image_size=(W, H)
+    )
     assert np.abs(pose.numpy() - ref.canonical).max() < 1e-12
 
 
@@ -160,8 +173,11 @@ def test_v2_pipeline_on_aflw2000_moves_pose_and_landmarks_consistently(seed):
 
     torch.manual_seed(seed)
     flip = seed % 2 == 0
-    steps = [T.RandomHorizontalFlip(p=1.0 if flip else 0.0, scheme="ibug68"), v2.RandomRotation(40),
-             v2.RandomCrop((300, 320), pad_if_needed=True)]
+    steps = [
+        T.RandomHorizontalFlip(p=1.0 if flip else 0.0, scheme="ibug68"),
+        v2.RandomRotation(40),
+        v2.RandomCrop((300, 320), pad_if_needed=True),
+    ]
     if seed >= 3:
         steps.append(v2.RandomVerticalFlip(p=1.0))  # torchvision's own: points only, re-indexed below
         steps.append(PermuteLandmarks("ibug68"))

@@ -5,6 +5,7 @@ the labels already in the layout's rotation system) and, for layouts that keep p
 ``hf``), the encoded or raw crops as they are produced. Crop files of the folder layouts are written by the
 worker processes straight into the staging folder, at the paths the layout's :meth:`Layout.relpath` names.
 """
+
 from __future__ import annotations
 
 LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")

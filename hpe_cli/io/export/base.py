@@ -1,4 +1,5 @@
 """What every export layout shares: crop names, label rules, the hooks the export job calls."""
+
 from __future__ import annotations
 
 import re
@@ -95,8 +96,10 @@ class Layout:
 
     def __init__(self, system=None, form=None, trainer=None, **options):
         if trainer is not None:
-            raise ValueError(f"--trainer applies to --layout 6drepnet only (its file lists are read by Hopenet, "
-                             f"6DRepNet and 6DRepNet360), not to --layout {self.name}")
+            raise ValueError(
+                f"--trainer applies to --layout 6drepnet only (its file lists are read by Hopenet, "
+                f"6DRepNet and 6DRepNet360), not to --layout {self.name}"
+            )
         self.user_system = system
         self.form = form
         self.options = options

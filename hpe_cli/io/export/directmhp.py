@@ -27,6 +27,7 @@ Followed (hnuzhy/DirectMHP@a51b06bc, the current code):
   solution keeps them inside, so the rule only guards. The box is clamped to the image (a box less than half
   inside the frame is a reject).
 """
+
 from __future__ import annotations
 
 import json
@@ -35,14 +36,46 @@ import numpy as np
 
 from .base import Layout
 
-SEQ_NAMES = ["171204_pose3", "171026_pose3", "170221_haggling_b3", "170221_haggling_m3", "170224_haggling_a3",
-             "170228_haggling_b1", "170404_haggling_a1", "170407_haggling_a2", "170407_haggling_b2",
-             "171026_cello3", "161029_piano4", "160422_ultimatum1", "160224_haggling1", "170307_dance5",
-             "160906_ian1", "170915_office1", "160906_pizza1"]
-SEQ_TRAIN = ["171204_pose3", "161029_piano4", "160422_ultimatum1", "170307_dance5", "160906_pizza1",
-             "170221_haggling_b3", "170224_haggling_a3", "170404_haggling_a1", "170407_haggling_b2"]
-SEQ_VAL = ["171026_pose3", "171026_cello3", "160224_haggling1", "160906_ian1", "170915_office1",
-           "170221_haggling_m3", "170228_haggling_b1", "170407_haggling_a2"]
+SEQ_NAMES = [
+    "171204_pose3",
+    "171026_pose3",
+    "170221_haggling_b3",
+    "170221_haggling_m3",
+    "170224_haggling_a3",
+    "170228_haggling_b1",
+    "170404_haggling_a1",
+    "170407_haggling_a2",
+    "170407_haggling_b2",
+    "171026_cello3",
+    "161029_piano4",
+    "160422_ultimatum1",
+    "160224_haggling1",
+    "170307_dance5",
+    "160906_ian1",
+    "170915_office1",
+    "160906_pizza1",
+]
+SEQ_TRAIN = [
+    "171204_pose3",
+    "161029_piano4",
+    "160422_ultimatum1",
+    "170307_dance5",
+    "160906_pizza1",
+    "170221_haggling_b3",
+    "170224_haggling_a3",
+    "170404_haggling_a1",
+    "170407_haggling_b2",
+]
+SEQ_VAL = [
+    "171026_pose3",
+    "171026_cello3",
+    "160224_haggling1",
+    "160906_ian1",
+    "170915_office1",
+    "170221_haggling_m3",
+    "170228_haggling_b1",
+    "170407_haggling_a2",
+]
 RULE = "DirectMHP normalisation: |pitch| > 90 or |roll| > 90 cannot be held in [0, 1]"
 CATEGORIES = [{"supercategory": "person", "id": 1, "name": "person"}]
 
@@ -68,8 +101,12 @@ def image_ids(rows) -> np.ndarray:
     ids = np.zeros(len(rows), dtype=np.int64)
     node = np.array([int(c.split("_")[-1]) if c and c.split("_")[-1].isdigit() else -1 for c in cam])
     cmu = (node >= 0) & (node < 100) & (frame >= 0) & (frame < 1_000_000) & (seq != "")
-    ids[cmu] = (10_000_000_000 + np.array([nums[s] for s in seq[cmu]], dtype=np.int64) * 100_000_000
-                + frame[cmu] * 100 + node[cmu])
+    ids[cmu] = (
+        10_000_000_000
+        + np.array([nums[s] for s in seq[cmu]], dtype=np.int64) * 100_000_000
+        + frame[cmu] * 100
+        + node[cmu]
+    )
     if (~cmu).any():
         key = rows["source"].astype(str).to_numpy()[~cmu] + "\0" + rows["image"].astype(str).to_numpy()[~cmu]
         _, first, inv = np.unique(key, return_index=True, return_inverse=True)
@@ -88,8 +125,10 @@ def default_splits(rows) -> np.ndarray:
 class DirectMHPLayout(Layout):
     name = "directmhp"
     system = "whenet"
-    loader = ("hnuzhy/DirectMHP@a51b06bc train.py:98-99, val.py:86,177, utils/general.py:282-285, "
-              "utils/datasets.py:371-372,394-407,889-933")
+    loader = (
+        "hnuzhy/DirectMHP@a51b06bc train.py:98-99, val.py:86,177, utils/general.py:282-285, "
+        "utils/datasets.py:371-372,394-407,889-933"
+    )
     full_frames = True
     uses_landmarks = True
 
@@ -112,7 +151,8 @@ class DirectMHPLayout(Layout):
                 f"--layout directmhp: DirectMHP's train.py reads data['train'] and data['val'] (and val.py the "
                 f"val COCO annotations for its MAE), but this export has no {' and no '.join(missing)} split "
                 f"(got {', '.join(splits) or 'none'}); give --split, e.g. --split sequence:train=0.8,val=0.2 "
-                "(or camera:/image: for one sequence), or a --split-file naming train and val")
+                "(or camera:/image: for one sequence), or a --split-file naming train and val"
+            )
 
     def finish(self, exported, final_root):
         from ...io.layout import landmark_count
@@ -133,9 +173,13 @@ class DirectMHPLayout(Layout):
         _write_yaml(root / "data.yaml", splits)
         nums = sequence_numbers(exported["sequence"].astype(str).unique())
         extra = {s: n for s, n in nums.items() if s not in SEQ_NAMES}
-        notes = [f"read by {self.loader}",
-                 ("data.yaml has path: . (DirectMHP's check_dataset joins it to the working folder): run DirectMHP's "
-                  "train.py/val.py from the export folder with --data data.yaml, or set path: to where the export is")]
+        notes = [
+            f"read by {self.loader}",
+            (
+                "data.yaml has path: . (DirectMHP's check_dataset joins it to the working folder): run DirectMHP's "
+                "train.py/val.py from the export folder with --data data.yaml, or set path: to where the export is"
+            ),
+        ]
         return notes + ([f"DirectMHP sequence numbers after its 17: {extra}"] if extra else [])
 
 
@@ -157,14 +201,38 @@ def _write_coco(path, part, ids, W, H, box, ang, n_lm):
         pts = [[] for _ in range(len(part))]
     uniq, first = np.unique(ids, return_index=True)
     seqs = part["sequence"].astype(str).to_numpy()
-    images = [{"file_name": f"{i}.jpg", "height": int(H[k]), "width": int(W[k]), "id": int(i),
-               **({"seq": seqs[k]} if seqs[k] else {})} for i, k in zip(uniq.tolist(), first.tolist())]
+    images = [
+        {
+            "file_name": f"{i}.jpg",
+            "height": int(H[k]),
+            "width": int(W[k]),
+            "id": int(i),
+            **({"seq": seqs[k]} if seqs[k] else {}),
+        }
+        for i, k in zip(uniq.tolist(), first.tolist())
+    ]
     box_l, ang_l, area = box.tolist(), ang.tolist(), np.round(box[:, 2] * box[:, 3], 4).tolist()
-    anns = [{"image_id": int(ids[k]), "id": k + 1, "category_id": 1, "bbox": box_l[k],
-             "euler_angles": ang_l[k], "face2d_pts": pts[k], "area": area[k], "iscrowd": 0,
-             "segmentation": []} for k in range(len(part))]
-    coco = {"info": {"description": "hpe export --layout directmhp", "version": "1.0"},
-            "licenses": [], "images": images, "annotations": anns, "categories": CATEGORIES}
+    anns = [
+        {
+            "image_id": int(ids[k]),
+            "id": k + 1,
+            "category_id": 1,
+            "bbox": box_l[k],
+            "euler_angles": ang_l[k],
+            "face2d_pts": pts[k],
+            "area": area[k],
+            "iscrowd": 0,
+            "segmentation": [],
+        }
+        for k in range(len(part))
+    ]
+    coco = {
+        "info": {"description": "hpe export --layout directmhp", "version": "1.0"},
+        "licenses": [],
+        "images": images,
+        "annotations": anns,
+        "categories": CATEGORIES,
+    }
     with open(path, "w", encoding="utf-8") as fh:
         json.dump(coco, fh)
 
@@ -177,7 +245,9 @@ def _write_yolo(folder, ids, W, H, box, ang):
     p, y, r = ang[:, 0] / 180 + 0.5, ang[:, 1] / 360 + 0.5, ang[:, 2] / 180 + 0.5
     lines: dict = {}
     for k, i in enumerate(ids.tolist()):
-        lines.setdefault(i, []).append(f"{0} {xc[k]:.6f} {yc[k]:.6f} {w[k]:.6f} {h[k]:.6f} {p[k]:.6f} {y[k]:.6f} {r[k]:.6f}\n")
+        lines.setdefault(i, []).append(
+            f"{0} {xc[k]:.6f} {yc[k]:.6f} {w[k]:.6f} {h[k]:.6f} {p[k]:.6f} {y[k]:.6f} {r[k]:.6f}\n"
+        )
     for i, ls in lines.items():
         with open(folder / f"{i}.txt", "w", encoding="utf-8", newline="") as fh:
             fh.writelines(ls)
@@ -192,9 +262,13 @@ def _write_yaml(path, splits):
     folder; ``val.py:177`` joins ``path`` and ``<split>_annotations``. (DirectMHP's own image lists hold absolute
     paths, and its ``./`` list entries resolve against the list's own folder, so a list could not be moved.)
     """
-    yaml = ["# written by hpe export --layout directmhp (keys of DirectMHP data/cmu_panoptic_coco.yaml)",
-            "# path: . is the working folder (check_dataset): run train.py/val.py from this folder,",
-            "# or set path: to this folder's location", "path: .", "labels: yolov5_labels_coco"]
+    yaml = [
+        "# written by hpe export --layout directmhp (keys of DirectMHP data/cmu_panoptic_coco.yaml)",
+        "# path: . is the working folder (check_dataset): run train.py/val.py from this folder,",
+        "# or set path: to this folder's location",
+        "path: .",
+        "labels: yolov5_labels_coco",
+    ]
     yaml += [f"{split}: images/{split}" for split in splits]
     yaml += [f"{split}_annotations: annotations/coco_style_{split}.json" for split in splits]
     yaml += ["", "nc: 1", "num_angles: 3", "names: [ 'person' ]", ""]

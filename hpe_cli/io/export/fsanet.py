@@ -13,6 +13,7 @@ are within [-99, 99] (``:78-87``); labels outside are rejects here. thohemp/6DRe
 The crops are streamed to a raw temporary file and the ``.npz`` (a stored zip of ``.npy`` members, as
 ``np.savez`` writes) is assembled member by member, so memory stays flat.
 """
+
 from __future__ import annotations
 
 import zipfile
@@ -27,8 +28,10 @@ RULE_99 = "outside ±99° (FSA-Net's FSANET_fine_train.py keeps [-99, 99])"
 class FSANetLayout(Layout):
     name = "fsanet"
     system = "300w_lp"
-    loader = ("shamangary/FSA-Net@4361d0e4 training_and_testing/FSANET_fine_train.py:25-27,78-92 (load_data_npz, "
-              "the [-99, 99] filter); thohemp/6DRepNet@464b2ba5 sixdrepnet/datasets.py:177-228 (BIWI)")
+    loader = (
+        "shamangary/FSA-Net@4361d0e4 training_and_testing/FSANET_fine_train.py:25-27,78-92 (load_data_npz, "
+        "the [-99, 99] filter); thohemp/6DRepNet@464b2ba5 sixdrepnet/datasets.py:177-228 (BIWI)"
+    )
     pixels = "array"
     default_size = 64
     default_square = True
@@ -67,12 +70,16 @@ class FSANetLayout(Layout):
             pose = part[["yaw", "pitch", "roll"]].to_numpy(dtype=np.float64)
             shape = (n,) + tuple(self._shape)
             raw = self.root / f".{split}.image.raw"
-            with zipfile.ZipFile(self.root / f"{split}.npz", "w", compression=zipfile.ZIP_STORED,
-                                 allowZip64=True) as z:
+            with zipfile.ZipFile(self.root / f"{split}.npz", "w", compression=zipfile.ZIP_STORED, allowZip64=True) as z:
                 with z.open("image.npy", "w", force_zip64=True) as out:
                     np.lib.format.write_array_header_1_0(
-                        out, {"descr": np.lib.format.dtype_to_descr(np.dtype(np.uint8)), "fortran_order": False,
-                              "shape": shape})
+                        out,
+                        {
+                            "descr": np.lib.format.dtype_to_descr(np.dtype(np.uint8)),
+                            "fortran_order": False,
+                            "shape": shape,
+                        },
+                    )
                     with open(raw, "rb") as src:
                         while True:
                             chunk = src.read(1 << 22)

@@ -14,6 +14,7 @@ Each row: ``image`` (the crop), ``rotation`` (3 x 3, the rotation matrix of the 
 box and the crop box in the source frame's pixels (``bbox_*``, ``crop_x0..y1``) and the source-frame landmarks
 under ``source_landmarks_x/y``.
 """
+
 from __future__ import annotations
 
 import json
@@ -29,8 +30,10 @@ META_STR = ["source", "image_file", "sequence", "camera", "split"]
 META_INT = ["frame", "person_id", "crop_x0", "crop_y0", "crop_x1", "crop_y1", "image_width", "image_height"]
 BOX = ["bbox_x", "bbox_y", "bbox_w", "bbox_h"]
 LANDMARKS = ("landmarks_x", "landmarks_y", "source_landmarks_x", "source_landmarks_y")
-LOADER = ("huggingface/datasets load_dataset('parquet' or folder): features/image.py (Image struct), "
-          "features/features.py (Array2D, Value, Sequence), the 'huggingface' schema metadata")
+LOADER = (
+    "huggingface/datasets load_dataset('parquet' or folder): features/image.py (Image struct), "
+    "features/features.py (Array2D, Value, Sequence), the 'huggingface' schema metadata"
+)
 
 
 def _features(n_lm: int) -> dict:
@@ -97,8 +100,12 @@ class HFLayout(Layout):
         if self._n_lm is None:
             self._n_lm = landmark_count(rows.columns)
         files = rows["file"].tolist()
-        cols = {"image": pa.array([{"bytes": b, "path": f} for b, f in zip(payloads, files)],
-                                  type=pa.struct([pa.field("bytes", pa.binary()), pa.field("path", pa.string())]))}
+        cols = {
+            "image": pa.array(
+                [{"bytes": b, "path": f} for b, f in zip(payloads, files)],
+                type=pa.struct([pa.field("bytes", pa.binary()), pa.field("path", pa.string())]),
+            )
+        }
         for c in META_STR:
             cols[c] = pa.array(rows[c if c != "image_file" else "image"].astype(str).tolist(), pa.string())
         for c in META_INT:
@@ -124,8 +131,7 @@ class HFLayout(Layout):
             k = self._shards.get(split, 0)
             self._shards[split] = k + 1
             self._rows[split] = 0
-            w = self._writers[split] = pq.ParquetWriter(self.root / "data" / f".{split}-{k:05d}.parquet",
-                                                        table.schema)
+            w = self._writers[split] = pq.ParquetWriter(self.root / "data" / f".{split}-{k:05d}.parquet", table.schema)
         w.write_table(table)
         self._rows[split] += table.num_rows
 
@@ -142,7 +148,8 @@ class HFLayout(Layout):
         for split, n in self._shards.items():
             for k in range(n):
                 (self.root / "data" / f".{split}-{k:05d}.parquet").rename(
-                    self.root / "data" / f"{split}-{k:05d}-of-{n:05d}.parquet")
+                    self.root / "data" / f"{split}-{k:05d}-of-{n:05d}.parquet"
+                )
         self.card = None
         return [f"read by {self.loader}"]
 
@@ -150,23 +157,44 @@ class HFLayout(Layout):
         """The dataset card: YAML header (task, configs, features, splits), then the labels in words."""
         counts = exported["split"].value_counts().sort_index()
         y = _card_header(counts, self._n_lm or 0, self.root)
-        y += ["# Head-pose crops exported by `hpe export --layout hf`", "",
-              "A head-pose estimation (regression) dataset: each row is one head crop and its 3-D head rotation.",
-              ""]
+        y += [
+            "# Head-pose crops exported by `hpe export --layout hf`",
+            "",
+            "A head-pose estimation (regression) dataset: each row is one head crop and its 3-D head rotation.",
+            "",
+        ]
         d = system.describe()
-        y += ["## Labels", "",
-              (f"`rotation` (3 x 3) is the head's rotation matrix and `pitch`, `yaw`, `roll` (degrees) its angles, "
-               f"both in the rotation system `{system.name}`:"), ""]
+        y += [
+            "## Labels",
+            "",
+            (
+                f"`rotation` (3 x 3) is the head's rotation matrix and `pitch`, `yaw`, `roll` (degrees) its angles, "
+                f"both in the rotation system `{system.name}`:"
+            ),
+            "",
+        ]
         y += [f"- {k}: {v}" for k, v in d.items()]
-        y += ["", ("Compare rotations through the matrix, not the angles (angles wrap and have two solutions). The "
-                   f"canonical 300W-LP matrix of a row is `get_system('{system.name}').to_canonical(rotation)` in "
-                   "`hpe`. `datasets.load_dataset(folder)` reads `rotation` as `Array2D((3, 3))` (this card's "
-                   "features); `load_dataset('parquet', ...)` as a 3 x 3 nested list."),
-              "", "## Pixels", "",
-              ("`image` is the crop. `landmarks_x/y` are in the crop's pixels (the written image, after the "
-               "resize); `source_landmarks_x/y`, `bbox_*` (the head box) and `crop_x0..crop_y1` (the crop's box, "
-               "exclusive ends) are in the source frame's pixels (`image_file`, `image_width` x `image_height`). "
-               "Parts of the crop outside the frame are padded with a constant."), "", "## Sampling", ""]
+        y += [
+            "",
+            (
+                "Compare rotations through the matrix, not the angles (angles wrap and have two solutions). The "
+                f"canonical 300W-LP matrix of a row is `get_system('{system.name}').to_canonical(rotation)` in "
+                "`hpe`. `datasets.load_dataset(folder)` reads `rotation` as `Array2D((3, 3))` (this card's "
+                "features); `load_dataset('parquet', ...)` as a 3 x 3 nested list."
+            ),
+            "",
+            "## Pixels",
+            "",
+            (
+                "`image` is the crop. `landmarks_x/y` are in the crop's pixels (the written image, after the "
+                "resize); `source_landmarks_x/y`, `bbox_*` (the head box) and `crop_x0..crop_y1` (the crop's box, "
+                "exclusive ends) are in the source frame's pixels (`image_file`, `image_width` x `image_height`). "
+                "Parts of the crop outside the frame are padded with a constant."
+            ),
+            "",
+            "## Sampling",
+            "",
+        ]
         y += [f"- {s}" for s in sampling] or ["- none: every usable label is exported"]
         y += ["", "## Sources and licences", ""]
         for src, note in sources.items():
@@ -184,10 +212,24 @@ def _size_category(n: int) -> str:
 
 def _card_header(counts, n_lm: int, root) -> list:
     """The card's YAML header: task, size, configs (split files), features and splits."""
-    y = ["---", "license: other", "pretty_name: Head pose crops (hpe export)", "task_categories:",
-         "- keypoint-detection", "task_ids:", "- pose-estimation", "tags:", "- head-pose", "- head-pose-estimation",
-         "- rotation-regression", "size_categories:", f"- {_size_category(int(counts.sum()))}",
-         "configs:", "- config_name: default", "  data_files:"]
+    y = [
+        "---",
+        "license: other",
+        "pretty_name: Head pose crops (hpe export)",
+        "task_categories:",
+        "- keypoint-detection",
+        "task_ids:",
+        "- pose-estimation",
+        "tags:",
+        "- head-pose",
+        "- head-pose-estimation",
+        "- rotation-regression",
+        "size_categories:",
+        f"- {_size_category(int(counts.sum()))}",
+        "configs:",
+        "- config_name: default",
+        "  data_files:",
+    ]
     for split in counts.index:
         y += [f"  - split: {split}", f"    path: data/{split}-*"]
     y += ["dataset_info:", "  features:"]
@@ -197,8 +239,15 @@ def _card_header(counts, n_lm: int, root) -> list:
         elif f["_type"] == "Sequence":
             y += [f"  - name: {name}", "    sequence: float64"]
         elif f["_type"] == "Array2D":
-            y += [f"  - name: {name}", "    dtype:", "      array2_d:", "        shape:", "        - 3",
-                  "        - 3", "        dtype: float64"]
+            y += [
+                f"  - name: {name}",
+                "    dtype:",
+                "      array2_d:",
+                "        shape:",
+                "        - 3",
+                "        - 3",
+                "        dtype: float64",
+            ]
         else:
             y += [f"  - name: {name}", f"    dtype: {f['dtype']}"]
     y += ["  splits:"]

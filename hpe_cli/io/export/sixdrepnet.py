@@ -44,6 +44,7 @@ its frame, resizes it to ``img_size`` x ``img_size`` (256; stretched, not padded
 joins ``data_dir`` and the name, and builds ``get_R`` of the angles in radians. No range rule (the fork reads any
 angle) unless ``--trainer`` names one. hpe writes the angles with full precision (DirectMHP: ``%.4f``).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -53,18 +54,19 @@ from .base import Layout, abs_over
 
 TRAINERS = ("hopenet", "6drepnet", "6drepnet360")
 RULE_HOPENET = "Hopenet bins: an angle outside [-99, 99) has no class (deep-head-pose code/datasets.py:134-136)"
-RULE_6DREPNET = ("6DRepNet create_filename_list.py: |angle| > 99 is not listed "
-                 "(--trainer 6drepnet360 keeps the full range)")
+RULE_6DREPNET = (
+    "6DRepNet create_filename_list.py: |angle| > 99 is not listed (--trainer 6drepnet360 keeps the full range)"
+)
 #: loaders named in export.json, per form and trainer
 LOADERS = {
     ("mat", "6drepnet"): "thohemp/6DRepNet@464b2ba5 sixdrepnet/datasets.py:230-300 (Pose_300W_LP), :24-72 "
-                         "(AFLW2000); list rule sixdrepnet/create_filename_list.py:47-59",
+    "(AFLW2000); list rule sixdrepnet/create_filename_list.py:47-59",
     ("mat", "6drepnet360"): "thohemp/6DRepNet360@b06e4fed sixdrepnet360/datasets.py:230-300 (Pose_300W_LP), "
-                            ":24-72 (AFLW2000)",
+    ":24-72 (AFLW2000)",
     ("mat", "hopenet"): "natanielruiz/deep-head-pose@f7bbb998 code/datasets.py:80-145 (Pose_300W_LP), :226-274 "
-                        "(AFLW2000)",
+    "(AFLW2000)",
     ("crops", None): "hnuzhy/DirectMHP@a51b06bc exps/sixdrepnet.zip:sixdrepnet/datasets.py:307-361 "
-                     "(Pose_AGORA_CMU); writer exps/gen_dataset_full_AGORA_CMU.py:108-123",
+    "(Pose_AGORA_CMU); writer exps/gen_dataset_full_AGORA_CMU.py:108-123",
 }
 #: landmark-box margins of the ``mat`` form's crop (fractions of the landmark box: left, top, right, bottom)
 MAT_MARGINS = (0.5, 0.9, 0.65, 0.5)
@@ -108,12 +110,15 @@ class SixDRepNetLayout(Layout):
         if landmarks is None or np.asarray(landmarks).ndim != 3 or np.asarray(landmarks).shape[1] == 0:
             from ...errors import HpeError
 
-            raise HpeError("--layout 6drepnet --form mat needs 2-D landmarks (lm0_x, lm0_y, ... or pt2d): 6DRepNet's and "
-                           "Hopenet's loaders crop each face from pt2d; the input has none: use --form crops")
+            raise HpeError(
+                "--layout 6drepnet --form mat needs 2-D landmarks (lm0_x, lm0_y, ... or pt2d): 6DRepNet's and "
+                "Hopenet's loaders crop each face from pt2d; the input has none: use --form crops"
+            )
         t = landmark_boxes(landmarks)
         ml, mt, mr, mb = MAT_MARGINS
-        return np.stack([t[:, 0] - ml * t[:, 2], t[:, 1] - mt * t[:, 3],
-                         t[:, 2] * (1 + ml + mr), t[:, 3] * (1 + mt + mb)], axis=1)
+        return np.stack(
+            [t[:, 0] - ml * t[:, 2], t[:, 1] - mt * t[:, 3], t[:, 2] * (1 + ml + mr), t[:, 3] * (1 + mt + mb)], axis=1
+        )
 
     def finish(self, exported, final_root):
         notes = [f"read by {self.loader}"]
@@ -131,17 +136,19 @@ class SixDRepNetLayout(Layout):
         n_lm = landmark_count(exported.columns)
         for split, part in exported.groupby("split", sort=True):
             names = []
-            lm = np.stack([part[[f"lm{i}_{a}" for i in range(n_lm)]].to_numpy(dtype=np.float64)
-                           for a in "xy"], -1)
+            lm = np.stack([part[[f"lm{i}_{a}" for i in range(n_lm)]].to_numpy(dtype=np.float64) for a in "xy"], -1)
             box = part[["crop_x0", "crop_y0", "crop_x1", "crop_y1"]].to_numpy(dtype=np.int64)
             size = part[["out_w", "out_h"]].to_numpy(dtype=np.int64)
             rad = np.deg2rad(part[["pitch", "yaw", "roll"]].to_numpy(dtype=np.float64))
-            td = part[["tdx", "tdy", "tdz", "scale"]].to_numpy(dtype=np.float64) if "tdx" in part \
+            td = (
+                part[["tdx", "tdy", "tdz", "scale"]].to_numpy(dtype=np.float64)
+                if "tdx" in part
                 else np.full((len(part), 4), np.nan)
+            )
             heights = part["image_height"].to_numpy(dtype=np.float64)
             for k, f in enumerate(part["file"].tolist()):
                 name = f[:-4]
-                pts = points_to_crop(lm[k:k + 1], box[k:k + 1], tuple(size[k]))[0]
+                pts = points_to_crop(lm[k : k + 1], box[k : k + 1], tuple(size[k]))[0]
                 pts = pts[np.isfinite(pts).all(1)]
                 # tdx/tdy: the projection centre in the written image (tdy counts from the bottom, SPEC §8)
                 sx = size[k, 0] / (box[k, 2] - box[k, 0])
@@ -150,8 +157,11 @@ class SixDRepNetLayout(Layout):
                 tdx = (td[k, 0] - box[k, 0] + 0.5) * sx - 0.5
                 tdy = size[k, 1] - 1 - ((row - box[k, 1] + 0.5) * sy - 0.5)
                 pose = np.array([[rad[k, 0], rad[k, 1], rad[k, 2], tdx, tdy, td[k, 2], td[k, 3]]])
-                scipy.io.savemat(self.split_dir(split) / f"{name}.mat",
-                                 {"Pose_Para": pose, "pt2d": np.ascontiguousarray(pts.T)}, do_compression=False)
+                scipy.io.savemat(
+                    self.split_dir(split) / f"{name}.mat",
+                    {"Pose_Para": pose, "pt2d": np.ascontiguousarray(pts.T)},
+                    do_compression=False,
+                )
                 names.append(name + "\n")
             with open(self.split_dir(split) / "files.txt", "w", encoding="utf-8", newline="") as fh:
                 fh.writelines(names)

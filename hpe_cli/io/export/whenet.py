@@ -9,6 +9,7 @@ in its primary solution; every row that rule removes is a reject.
 Files: ``<split>/annotation.txt`` and ``<split>/<sequence>/<camera>_<person>_<frame>.jpg`` (crops); each
 split folder is one WHENet dataset folder.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,8 +23,10 @@ RULE = "WHENet rule: |pitch| >= 90 or |roll| >= 90 in the whenet primary solutio
 class WhenetLayout(Layout):
     name = "whenet"
     system = "whenet"
-    loader = ("Ascend-Research/HeadPoseEstimation-WHENet@a0d7bdfb prepare_images.py:160-165 (annotation.txt lines; "
-              "the repository publishes no training loader)")
+    loader = (
+        "Ascend-Research/HeadPoseEstimation-WHENet@a0d7bdfb prepare_images.py:160-165 (annotation.txt lines; "
+        "the repository publishes no training loader)"
+    )
 
     def label_reasons(self, angles):
         bad = (np.abs(angles[:, 0]) >= 90) | (np.abs(angles[:, 2]) >= 90)
@@ -33,8 +36,14 @@ class WhenetLayout(Layout):
         import pandas as pd
 
         for split, part in exported.groupby("split", sort=True):
-            frame = pd.DataFrame({"image": part["file"].to_numpy(), "pitch": part["pitch"].to_numpy(),
-                                  "yaw": part["yaw"].to_numpy(), "roll": part["roll"].to_numpy()})
+            frame = pd.DataFrame(
+                {
+                    "image": part["file"].to_numpy(),
+                    "pitch": part["pitch"].to_numpy(),
+                    "yaw": part["yaw"].to_numpy(),
+                    "roll": part["roll"].to_numpy(),
+                }
+            )
             path = self.split_dir(split) / "annotation.txt"
             with open(path, "w", encoding="utf-8", newline="") as fh:
                 fh.writelines(whenet_lines(frame, path))

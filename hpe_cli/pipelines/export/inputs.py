@@ -1,6 +1,7 @@
 """Export stage 1, load inputs: every input (label tables, 300W-LP/AFLW2000 ``.mat`` folders, the 300W-LP root)
 as one label table with the image reference, head box, canonical matrix ``A`` (columns ``a00..a22``),
 landmarks, group columns and a ``reason`` column (``''`` = usable)."""
+
 from __future__ import annotations
 
 import json
@@ -69,11 +70,27 @@ def load_mat_input(path: Path, source: str, landmarks: bool = True):
     box = sixdrepnet_test_boxes(tight)
     files = t["file"].astype(str).to_numpy()
     stems = [Path(f).with_suffix("").as_posix() for f in files]
-    return _pose_para_frame(t, box, lm, landmarks, {
-        "source": source, "kind": "300w_lp", "input": str(path), "row": files, "image": [s + ".jpg" for s in stems],
-        "root": str(path if path.is_dir() else path.parent), "sequence": "", "camera": "", "frame": -1,
-        "person_id": -1, "subject": [_subject_of(Path(s).name) for s in stems],
-        "image_width": np.nan, "image_height": np.nan})
+    return _pose_para_frame(
+        t,
+        box,
+        lm,
+        landmarks,
+        {
+            "source": source,
+            "kind": "300w_lp",
+            "input": str(path),
+            "row": files,
+            "image": [s + ".jpg" for s in stems],
+            "root": str(path if path.is_dir() else path.parent),
+            "sequence": "",
+            "camera": "",
+            "frame": -1,
+            "person_id": -1,
+            "subject": [_subject_of(Path(s).name) for s in stems],
+            "image_width": np.nan,
+            "image_height": np.nan,
+        },
+    )
 
 
 def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
@@ -105,11 +122,27 @@ def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
         pad = lambda a: np.concatenate([a, np.full((n, L - a.shape[1], 2), np.nan)], 1)
         lm = np.where(has_own[:, None, None], pad(own), pad(main))
     box = sixdrepnet_test_boxes(landmark_boxes(lm))
-    return _pose_para_frame(t, box, lm, landmarks, {
-        "source": source, "kind": "300w_lp", "input": str(path), "row": t["file"].astype(str).to_numpy(),
-        "image": t["image"].astype(str).to_numpy(), "root": str(path), "sequence": "", "camera": "", "frame": -1,
-        "person_id": -1, "subject": t["identity"].astype(str).to_numpy(), "image_width": np.nan,
-        "image_height": np.nan})
+    return _pose_para_frame(
+        t,
+        box,
+        lm,
+        landmarks,
+        {
+            "source": source,
+            "kind": "300w_lp",
+            "input": str(path),
+            "row": t["file"].astype(str).to_numpy(),
+            "image": t["image"].astype(str).to_numpy(),
+            "root": str(path),
+            "sequence": "",
+            "camera": "",
+            "frame": -1,
+            "person_id": -1,
+            "subject": t["identity"].astype(str).to_numpy(),
+            "image_width": np.nan,
+            "image_height": np.nan,
+        },
+    )
 
 
 def _pose_para_frame(t, box, lm, landmarks: bool, columns: dict):
@@ -139,8 +172,9 @@ def _pose_para_frame(t, box, lm, landmarks: bool, columns: dict):
     return frame.copy()
 
 
-def load_table_input(path: Path, source: str, input_system=None, images_root=None, landmarks: bool = True,
-                     radians: bool = False):
+def load_table_input(
+    path: Path, source: str, input_system=None, images_root=None, landmarks: bool = True, radians: bool = False
+):
     """A label table (relabel-panoptic/agora output or any table with image, box and labels); ``radians``: its
     angle columns are in radians (``--radians``; matrix columns and ``.mat`` folders are unaffected)."""
     import pandas as pd
@@ -152,14 +186,30 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
     cols = src.columns
     missing = [c for c in ["image"] + BBOX_COLS if c not in cols]
     if missing:
-        raise HpeError(f"{path}: expected columns {', '.join(missing)} (an image reference and a head box) "
-                       f"to export crops, got {', '.join(cols[:12])}{'...' if len(cols) > 12 else ''}")
+        raise HpeError(
+            f"{path}: expected columns {', '.join(missing)} (an image reference and a head box) "
+            f"to export crops, got {', '.join(cols[:12])}{'...' if len(cols) > 12 else ''}"
+        )
     mode = label_mode(cols, path)
     system = _table_system(src, input_system)
     kind = _kind_of_table(src.schema)
     n_lm = landmark_count(cols) if landmarks else 0
-    keep = [c for c in ["image", "sequence", "camera", "frame", "person_id", "person", "subject", "image_width",
-                        "image_height"] + BBOX_COLS if c in cols]
+    keep = [
+        c
+        for c in [
+            "image",
+            "sequence",
+            "camera",
+            "frame",
+            "person_id",
+            "person",
+            "subject",
+            "image_width",
+            "image_height",
+        ]
+        + BBOX_COLS
+        if c in cols
+    ]
     if kind == "table" and "source" in cols:  # relabel-agora writes its source per row
         first = next(iter(src.batches_with_rejects()), (None, None))[0]
         if first is not None and first.num_rows and "agora" in str(first.column("source")[0]).lower():
@@ -193,9 +243,17 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
         parts.append(df)
     if unreadable:
         eye = np.eye(3).reshape(9)
-        parts.append(pd.DataFrame({"row": [ln for ln, _ in unreadable], "image": "",
-                                   **{c: np.nan for c in BBOX_COLS}, "reason": [r for _, r in unreadable],
-                                   **{c: eye[k] for k, c in enumerate(A_COLS)}}))
+        parts.append(
+            pd.DataFrame(
+                {
+                    "row": [ln for ln, _ in unreadable],
+                    "image": "",
+                    **{c: np.nan for c in BBOX_COLS},
+                    "reason": [r for _, r in unreadable],
+                    **{c: eye[k] for k, c in enumerate(A_COLS)},
+                }
+            )
+        )
     if not parts:
         raise HpeError(f"{path}: no rows")
     frame = pd.concat(parts, ignore_index=True).sort_values("row", kind="stable", ignore_index=True)
@@ -204,8 +262,14 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
         frame["person_id"] = frame.pop("person")
     frame["source"], frame["kind"], frame["input"] = source, kind, str(path)
     frame["root"] = str(images_root) if images_root else str(path.parent)
-    for c, default in (("sequence", ""), ("camera", ""), ("frame", -1), ("person_id", -1),
-                       ("image_width", np.nan), ("image_height", np.nan)):
+    for c, default in (
+        ("sequence", ""),
+        ("camera", ""),
+        ("frame", -1),
+        ("person_id", -1),
+        ("image_width", np.nan),
+        ("image_height", np.nan),
+    ):
         if c not in frame.columns:
             frame[c] = default
     frame["sequence"] = frame["sequence"].fillna("").astype(str)
@@ -214,9 +278,11 @@ def load_table_input(path: Path, source: str, input_system=None, images_root=Non
     frame["frame"] = pd.to_numeric(frame["frame"], errors="coerce").fillna(-1).astype(np.int64)
     frame["person_id"] = pd.to_numeric(frame["person_id"], errors="coerce").fillna(-1).astype(np.int64)
     if "subject" not in frame.columns:
-        frame["subject"] = np.where(frame["person_id"].to_numpy() >= 0,
-                                    frame["sequence"] + ":" + frame["person_id"].astype(str),
-                                    [_subject_of(Path(s).stem) for s in frame["image"].tolist()])
+        frame["subject"] = np.where(
+            frame["person_id"].to_numpy() >= 0,
+            frame["sequence"] + ":" + frame["person_id"].astype(str),
+            [_subject_of(Path(s).stem) for s in frame["image"].tolist()],
+        )
     frame["subject"] = frame["subject"].astype(str)
     assert len(frame) == n
     return frame
@@ -251,8 +317,10 @@ def load_inputs(paths, images=(), input_system=None, landmarks: bool = True, rad
             if root:
                 f["root"] = str(root)
         elif p.is_dir():
-            raise HpeError(f"{p}: expected a label table (.parquet/.csv) or a folder of 300W-LP/AFLW2000 .mat "
-                           "files (BIWI: export its table with image and box columns)")
+            raise HpeError(
+                f"{p}: expected a label table (.parquet/.csv) or a folder of 300W-LP/AFLW2000 .mat "
+                "files (BIWI: export its table with image and box columns)"
+            )
         else:
             f = load_table_input(p, name, input_system, root, landmarks, radians)
         frames.append(f)
@@ -260,4 +328,3 @@ def load_inputs(paths, images=(), input_system=None, landmarks: bool = True, rad
     for c in [c for c in frame.columns if re.fullmatch(r"lm\d+_[xy]", c)]:
         frame[c] = frame[c].astype(np.float64)
     return frame
-

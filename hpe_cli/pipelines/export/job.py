@@ -1,4 +1,5 @@
 """``hpe export`` as one job: load inputs -> select/split -> place pixels -> write layout."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -32,8 +33,10 @@ def _layout_and_system(opts):
     except ValueError as exc:
         raise HpeError(str(exc)) from None
     if layout.system is not None and opts.system is not None and get_system(opts.system).name != layout.system:
-        raise HpeError(f"--layout {layout.name} stores labels in the {layout.system} system, which its trainer "
-                       f"expects; --system {get_system(opts.system).name} cannot be used with it")
+        raise HpeError(
+            f"--layout {layout.name} stores labels in the {layout.system} system, which its trainer "
+            f"expects; --system {get_system(opts.system).name} cannot be used with it"
+        )
     return layout, get_system(layout.system or opts.system or "300w_lp")
 
 
@@ -46,8 +49,7 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
     rejects = Rejects(opts.rejects, opts.overwrite)
     layout, system = _layout_and_system(opts)
     # stage 1 and 2: the label table, the layout's rules, splits and sampling
-    rows = load_inputs(inputs, opts.images, opts.input_system, landmarks=layout.uses_landmarks,
-                       radians=opts.radians)
+    rows = load_inputs(inputs, opts.images, opts.input_system, landmarks=layout.uses_landmarks, radians=opts.radians)
     sel = select(rows, layout, system, opts)
     # stage 3: crop geometry and one task per source image
     plan = pixels.plan_crops(sel, layout, opts)

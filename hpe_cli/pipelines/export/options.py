@@ -1,4 +1,5 @@
 """Export options and the names shared by the stages."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -9,10 +10,10 @@ META = ["source", "input", "row", "image", "sequence", "camera", "frame", "perso
 SPLIT_NAMES = {1: ["train"], 2: ["train", "val"], 3: ["train", "val", "test"]}
 LICENCES = {
     "cmu_panoptic": "CMU Panoptic Studio (domedb.perception.cs.cmu.edu): non-commercial research use; cite Joo et "
-                    "al. Labels relabelled by hpe from the 3-D face landmarks.",
+    "al. Labels relabelled by hpe from the 3-D face landmarks.",
     "agora": "AGORA (agora.is.tue.mpg.de): its licence allows non-commercial scientific research only.",
     "300w_lp": "300W-LP / AFLW2000-3D (3DDFA, Zhu et al.): research use only; images from 300W/AFLW keep their "
-               "original terms.",
+    "original terms.",
     "biwi": "BIWI Kinect Head Pose (ETH Zurich): research use only.",
     "table": "a label table: check the licence of the dataset it came from.",
 }
@@ -47,4 +48,3 @@ class ExportOptions:
     strict: bool = False
     quiet: bool = True
     sampling_notes: list = field(default_factory=list)
-

@@ -1,6 +1,7 @@
 """Export stage 3, place pixels (parent side): the crop box and written size of every head, one task per source
 image (or Panoptic video), and the loop that runs the tasks (in worker processes with ``--workers``) and hands
 the finished heads and their pixels to the layout."""
+
 from __future__ import annotations
 
 import os
@@ -9,9 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...geometry.crop import expand_boxes, pixel_boxes
+from ...io.images import leaves_root, resolve_image, video_path
 from ...io.layout import BBOX_COLS
 from . import workers
-from ...io.images import leaves_root, resolve_image, video_path
 
 
 @dataclass
@@ -90,8 +91,15 @@ def build_tasks(sel, layout, plan: CropPlan, todo) -> list:
                 t = task_of[key] = ["image", src, []]
                 tasks.append(t)
         size = tuple(int(v) for v in want[i]) if np.isfinite(want[i]).all() and (want[i] > 0).all() else None
-        item = (i, split[i], plan.rel[i], tuple(plan.pbox[i].tolist()), tuple(plan.bbox[i].tolist()),
-                None if full_frames else tuple(plan.osz[i].tolist()), size)
+        item = (
+            i,
+            split[i],
+            plan.rel[i],
+            tuple(plan.pbox[i].tolist()),
+            tuple(plan.bbox[i].tolist()),
+            None if full_frames else tuple(plan.osz[i].tolist()),
+            size,
+        )
         if t[0] == "video":
             t[2].setdefault(int(frames[i]), []).append(item)
         else:
@@ -107,8 +115,9 @@ def _results(tasks, cfg, n_workers: int):
         ctx = mp.get_context("spawn" if os.name == "nt" else "fork")
         pool = ctx.Pool(n_workers, initializer=workers._init_worker, initargs=(cfg,))
         try:
-            yield from pool.imap(workers._work, [tuple(t) for t in tasks],
-                                 chunksize=max(1, min(16, len(tasks) // (8 * n_workers))))
+            yield from pool.imap(
+                workers._work, [tuple(t) for t in tasks], chunksize=max(1, min(16, len(tasks) // (8 * n_workers)))
+            )
         finally:
             pool.close()
             pool.join()
@@ -132,9 +141,12 @@ def run_tasks(tasks, cfg, sel, layout, plan: CropPlan, n_workers: int, bar=None)
     from .write import add_pixels
 
     n = sel.n
-    res_all = PixelResult(np.full(n, "", dtype=object), np.full(n, -1, dtype=np.int64),
-                          sel.rows["image_width"].to_numpy(np.float64).copy(),
-                          sel.rows["image_height"].to_numpy(np.float64).copy())
+    res_all = PixelResult(
+        np.full(n, "", dtype=object),
+        np.full(n, -1, dtype=np.int64),
+        sel.rows["image_width"].to_numpy(np.float64).copy(),
+        sel.rows["image_height"].to_numpy(np.float64).copy(),
+    )
     status, order, W, H = res_all.status, res_all.order, res_all.W, res_all.H
     counter = 0
     results = _results(tasks, cfg, n_workers)
@@ -170,6 +182,13 @@ def run_tasks(tasks, cfg, sel, layout, plan: CropPlan, n_workers: int, bar=None)
 def worker_config(stage, layout, splits_used, opts) -> dict:
     """The settings every worker reads (``workers._CFG``)."""
     split_dirs = {s: str(layout.split_dir(s).relative_to(stage)) for s in splits_used}
-    return {"root": str(stage), "split_dirs": split_dirs, "quality": int(opts.quality),
-            "pad_value": int(opts.pad_value), "min_inside": float(opts.min_inside),
-            "full_frames": layout.full_frames, "pixels": layout.pixels, "made": set()}
+    return {
+        "root": str(stage),
+        "split_dirs": split_dirs,
+        "quality": int(opts.quality),
+        "pad_value": int(opts.pad_value),
+        "min_inside": float(opts.min_inside),
+        "full_frames": layout.full_frames,
+        "pixels": layout.pixels,
+        "made": set(),
+    }

@@ -1,5 +1,6 @@
 """Export sampling rules (pure functions over arrays): group splits, ``--split-file``, ``--min-change``,
 ``--balance``, and which reject reasons are choices (layout rules, sampling) rather than bad input."""
+
 from __future__ import annotations
 
 import hashlib
@@ -48,8 +49,9 @@ def check_split_names(names, where: str) -> None:
 
 def group_hash(values, seed: int) -> np.ndarray:
     """A deterministic 64-bit key per group value (sha256 of ``seed:value``)."""
-    return np.array([int.from_bytes(hashlib.sha256(f"{seed}:{v}".encode()).digest()[:8], "big")
-                     for v in values], dtype=np.uint64)
+    return np.array(
+        [int.from_bytes(hashlib.sha256(f"{seed}:{v}".encode()).digest()[:8], "big") for v in values], dtype=np.uint64
+    )
 
 
 def assign_splits(groups, names, fractions, seed: int = 0) -> np.ndarray:
@@ -78,8 +80,9 @@ def read_split_file(path):
     except Exception as exc:
         raise HpeError(f"{path}: cannot read ({' '.join(str(exc).split())[:160]})") from None
     if t.shape[1] != 2 or "split" not in t.columns:
-        raise HpeError(f"{path}: expected two columns, a group column (e.g. sequence) and split, "
-                       f"got {', '.join(t.columns)}")
+        raise HpeError(
+            f"{path}: expected two columns, a group column (e.g. sequence) and split, got {', '.join(t.columns)}"
+        )
     col = [c for c in t.columns if c != "split"][0]
     dup = t[col].duplicated(keep=False) & (t.groupby(col)["split"].transform("nunique") > 1)
     if dup.any():
@@ -143,8 +146,17 @@ def balance_keep(yaw, bin_deg: float, max_per_bin: int, ok, seed: int = 0):
     return keep, bins
 
 
-CHOICE_PREFIXES = ("WHENet rule", "DirectMHP normalisation", "outside ±99", "min-change", "balance",
-                   "image dropped", "no 2-D landmarks", "Hopenet bins", "6DRepNet create_filename_list")
+CHOICE_PREFIXES = (
+    "WHENet rule",
+    "DirectMHP normalisation",
+    "outside ±99",
+    "min-change",
+    "balance",
+    "image dropped",
+    "no 2-D landmarks",
+    "Hopenet bins",
+    "6DRepNet create_filename_list",
+)
 
 
 def is_choice(reason: str) -> bool:

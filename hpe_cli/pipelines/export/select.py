@@ -1,6 +1,7 @@
 """Export stage 2, select and split: labels in the layout's system, the layout's own rules, the split, the
 sampling rules (``--min-change``, ``--balance``, ``--drop-images-with-rejects``). Every row a rule skips gets
 the rule's reason (it becomes a reject); nothing is dropped silently."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -53,8 +54,11 @@ def label_stage(rows, layout, system) -> Selection:
     rule = layout.label_reasons(ang)
     reasons[ok & (rule != "")] = rule[ok & (rule != "")]
     n_lm = landmark_count(rows.columns)
-    lm = (np.stack([rows[[f"lm{i}_{a}" for i in range(n_lm)]].to_numpy(np.float64) for a in "xy"], -1)
-          if n_lm else np.full((n, 0, 2), np.nan))
+    lm = (
+        np.stack([rows[[f"lm{i}_{a}" for i in range(n_lm)]].to_numpy(np.float64) for a in "xy"], -1)
+        if n_lm
+        else np.full((n, 0, 2), np.nan)
+    )
     if layout.needs_landmarks:
         nolm = ~np.isfinite(lm).all(-1).any(1) if n_lm else np.ones(n, bool)
         reasons[(reasons == "") & nolm] = "no 2-D landmarks (the 6DRepNet .mat loader crops from pt2d)"
@@ -71,8 +75,9 @@ def split_stage(sel: Selection, layout, opts) -> None:
     if opts.split_file:
         col, mapping = read_split_file(opts.split_file)
         if col not in rows.columns:
-            raise HpeError(f"{opts.split_file}: group column {col!r} is not in the labels "
-                           f"(expected one of {GROUP_COLUMNS})")
+            raise HpeError(
+                f"{opts.split_file}: group column {col!r} is not in the labels (expected one of {GROUP_COLUMNS})"
+            )
         split = rows[col].astype(str).map(mapping).to_numpy(dtype=object)
         miss = pd.isna(split)
         reasons[(reasons == "") & miss] = f"{col} not listed in --split-file"
@@ -98,14 +103,23 @@ def sampling_stage(sel: Selection, system, opts) -> list:
     rows, reasons = sel.rows, sel.reasons
     notes = []
     if opts.min_change is not None:
-        keys = (rows["source"].astype(str) + "\0" + rows["sequence"].astype(str) + "\0" +
-                rows["person_id"].astype(str) + "\0" + rows["camera"].astype(str)).to_numpy()
+        keys = (
+            rows["source"].astype(str)
+            + "\0"
+            + rows["sequence"].astype(str)
+            + "\0"
+            + rows["person_id"].astype(str)
+            + "\0"
+            + rows["camera"].astype(str)
+        ).to_numpy()
         ok = reasons == ""
         keep = min_change_keep(keys, rows["frame"].to_numpy(), sel.A, opts.min_change, ok)
         reasons[ok & ~keep] = f"min-change: within {opts.min_change:g} deg of the last kept sample"
-        notes.append(f"--min-change {opts.min_change:g}: per (sequence, person, camera), in frame order, a sample "
-                     f"is kept only if its rotation differs from the last kept one by more than {opts.min_change:g} "
-                     "degrees (geodesic angle)")
+        notes.append(
+            f"--min-change {opts.min_change:g}: per (sequence, person, camera), in frame order, a sample "
+            f"is kept only if its rotation differs from the last kept one by more than {opts.min_change:g} "
+            "degrees (geodesic angle)"
+        )
     if opts.balance:
         bin_deg, mx = parse_balance(opts.balance)
         ok = reasons == ""
@@ -113,8 +127,10 @@ def sampling_stage(sel: Selection, system, opts) -> list:
         lo = -180.0 + bins * bin_deg
         drop = ok & ~keep
         reasons[drop] = [f"balance: yaw bin [{a:g}, {a + bin_deg:g}) over {mx}" for a in lo[drop]]
-        notes.append(f"--balance yaw:{bin_deg:g}:{mx} --seed {opts.seed}: at most {mx} samples per {bin_deg:g}-degree "
-                     f"bin of {system.name} yaw, chosen at random with seed {opts.seed}")
+        notes.append(
+            f"--balance yaw:{bin_deg:g}:{mx} --seed {opts.seed}: at most {mx} samples per {bin_deg:g}-degree "
+            f"bin of {system.name} yaw, chosen at random with seed {opts.seed}"
+        )
     if opts.drop_images_with_rejects:
         img_key = (rows["source"].astype(str) + "\0" + rows["image"].astype(str)).to_numpy()
         bad_imgs = np.unique(img_key[reasons != ""])

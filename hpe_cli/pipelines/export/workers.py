@@ -1,5 +1,6 @@
 """Export stage 3, place pixels: the worker side (decode each source image or video once, crop every head in
 it with padding, resize, encode, write or hand back the pixels)."""
+
 from __future__ import annotations
 
 import os
@@ -8,8 +9,8 @@ import tempfile
 import numpy as np
 
 from ...errors import HpeError
-from .options import NO_FILES, NO_VIDEO
 from ...io.images import jpeg_size
+from .options import NO_FILES, NO_VIDEO
 
 _CFG: dict = {}
 _LAST_FRAME: list = [None]
@@ -43,8 +44,10 @@ def _process_image(image, data, items, cfg, out):
     for it in items:
         idx, split, rel, box, bbox, osz, want = it
         if want is not None and want != (W, H):  # e.g. a 1280x720 video for a 1920x1080 calibration
-            reason = (f"image size {W}x{H} differs from the labels' image_width x image_height "
-                      f"{want[0]}x{want[1]} (boxes would be cut from the wrong pixels)")
+            reason = (
+                f"image size {W}x{H} differs from the labels' image_width x image_height "
+                f"{want[0]}x{want[1]} (boxes would be cut from the wrong pixels)"
+            )
             out.append((idx, reason, W, H, None))
             continue
         bx, by, bw, bh = bbox  # fraction of the head box inside the frame (scalar form of inside_fraction)
@@ -68,8 +71,9 @@ def _process_image(image, data, items, cfg, out):
             continue
         crop = crop_padded(image, box, cfg["pad_value"])
         if osz is not None and (crop.shape[1], crop.shape[0]) != tuple(osz):
-            crop = cv2.resize(crop, tuple(osz), interpolation=cv2.INTER_AREA
-                              if osz[0] < crop.shape[1] else cv2.INTER_LINEAR)
+            crop = cv2.resize(
+                crop, tuple(osz), interpolation=cv2.INTER_AREA if osz[0] < crop.shape[1] else cv2.INTER_LINEAR
+            )
         if cfg["pixels"] == "array":
             out.append((idx, "", W, H, _spill(np.ascontiguousarray(crop), cfg)))
             continue
@@ -148,8 +152,12 @@ def _work_items(task):
                     _process_image(img, None, items, cfg, out)
         except Exception as exc:  # a broken video: every head it should give is a reject
             done = {o[0] for o in out}
-            out += [(it[0], f"no image (video {src}: {' '.join(str(exc).split())[:120]})", -1, -1, None)
-                    for items in groups.values() for it in items if it[0] not in done]
+            out += [
+                (it[0], f"no image (video {src}: {' '.join(str(exc).split())[:120]})", -1, -1, None)
+                for items in groups.values()
+                for it in items
+                if it[0] not in done
+            ]
         return out
     items = groups
     if kind == "refused":  # src is the reason
@@ -162,8 +170,10 @@ def _work_items(task):
     except OSError as exc:
         return [(it[0], f"no image ({exc.strerror or exc})", -1, -1, None) for it in items]
     if truncated_jpeg(data):
-        return [(it[0], "unreadable image (truncated JPEG: no end-of-image marker after its last scan)", -1, -1,
-                 None) for it in items]
+        return [
+            (it[0], "unreadable image (truncated JPEG: no end-of-image marker after its last scan)", -1, -1, None)
+            for it in items
+        ]
     if cfg["full_frames"] and src.lower().endswith((".jpg", ".jpeg")):
         size = jpeg_size(data)
         if size is not None:  # copy the JPEG as is: no decode needed for the whole frame
@@ -180,8 +190,9 @@ def _work_items(task):
     _LAST_FRAME[0] = image
     if image is None:
         return [(it[0], "unreadable image", -1, -1, None) for it in items]
-    _process_image(image, data if cfg["full_frames"] and src.lower().endswith((".jpg", ".jpeg")) else None,
-                   items, cfg, out)
+    _process_image(
+        image, data if cfg["full_frames"] and src.lower().endswith((".jpg", ".jpeg")) else None, items, cfg, out
+    )
     return out
 
 
@@ -204,4 +215,3 @@ class _SizeOnly:
 
     def __init__(self, size):
         self.shape = (size[1], size[0], 3)
-

@@ -1,5 +1,6 @@
 """Export stage 4, write the layout: the staging folder, the exported rows handed to the layout, ``crops.csv``,
 the dataset card, ``export.json`` and the rejects (every input row not exported, with its reason)."""
+
 from __future__ import annotations
 
 import json
@@ -51,7 +52,6 @@ def staged_dir(path, overwrite: bool):
                 txn.after_commit(prune)
 
 
-
 def add_pixels(layout, sel, plan, px, good, payloads, spill_fh) -> None:
     """Hand one slice of finished heads (and their pixels) to the layout, split by split."""
     split = sel.split
@@ -69,8 +69,10 @@ def exported_frame(sel, plan, px, idx):
     rows, ang, lm = sel.rows, sel.ang, sel.lm
     idx = np.asarray(idx, dtype=np.int64)
     sub = rows.iloc[idx]
-    d = {c: sub[c].to_numpy() for c in ["split", "source", "kind", "image", "sequence", "camera", "frame",
-                                        "person_id", "subject"] + BBOX_COLS}
+    d = {
+        c: sub[c].to_numpy()
+        for c in ["split", "source", "kind", "image", "sequence", "camera", "frame", "person_id", "subject"] + BBOX_COLS
+    }
     d["file"] = plan.rel[idx]
     d["pitch"], d["yaw"], d["roll"] = ang[idx, 0], ang[idx, 1], ang[idx, 2]
     M = sel.conv.matrix[idx].reshape(-1, 9)
@@ -88,8 +90,24 @@ def exported_frame(sel, plan, px, idx):
     return pd.DataFrame(d)
 
 
-CROP_COLUMNS = ["split", "file", "source", "image", "bbox_x", "bbox_y", "bbox_w", "bbox_h", "crop_x0", "crop_y0",
-                "crop_x1", "crop_y1", "out_w", "out_h", "image_width", "image_height"]
+CROP_COLUMNS = [
+    "split",
+    "file",
+    "source",
+    "image",
+    "bbox_x",
+    "bbox_y",
+    "bbox_w",
+    "bbox_h",
+    "crop_x0",
+    "crop_y0",
+    "crop_x1",
+    "crop_y1",
+    "out_w",
+    "out_h",
+    "image_width",
+    "image_height",
+]
 
 
 def write_index(stage, layout, sel, plan, px, todo, system, final_root):
@@ -109,8 +127,9 @@ def write_index(stage, layout, sel, plan, px, todo, system, final_root):
         exported[CROP_COLUMNS].to_csv(stage / "crops.csv", index=False)
     if layout.name == "hf":
         kinds = sorted(set(sel.rows["kind"].iloc[done].tolist()))
-        layout.write_card(exported, system, sel.notes, {k: LICENCES.get(k, LICENCES["table"]) for k in kinds},
-                          final_root)
+        layout.write_card(
+            exported, system, sel.notes, {k: LICENCES.get(k, LICENCES["table"]) for k in kinds}, final_root
+        )
     return exported, notes_extra
 
 
@@ -121,18 +140,34 @@ def summary_of(layout, system, inputs, sel, plan, exported, notes_extra, opts) -
     reasons = sel.reasons
     per_reason = pd.Series(reasons[reasons != ""]).value_counts().to_dict()
     per_split = exported["split"].value_counts().sort_index().to_dict()
-    return {"layout": layout.name, "form": getattr(layout, "form", None), "trainer": layout.trainer,
-            "read_by": layout.loader, "system": system.name,
-            "system_description": system.describe(), "inputs": [str(p) for p in inputs],
-            "labels": int(sel.n), "exported": len(exported), "per_split": per_split,
-            "rejected": int((reasons != "").sum()), "rejects_per_reason": per_reason, "sampling": sel.notes,
-            "crop": {"scale": plan.scale, "square": bool(plan.square),
-                     "size": None if plan.size is None else int(plan.size),
-                     "jpeg_quality": int(opts.quality), "pad_value": int(opts.pad_value),
-                     "min_inside": opts.min_inside},
-            "split": opts.split or (opts.split_file and f"file {opts.split_file}") or
-            ("DirectMHP's sequence lists" if layout.name == "directmhp" else "none (one split: train)"),
-            "seed": opts.seed, "notes": notes_extra}
+    return {
+        "layout": layout.name,
+        "form": getattr(layout, "form", None),
+        "trainer": layout.trainer,
+        "read_by": layout.loader,
+        "system": system.name,
+        "system_description": system.describe(),
+        "inputs": [str(p) for p in inputs],
+        "labels": int(sel.n),
+        "exported": len(exported),
+        "per_split": per_split,
+        "rejected": int((reasons != "").sum()),
+        "rejects_per_reason": per_reason,
+        "sampling": sel.notes,
+        "crop": {
+            "scale": plan.scale,
+            "square": bool(plan.square),
+            "size": None if plan.size is None else int(plan.size),
+            "jpeg_quality": int(opts.quality),
+            "pad_value": int(opts.pad_value),
+            "min_inside": opts.min_inside,
+        },
+        "split": opts.split
+        or (opts.split_file and f"file {opts.split_file}")
+        or ("DirectMHP's sequence lists" if layout.name == "directmhp" else "none (one split: train)"),
+        "seed": opts.seed,
+        "notes": notes_extra,
+    }
 
 
 def where(rows, k: int, reason: str) -> str:
@@ -161,22 +196,34 @@ def write_rejects(rejects, sel, opts) -> None:
         sub = rows.iloc[rej]
         if rejects.first_where is None:  # rows of a .mat folder are file names, not numbers
             rejects.first_where = where(rows, int(rej[0]), str(reasons[rej[0]]))
-        rejects.add({"input": sub["input"].to_numpy(), "row": sub["row"].astype(str).to_numpy(),
-                     "source": sub["source"].to_numpy(), "image": sub["image"].to_numpy(),
-                     "sequence": sub["sequence"].to_numpy(), "camera": sub["camera"].to_numpy(),
-                     "frame": sub["frame"].to_numpy(), "person_id": sub["person_id"].to_numpy(),
-                     "split": rows["split"].to_numpy()[rej].astype(str)}, reasons[rej])
+        rejects.add(
+            {
+                "input": sub["input"].to_numpy(),
+                "row": sub["row"].astype(str).to_numpy(),
+                "source": sub["source"].to_numpy(),
+                "image": sub["image"].to_numpy(),
+                "sequence": sub["sequence"].to_numpy(),
+                "camera": sub["camera"].to_numpy(),
+                "frame": sub["frame"].to_numpy(),
+                "person_id": sub["person_id"].to_numpy(),
+                "split": rows["split"].to_numpy()[rej].astype(str),
+            },
+            reasons[rej],
+        )
     bad = np.flatnonzero((reasons != "") & ~np.array([is_choice(r) for r in reasons], dtype=bool))
     if bad.size:
         from ...io.rejects import rejects_rule
 
         k = int(bad[0])
-        rejects_rule(int(bad.size), where(rows, k, str(reasons[k])), has_file=rejects.path is not None,
-                     strict=opts.strict)
+        rejects_rule(
+            int(bad.size), where(rows, k, str(reasons[k])), has_file=rejects.path is not None, strict=opts.strict
+        )
     if opts.strict and (reasons != "").any():
         k = int(np.flatnonzero(reasons != "")[0])
-        raise HpeError(f"{where(rows, k, str(reasons[k]))}; "
-                       f"{int((reasons != '').sum())} label(s) not exported and --strict given: nothing written")
+        raise HpeError(
+            f"{where(rows, k, str(reasons[k]))}; "
+            f"{int((reasons != '').sum())} label(s) not exported and --strict given: nothing written"
+        )
     rejects.write()
 
 
@@ -190,5 +237,4 @@ def nothing_left(layout, reasons, idx, what: str) -> HpeError:
     import pandas as pd
 
     c = pd.Series(reasons[idx]).value_counts()
-    return HpeError(f"--layout {layout.name}: {what}, nothing written "
-                    f"({'; '.join(f'{r}: {k}' for r, k in c.items())})")
+    return HpeError(f"--layout {layout.name}: {what}, nothing written ({'; '.join(f'{r}: {k}' for r, k in c.items())})")

@@ -97,6 +97,7 @@ The package is split by mode: :mod:`.core` (candidates, samples, scores, reports
 :mod:`.code` (builders), :mod:`.decoders`, :mod:`.data` (tables), :mod:`.landmarks` and
 :mod:`.storage` (decoders returning stored values); every name is importable from here.
 """
+
 from __future__ import annotations
 
 from .code import as_builder, infer_builder
@@ -136,4 +137,41 @@ from .landmarks import (
 )
 from .storage import STORAGE_FORMS, as_value_decoder, infer_storage_decoder
 
-__all__ = ["CLEAR_SEPARATION", "CODE_TOL", "DATA_TOL", "LOCK_ZONE", "MAX_TEMPLATE_OFFSET_DEG", "MIN_EXPLAINED", "MIN_FACES_FOR_OFFSET", "POOR_RESIDUAL_DEG", "PRIORITY", "SEARCH_ROWS", "SEQUENCES", "STORAGE_FORMS", "CallError", "Candidate", "Scores", "as_builder", "as_decoder", "as_value_decoder", "builtin_canonical_by_candidate", "builtin_names_by_candidate", "candidate_locks", "candidate_matrices", "candidate_of", "candidates", "infer_builder", "infer_decoder", "infer_landmarks", "infer_storage_decoder", "infer_table", "polar_rotation", "probe_builder", "probe_decoder", "random_rotations", "report_json", "score", "spread_angles"]
+__all__ = [
+    "CLEAR_SEPARATION",
+    "CODE_TOL",
+    "DATA_TOL",
+    "LOCK_ZONE",
+    "MAX_TEMPLATE_OFFSET_DEG",
+    "MIN_EXPLAINED",
+    "MIN_FACES_FOR_OFFSET",
+    "POOR_RESIDUAL_DEG",
+    "PRIORITY",
+    "SEARCH_ROWS",
+    "SEQUENCES",
+    "STORAGE_FORMS",
+    "CallError",
+    "Candidate",
+    "Scores",
+    "as_builder",
+    "as_decoder",
+    "as_value_decoder",
+    "builtin_canonical_by_candidate",
+    "builtin_names_by_candidate",
+    "candidate_locks",
+    "candidate_matrices",
+    "candidate_of",
+    "candidates",
+    "infer_builder",
+    "infer_decoder",
+    "infer_landmarks",
+    "infer_storage_decoder",
+    "infer_table",
+    "polar_rotation",
+    "probe_builder",
+    "probe_decoder",
+    "random_rotations",
+    "report_json",
+    "score",
+    "spread_angles",
+]

@@ -1,4 +1,5 @@
 """Builders (angles -> matrix, such as 6DRepNet's ``get_R``): adapting user code and the search."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -50,8 +51,10 @@ def as_builder(func, roles=ROLES, units: str = "radians", packed: bool = False):
             try:
                 m = _to_numpy(func(np.array(args)) if packed else func(*args))
             except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
-                raise CallError(f"raised {type(exc).__name__} on angles {tuple(round(a, 6) for a in args)}: "
-                                f"{' '.join(str(exc).split())[:200]}") from None
+                raise CallError(
+                    f"raised {type(exc).__name__} on angles {tuple(round(a, 6) for a in args)}: "
+                    f"{' '.join(str(exc).split())[:200]}"
+                ) from None
             if m.size != 9:
                 raise CallError(f"expected a 3x3 matrix, got shape {m.shape}")
             out[n] = m.reshape(3, 3)
@@ -109,8 +112,19 @@ def _prefer_vectorised(vectorised, per_sample, atol: float, equal_nan: bool):
     return run
 
 
-def infer_builder(build, *, roles=ROLES, units="radians", n: int = 64, tol: float = CODE_TOL, seed: int = 0,
-                  source: str = "<callable>", name: str | None = None, frame=None, storage: str = "active") -> dict:
+def infer_builder(
+    build,
+    *,
+    roles=ROLES,
+    units="radians",
+    n: int = 64,
+    tol: float = CODE_TOL,
+    seed: int = 0,
+    source: str = "<callable>",
+    name: str | None = None,
+    frame=None,
+    storage: str = "active",
+) -> dict:
     """Find the system whose stored matrix function equals ``build``.
 
     Parameters
@@ -135,8 +149,9 @@ def infer_builder(build, *, roles=ROLES, units="radians", n: int = 64, tol: floa
     M = build(pyr)
     _check_rotations(M, "returned")
     sc = score(frobenius(candidate_matrices(pyr), M[None]), tol)
-    rep = _result("callable", sc, roles=roles, units=units, source=source, tol=tol, n=n, name=name,
-                  frame=frame, storage=storage)
+    rep = _result(
+        "callable", sc, roles=roles, units=units, source=source, tol=tol, n=n, name=name, frame=frame, storage=storage
+    )
     if rep["fit"] != "exact":
         cand = candidates()[int(sc.index[sc.order[0]])]
         rep["best_partial"]["breaks"] = probe_builder(build, cand, tol)

@@ -1,4 +1,5 @@
 """The search space and its scoring: candidate systems, samples, scores, built-in names, reports."""
+
 from __future__ import annotations
 
 import itertools
@@ -64,21 +65,34 @@ class Candidate:
 
     def formula(self) -> str:
         """E.g. ``R = Rz(roll) @ Ry(-yaw) @ Rx(pitch)`` (a left-handed turn is a negated angle)."""
-        return "R = " + " @ ".join(f"R{a}({'-' if h == 'left' else ''}{r})"
-                                   for r, a, h in zip(self.roles, self.axes, self.hands))
+        return "R = " + " @ ".join(
+            f"R{a}({'-' if h == 'left' else ''}{r})" for r, a, h in zip(self.roles, self.axes, self.hands)
+        )
 
     def words(self) -> str:
         def seq(turns):
             return ", then ".join(f"{t.angle} about {t.axis} ({t.hand}-handed)" for t in turns)
 
-        return (f"intrinsic {'-'.join(self.axes.upper())}: {seq(self.turns)}; equivalently extrinsic "
-                f"{'-'.join(self.axes[::-1].upper())}: {seq(self.turns[::-1])}")
+        return (
+            f"intrinsic {'-'.join(self.axes.upper())}: {seq(self.turns)}; equivalently extrinsic "
+            f"{'-'.join(self.axes[::-1].upper())}: {seq(self.turns[::-1])}"
+        )
 
     def default_selection(self) -> str:
         return "proper" if self.proper else "tait_bryan"
 
-    def system(self, name: str = "custom", description: str = "", *, order=ROLES, units: str = "degrees",
-               selection: str | None = None, frame=None, storage: str = "active", notes: str = "") -> RotationSystem:
+    def system(
+        self,
+        name: str = "custom",
+        description: str = "",
+        *,
+        order=ROLES,
+        units: str = "degrees",
+        selection: str | None = None,
+        frame=None,
+        storage: str = "active",
+        notes: str = "",
+    ) -> RotationSystem:
         """A :class:`RotationSystem` whose ``from_angles`` is this function."""
         selection = selection or self.default_selection()
         ranges = {r: (-180.0, 180.0) for r in ROLES}
@@ -89,9 +103,19 @@ class Candidate:
         else:  # whenet: |pitch| < 90 and |roll| < 90
             ranges["pitch"] = ranges["roll"] = (-90.0, 90.0)
         frame = tuple(map(tuple, np.eye(3))) if frame is None else tuple(tuple(map(float, r)) for r in frame)
-        return RotationSystem(name=name, description=description or self.formula(), frame=frame, turns=self.turns,
-                              sequence="intrinsic", storage=storage, order=tuple(order), units=units, ranges=ranges,
-                              selection=selection, notes=notes)
+        return RotationSystem(
+            name=name,
+            description=description or self.formula(),
+            frame=frame,
+            turns=self.turns,
+            sequence="intrinsic",
+            storage=storage,
+            order=tuple(order),
+            units=units,
+            ranges=ranges,
+            selection=selection,
+            notes=notes,
+        )
 
 
 @lru_cache(maxsize=1)
@@ -108,8 +132,10 @@ def candidates() -> tuple:
 @lru_cache(maxsize=1)
 def _codes() -> np.ndarray:
     """(C, 3 positions, 3) int: role index, axis index, hand (0 right, 1 left)."""
-    return np.array([[[_ROLE[r], _AXIS[a], int(h == "left")] for r, a, h in zip(c.roles, c.axes, c.hands)]
-                     for c in candidates()], dtype=np.intp)
+    return np.array(
+        [[[_ROLE[r], _AXIS[a], int(h == "left")] for r, a, h in zip(c.roles, c.axes, c.hands)] for c in candidates()],
+        dtype=np.intp,
+    )
 
 
 @lru_cache(maxsize=1)
@@ -168,11 +194,14 @@ def random_rotations(n: int = 256, seed: int = 0) -> np.ndarray:
     q = np.random.default_rng(seed).normal(size=(n, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
 
 
 # --------------------------------------------------------------------------- scoring
@@ -180,9 +209,9 @@ def random_rotations(n: int = 256, seed: int = 0) -> np.ndarray:
 class Scores:
     """Per-candidate errors on the samples and the ranking they give."""
 
-    index: np.ndarray      # (C,) candidate indices scored
-    err: np.ndarray        # (C, N) Frobenius error
-    excused: np.ndarray    # (C, N) bool: unexplained but inside the lock zone
+    index: np.ndarray  # (C,) candidate indices scored
+    err: np.ndarray  # (C, N) Frobenius error
+    excused: np.ndarray  # (C, N) bool: unexplained but inside the lock zone
     tol: float
 
     def __post_init__(self):
@@ -253,11 +282,14 @@ def _rank_builtins(names, order=None, units=None, selection=None) -> list:
 
     def key(n):
         s = systems[n]
-        return (s.storage_kind != "angles" or s.angle_frame != "system",  # systems that store angles first
-                selection is not None and s.selection != selection,
-                order is not None and tuple(s.order) != tuple(order),
-                units is not None and s.units != units,
-                PRIORITY.index(n) if n in PRIORITY else len(PRIORITY), n)
+        return (
+            s.storage_kind != "angles" or s.angle_frame != "system",  # systems that store angles first
+            selection is not None and s.selection != selection,
+            order is not None and tuple(s.order) != tuple(order),
+            units is not None and s.units != units,
+            PRIORITY.index(n) if n in PRIORITY else len(PRIORITY),
+            n,
+        )
 
     return sorted(names, key=key)
 
@@ -340,8 +372,14 @@ def probe_decoder(decode, cand: Candidate, tol: float) -> dict:
         near = np.where((d1.sum(1) <= d2.sum(1))[:, None], d1, d2)
         ok_lock = lock >= LOCK_ZONE  # the angles are not unique at the lock: judge them elsewhere only
         wrong = [ROLES[k] for k in range(3) if np.any((near[:, k] > atol) & ok_lock)]
-        rows.append({"nonzero": roles, "exact": bool(np.all(err <= tol)), "max_error": float(np.nanmax(err)),
-                     "wrong_angles": wrong})
+        rows.append(
+            {
+                "nonzero": roles,
+                "exact": bool(np.all(err <= tol)),
+                "max_error": float(np.nanmax(err)),
+                "wrong_angles": wrong,
+            }
+        )
     return {"candidate": cand.formula(), "summary": _breaks_summary(rows), "probes": rows}
 
 
@@ -361,8 +399,21 @@ def _selection_of(cand: Candidate, R, decoded, tol: float):
     return best
 
 
-def _result(mode: str, sc: Scores, *, roles, units, source, tol, n, name, frame, storage,
-            selection=None, selection_fraction=None) -> dict:
+def _result(
+    mode: str,
+    sc: Scores,
+    *,
+    roles,
+    units,
+    source,
+    tol,
+    n,
+    name,
+    frame,
+    storage,
+    selection=None,
+    selection_fraction=None,
+) -> dict:
     """Assemble the common part of a builder/decoder/table report."""
     stored = builtin_names_by_candidate()
     best_pos = int(sc.order[0])
@@ -372,14 +423,20 @@ def _result(mode: str, sc: Scores, *, roles, units, source, tol, n, name, frame,
     n_exact = int(sum(sc.exact(int(p)) for p in sc.order[:8]))
     units_word = "radians" if units in ("rad", "radians") else "degrees"
     report = {
-        "mode": mode, "source": source, "roles": list(roles), "units": units_word, "samples": int(n),
-        "tolerance": tol, "candidates": len(candidates()),
+        "mode": mode,
+        "source": source,
+        "roles": list(roles),
+        "units": units_word,
+        "samples": int(n),
+        "tolerance": tol,
+        "candidates": len(candidates()),
         "fit": "exact" if exact else "none",
     }
     entry = _entry(best_idx, sc, stored)
     if not exact:
-        report.update(best="none", max_error=entry["max_error"], best_partial=entry,
-                      runners_up=_runners_up(sc, stored, best_pos))
+        report.update(
+            best="none", max_error=entry["max_error"], best_partial=entry, runners_up=_runners_up(sc, stored, best_pos)
+        )
         return report
     names = _rank_builtins(entry["builtins"], order=tuple(roles), units=units_word, selection=selection)
     if names:
@@ -391,23 +448,40 @@ def _result(mode: str, sc: Scores, *, roles, units, source, tol, n, name, frame,
             changes = {"selection": selection, "ranges": cand.system(selection=selection).ranges}
             note += f", except that it keeps the {selection} solution (the built-in keeps {base.selection})"
             report["selection_differs"] = note
-        system = replace(base, order=tuple(roles), units=units_word,
-                         notes=(base.notes + " " if base.notes else "") + note, **changes)
+        system = replace(
+            base, order=tuple(roles), units=units_word, notes=(base.notes + " " if base.notes else "") + note, **changes
+        )
         if system.definition() != base.definition():  # a built-in's name may only carry its own definition
             system = replace(system, name=name or f"{base.name}_as_inferred")
         best = base.name
     else:
-        system = cand.system(name or "custom", f"inferred from {source}: {cand.formula()}", order=roles,
-                             units=units_word, selection=selection, frame=frame, storage=storage,
-                             notes="frame and storage are not observable from angles and matrices alone; "
-                                   "set them to what the code means")
+        system = cand.system(
+            name or "custom",
+            f"inferred from {source}: {cand.formula()}",
+            order=roles,
+            units=units_word,
+            selection=selection,
+            frame=frame,
+            storage=storage,
+            notes="frame and storage are not observable from angles and matrices alone; "
+            "set them to what the code means",
+        )
         best = "custom"
-    report.update(best=best, max_error=entry["max_error"], matched=entry, definition=system.describe(),
-                  system=system.to_dict(), runners_up=_runners_up(sc, stored, best_pos))
+    report.update(
+        best=best,
+        max_error=entry["max_error"],
+        matched=entry,
+        definition=system.describe(),
+        system=system.to_dict(),
+        runners_up=_runners_up(sc, stored, best_pos),
+    )
     report["reproduced_by"] = names
     if len(names) > 1:
-        report["also_matches"] = {"names": names[1:], "note": "same matrix from the same angles; these differ only "
-                                  "in what the code cannot reveal (frame, storage, solution rule, storage order)"}
+        report["also_matches"] = {
+            "names": names[1:],
+            "note": "same matrix from the same angles; these differ only "
+            "in what the code cannot reveal (frame, storage, solution rule, storage order)",
+        }
     if n_exact > 1:
         report["ambiguous"] = f"{n_exact} distinct functions fit these samples exactly; sample more varied angles"
     if selection is not None:

@@ -1,4 +1,5 @@
 """Tables of angles with their matrices (a dataset's labels): the search on rows."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -19,8 +20,19 @@ from .core import (
 )
 
 
-def infer_table(pyr_deg, R, *, roles=ROLES, units="degrees", tol: float = DATA_TOL, source: str = "<table>",
-                name: str | None = None, frame=None, storage: str = "active", seed: int = 0) -> dict:
+def infer_table(
+    pyr_deg,
+    R,
+    *,
+    roles=ROLES,
+    units="degrees",
+    tol: float = DATA_TOL,
+    source: str = "<table>",
+    name: str | None = None,
+    frame=None,
+    storage: str = "active",
+    seed: int = 0,
+) -> dict:
     """Same search on a table of angles (role order, degrees) with their stored matrices.
 
     Rows in a candidate's lock zone may disagree (labels there are often
@@ -42,16 +54,33 @@ def infer_table(pyr_deg, R, *, roles=ROLES, units="degrees", tol: float = DATA_T
     sc = score(frobenius(candidate_matrices(pyr[sub]), R[sub][None]), tol, locks=candidate_locks(R[sub]))
     if len(sub) < len(pyr):
         lead = np.unique(np.concatenate([sc.order[:8], list(builtin_names_by_candidate())]))
-        err = np.concatenate([frobenius(candidate_matrices(pyr[a:a + 65536], lead), R[a:a + 65536][None])
-                              for a in range(0, len(pyr), 65536)], axis=1)
-        locks = np.concatenate([candidate_locks(R[a:a + 65536], lead) for a in range(0, len(pyr), 65536)], axis=1)
+        err = np.concatenate(
+            [
+                frobenius(candidate_matrices(pyr[a : a + 65536], lead), R[a : a + 65536][None])
+                for a in range(0, len(pyr), 65536)
+            ],
+            axis=1,
+        )
+        locks = np.concatenate([candidate_locks(R[a : a + 65536], lead) for a in range(0, len(pyr), 65536)], axis=1)
         sc = score(err, tol, locks=locks, index=lead)
     sel = frac = None
     if sc.exact(int(sc.order[0])):  # labels are usually a decoder's output: which solution do they keep?
         sel, frac = _selection_of(candidates()[int(sc.index[sc.order[0]])], R, pyr, tol)
         sel = sel if frac >= MIN_EXPLAINED else None
-    rep = _result("table", sc, roles=roles, units=units, source=source, tol=tol, n=len(pyr), name=name,
-                  frame=frame, storage=storage, selection=sel, selection_fraction=frac)
+    rep = _result(
+        "table",
+        sc,
+        roles=roles,
+        units=units,
+        source=source,
+        tol=tol,
+        n=len(pyr),
+        name=name,
+        frame=frame,
+        storage=storage,
+        selection=sel,
+        selection_fraction=frac,
+    )
     rep["rows_skipped"] = {"non_finite": int((~finite).sum()), "not_a_rotation": int((finite & ~ok).sum())}
     if rep["fit"] != "exact":
         pos = int(sc.order[0])

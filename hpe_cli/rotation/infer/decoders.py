@@ -1,4 +1,5 @@
 """Decoders (matrix -> angles, such as 3DDFA_V2's ``matrix2angle``): adapting user code and the search."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -41,8 +42,9 @@ def as_decoder(func, roles=ROLES, units: str = "radians"):
             try:
                 v = _to_numpy(func(m.copy()))
             except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
-                raise CallError(f"raised {type(exc).__name__} on matrix row {n}: "
-                                f"{' '.join(str(exc).split())[:200]}") from None
+                raise CallError(
+                    f"raised {type(exc).__name__} on matrix row {n}: {' '.join(str(exc).split())[:200]}"
+                ) from None
             if v.size != 3:
                 raise CallError(f"expected three angles, got shape {v.shape}")
             vals[n] = v.reshape(3)
@@ -66,9 +68,20 @@ def as_decoder(func, roles=ROLES, units: str = "radians"):
     return decode
 
 
-def infer_decoder(decode, *, roles=ROLES, units="radians", n: int = 256, tol: float = CODE_TOL, seed: int = 0,
-                  source: str = "<callable>", name: str | None = None, frame=None, storage: str = "active",
-                  rotations=None) -> dict:
+def infer_decoder(
+    decode,
+    *,
+    roles=ROLES,
+    units="radians",
+    n: int = 256,
+    tol: float = CODE_TOL,
+    seed: int = 0,
+    source: str = "<callable>",
+    name: str | None = None,
+    frame=None,
+    storage: str = "active",
+    rotations=None,
+) -> dict:
     """Find the system whose ``from_angles`` rebuilds the matrices a decoder was given.
 
     ``decode`` maps ``(N, 3, 3)`` -> ``(N, 3)`` angles (role order, degrees);
@@ -87,17 +100,35 @@ def infer_decoder(decode, *, roles=ROLES, units="radians", n: int = 256, tol: fl
         sel, frac = _selection_of(best, R, d, tol)
         if frac < MIN_EXPLAINED:
             sel = None
-    rep = _result("decoder", sc, roles=roles, units=units, source=source, tol=tol, n=n, name=name, frame=frame,
-                  storage=storage, selection=sel, selection_fraction=frac)
+    rep = _result(
+        "decoder",
+        sc,
+        roles=roles,
+        units=units,
+        source=source,
+        tol=tol,
+        n=n,
+        name=name,
+        frame=frame,
+        storage=storage,
+        selection=sel,
+        selection_fraction=frac,
+    )
     if rep["fit"] == "exact":
         if sel is None:
-            rep["selection"] = {"rule": "none", "fraction": frac,
-                                "note": "the decoder's choice between the two solutions follows no known rule"}
+            rep["selection"] = {
+                "rule": "none",
+                "fraction": frac,
+                "note": "the decoder's choice between the two solutions follows no known rule",
+            }
         pos = sc.pos_of(_index()[best.key()])
         exc = np.flatnonzero(sc.excused[pos])
         if exc.size:
-            rep["near_lock"] = {"count": int(exc.size), "max_error": float(sc.err[pos, exc].max()),
-                                "note": "samples within ~5.7 deg of gimbal lock that the decoder handles its own way"}
+            rep["near_lock"] = {
+                "count": int(exc.size),
+                "max_error": float(sc.err[pos, exc].max()),
+                "note": "samples within ~5.7 deg of gimbal lock that the decoder handles its own way",
+            }
     else:
         rep["best_partial"]["breaks"] = probe_decoder(decode, best, tol)
     return rep

@@ -1,4 +1,5 @@
 """3-D landmarks of faces: ranking the systems by the rotation residual of a fitted template."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -52,9 +53,19 @@ def _landmark_residuals(G, R_obs, fit_offset: bool):
     return geodesic_deg(np.matmul(G, Q[:, None]), R_obs[None]), Q
 
 
-def infer_landmarks(pyr_deg, R_obs, *, roles=ROLES, fit_offset: bool | None = None, source: str = "<table>",
-                    row_ids=None, fit_rmse=None, fit_rmse_limit: float | None = None, seed: int = 0,
-                    name: str | None = None) -> dict:
+def infer_landmarks(
+    pyr_deg,
+    R_obs,
+    *,
+    roles=ROLES,
+    fit_offset: bool | None = None,
+    source: str = "<table>",
+    row_ids=None,
+    fit_rmse=None,
+    fit_rmse_limit: float | None = None,
+    seed: int = 0,
+    name: str | None = None,
+) -> dict:
     """Rank systems by how well their matrices from the labels explain observed rotations.
 
     Parameters
@@ -110,11 +121,16 @@ def infer_landmarks(pyr_deg, R_obs, *, roles=ROLES, fit_offset: bool | None = No
         ci = int(lead[k])
         c = candidates()[ci]
         off = float(np.rad2deg(2 * np.arctan2(np.linalg.norm(Q[k] - np.eye(3)), np.linalg.norm(Q[k] + np.eye(3)))))
-        return {"formula": c.formula(), "turns": c.words(),
-                "builtins": _rank_builtins(canon.get(ci, []), order=tuple(roles)),
-                "stored_matrix_of": stored.get(ci, []),
-                "rms_residual_deg": float(rms[k]), "median_residual_deg": float(med[k]),
-                "max_residual_deg": float(res[k].max()), "template_offset_deg": off}
+        return {
+            "formula": c.formula(),
+            "turns": c.words(),
+            "builtins": _rank_builtins(canon.get(ci, []), order=tuple(roles)),
+            "stored_matrix_of": stored.get(ci, []),
+            "rms_residual_deg": float(rms[k]),
+            "median_residual_deg": float(med[k]),
+            "max_residual_deg": float(res[k].max()),
+            "template_offset_deg": off,
+        }
 
     ranking = [entry(k) for k in order[:8]]
     best_k = int(order[0])
@@ -126,35 +142,70 @@ def infer_landmarks(pyr_deg, R_obs, *, roles=ROLES, fit_offset: bool | None = No
         fr = float(np.nanmedian(np.asarray(fit_rmse, dtype=np.float64)[rows])) if n else np.nan
         if not fr <= fit_rmse_limit:
             fit = "poor"
-            warning = (f"the template fits the landmarks poorly (median RMSE {fr:.2f}, expected at most "
-                       f"{fit_rmse_limit:g}): check the landmark frame")
+            warning = (
+                f"the template fits the landmarks poorly (median RMSE {fr:.2f}, expected at most "
+                f"{fit_rmse_limit:g}): check the landmark frame"
+            )
     best = ranking[0]["builtins"][0] if ranking[0]["builtins"] else "custom"
     # every built-in reading of the labels is one of the candidates already scored
     readings: dict = {}
     for ci, names in canon.items():
         readings.setdefault(ci, []).extend(names)
     for ci, names in stored.items():
-        readings.setdefault(ci, []).extend(f"{n} (stored matrix read as active)" for n in names
-                                           if n not in canon.get(ci, []))
+        readings.setdefault(ci, []).extend(
+            f"{n} (stored matrix read as active)" for n in names if n not in canon.get(ci, [])
+        )
     pos = {int(ci): k for k, ci in enumerate(lead)}
-    hyps = sorted(({"readings": r, "formula": candidates()[ci].formula(), "rms_residual_deg": float(rms[pos[ci]]),
-                    "median_residual_deg": float(med[pos[ci]]), "max_residual_deg": float(res[pos[ci]].max())}
-                   for ci, r in readings.items()), key=lambda h: h["rms_residual_deg"])
+    hyps = sorted(
+        (
+            {
+                "readings": r,
+                "formula": candidates()[ci].formula(),
+                "rms_residual_deg": float(rms[pos[ci]]),
+                "median_residual_deg": float(med[pos[ci]]),
+                "max_residual_deg": float(res[pos[ci]].max()),
+            }
+            for ci, r in readings.items()
+        ),
+        key=lambda h: h["rms_residual_deg"],
+    )
     ids = list(range(len(ok))) if row_ids is None else list(row_ids)
-    per_face = [{"row": int(i), "id": ids[i], "residual_deg": float(v),
-                 **({"fit_rmse": float(fit_rmse[i])} if fit_rmse is not None else {})}
-                for i, v in zip(rows, res[best_k])]
-    rep = {"mode": "landmarks", "source": source, "roles": list(roles), "units": "degrees", "samples": n,
-           "candidates": len(candidates()), "template_offset_fitted": bool(fit_offset),
-           "fit": fit, "best": best, "separation": ratio, "rms_residual_deg": float(rms[best_k]),
-           "median_residual_deg": float(med[best_k]),
-           "matched": ranking[0], "ranking": ranking, "hypotheses": hyps, "per_face": per_face,
-           "rows_skipped": int((~ok).sum())}
+    per_face = [
+        {
+            "row": int(i),
+            "id": ids[i],
+            "residual_deg": float(v),
+            **({"fit_rmse": float(fit_rmse[i])} if fit_rmse is not None else {}),
+        }
+        for i, v in zip(rows, res[best_k])
+    ]
+    rep = {
+        "mode": "landmarks",
+        "source": source,
+        "roles": list(roles),
+        "units": "degrees",
+        "samples": n,
+        "candidates": len(candidates()),
+        "template_offset_fitted": bool(fit_offset),
+        "fit": fit,
+        "best": best,
+        "separation": ratio,
+        "rms_residual_deg": float(rms[best_k]),
+        "median_residual_deg": float(med[best_k]),
+        "matched": ranking[0],
+        "ranking": ranking,
+        "hypotheses": hyps,
+        "per_face": per_face,
+        "rows_skipped": int((~ok).sum()),
+    }
     if warning:
         rep["warning"] = warning
     c = candidates()[int(lead[best_k])]
-    system = builtin_systems()[best] if best != "custom" else c.system(
-        name or "custom", f"inferred from {source}: {c.formula()} (canonical frame, active)", order=roles)
+    system = (
+        builtin_systems()[best]
+        if best != "custom"
+        else c.system(name or "custom", f"inferred from {source}: {c.formula()} (canonical frame, active)", order=roles)
+    )
     rep["definition"] = system.describe()
     rep["system"] = system.to_dict()
     rep["_system"] = system

@@ -1,4 +1,5 @@
 """Decoders that return stored values (rotation vector, quaternion, 6-D, 9 entries) instead of angles."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -10,9 +11,11 @@ from .core import CODE_TOL, random_rotations
 
 # --------------------------------------------------------------------------- decoders returning stored values
 #: (kind, order or 6-D columns, number of values) searched for a decoder that returns no angles
-STORAGE_FORMS = ([("rotvec", None, 3), ("quaternion", "wxyz", 4), ("quaternion", "xyzw", 4)]
-                 + [("6d", (i, j), 6) for i in range(3) for j in range(3) if i != j]
-                 + [("matrix", None, 9)])
+STORAGE_FORMS = (
+    [("rotvec", None, 3), ("quaternion", "wxyz", 4), ("quaternion", "xyzw", 4)]
+    + [("6d", (i, j), 6) for i in range(3) for j in range(3) if i != j]
+    + [("matrix", None, 9)]
+)
 
 
 def as_value_decoder(func):
@@ -52,15 +55,26 @@ def _form_matrices(kind, arg, values):
 
 
 def _form_words(kind, arg, transposed):
-    what = {"rotvec": "rotation vector (axis * angle, radians)",
-            "quaternion": f"unit quaternion ({arg}, {'scalar first' if arg == 'wxyz' else 'scalar last'})",
-            "6d": f"6-D: matrix column {arg[0] if arg else 0} then column {arg[1] if arg else 1}",
-            "matrix": "3x3 matrix, row-major"}[kind]
+    what = {
+        "rotvec": "rotation vector (axis * angle, radians)",
+        "quaternion": f"unit quaternion ({arg}, {'scalar first' if arg == 'wxyz' else 'scalar last'})",
+        "6d": f"6-D: matrix column {arg[0] if arg else 0} then column {arg[1] if arg else 1}",
+        "matrix": "3x3 matrix, row-major",
+    }[kind]
     return f"{what} of the {'transpose of the ' if transposed else ''}matrix it is given"
 
 
-def infer_storage_decoder(decode, *, n: int = 256, tol: float = CODE_TOL, seed: int = 0, source: str = "<callable>",
-                          name: str | None = None, frame=None, **_ignored) -> dict:
+def infer_storage_decoder(
+    decode,
+    *,
+    n: int = 256,
+    tol: float = CODE_TOL,
+    seed: int = 0,
+    source: str = "<callable>",
+    name: str | None = None,
+    frame=None,
+    **_ignored,
+) -> dict:
     """Which storage form a decoder returning no angles (matrix -> k numbers) writes.
 
     Tries every form of :data:`STORAGE_FORMS` with the right width, of the
@@ -83,28 +97,63 @@ def infer_storage_decoder(decode, *, n: int = 256, tol: float = CODE_TOL, seed: 
             err = frobenius(M, ref)
             err = np.where(np.isfinite(err), err, np.inf)
             tried.append((float(np.max(err)), float(np.median(err)), int((err <= tol).sum()), kind, arg, transposed))
-    report = {"mode": "storage_decoder", "source": source, "samples": len(R), "tolerance": tol,
-              "values_per_sample": int(k), "candidates": len(tried)}
+    report = {
+        "mode": "storage_decoder",
+        "source": source,
+        "samples": len(R),
+        "tolerance": tol,
+        "values_per_sample": int(k),
+        "candidates": len(tried),
+    }
     if not tried:
-        report.update(fit="none", best="none", max_error=float("inf"),
-                      best_partial={"formula": f"no storage form returns {k} numbers (rotvec 3, quaternion 4, "
-                                               "6-D 6, matrix 9)", "builtins": [], "explained": 0,
-                                    "median_error": float("inf")}, runners_up=[])
+        report.update(
+            fit="none",
+            best="none",
+            max_error=float("inf"),
+            best_partial={
+                "formula": f"no storage form returns {k} numbers (rotvec 3, quaternion 4, 6-D 6, matrix 9)",
+                "builtins": [],
+                "explained": 0,
+                "median_error": float("inf"),
+            },
+            runners_up=[],
+        )
         return report
     tried.sort(key=lambda t: (t[0], -t[2]))
     best = tried[0]
-    entry = lambda t: {"formula": _form_words(t[3], t[4], t[5]), "max_error": t[0], "median_error": t[1],
-                       "explained": t[2], "builtins": [], "turns": f"storage_kind {t[3]}", "transpose_of": []}
+    entry = lambda t: {
+        "formula": _form_words(t[3], t[4], t[5]),
+        "max_error": t[0],
+        "median_error": t[1],
+        "explained": t[2],
+        "builtins": [],
+        "turns": f"storage_kind {t[3]}",
+        "transpose_of": [],
+    }
     if best[0] > tol:
-        report.update(fit="none", best="none", max_error=best[0], best_partial=entry(best),
-                      runners_up=[entry(t) for t in tried[1:4]])
+        report.update(
+            fit="none",
+            best="none",
+            max_error=best[0],
+            best_partial=entry(best),
+            runners_up=[entry(t) for t in tried[1:4]],
+        )
         return report
     kind, arg, transposed = best[3], best[4], best[5]
-    same = [n_ for n_, s in builtin_systems().items() if s.storage_kind == kind and
-            (kind != "quaternion" or s.quaternion_order == arg) and (kind != "6d" or tuple(s.sixd_columns) == arg)]
-    d = {"name": name or "custom", "description": f"inferred from {source}: {_form_words(kind, arg, transposed)}",
-         "storage_kind": kind, "storage": "transposed" if transposed else "active",
-         "notes": "frame is not observable from code alone; set it to what the code means"}
+    same = [
+        n_
+        for n_, s in builtin_systems().items()
+        if s.storage_kind == kind
+        and (kind != "quaternion" or s.quaternion_order == arg)
+        and (kind != "6d" or tuple(s.sixd_columns) == arg)
+    ]
+    d = {
+        "name": name or "custom",
+        "description": f"inferred from {source}: {_form_words(kind, arg, transposed)}",
+        "storage_kind": kind,
+        "storage": "transposed" if transposed else "active",
+        "notes": "frame is not observable from code alone; set it to what the code means",
+    }
     if frame is not None:
         d["frame"] = [list(map(float, r)) for r in frame]
     if kind == "quaternion":
@@ -116,11 +165,21 @@ def infer_storage_decoder(decode, *, n: int = 256, tol: float = CODE_TOL, seed: 
     system = system_from_dict(d, source)
     e = entry(best)
     e["builtins"] = same
-    report.update(fit="exact", best=system.name, max_error=best[0], matched=e,
-                  definition=system.describe(), system=system.to_dict(), runners_up=[entry(t) for t in tried[1:4]],
-                  reproduced_by=same, storage_form={"kind": kind, "order": arg, "transposed": transposed})
+    report.update(
+        fit="exact",
+        best=system.name,
+        max_error=best[0],
+        matched=e,
+        definition=system.describe(),
+        system=system.to_dict(),
+        runners_up=[entry(t) for t in tried[1:4]],
+        reproduced_by=same,
+        storage_form={"kind": kind, "order": arg, "transposed": transposed},
+    )
     if same:
-        report["also_matches"] = {"names": same, "note": "built-ins storing the same form (their frame and "
-                                  "storage may differ: code cannot reveal them)"}
+        report["also_matches"] = {
+            "names": same,
+            "note": "built-ins storing the same form (their frame and storage may differ: code cannot reveal them)",
+        }
     report["_system"] = system
     return report
