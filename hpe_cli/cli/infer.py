@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from .options import SYSTEM, deprecated_spellings, overwrite_option, verbosity_options
+from .options import SYSTEM, deprecated_spellings, overwrite_option, rejects_options, verbosity_options
 from .table_options import column_options
 
 ROLE_NAMES = ("pitch", "yaw", "roll")
@@ -199,6 +199,7 @@ def _positive_seconds(ctx, param, value):
     show_default=True,
     help="Seconds the code of --callable/--decoder may run (it runs in a separate process).",
 )
+@rejects_options
 @overwrite_option
 @verbosity_options
 @column_options
@@ -223,6 +224,8 @@ def infer(
     storage,
     json_path,
     output,
+    rejects,
+    strict,
     overwrite,
     verbose,
     quiet,
@@ -259,6 +262,7 @@ def infer(
       hpe infer --decoder mycode.py:to_rotvec --returns stored -o mine.toml
       hpe infer --callable mylib.pose:euler_to_matrix --args roll,pitch,yaw --degrees -o mine.toml
       hpe infer labels.parquet --angles pitch,yaw,roll --matrix r00..r22
+      hpe infer labels.csv --rejects unusable.csv   # rows with missing/NaN values set aside, not dropped silently
       hpe infer preds.csv --angles pitch,yaw,roll --rotations rotvec:rx,ry,rz
       hpe infer AFLW2000/ --landmarks3d lm3d --json aflw_system.json
     """
@@ -302,6 +306,9 @@ def infer(
         storage=storage,
         timeout=timeout,
         import_path=import_path,
+        rejects_path=rejects,
+        strict=strict,
+        overwrite=overwrite,
     )
     _, written = finish(
         rep,

@@ -80,6 +80,51 @@ def read_data(path, units):
     return read_table(p), units or "deg"
 
 
+def _set_aside_unusable(frame_df, pyr, data, mcols, stored, landmarks3d, rejects_path, strict, overwrite):
+    """Rows whose angles or rotation values are missing or not finite cannot take part in the search: they go to
+    ``--rejects`` with their reason (named ``FILE: line N`` / ``row N`` / the ``.mat`` file), and without a
+    rejects file (or with ``--strict``) they are an error, as in every command that reads rows."""
+    import numpy as np
+
+    from ..io import Rejects
+    from ..io.table_source import row_name
+
+    if stored is not None:
+        cols = list(stored[1])
+    elif mcols is not None:
+        cols = list(mcols)
+    else:
+        cols = [f"{landmarks3d}{i}_{a}" for i in range(68) for a in "xyz"]
+    cols = [c for c in cols if c in frame_df.columns]
+    values = numeric(frame_df, cols, data) if cols else np.zeros((len(frame_df), 0))
+    bad_angles = ~np.isfinite(pyr).all(axis=1)
+    bad_values = ~np.isfinite(values).all(axis=1)
+    bad = bad_angles | bad_values
+    if not bad.any():
+        return frame_df, pyr
+    from pathlib import Path
+
+    p = Path(str(data))
+    idx = np.flatnonzero(bad)
+    if "file" in frame_df.columns and (p.is_dir() or p.suffix.lower() == ".mat"):
+        rows = frame_df["file"].astype(str).to_numpy()[idx]  # one-record files name themselves
+    else:
+        text = p.suffix.lower() not in (".parquet", ".pq", ".arrow", ".feather")
+        rows = idx + (2 if text else 1)  # text: file line (header = line 1); tables: 1-based row
+    reasons = np.where(
+        bad_angles[idx],
+        "angle not finite (missing, NaN or infinite)",
+        "rotation value not finite (missing, NaN or infinite)",
+    ).astype(object)
+    rej = Rejects(rejects_path, overwrite, strict=strict, source=str(data))
+    rej.add(
+        {"input": np.full(len(idx), str(data), dtype=object), "row": rows}, reasons, where=row_name(str(data), rows[0])
+    )
+    rej.finish()
+    keep = ~bad
+    return frame_df[keep].reset_index(drop=True), pyr[keep]
+
+
 def numeric(frame, cols, path):
     import numpy as np
 
@@ -228,6 +273,9 @@ def run_infer(
     storage="active",
     timeout=None,
     import_path=(),
+    rejects_path=None,
+    strict=False,
+    overwrite=False,
 ) -> dict:
     """The infer report of user code (``spec``: ``FILE.py:FUNC`` or ``module:FUNC``) or of a data table.
 
@@ -292,6 +340,9 @@ def run_infer(
                 "qw,qx,qy,qz) nor 3-D landmarks lm3d0_x..; use --matrix, --rotations or --landmarks3d"
             )
         landmarks3d = "lm3d"
+    frame_df, pyr = _set_aside_unusable(
+        frame_df, pyr, data, mcols, stored, landmarks3d, rejects_path, strict, overwrite
+    )
     try:
         rep = infer_data(
             data,

@@ -329,3 +329,44 @@ def test_data_table_with_stored_rotation_vectors_and_quaternions(tmp_path):
         assert rep["rotation_columns"]["kind"] == ("rotvec" if not extra else "quaternion-xyzw")
     res = CliRunner().invoke(cli, ["infer", str(src), "--angles", "pitch,yaw,roll", "--rotations", "rotvec:rx,ry"])
     assert res.exit_code == 2 and "expected 3 columns" in res.output
+
+
+def test_data_rows_that_cannot_be_used_go_to_rejects_or_stop_the_run(tmp_path):
+    """hpe infer DATA: a row whose angles or matrix are not finite is not silently left out of the search: without
+    --rejects it is one error line naming the file and line (exit 1); with --rejects it is set aside with its
+    reason and the rest is searched (the same system as the clean table); --strict refuses it again."""
+    import numpy as np
+    import pandas as pd
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(3)
+    pyr = rng.uniform(-60, 60, (40, 3))
+    R = Rotation.from_euler("ZYX", pyr[:, [2, 1, 0]], degrees=True).as_matrix()  # any fixed convention
+    t = pd.DataFrame(pyr, columns=["pitch", "yaw", "roll"])
+    for i in range(3):
+        for j in range(3):
+            t[f"r{i}{j}"] = R[:, i, j]
+    clean = tmp_path / "clean.csv"
+    t.to_csv(clean, index=False)
+    t.loc[5, "yaw"] = np.nan
+    t.loc[9, "r11"] = np.inf
+    bad = tmp_path / "bad.csv"
+    t.to_csv(bad, index=False)
+    runner = CliRunner()
+    res = runner.invoke(cli, ["infer", str(bad)])
+    assert res.exit_code == 1, res.output
+    assert f"{bad}: line 7: angle not finite" in res.output  # row 5 -> line 7 (header = line 1)
+    rej = tmp_path / "rej.csv"
+    res = runner.invoke(cli, ["infer", str(bad), "--rejects", str(rej), "--json", str(tmp_path / "b.json")])
+    assert res.exit_code == 0, res.output
+    r = pd.read_csv(rej)
+    assert r["row"].tolist() == [7, 11] and r["reason"].str.contains("not finite").all()
+    res = runner.invoke(cli, ["infer", str(clean), "--json", str(tmp_path / "c.json")])
+    assert res.exit_code == 0, res.output
+    import json
+
+    a, b = json.loads((tmp_path / "b.json").read_text()), json.loads((tmp_path / "c.json").read_text())
+    assert a["fit"] == b["fit"] == "exact"
+    assert a["system"]["name"] == b["system"]["name"] and a["system"].get("sequence") == b["system"].get("sequence")
+    res = runner.invoke(cli, ["infer", str(bad), "--rejects", str(tmp_path / "r2.csv"), "--strict"])
+    assert res.exit_code == 1 and not (tmp_path / "r2.csv").exists()
