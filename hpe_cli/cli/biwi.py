@@ -4,14 +4,7 @@ from __future__ import annotations
 
 import click
 
-from .options import (
-    SYSTEM,
-    echo_summary,
-    output_option,
-    overwrite_option,
-    rejects_options,
-    verbosity_options,
-)
+from .options import SYSTEM, echo_summary, output_option, overwrite_option, rejects_options, verbosity_options
 
 
 def _fractions(ctx, param, value):

@@ -51,13 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
-from .fields import (
-    distortion_problem,
-    frame_number_problem,
-    intrinsics_problem,
-    member_problem,
-    rotation_problem,
-)
+from .fields import distortion_problem, frame_number_problem, intrinsics_problem, member_problem, rotation_problem
 
 #: the rotation system of BIWI's matrices and ``.bin`` angles
 BIWI_SYSTEM = "biwi"

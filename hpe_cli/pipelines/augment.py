@@ -286,12 +286,7 @@ class _Plan:
         """On a worker thread: labels, sizes, landmarks, boxes, tdx/tdy of one batch."""
         import pyarrow as pa
 
-        from ..geometry.augment import (
-            augment_canonical,
-            move_boxes,
-            move_points,
-            move_td,
-        )
+        from ..geometry.augment import augment_canonical, move_boxes, move_points, move_td
         from ..io import BBOX_COLS, LABEL_COLS, conversion_columns
         from ..io.images import row_ids
         from ..io.labels import numeric_column
@@ -407,14 +402,7 @@ def run_augment(
 
     from ..geometry.augment import plane_matrix
     from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
-    from ..io import (
-        BBOX_COLS,
-        Rejects,
-        TableWriter,
-        check_output,
-        open_table,
-        system_metadata,
-    )
+    from ..io import BBOX_COLS, Rejects, TableWriter, check_output, open_table, system_metadata
     from ..io.system_meta import output_system, resolve_system
     from ..io.transaction import ensure_transaction, staged_dir
     from .augment_images import ImageJob, RowImages

@@ -38,6 +38,7 @@ import numpy as np
 
 from . import euler as _euler
 from . import soa as _soa
+from .system_text import _CANONICAL_WORDS, _esc, _fmt, _num  # noqa: F401
 
 ROLES = ("pitch", "yaw", "roll")
 SELECTIONS = ("tait_bryan", "proper", "whenet")
@@ -51,14 +52,6 @@ GIMBAL_TOL = 1e-4
 
 _DEG = 180.0 / np.pi
 
-_CANONICAL_WORDS = {
-    (0, 1): "subject's left (image right)",
-    (0, -1): "subject's right (image left)",
-    (1, 1): "up (towards the forehead)",
-    (1, -1): "down (towards the chin)",
-    (2, 1): "out of the face (towards the camera)",
-    (2, -1): "into the head (away from the camera)",
-}
 
 #: the 300W-LP turns: the angles reported by systems that store no angles
 CANONICAL_TURNS = None  # set after Turn is defined
@@ -597,19 +590,3 @@ class RotationSystem:
         if self.columns:
             lines += ["", "[columns]"] + [f'{k} = "{_esc(v)}"' for k, v in self.columns.items()]
         return "\n".join(lines) + "\n"
-
-
-def _esc(s: str) -> str:
-    return s.replace("\\", "\\\\").replace('"', '\\"')
-
-
-def _num(v) -> str:
-    v = float(v)
-    return str(int(v)) if v.is_integer() else repr(v)
-
-
-def _fmt(v) -> str:
-    try:
-        return json.dumps(v)
-    except (TypeError, ValueError):
-        return repr(v)

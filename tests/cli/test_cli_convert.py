@@ -162,11 +162,7 @@ def test_overwrite_and_usage_errors(tmp_path, labels):
 
 @pytest.mark.parametrize(
     "content,msg",
-    [
-        ("", "empty file"),
-        ("a,b\n1,2\n", "missing column(s) pitch, yaw, roll"),
-        ("pitch,yaw,roll\n", "empty table"),
-    ],
+    [("", "empty file"), ("a,b\n1,2\n", "missing column(s) pitch, yaw, roll"), ("pitch,yaw,roll\n", "empty table")],
 )
 def test_bad_files(tmp_path, content, msg):
     src = tmp_path / "in.csv"

@@ -7,14 +7,7 @@ import pytest
 from click.testing import CliRunner
 
 from hpe_cli.cli.main import cli
-from hpe_cli.io.images import (
-    ImageResolver,
-    image_size,
-    jpeg_size,
-    panoptic_view,
-    resolve_image,
-    video_path,
-)
+from hpe_cli.io.images import ImageResolver, image_size, jpeg_size, panoptic_view, resolve_image, video_path
 
 
 def _img(path, w=64, h=48, value=100):

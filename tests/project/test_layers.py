@@ -77,8 +77,8 @@ def _layer(module: str) -> str | None:
     parts = module.split(".")
     if parts[0] != "hpe_cli":
         return None
-    if len(parts) == 1 or parts[1] in ("api", "__main__"):
-        return "api" if len(parts) == 1 or parts[1] == "api" else "cli"
+    if len(parts) == 1 or parts[1] in ("api", "api_arrays", "__main__"):
+        return "api" if len(parts) == 1 or parts[1] in ("api", "api_arrays") else "cli"
     return parts[1]
 
 

@@ -15,12 +15,7 @@ from conftest import REALDATA
 from hpe_cli import write_labels
 from hpe_cli.geometry.crop import points_to_crop
 from hpe_cli.rotation import get_system
-from hpe_cli.torch import (
-    HeadPose,
-    HeadPoseDataset,
-    UndefinedPoseError,
-    angles_to_canonical,
-)
+from hpe_cli.torch import HeadPose, HeadPoseDataset, UndefinedPoseError, angles_to_canonical
 from hpe_cli.torch import transforms as T
 
 AFLW = REALDATA / "aflw2000_prnet"

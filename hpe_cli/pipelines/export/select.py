@@ -11,14 +11,7 @@ import numpy as np
 from ...errors import HpeError
 from ...io.layout import landmark_count
 from .options import A_COLS
-from .sampling import (
-    assign_splits,
-    balance_keep,
-    min_change_keep,
-    parse_balance,
-    parse_split,
-    read_split_file,
-)
+from .sampling import assign_splits, balance_keep, min_change_keep, parse_balance, parse_split, read_split_file
 
 GROUP_COLUMNS = "sequence, subject, identity, person_id, camera, source, image"
 

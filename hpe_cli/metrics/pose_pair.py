@@ -1,0 +1,132 @@
+"""The pair a protocol scores: ground truth and prediction as matrices and as the angles each side wrote."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import peer_angles as pa_
+from . import rotation_errors as re_
+
+_DEG = 180.0 / np.pi
+
+
+class PosePair:
+    """Predicted (``P``) and true (``G``) canonical rotations with cached conversions.
+
+    Parameters
+    ----------
+    P, G : nested list (3x3 of 1-D arrays) or ndarray (N, 3, 3)
+        Canonical 300W-LP matrices (``A = Rx(p).T Ry(y).T Rz(r).T``).
+    gt_system : RotationSystem
+        The ground truth's own system (used by the core metrics).
+    raw : dict, optional
+        ``{"pred" | "gt": (system, angles (N, 3) degrees)}``: the angles as
+        written in the input file, for sides that were given as angles. The
+        raw-angle protocols compare these numbers as written.
+    """
+
+    def __init__(self, P, G, gt_system, raw=None, context=None):
+        self.context = dict(context or {})
+        self.P = re_.as_nested(P)
+        self.G = re_.as_nested(G)
+        self.gt_system = gt_system
+        self.n = int(np.broadcast(*[x for row in self.G for x in row]).shape[0])
+        self.raw = dict(raw or {})
+        self._cache = {}
+
+    def stored(self, system, side: str):
+        """Nested stored matrix of ``side`` ('pred' or 'gt') in ``system``."""
+        from ..rotation.systems import get_system
+
+        system = get_system(system)
+        key = ("stored", system.name, side)
+        if key not in self._cache:
+            self._cache[key] = system.soa_from_canonical(self.P if side == "pred" else self.G)
+        return self._cache[key]
+
+    def angles(self, system, side: str):
+        """``(primary, secondary)`` angles ``(N, 3)`` (pitch, yaw, roll; degrees) of ``side`` in ``system``."""
+        from ..rotation.systems import get_system
+
+        system = get_system(system)
+        key = ("angles", system.name, side)
+        if key not in self._cache:
+            p1, p2, _, _ = system.soa_to_angles(self.stored(system, side))
+            self._cache[key] = (np.stack(np.broadcast_arrays(*p1), -1), np.stack(np.broadcast_arrays(*p2), -1))
+        return self._cache[key]
+
+    def written(self, system, side: str):
+        """Angles of ``side`` as a peer reading ``system`` labels sees them, and the re-expressed rows.
+
+        When ``side`` was given as angles and those numbers mean the same
+        rotation in ``system`` (same system, or one whose angles are the same
+        numbers, e.g. 6drepnet and 300w_lp), they are returned as written: no
+        re-extraction from the matrix, so a non-primary solution, a yaw past
+        the range or a gimbal-lock label stays what the file says. Other rows
+        (another system's angles, or matrices/vectors) take the primary
+        solution of ``system`` from the matrix.
+
+        Returns
+        -------
+        angles : ndarray (N, 3)
+        changed : ndarray of bool (N,) or None
+            Rows given as angles whose numbers were changed by the conversion;
+            None when the side was not given as angles (all from the matrix).
+        """
+        from ..rotation.systems import get_system
+
+        system = get_system(system)
+        key = ("written", system.name, side)
+        if key in self._cache:
+            return self._cache[key]
+        raw = self.raw.get(side)
+        if raw is None:
+            out = (self.angles(system, side)[0], None)
+        else:
+            rsys, a = get_system(raw[0]), np.asarray(raw[1], dtype=np.float64)
+            if rsys.name == system.name or _same_angles(rsys, system):
+                out = (a, np.zeros(self.n, dtype=bool))
+            else:
+                conv, _ = self.angles(system, side)
+                X = system.soa_to_canonical(system.soa_from_angles(a[:, 0], a[:, 1], a[:, 2]))
+                C = self.P if side == "pred" else self.G
+                same = np.ones(self.n, dtype=bool)
+                for i in range(3):
+                    for j in range(3):
+                        same &= np.abs(np.asarray(X[i][j]) - C[i][j]) <= 1e-9
+                out = (np.where(same[:, None], a, conv), ~same)
+        self._cache[key] = out
+        return out
+
+    def array(self, system, side: str) -> np.ndarray:
+        """Stored matrices of ``side`` in ``system`` as ``(N, 3, 3)``."""
+        return pa_.stack3(self.stored(system, side))
+
+
+_SAME: dict = {}
+
+
+def _same_angles(a, b) -> bool:
+    """True when (pitch, yaw, roll) mean the same rotation in systems ``a`` and ``b`` for EVERY triple.
+
+    Checked once per pair of systems on 2,000 triples spread over the whole
+    [-180, 180]^3 cube (other solutions, past-range yaws, gimbal lock
+    included): e.g. 300w_lp and 6drepnet angles are the same numbers.
+    """
+    key = (a.name, b.name)
+    if key not in _SAME:
+        rng = np.random.default_rng(0)
+        t = np.concatenate(
+            [
+                rng.uniform(-180, 180, (1900, 3)),
+                np.c_[rng.uniform(-180, 180, 100), np.repeat([90.0, -90.0], 50), rng.uniform(-180, 180, 100)],
+            ]
+        )
+        Xa = a.soa_to_canonical(a.soa_from_angles(t[:, 0], t[:, 1], t[:, 2]))
+        Xb = b.soa_to_canonical(b.soa_from_angles(t[:, 0], t[:, 1], t[:, 2]))
+        _SAME[key] = all(
+            np.allclose(np.broadcast_to(Xa[i][j], (len(t),)), np.broadcast_to(Xb[i][j], (len(t),)), atol=1e-12, rtol=0)
+            for i in range(3)
+            for j in range(3)
+        )
+    return _SAME[key]
