@@ -91,11 +91,20 @@ def as_numbers(value, shape=None, min_size: int = 0):
                 or raw.dtype.kind == "O"
                 and raw.size
                 and all(
-                    isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+                    v is None
+                    or (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_)))
                     for v in raw.reshape(-1).tolist()
                 )
+                and any(v is not None for v in raw.reshape(-1).tolist())
             ):
-                arr = raw.astype(np.float64)
+                # a null inside an array of numbers is a missing number (NaN), as a Parquet round trip writes NaN
+                arr = np.where(raw == None, np.nan, raw).astype(np.float64)  # noqa: E711 (elementwise)
+            elif raw.dtype.kind == "O" and raw.ndim == 1 and raw.size:
+                # a nested sequence (what a Parquet round trip gives: an object array of per-row arrays):
+                # numbers of one shape on every row, stacked; ragged rows or anything else is refused
+                parts = [as_numbers(v)[0] if isinstance(v, (np.ndarray, list, tuple)) else None for v in raw.tolist()]
+                if all(q is not None and q.shape == parts[0].shape for q in parts):
+                    arr = np.stack(parts)
         except (ValueError, TypeError, OverflowError, RecursionError, MemoryError):
             arr = None
     if arr is None:
