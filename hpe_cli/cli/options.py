@@ -384,3 +384,19 @@ def known_rows(*paths) -> int | None:
             return None
         total += n
     return total
+
+
+#: the label-file formats relabel-panoptic and relabel-agora write
+OUTPUT_FORMATS = ("table", "coco", "whenet")
+
+
+def format_option(f):
+    """``--format table|coco|whenet`` of the relabel commands (default: from OUTPUT's extension)."""
+    return click.option(
+        "--format",
+        "fmt",
+        type=click.Choice(OUTPUT_FORMATS),
+        default=None,
+        help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
+        "[default: from OUTPUT's extension].",
+    )(f)

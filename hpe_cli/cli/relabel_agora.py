@@ -9,6 +9,7 @@ from .options import (
     deprecated_spellings,
     echo_summary,
     format_from_suffix,
+    format_option,
     image_size_option,
     max_rmse_option,
     non_negative_or_inf,
@@ -18,8 +19,6 @@ from .options import (
     rejects_options,
     verbosity_options,
 )
-
-FORMATS = ("table", "coco", "whenet")
 
 
 @deprecated_spellings("image-size")
@@ -34,14 +33,7 @@ FORMATS = ("table", "coco", "whenet")
     help="Rotation system of the labels: built-in name or .toml file "
     "[default: 300w_lp; whenet for --format coco/whenet, which store DirectMHP's/WHENet's angles].",
 )
-@click.option(
-    "--format",
-    "fmt",
-    type=click.Choice(FORMATS),
-    default=None,
-    help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
-    "[default: from OUTPUT's extension].",
-)
+@format_option
 @image_size_option(
     default="3840x2160",
     show_default=True,

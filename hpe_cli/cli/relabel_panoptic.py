@@ -8,6 +8,7 @@ from .options import (
     SYSTEM,
     echo_summary,
     format_from_suffix,
+    format_option,
     max_rmse_option,
     output_option,
     overwrite_option,
@@ -15,8 +16,6 @@ from .options import (
     rejects_options,
     verbosity_options,
 )
-
-FORMATS = ("table", "coco", "whenet")
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
@@ -43,14 +42,7 @@ FORMATS = ("table", "coco", "whenet")
     help="Helmet radius and box rule: whenet (radius 22, aspect <= 2) or directmhp (radius 18, "
     "aspect < 1.5, each side < 70% of the image).",
 )
-@click.option(
-    "--format",
-    "fmt",
-    type=click.Choice(FORMATS),
-    default=None,
-    help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
-    "[default: from OUTPUT's extension].",
-)
+@format_option
 @click.option(
     "--cameras",
     default="hd",
