@@ -306,3 +306,26 @@ def case_factory(tmp_path):
         return Case(name, tmp_path)
 
     return make
+
+
+def children(pid: int) -> set:
+    """Every descendant process of ``pid`` (from /proc), children of children included."""
+    out = set()
+    try:
+        for task in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{task}/children") as f:
+                out.update(int(x) for x in f.read().split())
+    except OSError:
+        return out
+    for c in list(out):
+        out |= children(c)
+    return out
+
+
+def alive(pid: int) -> bool:
+    """``pid`` exists and is neither a zombie nor dead."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except OSError:
+        return False

@@ -20,6 +20,8 @@ from pathlib import Path
 import pytest
 
 from .conftest import ROOT, SYNTH, run, temp_files
+from .conftest import alive as _alive
+from .conftest import children as _children
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
@@ -32,27 +34,6 @@ def _sequence(dst: Path, frames: int = 200) -> Path:
     for k in range(frames):
         shutil.copy(faces[k % len(faces)], seq / "hdFace3d" / f"faceRecon3D_hd{k:08d}.json")
     return seq
-
-
-def _children(pid: int) -> set:
-    out = set()
-    try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            with open(f"/proc/{pid}/task/{task}/children") as f:
-                out.update(int(x) for x in f.read().split())
-    except OSError:
-        return out
-    for c in list(out):
-        out |= _children(c)
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-    except OSError:
-        return False
 
 
 def _args(seq, out, rej):

@@ -21,6 +21,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from .conftest import ROOT, SYNTH, temp_files, tree
+from .conftest import alive as _alive
+from .conftest import children as _children
 
 SIGNALS = [signal.SIGTERM, signal.SIGHUP, signal.SIGINT]
 
@@ -30,27 +32,6 @@ def _popen(*args):
     return subprocess.Popen(
         [sys.executable, "-m", "hpe_cli", *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env
     )
-
-
-def _children(pid: int) -> set:
-    out = set()
-    try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            with open(f"/proc/{pid}/task/{task}/children") as f:
-                out.update(int(x) for x in f.read().split())
-    except OSError:
-        return out
-    for c in list(out):
-        out |= _children(c)
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-    except OSError:
-        return False
 
 
 def _wait_for(cond, proc, timeout=60.0):
