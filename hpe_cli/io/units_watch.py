@@ -19,14 +19,28 @@ class UnitsWatch:
     """Running count and largest |value| of the usable angle rows read as degrees in one run."""
 
     def __init__(self, inputs):
+        import threading
+
         self.inputs, self.rows, self.largest = inputs, 0, 0.0
+        self._lock = threading.Lock()  # readers may feed it from several threads
 
     def observe(self, cols, ok=None) -> None:
-        v = np.stack([np.asarray(c, dtype=np.float64) for c in cols], axis=-1)
+        cols = [np.asarray(c, dtype=np.float64) for c in cols]
+        n = len(cols[0]) if cols and np.ndim(cols[0]) else 0
+        if n and (ok is None or bool(np.all(ok))):  # the usual batch: min and max only, no temporaries
+            lo, hi = min(float(c.min()) for c in cols), max(float(c.max()) for c in cols)
+            if np.isfinite(lo) and np.isfinite(hi):
+                self._add(n, max(hi, -lo))
+                return
+        v = np.stack(cols, axis=-1)
         good = np.isfinite(v).all(axis=-1) if ok is None else (np.asarray(ok) & np.isfinite(v).all(axis=-1))
         if good.any():
-            self.rows += int(good.sum())
-            self.largest = max(self.largest, float(np.abs(v[good]).max()))
+            self._add(int(good.sum()), float(np.abs(v[good]).max()))
+
+    def _add(self, rows: int, largest: float) -> None:
+        with self._lock:
+            self.rows += rows
+            self.largest = max(self.largest, largest)
 
     def message(self) -> str | None:
         if self.rows <= MIN_ROWS or self.largest > np.pi:

@@ -36,12 +36,20 @@ def sixdrepnet_euler(R) -> np.ndarray:
     ``x = atan2(R21, R22)``, ``y = atan2(-R20, sy)``, ``z = atan2(R10, R00)``;
     rows with ``sy < 1e-6``: ``x = atan2(-R12, R11)``, ``z = 0``.
     """
+    R = [[np.asarray(v, dtype=np.float64) for v in row] for row in R]
+    n = int(np.broadcast(*[v for row in R for v in row]).shape[0])
+    R = [[np.broadcast_to(v, (n,)) for v in row] for row in R]
     sy = np.sqrt(R[0][0] * R[0][0] + R[1][0] * R[1][0])
+    out = np.empty((n, 3))
+    np.arctan2(R[2][1], R[2][2], out=out[:, 0])
+    np.arctan2(-R[2][0], sy, out=out[:, 1])
+    np.arctan2(R[1][0], R[0][0], out=out[:, 2])
     singular = sy < 1e-6
-    x = np.where(singular, np.arctan2(-R[1][2], R[1][1]), np.arctan2(R[2][1], R[2][2]))
-    y = np.arctan2(-R[2][0], sy)
-    z = np.where(singular, 0.0, np.arctan2(R[1][0], R[0][0]))
-    return np.stack(np.broadcast_arrays(x, y, z), -1) * _DEG
+    if singular.any():  # the peer's other branch, on its rows only
+        out[singular, 0] = np.arctan2(-R[1][2][singular], R[1][1][singular])
+        out[singular, 2] = 0.0
+    out *= _DEG
+    return out
 
 
 def min_wrapped(pred, gt, with_180: bool) -> np.ndarray:

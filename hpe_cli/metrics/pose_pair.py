@@ -51,9 +51,35 @@ class PosePair:
         system = get_system(system)
         key = ("angles", system.name, side)
         if key not in self._cache:
-            p1, p2, _, _ = system.soa_to_angles(self.stored(system, side))
-            self._cache[key] = (np.stack(np.broadcast_arrays(*p1), -1), np.stack(np.broadcast_arrays(*p2), -1))
+            self._cache[key] = self._angles(system, side)
         return self._cache[key]
+
+    def _angles(self, system, side: str):
+        """Both solutions; rows written as angles in ``system`` that are its primary triple are read as written
+        (:func:`hpe_cli.rotation.solutions.primary_from_written`), the rest come from the matrix."""
+        from ..rotation import solutions
+
+        raw = self.raw.get(side)
+        fast = None
+        if raw is not None and self.n:
+            from ..rotation.systems import get_system
+
+            rsys = get_system(raw[0])
+            if rsys.name == system.name or _same_angles(rsys, system):
+                a = np.asarray(raw[1], dtype=np.float64)
+                fast = solutions.primary_from_written(system, a)
+        if fast is None or not fast.any():
+            p1, p2, _, _ = system.soa_to_angles(self.stored(system, side))
+            return np.stack(np.broadcast_arrays(*p1), -1), np.stack(np.broadcast_arrays(*p2), -1)
+        p1 = np.array(a, dtype=np.float64, order="F")  # columns contiguous: second_degrees works per column
+        if not fast.all():
+            slow = ~fast
+            X = self.stored(system, side)
+            sub = [[np.broadcast_to(v, (self.n,))[slow] for v in row] for row in X]
+            q1, _, _, _ = system.soa_to_angles(sub)
+            p1[slow] = np.stack(q1, -1)
+        p2 = solutions.second_degrees([p1[:, k] for k in range(3)], solutions.middle_role(system), False)
+        return np.ascontiguousarray(p1), np.stack(p2, -1)
 
     def written(self, system, side: str):
         """Angles of ``side`` as a peer reading ``system`` labels sees them, and the re-expressed rows.

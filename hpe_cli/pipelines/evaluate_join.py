@@ -22,6 +22,8 @@ from ..errors import HpeError
 
 #: key columns tried in order when --key is not given
 DEFAULT_KEYS = ("image", "file")
+#: threads that turn each side's decoded batches into labels
+LABEL_THREADS = 2
 
 
 @dataclass
@@ -198,24 +200,43 @@ class SideReader:
         self.unit = "row" if src.kind == "parquet" else "line"
 
     def chunks(self):
-        """Yield one :class:`Chunk` per batch of the table."""
+        """Yield one :class:`Chunk` per batch of the table, in file order.
+
+        The batches are decoded here, one after the other; their labels (matrices from the angles, checks) are
+        computed on :data:`LABEL_THREADS` threads, at most that many batches ahead.
+        """
+        from concurrent.futures import ThreadPoolExecutor
+
+        from .pools import in_order
+
+        def batches():
+            for batch, bad_rows in self.src.batches_with_rejects():
+                self.unreadable += [(r.line, r.reason) for r in bad_rows]
+                yield batch
+
+        pool = ThreadPoolExecutor(LABEL_THREADS, thread_name_prefix="hpe-evaluate-labels")
+        try:
+            for chunk in in_order(pool, self._chunk, batches(), ahead=LABEL_THREADS):
+                self.n += chunk.n
+                if self.progress is not None:
+                    self.progress.update(chunk.n)
+                yield chunk
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    def _chunk(self, batch) -> Chunk:
         from ..io.readers import LINE_COL
         from ..rotation import soa
 
-        for batch, bad_rows in self.src.batches_with_rejects():
-            if self.dataset_stem:
-                batch = _stem_key_hook(batch)
-            self.unreadable += [(r.line, r.reason) for r in bad_rows]
-            lines = batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64)
-            X, ok, rs, raw, dist = _batch_labels(batch, self.system, self.mode, self.radians, self.orthonormalize)
-            n = batch.num_rows
-            X = self.system.soa_to_canonical(X)
-            keys = batch.select(self.keep) if self.keep else None
-            by = keys.column(self.by).to_numpy(zero_copy_only=False) if self.by else None
-            self.n += n
-            if self.progress is not None:
-                self.progress.update(n)
-            yield Chunk(soa.columns(X, n), ok, rs, raw, dist, keys, by, lines)
+        if self.dataset_stem:
+            batch = _stem_key_hook(batch)
+        lines = batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64)
+        X, ok, rs, raw, dist = _batch_labels(batch, self.system, self.mode, self.radians, self.orthonormalize)
+        n = batch.num_rows
+        X = self.system.soa_to_canonical(X)
+        keys = batch.select(self.keep) if self.keep else None
+        by = keys.column(self.by).to_numpy(zero_copy_only=False) if self.by else None
+        return Chunk(soa.columns(X, n), ok, rs, raw, dist, keys, by, lines)
 
 
 def read_side(

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import euler as _euler
+from . import solutions as _solutions
 from . import soa as _soa
 from .system_text import _CANONICAL_WORDS, _esc, _fmt, _num  # noqa: F401
 
@@ -412,30 +413,14 @@ class RotationSystem:
         turns = self._intrinsic_turns()
         proper = seq[0] == seq[2]
         first = {}
-        for n, (t, v) in enumerate(zip(turns, (a, b, c))):
+        for t, v in zip(turns, (a, b, c)):
             d = v * (_DEG if t.hand == "right" else -_DEG)
             d[d <= -180.0] += 360.0  # atan2(-0.0, -1) and left hands give -180; keep (-180, 180]
-            first[t.angle] = (d, n == 1)
-        p1, p2 = [], []
-        for role in ROLES:
-            d, middle = first[role]
-            p1.append(d)
-            if not middle:  # the first and last turns move by 180 degrees
-                d2 = d + 180.0
-                d2[d > 0] -= 360.0
-            elif proper:
-                d2 = -d
-            else:  # the middle Tait-Bryan turn goes to 180 - b
-                d2 = 180.0 - d
-                d2[d < 0] -= 360.0
-            d2[d2 <= -180.0] += 360.0  # tiny |d| rounds d - 180 to exactly -180
-            p2.append(d2)
+            first[t.angle] = d
+        p1 = [first[role] for role in ROLES]
+        p2 = _solutions.second_degrees(p1, _solutions.middle_role(self), proper)
         if self.selection == "whenet":
-            ok1 = (np.abs(p1[0]) < 90) & (np.abs(p1[2]) < 90)
-            ok2 = (np.abs(p2[0]) < 90) & (np.abs(p2[2]) < 90)
-            swap = ~ok1 & ok2
-            if swap.any():
-                p1, p2 = [np.where(swap, y, x) for x, y in zip(p1, p2)], [np.where(swap, x, y) for x, y in zip(p1, p2)]
+            p1, p2 = _solutions.whenet_select(p1, p2)
         return p1, p2, lock < self.gimbal_tol, lock
 
     def soa_to_canonical(self, X):

@@ -119,3 +119,30 @@ def test_streamed_run_equals_in_memory_join(tmp_path, align):
         golden = {g["protocol"]: g["numbers"] for g in json.loads((SYN / "golden.json").read_text())["golden"]}
         for k in ("pitch", "yaw", "roll", "mean", "geodesic"):
             assert abs(a["protocols"]["opal23-align"][k] - golden["opal23_align"][k]) <= 1e-6, k
+
+
+@pytest.mark.parametrize("shuffled", [False, True])
+def test_threads_and_piece_sizes_change_nothing(tmp_path, monkeypatch, shuffled):
+    """2 scoring and 2 label threads give exactly the numbers and rows of 1; 100-row pieces those of whole batches
+    up to the order of the sums."""
+    import hpe_cli.pipelines.evaluate as ev
+    import hpe_cli.pipelines.evaluate_join as ej
+
+    p = pd.read_csv(SYN / "pred.csv")
+    p["group"] = np.where(np.arange(len(p)) % 4 == 0, "even", "odd")
+    pred = tmp_path / "pred.csv"
+    (p.sample(frac=1.0, random_state=3) if shuffled else p).to_csv(pred, index=False)
+    out = {}
+    for threads, rows in ((1, 100), (2, 100), (1, 10**9)):
+        monkeypatch.setattr(ev, "SCORE_THREADS", threads)
+        monkeypatch.setattr(ev, "SCORE_ROWS", rows)
+        monkeypatch.setattr(ej, "LABEL_THREADS", threads)
+        rows_file = tmp_path / f"rows{threads}_{rows}.parquet"
+        rep = _run(tmp_path, pred, "-o", str(rows_file), "--overwrite")
+        out[threads, rows] = (rep, pd.read_parquet(rows_file))
+    (a, ra), (b, rb), (c, rc) = out[1, 100], out[2, 100], out[1, 10**9]
+    for k in ("metrics", "protocols", "by", "yaw_bins", "n"):
+        assert a[k] == b[k], k  # the same sums in the same order: equal, not close
+        _close(c[k], b[k], k)
+    pd.testing.assert_frame_equal(ra, rb)
+    pd.testing.assert_frame_equal(rc, rb)
