@@ -133,7 +133,9 @@ def _with_line(batch, first_line: int):
     import pyarrow as pa
 
     n = batch.num_rows  # from_buffers: zero copy, and pa.array's import of pandas (0.4 s) is not needed here
-    lines = pa.Array.from_buffers(pa.int64(), n, [None, pa.py_buffer(np.arange(first_line, first_line + n, dtype=np.int64))])
+    lines = pa.Array.from_buffers(
+        pa.int64(), n, [None, pa.py_buffer(np.arange(first_line, first_line + n, dtype=np.int64))]
+    )
     return batch.append_column(LINE_COL, lines)
 
 

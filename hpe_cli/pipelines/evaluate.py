@@ -31,30 +31,11 @@ from .evaluate_join import (  # noqa: F401
     prefetch,
     read_side,
 )
-from .evaluate_outputs import Images, Sample, Worst, empty_rows, row_table, worst_pictures
+from .evaluate_outputs import Images, empty_rows, worst_pictures
 from .evaluate_rejects import _add_rejects, _align_block, _collect_rejects, _stream_rejects, _unreadable_rejects  # noqa: F401
+from .evaluate_score import PLACEMENT, SCORE_ROWS, SCORE_THREADS, _nested, _raw, _score, _take  # noqa: F401
 
 ANGLES = ("pitch", "yaw", "roll")
-#: threads that score chunks side by side (the reading runs on one more, see ``prefetch``)
-SCORE_THREADS = 2
-#: rows scored at once (arrays of 64k float64 stay in the caches)
-SCORE_ROWS = 65536
-#: GT columns carried to the worst rows (with --report) to place and crop their pictures
-PLACEMENT = ("bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "size")
-
-
-def _take(c: Chunk, idx) -> Chunk:
-    """Rows ``idx`` (int array or bool mask) of a chunk."""
-
-    def t(x):
-        return None if x is None else x[idx]
-
-    keys = None
-    if c.keys is not None:
-        keys = c.keys.filter(idx) if np.asarray(idx).dtype == bool else c.keys.take(idx)
-    return Chunk(
-        [x[idx] for x in c.canonical], c.ok[idx], t(c.reasons), t(c.raw), t(c.dist), keys, t(c.by), c.lines[idx]
-    )
 
 
 def _memory_pairs(gt, pred, gv, pv, batch_size):
@@ -89,19 +70,6 @@ class _Settings:
 
     def __init__(self, **kw):
         self.__dict__.update(kw)
-
-
-def _nested(c: Chunk):
-    return [[c.canonical[3 * i + j] for j in range(3)] for i in range(3)]
-
-
-def _raw(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
-    raw = {}
-    if g.raw is not None:
-        raw["gt"] = (gsys, g.raw)
-    if p.raw is not None and not aligned:
-        raw["pred"] = (psys, p.raw)
-    return raw
 
 
 def _globals(s, pairs_factory, gsys, psys) -> dict:
@@ -154,95 +122,6 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
         return out
     finally:
         os.unlink(path)
-
-
-def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
-    """Score every chunk of pairs: accumulate, write rows, keep the worst and a plot sample.
-
-    Chunks are scored on :data:`SCORE_THREADS` threads (numpy releases the GIL on
-    whole columns) and consumed in input order, so sums, the spill and the
-    per-row output are the same as one thread's.
-    """
-    from concurrent.futures import ThreadPoolExecutor
-
-    from ..metrics.align import remove_offset
-    from ..metrics.evaluate import compute_rows, yaw_bin_edges
-    from ..metrics.protocols import PROTOCOLS
-    from ..metrics.stream import Accumulator
-    from .pools import in_order
-
-    protos = {k: PROTOCOLS[k] for k in s.protocols}
-    edges = yaw_bin_edges(gsys, float(s.yaw_bins)) if s.yaw_bins else None
-    acc = Accumulator(protos, edges, by=bool(s.by))
-    before = Accumulator(protos, None, by=False, percentiles=True) if s.align == "mean" else None
-    worst, sample = Worst(s.worst if s.html else 0), Sample()
-    ctx = {"opal23_mean": glob["opal23_mean"]} if "opal23_mean" in glob else {}
-    counts = {"pairs": 0, "invalid": 0}
-
-    def usable():  # in order, on this thread: the rejects file is written as the rows come
-        for g, p in pairs:
-            if stream:
-                bad = ~(g.ok & p.ok)
-                if bad.any():
-                    _stream_rejects(rej, s, g, p, bad)
-                    counts["invalid"] += int(bad.sum())
-                    g, p = _take(g, ~bad), _take(p, ~bad)
-            for a in range(0, g.n, SCORE_ROWS):  # cache-sized pieces: numpy is faster on them
-                yield g.slice(a, a + SCORE_ROWS), p.slice(a, a + SCORE_ROWS)
-
-    def work(gp):  # on a scoring thread: pure numpy and Arrow, no shared state
-        g, p = gp
-        P, G = _nested(p), _nested(g)
-        by_values = (g.by if g.by is not None else p.by) if s.by else None
-        rows_before = None
-        if before is not None:
-            rows_before = compute_rows(P, G, gsys, s.protocols, _raw(g, p, gsys, psys), ctx)
-            P = remove_offset(P, glob["Q"])
-        rows = compute_rows(P, G, gsys, s.protocols, _raw(g, p, gsys, psys, aligned=before is not None), ctx)
-        table = None
-        if writer is not None or worst.n:
-            table = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
-        return g, p, rows, rows_before, by_values, table
-
-    pending: list = []  # per-row tables, written in pieces of about one batch
-
-    def flush(at_least):
-        if pending and sum(t.num_rows for t in pending) >= at_least:
-            import pyarrow as pa
-
-            writer.write(pending[0] if len(pending) == 1 else pa.concat_tables(pending))
-            pending.clear()
-
-    pool = ThreadPoolExecutor(SCORE_THREADS, thread_name_prefix="hpe-evaluate-score")
-    try:
-        for g, p, rows, rows_before, by_values, t in in_order(pool, work, usable(), ahead=SCORE_THREADS):
-            if rows_before is not None:
-                before.add(rows_before)
-            counts["pairs"] += rows.n
-            if p.dist is not None and len(p.dist):
-                counts["orthonormalized"] = counts.get("orthonormalized", 0) + int((p.dist > 1e-6).sum())
-                counts["dist_sum"] = counts.get("dist_sum", 0.0) + float(p.dist.sum())
-                counts["dist_max"] = max(counts.get("dist_max", 0.0), float(p.dist.max()))
-            acc.add(rows, by_values)
-            sample.add(rows)
-            if writer is not None:
-                pending.append(t)
-                flush(s.batch_size)
-            if worst.n:  # the face box of each row places its picture (not in the per-row output)
-                for c in PLACEMENT:
-                    if g.keys is not None and c in g.keys.column_names and c not in t.column_names:
-                        t = t.append_column(c, g.keys.column(c))
-                worst.add(t)
-        if writer is not None:
-            flush(1)
-        rep = acc.report()
-        rep_before = before.report() if before is not None else None
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        acc.close()
-        if before is not None:
-            before.close()
-    return rep, rep_before, counts, worst, sample
 
 
 def _readers(s, progress=None):

@@ -37,8 +37,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import euler as _euler
-from . import solutions as _solutions
 from . import soa as _soa
+from . import solutions as _solutions
 from .system_text import _CANONICAL_WORDS, _esc, _fmt, _num  # noqa: F401
 
 ROLES = ("pitch", "yaw", "roll")
