@@ -14,6 +14,7 @@ is used only with ``--join order`` and equal row counts.
 
 from __future__ import annotations
 
+from contextlib import closing
 from dataclasses import dataclass
 
 import numpy as np
@@ -264,13 +265,14 @@ def read_side(
     parts: dict = {f"c{k}": [] for k in range(9)}
     parts.update(ok=[], reasons=[], raw=[], dist=[], keys=[], by=[], lines=[])
     any_reasons = False
-    for c in r.chunks():
-        for k in range(9):
-            parts[f"c{k}"].append(c.canonical[k])
-        any_reasons |= c.reasons is not None
-        for name in ("ok", "reasons", "raw", "dist", "keys", "by", "lines"):
-            v = getattr(c, name)
-            parts[name].append(np.full(c.n, "", dtype=object) if name == "reasons" and v is None else v)
+    with closing(r.chunks()) as chunks:  # an error stops the label threads at once
+        for c in chunks:
+            for k in range(9):
+                parts[f"c{k}"].append(c.canonical[k])
+            any_reasons |= c.reasons is not None
+            for name in ("ok", "reasons", "raw", "dist", "keys", "by", "lines"):
+                v = getattr(c, name)
+                parts[name].append(np.full(c.n, "", dtype=object) if name == "reasons" and v is None else v)
 
     def cat(name, empty=None):
         lst, parts[name] = parts[name], None
@@ -483,6 +485,14 @@ def lockstep(gr: SideReader, pr: SideReader, keys, join_mode: str, notes: set):
     rows left over, :class:`JoinUsageError` (``--join order``) on unequal counts.
     """
     gi, pi = gr.chunks(), pr.chunks()
+    try:
+        yield from _lockstep(gr, pr, gi, pi, keys, join_mode, notes)
+    finally:  # an abandoned side (Unaligned, an error) stops its label threads now, not at exit
+        gi.close()
+        pi.close()
+
+
+def _lockstep(gr, pr, gi, pi, keys, join_mode, notes):
     gbuf = pbuf = None
     while True:
         while gbuf is None or gbuf.n == 0:
@@ -541,3 +551,5 @@ def prefetch(gen):
             yield item
     finally:
         ex.shutdown(wait=True, cancel_futures=True)
+        if hasattr(gen, "close"):  # after the worker is joined: the generator is not running
+            gen.close()

@@ -16,6 +16,7 @@ import math
 import os
 import shutil
 import tempfile
+from contextlib import closing
 
 import numpy as np
 
@@ -39,27 +40,19 @@ def _text(col):
     return col if pa.types.is_string(col.type) else pc.cast(col, pa.string())
 
 
-def _hash(arr) -> np.ndarray:
-    import pandas as pd
-
-    return pd.util.hash_array(arr.to_numpy(zero_copy_only=False), categorize=False)
-
-
 def key_hashes(keys_table, keys):
     """``(partition hash, {key: (hash of the text, hash of its file stem)})`` of each row, uint64.
 
     The partition hash combines the stem hashes of all key columns, so equal keys and equal stems land in
     the same partition; the per-column hashes let :meth:`Partitions.stem_columns` count matches cheaply.
+    Hashed off the Arrow buffers (:func:`hpe_cli.io.key_hash.string_hashes`).
     """
+    from ..io.key_hash import string_hashes
+
     h = np.zeros(keys_table.num_rows, dtype=np.uint64)
     per = {}
     for k in keys:
-        import pyarrow.compute as pc
-
-        text = _text(keys_table.column(k))
-        stems = _stems(text)
-        hx = _hash(text)
-        hs = hx if pc.all(pc.equal(text, stems)).as_py() is not False else _hash(stems)  # no folder or suffix
+        hx, hs = string_hashes(_text(keys_table.column(k)))
         per[k] = (hx, hs)
         with np.errstate(over="ignore"):
             h = h * np.uint64(1_000_003) ^ hs
@@ -94,6 +87,7 @@ class _SideSpill:
         self.folder, self.name, self.reader, self.K = folder, name, reader, K
         self.writers: list = [None] * K
         self.schema = None
+        self.stem_differs: set = set()  # key columns with a row whose file stem is not its text
 
     def _table(self, c, per):
         import pyarrow as pa
@@ -129,17 +123,21 @@ class _SideSpill:
         if not c.n:
             return
         h, per = key_hashes(c.keys, keys)
+        for j, (hx, hs) in enumerate(per.values()):  # a key whose stems are its texts everywhere needs no count
+            if j not in self.stem_differs and bool((hx != hs).any()):
+                self.stem_differs.add(j)
         t = self._table(c, per)
         part = (h % np.uint64(self.K)).astype(np.int64) if self.K > 1 else np.zeros(c.n, dtype=np.int64)
         order = np.argsort(part, kind="stable")
         bounds = np.searchsorted(part[order], np.arange(self.K + 1))
+        t = t.take(pa.array(order))  # one gather; each partition is then a zero-copy slice
         for k in range(self.K):
-            a, b = bounds[k], bounds[k + 1]
+            a, b = int(bounds[k]), int(bounds[k + 1])
             if a == b:
                 continue
             if self.writers[k] is None:
                 self.writers[k] = pa.ipc.new_file(self._path(k), self.schema)
-            self.writers[k].write_table(t.take(pa.array(order[a:b])))
+            self.writers[k].write_table(t.slice(a, b - a))
 
     def _path(self, k):
         return os.path.join(self.folder, f"{self.name}_{k:04d}.arrow")
@@ -226,8 +224,9 @@ class Partitions:
     def fill(self):
         try:
             for spill, reader in ((self.g, self.gr), (self.p, self.pr)):
-                for c in reader.chunks():
-                    spill.add(c, self.keys)
+                with closing(reader.chunks()) as chunks:  # an error stops the label threads at once
+                    for c in chunks:
+                        spill.add(c, self.keys)
                 spill.close()
         except BaseException:
             self.cleanup()
@@ -266,11 +265,14 @@ class Partitions:
         check = [
             j
             for j, k in enumerate(self.keys)
-            if text_key(self.g.schema, k) != text_key(self.p.schema, k)
-            or pa.types.is_string(text_key(self.g.schema, k))
-            or pa.types.is_large_string(text_key(self.g.schema, k))
+            if (j in self.g.stem_differs or j in self.p.stem_differs)
+            and (
+                text_key(self.g.schema, k) != text_key(self.p.schema, k)
+                or pa.types.is_string(text_key(self.g.schema, k))
+                or pa.types.is_large_string(text_key(self.g.schema, k))
+            )
         ]
-        for i in range(self.K):
+        for i in range(self.K if check else 0):
             tg, tp = self.g.table(i), self.p.table(i)
             n_g, n_p = (tg.num_rows if tg is not None else 0), (tp.num_rows if tp is not None else 0)
             for j in check:

@@ -140,7 +140,10 @@ def test_hash_collisions_fall_back_to_the_string_join(tmp_path, monkeypatch):
     calls.update(hash=0, none=0)
     r2 = run_evaluate(pred, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
     assert calls["none"] > 0 and calls["hash"] == 0
-    monkeypatch.setattr(es, "_hash", lambda arr: np.zeros(len(arr), dtype=np.uint64))  # every key collides
+    import hpe_cli.io.key_hash as kh
+
+    zeros = lambda arr: (np.zeros(len(arr), dtype=np.uint64),) * 2  # noqa: E731 - every key collides
+    monkeypatch.setattr(kh, "string_hashes", zeros)
     r3 = run_evaluate(pred, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
     for rep in (r, r2, r3):
         _close({k: want[k] for k in ("metrics", "protocols", "n")}, {k: rep[k] for k in ("metrics", "protocols", "n")})

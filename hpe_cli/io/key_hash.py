@@ -1,0 +1,104 @@
+"""64-bit hashes of Arrow text keys, and of their file stems, straight off the Arrow buffers (no Python strings).
+
+Used to partition and pre-match the keys of two tables (``hpe evaluate``'s external join): equal strings get
+equal hashes, and every match found by hash is verified on the strings themselves by the caller, so a
+collision costs time, never a wrong pair.
+
+The hash of the bytes ``b[s:e]`` of the column's data buffer is a polynomial ``sum b[i] P**(i - s)`` (mod
+2**64), read off one prefix sum per batch as ``(S[e] - S[s]) * P**-s`` (``P`` odd, so it has an inverse
+mod 2**64), mixed with the length and finished with SplitMix64's finaliser so that its low bits (the
+partition) are well spread. Any substring costs the same, which gives the stem (the text after the last
+``/`` or ``\\`` and before the last ``.`` after it: what ``^.*[\\/]|\\.[^.\\/]*$`` removed) for free.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_P = np.uint64(0x100000001B3)  # FNV's 64-bit prime (odd)
+_P_INV = np.uint64(pow(int(_P), -1, 1 << 64))
+_LEN = np.uint64(0x9E3779B97F4A7C15)
+_NULL = np.uint64(0xD6E8FEB86659FD93)
+
+
+def _mix(h: np.ndarray) -> np.ndarray:
+    """SplitMix64's finaliser, vectorised (uint64 arithmetic wraps)."""
+    h = h ^ (h >> np.uint64(30))
+    h = h * np.uint64(0xBF58476D1CE4E5B9)
+    h = h ^ (h >> np.uint64(27))
+    h = h * np.uint64(0x94D049BB133111EB)
+    return h ^ (h >> np.uint64(31))
+
+
+_CACHE: dict = {}
+
+
+def _powers(base: np.uint64, n: int) -> np.ndarray:
+    """``base**0 .. base**(n-1)`` mod 2**64 (kept and grown: batches of one run need about the same length)."""
+    have = _CACHE.get(int(base))
+    if have is None or len(have) < n:
+        m = max(n, 1 << 16, 0 if have is None else 2 * len(have))
+        out = np.full(m, base, dtype=np.uint64)
+        out[0] = 1
+        have = _CACHE[int(base)] = np.cumprod(out, dtype=np.uint64)  # a new array: readers of the old keep it
+    return have[:n]
+
+
+def string_hashes(arr) -> tuple[np.ndarray, np.ndarray]:
+    """``(hash of each string, hash of its file stem)``, uint64, of a pyarrow ``string``/``large_string`` array.
+
+    A null gets a hash of its own (its stem too). Equal strings, wherever they sit in whichever array, get
+    equal hashes; a string that is its own stem (no folder, no suffix) gets the same hash for both.
+    """
+    import pyarrow as pa
+
+    if isinstance(arr, pa.ChunkedArray):
+        arr = arr.combine_chunks()
+    if not (pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type)):
+        raise TypeError(f"expected a string array, got {arr.type}")
+    n = len(arr)
+    if n == 0:
+        z = np.zeros(0, dtype=np.uint64)
+        return z, z
+    width = np.int64 if pa.types.is_large_string(arr.type) else np.int32
+    bufs = arr.buffers()
+    off = np.frombuffer(bufs[1], dtype=width, count=n + 1, offset=arr.offset * np.dtype(width).itemsize)
+    off = off.astype(np.int64)
+    base, top = int(off[0]), int(off[-1])
+    data = (
+        np.frombuffer(bufs[2], dtype=np.uint8)[base:top]
+        if bufs[2] is not None and top > base
+        else np.zeros(0, np.uint8)
+    )
+    start, end = off[:-1] - base, off[1:] - base
+    L = len(data)
+    # S[j] = sum_{i<j} b[i] P**i ;  hash(s, e) = (S[e] - S[s]) * P**-s, then the length mixed in
+    pw = _powers(_P, L + 1)
+    S = np.zeros(L + 1, dtype=np.uint64)
+    np.cumsum(data.astype(np.uint64) * pw[:L], dtype=np.uint64, out=S[1:])
+    inv = _powers(_P_INV, L + 1)
+
+    def sub(s, e):
+        h = (S[e] - S[s]) * inv[s]
+        return _mix(h ^ ((e - s).astype(np.uint64) * _LEN))
+
+    hx = sub(start, end)
+    # the stem: after the last / or \ ; before the last . after that
+    slash = np.flatnonzero((data == 47) | (data == 92))
+    dot = np.flatnonzero(data == 46)
+    s0 = start.copy()
+    if len(slash):
+        j = np.searchsorted(slash, end, side="left") - 1
+        last = np.where(j >= 0, slash[np.maximum(j, 0)], -1)
+        s0 = np.where(last >= start, last + 1, start)
+    e0 = end.copy()
+    if len(dot):
+        j = np.searchsorted(dot, end, side="left") - 1
+        last = np.where(j >= 0, dot[np.maximum(j, 0)], -1)
+        e0 = np.where(last >= s0, last, end)
+    hs = np.where((s0 == start) & (e0 == end), hx, sub(s0, e0))
+    if arr.null_count:
+        valid = np.asarray(arr.is_valid().to_numpy(zero_copy_only=False), dtype=bool)
+        hx = np.where(valid, hx, _NULL)
+        hs = np.where(valid, hs, _NULL)
+    return hx, hs

@@ -1,0 +1,44 @@
+"""Key hashes off the Arrow buffers: equal strings hash equal anywhere; the stem hash is the hash of the stem that
+the join's regex gives (pyarrow's own ``replace_substring_regex`` as the oracle)."""
+
+import pyarrow as pa
+import pyarrow.compute as pc
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hpe_cli.io.key_hash import string_hashes
+
+TEXT = st.lists(st.sampled_from(list("ab./\\é0_") + [".jpg", "img", "/x/"]), max_size=8).map("".join)
+STEM = r"^.*[\\/]|\.[^.\\/]*$"
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.one_of(TEXT, st.none()), min_size=1, max_size=40), st.integers(0, 5), st.booleans())
+def test_equal_strings_equal_hashes_and_stems_as_the_regex(values, cut, large):
+    arr = pa.array(values, pa.large_string() if large else pa.string())
+    arr = arr.slice(min(cut, len(values) - 1))  # an offset into the buffers
+    vals = arr.to_pylist()
+    hx, hs = string_hashes(arr)
+    stems = pc.replace_substring_regex(arr, STEM, "")
+    shx, _ = string_hashes(pa.array(stems.to_pylist(), pa.string()))
+    for i, v in enumerate(vals):
+        if v is None:
+            continue
+        assert hs[i] == shx[i], (v, stems[i])  # the stem's hash is the hash of the stem
+        for k, w in enumerate(vals):
+            if w is not None and (v == w) != (hx[i] == hx[k]):
+                raise AssertionError((v, w))
+    # the same strings alone in their own array hash the same
+    alone = string_hashes(pa.array([v for v in vals if v is not None], pa.string()))[0]
+    assert list(alone) == [h for h, v in zip(hx, vals) if v is not None]
+    nulls = [h for h, v in zip(hx, vals) if v is None]
+    assert len(set(nulls)) <= 1
+
+
+def test_spread_over_partitions():
+    import numpy as np
+
+    hx, hs = string_hashes(pa.array([f"img{i}" for i in range(200_000)]))
+    assert len(np.unique(hx)) == 200_000 and (hx == hs).all()
+    counts = np.bincount((hx % np.uint64(64)).astype(np.int64), minlength=64)
+    assert counts.min() > 0.9 * 200_000 / 64
