@@ -42,13 +42,17 @@ def _memory_pairs(gt, pred, gv, pv, batch_size):
     """Chunks of the joined valid pairs (in GT order) from two sides held in memory."""
     for a in range(0, len(gv), batch_size):
         gi, pi = gv[a : a + batch_size], pv[a : a + batch_size]
+        if len(gi) and int(gi[-1]) - int(gi[0]) + 1 == len(gi):  # GT rows in order, none left out: a view
+            gi = slice(int(gi[0]), int(gi[-1]) + 1)
         g = Chunk(
             [x[gi] for x in gt.canonical],
             gt.ok[gi],
             None,
             None if gt.raw is None else gt.raw[gi],
             None,
-            None if gt.keys is None else gt.keys.take(gi),
+            None
+            if gt.keys is None
+            else (gt.keys.slice(gi.start, gi.stop - gi.start) if isinstance(gi, slice) else gt.keys.take(gi)),
             None if gt.by is None else gt.by[gi],
             gt.lines[gi],
         )

@@ -310,15 +310,18 @@ class Partitions:
             with np.errstate(over="ignore"):
                 hg = hg * np.uint64(1_000_003) ^ gt.hashes[j][w]
                 hp = hp * np.uint64(1_000_003) ^ pred.hashes[j][w]
-        _, inv = np.unique(np.concatenate([hg, hp]), return_inverse=True)
-        inv = inv.reshape(-1).astype(np.int64)
-        cg, cp = inv[: gt.n], inv[gt.n :]
-        if np.bincount(cg).max() > 1 or np.bincount(cp).max() > 1:
-            return None
-        pos = np.full(int(inv.max()) + 1, -1, dtype=np.int64)
-        pos[cp] = np.arange(pred.n)
-        gi = np.flatnonzero(pos[cg] >= 0)
-        pi = pos[cg[gi]]
+        # codes: a prediction's is its row, a GT row's the row of its match (else one past all predictions)
+        order = np.argsort(hp)
+        sp = hp[order]
+        sg = np.sort(hg)
+        if (sp[1:] == sp[:-1]).any() or (sg[1:] == sg[:-1]).any():
+            return None  # equal hashes on one side: a duplicate key (named by the string join) or a collision
+        at = np.minimum(np.searchsorted(sp, hg), pred.n - 1)
+        gi = np.flatnonzero(sp[at] == hg)
+        pi = order[at[gi]]
+        cp = np.arange(pred.n, dtype=np.int64)
+        cg = np.arange(pred.n, pred.n + gt.n, dtype=np.int64)
+        cg[gi] = pi
         for k in self.keys:
             a, b = gt.keys.column(k), pred.keys.column(k)
             a, b = (
