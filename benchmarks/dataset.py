@@ -14,7 +14,10 @@ and returns ``torch.from_numpy(hwc).permute(2, 0, 1)``: the same uint8 RGB pixel
 same (3, H, W) channels-last tensor layout as the dataset (checked equal below), so a
 DataLoader's collate does the same copy for both. (An earlier version returned BGR HWC numpy
 arrays in one process, HWC tensors in the DataLoader: not the dataset's output, and a
-different collate copy.) ``HeadPoseDataset`` also returns the pose (matrix, angles,
+different collate copy.) ``HeadPoseDataset`` decodes JPEGs with ``simplejpeg`` (libjpeg-turbo's
+SIMD build) when installed, to OpenCV's exact pixels (:mod:`hpe_cli.io.jpeg`); a second floor row,
+"bare loop, simplejpeg decode", does the same, so the comparison that isolates the loader's own
+cost is printed too. ``HeadPoseDataset`` also returns the pose (matrix, angles,
 canonical, gimbal lock, undefined flag) after the flip, the box and the 68 landmarks
 (moved and re-indexed) and the index. Three HeadPoseDataset configurations are timed:
 
@@ -100,14 +103,21 @@ def square_crop(box, margin):
 class BareLoop(torch.utils.data.Dataset):
     """cv2.imread (RGB) -> square crop (zeros outside) -> cv2.resize -> cv2.flip -> (3, H, W) tensor: the floor."""
 
-    def __init__(self, files, boxes, margin, size):
+    def __init__(self, files, boxes, margin, size, simplejpeg=False):
         self.files, self.boxes, self.margin, self.size = list(files), np.asarray(boxes), margin, size
+        self.simplejpeg = simplejpeg
 
     def __len__(self):
         return len(self.files)
 
     def sample(self, i):
-        img = cv2.imread(self.files[i], RGB if RGB is not None else cv2.IMREAD_COLOR)
+        if self.simplejpeg:  # the decoder HeadPoseDataset uses (same pixels as cv2.imread, checked)
+            import simplejpeg
+
+            with open(self.files[i], "rb") as fh:
+                img = simplejpeg.decode_jpeg(fh.read(), colorspace="RGB" if RGB is not None else "BGR")
+        else:
+            img = cv2.imread(self.files[i], RGB if RGB is not None else cv2.IMREAD_COLOR)
         top, left, side = square_crop(self.boxes[i], self.margin)
         H, W = img.shape[:2]
         t0, l0, t1, l1 = max(top, 0), max(left, 0), min(top + side, H), min(left + side, W)
@@ -131,11 +141,14 @@ def _cpu():
 
 
 def _rates(runs, items, repeat):
-    """``{name: (samples/s by wall clock, by CPU time)}``, each the median of ``repeat`` rounds.
+    """``{name: (samples/s by wall clock, by CPU time, ratio to the first run by wall clock, by CPU)}``.
 
-    The runs are interleaved (one of each per round), so a load change on a shared machine
-    hits them all alike, in an order reversed every other round (what runs second finds
-    warmer caches: ~2% in one process).
+    Rates are medians over ``repeat`` rounds. The runs are interleaved (one of each per
+    round), so a load change on a shared machine hits them all alike, in an order reversed
+    every other round (what runs second finds warmer caches: ~2% in one process). The ratio
+    to the first run (the floor) is the median of the per-round ratios: each compares two
+    runs a few hundred milliseconds apart, which cancels the slow drifts of a shared
+    machine's speed (seen here: the same loop at 880 and at 1,220 samples/s minutes apart).
     """
     times = {name: [] for name in runs}
     for r in range(repeat):
@@ -144,7 +157,11 @@ def _rates(runs, items, repeat):
             t0, c0 = time.perf_counter(), _cpu()
             fn()
             times[name].append((time.perf_counter() - t0, _cpu() - c0))
-    return {name: tuple(items / np.median(t, axis=0)) for name, t in times.items()}
+    base = np.asarray(times[next(iter(runs))])
+    return {
+        name: tuple(items / np.median(t, axis=0)) + tuple(np.median(base / np.asarray(t), axis=0))
+        for name, t in times.items()
+    }
 
 
 def one_process(get, order):
@@ -189,6 +206,7 @@ def main(argv=None):
             labels, crop=args.margin, transform=v2.Compose([v2.Resize((args.size, args.size)), flip])
         )
         bare = BareLoop(fused._image_refs, fused.boxes, args.margin, args.size)
+        same_decoder = BareLoop(fused._image_refs, fused.boxes, args.margin, args.size, simplejpeg=True)
         n = len(fused)
         order = [k % n for k in range(args.items)]
         # same pixels: the fused path's crop + resize + flip is the bare loop's, in RGB
@@ -198,13 +216,23 @@ def main(argv=None):
             f"{n} images from {args.images}, {args.items} items, crop {args.margin:g} square, "
             f"resize {args.size}, hflip; median of {args.repeat}; torch threads 1, cv2 threads 1"
         )
+        from hpe_cli.io.jpeg import fast_decoder
+
         print(f"fast-path image tensor equal to the bare loop's (values, shape, strides): {same}")
+        print(
+            f"HeadPoseDataset decodes JPEGs with {fast_decoder()} (OpenCV's pixels, checked on this process's "
+            "first image); the second row is the bare loop with that decoder"
+        )
+        sj_row = [("bare loop, simplejpeg decode", same_decoder, same_decoder.__getitem__)]
+        if fast_decoder() != "simplejpeg":
+            sj_row = []
         configs = (
             ("bare cv2 loop", bare, bare.__getitem__),
+            *sj_row,
             ("HeadPoseDataset(size, hflip)", fused, fused.__getitem__),
             ("HeadPoseDataset(size) + v2 flip", v2flip, v2flip.__getitem__),
             ("HeadPoseDataset + v2 Resize,flip", v2ds, v2ds.__getitem__),
-        )[: 2 if args.fast_only else 4]
+        )[: 2 + len(sj_row) if args.fast_only else 4 + len(sj_row)]
         one = _rates({name: one_process(get, order) for name, _, get in configs}, args.items, args.repeat)
         dl = _rates(
             {name: through_loader(ds, order, args.workers, args.batch) for name, ds, _ in configs},
@@ -212,13 +240,12 @@ def main(argv=None):
             args.repeat,
         )
         rows = [(name, one[name], dl[name]) for name, _, _ in configs]
-        base = rows[0]
         print(
             f"samples/s (x bare loop)  {'1 process: wall':>19s} {'CPU':>14s}   "
             f"{f'DataLoader({args.workers}): wall':>22s} {'CPU':>14s}"
         )
         for name, one, dl in rows:
-            cells = [f"{v:7.0f} ({v / b:4.2f}x)" for v, b in zip(one + dl, base[1] + base[2])]
+            cells = [f"{v:7.0f} ({x:4.2f}x)" for v, x in zip(one[:2] + dl[:2], one[2:] + dl[2:])]
             print(f"{name:33s} {cells[0]:>15s} {cells[1]:>15s}   {cells[2]:>18s} {cells[3]:>15s}")
     own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
