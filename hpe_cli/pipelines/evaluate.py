@@ -2,7 +2,7 @@
 
 Memory is flat in the number of pairs whenever the two files list the same
 keys in the same order (or ``--join order``): chunks are paired as they are
-read (:func:`hpe_cli.pipelines.evaluate_join.lockstep`, keys verified chunk by
+read (:func:`hpe_cli.pipelines.evaluate_lockstep.lockstep`, keys verified chunk by
 chunk), every metric is summed per group (:class:`hpe_cli.metrics.stream.Accumulator`),
 the geodesic errors are spilled as float32 for exact medians and percentiles,
 and the per-row output is written chunk by chunk. Files in different orders
@@ -22,15 +22,13 @@ from .evaluate_join import (  # noqa: F401
     Chunk,
     JoinUsageError,
     SideReader,
-    Unaligned,
     _choose_keys,
     _reasons,
     _where,
     join,
-    lockstep,
-    prefetch,
     read_side,
 )
+from .evaluate_lockstep import Unaligned, lockstep, prefetch  # noqa: F401
 from .evaluate_outputs import Images, empty_rows, worst_pictures
 from .evaluate_rejects import _add_rejects, _align_block, _collect_rejects, _stream_rejects, _unreadable_rejects  # noqa: F401
 from .evaluate_score import PLACEMENT, SCORE_ROWS, SCORE_THREADS, _nested, _raw, _score, _take  # noqa: F401

@@ -178,3 +178,39 @@ def test_no_reading_or_scoring_thread_outlives_a_run(tmp_path):
         took = time.perf_counter() - t
         assert r.returncode == 0, r.stderr
         assert took < 25, f"{pred.name}: {took:.0f} s (threads left waiting at exit?)"
+
+
+@pytest.mark.parametrize("order", ["unsorted", "sorted-then-not"])
+def test_a_key_repeated_in_another_chunk_is_named(tmp_path, order):
+    """Both files in the same order, one key twice, 200 rows apart (another chunk): the run stops with the key and
+    both lines, as the key join does, instead of scoring two ambiguous pairs."""
+    gt = pd.read_csv(SYN / "gt.csv").head(400).copy()
+    pr = pd.read_csv(SYN / "pred.csv").head(400).copy()
+    if order == "unsorted":
+        idx = np.random.default_rng(2).permutation(400)
+        gt, pr = gt.iloc[idx].reset_index(drop=True), pr.iloc[idx].reset_index(drop=True)
+    else:  # the first chunks sorted, the rest not
+        tail = np.r_[np.arange(200), 200 + np.random.default_rng(2).permutation(200)]
+        gt, pr = gt.iloc[tail].reset_index(drop=True), pr.iloc[tail].reset_index(drop=True)
+    gt.loc[350, "image"] = pr.loc[350, "image"] = gt.loc[150, "image"]
+    gt.to_csv(tmp_path / "gt.csv", index=False)
+    pr.to_csv(tmp_path / "pred.csv", index=False)
+    args = ["--pred-system", "300w_lp", "--gt-system", "300w_lp", "--batch-size", "64", "-q"]
+    r = CliRunner().invoke(cli, ["evaluate", str(tmp_path / "pred.csv"), str(tmp_path / "gt.csv"), *args])
+    assert r.exit_code == 1, r.output
+    key = gt.loc[150, "image"]
+    assert f"duplicate key image={key!r}" in r.output and "line 152" in r.output and "352" in r.output, r.output
+
+
+def test_sorted_keys_are_streamed_without_hashing(tmp_path, monkeypatch):
+    import hpe_cli.pipelines.evaluate_lockstep as ls
+
+    spilled = []
+    monkeypatch.setattr(ls.KeysSeen, "_spill", lambda self, g: spilled.append(g.n))
+    p = pd.read_csv(SYN / "pred.csv")
+    p["group"] = "all"
+    pred = tmp_path / "pred.csv"
+    p.to_csv(pred, index=False)
+    assert (pd.read_csv(SYN / "gt.csv")["image"].is_monotonic_increasing) and p["image"].is_unique
+    rep = _run(tmp_path, pred)
+    assert rep["inputs"]["paired"] == "streamed in file order" and not spilled

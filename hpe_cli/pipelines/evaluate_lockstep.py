@@ -1,0 +1,198 @@
+"""Streaming ``hpe evaluate``'s two inputs side by side when they list the same keys in the same order.
+
+:func:`lockstep` pairs equal-length chunks of the two sides as they are read, checks the keys chunk by chunk
+(:func:`_same_keys`) and duplicate keys across chunks (:class:`KeysSeen`); :class:`Unaligned` sends the run to
+the key join (:mod:`hpe_cli.pipelines.evaluate_spill`). :func:`prefetch` reads one pair ahead on a thread.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .evaluate_join import Chunk, JoinUsageError, SideReader, _stems
+
+
+class Unaligned(Exception):
+    """The two files do not list the same keys in the same order: pair them with the in-memory join."""
+
+
+def _same_keys(g: Chunk, p: Chunk, keys, notes: set, seen=None) -> None:
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    for k in keys:
+        a, b = g.keys.column(k), p.keys.column(k)
+        a, b = (x.cast(x.type.value_type) if pa.types.is_dictionary(x.type) else x for x in (a, b))
+        if a.type != b.type:
+            a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
+        if pc.all(pc.equal(a, b)).as_py() is not False and a.null_count == 0 and b.null_count == 0:
+            continue
+        if pa.types.is_string(a.type) and pc.all(pc.equal(_stems(a), _stems(b))).as_py():
+            notes.add(f"key {k!r} joined on file stems (the two files spell the names differently)")
+            continue
+        raise Unaligned(k)
+    if seen is not None:
+        seen.add(g)
+
+
+class KeysSeen:
+    """Duplicate keys across the chunks of a streamed pair of files (the key join names them).
+
+    Keys that increase strictly through the whole file cannot repeat: only the last key of each chunk is kept.
+    Otherwise, from the first chunk on, each row's 64-bit key hash is spilled into one of 16 files by its top
+    bits, and :meth:`check` sorts one file at a time (memory flat in the rows). A file whose keys increase for
+    a while and then do not goes to the key join (its first rows were not hashed).
+    """
+
+    def __init__(self, keys):
+        self.keys, self.last, self.sorted, self.files, self.folder = list(keys), None, True, None, None
+
+    def add(self, g: Chunk) -> None:
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        if not g.n:
+            return
+        if self.sorted and len(self.keys) == 1:
+            col = g.keys.column(self.keys[0])
+            col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
+            ok = col.null_count == 0 and (g.n < 2 or pc.all(pc.greater(col.slice(1), col.slice(0, g.n - 1))).as_py())
+            if ok and self.last is not None:
+                ok = pc.greater(col[0], self.last).as_py()
+            if ok:
+                self.last = col[g.n - 1]
+                return
+            if self.last is not None:  # sorted so far, not from here on: the earlier rows were not hashed
+                raise Unaligned("keys not in order after a sorted start")
+        self.sorted = False
+        self._spill(g)
+
+    def _spill(self, g: Chunk) -> None:
+        import os
+        import tempfile
+
+        import pyarrow as pa
+
+        from ..io.key_hash import string_hashes
+
+        h = np.zeros(g.n, dtype=np.uint64)
+        for k in self.keys:
+            col = g.keys.column(k)
+            col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
+            if pa.types.is_dictionary(col.type):
+                col = col.cast(col.type.value_type)
+            if not pa.types.is_string(col.type):
+                col = col.cast(pa.string())
+            with np.errstate(over="ignore"):
+                h = h * np.uint64(1_000_003) ^ string_hashes(col)[0]
+        if self.files is None:
+            self.folder = tempfile.mkdtemp(prefix="hpe_eval_keys_")
+            self.files = [open(os.path.join(self.folder, f"{b:02d}.bin"), "wb") for b in range(16)]  # noqa: SIM115
+        part = (h >> np.uint64(60)).astype(np.int64)
+        for b in np.unique(part):
+            h[part == b].tofile(self.files[b])
+
+    def check(self) -> None:
+        """Raise :class:`Unaligned` when a key hash repeats (a duplicate key, or a collision the join settles)."""
+        if self.files is None:
+            return
+        try:
+            for f in self.files:
+                f.close()
+            for f in self.files:
+                h = np.sort(np.fromfile(f.name, dtype=np.uint64))
+                if len(h) > 1 and (h[1:] == h[:-1]).any():
+                    raise Unaligned("duplicate")
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        import shutil
+
+        for f in self.files or ():
+            f.close()
+        if self.folder:
+            shutil.rmtree(self.folder, ignore_errors=True)
+        self.files = self.folder = None
+
+
+def lockstep(gr: SideReader, pr: SideReader, keys, join_mode: str, notes: set):
+    """Pairs of equal-length chunks of the two sides, in file order; keys verified chunk by chunk.
+
+    Raises :class:`Unaligned` (key join) when the keys differ or one side has
+    rows left over, :class:`JoinUsageError` (``--join order``) on unequal counts.
+    """
+    gi, pi = gr.chunks(), pr.chunks()
+    seen = KeysSeen(keys) if keys else None
+    try:
+        yield from _lockstep(gr, pr, gi, pi, keys, join_mode, notes, seen)
+        if seen is not None:
+            seen.check()
+    finally:  # an abandoned side (Unaligned, an error) stops its label threads now, not at exit
+        gi.close()
+        pi.close()
+        if seen is not None:
+            seen.close()
+
+
+def _lockstep(gr, pr, gi, pi, keys, join_mode, notes, seen):
+    gbuf = pbuf = None
+    while True:
+        while gbuf is None or gbuf.n == 0:
+            gbuf = next(gi, None)
+            if gbuf is None:
+                break
+        while pbuf is None or pbuf.n == 0:
+            pbuf = next(pi, None)
+            if pbuf is None:
+                break
+        if gbuf is None or pbuf is None:
+            break
+        m = min(gbuf.n, pbuf.n)
+        g, p = gbuf.slice(0, m), pbuf.slice(0, m)
+        gbuf, pbuf = gbuf.slice(m, gbuf.n), pbuf.slice(m, pbuf.n)
+        if keys:
+            _same_keys(g, p, keys, notes, seen)
+        yield g, p
+    if (
+        (gbuf is not None and gbuf.n)
+        or (pbuf is not None and pbuf.n)
+        or next(gi, None) is not None
+        or next(pi, None) is not None
+    ):
+        if join_mode == "order":
+            for _ in gi:
+                pass
+            for _ in pi:
+                pass
+            raise JoinUsageError(
+                f"{pr.path}: --join order pairs rows by position and needs equal row counts; "
+                f"got {pr.n} predictions and {gr.n} ground-truth rows in {gr.path}"
+            )
+        raise Unaligned("row counts")
+
+
+_END = object()
+
+
+def prefetch(gen):
+    """Iterate ``gen`` one item ahead in one worker thread (Parquet/CSV decoding and numpy release the GIL).
+
+    The worker only ever runs one ``next(gen)`` at a time and is joined before
+    this generator returns or raises, so no thread outlives the run.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    ex = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-read")
+    try:
+        fut = ex.submit(next, gen, _END)
+        while True:
+            item = fut.result()
+            if item is _END:
+                return
+            fut = ex.submit(next, gen, _END)
+            yield item
+    finally:
+        ex.shutdown(wait=True, cancel_futures=True)
+        if hasattr(gen, "close"):  # after the worker is joined: the generator is not running
+            gen.close()
