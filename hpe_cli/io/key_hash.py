@@ -44,11 +44,12 @@ def _powers(base: np.uint64, n: int) -> np.ndarray:
     return have[:n]
 
 
-def string_hashes(arr) -> tuple[np.ndarray, np.ndarray]:
+def string_hashes(arr, stems: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
     """``(hash of each string, hash of its file stem)``, uint64, of a pyarrow ``string``/``large_string`` array.
 
     A null gets a hash of its own (its stem too). Equal strings, wherever they sit in whichever array, get
     equal hashes; a string that is its own stem (no folder, no suffix) gets the same hash for both.
+    ``stems=False`` skips the stems (the second item is None).
     """
     import pyarrow as pa
 
@@ -83,6 +84,10 @@ def string_hashes(arr) -> tuple[np.ndarray, np.ndarray]:
         return _mix(h ^ ((e - s).astype(np.uint64) * _LEN))
 
     hx = sub(start, end)
+    if not stems:
+        if arr.null_count:
+            hx = np.where(np.asarray(arr.is_valid().to_numpy(zero_copy_only=False), dtype=bool), hx, _NULL)
+        return hx, None
     # the stem: after the last / or \ ; before the last . after that
     slash = np.flatnonzero((data == 47) | (data == 92))
     dot = np.flatnonzero(data == 46)

@@ -59,7 +59,7 @@ def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None) -> Pai
     written for sides given as angles (see :class:`PosePair`).
     """
     pair = PosePair(P, G, gt_system, raw, context)
-    g, _ = pair.angles(gt_system, "gt")  # hpe's own metrics: primary solutions from the matrices
+    g = pair.primary(gt_system, "gt")  # hpe's own metrics: primary solutions (of the matrices)
     p1, p2 = pair.angles(gt_system, "pred")
     best, _ = re_.best_of_two_error(p1, p2, g)
     protos = {name: PROTOCOLS[name].func(pair) for name in check_protocols(protocols)}

@@ -46,40 +46,52 @@ class PosePair:
 
     def angles(self, system, side: str):
         """``(primary, secondary)`` angles ``(N, 3)`` (pitch, yaw, roll; degrees) of ``side`` in ``system``."""
+        from ..rotation import solutions
         from ..rotation.systems import get_system
 
         system = get_system(system)
         key = ("angles", system.name, side)
         if key not in self._cache:
-            self._cache[key] = self._angles(system, side)
+            p1 = self.primary(system, side)
+            p2 = self._cache.pop(("second", system.name, side), None)
+            if p2 is None:  # read as written: the other solution from the primary one
+                p2 = np.stack(
+                    solutions.second_degrees([p1[:, k] for k in range(3)], solutions.middle_role(system), False), -1
+                )
+            self._cache[key] = (p1, p2)
         return self._cache[key]
 
-    def _angles(self, system, side: str):
-        """Both solutions; rows written as angles in ``system`` that are its primary triple are read as written
-        (:func:`hpe_cli.rotation.solutions.primary_from_written`), the rest come from the matrix."""
+    def primary(self, system, side: str) -> np.ndarray:
+        """The primary angles ``(N, 3)`` of ``side`` in ``system`` (degrees): rows written as angles in ``system``
+        that are its primary triple are read as written (:func:`hpe_cli.rotation.solutions.primary_from_written`),
+        the rest come from the matrix."""
         from ..rotation import solutions
+        from ..rotation.systems import get_system
 
+        system = get_system(system)
+        key = ("primary", system.name, side)
+        if key in self._cache:
+            return self._cache[key]
         raw = self.raw.get(side)
         fast = None
         if raw is not None and self.n:
-            from ..rotation.systems import get_system
-
             rsys = get_system(raw[0])
             if rsys.name == system.name or _same_angles(rsys, system):
                 a = np.asarray(raw[1], dtype=np.float64)
                 fast = solutions.primary_from_written(system, a)
         if fast is None or not fast.any():
-            p1, p2, _, _ = system.soa_to_angles(self.stored(system, side))
-            return np.stack(np.broadcast_arrays(*p1), -1), np.stack(np.broadcast_arrays(*p2), -1)
-        p1 = np.array(a, dtype=np.float64, order="F")  # columns contiguous: second_degrees works per column
-        if not fast.all():
-            slow = ~fast
-            X = self.stored(system, side)
-            sub = [[np.broadcast_to(v, (self.n,))[slow] for v in row] for row in X]
-            q1, _, _, _ = system.soa_to_angles(sub)
-            p1[slow] = np.stack(q1, -1)
-        p2 = solutions.second_degrees([p1[:, k] for k in range(3)], solutions.middle_role(system), False)
-        return np.ascontiguousarray(p1), np.stack(p2, -1)
+            q1, q2, _, _ = system.soa_to_angles(self.stored(system, side))
+            p1 = np.stack(np.broadcast_arrays(*q1), -1)
+            self._cache[("second", system.name, side)] = np.stack(np.broadcast_arrays(*q2), -1)
+        else:
+            p1 = np.array(a, dtype=np.float64)
+            if not fast.all():
+                slow = ~fast
+                X = self.stored(system, side)
+                q1, _, _, _ = system.soa_to_angles([[np.broadcast_to(v, (self.n,))[slow] for v in row] for row in X])
+                p1[slow] = np.stack(q1, -1)
+        self._cache[key] = p1
+        return p1
 
     def written(self, system, side: str):
         """Angles of ``side`` as a peer reading ``system`` labels sees them, and the re-expressed rows.
@@ -107,13 +119,13 @@ class PosePair:
             return self._cache[key]
         raw = self.raw.get(side)
         if raw is None:
-            out = (self.angles(system, side)[0], None)
+            out = (self.primary(system, side), None)
         else:
             rsys, a = get_system(raw[0]), np.asarray(raw[1], dtype=np.float64)
             if rsys.name == system.name or _same_angles(rsys, system):
                 out = (a, np.zeros(self.n, dtype=bool))
             else:
-                conv, _ = self.angles(system, side)
+                conv = self.primary(system, side)
                 X = system.soa_to_canonical(system.soa_from_angles(a[:, 0], a[:, 1], a[:, 2]))
                 C = self.P if side == "pred" else self.G
                 same = np.ones(self.n, dtype=bool)

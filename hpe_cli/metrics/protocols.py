@@ -227,8 +227,8 @@ def headposeplus(pair: PosePair) -> ProtocolRows:
     ``as_euler('xyz')`` of the 300W-LP matrix gives the biwi angles with yaw
     and roll negated on both sides: the absolute differences are the same.
     """
-    p, _ = pair.angles("biwi", "pred")
-    g, _ = pair.angles("biwi", "gt")
+    p = pair.primary("biwi", "pred")
+    g = pair.primary("biwi", "gt")
     py, gy, rx = _written_pair(pair, "300w_lp")
     return ProtocolRows(
         re_.abs_error(p, g),

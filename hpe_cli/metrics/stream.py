@@ -79,31 +79,49 @@ class _Grouping:
         self.n = n
 
     def add(self, rows, codes):
+        self.merge(self.partial(rows, codes))
+
+    def partial(self, rows, codes) -> tuple:
+        """The sums and counts of one chunk (no state read or written: any thread may compute it)."""
         G = self.n
         single = codes is None  # one group (all rows): plain sums, no bincount
+        counts, sums = {}, {}
         for path, mask, values in _items(rows):
             if single:
-                cnt = np.array([float(len(rows.geodesic) if mask is None else np.count_nonzero(mask))])
+                counts[path] = np.array([float(len(rows.geodesic) if mask is None else np.count_nonzero(mask))])
             else:
                 c = codes if mask is None else codes[mask]
-                cnt = np.bincount(c, minlength=G).astype(np.float64)
-            self.counts[path] = self.counts.get(path, np.zeros(G)) + cnt
+                counts[path] = np.bincount(c, minlength=G).astype(np.float64)
             if values is not None:
                 v = values if mask is None else values[mask]
                 if single:
-                    s = np.array([float(np.sum(v))])
+                    sums[path] = np.array([float(np.sum(v))])
                 else:
-                    s = np.bincount(c, weights=v, minlength=G) if len(c) else np.zeros(G)
-                self.sums[path] = self.sums.get(path, np.zeros(G)) + s
-        for name, pr in rows.protocols.items():
-            for side, m in pr.reexpressed.items():
-                if m is None:
-                    self.static[("p", name, "rx", side)] = "from matrix"
+                    sums[path] = np.bincount(c, weights=v, minlength=G) if len(c) else np.zeros(G)
+        static = {
+            ("p", name, "rx", side): "from matrix"
+            for name, pr in rows.protocols.items()
+            for side, m in pr.reexpressed.items()
+            if m is None
+        }
         if single:
-            if len(rows.geodesic):
-                self.max[0] = max(self.max[0], float(rows.geodesic.max()))
-        elif len(codes):
-            np.maximum.at(self.max, codes, rows.geodesic)
+            mx = np.array([float(rows.geodesic.max()) if len(rows.geodesic) else -np.inf])
+        else:
+            mx = np.full(G, -np.inf)
+            if len(codes):
+                np.maximum.at(mx, codes, rows.geodesic)
+        return counts, sums, static, mx
+
+    def merge(self, part) -> None:
+        """Add a :meth:`partial` (in chunk order: the sums are then the same as one thread's)."""
+        counts, sums, static, mx = part
+        G = self.n
+        for path, cnt in counts.items():
+            self.counts[path] = self.counts.get(path, np.zeros(G)) + cnt
+        for path, v in sums.items():
+            self.sums[path] = self.sums.get(path, np.zeros(G)) + v
+        self.static.update(static)
+        self.max = np.maximum(self.max, mx)
 
     def mean(self, path, g):
         c = self.counts.get(path)
@@ -171,23 +189,32 @@ class Accumulator:
     def bin_codes(self, gt_yaw):
         return np.clip(np.searchsorted(self.edges, gt_yaw, side="right") - 1, 0, len(self.edges) - 2)
 
-    def add(self, rows, by_values=None):
-        """Add one chunk of per-row results (``PairRows``) and its ``--by`` values."""
+    def partial(self, rows) -> dict:
+        """What :meth:`add` needs of a chunk that does not depend on earlier chunks (any thread may compute it)."""
+        out = {"all": self.all.partial(rows, None), "geo": rows.geodesic.astype(np.float32)}
+        if self.bins is not None:
+            c = self.bin_codes(rows.gt_angles[:, 1])
+            out["bins"], out["bin_codes"] = self.bins.partial(rows, c), c.astype(np.int32)
+        return out
+
+    def add(self, rows, by_values=None, partial=None):
+        """Add one chunk of per-row results (``PairRows``) and its ``--by`` values (``partial``: :meth:`partial`
+        of the same rows, computed ahead on another thread)."""
+        part = self.partial(rows) if partial is None else partial
         n = rows.n
         self.n += n
-        self.all.add(rows, None)
+        self.all.merge(part["all"])
         if self.percentiles:
-            self._spill("geo", rows.geodesic.astype(np.float32))
+            self._spill("geo", part["geo"])
         if self.by is not None:
             c = self._by_codes(by_values)
             self.by.add(rows, c)
             if self.percentiles:
                 self._spill("by", c.astype(np.int32))
         if self.bins is not None:
-            c = self.bin_codes(rows.gt_angles[:, 1])
-            self.bins.add(rows, c)
+            self.bins.merge(part["bins"])
             if self.percentiles:
-                self._spill("bin", c.astype(np.int32))
+                self._spill("bin", part["bin_codes"])
 
     # ------------------------------------------------------------------ report
     def _load(self, name):

@@ -127,6 +127,7 @@ class Chunk:
     keys: object  # pyarrow Table of the key (and --by) columns, or None
     by: np.ndarray | None
     lines: np.ndarray
+    key_hash: np.ndarray | None = None  # (n,) uint64 of the key columns, when the reader was asked for them
 
     @property
     def n(self) -> int:
@@ -145,7 +146,27 @@ class Chunk:
             None if self.keys is None else self.keys.slice(a, b - a),
             cut(self.by),
             self.lines[a:b],
+            cut(self.key_hash),
         )
+
+
+def keys_hash(table, keys) -> np.ndarray:
+    """One uint64 per row of the key columns (text as written; see :func:`hpe_cli.io.key_hash.string_hashes`)."""
+    import pyarrow as pa
+
+    from ..io.key_hash import string_hashes
+
+    h = np.zeros(table.num_rows, dtype=np.uint64)
+    for k in keys:
+        col = table.column(k)
+        col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
+        if pa.types.is_dictionary(col.type):
+            col = col.cast(col.type.value_type)
+        if not pa.types.is_string(col.type):
+            col = col.cast(pa.string())
+        with np.errstate(over="ignore"):
+            h = h * np.uint64(1_000_003) ^ string_hashes(col, stems=False)[0]
+    return h
 
 
 class SideReader:
@@ -196,6 +217,8 @@ class SideReader:
         self.radians, self.progress, self.orthonormalize = radians, progress, orthonormalize
         self.unreadable: list = []
         self.n = 0
+        #: key columns whose hash each chunk carries (set while streaming unsorted keys: hashed on the label threads)
+        self.hash_keys: list | None = None
         self.image_dir = src.path if self.dataset_stem else None
         #: how a row is named in messages: Parquet "row N" (1-based), text "line N" (header = line 1)
         self.unit = "row" if src.kind == "parquet" else "line"
@@ -237,7 +260,8 @@ class SideReader:
         X = self.system.soa_to_canonical(X)
         keys = batch.select(self.keep) if self.keep else None
         by = keys.column(self.by).to_numpy(zero_copy_only=False) if self.by else None
-        return Chunk(soa.columns(X, n), ok, rs, raw, dist, keys, by, lines)
+        kh = keys_hash(keys, self.hash_keys) if self.hash_keys and keys is not None else None
+        return Chunk(soa.columns(X, n), ok, rs, raw, dist, keys, by, lines, kh)
 
 
 def read_side(

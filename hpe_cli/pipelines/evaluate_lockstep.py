@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .evaluate_join import Chunk, JoinUsageError, SideReader, _stems
+from .evaluate_join import Chunk, JoinUsageError, SideReader, _stems, keys_hash
 
 
 class Unaligned(Exception):
@@ -44,8 +44,9 @@ class KeysSeen:
     a while and then do not goes to the key join (its first rows were not hashed).
     """
 
-    def __init__(self, keys):
+    def __init__(self, keys, reader=None):
         self.keys, self.last, self.sorted, self.files, self.folder = list(keys), None, True, None, None
+        self.reader = reader  # asked to hash the keys of the chunks it labels from then on
 
     def add(self, g: Chunk) -> None:
         import pyarrow as pa
@@ -64,6 +65,8 @@ class KeysSeen:
                 return
             if self.last is not None:  # sorted so far, not from here on: the earlier rows were not hashed
                 raise Unaligned("keys not in order after a sorted start")
+        if self.sorted and self.reader is not None:
+            self.reader.hash_keys = self.keys  # the chunks labelled from now on come hashed
         self.sorted = False
         self._spill(g)
 
@@ -71,26 +74,17 @@ class KeysSeen:
         import os
         import tempfile
 
-        import pyarrow as pa
-
-        from ..io.key_hash import string_hashes
-
-        h = np.zeros(g.n, dtype=np.uint64)
-        for k in self.keys:
-            col = g.keys.column(k)
-            col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
-            if pa.types.is_dictionary(col.type):
-                col = col.cast(col.type.value_type)
-            if not pa.types.is_string(col.type):
-                col = col.cast(pa.string())
-            with np.errstate(over="ignore"):
-                h = h * np.uint64(1_000_003) ^ string_hashes(col)[0]
+        h = g.key_hash if g.key_hash is not None else keys_hash(g.keys, self.keys)
         if self.files is None:
             self.folder = tempfile.mkdtemp(prefix="hpe_eval_keys_")
             self.files = [open(os.path.join(self.folder, f"{b:02d}.bin"), "wb") for b in range(16)]  # noqa: SIM115
-        part = (h >> np.uint64(60)).astype(np.int64)
-        for b in np.unique(part):
-            h[part == b].tofile(self.files[b])
+        part = (h >> np.uint64(60)).astype(np.uint8)
+        order = np.argsort(part, kind="stable")  # a radix sort on 8 bits
+        bounds = np.searchsorted(part[order], np.arange(17))
+        h = h[order]
+        for b in range(16):
+            if bounds[b + 1] > bounds[b]:
+                h[bounds[b] : bounds[b + 1]].tofile(self.files[b])
 
     def check(self) -> None:
         """Raise :class:`Unaligned` when a key hash repeats (a duplicate key, or a collision the join settles)."""
@@ -123,7 +117,7 @@ def lockstep(gr: SideReader, pr: SideReader, keys, join_mode: str, notes: set):
     rows left over, :class:`JoinUsageError` (``--join order``) on unequal counts.
     """
     gi, pi = gr.chunks(), pr.chunks()
-    seen = KeysSeen(keys) if keys else None
+    seen = KeysSeen(keys, gr) if keys else None
     try:
         yield from _lockstep(gr, pr, gi, pi, keys, join_mode, notes, seen)
         if seen is not None:

@@ -38,11 +38,18 @@ class Sample:
         self.cap, self.step, self.seen = cap, 1, 0
         self.parts: list = []
 
-    def add(self, rows):
+    @staticmethod
+    def block(rows) -> np.ndarray:
+        """The plotted columns of every row of a chunk, float32 (any thread may compute it)."""
+        out = np.empty((rows.n, 5), dtype=np.float32)
+        out[:, 0], out[:, 1], out[:, 2:5] = rows.gt_angles[:, 1], rows.geodesic, rows.mae_wrapped
+        return out
+
+    def add(self, rows, block=None):
         n = rows.n
         idx = np.arange((-self.seen) % self.step, n, self.step)
         self.seen += n
-        part = np.column_stack([rows.gt_angles[idx, 1], rows.geodesic[idx], rows.mae_wrapped[idx]]).astype(np.float32)
+        part = (self.block(rows) if block is None else block)[idx]
         self.parts.append(part)
         if sum(len(p) for p in self.parts) > self.cap:
             allp = np.concatenate(self.parts)

@@ -89,7 +89,7 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
         table = None
         if writer is not None or worst.n:
             table = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
-        return g, p, rows, rows_before, by_values, table
+        return g, p, rows, rows_before, by_values, table, acc.partial(rows), Sample.block(rows)
 
     pending: list = []  # per-row tables, written in pieces of about one batch
 
@@ -102,7 +102,7 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
 
     pool = ThreadPoolExecutor(SCORE_THREADS, thread_name_prefix="hpe-evaluate-score")
     try:
-        for g, p, rows, rows_before, by_values, t in in_order(pool, work, usable(), ahead=SCORE_THREADS):
+        for g, p, rows, rows_before, by_values, t, part, block in in_order(pool, work, usable(), ahead=SCORE_THREADS):
             if rows_before is not None:
                 before.add(rows_before)
             counts["pairs"] += rows.n
@@ -110,8 +110,8 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 counts["orthonormalized"] = counts.get("orthonormalized", 0) + int((p.dist > 1e-6).sum())
                 counts["dist_sum"] = counts.get("dist_sum", 0.0) + float(p.dist.sum())
                 counts["dist_max"] = max(counts.get("dist_max", 0.0), float(p.dist.max()))
-            acc.add(rows, by_values)
-            sample.add(rows)
+            acc.add(rows, by_values, part)
+            sample.add(rows, block)
             if writer is not None:
                 pending.append(t)
                 flush(s.batch_size)
