@@ -30,6 +30,9 @@ def _simplejpeg():
 
 def _orientation(data: bytes) -> int:
     """The EXIF orientation of a JPEG (1 when it has none), read from the APP1 segments before the scan."""
+    sos = data.find(b"\xff\xda")
+    if b"Exif\x00\x00" not in (data[:sos] if sos > 0 else data):  # the usual frame: one C search, no walk
+        return 1
     i, n = 2, len(data)
     while i + 4 <= n and data[i] == 0xFF:
         marker = data[i + 1]

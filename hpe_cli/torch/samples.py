@@ -16,6 +16,7 @@ import torch
 
 from ..geometry.augment import box_of_points
 from ..geometry.crop import crop_padded
+from ..io.jpeg import decode_image, read_image
 from .collate import Sample
 from .transforms import pose_mirror
 
@@ -127,8 +128,6 @@ def decode(data=None, path=None):
     pixels exactly; JPEGs through libjpeg-turbo's SIMD decoder when ``simplejpeg`` is installed
     (:mod:`hpe_cli.io.jpeg`: about twice as fast, the same bytes).
     """
-    from ..io.jpeg import decode_image, read_image
-
     rgb = _rgb_flag() is not None
     if data is not None:
         return decode_image(data, rgb) if data.size else None
