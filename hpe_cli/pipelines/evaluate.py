@@ -31,7 +31,7 @@ from .evaluate_join import (  # noqa: F401
 from .evaluate_lockstep import Unaligned, lockstep, prefetch  # noqa: F401
 from .evaluate_outputs import Images, empty_rows, worst_pictures
 from .evaluate_rejects import _add_rejects, _align_block, _collect_rejects, _stream_rejects, _unreadable_rejects  # noqa: F401
-from .evaluate_score import PLACEMENT, SCORE_ROWS, SCORE_THREADS, _nested, _raw, _score, _take  # noqa: F401
+from .evaluate_score import PLACEMENT, SCORE_ROWS, SCORE_THREADS, _nested, _raw, _score, _take, with_canonical  # noqa: F401
 
 ANGLES = ("pitch", "yaw", "roll")
 
@@ -43,7 +43,7 @@ def _memory_pairs(gt, pred, gv, pv, batch_size):
         if len(gi) and int(gi[-1]) - int(gi[0]) + 1 == len(gi):  # GT rows in order, none left out: a view
             gi = slice(int(gi[0]), int(gi[-1]) + 1)
         g = Chunk(
-            [x[gi] for x in gt.canonical],
+            None if gt.canonical is None else [x[gi] for x in gt.canonical],
             gt.ok[gi],
             None,
             None if gt.raw is None else gt.raw[gi],
@@ -55,7 +55,7 @@ def _memory_pairs(gt, pred, gv, pv, batch_size):
             gt.lines[gi],
         )
         p = Chunk(
-            [x[pi] for x in pred.canonical],
+            None if pred.canonical is None else [x[pi] for x in pred.canonical],
             pred.ok[pi],
             None,
             None if pred.raw is None else pred.raw[pi],
@@ -93,6 +93,7 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
     try:
         with os.fdopen(fd, "wb") as f:
             for g, p in pairs_factory():
+                g, p = with_canonical(g, gsys), with_canonical(p, psys)
                 ok = g.ok & p.ok
                 if not ok.all():
                     g, p = _take(g, ok), _take(p, ok)

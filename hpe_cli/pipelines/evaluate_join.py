@@ -119,7 +119,7 @@ def _stem_key_hook(batch):
 class Chunk:
     """One batch of one side."""
 
-    canonical: list  # 9 arrays (n,): canonical matrix entries, row-major
+    canonical: list | None  # 9 arrays (n,): canonical matrix entries, row-major (None: rebuilt from ``raw``)
     ok: np.ndarray
     reasons: np.ndarray | None
     raw: np.ndarray | None
@@ -138,7 +138,7 @@ class Chunk:
             return None if x is None else x[a:b]
 
         return Chunk(
-            [c[a:b] for c in self.canonical],
+            None if self.canonical is None else [c[a:b] for c in self.canonical],
             self.ok[a:b],
             cut(self.reasons),
             cut(self.raw),

@@ -26,8 +26,29 @@ def _take(c: Chunk, idx) -> Chunk:
     if c.keys is not None:
         keys = c.keys.filter(idx) if np.asarray(idx).dtype == bool else c.keys.take(idx)
     return Chunk(
-        [x[idx] for x in c.canonical], c.ok[idx], t(c.reasons), t(c.raw), t(c.dist), keys, t(c.by), c.lines[idx]
+        None if c.canonical is None else [x[idx] for x in c.canonical],
+        c.ok[idx],
+        t(c.reasons),
+        t(c.raw),
+        t(c.dist),
+        keys,
+        t(c.by),
+        c.lines[idx],
     )
+
+
+def with_canonical(c: Chunk, system) -> Chunk:
+    """The chunk with its canonical matrices, rebuilt from the angles as written when the key join's partition
+    files kept only those (the reader's own computation on the same numbers: the same bits)."""
+    if c.canonical is not None:
+        return c
+    from ..rotation import soa
+
+    raw = c.raw
+    X = system.soa_from_angles(raw[:, 0], raw[:, 1], raw[:, 2])
+    X = [[np.broadcast_to(np.asarray(v, dtype=np.float64), (c.n,)) if np.ndim(v) == 0 else v for v in row] for row in X]
+    c.canonical = soa.columns(system.soa_to_canonical(X), c.n)
+    return c
 
 
 def _nested(c: Chunk):
@@ -78,7 +99,7 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 yield g.slice(a, a + SCORE_ROWS), p.slice(a, a + SCORE_ROWS)
 
     def work(gp):  # on a scoring thread: pure numpy and Arrow, no shared state
-        g, p = gp
+        g, p = with_canonical(gp[0], gsys), with_canonical(gp[1], psys)
         P, G = _nested(p), _nested(g)
         by_values = (g.by if g.by is not None else p.by) if s.by else None
         rows_before = None

@@ -92,7 +92,10 @@ class _SideSpill:
     def _table(self, c, per):
         import pyarrow as pa
 
-        cols = {f"{_PFX}c{k}": c.canonical[k] for k in range(9)}
+        # angles as written are enough: the matrices are rebuilt from them on the scoring threads (the same
+        # function on the same numbers: the same bits), which halves what goes to disk and back
+        lean = c.raw is not None and c.dist is None
+        cols = {} if lean else {f"{_PFX}c{k}": c.canonical[k] for k in range(9)}
         for j, (hx, hs) in enumerate(per.values()):
             cols[f"{_PFX}hx{j}"], cols[f"{_PFX}hs{j}"] = hx, hs
         cols[f"{_PFX}ok"] = c.ok
@@ -185,11 +188,12 @@ class _SideSpill:
             keys = t.select([n for n in t.column_names if not n.startswith(_PFX)])
             keys = keys.select(r.keep) if r.keep else None
             by = keys.column(r.by).to_numpy(zero_copy_only=False) if r.by else None
+            lean = f"{_PFX}c0" not in t.column_names
             side = Side(
                 r.path,
                 r.system,
                 r.mode,
-                [col(f"{_PFX}c{i}") for i in range(9)],
+                None if lean else [col(f"{_PFX}c{i}") for i in range(9)],
                 col(f"{_PFX}ok"),
                 reasons if (reasons != "").any() else None,
                 keys,
