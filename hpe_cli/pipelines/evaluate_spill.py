@@ -99,8 +99,12 @@ class _SideSpill:
         for j, (hx, hs) in enumerate(per.values()):
             cols[f"{_PFX}hx{j}"], cols[f"{_PFX}hs{j}"] = hx, hs
         cols[f"{_PFX}ok"] = c.ok
-        cols[f"{_PFX}reason"] = pa.array(
-            np.full(c.n, "", dtype=object) if c.reasons is None else c.reasons.astype(str), pa.string()
+        cols[f"{_PFX}reason"] = (
+            pa.Array.from_buffers(
+                pa.string(), c.n, [None, pa.py_buffer(np.zeros(c.n + 1, np.int32)), pa.py_buffer(b"")]
+            )
+            if c.reasons is None  # every row usable: n empty strings, built from their (all-zero) offsets
+            else pa.array(c.reasons.astype(str), pa.string())
         )
         if c.raw is not None:
             for k in range(3):
