@@ -86,7 +86,7 @@ class PosePair:
         else:
             p1 = np.array(a, dtype=np.float64)
             if not fast.all():
-                slow = ~fast
+                slow = np.flatnonzero(~fast)  # few rows: gathered by index, not by nine scans of a mask
                 X = self.stored(system, side)
                 q1, _, _, _ = system.soa_to_angles([[np.broadcast_to(v, (self.n,))[slow] for v in row] for row in X])
                 p1[slow] = np.stack(q1, -1)
