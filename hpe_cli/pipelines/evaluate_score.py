@@ -123,7 +123,8 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
 
     pool = ThreadPoolExecutor(SCORE_THREADS, thread_name_prefix="hpe-evaluate-score")
     try:
-        for g, p, rows, rows_before, by_values, t, part, block in in_order(pool, work, usable(), ahead=SCORE_THREADS):
+        pieces = usable()
+        for g, p, rows, rows_before, by_values, t, part, block in in_order(pool, work, pieces, ahead=SCORE_THREADS):
             if rows_before is not None:
                 before.add(rows_before)
             counts["pairs"] += rows.n
@@ -147,6 +148,9 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
         rep_before = before.report() if before is not None else None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+        for it in (locals().get("pieces"), pairs):  # a signal or an error: the readers' threads and temp files go now
+            if hasattr(it, "close"):
+                it.close()
         acc.close()
         if before is not None:
             before.close()
