@@ -160,13 +160,18 @@ def _open_core(
         system = dataset.attrs.get("system")
         # one record per file (.mat, BIWI pose files): a row is named by its file
         row_files = [str(f) for f in dataset["file"]] if dataset.attrs.get("one_record_files") else None
+        # one-record files that could not be read (BIWI): named after the rows, set aside with their reason
+        bad_files = dataset.attrs.get("bad_files") or []
+        rejected = [Reject(len(dataset) + 1 + j, reason, str(f)) for j, (f, reason) in enumerate(bad_files)]
+        if row_files is not None:
+            row_files = row_files + [str(f) for f, _ in bad_files]
         table = pa.Table.from_pandas(dataset, preserve_index=False)
 
         def gen():
             for start in range(0, max(table.num_rows, 1), batch_size):
                 b = table.slice(start, batch_size).combine_chunks().to_batches()
                 b = b[0] if b else pa.RecordBatch.from_pylist([], schema=table.schema)
-                yield _with_line(b, start + 1), []
+                yield _with_line(b, start + 1), (rejected if start == 0 else [])
 
         return TableSource(
             path,
@@ -273,12 +278,14 @@ def _read_dataset(path: Path):
     if is_biwi_file or (path.is_dir() and next(path.rglob("frame_*_pose.*"), None) is not None):
         from ..datasets.biwi import read_biwi
 
-        table = read_biwi(path)
+        bad: list = []  # unreadable or invalid pose files: rejects of the commands that read the table
+        table = read_biwi(path, bad=bad)
         out = table[["file", "sequence", "frame", "pitch", "yaw", "roll", "center_x", "center_y", "center_z"]].copy()
         # the key of each row: sequence + frame, and the RGB frame they label (BIWI's NN/frame_XXXXX_rgb.png)
         out.insert(1, "image", [f"{s}/frame_{int(f):05d}_rgb.png" for s, f in zip(out["sequence"], out["frame"])])
         out.attrs["system"] = "biwi"
         out.attrs["one_record_files"] = True
+        out.attrs["bad_files"] = [(b["file"], b["reason"]) for b in bad]
         return out
     if path.is_dir():
         raise HpeError(

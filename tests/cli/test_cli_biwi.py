@@ -208,3 +208,24 @@ def test_cli_biwi_without_rejects_or_strict_writes_nothing(tmp_path):
     r = CliRunner().invoke(cli, ["biwi", str(ann), "-o", str(out), "--rejects", str(rej), "--strict", "-q"])
     assert r.exit_code == 0, r.output  # nothing rejected: --strict changes nothing
     assert pd.read_csv(rej).empty and len(pd.read_csv(out)) == len(list(ann.rglob("*.bin")))
+
+
+@pytest.mark.parametrize("command", ["convert", "audit"])
+def test_convert_and_audit_set_damaged_pose_files_aside(tmp_path, command):
+    """A damaged pose file in a BIWI folder is one reject naming the file (convert and audit read on past it);
+    without --rejects the run stops at that file with one line and writes nothing."""
+    ann, frames = _damaged_copy(tmp_path)
+    out, rej = tmp_path / "o.parquet", tmp_path / "rej.csv"
+    args = ["convert", str(ann), "-o", str(out), "--to", "300w_lp"] if command == "convert" else ["audit", str(ann)]
+    r = CliRunner().invoke(cli, [*args, "-q"])
+    assert r.exit_code == 1 and len(r.output.strip().splitlines()) == 1, r.output
+    assert "01/frame_00006_pose.bin: expected 24 bytes (6 float32), got 10" in r.output and not out.exists()
+    r = CliRunner().invoke(cli, [*args, "--rejects", str(rej), "-q"])
+    assert r.exit_code == 0, r.output
+    rejects = pd.read_csv(rej)
+    assert sorted(rejects["raw"]) == ["01/frame_00006_pose.bin", "02/frame_00348_pose.bin", "03/frame_00562_pose.bin"]
+    assert rejects.set_index("raw").loc["03/frame_00562_pose.bin", "reason"].startswith("yaw: expected degrees")
+    if command == "convert":  # every frame is in the labels or in the rejects
+        labels = pd.read_parquet(out)
+        assert len(labels) + len(rejects) == len(frames)
+        assert not set(labels["file"]) & set(rejects["raw"])
