@@ -117,9 +117,27 @@ def _arm_watchdog(signum: int) -> None:
                     pass
             os._exit(128 + signum)
 
+    global _watchdog
     t = threading.Timer(WATCHDOG_SECONDS, force)
     t.daemon = True
     t.start()
+    _watchdog = t
+
+
+_watchdog = None
+
+
+def _late(exc) -> None:
+    """A signal held back by the commit of the run's outputs, which then completed: the run is complete."""
+    global _fired, _watchdog
+    from ..io.transaction import request_stop
+
+    if _watchdog is not None:
+        _watchdog.cancel()
+        _watchdog = None
+    request_stop(None)
+    _fired = False
+    _note_complete(getattr(exc, "signum", signal.SIGTERM))
 
 
 def fired():
@@ -199,11 +217,12 @@ def handled():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    from ..io.transaction import reset_run_state, run_committed
+    from ..io.transaction import on_late_signal, reset_run_state, run_committed
 
     previous = {s: signal.getsignal(s) for s in SIGNALS}
     _owner, _fired = os.getpid(), False
     reset_run_state()
+    on_late_signal(_late)
     for s in SIGNALS:
         signal.signal(s, _handler)
     import sys
@@ -215,6 +234,7 @@ def handled():
     try:
         yield
     finally:
+        on_late_signal(None)
         sys.unraisablehook = unraisable
         if run_committed() and _is_program():
             # the run is complete: a signal while the process exits (threads joined, buffers flushed) must

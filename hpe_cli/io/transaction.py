@@ -118,6 +118,15 @@ def in_critical_section(exc: BaseException) -> bool:
     return False
 
 
+_late_signal = None  # called instead of raising a signal held back until the run had committed
+
+
+def on_late_signal(func) -> None:
+    """What a signal held back until the run's commit finished does (``cli/signals.py``: the run is complete)."""
+    global _late_signal
+    _late_signal = func
+
+
 @contextmanager
 def _section():
     """Create/rename a file and record it, with no signal exception in between."""
@@ -129,7 +138,10 @@ def _section():
         _critical -= 1
         if not _critical and _pending is not None:
             exc, _pending = _pending, None
-            raise exc
+            if _run_committed and _late_signal is not None:  # the outputs are complete: nothing to undo
+                _late_signal(exc)
+            else:
+                raise exc
 
 
 def _real(path) -> str:
@@ -385,6 +397,13 @@ class OutputTransaction:
         self.state = "committing"
         undo: list = []
         backups: list = []
+        with _section():  # a signal is held until every output is placed and recorded, or all are undone
+            self._commit(undo, backups)
+        for func in self._after:
+            func()
+
+    def _commit(self, undo: list, backups: list) -> None:
+        global _run_committed
         try:
             plans = []
             for s in self._staged:
@@ -428,10 +447,7 @@ class OutputTransaction:
         self._made_dirs.clear()
         self.state = "committed"
         if self is _run:
-            global _run_committed
             _run_committed = True
-        for func in self._after:
-            func()
 
     def abort(self) -> None:
         """Remove everything staged and every folder created for it (if still empty)."""

@@ -259,3 +259,58 @@ def test_augment_out_images_commit_failing_halfway_leaves_nothing(tmp_path):
     assert res.exit_code == 1 and "c.jpg" in res.output, res.output
     assert sorted(os.listdir(out)) == ["c.jpg"] and (out / "c.jpg").is_dir()  # only the other process's folder
     assert not (tmp_path / "a.csv").exists() and not temp_files(tmp_path)
+
+
+@pytest.mark.parametrize("signal_at", range(7))
+def test_a_signal_during_the_commit_is_held_until_it_is_complete(tmp_path, monkeypatch, signal_at):
+    """A signal landing while the outputs are placed (after any placement, the last included, or while the commit
+    is being recorded) waits for the commit: every output is in place and the run is reported complete, never
+    'interrupted' with its outputs written (seen once under load: exit 143 with both outputs present)."""
+    from hpe_cli.cli.signals import Interrupted
+
+    tx.reset_run_state()
+    late = []
+    monkeypatch.setattr(tx, "_late_signal", late.append)
+    txn = _stage(tmp_path)
+    monkeypatch.setattr(tx, "_run", txn)  # the run's own transaction: its commit completes the run
+    real, calls = tx._place, []
+
+    def place(src, dst, ow, undo, backups):
+        real(src, dst, ow, undo, backups)
+        calls.append(dst)
+        if len(calls) == signal_at + 1:  # what the handler does when the signal lands here
+            exc = Interrupted(15)
+            tx.request_stop(exc)
+            assert tx.in_critical_section(exc)
+
+    monkeypatch.setattr(tx, "_place", place)
+    txn.commit()
+    assert txn.state == "committed" and tx.run_committed() and len(late) == 1
+    assert (tmp_path / "a.csv").read_bytes() == b"new a.csv" and (tmp_path / "imgs" / "sub" / "x.jpg").exists()
+    assert not temp_files(tmp_path)
+    tx.reset_run_state()
+
+
+def test_a_signal_held_by_a_failing_commit_is_raised_with_nothing_placed(tmp_path, monkeypatch):
+    from hpe_cli.cli.signals import Interrupted
+
+    tx.reset_run_state()
+    monkeypatch.setattr(tx, "_late_signal", lambda exc: pytest.fail("the commit did not complete"))
+    before = tree(tmp_path)
+    txn = _stage(tmp_path)
+    real, calls = tx._place, []
+
+    def place(src, dst, ow, undo, backups):
+        calls.append(dst)
+        if len(calls) == 2:
+            exc = Interrupted(15)
+            assert tx.in_critical_section(exc)
+        if len(calls) == 4:
+            raise OSError(errno.EACCES, "Permission denied")
+        real(src, dst, ow, undo, backups)
+
+    monkeypatch.setattr(tx, "_place", place)
+    with pytest.raises(Interrupted):
+        txn.commit()
+    assert tree(tmp_path) == before and not temp_files(tmp_path)
+    tx.reset_run_state()
