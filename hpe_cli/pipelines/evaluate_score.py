@@ -113,12 +113,16 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
         return g, p, rows, rows_before, by_values, table, acc.partial(rows), Sample.block(rows)
 
     pending: list = []  # per-row tables, written in pieces of about one batch
+    writes: list = []  # the per-row file is written on its own thread (Parquet encoding releases the GIL)
+    wpool = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-write") if writer is not None else None
 
     def flush(at_least):
         if pending and sum(t.num_rows for t in pending) >= at_least:
             import pyarrow as pa
 
-            writer.write(pending[0] if len(pending) == 1 else pa.concat_tables(pending))
+            while len(writes) >= 2:  # at most two pieces waiting: memory stays bounded
+                writes.pop(0).result()
+            writes.append(wpool.submit(writer.write, pending[0] if len(pending) == 1 else pa.concat_tables(pending)))
             pending.clear()
 
     pool = ThreadPoolExecutor(SCORE_THREADS, thread_name_prefix="hpe-evaluate-score")
@@ -144,10 +148,14 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 worst.add(t)
         if writer is not None:
             flush(1)
+            while writes:  # every piece written, in order; a write's error is raised here
+                writes.pop(0).result()
         rep = acc.report()
         rep_before = before.report() if before is not None else None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+        if wpool is not None:
+            wpool.shutdown(wait=True, cancel_futures=True)
         for it in (locals().get("pieces"), pairs):  # a signal or an error: the readers' threads and temp files go now
             if hasattr(it, "close"):
                 it.close()
