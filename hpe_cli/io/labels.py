@@ -10,6 +10,7 @@ import numpy as np
 
 from ..errors import HpeError
 from .layout import ANGLE_COLS, MATRIX_COLS
+from .table_source import plain_numpy
 
 #: angles beyond this many degrees are rejected (a unit or storage mistake, and float precision is gone)
 MAX_ANGLE = 1e6
@@ -42,7 +43,7 @@ def _numeric(batch, name):
     )
     if numeric:
         if col.null_count == 0 and pa.types.is_float64(col.type):
-            values = col.to_numpy()
+            values = plain_numpy(col)
         else:
             values = np.asarray(pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False), dtype=np.float64)
         bad = ~np.isfinite(values)

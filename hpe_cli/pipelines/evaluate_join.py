@@ -250,11 +250,12 @@ class SideReader:
 
     def _chunk(self, batch) -> Chunk:
         from ..io.readers import LINE_COL
+        from ..io.table_source import plain_numpy
         from ..rotation import soa
 
         if self.dataset_stem:
             batch = _stem_key_hook(batch)
-        lines = batch.column(LINE_COL).to_numpy(zero_copy_only=False).astype(np.int64)
+        lines = plain_numpy(batch.column(LINE_COL)).astype(np.int64)
         X, ok, rs, raw, dist = _batch_labels(batch, self.system, self.mode, self.radians, self.orthonormalize)
         n = batch.num_rows
         X = self.system.soa_to_canonical(X)
