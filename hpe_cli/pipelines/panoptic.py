@@ -178,7 +178,7 @@ def write_outputs(
 
     parts = None
     with critical():  # a signal waits until `parts` is known and registered for cleanup
-        parts = _prepare_parts(plans, cfg, fmt, output, resume) if use_parts else None
+        parts = _prepare_parts(plans, cfg, fmt, output, resume, overwrite) if use_parts else None
         if parts is not None and not resume and current() is not None:
             current().on_abort(lambda: shutil.rmtree(parts, ignore_errors=True))  # whatever ends the run
     tasks = [unit_task(plans, cfg, u, parts) for u in units]

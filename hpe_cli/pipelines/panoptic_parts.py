@@ -327,7 +327,7 @@ def unlock_parts(d) -> None:
         os.close(fd)
 
 
-def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
+def _prepare_parts(plans, cfg, fmt, output, resume: bool, overwrite: bool = False) -> Path:
     """The locked parts folder of this run (:func:`lock_parts`; release it with :func:`unlock_parts`)."""
     d = parts_dir_for(output)
     fp = _fingerprint(plans, cfg, fmt)
@@ -335,6 +335,15 @@ def _prepare_parts(plans, cfg, fmt, output, resume: bool) -> Path:
     existed = d.exists()
     lock_parts(d, output)
     try:
+        # with the lock no other run is writing this output: one that ended just now may have placed it
+        if not overwrite and Path(output).exists():
+            if not existed:
+                import shutil
+
+                shutil.rmtree(d, ignore_errors=True)
+            raise HpeError(
+                f"{output}: already exists (another run created it meanwhile; use --overwrite to replace it)"
+            )
         _reuse_or_reset(d, run_file, fp, existed, resume)
     except BaseException:
         unlock_parts(d)
