@@ -163,7 +163,7 @@ def test_same_bytes_with_workers_resume_and_dask(seqs, tmp_path):
     assert len(calls) == len(tasks) - 2
     assert res.read_bytes() == ref.read_bytes()
     # resuming with other options is refused
-    job._prepare_parts(plans, cfg, "table", res, resume=False)
+    job._prepare_parts(plans, cfg, "table", res, resume=False, overwrite=True)  # next to the finished output
     with pytest.raises(HpeError, match="other inputs or options"):
         job.write_outputs(plans, job.Config(landmarks=True), res, resume=True, overwrite=True)
     shutil.rmtree(job.parts_dir_for(res))
