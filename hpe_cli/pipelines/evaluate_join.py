@@ -74,11 +74,7 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
         else:
             cols, ok, reasons = label_columns_fast(batch, "angles", radians)
         raw = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1)
-        X = system.soa_from_angles(raw[:, 0], raw[:, 1], raw[:, 2])
-        X = [
-            [np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) if np.ndim(v) == 0 else v for v in row] for row in X
-        ]
-        return X, ok, reasons, raw, None
+        return stored_of_angles(system, raw), ok, reasons, raw, None
     if orthonormalize and (mode == "matrix" or system.storage_kind == "matrix"):
         from ..metrics.align import project_to_so3_batch
 
@@ -99,6 +95,16 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
         return [[R[:, i, j] for j in range(3)] for i in range(3)], ok, reasons, None, np.where(ok, dist, np.nan)
     X, ok, rs = batch_rotations(batch, system, mode, radians)
     return X, ok, rs, None, None
+
+
+def stored_of_angles(system, raw) -> list:
+    """The stored matrices (nested list of ``(n,)`` arrays) of angles ``(n, 3)`` in degrees written in ``system``:
+    the reader's computation, and the key join's when it rebuilds them from the angles it kept."""
+    n = len(raw)
+    X = system.soa_from_angles(raw[:, 0], raw[:, 1], raw[:, 2])
+    return [
+        [np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) if np.ndim(v) == 0 else v for v in row] for row in X
+    ]
 
 
 def _stem_key_hook(batch):
@@ -150,22 +156,31 @@ class Chunk:
         )
 
 
+def key_text(col):
+    """A key column as one Arrow string array (chunks combined, dictionaries decoded, other types cast)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if isinstance(col, pa.ChunkedArray):
+        col = col.combine_chunks()
+    if pa.types.is_dictionary(col.type):
+        col = col.cast(col.type.value_type)
+    return col if pa.types.is_string(col.type) else pc.cast(col, pa.string())
+
+
+def combine_key_hash(h: np.ndarray, column_hash: np.ndarray) -> np.ndarray:
+    """Fold one key column's 64-bit hashes into the running hash of the key columns before it."""
+    with np.errstate(over="ignore"):
+        return h * np.uint64(1_000_003) ^ column_hash
+
+
 def keys_hash(table, keys) -> np.ndarray:
     """One uint64 per row of the key columns (text as written; see :func:`hpe_cli.io.key_hash.string_hashes`)."""
-    import pyarrow as pa
-
     from ..io.key_hash import string_hashes
 
     h = np.zeros(table.num_rows, dtype=np.uint64)
     for k in keys:
-        col = table.column(k)
-        col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
-        if pa.types.is_dictionary(col.type):
-            col = col.cast(col.type.value_type)
-        if not pa.types.is_string(col.type):
-            col = col.cast(pa.string())
-        with np.errstate(over="ignore"):
-            h = h * np.uint64(1_000_003) ^ string_hashes(col, stems=False)[0]
+        h = combine_key_hash(h, string_hashes(key_text(table.column(k)), stems=False)[0])
     return h
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .evaluate_join import Chunk
+from .evaluate_join import Chunk, stored_of_angles
 from .evaluate_outputs import Sample, Worst, row_table
 from .evaluate_rejects import _stream_rejects
 
@@ -44,10 +44,7 @@ def with_canonical(c: Chunk, system) -> Chunk:
         return c
     from ..rotation import soa
 
-    raw = c.raw
-    X = system.soa_from_angles(raw[:, 0], raw[:, 1], raw[:, 2])
-    X = [[np.broadcast_to(np.asarray(v, dtype=np.float64), (c.n,)) if np.ndim(v) == 0 else v for v in row] for row in X]
-    c.canonical = soa.columns(system.soa_to_canonical(X), c.n)
+    c.canonical = soa.columns(system.soa_to_canonical(stored_of_angles(system, c.raw)), c.n)
     return c
 
 

@@ -20,24 +20,13 @@ from contextlib import closing
 
 import numpy as np
 
-from .evaluate_join import Side, _stems
+from .evaluate_join import Side, _stems, combine_key_hash, key_text
 
 #: rows of one side per partition (about 130 bytes each on disk, ~550 bytes each while a partition is joined)
 PARTITION_ROWS = 400_000
 #: at most this many partition files per side open at once
 MAX_PARTITIONS = 400
 _PFX = "__hpe_"
-
-
-def _text(col):
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    if isinstance(col, pa.ChunkedArray):
-        col = col.combine_chunks()
-    if pa.types.is_dictionary(col.type):
-        col = col.cast(col.type.value_type)
-    return col if pa.types.is_string(col.type) else pc.cast(col, pa.string())
 
 
 def key_hashes(keys_table, keys):
@@ -52,10 +41,9 @@ def key_hashes(keys_table, keys):
     h = np.zeros(keys_table.num_rows, dtype=np.uint64)
     per = {}
     for k in keys:
-        hx, hs = string_hashes(_text(keys_table.column(k)))
+        hx, hs = string_hashes(key_text(keys_table.column(k)))
         per[k] = (hx, hs)
-        with np.errstate(over="ignore"):
-            h = h * np.uint64(1_000_003) ^ hs
+        h = combine_key_hash(h, hs)
     return h, per
 
 
@@ -315,9 +303,8 @@ class Partitions:
         hg, hp = np.zeros(gt.n, dtype=np.uint64), np.zeros(pred.n, dtype=np.uint64)
         for j, k in enumerate(self.keys):
             w = 1 if k in stems else 0
-            with np.errstate(over="ignore"):
-                hg = hg * np.uint64(1_000_003) ^ gt.hashes[j][w]
-                hp = hp * np.uint64(1_000_003) ^ pred.hashes[j][w]
+            hg = combine_key_hash(hg, gt.hashes[j][w])
+            hp = combine_key_hash(hp, pred.hashes[j][w])
         # codes: a prediction's is its row, a GT row's the row of its match (else one past all predictions)
         order = np.argsort(hp)
         sp = hp[order]
