@@ -1,4 +1,4 @@
-"""Decode images to OpenCV's exact pixels, JPEGs through libjpeg-turbo's SIMD decoder when it is installed.
+"""Decode images (or one rectangle of them) to OpenCV's exact pixels, doing less work where it can.
 
 ``cv2.imread``/``cv2.imdecode`` decode JPEGs with the libjpeg-turbo that OpenCV bundles; ``simplejpeg``
 (the ``torch`` extra) wraps a SIMD build of the same library and decodes the AFLW2000-3D and Panoptic frames
@@ -9,11 +9,21 @@ path is taken only where the pixels must be OpenCV's:
 * it carries no EXIF orientation other than 1 (OpenCV turns the pixels by it; ``simplejpeg`` does not);
 * the first JPEG this process decodes is decoded both ways and compared: if they differ in one byte, every
   later image goes to OpenCV (:func:`fast_decoder` says which decoder is in use).
+
+:func:`decode_crop` returns one rectangle of a frame (a training crop): with ``_hpe_jpeg``, a small C
+module over the system's libjpeg-turbo built with the package when its headers are there (``setup.py``), the
+rows above the rectangle are only entropy-decoded, the columns beside it are not transformed and decoding
+stops at its last row: 1.3-1.8x faster than a whole decode on the AFLW2000-3D crops, 2-4x on Panoptic's HD
+frames. The same conditions hold (plain 8-bit YCbCr JPEG, orientation 1, any libjpeg warning sends the image
+to OpenCV), and the first rectangle of each process is compared with OpenCV's whole-frame decode
+(:func:`region_decoder` says whether it is in use).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from ..geometry.crop import crop_padded
 
 _STATE: dict = {}
 
@@ -97,11 +107,66 @@ def decode_image(data, rgb: bool = True):
     return img
 
 
-def read_image(path, rgb: bool = True):
-    """:func:`decode_image` of a file's bytes, or None when it cannot be read or decoded (as ``cv2.imread``)."""
+def _region():
+    if "region" not in _STATE:
+        try:
+            import _hpe_jpeg
+        except ImportError:  # built without libjpeg-turbo's headers or a C compiler: whole frames
+            _hpe_jpeg = None
+        _STATE["region"] = _hpe_jpeg
+    return _STATE["region"] if _STATE.get("region_same", True) else None
+
+
+def region_decoder() -> str | None:
+    """``"libjpeg-turbo"`` while :func:`decode_crop` decodes JPEG rectangles itself in this process, else None."""
+    return "libjpeg-turbo" if _region() is not None else None
+
+
+def _read(path):
     try:
         with open(path, "rb") as fh:
-            data = fh.read()
+            return fh.read()
     except OSError:
         return None
+
+
+def decode_crop(data, box, rgb: bool = True):
+    """The pixels of the integer box ``(x0, y0, x1, y1)`` (ends exclusive) of encoded ``data``, zeros outside the
+    frame: exactly ``crop_padded(decode_image(data, rgb), box)``, or None when the data cannot be decoded.
+
+    JPEGs are decoded over the box only when ``_hpe_jpeg`` is built (see the module's notes); the result is
+    then a view of a band a little larger than the box when the box lies inside the frame.
+    """
+    raw = data.tobytes() if isinstance(data, np.ndarray) else bytes(data)
+    x0, y0, x1, y1 = (int(v) for v in box)
+    mod = _region()
+    if mod is not None and raw[:2] == b"\xff\xd8" and x1 > x0 and y1 > y0 and _orientation(raw) == 1:
+        got = mod.decode_region(raw, y0, x0, y1, x1, rgb)
+        if got is not None:
+            band, rows, stride, H, W, ry, rx, dy, dx = got
+            pix = np.frombuffer(band, np.uint8).reshape(rows, stride // 3, 3)
+            pix = pix[dy : dy + min(y1, H) - ry, dx : dx + min(x1, W) - rx]
+            if (ry, rx, min(y1, H), min(x1, W)) != (y0, x0, y1, x1):  # the box leaves the frame: zeros outside
+                out = np.zeros((y1 - y0, x1 - x0, 3), np.uint8)
+                out[ry - y0 : ry - y0 + pix.shape[0], rx - x0 : rx - x0 + pix.shape[1]] = pix
+                pix = out
+            if "region_same" not in _STATE:  # the first rectangle of this process, against OpenCV's whole frame
+                ref = _cv2(raw, rgb)
+                ref = None if ref is None else crop_padded(ref, box)
+                _STATE["region_same"] = ref is not None and ref.shape == pix.shape and bool(np.array_equal(ref, pix))
+                return ref
+            return pix
+    img = decode_image(raw, rgb)
+    return None if img is None else crop_padded(img, box)
+
+
+def read_crop(path, box, rgb: bool = True):
+    """:func:`decode_crop` of a file's bytes, or None when it cannot be read or decoded."""
+    data = _read(path)
+    return decode_crop(data, box, rgb) if data else None
+
+
+def read_image(path, rgb: bool = True):
+    """:func:`decode_image` of a file's bytes, or None when it cannot be read or decoded (as ``cv2.imread``)."""
+    data = _read(path)
     return decode_image(data, rgb) if data else None

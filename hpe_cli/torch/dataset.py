@@ -30,8 +30,8 @@ from .samples import (
     INTERPOLATIONS,
     PackedRows,
     PoseOutputs,
+    as_rgb,
     crop_rects,
-    crop_rgb,
     decode,
     flip_geometry,
     hflip_pixels,
@@ -299,14 +299,14 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             raise HpeError(f"{path}: row {i + 1}: no image bytes in column {column!r}")
         return np.frombuffer(value, dtype=np.uint8), f"{path}: row {i - int(offsets[g]) + 1} of row group {local}"
 
-    def _decoded(self, i):
-        """The decoded pixels (H, W, 3), in :func:`~hpe_cli.torch.samples.decode`'s channel order."""
+    def _decoded(self, i, rect=None):
+        """The decoded pixels (H, W, 3) or those of ``rect`` (:func:`~hpe_cli.torch.samples.decode`)."""
         if self._parquet is not None:
             data, where = self._image_bytes(i)
-            img = decode(data=data)
+            img = decode(data=data, rect=rect)
         else:
             path = self._image_path(i)
-            img, where = decode(path=path), str(path)
+            img, where = decode(path=path, rect=rect), str(path)
             if img is None and not path.exists():
                 raise HpeError(f"{path}: no such image (row {i + 1} of {self.source})")
         if img is None:
@@ -322,11 +322,10 @@ class HeadPoseDataset(torch.utils.data.Dataset):
 
     def _pixels(self, i, flip):
         """Cropped (resized, flipped) RGB HWC pixels, the crop's ``(left, top)``, its scale ``(sx, sy)``, aspect note."""
-        img = self._decoded(i)
         rect = None
         if self._rects is not None and self._rects[1][i]:
             rect = self._rects[0][i].tolist()
-        pix = crop_rgb(img, rect)
+        pix = as_rgb(self._decoded(i, rect))  # decoded over the crop only where it can be
         origin = (0, 0) if rect is None else (rect[1], rect[0])
         scale = note = None
         if self.size is not None:

@@ -3,10 +3,10 @@
 Everything that can be done once for all rows is done in the constructor, vectorised:
 the crop rectangles of every row and the pose outputs (stored matrix, angles, gimbal
 lock) of every row's canonical matrix, and of its mirror image (the pose after a
-horizontal flip) on first use. ``__getitem__`` then decodes the JPEG straight into RGB
-(OpenCV >= 4.10 ``IMREAD_COLOR_RGB``; older versions convert the crop only), crops
-with a view (a padded copy only when the crop leaves the image), optionally resizes
-with ``cv2.resize`` and wraps the HWC array as a (3, H, W) tensor without a copy.
+horizontal flip) on first use. ``__getitem__`` then decodes the crop's rectangle of the
+JPEG straight into RGB (:mod:`hpe_cli.io.jpeg`: OpenCV's pixels; older OpenCV versions
+decode BGR and the crop is converted), zeros where the crop leaves the image, optionally
+resizes with ``cv2.resize`` and wraps the HWC array as a (3, H, W) tensor without a copy.
 """
 
 from __future__ import annotations
@@ -15,8 +15,7 @@ import numpy as np
 import torch
 
 from ..geometry.augment import box_of_points
-from ..geometry.crop import crop_padded
-from ..io.jpeg import decode_image, read_image
+from ..io.jpeg import decode_crop, decode_image, read_crop, read_image
 from .collate import Sample
 from .transforms import pose_mirror
 
@@ -121,27 +120,26 @@ def _rgb_flag():
     return _FLAGS["rgb"]
 
 
-def decode(data=None, path=None):
-    """uint8 (H, W, 3) pixels of encoded bytes (``data``) or a file (``path``), None if OpenCV cannot decode them.
+def decode(data=None, path=None, rect=None):
+    """uint8 pixels of encoded bytes (``data``) or a file (``path``), None if OpenCV cannot decode them.
 
-    RGB when OpenCV has ``IMREAD_COLOR_RGB``, else BGR (:func:`crop_rgb` converts the crop). OpenCV's
-    pixels exactly; JPEGs through libjpeg-turbo's SIMD decoder when ``simplejpeg`` is installed
-    (:mod:`hpe_cli.io.jpeg`: about twice as fast, the same bytes).
+    The whole frame (H, W, 3), or with ``rect`` ``(top, left, height, width)`` that rectangle of it, zeros
+    outside the frame. RGB when OpenCV has ``IMREAD_COLOR_RGB``, else BGR (:func:`as_rgb` converts).
+    OpenCV's pixels exactly, with less work where :mod:`hpe_cli.io.jpeg` can: JPEG rectangles decoded over
+    the rectangle only, whole JPEGs through libjpeg-turbo's SIMD decoder (``simplejpeg``).
     """
     rgb = _rgb_flag() is not None
-    if data is not None:
-        return decode_image(data, rgb) if data.size else None
-    return read_image(path, rgb)
+    if data is not None and not data.size:
+        return None
+    if rect is None:
+        return decode_image(data, rgb) if data is not None else read_image(path, rgb)
+    top, left, h, w = rect.tolist() if isinstance(rect, np.ndarray) else rect
+    box = (left, top, left + w, top + h)
+    return decode_crop(data, box, rgb) if data is not None else read_crop(path, box, rgb)
 
 
-def crop_rgb(img, rect):
-    """The RGB pixels of ``rect`` ``(top, left, height, width)`` (None: all) of a :func:`decode` result.
-
-    A view when the rectangle lies inside the image, else a copy with zeros outside it.
-    """
-    if rect is not None:
-        top, left, h, w = rect.tolist() if isinstance(rect, np.ndarray) else rect
-        img = crop_padded(img, (left, top, left + w, top + h))
+def as_rgb(img):
+    """A :func:`decode` result in RGB: itself, or (OpenCV older than 4.10, which decodes BGR) converted."""
     if _rgb_flag() is None:
         import cv2
 
