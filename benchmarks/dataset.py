@@ -14,10 +14,13 @@ and returns ``torch.from_numpy(hwc).permute(2, 0, 1)``: the same uint8 RGB pixel
 same (3, H, W) channels-last tensor layout as the dataset (checked equal below), so a
 DataLoader's collate does the same copy for both. (An earlier version returned BGR HWC numpy
 arrays in one process, HWC tensors in the DataLoader: not the dataset's output, and a
-different collate copy.) ``HeadPoseDataset`` decodes JPEGs with ``simplejpeg`` (libjpeg-turbo's
-SIMD build) when installed, to OpenCV's exact pixels (:mod:`hpe_cli.io.jpeg`); a second floor row,
-"bare loop, simplejpeg decode", does the same, so the comparison that isolates the loader's own
-cost is printed too. ``HeadPoseDataset`` also returns the pose (matrix, angles,
+different collate copy.) ``HeadPoseDataset`` decodes only the crop's rectangle of each JPEG when
+``_hpe_jpeg`` is built (libjpeg-turbo: rows above it entropy-decoded only, columns beside it not
+transformed, nothing below it), else whole frames with ``simplejpeg``; both give OpenCV's exact
+pixels (:mod:`hpe_cli.io.jpeg`). A second floor row, "bare loop, same decoder", decodes the same
+way with the same calls and nothing else, so the loader's own cost is printed too: the first row
+is the floor the loader has to beat, the second shows what it costs over the decoder it uses.
+``HeadPoseDataset`` also returns the pose (matrix, angles,
 canonical, gimbal lock, undefined flag) after the flip, the box and the 68 landmarks
 (moved and re-indexed) and the index. Three HeadPoseDataset configurations are timed:
 
@@ -40,6 +43,11 @@ Usage::
     python benchmarks/dataset.py --items 400 --repeat 3 --workers 2
     python benchmarks/dataset.py --fast-only --items 256 --repeat 7   # the floor and the fast path only
     python benchmarks/dataset.py --images /path/to/AFLW2000   # a folder of .mat + .jpg
+    python benchmarks/dataset.py --panoptic   # the pizza1 HD frames (1920x1080), heads relabelled by hpe
+
+``--panoptic`` labels the real CMU Panoptic sample (``hpe relabel-panoptic``, every labelled head in
+the 8 HD frames shipped) and crops each head's box: a small part of a large frame, the case of
+Panoptic, AGORA and BIWI training sets.
 """
 
 from __future__ import annotations
@@ -91,6 +99,32 @@ def make_labels(folder: Path, out: Path) -> Path:
 RGB = getattr(cv2, "IMREAD_COLOR_RGB", None)
 
 
+PANOPTIC = ROOT.parent.parent / "shared" / "realdata" / "panoptic_160906_pizza1"
+for _cand in (Path("/work/shared/realdata/panoptic_160906_pizza1"), PANOPTIC):
+    if _cand.is_dir():
+        PANOPTIC = _cand
+        break
+
+
+def make_panoptic_labels(seq: Path, out: Path) -> Path:
+    """A Parquet label table of every head ``hpe relabel-panoptic`` labels in the HD frames shipped with ``seq``."""
+    import subprocess
+
+    raw = out.with_name("relabelled.parquet")
+    subprocess.run(
+        [sys.executable, "-m", "hpe_cli.cli.main", "relabel-panoptic", str(seq), "-o", str(raw), "--quiet"],
+        check=True, cwd=ROOT, capture_output=True,
+    )  # fmt: skip
+    table = pd.read_parquet(raw)
+    table["file"] = [
+        str(seq / "hdImgs" / f"hd_{cam}" / f"{int(fr):08d}.jpg") for cam, fr in zip(table["camera"], table["frame"])
+    ]
+    table = table[[Path(f).is_file() for f in table["file"]]].reset_index(drop=True)
+    keep = ["file", "pitch", "yaw", "roll", "bbox_x", "bbox_y", "bbox_w", "bbox_h"]
+    keep += [c for c in table.columns if c.startswith("lm") and c.endswith(("_x", "_y"))]
+    return write_labels(table[keep], out, system="300w_lp")
+
+
 def square_crop(box, margin):
     """``(top, left, size)``: the same square as ``HeadPoseDataset(crop=margin, square=True)``."""
     x, y, w, h = box
@@ -103,23 +137,33 @@ def square_crop(box, margin):
 class BareLoop(torch.utils.data.Dataset):
     """cv2.imread (RGB) -> square crop (zeros outside) -> cv2.resize -> cv2.flip -> (3, H, W) tensor: the floor."""
 
-    def __init__(self, files, boxes, margin, size, simplejpeg=False):
+    def __init__(self, files, boxes, margin, size, decoder="cv2"):
         self.files, self.boxes, self.margin, self.size = list(files), np.asarray(boxes), margin, size
-        self.simplejpeg = simplejpeg
+        self.decoder = decoder
 
     def __len__(self):
         return len(self.files)
 
     def sample(self, i):
-        if self.simplejpeg:  # the decoder HeadPoseDataset uses (same pixels as cv2.imread, checked)
+        top, left, side = square_crop(self.boxes[i], self.margin)
+        if self.decoder == "region":  # HeadPoseDataset's decoder: the crop's rectangle only (OpenCV's pixels)
+            import _hpe_jpeg
+
+            with open(self.files[i], "rb") as fh:
+                got = _hpe_jpeg.decode_region(fh.read(), top, left, top + side, left + side, RGB is not None)
+            band, rows, stride, H, W, y0, x0, dy, dx = got
+            img = np.frombuffer(band, np.uint8).reshape(rows, stride // 3, 3)
+            img, top, left = img[dy:, dx:], top - y0, left - x0  # the band from (y0, x0) on
+            H, W = min(H - y0, img.shape[0]), min(W - x0, img.shape[1])
+        elif self.decoder == "simplejpeg":  # HeadPoseDataset's decoder without _hpe_jpeg (whole frames)
             import simplejpeg
 
             with open(self.files[i], "rb") as fh:
                 img = simplejpeg.decode_jpeg(fh.read(), colorspace="RGB" if RGB is not None else "BGR")
+            H, W = img.shape[:2]
         else:
             img = cv2.imread(self.files[i], RGB if RGB is not None else cv2.IMREAD_COLOR)
-        top, left, side = square_crop(self.boxes[i], self.margin)
-        H, W = img.shape[:2]
+            H, W = img.shape[:2]
         t0, l0, t1, l1 = max(top, 0), max(left, 0), min(top + side, H), min(left + side, W)
         if (t0, l0, t1, l1) == (top, left, top + side, left + side):
             crop = img[t0:t1, l0:l1]
@@ -186,6 +230,7 @@ def through_loader(ds, order, workers, batch):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--images", type=Path, default=DEFAULT_IMAGES, help="folder of AFLW2000-3D .mat + .jpg")
+    ap.add_argument("--panoptic", action="store_true", help=f"the Panoptic HD frames and heads of {PANOPTIC.name}")
     ap.add_argument("--items", type=int, default=256)
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--workers", type=int, default=2)
@@ -198,15 +243,24 @@ def main(argv=None):
     torch.set_num_threads(1)
     cv2.setNumThreads(1)
     with tempfile.TemporaryDirectory() as tmp:
-        labels = make_labels(args.images, Path(tmp) / "labels.parquet")
-        flip = T.RandomHorizontalFlip(p=1.0, scheme="ibug68")
-        fused = HeadPoseDataset(labels, crop=args.margin, size=args.size, hflip=1.0, flip_scheme="ibug68")
+        if args.panoptic:
+            args.images = PANOPTIC
+            labels = make_panoptic_labels(PANOPTIC, Path(tmp) / "labels.parquet")
+        else:
+            labels = make_labels(args.images, Path(tmp) / "labels.parquet")
+        scheme = "face70" if args.panoptic else "ibug68"  # Panoptic's face has 70 landmarks
+        flip = T.RandomHorizontalFlip(p=1.0, scheme=scheme)
+        fused = HeadPoseDataset(labels, crop=args.margin, size=args.size, hflip=1.0, flip_scheme=scheme)
         v2flip = HeadPoseDataset(labels, crop=args.margin, size=args.size, transform=flip)
         v2ds = HeadPoseDataset(
             labels, crop=args.margin, transform=v2.Compose([v2.Resize((args.size, args.size)), flip])
         )
         bare = BareLoop(fused._image_refs, fused.boxes, args.margin, args.size)
-        same_decoder = BareLoop(fused._image_refs, fused.boxes, args.margin, args.size, simplejpeg=True)
+        from hpe_cli.io.jpeg import fast_decoder, region_decoder
+
+        fused[0]  # the process's first-image checks, before the decoder in use is read
+        used = "region" if region_decoder() else "simplejpeg" if fast_decoder() == "simplejpeg" else None
+        same_decoder = BareLoop(fused._image_refs, fused.boxes, args.margin, args.size, decoder=used)
         n = len(fused)
         order = [k % n for k in range(args.items)]
         # same pixels: the fused path's crop + resize + flip is the bare loop's, in RGB
@@ -216,16 +270,14 @@ def main(argv=None):
             f"{n} images from {args.images}, {args.items} items, crop {args.margin:g} square, "
             f"resize {args.size}, hflip; median of {args.repeat}; torch threads 1, cv2 threads 1"
         )
-        from hpe_cli.io.jpeg import fast_decoder
-
+        same = same and all(torch.equal(bare[k], same_decoder[k]) for k in range(n)) if used else same
         print(f"fast-path image tensor equal to the bare loop's (values, shape, strides): {same}")
+        how = {"region": "the crop's rectangle of each JPEG (_hpe_jpeg, libjpeg-turbo)", "simplejpeg": "simplejpeg"}
         print(
-            f"HeadPoseDataset decodes JPEGs with {fast_decoder()} (OpenCV's pixels, checked on this process's "
-            "first image); the second row is the bare loop with that decoder"
+            f"HeadPoseDataset decodes {how.get(used, 'with OpenCV')} (OpenCV's pixels, checked on this "
+            "process's first image)" + ("; the second row is the bare loop with that decoder" if used else "")
         )
-        sj_row = [("bare loop, simplejpeg decode", same_decoder, same_decoder.__getitem__)]
-        if fast_decoder() != "simplejpeg":
-            sj_row = []
+        sj_row = [("bare loop, same decoder", same_decoder, same_decoder.__getitem__)] if used else []
         configs = (
             ("bare cv2 loop", bare, bare.__getitem__),
             *sj_row,

@@ -13,7 +13,7 @@ path is taken only where the pixels must be OpenCV's:
 :func:`decode_crop` returns one rectangle of a frame (a training crop): with ``_hpe_jpeg``, a small C
 module over the system's libjpeg-turbo built with the package when its headers are there (``setup.py``), the
 rows above the rectangle are only entropy-decoded, the columns beside it are not transformed and decoding
-stops at its last row: 1.3-1.8x faster than a whole decode on the AFLW2000-3D crops, 2-4x on Panoptic's HD
+stops at its last row: 1.15-1.8x faster than simplejpeg's whole decode on the AFLW2000-3D crops, 2-3x on Panoptic's HD
 frames. The same conditions hold (plain 8-bit YCbCr JPEG, orientation 1, any libjpeg warning sends the image
 to OpenCV), and the first rectangle of each process is compared with OpenCV's whole-frame decode
 (:func:`region_decoder` says whether it is in use).
