@@ -143,9 +143,7 @@ def _picture(h, w, seed=0):
 
 
 SAMPLINGS = [
-    name
-    for name in ("411", "420", "422", "440", "444")
-    if hasattr(cv2, f"IMWRITE_JPEG_SAMPLING_FACTOR_{name}")
+    name for name in ("411", "420", "422", "440", "444") if hasattr(cv2, f"IMWRITE_JPEG_SAMPLING_FACTOR_{name}")
 ]
 
 
