@@ -6,6 +6,8 @@ Makes ``--images`` synthetic 1920x1080 JPEG frames (smooth gradients plus noise,
 
 1. the floor: for each image ``cv2.imdecode`` once, then per head slice + ``cv2.resize`` to SIZE x SIZE +
    ``cv2.imencode`` + write the file (no padding, no labels, no bookkeeping);
+1b. the same floor decoding the way ``hpe export`` does when ``_hpe_jpeg`` is built (only the union of the
+   frame's head boxes, OpenCV's pixels): the floor for the command's own cost;
 2. ``hpe export --layout whenet --square --size SIZE`` with ``--workers 1`` and ``--workers 2``, each in a fresh
    process: the wall time with Python start-up and imports, and the command alone (reading the table, labels,
    rejects, crops, annotation.txt, staging and commit) once its modules are imported.
@@ -32,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # an in-place build of _hpe_jpeg (setup.py build_ext --inplace) sits in the root
 
 
 def make_data(folder: Path, n_images: int, heads: int, seed: int = 0):
@@ -68,7 +71,7 @@ def make_data(folder: Path, n_images: int, heads: int, seed: int = 0):
     return folder / "labels.parquet", rows
 
 
-def floor_loop(folder: Path, rows, size: int, out: Path) -> float:
+def floor_loop(folder: Path, rows, size: int, out: Path, region: bool = False) -> float:
     import cv2
 
     cv2.setNumThreads(1)
@@ -80,10 +83,21 @@ def floor_loop(folder: Path, rows, size: int, out: Path) -> float:
     k = 0
     for image, heads in by_image.items():
         with open(folder / image, "rb") as fh:
-            img = cv2.imdecode(np.frombuffer(fh.read(), np.uint8), cv2.IMREAD_COLOR)
+            data = fh.read()
+        top = left = 0
+        if region:  # the union of the heads' boxes only, as hpe export decodes it
+            import _hpe_jpeg
+
+            xs, ys = [int(r["bbox_x"]) for r in heads], [int(r["bbox_y"]) for r in heads]
+            band, rows_, stride, H, W, top, left, dy, dx = _hpe_jpeg.decode_region(
+                data, min(ys), min(xs), max(ys) + 180, max(xs) + 180, False
+            )
+            img = np.frombuffer(band, np.uint8).reshape(rows_, stride // 3, 3)[dy:, dx:]
+        else:
+            img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
         for r in heads:
             x0, y0 = int(r["bbox_x"]), int(r["bbox_y"])
-            crop = img[max(y0, 0) : y0 + 180, max(x0, 0) : x0 + 180]
+            crop = img[max(y0, 0) - top : y0 + 180 - top, max(x0, 0) - left : x0 + 180 - left]
             crop = cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA)
             ok, buf = cv2.imencode(".jpg", crop, [cv2.IMWRITE_JPEG_QUALITY, 95])
             buf.tofile(str(out / f"{k}.jpg"))
@@ -158,6 +172,16 @@ def main():
             f"floor   bare imdecode+resize+imencode loop: {n / t_floor:8.1f} crops/s  ({t1:.2f} s and {t2:.2f} s, "
             f"peak RSS {rss0 / 1024:.0f} MB)"
         )
+        try:
+            import _hpe_jpeg  # noqa: F401
+        except ImportError:
+            pass
+        else:
+            t3 = floor_loop(tmp / "data", rows, args.size, tmp / "floor3", region=True)
+            print(
+                f"floor   the same, union-of-heads decode:  {n / t3:8.1f} crops/s  ({t3:.2f} s, "
+                f"{t3 / t_floor:.2f}x the floor)"
+            )
         for w, wall, dt, rss in runs:
             print(
                 f"hpe export --workers {w}:  {n / wall:8.1f} crops/s with start-up ({wall:.2f} s, "

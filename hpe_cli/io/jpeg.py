@@ -130,33 +130,64 @@ def _read(path):
         return None
 
 
+def decode_band(data, box, rgb: bool = True):
+    """The part of the integer box ``(x0, y0, x1, y1)`` inside the frame, decoded over that part only:
+    ``(pixels, (top, left), (H, W))`` with ``pixels`` exactly ``cv2.imdecode(data)[top:..., left:...]``, or
+    None when ``_hpe_jpeg`` is not built or in use, or declines the data (then decode the whole frame).
+
+    ``pixels`` is a view of a band a little larger than the box; ``(H, W)`` is the whole frame's size.
+    """
+    mod = _region()
+    x0, y0, x1, y1 = (int(v) for v in box)
+    if mod is None or x1 <= x0 or y1 <= y0:
+        return None
+    raw = data.tobytes() if isinstance(data, np.ndarray) else bytes(data)
+    if raw[:2] != b"\xff\xd8" or _orientation(raw) != 1:
+        return None
+    got = mod.decode_region(raw, y0, x0, y1, x1, rgb)
+    if got is None:
+        return None
+    band, rows, stride, H, W, ry, rx, dy, dx = got
+    pix = np.frombuffer(band, np.uint8).reshape(rows, stride // 3, 3)
+    pix = pix[dy : dy + min(y1, H) - ry, dx : dx + min(x1, W) - rx]
+    if "region_same" not in _STATE:  # the first rectangle of this process, against OpenCV's whole frame
+        ref = _cv2(raw, rgb)
+        ref = None if ref is None else ref[ry : ry + pix.shape[0], rx : rx + pix.shape[1]]
+        _STATE["region_same"] = ref is not None and ref.shape == pix.shape and bool(np.array_equal(ref, pix))
+        if not _STATE["region_same"]:
+            return None
+    return pix, (ry, rx), (H, W)
+
+
+def crop_band(band, box, value=0):
+    """The pixels of the integer box ``(x0, y0, x1, y1)`` from a :func:`decode_band` result, ``value`` outside
+    the frame: what :func:`~hpe_cli.geometry.crop.crop_padded` gives on the whole frame, for any box inside the
+    decoded part (a view when the box lies inside the frame)."""
+    pix, (top, left), (H, W) = band
+    x0, y0, x1, y1 = (int(v) for v in box)
+    sx0, sy0, sx1, sy1 = max(x0, 0), max(y0, 0), min(x1, W), min(y1, H)
+    bottom, right = top + pix.shape[0], left + pix.shape[1]
+    if sx1 > sx0 and sy1 > sy0 and not (top <= sy0 and left <= sx0 and sy1 <= bottom and sx1 <= right):
+        raise ValueError(f"expected a box inside the decoded part {left, top, right, bottom}, got {box}")
+    inner = pix[sy0 - top : sy1 - top, sx0 - left : sx1 - left]
+    if (sx0, sy0, sx1, sy1) == (x0, y0, x1, y1):
+        return inner
+    out = np.full((y1 - y0, x1 - x0, 3), value, dtype=np.uint8)
+    if sx1 > sx0 and sy1 > sy0:
+        out[sy0 - y0 : sy1 - y0, sx0 - x0 : sx1 - x0] = inner
+    return out
+
+
 def decode_crop(data, box, rgb: bool = True):
     """The pixels of the integer box ``(x0, y0, x1, y1)`` (ends exclusive) of encoded ``data``, zeros outside the
     frame: exactly ``crop_padded(decode_image(data, rgb), box)``, or None when the data cannot be decoded.
 
-    JPEGs are decoded over the box only when ``_hpe_jpeg`` is built (see the module's notes); the result is
-    then a view of a band a little larger than the box when the box lies inside the frame.
+    JPEGs are decoded over the box only (:func:`decode_band`) when ``_hpe_jpeg`` is built and in use.
     """
-    raw = data.tobytes() if isinstance(data, np.ndarray) else bytes(data)
-    x0, y0, x1, y1 = (int(v) for v in box)
-    mod = _region()
-    if mod is not None and raw[:2] == b"\xff\xd8" and x1 > x0 and y1 > y0 and _orientation(raw) == 1:
-        got = mod.decode_region(raw, y0, x0, y1, x1, rgb)
-        if got is not None:
-            band, rows, stride, H, W, ry, rx, dy, dx = got
-            pix = np.frombuffer(band, np.uint8).reshape(rows, stride // 3, 3)
-            pix = pix[dy : dy + min(y1, H) - ry, dx : dx + min(x1, W) - rx]
-            if (ry, rx, min(y1, H), min(x1, W)) != (y0, x0, y1, x1):  # the box leaves the frame: zeros outside
-                out = np.zeros((y1 - y0, x1 - x0, 3), np.uint8)
-                out[ry - y0 : ry - y0 + pix.shape[0], rx - x0 : rx - x0 + pix.shape[1]] = pix
-                pix = out
-            if "region_same" not in _STATE:  # the first rectangle of this process, against OpenCV's whole frame
-                ref = _cv2(raw, rgb)
-                ref = None if ref is None else crop_padded(ref, box)
-                _STATE["region_same"] = ref is not None and ref.shape == pix.shape and bool(np.array_equal(ref, pix))
-                return ref
-            return pix
-    img = decode_image(raw, rgb)
+    band = decode_band(data, box, rgb)
+    if band is not None:
+        return crop_band(band, box)
+    img = decode_image(data, rgb)
     return None if img is None else crop_padded(img, box)
 
 

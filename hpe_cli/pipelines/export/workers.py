@@ -10,6 +10,7 @@ import numpy as np
 
 from ...errors import HpeError
 from ...io.images import jpeg_size
+from ...io.jpeg import crop_band, decode_band
 from .options import NO_FILES, NO_VIDEO
 
 _CFG: dict = {}
@@ -33,8 +34,28 @@ def _encode(crop, cfg):
     return buf
 
 
+class _Band:
+    """The part of a frame that a task's heads need, decoded alone (:func:`hpe_cli.io.jpeg.decode_band`):
+    stands in for the decoded frame (``shape`` is the frame's)."""
+
+    def __init__(self, band):
+        self.band = band
+        self.shape = band[2] + (3,)
+
+
+def _band(data, items):
+    """The union of the items' crop boxes of a JPEG, decoded over that union only, or None (decode it all)."""
+    boxes = np.array([it[3] for it in items], dtype=np.int64).reshape(-1, 4)
+    if not len(boxes):
+        return None
+    union = (*boxes[:, :2].min(axis=0).tolist(), *boxes[:, 2:].max(axis=0).tolist())
+    band = decode_band(data, union, rgb=False)  # BGR, as cv2.imdecode(IMREAD_COLOR)
+    return None if band is None else _Band(band)
+
+
 def _process_image(image, data, items, cfg, out):
-    """Crop/encode every item of one decoded image (or copy the file for full frames)."""
+    """Crop/encode every item of one decoded image, or of the part of it they need (a :class:`_Band`), or copy
+    the file for full frames."""
     import cv2
 
     from ...geometry.crop import crop_padded
@@ -69,7 +90,10 @@ def _process_image(image, data, items, cfg, out):
                 wrote_full = True
             out.append((idx, "", W, H, None))
             continue
-        crop = crop_padded(image, box, cfg["pad_value"])
+        if isinstance(image, _Band):
+            crop = crop_band(image.band, box, cfg["pad_value"])
+        else:
+            crop = crop_padded(image, box, cfg["pad_value"])
         if osz is not None and (crop.shape[1], crop.shape[0]) != tuple(osz):
             crop = cv2.resize(
                 crop, tuple(osz), interpolation=cv2.INTER_AREA if osz[0] < crop.shape[1] else cv2.INTER_LINEAR
@@ -181,6 +205,11 @@ def _work_items(task):
             return out
     if not data:
         return [(it[0], "unreadable image (empty file)", -1, -1, None) for it in items]
+    if not cfg["full_frames"]:  # crops only: decode the part of a JPEG that the heads need (OpenCV's pixels)
+        band = _band(data, items)
+        if band is not None:
+            _process_image(band, None, items, cfg, out)
+            return out
     try:
         image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
     except cv2.error:  # OpenCV asserts on some inputs instead of returning None
