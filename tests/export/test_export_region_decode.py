@@ -52,45 +52,22 @@ def test_crops_are_the_same_bytes_with_and_without_the_rectangle_decoder(tmp_pat
         return got
 
     monkeypatch.setattr(workers, "decode_band", counted)
-    monkeypatch.setattr(jpeg, "_STATE", {})
-    fast = tmp_path / "fast"
     extra = ["--form", "crops"] if layout == "6drepnet" else []
-    r = run(
-        "export",
-        pizza,
-        "-o",
-        fast,
-        "--layout",
-        layout,
-        "--images",
-        PIZZA,
-        "-q",
-        "--rejects",
-        tmp_path / "r1.csv",
-        *extra,
-    )
-    assert r.exit_code == 0, r.output
+
+    def export(name, state):
+        monkeypatch.setattr(jpeg, "_STATE", state)
+        out = tmp_path / name
+        r = run("export", pizza, "-o", out, "--layout", layout, "--images", PIZZA, "-q",
+                "--rejects", tmp_path / f"{name}.csv", *extra)  # fmt: skip
+        assert r.exit_code == 0, r.output
+        return out
+
+    fast = export("fast", {})
     assert bands and all(bands)  # every frame was decoded over its heads only
-    monkeypatch.setattr(jpeg, "_STATE", {"region": None})  # as without _hpe_jpeg: whole frames
-    whole = tmp_path / "whole"
-    r = run(
-        "export",
-        pizza,
-        "-o",
-        whole,
-        "--layout",
-        layout,
-        "--images",
-        PIZZA,
-        "-q",
-        "--rejects",
-        tmp_path / "r2.csv",
-        *extra,
-    )
-    assert r.exit_code == 0, r.output
+    whole = export("whole", {"region": None})  # as without _hpe_jpeg: whole frames
     a, b = _files(fast), _files(whole)
     assert json.loads(a.pop("export.json"))["exported"] == json.loads(b.pop("export.json"))["exported"] > 0
-    assert (tmp_path / "r1.csv").read_bytes() == (tmp_path / "r2.csv").read_bytes()  # frames missing: rejects
+    assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "whole.csv").read_bytes()  # frames missing: rejects
     assert a.keys() == b.keys() and len(a) >= 2
     for k in a:
         if k.endswith(".npz"):  # a zip: its members' dates may differ, the arrays may not
