@@ -272,9 +272,19 @@ def record_temps(d: Path, temps) -> None:
 _LOCKS: dict = {}
 
 
-def lock_parts(d: Path, output) -> None:
+def _make(d: Path) -> bool:
+    """Make the folder ``d`` (and its parents): True if this call made it, False if it was there."""
+    try:
+        d.mkdir(parents=True)
+    except FileExistsError:
+        return False
+    return True
+
+
+def lock_parts(d: Path, output) -> bool:
     """Create (if needed) and lock the parts folder ``d`` for this run, or fail at once with one line if
     another run holds it (two runs writing one output: one goes on, the other stops here, nothing mixed).
+    Returns True when this run made the folder it locked (False: it was there, left by an earlier run).
 
     The lock is ``flock`` on the folder itself; a folder removed and made again by the other run meanwhile
     is detected (inode changed) and locked afresh."""
@@ -283,18 +293,17 @@ def lock_parts(d: Path, output) -> None:
     try:
         import fcntl
     except ImportError:  # no flock on this platform: runs are not protected from each other
-        d.mkdir(parents=True, exist_ok=True)
-        return
+        return _make(d)
     held = _LOCKS.get(str(d))
     if held is not None:  # this process holds it already (the lock keeps other processes out)
         try:
             if os.stat(d).st_ino == os.fstat(held).st_ino:
-                return
+                return False
         except FileNotFoundError:
             pass
         unlock_parts(d)
     for _ in range(100):
-        d.mkdir(parents=True, exist_ok=True)
+        made = _make(d)
         try:
             fd = os.open(d, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
         except FileNotFoundError:
@@ -313,7 +322,7 @@ def lock_parts(d: Path, output) -> None:
             same = False
         if same:
             _LOCKS[str(d)] = fd
-            return
+            return made
         os.close(fd)
     raise HpeError(f"{d}: cannot lock the parts folder (it keeps being replaced by another run)")
 
@@ -332,8 +341,9 @@ def _prepare_parts(plans, cfg, fmt, output, resume: bool, overwrite: bool = Fals
     d = parts_dir_for(output)
     fp = _fingerprint(plans, cfg, fmt)
     run_file = d / "run.json"
-    existed = d.exists()
-    lock_parts(d, output)
+    # whether the folder was there is read when it is locked, not before: another run may end (and remove its
+    # parts folder) between a look before the lock and the lock, and this run then makes a new one
+    existed = not lock_parts(d, output)
     try:
         # with the lock no other run is writing this output: one that ended just now may have placed it
         if not overwrite and Path(output).exists():

@@ -320,3 +320,30 @@ def test_corrupt_header_in_the_middle_is_an_error(seqs, tmp_path):
     tar.write_bytes((seqs / "tar" / "seqA" / "hdFace3d.tar").read_bytes()[: refs[-1].offset - 512])
     with pytest.raises(HpeError, match="without tar's end-of-archive blocks"):
         pan.tar_frames(tar)
+
+
+def test_a_run_that_ends_between_a_look_and_the_lock_leaves_no_parts_folder(seqs, tmp_path, monkeypatch):
+    """Two runs, one output (seen in CI): run B sees A's parts folder, A places the output and removes its folder,
+    then B makes a folder of its own and locks it. B must fail with 'already exists' and remove the folder it
+    made, not keep it as if it were an interrupted run's (whether the folder was there is read at the lock)."""
+    from hpe_cli.pipelines import panoptic_parts
+
+    plans = job.plan_many([seqs / "tar" / "seqA"], chunk_frames=4)
+    cfg = job.Config(landmarks=False)
+    out = tmp_path / "o.parquet"
+    d = job.parts_dir_for(out)
+    d.mkdir()  # run A's parts folder, there when B looks
+    real = panoptic_parts._make
+
+    def a_ends_first(folder):
+        shutil.rmtree(d)  # A: done, output placed, its parts folder removed
+        out.write_bytes(b"A's output")
+        return real(folder)  # B makes a new folder
+
+    monkeypatch.setattr(panoptic_parts, "_make", a_ends_first)
+    for resume in (True, False):
+        d.mkdir(exist_ok=True)
+        out.unlink(missing_ok=True)
+        with pytest.raises(HpeError, match="already exists"):
+            job._prepare_parts(plans, cfg, "table", out, resume=resume)
+        assert not d.exists() and out.read_bytes() == b"A's output"
