@@ -7,6 +7,7 @@ import click
 from .options import (
     SYSTEM,
     batch_option,
+    columns_option,
     echo_summary,
     output_option,
     overwrite_option,
@@ -57,14 +58,7 @@ from .table_options import column_options
     help="near_gimbal: the middle angle within this many degrees of its gimbal lock.",
 )
 @radians_option()
-@click.option(
-    "--columns",
-    "use",
-    type=click.Choice(["auto", "angles", "matrix"]),
-    default="auto",
-    show_default=True,
-    help="Audit pitch,yaw,roll or r00..r22 (auto: angles when present).",
-)
+@columns_option("Audit pitch,yaw,roll or r00..r22 (auto: angles when present).")
 @click.option(
     "--key",
     "keys",

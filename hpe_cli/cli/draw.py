@@ -6,12 +6,14 @@ import click
 
 from .options import (
     SYSTEM,
+    columns_option,
     deprecated_spellings,
     echo_summary,
     image_size_option,
     overwrite_option,
     progress,
-    radians_option,  # the one spelling of input angle units
+    radians_option,
+    # the one spelling of input angle units
     rejects_options,
     verbosity_options,
 )
@@ -55,14 +57,7 @@ from .table_options import column_options
     "images. The old --canvas WxH still works, with a warning.",
 )
 @radians_option()
-@click.option(
-    "--columns",
-    "use",
-    type=click.Choice(["auto", "angles", "matrix"]),
-    default="auto",
-    show_default=True,
-    help="Draw from pitch,yaw,roll or r00..r22 (auto: angles when present).",
-)
+@columns_option("Draw from pitch,yaw,roll or r00..r22 (auto: angles when present).")
 @click.option(
     "--length",
     type=click.FloatRange(0, min_open=True),

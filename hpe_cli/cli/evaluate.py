@@ -7,6 +7,7 @@ import click
 from .options import (
     SYSTEM,
     batch_option,
+    columns_option,
     echo_summary,
     output_option,
     overwrite_option,
@@ -153,14 +154,7 @@ def _split_keys(ctx, param, value):
     "numbers always use all pairs.",
 )
 @rejects_options
-@click.option(
-    "--columns",
-    "use",
-    type=click.Choice(["auto", "angles", "matrix"]),
-    default="auto",
-    show_default=True,
-    help="Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).",
-)
+@columns_option("Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).")
 @click.option("--pred-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for PRED.")
 @click.option("--gt-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for GT.")
 @radians_option()

@@ -230,6 +230,61 @@ def image_size_option(*names, help="Width and height of the images, in pixels, a
 RADIANS_HELP = "Angle columns of the input are in radians (default: degrees; hpe always writes degrees)."
 
 
+def columns_option(help: str):
+    """``--columns auto|angles|matrix`` (parameter ``use``): which label columns a command reads."""
+    return click.option(
+        "--columns",
+        "use",
+        type=click.Choice(["auto", "angles", "matrix"]),
+        default="auto",
+        show_default=True,
+        help=help,
+    )
+
+
+def label_frame_option(f):
+    """``--frame camera|crop`` (parameter ``label_frame``) of the relabelling commands."""
+    return click.option(
+        "--frame",
+        "label_frame",
+        type=click.Choice(["camera", "crop"]),
+        default="camera",
+        show_default=True,
+        help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
+        "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.",
+    )(f)
+
+
+def label_system_option(whose: str):
+    """``--system`` of the relabelling commands (default 300w_lp; whenet for the formats storing ``whose`` angles)."""
+    return click.option(
+        "--system",
+        "system",
+        type=SYSTEM,
+        default=None,
+        help="Rotation system of the labels: built-in name or .toml file "
+        f"[default: 300w_lp; whenet for --format coco/whenet, which store {whose} angles].",
+    )
+
+
+_PRESETS = {
+    "whenet": "whenet (radius 22, aspect <= 2)",
+    "directmhp": "directmhp (radius 18, aspect < 1.5, each side < 70% of the image)",
+}
+
+
+def preset_option(default: str):
+    """``--preset whenet|directmhp``: the helmet radius and box rule, ``default`` first."""
+    order = [default] + [p for p in _PRESETS if p != default]
+    return click.option(
+        "--preset",
+        type=click.Choice(order),
+        default=default,
+        show_default=True,
+        help=f"Helmet radius and box rule: {_PRESETS[order[0]]} or {_PRESETS[order[1]]}.",
+    )
+
+
 def radians_option(help: str = RADIANS_HELP):
     """``--radians``: the one spelling of input angle units."""
     return click.option("--radians", is_flag=True, help=help)

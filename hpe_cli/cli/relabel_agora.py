@@ -11,10 +11,13 @@ from .options import (
     format_from_suffix,
     format_option,
     image_size_option,
+    label_frame_option,
+    label_system_option,
     max_rmse_option,
     non_negative_or_inf,
     output_option,
     overwrite_option,
+    preset_option,
     progress,
     rejects_options,
     verbosity_options,
@@ -25,14 +28,7 @@ from .options import (
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("dataframes", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
 @output_option(help="Output: a .parquet/.csv table, or with --format coco a .json, with --format whenet a .txt.")
-@click.option(
-    "--system",
-    "system",
-    type=SYSTEM,
-    default=None,
-    help="Rotation system of the labels: built-in name or .toml file "
-    "[default: 300w_lp; whenet for --format coco/whenet, which store DirectMHP's/WHENet's angles].",
-)
+@label_system_option("DirectMHP's/WHENet's")
 @format_option
 @image_size_option(
     default="3840x2160",
@@ -41,14 +37,7 @@ from .options import (
     "camK (and so the boxes and 2-D points) is rescaled from the size the dataframe was built for "
     "(read from camK's principal point, which AGORA puts at the image centre).",
 )
-@click.option(
-    "--preset",
-    type=click.Choice(["directmhp", "whenet"]),
-    default="directmhp",
-    show_default=True,
-    help="Helmet radius and box rule: directmhp (radius 18, aspect < 1.5, each side < 70% of the "
-    "image) or whenet (radius 22, aspect <= 2).",
-)
+@preset_option("directmhp")
 @max_rmse_option("m", 2, "DirectMHP used no threshold: inf")
 @click.option(
     "--max-occlusion",
@@ -65,15 +54,7 @@ from .options import (
     help="Label with DirectMHP's chain, which is WHENet's (compound, Z-Y-X decomposition, "
     "select_euler, negation), and drop what it drops; adds legacy_pitch/yaw/roll columns.",
 )
-@click.option(
-    "--frame",
-    "label_frame",
-    type=click.Choice(["camera", "crop"]),
-    default="camera",
-    show_default=True,
-    help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
-    "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.",
-)
+@label_frame_option
 @click.option(
     "--trust-pickle",
     is_flag=True,

@@ -9,9 +9,12 @@ from .options import (
     echo_summary,
     format_from_suffix,
     format_option,
+    label_frame_option,
+    label_system_option,
     max_rmse_option,
     output_option,
     overwrite_option,
+    preset_option,
     progress,
     rejects_options,
     verbosity_options,
@@ -26,22 +29,8 @@ from .options import (
     type=click.Path(exists=True, dir_okay=False),
     help="Calibration JSON [default: SEQ_DIR/calibration_<seq>.json].",
 )
-@click.option(
-    "--system",
-    "system",
-    type=SYSTEM,
-    default=None,
-    help="Rotation system of the labels: built-in name or .toml file "
-    "[default: 300w_lp; whenet for --format coco/whenet, which store WHENet's angles].",
-)
-@click.option(
-    "--preset",
-    type=click.Choice(["whenet", "directmhp"]),
-    default="whenet",
-    show_default=True,
-    help="Helmet radius and box rule: whenet (radius 22, aspect <= 2) or directmhp (radius 18, "
-    "aspect < 1.5, each side < 70% of the image).",
-)
+@label_system_option("WHENet's")
+@preset_option("whenet")
 @format_option
 @click.option(
     "--cameras",
@@ -73,15 +62,7 @@ from .options import (
     "kept for the same sequence, person and camera; the others go to the rejects.",
 )
 @click.option("--all-views", is_flag=True, help="Keep a face in a frame only if every selected camera labels it.")
-@click.option(
-    "--frame",
-    "label_frame",
-    type=click.Choice(["camera", "crop"]),
-    default="camera",
-    show_default=True,
-    help="camera: labels relative to the camera's optical axis; crop: relative to the line of sight "
-    "to the head centre, as a network sees a crop (adds ray_angle). See docs/label_frames.md.",
-)
+@label_frame_option
 @click.option("--no-landmarks", is_flag=True, help="Leave out the 140 projected landmark columns (faster).")
 @click.option(
     "--workers",
