@@ -159,7 +159,7 @@ def run_draw(
     pose_para = is_mat or {"tdz", "scale"} <= set(src.columns)
     flip = tdy_origin == "bottom" or (tdy_origin == "auto" and pose_para)
     frame, A, angles, reasons, lines = _read_all(src, mode, radians, system)
-    where = row_namer(src, lines, frame)
+    where = row_namer(src, lines)
     n = len(frame)
     if n == 0:
         raise HpeError(f"{src.path}: empty table (no rows)")

@@ -161,24 +161,21 @@ def _safe_relative(name, where):
     return rel
 
 
-def row_namer(src, lines, frame=None):
-    """``f(i)`` naming 0-based row ``i`` of ``src`` as its error messages do: ``FILE: line N`` for text
-    (1-based, header = line 1), the ``.mat`` file itself for a ``.mat`` folder, ``FILE: row N`` (1-based)
-    otherwise."""
-    if frame is not None and Path(src.path).is_dir() and "file" in frame.columns:
-        files = frame["file"].tolist()
-        return lambda i: f"{Path(src.path) / str(files[i])}"
-    if src.kind == "csv" and lines is not None:
-        return lambda i: f"{src.path}: line {int(lines[i])}"
-    return lambda i: f"{src.path}: row {int(i) + 1}"
+def row_namer(src, lines):
+    """``f(i)`` naming 0-based row ``i`` of ``src`` as every message does (:meth:`TableSource.where
+    <hpe_cli.io.table_source.TableSource.where>` of its line number): ``FILE: line N`` for text (1-based,
+    header = line 1), the ``.mat`` file itself for a ``.mat`` folder, ``FILE: row N`` (1-based) otherwise."""
+    if lines is None:
+        return lambda i: f"{src.path}: row {int(i) + 1}"
+    return lambda i: src.where(lines[i])
 
 
 def row_numbers(src, lines, idx):
-    """The numbers :func:`row_namer` prints for 0-based rows ``idx`` (for a rejects file's ``row`` column)."""
+    """The numbers :func:`row_namer` names for 0-based rows ``idx`` (a rejects file's ``row`` column)."""
     import numpy as np
 
     idx = np.asarray(idx, dtype=np.int64)
-    return np.asarray(lines, dtype=np.int64)[idx] if src.kind == "csv" and lines is not None else idx + 1
+    return idx + 1 if lines is None else np.asarray(lines, dtype=np.int64)[idx]
 
 
 def _read_image(path):
