@@ -5,7 +5,6 @@ row is named in messages, and reading/writing the pictures. Shared by :mod:`.dra
 
 from __future__ import annotations
 
-
 #: 300W-LP/AFLW2000 Pose_Para: line length = this many Basel-Face-Model units times ``scale``.
 #: The model is in micrometres and its origin is the centre of the head (the nose tip is
 #: about 130 mm in front of it, the outer eye corners 43 mm to each side).
