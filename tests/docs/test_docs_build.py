@@ -114,3 +114,20 @@ def test_no_internal_design_notes_cited():
         assert "SPEC" not in page.read_text(encoding="utf-8"), page
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     assert "SPEC" not in readme
+
+
+def test_the_site_loads_nothing_from_the_network(built):
+    """Formulas render offline: MathJax is shipped with the site (docs/js/mathjax, unchanged from npm), no page
+    asks a CDN for a script, a style sheet or a font."""
+    import re
+
+    p, site, _, _ = built
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert (site / "js" / "mathjax" / "tex-chtml.js").stat().st_size > 500_000
+    fonts = list((site / "js" / "mathjax" / "output" / "chtml" / "fonts" / "woff-v2").glob("*.woff"))
+    assert len(fonts) >= 20  # MathJax's CHTML fonts, found next to the script
+    remote = re.compile(r"<(?:script|link)\b[^>]*\b(?:src|href)=\"(https?:)?//[^\"]+\"")
+    for page in ("maths/index.html", "atlas/index.html", "index.html"):
+        html = (site / page).read_text(encoding="utf-8")
+        assert "js/mathjax/tex-chtml.js" in html, page
+        assert not remote.findall(html), (page, remote.findall(html))
