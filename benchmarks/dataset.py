@@ -26,7 +26,8 @@ canonical, gimbal lock, undefined flag) after the flip, the box and the 68 landm
 
 - ``size=S, hflip=1``: crop, resize and flip in the decode step (OpenCV), the pose from
   the mirrored-pose table: the fast path, same pixels as the bare loop (checked);
-- ``size=S`` + ``transform=T.RandomHorizontalFlip(p=1)`` (torchvision v2 dispatch for the flip);
+- ``size=S`` + ``transform=T.RandomHorizontalFlip(p=1)`` (a 6DRepNet-style recipe: the dataset takes a
+  leading hpe flip over into the decode step, so this runs as the fast path);
 - ``transform=v2.Compose([v2.Resize((S, S)), T.RandomHorizontalFlip(p=1)])`` (torchvision's
   antialiased uint8 resize, a different filter from ``cv2.resize``).
 

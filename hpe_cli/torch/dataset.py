@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from torchvision import tv_tensors
+from torchvision.transforms import v2
 
 from ..errors import HpeError
 from ..rotation.systems import get_system
@@ -95,6 +96,10 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         "landmarks": KeyPoints (1, L, 2), "pose": HeadPose (1, 3, 3)}`` (absent keys
         omitted) after the crop; a ``torchvision.transforms.v2`` pipeline moves all of
         them together (use :mod:`hpe_cli.torch.transforms` flips for landmark re-indexing).
+        A :class:`hpe_cli.torch.transforms.RandomHorizontalFlip` that is the transform, or
+        comes first in a ``v2.Compose``, is done in the decode step as ``hflip`` does (same
+        pixels, poses to float rounding, the same ``torch.rand`` draw per sample), about
+        twice as fast; the rest of the pipeline runs as given.
     landmarks : str or None
         Column prefix of the 2-D landmarks: ``"lm"`` (``lm{i}_x``; for ``.mat`` input
         ``pt2d``) or ``"lm3d"`` (``.mat`` input: the x, y rows of ``pt3d_68``); None: no
@@ -180,6 +185,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         if not 0.0 <= self.hflip <= 1.0:
             raise ValueError(f"expected hflip a probability in [0, 1], got {hflip!r}")
         self.transform = transform
+        self._transform, self._draws = transform, False  # what runs after the crop; v2's flip draw kept
         self.dtype = dtype
         table, found, source, parquet = _load_table(labels, landmarks)
         src_system = get_system(label_system) if label_system is not None else found
@@ -211,13 +217,17 @@ class HeadPoseDataset(torch.utils.data.Dataset):
                     f"{source}: crop= needs bbox_x, bbox_y, bbox_w, bbox_h or landmark columns, found neither"
                 )
             self._rects = crop_rects(self.boxes, points, self.crop, self.square)
+        peeled = _leading_flip(transform, self.hflip, self.landmarks)
+        if peeled is not None:  # hpe's RandomHorizontalFlip first in transform: done in the decode step instead
+            self._transform, self.hflip, flip_scheme = peeled
+            self._draws = True
         self._perm = None
         if self.hflip > 0 and self.landmarks is not None:
             self._perm = _perm_for(flip_scheme, self.landmarks.shape[1])
         self._paths = None if self._image_refs is None else _join_paths(self.images_root, self._image_refs)
         self._place_all()
         self._poses = PoseOutputs(self.canonical, self.system, dtype)
-        flips = [f for f, can in ((False, self.hflip < 1), (True, self.hflip > 0)) if can and transform is None]
+        flips = [f for f, can in ((False, self.hflip < 1), (True, self.hflip > 0)) if can and self._transform is None]
         self._rows = PackedRows(self._poses, self._placed, *self._tabled(), self._perm, flips=flips)
         self._n = n
         self._pf = None
@@ -355,21 +365,28 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             box, lm = flip_geometry(box, lm, width, self._perm)
         return box, lm
 
+    def _flip(self) -> bool:
+        """Whether this sample is flipped: ``torch.rand`` below ``hflip``. A flip taken over from ``transform``
+        draws as ``v2.RandomHorizontalFlip`` does, for every sample (so later random transforms draw the same)."""
+        if self._draws:
+            return float(torch.rand(())) < self.hflip
+        return self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
+
     def _prepare(self, i, flip=None, pixels=None):
         """``(partial output, i, A after the transform (None: the table's), undefined flag, flipped)``."""
         if flip is None:
-            flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
+            flip = self._flip()
         pix, origin, scale, note = self._pixels(i, flip) if pixels is None else pixels
         image = to_tensor(pix)
         canvas = tuple(pix.shape[:2])
         box, lm = self._geometry(i, origin, scale, canvas[1], flip)
         pose = None
-        if note is not None or self.transform is not None:
+        if note is not None or self._transform is not None:
             A = self._poses.mirrored(i) if flip else self._poses.A[i : i + 1]
             pose = HeadPose(A, canvas_size=canvas, on_undefined=self.on_undefined)
             if note is not None:
                 pose = no_exact_pose(pose, note)
-        if self.transform is None:
+        if self._transform is None:
             out = {"image": image}
             if box is not None:
                 out["box"] = torch.from_numpy(box.astype(self._poses.np_dtype))
@@ -383,7 +400,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             sample["box"] = tv_tensors.BoundingBoxes(torch.from_numpy(box[None]), format="XYWH", canvas_size=canvas)
         if lm is not None:
             sample["landmarks"] = tv_tensors.KeyPoints(torch.from_numpy(lm[None]), canvas_size=canvas)
-        sample = self.transform(sample)
+        sample = self._transform(sample)
         pose = sample["pose"]
         out = {"image": sample["image"]}
         if "box" in sample:
@@ -404,9 +421,9 @@ class HeadPoseDataset(torch.utils.data.Dataset):
 
     def _sample(self, i):
         """The finished sample dict of row ``i`` when its outputs are tabled, else ``_prepare``'s tuple."""
-        if self.transform is not None:
+        if self._transform is not None:
             return self._prepare(i)
-        flip = self.hflip > 0 and (self.hflip >= 1 or float(torch.rand(())) < self.hflip)
+        flip = self._flip()
         pix, origin, scale, note = self._pixels(i, flip)
         out = None if note is not None else self._rows.sample(i, flip, to_tensor(pix))
         return self._prepare(i, flip, (pix, origin, scale, note)) if out is None else out
@@ -422,3 +439,31 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         for k, out in zip(todo, self._finish([got[k] for k in todo]) if todo else ()):
             got[k] = out
         return got
+
+
+def _leading_flip(transform, hflip: float, landmarks):
+    """``(the rest of transform or None, p, scheme)`` when ``transform`` is, or starts with (``v2.Compose``),
+    :class:`hpe_cli.torch.transforms.RandomHorizontalFlip` and ``hflip`` is 0; else None.
+
+    That flip is then done in the decode step, as ``hflip=p`` does (``cv2.flip``, the mirrored-pose table):
+    the same pixels, poses to float rounding, the same random draws, without torchvision's dispatch per sample.
+    Not when the landmarks fit no permutation of its ``scheme`` (the flip then raises as it would in v2).
+    """
+    from .transforms import RandomHorizontalFlip
+
+    if hflip or transform is None:
+        return None
+    first, rest = transform, None
+    if isinstance(transform, v2.Compose):
+        if not transform.transforms:
+            return None
+        first, more = transform.transforms[0], list(transform.transforms[1:])
+        rest = v2.Compose(more) if more else None
+    if type(first) is not RandomHorizontalFlip:
+        return None
+    if landmarks is not None:
+        try:
+            _perm_for(first.scheme, landmarks.shape[1])
+        except ValueError:
+            return None
+    return rest, float(first.p), first.scheme

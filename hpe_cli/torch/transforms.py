@@ -467,6 +467,7 @@ class PermuteLandmarks(v2.Transform):
 class _MirrorAware:
     def __init__(self, p: float = 0.5, scheme="auto"):
         super().__init__(p)
+        self.scheme = scheme
         self._permute = PermuteLandmarks(scheme)
 
     def transform(self, inpt, params):

@@ -209,3 +209,49 @@ def test_policy_on_cuda_poses():
     A = angles_to_canonical(torch.tensor([[10.0, 30.0, 5.0]], dtype=torch.float64), "300w_lp").cuda()
     out = F.resized_crop(HeadPose(A, canvas_size=(64, 64), on_undefined="drop"), 0, 0, 40, 20, [32, 32])
     assert out.is_cuda and out.undefined and out.isnan().all()
+
+
+class _NotTakenOver(T.RandomHorizontalFlip):
+    """The same flip as a subclass: the dataset leaves subclasses to torchvision (the reference path)."""
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.0])
+@pytest.mark.parametrize("then", ["nothing", "rotation"])
+def test_a_leading_flip_in_transform_is_done_in_the_decode_step(tmp_path, p, then):
+    """``transform=T.RandomHorizontalFlip(p)`` (alone or first in ``v2.Compose``) runs as ``hflip=p``: the same
+    images, poses to float rounding, and the same random draws, so a random transform after it draws alike."""
+    path, df, _ = _labels(tmp_path)
+
+    def make(cls):
+        flip = cls(p=p, scheme=PERM)
+        t = flip if then == "nothing" else v2.Compose([flip, v2.RandomRotation(30)])
+        return HeadPoseDataset(path, system="6drepnet", crop=0.3, size=48, transform=t)
+
+    fast, slow = make(T.RandomHorizontalFlip), make(_NotTakenOver)
+    assert fast.hflip == p and (fast._transform is None) == (then == "nothing")  # taken over
+    assert slow.hflip == 0 and slow._transform is slow.transform  # left to torchvision
+    for seed in (0, 1):
+        torch.manual_seed(seed)
+        a = [fast[k] for k in range(len(df))] + fast.__getitems__(list(range(len(df))))
+        torch.manual_seed(seed)
+        b = [slow[k] for k in range(len(df))] + slow.__getitems__(list(range(len(df))))
+        for x, y in zip(a, b):
+            assert torch.equal(x["image"], y["image"])
+            for key in ("matrix", "angles", "canonical", "box", "landmarks"):
+                assert torch.allclose(x[key], y[key], atol=1e-5, rtol=0), key
+            assert x["gimbal_lock"] == y["gimbal_lock"] and x["pose_undefined"] == y["pose_undefined"]
+    torch.manual_seed(3)
+    [fast[k] for k in range(4)]
+    after_fast = torch.rand(())
+    torch.manual_seed(3)
+    [slow[k] for k in range(4)]
+    assert torch.rand(()) == after_fast  # one draw per sample on both paths, p = 1 included
+
+
+def test_a_flip_not_first_or_with_hflip_stays_in_torchvision(tmp_path):
+    path, _, _ = _labels(tmp_path)
+    flip = T.RandomHorizontalFlip(p=1.0, scheme=PERM)
+    later = HeadPoseDataset(path, crop=0.3, size=48, transform=v2.Compose([v2.RandomRotation(5), flip]))
+    both = HeadPoseDataset(path, crop=0.3, size=48, hflip=0.5, flip_scheme=PERM, transform=flip)
+    assert later.hflip == 0 and later._transform is later.transform
+    assert both.hflip == 0.5 and both._transform is flip
