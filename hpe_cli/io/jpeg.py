@@ -10,13 +10,14 @@ path is taken only where the pixels must be OpenCV's:
 * the first JPEG this process decodes is decoded both ways and compared: if they differ in one byte, every
   later image goes to OpenCV (:func:`fast_decoder` says which decoder is in use).
 
-:func:`decode_crop` returns one rectangle of a frame (a training crop): with ``_hpe_jpeg``, a small C
-module over the system's libjpeg-turbo built with the package when its headers are there (``setup.py``), the
-rows above the rectangle are only entropy-decoded, the columns beside it are not transformed and decoding
-stops at its last row: 1.15-1.8x faster than simplejpeg's whole decode on the AFLW2000-3D crops, 2-3x on Panoptic's HD
-frames. The same conditions hold (plain 8-bit YCbCr JPEG, orientation 1, any libjpeg warning sends the image
-to OpenCV), and the first rectangle of each process is compared with OpenCV's whole-frame decode
-(:func:`region_decoder` says whether it is in use).
+:func:`decode_crop` returns one rectangle of a frame (a training crop), :func:`decode_band` the part of a
+frame that several crops need. With ``_hpe_jpeg``, a small C module over the system's libjpeg-turbo built
+with the package when its headers are there (``setup.py``), the rows above the rectangle are only
+entropy-decoded, the columns beside it are not transformed and decoding stops at its last row: 1.15-1.8x
+faster than simplejpeg's whole decode on the AFLW2000-3D crops, 2-3x on Panoptic's HD frames. The same
+conditions hold (plain 8-bit YCbCr JPEG, orientation 1, any libjpeg warning sends the image to OpenCV), and
+the first rectangle of each process is compared with OpenCV's whole-frame decode (:func:`region_decoder`
+says whether it is in use).
 """
 
 from __future__ import annotations
