@@ -140,8 +140,8 @@ def decode_band(data, box, rgb: bool = True):
     """
     mod = _region()
     x0, y0, x1, y1 = (int(v) for v in box)
-    if mod is None or x1 <= x0 or y1 <= y0:
-        return None
+    if mod is None or x1 <= x0 or y1 <= y0 or max(abs(x0), abs(y0), abs(x1), abs(y1)) >= 1 << 30:
+        return None  # (a box beyond C int range: the whole-frame path crops it)
     raw = data.tobytes() if isinstance(data, np.ndarray) else bytes(data)
     if raw[:2] != b"\xff\xd8" or _orientation(raw) != 1:
         return None

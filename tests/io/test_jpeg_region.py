@@ -205,6 +205,8 @@ def test_grey_damaged_truncated_and_turned_jpegs_are_opencvs():
         else:
             assert np.array_equal(got, crop_padded(want, box)), name
     assert jpeg.decode_crop(b"not an image", (0, 0, 4, 4)) is None
+    far = (2**40, 10, 2**40 + 3, 12)  # beyond C int: the whole-frame path, zeros
+    assert np.array_equal(jpeg.decode_crop(colour, far), np.zeros((2, 3, 3), np.uint8))
     assert jpeg.read_crop("/no/such/file.jpg", (0, 0, 4, 4)) is None
 
 
