@@ -14,14 +14,19 @@
  * The rectangle [top, bottom) x [left, right) is clipped to the H x W frame, giving [y0, y0 + h) x [x0, x0 + w);
  * the bytearray holds `rows` rows of `stride` bytes (3 per pixel) and the clipped rectangle starts at row dy,
  * pixel dx of it. None (the caller then decodes the whole frame with OpenCV) when the clipped rectangle is
- * empty, when the data is not an 8-bit Huffman-coded 3-component YCbCr JPEG without an Adobe marker, or when
- * libjpeg reports any error or warning (corrupt or truncated data).
+ * empty, when the data is not an 8-bit Huffman-coded 3-component YCbCr JPEG without an Adobe marker, when the
+ * frame has more pixels than OpenCV decodes, when the band does not fit in memory, or when libjpeg reports any
+ * error or warning (corrupt or truncated data).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <setjmp.h>
 #include <stdio.h>
 #include <jpeglib.h>
+
+/* OpenCV's own limit on a decoded image (CV_IO_MAX_IMAGE_PIXELS, 2^30 by default): a larger frame is left
+ * to OpenCV, which refuses it, whatever the rectangle asked for */
+#define HPE_MAX_PIXELS (1LL << 30)
 
 struct hpe_err {
     struct jpeg_error_mgr pub;
@@ -85,7 +90,8 @@ static PyObject *decode_region(PyObject *self, PyObject *args)
     h = imin(bottom, H) - y0;
     w = imin(right, W) - x0;
     if (h <= 0 || w <= 0 || cinfo.num_components != 3 || cinfo.data_precision != 8 || cinfo.arith_code ||
-        cinfo.saw_Adobe_marker || cinfo.jpeg_color_space != JCS_YCbCr || jerr.pub.num_warnings) {
+        cinfo.saw_Adobe_marker || cinfo.jpeg_color_space != JCS_YCbCr || jerr.pub.num_warnings ||
+        (long long)H * W > HPE_MAX_PIXELS) {
         jpeg_destroy_decompress(&cinfo);
         PyBuffer_Release(&buf);
         Py_RETURN_NONE;
@@ -110,11 +116,12 @@ static PyObject *decode_region(PyObject *self, PyObject *args)
     nrows = y0 + h - dy0;
     out = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)nrows * stride);
     ptrs = out ? (JSAMPROW *)PyMem_Malloc(sizeof(JSAMPROW) * (size_t)nrows) : NULL;
-    if (!ptrs) {
+    if (!ptrs) { /* no memory for the band: declined, like any other frame this module does not decode */
+        PyErr_Clear();
         jpeg_destroy_decompress(&cinfo);
         Py_XDECREF(out);
         PyBuffer_Release(&buf);
-        return PyErr_NoMemory();
+        Py_RETURN_NONE;
     }
     dst = (unsigned char *)PyByteArray_AS_STRING(out);
     for (k = 0; k < nrows; k++)

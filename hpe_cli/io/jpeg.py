@@ -82,7 +82,10 @@ def _cv2(data, rgb: bool):
     if flag is None:
         raise ValueError("expected OpenCV >= 4.10 for RGB decoding (cv2.IMREAD_COLOR_RGB)")
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
-    return cv2.imdecode(buf, flag) if buf.size else None
+    try:
+        return cv2.imdecode(buf, flag) if buf.size else None
+    except cv2.error:  # OpenCV asserts instead of returning None on some inputs (a frame over its pixel limit)
+        return None
 
 
 def fast_decoder() -> str:

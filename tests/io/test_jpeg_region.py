@@ -210,6 +210,19 @@ def test_grey_damaged_truncated_and_turned_jpegs_are_opencvs():
     assert jpeg.read_crop("/no/such/file.jpg", (0, 0, 4, 4)) is None
 
 
+def test_a_frame_over_opencvs_pixel_limit_is_declined_and_not_decoded():
+    """A header claiming 40000 x 40000 pixels (more than OpenCV's 2^30): the module declines before allocating,
+    and OpenCV's refusal (it asserts) is 'cannot decode' (None), not an exception."""
+    mod = _module()
+    ok, enc = cv2.imencode(".jpg", _picture(64, 64))
+    data = bytearray(enc.tobytes())
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5 : sof + 9] = (40000).to_bytes(2, "big") * 2
+    data = bytes(data)
+    assert mod.decode_region(data, 0, 0, 10, 10, True) is None
+    assert jpeg.decode_crop(data, (0, 0, 10, 10)) is None and jpeg.decode_image(data) is None
+
+
 def test_a_truncated_frame_is_declined_where_libjpeg_warns():
     """Rows above the cut decode (no warning yet); a box reaching past it is declined (libjpeg warns)."""
     mod = _module()
