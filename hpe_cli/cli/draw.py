@@ -12,8 +12,7 @@ from .options import (
     image_size_option,
     overwrite_option,
     progress,
-    radians_option,
-    # the one spelling of input angle units
+    radians_option,  # the one spelling of input angle units
     rejects_options,
     verbosity_options,
 )

@@ -59,6 +59,15 @@ def _orientation(data: bytes) -> int:
     return 1
 
 
+def _upright_jpeg(raw: bytes) -> bool:
+    """A JPEG (``FF D8`` first) with no EXIF orientation other than 1: one whose pixels OpenCV does not turn."""
+    return raw[:2] == b"\xff\xd8" and _orientation(raw) == 1
+
+
+def _bytes(data) -> bytes:
+    return data.tobytes() if isinstance(data, np.ndarray) else bytes(data)
+
+
 def _tiff_orientation(t: bytes) -> int:
     if len(t) < 8 or t[:2] not in (b"II", b"MM"):
         return 0  # unreadable EXIF: let OpenCV decide
@@ -96,9 +105,9 @@ def fast_decoder() -> str:
 def decode_image(data, rgb: bool = True):
     """uint8 ``(H, W, 3)`` pixels of encoded ``data`` (bytes or a uint8 array), exactly as ``cv2.imdecode``
     with ``IMREAD_COLOR_RGB`` (``rgb``) or ``IMREAD_COLOR`` gives them, or None when it cannot decode them."""
-    raw = data.tobytes() if isinstance(data, np.ndarray) else bytes(data)
+    raw = _bytes(data)
     sj = _simplejpeg()
-    if sj is None or not _STATE.get("same", True) or raw[:2] != b"\xff\xd8" or _orientation(raw) != 1:
+    if sj is None or not _STATE.get("same", True) or not _upright_jpeg(raw):
         return _cv2(data, rgb)
     try:
         img = sj.decode_jpeg(raw, colorspace="RGB" if rgb else "BGR")
@@ -145,8 +154,8 @@ def decode_band(data, box, rgb: bool = True):
     x0, y0, x1, y1 = (int(v) for v in box)
     if mod is None or x1 <= x0 or y1 <= y0 or max(abs(x0), abs(y0), abs(x1), abs(y1)) >= 1 << 30:
         return None  # (a box beyond C int range: the whole-frame path crops it)
-    raw = data.tobytes() if isinstance(data, np.ndarray) else bytes(data)
-    if raw[:2] != b"\xff\xd8" or _orientation(raw) != 1:
+    raw = _bytes(data)
+    if not _upright_jpeg(raw):
         return None
     got = mod.decode_region(raw, y0, x0, y1, x1, rgb)
     if got is None:
@@ -173,13 +182,8 @@ def crop_band(band, box, value=0):
     bottom, right = top + pix.shape[0], left + pix.shape[1]
     if sx1 > sx0 and sy1 > sy0 and not (top <= sy0 and left <= sx0 and sy1 <= bottom and sx1 <= right):
         raise ValueError(f"expected a box inside the decoded part {left, top, right, bottom}, got {box}")
-    inner = pix[sy0 - top : sy1 - top, sx0 - left : sx1 - left]
-    if (sx0, sy0, sx1, sy1) == (x0, y0, x1, y1):
-        return inner
-    out = np.full((y1 - y0, x1 - x0, 3), value, dtype=np.uint8)
-    if sx1 > sx0 and sy1 > sy0:
-        out[sy0 - y0 : sy1 - y0, sx0 - x0 : sx1 - x0] = inner
-    return out
+    # the box's part inside the frame lies inside the band: outside the band is outside the frame
+    return crop_padded(pix, (x0 - left, y0 - top, x1 - left, y1 - top), value)
 
 
 def decode_crop(data, box, rgb: bool = True):
@@ -188,10 +192,11 @@ def decode_crop(data, box, rgb: bool = True):
 
     JPEGs are decoded over the box only (:func:`decode_band`) when ``_hpe_jpeg`` is built and in use.
     """
-    band = decode_band(data, box, rgb)
+    raw = _bytes(data)
+    band = decode_band(raw, box, rgb)
     if band is not None:
         return crop_band(band, box)
-    img = decode_image(data, rgb)
+    img = decode_image(raw, rgb)
     return None if img is None else crop_padded(img, box)
 
 
