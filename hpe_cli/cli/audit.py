@@ -88,6 +88,40 @@ from .table_options import column_options
     help="Also report how far this published decoder's printed angles are from each rotation "
     "(max/mean geodesic and per-angle, JSON key 'decoder').",
 )
+@click.option(
+    "--consistency",
+    is_flag=True,
+    help="Also check each label against independent evidence: its 2-D landmarks, the other views of the "
+    "head (calibrated cameras) and its neighbours in time; score and rank the rows (JSON key "
+    "'consistency', columns in -o, worst rows on the --plots page). See docs/commands/audit.md.",
+)
+@click.option(
+    "--calibration",
+    type=click.Path(exists=True, dir_okay=False),
+    help="With --consistency: Panoptic calibration JSON for the views check [default: the one "
+    "`hpe relabel-panoptic` recorded in INPUT's metadata].",
+)
+@click.option(
+    "--suspects",
+    type=click.Path(dir_okay=False),
+    help="With --consistency: write the suspect rows' key columns with 'score' and 'reason' "
+    "(.csv or .parquet), for `hpe export/convert --exclude`.",
+)
+@click.option(
+    "--max-jump",
+    type=click.FloatRange(0, min_open=True),
+    default=5.0,
+    show_default=True,
+    help="With --consistency: a label that leaves the interpolation of its neighbouring frames by more than "
+    "this many degrees per frame is a jump.",
+)
+@click.option(
+    "--suspect-score",
+    type=click.FloatRange(0, min_open=True),
+    default=3.0,
+    show_default=True,
+    help="With --consistency: rows scoring above this are suspects (1 = the disagreement expected for the row).",
+)
 @overwrite_option
 @batch_option
 @verbosity_options
@@ -110,6 +144,11 @@ def audit(
     strict,
     rejects,
     decoder,
+    consistency,
+    calibration,
+    suspects,
+    max_jump,
+    suspect_score,
     overwrite,
     batch_size,
     verbose,
@@ -139,6 +178,20 @@ def audit(
       duplicates     same label values and id columns (see --key) as an
                      earlier row; the first occurrence is not counted
 
+    \b
+    With --consistency (columns of -o; a row no check applies to is "not
+    checked", never consistent):
+      landmark_angle     degrees between the label and the rotation fitted
+                         to the row's 2-D landmarks (lm*_x/y, 21/68/70
+                         points, or a .mat folder's pt2d)
+      landmark_residual  that fit's RMS error per inter-ocular distance
+      view_angle         degrees to the consensus of the other cameras'
+                         labels of the head at that frame (calibration)
+      jump_rate          degrees per frame away from the neighbours' path
+      consistency_score  largest of the checks over what is expected
+      suspect            score above --suspect-score
+      consistency_note   why suspect, or why not checked
+
     The exit status is 0 whatever is found, unless --strict (1 if any row
     is flagged). Errors (unreadable input, missing columns) exit 1; rows
     the reader cannot parse go to --rejects FILE when given (the rest is
@@ -154,8 +207,18 @@ def audit(
       hpe audit AFLW2000/ --decoder synergynet --json -
       hpe audit img2pose_preds.csv --system img2pose --json report.json
       hpe audit messy.csv --rejects unreadable.csv --json report.json
+      hpe audit AFLW2000/ --consistency --json - --suspects suspects.csv
+      hpe audit panoptic_labels.parquet --consistency -o scored.parquet --plots audit/
     """
     from ..pipelines.audit import run_audit
+
+    if not consistency and (calibration or suspects):
+        raise click.UsageError("--calibration and --suspects need --consistency")
+    settings = None
+    if consistency:
+        from ..pipelines.consistency import Settings
+
+        settings = Settings(calibration=calibration, max_jump_deg=max_jump, suspect_score=suspect_score)
 
     bar = progress(desc="audit", quiet=quiet)
     try:
@@ -179,6 +242,8 @@ def audit(
             images=images,
             rejects_path=rejects,
             strict_rejects=strict,
+            consistency=settings,
+            suspects=suspects,
         )
     finally:
         bar.close()
@@ -202,9 +267,19 @@ def audit(
             f"{d['d_pitch']['max']:.3g}, |d_roll| max {d['d_roll']['max']:.3g} deg; "
             f"{d['rows_off_by_more_than_0.01deg']} rows off by > 0.01 deg; {d['not_decoded']} not decoded"
         )
+    if "consistency" in result:
+        c = result["consistency"]
+        lines.append(
+            f"  consistency: {c['checked']} checked, {c['not_checked']} not checked, {c['suspects']} suspects"
+            + (
+                f"; cameras with an offset: {', '.join(c['views']['cameras_with_offset'])}"
+                if c["views"].get("cameras_with_offset")
+                else ""
+            )
+        )
     if result["rejected"]:
         lines.append(f"  {result['rejected']} unreadable row(s) not audited -> {rejects}")
-    outs = [str(p) for p in (report if report != "-" else None, output, plots) if p]
+    outs = [str(p) for p in (report if report != "-" else None, output, plots, suspects) if p]
     if outs:
         lines.append("  wrote " + ", ".join(outs))
     echo_summary(lines, quiet)

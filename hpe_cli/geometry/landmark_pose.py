@@ -262,3 +262,79 @@ def landmark_disagreement(A_label, uv, scheme: str = "ibug68") -> dict:
     fit = fit_landmark_pose(uv, scheme)
     fit["angle"] = geodesic_deg(np.asarray(A_label, dtype=np.float64), fit["A"])
     return fit
+
+
+#: fixed-point iterations that invert OpenCV's lens distortion (as ``cv2.undistortPoints``)
+UNDISTORT_ITERATIONS = 8
+
+
+def undistort_normalised(uv, K, dist) -> np.ndarray:
+    """Pixels ``(N, L, 2)`` to undistorted normalised coordinates, per row's camera.
+
+    ``K`` (N, 3, 3) and ``dist`` (N, 5) (OpenCV's ``k1, k2, p1, p2, k3``): the
+    fixed-point inversion of :func:`hpe_cli.geometry.projection.distort` that
+    ``cv2.undistortPoints`` uses (``x = (x_d - tangential(x)) / radial(x)``).
+    """
+    uv = np.asarray(uv, dtype=np.float64)
+    K = np.asarray(K, dtype=np.float64)[:, None]
+    dist = np.asarray(dist, dtype=np.float64)[:, None]
+    yd = (uv[..., 1] - K[..., 1, 2]) / K[..., 1, 1]
+    xd = (uv[..., 0] - K[..., 0, 2] - K[..., 0, 1] * yd) / K[..., 0, 0]
+    x, y = xd.copy(), yd.copy()
+    k1, k2, p1, p2, k3 = (dist[..., i] for i in range(5))
+    for _ in range(UNDISTORT_ITERATIONS):
+        r2 = x * x + y * y
+        f = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        x = (xd - (2 * p1 * x * y + p2 * (r2 + 2 * x * x))) / f
+        y = (yd - (p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)) / f
+    return np.stack([x, y], -1)
+
+
+def fit_landmark_pose_perspective(uv, scheme: str, K, dist=None) -> dict:
+    """:func:`fit_landmark_pose` for a calibrated camera, corrected for where the head is in the image.
+
+    A weak-perspective fit sees the head along the ray through it, not along the
+    optical axis: a head near the image border looks turned by the angle
+    between them (up to 30 deg on CMU Panoptic's HD cameras). The landmarks are
+    undistorted and normalised with ``K`` and ``dist``, turned by ``Q.T`` (``Q``
+    the smallest rotation taking the optical axis to the ray through their
+    centroid, :func:`hpe_cli.geometry.line_of_sight.ray_rotation`) so the head is
+    on the axis of a virtual camera, fitted there, and the fit is turned back:
+    ``A = (E Q E) A_virtual``, ``E = diag(1, -1, -1)`` (the inverse of
+    :func:`hpe_cli.geometry.line_of_sight.camera_to_crop_labels`).
+
+    Parameters
+    ----------
+    uv : array_like, shape (N, L, 2)
+        Pixels, as :func:`fit_landmark_pose`.
+    scheme : str
+    K : array_like, shape (N, 3, 3)
+    dist : array_like, shape (N, 5), optional
+        Zero distortion by default.
+
+    Returns
+    -------
+    dict
+        As :func:`fit_landmark_pose`, with ``A`` in the camera frame, ``scale``
+        in normalised units (1 / focal length) and ``ray_angle`` (N,) degrees.
+    """
+    from .line_of_sight import ray_rotation
+
+    uv = np.asarray(uv, dtype=np.float64)
+    N = uv.shape[0]
+    dist = np.zeros((N, 5)) if dist is None else np.asarray(dist, dtype=np.float64)
+    invisible = ~np.isfinite(uv).all(-1) | ((uv[..., 0] == -1.0) & (uv[..., 1] == -1.0))
+    xy = undistort_normalised(np.where(invisible[..., None], 0.0, uv), K, dist)
+    xy[invisible] = np.nan
+    rays = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], -1)
+    with np.errstate(invalid="ignore"):
+        c = np.nanmean(rays, axis=1)
+    Q, angle = ray_rotation(np.where(np.isfinite(c), c, [0.0, 0.0, 1.0]))
+    v = np.einsum("nji,nlj->nli", Q, rays)  # Q.T @ ray
+    with np.errstate(invalid="ignore", divide="ignore"):
+        virt = v[..., :2] / v[..., 2:3]
+    fit = fit_landmark_pose(virt, scheme)
+    E = np.diag([1.0, -1.0, -1.0])
+    fit["A"] = E @ Q @ E @ fit["A"]
+    fit["ray_angle"] = angle
+    return fit

@@ -311,6 +311,8 @@ def run_audit(
     images=None,
     rejects_path=None,
     strict_rejects=False,
+    consistency=None,
+    suspects=None,
 ) -> dict:
     """Audit ``input_path`` and write the requested outputs; return the report dict.
 
@@ -320,6 +322,9 @@ def run_audit(
     unless ``rejects_path`` is given: they then go there with their reason, the
     rest is audited, and the report counts them (``rejected``); with
     ``strict_rejects`` any such row is still an error and nothing is written.
+    ``consistency`` (a :class:`hpe_cli.pipelines.consistency.Settings`) adds the
+    consistency checks (JSON key ``consistency``, columns in ``output``, the key
+    list of suspects in ``suspects``).
     """
     import os
 
@@ -341,6 +346,8 @@ def run_audit(
     from ..io.system_meta import resolve_system
 
     rejected = Rejects(rejects_path, overwrite, strict=strict_rejects, source=src)
+    if suspects:
+        check_output(suspects, overwrite)
     resolved = resolve_system(src, system, default="300w_lp")
     system = resolved.system
     columns = src.columns
@@ -375,6 +382,11 @@ def run_audit(
     id_cols = [c for c in ("file", "image", "image_id", "id", "path") if c in columns][:1]
     if progress is not None and src.num_rows:
         progress.total = src.num_rows
+    cons = None
+    if consistency is not None:
+        from .consistency import ConsistencyAudit, canonical_labels
+
+        cons = ConsistencyAudit(src, consistency)
 
     hist = AngleHistograms() if plots else None
     examples = {c: [] for c in CHECKS}
@@ -403,6 +415,8 @@ def run_audit(
             flagged += len(unread)
             unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[:n_examples]]
         eff, cols, res, any_flag, hashes = future.result()
+        if cons is not None:
+            cons.add(batch, lines, canonical_labels(system, cols, eff, res), unread=len(unread))
         if tally is not None:
             values = np.stack(cols, axis=-1)
             tally.add(system.to_canonical(system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3)))
@@ -458,6 +472,14 @@ def run_audit(
     }
     if tally is not None:
         result["decoder"] = tally.result()
+    if cons is not None:
+        from .consistency import consistency_outputs
+
+        def reread():
+            for b, _, _ in _batches(_source(input_path, batch_size), read_mode, src.path, _SKIP_REJECTS):
+                yield b
+
+        result["consistency"] = consistency_outputs(cons, reread, suspects, overwrite)
 
     if output:
         _write_flagged(
@@ -472,6 +494,7 @@ def run_audit(
             near_tol_deg,
             dups,
             via_system,
+            cons,
         )
     if plots:
         from .draw_flagged import flagged_pictures
@@ -541,7 +564,18 @@ _SKIP_REJECTS = _SkipRejects()
 
 
 def _write_flagged(
-    input_path, output, only_flagged, overwrite, batch_size, system, mode, radians, near_tol_deg, dups, via_system=False
+    input_path,
+    output,
+    only_flagged,
+    overwrite,
+    batch_size,
+    system,
+    mode,
+    radians,
+    near_tol_deg,
+    dups,
+    via_system=False,
+    cons=None,
 ):
     """Second pass over the input: every column, then one boolean column per check and 'flagged'."""
     import pyarrow as pa
@@ -550,8 +584,9 @@ def _write_flagged(
     from ..rotation.audit import CHECKS
 
     names = list(CHECKS) + ["flagged"]
+    extra = list(cons.output_columns) if cons is not None else []  # --consistency columns
     src = _source(input_path, batch_size)
-    keep = [c for c in src.columns if c not in names]
+    keep = [c for c in src.columns if c not in names + extra]
     meta = {**system_metadata(system), "hpe:audit_of": str(src.path)}
     offset = 0
     with TableWriter(output, overwrite, meta) as w:
@@ -563,12 +598,17 @@ def _write_flagged(
             for c in CHECKS:
                 any_flag |= res[c]
             arrays = list(batch.select(keep).columns) + [pa.array(res[c]) for c in CHECKS] + [pa.array(any_flag)]
-            out = pa.RecordBatch.from_arrays(arrays, names=keep + names)
+            if cons is not None:
+                arrays += [pa.array(v) for v in cons.columns(offset, n).values()]
+            out = pa.RecordBatch.from_arrays(arrays, names=keep + names + extra)
             if only_flagged:
                 out = out.filter(pa.array(any_flag))
             if out.num_rows or w.rows == 0:
                 w.write(out)
             offset += n
         if offset == 0:
-            empty = pa.schema([src.schema.field(c) for c in keep] + [pa.field(c, pa.bool_()) for c in names])
+            fields = [src.schema.field(c) for c in keep] + [pa.field(c, pa.bool_()) for c in names]
+            if cons is not None:
+                fields += [pa.field(c, t) for c, t in cons.output_types().items()]
+            empty = pa.schema(fields)
             w.write(empty.empty_table())
