@@ -322,9 +322,7 @@ def run_audit(
     unless ``rejects_path`` is given: they then go there with their reason, the
     rest is audited, and the report counts them (``rejected``); with
     ``strict_rejects`` any such row is still an error and nothing is written.
-    ``consistency`` (a :class:`hpe_cli.pipelines.consistency.Settings`) adds the
-    consistency checks (JSON key ``consistency``, columns in ``output``, the key
-    list of suspects in ``suspects``).
+    ``consistency`` (a :class:`hpe_cli.pipelines.consistency.Settings`) adds its checks (JSON, ``output``, ``suspects``).
     """
     import os
 
@@ -475,10 +473,9 @@ def run_audit(
     if cons is not None:
         from .consistency import consistency_outputs
 
-        def reread():
-            for b, _, _ in _batches(_source(input_path, batch_size), read_mode, src.path, _SKIP_REJECTS):
-                yield b
-
+        reread = lambda: (
+            b for b, _, _ in _batches(_source(input_path, batch_size), read_mode, src.path, _SKIP_REJECTS)
+        )  # noqa: E731
         result["consistency"] = consistency_outputs(cons, reread, suspects, overwrite)
 
     if output:
@@ -564,18 +561,7 @@ _SKIP_REJECTS = _SkipRejects()
 
 
 def _write_flagged(
-    input_path,
-    output,
-    only_flagged,
-    overwrite,
-    batch_size,
-    system,
-    mode,
-    radians,
-    near_tol_deg,
-    dups,
-    via_system=False,
-    cons=None,
+    input_path, output, only_flagged, overwrite, batch_size, system, mode, radians, near_tol_deg, dups, via_system, cons
 ):
     """Second pass over the input: every column, then one boolean column per check and 'flagged'."""
     import pyarrow as pa
@@ -607,8 +593,6 @@ def _write_flagged(
                 w.write(out)
             offset += n
         if offset == 0:
-            fields = [src.schema.field(c) for c in keep] + [pa.field(c, pa.bool_()) for c in names]
-            if cons is not None:
-                fields += [pa.field(c, t) for c, t in cons.output_types().items()]
-            empty = pa.schema(fields)
+            more = [pa.field(c, t) for c, t in cons.output_types().items()] if cons is not None else []
+            empty = pa.schema([src.schema.field(c) for c in keep] + [pa.field(c, pa.bool_()) for c in names] + more)
             w.write(empty.empty_table())
