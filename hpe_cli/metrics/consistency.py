@@ -18,7 +18,9 @@ Time (:func:`temporal_jumps`)
     A label is compared with the geodesic interpolation (slerp) of its previous and
     next labels at its frame: a steady turn lies on it, a label that jumps away and
     back does not. The deviation is divided by the frame distance to the nearer
-    neighbour (degrees per frame).
+    neighbour (degrees per frame). The smallest over the neighbour pairs one or two
+    rows away on each side is kept, so the neighbours of a one-frame glitch are not
+    flagged with it (a glitch of two consecutive frames is therefore not seen).
 
 Score (:func:`expected_landmark_angle`, :func:`combined_score`)
     Each check's angle is divided by the disagreement expected for it, so rows of
@@ -217,16 +219,35 @@ def temporal_jumps(A, frames, starts, max_gap: int) -> dict:
     inner[starts] = False  # first of a track
     inner[np.append(starts[1:], N) - 1] = False  # last of a track
     i = np.flatnonzero(inner)
-    g1 = f[i] - f[i - 1]
-    g2 = f[i + 1] - f[i]
-    use = (g1 > 0) & (g2 > 0) & (g1 <= max_gap) & (g2 <= max_gap)
-    i, g1, g2 = i[use], g1[use], g2[use]
-    P, Nx = A[i - 1], A[i + 1]
-    tau = g1 / (g1 + g2)
-    rel = matrix_to_rotvec(np.swapaxes(P, 1, 2) @ Nx)
-    interp = P @ rotvec_to_matrix(rel * tau[:, None])
-    dev[i] = geodesic_deg(interp, A[i])
-    rate[i] = dev[i] / np.minimum(g1, g2)
+    track = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, N)))
+    # the neighbours one and two rows away on each side: a glitch next door must not flag a good label
+    best_dev = np.full(len(i), np.nan)
+    best_rate = np.full(len(i), np.nan)
+    for a, b in ((1, 1), (2, 1), (1, 2), (2, 2)):
+        lo, hi = i - a, i + b
+        ok = (lo >= 0) & (hi < N)
+        lo_c, hi_c = np.clip(lo, 0, N - 1), np.clip(hi, 0, N - 1)
+        ok &= (track[lo_c] == track[i]) & (track[hi_c] == track[i])
+        g1 = f[i] - f[lo_c]
+        g2 = f[hi_c] - f[i]
+        ok &= (g1 > 0) & (g2 > 0) & (g1 <= max_gap) & (g2 <= max_gap)
+        if (a, b) == (1, 1):
+            have = ok  # the row needs its nearest neighbour on both sides
+        j = np.flatnonzero(ok)
+        if not len(j):
+            continue
+        P, Nx = A[lo_c[j]], A[hi_c[j]]
+        tau = g1[j] / (g1[j] + g2[j])
+        rel = matrix_to_rotvec(np.swapaxes(P, 1, 2) @ Nx)
+        interp = P @ rotvec_to_matrix(rel * tau[:, None])
+        d = geodesic_deg(interp, A[i[j]])
+        r = d / np.minimum(g1[j], g2[j])
+        better = ~(best_rate[j] <= r)
+        best_dev[j[better]] = d[better]
+        best_rate[j[better]] = r[better]
+    keep = have
+    dev[i[keep]] = best_dev[keep]
+    rate[i[keep]] = best_rate[keep]
     return {"deviation": dev, "rate": rate}
 
 
