@@ -8,6 +8,7 @@ from .options import (
     SYSTEM,
     batch_option,
     echo_summary,
+    exclude_option,
     output_option,
     overwrite_option,
     progress,
@@ -39,11 +40,14 @@ from .table_options import column_options
     "decoder_roll, decoder_ok), beside the exact angles. `hpe audit --decoder` measures the gap.",
 )
 @rejects_options
+@exclude_option
 @overwrite_option
 @batch_option
 @verbosity_options
 @column_options
-def convert(input, output, source, target, radians, decoder, rejects, strict, overwrite, batch_size, verbose, quiet):
+def convert(
+    input, output, source, target, radians, decoder, rejects, strict, exclude, overwrite, batch_size, verbose, quiet
+):
     """Convert head-pose labels between rotation systems.
 
     INPUT is a .parquet or .csv table with the source system's own value
@@ -90,6 +94,7 @@ def convert(input, output, source, target, radians, decoder, rejects, strict, ov
             progress=bar,
             strict=strict,
             decoder=decoder,
+            exclude=exclude,
         )
     finally:
         bar.close()
@@ -97,6 +102,8 @@ def convert(input, output, source, target, radians, decoder, rejects, strict, ov
         f"{s.written} of {s.rows} rows converted from {s.source} ({s.source_origin}) to {target.name} -> {output}",
         f"gimbal-locked rows: {s.gimbal_lock}; max round-trip error: {s.max_roundtrip_err:.3g}",
     ]
+    if s.excluded:
+        lines.append(f"excluded: {s.excluded} rows listed in {exclude}" + (f" -> {rejects}" if rejects else ""))
     if s.rejects:
         lines.append(
             "rejected: "

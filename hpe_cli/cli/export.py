@@ -7,6 +7,7 @@ import click
 from .options import (
     SYSTEM,
     echo_summary,
+    exclude_option,
     overwrite_option,
     progress,
     radians_option,
@@ -112,6 +113,7 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
     type=click.Path(exists=True, dir_okay=False),
     help="Explicit split: a CSV with a group column (e.g. sequence) and split.",
 )
+@exclude_option
 @click.option(
     "--min-change",
     type=click.FloatRange(0),
@@ -150,6 +152,7 @@ def export(
     min_inside,
     split,
     split_file,
+    exclude,
     min_change,
     balance,
     seed,
@@ -215,6 +218,7 @@ def export(
         min_inside=min_inside,
         split=split,
         split_file=split_file,
+        exclude=exclude,
         min_change=min_change,
         balance=balance,
         seed=seed,

@@ -455,3 +455,15 @@ def format_option(f):
         help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
         "[default: from OUTPUT's extension].",
     )(f)
+
+
+def exclude_option(f):
+    """``--exclude FILE``: drop the rows a key list names (``hpe audit --consistency --suspects`` writes one)."""
+    return click.option(
+        "--exclude",
+        type=click.Path(exists=True, dir_okay=False),
+        default=None,
+        help="Leave out the rows listed in this key list (.csv/.parquet with key columns such as image, "
+        "sequence, frame, camera, person_id and a 'reason', as `hpe audit --consistency --suspects` writes); "
+        "they are listed in --rejects with 'excluded: <reason>' and are never an error.",
+    )(f)

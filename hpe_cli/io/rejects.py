@@ -91,6 +91,11 @@ class Rejects:
         if self.path is not None:
             self._parts.append({**{k: np.asarray(v) for k, v in columns.items()}, "reason": reasons})
 
+    def add_choice(self, columns: dict, reasons) -> None:
+        """Rows dropped by the user's choice (``--exclude``): listed in the file, never an error, not counted."""
+        if self.path is not None and len(reasons):
+            self._parts.append({**{k: np.asarray(v) for k, v in columns.items()}, "reason": np.asarray(reasons)})
+
     def first(self) -> str | None:
         return next(iter(self.counts), None)
 

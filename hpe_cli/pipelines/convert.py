@@ -33,6 +33,8 @@ class ConvertSummary:
     #: the input's system and where it came from ("file metadata", "option", "default")
     source: str = ""
     source_origin: str = ""
+    #: rows dropped by ``exclude``
+    excluded: int = 0
 
 
 def convert_batch(batch, mode, source, target, radians=False, decoder=None):
@@ -90,6 +92,7 @@ def run_convert(
     workers=None,
     strict=False,
     decoder=None,
+    exclude=None,
 ) -> ConvertSummary:
     """Convert every row of ``input_path`` from ``source`` to ``target`` into ``output``.
 
@@ -98,7 +101,8 @@ def run_convert(
     the file, how many rows, the first one and its reason, and nothing is
     written (see :func:`hpe_cli.io.rejects.rejects_rule`). Batches are converted on ``workers`` threads
     (numpy and Arrow release the GIL) while this thread reads and writes in
-    order; at most ``workers + 1`` batches are in flight, so memory stays flat.
+    order; at most ``workers + 1`` batches are in flight, so memory stays flat. ``exclude`` (a key list
+    file, :mod:`hpe_cli.io.exclude`) drops the rows it names; they go to the rejects file as a choice.
     """
     from collections import deque
     from concurrent.futures import ThreadPoolExecutor
@@ -151,10 +155,16 @@ def run_convert(
         if progress is not None:
             progress.update(batch.num_rows)
 
+    if exclude is not None:
+        from ..io.exclude import ExcludeList
+
+        exclude = ExcludeList(exclude)
     with TableWriter(output, overwrite, meta) as writer, ThreadPoolExecutor(workers) as pool:
         pending = deque()
         try:
             for batch, read_rejects in src.batches_with_rejects():
+                if exclude is not None:
+                    batch = _exclude(batch, exclude, rejects, summary)
                 pending.append(
                     (batch, read_rejects, pool.submit(convert_batch, batch, mode, source, target, radians, decoder))
                 )
@@ -170,3 +180,23 @@ def run_convert(
         rejects.finish()
     summary.rejects = dict(rejects.counts)
     return summary
+
+
+def _exclude(batch, exclude, rejects, summary):
+    """``batch`` without the rows ``exclude`` names; those go to the rejects file with their reason."""
+    import pyarrow as pa
+
+    why = exclude.reasons(batch)
+    hit = why != ""
+    if not hit.any():
+        return batch
+    lines = batch.column(LINE_COL).to_numpy()
+    mask = pa.array(hit)
+    cols = {"row": lines[hit]}
+    cols.update(
+        {n: batch.column(n).filter(mask).to_numpy(zero_copy_only=False) for n in batch.schema.names if n != LINE_COL}
+    )
+    rejects.add_choice(cols, why[hit])
+    summary.rows += int(hit.sum())
+    summary.excluded += int(hit.sum())
+    return batch.filter(pa.array(~hit))

@@ -38,6 +38,7 @@ class ExportOptions:
     min_inside: float = 0.5
     split: str | None = None
     split_file: str | None = None
+    exclude: str | None = None
     min_change: float | None = None
     balance: str | None = None
     seed: int = 0

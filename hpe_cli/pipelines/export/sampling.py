@@ -153,6 +153,7 @@ CHOICE_PREFIXES = (
     "min-change",
     "balance",
     "image dropped",
+    "excluded: ",
     "no 2-D landmarks",
     "Hopenet bins",
     "6DRepNet create_filename_list",

@@ -137,6 +137,12 @@ def sampling_stage(sel: Selection, system, opts) -> list:
 def select(rows, layout, system, opts) -> Selection:
     """Stage 2 as a whole: labels and layout rules, split, sampling."""
     sel = label_stage(rows, layout, system)
+    if opts.exclude:  # --exclude: a key list (hpe audit --suspects); a choice, like the split file
+        from ...io.exclude import ExcludeList
+
+        why = ExcludeList(opts.exclude).reasons_frame(rows)
+        hit = (why != "") & (sel.reasons == "")
+        sel.reasons[hit] = why[hit]
     split_stage(sel, layout, opts)
     opts.sampling_notes = sampling_stage(sel, system, opts)
     return sel
