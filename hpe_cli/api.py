@@ -319,7 +319,9 @@ def audit_file(
     Returns the JSON report (``rows``, one count per check, ``system``,
     ``system_origin``, ``rejected``, ``examples``...); ``system`` defaults to
     the file's own, else ``300w_lp``. ``options``: ``near_tol_deg``, ``radians``,
-    ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``.
+    ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``; ``consistency`` (True or a
+    :class:`hpe_cli.pipelines.consistency.Settings`, as ``--consistency``; report key ``consistency``) and
+    ``suspects`` (path of the key list, as ``--suspects``).
     """
     from .io.transaction import ensure_transaction
     from .pipelines.audit import run_audit

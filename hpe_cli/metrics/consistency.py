@@ -219,10 +219,11 @@ def temporal_jumps(A, frames, starts, max_gap: int) -> dict:
     inner[starts] = False  # first of a track
     inner[np.append(starts[1:], N) - 1] = False  # last of a track
     i = np.flatnonzero(inner)
+    have = np.zeros(len(i), dtype=bool)
     track = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, N)))
     # the neighbours one and two rows away on each side: a glitch next door must not flag a good label
-    best_dev = np.full(len(i), np.nan)
-    best_rate = np.full(len(i), np.nan)
+    best = np.full(len(i), np.nan)
+    near = np.ones(len(i))
     for a, b in ((1, 1), (2, 1), (1, 2), (2, 2)):
         lo, hi = i - a, i + b
         ok = (lo >= 0) & (hi < N)
@@ -233,7 +234,8 @@ def temporal_jumps(A, frames, starts, max_gap: int) -> dict:
         ok &= (g1 > 0) & (g2 > 0) & (g1 <= max_gap) & (g2 <= max_gap)
         if (a, b) == (1, 1):
             have = ok  # the row needs its nearest neighbour on both sides
-        j = np.flatnonzero(ok)
+            near = np.maximum(np.minimum(g1, g2), 1)  # the rate is per frame to the nearer neighbour
+        j = np.flatnonzero(ok & have)
         if not len(j):
             continue
         P, Nx = A[lo_c[j]], A[hi_c[j]]
@@ -241,13 +243,9 @@ def temporal_jumps(A, frames, starts, max_gap: int) -> dict:
         rel = matrix_to_rotvec(np.swapaxes(P, 1, 2) @ Nx)
         interp = P @ rotvec_to_matrix(rel * tau[:, None])
         d = geodesic_deg(interp, A[i[j]])
-        r = d / np.minimum(g1[j], g2[j])
-        better = ~(best_rate[j] <= r)
-        best_dev[j[better]] = d[better]
-        best_rate[j[better]] = r[better]
-    keep = have
-    dev[i[keep]] = best_dev[keep]
-    rate[i[keep]] = best_rate[keep]
+        best[j] = np.fmin(best[j], d)
+    dev[i[have]] = best[have]
+    rate[i[have]] = best[have] / near[have]
     return {"deviation": dev, "rate": rate}
 
 

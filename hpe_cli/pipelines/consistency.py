@@ -107,7 +107,7 @@ class ConsistencyAudit:
 
     def __init__(self, src, settings: Settings | None = None):
         self.src = src
-        self.s = settings or Settings()
+        self.s = settings if isinstance(settings, Settings) else Settings()  # True: the defaults
         cols = set(src.columns)
         from ..io.layout import landmark_count
 

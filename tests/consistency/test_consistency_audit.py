@@ -190,3 +190,12 @@ def test_suspects_need_consistency(tmp_path):
     path.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\n")
     res = CliRunner().invoke(cli, ["audit", str(path), "--suspects", str(tmp_path / "s.csv")])
     assert res.exit_code == 2
+
+
+def test_python_api_runs_the_same_pipeline(realdata, tmp_path):
+    from hpe_cli.api import audit_file
+
+    rep = audit_file(realdata / "aflw2000_prnet", consistency=True, suspects=tmp_path / "s.csv")
+    cli_rep = audit_json(realdata / "aflw2000_prnet")
+    assert rep["consistency"]["landmarks"] == cli_rep["landmarks"]
+    assert (tmp_path / "s.csv").exists()
