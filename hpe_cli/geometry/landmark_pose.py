@@ -152,10 +152,38 @@ def fit_landmark_pose(uv, scheme: str = "ibug68", visible=None) -> dict:
     L = model.shape[0]
     if uv.ndim != 3 or uv.shape[1:] != (L, 2):
         raise ValueError(f"expected landmarks of shape (N, {L}, 2) for scheme {scheme}, got {uv.shape}")
+    if visible is not None:
+        visible = np.asarray(visible, dtype=bool)
+    N = uv.shape[0]
+    if N <= BLOCK:
+        return _fit_block(uv, model, used, visible)
+    # blocks that stay in cache: the work is a dozen passes over (rows x points) arrays
+    parts = [
+        _fit_block(uv[s : s + BLOCK], model, used, None if visible is None else visible[s : s + BLOCK])
+        for s in range(0, N, BLOCK)
+    ]
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+#: rows per block of :func:`fit_landmark_pose`
+BLOCK = 16384
+
+
+@lru_cache(maxsize=None)
+def _full_inverse(scheme_key: bytes, L: int) -> np.ndarray:
+    """Inverse normal matrix of a row whose model points are all visible (the same for every such row)."""
+    model = np.frombuffer(scheme_key).reshape(L, 3)
+    used = np.isfinite(model).all(1)
+    Xh = np.concatenate([model[used], np.ones((used.sum(), 1))], axis=1)
+    return np.linalg.inv(Xh.T @ Xh)
+
+
+def _fit_block(uv, model, used, visible) -> dict:
+    L = model.shape[0]
     u, v = uv[..., 0], uv[..., 1]
     vis = np.isfinite(u) & np.isfinite(v) & ~((u == -1.0) & (v == -1.0)) & used[None, :]
     if visible is not None:
-        vis &= np.asarray(visible, dtype=bool)
+        vis &= visible
     N = uv.shape[0]
     w = vis.astype(np.float64)
     n = w.sum(1)
@@ -167,11 +195,17 @@ def fit_landmark_pose(uv, scheme: str = "ibug68", visible=None) -> dict:
     rhs = np.stack([u0 @ Xh, v0 @ Xh], axis=-1)  # (N, 4, 2); invisible points are zero
     few = n < MIN_POINTS
     G[few] = np.eye(4)
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        try:
-            sol = np.linalg.solve(G, rhs)  # (N, 4, 2)
-        except np.linalg.LinAlgError:  # a singular row: solve one by one with lstsq
-            sol = np.stack([np.linalg.lstsq(g, r, rcond=None)[0] for g, r in zip(G, rhs)])
+    full = n == used.sum()  # every model point visible: one shared inverse
+    sol = np.empty((N, 4, 2))
+    if full.any():
+        sol[full] = np.einsum("ij,njk->nik", _full_inverse(model.tobytes(), L), rhs[full])
+    part = ~full
+    if part.any():
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            try:
+                sol[part] = np.linalg.solve(G[part], rhs[part])  # (n, 4, 2)
+            except np.linalg.LinAlgError:  # a singular row: each with lstsq
+                sol[part] = np.stack([np.linalg.lstsq(g, r, rcond=None)[0] for g, r in zip(G[part], rhs[part])])
     # rows s*A[0] and s*A[1] of the affine camera (v grows downwards: negate its row)
     b1 = np.where(np.isfinite(sol[:, :3, 0]), sol[:, :3, 0], 0.0)
     b2 = np.where(np.isfinite(sol[:, :3, 1]), -sol[:, :3, 1], 0.0)

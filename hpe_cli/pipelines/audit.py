@@ -403,7 +403,8 @@ def run_audit(
         any_flag = np.zeros(batch.num_rows, dtype=bool)
         for c in CHECKS[:-1]:
             any_flag |= res[c]
-        return eff, cols, res, any_flag, key_hashes(cols, batch, key_cols)
+        cons_in = None if cons is None else (A := canonical_labels(system, cols, eff, res), cons.measure(batch, A))
+        return eff, cols, res, any_flag, key_hashes(cols, batch, key_cols), cons_in
 
     def finish(batch, lines, unread, future):
         nonlocal rows, flagged, near_not_locked, unread_examples
@@ -412,9 +413,9 @@ def run_audit(
             counts["non_finite"] += len(unread)
             flagged += len(unread)
             unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[:n_examples]]
-        eff, cols, res, any_flag, hashes = future.result()
+        eff, cols, res, any_flag, hashes, cons_in = future.result()
         if cons is not None:
-            cons.add(batch, lines, canonical_labels(system, cols, eff, res), unread=len(unread))
+            cons.add(batch, lines, *cons_in, unread=len(unread))
         if tally is not None:
             values = np.stack(cols, axis=-1)
             tally.add(system.to_canonical(system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3)))

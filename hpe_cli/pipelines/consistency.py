@@ -181,16 +181,29 @@ class ConsistencyAudit:
             for c in COLUMNS
         }
 
-    def add(self, batch, lines, A, unread: int = 0) -> None:
-        """One batch: its ``__line__`` numbers and its labels as canonical matrices ``(n, 3, 3)`` (NaN if unusable).
+    def add(self, batch, lines, A, part=None, unread: int = 0) -> None:
+        """One batch, in input order: its ``__line__`` numbers and labels as canonical matrices ``(n, 3, 3)``.
 
+        ``part``: :meth:`measure`'s result when a worker thread already made it.
         ``unread``: rows of the batch's block the reader could not parse (counted as not checked).
         """
         self.unread = getattr(self, "unread", 0) + unread
+        if part is None:
+            part = self.measure(batch, A, lines)
+        part["line"] = np.asarray(lines, dtype=np.int64)
+        self.parts.append(part)
+
+    def measure(self, batch, A, lines=None):
+        """The per-row evidence of one batch (thread-safe; None for a .mat folder without ``lines``).
+
+        ``A``: the labels as canonical matrices ``(n, 3, 3)``, NaN where unusable.
+        """
+        if self.mat_landmarks is not None and lines is None:
+            return None
         n = batch.num_rows
         A = np.asarray(A, dtype=np.float64).reshape(n, 3, 3)
         finite = np.isfinite(A).all((1, 2))
-        part = {"line": np.asarray(lines, dtype=np.int64), "finite": finite}
+        part = {"finite": finite}
         part["abs_yaw"] = np.abs(mc.yaw_deg(A)).astype(np.float32)
         lm_angle = np.full(n, np.nan)
         lm_res = np.full(n, np.nan)
@@ -219,8 +232,8 @@ class ConsistencyAudit:
             part["A"] = A
             part["frame"] = arrow_to_numpy(batch.column("frame")).astype(np.int64)
             for c in self.track_cols:
-                part[c] = _codes(batch.column(c), self.code_tables[c])
-        self.parts.append(part)
+                part[c] = batch.column(c)  # coded in input order by finish (one dictionary per column)
+        return part
 
     def _intrinsics(self, batch):
         """``K`` (n, 3, 3) and ``dist`` (n, 5) of each row's camera, or ``(None, None)``.
@@ -270,6 +283,10 @@ class ConsistencyAudit:
     # ------------------------------------------------------------------ ranking
     def finish(self) -> dict:
         """Run the views and time checks, score every row; return the JSON section (without ``worst``)."""
+        for p in self.parts:
+            for c in self.track_cols if self.has_frame else ():
+                if not isinstance(p[c], np.ndarray):
+                    p[c] = _codes(p[c], self.code_tables[c])
         P = {k: np.concatenate([p[k] for p in self.parts]) if self.parts else np.zeros(0) for k in self.parts_keys()}
         N = len(P["line"])
         self.N = N
