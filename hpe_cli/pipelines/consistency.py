@@ -310,8 +310,7 @@ class ConsistencyAudit:
         for i in np.flatnonzero(suspect):
             note[i] = self._why(i, lm_angle, lm_ratio, view_angle, jump)
         unchecked = np.flatnonzero(~checked)
-        for i in unchecked:
-            note[i] = f"not checked: landmarks: {lm_reason[i]}; views: {view_reason[i]}; time: {time_reason[i]}"
+        note[unchecked] = _join_reasons(lm_reason[unchecked], view_reason[unchecked], time_reason[unchecked])
         self.rows = {
             "line": P["line"],
             "landmark_angle": lm_angle,
@@ -496,6 +495,22 @@ class ConsistencyAudit:
                     }
             offset += n
         return out
+
+
+def _join_reasons(lm, view, time) -> np.ndarray:
+    """``"not checked: landmarks: ...; views: ...; time: ..."`` per row, built once per distinct combination."""
+    import pandas as pd
+
+    codes, uniq = zip(*(pd.factorize(pd.Series(a, dtype=object)) for a in (lm, view, time)))
+    sizes = [len(u) + 1 for u in uniq]
+    key = (np.asarray(codes[0]) * sizes[1] + codes[1]) * sizes[2] + codes[2]
+    combos, inverse = np.unique(key, return_inverse=True)
+    text = []
+    for k in combos:
+        a, rest = divmod(int(k), sizes[1] * sizes[2])
+        b, c = divmod(rest, sizes[2])
+        text.append(f"not checked: landmarks: {uniq[0][a]}; views: {uniq[1][b]}; time: {uniq[2][c]}")
+    return np.array(text, dtype=object)[inverse.reshape(-1)]
 
 
 def canonical_labels(system, cols, eff, res) -> np.ndarray:
