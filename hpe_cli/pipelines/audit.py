@@ -477,7 +477,7 @@ def run_audit(
         reread = lambda: (
             b for b, _, _ in _batches(_source(input_path, batch_size), read_mode, src.path, _SKIP_REJECTS)
         )  # noqa: E731
-        result["consistency"] = consistency_outputs(cons, reread, suspects, overwrite)
+        result["consistency"] = consistency_outputs(cons, reread, suspects, overwrite, plots, images)
 
     if output:
         _write_flagged(

@@ -75,6 +75,7 @@ class Settings:
     max_gap: int = MAX_GAP_FRAMES
     suspect_score: float = mc.SUSPECT_SCORE
     worst: int = 20
+    drawn: int = 12
 
 
 def _codes(col, table: dict) -> np.ndarray:
@@ -223,6 +224,12 @@ class ConsistencyAudit:
             poor = (lm_reason == "") & ~(lm_res <= MAX_RESIDUAL)
             lm_reason[poor] = f"landmarks do not fit the face model (residual > {MAX_RESIDUAL} inter-ocular)"
             lm_angle[poor] = np.nan
+            # the label and the fit of rows that could be drawn among the worst (sparse: flat memory)
+            with np.errstate(invalid="ignore"):
+                keep = np.flatnonzero(
+                    (lm_angle / mc.expected_landmark_angle(np.abs(mc.yaw_deg(A))) > 1.0) | self.has_frame
+                )
+            part["pic"] = (keep, A[keep].astype(np.float32), fit["A"][keep].astype(np.float32))
         lm_reason[~finite] = "label not finite"
         lm_angle[~finite] = np.nan
         part.update(lm_angle=lm_angle, lm_res=lm_res, lm_reason=lm_reason)
@@ -288,6 +295,16 @@ class ConsistencyAudit:
                 if not isinstance(p[c], np.ndarray):
                     p[c] = _codes(p[c], self.code_tables[c])
         P = {k: np.concatenate([p[k] for p in self.parts]) if self.parts else np.zeros(0) for k in self.parts_keys()}
+        # rows with a landmark angle above the expected one: global index, label, landmark fit (for pictures)
+        idx, la, fa, offset = [np.zeros(0, np.int64)], [np.zeros((0, 3, 3))], [np.zeros((0, 3, 3))], 0
+        for p in self.parts:
+            if "pic" in p:
+                j, a, b = p.pop("pic")
+                idx.append(j + offset)
+                la.append(a)
+                fa.append(b)
+            offset += len(p["line"])
+        self.pic = (np.concatenate(idx), np.concatenate(la), np.concatenate(fa))
         N = len(P["line"])
         self.N = N
         lm_angle, lm_reason = P["lm_angle"], P["lm_reason"]
@@ -523,8 +540,9 @@ def canonical_labels(system, cols, eff, res) -> np.ndarray:
     return A
 
 
-def consistency_outputs(cons, reread, suspects=None, overwrite=False) -> dict:
-    """Finish ``cons``, describe its worst rows (read again with ``reread()``), write the suspects list.
+def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None, images=None) -> dict:
+    """Finish ``cons``, describe its worst rows (read again with ``reread()``), write the suspects list
+    and, with ``plots``, the page ``plots/consistency/index.html`` with the worst rows drawn.
 
     Returns the JSON section: counts, the checks' summaries, ``worst`` (the
     ``cons.s.worst`` highest-scoring suspects).
@@ -540,6 +558,12 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False) -> dict:
         rows = report["worst"] if len(order) <= len(top) else cons.describe_rows(reread(), order, key_cols)
         write_table(suspects_table(rows, key_cols), suspects, overwrite=overwrite)
         report["suspects_file"] = str(suspects)
+    if plots:
+        from .draw_consistency import FOLDER, consistency_page
+
+        pics = consistency_page(cons, report, reread(), top[: cons.s.drawn], plots, images, overwrite)
+        report["page"] = f"{plots}/{FOLDER}/index.html"
+        report["not_drawn"] = [f"{w}: {r}" for w, r in pics["missing"]]
     return report
 
 

@@ -199,3 +199,22 @@ def test_python_api_runs_the_same_pipeline(realdata, tmp_path):
     cli_rep = audit_json(realdata / "aflw2000_prnet")
     assert rep["consistency"]["landmarks"] == cli_rep["landmarks"]
     assert (tmp_path / "s.csv").exists()
+
+
+def test_plots_page_draws_the_worst_rows(realdata, tmp_path):
+    from hpe_cli.datasets.mat import read_mat_dir
+
+    t = read_mat_dir(realdata / "aflw2000_prnet", landmarks=True)
+    A = canonical_A(t[["pitch", "yaw", "roll"]].to_numpy())
+    A[0] = _turn([0, 1, 0], 30) @ A[0]
+    t[["pitch", "yaw", "roll"]] = _angles_of(A)
+    path = tmp_path / "turned.parquet"
+    t.to_parquet(path)
+    plots = tmp_path / "plots"
+    c = audit_json(path, "--plots", plots, "--images", realdata / "aflw2000_prnet")
+    page = (plots / "consistency" / "index.html").read_text()
+    assert c["page"].endswith("consistency/index.html") and c["not_drawn"] == []
+    assert (plots / "consistency" / "worst_1.png").stat().st_size > 1000
+    assert (plots / "consistency" / "scores.png").exists()
+    assert t["file"][0] in page and "landmark fit" in page
+    assert (plots / "index.html").exists()  # the audit's own page is still written

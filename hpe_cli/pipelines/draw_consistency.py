@@ -1,0 +1,148 @@
+"""Pictures of the worst rows of ``hpe audit --consistency`` for the ``--plots`` page.
+
+Each suspect among the worst is drawn on its image: the label's axes solid, the
+axes of the rotation fitted to its landmarks dashed (same colours: red to the
+subject's left, green forehead to chin, blue out of the nose), the landmarks the
+fit used as white dots, a legend, and the angle between the two in the caption.
+The axes start at the landmarks' centroid, with the length of the landmarks'
+extent. Images are found by :class:`hpe_cli.io.images.ImageResolver`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+#: sub-folder of the plots folder holding the page and its pictures
+FOLDER = "consistency"
+#: longest side of a picture, pixels
+MAX_SIDE = 480
+
+
+def _rows(batches, idx) -> tuple:
+    """The rows ``idx`` (global indices, any order) of the re-read table as one pandas frame, in ``idx`` order."""
+    import pandas as pd
+
+    want = np.asarray(idx, dtype=np.int64)
+    got, at, offset = [], [], 0
+    for batch in batches:
+        n = batch.num_rows
+        sel = np.flatnonzero((want >= offset) & (want < offset + n))
+        if len(sel):
+            got.append(batch.take(want[sel] - offset).to_pandas())
+            at.append(sel)
+        offset += n
+    if not got:
+        return pd.DataFrame(), np.zeros(0, np.int64)
+    frame = pd.concat(got, ignore_index=True)
+    order = np.argsort(np.concatenate(at), kind="stable")
+    return frame.iloc[order].reset_index(drop=True), np.concatenate(at)[order]
+
+
+def consistency_page(cons, report, batches, idx, plots_dir, images=None, overwrite=False) -> dict:
+    """Write ``plots_dir/consistency/``: ``index.html``, ``scores.png`` and the rows ``idx`` drawn.
+
+    ``idx``: global row indices of ``cons`` (the worst suspects). Returns
+    ``{"pictures": [{"path", "caption"}], "missing": [(where, reason)]}`` (paths
+    relative to ``plots_dir/consistency``).
+    """
+    from ..io.transaction import ensure_transaction, staged_dir
+    from ..report.consistency_page import page_html, score_figure
+
+    with ensure_transaction(), staged_dir(Path(plots_dir) / FOLDER, overwrite) as stage:
+        out = _pictures(cons, batches, idx, plots_dir, images, stage)
+        score_figure(cons.rows, stage / "scores.png")
+        title = f"hpe audit --consistency: {cons.src.path.name}"
+        (stage / "index.html").write_text(page_html(title, report, out), encoding="utf-8")
+    return out
+
+
+def _pictures(cons, batches, idx, plots_dir, images, stage) -> dict:
+    from ..io.images import ImageResolver, row_ids
+    from ..io.layout import landmark_count
+    from ..io.transaction import note_input
+    from .draw_rows import _image_names
+
+    out = {"pictures": [], "missing": []}
+    frame, _ = _rows(batches, idx)
+    if not len(frame):
+        return out
+    names = _image_names(frame)
+    if names is None:
+        out["missing"] = [(f"row {int(cons.rows['line'][i])}", "the table names no images") for i in idx]
+        return out
+    src = cons.src
+    root = Path(images) if images else (src.path if src.path.is_dir() else src.path.parent)
+    seqs, cams, frs = row_ids(frame)
+    resolver = ImageResolver(root)
+    n_lm = landmark_count(frame.columns)
+    refs, jobs = [], []
+    for k, i in enumerate(idx):
+        line = int(cons.rows["line"][i])
+        where = str(frame["file"].iat[k]) if "file" in frame.columns else src.where(line).split(": ", 1)[-1]
+        ref = resolver.find(names[k], seqs[k], cams[k], frs[k]) if names[k] else None
+        if ref is None:
+            out["missing"].append((where, f"image not found: {resolver.tried(names[k], seqs[k])}"))
+            continue
+        note_input(ref.path or ref.video)
+        if cons.mat_landmarks is not None:
+            uv = cons.mat_landmarks[line - 1]
+        elif n_lm:
+            uv = np.stack(
+                [frame[[f"lm{j}_x" for j in range(n_lm)]].iloc[k], frame[[f"lm{j}_y" for j in range(n_lm)]].iloc[k]], -1
+            )
+        else:
+            uv = np.zeros((0, 2))
+        refs.append(ref)
+        jobs.append((int(i), where, np.asarray(uv, dtype=np.float64)))
+    pic_idx, pic_A, pic_fit = cons.pic
+    for j, img, why in ImageResolver.read(refs):
+        i, where, uv = jobs[j]
+        if img is None:
+            out["missing"].append((where, why))
+            continue
+        hit = np.flatnonzero(pic_idx == i)
+        A, F = (pic_A[hit[0]], pic_fit[hit[0]]) if len(hit) else (None, None)
+        name = f"worst_{len(out['pictures']) + 1}.png"
+        caption = f"{where}: score {cons.rows['consistency_score'][i]:.1f}; {cons.rows['consistency_note'][i]}"
+        _draw(img, uv, A, F, cons.rows["landmark_angle"][i], stage / name, Path(plots_dir) / FOLDER / name)
+        out["pictures"].append({"path": name, "caption": caption})
+    return out
+
+
+def _draw(img, uv, A, F, angle, staged, shown) -> None:
+    import cv2
+
+    from ..geometry import draw as g
+    from .draw_flagged import _around
+    from .draw_rows import _write_image
+
+    H, W = img.shape[:2]
+    ok = np.isfinite(uv).all(1) & ~((uv[:, 0] == -1) & (uv[:, 1] == -1)) if len(uv) else np.zeros(0, bool)
+    pts = uv[ok]
+    if len(pts):
+        c = pts.mean(0)
+        length = 0.6 * float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 1]), 10.0))
+    else:
+        c, length = np.array([W / 2.0, H / 2.0]), 0.25 * min(H, W)
+    r = max(2, int(round(length / 40)))
+    for p in pts:
+        cv2.circle(img, (int(round(p[0])), int(round(p[1]))), r, (255, 255, 255), -1, cv2.LINE_AA)
+    if A is not None:
+        g.render_axes(img, np.asarray(A, np.float64)[None], c[None], np.array([length]))
+    if F is not None and np.isfinite(F).all():
+        g.render_axes_dashed(img, np.asarray(F, np.float64)[None], c[None], np.array([length]))
+    img = _around(img, c, length)
+    H, W = img.shape[:2]
+    s = MAX_SIDE / max(H, W)
+    if s < 1:
+        img = cv2.resize(img, (max(1, round(W * s)), max(1, round(H * s))), interpolation=cv2.INTER_AREA)
+    h = max(12.0, 0.04 * min(img.shape[:2]))
+    g.render_legend(img, [("label", "solid"), ("landmark fit", "dashed")], height_px=h)
+    if np.isfinite(angle):
+        g.render_caption(img, f"{angle:.1f} deg apart", (4, img.shape[0] - 6), height_px=h)
+    _write_image(img, staged, shown)
+
+
+__all__ = ["FOLDER", "consistency_page"]
