@@ -216,5 +216,5 @@ def test_plots_page_draws_the_worst_rows(realdata, tmp_path):
     assert c["page"].endswith("consistency/index.html") and c["not_drawn"] == []
     assert (plots / "consistency" / "worst_1.png").stat().st_size > 1000
     assert (plots / "consistency" / "scores.png").exists()
-    assert t["file"][0] in page and "landmark fit" in page
+    assert t["file"][0] in page and "fitted to the landmarks" in page
     assert (plots / "index.html").exists()  # the audit's own page is still written
