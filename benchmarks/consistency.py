@@ -101,7 +101,9 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "lm68.parquet"
         turned = make_table(n, path)
-        print(f"{n:,} rows of 68 landmarks ({path.stat().st_size / 1e6:.0f} MB Parquet); {turned:,} labels turned 30 deg")
+        print(
+            f"{n:,} rows of 68 landmarks ({path.stat().st_size / 1e6:.0f} MB Parquet); {turned:,} labels turned 30 deg"
+        )
 
         import pyarrow.parquet as pq
 
