@@ -22,10 +22,12 @@ Time (:func:`temporal_jumps`)
     rows away on each side is kept, so the neighbours of a one-frame glitch are not
     flagged with it (a glitch of two consecutive frames is therefore not seen).
 
-Score (:func:`expected_landmark_angle`, :func:`combined_score`)
+Score (:func:`fit_expected_landmark_angle`, :func:`combined_score`)
     Each check's angle is divided by the disagreement expected for it, so rows of
     different datasets and yaws rank together; the row's score is the largest
-    ratio over the checks that apply to it (NaN when none does).
+    ratio over the checks that apply to it (NaN when none does). The expected
+    landmark angle grows with |yaw| (landmark fits are noisier in profile); it is
+    fitted to the table's own medians per |yaw| bin when it has enough rows.
 """
 
 from __future__ import annotations
@@ -254,10 +256,61 @@ def yaw_deg(A) -> np.ndarray:
     return np.rad2deg(np.arcsin(np.clip(-np.asarray(A)[..., 0, 2], -1.0, 1.0)))
 
 
-def expected_landmark_angle(abs_yaw_deg) -> np.ndarray:
-    """Expected landmark-to-label angle (degrees) at ``|yaw|`` degrees (see :data:`LM_EXPECTED_0`)."""
+def expected_landmark_angle(abs_yaw_deg, a: float = LM_EXPECTED_0, b: float = LM_EXPECTED_90) -> np.ndarray:
+    """Expected landmark-to-label angle (degrees) at ``|yaw|`` degrees: ``a + b (|yaw| / 90)^2``."""
     t = np.clip(np.asarray(abs_yaw_deg, dtype=np.float64), 0.0, 90.0) / 90.0
-    return LM_EXPECTED_0 + LM_EXPECTED_90 * t * t
+    return a + b * t * t
+
+
+#: landmark-checked rows needed to fit the expected angle to the data (fewer: the constants above)
+MIN_FIT_ROWS = 200
+#: |yaw| bins of the fit (degrees) and the rows a bin needs
+FIT_EDGES = np.array([0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 180.0])
+FIT_MIN_BIN = 10
+#: the fitted expectation never goes below this (degrees): landmarks are not more precise than that
+FIT_FLOOR_DEG = 1.0
+
+
+def fit_expected_landmark_angle(abs_yaw_deg, angle_deg) -> dict:
+    """Fit ``expected(|yaw|) = a + b (|yaw| / 90)^2`` to the median angle per |yaw| bin (robust to outliers).
+
+    Parameters
+    ----------
+    abs_yaw_deg, angle_deg : array_like, shape (N,)
+        Labels' |yaw| and their landmark angles (NaN: not checked, ignored).
+
+    Returns
+    -------
+    dict
+        ``a``, ``b`` (degrees), ``source`` (``"fitted on N rows"`` or ``"constants"``
+        when fewer than :data:`MIN_FIT_ROWS` rows or no two bins of
+        :data:`FIT_MIN_BIN` rows). The medians of 15-degree bins make the fit
+        robust to up to half of a bin's labels being wrong; weighted least
+        squares over the bins, then ``a >= FIT_FLOOR_DEG`` and ``b >= 0``.
+    """
+    y = np.asarray(abs_yaw_deg, dtype=np.float64)
+    v = np.asarray(angle_deg, dtype=np.float64)
+    ok = np.isfinite(y) & np.isfinite(v)
+    const = {"a": LM_EXPECTED_0, "b": LM_EXPECTED_90, "source": "constants"}
+    if ok.sum() < MIN_FIT_ROWS:
+        return const
+    y, v = np.minimum(y[ok], 90.0), v[ok]
+    k = np.clip(np.searchsorted(FIT_EDGES, y, side="right") - 1, 0, len(FIT_EDGES) - 2)
+    t, m, w = [], [], []
+    for b in range(len(FIT_EDGES) - 1):  # six bins, not rows
+        sel = k == b
+        if sel.sum() >= FIT_MIN_BIN:
+            t.append(np.median((y[sel] / 90.0) ** 2))
+            m.append(np.median(v[sel]))
+            w.append(np.sqrt(sel.sum()))
+    if len(t) < 2:
+        return const
+    t, m, w = map(np.asarray, (t, m, w))
+    X = np.stack([np.ones_like(t), t], 1) * w[:, None]
+    (a, b), *_ = np.linalg.lstsq(X, m * w, rcond=None)
+    b = max(float(b), 0.0)
+    a = max(float(np.average(m - b * t, weights=w)) if b == 0.0 else float(a), FIT_FLOOR_DEG)
+    return {"a": a, "b": b, "source": f"fitted on {int(ok.sum())} rows"}
 
 
 def combined_score(*ratios) -> np.ndarray:

@@ -308,7 +308,8 @@ class ConsistencyAudit:
         N = len(P["line"])
         self.N = N
         lm_angle, lm_reason = P["lm_angle"], P["lm_reason"]
-        lm_ratio = lm_angle / mc.expected_landmark_angle(P["abs_yaw"])
+        self.expected = mc.fit_expected_landmark_angle(P["abs_yaw"], lm_angle)
+        lm_ratio = lm_angle / mc.expected_landmark_angle(P["abs_yaw"], self.expected["a"], self.expected["b"])
         view_angle = np.full(N, np.nan)
         view_reason = np.full(N, self.view_reason or "", dtype=object)
         jump = np.full(N, np.nan)
@@ -353,7 +354,8 @@ class ConsistencyAudit:
                 "suspect_score": self.s.suspect_score,
                 "score": "largest of: landmark angle / expected(|yaw|), view angle / "
                 f"{mc.VIEW_EXPECTED} deg, jump rate / ({self.s.max_jump_deg} / {self.s.suspect_score}) deg per frame",
-                "landmark_expected_deg": f"{mc.LM_EXPECTED_0} + {mc.LM_EXPECTED_90} * (|yaw| / 90)^2",
+                "landmark_expected_deg": f"{self.expected['a']:.3g} + {self.expected['b']:.3g} * (|yaw| / 90)^2 "
+                f"({self.expected['source']})",
                 "max_jump_deg_per_frame": self.s.max_jump_deg,
                 "max_gap_frames": self.s.max_gap,
             },

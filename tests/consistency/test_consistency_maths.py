@@ -95,3 +95,16 @@ def test_expected_landmark_angle_grows_with_yaw():
 def test_combined_score_is_nan_only_without_evidence():
     s = mc.combined_score([np.nan, 1.0, np.nan], [np.nan, 4.0, 2.0])
     assert np.isnan(s[0]) and s[1] == 4.0 and s[2] == 2.0
+
+
+def test_expected_angle_is_fitted_robustly_to_the_data():
+    rng = np.random.default_rng(5)
+    yaw = rng.uniform(0, 90, 5000)
+    typical = 3.0 + 6.0 * (yaw / 90) ** 2
+    angle = typical * rng.uniform(0.5, 1.5, yaw.size)  # median = typical
+    angle[rng.random(yaw.size) < 0.2] = 60.0  # a fifth of the labels wrong
+    f = mc.fit_expected_landmark_angle(yaw, angle)
+    assert f["source"] == "fitted on 5000 rows"
+    assert abs(f["a"] - 3.0) < 1.0 and abs(f["b"] - 6.0) < 2.5
+    few = mc.fit_expected_landmark_angle(yaw[:100], angle[:100])
+    assert few == {"a": mc.LM_EXPECTED_0, "b": mc.LM_EXPECTED_90, "source": "constants"}
