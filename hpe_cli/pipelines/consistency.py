@@ -305,6 +305,7 @@ class ConsistencyAudit:
                 fa.append(b)
             offset += len(p["line"])
         self.pic = (np.concatenate(idx), np.concatenate(la), np.concatenate(fa))
+        self.parts = []  # concatenated into P: do not hold the rows twice
         N = len(P["line"])
         self.N = N
         lm_angle, lm_reason = P["lm_angle"], P["lm_reason"]
