@@ -146,8 +146,6 @@ class ConsistencyAudit:
         self.cams = {}
         if not ({"camera", "frame"} <= cols):
             return "no camera and frame columns"
-        if self.meta.get("legacy_whenet"):
-            return "labels made with --legacy-whenet (WHENet's chain is not a rotation of one head)"
         if "Q.T" in str(self.meta.get("label", "")):
             return "labels in the crop frame (--frame crop)"
         paths = {}

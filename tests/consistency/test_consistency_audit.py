@@ -135,9 +135,19 @@ def test_synthetic_panoptic_camera_offset_and_glitch(synthetic_labels, tmp_path)
     assert np.nanmax(rest["jump_rate"]) < 5.0
 
 
-def test_pizza1_own_labels_show_no_view_disagreement(realdata, tmp_path):
+@pytest.mark.parametrize("legacy", [[], ["--legacy-whenet"]])
+def test_pizza1_own_labels_show_no_view_disagreement(realdata, tmp_path, legacy):
     out = tmp_path / "pizza1.parquet"
-    res = run("relabel-panoptic", realdata / "panoptic_160906_pizza1", "-o", out, "-q", "--rejects", tmp_path / "r.csv")
+    res = run(
+        "relabel-panoptic",
+        realdata / "panoptic_160906_pizza1",
+        "-o",
+        out,
+        "-q",
+        "--rejects",
+        tmp_path / "r.csv",
+        *legacy,
+    )
     assert res.exit_code == 0, res.output
     c = audit_json(out)
     v = c["views"]
