@@ -163,7 +163,10 @@ class ConsistencyAudit:
             try:
                 cams = read_calibration(p)
             except (OSError, HpeError) as exc:
-                raise HpeError(f"{p}: cannot read the calibration for --consistency ({exc})") from None
+                why = str(exc).removeprefix(f"{p}: ")
+                raise HpeError(
+                    f"{p}: cannot read the calibration for --consistency: {why} (give --calibration FILE)"
+                ) from None
             self.cams[seq] = {str(n): (R, K, d) for n, R, K, d in zip(cams.names, cams.R, cams.K, cams.dist)}
         self.calibration_files = sorted(map(str, paths.values()))
         return ""

@@ -228,3 +228,32 @@ def test_plots_page_draws_the_worst_rows(realdata, tmp_path):
     assert (plots / "consistency" / "scores.png").exists()
     assert t["file"][0] in page and "fitted to the landmarks" in page
     assert (plots / "index.html").exists()  # the audit's own page is still written
+
+
+def test_missing_recorded_calibration_is_one_line_error_and_nothing_written(synthetic_labels, tmp_path):
+    labels, _, _ = synthetic_labels
+    t = pq.read_table(labels)
+    meta = dict(t.schema.metadata)
+    rel = json.loads(meta[b"hpe:relabel"])
+    rel["calibration"] = str(tmp_path / "gone.json")
+    meta[b"hpe:relabel"] = json.dumps(rel).encode()
+    path = tmp_path / "moved.parquet"
+    pq.write_table(t.replace_schema_metadata(meta), path)
+    out, sus = tmp_path / "o.parquet", tmp_path / "s.csv"
+    res = CliRunner().invoke(cli, ["audit", str(path), "--consistency", "-o", str(out), "--suspects", str(sus)])
+    assert res.exit_code == 1
+    assert f"{tmp_path / 'gone.json'}: cannot read the calibration for --consistency" in res.output
+    assert "--calibration FILE" in res.output and "Traceback" not in res.output
+    assert not out.exists() and not sus.exists()
+    # the calibration given on the command line is used instead
+    calib = next((labels.parent / "synthseq").glob("calibration_*.json"))
+    c = audit_json(path, "--calibration", calib)
+    assert c["views"]["checked"] > 0
+
+
+def test_suspects_may_not_overwrite_the_input(tmp_path):
+    path = tmp_path / "plain.csv"
+    path.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\n")
+    res = CliRunner().invoke(cli, ["audit", str(path), "--consistency", "--suspects", str(path), "--overwrite"])
+    assert res.exit_code == 1 and "--suspects must differ from INPUT" in res.output
+    assert path.read_text() == "image,pitch,yaw,roll\na.jpg,1,2,3\n"
