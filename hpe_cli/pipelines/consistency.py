@@ -35,6 +35,7 @@ import numpy as np
 from ..errors import HpeError
 from ..geometry.landmark_pose import MIN_POINTS, SCHEME_SIZES, fit_landmark_pose, fit_landmark_pose_perspective
 from ..metrics import consistency as mc
+from .consistency_notes import _Notes, _r, _reason_codes, _stats, suspects_table
 
 #: a landmark fit whose residual (per inter-ocular distance) is above this does not look like a face
 MAX_RESIDUAL = 0.35
@@ -179,7 +180,7 @@ class ConsistencyAudit:
         import pyarrow as pa
 
         return {
-            c: pa.bool_() if c == "suspect" else pa.string() if c == "consistency_note" else pa.float64()
+            c: pa.bool_() if c == "suspect" else pa.string() if c == "consistency_note" else pa.float32()
             for c in COLUMNS
         }
 
@@ -325,24 +326,28 @@ class ConsistencyAudit:
         view_ratio = view_angle / mc.VIEW_EXPECTED
         score = mc.combined_score(lm_ratio, view_ratio, time_ratio)
         suspect = score > self.s.suspect_score
-        note = np.full(N, "", dtype=object)
         checked = np.isfinite(score)
-        for i in np.flatnonzero(suspect):
-            note[i] = self._why(i, lm_angle, lm_ratio, view_angle, jump)
+        sus_idx = np.flatnonzero(suspect)
+        sus_txt = [self._why(i, lm_angle, lm_ratio, view_angle, jump) for i in sus_idx]  # suspects only
         unchecked = np.flatnonzero(~checked)
-        note[unchecked] = _join_reasons(lm_reason[unchecked], view_reason[unchecked], time_reason[unchecked])
+        codes, texts = _reason_codes(lm_reason[unchecked], view_reason[unchecked], time_reason[unchecked])
+        note = _Notes(N, sus_idx, sus_txt, unchecked, codes, texts)
+        f32 = np.float32  # the ranking keeps about 30 bytes per row
         self.rows = {
             "line": P["line"],
-            "landmark_angle": lm_angle,
-            "landmark_residual": P["lm_res"],
-            "view_angle": view_angle,
-            "jump_rate": jump,
-            "consistency_score": score,
+            "landmark_angle": lm_angle.astype(f32),
+            "landmark_residual": P["lm_res"].astype(f32),
+            "view_angle": view_angle.astype(f32),
+            "jump_rate": jump.astype(f32),
+            "consistency_score": score.astype(f32),
             "suspect": suspect,
             "consistency_note": note,
         }
+        lm_reasons = dict(Counter(lm_reason[~np.isfinite(lm_angle)].tolist()).most_common(10))
+        del P, lm_reason, view_reason, time_reason, lm_ratio
+        lm_angle = self.rows["landmark_angle"]
         lm_ok = np.isfinite(lm_angle)
-        reasons = Counter(note[unchecked].tolist())
+        reasons = Counter({texts[k]: int(c) for k, c in zip(*np.unique(codes, return_counts=True))})
         unread = getattr(self, "unread", 0)
         if unread:
             reasons["not checked: label not readable"] += unread
@@ -368,8 +373,8 @@ class ConsistencyAudit:
                 "min_points": MIN_POINTS,
                 "checked": int(lm_ok.sum()),
                 "angle_deg": _stats(lm_angle[lm_ok]),
-                "residual": _stats(P["lm_res"][lm_ok]),
-                "not_checked_reasons": dict(Counter(lm_reason[~lm_ok].tolist()).most_common(10)),
+                "residual": _stats(self.rows["landmark_residual"][lm_ok]),
+                "not_checked_reasons": lm_reasons,
             },
             **out,
         }
@@ -486,7 +491,9 @@ class ConsistencyAudit:
     # ------------------------------------------------------------------ outputs
     def columns(self, offset: int, n: int) -> dict:
         """The output columns of rows ``offset .. offset + n`` (in input order)."""
-        return {c: self.rows[c][offset : offset + n] for c in COLUMNS}
+        out = {c: self.rows[c][offset : offset + n] for c in COLUMNS if c != "consistency_note"}
+        out["consistency_note"] = self.rows["consistency_note"].slice(offset, n)
+        return {c: out[c] for c in COLUMNS}
 
     def worst_order(self) -> np.ndarray:
         """Row indices of the suspects, highest score first."""
@@ -516,22 +523,6 @@ class ConsistencyAudit:
                     }
             offset += n
         return out
-
-
-def _join_reasons(lm, view, time) -> np.ndarray:
-    """``"not checked: landmarks: ...; views: ...; time: ..."`` per row, built once per distinct combination."""
-    import pandas as pd
-
-    codes, uniq = zip(*(pd.factorize(pd.Series(a, dtype=object)) for a in (lm, view, time)))
-    sizes = [len(u) + 1 for u in uniq]
-    key = (np.asarray(codes[0]) * sizes[1] + codes[1]) * sizes[2] + codes[2]
-    combos, inverse = np.unique(key, return_inverse=True)
-    text = []
-    for k in combos:
-        a, rest = divmod(int(k), sizes[1] * sizes[2])
-        b, c = divmod(rest, sizes[2])
-        text.append(f"not checked: landmarks: {uniq[0][a]}; views: {uniq[1][b]}; time: {uniq[2][c]}")
-    return np.array(text, dtype=object)[inverse.reshape(-1)]
 
 
 def canonical_labels(system, cols, eff, res) -> np.ndarray:
@@ -569,26 +560,3 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None
         report["page"] = f"{plots}/{FOLDER}/index.html"
         report["not_drawn"] = [f"{w}: {r}" for w, r in pics["missing"]]
     return report
-
-
-def _r(v):
-    return None if not np.isfinite(v) else round(float(v), 3)
-
-
-def _stats(x) -> dict:
-    x = np.asarray(x, dtype=np.float64)
-    if x.size == 0:
-        return {"n": 0}
-    q = np.percentile(x, [50, 90, 99])
-    return {"n": int(x.size), "median": _r(q[0]), "p90": _r(q[1]), "p99": _r(q[2]), "max": _r(x.max())}
-
-
-def suspects_table(rows: list, key_cols: list):
-    """The suspects key list: key columns, ``row``, ``score`` and ``reason`` (what ``--exclude`` reads)."""
-    import pyarrow as pa
-
-    cols = {c: [r.get(c) for r in rows] for c in key_cols}
-    cols["row"] = [r["row"] for r in rows]
-    cols["score"] = [r["score"] for r in rows]
-    cols["reason"] = [r["reason"] for r in rows]
-    return pa.table(cols)
