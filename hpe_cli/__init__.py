@@ -25,6 +25,7 @@ the 300W-LP active matrix ``A`` (x = subject's left, y = up, z = out of the face
 ``augment_batch``      the same for N samples at once
 ``draw_axes``          Hopenet-style pose axes drawn onto an image
 ``geodesic``           the rotation angle between two labels, degrees
+``landmark_pose``      head rotation fitted to 2-D landmarks alone (``hpe audit --consistency``'s evidence)
 =====================  ==========================================================
 
 The optional tensor side (``pip install hpe-cli[torch]``) lives in :mod:`hpe_cli.torch`.
@@ -51,6 +52,7 @@ _API = (
     "STORAGE_KINDS",
     "convert_file",
     "audit_file",
+    "landmark_pose",
 )
 
 #: names resolved lazily by :func:`__getattr__`: name -> (module, attribute)

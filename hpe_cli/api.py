@@ -10,7 +10,7 @@ call the same kernels.
 
 from __future__ import annotations
 
-from .api_arrays import augment_batch, augment_sample, draw_axes, geodesic  # noqa: F401
+from .api_arrays import augment_batch, augment_sample, draw_axes, geodesic, landmark_pose  # noqa: F401
 
 STORAGE_KINDS = ("angles", "matrix", "rotvec", "quaternion", "6d")
 

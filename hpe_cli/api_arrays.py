@@ -214,3 +214,62 @@ def geodesic(a, b, system=None):
         return get_system(system).from_angles(x)
 
     return geodesic_deg(mat(a), mat(b))
+
+
+def landmark_pose(landmarks, scheme=None, *, system="300w_lp", labels=None):
+    """Head rotation from 2-D landmarks alone (the evidence of ``hpe audit --consistency``).
+
+    A weak-perspective fit of DirectMHP's 68-point mean face, batched over all faces
+    (:func:`hpe_cli.geometry.landmark_pose.fit_landmark_pose`).
+
+    Parameters
+    ----------
+    landmarks : array_like, shape (N, L, 2)
+        Pixels (x right, y down); NaN or ``(-1, -1)`` marks an invisible point.
+    scheme : {"ibug68", "face70", "aflw21"}, optional
+        Default: by ``L`` (68, 70, 21).
+    system : str, path or RotationSystem
+        System of the returned angles and of ``labels``.
+    labels : array_like, shape (N, 3), optional
+        ``(pitch, yaw, roll)`` degrees in ``system``: also return their angle to the fit.
+
+    Returns
+    -------
+    dict
+        ``angles`` (N, 3) the fit's ``(pitch, yaw, roll)`` in ``system`` (NaN where not
+        fitted), ``matrix`` (N, 3, 3) the fit's canonical 300W-LP matrix, ``residual``
+        (N,) RMS reprojection error per inter-ocular distance, ``reason`` (N,) why a
+        face was not fitted (``""`` when it was); with ``labels`` also ``angle`` (N,)
+        degrees between each label and its fit.
+
+    Examples
+    --------
+    >>> import numpy as np, hpe_cli as hpe
+    >>> from hpe_cli.geometry.landmark_pose import project_model
+    >>> A = hpe.get_system("300w_lp").to_canonical(hpe.get_system("300w_lp").from_angles([[10.0, -40.0, 5.0]]))
+    >>> uv = project_model(A, np.array([100.0]), np.array([[200.0, 220.0]]))  # a noise-free face
+    >>> out = hpe.landmark_pose(uv, labels=[[10.0, -40.0, 5.0]])
+    >>> out["angles"].round(6).tolist(), bool(out["angle"][0] < 1e-6)
+    ([[10.0, -40.0, 5.0]], True)
+    """
+    import numpy as np
+
+    from .geometry.landmark_pose import SCHEME_SIZES, fit_landmark_pose
+    from .rotation.distances import geodesic_deg
+
+    uv = np.asarray(landmarks, dtype=np.float64)
+    if scheme is None:
+        n = uv.shape[1] if uv.ndim == 3 else 0
+        scheme = next((k for k, v in SCHEME_SIZES.items() if v == n), None)
+        if scheme is None:
+            raise ValueError(f"expected 21, 68 or 70 landmarks (aflw21, ibug68, face70), got shape {uv.shape}")
+    s = get_system(system)
+    fit = fit_landmark_pose(uv, scheme)
+    ok = fit["reason"] == ""
+    angles = np.full((len(uv), 3), np.nan)
+    if ok.any():
+        angles[ok] = s.to_angles(s.from_canonical(fit["A"][ok]))[0]
+    out = {"angles": angles, "matrix": fit["A"], "residual": fit["residual"], "reason": fit["reason"]}
+    if labels is not None:
+        out["angle"] = geodesic_deg(s.to_canonical(s.from_angles(np.asarray(labels, dtype=np.float64))), fit["A"])
+    return out
