@@ -257,3 +257,19 @@ def test_suspects_may_not_overwrite_the_input(tmp_path):
     res = CliRunner().invoke(cli, ["audit", str(path), "--consistency", "--suspects", str(path), "--overwrite"])
     assert res.exit_code == 1 and "--suspects must differ from INPUT" in res.output
     assert path.read_text() == "image,pitch,yaw,roll\na.jpg,1,2,3\n"
+
+
+def test_several_sequences_use_each_sequences_calibration(tmp_path):
+    gen = sample_data_script()
+    gen.make_synthetic(tmp_path / "seqA", n_frames=6, n_people=2, n_cameras=5, special=False)
+    gen.make_synthetic(tmp_path / "seqB", n_frames=6, n_people=2, n_cameras=5, seed=7, special=False)
+    out = tmp_path / "labels.parquet"
+    res = run(
+        "relabel-panoptic", tmp_path / "seqA", tmp_path / "seqB", "-o", out, "-q", "--rejects", tmp_path / "r.csv"
+    )
+    assert res.exit_code == 0, res.output
+    c = audit_json(out)
+    v = c["views"]
+    assert len(v["calibration"]) == 2
+    assert v["checked"] == c["rows"] and v["angle_deg"]["max"] < 1e-6
+    assert v["cameras_with_offset"] == [] and c["time"]["checked"] > 0
