@@ -51,6 +51,7 @@ _API = (
     "STORAGE_KINDS",
     "convert_file",
     "audit_file",
+    "view_file",
 )
 
 #: names resolved lazily by :func:`__getattr__`: name -> (module, attribute)

@@ -337,6 +337,53 @@ def audit_file(
         )
 
 
+def view_file(
+    labels,
+    output,
+    other=None,
+    *,
+    images=None,
+    system=None,
+    other_system=None,
+    keys=None,
+    rejects=None,
+    strict: bool = False,
+    overwrite: bool = False,
+    **options,
+) -> dict:
+    """``hpe view`` as a function: the same pipeline (:func:`hpe_cli.pipelines.view.run_view`).
+
+    Writes a browsable offline page of every row of ``labels`` (and of ``other`` joined by ``keys`` beside it)
+    into folder ``output``; open ``output/index.html``. Returns the counts (``rows``, ``shown``,
+    ``whole_frame``, ``made``, ``reused``, ``images``, ``matched``, ``rejects``, ``system``). ``options``:
+    ``radians``, ``use``, ``workers``, ``title``.
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> s = hpe.view_file("AFLW2000/", "page/")  # doctest: +SKIP
+    >>> s["shown"], s["whole_frame"]  # doctest: +SKIP
+    (2000, 2000)
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.view import run_view
+
+    with ensure_transaction():
+        return run_view(
+            labels,
+            output,
+            other,
+            images=images,
+            system=None if system is None else get_system(system),
+            other_system=None if other_system is None else get_system(other_system),
+            keys=keys,
+            rejects_path=rejects,
+            strict=strict,
+            overwrite=overwrite,
+            **options,
+        )
+
+
 def write_labels(table, path, system=None, *, overwrite: bool = False):
     """Write a label table atomically (Parquet or CSV by extension), naming its system.
 

@@ -147,7 +147,15 @@ def _resolve_images(t: Table, root, ok_rows):
         return [], code, reasons
     names = np.array(names, dtype=object)
     seqs, cams, frs = row_ids(t.frame)
-    key = pd.Series(names).astype(str) + "\0" + pd.Series(seqs) + "\0" + pd.Series(cams) + "\0" + pd.Series(frs).astype(str)
+    key = (
+        pd.Series(names).astype(str)
+        + "\0"
+        + pd.Series(seqs)
+        + "\0"
+        + pd.Series(cams)
+        + "\0"
+        + pd.Series(frs).astype(str)
+    )
     codes, uniq = pd.factorize(key, sort=False)
     first = np.full(len(uniq), -1, dtype=np.int64)
     first[codes[::-1]] = np.arange(n)[::-1]
@@ -166,10 +174,9 @@ def _resolve_images(t: Table, root, ok_rows):
         ref_of[u] = by_key[ref.key]
     code = ref_of[codes]
     missing = code < 0
-    for i in np.flatnonzero(missing & ok_rows):
-        reasons[i] = (
-            "no image name" if pd.isna(names[i]) else f"image not found: {resolver.tried(names[i], seqs[i])}"
-        )
+    nameless = pd.isna(names)
+    reasons[missing & ok_rows & nameless] = "no image name"
+    reasons[missing & ok_rows & ~nameless] = "image not found"
     return refs, code, reasons
 
 
@@ -250,7 +257,7 @@ def run_view(
     sizes = [image_size(r) for r in refs]
     for k, s in enumerate(sizes):
         if s is None:
-            missing[(img_code == k) & ok] = f"not a readable image: {refs[k]}"
+            missing[(img_code == k) & ok] = "not a readable image"
     centre, L, crops = _placement(a, sizes + [None], np.where(img_code >= 0, img_code, len(refs)))
     shown = ok & (missing == "")
     fp = vt.fingerprint_all(refs)
@@ -267,6 +274,8 @@ def run_view(
     why = np.where(ok, missing, a.reasons)
     _reject(rejects, a, bad, why[bad])
 
+    if len(rejects) and (rejects.path is None or strict):
+        rejects.check()  # fail before making any picture
     have_thumbs, have_frames = vt.existing(outdir, vt.THUMB_DIR), vt.existing(outdir, vt.FRAME_DIR)
     groups: dict = {}
     for i in idx:  # one entry per row to draw, grouped by image

@@ -38,7 +38,9 @@ def _num(v, digits=2):
 def _category(values) -> dict:
     import pandas as pd
 
-    s = pd.Series(values, dtype=object).map(lambda x: None if x is None or (isinstance(x, float) and x != x) else str(x))
+    s = pd.Series(values, dtype=object).map(
+        lambda x: None if x is None or (isinstance(x, float) and x != x) else str(x)
+    )
     codes, uniq = pd.factorize(s, sort=True)
     return {"values": [str(u) for u in uniq], "codes": codes.astype(np.int32)}
 
@@ -130,7 +132,15 @@ def write_page(
         "counts": {k: v for k, v in counts.items() if isinstance(v, (int, list))},
         "angles_system": labels.system.name,
     }
-    data = {"meta": meta, "num": num, "cat": cat, "flag": flag, "thumb": thumbs.tolist(), "img": img_code, "images": images}
+    data = {
+        "meta": meta,
+        "num": num,
+        "cat": cat,
+        "flag": flag,
+        "thumb": thumbs.tolist(),
+        "img": img_code,
+        "images": images,
+    }
     (folder / "rows.js").write_bytes(b"window.HPE_VIEW=" + _dumps(data) + b";\n")
 
     # every column, CHUNK rows per file
