@@ -14,7 +14,8 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import AFLW, PIZZA, ROOT, body_attrs, console_errors, detail_chunk, open_page, page_data, run
+
+from .conftest import AFLW, PIZZA, ROOT, body_attrs, console_errors, detail_chunk, open_page, page_data, run
 
 pytestmark = pytest.mark.skipif(not PIZZA.is_dir(), reason="../shared/realdata is not available")
 
