@@ -30,7 +30,7 @@ def _dumps(obj) -> bytes:
     return orjson.dumps(obj, option=orjson.OPT_SERIALIZE_NUMPY, default=str)
 
 
-def _num(v, digits=2):
+def _num(v, digits=3):
     v = np.asarray(v, dtype=np.float64)
     return np.round(np.where(np.isfinite(v), v, np.nan), digits)
 
