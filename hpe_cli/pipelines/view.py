@@ -239,7 +239,10 @@ def run_view(
         both = has & ok
         if both.any():
             angle[both] = geodesic_deg(A_other[both], a.A[both])
-            other_angles[both] = a.system.to_angles(a.system.from_canonical(A_other[both]))[0]
+            if b.system.name == a.system.name:  # the angles as OTHER wrote them
+                other_angles[both] = b.angles[bidx[both]]
+            else:  # OTHER's pose in LABELS' system, so the two read alike
+                other_angles[both] = a.system.to_angles(a.system.from_canonical(A_other[both]))[0]
         counts["matched"] = int((bidx >= 0).sum())
         counts["keys"] = keys
         if len(unmatched):
