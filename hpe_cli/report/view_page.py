@@ -99,7 +99,6 @@ def write_page(
     """Write the page into ``folder`` (the run's staged output folder). ``labels``/``other`` are
     :class:`hpe_cli.pipelines.view.Table` s; the arrays have one entry per row of ``labels``."""
     import importlib.resources as ir
-    import json
 
     folder = Path(folder)
     frame = labels.frame
@@ -186,7 +185,7 @@ def write_page(
         if name == "index.html":
             import html
 
-            text = text.replace("{{title}}", html.escape(str(title))).replace("{{meta}}", json.dumps(meta)[:0])
+            text = text.replace("{{title}}", html.escape(str(title)))
         (folder / name).write_text(text, encoding="utf-8")
 
 

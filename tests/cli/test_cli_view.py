@@ -169,3 +169,18 @@ def test_api_writes_the_same_page(tmp_path):
     assert sorted(p.name for p in (tmp_path / "cli" / "thumbs").iterdir()) == sorted(
         p.name for p in (tmp_path / "api" / "thumbs").iterdir()
     )
+
+
+def test_page_loads_nothing_from_the_network(tmp_path):
+    """No CDN, no remote font: the only URL in the page's files is the SVG namespace (a name, never fetched)."""
+    import re
+
+    _images(tmp_path / "img", ["a.png", "b.png"])
+    src = _table(tmp_path / "in.csv", ROWS)
+    page = tmp_path / "page"
+    assert run("view", src, "-o", page, "--images", tmp_path / "img", "-q").exit_code == 0
+    for name in ("index.html", "view.js", "view.css"):
+        text = (page / name).read_text()
+        urls = set(re.findall(r"(?:https?:)?//[\w.-]+\.[a-z]{2,}[^\s\"')]*", text))
+        assert urls <= {"http://www.w3.org/2000/svg"}, (name, urls)
+        assert "fetch(" not in text and "XMLHttpRequest" not in text and "import(" not in text

@@ -189,7 +189,7 @@
   }
 
   /* ---------- coverage map: yaw x pitch, 10-degree cells ---------- */
-  var COV = { yaw0: -180, pitch0: -90, step: 10, nx: 36, ny: 18, px: 8 };
+  var COV = { yaw0: -180, pitch0: -180, step: 10, nx: 36, ny: 36, px: 8 };
   function drawCoverage() {
     var cv = $("coverage"); if (!cv) return;
     var keep = passes(true), cnt = new Int32Array(COV.nx * COV.ny), max = 0, y = num.yaw, p = num.pitch;
@@ -209,7 +209,8 @@
       ctx.fillRect(xx * s, (COV.ny - 1 - yy) * s, s - 1, s - 1); // pitch up is up
     }
     ctx.strokeStyle = "#999"; ctx.beginPath();
-    ctx.moveTo(18 * s, 0); ctx.lineTo(18 * s, cv.height); ctx.moveTo(0, 9 * s); ctx.lineTo(cv.width, 9 * s); ctx.stroke();
+    ctx.moveTo(COV.nx / 2 * s, 0); ctx.lineTo(COV.nx / 2 * s, cv.height);
+    ctx.moveTo(0, COV.ny / 2 * s); ctx.lineTo(cv.width, COV.ny / 2 * s); ctx.stroke();
     var ry = state.ranges.yaw, rp = state.ranges.pitch;
     if (ry && rp && ry[0] !== null && rp[0] !== null) {
       ctx.strokeStyle = "#c2410c"; ctx.lineWidth = 2;
@@ -275,7 +276,7 @@
         (COV.cnt ? COV.cnt[c[1] * COV.nx + c[0]] : 0) + " rows";
     });
     f.appendChild(cv);
-    f.appendChild(el("div", { id: "cov-note" }, "yaw -180..180 across, pitch -90..90 up; cells count the rows the other filters keep"));
+    f.appendChild(el("div", { id: "cov-note" }, "yaw -180..180 across, pitch -180..180 up, 10-degree cells; they count the rows the other filters keep"));
     var cats = Object.keys(cat);
     if (cats.length) f.appendChild(el("h3", null, "Categories"));
     cats.forEach(function (k) {
