@@ -184,3 +184,19 @@ def test_page_loads_nothing_from_the_network(tmp_path):
         urls = set(re.findall(r"(?:https?:)?//[\w.-]+\.[a-z]{2,}[^\s\"')]*", text))
         assert urls <= {"http://www.w3.org/2000/svg"}, (name, urls)
         assert "fetch(" not in text and "XMLHttpRequest" not in text and "import(" not in text
+
+
+def test_rows_with_unusable_labels_are_rejects_and_stay_in_the_page(tmp_path):
+    _images(tmp_path / "img", ["a.png", "b.png"])
+    rows = [ROWS[0], dict(ROWS[1], yaw=float("nan"))]
+    src = _table(tmp_path / "in.csv", rows)
+    page, rej = tmp_path / "page", tmp_path / "rej.csv"
+    r = run("view", src, "-o", page, "--images", tmp_path / "img")
+    assert r.exit_code == 1 and f"{src}: line 3:" in r.output and not page.exists(), r.output
+    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--rejects", rej)
+    assert r.exit_code == 0, r.output
+    got = pd.read_csv(rej)
+    assert got["row"].tolist() == [3] and got["reason"].iloc[0]
+    d = data(page)
+    assert d["meta"]["n"] == 2 and d["thumb"][1] is None
+    assert d["cat"]["status"]["values"][d["cat"]["status"]["codes"][1]] == got["reason"].iloc[0]
