@@ -123,7 +123,9 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)
-    browser = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None)
+    browser = next(
+        (shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None
+    )
     with tempfile.TemporaryDirectory(prefix="hpe-view-bench-") as tmp:
         tmp = Path(tmp)
         labels, table = make_data(tmp, args.rows, args.images)
