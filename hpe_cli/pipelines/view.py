@@ -280,10 +280,16 @@ def run_view(
     if len(rejects) and (rejects.path is None or strict):
         rejects.check()  # fail before making any picture
     have_thumbs, have_frames = vt.existing(outdir, vt.THUMB_DIR), vt.existing(outdir, vt.FRAME_DIR)
+    from ..geometry.draw import image_vectors
+
+    V = np.full((a.n, 3, 2), np.nan)
+    V[idx] = image_vectors(a.A[idx])[:, :, :2]
+    has_other = b is not None and np.isfinite(A_other).any()
     groups: dict = {}
     for i in idx:  # one entry per row to draw, grouped by image
         crop = None if crops[i, 2] == -1 else tuple(crops[i])
-        groups.setdefault(int(img_code[i]), []).append((thumb[i], crop, centre[i], float(L[i]), a.A[i], A_other[i]))
+        other_i = A_other[i] if has_other else None
+        groups.setdefault(int(img_code[i]), []).append((thumb[i], crop, centre[i], float(L[i]), V[i], other_i))
     need_t = set(thumb[idx].tolist()) - have_thumbs
     need_f = set(frame_names) - have_frames
     with ensure_transaction(), staged_dir(outdir, overwrite) as stage:

@@ -38,7 +38,7 @@ class Task:
     """The rows of one image that need a picture, and the image's full frame when it needs one."""
 
     ref: object  # hpe_cli.io.images.ImageRef
-    rows: list = field(default_factory=list)  # (name, crop (x0, y0, x1, y1) or None, centre, length, A, A_other)
+    rows: list = field(default_factory=list)  # (name, crop (x0, y0, x1, y1) or None, centre, length, V, A_other)
     frame: str | None = None  # file name of the reduced full frame to write, or None
     stage: str = ""
 
@@ -98,17 +98,48 @@ def crop_boxes(frame_boxes) -> np.ndarray:
     return out
 
 
-def _draw(img, A, A_other, centre, length):
+def _draw(img, V, A_other, centre, length):
+    """The labels' three lines solid (Hopenet's ``draw_axis`` colours and order, anti-aliased, sub-pixel ends:
+    :func:`hpe_cli.geometry.draw.render_axes` with the vectors computed for every row at once), OTHER's dashed
+    (:func:`hpe_cli.geometry.draw.render_axes_dashed`)."""
+    import cv2
+
     from ..geometry import draw as g
 
-    c = np.asarray(centre, dtype=np.float64).reshape(1, 2)
+    c = np.asarray(centre, dtype=np.float64)
     if not (np.isfinite(c).all() and np.isfinite(length) and length > 0):
         return img
-    if np.isfinite(A).all():
-        g.render_axes(img, np.asarray(A).reshape(1, 3, 3), c, length, 2)
+    if V is not None and np.isfinite(V).all():
+        one = 1 << _SHIFT
+        p = (int(round(c[0] * one)), int(round(c[1] * one)))
+        ends = np.clip(c + length * np.asarray(V), -1e6, 1e6)
+        for i in range(3):
+            q = (int(round(ends[i, 0] * one)), int(round(ends[i, 1] * one)))
+            cv2.line(img, p, q, g.AXIS_COLOURS[i], 2, cv2.LINE_AA, _SHIFT)
     if A_other is not None and np.isfinite(A_other).all():
-        g.render_axes_dashed(img, np.asarray(A_other).reshape(1, 3, 3), c, length, 1)
+        g.render_axes_dashed(img, np.asarray(A_other).reshape(1, 3, 3), c.reshape(1, 2), length, 1)
     return img
+
+
+#: sub-pixel bits of the line end points (as :mod:`hpe_cli.geometry.draw`)
+_SHIFT = 4
+
+
+def _shrink(part, size: int):
+    """``part`` (square) resized to ``size``: by an integer factor with area averaging first when it is more than
+    twice as large (OpenCV's fast path), then bilinear. Returns ``(image, scale)``."""
+    import cv2
+
+    side = part.shape[0]
+    k = side // size
+    if k >= 2:
+        m = side // k
+        part = cv2.resize(part[: m * k, : m * k], (m, m), interpolation=cv2.INTER_AREA)
+        scale0 = 1.0 / k
+    else:
+        scale0 = 1.0
+    out = cv2.resize(part, (size, size), interpolation=cv2.INTER_LINEAR)
+    return out, scale0 * size / part.shape[0]
 
 
 def _interpolation(scale: float) -> int:
@@ -119,9 +150,10 @@ def _interpolation(scale: float) -> int:
     return cv2.INTER_AREA if scale < 0.5 else cv2.INTER_LINEAR
 
 
-def thumbnail(img, crop, A, A_other, centre, length, size: int = THUMB) -> np.ndarray:
+def thumbnail(img, crop, V, A_other, centre, length, size: int = THUMB) -> np.ndarray:
     """A ``size`` x ``size`` BGR thumbnail of ``img``: the square ``crop`` (padded with grey outside the image)
-    or, with ``crop`` None, the whole frame letterboxed; the pose ``A`` drawn solid and ``A_other`` dashed at
+    or, with ``crop`` None, the whole frame letterboxed; the labels' pose drawn solid (``V``: the (3, 2) image
+    directions of its three lines, :func:`hpe_cli.geometry.draw.image_vectors`) and ``A_other`` dashed at
     ``centre`` (image pixels) with lines ``length`` pixels long."""
     import cv2
 
@@ -130,9 +162,7 @@ def thumbnail(img, crop, A, A_other, centre, length, size: int = THUMB) -> np.nd
     centre = np.asarray(centre, dtype=np.float64)
     if crop is not None:
         x0, y0, x1, y1 = (int(v) for v in crop)
-        part = crop_padded(img, (x0, y0, x1, y1), value=48)
-        s = size / max(1, x1 - x0)
-        out = cv2.resize(part, (size, size), interpolation=_interpolation(s))
+        out, s = _shrink(crop_padded(img, (x0, y0, x1, y1), value=48), size)
         c = (centre - (x0, y0)) * s
     else:
         H, W = img.shape[:2]
@@ -143,7 +173,7 @@ def thumbnail(img, crop, A, A_other, centre, length, size: int = THUMB) -> np.nd
         ox, oy = (size - w) // 2, (size - h) // 2
         out[oy : oy + h, ox : ox + w] = small
         c = centre * s + (ox, oy)
-    return _draw(np.ascontiguousarray(out), A, A_other, c, length * s)
+    return _draw(np.ascontiguousarray(out), V, A_other, c, length * s)
 
 
 def reduced_frame(img, side: int = FRAME_SIDE) -> np.ndarray:
@@ -157,13 +187,14 @@ def reduced_frame(img, side: int = FRAME_SIDE) -> np.ndarray:
     return cv2.resize(img, (max(1, round(W * s)), max(1, round(H * s))), interpolation=cv2.INTER_AREA)
 
 
-def _write_jpeg(path: Path, img, quality: int) -> None:
+def _write_jpeg(path: str, img, quality: int) -> None:
     import cv2
 
     ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])
     if not ok:
-        raise OSError(f"cannot encode {path.name}")
-    path.write_bytes(buf.tobytes())
+        raise OSError(f"cannot encode {os.path.basename(path)}")
+    with open(path, "wb") as fh:
+        fh.write(buf)
 
 
 def run_task(task: Task) -> tuple:
@@ -179,11 +210,11 @@ def run_task(task: Task) -> tuple:
         import cv2
 
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-    stage = Path(task.stage)
     if task.frame is not None:
-        _write_jpeg(stage / FRAME_DIR / task.frame, reduced_frame(img), 85)
-    for name, crop, centre, length, A, A_other in task.rows:
-        _write_jpeg(stage / THUMB_DIR / name, thumbnail(img, crop, A, A_other, centre, length), 82)
+        _write_jpeg(os.path.join(task.stage, FRAME_DIR, task.frame), reduced_frame(img), 85)
+    thumbs = os.path.join(task.stage, THUMB_DIR)
+    for name, crop, centre, length, V, A_other in task.rows:
+        _write_jpeg(os.path.join(thumbs, name), thumbnail(img, crop, V, A_other, centre, length), 82)
     return len(task.rows), ""
 
 
