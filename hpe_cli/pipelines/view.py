@@ -243,6 +243,14 @@ def run_view(
                 other_angles[both] = b.angles[bidx[both]]
             else:  # OTHER's pose in LABELS' system, so the two read alike
                 other_angles[both] = a.system.to_angles(a.system.from_canonical(A_other[both]))[0]
+        bad_b = np.flatnonzero(b.reasons != "")
+        if len(bad_b):  # OTHER's rows without a usable pose: kept in the page (no angle), listed as rejects
+            rejects.add(
+                {"table": np.full(len(bad_b), str(b.src.path), dtype=object), "row": b.row_numbers()[bad_b],
+                 **{c: b.frame[c].to_numpy()[bad_b] for c in keys if c in b.frame}},
+                b.reasons[bad_b].astype(object),
+                where=b.where(int(bad_b[0])),
+            )  # fmt: skip
         counts["matched"] = int((bidx >= 0).sum())
         counts["keys"] = keys
         if len(unmatched):

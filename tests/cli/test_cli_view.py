@@ -200,3 +200,26 @@ def test_rows_with_unusable_labels_are_rejects_and_stay_in_the_page(tmp_path):
     d = data(page)
     assert d["meta"]["n"] == 2 and d["thumb"][1] is None
     assert d["cat"]["status"]["values"][d["cat"]["status"]["codes"][1]] == got["reason"].iloc[0]
+
+
+def test_other_rows_without_a_match_or_a_pose_are_rejects(tmp_path):
+    _images(tmp_path / "img", ["a.png", "b.png"])
+    src = _table(tmp_path / "in.csv", ROWS[:2])
+    other = _table(
+        tmp_path / "other.csv",
+        [
+            {"image": "a.png", "pitch": 0.0, "yaw": 10.0, "roll": 0.0},
+            {"image": "b.png", "pitch": 0.0, "yaw": float("nan"), "roll": 0.0},
+            {"image": "c.png", "pitch": 0.0, "yaw": 0.0, "roll": 0.0},
+        ],
+    )
+    r = run("view", src, other, "-o", tmp_path / "page", "--images", tmp_path / "img")
+    assert r.exit_code == 1 and f"{other}: line" in r.output, r.output
+    rej = tmp_path / "rej.csv"
+    r = run("view", src, other, "-o", tmp_path / "page", "--images", tmp_path / "img", "--rejects", rej)
+    assert r.exit_code == 0, r.output
+    got = pd.read_csv(rej).sort_values("row")
+    assert got["row"].tolist() == [3, 4] and got["table"].tolist() == [str(other)] * 2
+    assert got["reason"].iloc[1] == f"no row of {src} with this key"
+    d = data(tmp_path / "page")
+    assert d["num"]["angle"][0] == 0.0 and d["num"]["angle"][1] is None
