@@ -6,7 +6,8 @@ into the same page folder makes only the pictures of new or changed rows (the fi
 where they are; see :func:`plan_pictures`).
 
 The work is cut into tasks of at most :data:`TASK_ROWS` rows of one image; a task decodes its image once
-(:meth:`hpe_cli.io.images.ImageResolver.read`: files through OpenCV, video frames decoded front to back) and writes
+(files with the loader's decoder, :func:`hpe_cli.io.jpeg.read_image`: simplejpeg where it gives OpenCV's pixels;
+video frames with :meth:`hpe_cli.io.images.ImageResolver.read`, decoded front to back) and writes
 its JPEGs straight into the run's staged folder, so the parent holds only the plan and memory stays flat.
 """
 
@@ -201,9 +202,14 @@ def run_task(task: Task) -> tuple:
     """Make the pictures of one task; ``(rows done, reason)`` -- reason ``""``, or why the image is unreadable."""
     from ..io.images import ImageResolver
 
-    img, why = None, "image not found"
-    for _, img, why in ImageResolver.read([task.ref]):
-        pass
+    img, why = None, "not a readable image"
+    if task.ref.path is not None:  # the loader's decoder: simplejpeg where it gives OpenCV's exact pixels
+        from ..io.jpeg import read_image
+
+        img = read_image(task.ref.path, rgb=False)
+    else:  # a video frame
+        for _, img, why in ImageResolver.read([task.ref]):
+            pass
     if img is None:
         return 0, why or "not a readable image"
     if img.ndim == 2:
