@@ -60,6 +60,13 @@ from .table_options import column_options
 )
 @click.option("--title", help="Page title [default: LABELS' file name].")
 @click.option("--workers", type=click.IntRange(1), default=2, show_default=True, help="Threads making thumbnails.")
+@click.option(
+    "--frames/--no-frames",
+    default=True,
+    show_default=True,
+    help="Make each image once at 960 px for the detail view (--no-frames: the detail view shows the "
+    "thumbnail; for many distinct images).",
+)
 @rejects_options
 @overwrite_option
 @verbosity_options
@@ -76,6 +83,7 @@ def view(
     keys,
     title,
     workers,
+    frames,
     rejects,
     strict,
     overwrite,
@@ -129,6 +137,7 @@ def view(
             keys=keys,
             workers=workers,
             title=title,
+            frames=frames,
             rejects_path=rejects,
             strict=strict,
             overwrite=overwrite,

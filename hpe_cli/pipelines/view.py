@@ -193,6 +193,7 @@ def run_view(
     keys=None,
     workers=1,
     title=None,
+    frames=True,
     rejects_path=None,
     strict=False,
     overwrite=False,
@@ -203,6 +204,8 @@ def run_view(
     Returns the counts: ``rows``, ``shown`` (rows with a thumbnail), ``whole_frame`` (rows without a head box,
     shown whole), ``made`` / ``reused`` (thumbnails made this run / kept from an earlier one), ``images``,
     ``matched`` (rows of LABELS with an OTHER row), ``rejects`` (reason -> count), ``system``, ``keys``.
+    ``frames=False`` makes no full frames: the detail view then shows the thumbnail (for datasets of many
+    distinct images, whose frames would take about 100 kB each).
     """
     import hashlib
 
@@ -272,7 +275,8 @@ def run_view(
     centre, L, crops = _placement(a, sizes + [None], np.where(img_code >= 0, img_code, len(refs)))
     shown = ok & (missing == "")
     fp = vt.fingerprint_all(refs)
-    frame_names = [hashlib.blake2b(f"f{vt.VERSION}|{vt.FRAME_SIDE}|{f}".encode(), digest_size=10).hexdigest() + ".jpg"
+    frame_names = [None if not frames else
+                   hashlib.blake2b(f"f{vt.VERSION}|{vt.FRAME_SIDE}|{f}".encode(), digest_size=10).hexdigest() + ".jpg"
                    for f in fp]  # fmt: skip
     thumb = np.full(a.n, None, dtype=object)
     idx = np.flatnonzero(shown)
@@ -299,7 +303,7 @@ def run_view(
         other_i = A_other[i] if has_other else None
         groups.setdefault(int(img_code[i]), []).append((thumb[i], crop, centre[i], float(L[i]), V[i], other_i))
     need_t = set(thumb[idx].tolist()) - have_thumbs
-    need_f = set(frame_names) - have_frames
+    need_f = set(frame_names) - have_frames - {None}
     with ensure_transaction(), staged_dir(outdir, overwrite) as stage:
         stage = Path(stage)
         vt.mkdirs(stage)

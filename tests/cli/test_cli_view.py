@@ -223,3 +223,13 @@ def test_other_rows_without_a_match_or_a_pose_are_rejects(tmp_path):
     assert got["reason"].iloc[1] == f"no row of {src} with this key"
     d = data(tmp_path / "page")
     assert d["num"]["angle"][0] == 0.0 and d["num"]["angle"][1] is None
+
+
+def test_no_frames(tmp_path):
+    _images(tmp_path / "img", ["a.png", "b.png"])
+    src = _table(tmp_path / "in.csv", ROWS)
+    page = tmp_path / "page"
+    assert run("view", src, "-o", page, "--images", tmp_path / "img", "--no-frames", "-q").exit_code == 0
+    d = data(page)
+    assert [im["f"] for im in d["images"]] == [None, None] and all(d["thumb"])
+    assert not list((page / "frames").iterdir()) if (page / "frames").exists() else True

@@ -403,6 +403,10 @@
       axes(d.vec[j], false);
       if (HAS_OTHER) axes(d.vec_other[j], true);
       frame.appendChild(svg);
+    } else if (D.thumb[i]) { // made with --no-frames: the thumbnail, larger
+      frame.appendChild(el("img", { src: "thumbs/" + D.thumb[i], alt: "thumbnail", id: "detail-img",
+        style: "width:384px;height:384px;image-rendering:auto" }));
+      frame.appendChild(el("p", null, "no full frame (the page was made with --no-frames)"));
     } else {
       frame.appendChild(el("p", null, "no picture: " + cat.status.values[cat.status.codes[i]]));
     }
