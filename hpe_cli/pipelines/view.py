@@ -201,11 +201,41 @@ def run_view(
 ) -> dict:
     """Write a browsable page of every row of ``labels`` (and ``other`` beside it) into folder ``outdir``.
 
-    Returns the counts: ``rows``, ``shown`` (rows with a thumbnail), ``whole_frame`` (rows without a head box,
-    shown whole), ``made`` / ``reused`` (thumbnails made this run / kept from an earlier one), ``images``,
-    ``matched`` (rows of LABELS with an OTHER row), ``rejects`` (reason -> count), ``system``, ``keys``.
-    ``frames=False`` makes no full frames: the detail view then shows the thumbnail (for datasets of many
-    distinct images, whose frames would take about 100 kB each).
+    Parameters
+    ----------
+    labels, other : str or Path
+        Label tables (any reader: Parquet, CSV, text formats, ``.mat`` folders); ``other`` optional.
+    outdir : str or Path
+        Page folder; ``index.html`` opens from ``file://``. An earlier page there is the thumbnail cache.
+    images : str or Path, optional
+        Folder the ``image`` column is relative to (default: ``labels``' folder).
+    system, other_system : RotationSystem, optional
+        Each table's system when its file does not name one (``other_system`` defaults to ``system``);
+        the page's angles (degrees) are in ``labels``' system.
+    radians : bool
+        Angle columns in radians (default degrees).
+    use : {"auto", "angles", "matrix"}
+        Which label columns to read.
+    keys : list of str, optional
+        Columns pairing ``other``'s rows with ``labels``' (default: ``image`` or ``file``, plus ``person_id``
+        when both tables have it).
+    workers : int, >= 1
+        Threads making the pictures.
+    title : str, optional
+        Page title (default: ``labels``' file name).
+    frames : bool
+        Make each image once at most :data:`~hpe_cli.pipelines.view_thumbs.FRAME_SIDE` (960) pixels long for
+        the detail view; ``False`` shows the thumbnail there (for datasets of many distinct images).
+    rejects_path, strict, overwrite, progress
+        As every command (rejects file, any reject an error, replace outputs, a tqdm bar whose total is set).
+
+    Returns
+    -------
+    dict
+        ``rows``, ``shown`` (rows with a thumbnail), ``whole_frame`` (rows without a head box, shown whole),
+        ``made`` / ``reused`` (thumbnails made this run / kept from an earlier one), ``images``, ``matched``
+        (rows of ``labels`` with a row of ``other``), ``keys``, ``rejects`` (reason -> count), ``system``,
+        ``notes``.
     """
     import hashlib
 
