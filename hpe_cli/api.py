@@ -360,10 +360,13 @@ def view_file(
 
     Examples
     --------
+    >>> import pathlib, tempfile
     >>> import hpe_cli as hpe
-    >>> s = hpe.view_file("AFLW2000/", "page/")  # doctest: +SKIP
-    >>> s["shown"], s["whole_frame"]  # doctest: +SKIP
-    (2000, 2000)
+    >>> aflw = pathlib.Path(hpe.__file__).parents[1] / "sample_data" / "aflw2000"  # 4 faces, .mat labels
+    >>> with tempfile.TemporaryDirectory() as out:
+    ...     s = hpe.view_file(aflw, pathlib.Path(out) / "page")
+    >>> s["rows"], s["shown"], s["whole_frame"]  # .mat rows have no head box: shown whole
+    (4, 4, 4)
     """
     from .io.transaction import ensure_transaction
     from .pipelines.view import run_view
