@@ -140,3 +140,17 @@ def test_aflw_pages_open_clean(chromium, tmp_path):
         assert console_errors(err) == []
         attrs = body_attrs(dom)
         assert attrs["data-shown"] == str(n) and attrs.get("data-decoded") == str(n) and "data-broken" not in attrs
+
+
+def test_sort_and_category_filter_from_the_address(pizza, chromium, tmp_path):
+    """``#c.camera=00_08&sort=-yaw``: only camera 00_08's rows, largest yaw first (ties in file order)."""
+    corr, _, page = pizza
+    table = pd.read_parquet(corr)
+    url = page.joinpath("index.html").as_uri() + "#c.camera=00_08&sort=-yaw&ids=1"
+    dom, err = open_page(chromium, url, tmp_path / "prof")
+    assert console_errors(err) == []
+    ids = [int(x) for x in re.findall(r"-?\d+", re.search(r'<pre id="ids" hidden="">(.*?)</pre>', dom, re.S).group(1))]
+    sub = table[table["camera"] == "00_08"]
+    yaw = np.round(sub["yaw"].to_numpy(), 3)  # the page keeps 0.001 degree
+    want = (sub.index.to_numpy()[np.lexsort((sub.index.to_numpy(), -yaw))] + 1).tolist()
+    assert ids == want and len(ids) > 10
