@@ -53,6 +53,7 @@ _API = (
     "convert_file",
     "audit_file",
     "landmark_pose",
+    "view_file",
 )
 
 #: names resolved lazily by :func:`__getattr__`: name -> (module, attribute)

@@ -339,6 +339,56 @@ def audit_file(
         )
 
 
+def view_file(
+    labels,
+    output,
+    other=None,
+    *,
+    images=None,
+    system=None,
+    other_system=None,
+    keys=None,
+    rejects=None,
+    strict: bool = False,
+    overwrite: bool = False,
+    **options,
+) -> dict:
+    """``hpe view`` as a function: the same pipeline (:func:`hpe_cli.pipelines.view.run_view`).
+
+    Writes a browsable offline page of every row of ``labels`` (and of ``other`` joined by ``keys`` beside it)
+    into folder ``output``; open ``output/index.html``. Returns the counts (``rows``, ``shown``,
+    ``whole_frame``, ``made``, ``reused``, ``images``, ``matched``, ``rejects``, ``system``). ``options``:
+    ``radians``, ``use``, ``workers``, ``title``.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import hpe_cli as hpe
+    >>> aflw = pathlib.Path(hpe.__file__).parents[1] / "sample_data" / "aflw2000"  # 4 faces, .mat labels
+    >>> with tempfile.TemporaryDirectory() as out:
+    ...     s = hpe.view_file(aflw, pathlib.Path(out) / "page")
+    >>> s["rows"], s["shown"], s["whole_frame"]  # .mat rows have no head box: shown whole
+    (4, 4, 4)
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.view import run_view
+
+    with ensure_transaction():
+        return run_view(
+            labels,
+            output,
+            other,
+            images=images,
+            system=None if system is None else get_system(system),
+            other_system=None if other_system is None else get_system(other_system),
+            keys=keys,
+            rejects_path=rejects,
+            strict=strict,
+            overwrite=overwrite,
+            **options,
+        )
+
+
 def write_labels(table, path, system=None, *, overwrite: bool = False):
     """Write a label table atomically (Parquet or CSV by extension), naming its system.
 

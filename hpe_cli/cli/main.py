@@ -23,6 +23,7 @@ COMMANDS = {
     "biwi": "hpe_cli.cli.biwi:biwi",
     "evaluate": "hpe_cli.cli.evaluate:evaluate",
     "export": "hpe_cli.cli.export:export",
+    "view": "hpe_cli.cli.view:view",
 }
 
 

@@ -25,9 +25,10 @@ ROW_READERS = [
     "relabel-agora",
     "biwi",
     "infer",
+    "view",
 ]
 #: commands that read angle tables (degrees by default): each needs --radians
-ANGLE_READERS = ["convert", "audit", "draw", "augment", "evaluate", "export", "infer"]
+ANGLE_READERS = ["convert", "audit", "draw", "augment", "evaluate", "export", "infer", "view"]
 #: commands that read no rows / no angle table, with why (a new command must be put in one list or the other)
 NOT_ROW_READERS = {"systems": "lists the built-in systems"}
 NOT_ANGLE_READERS = {

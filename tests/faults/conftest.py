@@ -96,7 +96,7 @@ class Case:
     def file_option(self) -> str:
         """The option of the main file output (draw writes a folder: its rejects file; infer: --json,
         since -o must end in .toml)."""
-        return {"draw": "--rejects", "export": "--rejects", "infer": "--json"}.get(self.name, "-o")
+        return {"draw": "--rejects", "export": "--rejects", "view": "--rejects", "infer": "--json"}.get(self.name, "-o")
 
     def args(self, **outputs):
         outs = {**self.outputs, **outputs}
@@ -176,6 +176,18 @@ class Case:
             [src, t / "imgs" / "a.png", t / "imgs" / "b.png"],
             {"-o": t / "drawn", "--rejects": t / "rej.csv"},
             lambda o: ["draw", src, "-o", o["-o"], "--images", t / "imgs", "--rejects", o["--rejects"], "-q"],
+        )
+
+    def _view(self, t):
+        make_images(t / "imgs", ["a.png", "b.png"])
+        src = t / "in.csv"
+        pd.DataFrame({"image": ["a.png", "b.png"], "pitch": [1.0, 2], "yaw": [10.0, -20], "roll": [0.0, 5]}).to_csv(
+            src, index=False
+        )
+        return (
+            [src, t / "imgs" / "a.png", t / "imgs" / "b.png"],
+            {"-o": t / "page", "--rejects": t / "rej.csv"},
+            lambda o: ["view", src, "-o", o["-o"], "--images", t / "imgs", "--rejects", o["--rejects"], "-q"],
         )
 
     def _augment(self, t):
@@ -296,7 +308,18 @@ def _first_function(path: Path) -> str:
     )
 
 
-COMMANDS = ["convert", "relabel-panoptic", "relabel-agora", "audit", "draw", "augment", "infer", "evaluate", "export"]
+COMMANDS = [
+    "convert",
+    "relabel-panoptic",
+    "relabel-agora",
+    "audit",
+    "draw",
+    "augment",
+    "infer",
+    "evaluate",
+    "export",
+    "view",
+]
 WRITING = COMMANDS  # every command that writes files (systems only prints)
 
 
