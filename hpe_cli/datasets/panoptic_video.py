@@ -121,7 +121,7 @@ class VideoFrames:
             )
         return cap
 
-    def read(self, frame_numbers):
+    def read(self, frame_numbers, seek: bool = False):
         """Yield ``(frame_number, image, reason)`` for each requested frame, ascending.
 
         Parameters
@@ -129,6 +129,11 @@ class VideoFrames:
         frame_numbers : iterable of int
             HD frame numbers (video frame index from 0); duplicates are
             yielded once; negative numbers are rejected.
+        seek : bool
+            Start at the first requested frame with one seek (``CAP_PROP_POS_FRAMES``: FFmpeg seeks to the
+            key frame before it and decodes forward), then go on sequentially; used by ``hpe export`` to read
+            a block of frames of a long video. A seek that does not land on the frame asked for (the
+            position OpenCV reports differs) reads from frame 0 instead.
 
         Yields
         ------
@@ -160,6 +165,16 @@ class VideoFrames:
             if want is not None and 0 not in _cap_size(cap):  # 0: the container does not say (frames are checked)
                 self._compare(_cap_size(cap), want)
             pos = 0  # index of the next frame grab() returns
+            first = int(wanted[0])
+            if seek and first > 0:
+                pos = _seek(cap, first)
+                if pos is None:  # past the end, by the container's own count
+                    for f in wanted.tolist():
+                        yield f, None, _past_end(cap)
+                    return
+                if pos != first:  # the seek did not land where asked: decode from the start
+                    cap.release()
+                    cap, pos = self._open(), 0
             for f in wanted.tolist():
                 ended = False
                 while pos < f:
@@ -182,6 +197,26 @@ class VideoFrames:
                     yield f, image, ""
         finally:
             cap.release()
+
+
+def _seek(cap, frame: int):
+    """Seek ``cap`` to ``frame``; the position OpenCV reports after it, or None when the container says the
+    video has no such frame."""
+    import cv2
+
+    count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    if 0 < count <= frame:
+        return None
+    if not cap.set(cv2.CAP_PROP_POS_FRAMES, frame):
+        return -1
+    return int(cap.get(cv2.CAP_PROP_POS_FRAMES))
+
+
+def _past_end(cap) -> str:
+    import cv2
+
+    count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    return f"past the end of the video ({count} frames)" if count > 0 else "past the end of the video"
 
 
 def _cap_size(cap) -> tuple:

@@ -4,7 +4,6 @@ it with padding, resize, encode, write or hand back the pixels)."""
 from __future__ import annotations
 
 import os
-import tempfile
 
 import numpy as np
 
@@ -115,8 +114,8 @@ def _process_image(image, data, items, cfg, out):
 
 
 def _spill(payload, cfg):
-    """In a video task, pixels go to the task's spill file (a video can hold thousands of heads): the parent
-    reads them back one by one, so neither process holds a whole video's crops."""
+    """Pixels go to the unit's spill file (a unit can hold thousands of heads): the parent reads them back
+    one by one, so neither process holds a whole unit's crops."""
     fh = cfg.get("spill")
     if fh is None:
         return payload
@@ -138,27 +137,13 @@ def _unspill(payload, fh):
     return payload
 
 
-def _work(task):
-    """Run one task; returns ``(results, spill file or None)``."""
-    cfg = _CFG
-    if task[0] != "video" or cfg["pixels"] == "file":
-        return _work_items(task), None
-    fd, spill = tempfile.mkstemp(prefix=".spill-", suffix=".bin", dir=cfg["root"])
-    with os.fdopen(fd, "wb") as fh:
-        cfg["spill"] = fh
-        try:
-            out = _work_items(task)
-        finally:
-            cfg["spill"] = None
-    return out, spill
-
-
 def _work_items(task):
     """One task: an image file (or a video with its frames) and the heads to crop from it."""
     import cv2
 
     cfg = _CFG
-    kind, src, groups = task
+    kind, src, groups = task[:3]
+    seek = len(task) > 3 and bool(task[3])  # a block of a long video (units.make_units): one seek to its start
     out = []
     if kind == "video":
         try:
@@ -168,7 +153,9 @@ def _work_items(task):
         if src is None:
             return [(it[0], NO_FILES, -1, -1, None) for items in groups.values() for it in items]
         try:
-            for fr, img, reason in VideoFrames(src).read(sorted(groups)):
+            for fr, img, reason in (
+                VideoFrames(src).read(sorted(groups), seek=True) if seek else VideoFrames(src).read(sorted(groups))
+            ):
                 items = groups.get(fr, [])
                 if img is None:
                     out += [(it[0], f"no image (video {src} frame {fr}: {reason})", -1, -1, None) for it in items]
