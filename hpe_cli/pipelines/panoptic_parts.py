@@ -201,7 +201,7 @@ def parts_dir_for(output) -> Path:
     return out.parent / f".{out.name}.hpe-parts"
 
 
-def _mismatch(d: Path, old: dict, fp: dict, how: str = HOW_COMPARED, differ: str = DIFFER) -> str:
+def _mismatch(d: Path, old: dict, fp: dict, compared: str = HOW_COMPARED, differ: str = DIFFER) -> str:
     """Why the parts in ``d`` (fingerprint ``old``) cannot be resumed by a run with fingerprint ``fp``."""
     again = "run without --resume to start over"
     if old.get("hpe_parts") != fp["hpe_parts"]:
@@ -222,7 +222,7 @@ def _mismatch(d: Path, old: dict, fp: dict, how: str = HOW_COMPARED, differ: str
             more = f" (and {n - 1} more inputs)" if n > 1 else ""
             return (
                 f"{path}: changed since the interrupted run whose parts are in {d} ({how}){more}; "
-                f"--resume compares {how}; {again}"
+                f"--resume compares {compared}; {again}"
             )
     return f"{d}: its parts were made with other inputs or options (here: {differ}); {again}"
 
@@ -345,7 +345,7 @@ def _prepare_parts(plans, cfg, fmt, output, resume: bool, overwrite: bool = Fals
 
 def prepare_parts(fp: dict, output, resume: bool, overwrite: bool = False, **why) -> Path:
     """The locked parts folder of a run whose parts depend on ``fp`` (what :func:`_fingerprint` gives for
-    relabel-panoptic; ``why``: ``how`` and ``differ`` for the messages of :func:`_mismatch`)."""
+    relabel-panoptic; ``why``: ``compared`` and ``differ`` for the messages of :func:`_mismatch`)."""
     d = parts_dir_for(output)
     run_file = d / "run.json"
     # whether the folder was there is read when it is locked, not before: another run may end (and remove its

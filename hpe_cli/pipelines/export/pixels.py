@@ -133,6 +133,10 @@ def unit_results(units, cfg, pool, parts=None, resume: bool = False):
         yield U.read_unit(stem)
 
 
+#: heads handed to the layout at a time (pixel layouts: one Parquet row group, one slice of the .npz)
+FLUSH = 256
+
+
 @dataclass
 class PixelResult:
     """What the tasks gave back: per row, its image-level reject (``''``), written order and image size."""
@@ -150,6 +154,7 @@ def run_tasks(results, sel, layout, plan: CropPlan, stage, bar=None, keep_parts:
     from pathlib import Path
 
     from .units import link_files
+    from .workers import _unspill
     from .write import add_pixels
 
     n = sel.n
@@ -162,33 +167,39 @@ def run_tasks(results, sel, layout, plan: CropPlan, stage, bar=None, keep_parts:
     status, order, W, H = res_all.status, res_all.order, res_all.W, res_all.H
     counter = 0
     made: set = set()
+    good, payloads = [], []  # heads waiting for the layout, across units
     try:
         for res, spill, files in results:
             if files is not None and os.path.isdir(files):
                 link_files(files, Path(stage), made)
             spill_fh = open(spill, "rb") if spill else None
-            good, payloads = [], []
-            for idx, reason, w, h, payload in res:
-                if w > 0:
-                    W[idx], H[idx] = w, h
-                if reason:
-                    status[idx] = reason
-                    continue
-                order[idx] = counter
-                counter += 1
-                good.append(idx)
-                payloads.append(payload)
-                if spill_fh is not None and len(payloads) >= 256:  # flush in small slices
-                    add_pixels(layout, sel, plan, res_all, good, payloads, spill_fh)
-                    good, payloads = [], []
-            if good and layout.pixels != "file":
-                add_pixels(layout, sel, plan, res_all, good, payloads, spill_fh)
-            if spill_fh is not None:
-                spill_fh.close()
-                if not keep_parts:
-                    os.unlink(spill)
+            try:
+                for idx, reason, w, h, payload in res:
+                    if w > 0:
+                        W[idx], H[idx] = w, h
+                    if reason:
+                        status[idx] = reason
+                        continue
+                    order[idx] = counter
+                    counter += 1
+                    if layout.pixels == "file":
+                        continue
+                    good.append(idx)
+                    payloads.append(_unspill(payload, spill_fh))
+                    # slices of FLUSH heads, whatever the units: the layout's row groups and shards are the
+                    # same for every runner
+                    if len(good) >= FLUSH:
+                        add_pixels(layout, sel, plan, res_all, good, payloads, None)
+                        good, payloads = [], []
+            finally:
+                if spill_fh is not None:
+                    spill_fh.close()
+            if spill is not None and not keep_parts:
+                os.unlink(spill)
             if bar is not None:
                 bar.update(len(res))
+        if good:
+            add_pixels(layout, sel, plan, res_all, good, payloads, None)
     finally:
         results.close()
     return res_all
