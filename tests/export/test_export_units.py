@@ -17,9 +17,9 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.io
+from release import LAYOUT_IDS, export_args, make_release, run, sample_data_script, tree
 
 from hpe_cli.pipelines.export import units as U
-from release import LAYOUT_IDS, export_args, make_release, run, sample_data_script, tree
 
 
 @pytest.fixture(scope="module")
