@@ -198,3 +198,30 @@ def test_scheduler_unreachable_is_one_line_in_seconds(release, tmp_path):
     errors = [ln for ln in res.output.splitlines() if ln.startswith("Error:")]
     assert errors == [f"Error: --scheduler {address}: cannot connect (connection refused)"], res.output
     assert os.listdir(tmp_path) == []
+
+
+def test_a_unit_reads_relative_sources_from_the_runs_folder(tmp_path, monkeypatch):
+    """A Dask worker runs in another folder: a unit reads a relative image path from the folder the run was
+    started in (the task's ``cwd``), and names it as given."""
+    import cv2
+
+    (tmp_path / "run" / "img").mkdir(parents=True)
+    cv2.imwrite(str(tmp_path / "run" / "img" / "a.jpg"), np.full((60, 80, 3), 90, np.uint8))
+    monkeypatch.chdir(tmp_path / "run")
+    cfg = {
+        "root": str(tmp_path / "stage"),
+        "split_dirs": {"train": "train"},
+        "quality": 95,
+        "pad_value": 0,
+        "min_inside": 0.5,
+        "full_frames": False,
+        "pixels": "file",
+    }
+    items = [(0, "train", "a.jpg", (10, 10, 40, 40), (10.0, 10.0, 30.0, 30.0), (30, 30), None)]
+    missing = [(1, "train", "b.jpg", (10, 10, 40, 40), (10.0, 10.0, 30.0, 30.0), (30, 30), None)]
+    task = U.unit_task(cfg, [["image", "img/a.jpg", items], ["image", "img/b.jpg", missing]], None)
+    monkeypatch.chdir(tmp_path)  # the worker's own folder
+    res, spill = U.run_unit(task)
+    assert spill is None
+    assert [r[:2] for r in res] == [(0, ""), (1, "no image (No such file or directory)")]
+    assert cv2.imread(str(tmp_path / "stage" / "train" / "a.jpg")).shape == (30, 30, 3)

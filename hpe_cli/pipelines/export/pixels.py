@@ -111,7 +111,6 @@ def unit_results(units, cfg, pool, parts=None, resume: bool = False):
     ``pool`` (:func:`hpe_cli.pipelines.pools.unit_pool`). Without ``parts`` the units write into the staging
     folder and hand back their results; with a parts folder they write parts (:mod:`.units`), and with
     ``resume`` the units already done there are not computed again."""
-    from pathlib import Path
 
     from ..pools import in_order
     from . import units as U
@@ -121,7 +120,7 @@ def unit_results(units, cfg, pool, parts=None, resume: bool = False):
         for res, spill in in_order(pool, U.run_unit, tasks):
             yield res, spill, None
         return
-    stems = [str(Path(parts) / f"{k:06d}") for k in range(len(units))]
+    stems = [os.path.join(os.path.abspath(parts), f"{k:06d}") for k in range(len(units))]  # workers: elsewhere
     if resume:
         U.check_done(stems)
     todo = [U.unit_task(cfg, u, s) for u, s in zip(units, stems) if not os.path.exists(s + ".json")]
@@ -209,7 +208,7 @@ def worker_config(stage, layout, splits_used, opts) -> dict:
     """The settings every worker reads (``workers._CFG``)."""
     split_dirs = {s: str(layout.split_dir(s).relative_to(stage)) for s in splits_used}
     return {
-        "root": str(stage),
+        "root": os.path.abspath(stage),  # workers may run in another folder (Dask)
         "split_dirs": split_dirs,
         "quality": int(opts.quality),
         "pad_value": int(opts.pad_value),

@@ -62,7 +62,7 @@ def unit_items(unit) -> int:
 
 def unit_task(cfg: dict, unit: list, stem) -> dict:
     """What a worker needs for one unit (small and picklable); ``stem`` None: no parts (write into the stage)."""
-    return {"cfg": cfg, "tasks": unit, "stem": None if stem is None else str(stem)}
+    return {"cfg": cfg, "tasks": unit, "stem": None if stem is None else str(stem), "cwd": os.getcwd()}
 
 
 def run_unit(task: dict):
@@ -93,7 +93,7 @@ def run_unit(task: dict):
     try:
         cfg["spill"] = fh
         for t in task["tasks"]:
-            out += workers._work_items(t)
+            out += workers._work_items(t, task.get("cwd"))
     finally:
         cfg["spill"] = None
         if fh is not None:

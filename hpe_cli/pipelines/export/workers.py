@@ -137,12 +137,15 @@ def _unspill(payload, fh):
     return payload
 
 
-def _work_items(task):
-    """One task: an image file (or a video with its frames) and the heads to crop from it."""
+def _work_items(task, cwd=None):
+    """One task: an image file (or a video with its frames) and the heads to crop from it. A relative source
+    path is read relative to ``cwd`` (the folder the run was started in: a Dask worker runs elsewhere);
+    messages name it as the user gave it."""
     import cv2
 
     cfg = _CFG
     kind, src, groups = task[:3]
+    path = os.path.join(cwd, src) if cwd and isinstance(src, str) and kind != "refused" else src
     seek = len(task) > 3 and bool(task[3])  # a block of a long video (units.make_units): one seek to its start
     out = []
     if kind == "video":
@@ -154,7 +157,7 @@ def _work_items(task):
             return [(it[0], NO_FILES, -1, -1, None) for items in groups.values() for it in items]
         try:
             for fr, img, reason in (
-                VideoFrames(src).read(sorted(groups), seek=True) if seek else VideoFrames(src).read(sorted(groups))
+                VideoFrames(path).read(sorted(groups), seek=True) if seek else VideoFrames(path).read(sorted(groups))
             ):
                 items = groups.get(fr, [])
                 if img is None:
@@ -176,7 +179,7 @@ def _work_items(task):
     if src is None:
         return [(it[0], "no image (file not found)", -1, -1, None) for it in items]
     try:
-        with open(src, "rb") as fh:
+        with open(path, "rb") as fh:
             data = fh.read()
     except OSError as exc:
         return [(it[0], f"no image ({exc.strerror or exc})", -1, -1, None) for it in items]
