@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import ROOT, children, run, temp_files
+from .conftest import ROOT, alive, children, run, temp_files
 
 _spec = importlib.util.spec_from_file_location("export_release", ROOT / "tests" / "export" / "release.py")
 R = importlib.util.module_from_spec(_spec)
@@ -46,7 +46,7 @@ def _wait_for_units(proc, parts: Path, n: int, seconds: float = 90):
     return False
 
 
-def _interrupt_then_resume(release, tmp_path, lid, extra=()):
+def _interrupt_then_resume(release, tmp_path, lid, extra=(), sig=signal.SIGTERM):
     root, labels = release
     ref = tmp_path / "ref"
     res = run(*R.export_args(lid, labels, root, ref / "o", ref / "r.csv"))
@@ -59,14 +59,22 @@ def _interrupt_then_resume(release, tmp_path, lid, extra=()):
     if not _wait_for_units(proc, parts, 1):
         out, err = proc.communicate()
         pytest.fail(f"the run ended before it could be interrupted: {err.decode()}")
-    proc.send_signal(signal.SIGTERM)
+    kids = children(proc.pid)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
     lines = err.decode().strip().splitlines()
-    assert proc.returncode == 128 + signal.SIGTERM, err.decode()
-    assert lines == ["Error: interrupted (SIGTERM)"], err.decode()
+    if sig == signal.SIGKILL:  # no word from the run; its workers die with it, its temp files stay
+        assert proc.returncode == -signal.SIGKILL
+        end = time.monotonic() + 5
+        while time.monotonic() < end and any(alive(k) for k in kids):
+            time.sleep(0.05)
+        assert not [k for k in kids if alive(k)], "workers outlived their parent (kill -9)"
+    else:
+        assert proc.returncode == 128 + sig, err.decode()
+        assert lines == [f"Error: interrupted ({signal.Signals(sig).name})"], err.decode()
+        assert temp_files(dst) == []
     done = len(list(parts.glob("[0-9]*.json")))
     assert done >= 1 and not (dst / "o").exists() and not (dst / "r.csv").exists()
-    assert temp_files(dst) == []
     res = run(*args)
     assert res.exit_code == 0, res.output
     assert R.tree(dst / "o") == R.tree(ref / "o")
@@ -77,6 +85,10 @@ def _interrupt_then_resume(release, tmp_path, lid, extra=()):
 @pytest.mark.parametrize("lid", R.LAYOUT_IDS)
 def test_sigterm_then_resume_is_byte_identical(release, tmp_path, lid):
     _interrupt_then_resume(release, tmp_path, lid, ("--workers", "1"))
+
+
+def test_kill9_then_resume_removes_the_leftovers(release, tmp_path):
+    _interrupt_then_resume(release, tmp_path, "hf", ("--workers", "2"), sig=signal.SIGKILL)
 
 
 def test_sigterm_of_a_local_cluster_run_then_resume(release, tmp_path):
