@@ -137,7 +137,7 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
     help="Worker processes; each makes the crops of units of one video x 256 frames (or 64 images).",
 )
 @scheduler_option
-@resume_option("label tables, the split file, images and videos by size, modification time and inode")
+@resume_option("label tables, the split file, images and videos are compared by size, modification time and inode")
 @column_options
 @rejects_options
 @overwrite_option
