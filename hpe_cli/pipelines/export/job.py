@@ -138,12 +138,7 @@ def _parts(output, opts, units, cfg, inputs):
     fp = fingerprint(cfg, units, opts, inputs)
     with critical():  # a signal waits until the folder is known and registered for cleanup
         parts = prepare_parts(
-            fp,
-            output.absolute(),
-            opts.resume,
-            opts.overwrite,
-            compared=HOW_COMPARED,
-            differ="other rows, boxes or images",
+            fp, output, opts.resume, opts.overwrite, compared=HOW_COMPARED, differ="other rows, boxes or images"
         )
         if not opts.resume and current() is not None:
             current().on_abort(lambda: shutil.rmtree(parts, ignore_errors=True))  # whatever ends the run
