@@ -225,3 +225,32 @@ def test_a_unit_reads_relative_sources_from_the_runs_folder(tmp_path, monkeypatc
     assert spill is None
     assert [r[:2] for r in res] == [(0, ""), (1, "no image (No such file or directory)")]
     assert cv2.imread(str(tmp_path / "stage" / "train" / "a.jpg")).shape == (30, 30, 3)
+
+
+@pytest.mark.parametrize("gop", [["-g", "30", "-bf", "3"], ["-g", "30", "-bf", "3", "-x264-params", "open-gop=1"]])
+def test_a_seek_into_h264_with_b_frames(tmp_path, gop):
+    """The HD release is H.264: a seek into a stream with B-frames (closed or open GOPs) gives the frames, and
+    pixels, of sequential decoding (needs an ffmpeg with libx264 to make the video)."""
+    import shutil
+    import subprocess
+
+    cv2 = pytest.importorskip("cv2")
+    from hpe_cli.datasets.panoptic_video import VideoFrames
+
+    if shutil.which("ffmpeg") is None:
+        pytest.skip("ffmpeg is not installed (it makes the H.264 test video)")
+    mk = sample_data_script()
+    for k in range(100):
+        img = mk.encode_frame_number(k, 384, 216)
+        img[:20] = (k * 37) % 256  # motion for the encoder
+        cv2.imwrite(str(tmp_path / f"f{k:05d}.png"), img)
+    video = tmp_path / "v.mp4"
+    cmd = ["ffmpeg", "-loglevel", "error", "-y", "-framerate", "30000/1001", "-i", str(tmp_path / "f%05d.png")]
+    r = subprocess.run([*cmd, "-c:v", "libx264", "-pix_fmt", "yuv420p", *gop, str(video)], capture_output=True)
+    if r.returncode != 0:
+        pytest.skip(f"ffmpeg cannot encode H.264 here: {r.stderr.decode()[-200:]}")
+    seq = {f: img for f, img, _ in VideoFrames(video).read(range(100))}
+    assert all(mk.decode_frame_number(img) == f for f, img in seq.items())
+    for start in (1, 29, 30, 31, 47, 61, 90):
+        for f, img, reason in VideoFrames(video).read(range(start, min(start + 8, 100)), seek=True):
+            assert reason == "" and mk.decode_frame_number(img) == f and np.array_equal(img, seq[f]), (start, f)
