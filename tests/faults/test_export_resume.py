@@ -122,3 +122,63 @@ def test_a_killed_worker_is_one_line_and_the_run_resumes(release, tmp_path):
     res = run(*args)
     assert res.exit_code == 0, res.output
     assert R.tree(dst / "o") == R.tree(ref / "o")
+
+
+def _cluster_workers(pid: int) -> set:
+    """The LocalCluster's worker processes: the run's children started by multiprocessing's spawn (its nannies
+    live in the run's own process), not its resource tracker."""
+    out = set()
+    for c in _direct(pid):
+        try:
+            with open(f"/proc/{c}/cmdline", "rb") as f:
+                if b"spawn_main" in f.read():
+                    out.add(c)
+        except OSError:
+            pass
+    return out
+
+
+def _direct(pid: int) -> set:
+    out = set()
+    try:
+        for task in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{task}/children") as f:
+                out.update(int(x) for x in f.read().split())
+    except OSError:
+        pass
+    return out
+
+
+def test_a_dask_worker_killed_mid_run(release, tmp_path):
+    """Dask runs a lost worker's unit again (or the run ends with one line and resumes): the same bytes."""
+    pytest.importorskip("distributed")
+    root, labels = release
+    ref = tmp_path / "ref"
+    assert run(*R.export_args("hf", labels, root, ref / "o", ref / "r.csv")).exit_code == 0
+    dst = tmp_path / "dst"
+    dst.mkdir()
+    args = R.export_args(
+        "hf", labels, root, dst / "o", dst / "r.csv", "--resume", "--scheduler", "local", "--workers", "2"
+    )
+    proc = _start(args)
+    parts = dst / ".o.hpe-parts"
+    end = time.monotonic() + 90
+    workers: set = set()
+    while time.monotonic() < end and proc.poll() is None:
+        workers = _cluster_workers(proc.pid)
+        if len(workers) >= 2 and parts.is_dir() and list(parts.glob("0*")):  # units under way
+            break
+        time.sleep(0.005)
+    if proc.poll() is not None or len(workers) < 2:
+        proc.communicate()
+        pytest.skip("the run ended before a worker could be killed")
+    os.kill(max(workers), signal.SIGKILL)
+    _, err = proc.communicate(timeout=120)
+    if proc.returncode != 0:
+        lines = err.decode().strip().splitlines()
+        assert proc.returncode == 1 and len(lines) == 1 and lines[0].startswith("Error:"), err.decode()
+        res = run(*args)
+        assert res.exit_code == 0, res.output
+    assert R.tree(dst / "o") == R.tree(ref / "o")
+    assert (dst / "r.csv").read_bytes() == (ref / "r.csv").read_bytes()
+    assert sorted(os.listdir(dst)) == ["o", "r.csv"]
