@@ -133,7 +133,9 @@ class VideoFrames:
             Start at the first requested frame with one seek (``CAP_PROP_POS_FRAMES``: FFmpeg seeks to the
             key frame before it and decodes forward), then go on sequentially; used by ``hpe export`` to read
             a block of frames of a long video. A seek that does not land on the frame asked for (the
-            position OpenCV reports differs) reads from frame 0 instead.
+            position OpenCV reports differs) reads from frame 0 instead; a frame past the container's frame
+            count is sought from its last counted frame, so the end is found by decoding (the count may be
+            approximate) and reported as in sequential reading.
 
         Yields
         ------
@@ -167,12 +169,8 @@ class VideoFrames:
             pos = 0  # index of the next frame grab() returns
             first = int(wanted[0])
             if seek and first > 0:
-                pos = _seek(cap, first)
-                if pos is None:  # past the end, by the container's own count
-                    for f in wanted.tolist():
-                        yield f, None, _past_end(cap)
-                    return
-                if pos != first:  # the seek did not land where asked: decode from the start
+                target, pos = _seek(cap, first)
+                if pos != target:  # the seek did not land where asked: decode from the start
                     cap.release()
                     cap, pos = self._open(), 0
             for f in wanted.tolist():
@@ -199,24 +197,17 @@ class VideoFrames:
             cap.release()
 
 
-def _seek(cap, frame: int):
-    """Seek ``cap`` to ``frame``; the position OpenCV reports after it, or None when the container says the
-    video has no such frame."""
+def _seek(cap, frame: int) -> tuple:
+    """Seek ``cap`` to ``frame``, or to the last frame the container counts when that is before ``frame`` (the
+    grabs from there find the real end, or the frames a low count missed). Returns ``(target, position OpenCV
+    reports after the seek)``; -1 when the seek failed."""
     import cv2
 
     count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-    if 0 < count <= frame:
-        return None
-    if not cap.set(cv2.CAP_PROP_POS_FRAMES, frame):
-        return -1
-    return int(cap.get(cv2.CAP_PROP_POS_FRAMES))
-
-
-def _past_end(cap) -> str:
-    import cv2
-
-    count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-    return f"past the end of the video ({count} frames)" if count > 0 else "past the end of the video"
+    target = count - 1 if 0 < count <= frame else frame
+    if not cap.set(cv2.CAP_PROP_POS_FRAMES, target):
+        return target, -1
+    return target, int(cap.get(cv2.CAP_PROP_POS_FRAMES))
 
 
 def _cap_size(cap) -> tuple:
