@@ -178,6 +178,39 @@ def make_videos(folder: Path, frames: int, cameras: int, sequences: int = 2):
     return labels, pq.read_metadata(labels).num_rows
 
 
+def _unit_imports(_):
+    t = time.perf_counter()
+    import cv2  # noqa: F401
+
+    import hpe_cli.datasets.panoptic_video  # noqa: F401
+    import hpe_cli.pipelines.export.units  # noqa: F401
+    import hpe_cli.pipelines.export.workers  # noqa: F401
+
+    return time.perf_counter() - t
+
+
+def cluster_overhead(workers: int = 2) -> None:
+    """The fixed cost of ``--scheduler local``: starting the LocalCluster, its workers' first imports, closing."""
+    try:
+        from hpe_cli.pipelines.dask_runner import dask_client
+    except ImportError:
+        return
+    t0 = time.perf_counter()
+    try:
+        with dask_client("local", workers) as c:
+            t1 = time.perf_counter()
+            imports = c.gather([c.submit(_unit_imports, i, pure=False) for i in range(workers)])
+            t2 = time.perf_counter()
+    except Exception as exc:  # no distributed
+        print(f"LocalCluster: not measured ({exc})")
+        return
+    t3 = time.perf_counter()
+    print(
+        f"LocalCluster of {workers}: start {t1 - t0:.2f} s, first unit's imports {t2 - t1:.2f} s "
+        f"(in the workers: {', '.join(f'{v:.2f}' for v in imports)} s), close {t3 - t2:.2f} s"
+    )
+
+
 def scaling(labels: Path, images: Path, tmp: Path, size: int, n: int) -> None:
     """``--workers 1/2`` and ``--scheduler local --workers 1/2``: crops/s, crops/s per worker, and what a
     LocalCluster adds over local processes (its start, the scheduler's round trips, the parts folder)."""
@@ -202,6 +235,7 @@ def scaling(labels: Path, images: Path, tmp: Path, size: int, n: int) -> None:
         )
     if "--workers 2" in res:
         print(f"2 workers / 1 worker: {res['--workers 1'] / res['--workers 2']:.2f}x")
+    cluster_overhead(2)
     for w in (1, 2):
         a, b = res.get(f"--workers {w}"), res.get(f"--scheduler local --workers {w}")
         if a and b:
