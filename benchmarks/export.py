@@ -13,11 +13,15 @@ Makes ``--images`` synthetic 1920x1080 JPEG frames (smooth gradients plus noise,
    rejects, crops, annotation.txt, staging and commit) once its modules are imported.
 
 Each line prints crops/s, the ratio to the floor (the mean of a floor run before and after) and the peak RSS.
+Then the scaling: ``--workers 1/2`` and ``--scheduler local --workers 1/2`` (a Dask LocalCluster), crops/s per
+worker and what the LocalCluster adds. ``--videos FRAMES`` runs the scaling on a synthetic multi-sequence
+release made from videos instead (units of one video x 256 frames).
 
 Usage::
 
     python benchmarks/export.py                     # 200 frames x 3 heads, size 224
     python benchmarks/export.py --images 1000 --heads 4 --size 112
+    python benchmarks/export.py --videos 300 --cameras 2     # 2 sequences x 2 videos x 300 frames
 """
 
 from __future__ import annotations
@@ -105,7 +109,7 @@ def floor_loop(folder: Path, rows, size: int, out: Path, region: bool = False) -
     return time.perf_counter() - t0
 
 
-def run_hpe(labels: Path, images: Path, out: Path, size: int, workers: int):
+def run_hpe(labels: Path, images: Path, out: Path, size: int, workers: int, extra=()):
     """One ``hpe export`` in a fresh process: (seconds with start-up and imports, seconds of the command alone
     after its modules are imported, peak RSS in KB)."""
     code = (
@@ -139,6 +143,7 @@ def run_hpe(labels: Path, images: Path, out: Path, size: int, workers: int):
             str(size),
             "--workers",
             str(workers),
+            *extra,
             "-q",
         ],
         capture_output=True,
@@ -151,14 +156,114 @@ def run_hpe(labels: Path, images: Path, out: Path, size: int, workers: int):
     return wall, float(dt), int(rss)
 
 
+def make_videos(folder: Path, frames: int, cameras: int, sequences: int = 2):
+    """A synthetic multi-sequence release made from 1920x1080 mp4v videos (``make_sample_data``) and its labels
+    (``hpe relabel-panoptic``, one process): ``(labels, n_heads)``."""
+    import importlib.util
+
+    import pyarrow.parquet as pq
+
+    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
+    mk = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mk)
+    names = [f"seq{k}" for k in range(sequences)]
+    mk.make_video_release(folder / "rel", names, cameras=cameras, frames=frames, people=2, short=0)
+    labels = folder / "labels.parquet"
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    subprocess.run(
+        [sys.executable, "-m", "hpe_cli", "relabel-panoptic", str(folder / "rel"), "-o", str(labels), "-q"],
+        env=env,
+        check=True,
+    )
+    return labels, pq.read_metadata(labels).num_rows
+
+
+def _unit_imports(_):
+    t = time.perf_counter()
+    import cv2  # noqa: F401
+
+    import hpe_cli.datasets.panoptic_video  # noqa: F401
+    import hpe_cli.pipelines.export.units  # noqa: F401
+    import hpe_cli.pipelines.export.workers  # noqa: F401
+
+    return time.perf_counter() - t
+
+
+def cluster_overhead(workers: int = 2) -> None:
+    """The fixed cost of ``--scheduler local``: starting the LocalCluster, its workers' first imports, closing."""
+    try:
+        from hpe_cli.pipelines.dask_runner import dask_client
+    except ImportError:
+        return
+    t0 = time.perf_counter()
+    try:
+        with dask_client("local", workers) as c:
+            t1 = time.perf_counter()
+            imports = c.gather([c.submit(_unit_imports, i, pure=False) for i in range(workers)])
+            t2 = time.perf_counter()
+    except Exception as exc:  # no distributed
+        print(f"LocalCluster: not measured ({exc})")
+        return
+    t3 = time.perf_counter()
+    print(
+        f"LocalCluster of {workers}: start {t1 - t0:.2f} s, first unit's imports {t2 - t1:.2f} s "
+        f"(in the workers: {', '.join(f'{v:.2f}' for v in imports)} s), close {t3 - t2:.2f} s"
+    )
+
+
+def scaling(labels: Path, images: Path, tmp: Path, size: int, n: int) -> None:
+    """``--workers 1/2`` and ``--scheduler local --workers 1/2``: crops/s, crops/s per worker, and what a
+    LocalCluster adds over local processes (its start, the scheduler's round trips, the parts folder)."""
+    res = {}
+    for label, w, extra in (
+        ("--workers 1", 1, ()),
+        ("--workers 2", 2, ()),
+        ("--scheduler local --workers 1", 1, ("--scheduler", "local")),
+        ("--scheduler local --workers 2", 2, ("--scheduler", "local")),
+    ):
+        if extra:
+            try:
+                import distributed  # noqa: F401
+            except ImportError:
+                print(f"hpe export {label}: skipped (dask distributed is not installed)")
+                continue
+        wall, dt, rss = run_hpe(labels, images, tmp / f"s{len(res)}", size, w, extra)
+        res[label] = dt
+        print(
+            f"hpe export {label:31s} {n / dt:8.1f} crops/s, {n / dt / w:8.1f} per worker (command {dt:.2f} s, "
+            f"with start-up {wall:.2f} s); peak RSS of the parent {rss / 1024:.0f} MB"
+        )
+    if "--workers 2" in res:
+        print(f"2 workers / 1 worker: {res['--workers 1'] / res['--workers 2']:.2f}x")
+    cluster_overhead(2)
+    for w in (1, 2):
+        a, b = res.get(f"--workers {w}"), res.get(f"--scheduler local --workers {w}")
+        if a and b:
+            print(f"LocalCluster of {w} over --workers {w}: +{b - a:.2f} s ({b / a:.2f}x)")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--images", type=int, default=200)
     ap.add_argument("--heads", type=int, default=3)
     ap.add_argument("--size", type=int, default=224)
+    ap.add_argument(
+        "--videos",
+        type=int,
+        default=0,
+        metavar="FRAMES",
+        help="instead: a release of 2 sequences x --cameras videos of FRAMES 1920x1080 frames (2 people), "
+        "exported with --workers 1/2 and --scheduler local --workers 1/2",
+    )
+    ap.add_argument("--cameras", type=int, default=2)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        if args.videos:
+            labels, n = make_videos(tmp / "v", args.videos, args.cameras)
+            print(f"2 sequences x {args.cameras} videos x {args.videos} frames 1920x1080 (mp4v), {n} heads")
+            scaling(labels, tmp / "v" / "rel", tmp, args.size, n)
+            return
         labels, rows = make_data(tmp / "data", args.images, args.heads)
         n = len(rows)
         print(f"{args.images} frames 1920x1080, {n} heads, crops {args.size}x{args.size}, JPEG q95")
@@ -182,6 +287,7 @@ def main():
                 f"floor   the same, union-of-heads decode:  {n / t3:8.1f} crops/s  ({t3:.2f} s, "
                 f"{t3 / t_floor:.2f}x the floor)"
             )
+        scaling(labels, tmp / "data", tmp, args.size, n)
         for w, wall, dt, rss in runs:
             print(
                 f"hpe export --workers {w}:  {n / wall:8.1f} crops/s with start-up ({wall:.2f} s, "

@@ -437,6 +437,20 @@ def write_videos(seq_dir, last_frame: int, size=(192, 108), cameras=None, fps: f
     return out
 
 
+def make_video_release(
+    root, sequences=("seqA", "seqB"), cameras: int = 3, frames: int = 12, people: int = 2, short: int = 3
+) -> Path:
+    """A small multi-sequence release made from videos: ``root/<seq>/`` with a calibration, ``hdFace3d/`` and
+    ``hdVideos/hd_<cam>.mp4`` (1920x1080, frame k encoding k) for the first ``cameras`` HD cameras, frames
+    0..frames-1. Every sequence after the first has videos ``short`` frames shorter than its face files (a
+    video shorter than its labels). Deterministic (each sequence has its own seed)."""
+    root = Path(root)
+    for i, seq in enumerate(sequences):
+        make_synthetic(root / seq, frames, people, cameras, seed=7 + i, first_frame=0, special=False)
+        write_videos(root / seq, frames - 1 - (short if i else 0), size=(1920, 1080), cameras=cameras)
+    return root
+
+
 def copy_real(dst, src=REAL, frames=REAL_FRAMES) -> bool:
     """Copy the HD calibration and a few face frames of 160906_pizza1 (if available)."""
     src = Path(src)

@@ -12,6 +12,8 @@ from .options import (
     progress,
     radians_option,
     rejects_options,
+    resume_option,
+    scheduler_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -129,7 +131,15 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
     is_flag=True,
     help="Drop a whole image when any head in it is rejected (DirectMHP's rule).",
 )
-@click.option("--workers", type=click.IntRange(1), default=1, show_default=True, help="Worker processes.")
+@click.option(
+    "--workers",
+    type=click.IntRange(1),
+    default=1,
+    show_default=True,
+    help="Worker processes; each makes the crops of units of one video x 256 frames (or 64 images).",
+)
+@scheduler_option
+@resume_option("label tables, the split file, images and videos are compared by size, modification time and inode")
 @column_options
 @rejects_options
 @overwrite_option
@@ -158,6 +168,8 @@ def export(
     seed,
     drop_images_with_rejects,
     workers,
+    scheduler,
+    resume,
     rejects,
     strict,
     overwrite,
@@ -186,6 +198,7 @@ def export(
       hpe export AFLW2000/ 300W_LP/AFW -o out/fsa --layout fsanet --split identity:0.9,0.1
       hpe export pizza.parquet -o out/hf --layout hf --system 6drepnet --min-change 5 --balance yaw:10:500
       hpe export preds_rad.csv -o out/hf --layout hf --from 6drepnet --radians --rejects rej.csv
+      hpe export labels.parquet -o out/whenet --layout whenet --images ROOT --scheduler tcp://head:8786 --resume
     """
     from ..io.export import get_layout
     from ..pipelines.export import ExportOptions, run_export
@@ -224,6 +237,8 @@ def export(
         seed=seed,
         drop_images_with_rejects=drop_images_with_rejects,
         workers=workers,
+        scheduler=scheduler,
+        resume=resume,
         overwrite=overwrite,
         rejects=rejects,
         strict=strict,

@@ -467,3 +467,29 @@ def exclude_option(f):
         "sequence, frame, camera, person_id and a 'reason', as `hpe audit --consistency --suspects` writes); "
         "they are listed in --rejects with 'excluded: <reason>' and are never an error.",
     )(f)
+
+
+#: the commands that run units on Dask (relabel-panoptic, export) share these two options' words
+SCHEDULER_HELP = (
+    "Run the units on a Dask distributed scheduler (tcp://host:8786), or 'local' for a "
+    "LocalCluster of --workers processes. Needs the dask extra."
+)
+
+
+def scheduler_option(f):
+    """``--scheduler ADDRESS``: the units on a Dask cluster (:mod:`hpe_cli.pipelines.dask_runner`)."""
+    return click.option("--scheduler", default=None, metavar="ADDRESS", help=SCHEDULER_HELP)(f)
+
+
+def resume_option(compared: str):
+    """``--resume``: keep the finished units of an interrupted run; ``compared`` says how inputs are compared
+    (``"calibration files are compared by their contents, ..."``)."""
+    return click.option(
+        "--resume",
+        is_flag=True,
+        help="Keep the finished units of an interrupted run with the same inputs and options "
+        "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
+        "Give it on the first run too: a run without --resume removes its parts when interrupted. "
+        f"A changed input is refused, naming the file: {compared}. The temp files "
+        "of the run it resumes (killed by kill -9 or a power cut) are removed.",
+    )

@@ -17,6 +17,8 @@ from .options import (
     preset_option,
     progress,
     rejects_options,
+    resume_option,
+    scheduler_option,
     verbosity_options,
 )
 
@@ -71,22 +73,9 @@ from .options import (
     show_default=True,
     help="Worker processes; each computes units of 64 frames and writes its own parts.",
 )
-@click.option(
-    "--scheduler",
-    default=None,
-    metavar="ADDRESS",
-    help="Run the units on a Dask distributed scheduler (tcp://host:8786), or 'local' for a "
-    "LocalCluster of --workers processes. Needs the dask extra.",
-)
-@click.option(
-    "--resume",
-    is_flag=True,
-    help="Keep the finished units of an interrupted run with the same inputs and options "
-    "(parts in .OUTPUT.hpe-parts/) and compute only the others; the result is the same bytes. "
-    "Give it on the first run too: a run without --resume removes its parts when interrupted. "
-    "A changed input is refused, naming the file: calibration files are compared by their "
-    "contents, face files and hdFace3d.tar by size, modification time and inode. The temp files "
-    "of the run it resumes (killed by kill -9 or a power cut) are removed.",
+@scheduler_option
+@resume_option(
+    "calibration files are compared by their contents, face files and hdFace3d.tar by size, modification time and inode"
 )
 @max_rmse_option(
     "cm",

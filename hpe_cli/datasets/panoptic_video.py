@@ -121,7 +121,7 @@ class VideoFrames:
             )
         return cap
 
-    def read(self, frame_numbers):
+    def read(self, frame_numbers, seek: bool = False):
         """Yield ``(frame_number, image, reason)`` for each requested frame, ascending.
 
         Parameters
@@ -129,6 +129,13 @@ class VideoFrames:
         frame_numbers : iterable of int
             HD frame numbers (video frame index from 0); duplicates are
             yielded once; negative numbers are rejected.
+        seek : bool
+            Start at the first requested frame with one seek (``CAP_PROP_POS_FRAMES``: FFmpeg seeks to the
+            key frame before it and decodes forward), then go on sequentially; used by ``hpe export`` to read
+            a block of frames of a long video. A seek that does not land on the frame asked for (the
+            position OpenCV reports differs) reads from frame 0 instead; a frame past the container's frame
+            count is sought from its last counted frame, so the end is found by decoding (the count may be
+            approximate) and reported as in sequential reading.
 
         Yields
         ------
@@ -160,6 +167,12 @@ class VideoFrames:
             if want is not None and 0 not in _cap_size(cap):  # 0: the container does not say (frames are checked)
                 self._compare(_cap_size(cap), want)
             pos = 0  # index of the next frame grab() returns
+            first = int(wanted[0])
+            if seek and first > 0:
+                target, pos = _seek(cap, first)
+                if pos != target:  # the seek did not land where asked: decode from the start
+                    cap.release()
+                    cap, pos = self._open(), 0
             for f in wanted.tolist():
                 ended = False
                 while pos < f:
@@ -182,6 +195,19 @@ class VideoFrames:
                     yield f, image, ""
         finally:
             cap.release()
+
+
+def _seek(cap, frame: int) -> tuple:
+    """Seek ``cap`` to ``frame``, or to the last frame the container counts when that is before ``frame`` (the
+    grabs from there find the real end, or the frames a low count missed). Returns ``(target, position OpenCV
+    reports after the seek)``; -1 when the seek failed."""
+    import cv2
+
+    count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    target = count - 1 if 0 < count <= frame else frame
+    if not cap.set(cv2.CAP_PROP_POS_FRAMES, target):
+        return target, -1
+    return target, int(cap.get(cv2.CAP_PROP_POS_FRAMES))
 
 
 def _cap_size(cap) -> tuple:

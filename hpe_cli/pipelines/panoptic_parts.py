@@ -165,6 +165,8 @@ def _fingerprint(plans: list, cfg: Config, fmt: str) -> dict:
 HOW_COMPARED = (
     "calibration files by their contents (SHA-256), face files and hdFace3d.tar by size, modification time and inode"
 )
+#: what else differs when the plans do (the fingerprint's ``plans``)
+DIFFER = "other sequences, cameras or frames"
 
 
 def input_signatures(plans: list) -> dict:
@@ -199,7 +201,7 @@ def parts_dir_for(output) -> Path:
     return out.parent / f".{out.name}.hpe-parts"
 
 
-def _mismatch(d: Path, old: dict, fp: dict) -> str:
+def _mismatch(d: Path, old: dict, fp: dict, compared: str = HOW_COMPARED, differ: str = DIFFER) -> str:
     """Why the parts in ``d`` (fingerprint ``old``) cannot be resumed by a run with fingerprint ``fp``."""
     again = "run without --resume to start over"
     if old.get("hpe_parts") != fp["hpe_parts"]:
@@ -220,9 +222,9 @@ def _mismatch(d: Path, old: dict, fp: dict) -> str:
             more = f" (and {n - 1} more inputs)" if n > 1 else ""
             return (
                 f"{path}: changed since the interrupted run whose parts are in {d} ({how}){more}; "
-                f"--resume compares {HOW_COMPARED}; {again}"
+                f"--resume compares {compared}; {again}"
             )
-    return f"{d}: its parts were made with other inputs or options (here: other sequences, cameras or frames); {again}"
+    return f"{d}: its parts were made with other inputs or options (here: {differ}); {again}"
 
 
 def _remove_leftovers(d: Path) -> None:
@@ -338,8 +340,13 @@ def unlock_parts(d) -> None:
 
 def _prepare_parts(plans, cfg, fmt, output, resume: bool, overwrite: bool = False) -> Path:
     """The locked parts folder of this run (:func:`lock_parts`; release it with :func:`unlock_parts`)."""
+    return prepare_parts(_fingerprint(plans, cfg, fmt), output, resume, overwrite)
+
+
+def prepare_parts(fp: dict, output, resume: bool, overwrite: bool = False, **why) -> Path:
+    """The locked parts folder of a run whose parts depend on ``fp`` (what :func:`_fingerprint` gives for
+    relabel-panoptic; ``why``: ``compared`` and ``differ`` for the messages of :func:`_mismatch`)."""
     d = parts_dir_for(output)
-    fp = _fingerprint(plans, cfg, fmt)
     run_file = d / "run.json"
     # whether the folder was there is read when it is locked, not before: another run may end (and remove its
     # parts folder) between a look before the lock and the lock, and this run then makes a new one
@@ -354,14 +361,14 @@ def _prepare_parts(plans, cfg, fmt, output, resume: bool, overwrite: bool = Fals
             raise HpeError(
                 f"{output}: already exists (another run created it meanwhile; use --overwrite to replace it)"
             )
-        _reuse_or_reset(d, run_file, fp, existed, resume)
+        _reuse_or_reset(d, run_file, fp, existed, resume, **why)
     except BaseException:
         unlock_parts(d)
         raise
     return d
 
 
-def _reuse_or_reset(d: Path, run_file: Path, fp: dict, existed: bool, resume: bool) -> None:
+def _reuse_or_reset(d: Path, run_file: Path, fp: dict, existed: bool, resume: bool, **why) -> None:
     """With the lock held: check the parts of an earlier run against ``fp`` (``resume``) or clear them."""
     import json
     import shutil
@@ -376,7 +383,7 @@ def _reuse_or_reset(d: Path, run_file: Path, fp: dict, existed: bool, resume: bo
         if not isinstance(old, dict) or old.get("hpe_parts") not in (1, 2):
             raise HpeError(f"{d}: exists and is not an hpe parts folder; move it away")
         if resume and old != fp:
-            raise HpeError(_mismatch(d, old, fp))
+            raise HpeError(_mismatch(d, old, fp, **why))
         _remove_leftovers(d)
         if not resume:  # start afresh in the same (locked) folder
             for f in d.iterdir():

@@ -129,8 +129,6 @@ class SixDRepNetLayout(Layout):
                 with open(self.root / f"files_{split}.txt", "w", encoding="utf-8", newline="") as fh:
                     fh.writelines(lines)
             return notes
-        import scipy.io
-
         from ...io.layout import landmark_count
 
         n_lm = landmark_count(exported.columns)
@@ -157,12 +155,38 @@ class SixDRepNetLayout(Layout):
                 tdx = (td[k, 0] - box[k, 0] + 0.5) * sx - 0.5
                 tdy = size[k, 1] - 1 - ((row - box[k, 1] + 0.5) * sy - 0.5)
                 pose = np.array([[rad[k, 0], rad[k, 1], rad[k, 2], tdx, tdy, td[k, 2], td[k, 3]]])
-                scipy.io.savemat(
-                    self.split_dir(split) / f"{name}.mat",
-                    {"Pose_Para": pose, "pt2d": np.ascontiguousarray(pts.T)},
-                    do_compression=False,
+                savemat_pinned(
+                    self.split_dir(split) / f"{name}.mat", {"Pose_Para": pose, "pt2d": np.ascontiguousarray(pts.T)}
                 )
                 names.append(name + "\n")
             with open(self.split_dir(split) / "files.txt", "w", encoding="utf-8", newline="") as fh:
                 fh.writelines(names)
         return notes
+
+
+#: the 116-byte description of every ``.mat`` hpe writes: scipy's text with a fixed platform and creation time
+#: (scipy/scipy@v1.17.1 ``scipy/io/matlab/_mio5.py:849-858``, ``MatFile5Writer.write_file_header``, writes
+#: ``os.name`` and ``time.asctime()`` there, so two exports of the same data would differ in every file)
+MAT_DESCRIPTION = b"MATLAB 5.0 MAT-file Platform: posix, Created on: Thu Jan  1 00:00:00 1970"
+
+
+def savemat_pinned(path, mdict) -> None:
+    """``scipy.io.savemat(path, mdict, do_compression=False)`` with a fixed header description.
+
+    A level-5 MAT-file starts with a 128-byte header: 116 bytes of text, 8 of subsystem offset, the version and
+    the endian mark. scipy writes the platform and the current time into the text; hpe writes
+    :data:`MAT_DESCRIPTION` (null-padded, as scipy pads) instead, so the same export gives the same bytes on any
+    machine and day. The readers (``scipy.io.loadmat``, MATLAB) do not interpret the text.
+    """
+    import io
+
+    import scipy.io
+
+    buf = io.BytesIO()
+    scipy.io.savemat(buf, mdict, do_compression=False)
+    data = bytearray(buf.getbuffer())
+    if not data.startswith(b"MATLAB 5.0 MAT-file"):  # pragma: no cover - another scipy header format
+        raise RuntimeError("scipy.io.savemat wrote an unexpected MAT-file header")
+    data[:116] = MAT_DESCRIPTION.ljust(116, b"\0")
+    with open(path, "wb") as fh:
+        fh.write(data)

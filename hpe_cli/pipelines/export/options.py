@@ -44,6 +44,8 @@ class ExportOptions:
     seed: int = 0
     drop_images_with_rejects: bool = False
     workers: int = 1
+    scheduler: str | None = None
+    resume: bool = False
     overwrite: bool = False
     rejects: str | None = None
     strict: bool = False

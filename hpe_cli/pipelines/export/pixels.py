@@ -12,7 +12,6 @@ import numpy as np
 from ...geometry.crop import expand_boxes, pixel_boxes
 from ...io.images import leaves_root, resolve_image, video_path
 from ...io.layout import BBOX_COLS
-from . import workers
 
 
 @dataclass
@@ -73,7 +72,7 @@ def build_tasks(sel, layout, plan: CropPlan, todo) -> list:
     task_of = {}
     tasks = []
     for i in todo.tolist():
-        key = (roots[i], images[i])
+        key = (roots[i], seqs[i], images[i])  # one name (hdImgs/00_00/00_00_00000001.jpg) in two sequences
         t = task_of.get(key)
         if t is None and leaves_root(images[i]):
             t = task_of[key] = ["refused", f"image name {images[i]!r} leaves the --images folder (refused)", []]
@@ -107,23 +106,34 @@ def build_tasks(sel, layout, plan: CropPlan, todo) -> list:
     return tasks
 
 
-def _results(tasks, cfg, n_workers: int):
-    """Yield each task's ``(results, spill)``, in task order; closes the pool at the end."""
-    if n_workers > 1 and len(tasks) > 1:
-        import multiprocessing as mp
+def unit_results(units, cfg, pool, parts=None, resume: bool = False):
+    """Yield each unit's ``(results, spill file or None, files folder or None)``, in unit order, computed on
+    ``pool`` (:func:`hpe_cli.pipelines.pools.unit_pool`). Without ``parts`` the units write into the staging
+    folder and hand back their results; with a parts folder they write parts (:mod:`.units`), and with
+    ``resume`` the units already done there are not computed again."""
 
-        ctx = mp.get_context("spawn" if os.name == "nt" else "fork")
-        pool = ctx.Pool(n_workers, initializer=workers._init_worker, initargs=(cfg,))
-        try:
-            yield from pool.imap(
-                workers._work, [tuple(t) for t in tasks], chunksize=max(1, min(16, len(tasks) // (8 * n_workers)))
-            )
-        finally:
-            pool.close()
-            pool.join()
-    else:
-        workers._init_worker(cfg)
-        yield from map(workers._work, [tuple(t) for t in tasks])
+    from ..pools import in_order
+    from . import units as U
+
+    if parts is None:
+        tasks = [U.unit_task(cfg, u, None) for u in units]
+        for res, spill in in_order(pool, U.run_unit, tasks):
+            yield res, spill, None
+        return
+    stems = [os.path.join(os.path.abspath(parts), f"{k:06d}") for k in range(len(units))]  # workers: elsewhere
+    if resume:
+        U.check_done(stems)
+    todo = [U.unit_task(cfg, u, s) for u, s in zip(units, stems) if not os.path.exists(s + ".json")]
+    need = {t["stem"] for t in todo}
+    computed = in_order(pool, U.run_unit, todo)
+    for stem in stems:
+        if stem in need:
+            next(computed)  # in order: this unit's parts are complete after it
+        yield U.read_unit(stem)
+
+
+#: heads handed to the layout at a time (pixel layouts: one Parquet row group, one slice of the .npz)
+FLUSH = 256
 
 
 @dataclass
@@ -136,8 +146,14 @@ class PixelResult:
     H: np.ndarray
 
 
-def run_tasks(tasks, cfg, sel, layout, plan: CropPlan, n_workers: int, bar=None) -> PixelResult:
-    """Run every task and pass finished heads (with their pixels) to the layout in small slices."""
+def run_tasks(results, sel, layout, plan: CropPlan, stage, bar=None, keep_parts: bool = False) -> PixelResult:
+    """Take every unit's results (:func:`unit_results`), in order: link the files units wrote in their parts
+    into the staging folder ``stage`` and pass finished heads (with their pixels) to the layout in small
+    slices. ``keep_parts``: leave the spill files (parts of a resumable run)."""
+    from pathlib import Path
+
+    from .units import link_files
+    from .workers import _unspill
     from .write import add_pixels
 
     n = sel.n
@@ -149,31 +165,40 @@ def run_tasks(tasks, cfg, sel, layout, plan: CropPlan, n_workers: int, bar=None)
     )
     status, order, W, H = res_all.status, res_all.order, res_all.W, res_all.H
     counter = 0
-    results = _results(tasks, cfg, n_workers)
+    made: set = set()
+    good, payloads = [], []  # heads waiting for the layout, across units
     try:
-        for res, spill in results:
+        for res, spill, files in results:
+            if files is not None and os.path.isdir(files):
+                link_files(files, Path(stage), made)
             spill_fh = open(spill, "rb") if spill else None
-            good, payloads = [], []
-            for idx, reason, w, h, payload in res:
-                if w > 0:
-                    W[idx], H[idx] = w, h
-                if reason:
-                    status[idx] = reason
-                    continue
-                order[idx] = counter
-                counter += 1
-                good.append(idx)
-                payloads.append(payload)
-                if spill_fh is not None and len(payloads) >= 256:  # flush in small slices
-                    add_pixels(layout, sel, plan, res_all, good, payloads, spill_fh)
-                    good, payloads = [], []
-            if good and layout.pixels != "file":
-                add_pixels(layout, sel, plan, res_all, good, payloads, spill_fh)
-            if spill_fh is not None:
-                spill_fh.close()
+            try:
+                for idx, reason, w, h, payload in res:
+                    if w > 0:
+                        W[idx], H[idx] = w, h
+                    if reason:
+                        status[idx] = reason
+                        continue
+                    order[idx] = counter
+                    counter += 1
+                    if layout.pixels == "file":
+                        continue
+                    good.append(idx)
+                    payloads.append(_unspill(payload, spill_fh))
+                    # slices of FLUSH heads, whatever the units: the layout's row groups and shards are the
+                    # same for every runner
+                    if len(good) >= FLUSH:
+                        add_pixels(layout, sel, plan, res_all, good, payloads, None)
+                        good, payloads = [], []
+            finally:
+                if spill_fh is not None:
+                    spill_fh.close()
+            if spill is not None and not keep_parts:
                 os.unlink(spill)
             if bar is not None:
                 bar.update(len(res))
+        if good:
+            add_pixels(layout, sel, plan, res_all, good, payloads, None)
     finally:
         results.close()
     return res_all
@@ -183,7 +208,7 @@ def worker_config(stage, layout, splits_used, opts) -> dict:
     """The settings every worker reads (``workers._CFG``)."""
     split_dirs = {s: str(layout.split_dir(s).relative_to(stage)) for s in splits_used}
     return {
-        "root": str(stage),
+        "root": os.path.abspath(stage),  # workers may run in another folder (Dask)
         "split_dirs": split_dirs,
         "quality": int(opts.quality),
         "pad_value": int(opts.pad_value),

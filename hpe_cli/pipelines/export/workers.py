@@ -4,7 +4,6 @@ it with padding, resize, encode, write or hand back the pixels)."""
 from __future__ import annotations
 
 import os
-import tempfile
 
 import numpy as np
 
@@ -23,6 +22,34 @@ def _init_worker(cfg):
     import cv2
 
     cv2.setNumThreads(1)
+    _frame_sized_malloc()
+
+
+_MALLOC_DONE: list = [False]
+
+
+def _frame_sized_malloc() -> None:
+    """Undo, in this process, what ``MALLOC_TRIM_THRESHOLD_`` does to decoding frames.
+
+    Dask's nanny starts every worker with ``MALLOC_TRIM_THRESHOLD_=65536``
+    (dask/distributed@2026.8.0 ``distributed/distributed.yaml:195-197``, ``nanny.pre-spawn-environ``). Setting
+    it also fixes glibc's mmap threshold (``mallopt(3)``: an explicit threshold turns off the dynamic one), so
+    every multi-MB frame is mapped and unmapped and each decode faults in fresh pages: measured here, 1.7x the
+    CPU per export unit. Large thresholds (frames are at most 8K x 4K x 3 bytes) restore the default behaviour.
+    """
+    import sys
+
+    if _MALLOC_DONE[0] or "MALLOC_TRIM_THRESHOLD_" not in os.environ or not sys.platform.startswith("linux"):
+        return
+    _MALLOC_DONE[0] = True
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None)
+        libc.mallopt(-3, 128 << 20)  # M_MMAP_THRESHOLD: blocks below 128 MiB come from the heap
+        libc.mallopt(-1, 256 << 20)  # M_TRIM_THRESHOLD
+    except (OSError, AttributeError):
+        pass
 
 
 def _encode(crop, cfg):
@@ -115,8 +142,8 @@ def _process_image(image, data, items, cfg, out):
 
 
 def _spill(payload, cfg):
-    """In a video task, pixels go to the task's spill file (a video can hold thousands of heads): the parent
-    reads them back one by one, so neither process holds a whole video's crops."""
+    """Pixels go to the unit's spill file (a unit can hold thousands of heads): the parent reads them back
+    one by one, so neither process holds a whole unit's crops."""
     fh = cfg.get("spill")
     if fh is None:
         return payload
@@ -138,27 +165,16 @@ def _unspill(payload, fh):
     return payload
 
 
-def _work(task):
-    """Run one task; returns ``(results, spill file or None)``."""
-    cfg = _CFG
-    if task[0] != "video" or cfg["pixels"] == "file":
-        return _work_items(task), None
-    fd, spill = tempfile.mkstemp(prefix=".spill-", suffix=".bin", dir=cfg["root"])
-    with os.fdopen(fd, "wb") as fh:
-        cfg["spill"] = fh
-        try:
-            out = _work_items(task)
-        finally:
-            cfg["spill"] = None
-    return out, spill
-
-
-def _work_items(task):
-    """One task: an image file (or a video with its frames) and the heads to crop from it."""
+def _work_items(task, cwd=None):
+    """One task: an image file (or a video with its frames) and the heads to crop from it. A relative source
+    path is read relative to ``cwd`` (the folder the run was started in: a Dask worker runs elsewhere);
+    messages name it as the user gave it."""
     import cv2
 
     cfg = _CFG
-    kind, src, groups = task
+    kind, src, groups = task[:3]
+    path = os.path.join(cwd, src) if cwd and isinstance(src, str) and kind != "refused" else src
+    seek = len(task) > 3 and bool(task[3])  # a block of a long video (units.make_units): one seek to its start
     out = []
     if kind == "video":
         try:
@@ -168,7 +184,9 @@ def _work_items(task):
         if src is None:
             return [(it[0], NO_FILES, -1, -1, None) for items in groups.values() for it in items]
         try:
-            for fr, img, reason in VideoFrames(src).read(sorted(groups)):
+            for fr, img, reason in (
+                VideoFrames(path).read(sorted(groups), seek=True) if seek else VideoFrames(path).read(sorted(groups))
+            ):
                 items = groups.get(fr, [])
                 if img is None:
                     out += [(it[0], f"no image (video {src} frame {fr}: {reason})", -1, -1, None) for it in items]
@@ -189,7 +207,7 @@ def _work_items(task):
     if src is None:
         return [(it[0], "no image (file not found)", -1, -1, None) for it in items]
     try:
-        with open(src, "rb") as fh:
+        with open(path, "rb") as fh:
             data = fh.read()
     except OSError as exc:
         return [(it[0], f"no image ({exc.strerror or exc})", -1, -1, None) for it in items]
