@@ -8,6 +8,7 @@ from .options import (
     SYSTEM,
     batch_option,
     echo_summary,
+    fmt_small,
     output_option,
     overwrite_option,
     progress,
@@ -95,7 +96,7 @@ def convert(input, output, source, target, radians, decoder, rejects, strict, ov
         bar.close()
     lines = [
         f"{s.written} of {s.rows} rows converted from {s.source} ({s.source_origin}) to {target.name} -> {output}",
-        f"gimbal-locked rows: {s.gimbal_lock}; max round-trip error: {s.max_roundtrip_err:.3g}",
+        f"gimbal-locked rows: {s.gimbal_lock}; max round-trip error: {fmt_small(s.max_roundtrip_err)}",
     ]
     if s.rejects:
         lines.append(

@@ -44,6 +44,15 @@ class HpeGroup(click.Group):
             _error(f"{exc.format_message()} (see 'hpe --help')")
             raise SystemExit(2) from None
 
+    def resolve_command(self, ctx, args):
+        """``hpe convrt``: the unknown command's error names the command the user most likely meant."""
+        name = args[0] if args else ""
+        if name and not name.startswith("-") and self.get_command(ctx, name) is None:
+            from .suggest import did_you_mean
+
+            ctx.fail(f"No such command {name!r}{did_you_mean(name, self.list_commands(ctx))}.")
+        return super().resolve_command(ctx, args)
+
     def list_commands(self, ctx):
         return [n for n, target in COMMANDS.items() if importlib.util.find_spec(target.split(":")[0])]
 
