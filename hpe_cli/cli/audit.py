@@ -207,6 +207,9 @@ def audit(
     outs = [str(p) for p in (report if report != "-" else None, output, plots) if p]
     if outs:
         lines.append("  wrote " + ", ".join(outs))
+    if strict and flagged:  # one line naming what was found (the outputs are not written: the run failed)
+        from ..errors import HpeError
+
+        found = ", ".join(f"{c} {result[c]}" for c in CHECKS if result[c])
+        raise HpeError(f"{input}: {flagged} of {result['rows']} rows flagged ({found}); --strict: nothing written")
     echo_summary(lines, quiet)
-    if strict and flagged:
-        ctx.exit(1)

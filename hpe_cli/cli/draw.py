@@ -160,7 +160,7 @@ def draw(
     \b
     Examples:
       hpe draw AFLW2000/ -o drawn/
-      hpe draw labels.parquet -o drawn/ --images 300W_LP/ --style cube
+      hpe draw labels.parquet -o drawn/ --images AFLW2000/ --style cube
       hpe draw preds.csv -o drawn/ --images frames/ --system 6drepnet --columns matrix
       hpe draw poses.csv -o canvas/ --image-size 640x480 --annotate
       hpe draw AFLW2000/ -o sheet/ --grid --grid-cols 4 --annotate

@@ -210,7 +210,7 @@ def cli():
       hpe systems
       hpe convert labels.csv -o labels_6d.parquet --from 300w_lp --to 6drepnet
       hpe convert AFLW2000/ -o aflw.parquet --from 300w_lp --to whenet
-      hpe relabel-panoptic sample_data/panoptic -o labels.parquet
+      hpe relabel-panoptic sample_data/panoptic_160906_pizza1 -o labels.parquet
       hpe audit labels.parquet --system 300w_lp --json report.json
     """
 
