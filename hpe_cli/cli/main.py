@@ -8,7 +8,7 @@ import os
 
 import click
 
-from .. import __version__
+from .version import version_option
 
 #: command name -> "module:function". One module per command.
 COMMANDS = {
@@ -196,7 +196,7 @@ def _error(msg: str) -> None:
 
 
 @click.group(cls=HpeGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
-@click.version_option(__version__, prog_name="hpe")
+@version_option  # the version and the optional parts installed (cli/version.py)
 def cli():
     """hpe: relabel head-pose datasets correctly.
 
