@@ -211,7 +211,6 @@ def draw(
     lines = [
         f"drew {s['faces']} faces ({style}) on {s['images']} {'canvases' if canvas else 'images'} -> "
         + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir)),
-        f"labels of {input}: system {s['system']}",
     ]
     if s["rejects"]:
         lines.append(
