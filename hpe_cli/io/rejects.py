@@ -128,3 +128,15 @@ def _integral(v) -> bool:
         return float(v) == int(v)
     except (TypeError, ValueError):
         return False
+
+
+def fail_all_rejected(rejects: "Rejects", message: str):
+    """Every row was rejected: raise. With a rejects file (and no ``--strict``) the error is a
+    :class:`~hpe_cli.errors.RejectedAllError` that still commits that file, the one output that says why; the
+    main outputs are not written. Without one, a plain :class:`~hpe_cli.errors.HpeError`."""
+    from ..errors import RejectedAllError
+
+    if rejects.path is None or rejects.strict:
+        raise HpeError(message)
+    rejects.write()
+    raise RejectedAllError(f"{message}; every row's reason -> {rejects.path}", keep=[rejects.path])

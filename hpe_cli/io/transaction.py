@@ -359,6 +359,14 @@ class OutputTransaction:
                 _remove(s.tmp)
                 s.release()
 
+    def keep_only(self, paths) -> None:
+        """Discard every staged output whose target is not one of ``paths`` (a failing run that still commits the
+        rejects file the user asked for: :class:`~hpe_cli.errors.RejectedAllError`)."""
+        keys = {_real(p) for p in paths}
+        for s in list(self._staged):
+            if _real(s.target) not in keys:
+                self.discard(s.tmp)
+
     def staged_temps(self) -> list:
         """The temporary files and folders staged so far (to be removed by a later run if this one is killed)."""
         return [s.tmp for s in self._staged]
@@ -482,7 +490,15 @@ class OutputTransaction:
         try:
             yield self
             self.commit()
-        except BaseException:
+        except BaseException as exc:
+            keep = getattr(exc, "keep", None)  # RejectedAllError: commit only these (the rejects file), then fail
+            if keep and self.state == "open" and _stop is None:
+                self.keep_only(keep)
+                try:
+                    self.commit()
+                except BaseException:
+                    self.abort()
+                    raise
             self.abort()
             raise
         finally:

@@ -268,12 +268,14 @@ class _Book:
         self.rejects.add(cols, why)
 
     def finish(self, drawn):
-        from ..errors import HpeError
 
-        if drawn == 0 and self.rows:
-            raise HpeError(
+        if drawn == 0 and self.rows:  # the rejects file is still written: it says why
+            from ..io.rejects import fail_all_rejected
+
+            fail_all_rejected(
+                self.rejects,
                 f"{self.src.path}: nothing drawn: all {len(self.rows)} row(s) rejected "
-                f"(first: {self.where(self.rows[0][0]).split(': ', 1)[-1]}: {self.rows[0][1]})"
+                f"(first: {self.where(self.rows[0][0]).split(': ', 1)[-1]}: {self.rows[0][1]})",
             )
         self.rejects.finish()
 
