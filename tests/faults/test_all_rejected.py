@@ -83,3 +83,27 @@ def test_an_existing_rejects_file_needs_overwrite(tmp_path, bad_table, missing_i
     assert r.exit_code == 1 and "already exists" in r.output and rej.read_text() == "old\n"
     r = run(*args, "--rejects", rej, "--overwrite")
     assert r.exit_code == 1 and len(pd.read_csv(rej)) == 3
+
+
+def test_draw_sets_unparseable_rows_aside_with_rejects(tmp_path):
+    """draw read the whole table with the reader that stops at the first unparseable row, so with --rejects a
+    non-numeric angle still ended the run; it is now a reject like in every other command."""
+    src = tmp_path / "t.csv"
+    src.write_text("image,pitch,yaw,roll\na.jpg,x,1,2\nb.jpg,3,1,2\n")
+    rej = tmp_path / "rej.csv"
+    r = run("draw", src, "-o", tmp_path / "d", "--image-size", "64x64", "--rejects", rej)
+    assert r.exit_code == 0, r.output
+    assert "rejected: 1 non-numeric value in pitch" in r.output
+    frame = pd.read_csv(rej)
+    assert frame["row"].tolist() == [2] and frame["reason"].tolist() == ["non-numeric value in pitch"]
+    assert len(list((tmp_path / "d").iterdir())) == 1
+    # without --rejects: the first such row is the error, nothing written
+    r = run("draw", src, "-o", tmp_path / "d2", "--image-size", "64x64")
+    assert r.exit_code == 1 and f"{src}: line 2: non-numeric value in pitch" in r.output
+    assert not (tmp_path / "d2").exists()
+    # every row unparseable: exit 1, the rejects file says why
+    bad = tmp_path / "bad.csv"
+    bad.write_text("image,pitch,yaw,roll\na.jpg,x,1,2\n")
+    r = run("draw", bad, "-o", tmp_path / "d3", "--image-size", "64x64", "--rejects", tmp_path / "rej3.csv")
+    assert r.exit_code == 1 and "every row's reason" in r.output
+    assert len(pd.read_csv(tmp_path / "rej3.csv")) == 1 and not (tmp_path / "d3").exists()
