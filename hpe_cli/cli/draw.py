@@ -210,7 +210,7 @@ def draw(
         return
     lines = [
         f"drew {s['faces']} faces ({style}) on {s['images']} {'canvases' if canvas else 'images'} -> "
-        + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir)),
+        + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir))
     ]
     if s["rejects"]:
         lines.append(

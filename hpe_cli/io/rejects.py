@@ -138,5 +138,15 @@ def fail_all_rejected(rejects: "Rejects", message: str):
 
     if rejects.path is None or rejects.strict:
         raise HpeError(message)
+    from os.path import realpath
+
+    from .transaction import current
+
     rejects.write()
+    txn = current()
+    if txn is not None:  # only the rejects file stays staged: the run's transaction commits it, then fails
+        keep = realpath(rejects.path)
+        for tmp in txn.staged_temps():
+            if realpath(txn.target_of(tmp)) != keep:
+                txn.discard(tmp)
     raise RejectedAllError(f"{message}; every row's reason -> {rejects.path}", keep=[rejects.path])

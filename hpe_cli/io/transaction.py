@@ -20,7 +20,6 @@ Rules enforced here, for every command:
   plain ``open()`` would give it (the umask applies; the umask is never set);
 - errors name the user's path and the reason (permission denied, read-only
   file system, disk full, name too long), never a temporary name.
-
 - a commit that fails halfway (a target name taken by a folder meanwhile, a
   read-only folder, a full disk) undoes the files already placed: new ones are
   removed, replaced ones restored from hard-link backups;
@@ -359,14 +358,6 @@ class OutputTransaction:
                 _remove(s.tmp)
                 s.release()
 
-    def keep_only(self, paths) -> None:
-        """Discard every staged output whose target is not one of ``paths`` (a failing run that still commits the
-        rejects file the user asked for: :class:`~hpe_cli.errors.RejectedAllError`)."""
-        keys = {_real(p) for p in paths}
-        for s in list(self._staged):
-            if _real(s.target) not in keys:
-                self.discard(s.tmp)
-
     def staged_temps(self) -> list:
         """The temporary files and folders staged so far (to be removed by a later run if this one is killed)."""
         return [s.tmp for s in self._staged]
@@ -491,14 +482,8 @@ class OutputTransaction:
             yield self
             self.commit()
         except BaseException as exc:
-            keep = getattr(exc, "keep", None)  # RejectedAllError: commit only these (the rejects file), then fail
-            if keep and self.state == "open" and _stop is None:
-                self.keep_only(keep)
-                try:
-                    self.commit()
-                except BaseException:
-                    self.abort()
-                    raise
+            if getattr(exc, "keep", None) and self.state == "open" and _stop is None:  # errors.RejectedAllError
+                self.commit()  # what is still staged: the rejects file (io.rejects.fail_all_rejected)
             self.abort()
             raise
         finally:
