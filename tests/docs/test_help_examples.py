@@ -31,7 +31,8 @@ PLACEHOLDERS = {
     "labels.csv": "sample_data/labels_300wlp.csv",
     "poses.csv": "sample_data/labels_300wlp.csv",
     "SEQ": "sample_data/panoptic_160906_pizza1",
-    "ROOT": "sample_data",
+    "ROOT/seqA": "sample_data/panoptic_160906_pizza1",
+    "ROOT/seqB": "sample_data/panoptic_synth",
     "sixdrepnet.py": "tests/fixtures/conventions/sixdrepnet.py",
     "mycode.py": "tests/fixtures/conventions/stored_values.py",
     "3DDFA_V2/utils/pose.py": "tests/fixtures/conventions/tddfa_v2.py",
@@ -68,10 +69,8 @@ NEEDS = {
 NOT_RUN = {
     "hpe relabel-panoptic SEQ -o labels.csv --cameras 00_00,00_08 --frames 1000:2000 --every 10": "the sample has "
     "three frames (1147, 3476, 5777): the frame filter finds none",
-    "hpe relabel-panoptic ROOT/seqA ROOT/seqB -o labels.parquet --no-landmarks --workers 2": "two sequences: the "
-    "shipped ones are run one by one",
     "hpe relabel-panoptic ROOT -o labels.parquet --frame crop --cameras whenet-haggling --min-change 5": "WHENet's "
-    "haggling cameras are not in the synthetic sample's calibration",
+    "haggling cameras are not in the synthetic sample's calibration (ROOT/seqB)",
     "hpe relabel-panoptic ROOT -o labels.parquet --scheduler tcp://head:8786 --resume": NEEDS["dask"],
     "hpe relabel-agora validation_*_withjv.pkl -o agora_val.parquet": NEEDS["agora"],
     "hpe relabel-agora train_0_withjv.pkl -o train.json --format coco --image-size 1280x720": NEEDS["agora"],
