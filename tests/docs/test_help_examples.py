@@ -211,6 +211,23 @@ def readme_tour() -> list[str]:
     return quick_lines + dx.commands(tour)
 
 
+def getting_started_tour() -> list[str]:
+    """The marked examples of docs/getting-started.md, in order (the newcomer's page)."""
+    return [cmd for ex in dx.examples(dx.DOCS / "getting-started.md") for cmd in ex.commands]
+
+
+def test_getting_started_runs_twice(tmp_path):
+    """The getting-started page's commands, run twice in one folder as a reader following it would."""
+    lines = getting_started_tour()
+    assert len(lines) >= 8
+    for name in ("sample_data", "tests", "configs"):
+        (tmp_path / name).symlink_to(ROOT / name)
+    for round_ in (1, 2):
+        for line in lines:
+            code, out = dx.run(line, tmp_path)
+            assert code == 0, f"getting-started.md, run {round_}: {line!r} exited {code}:\n{out}"
+
+
 def test_readme_tour_runs_twice(tmp_path):
     """Every tour line runs from the repository root on the shipped samples, and again (a newcomer runs the tour
     twice): outputs go to out/ and the lines that write have --overwrite."""
