@@ -197,6 +197,7 @@ def _figures(sample, gt_system_name) -> str:
     ax.scatter(yaw[pick], geo[pick], s=4, alpha=0.5, color="#3b6ea8")
     ax.set_xlabel(f"GT yaw ({gt_system_name}, deg)")
     ax.set_ylabel("geodesic error (deg)")
+    ax.set_ylim(0, max(1.0, float(geo[pick].max()) * 1.05 if len(geo) else 1.0))  # rounding noise reads as 0
     ax.set_title("error against GT yaw")
     figs.append(("error against GT yaw", _png(fig)))
     fig = Figure(figsize=(6.4, 3.6))
