@@ -50,7 +50,8 @@ class HpeGroup(click.Group):
         if name and not name.startswith("-") and self.get_command(ctx, name) is None:
             from .suggest import did_you_mean
 
-            ctx.fail(f"No such command {name!r}{did_you_mean(name, self.list_commands(ctx))}.")
+            hint = did_you_mean(name, self.list_commands(ctx)) or " (see 'hpe --help' for the commands)"
+            ctx.fail(f"No such command {name!r}{hint}.")
         return super().resolve_command(ctx, args)
 
     def list_commands(self, ctx):
