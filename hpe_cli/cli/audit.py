@@ -9,6 +9,7 @@ from .options import (
     batch_option,
     columns_option,
     echo_summary,
+    fmt_small,
     output_option,
     overwrite_option,
     progress,
@@ -197,9 +198,9 @@ def audit(
     if "decoder" in result:
         d = result["decoder"]
         lines.append(
-            f"  decoder {d['decoder']} vs {d['reference_system']}: geodesic max {d['geodesic_deg']['max']:.3g} "
-            f"mean {d['geodesic_deg']['mean']:.3g} deg; |d_yaw| max {d['d_yaw']['max']:.3g}, |d_pitch| max "
-            f"{d['d_pitch']['max']:.3g}, |d_roll| max {d['d_roll']['max']:.3g} deg; "
+            f"  decoder {d['decoder']} vs {d['reference_system']}: geodesic max {fmt_small(d['geodesic_deg']['max'])} "
+            f"mean {fmt_small(d['geodesic_deg']['mean'])} deg; |d_yaw| max {fmt_small(d['d_yaw']['max'])}, |d_pitch| "
+            f"max {fmt_small(d['d_pitch']['max'])}, |d_roll| max {fmt_small(d['d_roll']['max'])} deg; "
             f"{d['rows_off_by_more_than_0.01deg']} rows off by > 0.01 deg; {d['not_decoded']} not decoded"
         )
     if result["rejected"]:
