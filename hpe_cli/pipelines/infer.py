@@ -178,10 +178,10 @@ def numeric(frame, cols, path):
         raise HpeError(f"{path}: columns {', '.join(cols[:3])}...: expected numbers ({exc})") from None
 
 
-def _small(x) -> str:
+def _small(x, spec: str = ".2g") -> str:
     """``x`` to 2 digits, or ``< 1e-12`` at rounding level (its digits differ between CPUs; as
     :func:`hpe_cli.cli.options.fmt_small`)."""
-    return "< 1e-12" if 0 <= float(x) < 1e-12 else f"{float(x):.2g}"
+    return "< 1e-12" if 0 <= float(x) < 1e-12 else format(float(x), spec)
 
 
 def report_lines(rep: dict) -> list:
@@ -232,12 +232,12 @@ def report_lines(rep: dict) -> list:
         names = f" ({', '.join(m['builtins'])})" if m["builtins"] else ""
         echo(
             f"no exact fit. best partial fit: {m['formula']}{names}: {m['explained']} of {rep['samples']} "
-            f"samples explained, median error {m['median_error']:.3g}"
+            f"samples explained, median error {_small(m['median_error'], '.3g')}"
         )
         if "breaks" in m:
             echo(f"  {m['breaks']['summary']}")
     for e in rep.get("runners_up", [])[:3]:
-        echo(f"  runner-up: {e['formula']}  max error {e['max_error']:.3g}")
+        echo(f"  runner-up: {e['formula']}  max error {_small(e['max_error'], '.3g')}")
     return lines
 
 
@@ -454,7 +454,7 @@ def finish(rep: dict, what: str, *, json_path=None, output=None, overwrite=False
             )
         raise HpeError(
             f"{what}: no rotation system reproduces it exactly (best partial fit "
-            f"{rep['best_partial']['formula']}, max error {rep['max_error']:.3g}){tail}"
+            f"{rep['best_partial']['formula']}, max error {_small(rep['max_error'], '.3g')}){tail}"
         )
     written = None
     if output is not None:
