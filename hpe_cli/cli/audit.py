@@ -9,6 +9,7 @@ from .options import (
     batch_option,
     columns_option,
     echo_summary,
+    fmt_small,
     output_option,
     overwrite_option,
     progress,
@@ -262,9 +263,9 @@ def audit(
     if "decoder" in result:
         d = result["decoder"]
         lines.append(
-            f"  decoder {d['decoder']} vs {d['reference_system']}: geodesic max {d['geodesic_deg']['max']:.3g} "
-            f"mean {d['geodesic_deg']['mean']:.3g} deg; |d_yaw| max {d['d_yaw']['max']:.3g}, |d_pitch| max "
-            f"{d['d_pitch']['max']:.3g}, |d_roll| max {d['d_roll']['max']:.3g} deg; "
+            f"  decoder {d['decoder']} vs {d['reference_system']}: geodesic max {fmt_small(d['geodesic_deg']['max'])} "
+            f"mean {fmt_small(d['geodesic_deg']['mean'])} deg; |d_yaw| max {fmt_small(d['d_yaw']['max'])}, |d_pitch| "
+            f"max {fmt_small(d['d_pitch']['max'])}, |d_roll| max {fmt_small(d['d_roll']['max'])} deg; "
             f"{d['rows_off_by_more_than_0.01deg']} rows off by > 0.01 deg; {d['not_decoded']} not decoded"
         )
     if "consistency" in result:
@@ -282,6 +283,9 @@ def audit(
     outs = [str(p) for p in (report if report != "-" else None, output, plots, suspects) if p]
     if outs:
         lines.append("  wrote " + ", ".join(outs))
+    if strict and flagged:  # one line naming what was found (the outputs are not written: the run failed)
+        from ..errors import HpeError
+
+        found = ", ".join(f"{c} {result[c]}" for c in CHECKS if result[c])
+        raise HpeError(f"{input}: {flagged} of {result['rows']} rows flagged ({found}); --strict: nothing written")
     echo_summary(lines, quiet)
-    if strict and flagged:
-        ctx.exit(1)

@@ -9,6 +9,7 @@ from .options import (
     batch_option,
     echo_summary,
     exclude_option,
+    fmt_small,
     output_option,
     overwrite_option,
     progress,
@@ -100,7 +101,7 @@ def convert(
         bar.close()
     lines = [
         f"{s.written} of {s.rows} rows converted from {s.source} ({s.source_origin}) to {target.name} -> {output}",
-        f"gimbal-locked rows: {s.gimbal_lock}; max round-trip error: {s.max_roundtrip_err:.3g}",
+        f"gimbal-locked rows: {s.gimbal_lock}; max round-trip error: {fmt_small(s.max_roundtrip_err)}",
     ]
     if s.excluded:
         lines.append(f"excluded: {s.excluded} rows listed in {exclude}" + (f" -> {rejects}" if rejects else ""))

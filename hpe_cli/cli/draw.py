@@ -160,7 +160,7 @@ def draw(
     \b
     Examples:
       hpe draw AFLW2000/ -o drawn/
-      hpe draw labels.parquet -o drawn/ --images 300W_LP/ --style cube
+      hpe draw labels.parquet -o drawn/ --images AFLW2000/ --style cube
       hpe draw preds.csv -o drawn/ --images frames/ --system 6drepnet --columns matrix
       hpe draw poses.csv -o canvas/ --image-size 640x480 --annotate
       hpe draw AFLW2000/ -o sheet/ --grid --grid-cols 4 --annotate
@@ -210,8 +210,7 @@ def draw(
         return
     lines = [
         f"drew {s['faces']} faces ({style}) on {s['images']} {'canvases' if canvas else 'images'} -> "
-        + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir)),
-        f"labels of {input}: system {s['system']}",
+        + (f"{s['sheets']} contact sheet(s) in {outdir}" if grid else str(outdir))
     ]
     if s["rejects"]:
         lines.append(

@@ -138,7 +138,8 @@ def _split_keys(ctx, param, value):
     "--yaw-bins",
     type=click.FloatRange(min=0, min_open=True),
     metavar="DEG",
-    help="Also report every metric per GT-yaw bin of this width.",
+    help="Also report every metric per GT-yaw bin of this width [default with --report: 30, so the page always "
+    "has its yaw table].",
 )
 @click.option(
     "--json",
@@ -237,6 +238,8 @@ def evaluate(
     protos = None if (not protocols or "all" in protocols) else list(protocols)
     from .options import known_rows
 
+    if html and yaw_bins is None:  # the page always has its yaw-bin table
+        yaw_bins = REPORT_YAW_BINS
     bar = progress(total=known_rows(pred, gt), desc="evaluate", quiet=quiet)  # both tables' rows, when known
     try:
         result = run_evaluate(
@@ -271,7 +274,7 @@ def evaluate(
     finally:
         bar.close()
     if not quiet:
-        lines = format_table(result)
+        lines = format_table(result, verbose)
         to_err = report == "-"
         for line in lines:
             click.echo(line, err=to_err)
@@ -283,8 +286,12 @@ def evaluate(
 evaluate.help = evaluate.help.replace("{protocols}", _protocol_help())
 
 
-def format_table(result: dict) -> list:
+#: --yaw-bins of a --report run that names none (degrees)
+REPORT_YAW_BINS = 30.0
+
+
+def format_table(result: dict, verbose: bool = False) -> list:
     """The readable summary (see :func:`hpe_cli.report.evaluate_text.summary_lines`)."""
     from ..report.evaluate_text import summary_lines
 
-    return summary_lines(result)
+    return summary_lines(result, verbose)

@@ -262,8 +262,8 @@ def infer(
       hpe infer --decoder mycode.py:to_rotvec --returns stored -o mine.toml
       hpe infer --callable mylib.pose:euler_to_matrix --args roll,pitch,yaw --degrees -o mine.toml
       hpe infer labels.parquet --angles pitch,yaw,roll --matrix r00..r22
-      hpe infer labels.csv --rejects unusable.csv   # rows with missing/NaN values set aside, not dropped silently
-      hpe infer preds.csv --angles pitch,yaw,roll --rotations rotvec:rx,ry,rz
+      hpe infer preds.csv --rejects unusable.csv    # rows with missing/NaN values set aside, not dropped silently
+      hpe infer preds_rotvec.csv --angles pitch,yaw,roll --rotations rotvec:rx,ry,rz
       hpe infer AFLW2000/ --landmarks3d lm3d --json aflw_system.json
     """
     from ..io import check_output

@@ -8,7 +8,7 @@ import os
 
 import click
 
-from .. import __version__
+from .version import version_option
 
 #: command name -> "module:function". One module per command.
 COMMANDS = {
@@ -44,6 +44,16 @@ class HpeGroup(click.Group):
                 raise
             _error(f"{exc.format_message()} (see 'hpe --help')")
             raise SystemExit(2) from None
+
+    def resolve_command(self, ctx, args):
+        """``hpe convrt``: the unknown command's error names the command the user most likely meant."""
+        name = args[0] if args else ""
+        if name and not name.startswith("-") and self.get_command(ctx, name) is None:
+            from .suggest import did_you_mean
+
+            hint = did_you_mean(name, self.list_commands(ctx)) or " (see 'hpe --help' for the commands)"
+            ctx.fail(f"No such command {name!r}{hint}.")
+        return super().resolve_command(ctx, args)
 
     def list_commands(self, ctx):
         return [n for n, target in COMMANDS.items() if importlib.util.find_spec(target.split(":")[0])]
@@ -188,7 +198,7 @@ def _error(msg: str) -> None:
 
 
 @click.group(cls=HpeGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
-@click.version_option(__version__, prog_name="hpe")
+@version_option  # the version and the optional parts installed (cli/version.py)
 def cli():
     """hpe: relabel head-pose datasets correctly.
 
@@ -202,7 +212,7 @@ def cli():
       hpe systems
       hpe convert labels.csv -o labels_6d.parquet --from 300w_lp --to 6drepnet
       hpe convert AFLW2000/ -o aflw.parquet --from 300w_lp --to whenet
-      hpe relabel-panoptic sample_data/panoptic -o labels.parquet
+      hpe relabel-panoptic sample_data/panoptic_160906_pizza1 -o labels.parquet
       hpe audit labels.parquet --system 300w_lp --json report.json
     """
 

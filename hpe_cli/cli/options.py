@@ -87,6 +87,9 @@ def mark_paths(command):
         if isinstance(t, (InputPath, OutputPath)) or not isinstance(t, click.Path):
             continue
         p.type = _as(InputPath if t.exists else OutputPath, t)
+    from .suggest import suggesting_choices
+
+    suggesting_choices(command)  # every choice option says "did you mean" (``--layout fsa-net`` -> fsanet)
     command._hpe_paths_marked = True
     return command
 
@@ -177,6 +180,22 @@ def echo_summary(lines, quiet: bool = False) -> None:
         show()
     else:
         txn.after_commit(show)
+
+
+#: values below this are at double rounding level (a few ulps of 1): printed as "< 1e-12", never as digits
+ROUNDING_LEVEL = 1e-12
+
+
+def fmt_small(x: float, spec: str = ".3g") -> str:
+    """``x`` formatted with ``spec``, or ``"< 1e-12"`` when ``0 <= x < 1e-12``.
+
+    Digits at rounding level depend on the CPU's SIMD paths (``1.12e-15`` on one machine, ``6.57e-16`` on another);
+    printing the bound keeps summaries and documented outputs identical across machines.
+    """
+    x = float(x)
+    if 0.0 <= x < ROUNDING_LEVEL:
+        return f"< {ROUNDING_LEVEL:g}"
+    return format(x, spec)
 
 
 def format_from_suffix(path) -> str:
@@ -404,15 +423,9 @@ def _system_fold(value, names):
 
 def _unknown_system(value, names) -> str:
     """'unknown system' with a "did you mean" for near misses (``300wlp``, ``6DRepNet``, ``biwii``)."""
-    import difflib
+    from .suggest import near_names
 
-    def key(n):
-        return "".join(ch for ch in str(n).lower() if ch.isalnum())
-
-    keyed = {key(n): n for n in names}
-    near = [keyed[k] for k in difflib.get_close_matches(key(value), list(keyed), n=3, cutoff=0.75)]
-    if key(value) in keyed:
-        near = [keyed[key(value)]]
+    near = near_names(value, names)
     hint = f"did you mean {' or '.join(near)}? " if near else ""
     return f"unknown system {value!r}; {hint}expected one of: {', '.join(names)} or a .toml file"
 

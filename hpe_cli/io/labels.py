@@ -91,6 +91,9 @@ def label_columns_fast(batch, mode: str, radians: bool = False):
     names = ANGLE_COLS if mode == "angles" else MATRIX_COLS
     cols, ok, reasons = _value_columns(batch, names)
     if radians and mode == "angles":
+        from .units_watch import observe_radians  # warns at the end of the run if they look like degrees
+
+        observe_radians(cols, ok)
         cols = [v * (180.0 / np.pi) for v in cols]
     elif mode == "angles":
         from .units_watch import observe_degrees  # warns at the end of the run if they look like radians
@@ -351,10 +354,12 @@ def label_values(batch, system, mode: str, radians: bool = False):
         cols = system.value_columns if native else ANGLE_COLS
         values = np.stack([numeric_column(batch, c)[0] for c in cols], axis=-1)
         rad = (system.value_units == "radians") if native else radians
-        if not rad:
-            from .units_watch import observe_degrees
+        from .units_watch import observe_degrees, observe_radians
 
+        if not rad:
             observe_degrees([values[:, 0], values[:, 1], values[:, 2]])
+        elif not native:  # --radians (a system's own radian columns are its definition, not the user's claim)
+            observe_radians([values[:, 0], values[:, 1], values[:, 2]])
         return np.rad2deg(values) if rad else values
     if mode == "matrix" and not (_native(system, names) and system.storage_kind == "matrix"):
         return np.stack([numeric_column(batch, c)[0] for c in MATRIX_COLS], axis=-1).reshape(-1, 3, 3)

@@ -36,6 +36,9 @@ def os_reason(exc: BaseException) -> str:
         return _REASONS[code]
     if code:
         return os.strerror(code).lower()
+    short = re.search(r"(\d+) requested and (\d+) written", str(exc))
+    if short:  # numpy's tofile on a short write (no errno): the device took only part of the bytes
+        return f"disk full (the device took {short.group(2)} of {short.group(1)} bytes)"
     if isinstance(exc, UnicodeError):
         return "file name is not valid UTF-8"
     text = " ".join(str(exc).split())
@@ -52,3 +55,15 @@ def printable(text) -> str:
         return text
     except UnicodeEncodeError:
         return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+def write_bytes(staged, data, shown) -> None:
+    """Write ``data`` to the staged file ``staged``; an OS error (a full disk, a quota) is one line naming ``shown``,
+    the path the user will see (not the temporary name), with the reason."""
+    from ..errors import HpeError
+
+    try:
+        with open(staged, "wb") as fh:
+            fh.write(memoryview(data).cast("B") if not isinstance(data, (bytes, bytearray)) else data)
+    except OSError as exc:
+        raise HpeError(f"{shown}: cannot write: {os_reason(exc)}") from None

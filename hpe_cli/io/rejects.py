@@ -133,3 +133,25 @@ def _integral(v) -> bool:
         return float(v) == int(v)
     except (TypeError, ValueError):
         return False
+
+
+def fail_all_rejected(rejects: "Rejects", message: str):
+    """Every row was rejected: raise. With a rejects file (and no ``--strict``) the error is a
+    :class:`~hpe_cli.errors.RejectedAllError` that still commits that file, the one output that says why; the
+    main outputs are not written. Without one, a plain :class:`~hpe_cli.errors.HpeError`."""
+    from ..errors import RejectedAllError
+
+    if rejects.path is None or rejects.strict:
+        raise HpeError(message)
+    from os.path import realpath
+
+    from .transaction import current
+
+    rejects.write()
+    txn = current()
+    if txn is not None:  # only the rejects file stays staged: the run's transaction commits it, then fails
+        keep = realpath(rejects.path)
+        for tmp in txn.staged_temps():
+            if realpath(txn.target_of(tmp)) != keep:
+                txn.discard(tmp)
+    raise RejectedAllError(f"{message}; every row's reason -> {rejects.path}", keep=[rejects.path])

@@ -49,9 +49,14 @@ class Resolved:
     def __iter__(self):  # ``system, origin = resolve_system(...)``
         return iter((self.system, self.origin))
 
+    @property
+    def origin_text(self) -> str:
+        """``"file metadata"``, or with its note: ``"file metadata; --from agrees"``."""
+        return f"{self.origin}{'; ' + self.note if self.note else ''}"
+
     def describe(self) -> str:
         """``"scipy_zyx (file metadata)"``, for summaries."""
-        out = f"{self.system.name} ({self.origin}{'; ' + self.note if self.note else ''})"
+        out = f"{self.system.name} ({self.origin_text})"
         if self.output is not None and self.output.name != self.system.name:
             out += f", converted to {self.output.name}"
         return out
@@ -226,8 +231,8 @@ def resolve_system(
     elif opt is None or _same(opt, own):
         if rein is not None and not _same(rein, own):
             res = Resolved(rein, OPTION, path, note=f"--reinterpret-as; the file says {own.name}")
-        else:
-            res = Resolved(own, FILE, path)
+        else:  # the user's option names the file's own system: say that they agree
+            res = Resolved(own, FILE, path, note=f"{option_name} agrees" if opt is not None else "")
     elif dataset and option_is_output:
         res = Resolved(own, FILE, path)
         out = opt

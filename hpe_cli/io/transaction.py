@@ -20,7 +20,6 @@ Rules enforced here, for every command:
   plain ``open()`` would give it (the umask applies; the umask is never set);
 - errors name the user's path and the reason (permission denied, read-only
   file system, disk full, name too long), never a temporary name.
-
 - a commit that fails halfway (a target name taken by a folder meanwhile, a
   read-only folder, a full disk) undoes the files already placed: new ones are
   removed, replaced ones restored from hard-link backups;
@@ -482,7 +481,9 @@ class OutputTransaction:
         try:
             yield self
             self.commit()
-        except BaseException:
+        except BaseException as exc:
+            if getattr(exc, "keep", None) and self.state == "open" and _stop is None:  # errors.RejectedAllError
+                self.commit()  # what is still staged: the rejects file (io.rejects.fail_all_rejected)
             self.abort()
             raise
         finally:

@@ -1,8 +1,11 @@
-"""A warning when angle columns read as degrees look like radians.
+"""A warning when angle columns look like the other unit: degrees that look like radians, and the reverse.
 
 Radians read as degrees give labels that are silently almost frontal. Degrees data where every angle of more
 than a handful of rows is within +-pi (3.14 degrees) is implausible, so the run says so on stderr once its outputs
 are committed (the check is per run: it needs every row, and rows stream in batches).
+
+Degrees read as radians (``--radians`` on degrees) wrap around many turns and give labels that look random. A head
+angle in radians never exceeds 2*pi in magnitude, so a single such value is worth a warning.
 """
 
 from __future__ import annotations
@@ -13,15 +16,17 @@ import numpy as np
 
 #: more rows than this, all within +-pi, are worth a warning
 MIN_ROWS = 5
+#: an angle read as radians beyond this magnitude is not a head angle in radians (one full turn)
+MAX_RADIANS = 2 * np.pi
 
 
 class UnitsWatch:
     """Running count and largest |value| of the usable angle rows read as degrees in one run."""
 
-    def __init__(self, inputs):
+    def __init__(self, inputs, unit: str = "degrees"):
         import threading
 
-        self.inputs, self.rows, self.largest = inputs, 0, 0.0
+        self.inputs, self.unit, self.rows, self.largest = inputs, unit, 0, 0.0
         self._lock = threading.Lock()  # readers may feed it from several threads
 
     def observe(self, cols, ok=None) -> None:
@@ -43,9 +48,16 @@ class UnitsWatch:
             self.largest = max(self.largest, largest)
 
     def message(self) -> str | None:
+        where = f"{self.inputs[0]}: " if len(self.inputs) == 1 else ""
+        if self.unit == "radians":
+            if not self.largest > MAX_RADIANS:
+                return None
+            return (
+                f"Warning: {where}an angle read as radians (--radians) reaches |value| {self.largest:.4g}, more "
+                f"than 2*pi (a full turn): if these are degrees, drop --radians"
+            )
         if self.rows <= MIN_ROWS or self.largest > np.pi:
             return None
-        where = f"{self.inputs[0]}: " if len(self.inputs) == 1 else ""
         return (
             f"Warning: {where}every angle read as degrees is within +-pi (largest |value| {self.largest:.3g}, "
             f"more than {MIN_ROWS} rows): if these are radians, add --radians"
@@ -59,14 +71,24 @@ class UnitsWatch:
 
 def observe_degrees(cols, ok=None) -> None:
     """Feed angle columns read as degrees to the running command's watch (no-op outside a command)."""
+    _observe(cols, ok, "degrees")
+
+
+def observe_radians(cols, ok=None) -> None:
+    """Feed angle columns read as radians (``--radians``, before conversion) to the running command's watch."""
+    _observe(cols, ok, "radians")
+
+
+def _observe(cols, ok, unit: str) -> None:
     from .transaction import current
 
     txn = current()
     if txn is None:
         return
-    watch = getattr(txn, "_units_watch", None)
+    attr = f"_units_watch_{unit}"
+    watch = getattr(txn, attr, None)
     if watch is None:
-        watch = UnitsWatch(txn.input_paths())
-        txn._units_watch = watch
+        watch = UnitsWatch(txn.input_paths(), unit)
+        setattr(txn, attr, watch)
         txn.after_commit(watch.report)
     watch.observe(cols, ok)

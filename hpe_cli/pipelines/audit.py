@@ -155,10 +155,13 @@ def _label_cols(batch, mode, radians):
     for c in names:
         v, _, _ = _numeric(batch, c)  # NaN where missing or non-numeric, inf kept
         cols.append(np.rad2deg(v) if (radians and mode == "angles") else v)
-    if mode == "angles" and not radians:
-        from ..io.units_watch import observe_degrees  # warns at the end of the run if they look like radians
+    if mode == "angles":
+        from ..io.units_watch import observe_degrees, observe_radians  # warn at the end if the unit looks wrong
 
-        observe_degrees(cols)
+        if radians:
+            observe_radians([np.deg2rad(c) for c in cols])
+        else:
+            observe_degrees(cols)
     return cols
 
 

@@ -403,6 +403,7 @@ def run_augment(
     from ..geometry.augment import plane_matrix
     from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
     from ..io import BBOX_COLS, Rejects, TableWriter, check_output, open_table, system_metadata
+    from ..io.rejects import fail_all_rejected
     from ..io.system_meta import output_system, resolve_system
     from ..io.transaction import ensure_transaction, staged_dir
     from .augment_images import ImageJob, RowImages
@@ -496,10 +497,11 @@ def run_augment(
 
         in_order(_batches_or_empty(src), plan.work, finish, workers)
         rejects.check()  # without --rejects (or with --strict) any bad row fails the run: nothing is written
-        if counts["rows"] and not counts["written"]:
-            raise HpeError(
+        if counts["rows"] and not counts["written"]:  # the rejects file is still written: it says why
+            fail_all_rejected(
+                rejects,
                 f"{path}: nothing augmented: all {counts['rows']} row(s) rejected "
-                f"({rejects.first_where or 'see the rejects file'})"
+                f"({rejects.first_where or 'see the rejects file'})",
             )
         rejects.finish()
     box_text = f"{counts['boxes']} moved ({box_from}{', clipped' if clip else ''})" if box_present else "none in input"

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import HpeError
 from ..io.images import IMAGE_SUFFIXES, ImageResolver, image_size, leaves_root
+from ..io.os_errors import write_bytes
 
 
 class RowImages:
@@ -144,7 +145,7 @@ class ImageJob:
         ok, buf = cv2.imencode(suffix, out, params)
         if not ok:
             raise HpeError(f"{self.dst / rel}: could not encode the image as {suffix}")
-        buf.tofile(staged)
+        write_bytes(staged, buf, self.dst / rel)  # a full disk names this picture, not the table
 
     def _write_mat(self, rel, mat, P, size_in, size_out, mirror, where):
         """``<stem>.mat`` beside the output image: Pose_Para (new angles, tdx, tdy), pt2d, pt3d_68 and roi moved;
@@ -180,7 +181,12 @@ class ImageJob:
         out.parent.mkdir(parents=True, exist_ok=True)
         if (self.dst / rel.with_suffix(".mat")).exists() and not self.overwrite:
             raise HpeError(f"{self.dst / rel.with_suffix('.mat')}: already exists (use --overwrite to replace it)")
-        scipy.io.savemat(out, m, do_compression=False)
+        try:
+            scipy.io.savemat(out, m, do_compression=False)
+        except OSError as exc:  # a full disk names this file, not the table
+            from ..io.os_errors import os_reason
+
+            raise HpeError(f"{self.dst / rel.with_suffix('.mat')}: cannot write: {os_reason(exc)}") from None
         self.mats += 1
 
     def _perm(self, n):

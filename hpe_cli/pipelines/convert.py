@@ -114,7 +114,7 @@ def run_convert(
     source = resolved.system
     mode = label_mode(src.columns, src.path, source)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=src)
-    summary = ConvertSummary(source=source.name, source_origin=resolved.origin)
+    summary = ConvertSummary(source=source.name, source_origin=resolved.origin_text)
     if progress is not None and src.num_rows:  # Parquet metadata, .mat file counts: the bar has a total
         progress.total = src.num_rows
     meta = {**system_metadata(target), "hpe:source_system": source.name, "hpe:input": str(src.path)}

@@ -158,9 +158,33 @@ def run_draw(
     is_mat = input_path.is_dir() or input_path.suffix.lower() == ".mat"
     pose_para = is_mat or {"tdz", "scale"} <= set(src.columns)
     flip = tdy_origin == "bottom" or (tdy_origin == "auto" and pose_para)
-    frame, A, angles, reasons, lines = _read_all(src, mode, radians, system)
+    read_rejects: list = []  # rows the reader cannot parse: with --rejects they are rejects, not the run's end
+    batches = None
+    if rejects_path is not None:
+        batches = []
+        for b, rr in src.batches_with_rejects():
+            batches.append(b)
+            read_rejects += rr
+    frame, A, angles, reasons, lines = _read_all(src, mode, radians, system, batches=batches)
     where = row_namer(src, lines)
     n = len(frame)
+    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
+    if read_rejects:
+        read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
+        rejects.add(
+            {"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
+            [r.reason for r in read_rejects],
+            lines=read_lines,
+        )
+    if n == 0 and read_rejects:
+        from ..io.rejects import fail_all_rejected
+
+        rejects.check()  # --strict: nothing written
+        fail_all_rejected(
+            rejects,
+            f"{src.path}: nothing drawn: all {len(read_rejects)} row(s) rejected "
+            f"(first: line {read_rejects[0].line}: {read_rejects[0].reason})",
+        )
     if n == 0:
         raise HpeError(f"{src.path}: empty table (no rows)")
     centre, L, from_td = face_placement(frame, pose_para, length)
@@ -172,7 +196,6 @@ def run_draw(
         )
     img_root = Path(images) if images else (input_path if input_path.is_dir() else input_path.parent)
     outdir = Path(outdir)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
 
     bad_rows = [(int(i), reasons[i]) for i in np.flatnonzero(reasons != "")]
     if names is None:
@@ -231,6 +254,11 @@ def run_draw(
             progress,
         )
         book.finish(s["images"])
+        if read_rejects:  # unparseable rows, set aside before drawing, count in the summary too
+            from collections import Counter
+
+            read = Counter(r.reason.split(":")[0] for r in read_rejects)
+            s["rejects"] = dict(read + Counter(s["rejects"]))
         s["system"] = resolved.describe()  # which system the labels were read in, and where that came from
         return s
 
@@ -268,12 +296,14 @@ class _Book:
         self.rejects.add(cols, why)
 
     def finish(self, drawn):
-        from ..errors import HpeError
 
-        if drawn == 0 and self.rows:
-            raise HpeError(
+        if drawn == 0 and self.rows:  # the rejects file is still written: it says why
+            from ..io.rejects import fail_all_rejected
+
+            fail_all_rejected(
+                self.rejects,
                 f"{self.src.path}: nothing drawn: all {len(self.rows)} row(s) rejected "
-                f"(first: {self.where(self.rows[0][0]).split(': ', 1)[-1]}: {self.rows[0][1]})"
+                f"(first: {self.where(self.rows[0][0]).split(': ', 1)[-1]}: {self.rows[0][1]})",
             )
         self.rejects.finish()
 

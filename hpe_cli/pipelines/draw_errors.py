@@ -420,16 +420,19 @@ def run_draw_errors(
             skipped.sort()
             idx = np.array([i for i, _ in skipped], dtype=np.int64)
             why = [w for _, w in skipped]
-            if not res:
-                raise HpeError(
-                    f"{input_path}: nothing drawn: all {len(idx)} row(s) rejected "
-                    f"(first: {where(int(idx[0])).split(': ', 1)[-1]}: {why[0]})"
-                )
             rejects.add(
                 {"row": row_numbers(src, lines, idx), **{c: frame[c].to_numpy()[idx] for c in frame.columns}},
                 why,
                 lines=np.asarray(lines)[idx] if src.kind == "csv" and lines is not None else None,
             )
+            if not res:  # the rejects file is still written: it says why
+                from ..io.rejects import fail_all_rejected
+
+                fail_all_rejected(
+                    rejects,
+                    f"{input_path}: nothing drawn: all {len(idx)} row(s) rejected "
+                    f"(first: {where(int(idx[0])).split(': ', 1)[-1]}: {why[0]})",
+                )
         rejects.finish()
     from collections import Counter
 

@@ -80,7 +80,31 @@ def read_data(path, units):
     return read_table(p), units or "deg"
 
 
-def _set_aside_unusable(frame_df, pyr, data, mcols, stored, landmarks3d, rejects_path, strict, overwrite):
+#: table kinds whose values are typed (no unparseable row to set aside) or one-record files
+_NOT_TEXT = (".parquet", ".pq", ".arrow", ".feather", ".mat")
+
+
+def read_text_table_with_rejects(path):
+    """A text table with the rows the reader cannot parse set aside: ``(frame, file line of each row, [Reject])``
+    (``--rejects``: such a row is a reject, as in every command, not the end of the run)."""
+    import pyarrow as pa
+
+    from ..io import open_table
+    from ..io.readers import LINE_COL
+
+    src = open_table(path, with_lines=True)
+    batches, read_rejects = [], []
+    for b, rr in src.batches_with_rejects():
+        batches.append(b)
+        read_rejects += rr
+    frame = pa.Table.from_batches(batches, schema=src.schema).to_pandas()
+    lines = frame.pop(LINE_COL).to_numpy()
+    return frame, lines, read_rejects
+
+
+def _set_aside_unusable(
+    frame_df, pyr, data, mcols, stored, landmarks3d, rejects_path, strict, overwrite, lines=None, read_rejects=()
+):
     """Rows whose angles or rotation values are missing or not finite cannot take part in the search: they go to
     ``--rejects`` with their reason (named ``FILE: line N`` / ``row N`` / the ``.mat`` file), and without a
     rejects file (or with ``--strict``) they are an error, as in every command that reads rows."""
@@ -100,7 +124,7 @@ def _set_aside_unusable(frame_df, pyr, data, mcols, stored, landmarks3d, rejects
     bad_angles = ~np.isfinite(pyr).all(axis=1)
     bad_values = ~np.isfinite(values).all(axis=1)
     bad = bad_angles | bad_values
-    if not bad.any():
+    if not bad.any() and not read_rejects:
         return frame_df, pyr
     from pathlib import Path
 
@@ -111,15 +135,27 @@ def _set_aside_unusable(frame_df, pyr, data, mcols, stored, landmarks3d, rejects
     else:
         text = p.suffix.lower() not in (".parquet", ".pq", ".arrow", ".feather")
         rows = idx + (2 if text else 1)  # text: file line (header = line 1); tables: 1-based row
+        if lines is not None:  # rows were set aside while reading: each keeps its own file line
+            rows = np.asarray(lines)[idx]
     reasons = np.where(
         bad_angles[idx],
         "angle not finite (missing, NaN or infinite)",
         "rotation value not finite (missing, NaN or infinite)",
     ).astype(object)
     rej = Rejects(rejects_path, overwrite, strict=strict, source=str(data))
-    rej.add(
-        {"input": np.full(len(idx), str(data), dtype=object), "row": rows}, reasons, where=row_name(str(data), rows[0])
-    )
+    if read_rejects:
+        read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
+        rej.add(
+            {"input": np.full(len(read_lines), str(data), dtype=object), "row": read_lines},
+            [r.reason for r in read_rejects],
+            where=row_name(str(data), int(read_lines[0])),
+        )
+    if len(idx):
+        rej.add(
+            {"input": np.full(len(idx), str(data), dtype=object), "row": rows},
+            reasons,
+            where=row_name(str(data), rows[0]),
+        )
     rej.finish()
     keep = ~bad
     return frame_df[keep].reset_index(drop=True), pyr[keep]
@@ -140,6 +176,12 @@ def numeric(frame, cols, path):
         return frame[cols].to_numpy(dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise HpeError(f"{path}: columns {', '.join(cols[:3])}...: expected numbers ({exc})") from None
+
+
+def _small(x, spec: str = ".2g") -> str:
+    """``x`` to 2 digits, or ``< 1e-12`` at rounding level (its digits differ between CPUs; as
+    :func:`hpe_cli.cli.options.fmt_small`)."""
+    return "< 1e-12" if 0 <= float(x) < 1e-12 else format(float(x), spec)
 
 
 def report_lines(rep: dict) -> list:
@@ -164,7 +206,9 @@ def report_lines(rep: dict) -> list:
         return lines
     if rep["fit"] == "exact":
         m = rep["matched"]
-        echo(f"best: {rep['best']} (exact; max Frobenius error {rep['max_error']:.2g} over {rep['samples']} samples)")
+        echo(
+            f"best: {rep['best']} (exact; max Frobenius error {_small(rep['max_error'])} over {rep['samples']} samples)"
+        )
         echo(f"  {m['formula']}")
         echo(f"  {m['turns']}")
         if m["transpose_of"]:
@@ -179,7 +223,7 @@ def report_lines(rep: dict) -> list:
         if rep.get("near_lock"):
             echo(
                 f"  {rep['near_lock']['count']} samples near gimbal lock handled differently "
-                f"(max error {rep['near_lock']['max_error']:.2g})"
+                f"(max error {_small(rep['near_lock']['max_error'])})"
             )
         if rep.get("ambiguous"):
             echo(f"  warning: {rep['ambiguous']}")
@@ -188,12 +232,12 @@ def report_lines(rep: dict) -> list:
         names = f" ({', '.join(m['builtins'])})" if m["builtins"] else ""
         echo(
             f"no exact fit. best partial fit: {m['formula']}{names}: {m['explained']} of {rep['samples']} "
-            f"samples explained, median error {m['median_error']:.3g}"
+            f"samples explained, median error {_small(m['median_error'], '.3g')}"
         )
         if "breaks" in m:
             echo(f"  {m['breaks']['summary']}")
     for e in rep.get("runners_up", [])[:3]:
-        echo(f"  runner-up: {e['formula']}  max error {e['max_error']:.3g}")
+        echo(f"  runner-up: {e['formula']}  max error {_small(e['max_error'], '.3g')}")
     return lines
 
 
@@ -322,7 +366,15 @@ def run_infer(
             rep["hint"] = "no fit with the default --radians; try --degrees"
         rep["_system_toml"], rep["_system_name"] = toml, system_name
         return rep
-    frame_df, units = read_data(data, units)
+    from pathlib import Path
+
+    lines, read_rejects = None, []
+    dpath = Path(str(data))
+    if rejects_path is not None and dpath.is_file() and dpath.suffix.lower() not in _NOT_TEXT:
+        frame_df, lines, read_rejects = read_text_table_with_rejects(data)
+        units = units or "deg"
+    else:
+        frame_df, units = read_data(data, units)
     roles, cols = angle_columns or (list(ROLE_NAMES), list(ROLE_NAMES))
     vals = numeric(frame_df, cols, data)
     if units == "rad":
@@ -341,7 +393,7 @@ def run_infer(
             )
         landmarks3d = "lm3d"
     frame_df, pyr = _set_aside_unusable(
-        frame_df, pyr, data, mcols, stored, landmarks3d, rejects_path, strict, overwrite
+        frame_df, pyr, data, mcols, stored, landmarks3d, rejects_path, strict, overwrite, lines, read_rejects
     )
     try:
         rep = infer_data(
@@ -402,7 +454,7 @@ def finish(rep: dict, what: str, *, json_path=None, output=None, overwrite=False
             )
         raise HpeError(
             f"{what}: no rotation system reproduces it exactly (best partial fit "
-            f"{rep['best_partial']['formula']}, max error {rep['max_error']:.3g}){tail}"
+            f"{rep['best_partial']['formula']}, max error {_small(rep['max_error'], '.3g')}){tail}"
         )
     written = None
     if output is not None:

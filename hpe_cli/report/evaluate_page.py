@@ -132,30 +132,44 @@ def _protocols(protocols) -> str:
     )
 
 
+#: protocol columns per table of a --by / --yaw-bins section (the first also has the six metric columns): more
+#: continue in further tables, so a 1280-px window needs no sideways scroll (tests/evaluate: headless Chromium)
+PROTOCOLS_PER_TABLE, PROTOCOLS_FIRST_TABLE = 7, 3
+
+
 def _group_table(label, groups, protocols) -> str:
     names = list(protocols)
-    head = [html.escape(label), "n", "geodesic mean (deg)", "median", "p90", "mae_wrapped (deg)", "maev (deg)"] + [
-        f"{html.escape(n)} ({'unitless' if protocols[n].get('units') == 'unitless' else 'deg'})" for n in names
-    ]
-    rows = []
     groups = list(groups)
-    for key, s in groups[:MAX_GROUPS]:
-        g = s["metrics"]["geodesic"]
-        rows.append(
-            [
-                html.escape(str(key)),
-                _f(s["n"]),
-                _f(g["mean"]),
-                _f(g["median"]),
-                _f(g["p90"]),
-                _f(s["metrics"]["mae_wrapped"]["mean"]),
-                _f(s["metrics"]["maev"]["mean"]),
-            ]
-            + [_f(s["protocols"][n].get("mean")) for n in names]
+    first, rest = names[:PROTOCOLS_FIRST_TABLE], names[PROTOCOLS_FIRST_TABLE:]
+    blocks = [first] + [rest[i : i + PROTOCOLS_PER_TABLE] for i in range(0, len(rest), PROTOCOLS_PER_TABLE)]
+    tables = []
+    for b, block in enumerate(blocks):
+        fixed = ["n", "geodesic mean (deg)", "median", "p90", "mae_wrapped (deg)", "maev (deg)"] if b == 0 else []
+        head = (
+            [html.escape(label)]
+            + fixed
+            + [f"{html.escape(n)} ({'unitless' if protocols[n].get('units') == 'unitless' else 'deg'})" for n in block]
         )
+        rows = []
+        for key, s in groups[:MAX_GROUPS]:
+            g = s["metrics"]["geodesic"]
+            first = (
+                [
+                    _f(s["n"]),
+                    _f(g["mean"]),
+                    _f(g["median"]),
+                    _f(g["p90"]),
+                    _f(s["metrics"]["mae_wrapped"]["mean"]),
+                    _f(s["metrics"]["maev"]["mean"]),
+                ]
+                if b == 0
+                else []
+            )
+            rows.append([html.escape(str(key))] + first + [_f(s["protocols"][n].get("mean")) for n in block])
+        tables.append(_table(head, rows, "groups"))
     more = len(groups) - MAX_GROUPS
     note = f"<p class='note'>{more:,} more groups: see the JSON report</p>" if more > 0 else ""
-    return _table(head, rows, "groups") + note
+    return "".join(tables) + note
 
 
 def _png(fig) -> str:
@@ -183,6 +197,7 @@ def _figures(sample, gt_system_name) -> str:
     ax.scatter(yaw[pick], geo[pick], s=4, alpha=0.5, color="#3b6ea8")
     ax.set_xlabel(f"GT yaw ({gt_system_name}, deg)")
     ax.set_ylabel("geodesic error (deg)")
+    ax.set_ylim(0, max(1.0, float(geo[pick].max()) * 1.05 if len(geo) else 1.0))  # rounding noise reads as 0
     ax.set_title("error against GT yaw")
     figs.append(("error against GT yaw", _png(fig)))
     fig = Figure(figsize=(6.4, 3.6))
@@ -215,8 +230,13 @@ def _figures(sample, gt_system_name) -> str:
     )
 
 
-def _worst(frame, pictures) -> str:
-    """The worst rows: keys, GT and predicted angles (GT system, deg), errors, and the picture when drawn."""
+def _worst(frame, pictures, systems=None) -> str:
+    """The worst rows: keys, GT and predicted angles (GT system, deg), errors, and the picture when drawn.
+
+    The prediction is shown re-expressed by hpe in the GT system (the same rotation, stated as the GT system's
+    primary Euler solution), so the per-angle errors compare like with like; when the frame carries the values
+    as written (``pred_written_pitch``...), they are shown beside it.
+    """
     if frame is None or not len(frame):
         return "<p>no rows</p>"
     cols = list(frame.columns)
@@ -241,6 +261,9 @@ def _worst(frame, pictures) -> str:
             "frobenius",
             "image_path",
             "pred_rotation_distance",
+            "pred_written_pitch",
+            "pred_written_yaw",
+            "pred_written_roll",
             "bbox_x",
             "bbox_y",
             "bbox_w",
@@ -250,13 +273,17 @@ def _worst(frame, pictures) -> str:
             "size",
         }
     ]
+    gsys = html.escape((systems or {}).get("gt", "GT system"))
+    psys = html.escape((systems or {}).get("pred", "its system"))
+    written = all(f"pred_written_{a}" in cols for a in ANGLES)
     head = (
         ["#"]
         + [html.escape(k) for k in keys]
+        + [f"GT p / y / r (deg, {gsys})"]
+        + ([f"pred as written p / y / r ({psys})"] if written else [])
         + [
-            "GT p / y / r (deg)",
-            "pred p / y / r (deg)",
-            "err p / y / r (deg)",
+            f"pred p / y / r (deg, re-expressed by hpe in {gsys})",
+            "err p / y / r (deg, wrapped)",
             "geodesic (deg)",
             "frobenius (unitless)",
             "picture",
@@ -278,7 +305,9 @@ def _worst(frame, pictures) -> str:
         rows.append(
             [str(i + 1)]
             + [_f(r[k]) for k in keys]
-            + [" / ".join(_f(float(r[f"{s}_{a}"]), 1) for a in ANGLES) for s in ("gt", "pred", "err")]
+            + [" / ".join(_f(float(r[f"{s}_{a}"]), 1) for a in ANGLES) for s in ("gt",)]
+            + ([" / ".join(_f(float(r[f"pred_written_{a}"]), 1) for a in ANGLES)] if written else [])
+            + [" / ".join(_f(float(r[f"{s}_{a}"]), 1) for a in ANGLES) for s in ("pred", "err")]
             + [f"<b>{_f(float(r['geodesic']))}</b>", _f(float(r["frobenius"]), 4), img]
         )
     return _table(head, rows, "worst")
@@ -298,8 +327,7 @@ def page_html(result: dict, worst=None, pictures=None, sample=None) -> str:
     sysline = (
         f"predictions <code>{html.escape(result['inputs']['pred'])}</code> ({html.escape(result['systems']['pred'])})"
         f" against ground truth <code>{html.escape(result['inputs']['gt'])}</code> "
-        f"({html.escape(result['systems']['gt'])}); key: {html.escape(str(result['inputs']['key']))}, "
-        f"{html.escape(result['inputs'].get('paired', ''))}"
+        f"({html.escape(result['systems']['gt'])}); key: {html.escape(str(result['inputs']['key']))}"
     )
     al = result.get("align", {})
     align = ""
@@ -341,12 +369,19 @@ def page_html(result: dict, worst=None, pictures=None, sample=None) -> str:
     if worst is not None:
         parts += [
             f"<h2>Worst {len(worst)} rows (largest geodesic error)</h2>",
-            "<p class='note'>angles in the GT system; pictures: GT and prediction drawn on the face</p>"
-            if pictures and any(pictures)
-            else "",
-            _worst(worst, pictures),
+            "<p class='note'>the prediction is re-expressed by hpe in the GT system "
+            f"({html.escape(result['systems']['gt'])}): the same rotation, stated as that system's primary Euler "
+            "solution, so the per-angle errors compare like with like (a value past the range, e.g. yaw 107 in a "
+            "[-90, 90] system, reads as the other solution, e.g. -141.7 / 72.6 / -158.9 for 38.3 / 107.4 / 21.1); "
+            "the geodesic error does not depend on how a rotation is written. Which protocol re-expressed rows "
+            "for its own score is in the protocols table (re-expressed)"
+            + ("; pictures: GT and prediction drawn on the face" if pictures and any(pictures) else "")
+            + "</p>",
+            _worst(worst, pictures, result.get("systems")),
         ]
-    notes = result.get("notes", [])
+    from .evaluate_text import same_rotation_notes
+
+    notes = same_rotation_notes(result) + list(result.get("notes", []))
     if notes or result.get("rejects"):
         parts.append(
             "<h2>Notes</h2><ul>"

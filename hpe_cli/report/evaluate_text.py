@@ -14,7 +14,39 @@ def _v(x, w=8, d=3):
     return f"{x:{w}.{d}f}"
 
 
-def _counts(result) -> str:
+#: below this geodesic error (degrees) every prediction is its GT rotation, up to rounding
+SAME_ROTATION_DEG = 1e-3
+
+
+def same_rotation_notes(result: dict) -> list:
+    """Why a protocol scores an error although every prediction is its GT rotation (the README tour's case).
+
+    Euler-angle protocols compare the three numbers as written. A rotation has two Euler solutions, and a GT row
+    stated with the other one or past its system's range (``hpe audit``: non_canonical, out_of_range) differs from
+    the prediction's numbers by up to 180 degrees per angle although the rotations are equal; at the gimbal lock
+    only the sum or difference of the first and last angles is defined, so the split can differ too.
+    """
+    g = result.get("metrics", {}).get("geodesic", {})
+    top = g.get("max")
+    if top is None or not top < SAME_ROTATION_DEG:
+        return []
+    scored = [
+        f"{name} {p['mean']:.3f}"
+        for name, p in result.get("protocols", {}).items()
+        if p.get("units", "deg") == "deg" and isinstance(p.get("mean"), float) and p["mean"] > 0.01
+    ]
+    if not scored:
+        return []
+    return [
+        f"every prediction is its GT rotation (geodesic max < {SAME_ROTATION_DEG:g} deg), yet "
+        + ", ".join(scored)
+        + ": Euler-angle protocols compare the angles as written, and a GT row written with the other Euler "
+        "solution, past its system's range or at the gimbal lock (hpe audit counts them: non_canonical, "
+        "out_of_range, gimbal_lock) has other numbers than the prediction for the same rotation"
+    ]
+
+
+def _counts(result, verbose: bool = False) -> str:
     n = result["n"]
     line = (
         f"pairs {n['pairs']} of {n['gt']} GT rows ({n['pred']} predictions): missing {n['missing']}, "
@@ -26,9 +58,8 @@ def _counts(result) -> str:
         line += f", orthonormalized {n['orthonormalized']}"
     inp = result.get("inputs", {})
     origin = result.get("system_origin") or {k: v for k, v in result["systems"].items()}
-    return line + (
-        f"; systems pred {origin['pred']}, gt {origin['gt']}; key {inp.get('key', '?')} ({inp.get('paired', '')})"
-    )
+    paired = f" ({inp['paired']})" if verbose and inp.get("paired") else ""  # how: internals, shown with -v
+    return line + f"; systems pred {origin['pred']}, gt {origin['gt']}; key {inp.get('key', '?')}{paired}"
 
 
 def _metrics(m) -> list:
@@ -80,29 +111,47 @@ def _protocols(protocols) -> list:
     return out
 
 
+#: the widest line of a --by / --yaw-bins table; wider tables continue in blocks of protocol columns below
+WIDTH = 100
+
+
 def _groups(title, groups, protocols) -> list:
+    """One row per group: n and the core metrics, then one mean per protocol. Protocol columns that do not fit in
+    :data:`WIDTH` characters continue in further blocks (each with the group column), so nothing scrolls."""
     names = list(protocols)
     w = max([len(title)] + [len(str(k)) for k, _ in groups] + [6]) + 2
-    head = f"{title:<{w}}{'n':>9}{'geo mean':>10}{'median':>9}{'p90':>9}{'mae_wr':>9}" + "".join(
-        f"{n[:10]:>11}" for n in names
-    )
-    out = [head]
-    more = len(groups) - MAX_GROUPS
-    for k, s in groups[:MAX_GROUPS]:
-        g = s["metrics"]["geodesic"]
-        out.append(
-            f"{k!s:<{w}}{s['n']:>9}{_v(g['mean'], 10)}{_v(g['median'], 9)}{_v(g['p90'], 9)}"
-            f"{_v(s['metrics']['mae_wrapped']['mean'], 9)}"
-            + "".join(_v(s["protocols"][n].get("mean"), 11) for n in names)
-        )
+    shown, more = groups[:MAX_GROUPS], len(groups) - MAX_GROUPS
+    fixed = f"{'n':>9}{'geo mean':>10}{'median':>9}{'p90':>9}{'mae_wr':>9}"
+    per_block = max(1, (WIDTH - w - len(fixed)) // 11)
+    rest = max(1, (WIDTH - w) // 11)
+    blocks, i = [names[:per_block]], per_block
+    while i < len(names):
+        blocks.append(names[i : i + rest])
+        i += rest
+    out = []
+    for b, block in enumerate(blocks):
+        if b:
+            out.append("")
+        head = f"{title:<{w}}" + (fixed if b == 0 else "") + "".join(f"{n[:10]:>11}" for n in block)
+        out.append(head)
+        for k, s in shown:
+            g = s["metrics"]["geodesic"]
+            line = f"{k!s:<{w}}"
+            if b == 0:
+                line += (
+                    f"{s['n']:>9}{_v(g['mean'], 10)}{_v(g['median'], 9)}{_v(g['p90'], 9)}"
+                    f"{_v(s['metrics']['mae_wrapped']['mean'], 9)}"
+                )
+            out.append(line + "".join(_v(s["protocols"][n].get("mean"), 11) for n in block))
     if more > 0:
         out.append(f"... {more} more groups (all of them in --json and --report)")
     return out
 
 
-def summary_lines(result: dict) -> list:
-    """The readable summary: counts, metrics, protocols with sources, --by and --yaw-bins tables, notes."""
-    lines = [_counts(result)]
+def summary_lines(result: dict, verbose: bool = False) -> list:
+    """The readable summary: counts, metrics, protocols with sources, --by and --yaw-bins tables, notes
+    (``verbose``: also how the tables were paired, e.g. the join's partitions)."""
+    lines = [_counts(result, verbose)]
     al = result.get("align", {})
     if al.get("method") == "mean":
         a = al["offset_angles"]
@@ -120,7 +169,7 @@ def summary_lines(result: dict) -> list:
     if result.get("yaw_bins"):
         lines.append("by GT yaw (degrees; dad3dheads unitless):")
         lines += _groups("GT yaw", [(f"[{b['lo']:g},{b['hi']:g})", b) for b in result["yaw_bins"]], result["protocols"])
-    for note in result.get("notes", []):
+    for note in same_rotation_notes(result) + list(result.get("notes", [])):
         lines.append(f"note: {note}")
     if result.get("rejects"):
         lines.append("rejects: " + ", ".join(f"{k} {v}" for k, v in result["rejects"].items()))

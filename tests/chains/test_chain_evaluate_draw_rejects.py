@@ -77,4 +77,7 @@ def test_every_image_missing_exits_1(errors, tmp_path):
     res = _draw(errors, "-o", tmp_path / "w", "--images", tmp_path, "--worst", 3, "--rejects", tmp_path / "rej.csv")
     assert res.exit_code == 1 and "nothing drawn: all 3 row(s) rejected" in res.output
     assert len(res.output.strip().splitlines()) == 1
-    assert not (tmp_path / "w").exists() and not (tmp_path / "rej.csv").exists()
+    assert not (tmp_path / "w").exists()
+    # the rejects file the user asked for is written all the same: it says why (issue 35)
+    assert "every row's reason -> " in res.output
+    assert len(pd.read_csv(tmp_path / "rej.csv")) == 3

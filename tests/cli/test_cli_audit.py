@@ -82,6 +82,15 @@ def test_exit_status_and_strict(table, tmp_path):
     assert run(clean, "-q", "--strict").exit_code == 0
 
 
+def test_strict_failure_says_what_was_flagged(table, tmp_path):
+    """--strict with flagged rows: one error line with the counts (before, exit 1 printed nothing at all)."""
+    res = run(table, "--strict", "--json", tmp_path / "r.json")
+    assert res.exit_code == 1
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Error: ") and "rows flagged (" in lines[0], res.output
+    assert "--strict" in lines[0] and not (tmp_path / "r.json").exists()
+
+
 def test_json_to_stdout_and_key_option(table):
     res = CliRunner().invoke(cli, ["audit", str(table), "--json", "-", "--key", "pitch", "-q"])
     rep = json.loads(res.stdout)

@@ -370,3 +370,44 @@ def test_data_rows_that_cannot_be_used_go_to_rejects_or_stop_the_run(tmp_path):
     assert a["system"]["name"] == b["system"]["name"] and a["system"].get("sequence") == b["system"].get("sequence")
     res = runner.invoke(cli, ["infer", str(bad), "--rejects", str(tmp_path / "r2.csv"), "--strict"])
     assert res.exit_code == 1 and not (tmp_path / "r2.csv").exists()
+
+
+def test_unparseable_rows_are_rejects_with_a_rejects_file(tmp_path):
+    """infer --rejects: a row the reader cannot parse (a word in an angle column) is a reject with its file line,
+    like a missing value, instead of the end of the run (issue 35); without --rejects it is still the error."""
+    import pandas as pd
+    from click.testing import CliRunner
+
+    from hpe_cli.cli.main import cli
+
+    root = Path(__file__).resolve().parents[2]
+    src = tmp_path / "p.csv"
+    r = CliRunner().invoke(
+        cli,
+        [
+            "convert",
+            str(root / "sample_data" / "labels_300wlp.csv"),
+            "-o",
+            str(src),
+            "--from",
+            "300w_lp",
+            "--to",
+            "6drepnet",
+            "-q",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    df = pd.read_csv(src)
+    df["pitch"] = df["pitch"].astype(object)
+    df.loc[2, "pitch"] = "oops"  # file line 4
+    df.loc[4, "pitch"] = None  # file line 6
+    df.to_csv(src, index=False)
+    rej = tmp_path / "rej.csv"
+    r = CliRunner().invoke(cli, ["infer", str(src), "--rejects", str(rej)])
+    assert r.exit_code == 0, r.output
+    assert "best: 6drepnet (exact; max Frobenius error < 1e-12 over 202 samples)" in r.output
+    got = pd.read_csv(rej)
+    assert got["row"].tolist() == [4, 6]
+    assert got["reason"].tolist() == ["non-numeric value in pitch", "angle not finite (missing, NaN or infinite)"]
+    r = CliRunner().invoke(cli, ["infer", str(src)])
+    assert r.exit_code == 1 and f"{src}: line 4: non-numeric value in pitch" in r.output

@@ -60,3 +60,19 @@ def test_bad_user_file_is_a_usage_error(tmp_path):
         cli, ["convert", str(f), "-o", str(tmp_path / "o.csv"), "--from", str(f), "--to", "300w_lp"]
     )
     assert res.exit_code == 2 and "gimbal_tol: expected a number in [0, 1)" in res.output and "got -1" in res.output
+
+
+def test_systems_by_name_and_did_you_mean():
+    """`hpe systems NAME`: only the named built-ins (any case); a misspelt name says which one was meant."""
+    from click.testing import CliRunner
+
+    from hpe_cli.cli.main import cli
+
+    r = CliRunner().invoke(cli, ["systems", "6DRepNet", "whenet"])
+    assert r.exit_code == 0, r.output
+    heads = [line for line in r.output.splitlines() if line and not line.startswith(" ")]
+    assert heads == ["6drepnet", "whenet"]
+    r = CliRunner().invoke(cli, ["systems", "300wlp"])
+    assert r.exit_code == 2 and "no built-in system '300wlp' (did you mean '300w_lp'?)" in r.output
+    r = CliRunner().invoke(cli, ["systems", "missing.toml"])
+    assert r.exit_code == 2 and "no file 'missing.toml'" in r.output

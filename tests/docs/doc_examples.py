@@ -108,6 +108,36 @@ def normalise(text: str) -> str:
     return "\n".join(line.rstrip() for line in text.strip().splitlines())
 
 
+#: a number written in e-notation (``6.57e-16``, ``-1E-13``)
+E_NUMBER = re.compile(r"[-+]?\d+(?:\.\d*)?[eE][-+]?\d+")
+#: below this, a printed number is rounding noise whose digits depend on the CPU's SIMD paths
+ROUNDING_LEVEL = 1e-9
+
+
+def rounding_level_numbers(text: str) -> list[str]:
+    """The numbers in ``text`` at rounding level (``0 < |x| < 1e-9``), which no page may show digit for digit
+    (a bound such as ``< 1e-12`` is stable, so it is not one of them)."""
+    return [
+        m.group(0)
+        for m in E_NUMBER.finditer(text)
+        if 0 < abs(float(m.group(0))) < ROUNDING_LEVEL and not text[: m.start()].endswith("< ")
+    ]
+
+
+def comparable(text: str) -> str:
+    """``normalise(text)`` with every number at rounding level replaced by ``~0``: what the tests compare."""
+    return E_NUMBER.sub(lambda m: "~0" if abs(float(m.group(0))) < ROUNDING_LEVEL else m.group(0), normalise(text))
+
+
+def simd_restricted_env() -> dict:
+    """``os.environ`` with ``NPY_DISABLE_CPU_FEATURES`` naming every SIMD extension numpy dispatches to on this CPU
+    above its baseline (AVX2/AVX-512 on x86-64): numpy then runs its baseline kernels, as on another CPU."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
+    disable = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
+    return dict(os.environ, NPY_DISABLE_CPU_FEATURES=" ".join(disable))
+
+
 def update(page: Path) -> None:
     text = page.read_text(encoding="utf-8")
     for ex, out, codes in reversed(run_page(page)):

@@ -57,15 +57,15 @@ def built(tmp_path_factory):
 def test_mkdocs_build_strict(built):
     p, site, _, _ = built
     assert p.returncode == 0, p.stdout + p.stderr
-    for page in (
+    for page in (  # one .html per page: the offline plugin turns directory URLs off, so file:// links work
         "index.html",
-        "atlas/index.html",
-        "maths/index.html",
-        "commands/convert/index.html",
-        "api/python/index.html",
-        "api/torch/index.html",
-        "guarantees/index.html",
-        "performance/index.html",
+        "atlas.html",
+        "maths.html",
+        "commands/convert.html",
+        "api/python.html",
+        "api/torch.html",
+        "guarantees.html",
+        "performance.html",
     ):
         assert (site / page).is_file(), page
 
@@ -92,13 +92,13 @@ def test_committed_atlas_is_current(built):
 
 def test_api_reference_rendered(built):
     _, site, _, _ = built
-    python = (site / "api" / "python" / "index.html").read_text(encoding="utf-8")
+    python = (site / "api" / "python.html").read_text(encoding="utf-8")
     for name in ("get_system", "convert", "read_labels", "write_labels", "audit", "evaluate", "augment_batch"):
         assert name in python
-    torch = (site / "api" / "torch" / "index.html").read_text(encoding="utf-8")
+    torch = (site / "api" / "torch.html").read_text(encoding="utf-8")
     for name in ("geodesic_loss", "HeadPose", "HeadPoseDataset", "from_matrix"):
         assert name in torch
-    convert = (site / "commands" / "convert" / "index.html").read_text(encoding="utf-8")
+    convert = (site / "commands" / "convert.html").read_text(encoding="utf-8")
     assert "--from" in convert and "--radians" in convert
 
 
@@ -127,7 +127,77 @@ def test_the_site_loads_nothing_from_the_network(built):
     fonts = list((site / "js" / "mathjax" / "output" / "chtml" / "fonts" / "woff-v2").glob("*.woff"))
     assert len(fonts) >= 20  # MathJax's CHTML fonts, found next to the script
     remote = re.compile(r"<(?:script|link)\b[^>]*\b(?:src|href)=\"(https?:)?//[^\"]+\"")
-    for page in ("maths/index.html", "atlas/index.html", "index.html"):
+    for page in ("maths.html", "atlas.html", "index.html"):
         html = (site / page).read_text(encoding="utf-8")
         assert "js/mathjax/tex-chtml.js" in html, page
         assert not remote.findall(html), (page, remote.findall(html))
+
+
+# ------------------------------------------------------------------ in a browser (headless Chromium), from file://
+def _chromium():
+    return next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None)
+
+
+def _probe(site, page, script, width=1280, budget=15000):
+    """Open ``page`` of the built site from file:// with ``script`` run in it; returns the ``data-probe`` attribute
+    the script sets on <body>."""
+    import re
+
+    browser = _chromium()
+    if browser is None:
+        pytest.skip("no chromium installed")
+    src = site / page
+    probe = src.with_name("probe-" + src.name)
+    probe.write_text(src.read_text(encoding="utf-8").replace("</body>", f"<script>{script}</script></body>"))
+    r = subprocess.run(
+        [
+            browser,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            f"--window-size={width},900",
+            f"--virtual-time-budget={budget}",
+            "--dump-dom",
+            probe.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        check=False,
+    )
+    m = re.search(r'data-probe="([^"]*)"', r.stdout, re.S)
+    assert m is not None, r.stderr[-800:]
+    return m.group(1).replace("&quot;", '"')
+
+
+@pytest.mark.parametrize("width", [1280, 1024])
+def test_maths_formulas_fit_the_page(built, width):
+    """No display formula (the elemental rotation matrices, the similarity fit) is wider than the text column."""
+    _, site, _, _ = built
+    script = (
+        "window.addEventListener('load',()=>setTimeout(()=>{const bad=[];"
+        "document.querySelectorAll('div.arithmatex').forEach(e=>{if(e.scrollWidth>e.clientWidth+1)"
+        "bad.push(e.textContent.slice(0,40))});"
+        "const n=document.querySelectorAll('mjx-container').length;"
+        "document.body.setAttribute('data-probe',n+'|'+JSON.stringify(bad))},2000));"
+    )
+    n, bad = _probe(site, "maths.html", script, width).split("|", 1)
+    assert int(n) > 10, "MathJax rendered no formula"
+    assert bad == "[]", bad
+
+
+def test_search_works_from_file_urls(built):
+    """MkDocs Material's offline plugin (index shipped as a script, its Web Worker shim in docs/js/iframe-worker):
+    typing in the search box of a page opened from disk lists results."""
+    _, site, _, _ = built
+    assert (site / "search" / "search_index.js").is_file()
+    script = (
+        "setTimeout(()=>{const i=document.querySelector('input[data-md-component=\"search-query\"]');"
+        "i.focus();i.value='gimbal';i.dispatchEvent(new Event('input',{bubbles:true}));"
+        "i.dispatchEvent(new KeyboardEvent('keyup',{bubbles:true,key:'l'}))},2000);"
+        "setTimeout(()=>{const m=document.querySelector('.md-search-result__meta');"
+        "document.body.setAttribute('data-probe',document.querySelectorAll('.md-search-result__item').length+'|'"
+        "+(m?m.textContent.trim():''))},7000);"
+    )
+    items, meta = _probe(site, "index.html", script).split("|", 1)
+    assert int(items) > 0 and "matching" in meta, (items, meta)

@@ -29,10 +29,56 @@ def test_marked_examples_run_and_print_what_the_page_shows(page):
         for cmd, code in codes:
             assert code == 0, f"{page.name}: {cmd!r} exited {code}:\n{out}"
         if ex.output is not None:
-            assert dx.normalise(out) == dx.normalise(ex.output), (
+            assert dx.comparable(out) == dx.comparable(ex.output), (
                 f"{page.name}: the output shown under {ex.commands[0]!r} is stale; "
                 "run python tests/docs/doc_examples.py --update"
             )
+
+
+def test_no_page_shows_a_number_at_rounding_level():
+    """Digits below 1e-9 differ between CPUs (SIMD paths): pages print them as a bound (``< 1e-12``)."""
+    bad = []
+    for page in PAGES:
+        for ex in dx.examples(page):
+            if ex.output is not None and dx.rounding_level_numbers(ex.output):
+                bad.append(f"{page.name}: {dx.rounding_level_numbers(ex.output)} under {ex.commands[0]!r}")
+    assert not bad, "\n".join(bad)
+
+
+def test_comparable_ignores_rounding_level_digits_only():
+    assert dx.comparable("error: 1.12e-15; 2.5e-3") == dx.comparable("error: 6.57e-16; 2.5e-3")
+    assert dx.comparable("error: 2.5e-3") != dx.comparable("error: 2.6e-3")
+
+
+SIMD_PAGES = ["commands/convert.md", "getting-started.md"]
+
+
+@pytest.mark.parametrize("name", SIMD_PAGES)
+def test_round_trip_examples_with_numpy_simd_paths_restricted(name, monkeypatch):
+    """The pages whose outputs carry round-trip errors print the same with numpy's SIMD dispatch turned off
+    (``NPY_DISABLE_CPU_FEATURES``): another CPU's code paths, on this machine."""
+    env = dx.simd_restricted_env()
+    if not env["NPY_DISABLE_CPU_FEATURES"]:
+        pytest.skip("numpy dispatches to no SIMD extension above its baseline on this CPU")
+    monkeypatch.setenv("NPY_DISABLE_CPU_FEATURES", env["NPY_DISABLE_CPU_FEATURES"])
+    probe = "from numpy._core._multiarray_umath import __cpu_features__ as f; import sys; sys.argv.pop(0); "
+    probe += "print(sum(f[n] for n in sys.argv))"
+    import subprocess
+
+    on = subprocess.run(
+        [sys.executable, "-c", probe, *env["NPY_DISABLE_CPU_FEATURES"].split()],
+        env=env,
+        text=True,
+        capture_output=True,
+        check=True,
+    ).stdout.strip()
+    assert on == "0", "numpy in a child process ignored NPY_DISABLE_CPU_FEATURES"
+    page = dx.DOCS / name
+    for ex, out, codes in dx.run_page(page):
+        for cmd, code in codes:
+            assert code == 0, f"{name}: {cmd!r} exited {code} with NPY_DISABLE_CPU_FEATURES set:\n{out}"
+        if ex.output is not None:
+            assert dx.normalise(out) == dx.normalise(ex.output), f"{name}: {ex.commands[0]!r} prints differently"
 
 
 def _fenced(text):

@@ -181,3 +181,34 @@ def test_a_handful_of_small_angles_do_not_warn(tmp_path):
     src = _radians_file(tmp_path, n=5)
     r = run("convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet")
     assert r.exit_code == 0 and "+-pi" not in r.stderr
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["convert", "--from", "300w_lp", "--to", "6drepnet"],
+        ["audit"],
+        ["draw", "--image-size", "500x500"],
+        ["augment", "--image-size", "500x500", "--hflip"],
+        ["evaluate-self"],
+    ],
+)
+def test_degrees_read_as_radians_warn(command, tmp_path):
+    """The mirror of the warning above: --radians on angles up to 170 (degrees) warns, naming the largest value."""
+    if command[0] == "evaluate-self":
+        args = ["evaluate", LABELS, LABELS, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--radians"]
+    else:
+        out = tmp_path / ("d" if command[0] == "draw" else "o.csv")
+        args = [command[0], LABELS, "-o", out, *command[1:], "--radians"]
+    r = run(*args)
+    assert r.exit_code == 0, r.output
+    assert "read as radians (--radians) reaches |value| 170" in r.stderr and "drop --radians" in r.stderr
+    assert r.stderr.count("read as radians") == 1
+    without = run(*[a for a in args if a != "--radians"], *(["--overwrite"] if command[0] != "evaluate-self" else []))
+    assert "read as radians" not in without.stderr
+
+
+def test_radians_within_a_turn_do_not_warn(tmp_path):
+    src = _radians_file(tmp_path)
+    r = run("convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet", "--radians")
+    assert r.exit_code == 0 and "read as radians" not in r.stderr and "+-pi" not in r.stderr

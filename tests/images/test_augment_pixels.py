@@ -173,7 +173,8 @@ def test_image_size_disagreement_is_a_reject_never_a_transform(tmp_path):
         tmp_path / "rej3.csv",
     )
     assert res.exit_code == 1 and "all 1 row(s) rejected" in res.output
-    assert not (tmp_path / "o3.parquet").exists() and not (tmp_path / "rej3.csv").exists()
+    assert not (tmp_path / "o3.parquet").exists()
+    assert len(pd.read_csv(tmp_path / "rej3.csv")) == 1  # the rejects file still says why (issue 35)
     # no size anywhere: a usage error
     t.drop(columns=["image_width", "image_height"]).to_parquet(tmp_path / "nosize.parquet")
     res = run(tmp_path / "nosize.parquet", "-o", tmp_path / "o4.parquet", "--hflip")

@@ -120,7 +120,8 @@ def test_mat_folder_size_disagreement_named_by_mat_file(mat3, tmp_path):
     assert res.exit_code == 1
     line = res.output.strip().splitlines()[-1]
     assert f"({mat3 / 'image00050.mat'}: image size: the image is 450x450, --image-size says 400x450)" in line
-    assert not (tmp_path / "a.parquet").exists() and not (tmp_path / "rej.parquet").exists()
+    assert not (tmp_path / "a.parquet").exists()
+    assert (tmp_path / "rej.parquet").exists()  # every row rejected: the rejects file still says why (issue 35)
 
 
 def test_draw_mat_folder_rejects_named_by_mat_file(mat3, tmp_path):

@@ -141,7 +141,8 @@ def test_draw_real_panoptic_folder(realdata, tmp_path):
         catch_exceptions=False,
     )
     assert res.exit_code == 1 and "nothing drawn" in res.output
-    assert not (tmp_path / "d2").exists() and not (tmp_path / "rej2.csv").exists()
+    assert not (tmp_path / "d2").exists()
+    assert (tmp_path / "rej2.csv").exists()  # the one output that says why is still written (issue 35)
 
 
 def _draw(*args):

@@ -191,7 +191,10 @@ def _work_items(task, cwd=None):
                 if img is None:
                     out += [(it[0], f"no image (video {src} frame {fr}: {reason})", -1, -1, None) for it in items]
                 else:
+                    n0 = len(out)
                     _process_image(img, None, items, cfg, out)
+                    # a reason about the pixels names the video read and its frame (no hdImgs file was read)
+                    out[n0:] = [(o[0], o[1] and f"{o[1]} (video {src} frame {fr})", *o[2:]) for o in out[n0:]]
         except Exception as exc:  # a broken video: every head it should give is a reject
             done = {o[0] for o in out}
             out += [
