@@ -122,10 +122,11 @@ def test_everything_rejected_writes_nothing(tmp_path):
     t.to_csv(path, index=False)
     r = run("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
     assert r.exit_code == 1 and "every label is rejected" in r.output and "Traceback" not in r.output
-    assert not (tmp_path / "o").exists() and not (tmp_path / "r.csv").exists()
+    # the rejects file the user asked for is still written (every label, its reason); the export is not
+    assert not (tmp_path / "o").exists() and len(pd.read_csv(tmp_path / "r.csv")) == len(t)
     for p in (tmp_path / "img",):
         (p / "f0.jpg").unlink()
-    r = run("export", path, "-o", tmp_path / "o", "--layout", "hf", "--rejects", tmp_path / "r.csv")
+    r = run("export", path, "-o", tmp_path / "o", "--layout", "hf", "--rejects", tmp_path / "r2.csv")
     assert r.exit_code == 0  # hf keeps any rotation: only the missing image is rejected
     r = run("export", path, "-o", tmp_path / "o3", "--layout", "hf", "--rejects", tmp_path / "r3.csv", "--strict")
     assert r.exit_code == 1 and "--strict" in r.output and not (tmp_path / "o3").exists()

@@ -107,3 +107,37 @@ def test_draw_sets_unparseable_rows_aside_with_rejects(tmp_path):
     r = run("draw", bad, "-o", tmp_path / "d3", "--image-size", "64x64", "--rejects", tmp_path / "rej3.csv")
     assert r.exit_code == 1 and "every row's reason" in r.output
     assert len(pd.read_csv(tmp_path / "rej3.csv")) == 1 and not (tmp_path / "d3").exists()
+
+
+def _export_table(path, pitch=("1", "3")):
+    path.write_text(
+        "image,pitch,yaw,roll,bbox_x,bbox_y,bbox_w,bbox_h\n"
+        f"a.jpg,{pitch[0]},1,2,10,10,40,40\nb.jpg,{pitch[1]},1,2,10,10,40,40\n"
+    )
+    return path
+
+
+@pytest.mark.parametrize(
+    "pitch, first_reason",
+    [(("1", "3"), "no image (file not found)"), (("x", ""), "unreadable row: non-numeric value in pitch")],
+    ids=["no-image", "bad-labels"],
+)
+def test_export_with_every_label_rejected_still_writes_the_rejects_file(tmp_path, pitch, first_reason):
+    """export: every label rejected before the pixels (bad labels) or by them (no image) -> exit 1, no export
+    folder, and the rejects file with every row and its reason."""
+    table = _export_table(tmp_path / "t.csv", pitch)
+    before = {p.name for p in tmp_path.iterdir()}
+    rej = tmp_path / "rej.csv"
+    args = ["export", table, "-o", tmp_path / "out", "--layout", "fsanet", "--images", tmp_path, "--system", "300w_lp"]
+    r = run(*args, "--rejects", rej)
+    assert r.exit_code == 1, r.output
+    lines = r.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Error: --layout fsanet: ") and f"-> {rej}" in lines[0], r.output
+    frame = pd.read_csv(rej)
+    assert frame["row"].tolist() == [2, 3] and frame["reason"].iloc[0] == first_reason
+    assert {p.name for p in tmp_path.iterdir()} - before == {"rej.csv"}
+    # without --rejects, or with --strict: nothing at all
+    rej.unlink()
+    assert run(*args).exit_code == 1
+    assert run(*args, "--rejects", rej, "--strict").exit_code == 1
+    assert {p.name for p in tmp_path.iterdir()} == before

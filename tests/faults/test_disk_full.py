@@ -59,3 +59,25 @@ def test_augment_out_images_on_a_full_disk(tmp_path, monkeypatch):
         ".jpg: cannot write: disk full (no space left on device)"
     ), lines[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing written, no temporaries
+
+
+def test_export_crops_on_a_full_disk_name_the_crop(tmp_path, monkeypatch):
+    """export writes its crops through io.os_errors.write_bytes: a full disk names the crop's path in the output
+    folder (not the staged name, not a byte count), and nothing is left behind."""
+    real_open = open
+
+    def full_open(path, mode="r", *a, **k):
+        if "w" in mode and str(path).endswith(".jpg"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_open(path, mode, *a, **k)
+
+    monkeypatch.setattr(os_errors, "open", full_open, raising=False)
+    out = tmp_path / "out"
+    r = run("export", AFLW, "-o", out, "--layout", "6drepnet", "--form", "crops", "--workers", "1")
+    assert r.exit_code == 1, r.output
+    lines = r.output.strip().splitlines()
+    assert len(lines) == 1, r.output
+    assert lines[0].startswith(f"Error: {out}/") and lines[0].endswith(
+        ".jpg: cannot write: disk full (no space left on device)"
+    ), lines[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

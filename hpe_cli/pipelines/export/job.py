@@ -80,7 +80,12 @@ def _run(inputs, output: Path, opts, progress, pool, use_parts: bool) -> dict:
     plan = pixels.plan_crops(sel, layout, opts)
     todo = np.flatnonzero(sel.reasons == "")
     if todo.size == 0:
-        raise write.nothing_left(layout, sel.reasons, np.arange(sel.n), "every label is rejected")
+        write.fail_nothing_left(
+            rejects,
+            sel,
+            write.nothing_left(layout, sel.reasons, np.arange(sel.n), "every label is rejected"),
+            opts.strict,
+        )
     pixels.name_files(sel, layout, plan, todo)
     units = make_units(pixels.build_tasks(sel, layout, plan, todo))
     splits_used = sorted(set(sel.split[todo].tolist()))
@@ -96,6 +101,7 @@ def _run(inputs, output: Path, opts, progress, pool, use_parts: bool) -> dict:
 
             layout.open(stage, splits_used)
             cfg = pixels.worker_config(stage, layout, splits_used, opts)
+            cfg["shown"] = str(final_root)  # the path a user sees in a message (a full disk)
             if use_parts:
                 parts = _parts(output, opts, units, cfg, inputs)
                 if current() is not None:  # a run killed from now on leaves these
@@ -107,7 +113,10 @@ def _run(inputs, output: Path, opts, progress, pool, use_parts: bool) -> dict:
                 img_rej = px.status != ""
                 sel.reasons[img_rej] = px.status[img_rej]
                 # stage 4: the layout's index files, the summary, the rejects
-                exported, notes_extra = write.write_index(stage, layout, sel, plan, px, todo, system, final_root)
+                try:
+                    exported, notes_extra = write.write_index(stage, layout, sel, plan, px, todo, system, final_root)
+                except write.NothingLeft as exc:  # every image unreadable: the rejects file still says why
+                    write.fail_nothing_left(rejects, sel, exc, opts.strict)
             except BaseException:
                 layout.abort()
                 raise

@@ -188,7 +188,7 @@ def fingerprint(cfg: dict, units: list, opts, inputs) -> dict:
     for u in units:
         h.update(repr(u).encode())
         h.update(b"\n")
-    pixel_cfg = {k: v for k, v in cfg.items() if k not in ("root", "made", "spill")}
+    pixel_cfg = {k: v for k, v in cfg.items() if k not in ("root", "made", "spill", "shown")}
     return {
         "hpe_parts": 2,
         "format": "export",

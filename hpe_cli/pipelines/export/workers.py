@@ -10,6 +10,7 @@ import numpy as np
 from ...errors import HpeError
 from ...io.images import jpeg_size
 from ...io.jpeg import crop_band, decode_band
+from ...io.os_errors import write_bytes
 from .options import NO_FILES, NO_VIDEO
 
 _CFG: dict = {}
@@ -109,11 +110,7 @@ def _process_image(image, data, items, cfg, out):
             if not wrote_full:
                 dst = os.path.join(cfg["root"], cfg["split_dirs"][split], rel)
                 os.makedirs(os.path.dirname(dst), exist_ok=True)
-                if data is not None:
-                    with open(dst, "wb") as fh:
-                        fh.write(data)
-                else:
-                    _encode(image, cfg).tofile(dst)
+                write_bytes(dst, data if data is not None else _encode(image, cfg), _shown(cfg, split, rel))
                 wrote_full = True
             out.append((idx, "", W, H, None))
             continue
@@ -137,8 +134,13 @@ def _process_image(image, data, items, cfg, out):
             if d not in cfg["made"]:
                 os.makedirs(d, exist_ok=True)
                 cfg["made"].add(d)
-            buf.tofile(dst)
+            write_bytes(dst, buf, _shown(cfg, split, rel))
             out.append((idx, "", W, H, None))
+
+
+def _shown(cfg, split, rel) -> str:
+    """The path of a picture as the user will see it (not the staged or parts name)."""
+    return os.path.join(cfg.get("shown", cfg["root"]), cfg["split_dirs"][split], rel)
 
 
 def _spill(payload, cfg):

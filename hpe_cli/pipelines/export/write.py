@@ -190,6 +190,27 @@ def write_rejects(rejects, sel, opts) -> None:
     command: without ``--rejects`` (or with ``--strict``) it is an error and nothing is written; the layout's own
     rules, the sampling and the split file are choices, always counted in the summary.
     """
+    _add_rejects(rejects, sel)
+    rows, reasons = sel.rows, sel.reasons
+    bad = np.flatnonzero((reasons != "") & ~np.array([is_choice(r) for r in reasons], dtype=bool))
+    if bad.size:
+        from ...io.rejects import rejects_rule
+
+        k = int(bad[0])
+        rejects_rule(
+            int(bad.size), where(rows, k, str(reasons[k])), has_file=rejects.path is not None, strict=opts.strict
+        )
+    if opts.strict and (reasons != "").any():
+        k = int(np.flatnonzero(reasons != "")[0])
+        raise HpeError(
+            f"{where(rows, k, str(reasons[k]))}; "
+            f"{int((reasons != '').sum())} label(s) not exported and --strict given: nothing written"
+        )
+    rejects.write()
+
+
+def _add_rejects(rejects, sel) -> None:
+    """Every label not exported, with its reason, added to ``rejects``."""
     rows, reasons = sel.rows, sel.reasons
     rej = np.flatnonzero(reasons != "")
     if rej.size:
@@ -210,21 +231,6 @@ def write_rejects(rejects, sel, opts) -> None:
             },
             reasons[rej],
         )
-    bad = np.flatnonzero((reasons != "") & ~np.array([is_choice(r) for r in reasons], dtype=bool))
-    if bad.size:
-        from ...io.rejects import rejects_rule
-
-        k = int(bad[0])
-        rejects_rule(
-            int(bad.size), where(rows, k, str(reasons[k])), has_file=rejects.path is not None, strict=opts.strict
-        )
-    if opts.strict and (reasons != "").any():
-        k = int(np.flatnonzero(reasons != "")[0])
-        raise HpeError(
-            f"{where(rows, k, str(reasons[k]))}; "
-            f"{int((reasons != '').sum())} label(s) not exported and --strict given: nothing written"
-        )
-    rejects.write()
 
 
 def write_summary(stage, summary) -> None:
@@ -232,9 +238,26 @@ def write_summary(stage, summary) -> None:
         json.dump(summary, fh, indent=1, default=str)
 
 
+class NothingLeft(HpeError):
+    """Every label was rejected: nothing to export (:func:`fail_nothing_left` still writes the rejects file)."""
+
+
 def nothing_left(layout, reasons, idx, what: str) -> HpeError:
     """The error for a run where every label of ``idx`` is rejected."""
     import pandas as pd
 
     c = pd.Series(reasons[idx]).value_counts()
-    return HpeError(f"--layout {layout.name}: {what}, nothing written ({'; '.join(f'{r}: {k}' for r, k in c.items())})")
+    return NothingLeft(
+        f"--layout {layout.name}: {what}, nothing written ({'; '.join(f'{r}: {k}' for r, k in c.items())})"
+    )
+
+
+def fail_nothing_left(rejects, sel, err: HpeError, strict: bool):
+    """Raise ``err`` (every label rejected). With ``--rejects`` and no ``--strict`` the rejects file is still
+    written, every label with its reason (the one output that says why); the export itself is not."""
+    from ...io.rejects import fail_all_rejected
+
+    if rejects.path is None or strict:
+        raise err
+    _add_rejects(rejects, sel)
+    fail_all_rejected(rejects, str(err))
