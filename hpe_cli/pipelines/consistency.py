@@ -43,7 +43,7 @@ from ..geometry.landmark_pose import (
 from ..metrics import consistency as mc
 from ..metrics.sketch import EXACT_CAP, StreamQuantiles
 from .consistency_groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
-from .consistency_notes import _r, suspects_table
+from .consistency_notes import _key_batches, _r, suspects_table
 from .consistency_spill import RowSpill
 
 #: a landmark fit whose residual (per inter-ocular distance) is above this does not look like a face
@@ -92,6 +92,8 @@ class Settings:
     suspect_score: float = mc.SUSPECT_SCORE
     worst: int = 20
     drawn: int = 12
+    #: rows whose statistics are kept exactly; beyond, fixed-resolution histograms (flat memory)
+    exact_rows: int = EXACT_CAP
 
 
 def _codes(col, table: dict) -> np.ndarray:
@@ -125,12 +127,12 @@ class ConsistencyAudit:
     Memory is flat in rows for tables without a ``frame`` column: each row's
     numbers go to a temporary file (:mod:`hpe_cli.pipelines.consistency_spill`,
     61 bytes a row on disk); statistics are exact up to ``exact_cap`` rows
-    (:data:`hpe_cli.metrics.sketch.EXACT_CAP`), then histograms (resolution in the
+    (``Settings.exact_rows``, :data:`hpe_cli.metrics.sketch.EXACT_CAP`), then histograms (resolution in the
     JSON). Tables with a ``frame`` column also hold each row's label matrix and
     keys (about 100 bytes a row) for the views and time checks.
     """
 
-    def __init__(self, src, settings: Settings | None = None, exact_cap: int | None = None):
+    def __init__(self, src, settings: Settings | None = None):
         self.src = src
         self.s = settings if isinstance(settings, Settings) else Settings()  # True: the defaults
         cols = set(src.columns)
@@ -164,7 +166,7 @@ class ConsistencyAudit:
         self.code_tables = {c: {} for c in ("sequence", "person_id", "camera")}
         self.parts = []
         self.unread = 0
-        self.exact_cap = EXACT_CAP if exact_cap is None else exact_cap
+        self.exact_cap = self.s.exact_rows
         self.spill = RowSpill()
         self.expected_sketch = mc.expected_angle_sketch(self.exact_cap)
 
@@ -320,11 +322,11 @@ class ConsistencyAudit:
         from ..io.layout import arrow_to_numpy
 
         n = batch.num_rows
-        buf = np.empty((2, self.n_lm, n))  # one contiguous copy per column; uv is a (n, L, 2) view of it
+        uv = np.empty((n, self.n_lm, 2))  # the fit's layout (a (2, L, n) buffer is faster to fill, slower to fit)
         for i in range(self.n_lm):  # columns, not rows
             for k, a in enumerate("xy"):
-                buf[k, i] = arrow_to_numpy(batch.column(f"lm{i}_{a}"), np.float64)
-        return buf.transpose(2, 1, 0)
+                uv[:, i, k] = arrow_to_numpy(batch.column(f"lm{i}_{a}"), np.float64)
+        return uv
 
     # ------------------------------------------------------------------ ranking
     def finish(self) -> dict:
@@ -570,11 +572,15 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None
     key_cols = [c for c in KEY_COLUMNS if c in cons.src.columns]
     order = cons.worst_order()
     top = order[: cons.s.worst]
-    report["worst"] = cons.describe_rows(reread(), top, key_cols)
+    report["worst"] = cons.describe_rows(_key_batches(cons, reread, key_cols), top, key_cols)
     if suspects:
         from ..io import write_table
 
-        rows = report["worst"] if len(order) <= len(top) else cons.describe_rows(reread(), order, key_cols)
+        rows = (
+            report["worst"]
+            if len(order) <= len(top)
+            else cons.describe_rows(_key_batches(cons, reread, key_cols), order, key_cols)
+        )
         write_table(suspects_table(rows, key_cols), suspects, overwrite=overwrite)
         report["suspects_file"] = str(suspects)
     if plots:

@@ -26,3 +26,20 @@ def suspects_table(rows: list, key_cols: list):
     cols["score"] = [r["score"] for r in rows]
     cols["reason"] = [r["reason"] for r in rows]
     return pa.table(cols)
+
+
+def _key_batches(cons, reread, key_cols):
+    """Batches of (at least) the key columns, in input order, for :meth:`ConsistencyAudit.describe_rows`.
+
+    A Parquet file read under its own column names is read again for the key
+    columns only (Parquet rows are never set aside, so the row indices agree);
+    anything else is read again whole with ``reread()``.
+    """
+    src = cons.src
+    if src.kind == "parquet" and key_cols:
+        import pyarrow.parquet as pq
+
+        names = set(pq.ParquetFile(src.path).schema_arrow.names)
+        if set(key_cols) <= names and names == set(src.columns) - {"__line__"}:
+            return pq.ParquetFile(src.path).iter_batches(65_536, columns=key_cols)
+    return reread()
