@@ -159,10 +159,8 @@ def test_consistency_usage_errors_exit_2(lm68, tmp_path):
     snap = tree(tmp_path)
     res = run("audit", path, "--suspects", tmp_path / "s.csv")
     _failed(res, {}, tmp_path, snap, "--consistency", codes=(2,))
-    res = run("audit", path, "--consistency", "--max-jump", "-1")
-    assert res.exit_code in (0, 2), res.output
-    if res.exit_code == 2:
-        _failed(res, {}, tmp_path, snap, "--max-jump", codes=(2,))
+    for bad in (["--max-jump", "-1"], ["--max-jump", "0"], ["--suspect-score", "abc"]):
+        _failed(run("audit", path, "--consistency", *bad), {}, tmp_path, snap, bad[0], codes=(2,))
 
 
 # --------------------------------------------------------------------------------------- --exclude
