@@ -344,8 +344,9 @@ class ConsistencyAudit:
         out = {}
         self.group_res = None
         if self.has_frame and N:
-            P = {k: np.concatenate([p[k] for p in self.parts]) for k in ["finite", "A", "frame", *self.track_cols]}
-            self.parts = []  # concatenated into P: do not hold the rows twice
+            # one key at a time, each part's array released once concatenated: the rows are not held twice
+            P = {k: np.concatenate([p.pop(k) for p in self.parts]) for k in ["A", "finite", "frame", *self.track_cols]}
+            self.parts = []
             view_angle, view_code, out["views"] = views(self, P, P["finite"])
             jump, time_code, out["time"] = time_check(self, P, P["finite"])
             del P
