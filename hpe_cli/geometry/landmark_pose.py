@@ -137,6 +137,8 @@ def fit_landmark_pose(uv, scheme: str = "ibug68", visible=None, *, reasons: bool
         Landmark order; ``L`` must be its size (68, 70, 21).
     visible : array_like of bool, shape (N, L), optional
         Further restricts the points used.
+    reasons : bool
+        ``True`` (default): ``reason`` texts; ``False``: ``code`` (see Returns).
 
     Returns
     -------
