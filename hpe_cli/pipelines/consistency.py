@@ -322,11 +322,13 @@ class ConsistencyAudit:
         from ..io.layout import arrow_to_numpy
 
         n = batch.num_rows
-        uv = np.empty((n, self.n_lm, 2))  # the fit's layout (a (2, L, n) buffer is faster to fill, slower to fit)
-        for i in range(self.n_lm):  # columns, not rows
-            for k, a in enumerate("xy"):
-                uv[:, i, k] = arrow_to_numpy(batch.column(f"lm{i}_{a}"), np.float64)
-        return uv
+        cols = [arrow_to_numpy(batch.column(f"lm{i}_{a}"), np.float64) for i in range(self.n_lm) for a in "xy"]
+        uv = np.empty((n, 2 * self.n_lm))  # the fit's (n, L, 2) layout (a (2, L, n) one fits 2x slower)
+        for s in range(0, n, 1024):  # blocks of rows that stay in cache while their columns are interleaved
+            blk = uv[s : s + 1024]
+            for j, c in enumerate(cols):
+                blk[:, j] = c[s : s + 1024]
+        return uv.reshape(n, self.n_lm, 2)
 
     # ------------------------------------------------------------------ ranking
     def finish(self) -> dict:
