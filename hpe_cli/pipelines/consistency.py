@@ -579,12 +579,8 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None
     if suspects:
         from ..io import write_table
 
-        rows = (
-            report["worst"]
-            if len(order) <= len(top)
-            else cons.describe_rows(_key_batches(cons, reread, key_cols), order, key_cols)
-        )
-        write_table(suspects_table(rows, key_cols), suspects, overwrite=overwrite)
+        table = suspects_table(cons, _key_batches(cons, reread, key_cols), order, key_cols)
+        write_table(table, suspects, overwrite=overwrite)
         report["suspects_file"] = str(suspects)
     if plots:
         from .draw_consistency import FOLDER, consistency_page

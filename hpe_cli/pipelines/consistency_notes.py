@@ -17,14 +17,39 @@ def _stats(x) -> dict:
     return {"n": int(x.size), "median": _r(q[0]), "p90": _r(q[1]), "p99": _r(q[2]), "max": _r(x.max())}
 
 
-def suspects_table(rows: list, key_cols: list):
-    """The suspects key list: key columns, ``row``, ``score`` and ``reason`` (what ``--exclude`` reads)."""
+def suspects_table(cons, batches, order, key_cols):
+    """The suspects key list, highest score first: key columns, ``row``, ``score``, ``reason`` (what
+    ``--exclude`` reads).
+
+    ``order``: the suspects' global row indices (:meth:`ConsistencyAudit.worst_order`);
+    ``batches``: the input again (at least ``key_cols``), in input order. The key
+    columns are taken from each batch as Arrow arrays (no Python object per value).
+    """
     import pyarrow as pa
 
-    cols = {c: [r.get(c) for r in rows] for c in key_cols}
-    cols["row"] = [r["row"] for r in rows]
-    cols["score"] = [r["score"] for r in rows]
-    cols["reason"] = [r["reason"] for r in rows]
+    idx = np.asarray(order, dtype=np.int64)
+    by_row = np.argsort(idx, kind="stable")
+    srt = idx[by_row]
+    pieces, offset = [], 0
+    for batch in batches if key_cols else ():
+        n = batch.num_rows
+        lo, hi = np.searchsorted(srt, [offset, offset + n])
+        if hi > lo:
+            pieces.append(pa.Table.from_batches([batch.select(key_cols).take(pa.array(srt[lo:hi] - offset))]))
+        offset += n
+    cols = {}
+    if key_cols:
+        keys = pa.concat_tables(pieces) if pieces else None
+        back = np.empty_like(by_row)
+        back[by_row] = np.arange(len(by_row))  # input order -> score order
+        for c in key_cols:
+            cols[c] = keys.column(c).take(pa.array(back)) if keys is not None else pa.array([], pa.string())
+    S = cons.sus
+    at = np.searchsorted(S["idx"], idx) if S is not None else np.zeros(0, np.int64)
+    cols["row"] = pa.array(S["line"][at] if S is not None else [], pa.int64())
+    cols["score"] = pa.array([round(float(v), 3) for v in (S["score"][at] if S is not None else [])], pa.float64())
+    why = [cons._why(*v) for v in zip(*(S[k][at] for k in ("lm_angle", "lm_ratio", "view_angle", "jump")))] if S else []
+    cols["reason"] = pa.array(why, pa.string())
     return pa.table(cols)
 
 
