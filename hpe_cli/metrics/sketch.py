@@ -22,21 +22,23 @@ EXACT_CAP = 1 << 20
 
 
 class StreamQuantiles:
-    """Percentiles of non-negative values given chunk by chunk.
+    """Percentiles of values given chunk by chunk.
 
     Parameters
     ----------
     hi : float
-        Top of the histogram range (values are expected in ``[0, hi]``).
+        Top of the histogram range (values are expected in ``[lo, hi]``; outside, they count in the end bins).
     resolution : float
         Width of a histogram bin, in the values' unit.
     exact_cap : int
         Values kept exactly before switching to the histogram.
+    lo : float
+        Bottom of the histogram range (default 0).
     """
 
-    def __init__(self, hi: float, resolution: float, exact_cap: int = EXACT_CAP):
-        self.hi, self.resolution, self.cap = float(hi), float(resolution), int(exact_cap)
-        self.nbins = int(np.ceil(self.hi / self.resolution)) + 1
+    def __init__(self, hi: float, resolution: float, exact_cap: int = EXACT_CAP, lo: float = 0.0):
+        self.lo, self.hi, self.resolution, self.cap = float(lo), float(hi), float(resolution), int(exact_cap)
+        self.nbins = int(np.ceil((self.hi - self.lo) / self.resolution)) + 1
         self.parts = []
         self.hist = None
         self.n = 0
@@ -68,7 +70,8 @@ class StreamQuantiles:
             self._bin(x)
 
     def _bin(self, x) -> None:
-        k = np.clip(np.floor(np.asarray(x, np.float64) / self.resolution), 0, self.nbins - 1).astype(np.int64)
+        k = np.floor((np.asarray(x, np.float64) - self.lo) / self.resolution)
+        k = np.clip(k, 0, self.nbins - 1).astype(np.int64)
         self.hist += np.bincount(k, minlength=self.nbins)
 
     def percentile(self, q) -> np.ndarray:
@@ -78,7 +81,19 @@ class StreamQuantiles:
             return np.full(q.shape, np.nan)
         if self.hist is None:
             return np.percentile(np.concatenate(self.parts).astype(np.float64), q)
-        return _hist_percentile(self.hist, self.n, q, self.resolution, self.max)
+        return np.maximum(_hist_percentile(self.hist, self.n, q, self.resolution, self.max, self.lo), self.min)
+
+    def mad(self, centre: float) -> float:
+        """Median of ``|x - centre|`` over the values given (NaN when none); from the bin centres once binned."""
+        if self.n == 0:
+            return float("nan")
+        if self.hist is None:
+            return float(np.median(np.abs(np.concatenate(self.parts).astype(np.float64) - centre)))
+        nz = np.flatnonzero(self.hist)
+        dev = np.abs(self.lo + (nz + 0.5) * self.resolution - centre)
+        order = np.argsort(dev, kind="stable")
+        c = np.cumsum(self.hist[nz][order])
+        return float(dev[order][np.searchsorted(c, (self.n - 1) // 2, side="right")])
 
     def stats(self) -> dict:
         """``{n, median, p90, p99, max}`` (rounded to 3 decimals); ``resolution`` too once binned."""
@@ -92,11 +107,11 @@ class StreamQuantiles:
         return out
 
 
-def _hist_percentile(hist, n, q, resolution, vmax) -> np.ndarray:
+def _hist_percentile(hist, n, q, resolution, vmax, lo=0.0) -> np.ndarray:
     c = np.cumsum(hist)
     rank = np.floor(q / 100.0 * (n - 1))  # the 0-based rank below numpy's interpolation point
     k = np.searchsorted(c, rank, side="right")
-    return np.minimum((k + 0.5) * resolution, vmax)
+    return np.minimum(lo + (k + 0.5) * resolution, vmax)
 
 
 class BinnedMedians:

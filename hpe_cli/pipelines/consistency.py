@@ -43,7 +43,7 @@ from ..geometry.landmark_pose import (
 from ..metrics import consistency as mc
 from ..metrics.sketch import EXACT_CAP, StreamQuantiles
 from .consistency_groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
-from .consistency_notes import _key_batches, _r, suspects_table
+from .consistency_notes import _codes, _key_batches, _r, canonical_labels, suspects_table  # noqa: F401
 from .consistency_spill import RowSpill
 
 #: a landmark fit whose residual (per inter-ocular distance) is above this does not look like a face
@@ -94,22 +94,8 @@ class Settings:
     drawn: int = 12
     #: rows whose statistics are kept exactly; beyond, fixed-resolution histograms (flat memory)
     exact_rows: int = EXACT_CAP
-
-
-def _codes(col, table: dict) -> np.ndarray:
-    """Global integer codes of an Arrow column's values (strings or ints), via dictionary encoding."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    if pa.types.is_integer(col.type):
-        from ..io.layout import arrow_to_numpy
-
-        return arrow_to_numpy(col).astype(np.int64)
-    enc = pc.dictionary_encode(col.cast(pa.string()))
-    values = enc.dictionary.to_pylist()
-    remap = np.array([table.setdefault(v, len(table)) for v in values] + [-1], dtype=np.int64)
-    idx = enc.indices.fill_null(len(values)).to_numpy(zero_copy_only=False)
-    return remap[idx]
+    #: a Parquet table sorted by (sequence, frame) runs the views and time checks as its rows stream
+    stream_groups: bool = True
 
 
 def _relabel_meta(src) -> dict:
@@ -169,6 +155,12 @@ class ConsistencyAudit:
         self.exact_cap = self.s.exact_rows
         self.spill = RowSpill()
         self.expected_sketch = mc.expected_angle_sketch(self.exact_cap)
+        self.stream = None
+        if self.has_frame and self.s.stream_groups:
+            from .consistency_stream import GroupStream, sorted_by_sequence_frame
+
+            if sorted_by_sequence_frame(src):
+                self.stream = GroupStream(self)
 
     # ------------------------------------------------------------------ set-up
     def _view_setup(self, cols) -> str:
@@ -229,7 +221,10 @@ class ConsistencyAudit:
         if self.has_frame:  # the views and time checks need the groups: labels and keys of every row
             for c in self.track_cols:
                 part[c] = _codes(part[c], self.code_tables[c])
-            self.parts.append(part)
+            if self.stream is not None:  # sorted by (sequence, frame): group by group
+                self.stream.add(part)
+            else:
+                self.parts.append(part)
 
     def measure(self, batch, A, lines=None):
         """The per-row evidence of one batch (thread-safe; None for a .mat folder without ``lines``).
@@ -345,7 +340,10 @@ class ConsistencyAudit:
         self.N = N
         out = {}
         self.group_res = None
-        if self.has_frame and N:
+        if self.stream is not None:
+            out["views"], out["time"] = self.stream.finish()
+            self.group_res = self.stream
+        elif self.has_frame and N:
             # one key at a time, each part's array released once concatenated: the rows are not held twice
             P = {k: np.concatenate([p.pop(k) for p in self.parts]) for k in ["A", "finite", "frame", *self.track_cols]}
             self.parts = []
@@ -436,8 +434,10 @@ class ConsistencyAudit:
         n = len(rec)
         lm_angle = rec["lm_angle"]
         lm_ratio = lm_angle / mc.expected_landmark_angle(rec["abs_yaw"], self.expected["a"], self.expected["b"])
-        if self.group_res is not None:
+        if isinstance(self.group_res, tuple):
             va, vc, ju, tc = (a[off : off + n] for a in self.group_res)
+        elif self.group_res is not None:  # streamed: read back from its file
+            va, vc, ju, tc = self.group_res.read(off, n)
         else:
             va, ju = np.full(n, np.nan), np.full(n, np.nan)
             vc, tc = np.zeros(n, np.uint8), np.zeros(n, np.uint8)
@@ -552,16 +552,6 @@ class ConsistencyAudit:
                     }
             offset += n
         return out
-
-
-def canonical_labels(system, cols, eff, res) -> np.ndarray:
-    """The audited labels as canonical matrices ``(n, 3, 3)``; NaN for rows that are not finite rotations."""
-    values = np.stack(cols, axis=-1)
-    bad = res["non_finite"] | res.get("not_rotation", False)
-    values = np.where(np.asarray(bad)[:, None], 0.0, values)
-    A = system.to_canonical(system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3))
-    A[np.asarray(bad)] = np.nan
-    return A
 
 
 def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None, images=None) -> dict:

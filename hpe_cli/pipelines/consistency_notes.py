@@ -68,3 +68,29 @@ def _key_batches(cons, reread, key_cols):
         if set(key_cols) <= names and names == set(src.columns) - {"__line__"}:
             return pq.ParquetFile(src.path).iter_batches(65_536, columns=key_cols)
     return reread()
+
+
+def canonical_labels(system, cols, eff, res) -> np.ndarray:
+    """The audited labels as canonical matrices ``(n, 3, 3)``; NaN for rows that are not finite rotations."""
+    values = np.stack(cols, axis=-1)
+    bad = res["non_finite"] | res.get("not_rotation", False)
+    values = np.where(np.asarray(bad)[:, None], 0.0, values)
+    A = system.to_canonical(system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3))
+    A[np.asarray(bad)] = np.nan
+    return A
+
+
+def _codes(col, table: dict) -> np.ndarray:
+    """Global integer codes of an Arrow column's values (strings or ints), via dictionary encoding."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if pa.types.is_integer(col.type):
+        from ..io.layout import arrow_to_numpy
+
+        return arrow_to_numpy(col).astype(np.int64)
+    enc = pc.dictionary_encode(col.cast(pa.string()))
+    values = enc.dictionary.to_pylist()
+    remap = np.array([table.setdefault(v, len(table)) for v in values] + [-1], dtype=np.int64)
+    idx = enc.indices.fill_null(len(values)).to_numpy(zero_copy_only=False)
+    return remap[idx]

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 from hypothesis import given, settings
@@ -129,3 +130,85 @@ def test_past_the_exact_limit_the_ranking_is_the_same(lm68_table, tmp_path):
     # the -o columns of the exact run agree with the JSON statistics (numpy on all rows)
     v = ex_rows["landmark_angle"].to_numpy(np.float64)
     assert exact["landmarks"]["angle_deg"]["median"] == round(float(np.median(v[np.isfinite(v)])), 3)
+
+
+# --------------------------------------------------------------------------------------- streamed groups
+@pytest.fixture(scope="module")
+def panoptic_tables(tmp_path_factory):
+    """The synthetic Panoptic labels with one camera turned 4 deg and a glitch frame, sorted and shuffled."""
+    import pyarrow as pa
+
+    from tests.conftest import canonical_A, sample_data_script
+    from tests.consistency.test_consistency_audit import _angles_of, _turn, run
+
+    root = tmp_path_factory.mktemp("stream") / "synthseq"
+    gen = sample_data_script()
+    gen.make_synthetic(root, n_frames=40, n_people=2, n_cameras=6, first_frame=100, special=False)
+    lab = root.parent / "labels.parquet"
+    assert run("relabel-panoptic", root, "-o", lab, "-q", "--rejects", root.parent / "rej.csv").exit_code == 0
+    t = pq.read_table(lab)
+    A = canonical_A(np.stack([t.column(c).to_numpy() for c in ("pitch", "yaw", "roll")], 1))
+    cams = np.array(t.column("camera").to_pylist())
+    A[cams == sorted(set(cams))[2]] = _turn([0.2, 1.0, -0.3], 4.0) @ A[cams == sorted(set(cams))[2]]
+    frames = t.column("frame").to_numpy()
+    pids = t.column("person_id").to_numpy()
+    g = (frames == 117) & (pids == pids[0])
+    A[g] = _turn([1.0, 0.2, 0.0], 20.0) @ A[g]  # a one-frame glitch of one person in every view
+    new = _angles_of(A)
+    t2 = t.select([c for c in t.column_names if c not in ("pitch", "yaw", "roll")])
+    for k, c in enumerate(("pitch", "yaw", "roll")):
+        t2 = t2.append_column(c, pa.array(new[:, k]))
+    t2 = t2.replace_schema_metadata(t.schema.metadata)
+    order = np.lexsort([t2.column("camera").to_numpy(), t2.column("person_id").to_numpy(), frames])
+    srt = root.parent / "sorted.parquet"
+    pq.write_table(t2.take(order), srt, row_group_size=100)  # several batches
+    shuf = root.parent / "shuffled.parquet"
+    pq.write_table(t2.take(np.random.default_rng(0).permutation(len(order))), shuf)
+    return srt, shuf
+
+
+def _audit(path, tmp, **kw):
+    from hpe_cli.pipelines.audit import run_audit
+    from hpe_cli.pipelines.consistency import Settings
+
+    out = tmp / f"o_{path.stem}_{len(kw)}.parquet"
+    rep = run_audit(path, None, output=out, overwrite=True, batch_size=97, consistency=Settings(**kw))
+    return json.loads(json.dumps(rep["consistency"])), pq.read_table(out).to_pandas()
+
+
+def test_streamed_groups_give_the_held_results(panoptic_tables, tmp_path):
+    from hpe_cli.io import open_table
+    from hpe_cli.pipelines.consistency_stream import sorted_by_sequence_frame
+
+    srt, shuf = panoptic_tables
+    assert sorted_by_sequence_frame(open_table(srt)) and not sorted_by_sequence_frame(open_table(shuf))
+    streamed, s_rows = _audit(srt, tmp_path)
+    held, h_rows = _audit(srt, tmp_path, stream_groups=False)
+    assert streamed["views"]["cameras_with_offset"] and streamed["time"]["jumps"] > 0
+    assert streamed["views"]["groups"] >= 70 and streamed["time"]["checked"] > 300
+    for k in ("views", "time", "checked", "not_checked", "not_checked_reasons", "suspects"):
+        assert streamed[k] == held[k], k
+    cols = ["view_angle", "jump_rate", "consistency_score", "suspect", "consistency_note"]
+    pd.testing.assert_frame_equal(s_rows[cols], h_rows[cols])
+    # the shuffled table (held rows) has the same rows' results
+    sh, sh_rows = _audit(shuf, tmp_path)
+    assert sh["views"]["cameras_with_offset"] == held["views"]["cameras_with_offset"]
+    assert sh["time"]["jumps"] == held["time"]["jumps"] and sh["suspects"] == held["suspects"]
+    key = ["frame", "person_id", "camera"]
+    a = h_rows.sort_values(key).reset_index(drop=True)
+    b = sh_rows.sort_values(key).reset_index(drop=True)
+    np.testing.assert_allclose(a["view_angle"], b["view_angle"], atol=1e-4)
+    np.testing.assert_allclose(a["jump_rate"], b["jump_rate"], atol=1e-4)
+
+
+def test_streamed_groups_past_the_exact_limit(panoptic_tables, tmp_path):
+    srt, _ = panoptic_tables
+    exact, rows = _audit(srt, tmp_path)
+    binned, b_rows = _audit(srt, tmp_path, exact_rows=50)
+    assert binned["views"]["cameras_with_offset"] == exact["views"]["cameras_with_offset"]
+    got = {b["camera"]: b["offset_deg"] for b in binned["views"]["cameras"]}
+    assert len(got) == len(exact["views"]["cameras"])
+    for e in exact["views"]["cameras"]:  # the order of the cameras without an offset may change
+        assert abs(e["offset_deg"] - got[e["camera"]]) < 0.01, (e, got)
+    assert binned["time"]["jumps"] == exact["time"]["jumps"]
+    np.testing.assert_array_equal(rows["suspect"], b_rows["suspect"])
