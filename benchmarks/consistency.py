@@ -6,6 +6,8 @@ Usage::
     python benchmarks/consistency.py --rows 100000
     python benchmarks/consistency.py --rows 10000000 --table /tmp/lm68_10M.parquet --only-cli
                                                      # keep the table for the next run; CLI runs only
+    python benchmarks/consistency.py --rows 1000000 --frames --only-cli
+                                                     # with sequence, camera, frame columns (time check)
 
 A synthetic table (image, pitch/yaw/roll, 68 landmark pairs = 136 float columns,
 the landmarks projected from the 68-point template with the label plus 1 px
@@ -37,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 
-def make_table(n: int, path: Path, seed: int = 0) -> int:
+def make_table(n: int, path: Path, seed: int = 0, frames: bool = False) -> int:
     import pyarrow as pa
     import pyarrow.parquet as pq
     from scipy.spatial.transform import Rotation
@@ -52,7 +54,11 @@ def make_table(n: int, path: Path, seed: int = 0) -> int:
     chunk = 100_000
     for start in range(0, n, chunk):
         m = min(chunk, n - start)
-        pyr = np.stack([rng.normal(0, 15, m), rng.uniform(-80, 80, m), rng.normal(0, 10, m)], 1)
+        if frames:  # one head seen by 10 cameras, turning slowly: rows sorted by frame
+            f = (start + np.arange(m)) // 10
+            pyr = np.stack([10 * np.sin(f / 37), 60 * np.sin(f / 50), 5 * np.cos(f / 23)], 1)
+        else:
+            pyr = np.stack([rng.normal(0, 15, m), rng.uniform(-80, 80, m), rng.normal(0, 10, m)], 1)
         A = s.to_canonical(s.from_angles(pyr))
         uv = project_model(A, np.full(m, 120.0), np.full((m, 2), 225.0), "ibug68")
         uv += rng.normal(0, 1.0, uv.shape)
@@ -63,6 +69,10 @@ def make_table(n: int, path: Path, seed: int = 0) -> int:
         A[bad] = T @ A[bad]
         lab = s.to_angles(s.from_canonical(A))[0]
         cols = {"image": pa.array([f"img{start + i:08d}.jpg" for i in range(m)])}
+        if frames:
+            cols["sequence"] = pa.array(np.full(m, "s0"))
+            cols["camera"] = pa.array([f"00_{c:02d}" for c in (start + np.arange(m)) % 10])
+            cols["frame"] = pa.array((start + np.arange(m)) // 10)
         for k, c in enumerate(("pitch", "yaw", "roll")):
             cols[c] = pa.array(lab[:, k])
         for i in range(68):
@@ -101,6 +111,9 @@ def main(argv=None) -> None:
     ap.add_argument("--rows", type=int, default=500_000)
     ap.add_argument("--table", help="Parquet file of the table: made when missing, reused (same --rows) when present")
     ap.add_argument("--only-cli", action="store_true", help="skip the kernel and the pyarrow floor")
+    ap.add_argument(
+        "--frames", action="store_true", help="sequence/camera/frame columns (10 cameras, sorted): the time check runs"
+    )
     a = ap.parse_args(argv)
     n = a.rows
     with tempfile.TemporaryDirectory() as tmp:
@@ -112,7 +125,7 @@ def main(argv=None) -> None:
                 raise SystemExit(f"{path}: has {pq.ParquetFile(path).metadata.num_rows} rows, expected --rows {n}")
             turned = int(Path(f"{path}.turned").read_text())
         else:
-            turned = make_table(n, path)
+            turned = make_table(n, path, frames=a.frames)
         print(
             f"{n:,} rows of 68 landmarks ({path.stat().st_size / 1e6:.0f} MB Parquet); {turned:,} labels turned 30 deg"
         )
