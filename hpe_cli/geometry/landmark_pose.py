@@ -121,7 +121,11 @@ def template_iod() -> float:
     return _iod(reference_template())
 
 
-def fit_landmark_pose(uv, scheme: str = "ibug68", visible=None) -> dict:
+#: why a row was not fitted, by ``code`` (0: fitted)
+FIT_REASONS = ("", f"fewer than {MIN_POINTS} visible landmarks", "degenerate landmarks (collinear or squashed)")
+
+
+def fit_landmark_pose(uv, scheme: str = "ibug68", visible=None, *, reasons: bool = True) -> dict:
     """Weak-perspective rotation of many faces from their 2-D landmarks.
 
     Parameters
@@ -133,6 +137,8 @@ def fit_landmark_pose(uv, scheme: str = "ibug68", visible=None) -> dict:
         Landmark order; ``L`` must be its size (68, 70, 21).
     visible : array_like of bool, shape (N, L), optional
         Further restricts the points used.
+    reasons : bool
+        ``True`` (default): ``reason`` texts; ``False``: ``code`` (see Returns).
 
     Returns
     -------
@@ -145,7 +151,9 @@ def fit_landmark_pose(uv, scheme: str = "ibug68", visible=None) -> dict:
         ``n_points`` (N,) int; ``reason`` (N,) object: ``""`` when fitted, else
         why not (``"fewer than 6 visible landmarks"``, ``"degenerate landmarks
         (collinear or squashed)"``). Rows not fitted have NaN in ``A``,
-        ``scale``, ``t`` and ``residual``.
+        ``scale``, ``t`` and ``residual``. With ``reasons=False``, ``code``
+        (N,) uint8 instead of ``reason``: an index into :data:`FIT_REASONS`
+        (no array of Python strings: the consistency audit's hot path).
     """
     model, used = scheme_model(scheme)
     uv = np.asarray(uv, dtype=np.float64)
@@ -156,13 +164,17 @@ def fit_landmark_pose(uv, scheme: str = "ibug68", visible=None) -> dict:
         visible = np.asarray(visible, dtype=bool)
     N = uv.shape[0]
     if N <= BLOCK:
-        return _fit_block(uv, model, used, visible)
-    # blocks that stay in cache: the work is a dozen passes over (rows x points) arrays
-    parts = [
-        _fit_block(uv[s : s + BLOCK], model, used, None if visible is None else visible[s : s + BLOCK])
-        for s in range(0, N, BLOCK)
-    ]
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        out = _fit_block(uv, model, used, visible)
+    else:
+        # blocks that stay in cache: the work is a dozen passes over (rows x points) arrays
+        parts = [
+            _fit_block(uv[s : s + BLOCK], model, used, None if visible is None else visible[s : s + BLOCK])
+            for s in range(0, N, BLOCK)
+        ]
+        out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    if reasons:
+        out["reason"] = np.array(FIT_REASONS, dtype=object)[out.pop("code")]
+    return out
 
 
 #: rows per block of :func:`fit_landmark_pose`
@@ -243,10 +255,10 @@ def _fit_block(uv, model, used, visible) -> dict:
     with np.errstate(invalid="ignore", divide="ignore"):
         rms = np.sqrt(np.maximum(ss, 0.0) / n_safe)
         residual = rms / (scale * template_iod())
-    reason = np.full(N, "", dtype=object)
-    reason[degenerate] = "degenerate landmarks (collinear or squashed)"
-    reason[few] = f"fewer than {MIN_POINTS} visible landmarks"
-    bad = reason != ""
+    code = np.zeros(N, dtype=np.uint8)
+    code[degenerate] = 2
+    code[few] = 1
+    bad = code != 0
     if bad.any():
         A[bad] = np.nan
         scale = np.where(bad, np.nan, scale)
@@ -259,7 +271,7 @@ def _fit_block(uv, model, used, visible) -> dict:
         "t": np.stack([tu, tv], axis=1),
         "residual": residual,
         "n_points": n.astype(np.int64),
-        "reason": reason,
+        "code": code,
     }
 
 
@@ -324,7 +336,7 @@ def undistort_normalised(uv, K, dist) -> np.ndarray:
     return np.stack([x, y], -1)
 
 
-def fit_landmark_pose_perspective(uv, scheme: str, K, dist=None) -> dict:
+def fit_landmark_pose_perspective(uv, scheme: str, K, dist=None, *, reasons: bool = True) -> dict:
     """:func:`fit_landmark_pose` for a calibrated camera, corrected for where the head is in the image.
 
     A weak-perspective fit sees the head along the ray through it, not along the
@@ -345,6 +357,8 @@ def fit_landmark_pose_perspective(uv, scheme: str, K, dist=None) -> dict:
     K : array_like, shape (N, 3, 3)
     dist : array_like, shape (N, 5), optional
         Zero distortion by default.
+    reasons : bool
+        As :func:`fit_landmark_pose`.
 
     Returns
     -------
@@ -367,7 +381,7 @@ def fit_landmark_pose_perspective(uv, scheme: str, K, dist=None) -> dict:
     v = np.einsum("nji,nlj->nli", Q, rays)  # Q.T @ ray
     with np.errstate(invalid="ignore", divide="ignore"):
         virt = v[..., :2] / v[..., 2:3]
-    fit = fit_landmark_pose(virt, scheme)
+    fit = fit_landmark_pose(virt, scheme, reasons=reasons)
     E = np.diag([1.0, -1.0, -1.0])
     fit["A"] = E @ Q @ E @ fit["A"]
     fit["ray_angle"] = angle

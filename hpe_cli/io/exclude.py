@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import HpeError
+from ..errors import HpeError, UsageError
 
 KEY_COLUMNS = ("file", "image", "image_id", "id", "path", "sequence", "frame", "camera", "person_id")
 SEP = "\x1f"
@@ -32,6 +32,12 @@ def _key_strings(table, keys):
     if len(cols) == 1:
         return cols[0]
     return pc.binary_join_element_wise(*cols, SEP)
+
+
+def _filled(s) -> bool:
+    """True when a pandas column has a value other than null, "" and -1."""
+    empty = s.isna() | (s == -1) if s.dtype.kind in "iuf" else s.isna() | (s.astype(str) == "")
+    return not bool(empty.all())
 
 
 class ExcludeList:
@@ -56,17 +62,23 @@ class ExcludeList:
     def __len__(self) -> int:
         return self.table.num_rows
 
+    def check_input(self, names) -> list:
+        """The key columns the input (column ``names``) shares with the list; a usage error naming the list
+        when there are none (the list was made for another table)."""
+        keys = [k for k in self.keys if k in names]
+        if not keys:
+            shown = [n for n in names if not n.startswith("__")][:12]
+            raise UsageError(
+                f"{self.path}: none of its key columns ({', '.join(self.keys)}) is in the input; "
+                f"expected some of: {', '.join(shown)}"
+            )
+        return keys
+
     def reasons(self, table) -> np.ndarray:
         """``"excluded: <reason>"`` for each listed row of ``table`` (Arrow table/batch), ``""`` for the others."""
         import pyarrow.compute as pc
 
-        names = table.schema.names
-        keys = [k for k in self.keys if k in names]
-        if not keys:
-            raise HpeError(
-                f"{self.path}: none of its key columns ({', '.join(self.keys)}) is in the input; "
-                f"expected some of: {', '.join(names[:12])}"
-            )
+        keys = self.check_input(table.schema.names)
         listed = _key_strings(self.table, keys)
         here = _key_strings(table, keys)
         idx = pc.index_in(here, value_set=listed).fill_null(-1).to_numpy(zero_copy_only=False)
@@ -77,5 +89,7 @@ class ExcludeList:
         """:meth:`reasons` of a pandas DataFrame."""
         import pyarrow as pa
 
-        cols = [k for k in self.keys if k in frame.columns]
-        return self.reasons(pa.Table.from_pandas(frame[cols], preserve_index=False) if cols else pa.table({"_": []}))
+        # a key column holding only the readers' placeholders ("" or -1: the input has no such column) is absent
+        have = [k for k in KEY_COLUMNS if k in frame.columns and (len(frame) == 0 or _filled(frame[k]))]
+        cols = self.check_input(have)
+        return self.reasons(pa.Table.from_pandas(frame[cols], preserve_index=False))

@@ -291,9 +291,8 @@ def fit_expected_landmark_angle(abs_yaw_deg, angle_deg) -> dict:
     y = np.asarray(abs_yaw_deg, dtype=np.float64)
     v = np.asarray(angle_deg, dtype=np.float64)
     ok = np.isfinite(y) & np.isfinite(v)
-    const = {"a": LM_EXPECTED_0, "b": LM_EXPECTED_90, "source": "constants"}
     if ok.sum() < MIN_FIT_ROWS:
-        return const
+        return {"a": LM_EXPECTED_0, "b": LM_EXPECTED_90, "source": "constants"}
     y, v = np.minimum(y[ok], 90.0), v[ok]
     k = np.clip(np.searchsorted(FIT_EDGES, y, side="right") - 1, 0, len(FIT_EDGES) - 2)
     t, m, w = [], [], []
@@ -303,14 +302,53 @@ def fit_expected_landmark_angle(abs_yaw_deg, angle_deg) -> dict:
             t.append(np.median((y[sel] / 90.0) ** 2))
             m.append(np.median(v[sel]))
             w.append(np.sqrt(sel.sum()))
+    return _fit_bins(t, m, w, int(ok.sum()))
+
+
+def _fit_bins(t, m, w, n: int) -> dict:
+    """Weighted least squares of ``m = a + b t`` over the bins (``a >= FIT_FLOOR_DEG``, ``b >= 0``)."""
     if len(t) < 2:
-        return const
+        return {"a": LM_EXPECTED_0, "b": LM_EXPECTED_90, "source": "constants"}
     t, m, w = map(np.asarray, (t, m, w))
     X = np.stack([np.ones_like(t), t], 1) * w[:, None]
     (a, b), *_ = np.linalg.lstsq(X, m * w, rcond=None)
     b = max(float(b), 0.0)
     a = max(float(np.average(m - b * t, weights=w)) if b == 0.0 else float(a), FIT_FLOOR_DEG)
-    return {"a": a, "b": b, "source": f"fitted on {int(ok.sum())} rows"}
+    return {"a": a, "b": b, "source": f"fitted on {n} rows"}
+
+
+#: resolution of the streamed |yaw| and landmark-angle medians once a table has more than
+#: :data:`hpe_cli.metrics.sketch.EXACT_CAP` landmark-checked rows (degrees)
+FIT_RESOLUTION_DEG = 0.01
+
+
+def expected_angle_sketch(exact_cap=None):
+    """The bounded-memory collector of ``(|yaw|, landmark angle)`` pairs :func:`fit_expected_streamed` fits."""
+    from .sketch import EXACT_CAP, BinnedMedians
+
+    cap = EXACT_CAP if exact_cap is None else exact_cap
+    return BinnedMedians(FIT_EDGES, 90.0, 180.0, FIT_RESOLUTION_DEG, FIT_RESOLUTION_DEG, cap)
+
+
+def fit_expected_streamed(sketch) -> dict:
+    """:func:`fit_expected_landmark_angle` of the pairs added to ``sketch`` (:func:`expected_angle_sketch`).
+
+    Exact (the same result) while the sketch holds every pair; beyond, the
+    medians per |yaw| bin come from histograms of :data:`FIT_RESOLUTION_DEG`
+    degrees, and the median ``t`` of a bin is ``(median |yaw| / 90)^2``.
+    """
+    vals = sketch.values()
+    if vals is not None:
+        return fit_expected_landmark_angle(*vals)
+    if sketch.n < MIN_FIT_ROWS:
+        return {"a": LM_EXPECTED_0, "b": LM_EXPECTED_90, "source": "constants"}
+    t, m, w = [], [], []
+    for x, y in zip(sketch.x, sketch.y):  # six bins, not rows
+        if x.n >= FIT_MIN_BIN:
+            t.append((float(x.percentile(50)[0]) / 90.0) ** 2)
+            m.append(float(y.percentile(50)[0]))
+            w.append(np.sqrt(x.n))
+    return _fit_bins(t, m, w, int(sketch.n))
 
 
 def combined_score(*ratios) -> np.ndarray:

@@ -33,9 +33,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import HpeError
-from ..geometry.landmark_pose import MIN_POINTS, SCHEME_SIZES, fit_landmark_pose, fit_landmark_pose_perspective
+from ..geometry.landmark_pose import (
+    FIT_REASONS,
+    MIN_POINTS,
+    SCHEME_SIZES,
+    fit_landmark_pose,
+    fit_landmark_pose_perspective,
+)
 from ..metrics import consistency as mc
-from .consistency_notes import _Notes, _r, _reason_codes, _stats, suspects_table
+from ..metrics.sketch import EXACT_CAP, StreamQuantiles
+from .consistency_groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
+from .consistency_notes import _codes, _key_batches, _r, canonical_labels, suspects_table  # noqa: F401
+from .consistency_spill import RowSpill
 
 #: a landmark fit whose residual (per inter-ocular distance) is above this does not look like a face
 MAX_RESIDUAL = 0.35
@@ -43,8 +52,14 @@ MAX_RESIDUAL = 0.35
 MAX_JUMP_DEG = 5.0
 #: neighbours further apart than this many frames are not compared
 MAX_GAP_FRAMES = 10
-#: views of one head at one frame needed for a consensus
-MIN_VIEWS = 3
+#: landmark reason codes after the fit's own (:data:`hpe_cli.geometry.landmark_pose.FIT_REASONS`)
+LM_POOR, LM_NOT_FINITE, LM_NONE = len(FIT_REASONS), len(FIT_REASONS) + 1, len(FIT_REASONS) + 2
+LM_TEXTS = (
+    *FIT_REASONS,
+    f"landmarks do not fit the face model (residual > {MAX_RESIDUAL} inter-ocular)",
+    "label not finite",
+    "no landmark columns",
+)
 #: ID columns reported for suspects (those present, in this order)
 KEY_COLUMNS = ("file", "image", "image_id", "id", "path", "sequence", "frame", "camera", "person_id")
 
@@ -77,22 +92,10 @@ class Settings:
     suspect_score: float = mc.SUSPECT_SCORE
     worst: int = 20
     drawn: int = 12
-
-
-def _codes(col, table: dict) -> np.ndarray:
-    """Global integer codes of an Arrow column's values (strings or ints), via dictionary encoding."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    if pa.types.is_integer(col.type):
-        from ..io.layout import arrow_to_numpy
-
-        return arrow_to_numpy(col).astype(np.int64)
-    enc = pc.dictionary_encode(col.cast(pa.string()))
-    values = enc.dictionary.to_pylist()
-    remap = np.array([table.setdefault(v, len(table)) for v in values] + [-1], dtype=np.int64)
-    idx = enc.indices.fill_null(len(values)).to_numpy(zero_copy_only=False)
-    return remap[idx]
+    #: rows whose statistics are kept exactly; beyond, fixed-resolution histograms (flat memory)
+    exact_rows: int = EXACT_CAP
+    #: a Parquet table sorted by (sequence, frame) runs the views and time checks as its rows stream
+    stream_groups: bool = True
 
 
 def _relabel_meta(src) -> dict:
@@ -105,7 +108,15 @@ def _relabel_meta(src) -> dict:
 
 
 class ConsistencyAudit:
-    """Collects the evidence batch by batch (:meth:`add`), then ranks (:meth:`finish`)."""
+    """Collects the evidence batch by batch (:meth:`add`), then ranks (:meth:`finish`).
+
+    Memory is flat in rows for tables without a ``frame`` column: each row's
+    numbers go to a temporary file (:mod:`hpe_cli.pipelines.consistency_spill`,
+    61 bytes a row on disk); statistics are exact up to ``exact_cap`` rows
+    (``Settings.exact_rows``, :data:`hpe_cli.metrics.sketch.EXACT_CAP`), then histograms (resolution in the
+    JSON). Tables with a ``frame`` column also hold each row's label matrix and
+    keys (about 100 bytes a row) for the views and time checks.
+    """
 
     def __init__(self, src, settings: Settings | None = None):
         self.src = src
@@ -140,6 +151,16 @@ class ConsistencyAudit:
         self.view_reason = self._view_setup(cols)
         self.code_tables = {c: {} for c in ("sequence", "person_id", "camera")}
         self.parts = []
+        self.unread = 0
+        self.exact_cap = self.s.exact_rows
+        self.spill = RowSpill()
+        self.expected_sketch = mc.expected_angle_sketch(self.exact_cap)
+        self.stream = None
+        if self.has_frame and self.s.stream_groups:
+            from .consistency_stream import GroupStream, sorted_by_sequence_frame
+
+            if sorted_by_sequence_frame(src):
+                self.stream = GroupStream(self)
 
     # ------------------------------------------------------------------ set-up
     def _view_setup(self, cols) -> str:
@@ -190,58 +211,71 @@ class ConsistencyAudit:
         ``part``: :meth:`measure`'s result when a worker thread already made it.
         ``unread``: rows of the batch's block the reader could not parse (counted as not checked).
         """
-        self.unread = getattr(self, "unread", 0) + unread
+        self.unread += unread
         if part is None:
             part = self.measure(batch, A, lines)
-        part["line"] = np.asarray(lines, dtype=np.int64)
-        self.parts.append(part)
+        rec = part.pop("rec")
+        rec["line"] = lines
+        self.spill.append(rec)
+        self.expected_sketch.add(np.minimum(rec["abs_yaw"], 90.0), rec["lm_angle"])
+        if self.has_frame:  # the views and time checks need the groups: labels and keys of every row
+            for c in self.track_cols:
+                part[c] = _codes(part[c], self.code_tables[c])
+            if self.stream is not None:  # sorted by (sequence, frame): group by group
+                self.stream.add(part)
+            else:
+                self.parts.append(part)
 
     def measure(self, batch, A, lines=None):
         """The per-row evidence of one batch (thread-safe; None for a .mat folder without ``lines``).
 
         ``A``: the labels as canonical matrices ``(n, 3, 3)``, NaN where unusable.
+        Returns ``{"rec": records}`` (:data:`~hpe_cli.pipelines.consistency_spill.RECORD`,
+        ``line`` not yet set), plus the labels and keys of a table with a ``frame`` column.
         """
         if self.mat_landmarks is not None and lines is None:
             return None
         n = batch.num_rows
         A = np.asarray(A, dtype=np.float64).reshape(n, 3, 3)
         finite = np.isfinite(A).all((1, 2))
-        part = {"finite": finite}
-        part["abs_yaw"] = np.abs(mc.yaw_deg(A)).astype(np.float32)
-        lm_angle = np.full(n, np.nan)
-        lm_res = np.full(n, np.nan)
-        lm_reason = np.full(n, "no landmark columns", dtype=object)
+        rec = RowSpill.empty(n)
+        rec["abs_yaw"] = np.abs(mc.yaw_deg(A))
+        rec["A"] = A.reshape(n, 9)
         if self.scheme is not None:
             uv = self._landmarks(batch, lines)
             K, dist = self._intrinsics(batch)
             if K is None:
-                fit = fit_landmark_pose(uv, self.scheme)
+                fit = fit_landmark_pose(uv, self.scheme, reasons=False)
             else:  # calibrated cameras: corrected for the head's place in the image
-                fit = fit_landmark_pose_perspective(uv, self.scheme, K, dist)
+                fit = fit_landmark_pose_perspective(uv, self.scheme, K, dist, reasons=False)
             from ..rotation.distances import geodesic_deg
 
             lm_angle = geodesic_deg(np.where(finite[:, None, None], A, np.nan), fit["A"])
             lm_res = fit["residual"]
-            lm_reason = fit["reason"].copy()
-            poor = (lm_reason == "") & ~(lm_res <= MAX_RESIDUAL)
-            lm_reason[poor] = f"landmarks do not fit the face model (residual > {MAX_RESIDUAL} inter-ocular)"
+            code = fit["code"]  # FIT_REASONS: 0 fitted, 1 too few points, 2 degenerate
+            poor = (code == 0) & ~(lm_res <= MAX_RESIDUAL)
+            code[poor] = LM_POOR
             lm_angle[poor] = np.nan
-            # the label and the fit of rows that could be drawn among the worst (sparse: flat memory)
-            with np.errstate(invalid="ignore"):
-                keep = np.flatnonzero(
-                    (lm_angle / mc.expected_landmark_angle(np.abs(mc.yaw_deg(A))) > 1.0) | self.has_frame
-                )
-            part["pic"] = (keep, A[keep].astype(np.float32), fit["A"][keep].astype(np.float32))
-        lm_reason[~finite] = "label not finite"
+            rec["lm_res"] = lm_res
+            rec["F"] = fit["A"].reshape(n, 9)
+        else:
+            lm_angle = np.full(n, np.nan)
+            rec["lm_res"] = np.nan
+            rec["F"] = np.nan
+            code = np.full(n, LM_NONE, dtype=np.uint8)
+        code[~finite] = LM_NOT_FINITE
         lm_angle[~finite] = np.nan
-        part.update(lm_angle=lm_angle, lm_res=lm_res, lm_reason=lm_reason)
+        rec["lm_angle"] = lm_angle
+        rec["lm_code"] = code
+        part = {"rec": rec}
         if self.has_frame:
             from ..io.layout import arrow_to_numpy
 
+            part["finite"] = finite
             part["A"] = A
             part["frame"] = arrow_to_numpy(batch.column("frame")).astype(np.int64)
             for c in self.track_cols:
-                part[c] = batch.column(c)  # coded in input order by finish (one dictionary per column)
+                part[c] = batch.column(c)  # coded in input order by add (one dictionary per column)
         return part
 
     def _intrinsics(self, batch):
@@ -283,80 +317,91 @@ class ConsistencyAudit:
         from ..io.layout import arrow_to_numpy
 
         n = batch.num_rows
-        uv = np.empty((n, self.n_lm, 2))
-        for i in range(self.n_lm):  # columns, not rows
-            for k, a in enumerate("xy"):
-                uv[:, i, k] = arrow_to_numpy(batch.column(f"lm{i}_{a}"), np.float64)
-        return uv
+        cols = [arrow_to_numpy(batch.column(f"lm{i}_{a}"), np.float64) for i in range(self.n_lm) for a in "xy"]
+        uv = np.empty((n, 2 * self.n_lm))  # the fit's (n, L, 2) layout (a (2, L, n) one fits 2x slower)
+        for s in range(0, n, 1024):  # blocks of rows that stay in cache while their columns are interleaved
+            blk = uv[s : s + 1024]
+            for j, c in enumerate(cols):
+                blk[:, j] = c[s : s + 1024]
+        return uv.reshape(n, self.n_lm, 2)
 
     # ------------------------------------------------------------------ ranking
     def finish(self) -> dict:
-        """Run the views and time checks, score every row; return the JSON section (without ``worst``)."""
-        for p in self.parts:
-            for c in self.track_cols if self.has_frame else ():
-                if not isinstance(p[c], np.ndarray):
-                    p[c] = _codes(p[c], self.code_tables[c])
-        P = {k: np.concatenate([p[k] for p in self.parts]) if self.parts else np.zeros(0) for k in self.parts_keys()}
-        # rows with a landmark angle above the expected one: global index, label, landmark fit (for pictures)
-        idx, la, fa, offset = [np.zeros(0, np.int64)], [np.zeros((0, 3, 3))], [np.zeros((0, 3, 3))], 0
-        for p in self.parts:
-            if "pic" in p:
-                j, a, b = p.pop("pic")
-                idx.append(j + offset)
-                la.append(a)
-                fa.append(b)
-            offset += len(p["line"])
-        self.pic = (np.concatenate(idx), np.concatenate(la), np.concatenate(fa))
-        self.parts = []  # concatenated into P: do not hold the rows twice
-        N = len(P["line"])
+        """Run the views and time checks, score every row; return the JSON section (without ``worst``).
+
+        The rows are streamed back from the spill in chunks: what stays in memory is
+        the suspects' numbers (sparse), the landmark statistics (exact up to
+        :data:`~hpe_cli.metrics.sketch.EXACT_CAP` rows, histograms beyond) and, for
+        tables with a ``frame`` column, the views and time results per row.
+        """
+        self.expected = mc.fit_expected_streamed(self.expected_sketch)
+        self.expected_sketch = None
+        N = self.spill.n
         self.N = N
-        lm_angle, lm_reason = P["lm_angle"], P["lm_reason"]
-        self.expected = mc.fit_expected_landmark_angle(P["abs_yaw"], lm_angle)
-        lm_ratio = lm_angle / mc.expected_landmark_angle(P["abs_yaw"], self.expected["a"], self.expected["b"])
-        view_angle = np.full(N, np.nan)
-        view_reason = np.full(N, self.view_reason or "", dtype=object)
-        jump = np.full(N, np.nan)
-        time_reason = np.full(N, "no frame column" if not self.has_frame else "", dtype=object)
         out = {}
-        if self.has_frame and N:
-            finite = P["finite"]
-            view_angle, view_reason, out["views"] = self._views(P, view_reason, finite)
-            jump, time_reason, out["time"] = self._time(P, finite)
-        time_ratio = jump / (self.s.max_jump_deg / self.s.suspect_score)
-        view_ratio = view_angle / mc.VIEW_EXPECTED
-        score = mc.combined_score(lm_ratio, view_ratio, time_ratio)
-        suspect = score > self.s.suspect_score
-        checked = np.isfinite(score)
-        sus_idx = np.flatnonzero(suspect)
-        sus_txt = [self._why(i, lm_angle, lm_ratio, view_angle, jump) for i in sus_idx]  # suspects only
-        unchecked = np.flatnonzero(~checked)
-        codes, texts = _reason_codes(lm_reason[unchecked], view_reason[unchecked], time_reason[unchecked])
-        note = _Notes(N, sus_idx, sus_txt, unchecked, codes, texts)
-        f32 = np.float32  # the ranking keeps about 30 bytes per row
-        self.rows = {
-            "line": P["line"],
-            "landmark_angle": lm_angle.astype(f32),
-            "landmark_residual": P["lm_res"].astype(f32),
-            "view_angle": view_angle.astype(f32),
-            "jump_rate": jump.astype(f32),
-            "consistency_score": score.astype(f32),
-            "suspect": suspect,
-            "consistency_note": note,
+        self.group_res = None
+        if self.stream is not None:
+            out["views"], out["time"] = self.stream.finish()
+            self.group_res = self.stream
+        elif self.has_frame and N:
+            # one key at a time, each part's array released once concatenated: the rows are not held twice
+            P = {k: np.concatenate([p.pop(k) for p in self.parts]) for k in ["A", "finite", "frame", *self.track_cols]}
+            self.parts = []
+            view_angle, view_code, out["views"] = views(self, P, P["finite"])
+            jump, time_code, out["time"] = time_check(self, P, P["finite"])
+            del P
+            self.group_res = (view_angle, view_code, jump, time_code)
+        lm_stats = StreamQuantiles(180.0, 0.001, self.exact_cap)
+        res_stats = StreamQuantiles(MAX_RESIDUAL, 1e-5, self.exact_cap)
+        self.sketches = {  # for the page's histograms
+            "landmark_angle": lm_stats,
+            "view_angle": StreamQuantiles(180.0, 0.001, self.exact_cap),
+            "consistency_score": StreamQuantiles(200.0, 0.002, self.exact_cap),
         }
-        lm_reasons = dict(Counter(lm_reason[~np.isfinite(lm_angle)].tolist()).most_common(10))
-        del P, lm_reason, view_reason, time_reason, lm_ratio
-        lm_angle = self.rows["landmark_angle"]
-        lm_ok = np.isfinite(lm_angle)
-        reasons = Counter({texts[k]: int(c) for k, c in zip(*np.unique(codes, return_counts=True))})
-        unread = getattr(self, "unread", 0)
+        lm_counts = np.zeros(256, np.int64)
+        lm_first = np.full(256, np.iinfo(np.int64).max)
+        combos = {}  # not-checked (landmarks, views, time) code triple -> [rows, first row]
+        sus = []
+        checked = 0
+        for off, rec in self.spill.chunks():
+            sc = self._score(rec, off)
+            lm_ok = np.isfinite(sc["lm_angle32"])
+            lm_stats.add(sc["lm_angle32"][lm_ok])
+            res_stats.add(rec["lm_res"][lm_ok])
+            self.sketches["view_angle"].add(sc["view_angle"].astype(np.float32))
+            self.sketches["consistency_score"].add(sc["score"])
+            miss = np.flatnonzero(~np.isfinite(rec["lm_angle"]))
+            np.add.at(lm_counts, rec["lm_code"][miss], 1)
+            np.minimum.at(lm_first, rec["lm_code"][miss], miss + off)
+            checked += int(sc["checked"].sum())
+            un = np.flatnonzero(~sc["checked"])
+            key = (rec["lm_code"][un].astype(np.int64) * 256 + sc["view_code"][un]) * 256 + sc["time_code"][un]
+            keys, first, cnt = np.unique(key, return_index=True, return_counts=True)
+            for k_, f_, c_ in zip(keys.tolist(), first.tolist(), cnt.tolist()):  # distinct reasons, not rows
+                e = combos.setdefault(k_, [0, int(un[f_]) + off])
+                e[0] += c_
+            j = np.flatnonzero(sc["suspect"])
+            if len(j):
+                sus.append({k_: v[j] for k_, v in sc.items() if k_ not in ("checked", "suspect")} | {"idx": j + off})
+        sk = ["idx", "line", "score", "lm_angle", "lm_ratio", "view_angle", "jump", "lm_angle32"]
+        self.sus = {k_: np.concatenate([p[k_] for p in sus]) for k_ in sk} if sus else None
+        n_sus = 0 if self.sus is None else len(self.sus["idx"])
+        reasons = Counter()
+        for key, (c_, _) in sorted(combos.items(), key=lambda kv: kv[1][1]):  # first seen first
+            lm_c, rest = divmod(key, 256 * 256)
+            v_c, t_c = divmod(rest, 256)
+            reasons[self._unchecked_text(lm_c, v_c, t_c)] += c_
+        unread = self.unread
         if unread:
             reasons["not checked: label not readable"] += unread
+        seen = np.flatnonzero(lm_counts)
+        lm_reasons = {LM_TEXTS[c]: int(lm_counts[c]) for c in seen[np.argsort(lm_first[seen], kind="stable")]}
         report = {
             "rows": int(N) + unread,
-            "checked": int(checked.sum()),
-            "not_checked": int((~checked).sum()) + unread,
+            "checked": checked,
+            "not_checked": int(N - checked) + unread,
             "not_checked_reasons": dict(reasons.most_common(10)),
-            "suspects": int(suspect.sum()),
+            "suspects": n_sus,
             "settings": {
                 "suspect_score": self.s.suspect_score,
                 "score": "largest of: landmark angle / expected(|yaw|), view angle / "
@@ -371,10 +416,10 @@ class ConsistencyAudit:
                 "model": MODEL,
                 "points": POINTS.get(self.scheme),
                 "min_points": MIN_POINTS,
-                "checked": int(lm_ok.sum()),
-                "angle_deg": _stats(lm_angle[lm_ok]),
-                "residual": _stats(self.rows["landmark_residual"][lm_ok]),
-                "not_checked_reasons": lm_reasons,
+                "checked": int(lm_stats.n),
+                "angle_deg": lm_stats.stats(),
+                "residual": res_stats.stats(),
+                "not_checked_reasons": dict(Counter(lm_reasons).most_common(10)),
             },
             **out,
         }
@@ -384,155 +429,129 @@ class ConsistencyAudit:
             report["time"] = {"checked": 0, "reason": "no frame column"}
         return report
 
-    def parts_keys(self):
-        keys = ["line", "finite", "abs_yaw", "lm_angle", "lm_res", "lm_reason"]
-        if self.has_frame:
-            keys += ["A", "frame"] + self.track_cols
-        return keys
+    def _score(self, rec, off: int) -> dict:
+        """Scores of the spilled rows ``rec`` (global rows ``off ..``): ratios, score, suspect, codes."""
+        n = len(rec)
+        lm_angle = rec["lm_angle"]
+        lm_ratio = lm_angle / mc.expected_landmark_angle(rec["abs_yaw"], self.expected["a"], self.expected["b"])
+        if isinstance(self.group_res, tuple):
+            va, vc, ju, tc = (a[off : off + n] for a in self.group_res)
+        elif self.group_res is not None:  # streamed: read back from its file
+            va, vc, ju, tc = self.group_res.read(off, n)
+        else:
+            va, ju = np.full(n, np.nan), np.full(n, np.nan)
+            vc, tc = np.zeros(n, np.uint8), np.zeros(n, np.uint8)
+        time_ratio = ju / (self.s.max_jump_deg / self.s.suspect_score)
+        score = mc.combined_score(lm_ratio, va / mc.VIEW_EXPECTED, time_ratio)
+        f32 = np.float32
+        return {
+            "line": rec["line"],
+            "lm_angle": lm_angle,
+            "lm_angle32": lm_angle.astype(f32),
+            "lm_ratio": lm_ratio,
+            "view_angle": va,
+            "jump": ju,
+            "view_code": vc,
+            "time_code": tc,
+            "score": score.astype(f32),
+            "suspect": score > self.s.suspect_score,
+            "checked": np.isfinite(score),
+        }
 
-    def _why(self, i, lm_angle, lm_ratio, view_angle, jump) -> str:
+    def _unchecked_text(self, lm_code, view_code, time_code) -> str:
+        v = view_texts(self.view_reason or "")[view_code]
+        t = time_texts(self.has_frame, self.s.max_gap)[time_code]
+        return f"not checked: landmarks: {LM_TEXTS[lm_code]}; views: {v}; time: {t}"
+
+    def _why(self, lm_angle, lm_ratio, view_angle, jump) -> str:
         parts = []
-        if lm_ratio[i] > self.s.suspect_score:
-            parts.append(f"landmarks {lm_angle[i]:.1f} deg from the label")
-        if view_angle[i] / mc.VIEW_EXPECTED > self.s.suspect_score:
-            parts.append(f"views: {view_angle[i]:.1f} deg from the consensus of its views")
-        if jump[i] * self.s.suspect_score / self.s.max_jump_deg > self.s.suspect_score:
-            parts.append(f"time: jumps {jump[i]:.1f} deg per frame away from its neighbours and back")
+        if lm_ratio > self.s.suspect_score:
+            parts.append(f"landmarks {lm_angle:.1f} deg from the label")
+        if view_angle / mc.VIEW_EXPECTED > self.s.suspect_score:
+            parts.append(f"views: {view_angle:.1f} deg from the consensus of its views")
+        if jump * self.s.suspect_score / self.s.max_jump_deg > self.s.suspect_score:
+            parts.append(f"time: jumps {jump:.1f} deg per frame away from its neighbours and back")
         return "; ".join(parts)
 
-    def _views(self, P, view_reason, finite):
-        N = len(P["line"])
-        angle = np.full(N, np.nan)
-        if self.view_reason:
-            return angle, view_reason, {"checked": 0, "reason": self.view_reason}
-        cam_names = {v: k for k, v in self.code_tables["camera"].items()}
-        seq_names = {v: k for k, v in self.code_tables["sequence"].items()}
-        cam_R = np.full((N, 3, 3), np.nan)
-        cams = P["camera"]
-        seqs = P.get("sequence")
-        for code in np.unique(cams):
-            sel = cams == code
-            name = cam_names.get(int(code))
-            if None in self.cams:
-                cam = self.cams[None].get(name)
-                if cam is not None:
-                    cam_R[sel] = cam[0]
-            else:
-                for sc in np.unique(seqs[sel]):
-                    cam = self.cams.get(seq_names.get(int(sc)), {}).get(name)
-                    if cam is not None:
-                        cam_R[sel & (seqs == sc)] = cam[0]
-        have_cam = np.isfinite(cam_R).all((1, 2))
-        view_reason[:] = ""
-        view_reason[~have_cam] = "camera not in the calibration"
-        view_reason[~finite] = "label not finite"
-        usable = have_cam & finite
-        keys = [P[c] for c in self.view_cols] + [P["frame"]]
-        idx = np.flatnonzero(usable)
-        order = idx[np.lexsort([k[idx] for k in reversed(keys)])]
-        kmat = np.stack([k[order] for k in keys], 1)
-        starts = mc.group_starts(kmat)
-        sizes = np.diff(np.append(starts, len(order)))
-        big = np.repeat(sizes >= MIN_VIEWS, sizes)
-        view_reason[order[~big]] = f"fewer than {MIN_VIEWS} views of this head at this frame"
-        order = order[big]
-        starts = mc.group_starts(kmat[big])
-        res = mc.view_consensus(P["A"][order], cam_R[order], starts)
-        angle[order] = res["angle"]
-        cams_out, named = [], []
-        if len(order):
-            off = mc.camera_offsets(res["offset"], cams[order])
-            for k in np.argsort(-off["angle"]):
-                entry = {
-                    "camera": cam_names.get(int(off["codes"][k])),
-                    "rows": int(off["n"][k]),
-                    "offset_deg": round(float(off["angle"][k]), 4),
-                    "rotvec_deg": [round(float(v), 4) for v in off["median"][k]],
-                    "significant": bool(off["significant"][k]),
-                }
-                cams_out.append(entry)
-                if entry["significant"]:
-                    named.append(entry["camera"])
-        ok = np.isfinite(angle)
-        summary = {
-            "calibration": self.calibration_files,
-            "checked": int(ok.sum()),
-            "groups": int(len(starts)),
-            "min_views": MIN_VIEWS,
-            "angle_deg": _stats(angle[ok]),
-            "cameras_with_offset": named,
-            "cameras": cams_out,
-        }
-        return angle, view_reason, summary
-
-    def _time(self, P, finite):
-        N = len(P["line"])
-        reason = np.full(N, "", dtype=object)
-        keys = [P[c] for c in self.track_cols] + [P["frame"]]
-        idx = np.flatnonzero(finite)
-        order = idx[np.lexsort([k[idx] for k in reversed(keys)])]
-        tracks = np.stack([k[order] for k in keys[:-1]], 1) if self.track_cols else np.zeros((len(order), 1))
-        starts = mc.group_starts(tracks)
-        res = mc.temporal_jumps(P["A"][order], P["frame"][order], starts, self.s.max_gap)
-        rate = np.full(N, np.nan)
-        rate[order] = res["rate"]
-        reason[~np.isfinite(rate)] = f"no neighbour on both sides within {self.s.max_gap} frames"
-        reason[~finite] = "label not finite"
-        ok = np.isfinite(rate)
-        flagged = ok & (rate > self.s.max_jump_deg)
-        summary = {
-            "tracks": [*self.track_cols] or ["(whole table)"],
-            "checked": int(ok.sum()),
-            "jumps": int(flagged.sum()),
-            "rate_deg_per_frame": _stats(rate[ok]),
-        }
-        return rate, reason, summary
+    def _notes(self, sc, rec) -> np.ndarray:
+        """``consistency_note`` of scored rows: the suspects' reasons, the not-checked reasons, else ""."""
+        out = np.full(len(rec), "", dtype=object)
+        for i in np.flatnonzero(sc["suspect"]):  # suspects only
+            out[i] = self._why(sc["lm_angle"][i], sc["lm_ratio"][i], sc["view_angle"][i], sc["jump"][i])
+        un = np.flatnonzero(~sc["checked"])
+        if len(un):
+            key = (rec["lm_code"][un].astype(np.int64) * 256 + sc["view_code"][un]) * 256 + sc["time_code"][un]
+            keys, inv = np.unique(key, return_inverse=True)
+            texts = [self._unchecked_text(k // 65536, (k // 256) % 256, k % 256) for k in keys.tolist()]
+            out[un] = np.array(texts, dtype=object)[inv.reshape(-1)]
+        return out
 
     # ------------------------------------------------------------------ outputs
     def columns(self, offset: int, n: int) -> dict:
-        """The output columns of rows ``offset .. offset + n`` (in input order)."""
-        out = {c: self.rows[c][offset : offset + n] for c in COLUMNS if c != "consistency_note"}
-        out["consistency_note"] = self.rows["consistency_note"].slice(offset, n)
-        return {c: out[c] for c in COLUMNS}
+        """The output columns of rows ``offset .. offset + n`` (in input order), read back from the spill."""
+        rec = self.spill.read(offset, n)
+        sc = self._score(rec, offset)
+        f32 = np.float32
+        return {
+            "landmark_angle": sc["lm_angle32"],
+            "landmark_residual": rec["lm_res"].astype(f32),
+            "view_angle": sc["view_angle"].astype(f32),
+            "jump_rate": sc["jump"].astype(f32),
+            "consistency_score": sc["score"],
+            "suspect": sc["suspect"],
+            "consistency_note": self._notes(sc, rec),
+        }
+
+    def row(self, i: int) -> dict:
+        """One row's ``line``, ``score``, ``note``, ``landmark_angle``, label ``A`` and landmark fit ``F`` (3, 3)."""
+        rec = self.spill.read(int(i), 1)
+        sc = self._score(rec, int(i))
+        F = rec["F"][0].astype(np.float64).reshape(3, 3)
+        return {
+            "line": int(rec["line"][0]),
+            "score": float(sc["score"][0]),
+            "note": str(self._notes(sc, rec)[0]),
+            "landmark_angle": float(sc["lm_angle32"][0]),
+            "A": rec["A"][0].astype(np.float64).reshape(3, 3),
+            "F": F if np.isfinite(F).all() else None,
+        }
 
     def worst_order(self) -> np.ndarray:
         """Row indices of the suspects, highest score first."""
-        s = self.rows["consistency_score"]
-        sus = np.flatnonzero(self.rows["suspect"])
-        return sus[np.argsort(-s[sus], kind="stable")]
+        if self.sus is None:
+            return np.zeros(0, np.int64)
+        return self.sus["idx"][np.argsort(-self.sus["score"], kind="stable")]
 
     def describe_rows(self, batches, idx, key_cols) -> list:
-        """``{row, key columns..., score, reason}`` of the rows ``idx`` (global indices), read from ``batches``."""
-        want = {int(i): k for k, i in enumerate(idx)}
+        """``{row, key columns..., score, reason}`` of the suspects ``idx`` (global indices), read from ``batches``."""
+        idx = np.asarray(idx, dtype=np.int64)
         out = [None] * len(idx)
+        if not len(idx):
+            return out
+        at = np.searchsorted(self.sus["idx"], idx)  # the suspects' numbers (sorted by row)
+        order = np.argsort(idx, kind="stable")
+        srt = idx[order]
         offset = 0
         for batch in batches:
             n = batch.num_rows
-            hit = [i for i in want if offset <= i < offset + n]
-            if hit:
-                sub = batch.select(key_cols).take(np.array([i - offset for i in hit])).to_pylist()
-                for i, rec in zip(hit, sub):
-                    out[want[i]] = {
-                        "row": int(self.rows["line"][i]),
+            lo, hi = np.searchsorted(srt, [offset, offset + n])
+            if hi > lo:
+                ks = order[lo:hi]
+                sub = batch.select(key_cols).take(srt[lo:hi] - offset).to_pylist()
+                for k, rec in zip(ks.tolist(), sub):
+                    a = at[k]
+                    S = self.sus
+                    out[k] = {
+                        "row": int(S["line"][a]),
                         **rec,
-                        "score": round(float(self.rows["consistency_score"][i]), 3),
-                        "landmark_angle": _r(self.rows["landmark_angle"][i]),
-                        "view_angle": _r(self.rows["view_angle"][i]),
-                        "jump_rate": _r(self.rows["jump_rate"][i]),
-                        "reason": self.rows["consistency_note"][i],
+                        "score": round(float(S["score"][a]), 3),
+                        "landmark_angle": _r(S["lm_angle32"][a]),
+                        "view_angle": _r(np.float32(S["view_angle"][a])),
+                        "jump_rate": _r(np.float32(S["jump"][a])),
+                        "reason": self._why(S["lm_angle"][a], S["lm_ratio"][a], S["view_angle"][a], S["jump"][a]),
                     }
             offset += n
         return out
-
-
-def canonical_labels(system, cols, eff, res) -> np.ndarray:
-    """The audited labels as canonical matrices ``(n, 3, 3)``; NaN for rows that are not finite rotations."""
-    values = np.stack(cols, axis=-1)
-    bad = res["non_finite"] | res.get("not_rotation", False)
-    values = np.where(np.asarray(bad)[:, None], 0.0, values)
-    A = system.to_canonical(system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3))
-    A[np.asarray(bad)] = np.nan
-    return A
 
 
 def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None, images=None) -> dict:
@@ -546,12 +565,12 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None
     key_cols = [c for c in KEY_COLUMNS if c in cons.src.columns]
     order = cons.worst_order()
     top = order[: cons.s.worst]
-    report["worst"] = cons.describe_rows(reread(), top, key_cols)
+    report["worst"] = cons.describe_rows(_key_batches(cons, reread, key_cols), top, key_cols)
     if suspects:
         from ..io import write_table
 
-        rows = report["worst"] if len(order) <= len(top) else cons.describe_rows(reread(), order, key_cols)
-        write_table(suspects_table(rows, key_cols), suspects, overwrite=overwrite)
+        table = suspects_table(cons, _key_batches(cons, reread, key_cols), order, key_cols)
+        write_table(table, suspects, overwrite=overwrite)
         report["suspects_file"] = str(suspects)
     if plots:
         from .draw_consistency import FOLDER, consistency_page

@@ -5,47 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 
-def _reason_codes(lm, view, time) -> tuple:
-    """``(codes, texts)``: ``texts[codes[i]]`` is ``"not checked: landmarks: ...; views: ...; time: ..."``
-    for row ``i``; each distinct combination is formatted once."""
-    import pandas as pd
-
-    if len(lm) == 0:
-        return np.zeros(0, np.int32), []
-    codes, uniq = zip(*(pd.factorize(pd.Series(a, dtype=object)) for a in (lm, view, time)))
-    sizes = [len(u) + 1 for u in uniq]
-    key = (np.asarray(codes[0], np.int64) * sizes[1] + codes[1]) * sizes[2] + codes[2]
-    combos, inverse = np.unique(key, return_inverse=True)
-    text = []
-    for k in combos:
-        a, rest = divmod(int(k), sizes[1] * sizes[2])
-        b, c = divmod(rest, sizes[2])
-        text.append(f"not checked: landmarks: {uniq[0][a]}; views: {uniq[1][b]}; time: {uniq[2][c]}")
-    return inverse.reshape(-1).astype(np.int32), text
-
-
-class _Notes:
-    """``consistency_note`` of every row without an array of N strings: the suspects' reasons (sparse) and a
-    code per not-checked row into the few distinct not-checked texts; ``""`` for the other rows."""
-
-    def __init__(self, n, sus_idx, sus_txt, un_idx, un_codes, un_texts):
-        self.n = n
-        self.sus_idx, self.sus_txt = np.asarray(sus_idx, np.int64), np.array(sus_txt + [""], dtype=object)
-        self.un_idx, self.un_codes = np.asarray(un_idx, np.int64), np.asarray(un_codes, np.int32)
-        self.un_texts = np.array(list(un_texts) + [""], dtype=object)
-
-    def slice(self, offset: int, n: int) -> np.ndarray:
-        out = np.full(n, "", dtype=object)
-        lo, hi = np.searchsorted(self.un_idx, [offset, offset + n])
-        out[self.un_idx[lo:hi] - offset] = self.un_texts[self.un_codes[lo:hi]]
-        lo, hi = np.searchsorted(self.sus_idx, [offset, offset + n])
-        out[self.sus_idx[lo:hi] - offset] = self.sus_txt[lo:hi]
-        return out
-
-    def __getitem__(self, i) -> str:
-        return str(self.slice(int(i), 1)[0])
-
-
 def _r(v):
     return None if not np.isfinite(v) else round(float(v), 3)
 
@@ -58,12 +17,80 @@ def _stats(x) -> dict:
     return {"n": int(x.size), "median": _r(q[0]), "p90": _r(q[1]), "p99": _r(q[2]), "max": _r(x.max())}
 
 
-def suspects_table(rows: list, key_cols: list):
-    """The suspects key list: key columns, ``row``, ``score`` and ``reason`` (what ``--exclude`` reads)."""
+def suspects_table(cons, batches, order, key_cols):
+    """The suspects key list, highest score first: key columns, ``row``, ``score``, ``reason`` (what
+    ``--exclude`` reads).
+
+    ``order``: the suspects' global row indices (:meth:`ConsistencyAudit.worst_order`);
+    ``batches``: the input again (at least ``key_cols``), in input order. The key
+    columns are taken from each batch as Arrow arrays (no Python object per value).
+    """
     import pyarrow as pa
 
-    cols = {c: [r.get(c) for r in rows] for c in key_cols}
-    cols["row"] = [r["row"] for r in rows]
-    cols["score"] = [r["score"] for r in rows]
-    cols["reason"] = [r["reason"] for r in rows]
+    idx = np.asarray(order, dtype=np.int64)
+    by_row = np.argsort(idx, kind="stable")
+    srt = idx[by_row]
+    pieces, offset = [], 0
+    for batch in batches if key_cols else ():
+        n = batch.num_rows
+        lo, hi = np.searchsorted(srt, [offset, offset + n])
+        if hi > lo:
+            pieces.append(pa.Table.from_batches([batch.select(key_cols).take(pa.array(srt[lo:hi] - offset))]))
+        offset += n
+    cols = {}
+    if key_cols:
+        keys = pa.concat_tables(pieces) if pieces else None
+        back = np.empty_like(by_row)
+        back[by_row] = np.arange(len(by_row))  # input order -> score order
+        for c in key_cols:
+            cols[c] = keys.column(c).take(pa.array(back)) if keys is not None else pa.array([], pa.string())
+    S = cons.sus
+    at = np.searchsorted(S["idx"], idx) if S is not None else np.zeros(0, np.int64)
+    cols["row"] = pa.array(S["line"][at] if S is not None else [], pa.int64())
+    cols["score"] = pa.array([round(float(v), 3) for v in (S["score"][at] if S is not None else [])], pa.float64())
+    why = [cons._why(*v) for v in zip(*(S[k][at] for k in ("lm_angle", "lm_ratio", "view_angle", "jump")))] if S else []
+    cols["reason"] = pa.array(why, pa.string())
     return pa.table(cols)
+
+
+def _key_batches(cons, reread, key_cols):
+    """Batches of (at least) the key columns, in input order, for :meth:`ConsistencyAudit.describe_rows`.
+
+    A Parquet file read under its own column names is read again for the key
+    columns only (Parquet rows are never set aside, so the row indices agree);
+    anything else is read again whole with ``reread()``.
+    """
+    src = cons.src
+    if src.kind == "parquet" and key_cols:
+        import pyarrow.parquet as pq
+
+        names = set(pq.ParquetFile(src.path).schema_arrow.names)
+        if set(key_cols) <= names and names == set(src.columns) - {"__line__"}:
+            return pq.ParquetFile(src.path).iter_batches(65_536, columns=key_cols)
+    return reread()
+
+
+def canonical_labels(system, cols, eff, res) -> np.ndarray:
+    """The audited labels as canonical matrices ``(n, 3, 3)``; NaN for rows that are not finite rotations."""
+    values = np.stack(cols, axis=-1)
+    bad = res["non_finite"] | res.get("not_rotation", False)
+    values = np.where(np.asarray(bad)[:, None], 0.0, values)
+    A = system.to_canonical(system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3))
+    A[np.asarray(bad)] = np.nan
+    return A
+
+
+def _codes(col, table: dict) -> np.ndarray:
+    """Global integer codes of an Arrow column's values (strings or ints), via dictionary encoding."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if pa.types.is_integer(col.type):
+        from ..io.layout import arrow_to_numpy
+
+        return arrow_to_numpy(col).astype(np.int64)
+    enc = pc.dictionary_encode(col.cast(pa.string()))
+    values = enc.dictionary.to_pylist()
+    remap = np.array([table.setdefault(v, len(table)) for v in values] + [-1], dtype=np.int64)
+    idx = enc.indices.fill_null(len(values)).to_numpy(zero_copy_only=False)
+    return remap[idx]

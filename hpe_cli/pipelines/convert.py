@@ -159,6 +159,7 @@ def run_convert(
         from ..io.exclude import ExcludeList
 
         exclude = ExcludeList(exclude)
+        exclude.check_input(src.columns)  # before anything is written, even for an empty input
     with TableWriter(output, overwrite, meta) as writer, ThreadPoolExecutor(workers) as pool:
         pending = deque()
         try:

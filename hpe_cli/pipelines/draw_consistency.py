@@ -52,10 +52,46 @@ def consistency_page(cons, report, batches, idx, plots_dir, images=None, overwri
 
     with ensure_transaction(), staged_dir(Path(plots_dir) / FOLDER, overwrite) as stage:
         out = _pictures(cons, batches, idx, plots_dir, images, stage)
-        score_figure(cons.rows, stage / "scores.png")
+        score_figure(score_histograms(cons), stage / "scores.png")
         title = f"hpe audit --consistency: {cons.src.path.name}"
         (stage / "index.html").write_text(page_html(title, report, out), encoding="utf-8")
     return out
+
+
+def score_histograms(cons, bins: int = 40) -> dict:
+    """Histograms of ``landmark_angle``, ``view_angle`` and ``consistency_score`` over all rows, in flat memory.
+
+    Each is binned over ``[max(min, 0), min(max, p99.5)]`` (values clipped to
+    ``[0, p99.5]``; p99.5 from the audit's streamed quantiles) in one more pass
+    over the audit's spill. Returns ``{column: {"counts", "edges", "median", "n"}}``
+    (``None`` for a column without finite values).
+    """
+    sk = cons.sketches
+    lims, counts = {}, {}
+    for col, q in sk.items():
+        if q.n:
+            p = float(q.percentile(99.5)[0]) if q.n > 20 else q.max
+            lo, hi = max(q.min, 0.0), min(q.max, p)
+            lims[col] = (p, np.histogram_bin_edges(np.array([lo, hi]), bins=bins, range=(lo, hi)))
+            counts[col] = np.zeros(bins, np.int64)
+    if lims:
+        for off, rec in cons.spill.chunks():
+            sc = cons._score(rec, off)
+            vals = {
+                "landmark_angle": sc["lm_angle32"],
+                "view_angle": sc["view_angle"].astype(np.float32),
+                "consistency_score": sc["score"],
+            }
+            for col, (p, edges) in lims.items():
+                v = np.asarray(vals[col], np.float64)
+                v = v[np.isfinite(v)]
+                counts[col] += np.histogram(np.clip(v, 0, p), bins=edges)[0]
+    return {
+        col: None
+        if col not in lims
+        else {"counts": counts[col], "edges": lims[col][1], "median": float(q.percentile(50)[0]), "n": int(q.n)}
+        for col, q in sk.items()
+    }
 
 
 def _pictures(cons, batches, idx, plots_dir, images, stage) -> dict:
@@ -70,7 +106,7 @@ def _pictures(cons, batches, idx, plots_dir, images, stage) -> dict:
         return out
     names = _image_names(frame)
     if names is None:
-        out["missing"] = [(f"row {int(cons.rows['line'][i])}", "the table names no images") for i in idx]
+        out["missing"] = [(f"row {cons.row(i)['line']}", "the table names no images") for i in idx]
         return out
     src = cons.src
     root = Path(images) if images else (src.path if src.path.is_dir() else src.path.parent)
@@ -79,7 +115,7 @@ def _pictures(cons, batches, idx, plots_dir, images, stage) -> dict:
     n_lm = landmark_count(frame.columns)
     refs, jobs = [], []
     for k, i in enumerate(idx):
-        line = int(cons.rows["line"][i])
+        line = cons.row(i)["line"]
         where = str(frame["file"].iat[k]) if "file" in frame.columns else src.where(line).split(": ", 1)[-1]
         ref = resolver.find(names[k], seqs[k], cams[k], frs[k]) if names[k] else None
         if ref is None:
@@ -96,17 +132,15 @@ def _pictures(cons, batches, idx, plots_dir, images, stage) -> dict:
             uv = np.zeros((0, 2))
         refs.append(ref)
         jobs.append((int(i), where, np.asarray(uv, dtype=np.float64)))
-    pic_idx, pic_A, pic_fit = cons.pic
     for j, img, why in ImageResolver.read(refs):
         i, where, uv = jobs[j]
         if img is None:
             out["missing"].append((where, why))
             continue
-        hit = np.flatnonzero(pic_idx == i)
-        A, F = (pic_A[hit[0]], pic_fit[hit[0]]) if len(hit) else (None, None)
+        r = cons.row(i)  # label and landmark fit from the audit's spill (half precision: for drawing)
         name = f"worst_{len(out['pictures']) + 1}.png"
-        caption = f"{where}: score {cons.rows['consistency_score'][i]:.1f}; {cons.rows['consistency_note'][i]}"
-        _draw(img, uv, A, F, cons.rows["landmark_angle"][i], stage / name, Path(plots_dir) / FOLDER / name)
+        caption = f"{where}: score {r['score']:.1f}; {r['note']}"
+        _draw(img, uv, r["A"], r["F"], r["landmark_angle"], stage / name, Path(plots_dir) / FOLDER / name)
         out["pictures"].append({"path": name, "caption": caption})
     return out
 

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import html
 
-import numpy as np
 
+def score_figure(hists: dict, path) -> None:
+    """Histograms of ``landmark_angle``, ``view_angle`` and ``consistency_score`` as a PNG.
 
-def score_figure(rows: dict, path) -> None:
-    """Histograms of ``landmark_angle``, ``view_angle`` and ``consistency_score`` (finite values) as a PNG."""
+    ``hists``: ``{column: {"counts", "edges", "median", "n"} or None}``, binned by
+    the caller (:func:`hpe_cli.pipelines.draw_consistency.score_histograms`).
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -23,12 +25,11 @@ def score_figure(rows: dict, path) -> None:
         (("landmark_angle", "degrees"), ("view_angle", "degrees"), ("consistency_score", "x expected"))
     ):
         ax = fig.add_subplot(1, 3, k + 1)
-        v = np.asarray(rows[col], dtype=np.float64)
-        v = v[np.isfinite(v)]
-        if len(v):
-            ax.hist(np.clip(v, 0, np.percentile(v, 99.5) if len(v) > 20 else v.max()), bins=40, color="#34699a")
-            ax.axvline(np.median(v), color="#c0392b", linewidth=1)
-        ax.set_title(f"{col}: {len(v)} rows (red: median)", fontsize=9)
+        h = hists.get(col)
+        if h:
+            ax.stairs(h["counts"], h["edges"], fill=True, color="#34699a")
+            ax.axvline(h["median"], color="#c0392b", linewidth=1)
+        ax.set_title(f"{col}: {h['n'] if h else 0} rows (red: median)", fontsize=9)
         ax.set_xlabel(unit)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
