@@ -116,7 +116,7 @@ def view(
     \b
     Examples:
       hpe view AFLW2000/ -o aflw_page/
-      hpe view labels.parquet -o page/ --images 300W_LP/
+      hpe view labels.parquet -o page/ --images frames/
       hpe view corrected.parquet legacy.parquet -o compare/ --images panoptic/ --rejects missing.csv
       hpe view gt.csv preds.csv -o errors/ --other-system 6drepnet --key image
       hpe view labels.parquet -o page/ --overwrite   # after the table grew: reuses the thumbnails

@@ -53,6 +53,7 @@ SETUP = [
     "hpe evaluate preds.csv AFLW2000/ --pred-system 6drepnet --gt-system 300w_lp -o errors.parquet",
     "hpe relabel-panoptic SEQ -o pizza.parquet --rejects pizza_rejects.csv",
     "hpe relabel-panoptic SEQ -o out/labels.parquet --rejects pizza_rejects2.csv",
+    "hpe relabel-panoptic SEQ -o panoptic_labels.parquet --rejects pizza_rejects3.csv",
 ]
 
 #: examples whose point is a failure exit on these samples: line -> (exit code, text the error names)
@@ -72,6 +73,10 @@ NOT_RUN = {
     "hpe relabel-panoptic ROOT -o labels.parquet --frame crop --cameras whenet-haggling --min-change 5": "WHENet's "
     "haggling cameras are not in the synthetic sample's calibration (ROOT/seqB)",
     "hpe relabel-panoptic ROOT -o labels.parquet --scheduler tcp://head:8786 --resume": NEEDS["dask"],
+    "hpe export labels.parquet -o out/whenet --layout whenet --images ROOT --scheduler tcp://head:8786 --resume": NEEDS[
+        "dask"
+    ],
+    "hpe view corrected.parquet legacy.parquet -o compare/ --images panoptic/ --rejects missing.csv": NEEDS["images"],
     "hpe relabel-agora validation_*_withjv.pkl -o agora_val.parquet": NEEDS["agora"],
     "hpe relabel-agora train_0_withjv.pkl -o train.json --format coco --image-size 1280x720": NEEDS["agora"],
     "hpe relabel-agora val_0_withjv.pkl -o annotation.txt --legacy-whenet --max-rmse inf": NEEDS["agora"],
