@@ -2,15 +2,16 @@
 
 Each function reproduces a few named lines of a peer's current code (the
 ``repo@commit file:lines`` is in its docstring). Where the peer calls SciPy's
-``Rotation`` the same SciPy call is made here, so the numbers agree to the
-last bits; everything runs on whole columns (no loop per row).
+``Rotation`` the same arithmetic runs here on whole columns
+(:mod:`.scipy_columns`, tested against SciPy), so the numbers agree to the last
+bits; no loop per row and no ``Rotation`` object.
 """
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
+
+from . import scipy_columns as sc
 
 _DEG = 180.0 / np.pi
 
@@ -77,30 +78,37 @@ def img2pose_euler(R_img2pose) -> np.ndarray:
     (notebook lines 112-118; ``R`` is ``Rotation.from_rotvec`` of the predicted rotation vector).
     """
 
-    M = np.transpose(stack3(R_img2pose), (0, 2, 1))
-    a = _euler(M, "xyz", True)
+    R = R_img2pose if isinstance(R_img2pose, (list, tuple)) else sc.nested(R_img2pose)
+    a = _euler([[R[j][i] for j in range(3)] for i in range(3)], "xyz", True)  # R.T: the indices swapped
     return a * np.array([1.0, -1.0, -1.0])
 
 
-def opal23_matrices(pyr) -> np.ndarray:
-    """opal23's matrices of (pitch, yaw, roll) degrees: ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])``."""
-    from scipy.spatial.transform import Rotation
+def opal23_matrices(pyr) -> list:
+    """opal23's matrices of (pitch, yaw, roll) degrees: ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])``.
 
+    Returns the nested 3x3 list of columns of ``.as_matrix()`` (SciPy's arithmetic, :mod:`.scipy_columns`).
+    """
     a = np.asarray(pyr, dtype=np.float64) * np.array([1.0, -1.0, 1.0])
-    return Rotation.from_euler("XYZ", a, degrees=True).as_matrix()
+    return sc.matrix_from_quat(sc.quat_from_euler("XYZ", a, degrees=True))
 
 
-def opal23_mae(ann, pred) -> np.ndarray:
+def opal23_euler(M) -> np.ndarray:
+    """``Rotation.from_matrix(M).as_euler('XYZ', degrees=True)`` of opal23's matrices (what ``compute_mae`` reads)."""
+    return _euler(M, "XYZ", True)
+
+
+def opal23_mae(ann, pred, ann_euler=None, pred_euler=None) -> np.ndarray:
     """``Evaluator.compute_mae`` (opal23_headpose@78c0c45 test/evaluator.py:51-75, 131-139).
 
-    Returns (N, 3) errors in the order (pitch, yaw, roll); the peer's array is
-    (yaw, pitch, roll) after its ``PYR -> YPR`` swap.
+    ``ann`` and ``pred`` are matrices (nested or ``(N, 3, 3)``); their
+    ``as_euler('XYZ')`` angles (:func:`opal23_euler`) may be passed when
+    already computed. Returns (N, 3) errors in the order (pitch, yaw, roll);
+    the peer's array is (yaw, pitch, roll) after its ``PYR -> YPR`` swap.
     """
 
-    a = _euler(ann, "XYZ", True)
-    p = _euler(pred, "XYZ", True)
-    a[:, [0, 1]] = a[:, [1, 0]]
-    p[:, [0, 1]] = p[:, [1, 0]]
+    a = opal23_euler(ann) if ann_euler is None else ann_euler
+    p = opal23_euler(pred) if pred_euler is None else pred_euler
+    a, p = a[:, [1, 0, 2]], p[:, [1, 0, 2]]
     sign = np.sign(p)
     w = np.stack([180 - p[:, 0], p[:, 1] - sign[:, 1] * 180, p[:, 2] - sign[:, 2] * 180], axis=1)
     w[w > 180] -= 360
@@ -115,30 +123,33 @@ def opal23_mae(ann, pred) -> np.ndarray:
 
 def opal23_geodesic(ann, pred) -> np.ndarray:
     """``Evaluator.compute_ge`` (test/evaluator.py:77-93): ``arccos(clip((trace(A P^T) - 1) / 2))`` degrees."""
-    t = np.einsum("nij,nij->n", ann, pred)
+    A, P = sc.nested(ann), sc.nested(pred)
+    t = A[0][0] * P[0][0]
+    for i, j in ((0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)):
+        t = t + A[i][j] * P[i][j]  # einsum's order: row by row
     return np.rad2deg(np.arccos(np.clip((t - 1) / 2, -1, 1)))
 
 
 def _euler(R, seq: str, degrees: bool = False) -> np.ndarray:
-    """SciPy ``Rotation.from_matrix(R).as_euler(seq)``, without its gimbal-lock warning (the peers see it too)."""
-    from scipy.spatial.transform import Rotation
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        return Rotation.from_matrix(R).as_euler(seq, degrees=degrees)
+    """SciPy ``Rotation.from_matrix(R).as_euler(seq)`` (column kernels of the same arithmetic, no warning)."""
+    return sc.euler_from_matrix(R, seq, degrees)
 
 
 def _log(M) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
+    """SciPy ``Rotation.from_matrix(M).as_rotvec()`` (radians), column-wise."""
+    return sc.rotvec_from_quat(sc.quat_from_matrix(M))
 
-    return Rotation.from_matrix(M).as_rotvec()
+
+def _times_transpose(P, G) -> list:
+    """``P @ G.T`` of nested matrices (``matmul``'s sum order per entry)."""
+    return [[(P[i][0] * G[j][0] + P[i][1] * G[j][1]) + P[i][2] * G[j][2] for j in range(3)] for i in range(3)]
 
 
 def opal23_near(ann, pred):
-    """``(P_i A_i^T of the rows within 90 degrees of the identity, mask of those rows)``."""
-    deltas = np.matmul(pred, np.transpose(ann, (0, 2, 1)))
-    near = np.linalg.norm(_log(deltas), axis=1) < np.pi / 2
-    return deltas[near], near
+    """``(P_i A_i^T of the rows within 90 degrees of the identity as (M, 3, 3), mask of those rows)``."""
+    deltas = _times_transpose(sc.nested(pred), sc.nested(ann))
+    near = sc.rotation_angle_from_matrix(deltas) < np.pi / 2
+    return stack3([[x[near] for x in row] for row in deltas]), near
 
 
 def opal23_near_deltas(ann, pred) -> np.ndarray:
@@ -184,7 +195,9 @@ def opal23_align(ann, pred, tol: float = 1e-4, max_iter: int = 100_000, mean=Non
     """
     if mean is None:
         mean = opal23_karcher(opal23_near_deltas(ann, pred), tol, max_iter)
-    return np.matmul(mean.T, pred), mean
+    P = sc.nested(pred)
+    m = np.asarray(mean, dtype=np.float64)
+    return [[(m[0, i] * P[0][j] + m[1, i] * P[1][j]) + m[2, i] * P[2][j] for j in range(3)] for i in range(3)], mean
 
 
 def trinet_euler(T) -> np.ndarray:
@@ -225,7 +238,7 @@ def opentrack_euler(T) -> np.ndarray:
     inverse takes ``as_euler('XYZ')`` of ``P M P`` (the [p, -y, r] matrix ``T``
     here) and negates yaw.
     """
-    return _euler(stack3(T), "XYZ") * np.array([1.0, -1.0, 1.0])
+    return _euler(T, "XYZ") * np.array([1.0, -1.0, 1.0])
 
 
 def opentrack_errors(e1, e2):
