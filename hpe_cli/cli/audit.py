@@ -14,6 +14,7 @@ from .options import (
     progress,
     radians_option,
     rejects_option,
+    threads_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -90,6 +91,7 @@ from .table_options import column_options
 )
 @overwrite_option
 @batch_option
+@threads_option
 @verbosity_options
 @column_options
 @click.pass_context
@@ -112,6 +114,7 @@ def audit(
     decoder,
     overwrite,
     batch_size,
+    threads,
     verbose,
     quiet,
 ):
@@ -179,6 +182,7 @@ def audit(
             images=images,
             rejects_path=rejects,
             strict_rejects=strict,
+            workers=threads,
         )
     finally:
         bar.close()

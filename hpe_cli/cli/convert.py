@@ -13,6 +13,7 @@ from .options import (
     progress,
     radians_option,  # the one spelling of input angle units
     rejects_options,
+    threads_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -41,9 +42,12 @@ from .table_options import column_options
 @rejects_options
 @overwrite_option
 @batch_option
+@threads_option
 @verbosity_options
 @column_options
-def convert(input, output, source, target, radians, decoder, rejects, strict, overwrite, batch_size, verbose, quiet):
+def convert(
+    input, output, source, target, radians, decoder, rejects, strict, overwrite, batch_size, threads, verbose, quiet
+):
     """Convert head-pose labels between rotation systems.
 
     INPUT is a .parquet or .csv table with the source system's own value
@@ -90,6 +94,7 @@ def convert(input, output, source, target, radians, decoder, rejects, strict, ov
             progress=bar,
             strict=strict,
             decoder=decoder,
+            workers=threads,
         )
     finally:
         bar.close()

@@ -455,3 +455,15 @@ def format_option(f):
         help="table (Parquet/CSV), coco (DirectMHP's COCO JSON) or whenet (annotation.txt lines) "
         "[default: from OUTPUT's extension].",
     )(f)
+
+
+#: --threads: the same help on every command that takes it (tests/docs/test_cli_consistency.py)
+THREADS_HELP = (
+    "Threads that process rows, at least 1 [default: one per core, os.cpu_count()]. The output is the same "
+    "whatever the number."
+)
+
+
+def threads_option(f):
+    """``--threads N``: the threads a command processes rows on (default: one per core)."""
+    return click.option("--threads", type=click.IntRange(1), default=None, metavar="N", help=THREADS_HELP)(f)

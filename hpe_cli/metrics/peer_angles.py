@@ -152,6 +152,14 @@ def opal23_near(ann, pred):
     return stack3([[x[near] for x in row] for row in deltas]), near
 
 
+def opal23_near_quats(ann, pred):
+    """:func:`opal23_near` with the deltas as SciPy's unit quaternions ``(M, 4)`` (x, y, z, w): what the
+    Karcher mean needs, in 4 numbers a row instead of 9."""
+    q = sc.quat_from_matrix(_times_transpose(sc.nested(pred), sc.nested(ann)))
+    near = np.linalg.norm(sc.rotvec_from_quat(q), axis=1) < np.pi / 2
+    return np.stack([c[near] for c in q], -1), near
+
+
 def opal23_near_deltas(ann, pred) -> np.ndarray:
     """``P_i A_i^T`` of the rows within 90 degrees of the identity: what opal23's mean is taken over."""
     return opal23_near(ann, pred)[0]
@@ -162,21 +170,38 @@ def opal23_karcher(
 ) -> np.ndarray:
     """opal23's ``_compute_mean_rotation`` (test/evaluator.py:111-126) over ``deltas`` (any array-like, e.g. a memmap).
 
-    Started at delta ``start`` (the peer starts at the first row of its file: a caller that spills the
-    deltas in another order names that row), ``mean <- mean @ exp(mean displacement)`` until
-    the mean displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the
-    sums run chunk by chunk, so a memory-mapped spill of any length works.
+    ``deltas`` are matrices ``(N, 3, 3)`` or their unit quaternions ``(N, 4)``
+    (:func:`opal23_near_quats`; then ``log(mean.T @ M_i)`` is taken of the
+    quaternion product, the same rotation to float rounding, without a
+    matrix product and a matrix-to-quaternion conversion per row and
+    iteration). Started at delta ``start`` (the peer starts at the first row
+    of its file: a caller that spills the deltas in another order names that
+    row), ``mean <- mean @ exp(mean displacement)`` until the mean
+    displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the sums run
+    chunk by chunk, so a memory-mapped spill of any length works.
     """
     from scipy.spatial.transform import Rotation
 
     n = len(deltas)
     if not n:
         return np.eye(3)
-    mean = np.array(deltas[start], dtype=np.float64)
+    quats = np.ndim(deltas) == 2
+    if quats:
+        mean = stack3(sc.matrix_from_quat(tuple(np.asarray(deltas[start], dtype=np.float64)[:, None])))[0]
+    else:
+        mean = np.array(deltas[start], dtype=np.float64)
     for _ in range(max_iter):
         total = np.zeros(3)
+        if quats:
+            x, y, z, w = sc.quat_from_matrix(mean[None])
+            inv = (-x, -y, -z, w)  # mean.T
         for a in range(0, n, chunk):
-            total += _log(np.matmul(mean.T, np.asarray(deltas[a : a + chunk]))).sum(axis=0)
+            if quats:
+                Q = np.asarray(deltas[a : a + chunk], dtype=np.float64)
+                r = sc.compose(inv, (Q[:, 0], Q[:, 1], Q[:, 2], Q[:, 3]))
+                total += sc.rotvec_from_quat(r).sum(axis=0)
+            else:
+                total += _log(np.matmul(mean.T, np.asarray(deltas[a : a + chunk]))).sum(axis=0)
         d = total / n
         if np.linalg.norm(d) < tol:
             break
@@ -194,7 +219,7 @@ def opal23_align(ann, pred, tol: float = 1e-4, max_iter: int = 100_000, mean=Non
     run) skips the estimate. Returns ``(aligned predictions, mean)``.
     """
     if mean is None:
-        mean = opal23_karcher(opal23_near_deltas(ann, pred), tol, max_iter)
+        mean = opal23_karcher(opal23_near_quats(ann, pred)[0], tol, max_iter)
     P = sc.nested(pred)
     m = np.asarray(mean, dtype=np.float64)
     return [[(m[0, i] * P[0][j] + m[1, i] * P[1][j]) + m[2, i] * P[2][j] for j in range(3)] for i in range(3)], mean

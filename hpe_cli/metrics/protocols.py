@@ -227,7 +227,7 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
     pairs first and passes it in ``pair.context["opal23_mean"]``.
     """
     P, G, rx = _opal23_mats(pair)
-    deltas, near = pa_.opal23_near(G, P)
+    deltas, near = pa_.opal23_near_quats(G, P)
     mean = pair.context.get("opal23_mean")
     if mean is None:
         mean = pa_.opal23_karcher(deltas)

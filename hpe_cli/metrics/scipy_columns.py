@@ -99,7 +99,7 @@ def quat_from_matrix(R) -> tuple:
     return x / norm, y / norm, z / norm, w / norm
 
 
-def _compose(p, q) -> tuple:
+def compose(p, q) -> tuple:
     """``p * q`` (SciPy ``compose_quat``)."""
     px, py, pz, pw = p
     qx, qy, qz, qw = q
@@ -138,7 +138,7 @@ def quat_from_euler(seq: str, angles, degrees: bool = False) -> tuple:
         h = a[..., k] / 2.0
         e = [zero, zero, zero, np.cos(h)]
         e[_AXIS[ax]] = np.sin(h)
-        q = tuple(e) if q is None else (_compose(q, e) if intrinsic else _compose(e, q))
+        q = tuple(e) if q is None else (compose(q, e) if intrinsic else compose(e, q))
     return q
 
 

@@ -106,7 +106,7 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
                 if need_opal and g.n:
                     pair = PosePair(P, G, gsys, _raw(g, p, gsys, psys))
                     Po, Go, _ = _opal23_mats(pair)
-                    deltas, near = pa_.opal23_near(Go, Po)
+                    deltas, near = pa_.opal23_near_quats(Go, Po)
                     if near.any():  # the peer starts at its file's first row: the smallest GT line
                         ln = g.lines[near]
                         j = int(np.argmin(ln))
@@ -119,12 +119,18 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
             out["Q"] = project_to_so3(M / n) if n else np.eye(3)
         if need_opal:
             size = os.path.getsize(path)
-            deltas = np.memmap(path, dtype=np.float64, mode="r").reshape(-1, 3, 3) if size else np.zeros((0, 3, 3))
+            deltas = np.memmap(path, dtype=np.float64, mode="r").reshape(-1, 4) if size else np.zeros((0, 4))
             out["opal23_mean"] = pa_.opal23_karcher(deltas, start=first[1])
             del deltas
         return out
     finally:
         os.unlink(path)
+
+
+def default_threads(threads=None) -> int:
+    from .pools import default_threads as d
+
+    return d(threads)
 
 
 def _readers(s, progress=None):
@@ -139,6 +145,7 @@ def _readers(s, progress=None):
         progress,
         extra=PLACEMENT if s.html else (),
         role="gt",
+        threads=s.threads,
     )
     pr = SideReader(
         s.pred_path,
@@ -151,6 +158,7 @@ def _readers(s, progress=None):
         progress,
         s.orthonormalize,
         role="pred",
+        threads=s.threads,
     )
     return gr, pr
 
@@ -183,7 +191,18 @@ def _run_stream(s, rej, writer):
 
 def _run_memory(s, rej, writer):
     """Read both sides whole, join them by key, then score the pairs in chunks."""
-    gt = read_side(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, s.progress, role="gt")
+    gt = read_side(
+        s.gt_path,
+        s.gt_system,
+        s.use_gt,
+        s.keys,
+        s.by,
+        s.radians,
+        s.batch_size,
+        s.progress,
+        role="gt",
+        threads=s.threads,
+    )
     pred = read_side(
         s.pred_path,
         s.pred_system,
@@ -195,6 +214,7 @@ def _run_memory(s, rej, writer):
         s.progress,
         role="pred",
         orthonormalize=s.orthonormalize,
+        threads=s.threads,
     )
     if pred.n == 0 and not pred.unreadable:
         raise HpeError(f"{pred.path}: no prediction rows (the file has a header only)")
@@ -358,12 +378,15 @@ def run_evaluate(
     images=None,
     join_engine="spill",
     partition_rows=None,
+    threads=None,
 ) -> dict:
     """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report.
 
     Files in different orders are joined by an external hash join (``join_engine="spill"``, partitions of
     about ``partition_rows`` rows, :mod:`hpe_cli.pipelines.evaluate_spill`) or, with ``"memory"``, whole in
-    memory (the reference the partitioned join is tested against).
+    memory (the reference the partitioned join is tested against). ``threads`` (default: one per core)
+    score chunks side by side and build each side's matrices; the report and the outputs are the same
+    whatever their number (chunks are summed and written in input order).
     """
     from ..io import TableWriter, open_table, system_metadata, write_json
     from ..io.writers import check_report_outputs
@@ -423,6 +446,7 @@ def run_evaluate(
         images=Images(folder) if folder else None,
         join_engine=join_engine,
         partition_rows=partition_rows,
+        threads=default_threads(threads),
     )
     meta = {
         **system_metadata(gt_system),

@@ -273,4 +273,11 @@ def in_order(pool, fn, items, ahead: int | None = None):
         yield res
 
 
-__all__ = ["unit_pool", "borrow", "in_order", "mp_context"]
+def default_threads(threads=None) -> int:
+    """``threads`` when given (``--threads``), else one per core (``os.cpu_count()``, at least 1)."""
+    import os
+
+    return max(1, int(threads)) if threads else max(1, os.cpu_count() or 1)
+
+
+__all__ = ["unit_pool", "borrow", "in_order", "mp_context", "default_threads"]
