@@ -303,10 +303,7 @@ def opentrack(pair: PosePair) -> ProtocolRows:
     b = pa_.opentrack_euler(pair.stored("trinet", "gt"))
     e, nan = pa_.opentrack_errors(a, b)
     return ProtocolRows(
-        e,
-        np.ones(pair.n, dtype=bool),
-        scalars={"geodesic": re_.geodesic_deg(pair.P, pair.G)},
-        counts={"peer_nan_rows": nan},
+        e, np.ones(pair.n, dtype=bool), scalars={"geodesic": pair.geodesic()}, counts={"peer_nan_rows": nan}
     )
 
 

@@ -9,7 +9,7 @@ arithmetic of SciPy's own implementation (scipy/scipy@v1.17.1
 ``compose_quat`` 1111-1124, ``as_matrix`` 299-330, ``as_rotvec`` 333-351,
 ``as_euler`` 362-398 with ``_get_angles`` 1049-1108; the Cython backend that
 NumPy arrays use computes the same expressions row by row) on whole 1-D
-columns, so the angles agree with SciPy's to float rounding (a few ulp; tested
+columns, so the angles agree with SciPy's to the last bit (tested
 against SciPy over the whole angle range, gimbal lock included, in
 ``tests/metrics/test_scipy_columns.py``). Where SciPy's Cython backend differs
 from its array-API one, the Cython one is followed (the wrap of an angle into
@@ -63,7 +63,7 @@ def _orthogonal(R):
     return R
 
 
-def quat_from_matrix(R) -> tuple:
+def quat_from_matrix(R, assume_valid: bool = False) -> tuple:
     """SciPy ``Rotation.from_matrix(R).as_quat()`` (Markley's method, normalised), column-wise.
 
     Parameters
@@ -71,13 +71,17 @@ def quat_from_matrix(R) -> tuple:
     R : nested 3x3 list of 1-D arrays or ndarray (N, 3, 3)
         Rotation matrices (det > 0; rows that are not orthonormal to 1e-12
         are first projected as SciPy does).
+    assume_valid : bool
+        Skip that check (SciPy's ``from_matrix(assume_valid=True)``): for
+        matrices built by these kernels (products of unit quaternions'
+        matrices), orthonormal to a few ulp by construction.
 
     Returns
     -------
     tuple of 4 ndarray (N,)
         ``(x, y, z, w)``, unit norm.
     """
-    R = _orthogonal(nested(R))
+    R = nested(R) if assume_valid else _orthogonal(nested(R))
     r00, r01, r02 = R[0]
     r10, r11, r12 = R[1]
     r20, r21, r22 = R[2]
@@ -208,24 +212,42 @@ def euler_from_quat(q, seq: str, degrees: bool = False) -> np.ndarray:
     return out * (180.0 / np.pi) if degrees else out
 
 
-def euler_from_matrix(R, seq: str, degrees: bool = False) -> np.ndarray:
+def euler_from_matrix(R, seq: str, degrees: bool = False, assume_valid: bool = False) -> np.ndarray:
     """SciPy ``Rotation.from_matrix(R).as_euler(seq)`` column-wise (see :func:`euler_from_quat`)."""
-    return euler_from_quat(quat_from_matrix(R), seq, degrees)
+    return euler_from_quat(quat_from_matrix(R, assume_valid), seq, degrees)
+
+
+def _canonical_sign(q) -> np.ndarray:
+    """+-1 per row: SciPy's ``_quat_canonical`` flips ``q`` when w < 0 (ties: the first nonzero of x, y, z)."""
+    x, y, z, w = q
+    flip = w < 0
+    zero = w == 0
+    if zero.any():
+        flip |= zero & ((x < 0) | ((x == 0) & ((y < 0) | ((y == 0) & (z < 0)))))
+    return np.where(flip, -1.0, 1.0)
+
+
+def quat_angle(q) -> np.ndarray:
+    """Rotation angle ``2 atan2(|(x, y, z)|, |w|)`` of unit quaternions (radians, in [0, pi]): SciPy's
+    ``as_rotvec`` angle, the norm of the rotation vector to float rounding."""
+    x, y, z, w = q
+    return 2 * np.arctan2(np.sqrt(x * x + y * y + z * z), np.abs(w))
 
 
 def rotvec_from_quat(q) -> np.ndarray:
     """SciPy ``Rotation.from_quat(q).as_rotvec()`` (radians), ``(N, 3)``."""
     x, y, z, w = q
-    flip = (w < 0) | ((w == 0) & ((x < 0) | ((x == 0) & ((y < 0) | ((y == 0) & (z < 0))))))
-    s = np.where(flip, -1.0, 1.0)
-    x, y, z, w = x * s, y * s, z * s, w * s
-    ax = np.sqrt(x * x + y * y + z * z)
-    angle = 2 * np.arctan2(ax, w)
+    s = _canonical_sign(q)
+    angle = 2 * np.arctan2(np.sqrt(x * x + y * y + z * z), w * s)  # the canonical w is |w|
     small = angle <= 1e-3
     a2 = angle * angle
     with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(small, 2 + a2 / 12 + 7 * a2 * a2 / 2880, angle / np.sin(angle / 2.0))
-    return np.stack([scale * x, scale * y, scale * z], -1)
+        scale = np.where(small, 2 + a2 / 12 + 7 * a2 * a2 / 2880, angle / np.sin(angle / 2.0)) * s
+    out = np.empty((len(angle), 3))
+    np.multiply(scale, x, out=out[:, 0])
+    np.multiply(scale, y, out=out[:, 1])
+    np.multiply(scale, z, out=out[:, 2])
+    return out
 
 
 def rotation_angle_from_matrix(R) -> np.ndarray:
