@@ -214,6 +214,9 @@ def main():
     except ImportError:
         have_duckdb = False
         print("duckdb is not installed (pip install duckdb): its rows are skipped")
+    # byte-compile hpe once, as an installed package is (with PYTHONDONTWRITEBYTECODE set, every child would
+    # compile the sources it imports again: about 0.4 s a run)
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "hpe_cli")], check=True)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         make_tables(n, folder, args.shuffled)
