@@ -120,6 +120,7 @@ HPE = textwrap.dedent("""
 DUCKDB = textwrap.dedent(r'''
     import sys, duckdb
     con = duckdb.connect()
+    con.execute("SET enable_progress_bar = false")
     if sys.argv[3] != "0":
         con.execute(f"SET threads = {int(sys.argv[3])}")
     def mat(p, y, r):  # 300W-LP A = Rx(p).T Ry(y).T Rz(r).T, entry by entry (radians)
@@ -165,6 +166,11 @@ def _child(args, env, parse):
     t = time.perf_counter()
     r = subprocess.run([sys.executable, "-c", *args], check=True, capture_output=True, text=True, env=env)
     return time.perf_counter() - t, parse(r)
+
+
+def _last(r) -> str:
+    """The last line a child printed (its result)."""
+    return r.stdout.strip().splitlines()[-1]
 
 
 def _hpe_cmd(folder: Path, protocols, threads, with_rows: bool):
@@ -227,11 +233,11 @@ def main():
         )
         jobs = {}
         if have_duckdb:
-            jobs["duckdb"] = ([DUCKDB, gt, pred, str(args.threads)], lambda r: r.stdout.split())
+            jobs["duckdb"] = ([DUCKDB, gt, pred, str(args.threads)], lambda r: _last(r).split())
         if args.join:
-            jobs["acero"] = ([ACERO, gt, pred], lambda r: r.stdout.split())
+            jobs["acero"] = ([ACERO, gt, pred], lambda r: _last(r).split())
         if not args.no_floor:
-            jobs["floor"] = ([FLOOR, gt, pred], lambda r: [*r.stdout.split()[:2], 0, r.stdout.split()[2]])
+            jobs["floor"] = ([FLOOR, gt, pred], lambda r: [*_last(r).split()[:2], 0, _last(r).split()[2]])
 
         def hpe_parse(r):
             rep = json.loads((folder / "report.json").read_text())
