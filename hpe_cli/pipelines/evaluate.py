@@ -89,26 +89,46 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
         return {}
     M, n = np.zeros((3, 3)), 0
     first, written = (np.iinfo(np.int64).max, 0), 0
+
+    def work(gp):  # on a pool thread: pure numpy, no shared state
+        g, p = with_canonical(gp[0], gsys), with_canonical(gp[1], psys)
+        ok = g.ok & p.ok
+        if not ok.all():
+            g, p = _take(g, ok), _take(p, ok)
+        P, G = _nested(p), _nested(g)
+        part = None
+        if need_mean:
+            part = np.array(
+                [[float(np.sum(P[k][0] * G[m][0] + P[k][1] * G[m][1] + P[k][2] * G[m][2])) for m in range(3)]
+                 for k in range(3)]
+            )  # fmt: skip
+        deltas = near = None
+        if need_opal and g.n:
+            pair = PosePair(P, G, gsys, _raw(g, p, gsys, psys))
+            Po, Go, _ = _opal23_mats(pair)
+            deltas, near = pa_.opal23_near_quats(Go, Po)
+        return g.n, part, deltas, near, g.lines
+
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .pools import in_order
+
     fd, path = tempfile.mkstemp(prefix="hpe_eval_opal23_", suffix=".bin")
+    threads = max(1, int(getattr(s, "threads", None) or 1))
+    pool = ThreadPoolExecutor(threads, thread_name_prefix="hpe-evaluate-glob")
+    pairs = pairs_factory()
     try:
         with os.fdopen(fd, "wb") as f:
-            for g, p in pairs_factory():
-                g, p = with_canonical(g, gsys), with_canonical(p, psys)
-                ok = g.ok & p.ok
-                if not ok.all():
-                    g, p = _take(g, ok), _take(p, ok)
-                P, G = _nested(p), _nested(g)
-                if need_mean:
+            # chunks in input order whatever the threads: the same sums, the same spill
+            for rows, part, deltas, near, lines in in_order(pool, work, pairs, ahead=threads):
+                if part is not None:
                     for k in range(3):
                         for m in range(3):
-                            M[k, m] += float(np.sum(P[k][0] * G[m][0] + P[k][1] * G[m][1] + P[k][2] * G[m][2]))
-                    n += g.n
-                if need_opal and g.n:
-                    pair = PosePair(P, G, gsys, _raw(g, p, gsys, psys))
-                    Po, Go, _ = _opal23_mats(pair)
-                    deltas, near = pa_.opal23_near_quats(Go, Po)
+                            M[k, m] += part[k, m]
+                    n += rows
+                if deltas is not None:
                     if near.any():  # the peer starts at its file's first row: the smallest GT line
-                        ln = g.lines[near]
+                        ln = lines[near]
                         j = int(np.argmin(ln))
                         if ln[j] < first[0]:
                             first = (int(ln[j]), written + j)
@@ -124,6 +144,9 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
             del deltas
         return out
     finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        if hasattr(pairs, "close"):  # an error or a signal: the readers' threads and temp files go now
+            pairs.close()
         os.unlink(path)
 
 
