@@ -182,14 +182,15 @@ def opal23_karcher(
     of its file: a caller that spills the deltas in another order names that
     row), ``mean <- mean @ exp(mean displacement)`` until the mean
     displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the sums run
-    chunk by chunk, so a memory-mapped spill of any length works.
+    chunk by chunk, so a spill of any length read piece by piece (anything with
+    ``len``, ``ndim`` and slicing) works.
     """
     from scipy.spatial.transform import Rotation
 
     n = len(deltas)
     if not n:
         return np.eye(3)
-    quats = np.ndim(deltas) == 2
+    quats = (deltas.ndim if hasattr(deltas, "ndim") else np.ndim(deltas)) == 2
     if quats:
         mean = stack3(sc.matrix_from_quat(tuple(np.asarray(deltas[start], dtype=np.float64)[:, None])))[0]
     else:

@@ -139,15 +139,36 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
             out["Q"] = project_to_so3(M / n) if n else np.eye(3)
         if need_opal:
             size = os.path.getsize(path)
-            deltas = np.memmap(path, dtype=np.float64, mode="r").reshape(-1, 4) if size else np.zeros((0, 4))
-            out["opal23_mean"] = pa_.opal23_karcher(deltas, start=first[1])
-            del deltas
+            with open(path, "rb") as f:  # read piece by piece: a memory map's pages would count in the peak
+                out["opal23_mean"] = pa_.opal23_karcher(_Rows(f, size // 32, 4), start=first[1])
         return out
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         if hasattr(pairs, "close"):  # an error or a signal: the readers' threads and temp files go now
             pairs.close()
         os.unlink(path)
+
+
+class _Rows:
+    """Rows of ``width`` float64 in an open binary file, read on indexing (``rows[a:b]``, ``rows[i]``): a spill
+    as an array-like whose pages do not stay mapped (a ``np.memmap`` would add them to the process's peak)."""
+
+    def __init__(self, f, n: int, width: int):
+        self.f, self.n, self.width = f, int(n), int(width)
+        self.ndim = 2
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            a, b, _ = k.indices(self.n)
+            b = max(a, b)
+        else:
+            a, b = int(k), int(k) + 1
+        self.f.seek(a * self.width * 8)
+        out = np.fromfile(self.f, dtype=np.float64, count=(b - a) * self.width).reshape(-1, self.width)
+        return out if isinstance(k, slice) else out[0]
 
 
 def default_threads(threads=None) -> int:

@@ -107,7 +107,10 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
         table = None
         if writer is not None or worst.n:
             table = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
-        return g, p, rows, rows_before, by_values, table, acc.partial(rows), Sample.block(rows)
+        part, block = acc.partial(rows), Sample.block(rows)
+        if not s.by:  # their sums are in `part`: every protocol's per-row arrays are freed before the chunk's turn
+            rows.protocols = {}
+        return g, p, rows, rows_before, by_values, table, part, block
 
     pending: list = []  # per-row tables, written in pieces of about one batch
     writes: list = []  # the per-row file is written on its own thread (Parquet encoding releases the GIL)
