@@ -459,8 +459,8 @@ def format_option(f):
 
 #: --threads: the same help on every command that takes it (tests/docs/test_cli_consistency.py)
 THREADS_HELP = (
-    "Threads that process rows, at least 1 [default: one per core, os.cpu_count()]. The output is the same "
-    "whatever the number."
+    "Threads that process rows, at least 1 [default: one per core, os.cpu_count(), at most 8]. The output is the "
+    "same whatever the number."
 )
 
 

@@ -19,6 +19,7 @@ from ..errors import HpeError
 from .evaluate_dataset import choose_directmhp
 from .evaluate_join import (  # noqa: F401
     DEFAULT_KEYS,
+    LABEL_THREADS,
     Chunk,
     JoinUsageError,
     SideReader,
@@ -189,7 +190,7 @@ def _readers(s, progress=None):
         progress,
         extra=PLACEMENT if s.html else (),
         role="gt",
-        threads=s.threads,
+        threads=min(s.threads, LABEL_THREADS),
     )
     pr = SideReader(
         s.pred_path,
@@ -202,7 +203,7 @@ def _readers(s, progress=None):
         progress,
         s.orthonormalize,
         role="pred",
-        threads=s.threads,
+        threads=min(s.threads, LABEL_THREADS),
     )
     return gr, pr
 
@@ -245,7 +246,7 @@ def _run_memory(s, rej, writer):
         s.batch_size,
         s.progress,
         role="gt",
-        threads=s.threads,
+        threads=min(s.threads, LABEL_THREADS),
     )
     pred = read_side(
         s.pred_path,
@@ -258,7 +259,7 @@ def _run_memory(s, rej, writer):
         s.progress,
         role="pred",
         orthonormalize=s.orthonormalize,
-        threads=s.threads,
+        threads=min(s.threads, LABEL_THREADS),
     )
     if pred.n == 0 and not pred.unreadable:
         raise HpeError(f"{pred.path}: no prediction rows (the file has a header only)")
@@ -428,9 +429,10 @@ def run_evaluate(
 
     Files in different orders are joined by an external hash join (``join_engine="spill"``, partitions of
     about ``partition_rows`` rows, :mod:`hpe_cli.pipelines.evaluate_spill`) or, with ``"memory"``, whole in
-    memory (the reference the partitioned join is tested against). ``threads`` (default: one per core)
-    score chunks side by side and build each side's matrices; the report and the outputs are the same
-    whatever their number (chunks are summed and written in input order).
+    memory (the reference the partitioned join is tested against). ``threads`` (default: one per core, at
+    most 8) score chunks side by side (each side's matrices are built on at most ``LABEL_THREADS`` of them);
+    the report and the outputs are the same whatever their number (chunks are summed and written in input
+    order).
     """
     from ..io import TableWriter, open_table, system_metadata, write_json
     from ..io.writers import check_report_outputs
