@@ -302,6 +302,8 @@ def _run_spill(s, rej, writer):
         notes: set = set()
 
         def key_cols(side, rows):
+            if not len(rows):  # no row set aside (the usual case): no Arrow take, which would import pandas
+                return {k: np.zeros(0, dtype=object) for k in s.keys}
             return {k: side.keys.column(k).take(rows).to_numpy(zero_copy_only=False) for k in s.keys}
 
         def pairs(first: bool):

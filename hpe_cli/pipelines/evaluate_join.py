@@ -395,8 +395,10 @@ def _stems(arr):
 def _encode(a, b):
     import pyarrow as pa
 
+    from ..io.layout import arrow_to_numpy
+
     enc = pa.concat_arrays([a, b]).dictionary_encode(null_encoding="encode")
-    return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), len(enc.dictionary)
+    return arrow_to_numpy(enc.indices).astype(np.int64), len(enc.dictionary)
 
 
 def _key_codes(gt_keys, pred_keys, keys, stems=None):
