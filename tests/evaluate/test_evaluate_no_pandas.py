@@ -15,7 +15,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-ROOT = Path(__file__).resolve().parents[2]
+import hpe_cli
+
+ROOT = Path(hpe_cli.__file__).resolve().parents[1]  # the hpe_cli this test session imports
 
 CHILD = """
 import sys
