@@ -1,21 +1,30 @@
-"""`hpe evaluate` at scale: time and peak RSS next to the floor, in the same run.
+"""`hpe evaluate` at scale: time and peak RSS beside DuckDB and the floor, in the same run.
 
-    python benchmarks/evaluate.py [--rows 2000000] [--protocol NAME ...] [--shuffled] [--json-only]
+    python benchmarks/evaluate.py [--rows 5000000] [--shuffled] [--protocol NAME ...] [--repeat 3]
+        [--threads N] [--with-rows] [--join]
 
 Two Parquet tables of N pairs (string key 'image', pitch/yaw/roll; GT in
-300w_lp, predictions in 6drepnet, the same rotation turned by ~5 degrees).
+300w_lp, predictions in 6drepnet, the same rotation turned by about 5 degrees:
+a rotation vector with N(0, 3 deg) components), predictions in GT order or,
+with --shuffled, in random order.
 
+* DuckDB: the job a user would write in SQL: join on ``image``, both rotation
+  matrices from the angles, the geodesic angle (``acos`` of the trace), the
+  per-angle MAE and the median geodesic error, on DuckDB's own threads. A
+  benchmark dependency only (``pip install duckdb``, or the ``bench`` extra;
+  skipped when absent).
 * floor: pyarrow streams both files batch by batch (the same columns) and
   does a plain numpy pass over them: rotation matrices from the angles and the
-  geodesic error, summed. Nothing else (no join, no protocol, no output).
-* hpe: ``hpe evaluate`` in a child process (imports included) with the per-row
-  Parquet output and the JSON report, predictions in GT order (streamed:
-  memory flat in N) or, with --shuffled, in random order (external hash join: both sides partitioned
-  by key on disk, joined one partition at a time; memory flat in N too).
+  geodesic error, summed. No join, no protocol, no output.
+* hpe: ``hpe evaluate`` in a child process (imports included) writing the JSON
+  report (``--with-rows``: also the per-row Parquet output); ``--protocol all``
+  (the command's default) scores every protocol, the default here is hopenet.
+* ``--join``: the same minimal job (join on the key, geodesic, per-angle MAE,
+  median) done by pyarrow's ``Table.join`` (Acero, in memory), beside hpe's
+  join and DuckDB's.
 
-Peak RSS is each child's VmHWM (/proc/self/status). Keep N small on a shared
-machine (2M pairs take about a minute); the issue's target is 30M pairs with
-peak RSS < 1 GB and time within 1.5x of the floor.
+Each child's peak RSS is its VmHWM (/proc/self/status). Each job runs --repeat
+times, the jobs taking turns; the median is printed with the range in brackets.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -107,78 +117,155 @@ HPE = textwrap.dedent("""
 """)
 
 
+DUCKDB = textwrap.dedent(r'''
+    import sys, duckdb
+    con = duckdb.connect()
+    con.execute("SET enable_progress_bar = false")
+    if sys.argv[3] != "0":
+        con.execute(f"SET threads = {int(sys.argv[3])}")
+    def mat(p, y, r):  # 300W-LP A = Rx(p).T Ry(y).T Rz(r).T, entry by entry (radians)
+        cp, sp, cy, sy, cr, sr = (f"{f}({v})" for v in (p, y, r) for f in ("cos", "sin"))
+        return [f"{cy}*{cr}", f"{cy}*{sr}", f"-{sy}", f"{sp}*{sy}*{cr} - {cp}*{sr}", f"{sp}*{sy}*{sr} + {cp}*{cr}",
+                f"{sp}*{cy}", f"{cp}*{sy}*{cr} + {sp}*{sr}", f"{cp}*{sy}*{sr} - {sp}*{cr}", f"{cp}*{cy}"]
+    trace = " + ".join(f"({a})*({b})" for a, b in zip(mat("gp", "gy", "gr"), mat("pp", "py", "pr")))
+    q = f"""
+        WITH j AS (
+            SELECT radians(g.pitch) gp, radians(g.yaw) gy, radians(g.roll) gr,
+                   radians(p.pitch) pp, radians(p.yaw) py, radians(p.roll) pr,
+                   abs(g.pitch - p.pitch) ep, abs(g.yaw - p.yaw) ey, abs(g.roll - p.roll) er
+            FROM read_parquet('{sys.argv[1]}') g JOIN read_parquet('{sys.argv[2]}') p USING (image)),
+        e AS (SELECT degrees(acos(greatest(-1.0, least(1.0, (({trace}) - 1) / 2)))) geo, ep, ey, er FROM j)
+        SELECT count(*), avg(geo), median(geo), avg(ep), avg(ey), avg(er) FROM e"""
+    n, mean, med, ep, ey, er = con.execute(q).fetchone()
+    hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM")][0].split()[1]
+    print(n, mean, med, int(hwm) // 1024)
+''')
+
+ACERO = textwrap.dedent("""
+    import sys, numpy as np, pyarrow.parquet as pq
+    def mats(p, y, r):
+        cp, sp, cy, sy, cr, sr = np.cos(p), np.sin(p), np.cos(y), np.sin(y), np.cos(r), np.sin(r)
+        return [cy * cr, cy * sr, -sy, sp * sy * cr - cp * sr, sp * sy * sr + cp * cr, sp * cy,
+                cp * sy * cr + sp * sr, cp * sy * sr - sp * cr, cp * cy]
+    cols = ["image", "pitch", "yaw", "roll"]
+    g = pq.read_table(sys.argv[1], columns=cols)
+    p = pq.read_table(sys.argv[2], columns=cols).rename_columns(["image", "pp", "py", "pr"])
+    j = g.join(p, "image", join_type="inner", use_threads=True)
+    del g, p
+    a = [j.column(k).to_numpy() for k in ("pitch", "yaw", "roll", "pp", "py", "pr")]
+    A, B = mats(*(np.radians(x) for x in a[:3])), mats(*(np.radians(x) for x in a[3:]))
+    geo = np.degrees(np.arccos(np.clip((sum(A[k] * B[k] for k in range(9)) - 1) / 2, -1, 1)))
+    mae = [np.abs(a[k] - a[k + 3]).mean() for k in range(3)]
+    hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM")][0].split()[1]
+    print(len(geo), geo.mean(), np.median(geo), int(hwm) // 1024)
+""")
+
+
+def _child(args, env, parse):
+    """``(seconds, parsed output)`` of one child process."""
+    t = time.perf_counter()
+    r = subprocess.run([sys.executable, "-c", *args], check=True, capture_output=True, text=True, env=env)
+    return time.perf_counter() - t, parse(r)
+
+
+def _last(r) -> str:
+    """The last line a child printed (its result)."""
+    return r.stdout.strip().splitlines()[-1]
+
+
+def _hpe_cmd(folder: Path, protocols, threads, with_rows: bool):
+    cmd = [HPE, "evaluate", str(folder / "pred.parquet"), str(folder / "gt.parquet"), "--pred-system", "6drepnet"]
+    cmd += ["--gt-system", "300w_lp", "--json", str(folder / "report.json"), "-q", "--overwrite"]
+    if with_rows:
+        cmd += ["-o", str(folder / "errors.parquet")]
+    if "all" not in protocols:
+        for p in protocols:
+            cmd += ["--protocol", p]
+    if threads:
+        cmd += ["--threads", str(threads)]
+    return cmd
+
+
+def _summary(label, times, rss, n, ref=None, extra=""):
+    med = statistics.median(times)
+    rng = f"[{min(times):.2f}-{max(times):.2f}]" if len(times) > 1 else ""
+    ratio = f"{med / ref:5.2f}x DuckDB" if ref else ""
+    print(
+        f"  {label:<46} {med:7.2f} s {rng:<13} {n / med / 1e6:5.2f} M pairs/s  peak RSS {max(rss):>6,} MB  "
+        f"{ratio}  {extra}"
+    )
+    return med
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rows", type=int, default=2_000_000)
+    ap.add_argument("--rows", type=int, default=5_000_000)
     ap.add_argument(
-        "--protocol",
-        action="append",
-        default=None,
-        help="protocols to run (default: 6drepnet360); 'all' for every protocol",
+        "--protocol", action="append", default=None, help="hpe protocols (default hopenet); 'all': every one"
     )
-    ap.add_argument("--shuffled", action="store_true", help="predictions in random order (external hash join)")
-    ap.add_argument("--json-only", action="store_true", help="skip the run that also writes the per-row output")
+    ap.add_argument("--shuffled", action="store_true", help="predictions in random order (key join)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs of each job (the median is printed)")
+    ap.add_argument("--threads", type=int, default=0, help="hpe --threads and DuckDB's threads (0: their default)")
+    ap.add_argument("--with-rows", action="store_true", help="hpe also writes the per-row Parquet output (-o)")
+    ap.add_argument("--join", action="store_true", help="also pyarrow's Table.join (Acero) doing DuckDB's job")
+    ap.add_argument("--no-floor", action="store_true", help="skip the pyarrow + numpy floor")
     args = ap.parse_args()
     n = args.rows
-    protocols = args.protocol or ["6drepnet360"]
+    protocols = args.protocol or ["hopenet"]
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    try:
+        import duckdb  # noqa: F401
+
+        have_duckdb = True
+    except ImportError:
+        have_duckdb = False
+        print("duckdb is not installed (pip install duckdb): its rows are skipped")
+    # byte-compile hpe once, as an installed package is (with PYTHONDONTWRITEBYTECODE set, every child would
+    # compile the sources it imports again: about 0.4 s a run)
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "hpe_cli")], check=True)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         make_tables(n, folder, args.shuffled)
+        gt, pred = str(folder / "gt.parquet"), str(folder / "pred.parquet")
         print(
-            f"hpe evaluate, {n:,} pairs, predictions {'shuffled' if args.shuffled else 'in GT order'}, "
-            f"protocols {protocols}"
+            f"{n:,} pairs, predictions {'shuffled' if args.shuffled else 'in GT order'}, hpe protocols {protocols}, "
+            f"{os.cpu_count()} cores, median of {args.repeat}"
         )
-        t = time.perf_counter()
-        out = subprocess.run(
-            [sys.executable, "-c", FLOOR, str(folder / "gt.parquet"), str(folder / "pred.parquet")],
-            check=True,
-            capture_output=True,
-            text=True,
-            env=env,
-        ).stdout.split()
-        t_floor = time.perf_counter() - t
-        print(
-            f"  floor (pyarrow stream + numpy geodesic)  {t_floor:7.2f} s  {n / t_floor / 1e6:6.2f} M pairs/s  "
-            f"peak RSS {int(out[2]):,} MB  (geodesic mean {float(out[1]):.3f})"
-        )
-        runs = (
-            ("hpe evaluate --json", []),
-            ("hpe evaluate --json -o rows.parquet", ["-o", str(folder / "errors.parquet")]),
-        )
-        for label, extra in runs[:1] if args.json_only else runs:
-            cmd = [
-                sys.executable,
-                "-c",
-                HPE,
-                "evaluate",
-                str(folder / "pred.parquet"),
-                str(folder / "gt.parquet"),
-                "--pred-system",
-                "6drepnet",
-                "--gt-system",
-                "300w_lp",
-                "--json",
-                str(folder / "report.json"),
-                "-q",
-                "--overwrite",
-                *extra,
-            ]
-            if "all" not in protocols:
-                for p in protocols:
-                    cmd += ["--protocol", p]
-            t = time.perf_counter()
-            r = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
-            t_hpe = time.perf_counter() - t
-            hwm = int(r.stderr.split("VmHWM_MB")[1].split()[0])
+        jobs = {}
+        if have_duckdb:
+            jobs["duckdb"] = ([DUCKDB, gt, pred, str(args.threads)], lambda r: _last(r).split())
+        if args.join:
+            jobs["acero"] = ([ACERO, gt, pred], lambda r: _last(r).split())
+        if not args.no_floor:
+            jobs["floor"] = ([FLOOR, gt, pred], lambda r: [*_last(r).split()[:2], 0, _last(r).split()[2]])
+
+        def hpe_parse(r):
             rep = json.loads((folder / "report.json").read_text())
             assert rep["n"]["pairs"] == n, rep["n"]
             g = rep["metrics"]["geodesic"]
-            print(
-                f"  {label:<40} {t_hpe:7.2f} s  {n / t_hpe / 1e6:6.2f} M pairs/s  peak RSS {hwm:,} MB  "
-                f"({t_hpe / t_floor:.2f}x the floor; {rep['inputs']['paired']}; geodesic mean {g['mean']:.3f}, "
-                f"median {g['median']:.3f})"
+            return [rep["n"]["pairs"], g["mean"], g["median"], int(r.stderr.split("VmHWM_MB")[1].split()[0])]
+
+        jobs["hpe"] = (_hpe_cmd(folder, protocols, args.threads, args.with_rows), hpe_parse)
+        times = {k: [] for k in jobs}
+        out: dict = {k: [] for k in jobs}
+        for _ in range(args.repeat):
+            for k, (a, parse) in jobs.items():
+                t, o = _child(a, env, parse)
+                times[k].append(t)
+                out[k].append(o)
+        rss = {k: [int(o[3]) for o in v] for k, v in out.items()}
+        geo = {k: f"geodesic mean {float(v[0][1]):.6f}, median {float(v[0][2]):.6f}" for k, v in out.items()}
+        ref = None
+        if have_duckdb:
+            ref = _summary(
+                "DuckDB (join, geodesic, MAE, median)", times["duckdb"], rss["duckdb"], n, None, geo["duckdb"]
             )
+        if args.join:
+            _summary("pyarrow Table.join + numpy (in memory)", times["acero"], rss["acero"], n, ref, geo["acero"])
+        if not args.no_floor:
+            _summary("floor (pyarrow stream + numpy, no join)", times["floor"], rss["floor"], n, ref)
+        label = f"hpe evaluate{' -o' if args.with_rows else ''} --protocol {','.join(protocols)}"
+        _summary(label, times["hpe"], rss["hpe"], n, ref, geo["hpe"])
 
 
 if __name__ == "__main__":

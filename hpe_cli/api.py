@@ -265,6 +265,7 @@ def convert_file(
     overwrite: bool = False,
     decoder=None,
     batch_size: int = 65_536,
+    threads: int | None = None,
 ):
     """``hpe convert`` as a function: the same pipeline (:func:`hpe_cli.pipelines.convert.run_convert`).
 
@@ -276,8 +277,8 @@ def convert_file(
         The system to write (``--to``).
     source : str, path or RotationSystem, optional
         The input's system (``--from``); default: the file's own (an error when it names none).
-    radians, rejects, strict, overwrite, decoder, batch_size
-        As the command's options.
+    radians, rejects, strict, overwrite, decoder, batch_size, threads
+        As the command's options (``threads``: ``--threads``, one per core by default).
 
     Returns
     -------
@@ -300,6 +301,7 @@ def convert_file(
             batch_size=batch_size,
             strict=strict,
             decoder=decoder,
+            workers=threads,
         )
 
 
@@ -319,9 +321,9 @@ def audit_file(
     Returns the JSON report (``rows``, one count per check, ``system``,
     ``system_origin``, ``rejected``, ``examples``...); ``system`` defaults to
     the file's own, else ``300w_lp``. ``options``: ``near_tol_deg``, ``radians``,
-    ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``; ``consistency`` (True or a
-    :class:`hpe_cli.pipelines.consistency.Settings`, as ``--consistency``; report key ``consistency``) and
-    ``suspects`` (path of the key list, as ``--suspects``).
+    ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``, ``workers`` (``--threads``); ``consistency``
+    (True or a :class:`hpe_cli.pipelines.consistency.Settings`, as ``--consistency``; report key ``consistency``)
+    and ``suspects`` (path of the key list, as ``--suspects``).
     """
     from .io.transaction import ensure_transaction
     from .pipelines.audit import run_audit

@@ -15,6 +15,7 @@ from .options import (
     progress,
     radians_option,
     rejects_option,
+    threads_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -125,6 +126,7 @@ from .table_options import column_options
 )
 @overwrite_option
 @batch_option
+@threads_option
 @verbosity_options
 @column_options
 @click.pass_context
@@ -152,6 +154,7 @@ def audit(
     suspect_score,
     overwrite,
     batch_size,
+    threads,
     verbose,
     quiet,
 ):
@@ -245,6 +248,7 @@ def audit(
             strict_rejects=strict,
             consistency=settings,
             suspects=suspects,
+            workers=threads,
         )
     finally:
         bar.close()

@@ -15,6 +15,7 @@ from .options import (
     progress,
     radians_option,  # the one spelling of input angle units
     rejects_options,
+    threads_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -44,10 +45,24 @@ from .table_options import column_options
 @exclude_option
 @overwrite_option
 @batch_option
+@threads_option
 @verbosity_options
 @column_options
 def convert(
-    input, output, source, target, radians, decoder, rejects, strict, exclude, overwrite, batch_size, verbose, quiet
+    input,
+    output,
+    source,
+    target,
+    radians,
+    decoder,
+    rejects,
+    strict,
+    exclude,
+    overwrite,
+    batch_size,
+    threads,
+    verbose,
+    quiet,
 ):
     """Convert head-pose labels between rotation systems.
 
@@ -96,6 +111,7 @@ def convert(
             strict=strict,
             decoder=decoder,
             exclude=exclude,
+            workers=threads,
         )
     finally:
         bar.close()

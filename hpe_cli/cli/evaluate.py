@@ -14,6 +14,7 @@ from .options import (
     progress,
     radians_option,
     rejects_options,
+    threads_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -161,6 +162,7 @@ def _split_keys(ctx, param, value):
 @radians_option()
 @overwrite_option
 @batch_option
+@threads_option
 @verbosity_options
 @column_options
 def evaluate(
@@ -188,6 +190,7 @@ def evaluate(
     radians,
     overwrite,
     batch_size,
+    threads,
     verbose,
     quiet,
     strict,
@@ -268,6 +271,7 @@ def evaluate(
             html=html,
             worst=worst,
             images=images,
+            threads=threads,
         )
     except JoinUsageError as exc:
         raise click.UsageError(str(exc)) from None

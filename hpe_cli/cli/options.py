@@ -506,3 +506,15 @@ def resume_option(compared: str):
         f"A changed input is refused, naming the file: {compared}. The temp files "
         "of the run it resumes (killed by kill -9 or a power cut) are removed.",
     )
+
+
+#: --threads: the same help on every command that takes it (tests/docs/test_cli_consistency.py)
+THREADS_HELP = (
+    "Threads that process rows, at least 1 [default: one per core, os.cpu_count(), at most 8]. The output is the "
+    "same whatever the number."
+)
+
+
+def threads_option(f):
+    """``--threads N``: the threads a command processes rows on (default: one per core)."""
+    return click.option("--threads", type=click.IntRange(1), default=None, metavar="N", help=THREADS_HELP)(f)

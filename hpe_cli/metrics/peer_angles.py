@@ -2,15 +2,16 @@
 
 Each function reproduces a few named lines of a peer's current code (the
 ``repo@commit file:lines`` is in its docstring). Where the peer calls SciPy's
-``Rotation`` the same SciPy call is made here, so the numbers agree to the
-last bits; everything runs on whole columns (no loop per row).
+``Rotation`` the same arithmetic runs here on whole columns
+(:mod:`.scipy_columns`, tested against SciPy), so the numbers agree to the last
+bits; no loop per row and no ``Rotation`` object.
 """
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
+
+from . import scipy_columns as sc
 
 _DEG = 180.0 / np.pi
 
@@ -77,30 +78,41 @@ def img2pose_euler(R_img2pose) -> np.ndarray:
     (notebook lines 112-118; ``R`` is ``Rotation.from_rotvec`` of the predicted rotation vector).
     """
 
-    M = np.transpose(stack3(R_img2pose), (0, 2, 1))
-    a = _euler(M, "xyz", True)
+    R = R_img2pose if isinstance(R_img2pose, (list, tuple)) else sc.nested(R_img2pose)
+    a = _euler([[R[j][i] for j in range(3)] for i in range(3)], "xyz", True)  # R.T: the indices swapped
     return a * np.array([1.0, -1.0, -1.0])
 
 
-def opal23_matrices(pyr) -> np.ndarray:
-    """opal23's matrices of (pitch, yaw, roll) degrees: ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])``."""
-    from scipy.spatial.transform import Rotation
+def opal23_matrices(pyr) -> list:
+    """opal23's matrices of (pitch, yaw, roll) degrees: ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])``.
 
+    Returns the nested 3x3 list of columns of ``.as_matrix()`` (SciPy's arithmetic, :mod:`.scipy_columns`).
+    """
     a = np.asarray(pyr, dtype=np.float64) * np.array([1.0, -1.0, 1.0])
-    return Rotation.from_euler("XYZ", a, degrees=True).as_matrix()
+    return sc.matrix_from_quat(sc.quat_from_euler("XYZ", a, degrees=True))
 
 
-def opal23_mae(ann, pred) -> np.ndarray:
+def opal23_euler(M) -> np.ndarray:
+    """``Rotation.from_matrix(M).as_euler('XYZ', degrees=True)`` of opal23's matrices (what ``compute_mae`` reads).
+
+    They are SciPy's matrices of unit quaternions (or products of them), orthonormal to a few ulp: SciPy's
+    orthonormality check (1e-12) always passes and is skipped.
+    """
+    return sc.euler_from_matrix(M, "XYZ", True, assume_valid=True)
+
+
+def opal23_mae(ann, pred, ann_euler=None, pred_euler=None) -> np.ndarray:
     """``Evaluator.compute_mae`` (opal23_headpose@78c0c45 test/evaluator.py:51-75, 131-139).
 
-    Returns (N, 3) errors in the order (pitch, yaw, roll); the peer's array is
-    (yaw, pitch, roll) after its ``PYR -> YPR`` swap.
+    ``ann`` and ``pred`` are matrices (nested or ``(N, 3, 3)``); their
+    ``as_euler('XYZ')`` angles (:func:`opal23_euler`) may be passed when
+    already computed. Returns (N, 3) errors in the order (pitch, yaw, roll);
+    the peer's array is (yaw, pitch, roll) after its ``PYR -> YPR`` swap.
     """
 
-    a = _euler(ann, "XYZ", True)
-    p = _euler(pred, "XYZ", True)
-    a[:, [0, 1]] = a[:, [1, 0]]
-    p[:, [0, 1]] = p[:, [1, 0]]
+    a = opal23_euler(ann) if ann_euler is None else ann_euler
+    p = opal23_euler(pred) if pred_euler is None else pred_euler
+    a, p = a[:, [1, 0, 2]], p[:, [1, 0, 2]]
     sign = np.sign(p)
     w = np.stack([180 - p[:, 0], p[:, 1] - sign[:, 1] * 180, p[:, 2] - sign[:, 2] * 180], axis=1)
     w[w > 180] -= 360
@@ -115,30 +127,41 @@ def opal23_mae(ann, pred) -> np.ndarray:
 
 def opal23_geodesic(ann, pred) -> np.ndarray:
     """``Evaluator.compute_ge`` (test/evaluator.py:77-93): ``arccos(clip((trace(A P^T) - 1) / 2))`` degrees."""
-    t = np.einsum("nij,nij->n", ann, pred)
+    A, P = sc.nested(ann), sc.nested(pred)
+    t = A[0][0] * P[0][0]
+    for i, j in ((0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)):
+        t = t + A[i][j] * P[i][j]  # einsum's order: row by row
     return np.rad2deg(np.arccos(np.clip((t - 1) / 2, -1, 1)))
 
 
 def _euler(R, seq: str, degrees: bool = False) -> np.ndarray:
-    """SciPy ``Rotation.from_matrix(R).as_euler(seq)``, without its gimbal-lock warning (the peers see it too)."""
-    from scipy.spatial.transform import Rotation
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        return Rotation.from_matrix(R).as_euler(seq, degrees=degrees)
+    """SciPy ``Rotation.from_matrix(R).as_euler(seq)`` (column kernels of the same arithmetic, no warning)."""
+    return sc.euler_from_matrix(R, seq, degrees)
 
 
 def _log(M) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
+    """SciPy ``Rotation.from_matrix(M).as_rotvec()`` (radians), column-wise."""
+    return sc.rotvec_from_quat(sc.quat_from_matrix(M))
 
-    return Rotation.from_matrix(M).as_rotvec()
+
+def _times_transpose(P, G) -> list:
+    """``P @ G.T`` of nested matrices (``matmul``'s sum order per entry)."""
+    return [[(P[i][0] * G[j][0] + P[i][1] * G[j][1]) + P[i][2] * G[j][2] for j in range(3)] for i in range(3)]
 
 
 def opal23_near(ann, pred):
-    """``(P_i A_i^T of the rows within 90 degrees of the identity, mask of those rows)``."""
-    deltas = np.matmul(pred, np.transpose(ann, (0, 2, 1)))
-    near = np.linalg.norm(_log(deltas), axis=1) < np.pi / 2
-    return deltas[near], near
+    """``(P_i A_i^T of the rows within 90 degrees of the identity as (M, 3, 3), mask of those rows)``."""
+    deltas = _times_transpose(sc.nested(pred), sc.nested(ann))
+    near = sc.rotation_angle_from_matrix(deltas) < np.pi / 2
+    return stack3([[x[near] for x in row] for row in deltas]), near
+
+
+def opal23_near_quats(ann, pred):
+    """:func:`opal23_near` with the deltas as SciPy's unit quaternions ``(M, 4)`` (x, y, z, w): what the
+    Karcher mean needs, in 4 numbers a row instead of 9."""
+    q = sc.quat_from_matrix(_times_transpose(sc.nested(pred), sc.nested(ann)), assume_valid=True)
+    near = sc.quat_angle(q) < np.pi / 2
+    return np.stack([c[near] for c in q], -1), near
 
 
 def opal23_near_deltas(ann, pred) -> np.ndarray:
@@ -151,21 +174,41 @@ def opal23_karcher(
 ) -> np.ndarray:
     """opal23's ``_compute_mean_rotation`` (test/evaluator.py:111-126) over ``deltas`` (any array-like, e.g. a memmap).
 
-    Started at delta ``start`` (the peer starts at the first row of its file: a caller that spills the
-    deltas in another order names that row), ``mean <- mean @ exp(mean displacement)`` until
-    the mean displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the
-    sums run chunk by chunk, so a memory-mapped spill of any length works.
+    ``deltas`` are matrices ``(N, 3, 3)`` or their unit quaternions ``(N, 4)``
+    (:func:`opal23_near_quats`; then ``log(mean.T @ M_i)`` is taken of the
+    quaternion product, the same rotation to float rounding, without a
+    matrix product and a matrix-to-quaternion conversion per row and
+    iteration). Started at delta ``start`` (the peer starts at the first row
+    of its file: a caller that spills the deltas in another order names that
+    row), ``mean <- mean @ exp(mean displacement)`` until the mean
+    displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the sums run
+    chunk by chunk, so a spill of any length read piece by piece (anything with
+    ``len``, ``ndim`` and slicing) works.
     """
     from scipy.spatial.transform import Rotation
 
     n = len(deltas)
     if not n:
         return np.eye(3)
-    mean = np.array(deltas[start], dtype=np.float64)
+    quats = (deltas.ndim if hasattr(deltas, "ndim") else np.ndim(deltas)) == 2
+    if quats:
+        mean = stack3(sc.matrix_from_quat(tuple(np.asarray(deltas[start], dtype=np.float64)[:, None])))[0]
+    else:
+        mean = np.array(deltas[start], dtype=np.float64)
     for _ in range(max_iter):
         total = np.zeros(3)
+        if quats:  # mean.T @ M_i as the quaternion product inv(q_mean) q_i: one 4x4 matrix for all rows
+            x, y, z, w = (float(v[0]) for v in sc.quat_from_matrix(mean[None]))
+            x, y, z = -x, -y, -z
+            left = np.array([[w, -z, y, x], [z, w, -x, y], [-y, x, w, z], [-x, -y, -z, w]])
         for a in range(0, n, chunk):
-            total += _log(np.matmul(mean.T, np.asarray(deltas[a : a + chunk]))).sum(axis=0)
+            if quats:
+                for b in range(a, min(a + chunk, n), 1 << 16):  # cache-sized pieces of the chunk
+                    r = np.asarray(deltas[b : min(b + (1 << 16), a + chunk, n)], dtype=np.float64) @ left.T
+                    v = sc.rotvec_from_quat((r[:, 0], r[:, 1], r[:, 2], r[:, 3]))
+                    total += [v[:, k].sum() for k in range(3)]
+            else:
+                total += _log(np.matmul(mean.T, np.asarray(deltas[a : a + chunk]))).sum(axis=0)
         d = total / n
         if np.linalg.norm(d) < tol:
             break
@@ -183,8 +226,10 @@ def opal23_align(ann, pred, tol: float = 1e-4, max_iter: int = 100_000, mean=Non
     run) skips the estimate. Returns ``(aligned predictions, mean)``.
     """
     if mean is None:
-        mean = opal23_karcher(opal23_near_deltas(ann, pred), tol, max_iter)
-    return np.matmul(mean.T, pred), mean
+        mean = opal23_karcher(opal23_near_quats(ann, pred)[0], tol, max_iter)
+    P = sc.nested(pred)
+    m = np.asarray(mean, dtype=np.float64)
+    return [[(m[0, i] * P[0][j] + m[1, i] * P[1][j]) + m[2, i] * P[2][j] for j in range(3)] for i in range(3)], mean
 
 
 def trinet_euler(T) -> np.ndarray:
@@ -225,7 +270,7 @@ def opentrack_euler(T) -> np.ndarray:
     inverse takes ``as_euler('XYZ')`` of ``P M P`` (the [p, -y, r] matrix ``T``
     here) and negates yaw.
     """
-    return _euler(stack3(T), "XYZ") * np.array([1.0, -1.0, 1.0])
+    return _euler(T, "XYZ") * np.array([1.0, -1.0, 1.0])
 
 
 def opentrack_errors(e1, e2):

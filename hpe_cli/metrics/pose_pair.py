@@ -136,6 +136,12 @@ class PosePair:
         self._cache[key] = out
         return out
 
+    def geodesic(self) -> np.ndarray:
+        """:func:`hpe_cli.metrics.rotation_errors.geodesic_deg` of ``P`` and ``G`` (computed once)."""
+        if "geodesic" not in self._cache:
+            self._cache["geodesic"] = re_.geodesic_deg(self.P, self.G)
+        return self._cache["geodesic"]
+
     def array(self, system, side: str) -> np.ndarray:
         """Stored matrices of ``side`` in ``system`` as ``(N, 3, 3)``."""
         return pa_.stack3(self.stored(system, side))

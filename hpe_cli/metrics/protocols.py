@@ -106,12 +106,23 @@ def fsanet(pair: PosePair) -> ProtocolRows:
     return ProtocolRows(re_.abs_error(p, g), _within_99(g), reexpressed=rx)
 
 
+def _cached(pair, key, make):
+    """``make()`` once per pair: protocols that share a decomposition (6DRepNet's Euler angles, the
+    axis angles, opal23's matrices) compute it once per chunk."""
+    if key not in pair._cache:
+        pair._cache[key] = make()
+    return pair._cache[key]
+
+
 def _sixd(pair, with_180: bool, filt: bool) -> ProtocolRows:
-    p = pa_.sixdrepnet_euler(pair.stored("6drepnet", "pred"))
+    p = _cached(pair, ("6drepnet", "euler"), lambda: pa_.sixdrepnet_euler(pair.stored("6drepnet", "pred")))
     g, cg = pair.written("6drepnet", "gt")
     keep = _within_99(g) if filt else np.ones(pair.n, dtype=bool)
-    vec = {} if filt else {"vmae": (re_.AXES, pa_.column_acos_deg(pair.P, pair.G, float32=True))}
-    return ProtocolRows(pa_.min_wrapped(p, g, with_180), keep, vectors=vec, reexpressed={"pred": None, "gt": cg})
+    vec = {}
+    if not filt:
+        vec["vmae"] = (re_.AXES, _cached(pair, ("6drepnet", "vmae"), lambda: pa_.column_acos_deg(pair.P, pair.G, True)))
+    err = _cached(pair, ("6drepnet", "min", with_180), lambda: pa_.min_wrapped(p, g, with_180))
+    return ProtocolRows(err, keep, vectors=vec, reexpressed={"pred": None, "gt": cg})
 
 
 def sixdrepnet(pair: PosePair) -> ProtocolRows:
@@ -177,8 +188,18 @@ def whenet(pair: PosePair) -> ProtocolRows:
 
 
 def _opal23_mats(pair):
-    p, g, rx = _written_pair(pair, "300w_lp")
-    return pa_.opal23_matrices(p), pa_.opal23_matrices(g), rx
+    """opal23's matrices of both sides (nested) and the re-expressed rows; computed once per pair (cached)."""
+
+    def make():
+        p, g, rx = _written_pair(pair, "300w_lp")
+        return pa_.opal23_matrices(p), pa_.opal23_matrices(g), rx
+
+    return _cached(pair, ("opal23", "mats"), make)
+
+
+def _opal23_gt_euler(pair) -> np.ndarray:
+    """``as_euler('XYZ')`` of opal23's GT matrices: shared by opal23 and opal23-align (cached)."""
+    return _cached(pair, ("opal23", "gt_euler"), lambda: pa_.opal23_euler(_opal23_mats(pair)[1]))
 
 
 def opal23(pair: PosePair) -> ProtocolRows:
@@ -190,7 +211,7 @@ def opal23(pair: PosePair) -> ProtocolRows:
     """
     P, G, rx = _opal23_mats(pair)
     return ProtocolRows(
-        pa_.opal23_mae(G, P),
+        pa_.opal23_mae(G, P, ann_euler=_opal23_gt_euler(pair)),
         np.ones(pair.n, dtype=bool),
         scalars={"geodesic": pa_.opal23_geodesic(G, P)},
         reexpressed=rx,
@@ -206,14 +227,16 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
     pairs first and passes it in ``pair.context["opal23_mean"]``.
     """
     P, G, rx = _opal23_mats(pair)
-    Pa, _ = pa_.opal23_align(G, P, mean=pair.context.get("opal23_mean"))
-    d = np.matmul(P, np.transpose(G, (0, 2, 1)))
-    left_out = np.linalg.norm(pa_._log(d), axis=1) >= np.pi / 2 if len(d) else np.zeros(0, dtype=bool)
+    deltas, near = pa_.opal23_near_quats(G, P)
+    mean = pair.context.get("opal23_mean")
+    if mean is None:
+        mean = pa_.opal23_karcher(deltas)
+    Pa, _ = pa_.opal23_align(G, P, mean=mean)
     return ProtocolRows(
-        pa_.opal23_mae(G, Pa),
+        pa_.opal23_mae(G, Pa, ann_euler=_opal23_gt_euler(pair)),
         np.ones(pair.n, dtype=bool),
         scalars={"geodesic": pa_.opal23_geodesic(G, Pa)},
-        counts={"left_out_of_mean": left_out},
+        counts={"left_out_of_mean": ~near},
         reexpressed=rx,
     )
 
@@ -280,10 +303,7 @@ def opentrack(pair: PosePair) -> ProtocolRows:
     b = pa_.opentrack_euler(pair.stored("trinet", "gt"))
     e, nan = pa_.opentrack_errors(a, b)
     return ProtocolRows(
-        e,
-        np.ones(pair.n, dtype=bool),
-        scalars={"geodesic": re_.geodesic_deg(pair.P, pair.G)},
-        counts={"peer_nan_rows": nan},
+        e, np.ones(pair.n, dtype=bool), scalars={"geodesic": pair.geodesic()}, counts={"peer_nan_rows": nan}
     )
 
 

@@ -319,7 +319,7 @@ def run_audit(
 ) -> dict:
     """Audit ``input_path`` and write the requested outputs; return the report dict.
 
-    Batches are checked and hashed on ``workers`` threads (default: up to 2)
+    Batches are checked and hashed on ``workers`` threads (default: one per core)
     while this thread reads and tallies them in order. Rows the reader cannot
     parse (wrong field count, bad quoting) fail the audit naming the first,
     unless ``rejects_path`` is given: they then go there with their reason, the
@@ -327,7 +327,6 @@ def run_audit(
     ``strict_rejects`` any such row is still an error and nothing is written.
     ``consistency`` (a :class:`hpe_cli.pipelines.consistency.Settings`) adds its checks (JSON, ``output``, ``suspects``).
     """
-    import os
 
     from ..io import ANGLE_COLS, MATRIX_COLS, check_output, label_mode, write_json
     from ..io.writers import check_report_outputs
@@ -393,7 +392,9 @@ def run_audit(
     examples = {c: [] for c in CHECKS}
     counts = {c: 0 for c in CHECKS}
     flagged = near_not_locked = 0
-    workers = workers or min(2, os.cpu_count() or 1)
+    from .pools import default_threads
+
+    workers = default_threads(workers)  # --threads; one per core by default
     dups = _Duplicates()
     flag_bits = []  # one bit a row: flagged by a check other than duplicates
     unread_examples = []

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -120,7 +119,9 @@ def run_convert(
     meta = {**system_metadata(target), "hpe:source_system": source.name, "hpe:input": str(src.path)}
     if decoder is not None:
         meta["hpe:decoder"] = decoder
-    workers = workers or min(2, os.cpu_count() or 1)
+    from .pools import default_threads
+
+    workers = default_threads(workers)  # --threads; one per core by default
 
     def finish(batch, read_rejects, future, writer):
         out, reasons, labels = future.result()

@@ -19,6 +19,7 @@ from ..errors import HpeError
 from .evaluate_dataset import choose_directmhp
 from .evaluate_join import (  # noqa: F401
     DEFAULT_KEYS,
+    LABEL_THREADS,
     Chunk,
     JoinUsageError,
     SideReader,
@@ -89,26 +90,46 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
         return {}
     M, n = np.zeros((3, 3)), 0
     first, written = (np.iinfo(np.int64).max, 0), 0
+
+    def work(gp):  # on a pool thread: pure numpy, no shared state
+        g, p = with_canonical(gp[0], gsys), with_canonical(gp[1], psys)
+        ok = g.ok & p.ok
+        if not ok.all():
+            g, p = _take(g, ok), _take(p, ok)
+        P, G = _nested(p), _nested(g)
+        part = None
+        if need_mean:
+            part = np.array(
+                [[float(np.sum(P[k][0] * G[m][0] + P[k][1] * G[m][1] + P[k][2] * G[m][2])) for m in range(3)]
+                 for k in range(3)]
+            )  # fmt: skip
+        deltas = near = None
+        if need_opal and g.n:
+            pair = PosePair(P, G, gsys, _raw(g, p, gsys, psys))
+            Po, Go, _ = _opal23_mats(pair)
+            deltas, near = pa_.opal23_near_quats(Go, Po)
+        return g.n, part, deltas, near, g.lines
+
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .pools import in_order
+
     fd, path = tempfile.mkstemp(prefix="hpe_eval_opal23_", suffix=".bin")
+    threads = max(1, int(getattr(s, "threads", None) or 1))
+    pool = ThreadPoolExecutor(threads, thread_name_prefix="hpe-evaluate-glob")
+    pairs = pairs_factory()
     try:
         with os.fdopen(fd, "wb") as f:
-            for g, p in pairs_factory():
-                g, p = with_canonical(g, gsys), with_canonical(p, psys)
-                ok = g.ok & p.ok
-                if not ok.all():
-                    g, p = _take(g, ok), _take(p, ok)
-                P, G = _nested(p), _nested(g)
-                if need_mean:
+            # chunks in input order whatever the threads: the same sums, the same spill
+            for rows, part, deltas, near, lines in in_order(pool, work, pairs, ahead=threads):
+                if part is not None:
                     for k in range(3):
                         for m in range(3):
-                            M[k, m] += float(np.sum(P[k][0] * G[m][0] + P[k][1] * G[m][1] + P[k][2] * G[m][2]))
-                    n += g.n
-                if need_opal and g.n:
-                    pair = PosePair(P, G, gsys, _raw(g, p, gsys, psys))
-                    Po, Go, _ = _opal23_mats(pair)
-                    deltas, near = pa_.opal23_near(Go, Po)
+                            M[k, m] += part[k, m]
+                    n += rows
+                if deltas is not None:
                     if near.any():  # the peer starts at its file's first row: the smallest GT line
-                        ln = g.lines[near]
+                        ln = lines[near]
                         j = int(np.argmin(ln))
                         if ln[j] < first[0]:
                             first = (int(ln[j]), written + j)
@@ -119,12 +140,42 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
             out["Q"] = project_to_so3(M / n) if n else np.eye(3)
         if need_opal:
             size = os.path.getsize(path)
-            deltas = np.memmap(path, dtype=np.float64, mode="r").reshape(-1, 3, 3) if size else np.zeros((0, 3, 3))
-            out["opal23_mean"] = pa_.opal23_karcher(deltas, start=first[1])
-            del deltas
+            with open(path, "rb") as f:  # read piece by piece: a memory map's pages would count in the peak
+                out["opal23_mean"] = pa_.opal23_karcher(_Rows(f, size // 32, 4), start=first[1])
         return out
     finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        if hasattr(pairs, "close"):  # an error or a signal: the readers' threads and temp files go now
+            pairs.close()
         os.unlink(path)
+
+
+class _Rows:
+    """Rows of ``width`` float64 in an open binary file, read on indexing (``rows[a:b]``, ``rows[i]``): a spill
+    as an array-like whose pages do not stay mapped (a ``np.memmap`` would add them to the process's peak)."""
+
+    def __init__(self, f, n: int, width: int):
+        self.f, self.n, self.width = f, int(n), int(width)
+        self.ndim = 2
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            a, b, _ = k.indices(self.n)
+            b = max(a, b)
+        else:
+            a, b = int(k), int(k) + 1
+        self.f.seek(a * self.width * 8)
+        out = np.fromfile(self.f, dtype=np.float64, count=(b - a) * self.width).reshape(-1, self.width)
+        return out if isinstance(k, slice) else out[0]
+
+
+def default_threads(threads=None) -> int:
+    from .pools import default_threads as d
+
+    return d(threads)
 
 
 def _readers(s, progress=None):
@@ -139,6 +190,7 @@ def _readers(s, progress=None):
         progress,
         extra=PLACEMENT if s.html else (),
         role="gt",
+        threads=min(s.threads, LABEL_THREADS),
     )
     pr = SideReader(
         s.pred_path,
@@ -151,6 +203,7 @@ def _readers(s, progress=None):
         progress,
         s.orthonormalize,
         role="pred",
+        threads=min(s.threads, LABEL_THREADS),
     )
     return gr, pr
 
@@ -183,7 +236,18 @@ def _run_stream(s, rej, writer):
 
 def _run_memory(s, rej, writer):
     """Read both sides whole, join them by key, then score the pairs in chunks."""
-    gt = read_side(s.gt_path, s.gt_system, s.use_gt, s.keys, s.by, s.radians, s.batch_size, s.progress, role="gt")
+    gt = read_side(
+        s.gt_path,
+        s.gt_system,
+        s.use_gt,
+        s.keys,
+        s.by,
+        s.radians,
+        s.batch_size,
+        s.progress,
+        role="gt",
+        threads=min(s.threads, LABEL_THREADS),
+    )
     pred = read_side(
         s.pred_path,
         s.pred_system,
@@ -195,6 +259,7 @@ def _run_memory(s, rej, writer):
         s.progress,
         role="pred",
         orthonormalize=s.orthonormalize,
+        threads=min(s.threads, LABEL_THREADS),
     )
     if pred.n == 0 and not pred.unreadable:
         raise HpeError(f"{pred.path}: no prediction rows (the file has a header only)")
@@ -237,6 +302,8 @@ def _run_spill(s, rej, writer):
         notes: set = set()
 
         def key_cols(side, rows):
+            if not len(rows):  # no row set aside (the usual case): no Arrow take, which would import pandas
+                return {k: np.zeros(0, dtype=object) for k in s.keys}
             return {k: side.keys.column(k).take(rows).to_numpy(zero_copy_only=False) for k in s.keys}
 
         def pairs(first: bool):
@@ -358,12 +425,16 @@ def run_evaluate(
     images=None,
     join_engine="spill",
     partition_rows=None,
+    threads=None,
 ) -> dict:
     """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report.
 
     Files in different orders are joined by an external hash join (``join_engine="spill"``, partitions of
     about ``partition_rows`` rows, :mod:`hpe_cli.pipelines.evaluate_spill`) or, with ``"memory"``, whole in
-    memory (the reference the partitioned join is tested against).
+    memory (the reference the partitioned join is tested against). ``threads`` (default: one per core, at
+    most 8) score chunks side by side (each side's matrices are built on at most ``LABEL_THREADS`` of them);
+    the report and the outputs are the same whatever their number (chunks are summed and written in input
+    order).
     """
     from ..io import TableWriter, open_table, system_metadata, write_json
     from ..io.writers import check_report_outputs
@@ -423,6 +494,7 @@ def run_evaluate(
         images=Images(folder) if folder else None,
         join_engine=join_engine,
         partition_rows=partition_rows,
+        threads=default_threads(threads),
     )
     meta = {
         **system_metadata(gt_system),

@@ -200,6 +200,7 @@ class SideReader:
         orthonormalize=False,
         extra=(),
         role="gt",
+        threads=LABEL_THREADS,
     ):
         from ..io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
         from ..io.system_meta import resolve_system
@@ -230,6 +231,7 @@ class SideReader:
         ]  # extra: carried (face boxes)
         self.by = by if by and by in columns else None
         self.radians, self.progress, self.orthonormalize = radians, progress, orthonormalize
+        self.threads = max(1, int(threads))
         self.unreadable: list = []
         self.n = 0
         #: key columns whose hash each chunk carries (set while streaming unsorted keys: hashed on the label threads)
@@ -242,7 +244,7 @@ class SideReader:
         """Yield one :class:`Chunk` per batch of the table, in file order.
 
         The batches are decoded here, one after the other; their labels (matrices from the angles, checks) are
-        computed on :data:`LABEL_THREADS` threads, at most that many batches ahead.
+        computed on ``threads`` threads (:data:`LABEL_THREADS` by default), at most that many batches ahead.
         """
         from concurrent.futures import ThreadPoolExecutor
 
@@ -253,9 +255,9 @@ class SideReader:
                 self.unreadable += [(r.line, r.reason) for r in bad_rows]
                 yield batch
 
-        pool = ThreadPoolExecutor(LABEL_THREADS, thread_name_prefix="hpe-evaluate-labels")
+        pool = ThreadPoolExecutor(self.threads, thread_name_prefix="hpe-evaluate-labels")
         try:
-            for chunk in in_order(pool, self._chunk, batches(), ahead=LABEL_THREADS):
+            for chunk in in_order(pool, self._chunk, batches(), ahead=self.threads):
                 self.n += chunk.n
                 if self.progress is not None:
                     self.progress.update(chunk.n)
@@ -281,7 +283,17 @@ class SideReader:
 
 
 def read_side(
-    path, system, use: str, keys, by, radians: bool, batch_size: int, progress=None, role="input", orthonormalize=False
+    path,
+    system,
+    use: str,
+    keys,
+    by,
+    radians: bool,
+    batch_size: int,
+    progress=None,
+    role="input",
+    orthonormalize=False,
+    threads=LABEL_THREADS,
 ) -> Side:
     """Read one table whole into a :class:`Side` (for the in-memory key join).
 
@@ -301,6 +313,7 @@ def read_side(
         progress,
         orthonormalize,
         role=role if role in ("gt", "pred") else "gt",
+        threads=threads,
     )
     parts: dict = {f"c{k}": [] for k in range(9)}
     parts.update(ok=[], reasons=[], raw=[], dist=[], keys=[], by=[], lines=[])
@@ -382,8 +395,10 @@ def _stems(arr):
 def _encode(a, b):
     import pyarrow as pa
 
+    from ..io.layout import arrow_to_numpy
+
     enc = pa.concat_arrays([a, b]).dictionary_encode(null_encoding="encode")
-    return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), len(enc.dictionary)
+    return arrow_to_numpy(enc.indices).astype(np.int64), len(enc.dictionary)
 
 
 def _key_codes(gt_keys, pred_keys, keys, stems=None):

@@ -64,7 +64,7 @@ def _raw(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
 def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     """Score every chunk of pairs: accumulate, write rows, keep the worst and a plot sample.
 
-    Chunks are scored on :data:`SCORE_THREADS` threads (numpy releases the GIL on
+    Chunks are scored on ``s.threads`` threads (:data:`SCORE_THREADS` by default; numpy releases the GIL on
     whole columns) and consumed in input order, so sums, the spill and the
     per-row output are the same as one thread's.
     """
@@ -107,7 +107,10 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
         table = None
         if writer is not None or worst.n:
             table = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
-        return g, p, rows, rows_before, by_values, table, acc.partial(rows), Sample.block(rows)
+        part, block = acc.partial(rows), Sample.block(rows)
+        if not s.by:  # their sums are in `part`: every protocol's per-row arrays are freed before the chunk's turn
+            rows.protocols = {}
+        return g, p, rows, rows_before, by_values, table, part, block
 
     pending: list = []  # per-row tables, written in pieces of about one batch
     writes: list = []  # the per-row file is written on its own thread (Parquet encoding releases the GIL)
@@ -122,10 +125,11 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             writes.append(wpool.submit(writer.write, pending[0] if len(pending) == 1 else pa.concat_tables(pending)))
             pending.clear()
 
-    pool = ThreadPoolExecutor(SCORE_THREADS, thread_name_prefix="hpe-evaluate-score")
+    threads = max(1, int(getattr(s, "threads", None) or SCORE_THREADS))
+    pool = ThreadPoolExecutor(threads, thread_name_prefix="hpe-evaluate-score")
     try:
         pieces = usable()
-        for g, p, rows, rows_before, by_values, t, part, block in in_order(pool, work, pieces, ahead=SCORE_THREADS):
+        for g, p, rows, rows_before, by_values, t, part, block in in_order(pool, work, pieces, ahead=threads):
             if rows_before is not None:
                 before.add(rows_before)
             counts["pairs"] += rows.n

@@ -20,7 +20,24 @@ from contextlib import closing
 
 import numpy as np
 
+from ..io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
 from .evaluate_join import Side, _stems, combine_key_hash, key_text
+
+
+def _bools(col) -> np.ndarray:
+    """A boolean Arrow column (no nulls) as a numpy bool array, from its bit buffers (no pandas)."""
+    import pyarrow as pa
+
+    chunks = col.chunks if isinstance(col, pa.ChunkedArray) else [col]
+    parts = [
+        np.unpackbits(np.frombuffer(ch.buffers()[1], dtype=np.uint8), bitorder="little")[
+            ch.offset : ch.offset + len(ch)
+        ].astype(bool)
+        for ch in chunks
+        if len(ch)
+    ]
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=bool)
+
 
 #: rows of one side per partition (about 130 bytes each on disk, ~550 bytes each while a partition is joined)
 PARTITION_ROWS = 400_000
@@ -105,7 +122,7 @@ class _SideSpill:
                 col = c.keys.column(name)
                 col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
                 cols[name] = col.cast(col.type.value_type) if pa.types.is_dictionary(col.type) else col
-        t = pa.table(cols)
+        t = arrow_table(cols)  # from the buffers: pa.table would import pandas (0.3 s) for numpy columns
         if self.schema is None:
             self.schema = t.schema
         elif t.schema != self.schema:
@@ -125,7 +142,7 @@ class _SideSpill:
         part = (h % np.uint64(self.K)).astype(np.int64) if self.K > 1 else np.zeros(c.n, dtype=np.int64)
         order = np.argsort(part, kind="stable")
         bounds = np.searchsorted(part[order], np.arange(self.K + 1))
-        t = t.take(pa.array(order))  # one gather; each partition is then a zero-copy slice
+        t = t.take(numpy_to_arrow(order))  # one gather; each partition is then a zero-copy slice
         for k in range(self.K):
             a, b = int(bounds[k]), int(bounds[k + 1])
             if a == b:
@@ -154,6 +171,9 @@ class _SideSpill:
 
     def side(self, k, empty_keys):
         """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate_join.Side` (empty when it holds no row)."""
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
         r = self.reader
         t = self.table(k)
         if t is None:
@@ -174,9 +194,12 @@ class _SideSpill:
         else:
 
             def col(name):
-                return t.column(name).to_numpy()
+                c = t.column(name)
+                return _bools(c) if pa.types.is_boolean(c.type) else arrow_to_numpy(c)
 
-            reasons = t.column(f"{_PFX}reason").to_numpy(zero_copy_only=False).astype(object)
+            rc = t.column(f"{_PFX}reason")
+            has_reasons = bool(pc.max(pc.utf8_length(rc)).as_py() or 0) if len(rc) else False
+            reasons = rc.to_numpy(zero_copy_only=False).astype(object) if has_reasons else None
             keys = t.select([n for n in t.column_names if not n.startswith(_PFX)])
             keys = keys.select(r.keep) if r.keep else None
             by = keys.column(r.by).to_numpy(zero_copy_only=False) if r.by else None
@@ -187,7 +210,7 @@ class _SideSpill:
                 r.mode,
                 None if lean else [col(f"{_PFX}c{i}") for i in range(9)],
                 col(f"{_PFX}ok"),
-                reasons if (reasons != "").any() else None,
+                reasons,
                 keys,
                 by,
                 r.columns,
@@ -237,7 +260,8 @@ class Partitions:
             schema.field(c) if schema is not None and c in schema.names else pa.field(c, pa.string())
             for c in reader.keep
         ]
-        return pa.schema(fields).empty_table()
+        schema = pa.schema(fields)
+        return pa.Table.from_arrays([pa.nulls(0, f.type) for f in schema], schema=schema)  # empty_table imports pandas
 
     def sides(self, k):
         return (
@@ -277,12 +301,12 @@ class Partitions:
                 t[3] += n_p
                 if not n_g or not n_p:
                     continue
-                exact = _count_in(tg.column(f"{_PFX}hx{j}").to_numpy(), tp.column(f"{_PFX}hx{j}").to_numpy())
+                exact = _count_in(arrow_to_numpy(tg.column(f"{_PFX}hx{j}")), arrow_to_numpy(tp.column(f"{_PFX}hx{j}")))
                 t[0] += exact
                 t[1] += (
                     exact
                     if exact == min(n_g, n_p)
-                    else _count_in(tg.column(f"{_PFX}hs{j}").to_numpy(), tp.column(f"{_PFX}hs{j}").to_numpy())
+                    else _count_in(arrow_to_numpy(tg.column(f"{_PFX}hs{j}")), arrow_to_numpy(tp.column(f"{_PFX}hs{j}")))
                 )
         return {k for k, (ex, st, ng, npr) in tally.items() if ex < min(ng, npr) and st > ex}
 
@@ -323,7 +347,7 @@ class Partitions:
                 a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
                 b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b,
             )
-            a, b = a.take(pa.array(gi)), b.take(pa.array(pi))
+            a, b = a.take(numpy_to_arrow(gi)), b.take(numpy_to_arrow(pi))
             if k in stems:
                 a, b = _stems(a), _stems(b)
             if len(gi) and not pc.all(pc.equal(a, b)).as_py():

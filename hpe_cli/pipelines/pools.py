@@ -273,4 +273,16 @@ def in_order(pool, fn, items, ahead: int | None = None):
         yield res
 
 
-__all__ = ["unit_pool", "borrow", "in_order", "mp_context"]
+#: the default thread count's cap: each thread keeps a chunk in flight, so memory grows with the count
+MAX_DEFAULT_THREADS = 8
+
+
+def default_threads(threads=None) -> int:
+    """``threads`` when given (``--threads``), else one per core (``os.cpu_count()``), between 1 and
+    :data:`MAX_DEFAULT_THREADS`."""
+    import os
+
+    return max(1, int(threads)) if threads else max(1, min(MAX_DEFAULT_THREADS, os.cpu_count() or 1))
+
+
+__all__ = ["unit_pool", "borrow", "in_order", "mp_context", "default_threads"]

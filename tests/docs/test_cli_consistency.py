@@ -159,6 +159,7 @@ def test_length_rejects_bad_values(value):
         "--names",
         "--input-format",
         "--batch-size",
+        "--threads",
     ],
 )
 def test_shared_option_help_is_identical(option):
