@@ -188,6 +188,7 @@ def run_view(
     images=None,
     system=None,
     other_system=None,
+    also_in=None,
     radians=False,
     use="auto",
     keys=None,
@@ -212,6 +213,10 @@ def run_view(
     system, other_system : RotationSystem, optional
         Each table's system when its file does not name one (``other_system`` defaults to ``system``);
         the page's angles (degrees) are in ``labels``' system.
+    also_in : list of (RotationSystem or str), optional
+        Further systems (names or ``.toml`` files) in which every row's angles are computed too, from its
+        canonical matrix (the kernels ``hpe convert`` uses); the page's selector makes its angle filters, sort,
+        captions and coverage map use one of them.
     radians : bool
         Angle columns in radians (default degrees).
     use : {"auto", "angles", "matrix"}
@@ -295,6 +300,8 @@ def run_view(
                 where=b.where(int(unmatched[0])),
             )  # fmt: skip
 
+    alt = also_angles(also_in, a.system, a.A, A_other)
+
     # images, placement, picture names
     root = Path(images) if images else (Path(labels) if Path(labels).is_dir() else Path(labels).parent)
     refs, img_code, missing = _resolve_images(a, root, ok)
@@ -364,6 +371,7 @@ def run_view(
             bidx=bidx,
             angles=a.angles,
             other_angles=other_angles,
+            also=alt,
             angle=angle,
             A=a.A,
             A_other=A_other,
@@ -381,6 +389,27 @@ def run_view(
     counts["system"] = a.resolved.describe()
     counts["notes"] = notes
     return counts
+
+
+def also_angles(systems, own, A, A_other) -> dict:
+    """Per system of ``systems`` (not ``own``): ``(angles, other_angles)``, each (N, 3) pitch, yaw, roll in
+    degrees (primary solution), NaN where the canonical matrix is unusable. Vectorised over all rows."""
+    from ..rotation.systems import get_system
+
+    out: dict = {}
+    for s in systems or []:
+        s = get_system(s) if isinstance(s, str) else s
+        if s.name == own.name or s.name in out:
+            continue
+        pair = []
+        for M in (A, A_other):
+            ang = np.full((len(M), 3), np.nan)
+            ok = np.isfinite(M.reshape(len(M), 9)).all(axis=1)
+            if ok.any():
+                ang[ok] = s.to_angles(s.from_canonical(M[ok]))[0]
+            pair.append(ang)
+        out[s.name] = tuple(pair)
+    return out
 
 
 def _reject(rejects, t: Table, rows, reasons) -> None:

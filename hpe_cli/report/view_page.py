@@ -86,6 +86,7 @@ def write_page(
     other_angles,
     angle,
     A,
+    also=None,
     A_other,
     centre,
     length,
@@ -97,7 +98,8 @@ def write_page(
     counts,
 ):
     """Write the page into ``folder`` (the run's staged output folder). ``labels``/``other`` are
-    :class:`hpe_cli.pipelines.view.Table` s; the arrays have one entry per row of ``labels``."""
+    :class:`hpe_cli.pipelines.view.Table` s; the arrays have one entry per row of ``labels``; ``also`` maps
+    further system names to ``(angles, other_angles)`` (:func:`hpe_cli.pipelines.view.also_angles`)."""
     import importlib.resources as ir
 
     folder = Path(folder)
@@ -130,12 +132,20 @@ def write_page(
         "chunk": CHUNK,
         "counts": {k: v for k, v in counts.items() if isinstance(v, (int, list))},
         "angles_system": labels.system.name,
+        "systems": [labels.system.name, *(also or {})],
     }
+    systems = {}
+    for name, (ang, ang_o) in (also or {}).items():
+        d = {"pitch": _num(ang[:, 0]), "yaw": _num(ang[:, 1]), "roll": _num(ang[:, 2])}
+        if other is not None:
+            d.update(other_pitch=_num(ang_o[:, 0]), other_yaw=_num(ang_o[:, 1]), other_roll=_num(ang_o[:, 2]))
+        systems[name] = d
     data = {
         "meta": meta,
         "num": num,
         "cat": cat,
         "flag": flag,
+        "systems": systems,
         "thumb": thumbs.tolist(),
         "img": img_code,
         "images": images,
