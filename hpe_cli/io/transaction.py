@@ -21,6 +21,13 @@ Rules enforced here, for every command:
 - errors name the user's path and the reason (permission denied, read-only
   file system, disk full, name too long), never a temporary name.
 
+- a staged folder whose target does not exist yet, with at least
+  :data:`RENAME_MIN_FILES` files and no input of the run under it, is placed
+  whole: its name is claimed with ``mkdir`` (fails if anything took it) and
+  the staged folder renamed onto that empty folder (``rename(2)`` replaces an
+  empty folder atomically); undone by renaming it back. A race (the name taken,
+  a file put into it meanwhile) falls back to placing the files one by one,
+  with every check of that path;
 - a commit that fails halfway (a target name taken by a folder meanwhile, a
   read-only folder, a full disk) undoes the files already placed: new ones are
   removed, replaced ones restored from hard-link backups;
@@ -63,6 +70,9 @@ __all__ = [
 ]
 
 TEMP_PREFIX = os_errors.TEMP_PREFIX
+#: a staged folder with at least this many files (and a target that does not exist) is renamed into place whole;
+#: smaller ones are placed file by file (the cost is the same, and the per-file path is the one fault tests probe)
+RENAME_MIN_FILES = 256
 _current: contextvars.ContextVar = contextvars.ContextVar("hpe_output_transaction", default=None)
 #: the run's transaction, also visible from worker threads (which do not inherit context variables)
 _run = None
@@ -387,6 +397,22 @@ class OutputTransaction:
                 pairs.append((src, dst))
         return pairs
 
+    def _can_rename(self, s: _Staged) -> bool:
+        """Whether staged folder ``s`` may be placed whole (:func:`_rename_dir`): its target does not exist, no
+        input of the run lies under it, and it holds at least :data:`RENAME_MIN_FILES` files."""
+        if os.path.lexists(s.target):
+            return False
+        real = _real(s.target)
+        under = real.rstrip(os.sep) + os.sep
+        if any(i.real == real or i.real.startswith(under) for i in self._inputs):
+            return False
+        n = 0
+        for _, _, files in os.walk(s.tmp):
+            n += len(files)
+            if n >= RENAME_MIN_FILES:
+                return True
+        return False
+
     def commit(self) -> None:
         """Move every staged output into place; on any failure undo what was moved and remove the rest."""
         if self.state != "open":
@@ -408,7 +434,7 @@ class OutputTransaction:
             plans = []
             for s in self._staged:
                 if s.is_dir:
-                    plans.append((s, self._dir_plan(s)))
+                    plans.append((s, None if self._can_rename(s) else self._dir_plan(s)))
                 else:
                     self._check_inputs(s.item)
                     if s.target.exists() and not s.overwrite:
@@ -418,6 +444,11 @@ class OutputTransaction:
                         )
                     plans.append((s, [(s.tmp, s.target)]))
             for s, pairs in plans:
+                if pairs is None:  # a new folder: placed whole, or (a race) file by file after all
+                    with _section():
+                        if _rename_dir(s, self._make_parents, undo):
+                            continue
+                    pairs = self._dir_plan(s)
                 if s.is_dir:
                     with _section():
                         self._make_parents(s.target / "x", s.target)
@@ -510,6 +541,26 @@ def _remove(p: Path) -> None:
         pass
     except OSError:
         pass
+
+
+def _rename_dir(s: _Staged, make_parents, undo: list) -> bool:
+    """Place staged folder ``s`` whole at its (new) target: True when placed, False to place its files instead."""
+    target = s.target
+    make_parents(target, target.parent)
+    try:
+        os.mkdir(target)  # claims the name: fails if a file or folder took it since the plan
+    except OSError:
+        return False
+    try:
+        os.rename(s.tmp, target)  # onto the empty folder just made: atomic, fails if something was put into it
+    except OSError:
+        try:
+            os.rmdir(target)
+        except OSError:
+            pass
+        return False
+    undo.append(lambda: os.rename(target, s.tmp))
+    return True
 
 
 _NO_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK, errno.ENOSYS, errno.EXDEV}
