@@ -305,7 +305,11 @@ def run_view(
     # images, placement, picture names
     root = Path(images) if images else (Path(labels) if Path(labels).is_dir() else Path(labels).parent)
     refs, img_code, missing = _resolve_images(a, root, ok)
-    sizes = [image_size(r) for r in refs]
+    sizes, by_video = [], {}  # a video's frame size is asked once, not once per frame
+    for r in refs:  # one per distinct picture
+        if r.path is None and r.video not in by_video:
+            by_video[r.video] = image_size(r)
+        sizes.append(image_size(r) if r.path is not None else by_video[r.video])
     for k, s in enumerate(sizes):
         if s is None:
             missing[(img_code == k) & ok] = "not a readable image"
@@ -346,16 +350,17 @@ def run_view(
         vt.mkdirs(stage)
         tasks = vt.make_tasks([(refs[k], frame_names[k], rows) for k, rows in groups.items()], stage, need_t, need_f)
         if progress is not None:
-            progress.total = sum(len(t.rows) for t in tasks)
+            progress.total = sum(t.n for t in tasks)
             progress.refresh()
         failed = vt.run_tasks(tasks, workers, progress)
-        for task, reason in failed:  # unreadable after all: its rows become rejects
-            k = refs.index(task.ref)
+        ref_index = {r.key: k for k, r in enumerate(refs)}
+        for ref, reason, _ in failed:  # unreadable after all: its rows become rejects
+            k = ref_index[ref.key]
             rows = np.flatnonzero((img_code == k) & (thumb != None))  # noqa: E711
             thumb[rows] = None
             _reject(rejects, a, rows, np.full(len(rows), reason, dtype=object))
             why[rows] = reason
-        counts["made"] = sum(len(t.rows) for t in tasks) - sum(len(t.rows) for t, _ in failed)
+        counts["made"] = sum(t.n for t in tasks) - sum(n for _, _, n in failed)
         counts["shown"] = int(sum(t is not None for t in thumb))
         counts["reused"] = counts["shown"] - counts["made"]
         counts["images"] = len(refs)
