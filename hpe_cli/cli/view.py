@@ -162,6 +162,8 @@ def view(
         f"{s['shown']} of {s['rows']} rows shown ({s['made']} thumbnails made, {s['reused']} reused; "
         f"{s['whole_frame']} without a head box shown whole) from {s['images']} images -> {outdir}/index.html"
     ]
+    if s.get("pruned"):
+        lines.append(f"{s['pruned']} files of the earlier page no longer used: removed")
     if other is not None:
         lines.append(f"{s['matched']} rows paired with {other} by {', '.join(s['keys'])}")
     lines += s["notes"]

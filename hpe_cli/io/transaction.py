@@ -28,6 +28,10 @@ Rules enforced here, for every command:
   empty folder atomically); undone by renaming it back. A race (the name taken,
   a file put into it meanwhile) falls back to placing the files one by one,
   with every check of that path;
+- a file given to :meth:`OutputTransaction.remove_at_commit` (a stale file of
+  an earlier output folder) is removed as part of the commit, after every
+  output is placed: renamed to a temp next to it, and renamed back if the
+  commit fails; an input of the run is never removed;
 - a commit that fails halfway (a target name taken by a folder meanwhile, a
   read-only folder, a full disk) undoes the files already placed: new ones are
   removed, replaced ones restored from hard-link backups;
@@ -223,6 +227,7 @@ class OutputTransaction:
         self._outputs: list = []  # declared outputs (command-line parameters)
         self._staged: list = []
         self._made_dirs: list = []  # folders created for outputs, removed on abort if still empty
+        self._removals: list = []  # files removed at commit (stale files of an earlier output folder)
         self._after: list = []
         self._on_abort: list = []
         self._swept: set = set()
@@ -262,6 +267,13 @@ class OutputTransaction:
     def paths(self) -> list:
         """Every input and output path of the run, as given (for error messages)."""
         return [i.shown for i in self._inputs + self._outputs] + [os.fspath(s.target) for s in self._staged]
+
+    def remove_at_commit(self, path) -> None:
+        """Remove file ``path`` when the run commits, as part of it (restored if the commit fails); it may not be
+        an input of the run."""
+        item = _Item(path)
+        self._check_inputs(item)
+        self._removals.append(Path(path))
 
     def on_abort(self, func) -> None:
         """Call ``func()`` if the run aborts (e.g. remove a work folder that is not an output)."""
@@ -457,6 +469,9 @@ class OutputTransaction:
                         if s.is_dir:
                             self._make_parents(dst, dst.parent)
                         _place(src, dst, s.overwrite, undo, backups)
+            for p in self._removals:
+                with _section():
+                    _unplace(p, undo, backups)
         except BaseException as exc:
             for action in reversed(undo):
                 try:
@@ -476,6 +491,7 @@ class OutputTransaction:
             s.release()
         self._staged.clear()
         self._made_dirs.clear()
+        self._removals.clear()
         self.state = "committed"
         if self is _run:
             _run_committed = True
@@ -500,6 +516,7 @@ class OutputTransaction:
             except OSError:
                 pass
         self._made_dirs.clear()
+        self._removals.clear()
 
     # ------------------------------------------------------------------ scope
     @contextmanager
@@ -561,6 +578,20 @@ def _rename_dir(s: _Staged, make_parents, undo: list) -> bool:
         return False
     undo.append(lambda: os.rename(target, s.tmp))
     return True
+
+
+def _unplace(path: Path, undo: list, backups: list) -> None:
+    """Remove ``path`` undoably: renamed to a temp next to it (deleted once the commit is complete)."""
+    bak = _temp_in(path.parent)
+    try:
+        os.rename(path, bak)
+    except FileNotFoundError:  # gone already
+        return
+    except OSError as exc:
+        exc.hpe_target = path
+        raise
+    backups.append(bak)
+    undo.append(lambda: os.rename(bak, path))
 
 
 _NO_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK, errno.ENOSYS, errno.EXDEV}

@@ -238,7 +238,8 @@ def run_view(
     -------
     dict
         ``rows``, ``shown`` (rows with a thumbnail), ``whole_frame`` (rows without a head box, shown whole),
-        ``made`` / ``reused`` (thumbnails made this run / kept from an earlier one), ``images``, ``matched``
+        ``made`` / ``reused`` (thumbnails made this run / kept from an earlier one), ``pruned`` (files of an
+        earlier page in ``outdir`` this one no longer uses, removed with the commit), ``images``, ``matched``
         (rows of ``labels`` with a row of ``other``), ``keys``, ``rejects`` (reason -> count), ``system``,
         ``notes``.
     """
@@ -345,7 +346,7 @@ def run_view(
         groups.setdefault(int(img_code[i]), []).append((thumb[i], crop, centre[i], float(L[i]), V[i], other_i))
     need_t = set(thumb[idx].tolist()) - have_thumbs
     need_f = set(frame_names) - have_frames - {None}
-    with ensure_transaction(), staged_dir(outdir, overwrite) as stage:
+    with ensure_transaction() as txn, staged_dir(outdir, overwrite) as stage:
         stage = Path(stage)
         vt.mkdirs(stage)
         tasks = vt.make_tasks([(refs[k], frame_names[k], rows) for k, rows in groups.items()], stage, need_t, need_f)
@@ -389,11 +390,36 @@ def run_view(
             status=status,
             counts=counts,
         )
+        counts["pruned"] = _prune(txn, outdir, thumb, frame_names, failed, refs, view_page.n_chunks(a.n))
         rejects.finish()
     counts["rejects"] = dict(rejects.counts)
     counts["system"] = a.resolved.describe()
     counts["notes"] = notes
     return counts
+
+
+def _prune(txn, outdir: Path, thumb, frame_names, failed, refs, chunks: int) -> int:
+    """Remove, when the run commits, the files an earlier page in ``outdir`` left that this page no longer uses
+    (thumbnails of rows dropped or changed, frames of images no longer shown, ``rows/`` files past the last
+    chunk). Only names this command writes are considered; anything else in the folder is left alone."""
+    import re
+
+    from . import view_thumbs as vt
+
+    bad = {r.key for r, _, _ in failed}
+    keep = {
+        vt.THUMB_DIR: {t for t in thumb if t is not None},
+        vt.FRAME_DIR: {f for f, r in zip(frame_names, refs) if f is not None and r.key not in bad},
+        "rows": {f"{k:05d}.js" for k in range(chunks)},
+    }
+    pattern = {vt.THUMB_DIR: r"[0-9a-f]{20}\.jpg", vt.FRAME_DIR: r"[0-9a-f]{20}\.jpg", "rows": r"\d{5}\.js"}
+    n = 0
+    for sub, names in keep.items():
+        for name in sorted(vt.existing(outdir, sub) - names):
+            if re.fullmatch(pattern[sub], name):
+                txn.remove_at_commit(outdir / sub / name)
+                n += 1
+    return n
 
 
 def also_angles(systems, own, A, A_other) -> dict:

@@ -24,6 +24,11 @@ _SKIP_NUMERIC = re.compile(r"^(lm\d+_[xyz]|r[0-2][0-2]|pitch(_2)?|yaw(_2)?|roll(
 ASSETS = ("index.html", "view.js", "view.css")
 
 
+def n_chunks(n: int) -> int:
+    """Number of ``rows/NNNNN.js`` files of a page of ``n`` rows."""
+    return -(-n // CHUNK)
+
+
 def _dumps(obj) -> bytes:
     import orjson
 

@@ -272,3 +272,55 @@ def test_also_in_angles_and_bad_names(tmp_path):
     )
     r = CliRunner().invoke(cli, ["view", str(src), "-o", str(tmp_path / "q"), "--also-in", "6drepnet,nope"])
     assert r.exit_code == 2 and "nope" in r.output and not (tmp_path / "q").exists()
+
+
+def test_rerun_that_drops_rows_prunes_stale_files(tmp_path, monkeypatch):
+    """A rerun on a table that lost rows (and images) removes the thumbnails, frames and ``rows/`` files the new
+    page no longer references, with the commit: a failing commit leaves the earlier page whole; files the
+    command does not write are left alone."""
+    from hpe_cli.io import transaction as tx
+    from hpe_cli.report import view_page
+
+    monkeypatch.setattr(view_page, "CHUNK", 2)  # 3 rows: rows/00000.js and rows/00001.js
+    _images(tmp_path / "img", ["a.png", "b.png"])
+    src = _table(tmp_path / "in.csv", ROWS)
+    page = tmp_path / "page"
+    assert run("view", src, "-o", page, "--images", tmp_path / "img", "-q").exit_code == 0
+    first = data(page)
+    (page / "notes.txt").write_text("mine")
+    (page / "thumbs" / "mine.jpg").write_bytes(b"mine")
+
+    def files():
+        return {str(p.relative_to(page)): p.read_bytes() for p in page.rglob("*") if p.is_file()}
+
+    before = files()
+    assert {"rows/00000.js", "rows/00001.js"} <= set(before) and len(list((page / "frames").iterdir())) == 2
+    _table(src, ROWS[:1])  # only a.png's first row is left
+    # a commit that fails after the removals: nothing changes
+    real = tx._unplace
+
+    def unplace(path, undo, backups):
+        real(path, undo, backups)
+        if path.name.endswith(".js"):
+            raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(tx, "_unplace", unplace)
+    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite", "-q")
+    assert r.exit_code == 1 and "no space left" in r.output.lower(), r.output
+    assert files() == before and not [p for p in page.rglob(".hpe-*")]
+    monkeypatch.setattr(tx, "_unplace", real)
+    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite")
+    assert r.exit_code == 0, r.output
+    # 2 thumbnails, b.png's frame and rows/00001.js
+    assert "0 thumbnails made, 1 reused" in r.output and "4 files of the earlier page no longer used: removed" in (
+        r.output
+    ), r.output
+    d = data(page)
+    assert sorted(p.name for p in (page / "thumbs").iterdir()) == sorted([d["thumb"][0], "mine.jpg"])
+    assert d["thumb"][0] == first["thumb"][0]
+    assert [p.name for p in (page / "frames").iterdir()] == [d["images"][0]["f"]]
+    assert sorted(p.name for p in (page / "rows").iterdir()) == ["00000.js"]
+    assert (page / "notes.txt").read_text() == "mine" and not [p for p in page.rglob(".hpe-*")]
+    # --no-frames: the frames go too
+    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite", "--no-frames", "-q")
+    assert r.exit_code == 0 and list((page / "frames").iterdir()) == []

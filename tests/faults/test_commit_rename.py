@@ -135,3 +135,35 @@ def test_an_existing_target_is_merged_file_by_file(tmp_path, monkeypatch):
     assert calls == []
     _stage(tmp_path, overwrite=True).commit()
     assert (tmp_path / "page" / "imgs" / "1.jpg").read_bytes() == b"new1" and calls == []
+
+
+def test_removals_are_part_of_the_commit_and_never_an_input(tmp_path, monkeypatch):
+    """``remove_at_commit``: done after every placement, undone (renamed back) when a later step fails; an input
+    of the run is refused."""
+    (tmp_path / "old.jpg").write_bytes(b"old")
+    (tmp_path / "in.csv").write_bytes(b"input")
+    before = tree(tmp_path)
+    txn = _stage(tmp_path, n=3)
+    txn.add_input(tmp_path / "in.csv")
+    with pytest.raises(HpeError, match="in.csv"):
+        txn.remove_at_commit(tmp_path / "in.csv")
+    txn.remove_at_commit(tmp_path / "old.jpg")
+    txn.remove_at_commit(tmp_path / "gone.jpg")  # not there: nothing to do
+    real = tx._unplace
+
+    def unplace(path, undo, backups):
+        real(path, undo, backups)
+        if path.name == "gone.jpg":
+            exc = OSError(errno.EIO, "I/O error")
+            exc.hpe_target = path
+            raise exc
+
+    monkeypatch.setattr(tx, "_unplace", unplace)
+    with pytest.raises(HpeError, match=r"gone\.jpg: cannot write: input/output error"):
+        txn.commit()
+    assert tree(tmp_path) == before and not temp_files(tmp_path)  # old.jpg back, nothing placed
+    txn = _stage(tmp_path, n=3)
+    txn.remove_at_commit(tmp_path / "old.jpg")
+    txn.commit()
+    assert not (tmp_path / "old.jpg").exists() and (tmp_path / "page" / "imgs" / "2.jpg").exists()
+    assert not temp_files(tmp_path)
