@@ -49,17 +49,14 @@ Without a transaction, each writer commits its own output atomically.
 from __future__ import annotations
 
 import contextvars
-import errno
 import os
-import secrets
-import shutil
-import stat
 from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import HpeError
 from . import os_errors
 from .os_errors import os_reason, printable
+from .placement import _place, _remove, _rename_dir, _temp_in, _unplace
 from .stale_temps import SWEEP_AGE, _lock, _sweep  # noqa: F401 - SWEEP_AGE for tests
 
 __all__ = [
@@ -168,10 +165,6 @@ def _key(path):
     except (OSError, ValueError):
         return None
     return (st.st_dev, st.st_ino)
-
-
-def _temp_in(folder: Path) -> Path:
-    return folder / f"{TEMP_PREFIX}{secrets.token_hex(4)}.tmp"
 
 
 def _name_max(folder: Path) -> int:
@@ -546,96 +539,6 @@ def _collision(out: _Item, other: _Item, kind: str) -> str:
         f"{out.shown}: {what} must differ from {against} (the same file after links); "
         "refusing to write it, with or without --overwrite"
     )
-
-
-def _remove(p: Path) -> None:
-    try:
-        if p.is_dir() and not p.is_symlink():
-            shutil.rmtree(p, ignore_errors=True)
-        else:
-            p.unlink()
-    except FileNotFoundError:
-        pass
-    except OSError:
-        pass
-
-
-def _rename_dir(s: _Staged, make_parents, undo: list) -> bool:
-    """Place staged folder ``s`` whole at its (new) target: True when placed, False to place its files instead."""
-    target = s.target
-    make_parents(target, target.parent)
-    try:
-        os.mkdir(target)  # claims the name: fails if a file or folder took it since the plan
-    except OSError:
-        return False
-    try:
-        os.rename(s.tmp, target)  # onto the empty folder just made: atomic, fails if something was put into it
-    except OSError:
-        try:
-            os.rmdir(target)
-        except OSError:
-            pass
-        return False
-    undo.append(lambda: os.rename(target, s.tmp))
-    return True
-
-
-def _unplace(path: Path, undo: list, backups: list) -> None:
-    """Remove ``path`` undoably: renamed to a temp next to it (deleted once the commit is complete)."""
-    bak = _temp_in(path.parent)
-    try:
-        os.rename(path, bak)
-    except FileNotFoundError:  # gone already
-        return
-    except OSError as exc:
-        exc.hpe_target = path
-        raise
-    backups.append(bak)
-    undo.append(lambda: os.rename(bak, path))
-
-
-_NO_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK, errno.ENOSYS, errno.EXDEV}
-
-
-def _place(src: Path, dst: Path, overwrite: bool, undo: list, backups: list) -> None:
-    """Move ``src`` to ``dst``: atomically create it, or replace it keeping its mode."""
-    try:
-        if overwrite and dst.exists():
-            mode = stat.S_IMODE(os.stat(dst).st_mode)
-            os.chmod(src, mode)
-            bak = _temp_in(dst.parent)
-            try:
-                os.link(dst, bak)
-                backups.append(bak)
-                undo.append(lambda: os.replace(bak, dst))
-            except OSError:
-                pass
-            os.replace(src, dst)
-            return
-        try:
-            os.link(src, dst)  # fails if dst exists, whoever created it
-        except FileExistsError:
-            raise HpeError(
-                f"{dst}: already exists (another run created it meanwhile; use --overwrite to replace it)"
-            ) from None
-        except OSError as exc:
-            if exc.errno not in _NO_LINKS:
-                raise
-            # no hard links here: claim the name atomically, then move the file onto it
-            fd = os.open(dst, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-            os.close(fd)
-            undo.append(lambda: os.unlink(dst))
-            os.replace(src, dst)
-            return
-        undo.append(lambda: os.unlink(dst))
-        os.unlink(src)
-    except FileExistsError:
-        raise HpeError(
-            f"{dst}: already exists (another run created it meanwhile; use --overwrite to replace it)"
-        ) from None
-    except OSError as exc:
-        exc.hpe_target = dst
-        raise
 
 
 def current() -> OutputTransaction | None:
