@@ -31,6 +31,21 @@ def _remove(p: Path) -> None:
         pass
 
 
+def _count_files(folder, stop: int) -> int:
+    """Files under ``folder``, counted up to ``stop`` (a listing of 100,000 names is not read to the end)."""
+    n, todo = 0, [os.fspath(folder)]
+    while todo:
+        with os.scandir(todo.pop()) as it:
+            for e in it:
+                if e.is_dir(follow_symlinks=False):
+                    todo.append(e.path)
+                else:
+                    n += 1
+                    if n >= stop:
+                        return n
+    return n
+
+
 def _rename_dir(s, make_parents, undo: list) -> bool:
     """Place staged folder ``s`` whole at its (new) target: True when placed, False to place its files instead."""
     target = s.target

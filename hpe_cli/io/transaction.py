@@ -56,7 +56,7 @@ from pathlib import Path
 from ..errors import HpeError
 from . import os_errors
 from .os_errors import os_reason, printable
-from .placement import _place, _remove, _rename_dir, _temp_in, _unplace
+from .placement import _count_files, _place, _remove, _rename_dir, _temp_in, _unplace
 from .stale_temps import SWEEP_AGE, _lock, _sweep  # noqa: F401 - SWEEP_AGE for tests
 
 __all__ = [
@@ -411,12 +411,7 @@ class OutputTransaction:
         under = real.rstrip(os.sep) + os.sep
         if any(i.real == real or i.real.startswith(under) for i in self._inputs):
             return False
-        n = 0
-        for _, _, files in os.walk(s.tmp):
-            n += len(files)
-            if n >= RENAME_MIN_FILES:
-                return True
-        return False
+        return _count_files(s.tmp, RENAME_MIN_FILES) >= RENAME_MIN_FILES
 
     def commit(self) -> None:
         """Move every staged output into place; on any failure undo what was moved and remove the rest."""
