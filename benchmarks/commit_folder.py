@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 
-def stage(root: Path, name: str, files: int, size: int, per_dir: bool):
+def stage(root: Path, name: str, files: int, size: int):
     from hpe_cli.io import transaction as tx
 
     txn = tx.OutputTransaction()
@@ -37,7 +37,7 @@ def main(argv=None):
     with tempfile.TemporaryDirectory(prefix="hpe-commit-bench-") as tmp:
         root = Path(tmp)
         for label, threshold in (("file by file", 10**12), ("whole folder", tx.RENAME_MIN_FILES)):
-            txn = stage(root, label.replace(" ", "_"), args.files, args.size, True)
+            txn = stage(root, label.replace(" ", "_"), args.files, args.size)
             tx.RENAME_MIN_FILES = threshold
             t = time.perf_counter()
             txn.commit()
