@@ -360,7 +360,8 @@ def view_file(
     Writes a browsable offline page of every row of ``labels`` (and of ``other`` joined by ``keys`` beside it)
     into folder ``output``; open ``output/index.html``. Returns the counts (``rows``, ``shown``,
     ``whole_frame``, ``made``, ``reused``, ``images``, ``matched``, ``rejects``, ``system``). ``options``:
-    ``radians``, ``use``, ``workers``, ``title``.
+    ``radians``, ``use``, ``workers``, ``title``, ``also_in`` (system names or ``.toml`` files whose angles the
+    page can filter by).
 
     Examples
     --------

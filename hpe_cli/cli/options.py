@@ -31,6 +31,20 @@ class SystemType(click.ParamType):
 SYSTEM = SystemType()
 
 
+class SystemListType(click.ParamType):
+    """Comma-separated system names or ``.toml`` files, each as :class:`SystemType` reads it."""
+
+    name = "SYSTEM[,SYSTEM...]"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, (list, tuple)):
+            return list(value)
+        return [SYSTEM.convert(v.strip(), param, ctx) for v in str(value).split(",") if v.strip()]
+
+
+SYSTEMS = SystemListType()
+
+
 class _DeclaredPath(click.Path):
     """A path declared to the run's output transaction as it is parsed (``_declare``: its method name)."""
 

@@ -6,6 +6,7 @@ import click
 
 from .options import (
     SYSTEM,
+    SYSTEMS,
     columns_option,
     echo_summary,
     overwrite_option,
@@ -48,6 +49,15 @@ from .table_options import column_options
     default=None,
     help="Rotation system of OTHER [default: its own, else --system].",
 )
+@click.option(
+    "--also-in",
+    "also_in",
+    type=SYSTEMS,
+    default=None,
+    metavar="SYSTEM[,SYSTEM...]",
+    help="Also give every row's angles in these systems: the page's angle filters, sort and coverage map then "
+    "work in any of them (a selector; default: LABELS' system).",
+)
 @radians_option()
 @columns_option("Read pitch,yaw,roll or r00..r22 (auto: the system's own columns, then angles, then matrices).")
 @click.option(
@@ -78,6 +88,7 @@ def view(
     images,
     system,
     other_system,
+    also_in,
     radians,
     use,
     keys,
@@ -96,7 +107,7 @@ def view(
     server and nothing loaded from the network: a grid of thumbnails (the
     crop around the head box with the pose drawn on it, the whole frame for
     rows without a box), filters on pitch, yaw and roll (in the labels'
-    system) and on every category, flag and number column, sorting by any
+    system, or in any system named by --also-in) and on every category, flag and number column, sorting by any
     column, a yaw-pitch coverage map whose cells filter the grid, and a click
     on a face shows its whole frame with the head box, the landmarks, the
     pose(s), every column and the file and line (or row) it came from. The
@@ -119,6 +130,7 @@ def view(
       hpe view labels.parquet -o page/ --images frames/
       hpe view corrected.parquet legacy.parquet -o compare/ --images panoptic/ --rejects missing.csv
       hpe view gt.csv preds.csv -o errors/ --other-system 6drepnet --key image
+      hpe view panoptic_whenet.parquet -o page/ --images panoptic/ --also-in 300w_lp,3ddfa_v2
       hpe view labels.parquet -o page/ --overwrite   # after the table grew: reuses the thumbnails
     """
     from ..pipelines.view import run_view
@@ -132,6 +144,7 @@ def view(
             images=images,
             system=system,
             other_system=other_system,
+            also_in=also_in,
             radians=radians,
             use=use,
             keys=keys,
@@ -149,6 +162,8 @@ def view(
         f"{s['shown']} of {s['rows']} rows shown ({s['made']} thumbnails made, {s['reused']} reused; "
         f"{s['whole_frame']} without a head box shown whole) from {s['images']} images -> {outdir}/index.html"
     ]
+    if s.get("pruned"):
+        lines.append(f"{s['pruned']} files of the earlier page no longer used: removed")
     if other is not None:
         lines.append(f"{s['matched']} rows paired with {other} by {', '.join(s['keys'])}")
     lines += s["notes"]

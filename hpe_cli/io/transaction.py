@@ -20,6 +20,17 @@ Rules enforced here, for every command:
   plain ``open()`` would give it (the umask applies; the umask is never set);
 - errors name the user's path and the reason (permission denied, read-only
   file system, disk full, name too long), never a temporary name.
+- a staged folder whose target does not exist yet, with at least
+  :data:`RENAME_MIN_FILES` files and no input of the run under it, is placed
+  whole: its name is claimed with ``mkdir`` (fails if anything took it) and
+  the staged folder renamed onto that empty folder (``rename(2)`` replaces an
+  empty folder atomically); undone by renaming it back. A race (the name taken,
+  a file put into it meanwhile) falls back to placing the files one by one,
+  with every check of that path;
+- a file given to :meth:`OutputTransaction.remove_at_commit` (a stale file of
+  an earlier output folder) is removed as part of the commit, after every
+  output is placed: renamed to a temp next to it, and renamed back if the
+  commit fails; an input of the run is never removed;
 - a commit that fails halfway (a target name taken by a folder meanwhile, a
   read-only folder, a full disk) undoes the files already placed: new ones are
   removed, replaced ones restored from hard-link backups;
@@ -37,17 +48,14 @@ Without a transaction, each writer commits its own output atomically.
 from __future__ import annotations
 
 import contextvars
-import errno
 import os
-import secrets
-import shutil
-import stat
 from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import HpeError
 from . import os_errors
 from .os_errors import os_reason, printable
+from .placement import _count_files, _place, _remove, _rename_dir, _temp_in, _unplace
 from .stale_temps import SWEEP_AGE, _lock, _sweep  # noqa: F401 - SWEEP_AGE for tests
 
 __all__ = [
@@ -62,6 +70,9 @@ __all__ = [
 ]
 
 TEMP_PREFIX = os_errors.TEMP_PREFIX
+#: a staged folder with at least this many files (and a target that does not exist) is renamed into place whole;
+#: smaller ones are placed file by file (the cost is the same, and the per-file path is the one fault tests probe)
+RENAME_MIN_FILES = 256
 _current: contextvars.ContextVar = contextvars.ContextVar("hpe_output_transaction", default=None)
 #: the run's transaction, also visible from worker threads (which do not inherit context variables)
 _run = None
@@ -155,10 +166,6 @@ def _key(path):
     return (st.st_dev, st.st_ino)
 
 
-def _temp_in(folder: Path) -> Path:
-    return folder / f"{TEMP_PREFIX}{secrets.token_hex(4)}.tmp"
-
-
 def _name_max(folder: Path) -> int:
     try:
         return os.pathconf(folder, "PC_NAME_MAX")
@@ -212,6 +219,7 @@ class OutputTransaction:
         self._outputs: list = []  # declared outputs (command-line parameters)
         self._staged: list = []
         self._made_dirs: list = []  # folders created for outputs, removed on abort if still empty
+        self._removals: list = []  # files removed at commit (stale files of an earlier output folder)
         self._after: list = []
         self._on_abort: list = []
         self._swept: set = set()
@@ -251,6 +259,13 @@ class OutputTransaction:
     def paths(self) -> list:
         """Every input and output path of the run, as given (for error messages)."""
         return [i.shown for i in self._inputs + self._outputs] + [os.fspath(s.target) for s in self._staged]
+
+    def remove_at_commit(self, path) -> None:
+        """Remove file ``path`` when the run commits, as part of it (restored if the commit fails); it may not be
+        an input of the run."""
+        item = _Item(path)
+        self._check_inputs(item)
+        self._removals.append(Path(path))
 
     def on_abort(self, func) -> None:
         """Call ``func()`` if the run aborts (e.g. remove a work folder that is not an output)."""
@@ -386,6 +401,17 @@ class OutputTransaction:
                 pairs.append((src, dst))
         return pairs
 
+    def _can_rename(self, s: _Staged) -> bool:
+        """Whether staged folder ``s`` may be placed whole (:func:`_rename_dir`): its target does not exist, no
+        input of the run lies under it, and it holds at least :data:`RENAME_MIN_FILES` files."""
+        if os.path.lexists(s.target):
+            return False
+        real = _real(s.target)
+        under = real.rstrip(os.sep) + os.sep
+        if any(i.real == real or i.real.startswith(under) for i in self._inputs):
+            return False
+        return _count_files(s.tmp, RENAME_MIN_FILES) >= RENAME_MIN_FILES
+
     def commit(self) -> None:
         """Move every staged output into place; on any failure undo what was moved and remove the rest."""
         if self.state != "open":
@@ -407,7 +433,7 @@ class OutputTransaction:
             plans = []
             for s in self._staged:
                 if s.is_dir:
-                    plans.append((s, self._dir_plan(s)))
+                    plans.append((s, None if self._can_rename(s) else self._dir_plan(s)))
                 else:
                     self._check_inputs(s.item)
                     if s.target.exists() and not s.overwrite:
@@ -417,6 +443,11 @@ class OutputTransaction:
                         )
                     plans.append((s, [(s.tmp, s.target)]))
             for s, pairs in plans:
+                if pairs is None:  # a new folder: placed whole, or (a race) file by file after all
+                    with _section():
+                        if _rename_dir(s, self._make_parents, undo):
+                            continue
+                    pairs = self._dir_plan(s)
                 if s.is_dir:
                     with _section():
                         self._make_parents(s.target / "x", s.target)
@@ -425,6 +456,9 @@ class OutputTransaction:
                         if s.is_dir:
                             self._make_parents(dst, dst.parent)
                         _place(src, dst, s.overwrite, undo, backups)
+            for p in self._removals:
+                with _section():
+                    _unplace(p, undo, backups)
         except BaseException as exc:
             for action in reversed(undo):
                 try:
@@ -444,6 +478,7 @@ class OutputTransaction:
             s.release()
         self._staged.clear()
         self._made_dirs.clear()
+        self._removals.clear()
         self.state = "committed"
         if self is _run:
             _run_committed = True
@@ -468,6 +503,7 @@ class OutputTransaction:
             except OSError:
                 pass
         self._made_dirs.clear()
+        self._removals.clear()
 
     # ------------------------------------------------------------------ scope
     @contextmanager
@@ -499,62 +535,6 @@ def _collision(out: _Item, other: _Item, kind: str) -> str:
         f"{out.shown}: {what} must differ from {against} (the same file after links); "
         "refusing to write it, with or without --overwrite"
     )
-
-
-def _remove(p: Path) -> None:
-    try:
-        if p.is_dir() and not p.is_symlink():
-            shutil.rmtree(p, ignore_errors=True)
-        else:
-            p.unlink()
-    except FileNotFoundError:
-        pass
-    except OSError:
-        pass
-
-
-_NO_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK, errno.ENOSYS, errno.EXDEV}
-
-
-def _place(src: Path, dst: Path, overwrite: bool, undo: list, backups: list) -> None:
-    """Move ``src`` to ``dst``: atomically create it, or replace it keeping its mode."""
-    try:
-        if overwrite and dst.exists():
-            mode = stat.S_IMODE(os.stat(dst).st_mode)
-            os.chmod(src, mode)
-            bak = _temp_in(dst.parent)
-            try:
-                os.link(dst, bak)
-                backups.append(bak)
-                undo.append(lambda: os.replace(bak, dst))
-            except OSError:
-                pass
-            os.replace(src, dst)
-            return
-        try:
-            os.link(src, dst)  # fails if dst exists, whoever created it
-        except FileExistsError:
-            raise HpeError(
-                f"{dst}: already exists (another run created it meanwhile; use --overwrite to replace it)"
-            ) from None
-        except OSError as exc:
-            if exc.errno not in _NO_LINKS:
-                raise
-            # no hard links here: claim the name atomically, then move the file onto it
-            fd = os.open(dst, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-            os.close(fd)
-            undo.append(lambda: os.unlink(dst))
-            os.replace(src, dst)
-            return
-        undo.append(lambda: os.unlink(dst))
-        os.unlink(src)
-    except FileExistsError:
-        raise HpeError(
-            f"{dst}: already exists (another run created it meanwhile; use --overwrite to replace it)"
-        ) from None
-    except OSError as exc:
-        exc.hpe_target = dst
-        raise
 
 
 def current() -> OutputTransaction | None:

@@ -188,6 +188,7 @@ def run_view(
     images=None,
     system=None,
     other_system=None,
+    also_in=None,
     radians=False,
     use="auto",
     keys=None,
@@ -212,6 +213,10 @@ def run_view(
     system, other_system : RotationSystem, optional
         Each table's system when its file does not name one (``other_system`` defaults to ``system``);
         the page's angles (degrees) are in ``labels``' system.
+    also_in : list of (RotationSystem or str), optional
+        Further systems (names or ``.toml`` files) in which every row's angles are computed too, from its
+        canonical matrix (the kernels ``hpe convert`` uses); the page's selector makes its angle filters, sort,
+        captions and coverage map use one of them.
     radians : bool
         Angle columns in radians (default degrees).
     use : {"auto", "angles", "matrix"}
@@ -233,7 +238,8 @@ def run_view(
     -------
     dict
         ``rows``, ``shown`` (rows with a thumbnail), ``whole_frame`` (rows without a head box, shown whole),
-        ``made`` / ``reused`` (thumbnails made this run / kept from an earlier one), ``images``, ``matched``
+        ``made`` / ``reused`` (thumbnails made this run / kept from an earlier one), ``pruned`` (files of an
+        earlier page in ``outdir`` this one no longer uses, removed with the commit), ``images``, ``matched``
         (rows of ``labels`` with a row of ``other``), ``keys``, ``rejects`` (reason -> count), ``system``,
         ``notes``.
     """
@@ -295,10 +301,16 @@ def run_view(
                 where=b.where(int(unmatched[0])),
             )  # fmt: skip
 
+    alt = also_angles(also_in, a.system, a.A, A_other)
+
     # images, placement, picture names
     root = Path(images) if images else (Path(labels) if Path(labels).is_dir() else Path(labels).parent)
     refs, img_code, missing = _resolve_images(a, root, ok)
-    sizes = [image_size(r) for r in refs]
+    sizes, by_video = [], {}  # a video's frame size is asked once, not once per frame
+    for r in refs:  # one per distinct picture
+        if r.path is None and r.video not in by_video:
+            by_video[r.video] = image_size(r)
+        sizes.append(image_size(r) if r.path is not None else by_video[r.video])
     for k, s in enumerate(sizes):
         if s is None:
             missing[(img_code == k) & ok] = "not a readable image"
@@ -334,21 +346,22 @@ def run_view(
         groups.setdefault(int(img_code[i]), []).append((thumb[i], crop, centre[i], float(L[i]), V[i], other_i))
     need_t = set(thumb[idx].tolist()) - have_thumbs
     need_f = set(frame_names) - have_frames - {None}
-    with ensure_transaction(), staged_dir(outdir, overwrite) as stage:
+    with ensure_transaction() as txn, staged_dir(outdir, overwrite) as stage:
         stage = Path(stage)
         vt.mkdirs(stage)
         tasks = vt.make_tasks([(refs[k], frame_names[k], rows) for k, rows in groups.items()], stage, need_t, need_f)
         if progress is not None:
-            progress.total = sum(len(t.rows) for t in tasks)
+            progress.total = sum(t.n for t in tasks)
             progress.refresh()
         failed = vt.run_tasks(tasks, workers, progress)
-        for task, reason in failed:  # unreadable after all: its rows become rejects
-            k = refs.index(task.ref)
+        ref_index = {r.key: k for k, r in enumerate(refs)}
+        for ref, reason, _ in failed:  # unreadable after all: its rows become rejects
+            k = ref_index[ref.key]
             rows = np.flatnonzero((img_code == k) & (thumb != None))  # noqa: E711
             thumb[rows] = None
             _reject(rejects, a, rows, np.full(len(rows), reason, dtype=object))
             why[rows] = reason
-        counts["made"] = sum(len(t.rows) for t in tasks) - sum(len(t.rows) for t, _ in failed)
+        counts["made"] = sum(t.n for t in tasks) - sum(n for _, _, n in failed)
         counts["shown"] = int(sum(t is not None for t in thumb))
         counts["reused"] = counts["shown"] - counts["made"]
         counts["images"] = len(refs)
@@ -364,6 +377,7 @@ def run_view(
             bidx=bidx,
             angles=a.angles,
             other_angles=other_angles,
+            also=alt,
             angle=angle,
             A=a.A,
             A_other=A_other,
@@ -376,11 +390,57 @@ def run_view(
             status=status,
             counts=counts,
         )
+        counts["pruned"] = _prune(txn, outdir, thumb, frame_names, failed, refs, view_page.n_chunks(a.n))
         rejects.finish()
     counts["rejects"] = dict(rejects.counts)
     counts["system"] = a.resolved.describe()
     counts["notes"] = notes
     return counts
+
+
+def _prune(txn, outdir: Path, thumb, frame_names, failed, refs, chunks: int) -> int:
+    """Remove, when the run commits, the files an earlier page in ``outdir`` left that this page no longer uses
+    (thumbnails of rows dropped or changed, frames of images no longer shown, ``rows/`` files past the last
+    chunk). Only names this command writes are considered; anything else in the folder is left alone."""
+    import re
+
+    from . import view_thumbs as vt
+
+    bad = {r.key for r, _, _ in failed}
+    keep = {
+        vt.THUMB_DIR: {t for t in thumb if t is not None},
+        vt.FRAME_DIR: {f for f, r in zip(frame_names, refs) if f is not None and r.key not in bad},
+        "rows": {f"{k:05d}.js" for k in range(chunks)},
+    }
+    pattern = {vt.THUMB_DIR: r"[0-9a-f]{20}\.jpg", vt.FRAME_DIR: r"[0-9a-f]{20}\.jpg", "rows": r"\d{5}\.js"}
+    n = 0
+    for sub, names in keep.items():
+        for name in sorted(vt.existing(outdir, sub) - names):
+            if re.fullmatch(pattern[sub], name):
+                txn.remove_at_commit(outdir / sub / name)
+                n += 1
+    return n
+
+
+def also_angles(systems, own, A, A_other) -> dict:
+    """Per system of ``systems`` (not ``own``): ``(angles, other_angles)``, each (N, 3) pitch, yaw, roll in
+    degrees (primary solution), NaN where the canonical matrix is unusable. Vectorised over all rows."""
+    from ..rotation.systems import get_system
+
+    out: dict = {}
+    for s in systems or []:
+        s = get_system(s) if isinstance(s, str) else s
+        if s.name == own.name or s.name in out:
+            continue
+        pair = []
+        for M in (A, A_other):
+            ang = np.full((len(M), 3), np.nan)
+            ok = np.isfinite(M.reshape(len(M), 9)).all(axis=1)
+            if ok.any():
+                ang[ok] = s.to_angles(s.from_canonical(M[ok]))[0]
+            pair.append(ang)
+        out[s.name] = tuple(pair)
+    return out
 
 
 def _reject(rejects, t: Table, rows, reasons) -> None:

@@ -5,10 +5,12 @@ time -- and of everything drawn on it: crop, centre, length, both poses, size, :
 into the same page folder makes only the pictures of new or changed rows (the files of the first run are kept
 where they are; see :func:`plan_pictures`).
 
-The work is cut into tasks of at most :data:`TASK_ROWS` rows of one image; a task decodes its image once
-(files with the loader's decoder, :func:`hpe_cli.io.jpeg.read_image`: simplejpeg where it gives OpenCV's pixels;
-video frames with :meth:`hpe_cli.io.images.ImageResolver.read`, decoded front to back) and writes
-its JPEGs straight into the run's staged folder, so the parent holds only the plan and memory stays flat.
+The work is cut into tasks: at most :data:`TASK_ROWS` rows of one image file, decoded once with the loader's
+decoder (:func:`hpe_cli.io.jpeg.read_image`: simplejpeg where it gives OpenCV's pixels); or every frame of one
+video that needs a picture, the video decoded once, front to back (:meth:`hpe_cli.io.images.ImageResolver.read`,
+:class:`hpe_cli.datasets.panoptic_video.VideoFrames`: a task per frame would decode the video from its start
+for each). A task writes its JPEGs straight into the run's staged folder, so the parent holds only the plan
+and memory stays flat (one frame at a time).
 """
 
 from __future__ import annotations
@@ -36,12 +38,20 @@ FRAME_DIR = "frames"
 
 @dataclass
 class Task:
-    """The rows of one image that need a picture, and the image's full frame when it needs one."""
+    """Pictures to make from one image file, or from frames of one video (decoded once, front to back).
 
-    ref: object  # hpe_cli.io.images.ImageRef
-    rows: list = field(default_factory=list)  # (name, crop (x0, y0, x1, y1) or None, centre, length, V, A_other)
-    frame: str | None = None  # file name of the reduced full frame to write, or None
+    ``items``: ``[(ref, frame name or None, rows)]``, one per picture; ``ref`` a
+    :class:`hpe_cli.io.images.ImageRef`; the frame name is the reduced full frame to write; ``rows`` the
+    thumbnails, each ``(name, crop (x0, y0, x1, y1) or None, centre, length, V, A_other)``.
+    """
+
+    items: list = field(default_factory=list)
     stage: str = ""
+
+    @property
+    def n(self) -> int:
+        """Thumbnails this task makes."""
+        return sum(len(rows) for _, _, rows in self.items)
 
 
 def _fingerprint(ref) -> str:
@@ -199,29 +209,39 @@ def _write_jpeg(path: str, img, quality: int) -> None:
 
 
 def run_task(task: Task) -> tuple:
-    """Make the pictures of one task; ``(rows done, reason)`` -- reason ``""``, or why the image is unreadable."""
+    """Make the pictures of one task; ``(thumbnails made, [(ref, reason, thumbnails not made)] of the pictures
+    that could not be read)``. Videos: :meth:`hpe_cli.io.images.ImageResolver.read` yields each frame once, in frame order."""
     from ..io.images import ImageResolver
 
-    img, why = None, "not a readable image"
-    if task.ref.path is not None:  # the loader's decoder: simplejpeg where it gives OpenCV's exact pixels
+    refs = [ref for ref, _, _ in task.items]
+    if len(refs) == 1 and refs[0].path is not None:  # the loader's decoder: simplejpeg where it gives OpenCV's pixels
         from ..io.jpeg import read_image
 
-        img = read_image(task.ref.path, rgb=False)
-    else:  # a video frame
-        for _, img, why in ImageResolver.read([task.ref]):
-            pass
-    if img is None:
-        return 0, why or "not a readable image"
+        img = read_image(refs[0].path, rgb=False)
+        pictures = [(0, img, "" if img is not None else "not a readable image")]
+    else:
+        pictures = ImageResolver.read(refs)
+    made, failed = 0, []
+    for i, img, why in pictures:
+        ref, frame_name, rows = task.items[i]
+        if img is None:
+            failed.append((ref, why or "not a readable image", len(rows)))
+            continue
+        made += _pictures(img, frame_name, rows, task.stage)
+    return made, failed
+
+
+def _pictures(img, frame_name, rows, stage) -> int:
     if img.ndim == 2:
         import cv2
 
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-    if task.frame is not None:
-        _write_jpeg(os.path.join(task.stage, FRAME_DIR, task.frame), reduced_frame(img), 85)
-    thumbs = os.path.join(task.stage, THUMB_DIR)
-    for name, crop, centre, length, V, A_other in task.rows:
+    if frame_name is not None:
+        _write_jpeg(os.path.join(stage, FRAME_DIR, frame_name), reduced_frame(img), 85)
+    thumbs = os.path.join(stage, THUMB_DIR)
+    for name, crop, centre, length, V, A_other in rows:
         _write_jpeg(os.path.join(thumbs, name), thumbnail(img, crop, V, A_other, centre, length), 82)
-    return len(task.rows), ""
+    return len(rows)
 
 
 def existing(outdir: Path, sub: str) -> set:
@@ -233,30 +253,34 @@ def existing(outdir: Path, sub: str) -> set:
 
 
 def make_tasks(groups, stage, thumbs_needed, frames_needed) -> list:
-    """Cut ``groups`` (``[(ref, frame name, [row tuples])]``) into :class:`Task` s of at most :data:`TASK_ROWS`
-    rows, keeping only the rows whose thumbnail is needed and images whose frame is needed."""
-    tasks = []
+    """Cut ``groups`` (``[(ref, frame name, [row tuples])]``) into :class:`Task` s, keeping only the rows whose
+    thumbnail is needed and the frames that are needed: an image file's rows by at most :data:`TASK_ROWS`;
+    the frames of one video all in one task, in frame order (the video is decoded once)."""
+    tasks, videos = [], {}
     for ref, frame_name, rows in groups:
         rows = [r for r in rows if r[0] in thumbs_needed]
         want_frame = frame_name if frame_name in frames_needed else None
         if not rows and want_frame is None:
             continue
+        if ref.path is None:
+            videos.setdefault(ref.video, []).append((ref, want_frame, rows))
+            continue
         for k in range(0, max(1, len(rows)), TASK_ROWS):
-            tasks.append(Task(ref, rows[k : k + TASK_ROWS], want_frame if k == 0 else None, str(stage)))
+            tasks.append(Task([(ref, want_frame if k == 0 else None, rows[k : k + TASK_ROWS])], str(stage)))
+    for items in videos.values():
+        tasks.append(Task(sorted(items, key=lambda it: it[0].frame), str(stage)))
     return tasks
 
 
 def run_tasks(tasks, workers: int, progress=None) -> list:
     """Run the tasks (on ``workers`` threads when more than one: OpenCV's decode, resize, drawing and encode
-    release the GIL); ``[(task, reason)]`` of unreadable images."""
+    release the GIL); ``[(ref, reason, thumbnails not made)]`` of the pictures that could not be read."""
     failed = []
 
     def done(task, res):
-        n, why = res
-        if why:
-            failed.append((task, why))
+        failed.extend(res[1])
         if progress is not None:
-            progress.update(len(task.rows))
+            progress.update(task.n)
 
     if workers <= 1 or len(tasks) <= 1:
         for t in tasks:

@@ -24,6 +24,11 @@ _SKIP_NUMERIC = re.compile(r"^(lm\d+_[xyz]|r[0-2][0-2]|pitch(_2)?|yaw(_2)?|roll(
 ASSETS = ("index.html", "view.js", "view.css")
 
 
+def n_chunks(n: int) -> int:
+    """Number of ``rows/NNNNN.js`` files of a page of ``n`` rows."""
+    return -(-n // CHUNK)
+
+
 def _dumps(obj) -> bytes:
     import orjson
 
@@ -86,6 +91,7 @@ def write_page(
     other_angles,
     angle,
     A,
+    also=None,
     A_other,
     centre,
     length,
@@ -97,7 +103,8 @@ def write_page(
     counts,
 ):
     """Write the page into ``folder`` (the run's staged output folder). ``labels``/``other`` are
-    :class:`hpe_cli.pipelines.view.Table` s; the arrays have one entry per row of ``labels``."""
+    :class:`hpe_cli.pipelines.view.Table` s; the arrays have one entry per row of ``labels``; ``also`` maps
+    further system names to ``(angles, other_angles)`` (:func:`hpe_cli.pipelines.view.also_angles`)."""
     import importlib.resources as ir
 
     folder = Path(folder)
@@ -130,12 +137,20 @@ def write_page(
         "chunk": CHUNK,
         "counts": {k: v for k, v in counts.items() if isinstance(v, (int, list))},
         "angles_system": labels.system.name,
+        "systems": [labels.system.name, *(also or {})],
     }
+    systems = {}
+    for name, (ang, ang_o) in (also or {}).items():
+        d = {"pitch": _num(ang[:, 0]), "yaw": _num(ang[:, 1]), "roll": _num(ang[:, 2])}
+        if other is not None:
+            d.update(other_pitch=_num(ang_o[:, 0]), other_yaw=_num(ang_o[:, 1]), other_roll=_num(ang_o[:, 2]))
+        systems[name] = d
     data = {
         "meta": meta,
         "num": num,
         "cat": cat,
         "flag": flag,
+        "systems": systems,
         "thumb": thumbs.tolist(),
         "img": img_code,
         "images": images,

@@ -233,3 +233,94 @@ def test_no_frames(tmp_path):
     d = data(page)
     assert [im["f"] for im in d["images"]] == [None, None] and all(d["thumb"])
     assert not list((page / "frames").iterdir()) if (page / "frames").exists() else True
+
+
+def test_also_in_angles_and_bad_names(tmp_path):
+    """``--also-in``: each row's angles in the named systems (rows.js ``systems``), the labels' own system
+    skipped; the API takes names; an unknown name is a usage error (exit 2) naming it."""
+    from scipy.spatial.transform import Rotation
+
+    import hpe_cli as hpe
+
+    _images(tmp_path / "img", ["a.png", "b.png"])
+    src = _table(tmp_path / "in.csv", ROWS)
+    r = run("view", src, "-o", tmp_path / "p", "--images", tmp_path / "img", "--also-in", "6drepnet, 300w_lp,3ddfa_v2",
+            "-q")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    d = data(tmp_path / "p")
+    assert d["meta"]["systems"] == ["300w_lp", "6drepnet", "3ddfa_v2"] and set(d["systems"]) == {"6drepnet", "3ddfa_v2"}
+
+    # 3ddfa_v2's published A = Rz(r) Ry(y).T Rx(p) of the page's angles is 300W-LP's A = Rx(p).T Ry(y).T Rz(r).T
+    def R(axis, v):
+        return Rotation.from_euler(axis, np.asarray(v, float)[:, None], degrees=True).as_matrix()
+
+    def T(M):
+        return np.swapaxes(M, 1, 2)
+
+    own = [[r_[k] for r_ in ROWS] for k in ("pitch", "yaw", "roll")]
+    p, y, r_ = (d["systems"]["3ddfa_v2"][k] for k in ("pitch", "yaw", "roll"))
+    A1 = T(R("x", own[0])) @ T(R("y", own[1])) @ T(R("z", own[2]))
+    assert np.abs(R("z", r_) @ T(R("y", y)) @ R("x", p) - A1).max() < 1e-4
+    assert not np.allclose(np.array([p, y, r_]), np.array(own), atol=0.1)  # and the angles differ
+    # 6DRepNet names the same angles as 300W-LP (its get_R is A.T); yaw 120 comes back as its in-range twin
+    p, y, r_ = (d["systems"]["6drepnet"][k] for k in ("pitch", "yaw", "roll"))
+    assert np.abs(T(R("x", p)) @ T(R("y", y)) @ T(R("z", r_)) - A1).max() < 1e-4 and max(np.abs(y)) <= 90
+    s = hpe.view_file(src, tmp_path / "api", images=tmp_path / "img", also_in=["6drepnet", "3ddfa_v2"])
+    assert s["shown"] == 3
+    assert (tmp_path / "api" / "rows.js").read_text() == (tmp_path / "p" / "rows.js").read_text().replace(
+        str(tmp_path / "p"), str(tmp_path / "api")
+    )
+    r = CliRunner().invoke(cli, ["view", str(src), "-o", str(tmp_path / "q"), "--also-in", "6drepnet,nope"])
+    assert r.exit_code == 2 and "nope" in r.output and not (tmp_path / "q").exists()
+
+
+def test_rerun_that_drops_rows_prunes_stale_files(tmp_path, monkeypatch):
+    """A rerun on a table that lost rows (and images) removes the thumbnails, frames and ``rows/`` files the new
+    page no longer references, with the commit: a failing commit leaves the earlier page whole; files the
+    command does not write are left alone."""
+    from hpe_cli.io import transaction as tx
+    from hpe_cli.report import view_page
+
+    monkeypatch.setattr(view_page, "CHUNK", 2)  # 3 rows: rows/00000.js and rows/00001.js
+    _images(tmp_path / "img", ["a.png", "b.png"])
+    src = _table(tmp_path / "in.csv", ROWS)
+    page = tmp_path / "page"
+    assert run("view", src, "-o", page, "--images", tmp_path / "img", "-q").exit_code == 0
+    first = data(page)
+    (page / "notes.txt").write_text("mine")
+    (page / "thumbs" / "mine.jpg").write_bytes(b"mine")
+
+    def files():
+        return {str(p.relative_to(page)): p.read_bytes() for p in page.rglob("*") if p.is_file()}
+
+    before = files()
+    assert {"rows/00000.js", "rows/00001.js"} <= set(before) and len(list((page / "frames").iterdir())) == 2
+    _table(src, ROWS[:1])  # only a.png's first row is left
+    # a commit that fails after the removals: nothing changes
+    real = tx._unplace
+
+    def unplace(path, undo, backups):
+        real(path, undo, backups)
+        if path.name.endswith(".js"):
+            raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(tx, "_unplace", unplace)
+    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite", "-q")
+    assert r.exit_code == 1 and "no space left" in r.output.lower(), r.output
+    assert files() == before and not [p for p in page.rglob(".hpe-*")]
+    monkeypatch.setattr(tx, "_unplace", real)
+    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite")
+    assert r.exit_code == 0, r.output
+    # 2 thumbnails, b.png's frame and rows/00001.js
+    assert "0 thumbnails made, 1 reused" in r.output and "4 files of the earlier page no longer used: removed" in (
+        r.output
+    ), r.output
+    d = data(page)
+    assert sorted(p.name for p in (page / "thumbs").iterdir()) == sorted([d["thumb"][0], "mine.jpg"])
+    assert d["thumb"][0] == first["thumb"][0]
+    assert [p.name for p in (page / "frames").iterdir()] == [d["images"][0]["f"]]
+    assert sorted(p.name for p in (page / "rows").iterdir()) == ["00000.js"]
+    assert (page / "notes.txt").read_text() == "mine" and not [p for p in page.rglob(".hpe-*")]
+    # --no-frames: the frames go too
+    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite", "--no-frames", "-q")
+    assert r.exit_code == 0 and list((page / "frames").iterdir()) == []

@@ -290,3 +290,10 @@ def test_augment_radians_equals_degrees(tmp_path):
     np.testing.assert_allclose(
         B[["pitch", "yaw", "roll"]].to_numpy(), A[["pitch", "yaw", "roll"]].to_numpy(), atol=1e-9
     )
+
+
+def test_system_list_options_use_the_system_list_type():
+    for name in NAMES:
+        for o, p in options(name).items():
+            if o == "--also-in":
+                assert p.type is opt.SYSTEMS and p.metavar == "SYSTEM[,SYSTEM...]", (name, o)

@@ -4,6 +4,8 @@
  *   NAME=LO,HI  numeric range, LO <= value < HI (either side may be empty)
  *   c.NAME=A|B  category values;  f.NAME=1|0  flag;  sort=[-]NAME;  open=ROW (detail of that input row)
  *   ids=1       also write the shown rows' numbers into #ids (tests)
+ *   sys=NAME    pitch, yaw, roll (filters, sort, captions, coverage map) in system NAME, one of meta.systems
+ *               (hpe view --also-in); default: the labels' own system, meta.angles_system
  */
 (function () {
   "use strict";
@@ -15,7 +17,10 @@
   var RANGE_MAIN = ["pitch", "yaw", "roll"].concat(HAS_OTHER ? ["angle"] : []);
   var AXIS = ["#e0201b", "#1fa83a", "#1f5fe0"]; // subject's left, forehead to chin, out of the nose
   var rowIndex = null; // input row number -> index, built on demand
-  var state = { ranges: {}, cats: {}, flags: {}, sort: "row", desc: false, open: null, ids: false };
+  var SYSTEMS = M.systems || [M.angles_system];
+  var SYS_KEYS = ["pitch", "yaw", "roll", "other_pitch", "other_yaw", "other_roll"];
+  var OWN = {}; SYS_KEYS.forEach(function (k) { if (num[k]) OWN[k] = num[k]; });
+  var state = { ranges: {}, cats: {}, flags: {}, sort: "row", desc: false, open: null, ids: false, sys: M.angles_system };
   var sel = new Int32Array(0);
 
   function $(id) { return document.getElementById(id); }
@@ -29,7 +34,7 @@
 
   /* ---------- URL hash <-> state ---------- */
   function parseHash() {
-    var s = { ranges: {}, cats: {}, flags: {}, sort: "row", desc: false, open: null, ids: false };
+    var s = { ranges: {}, cats: {}, flags: {}, sort: "row", desc: false, open: null, ids: false, sys: M.angles_system };
     var h = location.hash.replace(/^#/, "");
     if (!h) return s;
     h.split("&").forEach(function (part) {
@@ -38,6 +43,7 @@
       if (k === "sort") { s.desc = v.charAt(0) === "-"; s.sort = v.replace(/^-/, ""); }
       else if (k === "open") s.open = parseInt(v, 10);
       else if (k === "ids") s.ids = v === "1";
+      else if (k === "sys") { if (SYSTEMS.indexOf(v) >= 0) s.sys = v; }
       else if (k.indexOf("c.") === 0) s.cats[k.slice(2)] = v.split("|");
       else if (k.indexOf("f.") === 0) s.flags[k.slice(2)] = v === "1" ? 1 : 0;
       else if (num[k]) {
@@ -61,9 +67,21 @@
     Object.keys(state.flags).forEach(function (k) { parts.push("f." + encodeURIComponent(k) + "=" + state.flags[k]); });
     if (state.sort !== "row" || state.desc) parts.push("sort=" + (state.desc ? "-" : "") + encodeURIComponent(state.sort));
     if (state.open !== null) parts.push("open=" + state.open);
+    if (state.sys !== M.angles_system) parts.push("sys=" + encodeURIComponent(state.sys));
     if (state.ids) parts.push("ids=1");
     var h = parts.length ? "#" + parts.join("&") : "";
     if (h !== location.hash && !(h === "" && location.hash === "")) history.replaceState(null, "", h || location.pathname + location.search);
+  }
+
+  /* ---------- the system the angles are in ---------- */
+  function useSystem(name) {
+    var src = name === M.angles_system ? OWN : D.systems[name];
+    if (!src) { name = M.angles_system; src = OWN; }
+    SYS_KEYS.forEach(function (k) { if (src[k]) num[k] = src[k]; });
+    state.sys = name;
+    pool.forEach(function (t) { t.removeAttribute("data-i"); }); // captions change: redraw every tile
+    var s = $("system"); if (s) s.value = name;
+    document.body.setAttribute("data-system", name);
   }
 
   /* ---------- filtering and sorting ---------- */
@@ -255,7 +273,15 @@
   }
   function buildFilters() {
     var f = $("filters");
-    f.appendChild(el("h3", null, "Angles (" + M.angles_system + ", degrees)"));
+    var head = el("h3", { id: "angles-head" }, "Angles (");
+    if (SYSTEMS.length > 1) {
+      var ss = el("select", { id: "system", title: "the system of pitch, yaw and roll: filters, sort, captions and the coverage map" });
+      SYSTEMS.forEach(function (k) { ss.appendChild(el("option", { value: k }, k)); });
+      ss.addEventListener("change", function () { useSystem(this.value); apply(); });
+      head.appendChild(ss);
+    } else head.appendChild(document.createTextNode(M.angles_system));
+    head.appendChild(document.createTextNode(", degrees)"));
+    f.appendChild(head);
     RANGE_MAIN.forEach(function (k) {
       f.appendChild(rangeRow(k, k === "angle" ? "angle apart" : k));
     });
@@ -421,8 +447,8 @@
       var tr = el("tr"); tr.appendChild(el("td", null, k)); tr.appendChild(el("td", null, v === null || v === undefined ? "" : String(v)));
       tab.appendChild(tr);
     };
-    add("angles (" + M.angles_system + ")", "pitch " + fmt(num.pitch[i], 3) + ", yaw " + fmt(num.yaw[i], 3) + ", roll " + fmt(num.roll[i], 3));
-    if (HAS_OTHER) add("other in " + M.angles_system, "pitch " + fmt(num.other_pitch[i], 3) + ", yaw " + fmt(num.other_yaw[i], 3) + ", roll " + fmt(num.other_roll[i], 3));
+    add("angles (" + state.sys + ")", "pitch " + fmt(num.pitch[i], 3) + ", yaw " + fmt(num.yaw[i], 3) + ", roll " + fmt(num.roll[i], 3));
+    if (HAS_OTHER) add("other in " + state.sys, "pitch " + fmt(num.other_pitch[i], 3) + ", yaw " + fmt(num.other_yaw[i], 3) + ", roll " + fmt(num.other_roll[i], 3));
     add("status", cat.status.values[cat.status.codes[i]]);
     d.cols.forEach(function (k) { add(k, d.values[k][j]); });
     if (HAS_OTHER) d.other_cols.forEach(function (k) { add("other: " + k, d.other_values[k][j]); });
@@ -437,6 +463,7 @@
   state = parseHash();
   legend();
   buildFilters();
+  useSystem(state.sys);
   syncInputs();
   apply();
   $("grid").addEventListener("scroll", function () { window.requestAnimationFrame(render); }, { passive: true });
@@ -445,7 +472,7 @@
   $("detail").addEventListener("click", function (ev) { if (ev.target === this) closeDetail(); });
   document.addEventListener("keydown", function (ev) { if (ev.key === "Escape") closeDetail(); });
   window.addEventListener("hashchange", function () {
-    var s = parseHash(), open = s.open; state = s; syncInputs(); apply();
+    var s = parseHash(), open = s.open; state = s; useSystem(s.sys); syncInputs(); apply();
     if (open !== null && indexOfRow(open) !== undefined) openDetail(indexOfRow(open));
   });
   if (state.open !== null && indexOfRow(state.open) !== undefined) openDetail(indexOfRow(state.open));
