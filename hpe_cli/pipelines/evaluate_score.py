@@ -48,6 +48,18 @@ def with_canonical(c: Chunk, system) -> Chunk:
     return c
 
 
+def with_written(t, p: Chunk):
+    """The per-row table with the prediction's angles as written in its file (``pred_written_pitch``...,
+    degrees, its own system), for the page's worst rows: beside the angles hpe re-expressed in the GT system."""
+    if p.raw is None or "pred_written_pitch" in t.column_names:
+        return t
+    from ..io.layout import numpy_to_arrow
+
+    for k, a in enumerate(("pitch", "yaw", "roll")):
+        t = t.append_column(f"pred_written_{a}", numpy_to_arrow(np.ascontiguousarray(p.raw[:, k], dtype=np.float64)))
+    return t
+
+
 def _nested(c: Chunk):
     return [[c.canonical[3 * i + j] for j in range(3)] for i in range(3)]
 
@@ -146,6 +158,7 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 for c in PLACEMENT:
                     if g.keys is not None and c in g.keys.column_names and c not in t.column_names:
                         t = t.append_column(c, g.keys.column(c))
+                t = with_written(t, p)
                 worst.add(t)
         if writer is not None:
             flush(1)

@@ -166,3 +166,31 @@ def test_report_needs_no_sideways_scroll_at_1280px(tour, tmp_path):
     assert m is not None, r.stderr[-500:]
     scrolled = m.group(1).replace("&quot;", '"')
     assert "By GT yaw" not in scrolled and "By image" not in scrolled, scrolled
+
+
+def test_worst_rows_carry_the_prediction_as_written_end_to_end(tmp_path):
+    """A prediction written with yaw beyond 90 (WHENet's range) is re-expressed in 300W-LP's system for the
+    per-angle errors; the page's worst rows show it as written too, with its system, beside the re-expressed one
+    (the same rotation: checked with SciPy from both triples)."""
+    from scipy.spatial.transform import Rotation
+
+    import hpe_cli as hpe
+
+    gt = pd.read_csv(LABELS).head(5)
+    gt.to_csv(tmp_path / "gt.csv", index=False)
+    pred = gt[["image"]].copy()
+    pred["pitch"], pred["yaw"], pred["roll"] = 38.3, 107.4, 21.1
+    pred.to_csv(tmp_path / "pred.csv", index=False)
+    page = tmp_path / "r.html"
+    r = run(
+        "evaluate", tmp_path / "pred.csv", tmp_path / "gt.csv", "--pred-system", "whenet", "--gt-system", "300w_lp",
+        "--report", page, "--worst", "5",
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    text = page.read_text()
+    assert "pred as written p / y / r (whenet)" in text and text.count("38.3 / 107.4 / 21.1") >= 5
+    shown = hpe.convert([[38.3, 107.4, 21.1]], "whenet", "300w_lp").primary[0]
+    assert f"{shown[0]:.1f} / {shown[1]:.1f} / {shown[2]:.1f}" in text
+    A = hpe.convert([[38.3, 107.4, 21.1]], "whenet", "300w_lp").matrix[0]
+    B = hpe.convert([shown], "300w_lp", "300w_lp").matrix[0]
+    assert Rotation.from_matrix(A.T @ B).magnitude() < 1e-3  # the two triples are one rotation (to 0.1 deg print)
