@@ -77,6 +77,7 @@ NOT_RUN = {
         "dask"
     ],
     "hpe view corrected.parquet legacy.parquet -o compare/ --images panoptic/ --rejects missing.csv": NEEDS["images"],
+    "hpe view panoptic_whenet.parquet -o page/ --images panoptic/ --also-in 300w_lp,3ddfa_v2": NEEDS["images"],
     "hpe relabel-agora validation_*_withjv.pkl -o agora_val.parquet": NEEDS["agora"],
     "hpe relabel-agora train_0_withjv.pkl -o train.json --format coco --image-size 1280x720": NEEDS["agora"],
     "hpe relabel-agora val_0_withjv.pkl -o annotation.txt --legacy-whenet --max-rmse inf": NEEDS["agora"],

@@ -166,13 +166,3 @@ def test_no_import_cycles_between_modules():
 def test_the_rules_cover_every_layer():
     layers = {_layer(name) for name in MODULES}
     assert layers - FLOOR <= set(MAY_IMPORT), f"layers without a rule: {sorted(layers - FLOOR - set(MAY_IMPORT))}"
-
-
-def test_no_source_module_over_600_lines():
-    """Files small enough to hold in one's head: every hpe_cli module is at most 600 lines."""
-    big = {
-        str(p.relative_to(ROOT.parent)): n
-        for p in ROOT.rglob("*.py")
-        if (n := len(p.read_text(encoding="utf-8").splitlines())) > 600
-    }
-    assert not big, f"split these modules by responsibility: {big}"
