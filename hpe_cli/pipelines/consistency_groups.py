@@ -37,18 +37,12 @@ def time_texts(has_frame: bool, max_gap: int) -> tuple:
     )
 
 
-def views(cons, P, finite):
-    """``(angle, code, summary)`` of the views check (:func:`hpe_cli.metrics.consistency.view_consensus`)."""
-    N = len(P["frame"])
-    angle = np.full(N, np.nan)
-    code = np.zeros(N, dtype=np.uint8)
-    if cons.view_reason:
-        return angle, code, {"checked": 0, "reason": cons.view_reason}
+def camera_rotations(cons, cams, seqs) -> np.ndarray:
+    """(n, 3, 3) rotation of each row's camera (its calibration of the row's sequence when calibrations are per
+    sequence), NaN where none is known; ``cams``/``seqs`` are the coded camera and sequence columns."""
     cam_names = {v: k for k, v in cons.code_tables["camera"].items()}
     seq_names = {v: k for k, v in cons.code_tables["sequence"].items()}
-    cam_R = np.full((N, 3, 3), np.nan)
-    cams = P["camera"]
-    seqs = P.get("sequence")
+    cam_R = np.full((len(cams), 3, 3), np.nan)
     for c in np.unique(cams):  # one per camera (and sequence), not per row
         sel = cams == c
         name = cam_names.get(int(c))
@@ -61,11 +55,13 @@ def views(cons, P, finite):
                 cam = cons.cams.get(seq_names.get(int(sc)), {}).get(name)
                 if cam is not None:
                     cam_R[sel & (seqs == sc)] = cam[0]
-    have_cam = np.isfinite(cam_R).all((1, 2))
-    code[~have_cam] = 1
-    code[~finite] = 2
-    usable = have_cam & finite
-    keys = [P[c] for c in cons.view_cols] + [P["frame"]]
+    return cam_R
+
+
+def view_groups(keys, usable, code):
+    """The ``usable`` rows sorted into groups of one head at one time (``keys``: the view columns, then the
+    frame): ``(order, starts)``. Rows of groups with fewer than :data:`MIN_VIEWS` views get code 3 in ``code``
+    (changed in place) and are left out."""
     idx = np.flatnonzero(usable)
     order = idx[np.lexsort([k[idx] for k in reversed(keys)])]
     kmat = np.stack([k[order] for k in keys], 1)
@@ -73,8 +69,23 @@ def views(cons, P, finite):
     sizes = np.diff(np.append(starts, len(order)))
     big = np.repeat(sizes >= MIN_VIEWS, sizes)
     code[order[~big]] = 3
-    order = order[big]
-    starts = mc.group_starts(kmat[big])
+    return order[big], mc.group_starts(kmat[big])
+
+
+def views(cons, P, finite):
+    """``(angle, code, summary)`` of the views check (:func:`hpe_cli.metrics.consistency.view_consensus`)."""
+    N = len(P["frame"])
+    angle = np.full(N, np.nan)
+    code = np.zeros(N, dtype=np.uint8)
+    if cons.view_reason:
+        return angle, code, {"checked": 0, "reason": cons.view_reason}
+    cams = P["camera"]
+    cam_names = {v: k for k, v in cons.code_tables["camera"].items()}
+    cam_R = camera_rotations(cons, cams, P.get("sequence"))
+    have_cam = np.isfinite(cam_R).all((1, 2))
+    code[~have_cam] = 1
+    code[~finite] = 2
+    order, starts = view_groups([P[c] for c in cons.view_cols] + [P["frame"]], have_cam & finite, code)
     res = mc.view_consensus(P["A"][order], cam_R[order], starts)
     angle[order] = res["angle"]
     cams_out, named = [], []

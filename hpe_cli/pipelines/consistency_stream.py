@@ -20,7 +20,7 @@ import numpy as np
 
 from ..metrics import consistency as mc
 from ..metrics.sketch import StreamQuantiles
-from .consistency_groups import MIN_VIEWS
+from .consistency_groups import MIN_VIEWS, camera_rotations, view_groups
 
 RESULT = np.dtype([("view", "<f8"), ("vcode", "u1"), ("jump", "<f8"), ("tcode", "u1")])
 
@@ -165,27 +165,9 @@ class GroupStream:
         return rate, code
 
     def _cam_R(self, part) -> np.ndarray:
-        cons = self.cons
-        n = len(part["frame"])
-        cam_R = np.full((n, 3, 3), np.nan)
-        if cons.view_reason:
-            return cam_R
-        cam_names = {v: k for k, v in cons.code_tables["camera"].items()}
-        seq_names = {v: k for k, v in cons.code_tables["sequence"].items()}
-        cams, seqs = part["camera"], part.get("sequence")
-        for c in np.unique(cams):  # one per camera (and sequence), not per row
-            sel = cams == c
-            name = cam_names.get(int(c))
-            if None in cons.cams:
-                cam = cons.cams[None].get(name)
-                if cam is not None:
-                    cam_R[sel] = cam[0]
-            else:
-                for sc in np.unique(seqs[sel]):
-                    cam = cons.cams.get(seq_names.get(int(sc)), {}).get(name)
-                    if cam is not None:
-                        cam_R[sel & (seqs == sc)] = cam[0]
-        return cam_R
+        if self.cons.view_reason:
+            return np.full((len(part["frame"]), 3, 3), np.nan)
+        return camera_rotations(self.cons, part["camera"], part.get("sequence"))
 
     def _views(self, P, lo: int, hi: int) -> None:
         """Views results of rows ``lo .. hi`` of ``P`` (complete frames), into ``P["view"]``, ``P["vcode"]``."""
@@ -196,18 +178,10 @@ class GroupStream:
         code = P["vcode"][sl]
         code[~have_cam] = 1
         code[~finite] = 2
-        idx = np.flatnonzero(have_cam & finite)
         keys = [P[c][sl] for c in cons.view_cols] + [P["frame"][sl]]
-        order = idx[np.lexsort([k[idx] for k in reversed(keys)])]
-        kmat = np.stack([k[order] for k in keys], 1)
-        starts = mc.group_starts(kmat)
-        sizes = np.diff(np.append(starts, len(order)))
-        big = np.repeat(sizes >= MIN_VIEWS, sizes)
-        code[order[~big]] = 3
-        order = order[big]
+        order, starts = view_groups(keys, have_cam & finite, code)
         if not len(order):
             return
-        starts = mc.group_starts(kmat[big])
         self.groups += len(starts)
         res = mc.view_consensus(P["A"][sl][order], P["cam_R"][sl][order], starts)
         P["view"][sl][order] = res["angle"]
