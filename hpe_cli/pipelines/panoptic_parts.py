@@ -173,7 +173,6 @@ def input_signatures(plans: list) -> dict:
     """path -> signature of every file the run reads: a calibration's SHA-256 of its contents, a face
     file's or tar's ``size:mtime_ns:inode`` (reading every face file again would cost as much as a unit)."""
     import hashlib
-    import os
 
     out = {}
     for p in plans:
@@ -186,13 +185,20 @@ def input_signatures(plans: list) -> dict:
         for s in p.skipped:
             files.update(getattr(f, "path", f) for f in s.values())
         for f in sorted(map(str, files)):
-            try:
-                st = os.stat(f)
-            except OSError:
-                out[f] = "missing"
-                continue
-            out[f] = f"stat:{st.st_size}:{st.st_mtime_ns}:{st.st_ino}"
+            out[f] = stat_signature(f)
     return out
+
+
+def stat_signature(path: str) -> str:
+    """How ``--resume`` compares a large input (an image, a video, a face file): size, mtime and inode, or
+    ``"missing"``."""
+    import os
+
+    try:
+        st = os.stat(path)
+    except OSError:
+        return "missing"
+    return f"stat:{st.st_size}:{st.st_mtime_ns}:{st.st_ino}"
 
 
 def parts_dir_for(output) -> Path:

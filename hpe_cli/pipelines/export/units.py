@@ -20,6 +20,7 @@ import os
 from pathlib import Path
 
 from ...errors import HpeError
+from ..panoptic_parts import stat_signature
 
 #: frame numbers per video unit (one seek per unit, then sequential decoding)
 BLOCK_FRAMES = 256
@@ -216,12 +217,6 @@ def input_signatures(inputs, opts, units) -> dict:
                 files.append(str(t[1]))
     out = {}
     for f in files:
-        if f in out:
-            continue
-        try:
-            st = os.stat(f)
-        except OSError:
-            out[f] = "missing"
-            continue
-        out[f] = f"stat:{st.st_size}:{st.st_mtime_ns}:{st.st_ino}"
+        if f not in out:
+            out[f] = stat_signature(f)
     return out
