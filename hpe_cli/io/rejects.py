@@ -91,6 +91,18 @@ class Rejects:
         if self.path is not None:
             self._parts.append({**{k: np.asarray(v) for k, v in columns.items()}, "reason": reasons})
 
+    def add_unreadable(self, read_rejects) -> None:
+        """Add the rows a reader could not parse (``Reject(line, reason, raw)`` of
+        :meth:`~hpe_cli.io.readers.TableSource.batches_with_rejects`): their line, raw text and reason."""
+        if not read_rejects:
+            return
+        lines = np.array([r.line for r in read_rejects], dtype=np.int64)
+        self.add(
+            {"row": lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
+            [r.reason for r in read_rejects],
+            lines=lines,
+        )
+
     def add_choice(self, columns: dict, reasons) -> None:
         """Rows dropped by the user's choice (``--exclude``): listed in the file, never an error, not counted."""
         if self.path is not None and len(reasons):

@@ -275,12 +275,7 @@ def _batches(src, mode, path, rejects=None):
         unread = [r for r in rejects if r.reason in label]
         other = [r for r in rejects if r.reason not in label]
         if other and rejects_file is not None and rejects_file.path is not None:
-            lines = np.array([r.line for r in other], dtype=np.int64)
-            rejects_file.add(
-                {"row": lines, "raw": np.array([r.raw for r in other], dtype=object)},
-                [r.reason for r in other],
-                lines=lines,
-            )
+            rejects_file.add_unreadable(other)
             rejects = unread
         if len(unread) < len(rejects):
             r = next(r for r in rejects if r.reason not in label)

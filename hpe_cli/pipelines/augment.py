@@ -521,14 +521,8 @@ def run_augment(
 def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan):
     """On the main thread, in input order: rejects, images, the table."""
     batch, lines, reasons, keep, out, boxes, extra = result
-    if read_rejects:
-        read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
-        rejects.add(
-            {"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
-            [r.reason for r in read_rejects],
-            lines=read_lines,
-        )
-        counts["rows"] += len(read_rejects)
+    rejects.add_unreadable(read_rejects)
+    counts["rows"] += len(read_rejects)
     if not keep.all():
         drop = ~keep
         cols = {c: batch.column(i).to_numpy(zero_copy_only=False)[drop] for i, c in enumerate(batch.schema.names)}

@@ -127,14 +127,8 @@ def run_convert(
         out, reasons, labels = future.result()
         bad = np.flatnonzero(reasons != "") if reasons is not None else ()
         lines = batch.column(LINE_COL).to_numpy()
-        if read_rejects:
-            read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
-            rejects.add(
-                {"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
-                [r.reason for r in read_rejects],
-                lines=read_lines,
-            )
-            summary.rows += len(read_rejects)
+        rejects.add_unreadable(read_rejects)
+        summary.rows += len(read_rejects)
         if len(bad):
             cols = {"row": lines[bad]}
             if rejects.path is not None:

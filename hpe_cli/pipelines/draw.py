@@ -169,13 +169,7 @@ def run_draw(
     where = row_namer(src, lines)
     n = len(frame)
     rejects = Rejects(rejects_path, overwrite, strict=strict, source=src.path)
-    if read_rejects:
-        read_lines = np.array([r.line for r in read_rejects], dtype=np.int64)
-        rejects.add(
-            {"row": read_lines, "raw": np.array([r.raw for r in read_rejects], dtype=object)},
-            [r.reason for r in read_rejects],
-            lines=read_lines,
-        )
+    rejects.add_unreadable(read_rejects)
     if n == 0 and read_rejects:
         from ..io.rejects import fail_all_rejected
 
