@@ -143,45 +143,9 @@ def test_image_size_differs_from_the_labels(tmp_path):
 
 def test_video_frames_smaller_than_the_calibration(tmp_path, monkeypatch):
     """hdVideos read through pan's VideoFrames (a stand-in giving 1280x720 frames) for 1920x1080 labels."""
-    import sys
-    import types
+    from .test_export_video_names import _video_table
 
-    import numpy as np
-
-    class VideoFrames:
-        def __init__(self, path):
-            self.path = path
-
-        def read(self, frames):
-            for f in frames:
-                yield f, np.full((720, 1280, 3), 80, np.uint8), ""
-
-    mod = types.ModuleType("hpe_cli.datasets.panoptic_video")
-    mod.VideoFrames = VideoFrames
-    monkeypatch.setitem(sys.modules, "hpe_cli.datasets.panoptic_video", mod)
-    rows = [
-        {
-            "image": f"hdImgs/00_03/00_03_{f:08d}.jpg",
-            "sequence": "",
-            "camera": "00_03",
-            "frame": f,
-            "person_id": 1,
-            "image_width": 1920,
-            "image_height": 1080,
-            "bbox_x": 10.0,
-            "bbox_y": 10.0,
-            "bbox_w": 40.0,
-            "bbox_h": 40.0,
-            "pitch": 0.0,
-            "yaw": 5.0,
-            "roll": 0.0,
-        }
-        for f in (3, 4)
-    ]
-    path = tmp_path / "t.csv"
-    pd.DataFrame(rows).to_csv(path, index=False)
-    (tmp_path / "hdVideos").mkdir()
-    (tmp_path / "hdVideos" / "hd_00_03.mp4").write_bytes(b"")
+    path = _video_table(tmp_path, monkeypatch, ok_row=False)
     res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
     check_failed(res)  # every head rejected: nothing written, exit 1
     assert "image size 1280x720 differs" in res.output and not (tmp_path / "out").exists()

@@ -12,7 +12,10 @@ import pandas as pd
 from .conftest import run
 
 
-def _video_table(tmp_path, monkeypatch):
+def _video_table(tmp_path, monkeypatch, ok_row=True):
+    """Two heads of hdImgs/00_03 frames 3 and 4 read from hdVideos/hd_00_03.mp4 through a stand-in VideoFrames
+    giving 1280x720 frames under 1920x1080 labels, and (``ok_row``) one head of a JPEG that exports."""
+
     class VideoFrames:  # a stand-in for datasets.panoptic_video.VideoFrames giving 1280x720 frames
         def __init__(self, path):
             self.path = path
@@ -43,11 +46,12 @@ def _video_table(tmp_path, monkeypatch):
         }
         for f in (3, 4)
     ]
-    import cv2
+    if ok_row:
+        import cv2
 
-    (tmp_path / "img").mkdir()
-    cv2.imwrite(str(tmp_path / "img" / "ok.jpg"), np.full((1080, 1920, 3), 90, np.uint8))
-    rows.append({**rows[0], "image": "img/ok.jpg", "camera": "", "frame": 9})  # one head that exports
+        (tmp_path / "img").mkdir()
+        cv2.imwrite(str(tmp_path / "img" / "ok.jpg"), np.full((1080, 1920, 3), 90, np.uint8))
+        rows.append({**rows[0], "image": "img/ok.jpg", "camera": "", "frame": 9})  # one head that exports
     path = tmp_path / "t.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
     (tmp_path / "hdVideos").mkdir()
