@@ -67,9 +67,9 @@ def optional_parts() -> list[tuple[str, str]]:
     parts.append(
         (
             "dask extra",
-            f"distributed {dist}: relabel-panoptic --scheduler works"
+            f"distributed {dist}: relabel-panoptic and export --scheduler work"
             if dist
-            else 'not installed (pip install ".[dask]"): relabel-panoptic --scheduler is unavailable',
+            else 'not installed (pip install ".[dask]"): relabel-panoptic and export --scheduler are unavailable',
         )
     )
     return parts
