@@ -16,8 +16,6 @@ import numpy as np
 
 #: sub-folder of the plots folder holding the page and its pictures
 FOLDER = "consistency"
-#: longest side of a picture, pixels
-MAX_SIDE = 480
 
 
 def _rows(batches, idx) -> tuple:
@@ -149,7 +147,7 @@ def _draw(img, uv, A, F, angle, staged, shown) -> None:
     import cv2
 
     from ..geometry import draw as g
-    from .draw_flagged import _around
+    from .draw_flagged import around_face, shrink_to_page
     from .draw_rows import _write_image
 
     H, W = img.shape[:2]
@@ -167,11 +165,7 @@ def _draw(img, uv, A, F, angle, staged, shown) -> None:
         g.render_axes(img, np.asarray(A, np.float64)[None], c[None], np.array([length]))
     if F is not None and np.isfinite(F).all():
         g.render_axes_dashed(img, np.asarray(F, np.float64)[None], c[None], np.array([length]))
-    img = _around(img, c, length)
-    H, W = img.shape[:2]
-    s = MAX_SIDE / max(H, W)
-    if s < 1:
-        img = cv2.resize(img, (max(1, round(W * s)), max(1, round(H * s))), interpolation=cv2.INTER_AREA)
+    img = shrink_to_page(around_face(img, c, length))
     h = max(12.0, 0.04 * min(img.shape[:2]))
     g.render_legend(img, [("label", "solid"), ("landmark fit", "dashed")], height_px=h)
     if np.isfinite(angle):

@@ -147,7 +147,7 @@ def _safe(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)[:60] or "check"
 
 
-def _around(img, centre, length):
+def around_face(img, centre, length):
     """The part of ``img`` around the face: a square of side ``6 * length`` (at least 160 px) about ``centre``,
     cut to the image; a small face in a large frame stays visible on the page."""
     H, W = img.shape[:2]
@@ -159,9 +159,19 @@ def _around(img, centre, length):
     return np.ascontiguousarray(img[y0:y1, x0:x1])
 
 
+def shrink_to_page(img):
+    """``img`` shrunk (area averaging) so that its longer side is at most :data:`MAX_SIDE` pixels."""
+    import cv2
+
+    H, W = img.shape[:2]
+    s = MAX_SIDE / max(H, W)
+    if s < 1:
+        img = cv2.resize(img, (max(1, round(W * s)), max(1, round(H * s))), interpolation=cv2.INTER_AREA)
+    return img
+
+
 def _draw_one(img, frame, i, A, pose_para, check, staged, shown):
     """The row's axes (as ``hpe draw`` places them) and the check's name; shrunk; staged as PNG."""
-    import cv2
 
     from ..geometry import draw as g
     from .draw_rows import DEFAULT_LENGTH_FRACTION, _write_image, face_placement
@@ -176,14 +186,11 @@ def _draw_one(img, frame, i, A, pose_para, check, staged, shown):
             c = np.array([W / 2.0, H / 2.0])
         length = L[0] if np.isfinite(L[0]) else DEFAULT_LENGTH_FRACTION * min(H, W)
         g.render_axes(img, A[None], c[None], np.array([length]))
-        img = _around(img, c, length)
-        H, W = img.shape[:2]
-    s = MAX_SIDE / max(H, W)
-    if s < 1:
-        img = cv2.resize(img, (max(1, round(W * s)), max(1, round(H * s))), interpolation=cv2.INTER_AREA)
+        img = around_face(img, c, length)
+    img = shrink_to_page(img)
     h = max(14.0, 0.045 * min(img.shape[:2]))
     g.render_caption(img, check, (4, 4 + h), height_px=h)
     _write_image(img, staged, shown)
 
 
-__all__ = ["MAX_SIDE", "PER_CHECK", "PICTURE_DIR", "flagged_pictures"]
+__all__ = ["MAX_SIDE", "PER_CHECK", "PICTURE_DIR", "around_face", "flagged_pictures", "shrink_to_page"]
