@@ -556,6 +556,9 @@ class _SkipRejects:
     def add(self, *args, **kwargs):
         pass
 
+    def add_unreadable(self, read_rejects):
+        pass
+
 
 _SKIP_REJECTS = _SkipRejects()
 
