@@ -1,3 +1,6 @@
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +12,59 @@ settings.load_profile("hpe")
 
 REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _arg(a):
+    return a if isinstance(a, (str, bytes)) else str(a)
+
+
+def _check(argv, got: int, ok: bool | None, code: int | None, output: str) -> None:
+    """Fail with the command line and its output when the exit code ``got`` is not the one expected."""
+    __tracebackhide__ = True
+    want = 0 if ok is True else code
+    bad = (want is not None and got != want) or (ok is False and got == 0)
+    if bad:
+        cmd = "hpe " + " ".join(os.fsdecode(a) for a in argv)
+        expected = "a failure" if want is None else f"exit {want}"
+        pytest.fail(f"{cmd}\nexpected {expected}, got exit {got}; output:\n{output}")
+
+
+def hpe(*args, ok: bool | None = None, code: int | None = None, **kw):
+    """``hpe ARGS`` run in this process by click's ``CliRunner`` (each argument ``str()``-ed, bytes kept).
+
+    An exception that escapes the command (a traceback for a user) is raised, never folded into the exit
+    code. ``ok=True`` asserts exit 0, ``ok=False`` a non-zero exit, ``code=N`` exit ``N``; a failed check shows
+    the command line and its output. ``kw`` goes to ``CliRunner.invoke`` (``input=``, ``env=``,
+    ``terminal_width=``...). Returns click's ``Result``: ``.exit_code``, ``.output`` (stdout and stderr
+    interleaved), ``.stdout``, ``.stderr``.
+    """
+    from click.testing import CliRunner
+
+    from hpe_cli.cli.main import cli
+
+    __tracebackhide__ = True
+    argv = [_arg(a) for a in args]
+    res = CliRunner().invoke(cli, argv, catch_exceptions=False, **kw)
+    _check(argv, res.exit_code, ok, code, res.output)
+    return res
+
+
+def hpe_process(*args, ok: bool | None = None, code: int | None = None, timeout=120, text=True, env=None, **kw):
+    """``python -m hpe_cli ARGS`` in a separate process (what a user sees on the terminal; signals, workers).
+
+    This worktree comes first on ``PYTHONPATH``; ``env`` adds variables. Returns the ``CompletedProcess``
+    (``.returncode``, ``.stdout``, ``.stderr``: ``str``, bytes with ``text=False``); ``ok``/``code`` as in
+    ``hpe``. ``kw`` goes to ``subprocess.run`` (``input=``, ``cwd=``...).
+    """
+    __tracebackhide__ = True
+    argv = [_arg(a) for a in args]
+    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
+    environ = {**os.environ, "PYTHONPATH": path, **(env or {})}
+    proc = subprocess.run(
+        [sys.executable, "-m", "hpe_cli", *argv], capture_output=True, text=text, env=environ, timeout=timeout, **kw
+    )
+    _check(argv, proc.returncode, ok, code, f"{proc.stdout!s}\n{proc.stderr!s}")
+    return proc
 
 
 def sample_data_script():

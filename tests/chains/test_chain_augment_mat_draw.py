@@ -9,10 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.io
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.geometry.landmark_schemes import flip_permutation
 
 STEMS = ["image00050", "image00430", "image02283"]
@@ -35,10 +34,6 @@ def aflw(realdata, tmp_path):
         for ext in (".mat", ".jpg"):
             shutil.copy(realdata / "aflw2000_prnet" / f"{s}{ext}", d / f"{s}{ext}")
     return d
-
-
-def cli_run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
 
 
 def expected(how, A, pts, size):
@@ -71,11 +66,11 @@ def expected(how, A, pts, size):
 )
 def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
     out = tmp_path / "out"
-    res = cli_run("augment", aflw, "-o", tmp_path / "aug.parquet", *args, "--images", aflw, "--out-images", out)
+    res = hpe("augment", aflw, "-o", tmp_path / "aug.parquet", *args, "--images", aflw, "--out-images", out)
     assert res.exit_code == 0, res.output
     assert "3 .mat files written back" in res.output
     assert sorted(p.name for p in out.iterdir()) == sorted(f"{s}{e}" for s in STEMS for e in (".jpg", ".mat"))
-    res = cli_run("convert", out, "-o", tmp_path / "conv.csv", "--from", "300w_lp", "--to", "300w_lp", "-q")
+    res = hpe("convert", out, "-o", tmp_path / "conv.csv", "--from", "300w_lp", "--to", "300w_lp", "-q")
     assert res.exit_code == 0, res.output
     conv = pd.read_csv(tmp_path / "conv.csv").set_index("file")
     aug = pd.read_parquet(tmp_path / "aug.parquet").set_index("file")
@@ -144,7 +139,7 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
     assert (
         hidden > 0
     )  # the sample has invisible points: they were kept    # -> draw the written-back folder: lines from the moved centre, ends where SciPy puts them, inside the image
-    res = cli_run("draw", out, "-o", tmp_path / "drawn", "--thickness", "3")
+    res = hpe("draw", out, "-o", tmp_path / "drawn", "--thickness", "3")
     assert res.exit_code == 0, res.output
     for s in STEMS:
         m1 = scipy.io.loadmat(str(out / f"{s}.mat"))
@@ -172,11 +167,11 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
 
 def test_mat_folder_augment_without_image_sizes_uses_the_images(aflw, tmp_path):
     # AFLW2000 tables have no image_width/image_height: the images give 450x450
-    res = cli_run(
+    res = hpe(
         "augment", aflw, "-o", tmp_path / "a.parquet", "--rotate", 10, "--images", aflw, "--out-images", tmp_path / "o"
     )
     assert res.exit_code == 0, res.output
-    res = cli_run(
+    res = hpe(
         "augment",
         aflw,
         "-o",

@@ -11,10 +11,9 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.io
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 GOLDEN = Path(__file__).resolve().parents[3] / "shared" / "golden" / "evaluate" / "aflw16m"
 COLOURS = ((0, 0, 255), (0, 255, 0), (255, 0, 0))
@@ -34,20 +33,16 @@ def errors(realdata, tmp_path):
     if not GOLDEN.exists():
         pytest.skip("golden predictions not available")
     out = tmp_path / "errors.parquet"
-    res = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(GOLDEN / "pred.csv"),
-            str(GOLDEN / "gt.csv"),
-            "--pred-system",
-            "300w_lp",
-            "--gt-system",
-            "300w_lp",
-            "-o",
-            str(out),
-        ],
-        catch_exceptions=False,
+    res = hpe(
+        "evaluate",
+        GOLDEN / "pred.csv",
+        GOLDEN / "gt.csv",
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "-o",
+        out,
     )
     assert res.exit_code == 0, res.output
     return out
@@ -56,11 +51,7 @@ def errors(realdata, tmp_path):
 def test_evaluate_then_draw_worst(realdata, errors, tmp_path):
     aflw = realdata / "aflw2000_prnet"
     out = tmp_path / "worst"
-    res = CliRunner().invoke(
-        cli,
-        ["draw", str(errors), "-o", str(out), "--images", str(aflw), "--worst", "5", "--thickness", "2"],
-        catch_exceptions=False,
-    )
+    res = hpe("draw", errors, "-o", out, "--images", aflw, "--worst", "5", "--thickness", "2")
     assert res.exit_code == 0, res.output
     assert "300w_lp (file metadata)" in res.output
     gt = pd.read_csv(GOLDEN / "gt.csv").set_index("image")
@@ -102,23 +93,8 @@ def test_draw_worst_api_and_bad_sort_column(realdata, errors, tmp_path):
     assert [k for k, _, _ in got] == [(w,) for w in want]
     assert all(p.is_file() and p.parent == tmp_path / "api" for _, p, _ in got)
     assert "err_pitch" in got[0][2] and want[0] in got[0][2]
-    res = CliRunner().invoke(
-        cli,
-        [
-            "draw",
-            str(errors),
-            "-o",
-            str(tmp_path / "x"),
-            "--images",
-            str(realdata / "aflw2000_prnet"),
-            "--sort-by",
-            "nope",
-        ],
-        catch_exceptions=False,
-    )
+    res = hpe("draw", errors, "-o", tmp_path / "x", "--images", realdata / "aflw2000_prnet", "--sort-by", "nope")
     assert res.exit_code == 1 and "--sort-by 'nope'" in res.output and len(res.output.strip().splitlines()) == 1
     assert not (tmp_path / "x").exists()
-    res = CliRunner().invoke(
-        cli, ["draw", str(errors), "-o", str(tmp_path / "y"), "--images", str(tmp_path)], catch_exceptions=False
-    )
+    res = hpe("draw", errors, "-o", tmp_path / "y", "--images", tmp_path)
     assert res.exit_code == 1 and "image not found" in res.output and not (tmp_path / "y").exists()

@@ -6,15 +6,10 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 GOLDEN = Path(__file__).resolve().parents[3] / "shared" / "golden" / "evaluate" / "aflw16m"
-
-
-def _draw(*args):
-    return CliRunner().invoke(cli, ["draw", *map(str, args)], catch_exceptions=False)
 
 
 @pytest.fixture
@@ -22,20 +17,16 @@ def errors(realdata, tmp_path):
     if not GOLDEN.exists():
         pytest.skip("golden predictions not available")
     out = tmp_path / "errors.parquet"
-    res = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(GOLDEN / "pred.csv"),
-            str(GOLDEN / "gt.csv"),
-            "--pred-system",
-            "300w_lp",
-            "--gt-system",
-            "300w_lp",
-            "-o",
-            str(out),
-        ],
-        catch_exceptions=False,
+    res = hpe(
+        "evaluate",
+        GOLDEN / "pred.csv",
+        GOLDEN / "gt.csv",
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "-o",
+        out,
     )
     assert res.exit_code == 0, res.output
     return out
@@ -55,12 +46,12 @@ def test_missing_images_are_rejects_the_rest_drawn(realdata, errors, tmp_path, k
         for ext in (".jpg", ".mat"):
             shutil.copy(realdata / "aflw2000_prnet" / name.replace(".mat", ext), imgs)
     out = tmp_path / "worst"
-    res = _draw(src, "-o", out, "--images", imgs, "--worst", 5)
+    res = hpe("draw", src, "-o", out, "--images", imgs, "--worst", 5)
     assert res.exit_code == 1 and "image not found" in res.output and not out.exists()
     row0 = t.index[t["image"] == worst[0]][0]
     want_where = f"line {row0 + 2}" if kind == "csv" else f"row {row0 + 1}"
     assert f"{src}: {want_where}: image not found" in res.output, res.output
-    res = _draw(src, "-o", out, "--images", imgs, "--worst", 5, "--rejects", tmp_path / "rej.csv")
+    res = hpe("draw", src, "-o", out, "--images", imgs, "--worst", 5, "--rejects", tmp_path / "rej.csv")
     assert res.exit_code == 0, res.output
     assert "rejected: 2 image not found" in res.output
     assert sorted(p.name for p in out.iterdir()) == [
@@ -74,7 +65,9 @@ def test_missing_images_are_rejects_the_rest_drawn(realdata, errors, tmp_path, k
 
 
 def test_every_image_missing_exits_1(errors, tmp_path):
-    res = _draw(errors, "-o", tmp_path / "w", "--images", tmp_path, "--worst", 3, "--rejects", tmp_path / "rej.csv")
+    res = hpe(
+        "draw", errors, "-o", tmp_path / "w", "--images", tmp_path, "--worst", 3, "--rejects", tmp_path / "rej.csv"
+    )
     assert res.exit_code == 1 and "nothing drawn: all 3 row(s) rejected" in res.output
     assert len(res.output.strip().splitlines()) == 1
     assert not (tmp_path / "w").exists()

@@ -28,10 +28,9 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.io
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 ROOT = Path(__file__).resolve().parents[2]
 REALDATA = ROOT.parent / "shared" / "realdata"
@@ -42,10 +41,6 @@ pytestmark = pytest.mark.skipif(
     not (PIZZA.exists() and AFLW.exists() and W300.exists()), reason="shared/realdata is not available"
 )
 CAMS = "00_00,00_08,00_15,00_23"  # the pizza1 cameras with JPEGs in the sample
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
 
 
 def get_R(x, y, z):
@@ -62,7 +57,7 @@ def geodesic_deg(R1, R2):
 @pytest.fixture(scope="module")
 def pizza(tmp_path_factory):
     out = tmp_path_factory.mktemp("pizza") / "pizza.parquet"
-    r = run("relabel-panoptic", PIZZA, "-o", out, "--cameras", CAMS, "-q")
+    r = hpe("relabel-panoptic", PIZZA, "-o", out, "--cameras", CAMS, "-q")
     assert r.exit_code == 0, r.output
     return out, pd.read_parquet(out)
 
@@ -110,7 +105,7 @@ def truth(pizza):
 def export(tmp_path, inputs, *args):
     """Run ``hpe export`` with ``--rejects``, check labels + rejects = input rows, move the export, return it."""
     out, rej = tmp_path / "out", tmp_path / "rej.csv"
-    r = run("export", *inputs, "-o", out, "--rejects", rej, "-q", *args)
+    r = hpe("export", *inputs, "-o", out, "--rejects", rej, "-q", *args)
     assert r.exit_code == 0, r.output
     summary = json.loads((out / "export.json").read_text())
     rejects = pd.read_csv(rej) if rej.stat().st_size else pd.DataFrame(columns=["reason"])

@@ -13,9 +13,8 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 ROOT = Path(__file__).resolve().parents[2]
 PIZZA = Path("/work/shared/realdata/panoptic_160906_pizza1")
@@ -24,21 +23,15 @@ if not PIZZA.exists():
 KEYS = ["sequence", "frame", "camera", "person_id"]
 
 
-def run(*args, code=0):
-    res = CliRunner().invoke(cli, [str(a) for a in args])
-    assert res.exit_code == code, res.output
-    return res
-
-
 @pytest.fixture(scope="module")
 def audited(tmp_path_factory):
     if not PIZZA.exists():
         pytest.skip("realdata pizza1 sample not available")
     tmp = tmp_path_factory.mktemp("chain")
     lab = tmp / "labels.parquet"
-    run("relabel-panoptic", PIZZA, "-o", lab, "-q", "--rejects", tmp / "relabel_rejects.csv")
+    hpe("relabel-panoptic", PIZZA, "-o", lab, "-q", "--rejects", tmp / "relabel_rejects.csv", ok=True)
     sus = tmp / "suspects.csv"
-    run("audit", lab, "--consistency", "--suspects", sus, "-o", tmp / "scored.parquet", "-q")
+    hpe("audit", lab, "--consistency", "--suspects", sus, "-o", tmp / "scored.parquet", "-q", ok=True)
     return tmp, lab, sus
 
 
@@ -58,7 +51,7 @@ def test_suspects_list_is_a_key_list_with_reasons(audited):
 def test_convert_exclude_drops_exactly_the_suspects(audited):
     tmp, lab, sus = audited
     out, rej = tmp / "kept.parquet", tmp / "convert_rejects.csv"
-    res = run("convert", lab, "-o", out, "--to", "6drepnet", "--exclude", sus, "--rejects", rej)
+    res = hpe("convert", lab, "-o", out, "--to", "6drepnet", "--exclude", sus, "--rejects", rej, ok=True)
     s, kept, all_rows = pd.read_csv(sus), pd.read_parquet(out), pd.read_parquet(lab)
     assert f"excluded: {len(s)} rows" in res.output
     assert _keyset(kept) == _keyset(all_rows) - _keyset(s)
@@ -70,14 +63,29 @@ def test_convert_exclude_drops_exactly_the_suspects(audited):
 def test_convert_exclude_without_rejects_file_is_not_an_error(audited):
     tmp, lab, sus = audited
     out = tmp / "kept2.parquet"
-    run("convert", lab, "-o", out, "--to", "300w_lp", "--exclude", sus)
+    hpe("convert", lab, "-o", out, "--to", "300w_lp", "--exclude", sus, ok=True)
     assert len(pd.read_parquet(out)) == len(pd.read_parquet(lab)) - len(pd.read_csv(sus))
 
 
 def test_export_exclude_lists_the_suspects_as_excluded(audited):
     tmp, lab, sus = audited
     rej = tmp / "export_rejects.csv"
-    run("export", lab, "-o", tmp / "hf", "--layout", "hf", "--images", PIZZA, "--exclude", sus, "--rejects", rej, "-q")
+    hpe(
+        "export",
+        lab,
+        "-o",
+        tmp / "hf",
+        "--layout",
+        "hf",
+        "--images",
+        PIZZA,
+        "--exclude",
+        sus,
+        "--rejects",
+        rej,
+        "-q",
+        ok=True,
+    )
     s, r = pd.read_csv(sus), pd.read_csv(rej)
     ex = r[r["reason"].str.startswith("excluded: ")]
     assert _keyset(ex) == _keyset(s)
@@ -89,7 +97,6 @@ def test_exclude_file_without_keys_is_one_line_error(audited, tmp_path):
     tmp, lab, sus = audited
     bad = tmp_path / "bad.csv"
     bad.write_text("reason\nx\n")
-    res = CliRunner().invoke(cli, ["convert", str(lab), "-o", str(tmp_path / "o.parquet"), "--to", "300w_lp",
-                                   "--exclude", str(bad)])  # fmt: skip
+    res = hpe("convert", lab, "-o", tmp_path / "o.parquet", "--to", "300w_lp", "--exclude", bad)  # fmt: skip
     assert res.exit_code == 1
     assert f"{bad}: expected key columns" in res.output and "Traceback" not in res.output

@@ -11,18 +11,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = next((p / "shared" for p in ROOT.parents if (p / "shared" / "realdata").is_dir()), ROOT.parent / "shared")
 PIZZA = SHARED / "realdata" / "panoptic_160906_pizza1"
 pytestmark = pytest.mark.skipif(not PIZZA.is_dir(), reason="../shared/realdata is not available")
-
-
-def cli_run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
 
 
 def _data(page):
@@ -32,9 +27,9 @@ def _data(page):
 
 def test_relabel_audit_view_flags(tmp_path):
     labels, flags, page = tmp_path / "labels.parquet", tmp_path / "flags.parquet", tmp_path / "page"
-    assert cli_run("relabel-panoptic", PIZZA, "-o", labels, "--system", "whenet", "-q").exit_code == 0
-    assert cli_run("audit", labels, "-o", flags, "-q").exit_code == 0
-    r = cli_run("view", flags, "-o", page, "--images", PIZZA, "--rejects", tmp_path / "rej.csv", "-q")
+    assert hpe("relabel-panoptic", PIZZA, "-o", labels, "--system", "whenet", "-q").exit_code == 0
+    assert hpe("audit", labels, "-o", flags, "-q").exit_code == 0
+    r = hpe("view", flags, "-o", page, "--images", PIZZA, "--rejects", tmp_path / "rej.csv", "-q")
     assert r.exit_code == 0, r.output
     audited = pd.read_parquet(flags)
     d = _data(page)
@@ -60,13 +55,13 @@ def test_relabel_audit_view_flags(tmp_path):
 
 def test_relabel_augment_view(tmp_path):
     labels, aug, page = tmp_path / "labels.parquet", tmp_path / "aug.parquet", tmp_path / "page"
-    r = cli_run("relabel-panoptic", PIZZA, "-o", labels, "--cameras", "00_00,00_08", "--frames", "1147:1148", "-q")
+    r = hpe("relabel-panoptic", PIZZA, "-o", labels, "--cameras", "00_00,00_08", "--frames", "1147:1148", "-q")
     assert r.exit_code == 0, r.output
-    r = cli_run(
+    r = hpe(
         "augment", labels, "-o", aug, "--images", PIZZA, "--out-images", tmp_path / "imgs", "--hflip", "-q",
     )  # fmt: skip
     assert r.exit_code == 0, r.output
-    r = cli_run("view", aug, "-o", page, "--images", tmp_path / "imgs", "-q")
+    r = hpe("view", aug, "-o", page, "--images", tmp_path / "imgs", "-q")
     assert r.exit_code == 0, r.output
     d = _data(page)
     n = len(pd.read_parquet(aug))

@@ -6,23 +6,18 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.geometry.landmark_schemes import flip_permutation
 
 CROP = (300, 150, 1300, 800)
-
-
-def cli_run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
 
 
 @pytest.fixture
 def pizza(realdata, tmp_path):
     seq = realdata / "panoptic_160906_pizza1"
     out = tmp_path / "labels.parquet"
-    res = cli_run("relabel-panoptic", seq, "-o", out, "--cameras", "00_00,00_08", "--frames", "1147:1148")
+    res = hpe("relabel-panoptic", seq, "-o", out, "--cameras", "00_00,00_08", "--frames", "1147:1148")
     assert res.exit_code == 0, res.output
     return seq, out
 
@@ -31,7 +26,7 @@ def pizza(realdata, tmp_path):
 def test_relabel_augment_draw(pizza, tmp_path, op):
     seq, labels = pizza
     args = ["--crop", *CROP] if op == "crop" else ["--hflip"]
-    res = cli_run(
+    res = hpe(
         "augment", labels, "-o", tmp_path / "aug.parquet", *args, "--images", seq, "--out-images", tmp_path / "imgs"
     )
     assert res.exit_code == 0, res.output
@@ -53,7 +48,7 @@ def test_relabel_augment_draw(pizza, tmp_path, op):
         ref = src[y : y + h, x : x + w] if op == "crop" else cv2.flip(src, 1)
         got = cv2.imread(str(tmp_path / "imgs" / name))
         assert got.shape == ref.shape and np.abs(got.astype(int) - ref.astype(int)).mean() < 2.5
-    res = cli_run(
+    res = hpe(
         "draw", tmp_path / "aug.parquet", "-o", tmp_path / "drawn", "--images", tmp_path / "imgs", "--thickness", "4"
     )
     assert res.exit_code == 0, res.output

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from conftest import hpe
+
 ROOT = Path(__file__).resolve().parents[2]
 PIZZA = ROOT.parent / "shared" / "realdata" / "panoptic_160906_pizza1"
 CAMS = "00_00,00_08,00_15,00_23"  # the pizza1 cameras with JPEGs in the sample
@@ -28,7 +30,7 @@ def _chain(seq_root, tmp_path, monkeypatch, relabel_extra=(), dask: bool = False
     d.mkdir()
     with monkeypatch.context() as m:
         m.chdir(d)
-        res = R.run(
+        res = hpe(
             "relabel-panoptic",
             seq_root,
             "-o",
@@ -40,7 +42,7 @@ def _chain(seq_root, tmp_path, monkeypatch, relabel_extra=(), dask: bool = False
             "-q",
         )
         assert res.exit_code == 0, res.output
-        res = R.run(*R.export_args("whenet", "labels.parquet", seq_root, "whenet", "exp_rej.csv", *sched))
+        res = hpe(*R.export_args("whenet", "labels.parquet", seq_root, "whenet", "exp_rej.csv", *sched))
         assert res.exit_code == 0, res.output
     return d
 

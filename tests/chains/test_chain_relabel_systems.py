@@ -14,9 +14,8 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.rotation import get_system
 from hpe_cli.rotation.distances import geodesic_deg
 
@@ -29,12 +28,6 @@ MAT = [f"r{i}{j}" for i in range(3) for j in range(3)]
 CHECKS = ("gimbal_lock", "near_gimbal", "non_canonical", "out_of_range", "non_finite", "not_rotation", "duplicates")
 
 
-def run(*args, code=0):
-    res = CliRunner().invoke(cli, [str(a) for a in args])
-    assert res.exit_code == code, res.output
-    return res
-
-
 def canonical(frame, system):
     s = get_system(system)
     return s.to_canonical(frame[MAT].to_numpy().reshape(-1, 3, 3))
@@ -43,20 +36,20 @@ def canonical(frame, system):
 @pytest.mark.parametrize("system", ["300w_lp", "scipy_zyx", "6drepnet"])
 def test_relabel_then_audit_and_convert_without_system(tmp_path, system):
     lab = tmp_path / "labels.parquet"
-    run("relabel-panoptic", SYNTH, "-o", lab, "--system", system, "-q")
+    hpe("relabel-panoptic", SYNTH, "-o", lab, "--system", system, "-q", ok=True)
     relabel = pd.read_parquet(lab)
     # the relabel's matrices are its angles' matrices in X: an independent check of what it wrote
     R_angles = get_system(system).from_angles(relabel[["pitch", "yaw", "roll"]].to_numpy())
     assert geodesic_deg(R_angles, relabel[MAT].to_numpy().reshape(-1, 3, 3)).max() < 1e-6
 
-    res = run("audit", lab, "--json", "-")
+    res = hpe("audit", lab, "--json", "-", ok=True)
     rep = json.loads(res.stdout)
     assert rep["system"] == system and rep["system_origin"] == "file metadata"
     assert rep["rows"] == len(relabel) and all(rep[c] == 0 for c in CHECKS), rep
     assert f"system {system} (file metadata)" in res.stderr
 
     same = tmp_path / "same.parquet"
-    res = run("convert", lab, "-o", same, "--to", system)
+    res = hpe("convert", lab, "-o", same, "--to", system, ok=True)
     assert f"from {system} (file metadata)" in res.stderr
     back = pd.read_parquet(same)
     assert geodesic_deg(back[MAT].to_numpy().reshape(-1, 3, 3), relabel[MAT].to_numpy().reshape(-1, 3, 3)).max() < 1e-6
@@ -64,32 +57,32 @@ def test_relabel_then_audit_and_convert_without_system(tmp_path, system):
     # convert -> audit: the new file names its new system
     other = "whenet" if system != "whenet" else "300w_lp"
     conv = tmp_path / "conv.parquet"
-    run("convert", lab, "-o", conv, "--to", "300w_lp", "-q")
+    hpe("convert", lab, "-o", conv, "--to", "300w_lp", "-q", ok=True)
     c = pd.read_parquet(conv)
     assert geodesic_deg(canonical(c, "300w_lp"), canonical(relabel, system)).max() < 1e-6
-    rep2 = json.loads(run("audit", conv, "--json", "-", "-q").stdout)
+    rep2 = json.loads(hpe("audit", conv, "--json", "-", "-q", ok=True).stdout)
     assert rep2["system"] == "300w_lp" and rep2["system_origin"] == "file metadata"
     assert all(rep2[k] == 0 for k in CHECKS if k not in ("non_canonical",)), rep2
     # an explicit, disagreeing system is a usage error naming both; --reinterpret-as overrides
-    res = run("audit", lab, "--system", other, code=2)
+    res = hpe("audit", lab, "--system", other, code=2)
     assert system in res.output and other in res.output and res.output.count("\n") == 1
-    run("audit", lab, "--system", other, "--reinterpret-as", other, "-q")
+    hpe("audit", lab, "--system", other, "--reinterpret-as", other, "-q", ok=True)
 
 
 def test_coco_and_whenet_files_carry_their_system(tmp_path):
     coco = tmp_path / "train.json"
-    run("relabel-panoptic", SYNTH, "-o", coco, "--format", "coco", "-q")
+    hpe("relabel-panoptic", SYNTH, "-o", coco, "--format", "coco", "-q", ok=True)
     assert json.loads(coco.read_text())["info"]["hpe:system"] == "whenet"
-    rep = json.loads(run("audit", coco, "--json", "-", "-q").stdout)
+    rep = json.loads(hpe("audit", coco, "--json", "-", "-q", ok=True).stdout)
     assert rep["system"] == "whenet" and rep["system_origin"] == "file metadata"
     # rows with no whenet solution (|pitch|, |roll| < 90) are the only flags: the system's documented range
     assert rep["out_of_range"] == rep["details"]["flagged"]
     table = tmp_path / "w.parquet"
-    run("relabel-panoptic", SYNTH, "-o", table, "--system", "whenet", "-q")
-    rep_t = json.loads(run("audit", table, "--json", "-", "-q").stdout)
+    hpe("relabel-panoptic", SYNTH, "-o", table, "--system", "whenet", "-q", ok=True)
+    rep_t = json.loads(hpe("audit", table, "--json", "-", "-q", ok=True).stdout)
     assert rep_t["out_of_range"] == rep["out_of_range"] and rep_t["rows"] == rep["rows"]
     out = tmp_path / "c.parquet"
-    run("convert", coco, "-o", out, "--to", "300w_lp", "-q")
+    hpe("convert", coco, "-o", out, "--to", "300w_lp", "-q", ok=True)
     ref = pd.read_parquet(table).sort_values(["image", "bbox_x"]).reset_index(drop=True)
     got = pd.read_parquet(out).sort_values(["image", "bbox_x"]).reset_index(drop=True)
     assert geodesic_deg(canonical(got, "300w_lp"), canonical(ref, "whenet")).max() < 1e-6
@@ -98,8 +91,8 @@ def test_coco_and_whenet_files_carry_their_system(tmp_path):
 @pytest.mark.skipif(not PIZZA.exists(), reason="real Panoptic sample absent")
 def test_real_pizza_scipy_zyx_audits_clean(tmp_path):
     lab = tmp_path / "pizza.parquet"
-    run("relabel-panoptic", PIZZA, "-o", lab, "--system", "scipy_zyx", "-q")
-    rep = json.loads(run("audit", lab, "--json", "-", "-q").stdout)
+    hpe("relabel-panoptic", PIZZA, "-o", lab, "--system", "scipy_zyx", "-q", ok=True)
+    rep = json.loads(hpe("audit", lab, "--json", "-", "-q", ok=True).stdout)
     assert rep["system"] == "scipy_zyx" and rep["details"]["flagged"] == 0 and rep["rows"] > 1000
 
 
@@ -114,7 +107,7 @@ def test_relabel_in_two_systems_then_draw_without_system_draws_the_same_pixels(t
     pics = {}
     for system in ("300w_lp", "scipy_zyx"):
         lab = tmp_path / f"{system}.parquet"
-        run(
+        hpe(
             "relabel-panoptic",
             PIZZA,
             "-o",
@@ -126,9 +119,10 @@ def test_relabel_in_two_systems_then_draw_without_system_draws_the_same_pixels(t
             "--frames",
             "1147:1148",
             "-q",
+            ok=True,
         )
         out = tmp_path / f"draw_{system}"
-        res = run("draw", lab, "--images", PIZZA, "-o", out)
+        res = hpe("draw", lab, "--images", PIZZA, "-o", out, ok=True)
         assert f"system {system} (file metadata" in res.stderr, res.stderr
         pics[system] = {p.relative_to(out): cv2.imread(str(p)) for p in sorted(out.rglob("*.jpg"))}
     assert pics["300w_lp"] and pics["300w_lp"].keys() == pics["scipy_zyx"].keys()
@@ -138,7 +132,7 @@ def test_relabel_in_two_systems_then_draw_without_system_draws_the_same_pixels(t
         # the same lines on the same frame (JPEG noise only)
         assert np.abs(img.astype(int) - other.astype(int)).mean() < 0.5, name
     wrong = tmp_path / "wrong"
-    run("draw", tmp_path / "scipy_zyx.parquet", "--images", PIZZA, "-o", wrong, "--reinterpret-as", "300w_lp")
+    hpe("draw", tmp_path / "scipy_zyx.parquet", "--images", PIZZA, "-o", wrong, "--reinterpret-as", "300w_lp", ok=True)
     diffs = [
         np.abs(cv2.imread(str(wrong / n)).astype(int) - img.astype(int)).max() for n, img in pics["300w_lp"].items()
     ]

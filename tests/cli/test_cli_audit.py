@@ -6,10 +6,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 KEYS = [
@@ -36,10 +35,6 @@ ROWS = [  # file, pitch, yaw, roll -> expected flags
 ]
 
 
-def run(*args):
-    return CliRunner().invoke(cli, ["audit", *map(str, args)], catch_exceptions=False)
-
-
 @pytest.fixture
 def table(tmp_path):
     df = pd.DataFrame([r[:4] for r in ROWS], columns=["file", "pitch", "yaw", "roll"])
@@ -49,7 +44,7 @@ def table(tmp_path):
 
 
 def test_report_counts_and_keys(table, tmp_path):
-    res = run(table, "--json", tmp_path / "r.json", "--system", "300w_lp")
+    res = hpe("audit", table, "--json", tmp_path / "r.json", "--system", "300w_lp")
     assert res.exit_code == 0, res.output
     rep = json.loads((tmp_path / "r.json").read_text())
     assert list(rep)[:8] == KEYS
@@ -63,28 +58,28 @@ def test_report_counts_and_keys(table, tmp_path):
 
 def test_flag_columns_and_only_flagged(table, tmp_path):
     out = tmp_path / "flags.parquet"
-    assert run(table, "-o", out, "-q").exit_code == 0
+    assert hpe("audit", table, "-o", out, "-q").exit_code == 0
     df = pd.read_parquet(out)
     assert list(df.columns) == ["file", "pitch", "yaw", "roll"] + KEYS[1:] + ["flagged"]
     for i, r in enumerate(ROWS):
         assert {k for k in KEYS[1:] if df.loc[i, k]} == r[4], i
     assert df["flagged"].tolist() == [bool(r[4]) for r in ROWS]
     out2 = tmp_path / "only.csv"
-    assert run(table, "-o", out2, "--only-flagged", "-q").exit_code == 0
+    assert hpe("audit", table, "-o", out2, "--only-flagged", "-q").exit_code == 0
     assert pd.read_csv(out2)["file"].tolist() == [r[0] for r in ROWS if r[4]]
 
 
 def test_exit_status_and_strict(table, tmp_path):
-    assert run(table, "-q").exit_code == 0
-    assert run(table, "-q", "--strict").exit_code == 1
+    assert hpe("audit", table, "-q").exit_code == 0
+    assert hpe("audit", table, "-q", "--strict").exit_code == 1
     clean = tmp_path / "clean.csv"
     pd.DataFrame({"pitch": [1.0], "yaw": [2.0], "roll": [3.0]}).to_csv(clean, index=False)
-    assert run(clean, "-q", "--strict").exit_code == 0
+    assert hpe("audit", clean, "-q", "--strict").exit_code == 0
 
 
 def test_strict_failure_says_what_was_flagged(table, tmp_path):
     """--strict with flagged rows: one error line with the counts (before, exit 1 printed nothing at all)."""
-    res = run(table, "--strict", "--json", tmp_path / "r.json")
+    res = hpe("audit", table, "--strict", "--json", tmp_path / "r.json")
     assert res.exit_code == 1
     lines = res.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("Error: ") and "rows flagged (" in lines[0], res.output
@@ -92,25 +87,25 @@ def test_strict_failure_says_what_was_flagged(table, tmp_path):
 
 
 def test_json_to_stdout_and_key_option(table):
-    res = CliRunner().invoke(cli, ["audit", str(table), "--json", "-", "--key", "pitch", "-q"])
+    res = hpe("audit", table, "--json", "-", "--key", "pitch", "-q")
     rep = json.loads(res.stdout)
     # keyed on the label values only: b.jpg twice and c.jpg share (10, 20, 5)
     assert rep["duplicates"] == 2
-    res = run(table, "--key", "nope", "-q")
+    res = hpe("audit", table, "--key", "nope", "-q")
     assert res.exit_code == 1 and "nope" in res.output and "Traceback" not in res.output
 
 
 def test_plots(table, tmp_path):
     d = tmp_path / "plots"
-    assert run(table, "--plots", d, "-q").exit_code == 0
+    assert hpe("audit", table, "--plots", d, "-q").exit_code == 0
     names = {p.name for p in d.iterdir()}
     assert names == {"yaw_hist.png", "pitch_hist.png", "roll_hist.png", "yaw_pitch_coverage.png", "index.html"}
     page = (d / "index.html").read_text()
     assert "near_gimbal" in page and "yaw_pitch_coverage.png" in page
     assert (d / "yaw_hist.png").read_bytes()[:4] == b"\x89PNG"
-    res = run(table, "--plots", d, "-q")  # refuses to overwrite
+    res = hpe("audit", table, "--plots", d, "-q")  # refuses to overwrite
     assert res.exit_code == 1 and "--overwrite" in res.output
-    assert run(table, "--plots", d, "-q", "--overwrite").exit_code == 0
+    assert hpe("audit", table, "--plots", d, "-q", "--overwrite").exit_code == 0
 
 
 def test_matrix_input_and_radians(tmp_path):
@@ -123,42 +118,42 @@ def test_matrix_input_and_radians(tmp_path):
     path = tmp_path / "m.parquet"
     df.to_parquet(path)
     out = tmp_path / "r.json"
-    assert run(path, "--json", out, "-q").exit_code == 0
+    assert hpe("audit", path, "--json", out, "-q").exit_code == 0
     rep = json.loads(out.read_text())
     assert rep["label_columns"] == "matrix"
     assert (rep["gimbal_lock"], rep["not_rotation"], rep["non_canonical"]) == (1, 1, 0)
     # the same label as 6DRepNet's stored matrix G = A.T
     dfT = pd.DataFrame(np.swapaxes(A, 1, 2).reshape(-1, 9), columns=df.columns)
     dfT.to_csv(tmp_path / "g.csv", index=False)
-    assert run(tmp_path / "g.csv", "--system", "6drepnet", "--json", tmp_path / "g.json", "-q").exit_code == 0
+    assert hpe("audit", tmp_path / "g.csv", "--system", "6drepnet", "--json", tmp_path / "g.json", "-q").exit_code == 0
     assert json.loads((tmp_path / "g.json").read_text())["gimbal_lock"] == 1
     rad = tmp_path / "rad.csv"
     pd.DataFrame({"pitch": [0.0], "yaw": [np.deg2rad(120)], "roll": [0.0]}).to_csv(rad, index=False)
-    res = CliRunner().invoke(cli, ["audit", str(rad), "--radians", "--json", "-", "-q"])
+    res = hpe("audit", rad, "--radians", "--json", "-", "-q")
     assert json.loads(res.stdout)["non_canonical"] == 1
 
 
 def test_errors_are_one_line(tmp_path):
     p = tmp_path / "x.csv"
     pd.DataFrame({"a": [1]}).to_csv(p, index=False)
-    res = run(p)
+    res = hpe("audit", p)
     assert res.exit_code == 1 and res.output.startswith("Error:") and "pitch" in res.output
     assert len(res.output.strip().splitlines()) == 1
-    res = run(p, "--system", "nope")
+    res = hpe("audit", p, "--system", "nope")
     assert res.exit_code == 2
 
 
 def test_refuses_to_overwrite(table, tmp_path):
     out = tmp_path / "r.json"
     out.write_text("keep")
-    res = run(table, "--json", out, "-q")
+    res = hpe("audit", table, "--json", out, "-q")
     assert res.exit_code == 1 and out.read_text() == "keep"
 
 
 def test_empty_table(tmp_path):
     p = tmp_path / "e.parquet"
     pd.DataFrame({c: pd.Series([], dtype=float) for c in ("pitch", "yaw", "roll")}).to_parquet(p)
-    res = CliRunner().invoke(cli, ["audit", str(p), "--json", "-", "-q", "-o", str(tmp_path / "f.csv")])
+    res = hpe("audit", p, "--json", "-", "-q", "-o", tmp_path / "f.csv")
     assert res.exit_code == 0 and json.loads(res.stdout)["rows"] == 0
 
 
@@ -171,8 +166,8 @@ def test_batches_do_not_change_results(tmp_path):
     df.loc[1500:1509] = df.loc[0:9].to_numpy()  # duplicates across batches
     p = tmp_path / "r.parquet"
     df.to_parquet(p)
-    r1 = CliRunner().invoke(cli, ["audit", str(p), "--json", "-", "-q"])
-    r2 = CliRunner().invoke(cli, ["audit", str(p), "--json", "-", "-q", "--batch-size", "77"])
+    r1 = hpe("audit", p, "--json", "-", "-q")
+    r2 = hpe("audit", p, "--json", "-", "-q", "--batch-size", "77")
     a, b = json.loads(r1.stdout), json.loads(r2.stdout)
     assert {k: a[k] for k in KEYS} == {k: b[k] for k in KEYS}
     assert a["duplicates"] == 10
@@ -180,7 +175,7 @@ def test_batches_do_not_change_results(tmp_path):
 
 @pytest.mark.skipif(not (REALDATA / "aflw2000_prnet").is_dir(), reason="realdata not available")
 def test_aflw2000_mat_folder(tmp_path):
-    res = CliRunner().invoke(cli, ["audit", str(REALDATA / "aflw2000_prnet"), "--json", "-", "-q"])
+    res = hpe("audit", REALDATA / "aflw2000_prnet", "--json", "-", "-q")
     assert res.exit_code == 0, res.stderr
     rep = json.loads(res.stdout)
     # PROVENANCE.md: 16 files, every angle within +-90, none close to a lock

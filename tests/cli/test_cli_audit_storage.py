@@ -5,18 +5,14 @@ import json
 import numpy as np
 import pandas as pd
 import scipy.io as sio
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from conftest import canonical_A
-from hpe_cli.cli.main import cli
+from conftest import canonical_A, hpe
 
 
 def test_audit_decoder_on_real_aflw2000(tmp_path, realdata):
     out = tmp_path / "r.json"
-    res = CliRunner().invoke(
-        cli, ["audit", str(realdata / "aflw2000_prnet"), "--decoder", "synergynet", "--json", str(out)]
-    )
+    res = hpe("audit", realdata / "aflw2000_prnet", "--decoder", "synergynet", "--json", out)
     assert res.exit_code == 0, res.output
     d = json.loads(out.read_text())["decoder"]
     assert d["reference_system"] == "300w_lp" and d["rows"] == 16 and d["decoded"] == 16
@@ -36,7 +32,7 @@ def test_audit_rotvec_table(tmp_path):
     src = tmp_path / "rv.csv"
     pd.DataFrame({"rx": rv[:, 0], "ry": rv[:, 1], "rz": [rv[0, 2], np.nan]}).to_csv(src, index=False)
     out = tmp_path / "r.json"
-    res = CliRunner().invoke(cli, ["audit", str(src), "--system", "img2pose", "--json", str(out)])
+    res = hpe("audit", src, "--system", "img2pose", "--json", out)
     assert res.exit_code == 0, res.output
     rep = json.loads(out.read_text())
     assert rep["label_columns"] == "rotvec" and rep["non_finite"] == 1 and rep["rows"] == 2
@@ -47,21 +43,7 @@ def test_audit_rotvec_several_batches_and_flagged_output(tmp_path):
     src = tmp_path / "rv.csv"
     pd.DataFrame({"rx": rv[:, 0], "ry": rv[:, 1], "rz": rv[:, 2]}).to_csv(src, index=False)
     out = tmp_path / "f.csv"
-    res = CliRunner().invoke(
-        cli,
-        [
-            "audit",
-            str(src),
-            "--system",
-            "img2pose",
-            "--batch-size",
-            "7",
-            "-o",
-            str(out),
-            "--json",
-            str(tmp_path / "r.json"),
-        ],
-    )
+    res = hpe("audit", src, "--system", "img2pose", "--batch-size", "7", "-o", out, "--json", tmp_path / "r.json")
     assert res.exit_code == 0, res.output
     rep = json.loads((tmp_path / "r.json").read_text())
     assert rep["label_columns"] == "rotvec" and rep["rows"] == 50 and rep["not_rotation"] == 0

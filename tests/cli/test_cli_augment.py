@@ -9,10 +9,8 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from conftest import canonical_A
-from hpe_cli.cli.main import cli
+from conftest import canonical_A, hpe
 from hpe_cli.geometry.landmark_schemes import SCHEMES
 from hpe_cli.io import BBOX_COLS, LABEL_COLS, MATRIX_COLS, landmark_cols
 from hpe_cli.rotation import get_system
@@ -20,10 +18,6 @@ from hpe_cli.rotation import get_system
 DATA = Path(__file__).resolve().parents[2] / "hpe_cli" / "data"
 W, H = 640, 480
 SCALE = 8.0
-
-
-def run(*args):
-    return CliRunner().invoke(cli, ["augment", *map(str, args)])
 
 
 def face68():
@@ -105,7 +99,7 @@ def test_written_labels_reproduce_the_written_landmarks(tmp_path, args, kind, an
     df.to_csv(src, index=False)
     digest = hashlib.sha256(src.read_bytes()).hexdigest()
     out = tmp_path / "out.parquet"
-    res = run(src, "-o", out, "--image-size", W, H, *args)
+    res = hpe("augment", src, "-o", out, "--image-size", W, H, *args)
     assert res.exit_code == 0, res.output
     assert hashlib.sha256(src.read_bytes()).hexdigest() == digest  # input untouched
     o = pd.read_parquet(out)
@@ -130,20 +124,32 @@ def test_written_labels_reproduce_the_written_landmarks(tmp_path, args, kind, an
 def test_boxes_follow_the_rule(tmp_path):
     df = make_table(10)
     df.to_parquet(tmp_path / "in.parquet")
-    assert run(tmp_path / "in.parquet", "-o", tmp_path / "f.parquet", "--image-size", W, H, "--hflip").exit_code == 0
+    assert (
+        hpe("augment", tmp_path / "in.parquet", "-o", tmp_path / "f.parquet", "--image-size", W, H, "--hflip").exit_code
+        == 0
+    )
     f = pd.read_parquet(tmp_path / "f.parquet")
     # a flip moves the box exactly (margins kept)
     np.testing.assert_allclose(f["bbox_x"], W - 1 - df["bbox_x"] - df["bbox_w"], atol=1e-9)
     np.testing.assert_allclose(f[["bbox_y", "bbox_w", "bbox_h"]], df[["bbox_y", "bbox_w", "bbox_h"]], atol=1e-9)
-    res = run(tmp_path / "in.parquet", "-o", tmp_path / "r.parquet", "--image-size", W, H, "--rotate", 33)
+    res = hpe("augment", tmp_path / "in.parquet", "-o", tmp_path / "r.parquet", "--image-size", W, H, "--rotate", 33)
     assert res.exit_code == 0
     r = pd.read_parquet(tmp_path / "r.parquet")
     lm = lms(r)
     np.testing.assert_allclose(r["bbox_x"], lm[..., 0].min(axis=1), atol=1e-9)
     np.testing.assert_allclose(r["bbox_h"], lm[..., 1].max(axis=1) - lm[..., 1].min(axis=1), atol=1e-9)
     assert (
-        run(
-            tmp_path / "in.parquet", "-o", tmp_path / "c.parquet", "--image-size", 300, 300, "--rotate", 33, "--clip"
+        hpe(
+            "augment",
+            tmp_path / "in.parquet",
+            "-o",
+            tmp_path / "c.parquet",
+            "--image-size",
+            300,
+            300,
+            "--rotate",
+            33,
+            "--clip",
         ).exit_code
         == 0
     )
@@ -155,10 +161,15 @@ def test_spec_examples_through_the_cli(tmp_path):
     pd.DataFrame({"pitch": [20.0, 0.0], "yaw": [-50.0, 0.0], "roll": [15.0, 0.0]}).to_csv(
         tmp_path / "a.csv", index=False
     )
-    assert run(tmp_path / "a.csv", "-o", tmp_path / "r.csv", "--image-size", 450, 450, "--rotate", 30).exit_code == 0
+    assert (
+        hpe("augment", tmp_path / "a.csv", "-o", tmp_path / "r.csv", "--image-size", 450, 450, "--rotate", 30).exit_code
+        == 0
+    )
     r = pd.read_csv(tmp_path / "r.csv")
     np.testing.assert_allclose(r.loc[0, ["pitch", "yaw", "roll"]].astype(float), [43.511, -33.607, -19.343], atol=5e-4)
-    assert run(tmp_path / "a.csv", "-o", tmp_path / "v.csv", "--image-size", 450, 450, "--vflip").exit_code == 0
+    assert (
+        hpe("augment", tmp_path / "a.csv", "-o", tmp_path / "v.csv", "--image-size", 450, 450, "--vflip").exit_code == 0
+    )
     v = pd.read_csv(tmp_path / "v.csv")
     np.testing.assert_allclose(v.loc[1, ["pitch", "yaw", "roll"]].astype(float), [0, 0, 180], atol=1e-9)
 
@@ -169,7 +180,8 @@ def test_matrix_only_input_in_another_system(tmp_path):
     pyr = rng.uniform(-80, 80, (12, 3))
     R = sysm.from_angles(pyr)
     pd.DataFrame(R.reshape(-1, 9), columns=MATRIX_COLS).to_parquet(tmp_path / "m.parquet")
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "m.parquet",
         "-o",
         tmp_path / "o.parquet",
@@ -240,7 +252,8 @@ def test_images_agree_with_landmarks_to_the_pixel(tmp_path, args):
         )
     rows.append(dict(rows[0]))  # a second face in the same image: the image is written once
     pd.DataFrame(rows).to_csv(tmp_path / "in.csv", index=False)
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.csv",
         "-o",
         tmp_path / "out.csv",
@@ -266,7 +279,8 @@ def test_images_agree_with_landmarks_to_the_pixel(tmp_path, args):
         assert np.abs(found - pts[inside]).max() < 0.05
     assert not any(p.name.startswith(".hpe-augment") for p in (tmp_path / "aug").iterdir())
     # --overwrite is needed a second time
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.csv",
         "-o",
         tmp_path / "out2.csv",
@@ -287,7 +301,8 @@ def test_real_aflw2000_hflip_with_images(tmp_path, realdata):
     from hpe_cli.datasets.mat import read_mat_dir
 
     src = realdata / "aflw2000_prnet"
-    res = run(
+    res = hpe(
+        "augment",
         src,
         "-o",
         tmp_path / "f.parquet",
@@ -311,7 +326,7 @@ def test_real_aflw2000_hflip_with_images(tmp_path, realdata):
     lm = read_mat_dir(src, landmarks=True)
     lm = lm[["file", "pitch", "yaw", "roll"] + landmark_cols(21)]
     lm.to_parquet(tmp_path / "lm.parquet")
-    res = run(tmp_path / "lm.parquet", "-o", tmp_path / "lmf.parquet", "--image-size", 450, 450, "--hflip")
+    res = hpe("augment", tmp_path / "lm.parquet", "-o", tmp_path / "lmf.parquet", "--image-size", 450, 450, "--hflip")
     assert res.exit_code == 0, res.output
     assert "scheme aflw21" in res.output
     got = lms(pd.read_parquet(tmp_path / "lmf.parquet"), 21)
@@ -324,7 +339,8 @@ def test_landmarks_none_and_rejects(tmp_path):
     df = make_table(6)
     df.loc[1, "pitch"] = np.nan
     df.to_csv(tmp_path / "in.csv", index=False)
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.csv",
         "-o",
         tmp_path / "o.csv",
@@ -353,7 +369,8 @@ def test_matrix_checks(tmp_path):
     df.loc[1, "r00"] = 3.0  # not a rotation
     df.loc[2, "yaw"] = 25.0  # angles and matrix disagree
     df.to_parquet(tmp_path / "in.parquet")
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.parquet",
         "-o",
         tmp_path / "o.parquet",
@@ -383,7 +400,7 @@ def test_matrix_checks(tmp_path):
 )
 def test_usage_and_input_errors(tmp_path, args, code, msg):
     make_table(3).to_csv(tmp_path / "in.csv", index=False)
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, *args)
+    res = hpe("augment", tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, *args)
     assert res.exit_code == code, res.output
     assert msg in res.output
     assert "Traceback" not in res.output
@@ -392,7 +409,7 @@ def test_usage_and_input_errors(tmp_path, args, code, msg):
 
 def test_table_errors(tmp_path):
     pd.DataFrame({"a": [1.0]}).to_csv(tmp_path / "bad.csv", index=False)
-    res = run(tmp_path / "bad.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--hflip")
+    res = hpe("augment", tmp_path / "bad.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--hflip")
     assert res.exit_code == 1 and "expected angle columns pitch,yaw,roll" in res.output
     # text in a number column rejects that row only
     t = pd.DataFrame(
@@ -400,11 +417,12 @@ def test_table_errors(tmp_path):
     )
     t.to_csv(tmp_path / "text.csv", index=False)
     # without --rejects a bad row fails the run, naming the file line (header = line 1), as in every command
-    res = run(tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5)
+    res = hpe("augment", tmp_path / "text.csv", "-o", tmp_path / "t.csv", "--image-size", W, H, "--rotate", 5)
     assert res.exit_code == 1, res.output
     assert "text.csv: line 3: non-numeric value in pitch; 1 row(s) cannot be used" in res.output
     assert not (tmp_path / "t.csv").exists()
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "text.csv",
         "-o",
         tmp_path / "t.csv",
@@ -421,9 +439,10 @@ def test_table_errors(tmp_path):
     assert pd.read_csv(tmp_path / "r.csv")["row"].tolist() == [3]
     t["pitch"] = ["1", "2"]
     t.to_csv(tmp_path / "text.csv", index=False)
-    res = run(tmp_path / "text.csv", "-o", tmp_path / "t2.csv", "--image-size", W, H, "--rotate", 5)
+    res = hpe("augment", tmp_path / "text.csv", "-o", tmp_path / "t2.csv", "--image-size", W, H, "--rotate", 5)
     assert res.exit_code == 1 and "line 3: non-numeric value in lm0_x" in res.output
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "text.csv",
         "-o",
         tmp_path / "t2.csv",
@@ -439,14 +458,26 @@ def test_table_errors(tmp_path):
     assert res.exit_code == 1 and "--strict" in res.output and not (tmp_path / "t2.csv").exists()
     df = make_table(2)[["pitch", "yaw", "roll"] + landmark_cols(5)]
     df.to_csv(tmp_path / "five.csv", index=False)
-    res = run(tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--hflip")
+    res = hpe("augment", tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--hflip")
     assert res.exit_code == 1 and "match no built-in scheme" in res.output
-    assert run(tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--rotate", 5).exit_code == 0
-    res = run(tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--rotate", 5)
+    assert (
+        hpe("augment", tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--rotate", 5).exit_code
+        == 0
+    )
+    res = hpe("augment", tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--rotate", 5)
     assert res.exit_code == 1 and "already exists" in res.output
     assert (
-        run(
-            tmp_path / "five.csv", "-o", tmp_path / "o.csv", "--image-size", W, H, "--rotate", 5, "--overwrite"
+        hpe(
+            "augment",
+            tmp_path / "five.csv",
+            "-o",
+            tmp_path / "o.csv",
+            "--image-size",
+            W,
+            H,
+            "--rotate",
+            5,
+            "--overwrite",
         ).exit_code
         == 0
     )
@@ -459,19 +490,19 @@ def test_image_errors_leave_nothing_behind(tmp_path):
         tmp_path / "in.csv", index=False
     )
     base = [tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", tmp_path / "imgs"]
-    res = run(*base, "--image-size", 30, 20, "--out-images", tmp_path / "out")
+    res = hpe("augment", *base, "--image-size", 30, 20, "--out-images", tmp_path / "out")
     assert res.exit_code == 1 and "line 3: image not found" in res.output and "missing.png" in res.output
     assert not (tmp_path / "o.csv").exists() and not (tmp_path / "out").exists()
-    res = run(*base, "--image-size", 31, 20, "--out-images", tmp_path / "out")
+    res = hpe("augment", *base, "--image-size", 31, 20, "--out-images", tmp_path / "out")
     assert res.exit_code == 1 and "the image is 30x20, --image-size says 31x20" in res.output
-    res = run(*base, "--image-size", 30, 20, "--out-images", tmp_path / "imgs")
+    res = hpe("augment", *base, "--image-size", 30, 20, "--out-images", tmp_path / "imgs")
     assert res.exit_code == 1 and "must differ from --images" in res.output
     assert not (tmp_path / "o.csv").exists()
     assert sorted(p.name for p in (tmp_path / "imgs").iterdir()) == ["a.png"]
 
 
 def test_help_has_examples():
-    res = CliRunner().invoke(cli, ["augment", "--help"])
+    res = hpe("augment", "--help")
     assert res.exit_code == 0
     assert "Examples:" in res.output and "hpe augment labels.parquet" in res.output
 

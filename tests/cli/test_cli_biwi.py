@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.datasets.biwi import head_boxes, read_biwi_camera, sequence_split, to_rgb_camera
 
 BIWI = Path(__file__).resolve().parents[2] / ".." / "shared" / "realdata" / "biwi"
@@ -89,23 +88,20 @@ def test_cli_biwi_split_lists_and_protocol(tmp_path):
     if not tgz.exists():
         pytest.skip("real BIWI annotations absent")
     out, lists = tmp_path / "b.parquet", tmp_path / "splits"
-    r = CliRunner().invoke(
-        cli,
-        [
-            "biwi",
-            str(tgz),
-            "-o",
-            str(out),
-            "--split",
-            "0.7,0.3",
-            "--split-lists",
-            str(lists),
-            "--protocol",
-            "hopenet-99",
-            "--system",
-            "300w_lp",
-            "-q",
-        ],
+    r = hpe(
+        "biwi",
+        tgz,
+        "-o",
+        out,
+        "--split",
+        "0.7,0.3",
+        "--split-lists",
+        lists,
+        "--protocol",
+        "hopenet-99",
+        "--system",
+        "300w_lp",
+        "-q",
     )
     assert r.exit_code == 0, r.output
     f = pd.read_parquet(out)
@@ -117,7 +113,7 @@ def test_cli_biwi_split_lists_and_protocol(tmp_path):
     from hpe_cli.io import open_table
 
     assert open_table(out).system == "300w_lp"
-    r = CliRunner().invoke(cli, ["biwi", str(tgz), "-o", str(out)])
+    r = hpe("biwi", tgz, "-o", out)
     assert r.exit_code == 1 and "exists" in r.output
 
 
@@ -128,23 +124,10 @@ def test_cli_biwi_rgb_without_calibration(tmp_path):
     d = tmp_path / "ann" / "01"
     d.mkdir(parents=True)
     shutil.copy(sub / "frame_00166_pose.bin", d)
-    r = CliRunner().invoke(cli, ["biwi", str(tmp_path / "ann"), "-o", str(tmp_path / "o.csv"), "--camera", "rgb"])
+    r = hpe("biwi", tmp_path / "ann", "-o", tmp_path / "o.csv", "--camera", "rgb")
     assert r.exit_code == 1 and "rgb.cal" in r.output and len(r.output.strip().splitlines()) == 1
     if HPDB.exists():
-        r = CliRunner().invoke(
-            cli,
-            [
-                "biwi",
-                str(tmp_path / "ann"),
-                "-o",
-                str(tmp_path / "o.csv"),
-                "--camera",
-                "rgb",
-                "--calibration",
-                str(HPDB),
-                "-q",
-            ],
-        )
+        r = hpe("biwi", tmp_path / "ann", "-o", tmp_path / "o.csv", "--camera", "rgb", "--calibration", HPDB, "-q")
         assert r.exit_code == 0, r.output
         f = pd.read_csv(tmp_path / "o.csv")
         # frame 166's head box (checked by eye on frame_00166_rgb.png) lies inside the 640x480 image
@@ -173,7 +156,7 @@ def test_cli_biwi_rejects_damaged_frames(tmp_path):
     """Every frame is in the labels or the rejects (file, reason); the kept ones equal a read of the originals."""
     ann, frames = _damaged_copy(tmp_path)
     out, rej = tmp_path / "o.parquet", tmp_path / "rej.csv"
-    r = CliRunner().invoke(cli, ["biwi", str(ann), "-o", str(out), "--system", "300w_lp", "--rejects", str(rej)])
+    r = hpe("biwi", ann, "-o", out, "--system", "300w_lp", "--rejects", rej)
     assert r.exit_code == 0, r.output
     assert "rejected 3 frames" in r.stderr and str(rej) in r.stderr
     labels, rejects = pd.read_parquet(out), pd.read_csv(rej, dtype={"sequence": str})
@@ -196,16 +179,16 @@ def test_cli_biwi_rejects_damaged_frames(tmp_path):
 def test_cli_biwi_without_rejects_or_strict_writes_nothing(tmp_path):
     ann, _ = _damaged_copy(tmp_path)
     out, rej = tmp_path / "o.csv", tmp_path / "rej.csv"
-    r = CliRunner().invoke(cli, ["biwi", str(ann), "-o", str(out)])
+    r = hpe("biwi", ann, "-o", out)
     assert r.exit_code == 1 and len(r.output.strip().splitlines()) == 1, r.output
     assert f"{ann / '01' / 'frame_00006_pose.bin'}: expected 24 bytes" in r.output and "3 row(s)" in r.output
     assert "--rejects" in r.output and not out.exists()
-    r = CliRunner().invoke(cli, ["biwi", str(ann), "-o", str(out), "--rejects", str(rej), "--strict"])
+    r = hpe("biwi", ann, "-o", out, "--rejects", rej, "--strict")
     assert r.exit_code == 1 and "--strict" in r.output and len(r.output.strip().splitlines()) == 1, r.output
     assert not out.exists() and not rej.exists()
     shutil.rmtree(ann)
     shutil.copytree(BIWI / "db_annotations_subset", ann)
-    r = CliRunner().invoke(cli, ["biwi", str(ann), "-o", str(out), "--rejects", str(rej), "--strict", "-q"])
+    r = hpe("biwi", ann, "-o", out, "--rejects", rej, "--strict", "-q")
     assert r.exit_code == 0, r.output  # nothing rejected: --strict changes nothing
     assert pd.read_csv(rej).empty and len(pd.read_csv(out)) == len(list(ann.rglob("*.bin")))
 
@@ -217,10 +200,10 @@ def test_convert_and_audit_set_damaged_pose_files_aside(tmp_path, command):
     ann, frames = _damaged_copy(tmp_path)
     out, rej = tmp_path / "o.parquet", tmp_path / "rej.csv"
     args = ["convert", str(ann), "-o", str(out), "--to", "300w_lp"] if command == "convert" else ["audit", str(ann)]
-    r = CliRunner().invoke(cli, [*args, "-q"])
+    r = hpe(*args, "-q")
     assert r.exit_code == 1 and len(r.output.strip().splitlines()) == 1, r.output
     assert "01/frame_00006_pose.bin: expected 24 bytes (6 float32), got 10" in r.output and not out.exists()
-    r = CliRunner().invoke(cli, [*args, "--rejects", str(rej), "-q"])
+    r = hpe(*args, "--rejects", rej, "-q")
     assert r.exit_code == 0, r.output
     rejects = pd.read_csv(rej)
     assert sorted(rejects["raw"]) == ["01/frame_00006_pose.bin", "02/frame_00348_pose.bin", "03/frame_00562_pose.bin"]

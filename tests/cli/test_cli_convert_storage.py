@@ -3,17 +3,11 @@
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from conftest import canonical_A
-from hpe_cli.cli.main import cli
+from conftest import canonical_A, hpe
 
 F = np.diag([1.0, -1, -1])
-
-
-def run(*args):
-    return CliRunner().invoke(cli, ["convert", *map(str, args), "-q"])
 
 
 @pytest.fixture
@@ -30,7 +24,7 @@ def test_rotvec_in_300wlp_out(tmp_path, pyr):
         src, index=False
     )
     out = tmp_path / "o.csv"
-    res = run(src, "-o", out, "--from", "img2pose", "--to", "300w_lp")
+    res = hpe("convert", src, "-o", out, "--from", "img2pose", "--to", "300w_lp", "-q")
     assert res.exit_code == 0, res.output
     got = pd.read_csv(out)
     assert {"img", "rx", "ry", "rz", "tz"} <= set(got.columns)  # other columns kept
@@ -46,7 +40,7 @@ def test_300wlp_to_quaternion_user_system(tmp_path, pyr):
     src = tmp_path / "l.csv"
     pd.DataFrame({"pitch": pyr[:, 0], "yaw": pyr[:, 1], "roll": pyr[:, 2]}).to_csv(src, index=False)
     out = tmp_path / "q.parquet"
-    res = run(src, "-o", out, "--from", "300w_lp", "--to", sysf)
+    res = hpe("convert", src, "-o", out, "--from", "300w_lp", "--to", sysf, "-q")
     assert res.exit_code == 0, res.output
     got = pd.read_parquet(out)
     q = got[["QX", "QY", "QZ", "QW"]].to_numpy()
@@ -57,7 +51,7 @@ def test_300wlp_to_quaternion_user_system(tmp_path, pyr):
     # and back: reading the quaternion columns (the angle columns removed)
     back_in = tmp_path / "q_only.csv"
     got[["QX", "QY", "QZ", "QW"]].to_csv(back_in, index=False)
-    res = run(back_in, "-o", tmp_path / "b.csv", "--from", sysf, "--to", "300w_lp")
+    res = hpe("convert", back_in, "-o", tmp_path / "b.csv", "--from", sysf, "--to", "300w_lp", "-q")
     assert res.exit_code == 0, res.output
     assert np.abs(pd.read_csv(tmp_path / "b.csv")[["pitch", "yaw", "roll"]].to_numpy() - pyr).max() < 1e-9
 
@@ -81,7 +75,7 @@ def test_6d_and_4x4_and_named_angle_columns(tmp_path, pyr):
         ("openface", ["pose_Rx", "pose_Ry", "pose_Rz"], Rotation.from_matrix(F @ A @ F).as_euler("XYZ")),
     ]:
         out = tmp_path / f"{target}.csv"
-        res = run(src, "-o", out, "--from", "300w_lp", "--to", target, "--overwrite")
+        res = hpe("convert", src, "-o", out, "--from", "300w_lp", "--to", target, "--overwrite", "-q")
         assert res.exit_code == 0, res.output
         got = pd.read_csv(out)[cols].to_numpy()
         assert np.abs(got - ref).max() < 1e-9, target
@@ -95,19 +89,31 @@ def test_bad_quaternion_and_missing_columns(tmp_path):
         src, index=False
     )
     rej = tmp_path / "rej.csv"
-    res = run(src, "-o", tmp_path / "o.csv", "--from", sysf, "--to", "300w_lp", "--rejects", rej)
+    res = hpe("convert", src, "-o", tmp_path / "o.csv", "--from", sysf, "--to", "300w_lp", "--rejects", rej, "-q")
     assert res.exit_code == 0, res.output
     reasons = pd.read_csv(rej)["reason"].tolist()
     assert reasons == ["not a unit quaternion (norm differs from 1 by more than 1e-3)"] * 2
     bad = tmp_path / "x.csv"
     pd.DataFrame({"a": [1.0]}).to_csv(bad, index=False)
-    res = run(bad, "-o", tmp_path / "o2.csv", "--from", "img2pose", "--to", "300w_lp")
+    res = hpe("convert", bad, "-o", tmp_path / "o2.csv", "--from", "img2pose", "--to", "300w_lp", "-q")
     assert res.exit_code == 1 and "img2pose's rotvec columns rx,ry,rz" in res.output
 
 
 def test_decoder_columns(tmp_path, realdata):
     out = tmp_path / "d.csv"
-    res = run(realdata / "aflw2000_prnet", "-o", out, "--from", "300w_lp", "--to", "3ddfa_v2", "--decoder", "3ddfa_v2")
+    res = hpe(
+        "convert",
+        realdata / "aflw2000_prnet",
+        "-o",
+        out,
+        "--from",
+        "300w_lp",
+        "--to",
+        "3ddfa_v2",
+        "--decoder",
+        "3ddfa_v2",
+        "-q",
+    )
     assert res.exit_code == 0, res.output
     got = pd.read_csv(out)
     # no AFLW2000 sample is past 86.4 deg of yaw: matrix2angle prints the exact 3ddfa_v2 angles

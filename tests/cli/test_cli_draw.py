@@ -6,18 +6,13 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.rotation import get_system
 
 REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 AFLW = REALDATA / "aflw2000_prnet"
 RED, GREEN, BLUE, WHITE = (0, 0, 255), (0, 255, 0), (255, 0, 0), (255, 255, 255)
-
-
-def run(*args):
-    return CliRunner().invoke(cli, ["draw", *map(str, args)], catch_exceptions=False)
 
 
 def px(img, u, v):
@@ -37,7 +32,7 @@ def test_canvas_colours_and_names(tmp_path):
             "roll": [0.0, 0.0],
         }
     ).to_csv(t, index=False)
-    res = run(t, "-o", tmp_path / "out", "--canvas", "200x200", "--thickness", "5")
+    res = hpe("draw", t, "-o", tmp_path / "out", "--canvas", "200x200", "--thickness", "5")
     assert res.exit_code == 0, res.output
     a = cv2.imread(str(tmp_path / "out" / "a.png"))
     assert a.shape == (200, 200, 3)
@@ -70,15 +65,15 @@ def test_bbox_centre_relative_names_and_inputs_untouched(tmp_path):
         }
     ).to_parquet(t)
     out = tmp_path / "drawn"
-    res = run(t, "-o", out, "--images", root, "--thickness", "5")
+    res = hpe("draw", t, "-o", out, "--images", root, "--thickness", "5")
     assert res.exit_code == 0, res.output
     img = cv2.imread(str(out / "sub" / "a.png"))
     # centre (80, 60), length bbox_h / 2 = 40
     assert px(img, 100, 60) == RED and px(img, 80, 80) == GREEN and px(img, 60, 60) == (128, 128, 128)
     assert (root / "sub" / "a.png").read_bytes() == before
-    res = run(t, "-o", out, "--images", root)
+    res = hpe("draw", t, "-o", out, "--images", root)
     assert res.exit_code == 1 and "--overwrite" in res.output
-    res = run(t, "-o", root, "--images", root, "--overwrite")
+    res = hpe("draw", t, "-o", root, "--images", root, "--overwrite")
     assert res.exit_code == 1 and "must differ from --images" in res.output
     assert (root / "sub" / "a.png").read_bytes() == before
 
@@ -87,20 +82,20 @@ def test_missing_image_error_and_rejects(tmp_path):
     root = _images(tmp_path)
     t = tmp_path / "l.csv"
     pd.DataFrame({"image": ["sub/a.png", "nope.png"], "pitch": 0, "yaw": 0, "roll": 0}).to_csv(t, index=False)
-    res = run(t, "-o", tmp_path / "o1", "--images", root)
+    res = hpe("draw", t, "-o", tmp_path / "o1", "--images", root)
     assert res.exit_code == 1 and "l.csv: line 3: image not found" in res.output and "nope.png" in res.output
     assert len(res.output.strip().splitlines()) == 1
     assert not (tmp_path / "o1" / "sub" / "a.png").exists()  # nothing drawn before the check
     rej = tmp_path / "rej.csv"
-    res = run(t, "-o", tmp_path / "o2", "--images", root, "--rejects", rej)
+    res = hpe("draw", t, "-o", tmp_path / "o2", "--images", root, "--rejects", rej)
     assert res.exit_code == 0
     assert (tmp_path / "o2" / "sub" / "a.png").exists()
     assert pd.read_csv(rej)["row"].tolist() == [3]  # the CSV line (header = line 1)
     (root / "broken.png").write_bytes(b"not an image")
     pd.DataFrame({"image": ["broken.png", "sub/a.png"], "pitch": 0, "yaw": 0, "roll": 0}).to_csv(t, index=False)
-    res = run(t, "-o", tmp_path / "o3", "--images", root)
+    res = hpe("draw", t, "-o", tmp_path / "o3", "--images", root)
     assert res.exit_code == 1 and "not a readable image" in res.output
-    res = run(t, "-o", tmp_path / "o4", "--images", root, "--rejects", tmp_path / "rej2.csv")
+    res = hpe("draw", t, "-o", tmp_path / "o4", "--images", root, "--rejects", tmp_path / "rej2.csv")
     assert res.exit_code == 0 and (tmp_path / "o4" / "sub" / "a.png").exists()
     assert pd.read_csv(tmp_path / "rej2.csv")["reason"].str.startswith("not a readable image").all()
 
@@ -119,7 +114,8 @@ def test_matrix_of_another_system_draws_the_same(tmp_path):
     mat.to_csv(tmp_path / "mat.csv", index=False)
     for style in ("axes", "cube"):
         assert (
-            run(
+            hpe(
+                "draw",
                 tmp_path / "ang.csv",
                 "-o",
                 tmp_path / f"a_{style}",
@@ -134,7 +130,8 @@ def test_matrix_of_another_system_draws_the_same(tmp_path):
             == 0
         )
         assert (
-            run(
+            hpe(
+                "draw",
                 tmp_path / "mat.csv",
                 "-o",
                 tmp_path / f"m_{style}",
@@ -168,8 +165,19 @@ def test_cube_turned_away(tmp_path):
         }
     ).to_csv(t, index=False)
     assert (
-        run(
-            t, "-o", tmp_path / "o", "--canvas", "200x200", "--system", "whenet", "--style", "cube", "--thickness", "5"
+        hpe(
+            "draw",
+            t,
+            "-o",
+            tmp_path / "o",
+            "--canvas",
+            "200x200",
+            "--system",
+            "whenet",
+            "--style",
+            "cube",
+            "--thickness",
+            "5",
         ).exit_code
         == 0
     )
@@ -183,7 +191,9 @@ def test_grid(tmp_path):
     pd.DataFrame(
         {"image": [f"{i}.png" for i in range(5)], "pitch": 0, "yaw": np.linspace(-80, 80, 5), "roll": 0}
     ).to_csv(t, index=False)
-    res = run(t, "-o", tmp_path / "g", "--canvas", "100x100", "--grid", "--grid-cols", "2", "--tile", "64", "-q")
+    res = hpe(
+        "draw", t, "-o", tmp_path / "g", "--canvas", "100x100", "--grid", "--grid-cols", "2", "--tile", "64", "-q"
+    )
     assert res.exit_code == 0, res.output
     names = sorted(p.name for p in (tmp_path / "g").iterdir())
     assert names == ["contact_sheet_001.png", "contact_sheet_002.png"]
@@ -193,10 +203,10 @@ def test_grid(tmp_path):
 def test_usage_errors(tmp_path):
     t = tmp_path / "p.csv"
     pd.DataFrame({"pitch": [0], "yaw": [0], "roll": [0]}).to_csv(t, index=False)
-    res = run(t, "-o", tmp_path / "o")
+    res = hpe("draw", t, "-o", tmp_path / "o")
     assert res.exit_code == 1 and "--image-size WxH" in res.output
-    assert run(t, "-o", tmp_path / "o", "--canvas", "12by3").exit_code == 2
-    assert run(t, "-o", tmp_path / "o", "--canvas", "64x64", "-q").exit_code == 0
+    assert hpe("draw", t, "-o", tmp_path / "o", "--canvas", "12by3").exit_code == 2
+    assert hpe("draw", t, "-o", tmp_path / "o", "--canvas", "64x64", "-q").exit_code == 0
     assert (tmp_path / "o" / "row_000000.png").exists()
 
 
@@ -229,12 +239,22 @@ def test_pose_para_tdy_is_measured_from_the_bottom():
 
 @pytest.mark.skipif(not AFLW.is_dir(), reason="realdata not available")
 def test_mat_folder(tmp_path):
-    res = run(AFLW, "-o", tmp_path / "o", "-q")
+    res = hpe("draw", AFLW, "-o", tmp_path / "o", "-q")
     assert res.exit_code == 0, res.output
     assert len(list((tmp_path / "o").glob("*.jpg"))) == 16
     # the centre is (tdx, H - 1 - tdy): image00050 has tdx 229.71, tdy 209.54, H 450, roll 5.6 deg
-    res = run(
-        AFLW / "image00050.mat", "-o", tmp_path / "c", "--canvas", "450x450", "--length", "60", "--thickness", "7", "-q"
+    res = hpe(
+        "draw",
+        AFLW / "image00050.mat",
+        "-o",
+        tmp_path / "c",
+        "--canvas",
+        "450x450",
+        "--length",
+        "60",
+        "--thickness",
+        "7",
+        "-q",
     )
     assert res.exit_code == 0, res.output
     img = cv2.imread(str(tmp_path / "c" / "image00050.jpg")).astype(int)

@@ -6,10 +6,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 AFLW = REALDATA / "aflw2000_prnet"
@@ -23,10 +22,6 @@ METRIC_KEYS = {
     "mae_wrapped": {"pitch", "yaw", "roll", "mean"},
     "mae_best_of_two": {"pitch", "yaw", "roll", "mean"},
 }
-
-
-def run(*args):
-    return CliRunner().invoke(cli, ["evaluate", *map(str, args)], catch_exceptions=False)
 
 
 def _gt_table(tmp_path, n=40, seed=0, name="gt.csv"):
@@ -48,12 +43,10 @@ def _gt_table(tmp_path, n=40, seed=0, name="gt.csv"):
 @needs_data
 def test_aflw2000_against_itself_in_6drepnet_is_zero(tmp_path):
     conv = tmp_path / "pred6d.parquet"
-    r = CliRunner().invoke(
-        cli, ["convert", str(AFLW), "-o", str(conv), "--from", "300w_lp", "--to", "6drepnet"], catch_exceptions=False
-    )
+    r = hpe("convert", AFLW, "-o", conv, "--from", "300w_lp", "--to", "6drepnet")
     assert r.exit_code == 0, r.output
     out, rep = tmp_path / "err.parquet", tmp_path / "rep.json"
-    r = run(conv, AFLW, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "-o", out, "--json", rep)
+    r = hpe("evaluate", conv, AFLW, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "-o", out, "--json", rep)
     assert r.exit_code == 0, r.output
     report = json.loads(rep.read_text())
     n = len(list(AFLW.glob("*.mat")))
@@ -75,15 +68,15 @@ def test_aflw2000_against_itself_in_6drepnet_is_zero(tmp_path):
 @needs_data
 def test_aflw2000_with_yaw_sign_flipped_gives_large_errors(tmp_path):
     conv = tmp_path / "pred6d.parquet"
-    CliRunner().invoke(
-        cli, ["convert", str(AFLW), "-o", str(conv), "--from", "300w_lp", "--to", "6drepnet"], catch_exceptions=False
-    )
+    hpe("convert", AFLW, "-o", conv, "--from", "300w_lp", "--to", "6drepnet")
     df = pd.read_parquet(conv)[["file", "pitch", "yaw", "roll"]]
     df["yaw"] = -df["yaw"]
     flipped = tmp_path / "flipped.csv"
     df.to_csv(flipped, index=False)
     out = tmp_path / "err.csv"
-    r = run(flipped, AFLW, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "-o", out, "--json", "-", "-q")
+    r = hpe(
+        "evaluate", flipped, AFLW, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "-o", out, "--json", "-", "-q"
+    )
     assert r.exit_code == 0, r.output
     report = json.loads(r.output)
     rows = pd.read_csv(out).set_index("file").loc[df["file"]]
@@ -104,7 +97,8 @@ def test_json_keys_stdout_table_plots_breakdowns(tmp_path):
     p = p.sample(frac=1.0, random_state=1)  # another row order: the join is on 'image'
     p.to_csv(pred, index=False)
     rep, plots = tmp_path / "rep.json", tmp_path / "plots"
-    r = run(
+    r = hpe(
+        "evaluate",
         pred,
         gt,
         "--pred-system",
@@ -154,7 +148,8 @@ def test_missing_invalid_unmatched_counted_and_rejected(tmp_path):
     pred = tmp_path / "pred.csv"
     p.to_csv(pred, index=False)
     rej, rep = tmp_path / "rej.csv", tmp_path / "rep.json"
-    r = run(
+    r = hpe(
+        "evaluate",
         pred,
         gt,
         "--pred-system",
@@ -181,10 +176,13 @@ def test_missing_invalid_unmatched_counted_and_rejected(tmp_path):
     assert dict(zip(rj["image"], rj["line"]))["img003.jpg"] == 5
     # without --rejects (or with --strict) any set-aside row is an error and nothing is written
     out = tmp_path / "e.parquet"
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", out, "--protocol", "hopenet")
+    r = hpe(
+        "evaluate", pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", out, "--protocol", "hopenet"
+    )
     assert r.exit_code == 1 and "--rejects" in r.output and not out.exists()
     assert len(r.output.strip().splitlines()) == 1
-    r = run(
+    r = hpe(
+        "evaluate",
         pred,
         gt,
         "--pred-system",
@@ -212,7 +210,8 @@ def test_matrix_columns_non_rotation_is_invalid(tmp_path):
     pred = tmp_path / "pred.parquet"
     m.to_parquet(pred)
     rej = tmp_path / "rej.csv"
-    r = run(
+    r = hpe(
+        "evaluate",
         pred,
         gt,
         "--pred-system",
@@ -252,10 +251,11 @@ def test_key_option_and_multi_person(tmp_path):
     df.to_csv(gt, index=False)
     pred = tmp_path / "pred.csv"
     df.iloc[::-1].to_csv(pred, index=False)
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp")
+    r = hpe("evaluate", pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp")
     assert r.exit_code == 1
     assert "duplicate key" in r.output and "image='a'" in r.output
-    r = run(
+    r = hpe(
+        "evaluate",
         pred,
         gt,
         "--pred-system",
@@ -279,9 +279,10 @@ def test_row_order_join_and_count_mismatch(tmp_path):
     pred = tmp_path / "pred.csv"
     df[["pitch", "yaw", "roll"]].to_csv(pred, index=False)
     # no shared key: a usage error unless --join order says so (issue 20: joins by key only)
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-q", "--protocol", "hopenet")
+    r = hpe("evaluate", pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-q", "--protocol", "hopenet")
     assert r.exit_code == 2 and "--key" in r.output and "--join order" in r.output
-    r = run(
+    r = hpe(
+        "evaluate",
         pred,
         gt,
         "--pred-system",
@@ -299,7 +300,7 @@ def test_row_order_join_and_count_mismatch(tmp_path):
     assert r.exit_code == 0, r.output
     assert json.loads(r.output)["inputs"]["key"] == "row order"
     df[["pitch", "yaw", "roll"]].iloc[:7].to_csv(pred, index=False)
-    r = run(pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--join", "order")
+    r = hpe("evaluate", pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--join", "order")
     assert r.exit_code == 2
     assert "equal row counts" in r.output
 
@@ -308,19 +309,19 @@ def test_bad_input_errors(tmp_path):
     gt, df = _gt_table(tmp_path, n=5)
     bad = tmp_path / "bad.csv"
     df[["image", "pitch", "yaw"]].to_csv(bad, index=False)
-    r = run(bad, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp")
+    r = hpe("evaluate", bad, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp")
     assert r.exit_code == 1 and "missing column" in r.output and "roll" in r.output
-    r = run(gt, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--protocol", "nope")
+    r = hpe("evaluate", gt, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--protocol", "nope")
     assert r.exit_code == 2
-    r = run(gt, gt, "--pred-system", "nope", "--gt-system", "300w_lp")
+    r = hpe("evaluate", gt, gt, "--pred-system", "nope", "--gt-system", "300w_lp")
     assert r.exit_code == 2
-    r = run(gt, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--key", "person_id")
+    r = hpe("evaluate", gt, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--key", "person_id")
     assert r.exit_code == 1 and "person_id" in r.output
-    r = run(gt, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--by", "nothere")
+    r = hpe("evaluate", gt, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--by", "nothere")
     assert r.exit_code == 1 and "nothere" in r.output
     out = tmp_path / "o.parquet"
     out.write_text("keep")
-    r = run(gt, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", out)
+    r = hpe("evaluate", gt, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "-o", out)
     assert r.exit_code == 1 and out.read_text() == "keep"
 
 
@@ -336,7 +337,20 @@ def test_different_systems_and_align(tmp_path):
     pw, _, _, _ = w.to_angles(w.from_canonical(A))
     pred = tmp_path / "pred.csv"
     pd.DataFrame({"image": df["image"], "pitch": pw[:, 0], "yaw": pw[:, 1], "roll": pw[:, 2]}).to_csv(pred, index=False)
-    r = run(pred, gt, "--pred-system", "whenet", "--gt-system", "300w_lp", "--align", "mean", "--json", "-", "-q")
+    r = hpe(
+        "evaluate",
+        pred,
+        gt,
+        "--pred-system",
+        "whenet",
+        "--gt-system",
+        "300w_lp",
+        "--align",
+        "mean",
+        "--json",
+        "-",
+        "-q",
+    )
     assert r.exit_code == 0, r.output
     rep = json.loads(r.output)
     assert rep["align"]["offset_deg"] == pytest.approx(10.0, abs=1e-6)
@@ -345,7 +359,7 @@ def test_different_systems_and_align(tmp_path):
 
 
 def test_help_has_examples_and_sources():
-    r = CliRunner().invoke(cli, ["evaluate", "--help"])
+    r = hpe("evaluate", "--help")
     assert r.exit_code == 0
     for s in (
         "Examples:",
@@ -375,7 +389,20 @@ def test_prediction_in_a_native_storage_kind(tmp_path, name):
     pred.insert(0, "image", df["image"])
     path = tmp_path / "pred.parquet"
     pred.to_parquet(path)
-    r = run(path, gt, "--pred-system", name, "--gt-system", "300w_lp", "--json", "-", "-q", "--protocol", "hopenet")
+    r = hpe(
+        "evaluate",
+        path,
+        gt,
+        "--pred-system",
+        name,
+        "--gt-system",
+        "300w_lp",
+        "--json",
+        "-",
+        "-q",
+        "--protocol",
+        "hopenet",
+    )
     assert r.exit_code == 0, r.output
     rep = json.loads(r.output)
     assert rep["n"]["pairs"] == 12 and rep["metrics"]["geodesic"]["max"] < 1e-6

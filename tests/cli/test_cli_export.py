@@ -7,16 +7,10 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from conftest import REALDATA
-from hpe_cli.cli.main import cli
+from conftest import REALDATA, hpe
 
 AFLW = REALDATA / "aflw2000_prnet"
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 def make_set(tmp_path, n_images=3, heads=2, size=(120, 160)):
@@ -50,17 +44,17 @@ def make_set(tmp_path, n_images=3, heads=2, size=(120, 160)):
 
 
 def test_help_has_examples():
-    r = run("export", "--help")
+    r = hpe("export", "--help")
     assert r.exit_code == 0 and "Examples:" in r.output and "--layout" in r.output
 
 
 def test_usage_errors(tmp_path):
     path = make_set(tmp_path)
-    r = run("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--system", "6drepnet")
+    r = hpe("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--system", "6drepnet")
     assert r.exit_code == 2 and "whenet system" in r.output
-    r = run("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--form", "mat")
+    r = hpe("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--form", "mat")
     assert r.exit_code == 2
-    r = run("export", path, "-o", tmp_path / "o", "--layout", "nope")
+    r = hpe("export", path, "-o", tmp_path / "o", "--layout", "nope")
     assert r.exit_code == 2
     assert not (tmp_path / "o").exists()
 
@@ -70,9 +64,9 @@ def test_existing_output_needs_overwrite(tmp_path):
     out = tmp_path / "o"
     out.mkdir()
     (out / "keep.txt").write_text("x")
-    r = run("export", path, "-o", out, "--layout", "whenet")
+    r = hpe("export", path, "-o", out, "--layout", "whenet")
     assert r.exit_code == 1 and "already exists" in r.output and (out / "keep.txt").exists()
-    r = run("export", path, "-o", out, "--layout", "whenet", "--overwrite", "-q")
+    r = hpe("export", path, "-o", out, "--layout", "whenet", "--overwrite", "-q")
     assert r.exit_code == 0, r.output
     assert not (out / "keep.txt").exists() and (out / "train" / "annotation.txt").is_file()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staging left behind
@@ -94,7 +88,7 @@ def test_bad_images_are_rejects(tmp_path):
     with open(path, "a") as fh:
         fh.write("img/f0.jpg,s0,,0,5,1,2,3,4,5,6,7,8,9\n")  # too many fields
     out = tmp_path / "o"
-    r = run("export", path, "-o", out, "--layout", "whenet", "--rejects", tmp_path / "rej.csv")
+    r = hpe("export", path, "-o", out, "--layout", "whenet", "--rejects", tmp_path / "rej.csv")
     assert r.exit_code == 0, r.output
     rej = pd.read_csv(tmp_path / "rej.csv")
     reasons = rej.set_index("row")["reason"].to_dict()
@@ -108,7 +102,7 @@ def test_bad_images_are_rejects(tmp_path):
     assert len(lines) + len(rej) == len(t) + 1
     assert "rejected 8" in r.output and "unreadable image" in r.output
     # without --rejects, bad input is an error and nothing is written
-    r = run("export", path, "-o", tmp_path / "o2", "--layout", "whenet")
+    r = hpe("export", path, "-o", tmp_path / "o2", "--layout", "whenet")
     assert r.exit_code == 1 and "line 4: no image (file not found)" in r.output and "--rejects" in r.output
     assert not (tmp_path / "o2").exists()
 
@@ -120,22 +114,22 @@ def test_everything_rejected_writes_nothing(tmp_path):
     t["pitch"] = 0.0
     t["yaw"] = 0.0
     t.to_csv(path, index=False)
-    r = run("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
+    r = hpe("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
     assert r.exit_code == 1 and "every label is rejected" in r.output and "Traceback" not in r.output
     # the rejects file the user asked for is still written (every label, its reason); the export is not
     assert not (tmp_path / "o").exists() and len(pd.read_csv(tmp_path / "r.csv")) == len(t)
     for p in (tmp_path / "img",):
         (p / "f0.jpg").unlink()
-    r = run("export", path, "-o", tmp_path / "o", "--layout", "hf", "--rejects", tmp_path / "r2.csv")
+    r = hpe("export", path, "-o", tmp_path / "o", "--layout", "hf", "--rejects", tmp_path / "r2.csv")
     assert r.exit_code == 0  # hf keeps any rotation: only the missing image is rejected
-    r = run("export", path, "-o", tmp_path / "o3", "--layout", "hf", "--rejects", tmp_path / "r3.csv", "--strict")
+    r = hpe("export", path, "-o", tmp_path / "o3", "--layout", "hf", "--rejects", tmp_path / "r3.csv", "--strict")
     assert r.exit_code == 1 and "--strict" in r.output and not (tmp_path / "o3").exists()
 
 
 def test_bad_table_is_one_line(tmp_path):
     p = tmp_path / "x.csv"
     p.write_text("a,b\n1,2\n")
-    r = run("export", p, "-o", tmp_path / "o", "--layout", "whenet")
+    r = hpe("export", p, "-o", tmp_path / "o", "--layout", "whenet")
     assert r.exit_code == 1 and "expected columns image" in r.output and len(r.output.strip().splitlines()) == 1
 
 
@@ -144,12 +138,12 @@ def test_split_file_and_min_change_and_balance(tmp_path):
     sf = tmp_path / "split.csv"
     sf.write_text("sequence,split\ns0,train\ns1,test\n")
     out = tmp_path / "o"
-    r = run("export", path, "-o", out, "--layout", "hf", "--split-file", sf, "-q")
+    r = hpe("export", path, "-o", out, "--layout", "hf", "--split-file", sf, "-q")
     assert r.exit_code == 0, r.output
     s = json.loads((out / "export.json").read_text())
     assert s["per_split"] == {"test": 3, "train": 3}
     sf.write_text("sequence,split\ns0,train\n")
-    r = run(
+    r = hpe(
         "export",
         path,
         "-o",
@@ -167,7 +161,7 @@ def test_split_file_and_min_change_and_balance(tmp_path):
     assert (pd.read_csv(tmp_path / "r.csv")["reason"] == "sequence not listed in --split-file").sum() == 3
     # balance: yaws -30,-10,10,30,50,70 in 40-degree bins from -180: [-60,-20) [-20,20) [20,60) [60,100),
     # at most 1 each -> 4
-    r = run("export", path, "-o", out, "--layout", "hf", "--balance", "yaw:40:1", "--overwrite", "-q")
+    r = hpe("export", path, "-o", out, "--layout", "hf", "--balance", "yaw:40:1", "--overwrite", "-q")
     assert r.exit_code == 0, r.output
     assert json.loads((out / "export.json").read_text())["exported"] == 4
 
@@ -176,7 +170,7 @@ def test_split_file_and_min_change_and_balance(tmp_path):
 def test_merged_inputs_and_identity_split(tmp_path):
     path = make_set(tmp_path)
     out = tmp_path / "o"
-    r = run(
+    r = hpe(
         "export",
         AFLW,
         path,
@@ -202,13 +196,13 @@ def test_merged_inputs_and_identity_split(tmp_path):
 def test_agora_table(tmp_path):
     fixture = Path(__file__).resolve().parents[1] / "data" / "agora" / "validation_0_withjv.pkl"
     table = tmp_path / "agora.parquet"
-    assert run("relabel-agora", fixture, "-o", table, "-q").exit_code == 0
+    assert hpe("relabel-agora", fixture, "-o", table, "-q").exit_code == 0
     t = pd.read_parquet(table)
     for name in t["image"].unique():
         (tmp_path / "imgs" / name).parent.mkdir(parents=True, exist_ok=True)
         cv2.imwrite(str(tmp_path / "imgs" / name), np.full((2160, 3840, 3), 90, np.uint8))
     out = tmp_path / "o"
-    r = run("export", table, "-o", out, "--layout", "hf", "--images", tmp_path / "imgs", "-q")
+    r = hpe("export", table, "-o", out, "--layout", "hf", "--images", tmp_path / "imgs", "-q")
     assert r.exit_code == 0, r.output
     assert "AGORA" in (out / "README.md").read_text()
     assert json.loads((out / "export.json").read_text())["exported"] == len(t)
@@ -299,7 +293,7 @@ def test_video_source_real_reader(tmp_path):
     ]
     path = tmp_path / "t.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
-    r = run("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
+    r = hpe("export", path, "-o", tmp_path / "o", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
     assert r.exit_code == 0, r.output
     for f in (1, 3):
         crop = cv2.imread(str(tmp_path / "o" / "train" / f"00_05_0_{f:08d}.jpg"))
@@ -307,7 +301,7 @@ def test_video_source_real_reader(tmp_path):
     rej = pd.read_csv(tmp_path / "r.csv")
     assert len(rej) == 1 and "past the end" in rej["reason"].iloc[0]
     # pixel layouts get a video's crops through the worker's spill file
-    r = run(
+    r = hpe(
         "export", path, "-o", tmp_path / "f", "--layout", "fsanet", "--rejects", tmp_path / "r2.csv", "--workers", "2"
     )
     assert r.exit_code == 0, r.output
@@ -333,7 +327,7 @@ def test_w300lp_root_identity_groups(tmp_path):
     for ext in (".jpg", ".mat"):
         shutil.copy(str(src) + ext, root / "AFW" / f"AFW_111_2_0{ext}")
     out = tmp_path / "o"
-    r = run("export", root, "-o", out, "--layout", "6drepnet", "--form", "mat", "--split", "identity:0.5,0.5")
+    r = hpe("export", root, "-o", out, "--layout", "6drepnet", "--form", "mat", "--split", "identity:0.5,0.5")
     assert r.exit_code == 0, r.output
     crops = pd.read_csv(out / "crops.csv")
     assert len(crops) == 4
@@ -358,7 +352,7 @@ def test_radians_table_exports_the_same_rotations(tmp_path):
     got = {}
     for name, args in (("deg", [deg]), ("rad", [rad, "--radians"]), ("rad_as_deg", [rad])):
         out = tmp_path / name
-        r = run("export", *args, "-o", out, "--layout", "hf", "--from", "300w_lp", "-q")
+        r = hpe("export", *args, "-o", out, "--layout", "hf", "--from", "300w_lp", "-q")
         assert r.exit_code == 0, r.output
         f = pd.concat([pd.read_parquet(p) for p in sorted(out.rglob("*.parquet"))], ignore_index=True)
         f = f.sort_values(["image_file", "person_id"], ignore_index=True)

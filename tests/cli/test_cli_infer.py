@@ -7,29 +7,23 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from conftest import canonical_A
-from hpe_cli.cli.main import cli
+from conftest import canonical_A, hpe
 
 FIX = Path(__file__).resolve().parents[1] / "fixtures" / "conventions"
 MATRIX_COLS = [f"r{i}{j}" for i in range(3) for j in range(3)]
 
 
-def run(*args):
-    return CliRunner().invoke(cli, ["infer", *map(str, args)])
-
-
 def report(tmp_path, *args, code=0):
     out = tmp_path / "report.json"
-    res = run(*args, "--json", out, "--overwrite")
+    res = hpe("infer", *args, "--json", out, "--overwrite")
     assert res.exit_code == code, res.output
     return json.loads(out.read_text()), res
 
 
 def test_help_has_examples():
-    res = run("--help")
+    res = hpe("infer", "--help")
     assert res.exit_code == 0 and "Examples:" in res.output and "hpe infer --callable" in res.output
 
 
@@ -69,9 +63,7 @@ def test_custom_system_file_reproduces_the_callable_through_convert(tmp_path):
     pyr = np.random.default_rng(0).uniform(-180, 180, (40, 3))
     pd.DataFrame(pyr, columns=["pitch", "yaw", "roll"]).to_csv(tmp_path / "in.csv", index=False)
     out = tmp_path / "out.csv"
-    res = CliRunner().invoke(
-        cli, ["convert", str(tmp_path / "in.csv"), "-o", str(out), "--from", str(sys_path), "--to", str(sys_path)]
-    )
+    res = hpe("convert", tmp_path / "in.csv", "-o", out, "--from", sys_path, "--to", sys_path)
     assert res.exit_code == 0, res.output
     got = pd.read_csv(out)[MATRIX_COLS].to_numpy().reshape(-1, 3, 3)
     sys.path.insert(0, str(FIX))
@@ -82,7 +74,8 @@ def test_custom_system_file_reproduces_the_callable_through_convert(tmp_path):
 
 def test_custom_frame_and_storage_options(tmp_path):
     sys_path = tmp_path / "s.toml"
-    run(
+    hpe(
+        "infer",
         "--callable",
         f"{FIX}/made_up.py:made_up",
         "--args",
@@ -105,9 +98,9 @@ def test_module_path_and_refuse_overwrite(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(FIX))
     out = tmp_path / "s.toml"
     out.write_text("keep")
-    res = run("--callable", "lp300w:pose_matrix", "-o", out)
+    res = hpe("infer", "--callable", "lp300w:pose_matrix", "-o", out)
     assert res.exit_code == 1 and "already exists" in res.output and out.read_text() == "keep"
-    res = run("--callable", "lp300w:pose_matrix", "-o", out, "--overwrite")
+    res = hpe("infer", "--callable", "lp300w:pose_matrix", "-o", out, "--overwrite")
     assert res.exit_code == 0 and 'name = "300w_lp"' in out.read_text()
 
 
@@ -143,7 +136,7 @@ def test_wrong_units_hint(tmp_path):
     ],
 )
 def test_usage_and_user_errors(args, code, text):
-    res = run(*args)
+    res = hpe("infer", *args)
     assert res.exit_code == code and text in res.output, res.output
     assert "Traceback" not in res.output
 
@@ -172,9 +165,9 @@ def test_table_with_matrices(tmp_path):
 
 def test_table_missing_columns(tmp_path):
     pd.DataFrame({"pitch": [1.0], "yaw": [2.0], "roll": [3.0]}).to_csv(tmp_path / "t.csv", index=False)
-    res = run(tmp_path / "t.csv")
+    res = hpe("infer", tmp_path / "t.csv")
     assert res.exit_code == 1 and "neither matrix columns" in res.output
-    res = run(tmp_path / "t.csv", "--matrix", "q00..q22")
+    res = hpe("infer", tmp_path / "t.csv", "--matrix", "q00..q22")
     assert res.exit_code == 1 and "missing column(s) q00" in res.output
 
 
@@ -279,14 +272,12 @@ def test_decoder_returning_unknown_width(tmp_path):
 def test_written_system_loads_back_even_when_it_differs_from_the_builtin(tmp_path):
     """6DRepNet's get_R takes radians; the built-in 6drepnet says degrees: the file gets its own name."""
     out = tmp_path / "s.toml"
-    res = run("--callable", f"{FIX}/sixdrepnet.py:get_R", "-o", out, "-q")
+    res = hpe("infer", "--callable", f"{FIX}/sixdrepnet.py:get_R", "-o", out, "-q")
     assert res.exit_code == 0, res.output
     assert 'name = "6drepnet_as_inferred"' in out.read_text()
     labels = tmp_path / "l.csv"
     pd.DataFrame({"pitch": [10.0], "yaw": [20.0], "roll": [30.0]}).to_csv(labels, index=False)
-    res = CliRunner().invoke(
-        cli, ["convert", str(labels), "-o", str(tmp_path / "o.csv"), "--from", str(out), "--to", "6drepnet", "-q"]
-    )
+    res = hpe("convert", labels, "-o", tmp_path / "o.csv", "--from", out, "--to", "6drepnet", "-q")
     assert res.exit_code == 0, res.output
 
 
@@ -298,10 +289,7 @@ def test_data_table_with_stored_rotation_vectors_and_quaternions(tmp_path):
 
     import numpy as np
     import pandas as pd
-    from click.testing import CliRunner
     from scipy.spatial.transform import Rotation
-
-    from hpe_cli.cli.main import cli
 
     rng = np.random.default_rng(3)
     pyr = np.column_stack([rng.uniform(-80, 80, 60), rng.uniform(-85, 85, 60), rng.uniform(-80, 80, 60)])
@@ -320,14 +308,12 @@ def test_data_table_with_stored_rotation_vectors_and_quaternions(tmp_path):
     frame.to_csv(src, index=False)
     for extra in ([], ["--rotations", "quaternion-xyzw:qx,qy,qz,qw"]):
         report = tmp_path / f"r{len(extra)}.json"
-        res = CliRunner().invoke(
-            cli, ["infer", str(src), "--angles", "pitch,yaw,roll", *extra, "--json", str(report), "-q"]
-        )
+        res = hpe("infer", src, "--angles", "pitch,yaw,roll", *extra, "--json", report, "-q")
         assert res.exit_code == 0, res.output
         rep = json.loads(report.read_text())
         assert rep["fit"] == "exact" and rep["best"] in ("opencv", "img2pose"), rep.get("best")
         assert rep["rotation_columns"]["kind"] == ("rotvec" if not extra else "quaternion-xyzw")
-    res = CliRunner().invoke(cli, ["infer", str(src), "--angles", "pitch,yaw,roll", "--rotations", "rotvec:rx,ry"])
+    res = hpe("infer", src, "--angles", "pitch,yaw,roll", "--rotations", "rotvec:rx,ry")
     assert res.exit_code == 2 and "expected 3 columns" in res.output
 
 
@@ -352,23 +338,22 @@ def test_data_rows_that_cannot_be_used_go_to_rejects_or_stop_the_run(tmp_path):
     t.loc[9, "r11"] = np.inf
     bad = tmp_path / "bad.csv"
     t.to_csv(bad, index=False)
-    runner = CliRunner()
-    res = runner.invoke(cli, ["infer", str(bad)])
+    res = hpe("infer", bad)
     assert res.exit_code == 1, res.output
     assert f"{bad}: line 7: angle not finite" in res.output  # row 5 -> line 7 (header = line 1)
     rej = tmp_path / "rej.csv"
-    res = runner.invoke(cli, ["infer", str(bad), "--rejects", str(rej), "--json", str(tmp_path / "b.json")])
+    res = hpe("infer", bad, "--rejects", rej, "--json", tmp_path / "b.json")
     assert res.exit_code == 0, res.output
     r = pd.read_csv(rej)
     assert r["row"].tolist() == [7, 11] and r["reason"].str.contains("not finite").all()
-    res = runner.invoke(cli, ["infer", str(clean), "--json", str(tmp_path / "c.json")])
+    res = hpe("infer", clean, "--json", tmp_path / "c.json")
     assert res.exit_code == 0, res.output
     import json
 
     a, b = json.loads((tmp_path / "b.json").read_text()), json.loads((tmp_path / "c.json").read_text())
     assert a["fit"] == b["fit"] == "exact"
     assert a["system"]["name"] == b["system"]["name"] and a["system"].get("sequence") == b["system"].get("sequence")
-    res = runner.invoke(cli, ["infer", str(bad), "--rejects", str(tmp_path / "r2.csv"), "--strict"])
+    res = hpe("infer", bad, "--rejects", tmp_path / "r2.csv", "--strict")
     assert res.exit_code == 1 and not (tmp_path / "r2.csv").exists()
 
 
@@ -376,25 +361,11 @@ def test_unparseable_rows_are_rejects_with_a_rejects_file(tmp_path):
     """infer --rejects: a row the reader cannot parse (a word in an angle column) is a reject with its file line,
     like a missing value, instead of the end of the run (issue 35); without --rejects it is still the error."""
     import pandas as pd
-    from click.testing import CliRunner
-
-    from hpe_cli.cli.main import cli
 
     root = Path(__file__).resolve().parents[2]
     src = tmp_path / "p.csv"
-    r = CliRunner().invoke(
-        cli,
-        [
-            "convert",
-            str(root / "sample_data" / "labels_300wlp.csv"),
-            "-o",
-            str(src),
-            "--from",
-            "300w_lp",
-            "--to",
-            "6drepnet",
-            "-q",
-        ],
+    r = hpe(
+        "convert", root / "sample_data" / "labels_300wlp.csv", "-o", src, "--from", "300w_lp", "--to", "6drepnet", "-q"
     )
     assert r.exit_code == 0, r.output
     df = pd.read_csv(src)
@@ -403,11 +374,11 @@ def test_unparseable_rows_are_rejects_with_a_rejects_file(tmp_path):
     df.loc[4, "pitch"] = None  # file line 6
     df.to_csv(src, index=False)
     rej = tmp_path / "rej.csv"
-    r = CliRunner().invoke(cli, ["infer", str(src), "--rejects", str(rej)])
+    r = hpe("infer", src, "--rejects", rej)
     assert r.exit_code == 0, r.output
     assert "best: 6drepnet (exact; max Frobenius error < 1e-12 over 202 samples)" in r.output
     got = pd.read_csv(rej)
     assert got["row"].tolist() == [4, 6]
     assert got["reason"].tolist() == ["non-numeric value in pitch", "angle not finite (missing, NaN or infinite)"]
-    r = CliRunner().invoke(cli, ["infer", str(src)])
+    r = hpe("infer", src)
     assert r.exit_code == 1 and f"{src}: line 4: non-numeric value in pitch" in r.output

@@ -9,9 +9,8 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "agora"
 PKL = DATA / "validation_0_withjv.pkl"
@@ -20,12 +19,8 @@ N_PEOPLE = len(EXPECTED)
 N_OK = sum(e["status"].startswith("ok") for e in EXPECTED)
 
 
-def run(*args):
-    return CliRunner().invoke(cli, ["relabel-agora", *map(str, args)])
-
-
 def test_help_has_examples_and_pickle_warning():
-    r = run("--help")
+    r = hpe("relabel-agora", "--help")
     assert r.exit_code == 0
     assert "Examples:" in r.output and "restricted unpickler" in r.output and "--trust-pickle" in r.output
 
@@ -33,7 +28,7 @@ def test_help_has_examples_and_pickle_warning():
 def test_table_and_rejects(tmp_path):
     out, rej = tmp_path / "labels.parquet", tmp_path / "rejects.csv"
     before = PKL.read_bytes()
-    r = run(PKL, "-o", out, "--rejects", rej)
+    r = hpe("relabel-agora", PKL, "-o", out, "--rejects", rej)
     assert r.exit_code == 0, r.output
     assert PKL.read_bytes() == before  # input untouched
     t = pq.read_table(out)
@@ -85,7 +80,7 @@ def test_table_and_rejects(tmp_path):
 
 def test_coco_output(tmp_path):
     out = tmp_path / "agora.json"
-    r = run(PKL, "-o", out, "--image-size", "1280x720")
+    r = hpe("relabel-agora", PKL, "-o", out, "--image-size", "1280x720")
     assert r.exit_code == 0, r.output
     doc = json.loads(out.read_text())
     assert doc["categories"][0]["id"] == 1 and doc["info"]["hpe:system"] == "whenet"
@@ -104,7 +99,7 @@ def test_coco_output(tmp_path):
 
 def test_whenet_output_and_legacy(tmp_path):
     out = tmp_path / "annotation.txt"
-    r = run(PKL, "-o", out, "--legacy-whenet")
+    r = hpe("relabel-agora", PKL, "-o", out, "--legacy-whenet")
     assert r.exit_code == 0, r.output
     lines = out.read_text().splitlines()
     assert len(lines) == N_OK - 1  # the (120, 20, 10) head has no WHENet triple
@@ -117,7 +112,7 @@ def test_whenet_output_and_legacy(tmp_path):
 
 def test_legacy_columns_in_table(tmp_path):
     out = tmp_path / "l.csv"
-    r = run(PKL, "-o", out, "--legacy-whenet", "--system", "whenet")
+    r = hpe("relabel-agora", PKL, "-o", out, "--legacy-whenet", "--system", "whenet")
     assert r.exit_code == 0, r.output
     t = pd.read_csv(out)
     np.testing.assert_allclose(t["legacy_yaw"], t["yaw"], atol=1e-9)
@@ -125,10 +120,10 @@ def test_legacy_columns_in_table(tmp_path):
 
 
 def test_gates(tmp_path):
-    r = run(PKL, "-o", tmp_path / "a.csv", "--max-rmse", "inf")
+    r = hpe("relabel-agora", PKL, "-o", tmp_path / "a.csv", "--max-rmse", "inf")
     assert r.exit_code == 0, r.output
     assert len(pd.read_csv(tmp_path / "a.csv")) == N_OK + 1  # the noisy face is labelled now
-    r = run(PKL, "-o", tmp_path / "b.csv", "--max-occlusion", "100", "--rejects", tmp_path / "rb.csv")
+    r = hpe("relabel-agora", PKL, "-o", tmp_path / "b.csv", "--max-occlusion", "100", "--rejects", tmp_path / "rb.csv")
     assert r.exit_code == 0, r.output
     rb = pd.read_csv(tmp_path / "rb.csv")
     assert "occluded" not in set(rb["reason"]) and (rb["reason"] == "invalid").sum() == 2
@@ -140,7 +135,7 @@ def test_several_dataframes(tmp_path):
     second = tmp_path / "train_0_withjv.pkl"
     df.to_pickle(second)
     out = tmp_path / "both.parquet"
-    r = run(PKL, second, "-o", out, "-v")
+    r = hpe("relabel-agora", PKL, second, "-o", out, "-v")
     assert r.exit_code == 0, r.output
     t = pq.read_table(out).to_pandas()
     assert len(t) == 2 * N_OK
@@ -151,10 +146,10 @@ def test_several_dataframes(tmp_path):
 def test_refuses_overwrite(tmp_path):
     out = tmp_path / "x.parquet"
     out.write_text("keep")
-    r = run(PKL, "-o", out)
+    r = hpe("relabel-agora", PKL, "-o", out)
     assert r.exit_code == 1 and "already exists" in r.output
     assert out.read_text() == "keep"
-    r = run(PKL, "-o", out, "--overwrite", "-q")
+    r = hpe("relabel-agora", PKL, "-o", out, "--overwrite", "-q")
     assert r.exit_code == 0 and r.output == ""
     assert pq.read_table(out).num_rows == N_OK
 
@@ -163,7 +158,7 @@ def test_missing_column_is_one_line(tmp_path):
     bad = tmp_path / "bad_withjv.pkl"
     pd.read_pickle(PKL).drop(columns=["occlusion"]).to_pickle(bad)
     out = tmp_path / "x.parquet"
-    r = run(bad, "-o", out)
+    r = hpe("relabel-agora", bad, "-o", out)
     assert r.exit_code == 1
     assert (
         r.output.strip() == f"Error: {bad}: missing column 'occlusion' (expected an AGORA *_withjv.pkl "
@@ -173,11 +168,11 @@ def test_missing_column_is_one_line(tmp_path):
 
 
 def test_usage_errors(tmp_path):
-    assert run(PKL, "-o", tmp_path / "a.json", "--system", "6drepnet").exit_code == 2
-    assert run(PKL, "-o", tmp_path / "a.csv", "--image-size", "big").exit_code == 2
-    assert run(PKL, "-o", tmp_path / "a.csv", "--max-rmse", "-1").exit_code == 2
-    assert run(tmp_path / "nope.pkl", "-o", tmp_path / "a.csv").exit_code == 2
-    r = run(PKL, "-o", tmp_path / "a.csv", "--image-size", "1000x1000")
+    assert hpe("relabel-agora", PKL, "-o", tmp_path / "a.json", "--system", "6drepnet").exit_code == 2
+    assert hpe("relabel-agora", PKL, "-o", tmp_path / "a.csv", "--image-size", "big").exit_code == 2
+    assert hpe("relabel-agora", PKL, "-o", tmp_path / "a.csv", "--max-rmse", "-1").exit_code == 2
+    assert hpe("relabel-agora", tmp_path / "nope.pkl", "-o", tmp_path / "a.csv").exit_code == 2
+    r = hpe("relabel-agora", PKL, "-o", tmp_path / "a.csv", "--image-size", "1000x1000")
     assert r.exit_code == 1 and "principal point" in r.output
     assert not (tmp_path / "a.csv").exists()
 
@@ -186,8 +181,8 @@ def test_frame_crop_rotates_by_the_ray_angle(tmp_path):
     from scipy.spatial.transform import Rotation
 
     a, b = tmp_path / "cam.parquet", tmp_path / "crop.parquet"
-    assert run(PKL, "-o", a, "--rejects", tmp_path / "r1.csv").exit_code == 0
-    r = run(PKL, "-o", b, "--frame", "crop", "--rejects", tmp_path / "r2.csv")
+    assert hpe("relabel-agora", PKL, "-o", a, "--rejects", tmp_path / "r1.csv").exit_code == 0
+    r = hpe("relabel-agora", PKL, "-o", b, "--frame", "crop", "--rejects", tmp_path / "r2.csv")
     assert r.exit_code == 0, r.output
     ta, tb = pq.read_table(a).to_pandas(), pq.read_table(b).to_pandas()
     assert list(ta["person"]) == list(tb["person"]) and "ray_angle" in tb and "ray_angle" not in ta

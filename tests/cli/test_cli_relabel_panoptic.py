@@ -8,28 +8,23 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 ROOT = Path(__file__).resolve().parents[2]
 SYNTH = ROOT / "sample_data" / "panoptic_synth"
 REAL_SAMPLE = ROOT / "sample_data" / "panoptic_160906_pizza1"
 
 
-def run(*args):
-    return CliRunner().invoke(cli, ["relabel-panoptic", *map(str, args)])
-
-
 def test_help_has_examples():
-    r = run("--help")
+    r = hpe("relabel-panoptic", "--help")
     assert r.exit_code == 0
     assert "Examples:" in r.output and "hpe relabel-panoptic" in r.output and "--legacy-whenet" in r.output
 
 
 def test_table_output_and_accounting(tmp_path):
     out, rej = tmp_path / "labels.parquet", tmp_path / "rejects.csv"
-    r = run(SYNTH, "-o", out, "--rejects", rej)
+    r = hpe("relabel-panoptic", SYNTH, "-o", out, "--rejects", rej)
     assert r.exit_code == 0, r.output
     t = pq.read_table(out)
     cols = t.column_names
@@ -85,28 +80,42 @@ def test_table_output_and_accounting(tmp_path):
 def test_refuses_to_overwrite(tmp_path):
     out = tmp_path / "labels.csv"
     out.write_text("keep me")
-    r = run(SYNTH, "-o", out)
+    r = hpe("relabel-panoptic", SYNTH, "-o", out)
     assert r.exit_code == 1 and "already exists" in r.output and out.read_text() == "keep me"
-    r = run(SYNTH, "-o", out, "--overwrite", "-q")
+    r = hpe("relabel-panoptic", SYNTH, "-o", out, "--overwrite", "-q")
     assert r.exit_code == 0 and r.output == ""
     assert pd.read_csv(out).shape[0] > 100
 
 
 def test_options_cameras_frames_every_workers(tmp_path):
     a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
-    r = run(SYNTH, "-o", a, "--cameras", "00_00,00_02", "--frames", "100:110", "--every", "2", "-q")
+    r = hpe("relabel-panoptic", SYNTH, "-o", a, "--cameras", "00_00,00_02", "--frames", "100:110", "--every", "2", "-q")
     assert r.exit_code == 0, r.output
     df = pd.read_parquet(a)
     assert set(df.camera) == {"00_00", "00_02"} and sorted(set(df.frame)) == [100, 102, 106, 108]
-    r = run(SYNTH, "-o", b, "--cameras", "00_00,00_02", "--frames", "100:110", "--every", "2", "-q", "--workers", "2")
+    r = hpe(
+        "relabel-panoptic",
+        SYNTH,
+        "-o",
+        b,
+        "--cameras",
+        "00_00,00_02",
+        "--frames",
+        "100:110",
+        "--every",
+        "2",
+        "-q",
+        "--workers",
+        "2",
+    )
     assert r.exit_code == 0, r.output
     pd.testing.assert_frame_equal(df, pd.read_parquet(b))
 
 
 def test_system_and_preset(tmp_path):
     a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
-    assert run(SYNTH, "-o", a, "-q").exit_code == 0
-    assert run(SYNTH, "-o", b, "-q", "--system", "6drepnet", "--preset", "directmhp").exit_code == 0
+    assert hpe("relabel-panoptic", SYNTH, "-o", a, "-q").exit_code == 0
+    assert hpe("relabel-panoptic", SYNTH, "-o", b, "-q", "--system", "6drepnet", "--preset", "directmhp").exit_code == 0
     x, y = pd.read_parquet(a), pd.read_parquet(b)
     key = ["frame", "person_id", "camera"]
     m = x.merge(y, on=key, suffixes=("", "_6d"))
@@ -119,7 +128,7 @@ def test_system_and_preset(tmp_path):
 
 def test_legacy_summary_and_columns(tmp_path):
     out = tmp_path / "legacy.parquet"
-    r = run(SYNTH, "-o", out, "--legacy-whenet")
+    r = hpe("relabel-panoptic", SYNTH, "-o", out, "--legacy-whenet")
     assert r.exit_code == 0, r.output
     df = pd.read_parquet(out)
     assert {"legacy_pitch", "legacy_yaw", "legacy_roll"} <= set(df.columns)
@@ -130,10 +139,10 @@ def test_legacy_summary_and_columns(tmp_path):
 def test_other_formats(tmp_path, fmt, name):
     pytest.importorskip(f"hpe_cli.io.{'coco' if fmt == 'coco' else 'whenet_txt'}")
     out = tmp_path / name
-    r = run(SYNTH, "-o", out, "--format", fmt, "-q")
+    r = hpe("relabel-panoptic", SYNTH, "-o", out, "--format", fmt, "-q")
     assert r.exit_code == 0, r.output
     table = tmp_path / "t.parquet"
-    assert run(SYNTH, "-o", table, "-q", "--system", "whenet").exit_code == 0
+    assert hpe("relabel-panoptic", SYNTH, "-o", table, "-q", "--system", "whenet").exit_code == 0
     df = pd.read_parquet(table)
     if fmt == "whenet":
         lines = out.read_text().splitlines()
@@ -148,30 +157,30 @@ def test_other_formats(tmp_path, fmt, name):
         assert doc["images"][0]["width"] == 1920 and len(ann["face2d_pts"]) == 2
     # the format follows the extension by default
     out2 = tmp_path / ("b.txt" if fmt == "whenet" else "b.json")
-    assert run(SYNTH, "-o", out2, "-q").exit_code == 0
+    assert hpe("relabel-panoptic", SYNTH, "-o", out2, "-q").exit_code == 0
     assert out2.read_text() == out.read_text()
 
 
 def test_usage_errors(tmp_path):
     out = tmp_path / "x.parquet"
-    r = run(SYNTH, "-o", tmp_path / "a.txt", "--format", "whenet", "--system", "300w_lp")
+    r = hpe("relabel-panoptic", SYNTH, "-o", tmp_path / "a.txt", "--format", "whenet", "--system", "300w_lp")
     assert r.exit_code == 2 and "whenet system" in r.output
-    assert run(SYNTH, "-o", out, "--frames", "9:3").exit_code == 2
-    assert run(SYNTH, "-o", out, "--every", "0").exit_code == 2
-    assert run(SYNTH, "-o", out, "--max-rmse", "-1").exit_code == 2
-    assert run(SYNTH, "-o", out, "--system", "nope").exit_code == 2
-    assert run(tmp_path / "missing", "-o", out).exit_code == 2
+    assert hpe("relabel-panoptic", SYNTH, "-o", out, "--frames", "9:3").exit_code == 2
+    assert hpe("relabel-panoptic", SYNTH, "-o", out, "--every", "0").exit_code == 2
+    assert hpe("relabel-panoptic", SYNTH, "-o", out, "--max-rmse", "-1").exit_code == 2
+    assert hpe("relabel-panoptic", SYNTH, "-o", out, "--system", "nope").exit_code == 2
+    assert hpe("relabel-panoptic", tmp_path / "missing", "-o", out).exit_code == 2
     assert not out.exists()
 
 
 def test_user_errors_are_one_line(tmp_path):
     out = tmp_path / "x.parquet"
-    r = run(SYNTH, "-o", out, "--cameras", "99_99")
+    r = hpe("relabel-panoptic", SYNTH, "-o", out, "--cameras", "99_99")
     assert r.exit_code == 1 and r.output.startswith("Error: ") and "99_99" in r.output
     assert r.output.count("\n") == 1 and "Traceback" not in r.output
-    r = run(SYNTH, "-o", out, "--cameras", "vga")
+    r = hpe("relabel-panoptic", SYNTH, "-o", out, "--cameras", "vga")
     assert r.exit_code == 1 and "expected hd cameras" in r.output
-    r = run(SYNTH, "-o", tmp_path / "x.xlsx")
+    r = hpe("relabel-panoptic", SYNTH, "-o", tmp_path / "x.xlsx")
     assert r.exit_code == 1 and "expected an output ending in .parquet or .csv" in r.output
     # a truncated face file: one line naming it, and no half-written output
     seq = tmp_path / "seq"
@@ -179,11 +188,11 @@ def test_user_errors_are_one_line(tmp_path):
     bad = seq / "hdFace3d" / "faceRecon3D_hd00000110.json"
     bad.write_text(bad.read_text()[:500])
     rej = tmp_path / "rej.csv"
-    r = run(seq, "-o", out, "--rejects", rej)
+    r = hpe("relabel-panoptic", seq, "-o", out, "--rejects", rej)
     assert r.exit_code == 1 and "faceRecon3D_hd00000110.json: not valid JSON" in r.output
     assert not out.exists() and not rej.exists() and not list(tmp_path.glob(".x.parquet*"))
     # ... which --frames can step around
-    r = run(seq, "-o", out, "--frames", ":110", "-q")
+    r = hpe("relabel-panoptic", seq, "-o", out, "--frames", ":110", "-q")
     assert r.exit_code == 0 and out.exists()
 
 
@@ -195,7 +204,7 @@ def test_nan_landmarks_become_rejects(tmp_path):
     doc["people"][0]["face70"]["landmarks"] = [float("nan")] * 210
     f.write_text(json.dumps(doc))
     rej = tmp_path / "rej.parquet"
-    r = run(seq, "-o", tmp_path / "x.parquet", "--frames", "100:101", "--rejects", rej, "-q")
+    r = hpe("relabel-panoptic", seq, "-o", tmp_path / "x.parquet", "--frames", "100:101", "--rejects", rej, "-q")
     assert r.exit_code == 0, r.output
     rj = pd.read_parquet(rej)
     first = rj[(rj.frame == 100) & (rj.person_id == doc["people"][0]["id"])]
@@ -204,7 +213,7 @@ def test_nan_landmarks_become_rejects(tmp_path):
 
 def test_real_sample(tmp_path):
     out, rej = tmp_path / "real.parquet", tmp_path / "rej.csv"
-    r = run(REAL_SAMPLE, "-o", out, "--rejects", rej)
+    r = hpe("relabel-panoptic", REAL_SAMPLE, "-o", out, "--rejects", rej)
     assert r.exit_code == 0, r.output
     df, rj = pd.read_parquet(out), pd.read_csv(rej)
     assert df.sequence.unique().tolist() == ["160906_pizza1"]
@@ -213,13 +222,15 @@ def test_real_sample(tmp_path):
     assert len(bad) == 31 and set(bad.reason) == {"bad fit"}
     assert set(rj[(rj.frame == 5777) & (rj.person_id == 2)].reason) == {"too few confident points"}
     assert "fit RMSE (cm) of fitted faces: median" in r.output and "2 bad fits (--max-rmse 2)" in r.output
-    r = run(REAL_SAMPLE, "-o", tmp_path / "loose.parquet", "--max-rmse", "inf", "-q")
+    r = hpe("relabel-panoptic", REAL_SAMPLE, "-o", tmp_path / "loose.parquet", "--max-rmse", "inf", "-q")
     assert r.exit_code == 0 and len(pd.read_parquet(tmp_path / "loose.parquet")) > len(df)
 
 
 def test_nothing_labelled_still_writes_typed_files(tmp_path):
     out, rej = tmp_path / "none.parquet", tmp_path / "rej.parquet"
-    r = run(SYNTH, "-o", out, "--cameras", "00_05", "--rejects", rej, "-q")  # the camera facing the wall
+    r = hpe(
+        "relabel-panoptic", SYNTH, "-o", out, "--cameras", "00_05", "--rejects", rej, "-q"
+    )  # the camera facing the wall
     assert r.exit_code == 0, r.output
     t = pq.read_table(out)
     assert t.num_rows == 0 and "lm69_y" in t.column_names and str(t.schema.field("image").type) == "string"
@@ -228,6 +239,6 @@ def test_nothing_labelled_still_writes_typed_files(tmp_path):
     (seq / "hdFace3d").mkdir(parents=True)
     shutil.copy(SYNTH / "calibration_panoptic_synth.json", seq / "calibration_empty.json")
     (seq / "hdFace3d" / "faceRecon3D_hd00000001.json").write_text('{"version": 0.7, "univTime": 3.0, "people": []}')
-    r = run(seq, "-o", tmp_path / "e.csv")
+    r = hpe("relabel-panoptic", seq, "-o", tmp_path / "e.csv")
     assert r.exit_code == 0 and "0 faces x 7 cameras" in r.output
     assert (tmp_path / "e.csv").read_text().startswith('"sequence","frame","camera"')

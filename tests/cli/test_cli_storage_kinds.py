@@ -3,11 +3,9 @@
 import cv2
 import numpy as np
 import pandas as pd
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from conftest import canonical_A
-from hpe_cli.cli.main import cli
+from conftest import canonical_A, hpe
 
 F = np.diag([1.0, -1, -1])
 
@@ -19,27 +17,8 @@ def test_draw_rotvec_equals_draw_angles(tmp_path):
     base.assign(pitch=pyr[:, 0], yaw=pyr[:, 1], roll=pyr[:, 2]).to_csv(tmp_path / "ang.csv", index=False)
     rv = Rotation.from_matrix(F @ canonical_A(pyr) @ F).as_rotvec()  # img2pose rotation vectors
     base.assign(rx=rv[:, 0], ry=rv[:, 1], rz=rv[:, 2]).to_csv(tmp_path / "rv.csv", index=False)
-    r = CliRunner()
-    assert (
-        r.invoke(
-            cli, ["draw", str(tmp_path / "ang.csv"), "-o", str(tmp_path / "a"), "--canvas", "128x128", "-q"]
-        ).exit_code
-        == 0
-    )
-    res = r.invoke(
-        cli,
-        [
-            "draw",
-            str(tmp_path / "rv.csv"),
-            "-o",
-            str(tmp_path / "b"),
-            "--canvas",
-            "128x128",
-            "--system",
-            "img2pose",
-            "-q",
-        ],
-    )
+    assert hpe("draw", tmp_path / "ang.csv", "-o", tmp_path / "a", "--canvas", "128x128", "-q").exit_code == 0
+    res = hpe("draw", tmp_path / "rv.csv", "-o", tmp_path / "b", "--canvas", "128x128", "--system", "img2pose", "-q")
     assert res.exit_code == 0, res.output
     for i in range(4):
         a = cv2.imread(str(tmp_path / "a" / f"{i}.png")).astype(int)
@@ -60,38 +39,21 @@ def test_augment_quaternion_input(tmp_path):
     pd.DataFrame({"id": range(6), "pitch": pyr[:, 0], "yaw": pyr[:, 1], "roll": pyr[:, 2]}).to_csv(
         tmp_path / "a.csv", index=False
     )
-    r = CliRunner()
-    res = r.invoke(
-        cli,
-        [
-            "augment",
-            str(tmp_path / "q.csv"),
-            "-o",
-            str(tmp_path / "qo.csv"),
-            "--system",
-            str(sysf),
-            "--hflip",
-            "--image-size",
-            "450",
-            "450",
-            "-q",
-        ],
+    res = hpe(
+        "augment",
+        tmp_path / "q.csv",
+        "-o",
+        tmp_path / "qo.csv",
+        "--system",
+        sysf,
+        "--hflip",
+        "--image-size",
+        "450",
+        "450",
+        "-q",
     )
     assert res.exit_code == 0, res.output
-    res = r.invoke(
-        cli,
-        [
-            "augment",
-            str(tmp_path / "a.csv"),
-            "-o",
-            str(tmp_path / "ao.csv"),
-            "--hflip",
-            "--image-size",
-            "450",
-            "450",
-            "-q",
-        ],
-    )
+    res = hpe("augment", tmp_path / "a.csv", "-o", tmp_path / "ao.csv", "--hflip", "--image-size", "450", "450", "-q")
     assert res.exit_code == 0, res.output
     mq = pd.read_csv(tmp_path / "qo.csv")[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy()
     ma = pd.read_csv(tmp_path / "ao.csv")[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy()

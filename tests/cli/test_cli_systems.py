@@ -2,15 +2,13 @@
 
 import json
 
-from click.testing import CliRunner
-
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 BUILTINS = {"300w_lp", "whenet", "6drepnet", "3ddfa_v2", "scipy_zyx", "opencv"}
 
 
 def test_text_listing():
-    res = CliRunner().invoke(cli, ["systems"])
+    res = hpe("systems")
     assert res.exit_code == 0
     for name in BUILTINS:
         assert name in res.output
@@ -24,7 +22,7 @@ def test_json_listing_and_extra_file(tmp_path):
         'name = "mine"\n'
         + "".join(f'[[turns]]\nangle = "{r}"\naxis = "{a}"\n' for r, a in [("yaw", "z"), ("pitch", "y"), ("roll", "x")])
     )
-    res = CliRunner().invoke(cli, ["systems", "--json", str(f)])
+    res = hpe("systems", "--json", f)
     assert res.exit_code == 0
     data = {d["name"]: d for d in json.loads(res.output)}
     assert BUILTINS | {"mine"} <= set(data)
@@ -34,12 +32,12 @@ def test_json_listing_and_extra_file(tmp_path):
 
 
 def test_top_level_help_fast_and_lists_commands():
-    res = CliRunner().invoke(cli, ["--help"])
+    res = hpe("--help")
     assert res.exit_code == 0 and "convert" in res.output and "systems" in res.output and "Examples" in res.output
 
 
 def test_verbose_shows_source_storage_frame_verification():
-    res = CliRunner().invoke(cli, ["systems", "--verbose"])
+    res = hpe("systems", "--verbose")
     assert res.exit_code == 0, res.output
     block = res.output.split("\ntrinet\n")[1].split("\n\n")[0]
     assert "LEFT-HANDED" in block and "computeMAE.py" in block and "left_x" in block
@@ -56,23 +54,18 @@ def test_bad_user_file_is_a_usage_error(tmp_path):
         'name = "mine"\ngimbal_tol = -1\n'
         + "".join(f'[[turns]]\nangle = "{r}"\naxis = "{a}"\n' for r, a in [("yaw", "z"), ("pitch", "y"), ("roll", "x")])
     )
-    res = CliRunner().invoke(
-        cli, ["convert", str(f), "-o", str(tmp_path / "o.csv"), "--from", str(f), "--to", "300w_lp"]
-    )
+    res = hpe("convert", f, "-o", tmp_path / "o.csv", "--from", f, "--to", "300w_lp")
     assert res.exit_code == 2 and "gimbal_tol: expected a number in [0, 1)" in res.output and "got -1" in res.output
 
 
 def test_systems_by_name_and_did_you_mean():
     """`hpe systems NAME`: only the named built-ins (any case); a misspelt name says which one was meant."""
-    from click.testing import CliRunner
 
-    from hpe_cli.cli.main import cli
-
-    r = CliRunner().invoke(cli, ["systems", "6DRepNet", "whenet"])
+    r = hpe("systems", "6DRepNet", "whenet")
     assert r.exit_code == 0, r.output
     heads = [line for line in r.output.splitlines() if line and not line.startswith(" ")]
     assert heads == ["6drepnet", "whenet"]
-    r = CliRunner().invoke(cli, ["systems", "300wlp"])
+    r = hpe("systems", "300wlp")
     assert r.exit_code == 2 and "no built-in system '300wlp' (did you mean '300w_lp'?)" in r.output
-    r = CliRunner().invoke(cli, ["systems", "missing.toml"])
+    r = hpe("systems", "missing.toml")
     assert r.exit_code == 2 and "no file 'missing.toml'" in r.output

@@ -12,8 +12,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
+from conftest import hpe
 from hpe_cli.cli.main import cli
 from hpe_cli.cli.options import THREADS_HELP
 
@@ -33,12 +33,6 @@ def _tables(tmp_path, n=9000, shuffled=False):
     return tmp_path / "gt.parquet", tmp_path / "pred.parquet"
 
 
-def _run(*args):
-    r = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
-    assert r.exit_code == 0, r.output
-    return r
-
-
 @pytest.mark.parametrize("shuffled", [False, True])
 def test_evaluate_same_bytes_for_1_and_2_threads(tmp_path, shuffled):
     gt, pred = _tables(tmp_path, shuffled=shuffled)
@@ -46,9 +40,10 @@ def test_evaluate_same_bytes_for_1_and_2_threads(tmp_path, shuffled):
     for t in (1, 2, 3):
         d = tmp_path / f"t{t}"
         d.mkdir()
-        _run(
+        hpe(
             "evaluate", pred, gt, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "--batch-size", "1000",
             "--json", d / "r.json", "-o", d / "rows.parquet", "--yaw-bins", "30", "--threads", t, "-q",
+            ok=True,
         )  # fmt: skip
         rep = json.loads((d / "r.json").read_text())
         assert rep["n"]["pairs"] == 9000
@@ -62,10 +57,10 @@ def test_convert_and_audit_same_bytes_for_1_and_2_threads(tmp_path):
     gt, _ = _tables(tmp_path, n=5000)
     outs = {}
     for t in (1, 2):
-        _run("convert", gt, "-o", tmp_path / f"c{t}.parquet", "--from", "300w_lp", "--to", "6drepnet",
-             "--batch-size", "700", "--threads", t, "-q")  # fmt: skip
-        _run("audit", gt, "--system", "300w_lp", "--json", tmp_path / f"a{t}.json", "-o", tmp_path / f"a{t}.parquet",
-             "--batch-size", "700", "--threads", t, "-q")  # fmt: skip
+        hpe("convert", gt, "-o", tmp_path / f"c{t}.parquet", "--from", "300w_lp", "--to", "6drepnet",
+             "--batch-size", "700", "--threads", t, "-q", ok=True)  # fmt: skip
+        hpe("audit", gt, "--system", "300w_lp", "--json", tmp_path / f"a{t}.json", "-o", tmp_path / f"a{t}.parquet",
+             "--batch-size", "700", "--threads", t, "-q", ok=True)  # fmt: skip
         outs[t] = [pq.read_table(tmp_path / f"{k}{t}.parquet") for k in "ca"]
         outs[t].append(json.loads((tmp_path / f"a{t}.json").read_text()))
     assert outs[1][0].equals(outs[2][0])
@@ -75,7 +70,7 @@ def test_convert_and_audit_same_bytes_for_1_and_2_threads(tmp_path):
 
 @pytest.mark.parametrize("name", ["evaluate", "convert", "audit"])
 def test_threads_help_says_the_default(name):
-    r = CliRunner().invoke(cli, [name, "--help"])
+    r = hpe(name, "--help")
     assert "--threads N" in r.output
     assert "one per core" in r.output and "os.cpu_count()" in r.output
     opt = next(p for p in cli.get_command(None, name).params if "--threads" in p.opts)
@@ -84,6 +79,5 @@ def test_threads_help_says_the_default(name):
 
 def test_threads_must_be_positive(tmp_path):
     gt, pred = _tables(tmp_path, n=10)
-    r = CliRunner().invoke(cli, ["convert", str(gt), "-o", str(tmp_path / "c.parquet"), "--from", "300w_lp", "--to",
-                                 "6drepnet", "--threads", "0"])  # fmt: skip
+    r = hpe("convert", gt, "-o", tmp_path / "c.parquet", "--from", "300w_lp", "--to", "6drepnet", "--threads", "0")  # fmt: skip
     assert r.exit_code == 2 and "--threads" in r.output

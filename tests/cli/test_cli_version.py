@@ -10,14 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from conftest import hpe_process
 from hpe_cli import __version__
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def hpe(*args, **env):
-    e = dict(os.environ, PYTHONPATH=str(ROOT), **env)
-    return subprocess.run([sys.executable, "-m", "hpe_cli", *args], capture_output=True, text=True, env=e, timeout=60)
 
 
 def _has(module):
@@ -27,7 +23,7 @@ def _has(module):
 
 
 def test_version_lists_the_optional_parts():
-    p = hpe("--version")
+    p = hpe_process("--version")
     assert p.returncode == 0 and p.stderr == ""
     lines = p.stdout.strip().splitlines()
     assert lines[0].startswith(f"hpe {__version__} (Python ")

@@ -7,13 +7,8 @@ import json
 import cv2
 import numpy as np
 import pandas as pd
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+from conftest import hpe as hpe_cmd
 
 
 def data(page):
@@ -44,7 +39,7 @@ ROWS = [
 
 
 def test_help_has_examples():
-    r = run("view", "--help")
+    r = hpe_cmd("view", "--help")
     assert r.exit_code == 0 and "Examples:" in r.output and "hpe view" in r.output and "--rejects" in r.output
 
 
@@ -52,7 +47,7 @@ def test_thumbnails_crop_and_whole_frame(tmp_path):
     _images(tmp_path / "img", ["a.png", "b.png"])
     src = _table(tmp_path / "in.csv", ROWS)
     page = tmp_path / "page"
-    r = run("view", src, "-o", page, "--images", tmp_path / "img", "-q")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "-q")
     assert r.exit_code == 0, r.output
     d = data(page)
     assert d["meta"]["counts"]["whole_frame"] == 1 and d["meta"]["counts"]["shown"] == 3
@@ -82,13 +77,13 @@ def test_rerun_on_a_grown_table_reuses_thumbnails(tmp_path):
     _images(tmp_path / "img", ["a.png", "b.png"])
     src = _table(tmp_path / "in.csv", ROWS[:2])
     page = tmp_path / "page"
-    r = run("view", src, "-o", page, "--images", tmp_path / "img")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img")
     assert r.exit_code == 0 and "2 thumbnails made, 0 reused" in r.output, r.output
     first = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in (page / "thumbs").iterdir()}
-    r = run("view", src, "-o", page, "--images", tmp_path / "img")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img")
     assert r.exit_code == 1 and "index.html: exists (use --overwrite" in r.output
     _table(src, ROWS)  # the table grew by one row
-    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite")
     assert r.exit_code == 0 and "1 thumbnails made, 2 reused" in r.output, r.output
     for name, (mtime, blob) in first.items():  # untouched
         p = page / "thumbs" / name
@@ -98,7 +93,7 @@ def test_rerun_on_a_grown_table_reuses_thumbnails(tmp_path):
     rows = [dict(r) for r in ROWS]
     rows[1]["yaw"] = -80.0
     _table(src, rows)
-    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite")
     assert "1 thumbnails made, 2 reused" in r.output, r.output
 
 
@@ -108,11 +103,11 @@ def test_missing_and_unreadable_images_are_rejects(tmp_path):
     rows = ROWS + [dict(ROWS[0], image="gone.png"), dict(ROWS[0], image="bad.png")]
     src = _table(tmp_path / "in.csv", rows)
     page = tmp_path / "page"
-    r = run("view", src, "-o", page, "--images", tmp_path / "img")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img")
     assert r.exit_code == 1 and not page.exists()
     assert r.output.strip().splitlines()[-1].startswith(f"Error: {src}: line 5: image not found"), r.output
     rej = tmp_path / "rej.csv"
-    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--rejects", rej)
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--rejects", rej)
     assert r.exit_code == 0, r.output
     assert "rejected: 1 image not found; 1 not a readable image" in r.output
     got = pd.read_csv(rej)
@@ -130,7 +125,7 @@ def test_two_tables_without_a_common_key_are_a_usage_error(tmp_path):
     _images(tmp_path / "img", ["a.png", "b.png"])
     src = _table(tmp_path / "in.csv", ROWS[:2])
     other = _table(tmp_path / "other.csv", [{"name": "a.png", "pitch": 0.0, "yaw": 0.0, "roll": 0.0}])
-    r = run("view", src, other, "-o", tmp_path / "page", "--images", tmp_path / "img")
+    r = hpe_cmd("view", src, other, "-o", tmp_path / "page", "--images", tmp_path / "img")
     assert r.exit_code == 2 and "no key column shared" in r.output and "Traceback" not in r.output, r.output
     assert not (tmp_path / "page").exists()
 
@@ -146,7 +141,7 @@ def test_other_rows_joined_by_key_with_the_angle(tmp_path):
         ],
     )
     page = tmp_path / "page"
-    r = run("view", src, other, "-o", page, "--images", tmp_path / "img")
+    r = hpe_cmd("view", src, other, "-o", page, "--images", tmp_path / "img")
     assert r.exit_code == 0 and "2 rows paired with" in r.output, r.output
     d = data(page)
     assert d["num"]["angle"] == [0.0, 30.0]  # a pure roll difference of 30 degrees
@@ -158,7 +153,7 @@ def test_api_writes_the_same_page(tmp_path):
 
     _images(tmp_path / "img", ["a.png", "b.png"])
     src = _table(tmp_path / "in.csv", ROWS)
-    r = run("view", src, "-o", tmp_path / "cli", "--images", tmp_path / "img", "-q")
+    r = hpe_cmd("view", src, "-o", tmp_path / "cli", "--images", tmp_path / "img", "-q")
     assert r.exit_code == 0
     s = hpe.view_file(src, tmp_path / "api", images=tmp_path / "img")
     assert s["shown"] == 3 and s["whole_frame"] == 1
@@ -178,7 +173,7 @@ def test_page_loads_nothing_from_the_network(tmp_path):
     _images(tmp_path / "img", ["a.png", "b.png"])
     src = _table(tmp_path / "in.csv", ROWS)
     page = tmp_path / "page"
-    assert run("view", src, "-o", page, "--images", tmp_path / "img", "-q").exit_code == 0
+    assert hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "-q").exit_code == 0
     for name in ("index.html", "view.js", "view.css"):
         text = (page / name).read_text()
         urls = set(re.findall(r"(?:https?:)?//[\w.-]+\.[a-z]{2,}[^\s\"')]*", text))
@@ -191,9 +186,9 @@ def test_rows_with_unusable_labels_are_rejects_and_stay_in_the_page(tmp_path):
     rows = [ROWS[0], dict(ROWS[1], yaw=float("nan"))]
     src = _table(tmp_path / "in.csv", rows)
     page, rej = tmp_path / "page", tmp_path / "rej.csv"
-    r = run("view", src, "-o", page, "--images", tmp_path / "img")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img")
     assert r.exit_code == 1 and f"{src}: line 3:" in r.output and not page.exists(), r.output
-    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--rejects", rej)
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--rejects", rej)
     assert r.exit_code == 0, r.output
     got = pd.read_csv(rej)
     assert got["row"].tolist() == [3] and got["reason"].iloc[0]
@@ -213,10 +208,10 @@ def test_other_rows_without_a_match_or_a_pose_are_rejects(tmp_path):
             {"image": "c.png", "pitch": 0.0, "yaw": 0.0, "roll": 0.0},
         ],
     )
-    r = run("view", src, other, "-o", tmp_path / "page", "--images", tmp_path / "img")
+    r = hpe_cmd("view", src, other, "-o", tmp_path / "page", "--images", tmp_path / "img")
     assert r.exit_code == 1 and f"{other}: line" in r.output, r.output
     rej = tmp_path / "rej.csv"
-    r = run("view", src, other, "-o", tmp_path / "page", "--images", tmp_path / "img", "--rejects", rej)
+    r = hpe_cmd("view", src, other, "-o", tmp_path / "page", "--images", tmp_path / "img", "--rejects", rej)
     assert r.exit_code == 0, r.output
     got = pd.read_csv(rej).sort_values("row")
     assert got["row"].tolist() == [3, 4] and got["table"].tolist() == [str(other)] * 2
@@ -229,7 +224,7 @@ def test_no_frames(tmp_path):
     _images(tmp_path / "img", ["a.png", "b.png"])
     src = _table(tmp_path / "in.csv", ROWS)
     page = tmp_path / "page"
-    assert run("view", src, "-o", page, "--images", tmp_path / "img", "--no-frames", "-q").exit_code == 0
+    assert hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--no-frames", "-q").exit_code == 0
     d = data(page)
     assert [im["f"] for im in d["images"]] == [None, None] and all(d["thumb"])
     assert not list((page / "frames").iterdir()) if (page / "frames").exists() else True
@@ -244,7 +239,7 @@ def test_also_in_angles_and_bad_names(tmp_path):
 
     _images(tmp_path / "img", ["a.png", "b.png"])
     src = _table(tmp_path / "in.csv", ROWS)
-    r = run("view", src, "-o", tmp_path / "p", "--images", tmp_path / "img", "--also-in", "6drepnet, 300w_lp,3ddfa_v2",
+    r = hpe_cmd("view", src, "-o", tmp_path / "p", "--images", tmp_path / "img", "--also-in", "6drepnet, 300w_lp,3ddfa_v2",
             "-q")  # fmt: skip
     assert r.exit_code == 0, r.output
     d = data(tmp_path / "p")
@@ -270,7 +265,7 @@ def test_also_in_angles_and_bad_names(tmp_path):
     assert (tmp_path / "api" / "rows.js").read_text() == (tmp_path / "p" / "rows.js").read_text().replace(
         str(tmp_path / "p"), str(tmp_path / "api")
     )
-    r = CliRunner().invoke(cli, ["view", str(src), "-o", str(tmp_path / "q"), "--also-in", "6drepnet,nope"])
+    r = hpe_cmd("view", src, "-o", tmp_path / "q", "--also-in", "6drepnet,nope")
     assert r.exit_code == 2 and "nope" in r.output and not (tmp_path / "q").exists()
 
 
@@ -285,7 +280,7 @@ def test_rerun_that_drops_rows_prunes_stale_files(tmp_path, monkeypatch):
     _images(tmp_path / "img", ["a.png", "b.png"])
     src = _table(tmp_path / "in.csv", ROWS)
     page = tmp_path / "page"
-    assert run("view", src, "-o", page, "--images", tmp_path / "img", "-q").exit_code == 0
+    assert hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "-q").exit_code == 0
     first = data(page)
     (page / "notes.txt").write_text("mine")
     (page / "thumbs" / "mine.jpg").write_bytes(b"mine")
@@ -305,11 +300,11 @@ def test_rerun_that_drops_rows_prunes_stale_files(tmp_path, monkeypatch):
             raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(tx, "_unplace", unplace)
-    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite", "-q")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite", "-q")
     assert r.exit_code == 1 and "no space left" in r.output.lower(), r.output
     assert files() == before and not [p for p in page.rglob(".hpe-*")]
     monkeypatch.setattr(tx, "_unplace", real)
-    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite")
     assert r.exit_code == 0, r.output
     # 2 thumbnails, b.png's frame and rows/00001.js
     assert "0 thumbnails made, 1 reused" in r.output and "4 files of the earlier page no longer used: removed" in (
@@ -322,5 +317,5 @@ def test_rerun_that_drops_rows_prunes_stale_files(tmp_path, monkeypatch):
     assert sorted(p.name for p in (page / "rows").iterdir()) == ["00000.js"]
     assert (page / "notes.txt").read_text() == "mine" and not [p for p in page.rglob(".hpe-*")]
     # --no-frames: the frames go too
-    r = run("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite", "--no-frames", "-q")
+    r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite", "--no-frames", "-q")
     assert r.exit_code == 0 and list((page / "frames").iterdir()) == []

@@ -6,17 +6,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 ROOT = Path(__file__).resolve().parents[2]
 AFLW = ROOT / "sample_data" / "aflw2000"
 LABELS = ROOT / "sample_data" / "labels_300wlp.csv"
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 @pytest.mark.parametrize(
@@ -31,7 +26,7 @@ def run(*args):
     ],
 )
 def test_system_line_printed_once(args, tmp_path):
-    r = run(*[str(a).replace("{tmp}", str(tmp_path)) for a in args])
+    r = hpe(*[str(a).replace("{tmp}", str(tmp_path)) for a in args])
     assert r.exit_code == 0, r.output
     lines = [line for line in r.stderr.splitlines() if line.startswith("labels of ")]
     assert len(lines) == len(set(lines)) <= 1, r.stderr
@@ -45,10 +40,10 @@ def test_system_line_printed_once(args, tmp_path):
     ],
 )
 def test_an_agreeing_option_is_named(args, option, tmp_path):
-    r = run(*[str(a).replace("{tmp}", str(tmp_path)) for a in args])
+    r = hpe(*[str(a).replace("{tmp}", str(tmp_path)) for a in args])
     assert r.exit_code == 0, r.output
     assert f"labels of {AFLW}: system 300w_lp (file metadata; {option} agrees)" in r.stderr, r.stderr
     without = [a for a in args if a not in (option, "300w_lp")]
-    r = run(*[str(a).replace("{tmp}", str(tmp_path)).replace("/d", "/d2").replace("x.csv", "y.csv") for a in without])
+    r = hpe(*[str(a).replace("{tmp}", str(tmp_path)).replace("/d", "/d2").replace("x.csv", "y.csv") for a in without])
     if r.exit_code == 0:
         assert f"labels of {AFLW}: system 300w_lp (file metadata)\n" in r.stderr and "agrees" not in r.stderr

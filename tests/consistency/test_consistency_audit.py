@@ -8,20 +8,14 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from tests.conftest import canonical_A, sample_data_script
 
 
-def run(*args):
-    res = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
-    return res
-
-
 def audit_json(path, *extra):
-    res = run("audit", path, "--consistency", "--json", "-", "-q", *extra)
+    res = hpe("audit", path, "--consistency", "--json", "-", "-q", *extra)
     assert res.exit_code == 0, res.output
     return json.loads(res.output)["consistency"]
 
@@ -60,7 +54,7 @@ def test_aflw2000_labels_turned_by_30_deg_top_the_ranking(realdata, tmp_path):
     path = tmp_path / "turned.parquet"
     t.to_parquet(path)
     out = tmp_path / "scored.parquet"
-    res = run("audit", path, "--consistency", "--json", tmp_path / "r.json", "-o", out, "-q")
+    res = hpe("audit", path, "--consistency", "--json", tmp_path / "r.json", "-o", out, "-q")
     assert res.exit_code == 0, res.output
     c = json.loads((tmp_path / "r.json").read_text())["consistency"]
     files = [str(t["file"][i]) for i in turned]
@@ -90,7 +84,7 @@ def synthetic_labels(tmp_path_factory):
     doc["people"][0]["face70"]["landmarks"] = ((lm - c) @ _turn([0.3, 1.0, 0.2], 25).T + c).reshape(-1).tolist()
     face.write_text(json.dumps(doc))
     out = root.parent / "labels.parquet"
-    res = run("relabel-panoptic", root, "-o", out, "-q", "--rejects", root.parent / "rej.csv")
+    res = hpe("relabel-panoptic", root, "-o", out, "-q", "--rejects", root.parent / "rej.csv")
     assert res.exit_code == 0, res.output
     return out, glitch, doc["people"][0]["id"]
 
@@ -113,7 +107,7 @@ def test_synthetic_panoptic_camera_offset_and_glitch(synthetic_labels, tmp_path)
     path = tmp_path / "turned.parquet"
     pq.write_table(t2, path)
     out = tmp_path / "scored.parquet"
-    res = run("audit", path, "--consistency", "-o", out, "--json", tmp_path / "r.json", "-q")
+    res = hpe("audit", path, "--consistency", "-o", out, "--json", tmp_path / "r.json", "-q")
     assert res.exit_code == 0, res.output
     c = json.loads((tmp_path / "r.json").read_text())["consistency"]
     v = c["views"]
@@ -138,7 +132,7 @@ def test_synthetic_panoptic_camera_offset_and_glitch(synthetic_labels, tmp_path)
 @pytest.mark.parametrize("legacy", [[], ["--legacy-whenet"]])
 def test_pizza1_own_labels_show_no_view_disagreement(realdata, tmp_path, legacy):
     out = tmp_path / "pizza1.parquet"
-    res = run(
+    res = hpe(
         "relabel-panoptic",
         realdata / "panoptic_160906_pizza1",
         "-o",
@@ -164,7 +158,7 @@ def test_rows_without_evidence_are_not_checked(tmp_path):
     path = tmp_path / "plain.csv"
     path.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\nb.jpg,nan,2,3\n")
     out = tmp_path / "o.csv"
-    res = run("audit", path, "--consistency", "--json", tmp_path / "r.json", "-o", out, "-q")
+    res = hpe("audit", path, "--consistency", "--json", tmp_path / "r.json", "-o", out, "-q")
     assert res.exit_code == 0, res.output
     c = json.loads((tmp_path / "r.json").read_text())["consistency"]
     assert c["checked"] == 0 and c["not_checked"] == 2 and c["suspects"] == 0
@@ -179,7 +173,7 @@ def test_landmarks_of_an_unknown_count_are_one_line_error(tmp_path):
     cols = ["image", "pitch", "yaw", "roll"] + [f"lm{i}_{a}" for i in range(5) for a in "xy"]
     path = tmp_path / "five.csv"
     path.write_text(",".join(cols) + "\n" + ",".join(["a.jpg", "1", "2", "3"] + ["1"] * 10) + "\n")
-    res = CliRunner().invoke(cli, ["audit", str(path), "--consistency"])
+    res = hpe("audit", path, "--consistency")
     assert res.exit_code == 1
     assert "expected 21 (aflw21), 68 (ibug68) or 70 (face70) landmark columns" in res.output
     assert str(path) in res.output and "Traceback" not in res.output
@@ -198,7 +192,7 @@ def test_too_few_visible_points_is_not_checked_with_reason(tmp_path):
 def test_suspects_need_consistency(tmp_path):
     path = tmp_path / "plain.csv"
     path.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\n")
-    res = CliRunner().invoke(cli, ["audit", str(path), "--suspects", str(tmp_path / "s.csv")])
+    res = hpe("audit", path, "--suspects", tmp_path / "s.csv")
     assert res.exit_code == 2
 
 
@@ -240,7 +234,7 @@ def test_missing_recorded_calibration_is_one_line_error_and_nothing_written(synt
     path = tmp_path / "moved.parquet"
     pq.write_table(t.replace_schema_metadata(meta), path)
     out, sus = tmp_path / "o.parquet", tmp_path / "s.csv"
-    res = CliRunner().invoke(cli, ["audit", str(path), "--consistency", "-o", str(out), "--suspects", str(sus)])
+    res = hpe("audit", path, "--consistency", "-o", out, "--suspects", sus)
     assert res.exit_code == 1
     assert f"{tmp_path / 'gone.json'}: cannot read the calibration for --consistency" in res.output
     assert "--calibration FILE" in res.output and "Traceback" not in res.output
@@ -254,7 +248,7 @@ def test_missing_recorded_calibration_is_one_line_error_and_nothing_written(synt
 def test_suspects_may_not_overwrite_the_input(tmp_path):
     path = tmp_path / "plain.csv"
     path.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\n")
-    res = CliRunner().invoke(cli, ["audit", str(path), "--consistency", "--suspects", str(path), "--overwrite"])
+    res = hpe("audit", path, "--consistency", "--suspects", path, "--overwrite")
     assert res.exit_code == 1 and "--suspects must differ from INPUT" in res.output
     assert path.read_text() == "image,pitch,yaw,roll\na.jpg,1,2,3\n"
 
@@ -264,7 +258,7 @@ def test_several_sequences_use_each_sequences_calibration(tmp_path):
     gen.make_synthetic(tmp_path / "seqA", n_frames=6, n_people=2, n_cameras=5, special=False)
     gen.make_synthetic(tmp_path / "seqB", n_frames=6, n_people=2, n_cameras=5, seed=7, special=False)
     out = tmp_path / "labels.parquet"
-    res = run(
+    res = hpe(
         "relabel-panoptic", tmp_path / "seqA", tmp_path / "seqB", "-o", out, "-q", "--rejects", tmp_path / "r.csv"
     )
     assert res.exit_code == 0, res.output

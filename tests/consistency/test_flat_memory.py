@@ -138,14 +138,14 @@ def panoptic_tables(tmp_path_factory):
     """The synthetic Panoptic labels with one camera turned 4 deg and a glitch frame, sorted and shuffled."""
     import pyarrow as pa
 
-    from tests.conftest import canonical_A, sample_data_script
-    from tests.consistency.test_consistency_audit import _angles_of, _turn, run
+    from tests.conftest import canonical_A, hpe, sample_data_script
+    from tests.consistency.test_consistency_audit import _angles_of, _turn
 
     root = tmp_path_factory.mktemp("stream") / "synthseq"
     gen = sample_data_script()
     gen.make_synthetic(root, n_frames=40, n_people=2, n_cameras=6, first_frame=100, special=False)
     lab = root.parent / "labels.parquet"
-    assert run("relabel-panoptic", root, "-o", lab, "-q", "--rejects", root.parent / "rej.csv").exit_code == 0
+    assert hpe("relabel-panoptic", root, "-o", lab, "-q", "--rejects", root.parent / "rej.csv").exit_code == 0
     t = pq.read_table(lab)
     A = canonical_A(np.stack([t.column(c).to_numpy() for c in ("pitch", "yaw", "roll")], 1))
     cams = np.array(t.column("camera").to_pylist())

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 import pytest
-from click.testing import CliRunner
 
+from conftest import hpe
 from hpe_cli.cli import options as opt
 from hpe_cli.cli.main import COMMANDS, cli
 
@@ -178,16 +178,12 @@ def test_system_options_use_the_system_type():
                 assert p.type is opt.SYSTEM, (name, o)
 
 
-def _run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
-
-
 def test_deprecated_image_size_forms_warn_and_work(tmp_path):
     out = tmp_path / "a.parquet"
-    r = _run("augment", ROOT / "sample_data/aflw2000", "-o", out, "--image-size", "450", "450", "--hflip", "-q")
+    r = hpe("augment", ROOT / "sample_data/aflw2000", "-o", out, "--image-size", "450", "450", "--hflip", "-q")
     assert r.exit_code == 0, r.output
     assert "deprecated" in r.stderr and "--image-size 450x450" in r.stderr
-    r2 = _run(
+    r2 = hpe(
         "augment",
         ROOT / "sample_data/aflw2000",
         "-o",
@@ -202,7 +198,7 @@ def test_deprecated_image_size_forms_warn_and_work(tmp_path):
 
 
 def test_deprecated_canvas_warns_and_draws(tmp_path):
-    r = _run(
+    r = hpe(
         "draw", ROOT / "sample_data/labels_300wlp.csv", "-o", tmp_path / "c", "--canvas", "64x48", "--limit", "2", "-q"
     )
     assert r.exit_code == 0, r.output
@@ -215,16 +211,16 @@ def test_deprecated_canvas_warns_and_draws(tmp_path):
 
 def test_deprecated_units_maps_to_radians(tmp_path):
     fx = f"{ROOT}/tests/fixtures/conventions/sixdrepnet.py:get_R"
-    r = _run("infer", "--callable", fx, "--args", "pitch,yaw,roll", "--units", "rad")
+    r = hpe("infer", "--callable", fx, "--args", "pitch,yaw,roll", "--units", "rad")
     assert r.exit_code == 0 and "--units rad is deprecated; use --radians" in r.stderr and "6drepnet" in r.stdout
-    r = _run("infer", "--callable", fx, "--args", "pitch,yaw,roll", "--units", "deg")
+    r = hpe("infer", "--callable", fx, "--args", "pitch,yaw,roll", "--units", "deg")
     assert r.exit_code == 1 and "use --degrees" in r.stderr
-    r = _run("infer", "--callable", fx, "--args", "pitch,yaw,roll", "--units", "grad")
+    r = hpe("infer", "--callable", fx, "--args", "pitch,yaw,roll", "--units", "grad")
     assert r.exit_code == 2
 
 
 def test_max_rmse_suffix_reaches_the_pipeline(tmp_path):
-    a = _run(
+    a = hpe(
         "relabel-panoptic",
         ROOT / "sample_data/panoptic_160906_pizza1",
         "-o",
@@ -234,7 +230,7 @@ def test_max_rmse_suffix_reaches_the_pipeline(tmp_path):
         "--max-rmse",
         "0.01m",
     )
-    b = _run(
+    b = hpe(
         "relabel-panoptic",
         ROOT / "sample_data/panoptic_160906_pizza1",
         "-o",
@@ -251,14 +247,12 @@ def test_max_rmse_suffix_reaches_the_pipeline(tmp_path):
 
 def test_agora_max_rmse_in_centimetres(tmp_path):
     pkl = ROOT / "tests/data/agora/validation_0_withjv.pkl"
-    a = _run("relabel-agora", pkl, "-o", tmp_path / "a.parquet", "--rejects", tmp_path / "ra.csv", "--max-rmse", "2")
-    b = _run(
-        "relabel-agora", pkl, "-o", tmp_path / "b.parquet", "--rejects", tmp_path / "rb.csv", "--max-rmse", "0.02m"
-    )
+    a = hpe("relabel-agora", pkl, "-o", tmp_path / "a.parquet", "--rejects", tmp_path / "ra.csv", "--max-rmse", "2")
+    b = hpe("relabel-agora", pkl, "-o", tmp_path / "b.parquet", "--rejects", tmp_path / "rb.csv", "--max-rmse", "0.02m")
     assert a.exit_code == 0 and b.exit_code == 0, a.output
     assert (tmp_path / "a.parquet").read_bytes() == (tmp_path / "b.parquet").read_bytes()
     assert "fit RMSE (cm)" in a.stderr and "(--max-rmse 2)" in a.stderr
-    c = _run("relabel-agora", pkl, "-o", tmp_path / "c.parquet", "--rejects", tmp_path / "rc.csv", "--max-rmse", "0.02")
+    c = hpe("relabel-agora", pkl, "-o", tmp_path / "c.parquet", "--rejects", tmp_path / "rc.csv", "--max-rmse", "0.02")
     assert c.exit_code == 0 and "write 0.02m for metres" in c.stderr
 
 
@@ -271,8 +265,8 @@ def test_augment_radians_equals_degrees(tmp_path):
     rad[["pitch", "yaw", "roll"]] = np.radians(df[["pitch", "yaw", "roll"]])
     df.to_csv(tmp_path / "deg.csv", index=False)
     rad.to_csv(tmp_path / "rad.csv", index=False)
-    a = _run("augment", tmp_path / "deg.csv", "-o", tmp_path / "a.parquet", "--image-size", "512x512", "--rotate", 20)
-    b = _run(
+    a = hpe("augment", tmp_path / "deg.csv", "-o", tmp_path / "a.parquet", "--image-size", "512x512", "--rotate", 20)
+    b = hpe(
         "augment",
         tmp_path / "rad.csv",
         "-o",

@@ -3,34 +3,17 @@ a --columns-map hint for capitalised or renamed angle columns, a warning for rad
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe, hpe_process
 from hpe_cli.io.labels import columns_map_hint
 
 ROOT = Path(__file__).resolve().parents[2]
 LABELS = ROOT / "sample_data" / "labels_300wlp.csv"
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
-
-
-def hpe(*args):
-    """The real console entry point (a separate process): what a user sees on stderr."""
-    import os
-
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run(
-        [sys.executable, "-m", "hpe_cli", *map(str, args)], capture_output=True, text=True, env=env, timeout=120
-    )
 
 
 @pytest.mark.parametrize(
@@ -46,7 +29,7 @@ def hpe(*args):
     ],
 )
 def test_usage_errors_are_one_line_exit_2(args, tmp_path):
-    p = hpe(*args)
+    p = hpe_process(*args)
     assert p.returncode == 2, p.stderr
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("Error: "), p.stderr
@@ -54,7 +37,7 @@ def test_usage_errors_are_one_line_exit_2(args, tmp_path):
 
 
 def test_did_you_mean_300w_lp(tmp_path):
-    p = hpe("convert", LABELS, "-o", tmp_path / "x.csv", "--from", "300wlp", "--to", "6drepnet")
+    p = hpe_process("convert", LABELS, "-o", tmp_path / "x.csv", "--from", "300wlp", "--to", "6drepnet")
     assert p.returncode == 2
     assert "unknown system '300wlp'; did you mean 300w_lp?" in p.stderr
     assert not (tmp_path / "x.csv").exists()
@@ -71,22 +54,22 @@ def test_did_you_mean_300w_lp(tmp_path):
     ],
 )
 def test_did_you_mean_near_misses(typo, meant, tmp_path):
-    r = run("convert", LABELS, "-o", tmp_path / "x.csv", "--from", "300w_lp", "--to", typo)
+    r = hpe("convert", LABELS, "-o", tmp_path / "x.csv", "--from", "300w_lp", "--to", typo)
     assert r.exit_code == 2 and f"did you mean {meant}" in r.output, r.output
 
 
 def test_no_suggestion_for_far_names(tmp_path):
-    r = run("convert", LABELS, "-o", tmp_path / "x.csv", "--from", "300w_lp", "--to", "quaternion_thing")
+    r = hpe("convert", LABELS, "-o", tmp_path / "x.csv", "--from", "300w_lp", "--to", "quaternion_thing")
     assert r.exit_code == 2 and "did you mean" not in r.output and "expected one of" in r.output
 
 
 @pytest.mark.parametrize("name", ["300W_LP", "6DRepNet", "WHENET", "Scipy_ZYX"])
 def test_system_names_case_insensitive(name, tmp_path):
     out = tmp_path / "x.parquet"
-    r = run("convert", LABELS, "-o", out, "--from", name, "--to", "whenet", "-q")
+    r = hpe("convert", LABELS, "-o", out, "--from", name, "--to", "whenet", "-q")
     assert r.exit_code == 0, r.output
     ref = tmp_path / "ref.parquet"
-    assert run("convert", LABELS, "-o", ref, "--from", name.lower(), "--to", "whenet", "-q").exit_code == 0
+    assert hpe("convert", LABELS, "-o", ref, "--from", name.lower(), "--to", "whenet", "-q").exit_code == 0
     a, b = pd.read_parquet(out), pd.read_parquet(ref)
     np.testing.assert_array_equal(a[["r00", "r11", "r22"]].to_numpy(), b[["r00", "r11", "r22"]].to_numpy())
 
@@ -103,13 +86,13 @@ def _capitalised(tmp_path, header=("Pitch", "Yaw", "Roll")):
 )
 def test_capitalised_columns_get_a_columns_map_hint(command, tmp_path):
     src = _capitalised(tmp_path)
-    r = run(command[0], src, "-o", tmp_path / ("o.csv" if command[0] != "draw" else "d"), *command[1:])
+    r = hpe(command[0], src, "-o", tmp_path / ("o.csv" if command[0] != "draw" else "d"), *command[1:])
     assert r.exit_code == 1
     assert "--columns-map pitch=Pitch,yaw=Yaw,roll=Roll" in r.output, r.output
     assert len(r.output.strip().splitlines()) == 1
     # and the hint works as written
     if command[0] == "convert":
-        ok = run(
+        ok = hpe(
             "convert",
             src,
             "-o",
@@ -162,24 +145,24 @@ def _radians_file(tmp_path, n=40, suffix=".csv"):
 def test_radians_read_as_degrees_warn(command, suffix, tmp_path):
     src = _radians_file(tmp_path, suffix=suffix)
     if command[0] == "evaluate-self":
-        r = run("evaluate", src, src, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--key", "image")
+        r = hpe("evaluate", src, src, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--key", "image")
     else:
-        r = run(command[0], src, "-o", tmp_path / "o.csv", *command[1:])
+        r = hpe(command[0], src, "-o", tmp_path / "o.csv", *command[1:])
     assert r.exit_code == 0, r.output
     assert "read as degrees is within +-pi" in r.stderr and "add --radians" in r.stderr
     if command[0] != "evaluate-self":
-        again = run(command[0], src, "-o", tmp_path / "o2.csv", *command[1:], "--radians")
+        again = hpe(command[0], src, "-o", tmp_path / "o2.csv", *command[1:], "--radians")
         assert again.exit_code == 0 and "+-pi" not in again.stderr
 
 
 def test_degrees_do_not_warn(tmp_path):
-    r = run("convert", LABELS, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet")
+    r = hpe("convert", LABELS, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet")
     assert r.exit_code == 0 and "+-pi" not in r.stderr
 
 
 def test_a_handful_of_small_angles_do_not_warn(tmp_path):
     src = _radians_file(tmp_path, n=5)
-    r = run("convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet")
+    r = hpe("convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet")
     assert r.exit_code == 0 and "+-pi" not in r.stderr
 
 
@@ -200,15 +183,15 @@ def test_degrees_read_as_radians_warn(command, tmp_path):
     else:
         out = tmp_path / ("d" if command[0] == "draw" else "o.csv")
         args = [command[0], LABELS, "-o", out, *command[1:], "--radians"]
-    r = run(*args)
+    r = hpe(*args)
     assert r.exit_code == 0, r.output
     assert "read as radians (--radians) reaches |value| 170" in r.stderr and "drop --radians" in r.stderr
     assert r.stderr.count("read as radians") == 1
-    without = run(*[a for a in args if a != "--radians"], *(["--overwrite"] if command[0] != "evaluate-self" else []))
+    without = hpe(*[a for a in args if a != "--radians"], *(["--overwrite"] if command[0] != "evaluate-self" else []))
     assert "read as radians" not in without.stderr
 
 
 def test_radians_within_a_turn_do_not_warn(tmp_path):
     src = _radians_file(tmp_path)
-    r = run("convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet", "--radians")
+    r = hpe("convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet", "--radians")
     assert r.exit_code == 0 and "read as radians" not in r.stderr and "+-pi" not in r.stderr

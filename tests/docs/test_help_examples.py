@@ -16,10 +16,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import doc_examples as dx  # noqa: E402
+
+from conftest import hpe
 
 ROOT = dx.ROOT
 
@@ -127,16 +128,16 @@ def _files(tmp: Path) -> None:
 def help_examples() -> list[tuple[str, str]]:
     """(command, example line) of every example printed by ``hpe --help`` and ``hpe COMMAND --help``: the
     lines under ``Examples:``."""
-    from hpe_cli.cli.main import COMMANDS, cli
+    from hpe_cli.cli.main import COMMANDS
 
     def examples(text):
         block = text.split("Examples:", 1)[1] if "Examples:" in text else ""
         block = block.split("\nOptions:", 1)[0]
         return dx.commands(block)
 
-    out = [("hpe", line) for line in examples(CliRunner().invoke(cli, ["--help"]).output)]
+    out = [("hpe", line) for line in examples(hpe("--help").output)]
     for name in COMMANDS:
-        text = CliRunner().invoke(cli, [name, "--help"], terminal_width=400).output
+        text = hpe(name, "--help", terminal_width=400).output
         out += [(name, line) for line in examples(text)]
     return out
 

@@ -7,9 +7,8 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.cli.options import known_rows
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -61,65 +60,27 @@ def test_known_rows(parquet):
 
 
 def test_convert_bar_total(bars, parquet, tmp_path):
-    r = CliRunner().invoke(
-        cli,
-        [
-            "convert",
-            str(parquet),
-            "-o",
-            str(tmp_path / "o.parquet"),
-            "--from",
-            "300w_lp",
-            "--to",
-            "6drepnet",
-            "--batch-size",
-            "50",
-        ],
+    r = hpe(
+        "convert", parquet, "-o", tmp_path / "o.parquet", "--from", "300w_lp", "--to", "6drepnet", "--batch-size", "50"
     )
     assert r.exit_code == 0, r.output
     assert bars[0].seen and set(bars[0].seen) == {204} and bars[0].n == 204
 
 
 def test_augment_bar_total(bars, parquet, tmp_path):
-    r = CliRunner().invoke(
-        cli,
-        [
-            "augment",
-            str(parquet),
-            "-o",
-            str(tmp_path / "o.parquet"),
-            "--image-size",
-            "450x450",
-            "--hflip",
-            "--batch-size",
-            "64",
-        ],
+    r = hpe(
+        "augment", parquet, "-o", tmp_path / "o.parquet", "--image-size", "450x450", "--hflip", "--batch-size", "64"
     )
     assert r.exit_code == 0, r.output
     assert set(bars[0].seen) == {204} and bars[0].n == 204
 
 
 def test_evaluate_bar_total(bars, parquet, tmp_path):
-    r = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(parquet),
-            str(parquet),
-            "--pred-system",
-            "300w_lp",
-            "--gt-system",
-            "300w_lp",
-            "--key",
-            "image",
-        ],
-    )
+    r = hpe("evaluate", parquet, parquet, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--key", "image")
     assert r.exit_code == 0, r.output
     assert set(bars[0].seen) == {408} and bars[0].n == 408
 
 
 def test_csv_bar_has_no_made_up_total(bars, tmp_path):
-    r = CliRunner().invoke(
-        cli, ["convert", str(LABELS), "-o", str(tmp_path / "o.csv"), "--from", "300w_lp", "--to", "6drepnet"]
-    )
+    r = hpe("convert", LABELS, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet")
     assert r.exit_code == 0 and set(bars[0].seen) == {None}

@@ -3,14 +3,12 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import click
 import pytest
-from click.testing import CliRunner
 
+from conftest import hpe, hpe_process
 from hpe_cli.cli.main import COMMANDS, cli
 from hpe_cli.cli.suggest import SuggestChoice, near_names
 
@@ -68,14 +66,14 @@ def test_choice_typo_names_the_choice(command, param):
     ],
 )
 def test_choice_typo_through_the_cli(argv, meant):
-    r = CliRunner().invoke(cli, argv)
+    r = hpe(*argv)
     assert r.exit_code == 2, r.output
     assert f"(did you mean {meant}?)" in r.output, r.output
     assert len(r.output.strip().splitlines()) == 1
 
 
 def test_far_choice_gets_no_suggestion():
-    r = CliRunner().invoke(cli, ["draw", "x", "-o", "y", "--style", "zzz"])
+    r = hpe("draw", "x", "-o", "y", "--style", "zzz")
     assert r.exit_code == 2 and "did you mean" not in r.output and "'axes', 'cube'" in r.output
 
 
@@ -84,19 +82,13 @@ def test_far_choice_gets_no_suggestion():
     [("convrt", "convert"), ("relabel_panoptic", "relabel-panoptic"), ("evalute", "evaluate"), ("Audit", "audit")],
 )
 def test_misspelt_command_suggests(typo, meant):
-    p = subprocess.run(
-        [sys.executable, "-m", "hpe_cli", typo, "x"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env={**__import__("os").environ, "PYTHONPATH": str(ROOT)},
-    )
+    p = hpe_process(typo, "x")
     assert p.returncode == 2
     assert p.stderr.strip() == f"Error: No such command {typo!r} (did you mean {meant!r}?).", p.stderr
 
 
 def test_unrelated_command_gets_no_suggestion():
-    r = CliRunner().invoke(cli, ["frobnicate"])
+    r = hpe("frobnicate")
     assert r.exit_code == 2 and "did you mean" not in r.output
     assert "No such command 'frobnicate' (see 'hpe --help' for the commands)." in r.output
 

@@ -8,9 +8,8 @@ from types import SimpleNamespace
 
 import pyarrow as pa
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.pipelines.evaluate_dataset import choose_directmhp, gt_dataset
 
 AFLW = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "aflw2000_prnet"
@@ -72,13 +71,11 @@ def test_cli_prints_the_choice_on_aflw2000(tmp_path):
     )
     args = ["evaluate", str(pred), str(AFLW), "--pred-system", "300w_lp", "--gt-system", "300w_lp"]
     js = tmp_path / "r.json"
-    r = CliRunner().invoke(cli, args + ["--protocol", "directmhp", "--json", str(js)], catch_exceptions=False)
+    r = hpe(*args + ["--protocol", "directmhp", "--json", str(js)])
     assert r.exit_code == 0, r.output
     assert "directmhp: GT is AFLW2000-3D / 300W-LP (.mat labels)" in r.output
     rep = json.loads(js.read_text())
     assert list(rep["protocols"]) == ["directmhp-single"]
     assert "mean_absolute_error_calculate_single" in rep["protocols"]["directmhp-single"]["source"]
-    r = CliRunner().invoke(
-        cli, args + ["--protocol", "directmhp-v2", "--json", str(js), "--overwrite"], catch_exceptions=False
-    )
+    r = hpe(*args + ["--protocol", "directmhp-v2", "--json", str(js), "--overwrite"])
     assert r.exit_code == 0 and list(json.loads(js.read_text())["protocols"]) == ["directmhp-v2"]

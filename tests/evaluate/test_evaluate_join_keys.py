@@ -5,9 +5,8 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 AFLW = SHARED / "realdata" / "aflw2000_prnet"
@@ -16,23 +15,7 @@ pytestmark = pytest.mark.skipif(not (AFLW.is_dir() and PRED.is_file()), reason="
 
 
 def _eval(pred, gt, *args):
-    r = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(pred),
-            str(gt),
-            "--pred-system",
-            "300w_lp",
-            "--gt-system",
-            "300w_lp",
-            "--json",
-            "-",
-            "-q",
-            *map(str, args),
-        ],
-        catch_exceptions=False,
-    )
+    r = hpe("evaluate", pred, gt, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--json", "-", "-q", *args)
     return r, (json.loads(r.output) if r.exit_code == 0 else None)
 
 

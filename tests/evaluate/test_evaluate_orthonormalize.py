@@ -5,10 +5,9 @@ import json
 import numpy as np
 import pandas as pd
 import scipy.linalg
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 COLS = [f"r{i}{j}" for i in range(3) for j in range(3)]
 
@@ -29,22 +28,18 @@ def _files(tmp_path, n=60, seed=3):
 
 
 def _run(tmp_path, *args):
-    return CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(tmp_path / "pred.csv"),
-            str(tmp_path / "gt.csv"),
-            "--pred-system",
-            "300w_lp",
-            "--gt-system",
-            "300w_lp",
-            "--columns",
-            "matrix",
-            "-q",
-            *map(str, args),
-        ],
-        catch_exceptions=False,
+    return hpe(
+        "evaluate",
+        tmp_path / "pred.csv",
+        tmp_path / "gt.csv",
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "--columns",
+        "matrix",
+        "-q",
+        *args,
     )
 
 

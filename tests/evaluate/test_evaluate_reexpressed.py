@@ -6,10 +6,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 GOLD = Path(__file__).resolve().parents[3] / "shared" / "golden" / "evaluate" / "aflw16m"
 pytestmark = pytest.mark.skipif(not GOLD.is_dir(), reason="shared/golden/evaluate not available")
@@ -17,25 +16,21 @@ A = ["pitch", "yaw", "roll"]
 
 
 def _report(pred, gt, psys):
-    r = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(pred),
-            str(gt),
-            "--pred-system",
-            psys,
-            "--gt-system",
-            "300w_lp",
-            "--json",
-            "-",
-            "-q",
-            "--protocol",
-            "hopenet",
-            "--protocol",
-            "opal23",
-        ],
-        catch_exceptions=False,
+    r = hpe(
+        "evaluate",
+        pred,
+        gt,
+        "--pred-system",
+        psys,
+        "--gt-system",
+        "300w_lp",
+        "--json",
+        "-",
+        "-q",
+        "--protocol",
+        "hopenet",
+        "--protocol",
+        "opal23",
     )
     assert r.exit_code == 0, r.output
     return json.loads(r.output)

@@ -10,9 +10,8 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe as hpe_cmd
 from hpe_cli.report.evaluate_page import page_html
 from hpe_cli.report.evaluate_text import WIDTH, same_rotation_notes
 
@@ -21,22 +20,18 @@ LABELS = ROOT / "sample_data" / "labels_300wlp.csv"
 AFLW = ROOT / "sample_data" / "aflw2000"
 
 
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
-
-
 @pytest.fixture(scope="module")
 def tour(tmp_path_factory):
     """The tour's two tables: 6drepnet labels converted from the 300W-LP sample, and the sample itself."""
     tmp = tmp_path_factory.mktemp("tour")
     pred = tmp / "labels_6d.parquet"
-    r = run("convert", LABELS, "-o", pred, "--from", "300w_lp", "--to", "6drepnet", "-q")
+    r = hpe_cmd("convert", LABELS, "-o", pred, "--from", "300w_lp", "--to", "6drepnet", "-q")
     assert r.exit_code == 0, r.output
     return tmp, pred
 
 
 def _evaluate(pred, *extra):
-    r = run("evaluate", pred, LABELS, "--pred-system", "6drepnet", "--gt-system", "300w_lp", *extra)
+    r = hpe_cmd("evaluate", pred, LABELS, "--pred-system", "6drepnet", "--gt-system", "300w_lp", *extra)
     assert r.exit_code == 0, r.output
     return r.output
 
@@ -51,7 +46,7 @@ def test_identical_rotations_explain_the_euler_scores(tour):
     # the reason is real: the sample has rows that hpe audit counts as non-canonical / out of range
     import json
 
-    audit = json.loads(run("audit", LABELS, "--json", "-", "-q").stdout)
+    audit = json.loads(hpe_cmd("audit", LABELS, "--json", "-", "-q").stdout)
     assert audit["non_canonical"] + audit["out_of_range"] >= 1
 
 
@@ -66,9 +61,9 @@ def test_join_internals_only_with_verbose(tour, tmp_path):
     _, pred = tour
     shuffled = tmp_path / "shuffled.csv"  # another row order: a key join, not a streamed pairing
     pd.read_csv(LABELS).sample(frac=1.0, random_state=3).to_csv(shuffled, index=False)
-    r = run("evaluate", pred, shuffled, "--pred-system", "6drepnet", "--gt-system", "300w_lp")
+    r = hpe_cmd("evaluate", pred, shuffled, "--pred-system", "6drepnet", "--gt-system", "300w_lp")
     assert r.exit_code == 0 and "partition" not in r.output and "hash join" not in r.output, r.output
-    r = run("evaluate", pred, shuffled, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "-v")
+    r = hpe_cmd("evaluate", pred, shuffled, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "-v")
     assert r.exit_code == 0 and "joined by key in" in r.output
 
 
@@ -182,7 +177,7 @@ def test_worst_rows_carry_the_prediction_as_written_end_to_end(tmp_path):
     pred["pitch"], pred["yaw"], pred["roll"] = 38.3, 107.4, 21.1
     pred.to_csv(tmp_path / "pred.csv", index=False)
     page = tmp_path / "r.html"
-    r = run(
+    r = hpe_cmd(
         "evaluate", tmp_path / "pred.csv", tmp_path / "gt.csv", "--pred-system", "whenet", "--gt-system", "300w_lp",
         "--report", page, "--worst", "5",
     )  # fmt: skip

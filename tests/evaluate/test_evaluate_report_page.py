@@ -14,9 +14,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 AFLW = SHARED / "realdata" / "aflw2000_prnet"
@@ -36,26 +35,22 @@ def _make_page(tmp_path, worst=6):
     pred = tmp_path / "shuffled.csv"
     pd.read_csv(PRED).sample(frac=1.0, random_state=11).to_csv(pred, index=False)
     page = tmp_path / "page.html"
-    r = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(pred),
-            str(AFLW),
-            "--pred-system",
-            "300w_lp",
-            "--gt-system",
-            "300w_lp",
-            "--report",
-            str(page),
-            "--by",
-            "image",
-            "--yaw-bins",
-            "30",
-            "--worst",
-            str(worst),
-        ],
-        catch_exceptions=False,
+    r = hpe(
+        "evaluate",
+        pred,
+        AFLW,
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "--report",
+        page,
+        "--by",
+        "image",
+        "--yaw-bins",
+        "30",
+        "--worst",
+        worst,
     )
     assert r.exit_code == 0, r.output
     return page, r.output

@@ -10,9 +10,8 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 SEQ = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "panoptic_160906_pizza1"
 pytestmark = pytest.mark.skipif(not (SEQ / "hdImgs").is_dir(), reason="shared Panoptic sample not available")
@@ -20,11 +19,7 @@ pytestmark = pytest.mark.skipif(not (SEQ / "hdImgs").is_dir(), reason="shared Pa
 
 def test_panoptic_worst_rows_pictured_around_the_faces(tmp_path):
     labels = tmp_path / "pizza.parquet"
-    r = CliRunner().invoke(
-        cli,
-        ["relabel-panoptic", str(SEQ), "-o", str(labels), "--cameras", "00_00,00_08", "--frames", "1147:1148"],
-        catch_exceptions=False,
-    )
+    r = hpe("relabel-panoptic", SEQ, "-o", labels, "--cameras", "00_00,00_08", "--frames", "1147:1148")
     assert r.exit_code == 0, r.output
     t = pd.read_parquet(labels)
     pred = t[["sequence", "camera", "frame", "person_id", "pitch", "yaw", "roll"]].copy()
@@ -32,28 +27,24 @@ def test_panoptic_worst_rows_pictured_around_the_faces(tmp_path):
     p = tmp_path / "pred.csv"
     pred.sample(frac=1.0, random_state=2).to_csv(p, index=False)
     page = tmp_path / "r.html"
-    r = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(p),
-            str(labels),
-            "--pred-system",
-            "300w_lp",
-            "--gt-system",
-            "300w_lp",
-            "--key",
-            "sequence,camera,frame,person_id",
-            "--images",
-            str(SEQ),
-            "--report",
-            str(page),
-            "--worst",
-            "5",
-            "--protocol",
-            "directmhp",
-        ],
-        catch_exceptions=False,
+    r = hpe(
+        "evaluate",
+        p,
+        labels,
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "--key",
+        "sequence,camera,frame,person_id",
+        "--images",
+        SEQ,
+        "--report",
+        page,
+        "--worst",
+        "5",
+        "--protocol",
+        "directmhp",
     )
     assert r.exit_code == 0, r.output
     assert "directmhp: GT is CMU Panoptic" in r.output

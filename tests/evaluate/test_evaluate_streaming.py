@@ -7,9 +7,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.metrics.evaluate import compute_rows, evaluate_canonical, yaw_bin_edges
 from hpe_cli.metrics.protocols import PROTOCOLS
 from hpe_cli.metrics.stream import Accumulator
@@ -76,28 +75,24 @@ def test_accumulator_in_chunks_equals_whole_arrays():
 
 def _run(tmp_path, pred, *args):
     rep = tmp_path / f"{pred.stem}.json"
-    r = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(pred),
-            str(SYN / "gt.csv"),
-            "--pred-system",
-            "300w_lp",
-            "--gt-system",
-            "300w_lp",
-            "--json",
-            str(rep),
-            "-q",
-            "--batch-size",
-            "256",
-            "--by",
-            "group",
-            "--yaw-bins",
-            "45",
-            *args,
-        ],
-        catch_exceptions=False,
+    r = hpe(
+        "evaluate",
+        pred,
+        SYN / "gt.csv",
+        "--pred-system",
+        "300w_lp",
+        "--gt-system",
+        "300w_lp",
+        "--json",
+        rep,
+        "-q",
+        "--batch-size",
+        "256",
+        "--by",
+        "group",
+        "--yaw-bins",
+        "45",
+        *args,
     )
     assert r.exit_code == 0, r.output
     return json.loads(rep.read_text())
@@ -196,7 +191,7 @@ def test_a_key_repeated_in_another_chunk_is_named(tmp_path, order):
     gt.to_csv(tmp_path / "gt.csv", index=False)
     pr.to_csv(tmp_path / "pred.csv", index=False)
     args = ["--pred-system", "300w_lp", "--gt-system", "300w_lp", "--batch-size", "64", "-q"]
-    r = CliRunner().invoke(cli, ["evaluate", str(tmp_path / "pred.csv"), str(tmp_path / "gt.csv"), *args])
+    r = hpe("evaluate", tmp_path / "pred.csv", tmp_path / "gt.csv", *args)
     assert r.exit_code == 1, r.output
     key = gt.loc[150, "image"]
     assert f"duplicate key image={key!r}" in r.output and "line 152" in r.output and "352" in r.output, r.output

@@ -28,9 +28,8 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 GOLDEN = Path(__file__).resolve().parents[3] / "shared" / "golden" / "evaluate"
 SETS = ["aflw16m", "syn"]
@@ -41,21 +40,7 @@ pytestmark = pytest.mark.skipif(not GOLDEN.is_dir(), reason="shared/golden/evalu
 
 def _run(tmp_path, tag, pred, gt, *args):
     rep = tmp_path / f"{tag}.json"
-    r = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(pred),
-            str(gt),
-            "--json",
-            str(rep),
-            "-q",
-            "--rejects",
-            str(tmp_path / f"{tag}_rejects.csv"),
-            *args,
-        ],
-        catch_exceptions=False,
-    )
+    r = hpe("evaluate", pred, gt, "--json", rep, "-q", "--rejects", tmp_path / f"{tag}_rejects.csv", *args)
     assert r.exit_code == 0, r.output
     return json.loads(rep.read_text())
 
@@ -221,7 +206,7 @@ def test_dad3dheads_is_unitless_and_raw_angles_not_reexpressed(reports):
 def test_help_lists_every_protocol_with_its_source():
     from hpe_cli.metrics.protocols import PROTOCOLS
 
-    r = CliRunner().invoke(cli, ["evaluate", "--help"], terminal_width=200)
+    r = hpe("evaluate", "--help", terminal_width=200)
     assert r.exit_code == 0
     for p in PROTOCOLS.values():
         assert p.name in r.output and p.source in r.output, p.name

@@ -12,9 +12,7 @@ import importlib.util
 import os
 from pathlib import Path
 
-from click.testing import CliRunner
-
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 ROOT = Path(__file__).resolve().parents[2]
 #: (id, layout options): every layout, 6drepnet in both forms
@@ -37,15 +35,11 @@ def sample_data_script():
     return mod
 
 
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=True)
-
-
 def make_release(dst: Path):
     """``dst/rel`` (the release) and ``dst/labels.parquet`` (its one-process relabel)."""
     root = sample_data_script().make_video_release(dst / "rel")
     labels = dst / "labels.parquet"
-    res = run("relabel-panoptic", root, "-o", labels, "-q")
+    res = hpe("relabel-panoptic", root, "-o", labels, "-q")
     assert res.exit_code == 0, res.output
     return root, labels
 

@@ -9,15 +9,10 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 N = 24
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +70,7 @@ def test_labels_plus_rejects_are_the_input_rows(tmp_path, table, rule):
     args, reason = RULES[rule]
     args = [str(split_file) if a == "SPLIT" else a for a in args]
     out, rej = tmp_path / "o", tmp_path / "rej.csv"
-    r = run("export", path, "-o", out, "--rejects", rej, "-q", *args)
+    r = hpe("export", path, "-o", out, "--rejects", rej, "-q", *args)
     assert r.exit_code == 0, r.output
     summary = json.loads((out / "export.json").read_text())
     rejects = pd.read_csv(rej)

@@ -12,9 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.io import jpeg
 from hpe_cli.pipelines.export import workers
 
@@ -22,16 +21,12 @@ REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 PIZZA = REALDATA / "panoptic_160906_pizza1"
 
 
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
-
-
 @pytest.fixture(scope="module")
 def pizza(tmp_path_factory):
     if not (PIZZA / "hdImgs").is_dir():
         pytest.skip("no real Panoptic frames")
     out = tmp_path_factory.mktemp("pizza") / "pizza.parquet"
-    r = run("relabel-panoptic", PIZZA, "-o", out, "--cameras", "00_00,00_08,00_15,00_23", "-q")
+    r = hpe("relabel-panoptic", PIZZA, "-o", out, "--cameras", "00_00,00_08,00_15,00_23", "-q")
     assert r.exit_code == 0, r.output
     return out
 
@@ -57,7 +52,7 @@ def test_crops_are_the_same_bytes_with_and_without_the_rectangle_decoder(tmp_pat
     def export(name, state):
         monkeypatch.setattr(jpeg, "_STATE", state)
         out = tmp_path / name
-        r = run("export", pizza, "-o", out, "--layout", layout, "--images", PIZZA, "-q",
+        r = hpe("export", pizza, "-o", out, "--layout", layout, "--images", PIZZA, "-q",
                 "--rejects", tmp_path / f"{name}.csv", *extra)  # fmt: skip
         assert r.exit_code == 0, r.output
         return out

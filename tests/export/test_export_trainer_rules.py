@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from conftest import hpe
 from hpe_cli.io.export import get_layout
 
 ANGLE = st.floats(-180, 180, allow_nan=False)
@@ -55,14 +56,9 @@ def test_trainer_only_for_6drepnet():
 
 
 def test_cli_trainer_usage(tmp_path):
-    from click.testing import CliRunner
-
-    from hpe_cli.cli.main import cli
 
     (tmp_path / "t.csv").write_text("image,bbox_x,bbox_y,bbox_w,bbox_h,pitch,yaw,roll\n")
-    r = CliRunner().invoke(
-        cli, ["export", str(tmp_path / "t.csv"), "-o", str(tmp_path / "o"), "--layout", "hf", "--trainer", "hopenet"]
-    )
+    r = hpe("export", tmp_path / "t.csv", "-o", tmp_path / "o", "--layout", "hf", "--trainer", "hopenet")
     assert r.exit_code == 2 and "--trainer applies to --layout 6drepnet only" in r.output
-    r = CliRunner().invoke(cli, ["export", "--help"])
+    r = hpe("export", "--help")
     assert "--trainer [hopenet|6drepnet|6drepnet360]" in r.output and "--trainer hopenet" in r.output

@@ -17,8 +17,9 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.io
-from release import LAYOUT_IDS, export_args, make_release, run, sample_data_script, tree
+from release import LAYOUT_IDS, export_args, make_release, sample_data_script, tree
 
+from conftest import hpe
 from hpe_cli.pipelines.export import units as U
 
 
@@ -34,7 +35,7 @@ def reference(release, tmp_path_factory):
     d = tmp_path_factory.mktemp("reference")
     out = {}
     for lid in LAYOUT_IDS:
-        res = run(*export_args(lid, labels, root, d / lid, d / f"{lid}.csv"))
+        res = hpe(*export_args(lid, labels, root, d / lid, d / f"{lid}.csv"))
         assert res.exit_code == 0, res.output
         out[lid] = (tree(d / lid), (d / f"{lid}.csv").read_bytes())
     return out
@@ -48,7 +49,7 @@ def _same(reference, lid, out, rej):
 @pytest.mark.parametrize("lid", LAYOUT_IDS)
 def test_workers_give_the_one_process_bytes(release, reference, tmp_path, lid):
     root, labels = release
-    res = run(*export_args(lid, labels, root, tmp_path / "o", tmp_path / "r.csv", "--workers", "2"))
+    res = hpe(*export_args(lid, labels, root, tmp_path / "o", tmp_path / "r.csv", "--workers", "2"))
     assert res.exit_code == 0, res.output
     _same(reference, lid, tmp_path / "o", tmp_path / "r.csv")
     assert sorted(os.listdir(tmp_path)) == ["o", "r.csv"]
@@ -59,7 +60,7 @@ def test_local_cluster_gives_the_one_process_bytes(release, reference, tmp_path,
     pytest.importorskip("distributed")
     root, labels = release
     args = export_args(lid, labels, root, tmp_path / "o", tmp_path / "r.csv", "--scheduler", "local", "--workers", "2")
-    res = run(*args)
+    res = hpe(*args)
     assert res.exit_code == 0, res.output
     _same(reference, lid, tmp_path / "o", tmp_path / "r.csv")
     assert sorted(os.listdir(tmp_path)) == ["o", "r.csv"]  # no parts folder, no temp file
@@ -68,7 +69,7 @@ def test_local_cluster_gives_the_one_process_bytes(release, reference, tmp_path,
 def test_two_runs_write_the_same_mat_files(release, reference, tmp_path):
     """The .mat header's text is pinned (scipy writes the time there); loadmat reads the files as before."""
     root, labels = release
-    res = run(*export_args("6drepnet", labels, root, tmp_path / "o", tmp_path / "r.csv"))
+    res = hpe(*export_args("6drepnet", labels, root, tmp_path / "o", tmp_path / "r.csv"))
     assert res.exit_code == 0, res.output
     _same(reference, "6drepnet", tmp_path / "o", tmp_path / "r.csv")
     mats = sorted((tmp_path / "o").rglob("*.mat"))
@@ -84,7 +85,7 @@ def test_short_video_rows_are_rejects_naming_video_and_frame(release, reference,
     rejects (each naming seqB's own video and the frame), and seqA, whose images have the same names, is not
     taken for seqB."""
     root, labels = release
-    res = run(*export_args("hf", labels, root, tmp_path / "o", tmp_path / "r.csv"))
+    res = hpe(*export_args("hf", labels, root, tmp_path / "o", tmp_path / "r.csv"))
     assert res.exit_code == 0, res.output
     rej = pd.read_csv(tmp_path / "r.csv")
     assert len(rej) == 18
@@ -124,7 +125,7 @@ def test_small_blocks_give_the_same_bytes(release, reference, tmp_path, monkeypa
     """Units of 4 frames (each block one seek into the video) write what whole-video units write."""
     monkeypatch.setattr(U, "BLOCK_FRAMES", 4)
     root, labels = release
-    res = run(*export_args("hf", labels, root, tmp_path / "o", tmp_path / "r.csv"))
+    res = hpe(*export_args("hf", labels, root, tmp_path / "o", tmp_path / "r.csv"))
     assert res.exit_code == 0, res.output
     _same(reference, "hf", tmp_path / "o", tmp_path / "r.csv")
 
@@ -142,7 +143,7 @@ def test_resume_keeps_finished_units_and_refuses_a_changed_video(release, refere
 
     with monkeypatch.context() as m:
         m.setattr(write, "write_index", fail)
-        res = run(*args)
+        res = hpe(*args)
     assert res.exit_code == 1 and "stopped on purpose" in res.output
     parts = tmp_path / ".o.hpe-parts"
     assert len(list(parts.glob("[0-9]*.json"))) == 6  # 2 sequences x 3 videos, one block each
@@ -152,7 +153,7 @@ def test_resume_keeps_finished_units_and_refuses_a_changed_video(release, refere
     st = os.stat(video)
     os.utime(video, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
     try:
-        res = run(*args)
+        res = hpe(*args)
         assert res.exit_code == 1, res.output
         line = res.output.strip().splitlines()[-1]
         assert line.startswith(f"Error: {video}: changed since the interrupted run"), line
@@ -162,7 +163,7 @@ def test_resume_keeps_finished_units_and_refuses_a_changed_video(release, refere
 
     with monkeypatch.context() as m:  # every unit is done: none is computed again
         m.setattr(U, "run_unit", lambda task: pytest.fail("a finished unit was computed again"))
-        res = run(*args)
+        res = hpe(*args)
     assert res.exit_code == 0, res.output
     _same(reference, "whenet", out, rej)
     assert sorted(os.listdir(tmp_path)) == ["o", "r.csv"]
@@ -176,10 +177,10 @@ def test_resume_names_a_damaged_part(release, tmp_path, monkeypatch):
     args = export_args("hf", labels, root, tmp_path / "o", tmp_path / "r.csv", "--resume")
     with monkeypatch.context() as m:
         m.setattr(write, "write_index", lambda *a, **k: (_ for _ in ()).throw(HpeError("stop")))
-        assert run(*args).exit_code == 1
+        assert hpe(*args).exit_code == 1
     spill = tmp_path / ".o.hpe-parts" / "000001.spill"
     spill.write_bytes(spill.read_bytes()[:10])
-    res = run(*args)
+    res = hpe(*args)
     assert res.exit_code == 1
     assert f"Error: {spill}: damaged part of the interrupted run" in res.output, res.output
 
@@ -192,7 +193,7 @@ def test_scheduler_unreachable_is_one_line_in_seconds(release, tmp_path):
     root, labels = release
     t0 = time.monotonic()
     address = f"tcp://127.0.0.1:{port}"
-    res = run(*export_args("whenet", labels, root, tmp_path / "o", tmp_path / "r.csv", "--scheduler", address))
+    res = hpe(*export_args("whenet", labels, root, tmp_path / "o", tmp_path / "r.csv", "--scheduler", address))
     assert time.monotonic() - t0 < 10
     assert res.exit_code == 1
     errors = [ln for ln in res.output.splitlines() if ln.startswith("Error:")]

@@ -7,17 +7,12 @@ from __future__ import annotations
 import hashlib
 import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
-
-from hpe_cli.cli.main import cli
 
 ROOT = Path(__file__).resolve().parents[2]
 SYNTH = ROOT / "sample_data" / "panoptic_synth"
@@ -25,18 +20,6 @@ AGORA_PKL = ROOT / "tests" / "data" / "agora" / "validation_0_withjv.pkl"
 AFLW = ROOT / "sample_data" / "aflw2000"
 FIX = ROOT / "tests" / "fixtures" / "conventions"
 TEMP_MARK = ".hpe-"
-
-
-def run(*args, **kw):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=True, **kw)
-
-
-def run_sub(*args, timeout=120, **kw):
-    """``python -m hpe_cli ARGS`` in a subprocess (stdout, stderr as bytes)."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    return subprocess.run(
-        [sys.executable, "-m", "hpe_cli", *map(os.fsencode, args)], capture_output=True, env=env, timeout=timeout, **kw
-    )
 
 
 def tree(folder: Path) -> dict:

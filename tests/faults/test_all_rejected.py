@@ -6,13 +6,8 @@ from __future__ import annotations
 
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
+from conftest import hpe
 
 
 @pytest.fixture
@@ -55,7 +50,7 @@ def test_all_rejected_still_writes_the_rejects_file(case, tmp_path, bad_table, m
     args, n = _cases(tmp_path, bad_table, missing_images)[case]
     before = {p.name for p in tmp_path.iterdir()}
     rej = tmp_path / "rej.csv"
-    r = run(*args, "--rejects", rej)
+    r = hpe(*args, "--rejects", rej)
     assert r.exit_code == 1, r.output
     lines = r.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("Error: ") and f"every row's reason -> {rej}" in lines[0]
@@ -70,8 +65,8 @@ def test_all_rejected_still_writes_the_rejects_file(case, tmp_path, bad_table, m
 def test_without_rejects_or_with_strict_nothing_is_written(case, tmp_path, bad_table, missing_images):
     args, _ = _cases(tmp_path, bad_table, missing_images)[case]
     before = {p.name for p in tmp_path.iterdir()}
-    assert run(*args).exit_code == 1
-    assert run(*args, "--rejects", tmp_path / "rej.csv", "--strict").exit_code == 1
+    assert hpe(*args).exit_code == 1
+    assert hpe(*args, "--rejects", tmp_path / "rej.csv", "--strict").exit_code == 1
     assert {p.name for p in tmp_path.iterdir()} == before
 
 
@@ -79,9 +74,9 @@ def test_an_existing_rejects_file_needs_overwrite(tmp_path, bad_table, missing_i
     args, _ = _cases(tmp_path, bad_table, missing_images)["augment"]
     rej = tmp_path / "rej.csv"
     rej.write_text("old\n")
-    r = run(*args, "--rejects", rej)
+    r = hpe(*args, "--rejects", rej)
     assert r.exit_code == 1 and "already exists" in r.output and rej.read_text() == "old\n"
-    r = run(*args, "--rejects", rej, "--overwrite")
+    r = hpe(*args, "--rejects", rej, "--overwrite")
     assert r.exit_code == 1 and len(pd.read_csv(rej)) == 3
 
 
@@ -91,20 +86,20 @@ def test_draw_sets_unparseable_rows_aside_with_rejects(tmp_path):
     src = tmp_path / "t.csv"
     src.write_text("image,pitch,yaw,roll\na.jpg,x,1,2\nb.jpg,3,1,2\n")
     rej = tmp_path / "rej.csv"
-    r = run("draw", src, "-o", tmp_path / "d", "--image-size", "64x64", "--rejects", rej)
+    r = hpe("draw", src, "-o", tmp_path / "d", "--image-size", "64x64", "--rejects", rej)
     assert r.exit_code == 0, r.output
     assert "rejected: 1 non-numeric value in pitch" in r.output
     frame = pd.read_csv(rej)
     assert frame["row"].tolist() == [2] and frame["reason"].tolist() == ["non-numeric value in pitch"]
     assert len(list((tmp_path / "d").iterdir())) == 1
     # without --rejects: the first such row is the error, nothing written
-    r = run("draw", src, "-o", tmp_path / "d2", "--image-size", "64x64")
+    r = hpe("draw", src, "-o", tmp_path / "d2", "--image-size", "64x64")
     assert r.exit_code == 1 and f"{src}: line 2: non-numeric value in pitch" in r.output
     assert not (tmp_path / "d2").exists()
     # every row unparseable: exit 1, the rejects file says why
     bad = tmp_path / "bad.csv"
     bad.write_text("image,pitch,yaw,roll\na.jpg,x,1,2\n")
-    r = run("draw", bad, "-o", tmp_path / "d3", "--image-size", "64x64", "--rejects", tmp_path / "rej3.csv")
+    r = hpe("draw", bad, "-o", tmp_path / "d3", "--image-size", "64x64", "--rejects", tmp_path / "rej3.csv")
     assert r.exit_code == 1 and "every row's reason" in r.output
     assert len(pd.read_csv(tmp_path / "rej3.csv")) == 1 and not (tmp_path / "d3").exists()
 
@@ -129,7 +124,7 @@ def test_export_with_every_label_rejected_still_writes_the_rejects_file(tmp_path
     before = {p.name for p in tmp_path.iterdir()}
     rej = tmp_path / "rej.csv"
     args = ["export", table, "-o", tmp_path / "out", "--layout", "fsanet", "--images", tmp_path, "--system", "300w_lp"]
-    r = run(*args, "--rejects", rej)
+    r = hpe(*args, "--rejects", rej)
     assert r.exit_code == 1, r.output
     lines = r.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("Error: --layout fsanet: ") and f"-> {rej}" in lines[0], r.output
@@ -138,6 +133,6 @@ def test_export_with_every_label_rejected_still_writes_the_rejects_file(tmp_path
     assert {p.name for p in tmp_path.iterdir()} - before == {"rej.csv"}
     # without --rejects, or with --strict: nothing at all
     rej.unlink()
-    assert run(*args).exit_code == 1
-    assert run(*args, "--rejects", rej, "--strict").exit_code == 1
+    assert hpe(*args).exit_code == 1
+    assert hpe(*args, "--rejects", rej, "--strict").exit_code == 1
     assert {p.name for p in tmp_path.iterdir()} == before

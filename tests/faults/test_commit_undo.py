@@ -9,6 +9,7 @@ import os
 
 import pytest
 
+from conftest import hpe
 from hpe_cli.errors import HpeError
 from hpe_cli.io import transaction as tx
 
@@ -225,7 +226,7 @@ def test_a_target_folder_whose_sub_path_is_a_file(tmp_path):
 def test_augment_out_images_commit_failing_halfway_leaves_nothing(tmp_path):
     """``hpe augment --out-images`` whose commit fails on a later image (its name is taken by a folder made
     after the run started) leaves none of the earlier images."""
-    from .conftest import make_images, run
+    from .conftest import make_images
 
     imgs = tmp_path / "imgs"
     make_images(imgs, ["a.jpg", "b.jpg", "c.jpg"], size=(80, 60))
@@ -242,7 +243,7 @@ def test_augment_out_images_commit_failing_halfway_leaves_nothing(tmp_path):
     import unittest.mock
 
     with unittest.mock.patch.object(tx, "_place", place):
-        res = run(
+        res = hpe(
             "augment",
             t,
             "-o",

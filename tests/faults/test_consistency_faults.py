@@ -16,7 +16,9 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from .conftest import ROOT, check_failed, make_images, run, temp_files, tree
+from conftest import hpe
+
+from .conftest import ROOT, check_failed, make_images, temp_files, tree
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -40,7 +42,7 @@ def _audit(path, tmp, *extra):
     args = ["audit", path, "--consistency", "-q", *extra]
     for k, v in o.items():
         args += [k, v]
-    return run(*args), o
+    return hpe(*args), o
 
 
 def _failed(res, o, tmp, snap, name, codes=(1,)):
@@ -157,10 +159,10 @@ def test_consistency_usage_errors_exit_2(lm68, tmp_path):
     path = tmp_path / "t.parquet"
     lm68.to_parquet(path)
     snap = tree(tmp_path)
-    res = run("audit", path, "--suspects", tmp_path / "s.csv")
+    res = hpe("audit", path, "--suspects", tmp_path / "s.csv")
     _failed(res, {}, tmp_path, snap, "--consistency", codes=(2,))
     for bad in (["--max-jump", "-1"], ["--max-jump", "0"], ["--suspect-score", "abc"]):
-        _failed(run("audit", path, "--consistency", *bad), {}, tmp_path, snap, bad[0], codes=(2,))
+        _failed(hpe("audit", path, "--consistency", *bad), {}, tmp_path, snap, bad[0], codes=(2,))
 
 
 # --------------------------------------------------------------------------------------- --exclude
@@ -176,7 +178,7 @@ def table(tmp_path):
 
 def _convert(inp, tmp, lst, *extra):
     out = tmp / "out.parquet"
-    return run("convert", inp, "-o", out, "--from", "300w_lp", "--to", "300w_lp", "--exclude", lst, *extra), out
+    return hpe("convert", inp, "-o", out, "--from", "300w_lp", "--to", "300w_lp", "--exclude", lst, *extra), out
 
 
 @pytest.mark.parametrize(
@@ -207,7 +209,7 @@ def test_an_exclude_list_with_no_key_of_the_input_is_a_usage_error_naming_it(tab
         res, out = _convert(table, tmp_path, lst)
     else:
         out = tmp_path / "exp"
-        res = run("export", table, "-o", out, "--layout", "whenet", "--images", tmp_path / "img", "--exclude", lst)
+        res = hpe("export", table, "-o", out, "--layout", "whenet", "--images", tmp_path / "img", "--exclude", lst)
     line = check_failed(res, lst.name, codes=(2,))
     assert "none of its key columns" in line and "image" in line, line
     assert not out.exists() and not temp_files(tmp_path) and tree(tmp_path) == snap

@@ -13,9 +13,10 @@ import time
 
 import pytest
 
+from conftest import hpe
 from hpe_cli.pipelines import dask_runner
 
-from .conftest import ROOT, SYNTH, check_failed, run, temp_files
+from .conftest import ROOT, SYNTH, check_failed, temp_files
 from .test_runs_resume_workers import _alive, _children, _sequence
 
 
@@ -43,7 +44,7 @@ def test_scheduler_address_fails_in_seconds(tmp_path, monkeypatch, request, whic
     monkeypatch.setattr(dask_runner, "CONNECT_SECONDS", 1.0)
     address = request.getfixturevalue(which)
     t0 = time.monotonic()
-    res = run("relabel-panoptic", SYNTH, "-o", tmp_path / "o.parquet", "--scheduler", address)
+    res = hpe("relabel-panoptic", SYNTH, "-o", tmp_path / "o.parquet", "--scheduler", address)
     assert time.monotonic() - t0 < 10
     line = check_failed(res, must_name=address)
     assert reason in line, line

@@ -10,11 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import hpe
 from hpe_cli.errors import HpeError
 from hpe_cli.io import os_errors
 from hpe_cli.io.os_errors import os_reason, write_bytes
-
-from .conftest import run
 
 ROOT = Path(__file__).resolve().parents[2]
 AFLW = ROOT / "sample_data" / "aflw2000"
@@ -51,7 +50,7 @@ def test_augment_out_images_on_a_full_disk(tmp_path, monkeypatch):
 
     monkeypatch.setattr(os_errors, "open", full_open, raising=False)
     out, imgs = tmp_path / "out.parquet", tmp_path / "imgs"
-    r = run("augment", AFLW, "-o", out, "--hflip", "--images", AFLW, "--out-images", imgs)
+    r = hpe("augment", AFLW, "-o", out, "--hflip", "--images", AFLW, "--out-images", imgs)
     assert r.exit_code == 1
     lines = r.output.strip().splitlines()
     assert len(lines) == 1, r.output
@@ -73,7 +72,7 @@ def test_export_crops_on_a_full_disk_name_the_crop(tmp_path, monkeypatch):
 
     monkeypatch.setattr(os_errors, "open", full_open, raising=False)
     out = tmp_path / "out"
-    r = run("export", AFLW, "-o", out, "--layout", "6drepnet", "--form", "crops", "--workers", "1")
+    r = hpe("export", AFLW, "-o", out, "--layout", "6drepnet", "--form", "crops", "--workers", "1")
     assert r.exit_code == 1, r.output
     lines = r.output.strip().splitlines()
     assert len(lines) == 1, r.output

@@ -12,7 +12,9 @@ import shutil
 import pandas as pd
 import pytest
 
-from .conftest import AFLW, TEMP_MARK, check_failed, run, temp_files, tree
+from conftest import hpe
+
+from .conftest import AFLW, TEMP_MARK, check_failed, temp_files, tree
 
 FAULTS = {
     "zero-byte": lambda p: p.write_bytes(b""),
@@ -57,7 +59,7 @@ def test_broken_image_without_rejects_is_one_line(tmp_path, fault, layout):
     src, victim = broken_copy(tmp_path, fault)
     before = tree(src)
     out = tmp_path / "out"
-    res = run("export", src, "-o", out, *layout_args(layout))
+    res = hpe("export", src, "-o", out, *layout_args(layout))
     line = check_failed(res, must_name=victim.name)
     assert f"{victim.with_suffix('.mat')}" in line and REASON[fault] in line  # the label file and the image
     assert not out.exists() and not temp_files(tmp_path) and tree(src) == before
@@ -69,7 +71,7 @@ def test_broken_image_without_rejects_is_one_line(tmp_path, fault, layout):
 def test_broken_image_with_rejects_is_a_reject(tmp_path, fault, layout):
     src, victim = broken_copy(tmp_path, fault)
     out, rej = tmp_path / "out", tmp_path / "rej.csv"
-    res = run("export", src, "-o", out, "--rejects", rej, "-q", *layout_args(layout))
+    res = hpe("export", src, "-o", out, "--rejects", rej, "-q", *layout_args(layout))
     assert res.exit_code == 0, res.output
     assert "internal error" not in res.output and "Traceback" not in res.output
     r = pd.read_csv(rej)
@@ -88,7 +90,7 @@ def test_every_image_broken_exits_1(tmp_path):
     shutil.copytree(AFLW, src)
     for p in src.glob("*.jpg"):
         p.write_bytes(b"")
-    res = run("export", src, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "rej.csv")
+    res = hpe("export", src, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "rej.csv")
     check_failed(res)
     assert not (tmp_path / "out").exists()
 
@@ -96,7 +98,7 @@ def test_every_image_broken_exits_1(tmp_path):
 @pytest.mark.skipif(not AFLW.exists(), reason="no AFLW2000 sample")
 def test_png_under_a_jpg_name_is_exported(tmp_path):
     src, _ = broken_copy(tmp_path, "png-named-jpg")
-    res = run("export", src, "-o", tmp_path / "out", "--layout", "whenet", "-q")
+    res = hpe("export", src, "-o", tmp_path / "out", "--layout", "whenet", "-q")
     assert res.exit_code == 0, res.output
 
 
@@ -131,11 +133,11 @@ def test_image_size_differs_from_the_labels(tmp_path):
     """A frame whose size is not the labels' image_width x image_height (a 1280x720 video or image for a
     1920x1080 calibration) is refused: its boxes would be cut from the wrong pixels."""
     path = _sized_table(tmp_path, 1920, 1080)
-    res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet")
+    res = hpe("export", path, "-o", tmp_path / "out", "--layout", "whenet")
     line = check_failed(res, must_name=str(path))
     assert "line 2" in line and "image size 1280x720 differs" in line and "1920x1080" in line  # CSV: line 2
     assert not (tmp_path / "out").exists()
-    res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv", "-q")
+    res = hpe("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv", "-q")
     assert res.exit_code == 0, res.output
     r = pd.read_csv(tmp_path / "r.csv")
     assert r["image"].tolist() == ["img/a.jpg"] and r["reason"].iloc[0].startswith("image size 1280x720")
@@ -146,6 +148,6 @@ def test_video_frames_smaller_than_the_calibration(tmp_path, monkeypatch):
     from .test_export_video_names import _video_table
 
     path = _video_table(tmp_path, monkeypatch, ok_row=False)
-    res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
+    res = hpe("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
     check_failed(res)  # every head rejected: nothing written, exit 1
     assert "image size 1280x720 differs" in res.output and not (tmp_path / "out").exists()

@@ -18,7 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import ROOT, alive, children, run, temp_files
+from conftest import hpe
+
+from .conftest import ROOT, alive, children, temp_files
 
 _spec = importlib.util.spec_from_file_location("export_release", ROOT / "tests" / "export" / "release.py")
 R = importlib.util.module_from_spec(_spec)
@@ -49,7 +51,7 @@ def _wait_for_units(proc, parts: Path, n: int, seconds: float = 90):
 def _interrupt_then_resume(release, tmp_path, lid, extra=(), sig=signal.SIGTERM):
     root, labels = release
     ref = tmp_path / "ref"
-    res = run(*R.export_args(lid, labels, root, ref / "o", ref / "r.csv"))
+    res = hpe(*R.export_args(lid, labels, root, ref / "o", ref / "r.csv"))
     assert res.exit_code == 0, res.output
     dst = tmp_path / "dst"
     dst.mkdir()
@@ -75,7 +77,7 @@ def _interrupt_then_resume(release, tmp_path, lid, extra=(), sig=signal.SIGTERM)
         assert temp_files(dst) == []
     done = len(list(parts.glob("[0-9]*.json")))
     assert done >= 1 and not (dst / "o").exists() and not (dst / "r.csv").exists()
-    res = run(*args)
+    res = hpe(*args)
     assert res.exit_code == 0, res.output
     assert R.tree(dst / "o") == R.tree(ref / "o")
     assert (dst / "r.csv").read_bytes() == (ref / "r.csv").read_bytes()
@@ -99,7 +101,7 @@ def test_sigterm_of_a_local_cluster_run_then_resume(release, tmp_path):
 def test_a_killed_worker_is_one_line_and_the_run_resumes(release, tmp_path):
     root, labels = release
     ref = tmp_path / "ref"
-    assert run(*R.export_args("hf", labels, root, ref / "o", ref / "r.csv")).exit_code == 0
+    assert hpe(*R.export_args("hf", labels, root, ref / "o", ref / "r.csv")).exit_code == 0
     dst = tmp_path / "dst"
     dst.mkdir()
     args = R.export_args("hf", labels, root, dst / "o", dst / "r.csv", "--resume", "--workers", "2")
@@ -119,7 +121,7 @@ def test_a_killed_worker_is_one_line_and_the_run_resumes(release, tmp_path):
         pytest.skip("the killed worker was idle")
     assert proc.returncode == 1 and len(lines) == 1 and "worker process died" in lines[0], err.decode()
     assert not (dst / "o").exists() and temp_files(dst) == []
-    res = run(*args)
+    res = hpe(*args)
     assert res.exit_code == 0, res.output
     assert R.tree(dst / "o") == R.tree(ref / "o")
 
@@ -154,7 +156,7 @@ def test_a_dask_worker_killed_mid_run(release, tmp_path):
     pytest.importorskip("distributed")
     root, labels = release
     ref = tmp_path / "ref"
-    assert run(*R.export_args("hf", labels, root, ref / "o", ref / "r.csv")).exit_code == 0
+    assert hpe(*R.export_args("hf", labels, root, ref / "o", ref / "r.csv")).exit_code == 0
     dst = tmp_path / "dst"
     dst.mkdir()
     args = R.export_args(
@@ -177,7 +179,7 @@ def test_a_dask_worker_killed_mid_run(release, tmp_path):
     if proc.returncode != 0:
         lines = err.decode().strip().splitlines()
         assert proc.returncode == 1 and len(lines) == 1 and lines[0].startswith("Error:"), err.decode()
-        res = run(*args)
+        res = hpe(*args)
         assert res.exit_code == 0, res.output
     assert R.tree(dst / "o") == R.tree(ref / "o")
     assert (dst / "r.csv").read_bytes() == (ref / "r.csv").read_bytes()

@@ -9,7 +9,7 @@ import types
 import numpy as np
 import pandas as pd
 
-from .conftest import run
+from conftest import hpe
 
 
 def _video_table(tmp_path, monkeypatch, ok_row=True):
@@ -62,10 +62,10 @@ def _video_table(tmp_path, monkeypatch, ok_row=True):
 def test_error_and_rejects_name_the_video_and_frame(tmp_path, monkeypatch):
     path = _video_table(tmp_path, monkeypatch)
     video = tmp_path / "hdVideos" / "hd_00_03.mp4"
-    res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet")
+    res = hpe("export", path, "-o", tmp_path / "out", "--layout", "whenet")
     assert res.exit_code == 1
     assert f"(video {video} frame 3)" in res.output and "image size 1280x720 differs" in res.output, res.output
-    res = run("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
+    res = hpe("export", path, "-o", tmp_path / "out", "--layout", "whenet", "--rejects", tmp_path / "r.csv")
     assert res.exit_code == 0, res.output
     reasons = pd.read_csv(tmp_path / "r.csv")["reason"].tolist()
     assert len(reasons) == 2

@@ -21,7 +21,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from .conftest import AFLW, AGORA_PKL, ROOT, SYNTH, run, temp_files
+from conftest import hpe
+
+from .conftest import AFLW, AGORA_PKL, ROOT, SYNTH, temp_files
 
 REALDATA = ROOT.parent / "shared" / "realdata"
 FUZZ = settings(max_examples=20, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
@@ -98,7 +100,7 @@ def test_fuzz_csv_convert(m):
         src.write_bytes(data)
         h = _hash(src)
         out, rej = d / "out.parquet", d / "rej.csv"
-        res = run("convert", src, "-o", out, "--rejects", rej, "--from", "300w_lp", "--to", "6drepnet", "-q")
+        res = hpe("convert", src, "-o", out, "--rejects", rej, "--from", "300w_lp", "--to", "6drepnet", "-q")
         ok = _check(res, src, d, [out, rej])
         assert _hash(src) == h
         if ok:
@@ -126,11 +128,11 @@ def test_fuzz_parquet_convert_and_audit(m):
         src.write_bytes(mutate(BASE_PARQUET, m))
         h = _hash(src)
         out, rej = d / "out.csv", d / "rej.csv"
-        res = run("convert", src, "-o", out, "--rejects", rej, "--from", "300w_lp", "--to", "6drepnet", "-q")
+        res = hpe("convert", src, "-o", out, "--rejects", rej, "--from", "300w_lp", "--to", "6drepnet", "-q")
         if _check(res, src, d, [out, rej]):
             n_rej = _rows(rej) if rej.exists() else 0
             assert _rows(out) + n_rej == pq.read_metadata(src).num_rows
-        res = run("audit", src, "--json", d / "a.json", "-q")
+        res = hpe("audit", src, "--json", d / "a.json", "-q")
         _check(res, src, d, [d / "a.json"])
         assert _hash(src) == h
 
@@ -156,7 +158,7 @@ def test_fuzz_mat_convert(data):
         bad.write_bytes(mutate(raw, m))
         h = _hash(bad)
         out, rej = d / "out.csv", d / "rej.csv"
-        res = run("convert", folder, "-o", out, "--rejects", rej, "--from", "300w_lp", "--to", "whenet", "-q")
+        res = hpe("convert", folder, "-o", out, "--rejects", rej, "--from", "300w_lp", "--to", "whenet", "-q")
         if _check(res, bad, d, [out, rej], names=[bad.name, folder.name]):
             n_rej = _rows(rej) if rej.exists() else 0
             assert _rows(out) + n_rej == 1
@@ -187,7 +189,7 @@ def test_fuzz_biwi_tgz_convert(data):
         src.write_bytes(mutate(raw, m))
         h = _hash(src)
         out, rej = d / "out.csv", d / "rej.csv"
-        res = run("convert", src, "-o", out, "--rejects", rej, "--from", "biwi", "--to", "300w_lp", "-q")
+        res = hpe("convert", src, "-o", out, "--rejects", rej, "--from", "biwi", "--to", "300w_lp", "-q")
         _check(res, src, d, [out, rej])
         assert _hash(src) == h
 
@@ -208,7 +210,7 @@ def test_fuzz_panoptic_json_relabel(data, which):
         target.write_bytes(mutate(raw, data.draw(mutation(len(raw)))))
         h = _hash(target)
         out, rej = d / "labels.csv", d / "rej.csv"
-        res = run("relabel-panoptic", seq, "-o", out, "--rejects", rej, "--frames", "100:102", "-q")
+        res = hpe("relabel-panoptic", seq, "-o", out, "--rejects", rej, "--frames", "100:102", "-q")
         _check(res, target, d, [out, rej], names=[target.name])
         assert _hash(target) == h
 
@@ -228,6 +230,6 @@ def test_fuzz_agora_relabel(data):
         src.write_bytes(mutate(raw, m))
         h = _hash(src)
         out, rej = d / "labels.csv", d / "rej.csv"
-        res = run("relabel-agora", src, "-o", out, "--rejects", rej, "-q")
+        res = hpe("relabel-agora", src, "-o", out, "--rejects", rej, "-q")
         _check(res, src, d, [out, rej])
         assert _hash(src) == h

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import os
 
-from .conftest import check_failed, make_images, run
+from conftest import hpe
+
+from .conftest import check_failed, make_images
 
 
 def _setup(tmp_path):
@@ -22,7 +24,7 @@ def test_draw_refuses_a_name_leaving_the_folder(tmp_path):
     imgs = _setup(tmp_path)
     t = tmp_path / "t.csv"
     t.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\n../secret.jpg,4,5,6\n")
-    res = run("draw", t, "--images", imgs, "-o", tmp_path / "out")
+    res = hpe("draw", t, "--images", imgs, "-o", tmp_path / "out")
     line = check_failed(res)
     assert "../secret.jpg" in line and "outside" in line, line
     assert not (tmp_path / "out").exists()
@@ -32,7 +34,7 @@ def test_augment_refuses_a_name_leaving_images(tmp_path):
     imgs = _setup(tmp_path)
     t = tmp_path / "t.csv"
     t.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\n../secret.jpg,4,5,6\n")
-    res = run(
+    res = hpe(
         "augment",
         t,
         "-o",
@@ -55,7 +57,7 @@ def test_draw_follows_links_and_rejects_dangling_ones(tmp_path):
     imgs = _setup(tmp_path)
     t = tmp_path / "t.csv"
     t.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\nlink.jpg,1,1,1\ndangling.jpg,1,1,1\n")
-    res = run("draw", t, "--images", imgs, "-o", tmp_path / "out", "--rejects", tmp_path / "r.csv")
+    res = hpe("draw", t, "--images", imgs, "-o", tmp_path / "out", "--rejects", tmp_path / "r.csv")
     assert res.exit_code == 0, res.output
     assert sorted(os.listdir(tmp_path / "out")) == ["a.jpg", "link.jpg"]
     assert "dangling.jpg" in (tmp_path / "r.csv").read_text()
@@ -69,11 +71,11 @@ def test_export_refuses_a_name_leaving_images(tmp_path):
     t.write_text(
         "image,pitch,yaw,roll,bbox_x,bbox_y,bbox_w,bbox_h\na.jpg,1,2,3,10,10,40,40\n../secret.jpg,4,5,6,10,10,40,40\n"
     )
-    res = run("export", t, "--images", imgs, "--layout", "hf", "-o", tmp_path / "out")
+    res = hpe("export", t, "--images", imgs, "--layout", "hf", "-o", tmp_path / "out")
     line = check_failed(res, must_name=t)
     assert "../secret.jpg" in line and "leaves the --images folder" in line, line
     assert not (tmp_path / "out").exists()
-    res = run("export", t, "--images", imgs, "--layout", "hf", "-o", tmp_path / "out", "--rejects", tmp_path / "r.csv")
+    res = hpe("export", t, "--images", imgs, "--layout", "hf", "-o", tmp_path / "out", "--rejects", tmp_path / "r.csv")
     assert res.exit_code == 0, res.output
     rej = (tmp_path / "r.csv").read_text()
     assert "../secret.jpg" in rej and "leaves the --images folder" in rej

@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from .conftest import run, run_sub
+from conftest import hpe, hpe_process
 
 GOOD = """
 import math
@@ -87,7 +87,7 @@ def _user(tmp_path, body):
 def test_nothing_the_code_starts_outlives_hpe(tmp_path, kind):
     body, status = CODES[kind]
     code, pids = _user(tmp_path, body)
-    res = run_sub("infer", "--callable", f"{code}:f", "--timeout", "3", "-o", tmp_path / "s.toml")
+    res = hpe_process("infer", "--callable", f"{code}:f", "--timeout", "3", "-o", tmp_path / "s.toml", text=False)
     err = res.stderr.decode()
     assert res.returncode == status, err
     assert "Traceback" not in err
@@ -114,7 +114,7 @@ def f(p, y, r):
     return good(p, y, r)
 """,
     )
-    res = run_sub("infer", "--callable", f"{code}:f", "--timeout", "10")
+    res = hpe_process("infer", "--callable", f"{code}:f", "--timeout", "10", text=False)
     err = res.stderr.decode()
     assert res.returncode == 1, err
     lines = err.strip().splitlines()
@@ -132,14 +132,14 @@ def f(p, y, r):
     return good(p, y, r)
 """,
     )
-    res = run_sub("infer", "--callable", f"{code}:f", "-o", out)
+    res = hpe_process("infer", "--callable", f"{code}:f", "-o", out, text=False)
     assert res.returncode == 0, res.stderr.decode()
     assert (tmp_path / "junk.txt").exists() and "300w_lp" in res.stdout.decode() + out.read_text()
 
 
 @pytest.mark.parametrize("value", ["nan", "inf", "-inf", "0", "-1", "1e309"])
 def test_timeout_takes_positive_finite_seconds(tmp_path, value):
-    res = run("infer", "--callable", f"{tmp_path / 'x.py'}:f", "--timeout", value)
+    res = hpe("infer", "--callable", f"{tmp_path / 'x.py'}:f", "--timeout", value)
     assert res.exit_code == 2, res.output
     assert "positive finite" in res.output and "Traceback" not in res.output
 
@@ -196,6 +196,6 @@ def test_hostile_system_toml_is_one_line_quickly(tmp_path, kind):
     assert time.monotonic() - t0 < 5
     msg = str(info.value)
     assert msg.startswith(f"{path}: ") and expected in msg and "\n" not in msg and len(msg) < 300, msg
-    res = run("systems", path)  # the command line: one line, no traceback
+    res = hpe("systems", path)  # the command line: one line, no traceback
     assert res.exit_code in (1, 2) and expected in res.output and "Traceback" not in res.output, res.output
     assert len([ln for ln in res.output.splitlines() if ln.strip()]) <= 3, res.output

@@ -9,7 +9,9 @@ import textwrap
 
 import pytest
 
-from .conftest import check_failed, run, temp_files, tree
+from conftest import hpe
+
+from .conftest import check_failed, temp_files, tree
 
 BODIES = {
     "hang": ("def f(p, y, r):\n    while True:\n        pass\n", "no answer within --timeout"),
@@ -30,7 +32,7 @@ def test_user_code_cannot_escape(tmp_path, kind, mode):
     code = tmp_path / "user.py"
     code.write_text(textwrap.dedent(body).replace("(p, y, r)", "(R)" if mode == "--decoder" else "(p, y, r)"))
     snap = tree(tmp_path)
-    res = run("infer", mode, f"{code}:f", "--timeout", "1", "-o", tmp_path / "s.toml", "--json", tmp_path / "r.json")
+    res = hpe("infer", mode, f"{code}:f", "--timeout", "1", "-o", tmp_path / "s.toml", "--json", tmp_path / "r.json")
     line = check_failed(res, str(code))
     assert expected in line, line
     assert tree(tmp_path) == snap and not temp_files(tmp_path)
@@ -41,7 +43,7 @@ def test_output_can_never_be_the_users_code(tmp_path):
     code = tmp_path / "user.toml.py"
     code.write_text("def f(p, y, r):\n    return [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n")
     before = code.read_bytes()
-    res = run("infer", "--callable", f"{code}:f", "--json", code, "--overwrite")
+    res = hpe("infer", "--callable", f"{code}:f", "--json", code, "--overwrite")
     line = check_failed(res, str(code))
     assert "must differ" in line
     assert code.read_bytes() == before

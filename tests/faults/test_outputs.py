@@ -12,11 +12,13 @@ import stat
 
 import pytest
 
-from .conftest import COMMANDS, check_failed, run, temp_files, tree
+from conftest import hpe
+
+from .conftest import COMMANDS, check_failed, temp_files, tree
 
 
 def _valid(case):
-    res = run(*case.args())
+    res = hpe(*case.args())
     assert res.exit_code == 0, res.output
     return res
 
@@ -47,18 +49,18 @@ def test_audit_plots_are_part_of_the_run(case_factory):
     blocker = case.tmp / "blocker"
     blocker.write_text("x")
     snap = tree(case.tmp)
-    check_failed(run(*case.args(**{"--json": blocker / "r.json"}), "--plots", plots), blocker)
+    check_failed(hpe(*case.args(**{"--json": blocker / "r.json"}), "--plots", plots), blocker)
     assert tree(case.tmp) == snap
-    line = check_failed(run(*case.args(), "--plots", case.inputs[0], "--overwrite"), case.inputs[0], codes=(1, 2))
+    line = check_failed(hpe(*case.args(), "--plots", case.inputs[0], "--overwrite"), case.inputs[0], codes=(1, 2))
     assert tree(case.tmp) == snap, line
-    res = run(*case.args(), "--plots", plots)
+    res = hpe(*case.args(), "--plots", plots)
     assert res.exit_code == 0 and (plots / "index.html").exists() and not temp_files(case.tmp), res.output
 
 
 def _refused(case, outputs, names, overwrite=True):
     snap = tree(case.tmp)
     args = case.args(**outputs) + (["--overwrite"] if overwrite else [])
-    line = check_failed(run(*args))
+    line = check_failed(hpe(*args))
     for n in names:
         assert str(n) in line, line
     assert "must differ" in line
@@ -105,9 +107,9 @@ def test_existing_output_kept_without_overwrite_and_mode_kept_with_it(case_facto
     out.write_bytes(b"precious")
     os.chmod(out, 0o600)
     snap = tree(case.tmp)
-    check_failed(run(*case.args()), out)
+    check_failed(hpe(*case.args()), out)
     assert tree(case.tmp) == snap
-    res = run(*case.args(), "--overwrite")
+    res = hpe(*case.args(), "--overwrite")
     assert res.exit_code == 0, res.output
     assert out.read_bytes() != b"precious"
     assert stat.S_IMODE(out.stat().st_mode) == 0o600
@@ -137,7 +139,7 @@ def test_os_error_creating_an_output_names_it(case_factory, cmd, code, monkeypat
 
     monkeypatch.setattr(os, "open", refusing_open)
     monkeypatch.setattr(os, "mkdir", refusing_mkdir)
-    res = run(*case.args(**outs))
+    res = hpe(*case.args(**outs))
     monkeypatch.undo()
     line = check_failed(res)
     assert str(folder) in line
@@ -166,7 +168,7 @@ def test_disk_full_while_writing_a_table(case_factory, cmd, monkeypatch):
             self._w.close()
 
     monkeypatch.setattr(pcsv, "CSVWriter", FullDisk)
-    res = run(*case.args())
+    res = hpe(*case.args())
     monkeypatch.undo()
     line = check_failed(res)
     assert "disk full" in line and any(str(p) in line for p in case.outputs.values()), line
@@ -179,12 +181,12 @@ def test_name_too_long_is_named_and_a_long_legal_name_works(case_factory, cmd):
     opt = case.file_option
     suffix = case.outputs[opt].suffix
     long_ok = case.tmp / ("a" * (255 - len(suffix)) + suffix)  # the longest legal name
-    res = run(*case.args(**{opt: long_ok}))
+    res = hpe(*case.args(**{opt: long_ok}))
     assert res.exit_code == 0, res.output
     assert long_ok.exists() and not temp_files(case.tmp)
     too_long = case.tmp / ("b" * 300 + suffix)
     snap = tree(case.tmp)
-    line = check_failed(run(*case.args(**{opt: too_long}), "--overwrite"))
+    line = check_failed(hpe(*case.args(**{opt: too_long}), "--overwrite"))
     assert "name too long" in line and "b" * 300 in line
     assert tree(case.tmp) == snap
 
@@ -195,7 +197,7 @@ def test_non_utf8_output_names(case_factory, cmd):
     folder = case.tmp / os.fsdecode(b"caf\xe9")
     folder.mkdir()
     outs = {o: folder / p.name for o, p in case.outputs.items()}
-    res = run(*case.args(**outs))
+    res = hpe(*case.args(**outs))
     assert res.exit_code == 0, res.output
     assert "caf\\xe9" in res.output or not res.output.strip() or "caf" in res.output
     assert not temp_files(case.tmp)
@@ -206,7 +208,7 @@ def test_non_utf8_input_name_is_one_line(tmp_path, case_factory):
     case = case_factory("convert")
     src = tmp_path / os.fsdecode(b"\xff.csv")
     src.write_bytes(case.inputs[0].read_bytes())
-    res = run("convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet")
+    res = hpe("convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet")
     if res.exit_code != 0:
         line = check_failed(res)
         assert "\\xff.csv" in line
@@ -219,12 +221,12 @@ def test_output_where_a_folder_or_file_is(case_factory, cmd):
     opt = case.file_option
     case.outputs[opt].mkdir()
     snap = tree(case.tmp)
-    check_failed(run(*case.args(), "--overwrite"), case.outputs[opt], codes=(1, 2))
+    check_failed(hpe(*case.args(), "--overwrite"), case.outputs[opt], codes=(1, 2))
     assert tree(case.tmp) == snap
     blocker = case.tmp / "blocker"
     blocker.write_text("x")
     snap = tree(case.tmp)
-    check_failed(run(*case.args(**{opt: blocker / ("x" + case.outputs[opt].suffix)})), blocker, codes=(1, 2))
+    check_failed(hpe(*case.args(**{opt: blocker / ("x" + case.outputs[opt].suffix)})), blocker, codes=(1, 2))
     assert tree(case.tmp) == snap
 
 
@@ -237,5 +239,5 @@ def test_failure_after_the_first_output_leaves_nothing(case_factory, cmd):
     last = list(case.outputs)[-1]
     bad = blocker / case.outputs[last].name
     snap = tree(case.tmp)
-    check_failed(run(*case.args(**{last: bad})), blocker, codes=(1, 2))
+    check_failed(hpe(*case.args(**{last: bad})), blocker, codes=(1, 2))
     assert tree(case.tmp) == snap

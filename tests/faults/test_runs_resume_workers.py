@@ -19,7 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import ROOT, SYNTH, run, temp_files
+from conftest import hpe
+
+from .conftest import ROOT, SYNTH, temp_files
 from .conftest import alive as _alive
 from .conftest import children as _children
 
@@ -66,7 +68,7 @@ def test_kill9_then_resume_is_byte_identical_and_leaves_nothing(tmp_path):
     ref_dir, dst = tmp_path / "ref", tmp_path / "out"
     ref_dir.mkdir()
     dst.mkdir()
-    res = run(*_args(seq, ref_dir / "o.parquet", ref_dir / "r.csv"))
+    res = hpe(*_args(seq, ref_dir / "o.parquet", ref_dir / "r.csv"))
     assert res.exit_code == 0, res.output
     out, rej = dst / "o.parquet", dst / "r.csv"
     kids = _start_and_kill(seq, out, rej)
@@ -75,7 +77,7 @@ def test_kill9_then_resume_is_byte_identical_and_leaves_nothing(tmp_path):
         time.sleep(0.05)
     assert not [k for k in kids if _alive(k)], "workers outlived their parent (kill -9)"
     assert temp_files(dst)  # the killed run's staged outputs (and its parts) are there
-    res = run(*_args(seq, out, rej))
+    res = hpe(*_args(seq, out, rej))
     assert res.exit_code == 0, res.output
     assert out.read_bytes() == (ref_dir / "o.parquet").read_bytes()
     assert rej.read_bytes() == (ref_dir / "r.csv").read_bytes()
@@ -95,7 +97,7 @@ def test_resume_refuses_an_edited_calibration_and_names_damaged_parts(tmp_path):
     cal = seq / f"calibration_{SYNTH.name}.json"
     original = cal.read_bytes()
     cal.write_bytes(original.replace(b'"K"', b'"K" ', 1) if b'"K"' in original else original + b" ")
-    res = run(*_args(seq, out, rej))
+    res = hpe(*_args(seq, out, rej))
     assert (
         res.exit_code == 1
         and str(cal) in res.output
@@ -105,11 +107,11 @@ def test_resume_refuses_an_edited_calibration_and_names_damaged_parts(tmp_path):
     cal.write_bytes(original)
     labels = Path(str(done[0])[: -len(".json")] + ".labels.arrow")
     labels.write_bytes(labels.read_bytes()[:100])  # cut short
-    res = run(*_args(seq, out, rej))
+    res = hpe(*_args(seq, out, rej))
     assert res.exit_code == 1 and str(labels) in res.output and "damaged part" in res.output, res.output
     assert "internal error" not in res.output
     labels.unlink()
-    res = run(*_args(seq, out, rej))
+    res = hpe(*_args(seq, out, rej))
     assert res.exit_code == 1 and str(labels) in res.output and "missing part" in res.output, res.output
     assert str(rej) not in res.output
     shutil.rmtree(parts)
@@ -153,7 +155,7 @@ def test_two_runs_writing_one_output_at_once(tmp_path, extra):
     locked, or the output exists by then); the output is never a mix of the two."""
     seq = _sequence(tmp_path / "in", frames=150)
     ref = tmp_path / "ref.parquet"
-    assert run("relabel-panoptic", seq, "-o", ref, "-q").exit_code == 0
+    assert hpe("relabel-panoptic", seq, "-o", ref, "-q").exit_code == 0
     dst = tmp_path / "out"
     dst.mkdir()
     out = dst / "o.parquet"

@@ -4,9 +4,8 @@ frames in range, row for row (the oracle is the unsampled run: its labelled and 
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 from .conftest import SYNTH
 
@@ -15,9 +14,7 @@ KEY = ["sequence", "frame", "person_id", "camera"]
 
 def _relabel(tmp_path, name, *args):
     o, r = tmp_path / f"{name}.parquet", tmp_path / f"{name}.csv"
-    res = CliRunner().invoke(
-        cli, ["relabel-panoptic", str(SYNTH), "-o", str(o), "--rejects", str(r), "--no-landmarks", *map(str, args)]
-    )
+    res = hpe("relabel-panoptic", SYNTH, "-o", o, "--rejects", r, "--no-landmarks", *args)
     assert res.exit_code == 0, res.output
     t = pq.read_table(o).to_pandas()
     rj = pd.read_csv(r, dtype={"camera": str, "sequence": str})
@@ -62,21 +59,8 @@ def test_labels_plus_rejects_are_every_view(tmp_path, everything, rule):
 
 def test_strict_ignores_the_sampling_asked_for(tmp_path):
     o = tmp_path / "o.parquet"
-    res = CliRunner().invoke(
-        cli,
-        [
-            "relabel-panoptic",
-            str(SYNTH),
-            "-o",
-            str(o),
-            "--every",
-            "2",
-            "--strict",
-            "--frames",
-            "100:101",
-            "--cameras",
-            "00_00",
-        ],
+    res = hpe(
+        "relabel-panoptic", SYNTH, "-o", o, "--every", "2", "--strict", "--frames", "100:101", "--cameras", "00_00"
     )
     # frame 100 alone: whatever it rejects is a real failure, never the (absent) skipped frames
     assert "skipped by --every" not in res.output

@@ -10,7 +10,9 @@ import shutil
 
 import pytest
 
-from .conftest import SYNTH, check_failed, run
+from conftest import hpe
+
+from .conftest import SYNTH, check_failed
 
 
 def _root(tmp_path):
@@ -43,6 +45,6 @@ def test_one_broken_sequence_fails_the_run_naming_it(tmp_path, how, workers):
     bad = _break(root, how)
     out = tmp_path / "out"
     out.mkdir()
-    res = run("relabel-panoptic", root, "-o", out / "o.parquet", "--rejects", out / "r.csv", "--workers", workers, "-q")
+    res = hpe("relabel-panoptic", root, "-o", out / "o.parquet", "--rejects", out / "r.csv", "--workers", workers, "-q")
     check_failed(res, must_name=bad)
     assert os.listdir(out) == []

@@ -11,9 +11,8 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 
 class _Refs(HTMLParser):
@@ -35,10 +34,6 @@ class _Refs(HTMLParser):
             self._cap = False
 
 
-def _audit(*args):
-    return CliRunner().invoke(cli, ["audit", *map(str, args)], catch_exceptions=False)
-
-
 def _refs(page):
     p = _Refs()
     p.feed(page.read_text(encoding="utf-8"))
@@ -49,7 +44,7 @@ def test_aflw2000_page_shows_flagged_rows_drawn(realdata, tmp_path):
     aflw = realdata / "aflw2000_prnet"
     out = tmp_path / "plots"
     # within 75 deg of the lock: the rows with |pitch| above 15 deg are near_gimbal
-    res = _audit(aflw, "--plots", out, "--gimbal-tol", 75)
+    res = hpe("audit", aflw, "--plots", out, "--gimbal-tol", 75)
     assert res.exit_code == 0, res.output
     page = out / "index.html"
     refs = _refs(page)
@@ -97,12 +92,12 @@ def test_aflw2000_page_shows_flagged_rows_drawn(realdata, tmp_path):
 def test_missing_images_listed_and_no_images_no_section(tmp_path):
     t = pd.DataFrame({"image": ["a.jpg", "b.jpg"], "pitch": [0.0, 0.0], "yaw": [0.0, 89.9], "roll": [0.0, 0.0]})
     t.to_csv(tmp_path / "l.csv", index=False)
-    res = _audit(tmp_path / "l.csv", "--plots", tmp_path / "p")
+    res = hpe("audit", tmp_path / "l.csv", "--plots", tmp_path / "p")
     assert res.exit_code == 0, res.output
     page = (tmp_path / "p" / "index.html").read_text()
     assert "Not drawn" in page and "line 3: image not found" in page and not (tmp_path / "p" / "pictures").exists()
     t.drop(columns="image").to_parquet(tmp_path / "n.parquet")
-    res = _audit(tmp_path / "n.parquet", "--plots", tmp_path / "q")
+    res = hpe("audit", tmp_path / "n.parquet", "--plots", tmp_path / "q")
     assert res.exit_code == 0 and "Flagged rows" not in (tmp_path / "q" / "index.html").read_text()
     assert Path(tmp_path / "q" / "yaw_hist.png").is_file()
 
@@ -112,14 +107,10 @@ def test_panoptic_page_pictures_around_the_faces(realdata, tmp_path):
     picture is the part of the 1920x1080 frame around the face's box, with the axes drawn from its centre."""
     seq = realdata / "panoptic_160906_pizza1"
     labels = tmp_path / "pizza.parquet"
-    res = CliRunner().invoke(
-        cli,
-        ["relabel-panoptic", str(seq), "-o", str(labels), "--cameras", "00_00,00_08", "--frames", "1147:1148"],
-        catch_exceptions=False,
-    )
+    res = hpe("relabel-panoptic", seq, "-o", labels, "--cameras", "00_00,00_08", "--frames", "1147:1148")
     assert res.exit_code == 0, res.output
     out = tmp_path / "plots"
-    res = _audit(labels, "--plots", out, "--images", seq, "--gimbal-tol", 89)  # every row is near_gimbal
+    res = hpe("audit", labels, "--plots", out, "--images", seq, "--gimbal-tol", 89)  # every row is near_gimbal
     assert res.exit_code == 0, res.output
     refs = _refs(out / "index.html")
     caps = [c for c in refs.captions if c.startswith("near_gimbal: ")]

@@ -7,17 +7,12 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.geometry.landmark_schemes import flip_permutation
 
 W, H = 160, 120
-
-
-def run(*args):
-    return CliRunner().invoke(cli, ["augment", *map(str, args)], catch_exceptions=False)
 
 
 def a300(p, y, r):
@@ -87,7 +82,7 @@ def test_landmarks_and_tdx_tdy_land_on_the_moved_pixels(tmp_path, how, args):
     }
     row.update({f"lm{i}_{a}": lm[i, k] for i in range(n_lm) for k, a in enumerate("xy")})
     pd.DataFrame([row]).to_parquet(tmp_path / "in.parquet")
-    res = run(tmp_path / "in.parquet", "-o", tmp_path / "out.parquet", *args)
+    res = hpe("augment", tmp_path / "in.parquet", "-o", tmp_path / "out.parquet", *args)
     assert res.exit_code == 0, res.output
     out = pd.read_parquet(tmp_path / "out.parquet").iloc[0]
     wo, ho = (
@@ -135,13 +130,14 @@ def test_image_size_disagreement_is_a_reject_never_a_transform(tmp_path):
         }
     )
     t.to_parquet(tmp_path / "in.parquet")
-    res = run(tmp_path / "in.parquet", "-o", tmp_path / "o.parquet", "--image-size", 450, 450, "--hflip")
+    res = hpe("augment", tmp_path / "in.parquet", "-o", tmp_path / "o.parquet", "--image-size", 450, 450, "--hflip")
     assert (
         res.exit_code == 1
         and "row 1: image size: image_width/image_height is 1920x1080, --image-size says 450x450" in res.output
         and not (tmp_path / "o.parquet").exists()
     )
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.parquet",
         "-o",
         tmp_path / "o.parquet",
@@ -156,12 +152,13 @@ def test_image_size_disagreement_is_a_reject_never_a_transform(tmp_path):
     o = pd.read_parquet(tmp_path / "o.parquet")
     assert o["bbox_x"].tolist() == [449 - 5 - 80.0] and pd.read_csv(tmp_path / "rej.csv")["row"].tolist() == [1]
     # without --image-size: each row's own size
-    res = run(tmp_path / "in.parquet", "-o", tmp_path / "o2.parquet", "--hflip")
+    res = hpe("augment", tmp_path / "in.parquet", "-o", tmp_path / "o2.parquet", "--hflip")
     assert res.exit_code == 0, res.output
     assert pd.read_parquet(tmp_path / "o2.parquet")["bbox_x"].tolist() == [1919 - 100 - 80.0, 449 - 5 - 80.0]
     # every row rejected: exit 1 even with --rejects, nothing written
     t.iloc[:1].to_parquet(tmp_path / "one.parquet")
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "one.parquet",
         "-o",
         tmp_path / "o3.parquet",
@@ -177,7 +174,7 @@ def test_image_size_disagreement_is_a_reject_never_a_transform(tmp_path):
     assert len(pd.read_csv(tmp_path / "rej3.csv")) == 1  # the rejects file still says why (issue 35)
     # no size anywhere: a usage error
     t.drop(columns=["image_width", "image_height"]).to_parquet(tmp_path / "nosize.parquet")
-    res = run(tmp_path / "nosize.parquet", "-o", tmp_path / "o4.parquet", "--hflip")
+    res = hpe("augment", tmp_path / "nosize.parquet", "-o", tmp_path / "o4.parquet", "--hflip")
     assert res.exit_code == 2 and "expected the image size" in res.output
 
 
@@ -206,7 +203,8 @@ def test_sizes_from_the_images_and_pixels_match_cv2(tmp_path):
             "bbox_h": 20.0,
         }
     ).to_csv(tmp_path / "in.csv", index=False)
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.csv",
         "-o",
         tmp_path / "o.csv",
@@ -225,7 +223,8 @@ def test_sizes_from_the_images_and_pixels_match_cv2(tmp_path):
     o = pd.read_csv(tmp_path / "o.csv")
     # 90 degrees about ((W-1)/2, (H-1)/2) of each image's own size: 160x120 and 200x100 move the box differently
     assert o["bbox_x"].tolist()[:2] == [10.0 + 20, 10.0 + 20] and o["bbox_x"].tolist()[2] != o["bbox_x"].tolist()[0]
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.csv",
         "-o",
         tmp_path / "o2.csv",
@@ -250,7 +249,8 @@ def test_commit_failing_halfway_places_nothing(tmp_path):
     )
     out = tmp_path / "out"
     (out / "c.png").mkdir(parents=True)  # sorts last: a.png and b.png would be placed before it fails
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.csv",
         "-o",
         tmp_path / "o.csv",
@@ -275,7 +275,8 @@ def test_two_rows_one_output_image(tmp_path):
         {"image": ["a.png", "a.png", str(root / "x" / "a.png")], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}
     ).to_csv(tmp_path / "in.csv", index=False)
     # two faces of one picture: transformed once; an absolute name whose base name is taken: an error naming both
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.csv",
         "-o",
         tmp_path / "o.csv",
@@ -293,8 +294,16 @@ def test_two_rows_one_output_image(tmp_path):
     pd.DataFrame({"image": ["a.png", "a.png"], "pitch": 0.0, "yaw": 0.0, "roll": [0.0, 5.0]}).to_csv(
         tmp_path / "in2.csv", index=False
     )
-    res = run(
-        tmp_path / "in2.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root, "--out-images", tmp_path / "out"
+    res = hpe(
+        "augment",
+        tmp_path / "in2.csv",
+        "-o",
+        tmp_path / "o.csv",
+        "--hflip",
+        "--images",
+        root,
+        "--out-images",
+        tmp_path / "out",
     )
     assert res.exit_code == 0 and os.listdir(tmp_path / "out") == ["a.png"]
 
@@ -321,7 +330,8 @@ def test_commit_failing_after_some_images_were_placed_undoes_them(tmp_path, monk
 
     monkeypatch.setattr(transaction, "_place", place)
     out = tmp_path / "out"
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "in.csv",
         "-o",
         tmp_path / "o.csv",
@@ -393,7 +403,7 @@ def test_images_alone_give_the_sizes(tmp_path):
             "bbox_h": 20.0,
         }
     ).to_csv(tmp_path / "in.csv", index=False)
-    res = run(tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root)
+    res = hpe("augment", tmp_path / "in.csv", "-o", tmp_path / "o.csv", "--hflip", "--images", root)
     assert res.exit_code == 0, res.output
     assert pd.read_csv(tmp_path / "o.csv")["bbox_x"].tolist() == [W - 1 - 10.0 - 20.0]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["imgs", "in.csv", "o.csv"]

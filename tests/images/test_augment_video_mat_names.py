@@ -7,14 +7,9 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.datasets import panoptic_video
-
-
-def run(*args):
-    return CliRunner().invoke(cli, ["augment", *map(str, args)], catch_exceptions=False)
 
 
 def _video(path, n, w=64, h=48):
@@ -54,7 +49,8 @@ def test_video_frames_decoded_once_per_video_in_order(tmp_path, monkeypatch):
         yield from real(self, frames)
 
     monkeypatch.setattr(panoptic_video.VideoFrames, "read", spy)
-    res = run(
+    res = hpe(
+        "augment",
         tmp_path / "l.parquet",
         "-o",
         tmp_path / "o.parquet",
@@ -87,13 +83,21 @@ def mat3(realdata, tmp_path):
 
 
 def test_mat_folder_rows_named_by_their_mat_file(mat3, tmp_path):
-    res = run(mat3, "-o", tmp_path / "a.parquet", "--hflip", "--out-images", tmp_path / "o")
+    res = hpe("augment", mat3, "-o", tmp_path / "a.parquet", "--hflip", "--out-images", tmp_path / "o")
     assert res.exit_code == 1
     line = res.output.strip().splitlines()[-1]
     assert line.startswith(f"Error: {mat3 / 'image00251.mat'}: image not found"), line
     assert "row " not in line
-    res = run(
-        mat3, "-o", tmp_path / "a.parquet", "--hflip", "--out-images", tmp_path / "o", "--rejects", tmp_path / "rej.csv"
+    res = hpe(
+        "augment",
+        mat3,
+        "-o",
+        tmp_path / "a.parquet",
+        "--hflip",
+        "--out-images",
+        tmp_path / "o",
+        "--rejects",
+        tmp_path / "rej.csv",
     )
     assert res.exit_code == 0, res.output
     rej = pd.read_csv(tmp_path / "rej.csv")
@@ -104,7 +108,8 @@ def test_mat_folder_rows_named_by_their_mat_file(mat3, tmp_path):
 
 def test_mat_folder_size_disagreement_named_by_mat_file(mat3, tmp_path):
     (mat3 / "image00251.mat").unlink()
-    res = run(
+    res = hpe(
+        "augment",
         mat3,
         "-o",
         tmp_path / "a.parquet",
@@ -125,11 +130,7 @@ def test_mat_folder_size_disagreement_named_by_mat_file(mat3, tmp_path):
 
 
 def test_draw_mat_folder_rejects_named_by_mat_file(mat3, tmp_path):
-    res = CliRunner().invoke(
-        cli,
-        ["draw", str(mat3), "-o", str(tmp_path / "d"), "--rejects", str(tmp_path / "rej.csv")],
-        catch_exceptions=False,
-    )
+    res = hpe("draw", mat3, "-o", tmp_path / "d", "--rejects", tmp_path / "rej.csv")
     assert res.exit_code == 0, res.output
     rej = pd.read_csv(tmp_path / "rej.csv")
     assert rej["file"].tolist() == [str(mat3 / "image00251.mat")] and "row" not in rej.columns
@@ -138,9 +139,9 @@ def test_draw_mat_folder_rejects_named_by_mat_file(mat3, tmp_path):
 def test_mat_folder_images_give_sizes_without_images_option(mat3, tmp_path):
     """A .mat folder's own images check --image-size even without --images; a .mat without its image then needs
     --image-size (no reject for the missing picture itself: no image is written)."""
-    res = run(mat3, "-o", tmp_path / "a.parquet", "--hflip", "--image-size", 400, 450)
+    res = hpe("augment", mat3, "-o", tmp_path / "a.parquet", "--hflip", "--image-size", 400, 450)
     assert res.exit_code == 1 and "image size: the image is 450x450, --image-size says 400x450" in res.output
     assert f"{mat3 / 'image00050.mat'}: " in res.output
-    res = run(mat3, "-o", tmp_path / "b.parquet", "--hflip", "--image-size", 450, 450)
+    res = hpe("augment", mat3, "-o", tmp_path / "b.parquet", "--hflip", "--image-size", 450, 450)
     assert res.exit_code == 0, res.output
     assert len(pd.read_parquet(tmp_path / "b.parquet")) == 3

@@ -4,9 +4,8 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.io.images import ImageResolver, image_size, jpeg_size, panoptic_view, resolve_image, video_path
 
 
@@ -93,30 +92,10 @@ def test_draw_real_panoptic_folder(realdata, tmp_path):
     drawn, the projected axes start inside the image, and a run with all images missing exits 1."""
     seq = realdata / "panoptic_160906_pizza1"
     labels = tmp_path / "pizza.parquet"
-    runner = CliRunner()
-    res = runner.invoke(
-        cli,
-        ["relabel-panoptic", str(seq), "-o", str(labels), "--cameras", "00_00,00_08,00_01", "--frames", "1147:1148"],
-        catch_exceptions=False,
-    )
+    res = hpe("relabel-panoptic", seq, "-o", labels, "--cameras", "00_00,00_08,00_01", "--frames", "1147:1148")
     assert res.exit_code == 0, res.output
     out = tmp_path / "drawn"
-    res = runner.invoke(
-        cli,
-        [
-            "draw",
-            str(labels),
-            "--images",
-            str(seq),
-            "-o",
-            str(out),
-            "--rejects",
-            str(tmp_path / "rej.csv"),
-            "--thickness",
-            "3",
-        ],
-        catch_exceptions=False,
-    )
+    res = hpe("draw", labels, "--images", seq, "-o", out, "--rejects", tmp_path / "rej.csv", "--thickness", "3")
     assert res.exit_code == 0, res.output
     t = pd.read_parquet(labels)
     drawn = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.jpg"))
@@ -135,18 +114,10 @@ def test_draw_real_panoptic_folder(realdata, tmp_path):
             assert np.abs(new[v - 3 : v + 4, u - 3 : u + 4] - orig[v - 3 : v + 4, u - 3 : u + 4]).max() > 60
     none = tmp_path / "none.parquet"
     t[t["camera"] == "00_01"].to_parquet(none)
-    res = runner.invoke(
-        cli,
-        ["draw", str(none), "--images", str(seq), "-o", str(tmp_path / "d2"), "--rejects", str(tmp_path / "rej2.csv")],
-        catch_exceptions=False,
-    )
+    res = hpe("draw", none, "--images", seq, "-o", tmp_path / "d2", "--rejects", tmp_path / "rej2.csv")
     assert res.exit_code == 1 and "nothing drawn" in res.output
     assert not (tmp_path / "d2").exists()
     assert (tmp_path / "rej2.csv").exists()  # the one output that says why is still written (issue 35)
-
-
-def _draw(*args):
-    return CliRunner().invoke(cli, ["draw", *map(str, args)], catch_exceptions=False)
 
 
 def test_draw_video_frames(tmp_path):
@@ -162,8 +133,17 @@ def test_draw_video_frames(tmp_path):
             "roll": 0.0,
         }
     ).to_parquet(tmp_path / "l.parquet")
-    res = _draw(
-        tmp_path / "l.parquet", "-o", tmp_path / "d", "--images", tmp_path / "seq", "--length", 20, "--thickness", 3
+    res = hpe(
+        "draw",
+        tmp_path / "l.parquet",
+        "-o",
+        tmp_path / "d",
+        "--images",
+        tmp_path / "seq",
+        "--length",
+        20,
+        "--thickness",
+        3,
     )
     assert res.exit_code == 0, res.output
     for f in (1, 4):
@@ -190,7 +170,7 @@ def test_draw_same_picture_by_two_names_and_two_pictures_for_one_name(tmp_path):
     )
     t.to_csv(tmp_path / "l.csv", index=False)
     # face.mat names the same picture as face.jpg: both faces on one image
-    res = _draw(tmp_path / "l.csv", "-o", tmp_path / "d", "--images", tmp_path / "imgs", "--thickness", 2)
+    res = hpe("draw", tmp_path / "l.csv", "-o", tmp_path / "d", "--images", tmp_path / "imgs", "--thickness", 2)
     assert res.exit_code == 0, res.output
     assert "drew 2 faces" in res.output and [p.name for p in (tmp_path / "d").iterdir()] == ["face.jpg"]
     img = cv2.imread(str(tmp_path / "d" / "face.jpg"))
@@ -198,7 +178,7 @@ def test_draw_same_picture_by_two_names_and_two_pictures_for_one_name(tmp_path):
     # an absolute name of another picture with the same base name: an error naming both rows, nothing written
     t.loc[1, "image"] = str(tmp_path / "other" / "face.jpg")
     t.to_csv(tmp_path / "l2.csv", index=False)
-    res = _draw(tmp_path / "l2.csv", "-o", tmp_path / "d2", "--images", tmp_path / "imgs")
+    res = hpe("draw", tmp_path / "l2.csv", "-o", tmp_path / "d2", "--images", tmp_path / "imgs")
     assert res.exit_code == 1 and "line 3" in res.output and "line 2" in res.output
     assert "two different pictures for one output file" in res.output and not (tmp_path / "d2").exists()
     assert a.is_file()

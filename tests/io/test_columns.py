@@ -13,9 +13,8 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.errors import HpeError
 from hpe_cli.io import open_table
 
@@ -251,24 +250,21 @@ def test_cli_convert_with_column_options(tmp_path):
     p = tmp_path / "list.txt"
     p.write_text("".join(f"{r.image};{fmt(r.yaw)};{fmt(r.pitch)};{fmt(r.roll)}\n" for r in LABELS.itertuples()))
     out = tmp_path / "o.csv"
-    r = CliRunner().invoke(
-        cli,
-        [
-            "convert",
-            str(p),
-            "-o",
-            str(out),
-            "--from",
-            "300w_lp",
-            "--to",
-            "300w_lp",
-            "--delimiter",
-            ";",
-            "--no-header",
-            "--names",
-            "image,yaw,pitch,roll",
-            "-q",
-        ],
+    r = hpe(
+        "convert",
+        p,
+        "-o",
+        out,
+        "--from",
+        "300w_lp",
+        "--to",
+        "300w_lp",
+        "--delimiter",
+        ";",
+        "--no-header",
+        "--names",
+        "image,yaw,pitch,roll",
+        "-q",
     )
     assert r.exit_code == 0, r.output
     f = pd.read_csv(out)
@@ -285,55 +281,26 @@ def test_cli_convert_with_column_options(tmp_path):
 def test_cli_audit_reads_annotation_txt(tmp_path):
     p = tmp_path / "annotation.txt"
     p.write_text("a.jpg,10,20,30\nb.jpg,-10,5,1\n")
-    r = CliRunner().invoke(cli, ["audit", str(p), "--system", "whenet", "-q"])
+    r = hpe("audit", p, "--system", "whenet", "-q")
     assert r.exit_code == 0, r.output
 
 
 def test_cli_usage_errors(tmp_path):
     p = tmp_path / "t.csv"
     LABELS.to_csv(p, index=False)
-    r = CliRunner().invoke(
-        cli,
-        ["convert", str(p), "-o", str(tmp_path / "o.csv"), "--from", "300w_lp", "--to", "whenet", "--delimiter", "ab"],
-    )
+    r = hpe("convert", p, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet", "--delimiter", "ab")
     assert r.exit_code == 2
-    r = CliRunner().invoke(
-        cli,
-        [
-            "convert",
-            str(p),
-            "-o",
-            str(tmp_path / "o.csv"),
-            "--from",
-            "300w_lp",
-            "--to",
-            "whenet",
-            "--columns-map",
-            "pitch",
-        ],
-    )
+    r = hpe("convert", p, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet", "--columns-map", "pitch")
     assert r.exit_code == 2
-    r = CliRunner().invoke(
-        cli,
-        [
-            "convert",
-            str(p),
-            "-o",
-            str(tmp_path / "o.csv"),
-            "--from",
-            "300w_lp",
-            "--to",
-            "whenet",
-            "--columns-map",
-            "pitch=Nope",
-        ],
+    r = hpe(
+        "convert", p, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet", "--columns-map", "pitch=Nope"
     )
     assert r.exit_code == 1 and "Nope" in r.output
 
 
 @pytest.mark.parametrize("cmd", ["convert", "audit", "draw", "augment", "infer", "evaluate", "export"])
 def test_every_table_command_has_column_options(cmd):
-    r = CliRunner().invoke(cli, [cmd, "--help"])
+    r = hpe(cmd, "--help")
     assert r.exit_code == 0
     for opt in ("--columns-map", "--delimiter", "--no-header", "--names", "--input-format"):
         assert opt in r.output
@@ -343,9 +310,7 @@ def test_cli_bad_line_is_a_reject_with_its_line(tmp_path):
     p = tmp_path / "annotation.txt"
     p.write_text("a.jpg,1,2,3\n\nb.jpg,4,5\nc.jpg,7,x,9\nd.jpg,1,1,1\n")
     out, rej = tmp_path / "o.csv", tmp_path / "rej.csv"
-    r = CliRunner().invoke(
-        cli, ["convert", str(p), "-o", str(out), "--from", "whenet", "--to", "whenet", "--rejects", str(rej), "-q"]
-    )
+    r = hpe("convert", p, "-o", out, "--from", "whenet", "--to", "whenet", "--rejects", rej, "-q")
     assert r.exit_code == 0, r.output
     assert list(pd.read_csv(out)["image"]) == ["a.jpg", "d.jpg"]
     rj = pd.read_csv(rej)
@@ -366,24 +331,21 @@ def test_cli_evaluate_two_inputs_share_the_options(tmp_path):
     pred = tmp_path / "annotation.txt"  # WHENet layout: image,yaw,pitch,roll; PROVENANCE: 34.45, 4.69, 7.25
     pred.write_text("image00430.mat,4.69,34.45,7.25\n")
     rep = tmp_path / "r.json"
-    r = CliRunner().invoke(
-        cli,
-        [
-            "evaluate",
-            str(pred),
-            str(gt),
-            "--pred-system",
-            "whenet",
-            "--gt-system",
-            "300w_lp",
-            "--key",
-            "file",
-            "--columns-map",
-            "file=image",
-            "--json",
-            str(rep),
-            "-q",
-        ],
+    r = hpe(
+        "evaluate",
+        pred,
+        gt,
+        "--pred-system",
+        "whenet",
+        "--gt-system",
+        "300w_lp",
+        "--key",
+        "file",
+        "--columns-map",
+        "file=image",
+        "--json",
+        rep,
+        "-q",
     )
     assert r.exit_code == 0, r.output
     doc = json.loads(rep.read_text())

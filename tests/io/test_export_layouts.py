@@ -13,23 +13,17 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.io
-from click.testing import CliRunner
 
-from conftest import REALDATA, canonical_A
-from hpe_cli.cli.main import cli
+from conftest import REALDATA, canonical_A, hpe
 
 PIZZA = REALDATA / "panoptic_160906_pizza1"
 AFLW = REALDATA / "aflw2000_prnet"
 pytestmark = pytest.mark.skipif(not PIZZA.exists(), reason="../shared/realdata is not available")
 
 
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
-
-
 def export(path, out, *args):
     """``hpe export`` on the pizza table; its frames without a JPEG in the sample are rejects."""
-    return run("export", path, "-o", out, "--images", PIZZA, "--rejects", Path(str(out) + "_rejects.csv"), *args)
+    return hpe("export", path, "-o", out, "--images", PIZZA, "--rejects", Path(str(out) + "_rejects.csv"), *args)
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +31,7 @@ def pizza(tmp_path_factory):
     """relabel-panoptic on the real pizza1 sample, restricted to the 4 cameras with real images."""
     d = tmp_path_factory.mktemp("pizza")
     out = d / "pizza.parquet"
-    r = run("relabel-panoptic", PIZZA, "-o", out, "--cameras", "00_00,00_08,00_15,00_23", "-q")
+    r = hpe("relabel-panoptic", PIZZA, "-o", out, "--cameras", "00_00,00_08,00_15,00_23", "-q")
     assert r.exit_code == 0, r.output
     return out, pd.read_parquet(out)
 
@@ -89,7 +83,7 @@ def get_R_6drepnet(pitch, yaw, roll):
 def test_whenet_layout_read_back(pizza, tmp_path):
     path, t = pizza
     out = tmp_path / "w"
-    r = run(
+    r = hpe(
         "export",
         path,
         "-o",
@@ -156,7 +150,7 @@ def test_6drepnet_crops_matrices(pizza, tmp_path):
 @pytest.mark.skipif(not AFLW.exists(), reason="no AFLW2000 sample")
 def test_6drepnet_mat_form_on_aflw2000(tmp_path):
     out = tmp_path / "m"
-    r = run("export", AFLW, "-o", out, "--layout", "6drepnet", "--form", "mat")
+    r = hpe("export", AFLW, "-o", out, "--layout", "6drepnet", "--form", "mat")
     assert r.exit_code == 0, r.output
     names = (out / "train" / "files.txt").read_text().splitlines()
     assert sorted(names) == sorted(p.stem for p in AFLW.glob("*.mat"))
@@ -193,7 +187,7 @@ def test_directmhp_layout(pizza, tmp_path):
 
     path, t = pizza
     out = tmp_path / "d"
-    r = run(
+    r = hpe(
         "export",
         path,
         "-o",
@@ -260,7 +254,7 @@ def test_directmhp_drop_images_with_rejects(pizza, tmp_path):
     path = tmp_path / "t.parquet"
     t.to_parquet(path)
     out = tmp_path / "d"
-    r = run(
+    r = hpe(
         "export",
         path,
         "-o",
@@ -410,7 +404,7 @@ def test_coco_export_is_an_export_input(pizza, tmp_path):
     except Exception as exc:  # noqa: BLE001 - reader not there yet
         pytest.skip(f"open_table cannot read COCO yet: {exc}")
     out = tmp_path / "w"
-    r = run("export", coco, "-o", out, "--layout", "whenet", "--images", tmp_path / "d" / "images" / "train", "-q")
+    r = hpe("export", coco, "-o", out, "--layout", "whenet", "--images", tmp_path / "d" / "images" / "train", "-q")
     assert r.exit_code == 0, r.output
     lines = (out / "train" / "annotation.txt").read_text().splitlines()
     n = len(json.loads(coco.read_text())["annotations"])

@@ -5,9 +5,8 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pytest
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.io import open_table
 from hpe_cli.rotation.systems import get_system
 
@@ -55,7 +54,7 @@ def test_export_reads_back(tmp_path, layout):
     path, labels = make_set(tmp_path)
     out = tmp_path / "out"
     split = ["--split", "image:train=0.67,val=0.33"] if layout == "directmhp" else []  # DirectMHP needs a val split
-    r = CliRunner().invoke(cli, ["export", str(path), "-o", str(out), "--layout", layout, "-q", *split])
+    r = hpe("export", path, "-o", out, "--layout", layout, "-q", *split)
     assert r.exit_code == 0, r.output
     files = sorted(out.rglob("annotation.txt" if layout == "whenet" else "coco_style_*.json"))
     assert files

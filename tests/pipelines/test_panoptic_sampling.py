@@ -7,10 +7,9 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 
 #: Ascend-Research/HeadPoseEstimation-WHENet prepare_images.py: without_top (panel 0 nodes)
 WITHOUT_TOP = [0, 3, 5, 8, 9, 11, 12, 14, 15, 16, 18, 20, 21, 22, 23, 24, 25, 26, 27, 29]
@@ -21,19 +20,25 @@ def seq(realdata):
     return realdata / "panoptic_160906_pizza1"
 
 
-def _run(args):
-    r = CliRunner().invoke(cli, ["relabel-panoptic", *map(str, args)])
-    assert r.exit_code == 0, r.output
-    return r.output
-
-
 def _mats(t):
     return t[[f"r{i}{j}" for i in range(3) for j in range(3)]].to_numpy().reshape(-1, 3, 3)
 
 
 def test_whenet_haggling_cameras_and_all_views(seq, tmp_path):
     o, rj = tmp_path / "o.parquet", tmp_path / "r.csv"
-    out = _run([seq, "-o", o, "--rejects", rj, "--cameras", "whenet-haggling", "--all-views", "--no-landmarks"])
+    out = hpe(
+        "relabel-panoptic",
+        seq,
+        "-o",
+        o,
+        "--rejects",
+        rj,
+        "--cameras",
+        "whenet-haggling",
+        "--all-views",
+        "--no-landmarks",
+        ok=True,
+    ).output
     t = pq.read_table(o).to_pandas()
     r = pd.read_csv(rj, dtype={"camera": str})
     assert set(t["camera"]) <= {f"00_{i:02d}" for i in WITHOUT_TOP}
@@ -51,8 +56,21 @@ def test_whenet_haggling_cameras_and_all_views(seq, tmp_path):
 
 def test_min_change_matches_an_independent_loop(seq, tmp_path):
     full, samp, rj = tmp_path / "full.parquet", tmp_path / "s.parquet", tmp_path / "r.csv"
-    _run([seq, "-o", full, "--no-landmarks"])
-    out = _run([seq, "-o", samp, "--no-landmarks", "--min-change", "20", "--rejects", rj, "--workers", "2"])
+    hpe("relabel-panoptic", seq, "-o", full, "--no-landmarks", ok=True).output
+    out = hpe(
+        "relabel-panoptic",
+        seq,
+        "-o",
+        samp,
+        "--no-landmarks",
+        "--min-change",
+        "20",
+        "--rejects",
+        rj,
+        "--workers",
+        "2",
+        ok=True,
+    ).output
     f = pq.read_table(full).to_pandas()
     s = pq.read_table(samp).to_pandas()
     R = _mats(f)
@@ -74,7 +92,20 @@ def test_min_change_matches_an_independent_loop(seq, tmp_path):
 
 def test_every_and_frames_with_rejects_accounting(seq, tmp_path):
     o, rj = tmp_path / "o.parquet", tmp_path / "r.csv"
-    _run([seq, "-o", o, "--rejects", rj, "--every", "2", "--frames", "1147:6000", "--no-landmarks"])
+    hpe(
+        "relabel-panoptic",
+        seq,
+        "-o",
+        o,
+        "--rejects",
+        rj,
+        "--every",
+        "2",
+        "--frames",
+        "1147:6000",
+        "--no-landmarks",
+        ok=True,
+    ).output
     t = pq.read_table(o).to_pandas()
     r = pd.read_csv(rj)
     skipped = r[r["reason"] == "skipped by --every"]  # the frames --every skips are listed, not labelled

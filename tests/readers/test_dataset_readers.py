@@ -13,10 +13,9 @@ import pandas as pd
 import pyarrow as pa
 import pytest
 import scipy.io
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.errors import HpeError
 from hpe_cli.io import open_table
 
@@ -215,7 +214,7 @@ def test_draw_mat_reads_pose_para_as_300w_lp(aflw430, tmp_path, system):
     outs = []
     for sysname in ("300w_lp", system):
         out = tmp_path / f"d_{sysname}"
-        r = CliRunner().invoke(cli, ["draw", str(aflw430), "-o", str(out), "--system", sysname, "-q"])
+        r = hpe("draw", aflw430, "-o", out, "--system", sysname, "-q")
         assert r.exit_code == 0, r.output
         outs.append((out / "image00430.jpg").read_bytes())
     assert outs[0] == outs[1]
@@ -225,23 +224,7 @@ def test_augment_rotate0_mat_gives_target_system_angles(aflw430, tmp_path):
     from hpe_cli.rotation.systems import get_system
 
     out = tmp_path / "aug.csv"
-    r = CliRunner().invoke(
-        cli,
-        [
-            "augment",
-            str(aflw430),
-            "-o",
-            str(out),
-            "--system",
-            "3ddfa_v2",
-            "--rotate",
-            "0",
-            "--image-size",
-            "450",
-            "450",
-            "-q",
-        ],
-    )
+    r = hpe("augment", aflw430, "-o", out, "--system", "3ddfa_v2", "--rotate", "0", "--image-size", "450", "450", "-q")
     assert r.exit_code == 0, r.output
     f = pd.read_csv(out)
     pose = np.rad2deg(scipy.io.loadmat(aflw430 / "image00430.mat")["Pose_Para"][0, :3])
@@ -273,9 +256,7 @@ def test_dad3dheads_converts_with_the_builtin_system(tmp_path):
     rots = Rotation.from_euler("xyz", [[10, -20, 5], [-40, 30, 100]], degrees=True).as_matrix()
     _dad_tree(tmp_path, rots, [1.0, 1.0])
     out = tmp_path / "o.csv"
-    r = CliRunner().invoke(
-        cli, ["convert", str(tmp_path), "-o", str(out), "--from", "dad3dheads", "--to", "300w_lp", "-q"]
-    )
+    r = hpe("convert", tmp_path, "-o", out, "--from", "dad3dheads", "--to", "300w_lp", "-q")
     assert r.exit_code == 0, r.output
     f = pd.read_csv(out)
     w = get_system("300w_lp")
@@ -297,22 +278,19 @@ def test_evaluate_mat_gt_is_300w_lp_whatever_gt_system(aflw430, tmp_path):
     )
     for gsys in ("300w_lp", "3ddfa_v2"):
         rep = tmp_path / f"{gsys}.json"
-        r = CliRunner().invoke(
-            cli,
-            [
-                "evaluate",
-                str(pred),
-                str(aflw430),
-                "--pred-system",
-                "300w_lp",
-                "--gt-system",
-                gsys,
-                "--key",
-                "file",
-                "--json",
-                str(rep),
-                "-q",
-            ],
+        r = hpe(
+            "evaluate",
+            pred,
+            aflw430,
+            "--pred-system",
+            "300w_lp",
+            "--gt-system",
+            gsys,
+            "--key",
+            "file",
+            "--json",
+            rep,
+            "-q",
         )
         assert r.exit_code == 0, r.output
         assert json.loads(rep.read_text())["metrics"]["geodesic"]["max"] < 1e-6

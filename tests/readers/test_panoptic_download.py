@@ -9,10 +9,8 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from conftest import sample_data_script
-from hpe_cli.cli.main import cli
+from conftest import hpe, sample_data_script
 from hpe_cli.datasets import panoptic as pan
 from hpe_cli.datasets.panoptic_video import VideoFrames
 from hpe_cli.errors import HpeError
@@ -40,16 +38,10 @@ def _read(path):
     return pq.read_table(path)
 
 
-def _run(args, expect=0):
-    r = CliRunner().invoke(cli, args)
-    assert r.exit_code == expect, r.output
-    return r.output
-
-
 def test_tar_gives_the_folder_labels(seqs, tmp_path):
     a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
-    _run(["relabel-panoptic", str(seqs / "folder" / "seqA"), "-o", str(a), "-q"])
-    _run(["relabel-panoptic", str(seqs / "tar" / "seqA"), "-o", str(b), "-q"])
+    hpe("relabel-panoptic", seqs / "folder" / "seqA", "-o", a, "-q", ok=True).output
+    hpe("relabel-panoptic", seqs / "tar" / "seqA", "-o", b, "-q", ok=True).output
     assert _read(a).equals(_read(b)) and _read(a).num_rows > 50
     frames = pan.face_sources(seqs / "tar" / "seqA")
     assert {7, 8, 14}.isdisjoint(frames) and min(frames) == 3  # gaps are fine
@@ -71,7 +63,7 @@ def test_duplicate_frames_name_both(seqs, tmp_path):
         r"hdFace3d/faceRecon3D_hd6\.json are both frame 6",
     ):
         pan.tar_frames(seq / "hdFace3d.tar")
-    out = _run(["relabel-panoptic", str(seq), "-o", str(tmp_path / "o.parquet")], expect=1)
+    out = hpe("relabel-panoptic", seq, "-o", tmp_path / "o.parquet", code=1).output
     assert "both frame 6" in out and "Traceback" not in out
 
 
@@ -87,7 +79,7 @@ def test_truncated_tar_rejects_the_cut_frame(seqs, tmp_path):
     cut = pan.tar_frames(tar)
     assert cut[last].truncated and not any(r.truncated for k, r in cut.items() if k != last)
     o, rj = tmp_path / "o.parquet", tmp_path / "r.csv"
-    out = _run(["relabel-panoptic", str(seq), "-o", str(o), "--rejects", str(rj)])
+    out = hpe("relabel-panoptic", seq, "-o", o, "--rejects", rj, ok=True).output
     assert "1 unreadable (truncated) face files" in out
     import pandas as pd
 
@@ -102,31 +94,24 @@ def test_truncated_tar_rejects_the_cut_frame(seqs, tmp_path):
 
 def test_several_sequences_and_a_root(seqs, tmp_path):
     o1, o2 = tmp_path / "1.parquet", tmp_path / "2.parquet"
-    out = _run(["relabel-panoptic", str(seqs / "multi" / "seqA"), str(seqs / "multi" / "seqB"), "-o", str(o1)])
+    out = hpe("relabel-panoptic", seqs / "multi" / "seqA", seqs / "multi" / "seqB", "-o", o1, ok=True).output
     assert out.count("seqA: ") == 1 and out.count("seqB: ") == 1 and "total over 2 sequences" in out
-    _run(["relabel-panoptic", str(seqs / "multi"), "-o", str(o2), "-q"])
+    hpe("relabel-panoptic", seqs / "multi", "-o", o2, "-q", ok=True).output
     t = _read(o1)
     assert t.equals(_read(o2))
     assert list(dict.fromkeys(t.column("sequence").to_pylist())) == ["seqA", "seqB"]
     one = _read(_one(seqs / "multi" / "seqB", tmp_path))
     sub = t.filter(np.asarray(t.column("sequence").to_pylist()) == "seqB")
     assert sub.equals(one)
-    out = _run(
-        [
-            "relabel-panoptic",
-            str(seqs / "multi" / "seqA"),
-            str(seqs / "multi" / "seqA"),
-            "-o",
-            str(tmp_path / "3.parquet"),
-        ],
-        expect=1,
-    )
+    out = hpe(
+        "relabel-panoptic", seqs / "multi" / "seqA", seqs / "multi" / "seqA", "-o", tmp_path / "3.parquet", code=1
+    ).output
     assert "given twice" in out
 
 
 def _one(seq, tmp_path):
     o = tmp_path / f"one_{seq.name}.parquet"
-    _run(["relabel-panoptic", str(seq), "-o", str(o), "-q"])
+    hpe("relabel-panoptic", seq, "-o", o, "-q", ok=True).output
     return o
 
 
@@ -173,16 +158,18 @@ def test_same_bytes_on_a_local_dask_cluster(seqs, tmp_path):
     pytest.importorskip("dask.distributed")
     seq = seqs / "multi" / "seqB"
     a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
-    _run(["relabel-panoptic", str(seq), "-o", str(a), "-q", "--no-landmarks"])
-    _run(["relabel-panoptic", str(seq), "-o", str(b), "-q", "--no-landmarks", "--scheduler", "local", "--workers", "2"])
+    hpe("relabel-panoptic", seq, "-o", a, "-q", "--no-landmarks", ok=True).output
+    hpe(
+        "relabel-panoptic", seq, "-o", b, "-q", "--no-landmarks", "--scheduler", "local", "--workers", "2", ok=True
+    ).output
     assert a.read_bytes() == b.read_bytes()
 
 
 def test_no_landmarks_drops_only_the_landmark_columns(seqs, tmp_path):
     seq = seqs / "multi" / "seqB"
     a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
-    _run(["relabel-panoptic", str(seq), "-o", str(a), "-q"])
-    _run(["relabel-panoptic", str(seq), "-o", str(b), "-q", "--no-landmarks"])
+    hpe("relabel-panoptic", seq, "-o", a, "-q", ok=True).output
+    hpe("relabel-panoptic", seq, "-o", b, "-q", "--no-landmarks", ok=True).output
     ta, tb = _read(a), _read(b)
     assert [c for c in ta.column_names if not c.startswith("lm")] == tb.column_names
     assert ta.select(tb.column_names).equals(tb)
@@ -270,7 +257,7 @@ def test_absurd_landmarks_are_a_face_reject(tmp_path):
     d["people"][0]["face70"]["landmarks"][5] = 1e308
     f.write_text(json.dumps(d))
     rj = tmp_path / "r.csv"
-    out = _run(["relabel-panoptic", str(seq), "-o", str(tmp_path / "o.parquet"), "--rejects", str(rj)])
+    out = hpe("relabel-panoptic", seq, "-o", tmp_path / "o.parquet", "--rejects", rj, ok=True).output
     assert "1 with bad landmarks" in out
     import pandas as pd
 
@@ -283,10 +270,10 @@ def test_absurd_landmarks_are_a_face_reject(tmp_path):
 def test_coco_and_whenet_stream_with_the_same_content(seqs, tmp_path, fmt, suffix):
     seq = seqs / "multi" / "seqB"
     a, b, t = tmp_path / f"a{suffix}", tmp_path / f"b{suffix}", tmp_path / "t.parquet"
-    _run(["relabel-panoptic", str(seq), "-o", str(a), "-q", "--format", fmt])
-    _run(["relabel-panoptic", str(seq), "-o", str(b), "-q", "--format", fmt, "--workers", "2"])
+    hpe("relabel-panoptic", seq, "-o", a, "-q", "--format", fmt, ok=True).output
+    hpe("relabel-panoptic", seq, "-o", b, "-q", "--format", fmt, "--workers", "2", ok=True).output
     assert a.read_bytes() == b.read_bytes()
-    _run(["relabel-panoptic", str(seq), "-o", str(t), "-q", "--system", "whenet"])
+    hpe("relabel-panoptic", seq, "-o", t, "-q", "--system", "whenet", ok=True).output
     frame = _read(t).to_pandas()
     ref = tmp_path / f"ref{suffix}"
     if fmt == "coco":

@@ -20,9 +20,8 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.io
-from click.testing import CliRunner
 
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.datasets import biwi
 from hpe_cli.datasets import panoptic as pan
 from hpe_cli.datasets.fields import MAX_TANGENTIAL, distortion_problem, distortion_problems
@@ -35,10 +34,6 @@ AFLW = ROOT / "sample_data" / "aflw2000"
 SYNTH = ROOT / "sample_data" / "panoptic_synth"
 REAL = ROOT.parent / "shared" / "realdata"
 needs_real = pytest.mark.skipif(not (REAL / "biwi").is_dir(), reason="../shared/realdata is not available")
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=True)
 
 
 def one_error(res, *must):
@@ -90,7 +85,7 @@ def set_person(col, row, person, value):
 )
 def test_agora_malformed_fields_name_file_row_person_field(tmp_path, edit, message):
     path = agora_copy(tmp_path, edit)
-    res = run("relabel-agora", path, "-o", tmp_path / "o.csv", "--rejects", tmp_path / "r.csv", "-q")
+    res = hpe("relabel-agora", path, "-o", tmp_path / "o.csv", "--rejects", tmp_path / "r.csv", "-q")
     one_error(res, path, message)
     assert not (tmp_path / "o.csv").exists() and not (tmp_path / "r.csv").exists()
 
@@ -108,10 +103,10 @@ def test_agora_malformed_fields_name_file_row_person_field(tmp_path, edit, messa
 def test_agora_invalid_values_refused_or_rejected(tmp_path, edit, detail):
     path = agora_copy(tmp_path, edit)
     # without --rejects: an error naming the file, the person and the field; nothing written
-    one_error(run("relabel-agora", path, "-o", tmp_path / "o.csv", "-q"), path, "row 1, person 0", detail)
+    one_error(hpe("relabel-agora", path, "-o", tmp_path / "o.csv", "-q"), path, "row 1, person 0", detail)
     assert not (tmp_path / "o.csv").exists()
     # with --rejects: the person is a 'bad input' reject whose detail names the field, the others are labelled
-    res = run("relabel-agora", path, "-o", tmp_path / "o.csv", "--rejects", tmp_path / "r.csv", "-q")
+    res = hpe("relabel-agora", path, "-o", tmp_path / "o.csv", "--rejects", tmp_path / "r.csv", "-q")
     assert res.exit_code == 0, res.output
     rj = pd.read_csv(tmp_path / "r.csv")
     hit = rj[(rj["row"] == 1) & (rj["person"] == 0)]
@@ -130,11 +125,11 @@ def test_agora_same_file_twice_or_same_name_refused(tmp_path):
     other.parent.mkdir()
     shutil.copy(AGORA_PKL, other)
     out = tmp_path / "o.csv"
-    one_error(run("relabel-agora", a, a, "-o", out, "-q"), f"{a} and {a}", "given twice")
-    one_error(run("relabel-agora", a, link, "-o", out, "-q"), f"{a} and {link}", "given twice")
-    one_error(run("relabel-agora", a, other, "-o", out, "-q"), f"{a} and {other}", "two dataframes named")
+    one_error(hpe("relabel-agora", a, a, "-o", out, "-q"), f"{a} and {a}", "given twice")
+    one_error(hpe("relabel-agora", a, link, "-o", out, "-q"), f"{a} and {link}", "given twice")
+    one_error(hpe("relabel-agora", a, other, "-o", out, "-q"), f"{a} and {other}", "two dataframes named")
     assert not out.exists()
-    assert run("relabel-agora", a, "-o", out, "-q").exit_code == 0  # the file alone is fine
+    assert hpe("relabel-agora", a, "-o", out, "-q").exit_code == 0  # the file alone is fine
 
 
 # ================================================================== .mat
@@ -173,7 +168,7 @@ def test_mat_fields_named_with_the_mat_file(tmp_path, key, value, got):
         ["convert", folder, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet"],
         ["audit", folder],
     ):
-        one_error(run(*cmd, "-q"), f"{bad}: {key}: expected", got)
+        one_error(hpe(*cmd, "-q"), f"{bad}: {key}: expected", got)
 
 
 # ================================================================== Panoptic calibration
@@ -232,7 +227,7 @@ def test_panoptic_null_camera_name_is_a_calibration_error_in_the_cli(tmp_path):
     doc = json.loads(calib.read_text())
     doc["cameras"][1]["name"] = None
     calib.write_text(json.dumps(doc))
-    one_error(run("relabel-panoptic", seq, "-o", tmp_path / "o.csv", "-q"), calib, "camera 1: name")
+    one_error(hpe("relabel-panoptic", seq, "-o", tmp_path / "o.csv", "-q"), calib, "camera 1: name")
 
 
 @pytest.mark.skipif(not (REAL / "panoptic_160906_pizza1").is_dir(), reason="../shared/realdata is not available")
@@ -254,7 +249,7 @@ def test_huge_frame_number_is_one_line(tmp_path):
     first = sorted((seq / "hdFace3d").iterdir())[0]
     huge = seq / "hdFace3d" / ("faceRecon3D_hd" + "9" * 25 + ".json")
     shutil.copy(first, huge)
-    one_error(run("relabel-panoptic", seq, "-o", tmp_path / "o.csv", "-q"), huge, "frame number", "out of range")
+    one_error(hpe("relabel-panoptic", seq, "-o", tmp_path / "o.csv", "-q"), huge, "frame number", "out of range")
 
 
 @pytest.mark.parametrize(
@@ -346,7 +341,7 @@ def make_tgz(path, members):
 )
 def test_biwi_tgz_duplicates_and_traversal(tmp_path, names, message):
     tgz = make_tgz(tmp_path / "db_annotations.tgz", [(n, bin_payload()) for n in names])
-    one_error(run("biwi", tgz, "-o", tmp_path / "o.csv", "-q"), tgz, message)
+    one_error(hpe("biwi", tgz, "-o", tmp_path / "o.csv", "-q"), tgz, message)
     assert not (tmp_path / "o.csv").exists()
 
 
@@ -488,5 +483,5 @@ def test_w300lp_zip_members(tmp_path, extra, message):
         with zipfile.ZipFile(arc, "w") as z:
             z.writestr("300W_LP/IBUG/IBUG_image_008_1_0.mat", src.read_bytes())
             z.writestr(extra, src.read_bytes())
-    one_error(run("convert", arc, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet", "-q"), arc, message)
+    one_error(hpe("convert", arc, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "whenet", "-q"), arc, message)
     assert not (tmp_path / "o.csv").exists()

@@ -13,19 +13,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
 import hpe_cli as hpe
-from hpe_cli.cli.main import cli
+from conftest import hpe as hpe_cmd
 
 ROOT = Path(__file__).resolve().parents[2]
 MAT_COLS = [f"r{i}{j}" for i in range(3) for j in range(3)]
-
-
-def run(*args):
-    res = CliRunner().invoke(cli, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
-    return res
 
 
 def geo(A, B):
@@ -50,13 +43,15 @@ def labels(tmp_path):
 
 def test_read_labels_matches_what_the_commands_read(tmp_path):
     out = tmp_path / "l.parquet"
-    run("relabel-panoptic", ROOT / "sample_data" / "panoptic_synth", "-o", out, "--system", "scipy_zyx", "-q")
+    hpe_cmd(
+        "relabel-panoptic", ROOT / "sample_data" / "panoptic_synth", "-o", out, "--system", "scipy_zyx", "-q", ok=True
+    )
     table, system = hpe.read_labels(out)
-    rep = json.loads(run("audit", out, "--json", "-", "-q").stdout)
+    rep = json.loads(hpe_cmd("audit", out, "--json", "-", "-q", ok=True).stdout)
     assert system.name == rep["system"] == "scipy_zyx" and rep["system_origin"] == "file metadata"
     assert rep["rows"] == len(table)
     same = tmp_path / "same.parquet"
-    run("convert", out, "-o", same, "--to", "scipy_zyx", "-q")
+    hpe_cmd("convert", out, "-o", same, "--to", "scipy_zyx", "-q", ok=True)
     back = pd.read_parquet(same)
     R_api = system.from_angles(table[["pitch", "yaw", "roll"]].to_numpy())
     assert geo(R_api, back[MAT_COLS].to_numpy()).max() < 1e-6
@@ -65,13 +60,13 @@ def test_read_labels_matches_what_the_commands_read(tmp_path):
 
     with pytest.raises(UsageError):
         hpe.read_labels(out, system="300w_lp")
-    assert CliRunner().invoke(cli, ["audit", str(out), "--system", "300w_lp"]).exit_code == 2
+    assert hpe_cmd("audit", out, "--system", "300w_lp").exit_code == 2
 
 
 def test_convert(labels, tmp_path):
     path, df, pyr = labels
     out = tmp_path / "c.parquet"
-    run("convert", path, "-o", out, "--from", "300w_lp", "--to", "6drepnet", "-q")
+    hpe_cmd("convert", path, "-o", out, "--from", "300w_lp", "--to", "6drepnet", "-q", ok=True)
     cli_out = pd.read_parquet(out)
     api = hpe.convert(pyr, "300w_lp", "6drepnet")
     assert geo(api.matrix, cli_out[MAT_COLS].to_numpy()).max() < 1e-6
@@ -86,7 +81,7 @@ def test_convert(labels, tmp_path):
 def test_audit(labels, tmp_path):
     path, _, pyr = labels
     flagged = tmp_path / "f.parquet"
-    rep = json.loads(run("audit", path, "--system", "300w_lp", "-o", flagged, "--json", "-", "-q").stdout)
+    rep = json.loads(hpe_cmd("audit", path, "--system", "300w_lp", "-o", flagged, "--json", "-", "-q", ok=True).stdout)
     got = pd.read_parquet(flagged)
     api = hpe.audit(pyr, "300w_lp")
     for check in ("gimbal_lock", "near_gimbal", "non_canonical", "out_of_range", "non_finite"):
@@ -109,7 +104,9 @@ def test_evaluate(labels, tmp_path):
     pp = tmp_path / "pred.csv"
     pred.to_csv(pp, index=False)
     rep = json.loads(
-        run("evaluate", pp, path, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--json", "-", "-q").stdout
+        hpe_cmd(
+            "evaluate", pp, path, "--pred-system", "300w_lp", "--gt-system", "300w_lp", "--json", "-", "-q", ok=True
+        ).stdout
     )
     api = hpe.evaluate(noisy, pyr, pred_system="300w_lp", gt_system="300w_lp")
     assert rep["n"]["pairs"] == api["n"]["pairs"] == len(df)
@@ -121,7 +118,7 @@ def test_evaluate(labels, tmp_path):
 def test_augment(labels, tmp_path):
     path, df, pyr = labels
     out = tmp_path / "a.parquet"
-    run("augment", path, "-o", out, "--system", "300w_lp", "--image-size", "64", "64", "--hflip", "-q")
+    hpe_cmd("augment", path, "-o", out, "--system", "300w_lp", "--image-size", "64", "64", "--hflip", "-q", ok=True)
     got = pd.read_parquet(out)
     box = df[["bbox_x", "bbox_y", "bbox_w", "bbox_h"]].to_numpy()
     api = hpe.augment_batch(pyr, bbox=box, op="hflip", image_size=(64, 64))
@@ -132,7 +129,7 @@ def test_augment(labels, tmp_path):
 def test_draw(labels, tmp_path):
     path, df, pyr = labels
     outdir = tmp_path / "drawn"
-    run("draw", path, "-o", outdir, "--canvas", "96x80", "--length", "20", "--thickness", "1", "-q")
+    hpe_cmd("draw", path, "-o", outdir, "--canvas", "96x80", "--length", "20", "--thickness", "1", "-q", ok=True)
     import cv2
 
     from hpe_cli.geometry.draw import blank_canvas

@@ -9,9 +9,6 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
-
-from hpe_cli.cli.main import cli
 
 ROOT = Path(__file__).resolve().parents[2]
 #: ../shared next to the checkout (or next to the folder of worktrees that holds it)
@@ -46,10 +43,6 @@ def chromium():
     if path is None:
         pytest.skip("no chromium installed (apt-get install -y chromium)")
     return path
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
 
 
 def page_data(page: Path) -> dict:

@@ -15,8 +15,10 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
+from conftest import hpe
+
 from .cdp import Browser
-from .conftest import CHROMIUM_FLAGS, PIZZA, body_attrs, console_errors, open_page, page_data, run
+from .conftest import CHROMIUM_FLAGS, PIZZA, body_attrs, console_errors, open_page, page_data
 
 pytestmark = pytest.mark.skipif(not PIZZA.is_dir(), reason="../shared/realdata is not available")
 ALSO = ("3ddfa_v2", "300w_lp")
@@ -26,8 +28,8 @@ ALSO = ("3ddfa_v2", "300w_lp")
 def page(tmp_path_factory):
     t = tmp_path_factory.mktemp("also")
     labels, page = t / "labels.parquet", t / "page"
-    assert run("relabel-panoptic", PIZZA, "-o", labels, "--system", "whenet", "-q").exit_code == 0
-    r = run("view", labels, "-o", page, "--images", PIZZA, "--rejects", t / "rej.csv", "--also-in", ",".join(ALSO),
+    assert hpe("relabel-panoptic", PIZZA, "-o", labels, "--system", "whenet", "-q").exit_code == 0
+    r = hpe("view", labels, "-o", page, "--images", PIZZA, "--rejects", t / "rej.csv", "--also-in", ",".join(ALSO),
             "-q")  # fmt: skip
     assert r.exit_code == 0, r.output
     return t, labels, page
@@ -36,7 +38,7 @@ def page(tmp_path_factory):
 def _converted(t, labels, system):
     out = t / f"{system}.parquet"
     if not out.exists():
-        r = run("convert", labels, "-o", out, "--to", system, "-q")
+        r = hpe("convert", labels, "-o", out, "--to", system, "-q")
         assert r.exit_code == 0, r.output
     return pd.read_parquet(out)
 

@@ -15,7 +15,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from .conftest import AFLW, PIZZA, ROOT, body_attrs, console_errors, detail_chunk, open_page, page_data, run
+from conftest import hpe
+
+from .conftest import AFLW, PIZZA, ROOT, body_attrs, console_errors, detail_chunk, open_page, page_data
 
 pytestmark = pytest.mark.skipif(not PIZZA.is_dir(), reason="../shared/realdata is not available")
 
@@ -26,9 +28,9 @@ def pizza(tmp_path_factory):
     t = tmp_path_factory.mktemp("pizza")
     corr, legacy, page = t / "corrected.parquet", t / "legacy.parquet", t / "page"
     for out, extra in ((corr, []), (legacy, ["--legacy-whenet"])):
-        r = run("relabel-panoptic", PIZZA, "-o", out, "--system", "whenet", "-q", *extra)
+        r = hpe("relabel-panoptic", PIZZA, "-o", out, "--system", "whenet", "-q", *extra)
         assert r.exit_code == 0, r.output
-    r = run("view", corr, legacy, "-o", page, "--images", PIZZA, "--rejects", t / "rej.csv", "-q")
+    r = hpe("view", corr, legacy, "-o", page, "--images", PIZZA, "--rejects", t / "rej.csv", "-q")
     assert r.exit_code == 0, r.output
     return corr, legacy, page
 
@@ -131,7 +133,7 @@ def test_aflw_pages_open_clean(chromium, tmp_path):
         if not src.is_dir():
             continue
         page = tmp_path / src.name
-        r = run("view", src, "-o", page, "-q")
+        r = hpe("view", src, "-o", page, "-q")
         assert r.exit_code == 0, r.output
         n = len(list(src.glob("*.mat")))
         data = page_data(page)

@@ -8,12 +8,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from .conftest import AFLW, PIZZA, PRED, page_data, run
+from conftest import hpe
+
+from .conftest import AFLW, PIZZA, PRED, page_data
 
 
 def _evaluate_rows(tmp_path, pred, gt, *extra):
     out = tmp_path / "rows.csv"
-    r = run("evaluate", pred, gt, "-o", out, "-q", *extra)
+    r = hpe("evaluate", pred, gt, "-o", out, "-q", *extra)
     assert r.exit_code == 0, r.output
     return pd.read_csv(out)
 
@@ -25,7 +27,7 @@ def test_aflw_angle_is_evaluate_geodesic(tmp_path):
     pred = tmp_path / "shuffled.csv"
     pd.read_csv(PRED).sample(frac=1.0, random_state=3).to_csv(pred, index=False)  # joined by key, not by order
     page = tmp_path / "page"
-    r = run("view", AFLW, pred, "-o", page, "--other-system", "300w_lp", "-q")
+    r = hpe("view", AFLW, pred, "-o", page, "--other-system", "300w_lp", "-q")
     assert r.exit_code == 0, r.output
     data = page_data(page)
     ev = _evaluate_rows(tmp_path, pred, AFLW, "--pred-system", "300w_lp")
@@ -49,9 +51,9 @@ def test_aflw_angle_is_evaluate_geodesic(tmp_path):
 def test_pizza_corrected_vs_legacy_angle_is_evaluate_geodesic(tmp_path):
     corr, legacy = tmp_path / "c.parquet", tmp_path / "l.parquet"
     for out, extra in ((corr, []), (legacy, ["--legacy-whenet"])):
-        assert run("relabel-panoptic", PIZZA, "-o", out, "-q", *extra).exit_code == 0
+        assert hpe("relabel-panoptic", PIZZA, "-o", out, "-q", *extra).exit_code == 0
     page = tmp_path / "page"
-    r = run("view", corr, legacy, "-o", page, "--images", PIZZA, "--rejects", tmp_path / "rej.csv", "-q")
+    r = hpe("view", corr, legacy, "-o", page, "--images", PIZZA, "--rejects", tmp_path / "rej.csv", "-q")
     assert r.exit_code == 0, r.output
     data = page_data(page)
     ev = _evaluate_rows(tmp_path, legacy, corr, "--key", "image,person_id", "--rejects", tmp_path / "ev_rej.csv")

@@ -7,8 +7,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from conftest import hpe
+
 from .cdp import Browser
-from .conftest import CHROMIUM_FLAGS, PIZZA, page_data, run
+from .conftest import CHROMIUM_FLAGS, PIZZA, page_data
 
 pytestmark = pytest.mark.skipif(not PIZZA.is_dir(), reason="../shared/realdata is not available")
 
@@ -16,9 +18,9 @@ pytestmark = pytest.mark.skipif(not PIZZA.is_dir(), reason="../shared/realdata i
 @pytest.fixture
 def page(tmp_path):
     labels = tmp_path / "labels.parquet"
-    assert run("relabel-panoptic", PIZZA, "-o", labels, "--system", "whenet", "-q").exit_code == 0
+    assert hpe("relabel-panoptic", PIZZA, "-o", labels, "--system", "whenet", "-q").exit_code == 0
     out = tmp_path / "page"
-    r = run("view", labels, "-o", out, "--images", PIZZA, "--rejects", tmp_path / "rej.csv", "-q")
+    r = hpe("view", labels, "-o", out, "--images", PIZZA, "--rejects", tmp_path / "rej.csv", "-q")
     assert r.exit_code == 0, r.output
     return labels, out
 
