@@ -10,8 +10,12 @@ from hypothesis import settings
 settings.register_profile("hpe", max_examples=60, deadline=None)
 settings.load_profile("hpe")
 
-REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
 ROOT = Path(__file__).resolve().parents[1]
+#: ``shared/realdata`` next to the checkout or next to a folder above it (worktrees live one level deeper)
+REALDATA = next(
+    (p / "shared" / "realdata" for p in ROOT.parents if (p / "shared" / "realdata").is_dir()),
+    ROOT.parent / "shared" / "realdata",
+)
 
 
 def _arg(a):
@@ -49,22 +53,39 @@ def hpe(*args, ok: bool | None = None, code: int | None = None, **kw):
     return res
 
 
-def hpe_process(*args, ok: bool | None = None, code: int | None = None, timeout=120, text=True, env=None, **kw):
-    """``python -m hpe_cli ARGS`` in a separate process (what a user sees on the terminal; signals, workers).
+def hpe_env(**extra) -> dict:
+    """The environment of an ``hpe`` child process: this worktree first on ``PYTHONPATH``, plus ``extra``."""
+    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
+    return {**os.environ, "PYTHONPATH": path, **extra}
 
-    This worktree comes first on ``PYTHONPATH``; ``env`` adds variables. Returns the ``CompletedProcess``
-    (``.returncode``, ``.stdout``, ``.stderr``: ``str``, bytes with ``text=False``); ``ok``/``code`` as in
-    ``hpe``. ``kw`` goes to ``subprocess.run`` (``input=``, ``cwd=``...).
+
+def hpe_process(*args, ok: bool | None = None, code: int | None = None, timeout=120, text=True, env=None, **kw):
+    """``python -m hpe_cli ARGS`` in a separate process, waited for (what a user sees on the terminal).
+
+    ``env`` adds variables to ``hpe_env()``. Returns the ``CompletedProcess`` (``.returncode``, ``.stdout``,
+    ``.stderr``: ``str``, bytes with ``text=False``); ``ok``/``code`` as in ``hpe``. ``kw`` goes to
+    ``subprocess.run`` (``input=``, ``cwd=``...).
     """
     __tracebackhide__ = True
     argv = [_arg(a) for a in args]
-    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
-    environ = {**os.environ, "PYTHONPATH": path, **(env or {})}
     proc = subprocess.run(
-        [sys.executable, "-m", "hpe_cli", *argv], capture_output=True, text=text, env=environ, timeout=timeout, **kw
+        [sys.executable, "-m", "hpe_cli", *argv],
+        capture_output=True,
+        text=text,
+        env=hpe_env(**(env or {})),
+        timeout=timeout,
+        **kw,
     )
     _check(argv, proc.returncode, ok, code, f"{proc.stdout!s}\n{proc.stderr!s}")
     return proc
+
+
+def hpe_popen(*args, env=None, **kw) -> subprocess.Popen:
+    """``python -m hpe_cli ARGS`` started in a separate process and not waited for (signals, killed workers):
+    stdout and stderr are pipes (bytes) unless ``kw`` says otherwise; ``env`` adds variables to ``hpe_env()``;
+    ``kw`` goes to ``subprocess.Popen``."""
+    kw = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, **kw}
+    return subprocess.Popen([sys.executable, "-m", "hpe_cli", *map(_arg, args)], env=hpe_env(**(env or {})), **kw)
 
 
 def sample_data_script():

@@ -14,16 +14,9 @@ from scipy.spatial.transform import Rotation
 from conftest import hpe
 from hpe_cli.geometry.landmark_schemes import flip_permutation
 
+from .conftest import COLOURS, a300wlp, geodesic_deg
+
 STEMS = ["image00050", "image00430", "image02283"]
-COLOURS = ((0, 0, 255), (0, 255, 0), (255, 0, 0))
-
-
-def a300(p, y, r):
-    return Rotation.from_euler("ZYX", [r, y, p], degrees=True).as_matrix().T
-
-
-def geodesic(A, B):
-    return np.degrees(np.linalg.norm(Rotation.from_matrix(A.T @ B).as_rotvec()))
 
 
 @pytest.fixture
@@ -79,7 +72,7 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
         m0 = scipy.io.loadmat(str(aflw / f"{s}.mat"))
         m1 = scipy.io.loadmat(str(out / f"{s}.mat"))
         p0 = m0["Pose_Para"].reshape(-1).astype(np.float64)
-        A0 = a300(*np.degrees(p0[:3]))
+        A0 = a300wlp(*np.degrees(p0[:3]))
         img0 = cv2.imread(str(aflw / f"{s}.jpg"))
         H0, W0 = img0.shape[:2]
         # the rotation, as matrices, through the .mat and convert
@@ -87,9 +80,9 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
         A_want, pts_want, (W1, H1) = expected(how, A0, pt0, (W0, H0))
         r = conv.loc[f"{s}.mat"]
         A_conv = np.array([[r[f"r{i}{j}"] for j in range(3)] for i in range(3)])
-        assert geodesic(A_want, A_conv) < 1e-6
+        assert geodesic_deg(A_want, A_conv) < 1e-6
         a = aug.loc[f"{s}.mat"]
-        assert geodesic(A_want, a300(a.pitch, a.yaw, a.roll)) < 1e-6
+        assert geodesic_deg(A_want, a300wlp(a.pitch, a.yaw, a.roll)) < 1e-6
         # pt2d moved (a mirror re-indexes the 21 AFLW points); invisible points (x = -1, y a filler) kept as they are
         vis = pt0[0] != -1
         perm = flip_permutation("aflw21") if how[0] == "hflip" else np.arange(pt0.shape[1])
@@ -147,7 +140,7 @@ def test_mat_augment_mat_convert_draw(aflw, tmp_path, how, args):
         img = cv2.imread(str(tmp_path / "drawn" / f"{s}.jpg"))
         H1, W1 = img.shape[:2]
         c = np.array([p1[3], H1 - 1 - p1[4]])
-        A = a300(*np.degrees(p1[:3]))
+        A = a300wlp(*np.degrees(p1[:3]))
         L = abs(p1[6]) * 100_000
         ends = [c + L * sgn * np.array([A[0, i], -A[1, i]]) for i, sgn in enumerate((1, -1, 1))]
         inside = 0

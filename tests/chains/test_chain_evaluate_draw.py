@@ -9,43 +9,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pandas as pd
-import pytest
 import scipy.io
-from scipy.spatial.transform import Rotation
 
 from conftest import hpe
 
-GOLDEN = Path(__file__).resolve().parents[3] / "shared" / "golden" / "evaluate" / "aflw16m"
-COLOURS = ((0, 0, 255), (0, 255, 0), (255, 0, 0))
-
-
-def _a300wlp(p, y, r):
-    """300W-LP's A = Rx(p)^T Ry(y)^T Rz(r)^T = (Rz(r) Ry(y) Rx(p))^T, from SciPy."""
-    return Rotation.from_euler("ZYX", [r, y, p], degrees=True).as_matrix().T
-
-
-def _geodesic(A, B):
-    return np.degrees(np.linalg.norm(Rotation.from_matrix(A.T @ B).as_rotvec()))
-
-
-@pytest.fixture
-def errors(realdata, tmp_path):
-    if not GOLDEN.exists():
-        pytest.skip("golden predictions not available")
-    out = tmp_path / "errors.parquet"
-    res = hpe(
-        "evaluate",
-        GOLDEN / "pred.csv",
-        GOLDEN / "gt.csv",
-        "--pred-system",
-        "300w_lp",
-        "--gt-system",
-        "300w_lp",
-        "-o",
-        out,
-    )
-    assert res.exit_code == 0, res.output
-    return out
+from .conftest import COLOURS, GOLDEN, a300wlp, geodesic_deg
 
 
 def test_evaluate_then_draw_worst(realdata, errors, tmp_path):
@@ -56,7 +24,7 @@ def test_evaluate_then_draw_worst(realdata, errors, tmp_path):
     assert "300w_lp (file metadata)" in res.output
     gt = pd.read_csv(GOLDEN / "gt.csv").set_index("image")
     pred = pd.read_csv(GOLDEN / "pred.csv").set_index("image")
-    geo = pd.Series({k: _geodesic(_a300wlp(*gt.loc[k]), _a300wlp(*pred.loc[k])) for k in gt.index})
+    geo = pd.Series({k: geodesic_deg(a300wlp(*gt.loc[k]), a300wlp(*pred.loc[k])) for k in gt.index})
     want = geo.sort_values(ascending=False).index[:5]
     files = sorted(p.name for p in out.iterdir())
     assert files == [f"{k + 1:04d}_{Path(n).stem}.png" for k, n in enumerate(want)]
@@ -68,7 +36,7 @@ def test_evaluate_then_draw_worst(realdata, errors, tmp_path):
         assert (H, W) == cv2.imread(str(aflw / name.replace(".mat", ".jpg"))).shape[:2]
         c = np.array([pose[3], H - 1 - pose[4]])
         L = abs(pose[6]) * 100_000
-        P = _a300wlp(*pred.loc[name])
+        P = a300wlp(*pred.loc[name])
         # canonical x = the subject's left, y = up, z = out of the face; the lines are x, -y (forehead to chin)
         # and z, in image (u right, v down) coordinates: direction s * (A[0, i], -A[1, i]), s = (1, -1, 1)
         ends = [c + L * s * np.array([P[0, i], -P[1, i]]) for i, s in enumerate((1, -1, 1))]

@@ -9,28 +9,6 @@ import pytest
 
 from conftest import hpe
 
-GOLDEN = Path(__file__).resolve().parents[3] / "shared" / "golden" / "evaluate" / "aflw16m"
-
-
-@pytest.fixture
-def errors(realdata, tmp_path):
-    if not GOLDEN.exists():
-        pytest.skip("golden predictions not available")
-    out = tmp_path / "errors.parquet"
-    res = hpe(
-        "evaluate",
-        GOLDEN / "pred.csv",
-        GOLDEN / "gt.csv",
-        "--pred-system",
-        "300w_lp",
-        "--gt-system",
-        "300w_lp",
-        "-o",
-        out,
-    )
-    assert res.exit_code == 0, res.output
-    return out
-
 
 @pytest.mark.parametrize("kind", ["parquet", "csv"])
 def test_missing_images_are_rejects_the_rest_drawn(realdata, errors, tmp_path, kind):

@@ -30,11 +30,10 @@ import pytest
 import scipy.io
 from scipy.spatial.transform import Rotation
 
-from conftest import hpe
+from conftest import REALDATA, hpe
 
-ROOT = Path(__file__).resolve().parents[2]
-REALDATA = ROOT.parent / "shared" / "realdata"
-PIZZA = REALDATA / "panoptic_160906_pizza1"
+from .conftest import PIZZA, geodesic_deg
+
 AFLW = REALDATA / "aflw2000_prnet"
 W300 = REALDATA / "300wlp_face3d"
 pytestmark = pytest.mark.skipif(
@@ -46,11 +45,6 @@ CAMS = "00_00,00_08,00_15,00_23"  # the pizza1 cameras with JPEGs in the sample
 def get_R(x, y, z):
     """6DRepNet ``utils.get_R`` (Rz @ Ry @ Rx of radians), through SciPy."""
     return Rotation.from_euler("ZYX", [z, y, x]).as_matrix()
-
-
-def geodesic_deg(R1, R2):
-    """The angle of ``R1^T R2`` (SciPy's rotation vector norm: exact near 0, unlike ``arccos`` of the trace)."""
-    return float(np.degrees(Rotation.from_matrix(np.asarray(R1).T @ np.asarray(R2)).magnitude()))
 
 
 # ------------------------------------------------------------------------------------------------ inputs

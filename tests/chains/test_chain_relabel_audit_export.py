@@ -9,17 +9,13 @@ the label of some faces, e.g. frame 6328 person 1 in every camera); the key list
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pandas as pd
 import pytest
 
 from conftest import hpe
 
-ROOT = Path(__file__).resolve().parents[2]
-PIZZA = Path("/work/shared/realdata/panoptic_160906_pizza1")
-if not PIZZA.exists():
-    PIZZA = ROOT.parent / "shared" / "realdata" / "panoptic_160906_pizza1"
+from .conftest import PIZZA
+
 KEYS = ["sequence", "frame", "camera", "person_id"]
 
 

@@ -6,7 +6,6 @@ import json
 import re
 import shutil
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,9 +13,8 @@ import pytest
 
 from conftest import hpe
 
-ROOT = Path(__file__).resolve().parents[2]
-SHARED = next((p / "shared" for p in ROOT.parents if (p / "shared" / "realdata").is_dir()), ROOT.parent / "shared")
-PIZZA = SHARED / "realdata" / "panoptic_160906_pizza1"
+from .conftest import PIZZA
+
 pytestmark = pytest.mark.skipif(not PIZZA.is_dir(), reason="../shared/realdata is not available")
 
 

@@ -14,8 +14,9 @@ import pytest
 
 from conftest import hpe
 
+from .conftest import PIZZA
+
 ROOT = Path(__file__).resolve().parents[2]
-PIZZA = ROOT.parent / "shared" / "realdata" / "panoptic_160906_pizza1"
 CAMS = "00_00,00_08,00_15,00_23"  # the pizza1 cameras with JPEGs in the sample
 
 _spec = importlib.util.spec_from_file_location("export_release", ROOT / "tests" / "export" / "release.py")

@@ -19,11 +19,10 @@ from conftest import hpe
 from hpe_cli.rotation import get_system
 from hpe_cli.rotation.distances import geodesic_deg
 
+from .conftest import PIZZA
+
 ROOT = Path(__file__).resolve().parents[2]
 SYNTH = ROOT / "sample_data" / "panoptic_synth"
-PIZZA = Path("/work/shared/realdata/panoptic_160906_pizza1")
-if not PIZZA.exists():
-    PIZZA = ROOT.parent / "shared" / "realdata" / "panoptic_160906_pizza1"
 MAT = [f"r{i}{j}" for i in range(3) for j in range(3)]
 CHECKS = ("gimbal_lock", "near_gimbal", "non_canonical", "out_of_range", "non_finite", "not_rotation", "duplicates")
 

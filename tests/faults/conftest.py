@@ -314,8 +314,9 @@ def case_factory(tmp_path):
     return make
 
 
-def children(pid: int) -> set:
-    """Every descendant process of ``pid`` (from /proc), children of children included."""
+def children(pid: int, *, recursive: bool = True) -> set:
+    """Every descendant process of ``pid`` (from /proc), children of children included unless not
+    ``recursive``."""
     out = set()
     try:
         for task in os.listdir(f"/proc/{pid}/task"):
@@ -323,8 +324,9 @@ def children(pid: int) -> set:
                 out.update(int(x) for x in f.read().split())
     except OSError:
         return out
-    for c in list(out):
-        out |= children(c)
+    if recursive:
+        for c in list(out):
+            out |= children(c)
     return out
 
 

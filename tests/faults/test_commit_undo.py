@@ -9,7 +9,7 @@ import os
 
 import pytest
 
-from conftest import hpe
+from conftest import hpe, hpe_popen, hpe_process
 from hpe_cli.errors import HpeError
 from hpe_cli.io import transaction as tx
 
@@ -143,38 +143,28 @@ def test_kill9_of_a_plain_run_then_another_run_cleans_up(tmp_path):
     """``hpe convert`` killed with SIGKILL mid-write leaves its temp; the next run in that folder removes it."""
     import signal as sg
     import subprocess
-    import sys
     import time
 
     import numpy as np
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from .conftest import ROOT
-
     src = tmp_path / "in.parquet"
     rng = np.random.default_rng(0)
     pq.write_table(pa.table({k: rng.uniform(-80, 80, 300_000) for k in ("pitch", "yaw", "roll")}), src)
     out = tmp_path / "out"
     out.mkdir()
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "hpe_cli",
-            "convert",
-            str(src),
-            "-o",
-            str(out / "a.csv"),
-            "--from",
-            "300w_lp",
-            "--to",
-            "6drepnet",
-            "--batch-size",
-            "2000",
-        ],
-        env=env,
+    proc = hpe_popen(
+        "convert",
+        src,
+        "-o",
+        out / "a.csv",
+        "--from",
+        "300w_lp",
+        "--to",
+        "6drepnet",
+        "--batch-size",
+        "2000",
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -188,25 +178,7 @@ def test_kill9_of_a_plain_run_then_another_run_cleans_up(tmp_path):
     old = time.time() - 2 * tx.SWEEP_AGE
     for p in left:
         os.utime(p, (old, old))
-    res = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "hpe_cli",
-            "convert",
-            str(src),
-            "-o",
-            str(out / "b.csv"),
-            "--from",
-            "300w_lp",
-            "--to",
-            "6drepnet",
-            "-q",
-        ],
-        env=env,
-        capture_output=True,
-        timeout=120,
-    )
+    res = hpe_process("convert", src, "-o", out / "b.csv", "--from", "300w_lp", "--to", "6drepnet", "-q", text=False)
     assert res.returncode == 0, res.stderr
     assert sorted(os.listdir(out)) == ["b.csv"]
 

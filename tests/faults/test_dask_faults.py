@@ -7,16 +7,14 @@ from __future__ import annotations
 import os
 import signal
 import socket
-import subprocess
-import sys
 import time
 
 import pytest
 
-from conftest import hpe
+from conftest import hpe, hpe_popen
 from hpe_cli.pipelines import dask_runner
 
-from .conftest import ROOT, SYNTH, check_failed, temp_files
+from .conftest import SYNTH, check_failed, temp_files
 from .test_runs_resume_workers import _alive, _children, _sequence
 
 
@@ -56,26 +54,7 @@ def test_sigterm_during_a_local_cluster_run(tmp_path):
     seq = _sequence(tmp_path / "in", frames=200)
     dst = tmp_path / "out"
     dst.mkdir()
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "hpe_cli",
-            "relabel-panoptic",
-            str(seq),
-            "-o",
-            str(dst / "o.parquet"),
-            "--scheduler",
-            "local",
-            "--workers",
-            "2",
-            "-q",
-        ],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
+    proc = hpe_popen("relabel-panoptic", seq, "-o", dst / "o.parquet", "--scheduler", "local", "--workers", "2", "-q")
     parts = dst / ".o.parquet.hpe-parts"
     end = time.monotonic() + 90
     while time.monotonic() < end and proc.poll() is None:

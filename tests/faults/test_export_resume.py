@@ -11,32 +11,23 @@ from __future__ import annotations
 import importlib.util
 import os
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from conftest import hpe
+from conftest import hpe, hpe_popen
 
 from .conftest import ROOT, alive, children, temp_files
 
 _spec = importlib.util.spec_from_file_location("export_release", ROOT / "tests" / "export" / "release.py")
 R = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(R)
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
 @pytest.fixture(scope="module")
 def release(tmp_path_factory):
     return R.make_release(tmp_path_factory.mktemp("release"))
-
-
-def _start(args):
-    return subprocess.Popen(
-        [sys.executable, "-m", "hpe_cli", *map(str, args)], env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
 
 
 def _wait_for_units(proc, parts: Path, n: int, seconds: float = 90):
@@ -56,7 +47,7 @@ def _interrupt_then_resume(release, tmp_path, lid, extra=(), sig=signal.SIGTERM)
     dst = tmp_path / "dst"
     dst.mkdir()
     args = R.export_args(lid, labels, root, dst / "o", dst / "r.csv", "--resume", *extra)
-    proc = _start(args)
+    proc = hpe_popen(*args)
     parts = dst / ".o.hpe-parts"
     if not _wait_for_units(proc, parts, 1):
         out, err = proc.communicate()
@@ -105,7 +96,7 @@ def test_a_killed_worker_is_one_line_and_the_run_resumes(release, tmp_path):
     dst = tmp_path / "dst"
     dst.mkdir()
     args = R.export_args("hf", labels, root, dst / "o", dst / "r.csv", "--resume", "--workers", "2")
-    proc = _start(args)
+    proc = hpe_popen(*args)
     end = time.monotonic() + 60
     kids: set = set()
     while time.monotonic() < end and proc.poll() is None and len(kids) < 2:
@@ -130,24 +121,13 @@ def _cluster_workers(pid: int) -> set:
     """The LocalCluster's worker processes: the run's children started by multiprocessing's spawn (its nannies
     live in the run's own process), not its resource tracker."""
     out = set()
-    for c in _direct(pid):
+    for c in children(pid, recursive=False):
         try:
             with open(f"/proc/{c}/cmdline", "rb") as f:
                 if b"spawn_main" in f.read():
                     out.add(c)
         except OSError:
             pass
-    return out
-
-
-def _direct(pid: int) -> set:
-    out = set()
-    try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            with open(f"/proc/{pid}/task/{task}/children") as f:
-                out.update(int(x) for x in f.read().split())
-    except OSError:
-        pass
     return out
 
 
@@ -162,7 +142,7 @@ def test_a_dask_worker_killed_mid_run(release, tmp_path):
     args = R.export_args(
         "hf", labels, root, dst / "o", dst / "r.csv", "--resume", "--scheduler", "local", "--workers", "2"
     )
-    proc = _start(args)
+    proc = hpe_popen(*args)
     parts = dst / ".o.hpe-parts"
     end = time.monotonic() + 90
     workers: set = set()

@@ -12,20 +12,16 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from conftest import hpe
+from conftest import hpe, hpe_popen
 
-from .conftest import ROOT, SYNTH, temp_files
+from .conftest import SYNTH, temp_files
 from .conftest import alive as _alive
 from .conftest import children as _children
-
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
 def _sequence(dst: Path, frames: int = 200) -> Path:
@@ -43,12 +39,7 @@ def _args(seq, out, rej):
 
 
 def _start_and_kill(seq, out, rej, parts_needed=2):
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hpe_cli", *_args(seq, out, rej)],
-        env=ENV,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
+    proc = hpe_popen(*_args(seq, out, rej))
     parts = out.parent / f".{out.name}.hpe-parts"
     end = time.monotonic() + 60
     while time.monotonic() < end and proc.poll() is None:
@@ -124,12 +115,7 @@ def test_a_killed_worker_is_one_clear_error(tmp_path):
     dst = tmp_path / "out"
     dst.mkdir()
     out = dst / "o.parquet"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hpe_cli", "relabel-panoptic", str(seq), "-o", str(out), "--workers", "2", "-q"],
-        env=ENV,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
+    proc = hpe_popen("relabel-panoptic", seq, "-o", out, "--workers", "2", "-q")
     parts = dst / ".o.parquet.hpe-parts"
     end = time.monotonic() + 60
     while time.monotonic() < end and proc.poll() is None:
@@ -159,15 +145,7 @@ def test_two_runs_writing_one_output_at_once(tmp_path, extra):
     dst = tmp_path / "out"
     dst.mkdir()
     out = dst / "o.parquet"
-    procs = [
-        subprocess.Popen(
-            [sys.executable, "-m", "hpe_cli", "relabel-panoptic", str(seq), "-o", str(out), "-q", *extra],
-            env=ENV,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-        )
-        for _ in range(2)
-    ]
+    procs = [hpe_popen("relabel-panoptic", seq, "-o", out, "-q", *extra) for _ in range(2)]
     results = [(p.wait(timeout=120), p.stderr.read().decode()) for p in procs]
     assert sorted(c for c, _ in results) == [0, 1], results
     err = next(e for c, e in results if c)

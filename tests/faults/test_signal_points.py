@@ -10,8 +10,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -19,7 +17,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from .conftest import ROOT, temp_files
+from conftest import hpe_popen
+
+from .conftest import temp_files
 
 N = 40_000
 
@@ -55,17 +55,11 @@ POINTS = [(_first_temp, 0.0), (_temps, 0.0), (_one_target, 0.0), (_both, 0.0)]
     "sig,points", [(signal.SIGTERM, POINTS), (signal.SIGINT, POINTS[:1] + POINTS[-1:])], ids=["SIGTERM", "SIGINT"]
 )
 def test_signal_at_many_points_of_audit(tmp_path, table, sig, points):
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
     outcomes = []
     for k, (trigger, delay) in enumerate(points):
         d = tmp_path / f"run{k}"
         d.mkdir()
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "hpe_cli", "audit", str(table), "-o", str(d / "a.csv"), "--json", str(d / "r.json")],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            env=env,
-        )
+        proc = hpe_popen("audit", table, "-o", d / "a.csv", "--json", d / "r.json")
         sent = False
         while proc.poll() is None:
             if trigger(os.listdir(d)):

@@ -11,7 +11,6 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -20,18 +19,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from .conftest import ROOT, SYNTH, temp_files, tree
+from conftest import hpe_popen, hpe_process
+
+from .conftest import SYNTH, temp_files, tree
 from .conftest import alive as _alive
 from .conftest import children as _children
 
 SIGNALS = [signal.SIGTERM, signal.SIGHUP, signal.SIGINT]
-
-
-def _popen(*args):
-    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    return subprocess.Popen(
-        [sys.executable, "-m", "hpe_cli", *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env
-    )
 
 
 def _wait_for(cond, proc, timeout=60.0):
@@ -84,7 +78,7 @@ def test_signal_mid_convert(tmp_path, big_parquet, sig):
     src = tmp_path / "in.parquet"
     shutil.copy(big_parquet, src)
     snap = tree(tmp_path)
-    proc = _popen(
+    proc = hpe_popen(
         "convert",
         src,
         "-o",
@@ -119,7 +113,7 @@ def test_signal_stops_relabel_workers(tmp_path, sig, output):
     """Parquet, and COCO whose text the workers make in a second task per unit (parts and text parts)."""
     seq = _long_sequence(tmp_path)
     snap = tree(tmp_path)
-    proc = _popen(
+    proc = hpe_popen(
         "relabel-panoptic", seq, "-o", tmp_path / output, "--workers", "2", "--rejects", tmp_path / "rej.csv", "-q"
     )
     parts = tmp_path / f".{output}.hpe-parts"
@@ -133,7 +127,7 @@ def test_signal_stops_infer_user_code(tmp_path):
     code = tmp_path / "slow.py"
     code.write_text("import time\ndef f(p, y, r):\n    time.sleep(600)\n")
     snap = tree(tmp_path)
-    proc = _popen("infer", "--callable", f"{code}:f", "--json", tmp_path / "r.json")
+    proc = hpe_popen("infer", "--callable", f"{code}:f", "--json", tmp_path / "r.json")
     if not _wait_for(lambda: len(_children(proc.pid)) >= 1, proc):
         pytest.fail("no child seen: " + proc.communicate()[1].decode())
     time.sleep(0.3)
@@ -145,7 +139,7 @@ def test_concurrent_creates_one_winner(tmp_path, big_parquet):
     src = tmp_path / "in.parquet"
     pq.write_table(pq.read_table(big_parquet).slice(0, 5_000), src)
     out = tmp_path / "out.parquet"
-    procs = [_popen("convert", src, "-o", out, "--from", "300w_lp", "--to", "6drepnet", "-q") for _ in range(2)]
+    procs = [hpe_popen("convert", src, "-o", out, "--from", "300w_lp", "--to", "6drepnet", "-q") for _ in range(2)]
     results = [(p.wait(timeout=120), p.stderr.read().decode()) for p in procs]
     codes = sorted(c for c, _ in results)
     assert codes == [0, 1], results
@@ -168,26 +162,10 @@ def test_file_size_limit_is_a_clean_error(tmp_path, big_parquet):
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
 
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONDONTWRITEBYTECODE": "1"}
-    res = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "hpe_cli",
-            "convert",
-            str(src),
-            "-o",
-            str(tmp_path / "o.csv"),
-            "--from",
-            "300w_lp",
-            "--to",
-            "6drepnet",
-        ],
-        capture_output=True,
-        env=env,
-        preexec_fn=limit,
-        timeout=120,
-    )
+    res = hpe_process(
+        "convert", src, "-o", tmp_path / "o.csv", "--from", "300w_lp", "--to", "6drepnet",
+        text=False, env={"PYTHONDONTWRITEBYTECODE": "1"}, preexec_fn=limit,
+    )  # fmt: skip
     err = res.stderr.decode()
     assert res.returncode == 1, err
     assert err.strip().count("\n") == 0 and str(tmp_path / "o.csv") in err and "too large" in err, err

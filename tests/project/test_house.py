@@ -1,7 +1,8 @@
 """The house rules of issue 32 as tests, read from the code with ``ast`` (the module walker of ``test_layers``).
 
 - private names stay home: no ``_name`` imported from a module of another package; inside a package, ``_names``
-  come only from that package's ``common.py`` (the one module that holds its shared internals);
+  come only from that package's ``common.py`` (the one module that holds its shared internals); the same for
+  ``module._name`` through an imported module;
 - no function or method outside ``hpe_cli/cli/`` longer than ``MAX_LINES`` lines (``def`` line to last line);
 - no function in ``hpe_cli/pipelines/`` with more than ``MAX_PARAMS`` parameters (``self``/``cls`` excluded;
   ``*args``/``**kwargs`` count one each);
@@ -125,6 +126,28 @@ def private_imports() -> set:
                     parts = alias.name.split(".")
                     if parts[0] == "hpe_cli" and any(_private(p) for p in parts):
                         out.add(f"{_rel(name)}::{alias.name}")
+        out |= _private_attributes(name, own)
+    return out
+
+
+def _private_attributes(name: str, own: str) -> set:
+    """``module._name`` reached through a module bound by an import (``from . import x``; ``x._name``)."""
+    tree, bound, out = _tree(name), {}, set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            target = _target(name, node)
+            for alias in node.names:
+                if f"{target}.{alias.name}" in MODULES:
+                    bound[alias.asname or alias.name] = f"{target}.{alias.name}"
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.asname and alias.name in MODULES:
+                    bound[alias.asname] = alias.name
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and _private(node.attr):
+            module = bound.get(node.value.id)
+            if module and not (_package(module) == own and module.rpartition(".")[2] == "common"):
+                out.add(f"{_rel(name)}::{module}.{node.attr}")
     return out
 
 
@@ -209,6 +232,8 @@ GET_SYSTEM_ALLOWED = {
 }
 
 KNOWN_PRIVATE_IMPORTS = {
+    "hpe_cli/cli/signals.py::hpe_cli.io.transaction._current",
+    "hpe_cli/cli/signals.py::hpe_cli.io.transaction._run",
     "hpe_cli/cli/systems.py::hpe_cli.cli.options._system_fold",
     "hpe_cli/datasets/panoptic.py::hpe_cli.datasets.panoptic_json._load_json",
     "hpe_cli/datasets/panoptic.py::hpe_cli.datasets.panoptic_json._parse_json",
@@ -281,6 +306,8 @@ KNOWN_PRIVATE_IMPORTS = {
     "hpe_cli/pipelines/evaluate_score.py::hpe_cli.pipelines.evaluate_rejects._stream_rejects",
     "hpe_cli/pipelines/evaluate_spill.py::hpe_cli.pipelines.evaluate_join._stems",
     "hpe_cli/pipelines/export/pixels.py::hpe_cli.pipelines.export.workers._unspill",
+    "hpe_cli/pipelines/export/units.py::hpe_cli.pipelines.export.workers._init_worker",
+    "hpe_cli/pipelines/export/units.py::hpe_cli.pipelines.export.workers._work_items",
     "hpe_cli/pipelines/export/write.py::hpe_cli.pipelines.export.workers._unspill",
     "hpe_cli/pipelines/panoptic.py::hpe_cli.pipelines.panoptic_parts._fingerprint",
     "hpe_cli/pipelines/panoptic.py::hpe_cli.pipelines.panoptic_parts._prepare_parts",
