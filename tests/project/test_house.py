@@ -15,12 +15,14 @@ Each rule has a ``KNOWN_*`` set of the violations of the day the rule was writte
 ``path::qualname`` so that unrelated edits do not move them). A rule fails on any violation not in its set,
 and on any entry of its set that no longer occurs, so the sets only shrink; they are to end empty.
 Moving or renaming a module or function moves its entries: ``python tests/project/test_house.py`` prints the
-violations of today in the format of the sets, to copy from.
+violations of today in the format of the sets, to copy from; ``--update`` rewrites the sets in this file (review
+the diff: an added line is a new violation).
 """
 
 from __future__ import annotations
 
 import ast
+import json
 import sys
 from functools import cache
 from pathlib import Path
@@ -1211,10 +1213,10 @@ def test_house_rule(rule):
     msg = []
     if new:
         msg.append(f"{rule}: {len(new)} new (fix them; a moved function moves its entry in KNOWN):")
-        msg += [f"    {v!r}," for v in new]
+        msg += [f"    {json.dumps(v)}," for v in new]
     if gone:
         msg.append(f"{rule}: {len(gone)} KNOWN no longer found (fixed or moved: delete these lines):")
-        msg += [f"    {v!r}," for v in gone]
+        msg += [f"    {json.dumps(v)}," for v in gone]
     assert not msg, "\n".join(msg)
 
 
@@ -1231,8 +1233,26 @@ def test_the_walker_sees_the_code():
     assert any(q.startswith("hpe_cli/pipelines/biwi.py::run_biwi: ") for q in get_system_calls())
 
 
-if __name__ == "__main__":  # print today's violations in the format of the KNOWN sets
+def _update_known() -> None:
+    """Rewrite the ``KNOWN_*`` sets of this file with today's violations (after a merge that moved functions:
+    review the diff, an added line is a new violation)."""
+    import re
+
+    path = Path(__file__)
+    text = path.read_text(encoding="utf-8")
+    for find, known in RULES.values():
+        name = next(k for k, v in globals().items() if k.startswith("KNOWN_") and v is known)
+        body = "".join(f"    {json.dumps(v)},\n" for v in sorted(find()))
+        new = f"{name} = {{\n{body}}}" if body else f"{name}: set = set()"
+        text = re.sub(rf"(?ms)^{name}(: set)? = (\{{\n.*?^\}}|set\(\))", lambda _: new, text, count=1)
+    path.write_text(text, encoding="utf-8")
+
+
+if __name__ == "__main__":  # print today's violations in the format of the KNOWN sets; --update rewrites them
+    if sys.argv[1:] == ["--update"]:
+        _update_known()
+        sys.exit(0)
     for rule, (find, _) in RULES.items():
         print(f"# {rule}")
         for v in sorted(find()):
-            print(f"    {v!r},")
+            print(f"    {json.dumps(v)},")
