@@ -105,6 +105,18 @@ def realdata():
     return REALDATA
 
 
+def locate_dots(img, pts, r=7):
+    """Sub-pixel intensity centroid of the dot nearest each expected position ``pts`` (N, 2) in a grey image
+    (pixel centres at integers); a window of ``2 r + 1`` pixels around each."""
+    out = []
+    for x, y in pts:
+        x0, y0 = int(round(x)), int(round(y))
+        win = img[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1].astype(float)
+        gy, gx = np.mgrid[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1]
+        out.append([(win * gx).sum() / win.sum(), (win * gy).sum() / win.sum()])
+    return np.array(out)
+
+
 def canonical_A(pyr_deg):
     """SPEC §2's expanded 300W-LP matrix, written out independently of the package."""
     p, y, r = np.deg2rad(np.asarray(pyr_deg, dtype=float)).T

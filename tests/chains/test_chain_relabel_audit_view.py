@@ -2,7 +2,6 @@
 each audit flag as a filter, and in headless Chromium ``#f.out_of_range=1`` shows exactly the rows audit flagged.
 Also relabel -> augment (crop) -> view: the augmented table and its pictures open as a page."""
 
-import json
 import re
 import shutil
 import subprocess
@@ -10,17 +9,13 @@ import subprocess
 import numpy as np
 import pandas as pd
 import pytest
+from view.conftest import page_data
 
 from conftest import hpe
 
 from .conftest import PIZZA
 
 pytestmark = pytest.mark.skipif(not PIZZA.is_dir(), reason="../shared/realdata is not available")
-
-
-def _data(page):
-    text = (page / "rows.js").read_text()
-    return json.loads(text[len("window.HPE_VIEW=") : text.rstrip().rindex(";")])
 
 
 def test_relabel_audit_view_flags(tmp_path):
@@ -30,7 +25,7 @@ def test_relabel_audit_view_flags(tmp_path):
     r = hpe("view", flags, "-o", page, "--images", PIZZA, "--rejects", tmp_path / "rej.csv", "-q")
     assert r.exit_code == 0, r.output
     audited = pd.read_parquet(flags)
-    d = _data(page)
+    d = page_data(page)
     assert {"gimbal_lock", "out_of_range", "flagged"} <= set(d["flag"])
     assert d["flag"]["out_of_range"] == audited["out_of_range"].astype(int).tolist()
     want = (np.flatnonzero(audited["out_of_range"].to_numpy()) + 1).tolist()
@@ -61,6 +56,6 @@ def test_relabel_augment_view(tmp_path):
     assert r.exit_code == 0, r.output
     r = hpe("view", aug, "-o", page, "--images", tmp_path / "imgs", "-q")
     assert r.exit_code == 0, r.output
-    d = _data(page)
+    d = page_data(page)
     n = len(pd.read_parquet(aug))
     assert d["meta"]["n"] == n and sum(t is not None for t in d["thumb"]) == n

@@ -10,7 +10,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from conftest import canonical_A, hpe
+from conftest import canonical_A, hpe, locate_dots
 from hpe_cli.geometry.landmark_schemes import SCHEMES
 from hpe_cli.io import BBOX_COLS, LABEL_COLS, MATRIX_COLS, landmark_cols
 from hpe_cli.rotation import get_system
@@ -219,16 +219,6 @@ def _dots_image(pts, w, h, sigma=1.6):
     return np.dstack([g, g // 2, 255 - g])  # 3 channels, BGR
 
 
-def _locate(img, pts, r=7):
-    out = []
-    for x, y in pts:
-        x0, y0 = int(round(x)), int(round(y))
-        win = img[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1].astype(float)
-        gy, gx = np.mgrid[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1]
-        out.append([(win * gx).sum() / win.sum(), (win * gy).sum() / win.sum()])
-    return np.array(out)
-
-
 @pytest.mark.parametrize("args", [["--mirror-line", "30"], ["--rotate", "-20"], ["--hflip"], ["--vflip"]])
 def test_images_agree_with_landmarks_to_the_pixel(tmp_path, args):
     w, h = 161, 120  # odd/even sizes expose any half-pixel centre error
@@ -275,7 +265,7 @@ def test_images_agree_with_landmarks_to_the_pixel(tmp_path, args):
         pts = lms(o.iloc[[i]], 21)[0]
         inside = ((pts >= 9) & (pts <= np.array([w, h]) - 10)).all(axis=1)
         assert inside.sum() >= 12
-        found = _locate(img[..., 0], pts[inside])
+        found = locate_dots(img[..., 0], pts[inside])
         assert np.abs(found - pts[inside]).max() < 0.05
     assert not any(p.name.startswith(".hpe-augment") for p in (tmp_path / "aug").iterdir())
     # --overwrite is needed a second time

@@ -2,18 +2,12 @@
 
 from __future__ import annotations
 
-import json
-
 import cv2
 import numpy as np
 import pandas as pd
+from view.conftest import page_data
 
 from conftest import hpe as hpe_cmd
-
-
-def data(page):
-    text = (page / "rows.js").read_text()
-    return json.loads(text[len("window.HPE_VIEW=") : text.rstrip().rindex(";")])
 
 
 def _images(folder, names, size=(320, 240)):
@@ -49,7 +43,7 @@ def test_thumbnails_crop_and_whole_frame(tmp_path):
     page = tmp_path / "page"
     r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "-q")
     assert r.exit_code == 0, r.output
-    d = data(page)
+    d = page_data(page)
     assert d["meta"]["counts"]["whole_frame"] == 1 and d["meta"]["counts"]["shown"] == 3
     assert d["num"]["row"] == [2, 3, 4]  # CSV lines, header = line 1
     # row 1: the square crop 1.6 x the box's longer side around the box centre, resized to 128 px
@@ -115,7 +109,7 @@ def test_missing_and_unreadable_images_are_rejects(tmp_path):
         [5, "gone.png", "image not found"],
         [6, "bad.png", "not a readable image"],
     ]
-    d = data(page)
+    d = page_data(page)
     status = [d["cat"]["status"]["values"][k] for k in d["cat"]["status"]["codes"]]
     assert status == ["ok", "ok", "ok", "image not found", "not a readable image"]
     assert d["thumb"][3] is None and d["thumb"][4] is None
@@ -143,7 +137,7 @@ def test_other_rows_joined_by_key_with_the_angle(tmp_path):
     page = tmp_path / "page"
     r = hpe_cmd("view", src, other, "-o", page, "--images", tmp_path / "img")
     assert r.exit_code == 0 and "2 rows paired with" in r.output, r.output
-    d = data(page)
+    d = page_data(page)
     assert d["num"]["angle"] == [0.0, 30.0]  # a pure roll difference of 30 degrees
     assert d["num"]["other_roll"][1] == 33.0
 
@@ -192,7 +186,7 @@ def test_rows_with_unusable_labels_are_rejects_and_stay_in_the_page(tmp_path):
     assert r.exit_code == 0, r.output
     got = pd.read_csv(rej)
     assert got["row"].tolist() == [3] and got["reason"].iloc[0]
-    d = data(page)
+    d = page_data(page)
     assert d["meta"]["n"] == 2 and d["thumb"][1] is None
     assert d["cat"]["status"]["values"][d["cat"]["status"]["codes"][1]] == got["reason"].iloc[0]
 
@@ -216,7 +210,7 @@ def test_other_rows_without_a_match_or_a_pose_are_rejects(tmp_path):
     got = pd.read_csv(rej).sort_values("row")
     assert got["row"].tolist() == [3, 4] and got["table"].tolist() == [str(other)] * 2
     assert got["reason"].iloc[1] == f"no row of {src} with this key"
-    d = data(tmp_path / "page")
+    d = page_data(tmp_path / "page")
     assert d["num"]["angle"][0] == 0.0 and d["num"]["angle"][1] is None
 
 
@@ -225,7 +219,7 @@ def test_no_frames(tmp_path):
     src = _table(tmp_path / "in.csv", ROWS)
     page = tmp_path / "page"
     assert hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--no-frames", "-q").exit_code == 0
-    d = data(page)
+    d = page_data(page)
     assert [im["f"] for im in d["images"]] == [None, None] and all(d["thumb"])
     assert not list((page / "frames").iterdir()) if (page / "frames").exists() else True
 
@@ -242,7 +236,7 @@ def test_also_in_angles_and_bad_names(tmp_path):
     r = hpe_cmd("view", src, "-o", tmp_path / "p", "--images", tmp_path / "img", "--also-in", "6drepnet, 300w_lp,3ddfa_v2",
             "-q")  # fmt: skip
     assert r.exit_code == 0, r.output
-    d = data(tmp_path / "p")
+    d = page_data(tmp_path / "p")
     assert d["meta"]["systems"] == ["300w_lp", "6drepnet", "3ddfa_v2"] and set(d["systems"]) == {"6drepnet", "3ddfa_v2"}
 
     # 3ddfa_v2's published A = Rz(r) Ry(y).T Rx(p) of the page's angles is 300W-LP's A = Rx(p).T Ry(y).T Rz(r).T
@@ -281,7 +275,7 @@ def test_rerun_that_drops_rows_prunes_stale_files(tmp_path, monkeypatch):
     src = _table(tmp_path / "in.csv", ROWS)
     page = tmp_path / "page"
     assert hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "-q").exit_code == 0
-    first = data(page)
+    first = page_data(page)
     (page / "notes.txt").write_text("mine")
     (page / "thumbs" / "mine.jpg").write_bytes(b"mine")
 
@@ -310,7 +304,7 @@ def test_rerun_that_drops_rows_prunes_stale_files(tmp_path, monkeypatch):
     assert "0 thumbnails made, 1 reused" in r.output and "4 files of the earlier page no longer used: removed" in (
         r.output
     ), r.output
-    d = data(page)
+    d = page_data(page)
     assert sorted(p.name for p in (page / "thumbs").iterdir()) == sorted([d["thumb"][0], "mine.jpg"])
     assert d["thumb"][0] == first["thumb"][0]
     assert [p.name for p in (page / "frames").iterdir()] == [d["images"][0]["f"]]

@@ -7,13 +7,13 @@ Frobenius unitless), the plots and the worst rows, each with its picture
 ``render_worst``, the pictures ``draw_worst`` writes, embedded in the page).
 """
 
-import shutil
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from view.conftest import browser as _browser
 
 from conftest import hpe
 
@@ -21,14 +21,6 @@ SHARED = Path(__file__).resolve().parents[3] / "shared"
 AFLW = SHARED / "realdata" / "aflw2000_prnet"
 PRED = SHARED / "golden" / "evaluate" / "aflw16m" / "pred.csv"
 pytestmark = pytest.mark.skipif(not (AFLW.is_dir() and PRED.is_file()), reason="shared data not available")
-
-
-def _browser():
-    for name in ("chromium", "chromium-browser", "google-chrome"):
-        path = shutil.which(name)
-        if path:
-            return path
-    return None
 
 
 def _make_page(tmp_path, worst=6):

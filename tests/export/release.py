@@ -8,11 +8,10 @@ row of blocks (``encode_frame_number``), so a frame read from the wrong place is
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import os
 from pathlib import Path
 
-from conftest import hpe
+from conftest import hpe, sample_data_script
 
 ROOT = Path(__file__).resolve().parents[2]
 #: (id, layout options): every layout, 6drepnet in both forms
@@ -26,13 +25,6 @@ LAYOUTS = [
 ]
 LAYOUT_IDS = [k for k, _ in LAYOUTS]
 OPTS = dict(LAYOUTS)
-
-
-def sample_data_script():
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def make_release(dst: Path):

@@ -17,7 +17,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from conftest import canonical_A
+from conftest import canonical_A, locate_dots
 from hpe_cli.geometry.augment import (
     augment_batch,
     augment_boxes,
@@ -252,17 +252,6 @@ def _render(pts, w, h, sigma=1.6):
     return img
 
 
-def _locate(img, pts, r=7):
-    """Sub-pixel intensity centroid of the dot nearest each expected position (pixel centres at integers)."""
-    out = []
-    for x, y in pts:
-        x0, y0 = int(round(x)), int(round(y))
-        win = img[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1].astype(float)
-        gy, gx = np.mgrid[y0 - r : y0 + r + 1, x0 - r : x0 + r + 1]
-        out.append([(win * gx).sum() / win.sum(), (win * gy).sum() / win.sum()])
-    return np.array(out)
-
-
 PIXEL_OPS = [
     ("hflip", None),
     ("vflip", None),
@@ -285,20 +274,20 @@ def test_moved_landmarks_land_on_the_moved_dots(size, dtype, op):
     pts = _grid_points(w, h, rng)
     img = _render(pts, w, h)
     img = img.astype(np.float32) if dtype == np.float32 else np.clip(img * 250, 0, 255).astype(np.uint8)
-    assert np.abs(_locate(img, pts) - pts).max() < 0.01  # the locator itself
+    assert np.abs(locate_dots(img, pts) - pts).max() < 0.01  # the locator itself
     M = plane_matrix(*op)
     warped = warp_image(img, M)
     assert warped.shape == img.shape and warped.dtype == img.dtype
     moved = augment_points(pts, M, size, np.arange(len(pts)))
     inside = ((moved >= 9) & (moved <= np.array(size) - 10)).all(axis=1)
     assert inside.sum() >= len(pts) // 2
-    err = np.abs(_locate(warped, moved[inside]) - moved[inside]).max()
+    err = np.abs(locate_dots(warped, moved[inside]) - moved[inside]).max()
     assert err < (0.02 if dtype == np.float32 else 0.03)
     # the common (W/2, H/2) centre misses by a visible fraction of a pixel
     N = pixel_affine(M, size)[:, :2]
     c = np.array([w / 2, h / 2])
     naive = cv2.warpAffine(img, np.c_[N, c - N @ c], (w, h))
-    assert np.abs(_locate(naive, moved[inside]) - moved[inside]).max() > 0.25
+    assert np.abs(locate_dots(naive, moved[inside]) - moved[inside]).max() > 0.25
 
 
 def test_warp_image_keeps_channels_and_flips_exactly():

@@ -7,7 +7,6 @@ a reject whose reason names the field -- never a traceback, an ``internal error`
 
 from __future__ import annotations
 
-import importlib.util
 import io
 import json
 import os
@@ -21,7 +20,7 @@ import pandas as pd
 import pytest
 import scipy.io
 
-from conftest import hpe
+from conftest import hpe, sample_data_script
 from hpe_cli.datasets import biwi
 from hpe_cli.datasets import panoptic as pan
 from hpe_cli.datasets.fields import MAX_TANGENTIAL, distortion_problem, distortion_problems
@@ -404,16 +403,9 @@ def test_real_biwi_files_pass():
 
 
 # ================================================================== video frames against the calibration
-def _sample_script():
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 @pytest.fixture(scope="module")
 def small_video(tmp_path_factory):
-    gen = _sample_script()
+    gen = sample_data_script()
     root = tmp_path_factory.mktemp("vid") / "seqV"
     gen.make_synthetic(root, n_frames=4, n_people=1, n_cameras=1, first_frame=0, special=False)
     paths = gen.write_videos(root, last_frame=3, size=(192, 108), cameras=1)
