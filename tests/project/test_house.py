@@ -1225,6 +1225,27 @@ def test_allowed_get_system_calls_exist():
     assert not gone, "GET_SYSTEM_ALLOWED entries no longer found (delete or update):\n" + "\n".join(gone)
 
 
+#: test files that may start hpe themselves -> why (everything else calls ``conftest.hpe``/``hpe_process``/``hpe_popen``)
+OWN_RUNNER_OK = {
+    "tests/conftest.py": "the one runner",
+    "tests/docs/doc_examples.py": "a script (--update) that runs the docs' shell lines outside pytest",
+    "tests/project/test_house.py": "names the patterns it looks for",
+}
+
+
+def test_one_cli_runner_for_the_tests():
+    tests = ROOT.parent / "tests"
+    bad = []
+    for path in sorted(tests.rglob("*.py")):
+        rel = path.relative_to(ROOT.parent).as_posix()
+        text = path.read_text(encoding="utf-8")
+        if rel not in OWN_RUNNER_OK and ("CliRunner(" in text or '"-m", "hpe_cli"' in text or '"hpe_cli",\n' in text):
+            bad.append(rel)
+    assert not bad, "run the CLI with conftest.hpe / hpe_process / hpe_popen, not a runner of its own:\n" + "\n".join(
+        bad
+    )
+
+
 def test_the_walker_sees_the_code():
     # guards against a walker that silently finds nothing
     assert "hpe_cli/pipelines/export/job.py::_layout_and_system" in {
