@@ -360,8 +360,8 @@ def view_file(
     Writes a browsable offline page of every row of ``labels`` (and of ``other`` joined by ``keys`` beside it)
     into folder ``output``; open ``output/index.html``. Returns the counts (``rows``, ``shown``,
     ``whole_frame``, ``made``, ``reused``, ``images``, ``matched``, ``rejects``, ``system``). ``options``:
-    ``radians``, ``use``, ``workers``, ``title``, ``also_in`` (system names or ``.toml`` files whose angles the
-    page can filter by).
+    the other :class:`~hpe_cli.pipelines.view.ViewOptions` fields (``radians``, ``use``, ``workers``,
+    ``title``, ``frames``, ``also_in``: system names or ``.toml`` files whose angles the page can filter by).
 
     Examples
     --------
@@ -374,22 +374,20 @@ def view_file(
     (4, 4, 4)
     """
     from .io.transaction import ensure_transaction
-    from .pipelines.view import run_view
+    from .pipelines.view import ViewOptions, run_view
 
+    settings = ViewOptions(
+        images=images,
+        system=None if system is None else get_system(system),
+        other_system=None if other_system is None else get_system(other_system),
+        keys=keys,
+        rejects_path=rejects,
+        strict=strict,
+        overwrite=overwrite,
+        **options,
+    )
     with ensure_transaction():
-        return run_view(
-            labels,
-            output,
-            other,
-            images=images,
-            system=None if system is None else get_system(system),
-            other_system=None if other_system is None else get_system(other_system),
-            keys=keys,
-            rejects_path=rejects,
-            strict=strict,
-            overwrite=overwrite,
-            **options,
-        )
+        return run_view(labels, output, other, settings)
 
 
 def write_labels(table, path, system=None, *, overwrite: bool = False):
