@@ -279,6 +279,7 @@ def run_tasks(tasks, workers: int, progress=None) -> list:
 
 
 def mkdirs(stage: Path) -> None:
+    """The picture folders (:data:`THUMB_DIR`, :data:`FRAME_DIR`) in the staged page folder."""
     (stage / THUMB_DIR).mkdir(parents=True, exist_ok=True)
     (stage / FRAME_DIR).mkdir(parents=True, exist_ok=True)
 
