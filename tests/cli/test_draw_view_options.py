@@ -93,3 +93,23 @@ def test_flagged_pictures_read_the_audits_label_source(tmp_path, monkeypatch):
     assert (
         out["pictures"][0]["caption"].startswith("near_gimbal: ") and "image00251.mat" in out["pictures"][0]["caption"]
     )
+
+
+@pytest.mark.parametrize("command", ["draw", "view"])
+def test_columns_angles_without_angle_columns_is_an_error(tmp_path, command):
+    """``--columns angles`` on a table holding only r00..r22: one line naming the missing columns, exit 1 (the
+    old reader read the absent columns as zeros and drew every face looking straight ahead)."""
+    import pandas as pd
+
+    R = hpe.get_system("300w_lp").from_angles([[10.0, 20.0, 30.0]])[0]
+    row = {"image": "image00050.jpg", **{f"r{i}{j}": [R[i, j]] for i in range(3) for j in range(3)}}
+    pd.DataFrame(row).to_csv(tmp_path / "m.csv", index=False)
+    res = CliRunner().invoke(
+        cli,
+        [command, str(tmp_path / "m.csv"), "-o", str(tmp_path / "out"), "--images", str(SAMPLE), "--columns", "angles"],
+    )
+    assert res.exit_code == 1, res.output
+    assert res.output.strip() == (
+        f"Error: {tmp_path / 'm.csv'}: missing column(s) pitch, yaw, roll: expected angles columns pitch,yaw,roll"
+    )
+    assert not (tmp_path / "out").exists()
