@@ -20,7 +20,6 @@ import argparse
 import os
 import re
 import resource
-import shutil
 import statistics
 import subprocess
 import sys
@@ -31,16 +30,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--window-size=1400,900",
-]
+sys.path.insert(0, str(ROOT))
+from benchmarks.browser import CHROMIUM_FLAGS, find_chromium  # noqa: E402  (one flag list with tests/view)
+
+FLAGS = [*CHROMIUM_FLAGS, "--window-size=1400,900"]
 
 
 def make_data(folder: Path, rows: int, images: int, seed: int = 0):
@@ -128,9 +121,7 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)
-    browser = next(
-        (shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None
-    )
+    browser = find_chromium()
     with tempfile.TemporaryDirectory(prefix="hpe-view-bench-") as tmp:
         tmp = Path(tmp)
         labels, table = make_data(tmp, args.rows, args.images)

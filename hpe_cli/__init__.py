@@ -54,6 +54,7 @@ _API = (
     "audit_file",
     "landmark_pose",
     "view_file",
+    "draw_file",
 )
 
 #: names resolved lazily by :func:`__getattr__`: name -> (module, attribute)

@@ -360,8 +360,8 @@ def view_file(
     Writes a browsable offline page of every row of ``labels`` (and of ``other`` joined by ``keys`` beside it)
     into folder ``output``; open ``output/index.html``. Returns the counts (``rows``, ``shown``,
     ``whole_frame``, ``made``, ``reused``, ``images``, ``matched``, ``rejects``, ``system``). ``options``:
-    ``radians``, ``use``, ``workers``, ``title``, ``also_in`` (system names or ``.toml`` files whose angles the
-    page can filter by).
+    the other :class:`~hpe_cli.pipelines.view.ViewOptions` fields (``radians``, ``use``, ``workers``,
+    ``title``, ``frames``, ``also_in``: system names or ``.toml`` files whose angles the page can filter by).
 
     Examples
     --------
@@ -374,22 +374,57 @@ def view_file(
     (4, 4, 4)
     """
     from .io.transaction import ensure_transaction
-    from .pipelines.view import run_view
+    from .pipelines.view import ViewOptions, run_view
 
+    settings = ViewOptions(
+        images=images,
+        system=None if system is None else get_system(system),
+        other_system=None if other_system is None else get_system(other_system),
+        keys=keys,
+        rejects_path=rejects,
+        strict=strict,
+        overwrite=overwrite,
+        **options,
+    )
     with ensure_transaction():
-        return run_view(
-            labels,
-            output,
-            other,
-            images=images,
-            system=None if system is None else get_system(system),
-            other_system=None if other_system is None else get_system(other_system),
-            keys=keys,
-            rejects_path=rejects,
-            strict=strict,
-            overwrite=overwrite,
-            **options,
-        )
+        return run_view(labels, output, other, settings)
+
+
+def draw_file(
+    input, output, *, images=None, system=None, rejects=None, strict: bool = False, overwrite: bool = False, **options
+) -> dict:
+    """``hpe draw`` as a function: the same pipeline (:func:`hpe_cli.pipelines.draw.run_draw`).
+
+    Draws every row of the label table (or ``.mat`` folder) ``input`` on its image into folder ``output``
+    (the per-row output of ``hpe evaluate -o``: ground truth and prediction on each face). Returns the counts
+    (``faces``, ``images``, ``sheets``, ``rejects``, ``system``). ``options``: the other
+    :class:`~hpe_cli.pipelines.draw.DrawOptions` fields (``style``, ``canvas``, ``radians``, ``use``,
+    ``length``, ``thickness``, ``tdy_origin``, ``annotate``, ``grid``, ``grid_cols``, ``tile``, ``limit``,
+    ``worst``, ``sort_by``).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import hpe_cli as hpe
+    >>> aflw = pathlib.Path(hpe.__file__).parents[1] / "sample_data" / "aflw2000"  # 4 faces, .mat labels
+    >>> with tempfile.TemporaryDirectory() as out:
+    ...     s = hpe.draw_file(aflw, pathlib.Path(out) / "drawn", style="cube")
+    >>> s["faces"], s["images"]
+    (4, 4)
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.draw import DrawOptions, run_draw
+
+    settings = DrawOptions(
+        images=images,
+        system=None if system is None else get_system(system),
+        rejects_path=rejects,
+        strict=strict,
+        overwrite=overwrite,
+        **options,
+    )
+    with ensure_transaction():
+        return run_draw(input, output, settings)
 
 
 def write_labels(table, path, system=None, *, overwrite: bool = False):

@@ -167,34 +167,32 @@ def draw(
       hpe draw errors.parquet -o worst/ --images AFLW2000/ --worst 20 --sort-by geodesic
       hpe draw errors.parquet -o worst/ --images frames/ --worst 20 --rejects missing.csv
     """
-    from ..pipelines.draw import run_draw
+    from ..pipelines.draw import DrawOptions, run_draw
 
+    options = DrawOptions(
+        images=images,
+        system=system,
+        style=style,
+        canvas=canvas,
+        radians=radians,
+        use=use,
+        length=length,
+        thickness=thickness,
+        tdy_origin=tdy_origin,
+        annotate=annotate,
+        grid=grid,
+        grid_cols=grid_cols,
+        tile=tile,
+        limit=limit,
+        worst=worst,
+        sort_by=sort_by,
+        rejects_path=rejects,
+        strict=strict,
+        overwrite=overwrite,
+    )
     bar = progress(desc="draw", quiet=quiet, unit="images")
     try:
-        s = run_draw(
-            input,
-            outdir,
-            images=images,
-            system=system,
-            style=style,
-            canvas=canvas,
-            radians=radians,
-            use=use,
-            length=length,
-            thickness=thickness,
-            tdy_origin=tdy_origin,
-            annotate=annotate,
-            grid=grid,
-            grid_cols=grid_cols,
-            tile=tile,
-            limit=limit,
-            rejects_path=rejects,
-            overwrite=overwrite,
-            progress=bar,
-            strict=strict,
-            worst=worst,
-            sort_by=sort_by,
-        )
+        s = run_draw(input, outdir, options, progress=bar)
     finally:
         bar.close()
     if "drawn" in s:

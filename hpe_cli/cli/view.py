@@ -133,29 +133,26 @@ def view(
       hpe view panoptic_whenet.parquet -o page/ --images panoptic/ --also-in 300w_lp,3ddfa_v2
       hpe view labels.parquet -o page/ --overwrite   # after the table grew: reuses the thumbnails
     """
-    from ..pipelines.view import run_view
+    from ..pipelines.view import ViewOptions, run_view
 
+    options = ViewOptions(
+        images=images,
+        system=system,
+        other_system=other_system,
+        also_in=also_in,
+        radians=radians,
+        use=use,
+        keys=keys,
+        workers=workers,
+        title=title,
+        frames=frames,
+        rejects_path=rejects,
+        strict=strict,
+        overwrite=overwrite,
+    )
     bar = progress(desc="view", quiet=quiet, unit="faces")
     try:
-        s = run_view(
-            labels,
-            outdir,
-            other,
-            images=images,
-            system=system,
-            other_system=other_system,
-            also_in=also_in,
-            radians=radians,
-            use=use,
-            keys=keys,
-            workers=workers,
-            title=title,
-            frames=frames,
-            rejects_path=rejects,
-            strict=strict,
-            overwrite=overwrite,
-            progress=bar,
-        )
+        s = run_view(labels, outdir, other, options, progress=bar)
     finally:
         bar.close()
     lines = [

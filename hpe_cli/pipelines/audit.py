@@ -494,10 +494,12 @@ def run_audit(
             cons,
         )
     if plots:
-        from .draw_flagged import flagged_pictures
+        from ..io.label_source import LabelSource
+        from .draw import flagged_pictures
 
-        # the first flagged rows of each check, drawn on their images, for the page
-        pics = flagged_pictures(src.path, examples, plots, system, images=images, radians=radians, overwrite=overwrite)
+        # the first flagged rows of each check, drawn on their images, for the page (the table opened above)
+        labels = LabelSource(src, resolved, label_mode(src.columns, src.path, system))
+        pics = flagged_pictures(labels, examples, plots, images=images, radians=radians, overwrite=overwrite)
         write_plots(
             hist,
             plots,

@@ -573,7 +573,7 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None
         write_table(table, suspects, overwrite=overwrite)
         report["suspects_file"] = str(suspects)
     if plots:
-        from .draw_consistency import FOLDER, consistency_page
+        from .draw.consistency import FOLDER, consistency_page
 
         pics = consistency_page(cons, report, reread(), top[: cons.s.drawn], plots, images, overwrite)
         report["page"] = f"{plots}/{FOLDER}/index.html"

@@ -132,7 +132,7 @@ class Images:
 def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 480):
     """GT and prediction drawn on the face for each worst row, as JPEG data URIs (None where no image is found).
 
-    Drawn by ``hpe draw``'s :func:`~hpe_cli.pipelines.draw_errors.render_worst` (the pictures ``draw_worst``
+    Drawn by ``hpe draw``'s :func:`~hpe_cli.pipelines.draw.render_worst` (the pictures ``draw_worst``
     writes, kept in memory: nothing is staged or written); images found by :mod:`hpe_cli.io.images` under
     ``images`` (``--images`` or the GT folder), else ``fallback_root``, ``.mat`` + ``.jpg`` folders and
     Panoptic layouts included. ``system`` is the GT system (the angles of ``frame``).
@@ -141,7 +141,7 @@ def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 48
 
     import cv2
 
-    from .draw_errors import render_worst
+    from .draw import render_worst
 
     if frame is None or not len(frame):
         return None

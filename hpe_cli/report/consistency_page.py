@@ -2,7 +2,7 @@
 
 Written as ``consistency/index.html`` in the plots folder with ``scores.png``
 (histograms of the landmark angle, the view angle and the score) and the pictures
-of :mod:`hpe_cli.pipelines.draw_consistency`. Pure formatting: the caller stages the files.
+of :mod:`hpe_cli.pipelines.draw.consistency`. Pure formatting: the caller stages the files.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ def score_figure(hists: dict, path) -> None:
     """Histograms of ``landmark_angle``, ``view_angle`` and ``consistency_score`` as a PNG.
 
     ``hists``: ``{column: {"counts", "edges", "median", "n"} or None}``, binned by
-    the caller (:func:`hpe_cli.pipelines.draw_consistency.score_histograms`).
+    the caller (:func:`hpe_cli.pipelines.draw.consistency.score_histograms`).
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure

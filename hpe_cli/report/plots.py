@@ -90,7 +90,7 @@ def write_plots(
     summary : dict
         Shown on the HTML page: check name -> count (and any other scalars).
     pictures : dict, optional
-        Drawn flagged rows (:func:`hpe_cli.pipelines.draw_flagged.flagged_pictures`): shown on the page by
+        Drawn flagged rows (:func:`hpe_cli.pipelines.draw.flagged_pictures`): shown on the page by
         check, each linking to its PNG; rows whose image was not found are listed.
     """
     from matplotlib.colors import LogNorm

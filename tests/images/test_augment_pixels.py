@@ -364,7 +364,7 @@ class _Bar:
 
 def test_progress_bars_have_totals_and_move_per_image(tmp_path):
     from hpe_cli.pipelines.augment import run_augment
-    from hpe_cli.pipelines.draw import run_draw
+    from hpe_cli.pipelines.draw import DrawOptions, run_draw
     from hpe_cli.rotation import get_system
 
     root = _images(tmp_path, ["a.png", "b.png", "c.png"])
@@ -385,7 +385,12 @@ def test_progress_bars_have_totals_and_move_per_image(tmp_path):
     )
     assert bar.total == 4 and bar.n == 4 and bar.steps.count(1) >= 4  # one step per row's image
     bar = _Bar()
-    run_draw(tmp_path / "in.parquet", tmp_path / "drawn", images=root, system=get_system("300w_lp"), progress=bar)
+    run_draw(
+        tmp_path / "in.parquet",
+        tmp_path / "drawn",
+        DrawOptions(images=root, system=get_system("300w_lp")),
+        progress=bar,
+    )
     assert bar.total == 3 and bar.n == 3  # three images (two rows on a.png)
 
 

@@ -198,11 +198,12 @@ def aflw430(tmp_path):
 @pytest.mark.parametrize("system", ["3ddfa_v2", "scipy_zyx", "biwi"])
 def test_draw_mat_reads_pose_para_as_300w_lp(aflw430, tmp_path, system):
     """image00430 looks up 34 deg: the nose points up whatever --system says (it only names the captions)."""
-    from hpe_cli.pipelines.draw import _read_all
+    from hpe_cli.io.label_source import label_source
+    from hpe_cli.pipelines.draw import read_rows
     from hpe_cli.rotation.systems import get_system
 
     src = open_table(aflw430)
-    _, A, angles, _, _ = _read_all(src, "angles", False, get_system(system))
+    _, A, angles, _, _ = read_rows(label_source(src, get_system(system), option_is_output=True, mode="angles"))
     nose = A[0] @ np.array([0.0, 0.0, 1.0])  # canonical: x subject's left, y up, z out of the face
     assert nose[1] > np.sin(np.deg2rad(30))  # about sin(34 deg) upwards
     w = get_system("300w_lp")

@@ -4,11 +4,13 @@ Chromium (the same browser lookup as the evaluate report tests; skipped when no 
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
+
+from benchmarks.browser import CHROMIUM_FLAGS as _BASE_FLAGS
+from benchmarks.browser import find_chromium
 
 ROOT = Path(__file__).resolve().parents[2]
 #: ../shared next to the checkout (or next to the folder of worktrees that holds it)
@@ -17,24 +19,12 @@ REALDATA = SHARED / "realdata"
 PIZZA = REALDATA / "panoptic_160906_pizza1"
 AFLW = REALDATA / "aflw2000_prnet"
 PRED = SHARED / "golden" / "evaluate" / "aflw16m" / "pred.csv"
-CHROMIUM_FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--hide-scrollbars",
-]
+#: the benchmarks' headless flags (benchmarks/browser.py: one list for both), scrollbars hidden for screenshots
+CHROMIUM_FLAGS = [*_BASE_FLAGS, "--hide-scrollbars"]
 
 
 def browser():
-    for name in ("chromium", "chromium-browser", "google-chrome"):
-        path = shutil.which(name)
-        if path:
-            return path
-    return None
+    return find_chromium()
 
 
 @pytest.fixture

@@ -12,7 +12,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
+import pandas as pd
+
+from ...geometry import draw as g
+from ...io.images import ImageResolver, row_ids
+from ...io.layout import landmark_count
+from ...io.transaction import ensure_transaction, note_input, staged_dir
+from ...report.consistency_page import page_html, score_figure
+from .flagged import around_face, shrink_to_page
+from .rows import image_names, write_image
 
 #: sub-folder of the plots folder holding the page and its pictures
 FOLDER = "consistency"
@@ -20,8 +30,6 @@ FOLDER = "consistency"
 
 def _rows(batches, idx) -> tuple:
     """The rows ``idx`` (global indices, any order) of the re-read table as one pandas frame, in ``idx`` order."""
-    import pandas as pd
-
     want = np.asarray(idx, dtype=np.int64)
     got, at, offset = [], [], 0
     for batch in batches:
@@ -45,9 +53,6 @@ def consistency_page(cons, report, batches, idx, plots_dir, images=None, overwri
     ``{"pictures": [{"path", "caption"}], "missing": [(where, reason)]}`` (paths
     relative to ``plots_dir/consistency``).
     """
-    from ..io.transaction import ensure_transaction, staged_dir
-    from ..report.consistency_page import page_html, score_figure
-
     with ensure_transaction(), staged_dir(Path(plots_dir) / FOLDER, overwrite) as stage:
         out = _pictures(cons, batches, idx, plots_dir, images, stage)
         score_figure(score_histograms(cons), stage / "scores.png")
@@ -93,16 +98,11 @@ def score_histograms(cons, bins: int = 40) -> dict:
 
 
 def _pictures(cons, batches, idx, plots_dir, images, stage) -> dict:
-    from ..io.images import ImageResolver, row_ids
-    from ..io.layout import landmark_count
-    from ..io.transaction import note_input
-    from .draw_rows import _image_names
-
     out = {"pictures": [], "missing": []}
     frame, _ = _rows(batches, idx)
     if not len(frame):
         return out
-    names = _image_names(frame)
+    names = image_names(frame)
     if names is None:
         out["missing"] = [(f"row {cons.row(i)['line']}", "the table names no images") for i in idx]
         return out
@@ -144,12 +144,6 @@ def _pictures(cons, batches, idx, plots_dir, images, stage) -> dict:
 
 
 def _draw(img, uv, A, F, angle, staged, shown) -> None:
-    import cv2
-
-    from ..geometry import draw as g
-    from .draw_flagged import around_face, shrink_to_page
-    from .draw_rows import _write_image
-
     H, W = img.shape[:2]
     ok = np.isfinite(uv).all(1) & ~((uv[:, 0] == -1) & (uv[:, 1] == -1)) if len(uv) else np.zeros(0, bool)
     pts = uv[ok]
@@ -170,7 +164,7 @@ def _draw(img, uv, A, F, angle, staged, shown) -> None:
     g.render_legend(img, [("label", "solid"), ("landmark fit", "dashed")], height_px=h)
     if np.isfinite(angle):
         g.render_caption(img, f"{angle:.1f} deg apart", (4, img.shape[0] - 6), height_px=h)
-    _write_image(img, staged, shown)
+    write_image(img, staged, shown)
 
 
 __all__ = ["FOLDER", "consistency_page"]

@@ -7,15 +7,41 @@ the top-right corner. One PNG per row, named ``<rank>_<image stem>.png`` (rank 1
 image never share an output file.
 
 :func:`draw_worst` writes the PNGs, :func:`render_worst` yields the same pictures as arrays (the evaluate
-page embeds them); :func:`run_draw_errors` is ``hpe draw``'s job.
+page embeds them), both as :class:`WorstOptions` say; :func:`run_draw_errors` is ``hpe draw``'s job.
 """
 
 from __future__ import annotations
 
 import itertools
+import re
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from ...datasets.mat import read_mat
+from ...errors import HpeError
+from ...geometry import draw as g
+from ...io import Rejects, open_table
+from ...io.images import ImageResolver, row_ids
+from ...io.readers import LINE_COL
+from ...io.rejects import fail_all_rejected
+from ...io.transaction import ensure_transaction, note_input, staged_dir
+from ...rotation import get_system
+from .rows import (
+    DEFAULT_LENGTH_FRACTION,
+    MAT_LENGTH_UNITS,
+    face_placement,
+    image_names,
+    row_namer,
+    row_numbers,
+    write_image,
+)
 
 #: columns ``hpe evaluate -o`` writes besides its key columns
 ANGLE_COLUMNS = ("gt_pitch", "gt_yaw", "gt_roll", "pred_pitch", "pred_yaw", "pred_roll")
@@ -33,6 +59,51 @@ _EVAL_COLUMNS = set(ANGLE_COLUMNS) | {
 _PLACEMENT = {"bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "tdz", "size", "scale"}
 GT_STYLE = "solid"
 PRED_STYLE = "dashed"
+#: what a row whose image is not found (or not readable) becomes
+ON_MISSING = ("canvas", "error", "skip")
+
+
+@dataclass(frozen=True)
+class WorstOptions:
+    """Which rows of evaluate's output :func:`draw_worst` / :func:`render_worst` draw, and how.
+
+    Attributes
+    ----------
+    worst : int, optional
+        Draw only the ``worst`` rows (>= 1) with the largest ``sort_by`` (all rows when None).
+    sort_by : str
+        Numeric column to sort by, largest first (NaN last); default ``geodesic``.
+    on_missing : {"canvas", "error", "skip"}
+        A row whose image is not found (or cannot be read) is drawn on a grey canvas that says so, is an
+        error, or is left out and listed in the caller's ``skipped``.
+    thickness : int, optional
+        Line thickness of the ground truth in pixels (default: from the length).
+    where : str, optional
+        The table's name in messages (default: the file, else ``"evaluate output"``).
+    row_name : callable, optional
+        ``row_name(i)`` names 0-based row ``i`` in messages (default ``"<where>: row <i + 1>"``).
+    """
+
+    worst: int | None = None
+    sort_by: str = "geodesic"
+    on_missing: str = "canvas"
+    thickness: int | None = None
+    where: str | None = None
+    row_name: Callable | None = None
+
+    def __post_init__(self):
+        if self.on_missing not in ON_MISSING:
+            raise HpeError(f"on_missing: expected one of {', '.join(ON_MISSING)}, got {self.on_missing!r}")
+        if self.worst is not None and not (isinstance(self.worst, int) and self.worst >= 1):
+            raise HpeError(f"worst: expected an integer >= 1, got {self.worst!r}")
+
+    @classmethod
+    def of(cls, settings: dict) -> WorstOptions:
+        """``settings["options"]`` (a :class:`WorstOptions`) when that is the one setting, else
+        ``WorstOptions(**settings)``."""
+        if set(settings) == {"options"}:
+            return settings["options"]
+        return cls(**settings)
 
 
 def is_errors_table(columns) -> bool:
@@ -48,8 +119,6 @@ def key_columns(columns) -> list:
 
 def table_system(schema, default):
     """The system named by a Parquet file's ``hpe:system`` metadata, else ``default``; and where it came from."""
-    from ..rotation import get_system
-
     name = (getattr(schema, "metadata", None) or {}).get(b"hpe:system")
     if name:
         try:
@@ -60,10 +129,6 @@ def table_system(schema, default):
 
 
 def _order(frame, sort_by, worst, where):
-    import pandas as pd
-
-    from ..errors import HpeError
-
     if sort_by not in frame.columns:
         numeric = [c for c in frame.columns if pd.api.types.is_numeric_dtype(frame[c])]
         raise HpeError(
@@ -81,17 +146,12 @@ def _order(frame, sort_by, worst, where):
 def _placement(frame, idx, ref, H, W):
     """Head centre (u, v) and line length for row ``idx``: the table's box/tdx, else the ``.mat`` beside the
     image (Pose_Para tdx, tdy from the bottom, length 100000 * scale), else the image centre."""
-    from .draw_rows import DEFAULT_LENGTH_FRACTION, MAT_LENGTH_UNITS, face_placement
-
     c, L, _ = face_placement(frame.iloc[[idx]], pose_para=False)
     if np.isfinite(c[0]).all():
         return c[0], (L[0] if np.isfinite(L[0]) else DEFAULT_LENGTH_FRACTION * min(H, W))
     if ref is not None and ref.path is not None:
         mat = Path(ref.path).with_suffix(".mat")
         if mat.is_file():
-            from ..datasets.mat import read_mat
-            from ..errors import HpeError
-
             try:
                 pose = read_mat(mat)["pose"]
             except HpeError:
@@ -107,8 +167,6 @@ def _placement(frame, idx, ref, H, W):
 def render_pair(img, A_gt, A_pred, centre, length, corner_text, thickness=None):
     """Draw ground truth (solid) and prediction (dashed, dot at each end) on ``img``, a legend top-left and
     ``corner_text`` (lines) top-right. In place; returns ``img``."""
-    from ..geometry import draw as g
-
     t = thickness or g.auto_thickness(length)
     c = np.asarray(centre, dtype=np.float64).reshape(1, 2)
     g.render_axes(img, A_gt[None], c, length, t)
@@ -121,22 +179,7 @@ def render_pair(img, A_gt, A_pred, centre, length, corner_text, thickness=None):
     return img
 
 
-def draw_worst(
-    rows,
-    *,
-    images,
-    out_dir,
-    worst=None,
-    sort_by="geodesic",
-    system=None,
-    overwrite=False,
-    progress=None,
-    on_missing="canvas",
-    thickness=None,
-    where=None,
-    skipped=None,
-    row_name=None,
-):
+def draw_worst(rows, *, images, out_dir, system=None, overwrite=False, progress=None, skipped=None, **settings):
     """Draw the worst rows of ``hpe evaluate -o``'s output, ground truth and prediction on the same face.
 
     Parameters
@@ -150,20 +193,18 @@ def draw_worst(
         Folder the image names are relative to (see :mod:`hpe_cli.io.images`).
     out_dir : str or Path
         Folder for the PNGs; created; staged and committed with the run (:func:`hpe_cli.io.transaction.staged_dir`).
-    worst : int, optional
-        Draw only the ``worst`` rows with the largest ``sort_by`` (all rows when None).
-    sort_by : str
-        Numeric column to sort by, largest first (NaN last); default ``geodesic``.
     system : str or RotationSystem, optional
         System of the ``gt_*``/``pred_*`` angles; default: the file's ``hpe:system`` metadata (or
         ``rows.attrs["hpe:system"]``), else ``300w_lp``.
-    on_missing : {"canvas", "error", "skip"}
-        A row whose image is not found (or cannot be read) is drawn on a grey canvas that says so, is an
-        error, or is left out and listed in ``skipped``.
+    overwrite : bool
+        Replace PNGs of an earlier run.
+    progress : tqdm, optional
+        A bar whose total is set to the number of rows drawn.
     skipped : list, optional
         With ``on_missing="skip"``: ``(row index, reason)`` is appended for each row left out.
-    row_name : callable, optional
-        ``row_name(i)`` names 0-based row ``i`` in messages (default ``"<where>: row <i + 1>"``).
+    **settings
+        :class:`WorstOptions` fields (``worst``, ``sort_by``, ``on_missing``, ``thickness``, ``where``,
+        ``row_name``), or ``options=WorstOptions(...)``.
 
     Returns
     -------
@@ -172,76 +213,48 @@ def draw_worst(
         (:func:`key_columns`), ``path`` the written PNG (a :class:`~pathlib.Path` in ``out_dir``),
         ``caption`` one line (key, error, both angle triples).
     """
-    from ..io.transaction import ensure_transaction, staged_dir
-    from .draw_rows import _write_image
-
+    options = WorstOptions.of(settings)
     out_dir = Path(out_dir)
     done = {}
     with ensure_transaction(), staged_dir(out_dir, overwrite) as stage:
-        for rank, _, img, key, caption, stem in render_worst(
-            rows,
-            images=images,
-            worst=worst,
-            sort_by=sort_by,
-            system=system,
-            progress=progress,
-            on_missing=on_missing,
-            thickness=thickness,
-            where=where,
-            skipped=skipped,
-            row_name=row_name,
-        ):
+        drawn = render_worst(rows, images=images, system=system, progress=progress, skipped=skipped, options=options)
+        for rank, _, img, key, caption, stem in drawn:
             rel = Path(f"{rank + 1:04d}_{_safe_stem(stem)}.png")
-            _write_image(img, stage / rel, out_dir / rel)
+            write_image(img, stage / rel, out_dir / rel)
             done[rank] = (key, out_dir / rel, caption)
     return [done[k] for k in sorted(done)]
 
 
-def render_worst(
-    rows,
-    *,
-    images,
-    worst=None,
-    sort_by="geodesic",
-    system=None,
-    progress=None,
-    on_missing="canvas",
-    thickness=None,
-    where=None,
-    skipped=None,
-    row_name=None,
-    crop=None,
-):
+def render_worst(rows, *, images, system=None, progress=None, skipped=None, crop=None, **settings):
     """The pictures :func:`draw_worst` writes, as arrays, without writing anything (the evaluate page embeds them).
 
     Same parameters as :func:`draw_worst` (no ``out_dir``). Yields ``(rank, row, image, key, caption, stem)`` for
-    each drawn row: ``rank`` 0 = worst, ``row`` the 0-based row of ``rows``, ``image`` a BGR ``uint8`` array, ``stem`` the image's file stem. Image files
-    come in rank order, then the frames of each video (decoded once), so one picture is in memory at a time.
-    ``crop(image, row)`` -> ``(part, (x0, y0))`` cuts each picture before drawing (the evaluate page: around
-    the face of a large frame); the poses are drawn at the row's centre moved by ``(x0, y0)``.
+    each drawn row: ``rank`` 0 = worst, ``row`` the 0-based row of ``rows``, ``image`` a BGR ``uint8`` array,
+    ``stem`` the image's file stem. Image files come in rank order, then the frames of each video (decoded
+    once), so one picture is in memory at a time. ``crop(image, row)`` -> ``(part, (x0, y0))`` cuts each
+    picture before drawing (the evaluate page: around the face of a large frame); the poses are drawn at the
+    row's centre moved by ``(x0, y0)``.
     """
-    from ..errors import HpeError
-    from ..io.images import ImageResolver
-    from .draw_rows import _image_names
-
-    rows, system, where = _load(rows, system, where)
-    row_name = row_name or (lambda i: f"{where}: row {i + 1}")
+    options = WorstOptions.of(settings)
+    rows, system, where = _load(rows, system, options.where)
+    row_name = options.row_name or (lambda i: f"{where}: row {i + 1}")
     skipped = [] if skipped is None else skipped
-    order = _order(rows, sort_by, worst, where)
-    names = _image_names(rows) or [None] * len(rows)
-    job = _Pairs(rows, system, sort_by, names, thickness)
-    refs = _find_all(rows, names, order, images, on_missing, skipped, row_name)
+    order = _order(rows, options.sort_by, options.worst, where)
+    names = image_names(rows) or [None] * len(rows)
+    job = _Pairs(rows, system, options.sort_by, names, options.thickness)
+    refs = _find_all(rows, names, order, images, options.on_missing, skipped, row_name)
     if progress is not None:
         progress.total = len(order)
         progress.refresh()
     found = [k for k, r in enumerate(refs) if r is not None]
-    missing = ((k, None, "image not found") for k, r in enumerate(refs) if r is None and on_missing == "canvas")
+    on_canvas = options.on_missing == "canvas"
+    missing = ((k, None, "image not found") for k, r in enumerate(refs) if r is None and on_canvas)
     pictures = ((found[k], img, why) for k, img, why in ImageResolver.read([refs[k] for k in found]))
     for rank, img, why in itertools.chain(missing, pictures):
         i = int(order[rank])
-        if img is None and on_missing == "error":
+        if img is None and options.on_missing == "error":
             raise HpeError(f"{row_name(i)}: {why}")
-        if img is None and on_missing == "skip":
+        if img is None and options.on_missing == "skip":
             skipped.append((i, why))
             continue
         off = (0, 0)
@@ -255,10 +268,6 @@ def render_worst(
 
 def _find_all(rows, names, order, images, on_missing, skipped, row_name):
     """The picture of each row of ``order`` (None when not found: an error, a skipped row or a canvas)."""
-    from ..errors import HpeError
-    from ..io.images import ImageResolver, row_ids
-    from ..io.transaction import note_input
-
     seqs, cams, frs = row_ids(rows)
     resolver = ImageResolver(images)
     refs = []
@@ -277,18 +286,10 @@ def _find_all(rows, names, order, images, on_missing, skipped, row_name):
 
 def _load(rows, system, where):
     """(DataFrame, RotationSystem, name for messages) of a DataFrame or a Parquet/CSV file of evaluate's output."""
-    import pandas as pd
-
-    from ..errors import HpeError
-    from ..io.transaction import note_input
-    from ..rotation import get_system
-
     if not isinstance(rows, pd.DataFrame):
         path = Path(rows)
         note_input(path)
         if path.suffix.lower() in (".parquet", ".pq"):
-            import pyarrow.parquet as pq
-
             table = pq.read_table(path)
             if system is None:
                 system, _ = table_system(table.schema, get_system("300w_lp"))
@@ -325,8 +326,6 @@ class _Pairs:
         self.A_pr[ok] = system.to_canonical(system.from_angles(self.pr[ok]))
 
     def draw(self, img, why, i, ref, offset=(0, 0)):
-        from ..geometry import draw as g
-
         rows, sort_by, gt, pr = self.rows, self.sort_by, self.gt, self.pr
         if img is None:
             img = g.blank_canvas(320, 320, 96)
@@ -352,90 +351,47 @@ class _Pairs:
 
 
 def _safe_stem(stem: str) -> str:
-    import re
-
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", stem)[:80] or "image"
 
 
-def run_draw_errors(
-    input_path,
-    outdir,
-    *,
-    images=None,
-    system=None,
-    worst=None,
-    sort_by="geodesic",
-    overwrite=False,
-    progress=None,
-    thickness=None,
-    rejects_path=None,
-    strict=False,
-) -> dict:
-    """``hpe draw`` on evaluate's output: a row whose image is missing is a reject (an error without ``--rejects``
-    or with ``strict``); a run that draws nothing exits 1. Rows are named as the input numbers them."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    from ..errors import HpeError
-    from ..io import Rejects, open_table
-    from ..io.readers import LINE_COL
-    from ..io.transaction import ensure_transaction
-    from ..rotation import get_system
-    from .draw_rows import row_namer, row_numbers
-
+def run_draw_errors(input_path, outdir, options, *, progress=None) -> dict:
+    """``hpe draw`` on evaluate's output (``options`` a :class:`~hpe_cli.pipelines.draw.DrawOptions`): a row
+    whose image is missing is a reject (an error without ``--rejects`` or with ``strict``); a run that draws
+    nothing exits 1. Rows are named as the input numbers them."""
     input_path = Path(input_path)
-    src = open_table(input_path, with_lines=True)
-    table = pa.Table.from_batches(list(src.batches()), schema=src.schema)
-    lines = table.column(LINE_COL).to_numpy() if LINE_COL in table.column_names else None
-    frame = table.drop_columns([LINE_COL]).to_pandas() if lines is not None else table.to_pandas()
-    source = "option"
+    src, frame, lines = _read_errors(input_path)
+    system, source = options.system, "option"
     if input_path.suffix.lower() in (".parquet", ".pq"):
-        file_system, source = table_system(pq.read_schema(input_path), system)
-        system = file_system
+        system, source = table_system(pq.read_schema(input_path), system)
     if system is None:
         system, source = get_system("300w_lp"), "default"
     if len(frame) == 0:
         raise HpeError(f"{input_path}: empty table (no rows)")
     where = row_namer(src, lines)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=input_path)
-    skip = rejects_path is not None and not strict
+    rejects = Rejects(options.rejects_path, options.overwrite, strict=options.strict, source=input_path)
+    skip = options.rejects_path is not None and not options.strict
+    worst = WorstOptions(
+        worst=options.worst,
+        sort_by=options.sort_by or "geodesic",
+        on_missing="skip" if skip else "error",
+        thickness=options.thickness,
+        where=str(input_path),
+        row_name=where,
+    )
     skipped: list = []
     with ensure_transaction():
         res = draw_worst(
             frame,
-            images=images or input_path.parent,
+            images=options.images or input_path.parent,
             out_dir=outdir,
-            worst=worst,
-            sort_by=sort_by,
             system=system,
-            overwrite=overwrite,
+            overwrite=options.overwrite,
             progress=progress,
-            on_missing="skip" if skip else "error",
-            thickness=thickness,
-            where=str(input_path),
             skipped=skipped,
-            row_name=where,
+            options=worst,
         )
-        if skipped:
-            skipped.sort()
-            idx = np.array([i for i, _ in skipped], dtype=np.int64)
-            why = [w for _, w in skipped]
-            rejects.add(
-                {"row": row_numbers(src, lines, idx), **{c: frame[c].to_numpy()[idx] for c in frame.columns}},
-                why,
-                lines=np.asarray(lines)[idx] if src.kind == "csv" and lines is not None else None,
-            )
-            if not res:  # the rejects file is still written: it says why
-                from ..io.rejects import fail_all_rejected
-
-                fail_all_rejected(
-                    rejects,
-                    f"{input_path}: nothing drawn: all {len(idx)} row(s) rejected "
-                    f"(first: {where(int(idx[0])).split(': ', 1)[-1]}: {why[0]})",
-                )
+        _reject_skipped(rejects, skipped, (src, input_path), frame, lines, drawn=len(res))
         rejects.finish()
-    from collections import Counter
-
     return {
         "faces": len(res),
         "images": len(res),
@@ -445,3 +401,35 @@ def run_draw_errors(
         "system_source": source,
         "drawn": res,
     }
+
+
+def _read_errors(input_path):
+    """``(TableSource, DataFrame, line numbers or None)`` of evaluate's output, read whole."""
+    src = open_table(input_path, with_lines=True)
+    table = pa.Table.from_batches(list(src.batches()), schema=src.schema)
+    lines = table.column(LINE_COL).to_numpy() if LINE_COL in table.column_names else None
+    frame = table.drop_columns([LINE_COL]).to_pandas() if lines is not None else table.to_pandas()
+    return src, frame, lines
+
+
+def _reject_skipped(rejects, skipped, table, frame, lines, drawn):
+    """The rows left out (image not found) into ``rejects``; a run that drew none of its rows is an error.
+    ``table``: ``(TableSource, the path as given)``."""
+    if not skipped:
+        return
+    src, path = table
+    skipped.sort()
+    idx = np.array([i for i, _ in skipped], dtype=np.int64)
+    why = [w for _, w in skipped]
+    rejects.add(
+        {"row": row_numbers(src, lines, idx), **{c: frame[c].to_numpy()[idx] for c in frame.columns}},
+        why,
+        lines=np.asarray(lines)[idx] if src.kind == "csv" and lines is not None else None,
+    )
+    if not drawn:  # the rejects file is still written: it says why
+        where = row_namer(src, lines)
+        fail_all_rejected(
+            rejects,
+            f"{path}: nothing drawn: all {len(idx)} row(s) rejected "
+            f"(first: {where(int(idx[0])).split(': ', 1)[-1]}: {why[0]})",
+        )

@@ -17,10 +17,18 @@ from __future__ import annotations
 
 import hashlib
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
+
+from ...geometry import draw as g
+from ...geometry.crop import crop_padded
+from ...io.images import ImageResolver
+from ...io.jpeg import read_image
+from ..pools import in_order
 
 #: thumbnail side, pixels (square)
 THUMB = 128
@@ -113,10 +121,6 @@ def _draw(img, V, A_other, centre, length):
     """The labels' three lines solid (Hopenet's ``draw_axis`` colours and order, anti-aliased, sub-pixel ends:
     :func:`hpe_cli.geometry.draw.render_axes` with the vectors computed for every row at once), OTHER's dashed
     (:func:`hpe_cli.geometry.draw.render_axes_dashed`)."""
-    import cv2
-
-    from ..geometry import draw as g
-
     c = np.asarray(centre, dtype=np.float64)
     if not (np.isfinite(c).all() and np.isfinite(length) and length > 0):
         return img
@@ -139,8 +143,6 @@ _SHIFT = 4
 def _shrink(part, size: int):
     """``part`` (square) resized to ``size``: by an integer factor with area averaging first when it is more than
     twice as large (OpenCV's fast path), then bilinear. Returns ``(image, scale)``."""
-    import cv2
-
     side = part.shape[0]
     k = side // size
     if k >= 2:
@@ -156,8 +158,6 @@ def _shrink(part, size: int):
 def _interpolation(scale: float) -> int:
     """Area averaging when shrinking by more than 2 (no aliasing), bilinear otherwise (OpenCV's area
     resampling at a non-integer factor costs about 5x bilinear)."""
-    import cv2
-
     return cv2.INTER_AREA if scale < 0.5 else cv2.INTER_LINEAR
 
 
@@ -166,10 +166,6 @@ def thumbnail(img, crop, V, A_other, centre, length, size: int = THUMB) -> np.nd
     or, with ``crop`` None, the whole frame letterboxed; the labels' pose drawn solid (``V``: the (3, 2) image
     directions of its three lines, :func:`hpe_cli.geometry.draw.image_vectors`) and ``A_other`` dashed at
     ``centre`` (image pixels) with lines ``length`` pixels long."""
-    import cv2
-
-    from ..geometry.crop import crop_padded
-
     centre = np.asarray(centre, dtype=np.float64)
     if crop is not None:
         x0, y0, x1, y1 = (int(v) for v in crop)
@@ -189,8 +185,6 @@ def thumbnail(img, crop, V, A_other, centre, length, size: int = THUMB) -> np.nd
 
 def reduced_frame(img, side: int = FRAME_SIDE) -> np.ndarray:
     """``img`` with its longer side at most ``side`` pixels."""
-    import cv2
-
     H, W = img.shape[:2]
     s = min(1.0, side / max(H, W))
     if s >= 1.0:
@@ -199,8 +193,6 @@ def reduced_frame(img, side: int = FRAME_SIDE) -> np.ndarray:
 
 
 def _write_jpeg(path: str, img, quality: int) -> None:
-    import cv2
-
     ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])
     if not ok:
         raise OSError(f"cannot encode {os.path.basename(path)}")
@@ -211,12 +203,8 @@ def _write_jpeg(path: str, img, quality: int) -> None:
 def run_task(task: Task) -> tuple:
     """Make the pictures of one task; ``(thumbnails made, [(ref, reason, thumbnails not made)] of the pictures
     that could not be read)``. Videos: :meth:`hpe_cli.io.images.ImageResolver.read` yields each frame once, in frame order."""
-    from ..io.images import ImageResolver
-
     refs = [ref for ref, _, _ in task.items]
     if len(refs) == 1 and refs[0].path is not None:  # the loader's decoder: simplejpeg where it gives OpenCV's pixels
-        from ..io.jpeg import read_image
-
         img = read_image(refs[0].path, rgb=False)
         pictures = [(0, img, "" if img is not None else "not a readable image")]
     else:
@@ -233,8 +221,6 @@ def run_task(task: Task) -> tuple:
 
 def _pictures(img, frame_name, rows, stage) -> int:
     if img.ndim == 2:
-        import cv2
-
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
     if frame_name is not None:
         _write_jpeg(os.path.join(stage, FRAME_DIR, frame_name), reduced_frame(img), 85)
@@ -286,10 +272,6 @@ def run_tasks(tasks, workers: int, progress=None) -> list:
         for t in tasks:
             done(t, run_task(t))
         return failed
-    from concurrent.futures import ThreadPoolExecutor
-
-    from .pools import in_order
-
     with ThreadPoolExecutor(workers, thread_name_prefix="hpe-view") as pool:
         for t, res in zip(tasks, in_order(pool, run_task, tasks, ahead=4 * workers)):
             done(t, res)
@@ -297,6 +279,7 @@ def run_tasks(tasks, workers: int, progress=None) -> list:
 
 
 def mkdirs(stage: Path) -> None:
+    """The picture folders (:data:`THUMB_DIR`, :data:`FRAME_DIR`) in the staged page folder."""
     (stage / THUMB_DIR).mkdir(parents=True, exist_ok=True)
     (stage / FRAME_DIR).mkdir(parents=True, exist_ok=True)
 

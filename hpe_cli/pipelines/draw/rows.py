@@ -1,9 +1,26 @@
 """The rows ``hpe draw`` draws: reading them (canonical matrices, caption angles), where each face sits, how a
-row is named in messages, and reading/writing the pictures. Shared by :mod:`.draw` (label tables),
-:mod:`.draw_errors` (``hpe evaluate -o`` output) and :mod:`.draw_flagged` (the audit page's pictures).
+row is named in messages, and writing the pictures. Used by :mod:`.job` (label tables), :mod:`.errors`
+(``hpe evaluate -o`` output), :mod:`.flagged` and :mod:`.consistency` (the audit pages' pictures) and by
+:mod:`hpe_cli.pipelines.view`.
 """
 
 from __future__ import annotations
+
+import math
+from pathlib import Path, PurePath
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+
+from ...errors import HpeError
+from ...io import batch_labels, batch_rotations
+from ...io.images import IMAGE_COLUMNS
+from ...io.readers import LINE_COL
+from ...io.transaction import os_reason
+from ...rotation import soa
 
 #: 300W-LP/AFLW2000 Pose_Para: line length = this many Basel-Face-Model units times ``scale``.
 #: The model is in micrometres and its origin is the centre of the head (the nose tip is
@@ -11,25 +28,45 @@ from __future__ import annotations
 MAT_LENGTH_UNITS = 100_000.0
 #: when a row gives no size: line length as a fraction of min(image width, height)
 DEFAULT_LENGTH_FRACTION = 0.25
-_WRITABLE = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"}
+#: image file extensions OpenCV writes (any other name gets ``.png``)
+WRITABLE = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"}
 
 
-def _read_all(src, mode, radians, system, batches=None):
-    """Whole table (or the given ``batches`` of it) as (frame, canonical A, angles for captions in ``system``,
-    reasons, lines).
+class Rows(NamedTuple):
+    """A label table read whole for drawing (:func:`read_rows`)."""
 
-    A dataset reader's labels (.mat Pose_Para: always 300w_lp) are read in
-    the dataset's own system and only the captions use ``system``.
+    #: every column (pandas DataFrame)
+    frame: object
+    #: (N, 3, 3) canonical matrices, NaN where unusable
+    A: np.ndarray
+    #: (N, 3) pitch, yaw, roll in degrees in the labels' output system (captions), NaN where unusable
+    angles: np.ndarray
+    #: (N,) object: "" for a usable row, else why not
+    reasons: np.ndarray
+    #: (N,) the reader's line/row numbers (``__line__``), or None when the table was opened without them
+    lines: np.ndarray | None
+
+
+def read_rows(labels, radians=False, batches=None) -> Rows:
+    """The whole table of ``labels`` (or the given ``batches`` of it) for drawing.
+
+    Parameters
+    ----------
+    labels : LabelSource
+        The opened table (:func:`hpe_cli.io.label_source.open_labels`): the labels are read in
+        ``labels.system`` with ``labels.mode``; the caption angles are in ``labels.output_system`` (a dataset
+        reader's labels, e.g. ``.mat`` Pose_Para, are read in the dataset's own system and converted).
+    radians : bool
+        Angle columns in radians (default degrees).
+    batches : iterable of pyarrow.RecordBatch, optional
+        Batches of ``labels.table`` to read instead of all of it.
+
+    Returns
+    -------
+    Rows
     """
-    from ..io.columns import label_system
-
-    out_system, system = system, label_system(src, system)
-    import numpy as np
-    import pyarrow as pa
-
-    from ..io import batch_labels
-    from ..io.readers import LINE_COL
-
+    src, mode, system, out_system = labels.table, labels.mode, labels.system, labels.output_system
+    convert = out_system is not system and out_system.name != system.name
     batches = list(src.batches()) if batches is None else list(batches)
     lines = None
     if src.with_lines:
@@ -40,9 +77,9 @@ def _read_all(src, mode, radians, system, batches=None):
     if mode not in ("angles", "matrix") or (system.columns and all(c in src.columns for c in system.value_columns)):
         A, angles, reasons = _read_stored(batches, mode, radians, system)
         ok = reasons == ""
-        if out_system is not system and ok.any():
+        if convert and ok.any():
             angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
-        return table.to_pandas(), A, angles, reasons, lines
+        return Rows(table.to_pandas(), A, angles, reasons, lines)
     values, reasons = [], []
     for b in batches:
         v, r = batch_labels(b, mode, radians)
@@ -61,18 +98,13 @@ def _read_all(src, mode, radians, system, batches=None):
         else:
             A[ok] = system.to_canonical(values[ok])
             angles[ok] = system.to_angles(values[ok])[0]
-        if out_system is not system:
+        if convert:
             angles[ok] = out_system.to_angles(out_system.from_canonical(A[ok]))[0]
-    return table.to_pandas(), A, angles, reasons, lines
+    return Rows(table.to_pandas(), A, angles, reasons, lines)
 
 
 def _read_stored(batches, mode, radians, system):
     """(canonical A, angles, reasons) of any storage kind (rotation vectors, quaternions, 6-D, named columns)."""
-    import numpy as np
-
-    from ..io import batch_rotations
-    from ..rotation import soa
-
     As, angles, reasons = [], [], []
     for b in batches:
         X, ok, r = batch_rotations(b, system, mode, radians)
@@ -90,10 +122,8 @@ def _read_stored(batches, mode, radians, system):
     return np.concatenate(As), np.concatenate(angles), np.concatenate(reasons)
 
 
-def _column(frame, name):
-    import numpy as np
-    import pandas as pd
-
+def numeric_values(frame, name):
+    """Column ``name`` of ``frame`` as float64 (NaN where not a number; all NaN when there is no such column)."""
     if name not in frame.columns:
         return np.full(len(frame), np.nan)
     return pd.to_numeric(frame[name], errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
@@ -105,34 +135,27 @@ def face_placement(frame, pose_para: bool, length=None):
     Returns ``(centre, length, tdy_rows)``: ``tdy_rows`` marks rows whose centre
     came from ``tdx, tdy`` (so it may need flipping once the image height is known).
     """
-    import numpy as np
-
-    bx, by, bw, bh = (_column(frame, c) for c in ("bbox_x", "bbox_y", "bbox_w", "bbox_h"))
+    bx, by, bw, bh = (numeric_values(frame, c) for c in ("bbox_x", "bbox_y", "bbox_w", "bbox_h"))
     has_box = np.isfinite(bx) & np.isfinite(by) & np.isfinite(bw) & np.isfinite(bh)
-    tdx, tdy = _column(frame, "tdx"), _column(frame, "tdy")
+    tdx, tdy = numeric_values(frame, "tdx"), numeric_values(frame, "tdy")
     has_td = ~has_box & np.isfinite(tdx) & np.isfinite(tdy)
     centre = np.full((len(frame), 2), np.nan)
     centre[has_box] = np.stack([bx + bw / 2, by + bh / 2], axis=1)[has_box]
     centre[has_td] = np.stack([tdx, tdy], axis=1)[has_td]
     L = np.full(len(frame), np.nan)
     L[has_box] = (bh / 2)[has_box]
-    size = _column(frame, "size")
+    size = numeric_values(frame, "size")
     L = np.where(~has_box & np.isfinite(size), size, L)
     if pose_para:
-        L = np.where(~has_box & ~np.isfinite(size), np.abs(_column(frame, "scale")) * MAT_LENGTH_UNITS, L)
+        L = np.where(~has_box & ~np.isfinite(size), np.abs(numeric_values(frame, "scale")) * MAT_LENGTH_UNITS, L)
     if length is not None:
         L = np.full(len(frame), float(length))
     L = np.where(np.isfinite(L) & (L > 0), L, np.nan)
     return centre, L, has_td
 
 
-def _image_names(frame):
+def image_names(frame):
     """Image name per row (str), or None when the table names no images."""
-    import math
-    from pathlib import PurePath
-
-    from ..io.images import IMAGE_COLUMNS
-
     col = next((c for c in IMAGE_COLUMNS if c in frame.columns), None)
     if col is None:
         return None
@@ -146,11 +169,14 @@ def _image_names(frame):
     return out
 
 
-def _safe_relative(name, where):
-    from pathlib import Path
+def safe_relative(name, where):
+    """``name`` as a path relative to the output folder (an absolute name keeps its file name only).
 
-    from ..errors import HpeError
-
+    Raises
+    ------
+    HpeError
+        The name would leave the output folder (``..``) or is empty; ``where`` names the row.
+    """
     rel = Path(name)
     if rel.is_absolute():
         rel = Path(rel.name)
@@ -170,28 +196,14 @@ def row_namer(src, lines):
 
 def row_numbers(src, lines, idx):
     """The numbers :func:`row_namer` names for 0-based rows ``idx`` (a rejects file's ``row`` column)."""
-    import numpy as np
-
     idx = np.asarray(idx, dtype=np.int64)
     return idx + 1 if lines is None else np.asarray(lines, dtype=np.int64)[idx]
 
 
-def _read_image(path):
-    """BGR image or None (see :func:`hpe_cli.io.images.read_image`)."""
-    from ..io.images import read_image
-
-    return read_image(path)
-
-
-def _write_image(img, staged, shown):
+def write_image(img, staged, shown):
     """Encode ``img`` by ``shown``'s extension (PNG if unknown) into ``staged`` (a file in the staged folder)."""
-    import cv2
-
-    from ..errors import HpeError
-    from ..io.transaction import os_reason
-
     staged.parent.mkdir(parents=True, exist_ok=True)
-    ext = shown.suffix.lower() if shown.suffix.lower() in _WRITABLE else ".png"
+    ext = shown.suffix.lower() if shown.suffix.lower() in WRITABLE else ".png"
     ok, buf = cv2.imencode(ext, img)
     if not ok:
         raise HpeError(f"{shown}: cannot encode the image as {ext}")

@@ -1,6 +1,7 @@
 """Pictures of flagged rows for ``hpe audit --plots``: the first few rows of each check, drawn on their images.
 
-The rows are the audit's examples (their line numbers); the table is read once more, keeping only those rows.
+The rows are the audit's examples (their line numbers); the audit's own :class:`~hpe_cli.io.label_source.LabelSource`
+is read once more (same stream, same system, same label columns), keeping only those rows.
 Each is drawn as ``hpe draw`` draws it (:mod:`hpe_cli.pipelines.draw`: the label's axes from the head centre -
 box, ``tdx, tdy`` or Pose_Para - red to the subject's left, green forehead to chin, blue out of the nose) with
 the check's name in the top-left corner, shrunk to at most :data:`MAX_SIDE` pixels and written as
@@ -10,9 +11,19 @@ the check's name in the top-left corner, shrunk to at most :data:`MAX_SIDE` pixe
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
+import cv2
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from ...geometry import draw as g
+from ...io.images import IMAGE_COLUMNS, ImageResolver, row_ids
+from ...io.readers import LINE_COL
+from ...io.transaction import ensure_transaction, note_input, staged_dir
+from .rows import DEFAULT_LENGTH_FRACTION, face_placement, image_names, read_rows, write_image
 
 #: pictures per check
 PER_CHECK = 3
@@ -34,11 +45,6 @@ def _wanted(examples, per_check):
 
 def _pick(src, lines):
     """The batches of ``src`` cut down to the rows whose line is in ``lines``."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    from ..io.readers import LINE_COL
-
     want = pa.array(sorted(lines), type=pa.int64())
     for batch, _ in src.batches_with_rejects():
         keep = pc.is_in(batch.column(LINE_COL).cast(pa.int64()), value_set=want)
@@ -46,24 +52,28 @@ def _pick(src, lines):
             yield batch.filter(keep)
 
 
-def flagged_pictures(
-    input_path, examples, plots_dir, system, *, images=None, per_check=PER_CHECK, radians=False, overwrite=False
-):
+def flagged_pictures(labels, examples, plots_dir, *, images=None, per_check=PER_CHECK, radians=False, overwrite=False):
     """Draw the first ``per_check`` flagged rows of each check; return what the page shows.
 
     Parameters
     ----------
-    input_path : str or Path
-        The audited table (or ``.mat`` folder).
+    labels : LabelSource
+        The audited table as the audit opened it (:func:`hpe_cli.io.label_source.open_labels`, with line
+        numbers): its rows are read again in ``labels.system`` with ``labels.mode``; the file is not opened or
+        its system resolved a second time.
     examples : dict
         ``{check: [{"row": line, ...}, ...]}``, the audit report's examples (``row`` = the reader's line number:
         the CSV line, header = 1; the 1-based row otherwise).
     plots_dir : str or Path
         The ``--plots`` folder; pictures go to its ``pictures/`` sub-folder, staged with the run.
-    system : RotationSystem
-        The system the audit read the labels in.
     images : str or Path, optional
         Image root (default: the table's folder; a ``.mat`` folder itself).
+    per_check : int
+        Pictures per check.
+    radians : bool
+        Angle columns in radians.
+    overwrite : bool
+        Replace pictures of an earlier run.
 
     Returns
     -------
@@ -72,44 +82,23 @@ def flagged_pictures(
         ``missing``: rows whose image was not found or not readable, ``[(check, where, reason)]``;
         ``root``: the image root.
     """
-    from ..io import label_mode, open_table
-    from ..io.images import IMAGE_COLUMNS, ImageResolver, row_ids
-    from ..io.transaction import ensure_transaction, note_input, staged_dir
-    from .draw_rows import _image_names, _read_all
-
-    input_path = Path(input_path)
+    src = labels.table
+    input_path = Path(src.path)
     root = Path(images) if images else (input_path if input_path.is_dir() else input_path.parent)
     result = {"pictures": [], "missing": [], "root": str(root)}
     wanted = _wanted(examples, per_check)
-    if not wanted:
+    if not wanted or not src.with_lines:  # no examples, or no line numbers to find them by
         return result
-    src = open_table(input_path, with_lines=True)
     if not any(c in src.columns for c in IMAGE_COLUMNS):  # no image names: no pictures (and no second read)
         return result
-    mode = label_mode(src.columns, src.path, system)
-    frame, A, _, reasons, lines = _read_all(
-        src, mode, radians, system, batches=_pick(src, {n for v in wanted.values() for n in v})
-    )
-    names = _image_names(frame)
-    if names is None or not len(frame):
+    rows = read_rows(labels, radians, batches=_pick(src, {n for v in wanted.values() for n in v}))
+    names = image_names(rows.frame)
+    if names is None or not len(rows.frame):
         return result
-    at = {int(n): i for i, n in enumerate(lines)}
-    seqs, cams, frs = row_ids(frame)
-    resolver = ImageResolver(root)
-    jobs, refs = [], []
-    for check, ls in wanted.items():
-        for k, line in enumerate(n for n in ls if n in at):
-            i = at[line]
-            where = _where(src, frame, i, line)
-            ref = resolver.find(names[i], seqs[i], cams[i], frs[i]) if names[i] else None
-            if ref is None:
-                result["missing"].append((check, where, f"image not found: {resolver.tried(names[i], seqs[i])}"))
-                continue
-            note_input(ref.path or ref.video)
-            jobs.append((check, k, i, where))
-            refs.append(ref)
+    jobs, refs = _find(src, rows, names, wanted, root, result)
     if not jobs:
         return result
+    frame = rows.frame
     pose_para = input_path.is_dir() or input_path.suffix.lower() == ".mat" or {"tdz", "scale"} <= set(frame.columns)
     out_dir = Path(plots_dir) / PICTURE_DIR
     drawn = {}
@@ -120,9 +109,9 @@ def flagged_pictures(
                 result["missing"].append((check, where, why))
                 continue
             rel = Path(f"{_safe(check)}_{k + 1}.png")
-            ok = reasons[i] == "" and np.isfinite(A[i]).all()
-            _draw_one(img, frame, i, A[i] if ok else None, pose_para, check, stage / rel, out_dir / rel)
-            label = "" if ok else f" (label not drawn: {reasons[i] or 'not finite'})"
+            ok = rows.reasons[i] == "" and np.isfinite(rows.A[i]).all()
+            _draw_one(img, frame, i, rows.A[i] if ok else None, pose_para, check, stage / rel, out_dir / rel)
+            label = "" if ok else f" (label not drawn: {rows.reasons[i] or 'not finite'})"
             shown = "" if input_path.is_dir() else f" ({names[i]})"
             drawn[j] = {
                 "check": check,
@@ -134,6 +123,27 @@ def flagged_pictures(
     return result
 
 
+def _find(src, rows, names, wanted, root, result):
+    """``(jobs, refs)``: ``(check, k, row, where)`` and the image of each wanted row that has one; the others
+    go to ``result["missing"]``."""
+    at = {int(n): i for i, n in enumerate(rows.lines)}
+    seqs, cams, frs = row_ids(rows.frame)
+    resolver = ImageResolver(root)
+    jobs, refs = [], []
+    for check, ls in wanted.items():
+        for k, line in enumerate(n for n in ls if n in at):
+            i = at[line]
+            where = _where(src, rows.frame, i, line)
+            ref = resolver.find(names[i], seqs[i], cams[i], frs[i]) if names[i] else None
+            if ref is None:
+                result["missing"].append((check, where, f"image not found: {resolver.tried(names[i], seqs[i])}"))
+                continue
+            note_input(ref.path or ref.video)
+            jobs.append((check, k, i, where))
+            refs.append(ref)
+    return jobs, refs
+
+
 def _where(src, frame, i, line) -> str:
     """A row as messages name it: the ``.mat`` file, ``line N`` of a text file, else ``row N`` (1-based)."""
     if Path(src.path).is_dir() and "file" in frame.columns:
@@ -142,8 +152,6 @@ def _where(src, frame, i, line) -> str:
 
 
 def _safe(text: str) -> str:
-    import re
-
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)[:60] or "check"
 
 
@@ -161,8 +169,6 @@ def around_face(img, centre, length):
 
 def shrink_to_page(img):
     """``img`` shrunk (area averaging) so that its longer side is at most :data:`MAX_SIDE` pixels."""
-    import cv2
-
     H, W = img.shape[:2]
     s = MAX_SIDE / max(H, W)
     if s < 1:
@@ -172,10 +178,6 @@ def shrink_to_page(img):
 
 def _draw_one(img, frame, i, A, pose_para, check, staged, shown):
     """The row's axes (as ``hpe draw`` places them) and the check's name; shrunk; staged as PNG."""
-
-    from ..geometry import draw as g
-    from .draw_rows import DEFAULT_LENGTH_FRACTION, _write_image, face_placement
-
     H, W = img.shape[:2]
     if A is not None:
         c, L, from_td = face_placement(frame.iloc[[i]], pose_para)
@@ -190,7 +192,7 @@ def _draw_one(img, frame, i, A, pose_para, check, staged, shown):
     img = shrink_to_page(img)
     h = max(14.0, 0.045 * min(img.shape[:2]))
     g.render_caption(img, check, (4, 4 + h), height_px=h)
-    _write_image(img, staged, shown)
+    write_image(img, staged, shown)
 
 
 __all__ = ["MAX_SIDE", "PER_CHECK", "PICTURE_DIR", "around_face", "flagged_pictures", "shrink_to_page"]
