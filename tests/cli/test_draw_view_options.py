@@ -4,10 +4,9 @@
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
 import hpe_cli as hpe
-from hpe_cli.cli.main import cli
+from conftest import hpe as hpe_cmd
 from hpe_cli.errors import HpeError
 from hpe_cli.pipelines.draw import DrawOptions, WorstOptions, flagged_pictures
 from hpe_cli.pipelines.view import ViewOptions
@@ -28,7 +27,7 @@ def _files(folder: Path) -> dict:
     ],
 )
 def test_api_draw_file_writes_the_cli_bytes(tmp_path, args, options):
-    res = CliRunner().invoke(cli, ["draw", str(SAMPLE), "-o", str(tmp_path / "cli"), "-q", *args])
+    res = hpe_cmd("draw", SAMPLE, "-o", tmp_path / "cli", "-q", *args)
     assert res.exit_code == 0, res.output
     system = "6drepnet" if "6drepnet" in args else None
     s = hpe.draw_file(SAMPLE, tmp_path / "api", system=system, **options)
@@ -104,10 +103,7 @@ def test_columns_angles_without_angle_columns_is_an_error(tmp_path, command):
     R = hpe.get_system("300w_lp").from_angles([[10.0, 20.0, 30.0]])[0]
     row = {"image": "image00050.jpg", **{f"r{i}{j}": [R[i, j]] for i in range(3) for j in range(3)}}
     pd.DataFrame(row).to_csv(tmp_path / "m.csv", index=False)
-    res = CliRunner().invoke(
-        cli,
-        [command, str(tmp_path / "m.csv"), "-o", str(tmp_path / "out"), "--images", str(SAMPLE), "--columns", "angles"],
-    )
+    res = hpe_cmd(command, tmp_path / "m.csv", "-o", tmp_path / "out", "--images", SAMPLE, "--columns", "angles")
     assert res.exit_code == 1, res.output
     assert res.output.strip() == (
         f"Error: {tmp_path / 'm.csv'}: missing column(s) pitch, yaw, roll: expected angles columns pitch,yaw,roll"

@@ -230,7 +230,7 @@ GET_SYSTEM_ALLOWED = {
     "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(layout.system or opts.system or '300w_lp')": (
         "export --system, or the system the --layout's trainer expects"
     ),
-    "hpe_cli/pipelines/view.py::also_angles: get_system(s)": "view --also-in (names of other systems)",
+    "hpe_cli/pipelines/view/job.py::also_angles: get_system(s)": "view --also-in (names of other systems)",
 }
 
 KNOWN_PRIVATE_IMPORTS = {
@@ -379,7 +379,6 @@ KNOWN_GET_SYSTEM = {
     "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(opts.system)",
     "hpe_cli/pipelines/panoptic_stats.py::unit_stats: get_system(cfg.system)",
     "hpe_cli/pipelines/relabel.py::relabel_views: get_system('300w_lp')",
-    "hpe_cli/pipelines/view/job.py::also_angles: get_system(s)",
 }
 KNOWN_LAZY_IMPORTS = {
     "hpe_cli/__init__.py::__getattr__: importlib",
