@@ -152,7 +152,7 @@ def _image_column(path, columns, images_dir, out_images, image_column):
 
 def _pixel_transform(op, M, wh, crop, scale=None):
     """Per-row pixel affine (N, 2, 3), output size (N, 2) and reasons ('' or why the row cannot be resized)."""
-    from ..geometry.augment import _affine, crop_affine
+    from ..geometry.augment import crop_affine, plane_to_pixel
 
     n = len(wh)
     reasons = np.full(n, "", dtype=object)
@@ -177,7 +177,7 @@ def _pixel_transform(op, M, wh, crop, scale=None):
         P[:, 0, 0] = P[:, 1, 1] = scale
         P[:, :, 2] = 0.5 * scale - 0.5
         return P, out, reasons
-    return _affine(np.asarray(M), safe), safe, reasons
+    return plane_to_pixel(np.asarray(M), safe), safe, reasons
 
 
 class _Plan:

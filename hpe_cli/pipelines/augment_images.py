@@ -219,7 +219,7 @@ def _warp(img, P, size_out, interpolation, border):
     """The picture under the pixel affine ``P`` (2, 3), ``size_out = (W, H)``; flips and integer crops exactly."""
     import cv2
 
-    from ..geometry.image_ops import _cv_flags
+    from ..geometry.image_ops import cv_flags
 
     W, H = (int(x) for x in size_out)
     h, w = img.shape[:2]
@@ -229,7 +229,7 @@ def _warp(img, P, size_out, interpolation, border):
         if t[0] == (0.0 if sx > 0 else w - 1.0) and t[1] == (0.0 if sy > 0 else h - 1.0):
             code = {(-1.0, 1.0): 1, (1.0, -1.0): 0, (-1.0, -1.0): -1}.get((sx, sy))
             return img.copy() if code is None else cv2.flip(img, code)
-    interp, borders = _cv_flags()
+    interp, borders = cv_flags()
     if A[0, 1] == 0 and A[1, 0] == 0 and A[0, 0] == A[1, 1] > 0 and np.allclose(t, 0.5 * A[0, 0] - 0.5):
         # a resize: cv2.resize has the same pixel-centre mapping; area averaging when shrinking
         flag = cv2.INTER_AREA if A[0, 0] < 1 and interpolation == "linear" else interp[interpolation]
