@@ -1,25 +1,36 @@
-"""``hpe augment`` as a streaming job: read batches, move labels/landmarks/boxes (and images), write."""
+"""``hpe augment``'s batches: the checks of the input's columns, then per batch the labels, sizes, landmarks,
+boxes and ``tdx, tdy`` moved (:meth:`BatchPlan.work`, on a worker thread)."""
 
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 
-from ..errors import HpeError
+from ...errors import HpeError, UsageError
+from ...geometry.augment import (
+    augment_canonical,
+    crop_affine,
+    move_boxes,
+    move_points,
+    move_td,
+    plane_matrix,
+    plane_to_pixel,
+)
+from ...geometry.landmark_schemes import SCHEMES, flip_permutation, scheme_for_count
+from ...io import BBOX_COLS, LABEL_COLS, MATRIX_COLS, batch_rotations, conversion_columns, landmark_cols, landmark_count
+from ...io.images import row_ids
+from ...io.label_source import LabelSource
+from ...io.labels import batch_labels, numeric_column
+from ...io.readers import LINE_COL
+from ...rotation import canonical_to_labels, frobenius, soa
+from .images import RowImages
+from .options import AGREE_TOL, IMAGE_COLUMNS, AugmentOptions
 
-#: columns tried, in order, for the image file name when --image-column is not given
-IMAGE_COLUMNS = ("image", "image_path", "img_path", "file_name", "filename", "file", "path")
-_IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
-#: rows whose angles and r00..r22 disagree by more than this (Frobenius) are rejected
-AGREE_TOL = 1e-3
 
-
-def _batches_or_empty(src):
+def batches_or_empty(src):
     """The input's batches; one empty batch for an empty table, so the output still gets its columns."""
-    import pyarrow as pa
-
     any_batch = False
     for batch, read_rejects in src.batches_with_rejects():
         any_batch = True
@@ -29,8 +40,6 @@ def _batches_or_empty(src):
 
 
 def _is_numeric_type(t) -> bool:
-    import pyarrow as pa
-
     return (
         pa.types.is_integer(t)
         or pa.types.is_floating(t)
@@ -40,12 +49,14 @@ def _is_numeric_type(t) -> bool:
     )
 
 
-def _plan_landmarks(path, columns, scheme, op):
-    """(number of landmarks to move, permutation or None, summary text)."""
-    from ..errors import HpeError
-    from ..geometry.landmark_schemes import SCHEMES, flip_permutation, scheme_for_count
-    from ..io import landmark_count
+def plan_landmarks(path, columns, scheme, op):
+    """(number of landmarks to move, permutation or None, summary text).
 
+    Raises
+    ------
+    HpeError
+        A mirror of landmarks no built-in scheme re-indexes, or ``--landmarks SCHEME`` against another count.
+    """
     n = landmark_count(columns)
     mirror = op in ("hflip", "vflip", "mirror")
     if scheme == "none":
@@ -73,12 +84,11 @@ def _plan_landmarks(path, columns, scheme, op):
     return n, flip_permutation(scheme), f"{n} moved, scheme {scheme}"
 
 
-def _size_source(columns, image_size, images_dir, path):
-    """Which sources give image sizes; a usage error when none does."""
+def size_source(columns, image_size, images_dir, path) -> bool:
+    """Whether the table's ``image_width/image_height`` columns give image sizes; a usage error when neither
+    they, ``image_size`` nor ``images_dir`` does."""
     has_cols = "image_width" in columns and "image_height" in columns
     if not has_cols and image_size is None and images_dir is None:
-        from ..errors import UsageError
-
         raise UsageError(
             f"{path}: expected the image size: --image-size WxH, image_width/image_height columns "
             "or --images (the images themselves); got none"
@@ -92,10 +102,6 @@ def row_sizes(batch, image_size, has_cols, pics, names, ids):
     Sources: the images (``pics``), the ``image_width/image_height`` columns, ``--image-size``; each row uses
     the first that gives a size, and any two that disagree reject the row.
     """
-    import numpy as np
-
-    from ..io.labels import numeric_column
-
     n = batch.num_rows
     reasons = np.full(n, "", dtype=object)
     col = np.full((n, 2), np.nan)
@@ -133,7 +139,7 @@ def row_sizes(batch, image_size, has_cols, pics, names, ids):
     return wh, refs, reasons
 
 
-def _image_column(path, columns, images_dir, out_images, image_column):
+def image_column(path, columns, images_dir, out_images, image_column):
     """The column naming each row's image (None without --images); usage errors for the image options."""
     if out_images is not None and images_dir is not None and Path(out_images).resolve() == Path(images_dir).resolve():
         raise HpeError(f"{out_images}: --out-images must differ from --images (inputs are never modified)")
@@ -150,10 +156,8 @@ def _image_column(path, columns, images_dir, out_images, image_column):
     return img_col
 
 
-def _pixel_transform(op, M, wh, crop, scale=None):
+def pixel_transform(op, M, wh, crop, scale=None):
     """Per-row pixel affine (N, 2, 3), output size (N, 2) and reasons ('' or why the row cannot be resized)."""
-    from ..geometry.augment import crop_affine, plane_to_pixel
-
     n = len(wh)
     reasons = np.full(n, "", dtype=object)
     safe = np.where(np.isfinite(wh), wh, 1.0)
@@ -180,60 +184,58 @@ def _pixel_transform(op, M, wh, crop, scale=None):
     return plane_to_pixel(np.asarray(M), safe), safe, reasons
 
 
-class _Plan:
-    """What every batch needs: the label reader, the landmark/box/size columns, the transform."""
+class BatchPlan:
+    """What every batch needs: the label reader, the landmark/box/size columns, the transform.
 
-    def __init__(
-        self,
-        path,
-        src,
-        in_system,
-        system,
-        columns,
-        n_lm,
-        perm,
-        has_box,
-        M,
-        op,
-        crop,
-        image_size,
-        has_cols,
-        box_from,
-        clip,
-        pose_para,
-        img_col,
-        pics,
-        scale=None,
-        radians=False,
-    ):
-        from ..io import MATRIX_COLS, landmark_cols
-        from ..io.labels import label_mode
+    Built once per run from the opened labels and the options; the checks of the input's columns against the
+    options (landmark scheme, box columns, the image size's source, the image column) run here, in that order.
+    """
 
-        self.path, self.src, self.in_system, self.system = path, src, in_system, system
-        self.mode = label_mode(columns, path, in_system)  # the system's own columns, else angles, else r00..r22
+    def __init__(self, labels: LabelSource, opts: AugmentOptions):
+        path, columns = Path(labels.path), labels.columns
+        self.path, self.src, self.in_system, self.system = path, labels.table, labels.system, labels.output_system
+        self.n_lm, self.perm, self.lm_text = plan_landmarks(path, columns, opts.scheme, opts.op)
+        box_present = [c for c in BBOX_COLS if c in columns]
+        if box_present and len(box_present) != 4:
+            raise HpeError(f"{path}: expected all of {', '.join(BBOX_COLS)}, got only {', '.join(box_present)}")
+        self.has_box = bool(box_present)
+        self.has_cols = size_source(columns, opts.image_size, opts.images_dir, path)
+        self.img_col = image_column(path, columns, opts.images_dir, opts.out_images, opts.image_column)
+        self.M = plane_matrix(opts.op, opts.angle) if opts.op not in ("crop", "scale") else np.eye(2)
+        is_mat = path.is_dir() or path.suffix.lower() == ".mat"
+        self.pose_para = is_mat or {"tdz", "scale"} <= set(columns)
+        self.pics = RowImages(opts.images_dir, opts.images_optional) if opts.images_dir else None
+        self._read_labels(labels, columns)
+        self.lm_names = landmark_cols(self.n_lm)
+        self.op, self.crop, self.image_size, self.scale = opts.op, opts.crop, opts.image_size, opts.scale
+        self.box_from, self.clip, self.radians = opts.box_from, opts.clip, opts.radians
+        self.has_td = "tdx" in columns and "tdy" in columns
+        self.zoom = opts.scale if opts.op == "scale" else 1.0  # lengths in pixels (size, Pose_Para scale) change
+        self.zoom_cols = (
+            [c for c in ("size", "scale") if c in columns and (c == "size" or self.pose_para)]
+            if opts.op == "scale"
+            else []
+        )
+        self.mirror = bool(np.linalg.det(self.M) < 0)
+        self.csv = labels.table.kind == "csv"
+        self.mat_base = (path if path.is_dir() else path.parent) if is_mat and "file" in columns else None
+        #: a ``.mat`` folder whose images are written: its ``.mat`` files are written back beside them
+        self.mat_input = labels.dataset and is_mat and opts.out_images is not None
+
+    def _read_labels(self, labels: LabelSource, columns):
+        """How the labels are read: the system's own stored kind, angles (checked against ``r00..r22`` when the
+        table has both), or ``r00..r22``."""
+        in_system = labels.system
+        self.mode = labels.mode  # the system's own columns, else angles, else r00..r22
         self.stored_kind = self.mode not in ("angles", "matrix") or bool(
             in_system.columns and all(c in columns for c in in_system.value_columns)
         )
         self.cross_check = self.mode == "angles" and not self.stored_kind and all(c in columns for c in MATRIX_COLS)
-        self.n_lm, self.perm, self.lm_names, self.has_box = n_lm, perm, landmark_cols(n_lm), has_box
-        self.M, self.op, self.crop, self.image_size, self.has_cols = M, op, crop, image_size, has_cols
-        self.box_from, self.clip, self.pose_para, self.img_col, self.pics = box_from, clip, pose_para, img_col, pics
-        self.has_td = "tdx" in columns and "tdy" in columns
-        self.scale = scale
-        self.radians = radians
-        self.zoom = scale if op == "scale" else 1.0  # lengths in pixels (size, Pose_Para scale) change by this
-        self.zoom_cols = (
-            [c for c in ("size", "scale") if c in columns and (c == "size" or pose_para)] if op == "scale" else []
-        )
-        self.mirror = bool(np.linalg.det(M) < 0)
         self.label_source = (
             "pitch,yaw,roll" + (" (checked against r00..r22)" if self.cross_check else "")
             if self.mode == "angles"
             else "r00..r22"
         )
-        self.csv = src.kind == "csv"
-        is_mat = path.is_dir() or path.suffix.lower() == ".mat"
-        self.mat_base = (path if path.is_dir() else path.parent) if is_mat and "file" in columns else None
 
     def numbers(self, lines):
         """The row numbers messages and rejects use: CSV lines (header = 1), else 1-based rows (the reader's
@@ -259,16 +261,10 @@ class _Plan:
 
     def labels(self, batch):
         """(matrices of the input system, reasons) of a batch."""
-        from ..io.labels import batch_labels
-        from ..rotation import frobenius
-
         n = batch.num_rows
         if self.stored_kind:  # rotation vectors, quaternions, 6-D, named columns: read as matrices
-            from ..io import batch_rotations
-            from ..rotation import soa as _soa
-
             X, _, reasons = batch_rotations(batch, self.in_system, self.mode, self.radians)
-            return _soa.to_array(X, n), (reasons if reasons is not None else np.full(n, "", dtype=object))
+            return soa.to_array(X, n), (reasons if reasons is not None else np.full(n, "", dtype=object))
         values, reasons = batch_labels(batch, self.mode, self.radians)  # --radians: input angles in radians
         if self.mode != "angles":
             return values, reasons
@@ -284,15 +280,6 @@ class _Plan:
 
     def work(self, batch):
         """On a worker thread: labels, sizes, landmarks, boxes, tdx/tdy of one batch."""
-        import pyarrow as pa
-
-        from ..geometry.augment import augment_canonical, move_boxes, move_points, move_td
-        from ..io import BBOX_COLS, LABEL_COLS, conversion_columns
-        from ..io.images import row_ids
-        from ..io.labels import numeric_column
-        from ..io.readers import LINE_COL
-        from ..rotation import canonical_to_labels
-
         lines = batch.column(LINE_COL).to_numpy()
         batch = batch.drop_columns([LINE_COL])
         n = batch.num_rows
@@ -317,7 +304,7 @@ class _Plan:
             if not _is_numeric_type(batch.schema.field(c).type):  # only text can hold non-numbers
                 bad = np.char.startswith(r.astype(str), "non-numeric")
                 reasons = np.where((reasons == "") & bad, r, reasons)
-        P, wh_out, scale_reasons = _pixel_transform(self.op, self.M, wh, self.crop, self.scale)
+        P, wh_out, scale_reasons = pixel_transform(self.op, self.M, wh, self.crop, self.scale)
         reasons = np.where(reasons == "", scale_reasons, reasons)
         keep = reasons == ""
         kb = batch.filter(pa.array(keep)) if not keep.all() else batch
@@ -357,207 +344,3 @@ class _Plan:
         A2_full[keep] = A2
         files = batch.column("file").to_pylist() if "file" in batch.schema.names else None
         return batch, lines, reasons, keep, out, boxes, (refs, names, P, wh, wh_out, A2_full, files)
-
-
-def run_augment(
-    input,
-    output,
-    system,
-    image_size,
-    op,
-    angle,
-    *,
-    scheme="auto",
-    box_from="auto",
-    clip=False,
-    images_dir=None,
-    out_images=None,
-    image_column=None,
-    interpolation="linear",
-    border="constant",
-    jpeg_quality=95,
-    rejects_path=None,
-    overwrite=False,
-    batch_size=65_536,
-    bar=None,
-    verbose=0,
-    description="",
-    workers=None,
-    strict=False,
-    crop=None,
-    scale=None,
-    images_optional=False,
-    radians=False,
-):
-    """Augment a label table (and optionally its images). Returns a summary dict.
-
-    ``image_size`` (``(W, H)`` or None) is checked against the table's ``image_width/image_height`` and the
-    images; a row where two of them disagree is rejected. ``op = "crop"`` with ``crop = (x, y, w, h)`` cuts
-    the images to that rectangle. Batches are transformed on ``workers`` threads (default: up to 2) while
-    this thread reads, moves images and writes in order; at most ``workers + 1`` batches are in flight.
-    ``images_optional``: ``images_dir`` is a ``.mat`` folder's own (not given by the user): an image found there
-    gives (and checks) the row's size, a missing one is no reject.
-    """
-    import os
-
-    from ..geometry.augment import plane_matrix
-    from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
-    from ..io import BBOX_COLS, Rejects, TableWriter, check_output, open_table, system_metadata
-    from ..io.rejects import fail_all_rejected
-    from ..io.system_meta import output_system, resolve_system
-    from ..io.transaction import ensure_transaction, staged_dir
-    from .augment_images import ImageJob, RowImages
-    from .inorder import in_order
-
-    path = Path(input)
-    check_output(output, overwrite)
-    src = open_table(path, batch_size, with_lines=True)
-    res = resolve_system(src, system, option_is_output=True)  # the file's own system, else --system
-    in_system, system = res.system, output_system(res)  # .mat Pose_Para is always 300w_lp; output in --system
-    columns = src.columns
-    n_lm, perm, lm_text = _plan_landmarks(path, columns, scheme, op)
-    box_present = [c for c in BBOX_COLS if c in columns]
-    if box_present and len(box_present) != 4:
-        raise HpeError(f"{path}: expected all of {', '.join(BBOX_COLS)}, got only {', '.join(box_present)}")
-    has_cols = _size_source(columns, image_size, images_dir, path)
-    img_col = _image_column(path, columns, images_dir, out_images, image_column)
-    M = plane_matrix(op, angle) if op not in ("crop", "scale") else np.eye(2)
-    mat_input = (
-        bool(getattr(src, "dataset", False))
-        and (path.is_dir() or path.suffix.lower() == ".mat")
-        and out_images is not None
-    )
-    pose_para = (path.is_dir() or path.suffix.lower() == ".mat") or {"tdz", "scale"} <= set(columns)
-    plan = _Plan(
-        path,
-        src,
-        in_system,
-        system,
-        columns,
-        n_lm,
-        perm,
-        bool(box_present),
-        M,
-        op,
-        crop,
-        image_size,
-        has_cols,
-        box_from,
-        clip,
-        pose_para,
-        img_col,
-        RowImages(images_dir, images_optional) if images_dir else None,
-        scale=scale,
-        radians=radians,
-    )
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=None if plan.mat_base is not None else src)
-    meta = {
-        **system_metadata(system),
-        "hpe:augment": {
-            "op": op,
-            "angle_deg": angle,
-            "crop": list(crop) if crop else None,
-            "scale": scale,
-            "description": description,
-            "image_size": list(image_size) if image_size else "from image_width/image_height or the images",
-            "landmarks": lm_text,
-            "box_from": box_from,
-            "clip": clip,
-            "pixel_convention": "pixel centres at integer coordinates; centre ((W-1)/2, (H-1)/2)",
-        },
-    }
-    counts = {"rows": 0, "written": 0, "boxes": 0}
-    workers = workers or min(2, os.cpu_count() or 1)
-    if bar is not None and src.num_rows is not None:
-        bar.total = src.num_rows
-        getattr(bar, "refresh", lambda: None)()
-
-    def perm_of(n):
-        name = scheme_for_count(n)
-        return None if name is None else flip_permutation(name)
-
-    with ensure_transaction(), contextlib.ExitStack() as stack:
-        job = None
-        if out_images is not None:
-            stage = stack.enter_context(staged_dir(out_images, overwrite))
-            job = ImageJob(
-                stage,
-                Path(out_images),
-                interpolation,
-                border,
-                jpeg_quality,
-                overwrite,
-                mat_dir=path if mat_input else None,
-                perm_of=perm_of,
-            )
-        writer = stack.enter_context(TableWriter(output, overwrite, meta))
-
-        def finish(_, read_rejects, future):
-            _finish_batch(read_rejects, future.result(), rejects, job, writer, counts, bar, plan)
-
-        in_order(_batches_or_empty(src), plan.work, finish, workers)
-        rejects.check()  # without --rejects (or with --strict) any bad row fails the run: nothing is written
-        if counts["rows"] and not counts["written"]:  # the rejects file is still written: it says why
-            fail_all_rejected(
-                rejects,
-                f"{path}: nothing augmented: all {counts['rows']} row(s) rejected "
-                f"({rejects.first_where or 'see the rejects file'})",
-            )
-        rejects.finish()
-    box_text = f"{counts['boxes']} moved ({box_from}{', clipped' if clip else ''})" if box_present else "none in input"
-    return {
-        "system": system.name,
-        "rows": counts["rows"],
-        "written": counts["written"],
-        "label_source": plan.label_source,
-        "landmarks": lm_text,
-        "boxes": box_text,
-        "images": len(job.done) if job else 0,
-        "mats": job.mats if job else 0,
-        "rejects": dict(rejects.counts),
-    }
-
-
-def _finish_batch(read_rejects, result, rejects, job, writer, counts, bar, plan):
-    """On the main thread, in input order: rejects, images, the table."""
-    batch, lines, reasons, keep, out, boxes, extra = result
-    rejects.add_unreadable(read_rejects)
-    counts["rows"] += len(read_rejects)
-    if not keep.all():
-        drop = ~keep
-        cols = {c: batch.column(i).to_numpy(zero_copy_only=False)[drop] for i, c in enumerate(batch.schema.names)}
-        if plan.mat_base is not None:  # a .mat file is one record: named by its file, as the messages do
-            cols["file"] = np.array([plan.where(0, f) for f in cols["file"]], dtype=object)
-            if rejects.first_where is None:
-                rejects.first_where = f"{cols['file'][0]}: {reasons[drop][0]}"
-        else:
-            cols = {"row": plan.numbers(lines[drop]), **cols}
-        rejects.add(cols, reasons[drop], lines=lines[drop] if plan.csv else None)
-    if job is not None:
-        refs, names, P, wh_in, wh_out, A2, files = extra
-        rows = []
-        for i in np.flatnonzero(keep):
-            mat = None
-            if job.mat_dir is not None and files is not None:
-                base = job.mat_dir if job.mat_dir.is_dir() else job.mat_dir.parent
-                mat = (base / files[i], A2[i], plan.roi_fn, plan.zoom)
-            rows.append(
-                (
-                    names[i] or "",
-                    plan.where(lines[i], files[i] if files else None),
-                    refs[i],
-                    P[i],
-                    wh_in[i],
-                    wh_out[i],
-                    plan.mirror,
-                    mat,
-                )
-            )
-        # the image work is the slow part: move the bar per row as its picture is done
-        job.add_rows(rows, tick=bar.update if bar is not None else None)
-    writer.write(out)
-    counts["boxes"] += boxes
-    counts["rows"] += batch.num_rows
-    counts["written"] += int(keep.sum())
-    if bar is not None:
-        bar.update(batch.num_rows - (int(keep.sum()) if job is not None else 0))

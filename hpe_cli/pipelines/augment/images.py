@@ -9,11 +9,16 @@ from __future__ import annotations
 
 from pathlib import Path, PurePath
 
+import cv2
 import numpy as np
+import scipy.io
 
-from ..errors import HpeError
-from ..io.images import IMAGE_SUFFIXES, ImageResolver, image_size, leaves_root
-from ..io.os_errors import write_bytes
+from ...errors import HpeError
+from ...geometry.augment import move_point, move_td
+from ...geometry.image_ops import cv_flags
+from ...io.images import IMAGE_SUFFIXES, ImageResolver, image_size, leaves_root
+from ...io.os_errors import os_reason, write_bytes
+from ...rotation import get_system
 
 
 class RowImages:
@@ -87,12 +92,8 @@ class ImageJob:
                 todo.append(row)
             elif tick is not None:
                 tick(1)
-        cv_flags = None
-        if todo:
-            import cv2
-
-            cv_flags = cv2.IMREAD_UNCHANGED  # keep grey, alpha and 16-bit images as they are
-        for k, img, why in ImageResolver.read([r[2] for r in todo], flags=cv_flags):
+        read_flags = cv2.IMREAD_UNCHANGED if todo else None  # keep grey, alpha and 16-bit images as they are
+        for k, img, why in ImageResolver.read([r[2] for r in todo], flags=read_flags):
             self._render(todo[k], img, why)
             if tick is not None:
                 tick(1)
@@ -128,8 +129,6 @@ class ImageJob:
 
     def _render(self, row, img, why):
         """Warp one picture into the staged folder."""
-        import cv2
-
         name, where, ref, P, size_in, size_out, _, _ = row
         if img is None:
             raise HpeError(f"{where}: {why or f'{ref}: not a readable image'}")
@@ -150,11 +149,6 @@ class ImageJob:
     def _write_mat(self, rel, mat, P, size_in, size_out, mirror, where):
         """``<stem>.mat`` beside the output image: Pose_Para (new angles, tdx, tdy), pt2d, pt3d_68 and roi moved;
         every other variable copied."""
-        import scipy.io
-
-        from ..geometry.augment import move_td
-        from ..rotation import get_system
-
         src_mat, A2, roi_fn, zoom = mat
         try:
             m = scipy.io.loadmat(src_mat)
@@ -184,8 +178,6 @@ class ImageJob:
         try:
             scipy.io.savemat(out, m, do_compression=False)
         except OSError as exc:  # a full disk names this file, not the table
-            from ..io.os_errors import os_reason
-
             raise HpeError(f"{self.dst / rel.with_suffix('.mat')}: cannot write: {os_reason(exc)}") from None
         self.mats += 1
 
@@ -197,8 +189,6 @@ class ImageJob:
 
     def _move_cols(self, pts, P, mirror, invisible=None):
         """(2, L) points moved by P, re-indexed after a mirror; ``invisible`` marks points (x = -1) kept as is."""
-        from ..geometry.augment import move_point
-
         hidden = (
             (pts[0] == invisible) | (pts[1] == invisible) if invisible is not None else np.zeros(pts.shape[1], bool)
         )
@@ -217,10 +207,6 @@ def _row_part(where: str) -> str:
 
 def _warp(img, P, size_out, interpolation, border):
     """The picture under the pixel affine ``P`` (2, 3), ``size_out = (W, H)``; flips and integer crops exactly."""
-    import cv2
-
-    from ..geometry.image_ops import cv_flags
-
     W, H = (int(x) for x in size_out)
     h, w = img.shape[:2]
     A, t = P[:, :2], P[:, 2]
