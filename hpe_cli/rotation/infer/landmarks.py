@@ -8,11 +8,11 @@ from ..distances import geodesic_deg
 from ..systems import ROLES, builtin_systems
 from .core import (
     SEARCH_ROWS,
-    _rank_builtins,
     builtin_canonical_by_candidate,
     builtin_names_by_candidate,
     candidate_matrices,
     candidates,
+    rank_builtins,
 )
 
 
@@ -175,7 +175,7 @@ class _Scores:
         return {
             "formula": c.formula(),
             "turns": c.words(),
-            "builtins": _rank_builtins(self.canon.get(ci, []), order=tuple(roles)),
+            "builtins": rank_builtins(self.canon.get(ci, []), order=tuple(roles)),
             "stored_matrix_of": self.stored.get(ci, []),
             "rms_residual_deg": float(self.rms[k]),
             "median_residual_deg": float(self.med[k]),

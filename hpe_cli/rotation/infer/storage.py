@@ -6,7 +6,7 @@ import numpy as np
 
 from ..distances import frobenius
 from ..systems import builtin_systems, system_from_dict
-from .code import CallError, _prefer_vectorised, _to_numpy
+from .code import CallError, prefer_vectorised, to_numpy
 from .core import CODE_TOL, random_rotations
 
 # --------------------------------------------------------------------------- decoders returning stored values
@@ -22,10 +22,10 @@ def as_value_decoder(func):
     """Wrap ``func`` (3x3 matrix -> k numbers, per sample or batched) as ``(N, 3, 3) -> (N, k)``."""
 
     def per_sample(R):
-        return np.stack([_to_numpy(func(m)).reshape(-1) for m in R])
+        return np.stack([to_numpy(func(m)).reshape(-1) for m in R])
 
     def vectorised(R):
-        out = _to_numpy(func(R))
+        out = to_numpy(func(R))
         if out.ndim != 2 or out.shape[0] != len(R):
             raise ValueError("not batched")
         return out
@@ -33,7 +33,7 @@ def as_value_decoder(func):
     def decode(R):
         R = np.asarray(R, dtype=np.float64)
         try:
-            return _prefer_vectorised(vectorised, per_sample, 1e-9, True)(R)
+            return prefer_vectorised(vectorised, per_sample, 1e-9, True)(R)
         except CallError:
             raise
         except Exception:  # noqa: BLE001 - the user's code may raise anything
