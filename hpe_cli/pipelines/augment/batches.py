@@ -284,15 +284,37 @@ class BatchPlan:
         batch = batch.drop_columns([LINE_COL])
         n = batch.num_rows
         R, reasons = self.labels(batch)
+        wh, refs, names, size_reasons = self._sizes(batch)
+        reasons = np.where(reasons == "", size_reasons, reasons)
+        extra, reasons = self._positions(batch, reasons)
+        P, wh_out, scale_reasons = pixel_transform(self.op, self.M, wh, self.crop, self.scale)
+        reasons = np.where(reasons == "", scale_reasons, reasons)
+        keep = reasons == ""
+        kb = batch.filter(pa.array(keep)) if not keep.all() else batch
+        A2 = augment_canonical(self.in_system.to_canonical(R[keep]), self.M)
+        new = conversion_columns(canonical_to_labels(A2, self.system))
+        boxes = self._move_positions(new, {c: v[keep] for c, v in extra.items()}, P[keep], wh[keep], wh_out[keep])
+        out = _output_batch(kb, new)
+        A2_full = np.full((n, 3, 3), np.nan)
+        A2_full[keep] = A2
+        files = batch.column("file").to_pylist() if "file" in batch.schema.names else None
+        return batch, lines, reasons, keep, out, boxes, (refs, names, P, wh, wh_out, A2_full, files)
+
+    def _sizes(self, batch):
+        """``(sizes (N, 2), picture refs, image names, reasons)`` of a batch's rows (:func:`row_sizes`)."""
         names = ids = None
         if self.pics is not None:
             names = [None if v is None else str(v) for v in batch.column(self.img_col).to_pylist()]
             ids = row_ids(
                 batch.select([c for c in ("sequence", "camera", "frame") if c in batch.schema.names]).to_pandas()
             )
-        wh, refs, size_reasons = row_sizes(batch, self.image_size, self.has_cols, self.pics, names, ids)
-        reasons = np.where(reasons == "", size_reasons, reasons)
-        extra = {}  # landmarks and boxes: NaN means missing and is kept; only non-numbers reject a row
+        wh, refs, reasons = row_sizes(batch, self.image_size, self.has_cols, self.pics, names, ids)
+        return wh, refs, names, reasons
+
+    def _positions(self, batch, reasons):
+        """The landmark, box, ``tdx, tdy`` and length columns as numbers, and the reasons with a row whose text
+        holds a non-number among them (NaN means missing and is kept)."""
+        extra = {}
         for c in (
             self.lm_names
             + (BBOX_COLS if self.has_box else [])
@@ -304,43 +326,40 @@ class BatchPlan:
             if not _is_numeric_type(batch.schema.field(c).type):  # only text can hold non-numbers
                 bad = np.char.startswith(r.astype(str), "non-numeric")
                 reasons = np.where((reasons == "") & bad, r, reasons)
-        P, wh_out, scale_reasons = pixel_transform(self.op, self.M, wh, self.crop, self.scale)
-        reasons = np.where(reasons == "", scale_reasons, reasons)
-        keep = reasons == ""
-        kb = batch.filter(pa.array(keep)) if not keep.all() else batch
-        A2 = augment_canonical(self.in_system.to_canonical(R[keep]), self.M)
-        new = conversion_columns(canonical_to_labels(A2, self.system))
-        Pk, out_k = P[keep], wh_out[keep]
+        return extra, reasons
+
+    def _move_positions(self, new, extra, P, wh, wh_out) -> int:
+        """Add the moved landmarks, boxes, ``tdx, tdy``, lengths and image sizes of the kept rows to ``new``;
+        return the number of boxes moved."""
         lm_new = None
         if self.n_lm:
-            lm = np.stack([extra[c][keep] for c in self.lm_names], axis=-1).reshape(-1, self.n_lm, 2)
-            lm_new = move_points(lm, Pk, self.mirror, self.perm)
+            lm = np.stack([extra[c] for c in self.lm_names], axis=-1).reshape(-1, self.n_lm, 2)
+            lm_new = move_points(lm, P, self.mirror, self.perm)
             flat = lm_new.reshape(-1, 2 * self.n_lm)
             new.update({c: flat[:, i] for i, c in enumerate(self.lm_names)})
         boxes = 0
         if self.has_box:
-            box = np.stack([extra[c][keep] for c in BBOX_COLS], axis=-1)
-            box_new = move_boxes(box, Pk, self.M, out_k, lm_new, self.box_from, self.clip)
+            box = np.stack([extra[c] for c in BBOX_COLS], axis=-1)
+            box_new = move_boxes(box, P, self.M, wh_out, lm_new, self.box_from, self.clip)
             boxes = int(np.isfinite(box_new).all(axis=1).sum())
             new.update({c: box_new[:, i] for i, c in enumerate(BBOX_COLS)})
         if self.has_td:
-            new["tdx"], new["tdy"] = move_td(
-                extra["tdx"][keep], extra["tdy"][keep], Pk, wh[keep, 1], out_k[:, 1], self.pose_para
-            )
+            new["tdx"], new["tdy"] = move_td(extra["tdx"], extra["tdy"], P, wh[:, 1], wh_out[:, 1], self.pose_para)
         for c in self.zoom_cols:
-            new[c] = extra[c][keep] * self.zoom
+            new[c] = extra[c] * self.zoom
         if self.has_cols:
-            new["image_width"], new["image_height"] = out_k[:, 0].astype(np.int64), out_k[:, 1].astype(np.int64)
-        out_cols, out_names = [], []
-        for i, c in enumerate(kb.schema.names):
+            new["image_width"], new["image_height"] = wh_out[:, 0].astype(np.int64), wh_out[:, 1].astype(np.int64)
+        return boxes
+
+
+def _output_batch(kb, new) -> pa.RecordBatch:
+    """The kept rows with their new columns: the input's columns in place, new label columns appended."""
+    out_cols, out_names = [], []
+    for i, c in enumerate(kb.schema.names):
+        out_names.append(c)
+        out_cols.append(pa.array(new.pop(c)) if c in new else kb.column(i))
+    for c in LABEL_COLS:
+        if c in new:
             out_names.append(c)
-            out_cols.append(pa.array(new.pop(c)) if c in new else kb.column(i))
-        for c in LABEL_COLS:
-            if c in new:
-                out_names.append(c)
-                out_cols.append(pa.array(new.pop(c)))
-        out = pa.RecordBatch.from_arrays(out_cols, names=out_names)
-        A2_full = np.full((n, 3, 3), np.nan)
-        A2_full[keep] = A2
-        files = batch.column("file").to_pylist() if "file" in batch.schema.names else None
-        return batch, lines, reasons, keep, out, boxes, (refs, names, P, wh, wh_out, A2_full, files)
+            out_cols.append(pa.array(new.pop(c)))
+    return pa.RecordBatch.from_arrays(out_cols, names=out_names)
