@@ -293,7 +293,7 @@ class BatchPlan:
         kb = batch.filter(pa.array(keep)) if not keep.all() else batch
         A2 = augment_canonical(self.in_system.to_canonical(R[keep]), self.M)
         new = conversion_columns(canonical_to_labels(A2, self.system))
-        boxes = self._move_positions(new, {c: v[keep] for c, v in extra.items()}, P[keep], wh[keep], wh_out[keep])
+        boxes = self._move_positions(new, extra, keep, P[keep], wh[keep], wh_out[keep])
         out = _output_batch(kb, new)
         A2_full = np.full((n, 3, 3), np.nan)
         A2_full[keep] = A2
@@ -328,25 +328,28 @@ class BatchPlan:
                 reasons = np.where((reasons == "") & bad, r, reasons)
         return extra, reasons
 
-    def _move_positions(self, new, extra, P, wh, wh_out) -> int:
+    def _move_positions(self, new, extra, keep, P, wh, wh_out) -> int:
         """Add the moved landmarks, boxes, ``tdx, tdy``, lengths and image sizes of the kept rows to ``new``;
-        return the number of boxes moved."""
+        return the number of boxes moved. ``extra``: the batch's columns (all rows; ``keep`` picks them one at a
+        time, so no second copy of every column is held); ``P``, ``wh``, ``wh_out``: of the kept rows."""
         lm_new = None
         if self.n_lm:
-            lm = np.stack([extra[c] for c in self.lm_names], axis=-1).reshape(-1, self.n_lm, 2)
+            lm = np.stack([extra[c][keep] for c in self.lm_names], axis=-1).reshape(-1, self.n_lm, 2)
             lm_new = move_points(lm, P, self.mirror, self.perm)
             flat = lm_new.reshape(-1, 2 * self.n_lm)
             new.update({c: flat[:, i] for i, c in enumerate(self.lm_names)})
         boxes = 0
         if self.has_box:
-            box = np.stack([extra[c] for c in BBOX_COLS], axis=-1)
+            box = np.stack([extra[c][keep] for c in BBOX_COLS], axis=-1)
             box_new = move_boxes(box, P, self.M, wh_out, lm_new, self.box_from, self.clip)
             boxes = int(np.isfinite(box_new).all(axis=1).sum())
             new.update({c: box_new[:, i] for i, c in enumerate(BBOX_COLS)})
         if self.has_td:
-            new["tdx"], new["tdy"] = move_td(extra["tdx"], extra["tdy"], P, wh[:, 1], wh_out[:, 1], self.pose_para)
+            new["tdx"], new["tdy"] = move_td(
+                extra["tdx"][keep], extra["tdy"][keep], P, wh[:, 1], wh_out[:, 1], self.pose_para
+            )
         for c in self.zoom_cols:
-            new[c] = extra[c] * self.zoom
+            new[c] = extra[c][keep] * self.zoom
         if self.has_cols:
             new["image_width"], new["image_height"] = wh_out[:, 0].astype(np.int64), wh_out[:, 1].astype(np.int64)
         return boxes
