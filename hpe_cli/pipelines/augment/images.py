@@ -18,7 +18,7 @@ from ...geometry.augment import move_point, move_td
 from ...geometry.image_ops import cv_flags
 from ...io.images import IMAGE_SUFFIXES, ImageResolver, image_size, leaves_root
 from ...io.os_errors import os_reason, write_bytes
-from ...rotation import get_system
+from .options import AugmentOptions
 
 
 class RowImages:
@@ -67,14 +67,19 @@ def output_name(name: str, ref) -> PurePath:
 
 
 class ImageJob:
-    """Warp each picture once into the staged folder; write ``.mat`` files back when the input is a ``.mat`` folder."""
+    """Warp each picture once into the staged folder; write ``.mat`` files back when the input is a ``.mat`` folder.
 
-    def __init__(
-        self, stage: Path, out_dir: Path, interpolation, border, jpeg_quality, overwrite, mat_dir=None, perm_of=None
-    ):
-        self.stage, self.dst = Path(stage), Path(out_dir)
-        self.interp, self.border, self.quality, self.overwrite = interpolation, border, jpeg_quality, overwrite
-        self.mat_dir, self.perm_of = mat_dir, perm_of
+    ``stage``: the staged ``--out-images`` folder; ``opts``: the run's :class:`~.options.AugmentOptions`
+    (``out_images``, ``interpolation``, ``border``, ``jpeg_quality``, ``overwrite``); ``mat_dir``: the input
+    ``.mat`` folder (or file) whose ``.mat`` files are written back, read in ``mat_system`` (their Pose_Para's);
+    ``perm_of(n)``: the left/right permutation of ``n`` landmarks, or None.
+    """
+
+    def __init__(self, stage: Path, opts: AugmentOptions, *, mat_dir=None, mat_system=None, perm_of=None):
+        self.stage, self.dst = Path(stage), Path(opts.out_images)
+        self.interp, self.border = opts.interpolation, opts.border
+        self.quality, self.overwrite = opts.jpeg_quality, opts.overwrite
+        self.mat_dir, self.mat_system, self.perm_of = mat_dir, mat_system, perm_of
         self.done: dict = {}  # output name -> (picture key, where of the first row)
         self.mats = 0
 
@@ -155,7 +160,7 @@ class ImageJob:
         except Exception as exc:  # noqa: BLE001 - scipy raises many types for a damaged file
             raise HpeError(f"{src_mat}: not a readable MATLAB .mat file ({' '.join(str(exc).split())[:120]})") from None
         m = {k: v for k, v in m.items() if not k.startswith("__")}
-        s = get_system("300w_lp")
+        s = self.mat_system
         pose = np.asarray(m["Pose_Para"], dtype=np.float64).reshape(-1).copy()
         pose[:3] = np.deg2rad(s.to_angles(s.from_canonical(A2[None]))[0][0])
         tdx, tdy = move_td(pose[3:4], pose[4:5], P, size_in[1], size_out[1], True)

@@ -64,17 +64,11 @@ def _perm_of(n):
 
 
 def _image_job(stage, path: Path, plan: BatchPlan, opts: AugmentOptions) -> ImageJob:
-    """The pictures' writer into the staged ``--out-images`` folder (and the ``.mat`` files of a ``.mat`` folder)."""
-    return ImageJob(
-        stage,
-        Path(opts.out_images),
-        opts.interpolation,
-        opts.border,
-        opts.jpeg_quality,
-        opts.overwrite,
-        mat_dir=path if plan.mat_input else None,
-        perm_of=_perm_of,
-    )
+    """The pictures' writer into the staged ``--out-images`` folder (and the ``.mat`` files of a ``.mat`` folder,
+    whose Pose_Para are in the reader's system: the labels' own)."""
+    if not plan.mat_input:
+        return ImageJob(stage, opts, perm_of=_perm_of)
+    return ImageJob(stage, opts, mat_dir=path, mat_system=plan.in_system, perm_of=_perm_of)
 
 
 def _metadata(plan: BatchPlan, opts: AugmentOptions) -> dict:
