@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import click
 
 from ..io.images import IMAGE_COLUMNS
@@ -237,14 +239,8 @@ def augment(
     for name, v in (("--rotate", rotate), ("--mirror-line", mirror_line)):
         if v is not None and not abs(v) < float("inf"):
             raise click.BadParameter(f"expected a finite angle in degrees, got {v}", param_hint=name)
-    images_optional = False
-    if images_dir is None:
-        from pathlib import Path
-
-        if out_images is not None and not Path(input).is_dir():
-            raise click.UsageError("--out-images needs --images (the folder of the input images)")
-        if Path(input).is_dir() and image_column is None:  # a .mat folder holds its images: they give the sizes
-            images_dir, images_optional = input, out_images is None
+    if images_dir is None and out_images is not None and not os.path.isdir(input):
+        raise click.UsageError("--out-images needs --images (the folder of the input images)")
     from ..pipelines.augment import AugmentOptions, run_augment
 
     opts = AugmentOptions(
@@ -261,7 +257,6 @@ def augment(
         images_dir=images_dir,
         out_images=out_images,
         image_column=image_column,
-        images_optional=images_optional,
         interpolation=interpolation,
         border=border,
         jpeg_quality=jpeg_quality,

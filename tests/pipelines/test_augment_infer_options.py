@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -115,3 +116,21 @@ def test_infer_system_gives_the_commands_report(tmp_path):
     assert api["fit"] == "exact" and api["best"] == "scipy_zyx"
     with pytest.raises(HpeError, match="expected exactly one of DATA and the code"):
         hpe.infer_system()
+
+
+def test_augment_file_on_a_mat_folder_uses_its_images_as_the_command_does(realdata, tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    for s in ("image00050", "image00081"):
+        for ext in (".mat", ".jpg"):
+            shutil.copy(realdata / "aflw2000_prnet" / f"{s}{ext}", src / f"{s}{ext}")
+    run("augment", src, "-o", tmp_path / "cli.parquet", "--out-images", tmp_path / "cli", "--rotate", "17", "-q")
+    s = hpe.augment_file(src, tmp_path / "api.parquet", "rotate", 17.0, out_images=tmp_path / "api")
+    assert s["written"] == s["images"] == s["mats"] == 2
+    assert pq.read_table(tmp_path / "cli.parquet").equals(pq.read_table(tmp_path / "api.parquet"))
+    for name in ("image00050.jpg", "image00081.jpg"):
+        assert (tmp_path / "cli" / name).read_bytes() == (tmp_path / "api" / name).read_bytes()
+    for name in ("image00050.mat", "image00081.mat"):  # past the header, whose text holds the creation time
+        assert (tmp_path / "cli" / name).read_bytes()[128:] == (tmp_path / "api" / name).read_bytes()[128:]
+    with pytest.raises(UsageError, match="--out-images needs --images"):
+        hpe.augment_file(tmp_path / "api.parquet", tmp_path / "x.parquet", "hflip", out_images=tmp_path / "x")

@@ -16,7 +16,7 @@ from __future__ import annotations
 from .batches import row_sizes
 from .images import ImageJob, RowImages, output_name
 from .job import run_augment
-from .options import AGREE_TOL, IMAGE_COLUMNS, OPS, AugmentOptions, describe_op
+from .options import AGREE_TOL, IMAGE_COLUMNS, OPS, AugmentOptions, describe_op, for_input
 
 __all__ = [
     "AGREE_TOL",
@@ -26,6 +26,7 @@ __all__ = [
     "ImageJob",
     "RowImages",
     "describe_op",
+    "for_input",
     "output_name",
     "row_sizes",
     "run_augment",

@@ -16,7 +16,7 @@ from ...io.transaction import ensure_transaction, staged_dir
 from ..inorder import in_order
 from .batches import BatchPlan, batches_or_empty
 from .images import ImageJob
-from .options import AugmentOptions
+from .options import AugmentOptions, for_input
 
 
 def run_augment(input, output, opts: AugmentOptions, *, bar=None) -> dict:
@@ -26,10 +26,11 @@ def run_augment(input, output, opts: AugmentOptions, *, bar=None) -> dict:
     images; a row where two of them disagree is rejected. ``opts.op = "crop"`` with ``opts.crop = (x, y, w, h)``
     cuts the images to that rectangle. Batches are transformed on ``opts.workers`` threads (default: up to 2)
     while this thread reads, moves images and writes in order; at most ``workers + 1`` batches are in flight.
-    ``opts.images_optional``: ``opts.images_dir`` is a ``.mat`` folder's own (not given by the user): an image
+    A ``.mat`` folder without ``opts.images_dir`` uses its own images (:func:`~.options.for_input`): an image
     found there gives (and checks) the row's size, a missing one is no reject. ``bar``: a tqdm-like progress bar.
     """
     path = Path(input)
+    opts = for_input(input, opts)
     check_output(output, opts.overwrite)
     # the file's own system, else --system; .mat Pose_Para is always 300w_lp, the output in --system
     labels = open_labels(path, opts.system, option_is_output=True, batch_size=opts.batch_size)

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 from ...errors import UsageError
 from ...geometry.image_ops import BORDERS, INTERPOLATIONS
@@ -135,3 +136,22 @@ class AugmentOptions:
     def description(self) -> str:
         """The operation in words (:func:`describe_op`)."""
         return describe_op(self.op, self.angle, self.crop, self.scale)
+
+
+def for_input(input, opts: AugmentOptions) -> AugmentOptions:
+    """``opts`` completed for ``input``: a ``.mat`` folder holds its images, so without ``images_dir`` (and
+    ``image_column``) they give the rows' sizes and, with ``out_images``, are the pictures transformed.
+
+    Raises
+    ------
+    UsageError
+        ``out_images`` without ``images_dir`` for a table (its images are elsewhere).
+    """
+    if opts.images_dir is not None:
+        return opts
+    folder = Path(input).is_dir()
+    if opts.out_images is not None and not folder:
+        raise UsageError("--out-images needs --images (the folder of the input images)")
+    if folder and opts.image_column is None:
+        return replace(opts, images_dir=input, images_optional=opts.out_images is None)
+    return opts
