@@ -123,7 +123,7 @@ class AugmentOptions:
             raise UsageError(f"crop: expected 4 whole pixels x, y, w, h with w, h >= 1, got {self.crop!r}")
         if (self.scale is not None) != (self.op == "scale"):
             raise UsageError(f"scale: expected a factor for scale only, got {self.scale!r} for {self.op}")
-        if self.scale is not None and not self.scale > 0:
+        if self.scale is not None and self.scale <= 0:  # as --scale's range (NaN: every row is rejected)
             raise UsageError(f"scale: expected a factor > 0, got {self.scale}")
         if self.image_size is not None and (len(self.image_size) != 2 or min(self.image_size) < 1):
             raise UsageError(f"image_size: expected (W, H) in pixels >= 1, got {self.image_size!r}")

@@ -112,7 +112,7 @@ class InferOptions:
                     f"rotations: expected (KIND, COLUMNS) with KIND one of {', '.join(ROTATION_KINDS)} and its "
                     f"number of columns, got {self.rotations!r}"
                 )
-        if self.tol is not None and not self.tol > 0:
+        if self.tol is not None and self.tol <= 0:  # as --tol's range
             raise UsageError(f"tol: expected a number > 0, got {self.tol}")
         if self.samples is not None and not SAMPLES_RANGE[0] <= self.samples <= SAMPLES_RANGE[1]:
             raise UsageError(f"samples: expected {SAMPLES_RANGE[0]}..{SAMPLES_RANGE[1]}, got {self.samples}")
