@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 from ...errors import HpeError, UsageError
-from ...io.transaction import note_input
 from ...rotation import infer as inf
 from .code import DEFAULT_TIMEOUT, code_file, run_code_inference
-from .data import infer_data, read_data_table, set_aside_unusable
 from .options import InferOptions
 
 
@@ -30,6 +28,10 @@ def run_infer(data, spec, opts: InferOptions) -> dict:
         return _infer_code(spec, opts)
     if opts.returns != "angles" or opts.builder:
         raise UsageError("returns and builder apply to code only, not to DATA")
+    # lazy: the table side (pyarrow, the .mat reader, the template fit) is no part of a --callable/--decoder run,
+    # whose parent and child both load this package (measured: +0.5 to 3 s and +27 MB per run when eager)
+    from .data import infer_data, read_data_table, set_aside_unusable
+
     table = set_aside_unusable(read_data_table(data, opts), opts)
     try:
         rep = infer_data(table, opts)
@@ -43,6 +45,8 @@ def run_infer(data, spec, opts: InferOptions) -> dict:
 
 def _infer_code(spec: str, opts: InferOptions) -> dict:
     """The search on ``--callable``/``--decoder`` code, run in a child process with ``opts.timeout``."""
+    from ...io.transaction import note_input  # lazy: the spawned child loads this package, and needs no I/O layer
+
     path = code_file(spec)
     if path is not None:
         note_input(path)  # -o/--json may never be the user's own code

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 from ...errors import HpeError
-from ...io import AtomicFile, write_json
-from ...io.transaction import current
 from ...rotation import infer as inf
 
 
@@ -82,6 +80,10 @@ def finish(rep: dict, what: str, *, json_path=None, output=None, overwrite=False
         Nothing fits (the JSON report is still kept: it explains why; nothing is
         written to ``output``).
     """
+    # lazy: the spawned child of --callable/--decoder loads this package, and needs no I/O layer
+    from ...io import AtomicFile, write_json
+    from ...io.transaction import current
+
     report = inf.report_json(rep)
     if json_path is not None:
         write_json(report, json_path, overwrite)
