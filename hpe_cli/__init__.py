@@ -23,6 +23,8 @@ the 300W-LP active matrix ``A`` (x = subject's left, y = up, z = out of the face
 ``evaluate``           the evaluation report of predictions against ground truth
 ``augment_sample``     labels, landmarks and box of one sample after a flip / rotation / mirror
 ``augment_batch``      the same for N samples at once
+``augment_file``       ``hpe augment`` on a file (the same pipeline), its summary
+``infer_system``       ``hpe infer`` on a table or on code (the same pipeline), its JSON report
 ``draw_axes``          Hopenet-style pose axes drawn onto an image
 ``geodesic``           the rotation angle between two labels, degrees
 ``landmark_pose``      head rotation fitted to 2-D landmarks alone (``hpe audit --consistency``'s evidence)
@@ -55,6 +57,8 @@ _API = (
     "landmark_pose",
     "view_file",
     "draw_file",
+    "augment_file",
+    "infer_system",
 )
 
 #: names resolved lazily by :func:`__getattr__`: name -> (module, attribute)

@@ -427,6 +427,62 @@ def draw_file(
         return run_draw(input, output, settings)
 
 
+def augment_file(input, output, op: str, angle=None, **settings) -> dict:
+    """``hpe augment`` as a function: the same pipeline (:func:`hpe_cli.pipelines.augment.run_augment`).
+
+    Parameters
+    ----------
+    input, output : str or path
+        A label table (or a folder of ``.mat`` files); the ``.parquet`` or ``.csv`` to write.
+    op : str
+        ``hflip``, ``vflip``, ``hvflip``, ``rotate``, ``mirror``, ``crop`` or ``scale``.
+    angle : float, optional
+        Degrees counter-clockwise, for ``rotate`` and ``mirror``.
+    **settings
+        The other fields of :class:`hpe_cli.pipelines.augment.AugmentOptions` (``crop``, ``scale``,
+        ``image_size``, ``system``, ``images_dir``, ``out_images``, ``rejects``, ``overwrite``...), checked once.
+
+    Returns
+    -------
+    dict
+        ``system``, ``rows``, ``written``, ``landmarks``, ``boxes``, ``images``, ``rejects`` (reason -> count).
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.augment import AugmentOptions, run_augment
+
+    opts = AugmentOptions(op=op, angle=angle, **settings)
+    with ensure_transaction():
+        return run_augment(input, output, opts)
+
+
+def infer_system(data=None, *, code=None, output=None, **settings) -> dict:
+    """``hpe infer`` as a function: the same pipeline (:func:`hpe_cli.pipelines.infer.run_infer`).
+
+    Give ``data`` (a label table or ``.mat`` folder) or ``code`` (``FILE.py:FUNC`` or ``module:FUNC``, a decoder
+    unless ``builder=True``). ``output``: write the matched system as TOML. ``settings``: the fields of
+    :class:`hpe_cli.pipelines.infer.InferOptions` (``roles``, ``units``, ``angle_columns``, ``tol``, ``seed``,
+    ``rejects``, ``overwrite``...), checked once.
+
+    Returns
+    -------
+    dict
+        The JSON report (``fit``, ``best``, ``system``...), as ``hpe infer --json`` writes it.
+
+    Raises
+    ------
+    HpeError
+        Nothing fits (with landmarks: no clear winner), as the command's exit status 1.
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.infer import InferOptions, finish, run_infer
+
+    opts = InferOptions(**settings)
+    with ensure_transaction():
+        rep = run_infer(data, code, opts)
+        report, _ = finish(rep, code or str(data), output=output, overwrite=opts.overwrite)
+    return report
+
+
 def write_labels(table, path, system=None, *, overwrite: bool = False):
     """Write a label table atomically (Parquet or CSV by extension), naming its system.
 

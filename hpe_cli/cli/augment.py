@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import os
+
 import click
 
-from ..pipelines.augment import AGREE_TOL, IMAGE_COLUMNS, run_augment  # noqa: F401  (re-exported)
+from ..io.images import IMAGE_COLUMNS
 from .options import (
     batch_option,
     deprecated_spellings,
@@ -218,63 +220,56 @@ def augment(
     if len(chosen) > 1 and sorted(chosen) != ["--hflip", "--vflip"]:
         raise click.UsageError(f"expected one augmentation (or --hflip with --vflip), got {' and '.join(chosen)}")
     if hflip and vflip:
-        op, angle, desc = "hvflip", None, "hflip+vflip (rotation by 180)"
+        op, angle = "hvflip", None
     elif hflip or vflip:
-        op, angle, desc = ("hflip" if hflip else "vflip"), None, "hflip" if hflip else "vflip"
+        op, angle = ("hflip" if hflip else "vflip"), None
     elif rotate is not None:
-        op, angle, desc = "rotate", rotate, f"rotate {rotate:g} deg counter-clockwise"
+        op, angle = "rotate", rotate
     elif crop is not None:
         if any(v != int(v) for v in crop) or crop[2] < 1 or crop[3] < 1:
             raise click.BadParameter(
                 f"expected whole pixels and W, H >= 1, got {' '.join(f'{v:g}' for v in crop)}", param_hint="--crop"
             )
         crop = tuple(int(v) for v in crop)
-        op, angle, desc = "crop", None, f"crop {crop[2]}x{crop[3]} at ({crop[0]}, {crop[1]})"
+        op, angle = "crop", None
     elif zoom is not None:
-        op, angle, desc = "scale", None, f"scale by {zoom:g}"
+        op, angle = "scale", None
     else:
-        op, angle, desc = "mirror", mirror_line, f"mirror about the {mirror_line:g} deg line"
+        op, angle = "mirror", mirror_line
     for name, v in (("--rotate", rotate), ("--mirror-line", mirror_line)):
         if v is not None and not abs(v) < float("inf"):
             raise click.BadParameter(f"expected a finite angle in degrees, got {v}", param_hint=name)
-    images_optional = False
-    if images_dir is None:
-        from pathlib import Path
+    if images_dir is None and out_images is not None and not os.path.isdir(input):
+        raise click.UsageError("--out-images needs --images (the folder of the input images)")
+    from ..pipelines.augment import AugmentOptions, run_augment
 
-        if out_images is not None and not Path(input).is_dir():
-            raise click.UsageError("--out-images needs --images (the folder of the input images)")
-        if Path(input).is_dir() and image_column is None:  # a .mat folder holds its images: they give the sizes
-            images_dir, images_optional = input, out_images is None
+    opts = AugmentOptions(
+        op=op,
+        angle=angle,
+        crop=crop,
+        scale=zoom,
+        image_size=tuple(image_size) if image_size else None,
+        system=system,
+        radians=radians,
+        scheme=scheme,
+        box_from=box_from,
+        clip=clip,
+        images_dir=images_dir,
+        out_images=out_images,
+        image_column=image_column,
+        interpolation=interpolation,
+        border=border,
+        jpeg_quality=jpeg_quality,
+        rejects=rejects,
+        strict=strict,
+        overwrite=overwrite,
+        batch_size=batch_size,
+        verbose=verbose,
+    )
+    desc = opts.description
     bar = progress(desc="augment", quiet=quiet)
     try:
-        s = run_augment(
-            input,
-            output,
-            system,
-            tuple(image_size) if image_size else None,
-            op,
-            angle,
-            crop=crop,
-            scale=zoom,
-            scheme=scheme,
-            box_from=box_from,
-            clip=clip,
-            images_dir=images_dir,
-            out_images=out_images,
-            image_column=image_column,
-            interpolation=interpolation,
-            border=border,
-            jpeg_quality=jpeg_quality,
-            rejects_path=rejects,
-            strict=strict,
-            overwrite=overwrite,
-            batch_size=batch_size,
-            bar=bar,
-            verbose=verbose,
-            description=desc,
-            images_optional=images_optional,
-            radians=radians,
-        )
+        s = run_augment(input, output, opts, bar=bar)
     finally:
         bar.close()
     lines = [

@@ -7,10 +7,10 @@ import click
 from .options import SYSTEM, deprecated_spellings, overwrite_option, rejects_options, verbosity_options
 from .table_options import column_options
 
-ROLE_NAMES = ("pitch", "yaw", "roll")
-
 
 def _roles(value: str, opt: str) -> list:
+    from ..pipelines.infer import ROLE_NAMES
+
     roles = [v.strip().lower() for v in value.split(",")]
     if sorted(roles) != sorted(ROLE_NAMES):
         raise click.BadParameter(
@@ -21,6 +21,8 @@ def _roles(value: str, opt: str) -> list:
 
 def _angle_columns(value: str):
     """``pitch,yaw,roll`` or ``pitch=col_a,yaw=col_b,roll=col_c`` -> (roles, columns)."""
+    from ..pipelines.infer import ROLE_NAMES
+
     roles, cols = [], []
     for item in value.split(","):
         role, _, col = item.partition("=")
@@ -52,7 +54,8 @@ def _stored_rotations(value: str | None):
 
     KIND is one of rotvec (radians), quaternion-wxyz, quaternion-xyzw or 6d (matrix columns 0 and 1).
     """
-    kinds = {"rotvec": 3, "quaternion-wxyz": 4, "quaternion-xyzw": 4, "6d": 6}
+    from ..pipelines.infer import ROTATION_KINDS as kinds
+
     if value is None:
         return None
     kind, sep, cols = value.partition(":")
@@ -267,7 +270,7 @@ def infer(
       hpe infer AFLW2000/ --landmarks3d lm3d --json aflw_system.json
     """
     from ..io import check_output
-    from ..pipelines.infer import finish, run_infer
+    from ..pipelines.infer import ROLE_NAMES, InferOptions, finish, run_infer
 
     units = None if radians is None else ("rad" if radians else "deg")
 
@@ -285,12 +288,10 @@ def infer(
     if json_path is not None:
         check_output(json_path, overwrite)
     spec = builder or decoder
-    rep = run_infer(
-        data=data,
-        spec=spec,
+    opts = InferOptions(
         builder=bool(builder),
         returns=returns,
-        roles=_roles(args_, "--args") if spec else None,
+        roles=tuple(_roles(args_, "--args")) if spec else ROLE_NAMES,
         packed=packed,
         units=units,
         angle_columns=None if spec else _angle_columns(angles),
@@ -305,11 +306,12 @@ def infer(
         frame=frame_of.frame if frame_of is not None else None,
         storage=storage,
         timeout=timeout,
-        import_path=import_path,
-        rejects_path=rejects,
+        import_path=tuple(import_path),
+        rejects=rejects,
         strict=strict,
         overwrite=overwrite,
     )
+    rep = run_infer(data, spec, opts)
     _, written = finish(
         rep,
         spec or str(data),

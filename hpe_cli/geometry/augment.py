@@ -101,7 +101,14 @@ def plane_matrix(op: str, angle=None) -> np.ndarray:
     return np.stack([np.stack([c, s], -1), np.stack([s, -c], -1)], -2)
 
 
-def _check_plane(M) -> tuple[np.ndarray, np.ndarray]:
+def check_plane(M) -> tuple[np.ndarray, np.ndarray]:
+    """``(M, det M)``: ``M`` (..., 2, 2) as float64, checked to be finite orthogonal image-plane matrices.
+
+    Raises
+    ------
+    ValueError
+        Expected shape (..., 2, 2) and ``|M M^T - I| <= 1e-9`` (rotations or mirrors, no scaling).
+    """
     M = np.asarray(M, dtype=np.float64)
     if M.shape[-2:] != (2, 2):
         raise ValueError(f"expected image-plane matrices of shape (..., 2, 2), got {M.shape}")
@@ -116,7 +123,7 @@ def _check_plane(M) -> tuple[np.ndarray, np.ndarray]:
 
 def is_mirror(M) -> np.ndarray:
     """True where ``M`` reverses orientation (``det M = -1``): landmarks must be re-indexed."""
-    return _check_plane(M)[1] < 0
+    return check_plane(M)[1] < 0
 
 
 def augment_canonical(A, M) -> np.ndarray:
@@ -136,7 +143,7 @@ def augment_canonical(A, M) -> np.ndarray:
         ``M3 @ A`` for rotations, ``M3 @ A @ diag(-1, 1, 1)`` for mirrors; a
         proper rotation in both cases.
     """
-    M, det = _check_plane(M)
+    M, det = check_plane(M)
     return _canonical(np.asarray(A, dtype=np.float64), M, det)
 
 
@@ -178,11 +185,19 @@ def pixel_affine(M, image_size) -> np.ndarray:
     -------
     ndarray, shape (..., 2, 3)
     """
-    M, _ = _check_plane(M)
-    return _affine(M, _image_size(image_size))
+    M, _ = check_plane(M)
+    return plane_to_pixel(M, _image_size(image_size))
 
 
-def _affine(M, wh):
+def plane_to_pixel(M, wh):
+    """:func:`pixel_affine` without its checks: ``M`` (..., 2, 2) already a plane matrix, ``wh`` (..., 2) any
+    finite sizes in pixels (a pipeline passes rows it will reject too).
+
+    Returns
+    -------
+    ndarray, shape (..., 2, 3)
+        The forward pixel affine ``[u', v'] = P @ [u, v, 1]``.
+    """
     # conjugate by diag(1, -1): the y-up plane to rows-down pixels
     N = M * np.array([[1.0, -1.0], [-1.0, 1.0]]) + 0.0  # + 0.0 drops negative zeros
     c = (wh - 1.0) / 2.0
@@ -250,7 +265,7 @@ def move_boxes(boxes, P, M, out_size, points=None, box_from: str = "auto", clip:
     return _move_boxes(
         np.asarray(boxes, dtype=np.float64),
         np.asarray(P, dtype=np.float64),
-        _check_plane(M)[0],
+        check_plane(M)[0],
         _image_size(out_size),
         points,
         box_from,
@@ -286,7 +301,7 @@ def augment_points(points, M, image_size, perm=None) -> np.ndarray:
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim < 2 or pts.shape[-1] != 2:
         raise ValueError(f"expected landmarks of shape (..., L, 2), got {pts.shape}")
-    M, det = _check_plane(M)
+    M, det = check_plane(M)
     mirror = det < 0
     if mirror.any():
         if perm is None:
@@ -295,7 +310,7 @@ def augment_points(points, M, image_size, perm=None) -> np.ndarray:
                 "(see hpe_cli.geometry.landmark_schemes), got none"
             )
         perm = flip_permutation(perm, pts.shape[-2])
-    return _move_points(pts, _affine(M, _image_size(image_size)), mirror, perm)
+    return _move_points(pts, plane_to_pixel(M, _image_size(image_size)), mirror, perm)
 
 
 def _move_points(pts, P, mirror, perm):
@@ -368,9 +383,9 @@ def augment_boxes(boxes, M, image_size, points=None, box_from: str = "auto", cli
     b = np.asarray(boxes, dtype=np.float64)
     if b.shape[-1:] != (4,):
         raise ValueError(f"expected boxes of shape (..., 4), got {b.shape}")
-    M, _ = _check_plane(M)
+    M, _ = check_plane(M)
     wh = _image_size(image_size)
-    return _move_boxes(b, _affine(M, wh), M, wh, points, box_from, clip)
+    return _move_boxes(b, plane_to_pixel(M, wh), M, wh, points, box_from, clip)
 
 
 def _move_boxes(b, P, M, wh, points, box_from, clip):
@@ -497,12 +512,12 @@ def augment_batch(
         raise ValueError(f"expected pose of shape (N, 3) angles or (N, 3, 3) matrices, got {pose.shape}")
     n = A.shape[0]
     M = plane_matrix(op, angle) if isinstance(op, str) else np.asarray(op, dtype=np.float64)
-    M, det = _check_plane(M)
+    M, det = check_plane(M)
     if M.ndim > 2 and M.shape[0] not in (1, n):
         raise ValueError(f"expected one op matrix or {n}, got {M.shape[0]}")
     conv = canonical_to_labels(_canonical(A, M, det), sysm)
     wh = _image_size(image_size)
-    P = _affine(M, wh)
+    P = plane_to_pixel(M, wh)
     lm_out = None
     if landmarks is not None:
         lm = np.asarray(landmarks, dtype=np.float64)

@@ -101,38 +101,59 @@ def helmet_boxes(
     p = helmet_preset(preset)
     scale = np.asarray(scale, dtype=np.float64).reshape(-1)
     n = scale.shape[0]
-    R = _per_row(R, n, (3, 3))
-    t = _per_row(t, n, (3,))
-    K = _per_row(K, n, (3, 3))
-    dist = np.asarray(dist, dtype=np.float64)
-    dist = _per_row(
-        dist if dist.shape[-1] == 5 else np.concatenate([dist, np.zeros(dist.shape[:-1] + (5 - dist.shape[-1],))], -1),
-        n,
-        (5,),
-    )
-    cam_R = _per_row(cam_R, n, (3, 3))
-    cam_t = _per_row(cam_t, n, (3,))
+    R, t = _per_row(R, n, (3, 3)), _per_row(t, n, (3,))
+    K, dist = _per_row(K, n, (3, 3)), _per_row(_five(dist), n, (5,))
+    cam_R, cam_t = _per_row(cam_R, n, (3, 3)), _per_row(cam_t, n, (3,))
     W = np.broadcast_to(np.asarray(width, dtype=np.float64), (n,))
     H = np.broadcast_to(np.asarray(height, dtype=np.float64), (n,))
 
-    # The sphere is a theta x phi grid: for a rotation-scale M, M @ u(theta, phi) =
-    # sin(phi) (cos(theta) M[:, 0] + sin(theta) M[:, 1]) + cos(phi) M[:, 2], so each
-    # camera coordinate costs one multiply-add per point. The 36 points at phi = 0
-    # coincide (the pole) and are projected once.
-    theta = np.deg2rad(np.arange(0, 360, 10, dtype=np.float64))
-    phi = np.deg2rad(np.arange(10, 180, 10, dtype=np.float64))
-    ct, st, sp, cp = np.cos(theta), np.sin(theta), np.sin(phi), np.cos(phi)
-    centre_ref = np.asarray(p.offset, dtype=np.float64)
-
     # camera frame of a helmet point: M @ u + c, M = scale * radius * cam_R @ R,
     # c = cam_R @ (scale * R @ offset + t) + cam_t
+    centre_ref = np.asarray(p.offset, dtype=np.float64)
     G = scale[:, None, None] * (cam_R @ R)
     M = p.radius * G
     c = np.einsum("nij,nj->ni", G, np.broadcast_to(centre_ref, (n, 3))) + np.einsum("nij,nj->ni", cam_R, t) + cam_t
+    lo, hi, behind, beyond, fitted = _helmet_extremes(M, c, scale, p.radius, K, dist, cam_R, R)
+    cu, cv = _centre_pixels(c, dist, K)
+    # the helmet centre, to tell "mostly outside" from "truncated by the border"
+    centre_in = (cu >= 0) & (cu < W) & (cv >= 0) & (cv < H)
+    bbox, reason, detail = _boxes(lo, hi, W, H, p, (behind, beyond, fitted, centre_in))
+    invalid = behind | ~fitted
+    bbox[invalid] = np.nan
+    out = {"bbox": bbox, "ok": reason == "", "reason": reason, "detail": detail}
+    if return_centre:
+        out["centre"] = np.where(invalid[:, None], np.nan, np.stack([cu, cv], axis=1))
+    return out
+
+
+def _five(dist) -> np.ndarray:
+    """Distortion coefficients padded with zeros to OpenCV's five ``k1, k2, p1, p2, k3``."""
+    dist = np.asarray(dist, dtype=np.float64)
+    if dist.shape[-1] == 5:
+        return dist
+    return np.concatenate([dist, np.zeros(dist.shape[:-1] + (5 - dist.shape[-1],))], -1)
+
+
+def _sphere_grid() -> tuple:
+    """``(cos theta, sin theta, sin phi, cos phi)`` of the helmet's theta x phi grid (10-degree steps).
+
+    For a rotation-scale M, M @ u(theta, phi) = sin(phi) (cos(theta) M[:, 0] + sin(theta) M[:, 1]) +
+    cos(phi) M[:, 2], so each camera coordinate costs one multiply-add per point. The 36 points at phi = 0
+    coincide (the pole) and are projected once.
+    """
+    theta = np.deg2rad(np.arange(0, 360, 10, dtype=np.float64))
+    phi = np.deg2rad(np.arange(10, 180, 10, dtype=np.float64))
+    return np.cos(theta), np.sin(theta), np.sin(phi), np.cos(phi)
+
+
+def _helmet_extremes(M, c, scale, radius, K, dist, cam_R, R) -> tuple:
+    """``(lo, hi, behind, beyond, fitted)``: per row the min and max pixel (N, 2) of the projected helmet
+    points ``M @ u + c`` (camera frame), whether it reaches behind the camera or beyond the lens model's field,
+    and whether the row has a fit."""
+    n = len(c)
     # the lens model's valid field depends on the camera only: evaluate it per distinct camera
     _, first, inv = np.unique(dist @ _HASH, return_index=True, return_inverse=True)
     r2_max = max_valid_r2(dist[first])[inv.reshape(-1)]
-
     lo = np.full((n, 2), np.nan)
     hi = np.full((n, 2), np.nan)
     behind = np.zeros(n, dtype=bool)
@@ -143,7 +164,7 @@ def helmet_boxes(
     # Every helmet point lies on the sphere |P - c| = rho, so min z >= c_z - rho and the
     # angle off the optical axis is at most angle(c) + asin(rho / |c|): rows where these
     # bounds already settle "behind" and "beyond" skip the per-point checks.
-    rho = np.abs(scale) * p.radius
+    rho = np.abs(scale) * radius
     dist_c = np.linalg.norm(c, axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         off = np.arccos(np.clip(c[:, 2] / dist_c, -1.0, 1.0)) + np.arcsin(np.clip(rho / dist_c, 0.0, 1.0))
@@ -164,50 +185,70 @@ def helmet_boxes(
                 Mf32[idx], cf32[idx], dist32[idx], K[idx], cam_R[idx] @ R[idx], c[idx], rho[idx], dist[idx]
             )
     slow = np.flatnonzero(~fast) if FAST else np.arange(n)
-    ct, st, sp, cp = (a.astype(DTYPE) for a in (ct, st, sp, cp))
+    grid = tuple(a.astype(DTYPE) for a in _sphere_grid())
     for s in range(0, len(slow), BLOCK_ROWS):
         sl = slow[s : s + BLOCK_ROWS]
-        m, cc, d, k = Mf32[sl], cf32[sl], dist32[sl], K[sl]
-        b = m.shape[0]
-        planes = []
-        for i in range(3):
-            ring = m[:, i, 0, None] * ct + m[:, i, 1, None] * st  # (b, 36)
-            P = np.empty((b, 1 + 36 * 17), dtype=DTYPE)
-            P[:, 0] = m[:, i, 2] + cc[:, i]  # the pole
-            Q = P[:, 1:].reshape(b, 36, 17)
-            np.multiply(ring[:, :, None], sp, out=Q)
-            Q += (m[:, i, 2, None] * cp + cc[:, i, None])[:, None, :]
-            planes.append(P)
-        X, Y, Z = planes
-        if not safe_front[sl].all():
-            behind[sl] = Z.min(1) <= 0
-        with np.errstate(divide="ignore", invalid="ignore"):  # unfitted rows are all zero
-            np.divide(1.0, Z, out=Z)
-            x = np.multiply(X, Z, out=X)
-            y = np.multiply(Y, Z, out=Y)
-        r2 = np.multiply(x, x, out=Z)
-        r2 += y * y
-        if not safe_field[sl].all():
-            beyond[sl] = r2.max(1) > r2_max[sl]
-        xd, yd = _distort32(x, y, r2, d)
-        blo = np.empty((b, 2))
-        bhi = np.empty((b, 2))
-        if np.any(k[:, 0, 1] != 0):  # skew: u mixes xd and yd
-            u = k[:, 0, 0, None] * xd + k[:, 0, 1, None] * yd
-            blo[:, 0], bhi[:, 0] = u.min(1) + k[:, 0, 2], u.max(1) + k[:, 0, 2]
-        else:  # u = fx xd + cx is monotonic in xd: scale the extremes only
-            _extremes(xd.min(1), xd.max(1), k[:, 0, 0], k[:, 0, 2], blo[:, 0], bhi[:, 0])
-        _extremes(yd.min(1), yd.max(1), k[:, 1, 1], k[:, 1, 2], blo[:, 1], bhi[:, 1])
-        lo[sl], hi[sl] = blo, bhi
+        lo[sl], hi[sl], b_behind, b_beyond = _block_extremes(
+            Mf32[sl], cf32[sl], dist32[sl], K[sl], grid, safe_front[sl].all(), safe_field[sl].all(), r2_max[sl]
+        )
+        if b_behind is not None:
+            behind[sl] = b_behind
+        if b_beyond is not None:
+            beyond[sl] = b_beyond
+    return lo, hi, behind, beyond, fitted
 
-    # the helmet centre, to tell "mostly outside" from "truncated by the border"
+
+def _block_extremes(m, cc, d, k, grid, all_front, all_in_field, r2_max) -> tuple:
+    """One block of rows, every grid point projected (float32): ``(lo, hi, behind or None, beyond or None)``
+    (``behind``/``beyond`` are None when the sphere bounds already settled them for the whole block)."""
+    ct, st, sp, cp = grid
+    b = m.shape[0]
+    planes = []
+    for i in range(3):
+        ring = m[:, i, 0, None] * ct + m[:, i, 1, None] * st  # (b, 36)
+        P = np.empty((b, 1 + 36 * 17), dtype=DTYPE)
+        P[:, 0] = m[:, i, 2] + cc[:, i]  # the pole
+        Q = P[:, 1:].reshape(b, 36, 17)
+        np.multiply(ring[:, :, None], sp, out=Q)
+        Q += (m[:, i, 2, None] * cp + cc[:, i, None])[:, None, :]
+        planes.append(P)
+    X, Y, Z = planes
+    behind = None if all_front else Z.min(1) <= 0
+    with np.errstate(divide="ignore", invalid="ignore"):  # unfitted rows are all zero
+        np.divide(1.0, Z, out=Z)
+        x = np.multiply(X, Z, out=X)
+        y = np.multiply(Y, Z, out=Y)
+    r2 = np.multiply(x, x, out=Z)
+    r2 += y * y
+    beyond = None if all_in_field else r2.max(1) > r2_max
+    xd, yd = _distort32(x, y, r2, d)
+    blo = np.empty((b, 2))
+    bhi = np.empty((b, 2))
+    if np.any(k[:, 0, 1] != 0):  # skew: u mixes xd and yd
+        u = k[:, 0, 0, None] * xd + k[:, 0, 1, None] * yd
+        blo[:, 0], bhi[:, 0] = u.min(1) + k[:, 0, 2], u.max(1) + k[:, 0, 2]
+    else:  # u = fx xd + cx is monotonic in xd: scale the extremes only
+        _extremes(xd.min(1), xd.max(1), k[:, 0, 0], k[:, 0, 2], blo[:, 0], bhi[:, 0])
+    _extremes(yd.min(1), yd.max(1), k[:, 1, 1], k[:, 1, 2], blo[:, 1], bhi[:, 1])
+    return blo, bhi, behind, beyond
+
+
+def _centre_pixels(c, dist, K) -> tuple:
+    """``(u, v)``: the helmet centre ``c`` (camera frame) in pixels, through the lens model."""
     with np.errstate(divide="ignore", invalid="ignore"):
         cx, cy = c[:, 0] / c[:, 2], c[:, 1] / c[:, 2]
     cxd, cyd = distort(cx, cy, dist)
     cu = K[:, 0, 0] * cxd + K[:, 0, 1] * cyd + K[:, 0, 2]
     cv = K[:, 1, 1] * cyd + K[:, 1, 2]
-    centre_in = (cu >= 0) & (cu < W) & (cv >= 0) & (cv < H)
+    return cu, cv
 
+
+def _boxes(lo, hi, W, H, p, flags) -> tuple:
+    """``(bbox, reason, detail)``: the extremes clamped to the image and the preset's box rules applied.
+
+    ``flags = (behind, beyond, fitted, centre_in)``; a row gets its most basic failure's reason.
+    """
+    behind, beyond, fitted, centre_in = flags
     x0 = np.maximum(lo[:, 0], 0.0)
     y0 = np.maximum(lo[:, 1], 0.0)
     x1 = np.minimum(hi[:, 0], W)
@@ -222,7 +263,7 @@ def helmet_boxes(
     side_bad = w >= p.max_side_fraction * W
     if p.check_height:
         side_bad |= h >= p.max_side_fraction * H
-
+    n = len(lo)
     reason = np.full(n, "", dtype=object)
     detail = np.full(n, "", dtype=object)
     op = ">" if p.aspect_inclusive else ">="
@@ -234,12 +275,7 @@ def helmet_boxes(
     _set(reason, detail, ~centre_in, "outside image", "head centre outside the image")
     _set(reason, detail, behind, "behind camera", "helmet reaches behind the camera")
     _set(reason, detail, ~fitted, "no fit", "no similarity fit")
-    invalid = behind | ~fitted
-    bbox[invalid] = np.nan
-    out = {"bbox": bbox, "ok": reason == "", "reason": reason, "detail": detail}
-    if return_centre:
-        out["centre"] = np.where(invalid[:, None], np.nan, np.stack([cu, cv], axis=1))
-    return out
+    return bbox, reason, detail
 
 
 def _extremes(amin, amax, scale, offset, lo, hi) -> None:

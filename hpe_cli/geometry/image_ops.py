@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .augment import _check_plane, pixel_affine
+from .augment import check_plane, pixel_affine
 
 INTERPOLATIONS = ("linear", "cubic", "nearest", "area", "lanczos")
 BORDERS = ("constant", "replicate", "reflect", "reflect101", "wrap")
@@ -20,7 +20,9 @@ BORDERS = ("constant", "replicate", "reflect", "reflect101", "wrap")
 _FLIP_CODES = {(-1.0, 1.0): 1, (1.0, -1.0): 0, (-1.0, -1.0): -1}
 
 
-def _cv_flags():
+def cv_flags() -> tuple[dict, dict]:
+    """OpenCV's flags by hpe's names: ``(interpolation name -> cv2.INTER_*, border name -> cv2.BORDER_*)``
+    (the names of :data:`INTERPOLATIONS` and :data:`BORDERS`)."""
     import cv2
 
     interp = {
@@ -67,7 +69,7 @@ def warp_image(image, M, interpolation: str = "linear", border: str = "constant"
     img = np.asarray(image)
     if img.ndim not in (2, 3) or img.shape[0] == 0 or img.shape[1] == 0:
         raise ValueError(f"expected an image of shape (H, W) or (H, W, C), got {img.shape}")
-    M, _ = _check_plane(M)
+    M, _ = check_plane(M)
     if M.shape != (2, 2):
         raise ValueError(f"expected one (2, 2) image-plane matrix, got {M.shape}")
     if interpolation not in INTERPOLATIONS:
@@ -80,7 +82,7 @@ def warp_image(image, M, interpolation: str = "linear", border: str = "constant"
         if key == (1.0, 1.0):
             return img.copy()
         return cv2.flip(img, _FLIP_CODES[key])
-    interp, borders = _cv_flags()
+    interp, borders = cv_flags()
     if np.ndim(border_value) == 0:
         border_value = (float(border_value),) * 4
     P = pixel_affine(M, (w, h))

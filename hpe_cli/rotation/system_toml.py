@@ -98,152 +98,18 @@ def system_from_dict(d: dict, source: str = "<dict>") -> RotationSystem:
     unknown storage/order/kind values, and worked examples that disagree with
     the definition.
     """
-    _expect(isinstance(d, dict), source, "a table of system keys", type(d).__name__)
-    for key in d:
-        if key not in _TOP_KEYS:
-            raise SystemError_(
-                f"{source}: {key}: unknown key{_closest(key, _TOP_KEYS)}; expected one of "
-                f"{', '.join(sorted(_TOP_KEYS))}"
-            )
-    _expect(
-        isinstance(d.get("name"), str) and d.get("name", "").strip() != "",
-        f"{source}: name",
-        "a non-empty string",
-        d.get("name"),
-    )
-    for key in (
-        "description",
-        "notes",
-        "source",
-        "verified",
-        "sequence",
-        "storage",
-        "units",
-        "selection",
-        "storage_kind",
-        "matrix_layout",
-        "quaternion_order",
-    ):
-        if key in d:
-            _expect(isinstance(d[key], str), f"{source}: {key}", "a string", d[key])
+    _check_keys(d, source)
     kind = d.get("storage_kind", "angles")
     _expect(kind in STORAGE_KINDS, f"{source}: storage_kind", "one of " + ", ".join(STORAGE_KINDS), kind)
     frame = _matrix3(d["frame"], f"{source}: frame") if "frame" in d else ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0))
     model_frame = _matrix3(d["model_frame"], f"{source}: model_frame") if "model_frame" in d else None
-
-    raw_turns = d.get("turns")
-    if raw_turns is None:
-        _expect(
-            kind != "angles",
-            f"{source}: turns",
-            "three [[turns]] tables (angle, axis, hand) for a system that stores angles",
-            None,
-        )
-        turns, angle_frame, sequence = CANONICAL_TURNS, "canonical", "intrinsic"
-        _expect(
-            "sequence" not in d, f"{source}: sequence", "no sequence when there are no [[turns]]", d.get("sequence")
-        )
-    else:
-        _expect(
-            isinstance(raw_turns, list) and len(raw_turns) == 3 and all(isinstance(t, dict) for t in raw_turns),
-            f"{source}: turns",
-            "three [[turns]] tables",
-            raw_turns,
-        )
-        turns = []
-        for n, t in enumerate(raw_turns):
-            for key in t:
-                if key not in _TURN_KEYS:
-                    raise SystemError_(
-                        f"{source}: turns[{n}].{key}: unknown key{_closest(key, _TURN_KEYS)}; "
-                        f"expected angle, axis, hand"
-                    )
-            _expect(t.get("angle") in ROLES, f"{source}: turns[{n}].angle", "pitch, yaw or roll", t.get("angle"))
-            axis = t.get("axis")
-            _expect(
-                isinstance(axis, str) and axis.lower() in ("x", "y", "z"),
-                f"{source}: turns[{n}].axis",
-                "x, y or z",
-                axis,
-            )
-            hand = t.get("hand", "right")
-            _expect(hand in ("right", "left"), f"{source}: turns[{n}].hand", "right or left", hand)
-            turns.append(Turn(t["angle"], axis.lower(), hand))
-        roles = [t.angle for t in turns]
-        _expect(sorted(roles) == sorted(ROLES), f"{source}: turns", "one turn each for pitch, yaw and roll", roles)
-        try:
-            _euler.parse_seq("".join(t.axis for t in turns))
-        except ValueError:
-            raise SystemError_(
-                f"{source}: turns: expected axes forming an Euler sequence (no axis twice in a row), "
-                f"got {''.join(t.axis for t in turns)}"
-            ) from None
-        turns, angle_frame, sequence = tuple(turns), "system", d.get("sequence", "intrinsic")
-
-    ranges = {}
-    raw_ranges = d.get("ranges", {})
-    _expect(isinstance(raw_ranges, dict), f"{source}: ranges", "a [ranges] table", raw_ranges)
-    for k, v in raw_ranges.items():
-        if k not in ROLES:
-            raise SystemError_(f"{source}: ranges.{k}: unknown key{_closest(k, ROLES)}; expected pitch, yaw, roll")
-        ok = isinstance(v, list) and len(v) == 2 and all(_number(x) for x in v)
-        _expect(ok, f"{source}: ranges.{k}", "[low, high] in degrees", v)
-        lo, hi = float(v[0]), float(v[1])
-        _expect(np.isfinite(lo) and np.isfinite(hi), f"{source}: ranges.{k}", "finite numbers", v)
-        _expect(lo < hi, f"{source}: ranges.{k}", "low < high", v)
-        ranges[k] = (lo, hi)
-
-    g = d.get("gimbal_tol", GIMBAL_TOL)
-    _expect(
-        _number(g) and np.isfinite(g) and 0 <= g < 1,
-        f"{source}: gimbal_tol",
-        "a number in [0, 1) (|cos| of the middle turn)",
-        g,
-    )
-    order = d.get("order", list(ROLES))
-    _expect(
-        isinstance(order, list) and sorted(map(str, order)) == sorted(ROLES),
-        f"{source}: order",
-        "a permutation of pitch, yaw, roll",
-        order,
-    )
-    six = d.get("sixd_columns", [0, 1])
-    _expect(
-        isinstance(six, list)
-        and len(six) == 2
-        and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 2 for c in six)
-        and six[0] != six[1],
-        f"{source}: sixd_columns",
-        "two different matrix columns out of 0, 1, 2",
-        six,
-    )
+    turns, angle_frame, sequence = _turns(d, source, kind)
+    ranges = _ranges(d, source)
+    g, order, six = _numbers(d, source)
     cols = d.get("columns", {})
     _expect(isinstance(cols, dict), f"{source}: columns", 'a [columns] table of name = "file column"', cols)
-    raw_examples = d.get("examples", [])
-    _expect(
-        isinstance(raw_examples, list) and all(isinstance(e, dict) for e in raw_examples),
-        f"{source}: examples",
-        "[[examples]] tables",
-        raw_examples,
-    )
-    for n, e in enumerate(raw_examples):
-        for key in e:
-            if key not in _EXAMPLE_KEYS:
-                raise SystemError_(
-                    f"{source}: examples[{n}].{key}: unknown key{_closest(key, _EXAMPLE_KEYS)}; "
-                    f"expected {', '.join(sorted(_EXAMPLE_KEYS))}"
-                )
-    for key in ("sequence", "storage", "units", "selection", "matrix_layout", "quaternion_order"):
-        allowed = {
-            "sequence": ("intrinsic", "extrinsic"),
-            "storage": ("active", "transposed"),
-            "units": ("degrees", "radians"),
-            "selection": SELECTIONS,
-            "matrix_layout": MATRIX_LAYOUTS,
-            "quaternion_order": ("wxyz", "xyzw"),
-        }[key]
-        if key in d:
-            _expect(d[key] in allowed, f"{source}: {key}", "one of " + ", ".join(allowed), d[key])
+    raw_examples = _examples(d, source)
+    _check_choices(d, source)
     try:
         system = RotationSystem(
             name=d["name"],
@@ -276,6 +142,172 @@ def system_from_dict(d: dict, source: str = "<dict>") -> RotationSystem:
     for n, e in enumerate(system.examples):
         check_example(system, e, f"{source}: examples[{n}]")
     return system
+
+
+#: the keys whose values are strings
+_STRING_KEYS = (
+    "description",
+    "notes",
+    "source",
+    "verified",
+    "sequence",
+    "storage",
+    "units",
+    "selection",
+    "storage_kind",
+    "matrix_layout",
+    "quaternion_order",
+)
+
+
+def _check_keys(d, source: str) -> None:
+    """A table of known top-level keys, a non-empty ``name``, strings where strings belong."""
+    _expect(isinstance(d, dict), source, "a table of system keys", type(d).__name__)
+    for key in d:
+        if key not in _TOP_KEYS:
+            raise SystemError_(
+                f"{source}: {key}: unknown key{_closest(key, _TOP_KEYS)}; expected one of "
+                f"{', '.join(sorted(_TOP_KEYS))}"
+            )
+    _expect(
+        isinstance(d.get("name"), str) and d.get("name", "").strip() != "",
+        f"{source}: name",
+        "a non-empty string",
+        d.get("name"),
+    )
+    for key in _STRING_KEYS:
+        if key in d:
+            _expect(isinstance(d[key], str), f"{source}: {key}", "a string", d[key])
+
+
+def _turns(d, source: str, kind: str) -> tuple:
+    """``(turns, angle_frame, sequence)``: the three ``[[turns]]`` (an Euler sequence, one per role), or the
+    300W-LP canonical turns for a system that stores no angles and names none."""
+    raw_turns = d.get("turns")
+    if raw_turns is None:
+        _expect(
+            kind != "angles",
+            f"{source}: turns",
+            "three [[turns]] tables (angle, axis, hand) for a system that stores angles",
+            None,
+        )
+        _expect(
+            "sequence" not in d, f"{source}: sequence", "no sequence when there are no [[turns]]", d.get("sequence")
+        )
+        return CANONICAL_TURNS, "canonical", "intrinsic"
+    _expect(
+        isinstance(raw_turns, list) and len(raw_turns) == 3 and all(isinstance(t, dict) for t in raw_turns),
+        f"{source}: turns",
+        "three [[turns]] tables",
+        raw_turns,
+    )
+    turns = [_turn(t, f"{source}: turns[{n}]") for n, t in enumerate(raw_turns)]
+    roles = [t.angle for t in turns]
+    _expect(sorted(roles) == sorted(ROLES), f"{source}: turns", "one turn each for pitch, yaw and roll", roles)
+    try:
+        _euler.parse_seq("".join(t.axis for t in turns))
+    except ValueError:
+        raise SystemError_(
+            f"{source}: turns: expected axes forming an Euler sequence (no axis twice in a row), "
+            f"got {''.join(t.axis for t in turns)}"
+        ) from None
+    return tuple(turns), "system", d.get("sequence", "intrinsic")
+
+
+def _turn(t: dict, where: str) -> Turn:
+    """One ``[[turns]]`` table (``where``: ``source: turns[n]``)."""
+    for key in t:
+        if key not in _TURN_KEYS:
+            raise SystemError_(f"{where}.{key}: unknown key{_closest(key, _TURN_KEYS)}; expected angle, axis, hand")
+    _expect(t.get("angle") in ROLES, f"{where}.angle", "pitch, yaw or roll", t.get("angle"))
+    axis = t.get("axis")
+    _expect(isinstance(axis, str) and axis.lower() in ("x", "y", "z"), f"{where}.axis", "x, y or z", axis)
+    hand = t.get("hand", "right")
+    _expect(hand in ("right", "left"), f"{where}.hand", "right or left", hand)
+    return Turn(t["angle"], axis.lower(), hand)
+
+
+def _ranges(d, source: str) -> dict:
+    """``[ranges]``: role -> (low, high) in degrees, finite, low < high."""
+    ranges = {}
+    raw_ranges = d.get("ranges", {})
+    _expect(isinstance(raw_ranges, dict), f"{source}: ranges", "a [ranges] table", raw_ranges)
+    for k, v in raw_ranges.items():
+        if k not in ROLES:
+            raise SystemError_(f"{source}: ranges.{k}: unknown key{_closest(k, ROLES)}; expected pitch, yaw, roll")
+        ok = isinstance(v, list) and len(v) == 2 and all(_number(x) for x in v)
+        _expect(ok, f"{source}: ranges.{k}", "[low, high] in degrees", v)
+        lo, hi = float(v[0]), float(v[1])
+        _expect(np.isfinite(lo) and np.isfinite(hi), f"{source}: ranges.{k}", "finite numbers", v)
+        _expect(lo < hi, f"{source}: ranges.{k}", "low < high", v)
+        ranges[k] = (lo, hi)
+    return ranges
+
+
+def _numbers(d, source: str) -> tuple:
+    """``(gimbal_tol, order, sixd_columns)``, each checked."""
+    g = d.get("gimbal_tol", GIMBAL_TOL)
+    _expect(
+        _number(g) and np.isfinite(g) and 0 <= g < 1,
+        f"{source}: gimbal_tol",
+        "a number in [0, 1) (|cos| of the middle turn)",
+        g,
+    )
+    order = d.get("order", list(ROLES))
+    _expect(
+        isinstance(order, list) and sorted(map(str, order)) == sorted(ROLES),
+        f"{source}: order",
+        "a permutation of pitch, yaw, roll",
+        order,
+    )
+    six = d.get("sixd_columns", [0, 1])
+    _expect(
+        isinstance(six, list)
+        and len(six) == 2
+        and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 2 for c in six)
+        and six[0] != six[1],
+        f"{source}: sixd_columns",
+        "two different matrix columns out of 0, 1, 2",
+        six,
+    )
+    return g, order, six
+
+
+def _examples(d, source: str) -> list:
+    """``[[examples]]`` tables with known keys (their values are checked once the system is built)."""
+    raw_examples = d.get("examples", [])
+    _expect(
+        isinstance(raw_examples, list) and all(isinstance(e, dict) for e in raw_examples),
+        f"{source}: examples",
+        "[[examples]] tables",
+        raw_examples,
+    )
+    for n, e in enumerate(raw_examples):
+        for key in e:
+            if key not in _EXAMPLE_KEYS:
+                raise SystemError_(
+                    f"{source}: examples[{n}].{key}: unknown key{_closest(key, _EXAMPLE_KEYS)}; "
+                    f"expected {', '.join(sorted(_EXAMPLE_KEYS))}"
+                )
+    return raw_examples
+
+
+#: the string keys with a fixed set of values
+_CHOICES = {
+    "sequence": ("intrinsic", "extrinsic"),
+    "storage": ("active", "transposed"),
+    "units": ("degrees", "radians"),
+    "selection": SELECTIONS,
+    "matrix_layout": MATRIX_LAYOUTS,
+    "quaternion_order": ("wxyz", "xyzw"),
+}
+
+
+def _check_choices(d, source: str) -> None:
+    """Each of :data:`_CHOICES` present holds one of its values."""
+    for key, allowed in _CHOICES.items():
+        if key in d:
+            _expect(d[key] in allowed, f"{source}: {key}", "one of " + ", ".join(allowed), d[key])
 
 
 #: worked examples are written with 6 decimals

@@ -499,7 +499,7 @@ def test_help_has_examples():
 
 def test_threaded_pipeline_same_output_and_rejects(tmp_path):
     """Two worker threads and small batches give exactly the one-thread output and rejects, in order."""
-    from hpe_cli.pipelines.augment import run_augment
+    from hpe_cli.pipelines.augment import AugmentOptions, run_augment
     from hpe_cli.rotation import get_system
 
     df = make_table(50)
@@ -509,9 +509,10 @@ def test_threaded_pipeline_same_output_and_rejects(tmp_path):
     outs = []
     for workers, bs in ((1, 1000), (2, 7)):
         out, rej = tmp_path / f"o{workers}.parquet", tmp_path / f"r{workers}.csv"
-        s = run_augment(
-            src, out, get_system("300w_lp"), (W, H), "rotate", 20.0, rejects_path=rej, batch_size=bs, workers=workers
+        opts = AugmentOptions(
+            "rotate", 20.0, system=get_system("300w_lp"), image_size=(W, H), rejects=rej, batch_size=bs, workers=workers
         )
+        s = run_augment(src, out, opts)
         assert s["rows"] == 50 and s["written"] == 47
         outs.append((pd.read_parquet(out), pd.read_csv(rej)))
     pd.testing.assert_frame_equal(outs[0][0], outs[1][0])

@@ -363,7 +363,7 @@ class _Bar:
 
 
 def test_progress_bars_have_totals_and_move_per_image(tmp_path):
-    from hpe_cli.pipelines.augment import run_augment
+    from hpe_cli.pipelines.augment import AugmentOptions, run_augment
     from hpe_cli.pipelines.draw import DrawOptions, run_draw
     from hpe_cli.rotation import get_system
 
@@ -372,17 +372,10 @@ def test_progress_bars_have_totals_and_move_per_image(tmp_path):
         tmp_path / "in.parquet"
     )
     bar = _Bar()
-    run_augment(
-        tmp_path / "in.parquet",
-        tmp_path / "o.parquet",
-        get_system("300w_lp"),
-        (W, H),
-        "hflip",
-        None,
-        images_dir=root,
-        out_images=tmp_path / "out",
-        bar=bar,
+    opts = AugmentOptions(
+        "hflip", system=get_system("300w_lp"), image_size=(W, H), images_dir=root, out_images=tmp_path / "out"
     )
+    run_augment(tmp_path / "in.parquet", tmp_path / "o.parquet", opts, bar=bar)
     assert bar.total == 4 and bar.n == 4 and bar.steps.count(1) >= 4  # one step per row's image
     bar = _Bar()
     run_draw(

@@ -7,13 +7,13 @@ import numpy as np
 from ..distances import frobenius
 from ..systems import ROLES
 from .core import (
-    _ROLE,
     CODE_TOL,
+    ROLE_INDEX,
     CallError,
-    _check_rotations,
-    _result,
+    assemble_report,
     candidate_matrices,
     candidates,
+    check_rotations,
     probe_builder,
     score,
     spread_angles,
@@ -21,7 +21,8 @@ from .core import (
 
 
 # --------------------------------------------------------------------------- code adapters
-def _to_numpy(out) -> np.ndarray:
+def to_numpy(out) -> np.ndarray:
+    """User code's result (NumPy, torch tensors, sequences of either) as a float64 array."""
     if hasattr(out, "detach"):  # a torch tensor, without importing torch
         out = out.detach().cpu().numpy()
     if isinstance(out, (tuple, list)):
@@ -38,7 +39,7 @@ def as_builder(func, roles=ROLES, units: str = "radians", packed: bool = False):
     ``(3, 3, N)`` out) and checks it against per-sample calls on two samples;
     otherwise every later call goes sample by sample.
     """
-    cols = [_ROLE[r] for r in roles]
+    cols = [ROLE_INDEX[r] for r in roles]
     conv = np.deg2rad if units == "radians" else (lambda a: a)
 
     def call(args):
@@ -49,7 +50,7 @@ def as_builder(func, roles=ROLES, units: str = "radians", packed: bool = False):
         for n, row in enumerate(pyr):
             args = [float(conv(row[c])) for c in cols]
             try:
-                m = _to_numpy(func(np.array(args)) if packed else func(*args))
+                m = to_numpy(func(np.array(args)) if packed else func(*args))
             except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
                 raise CallError(
                     f"raised {type(exc).__name__} on angles {tuple(round(a, 6) for a in args)}: "
@@ -62,7 +63,7 @@ def as_builder(func, roles=ROLES, units: str = "radians", packed: bool = False):
 
     def vectorised(pyr):
         try:
-            m = _to_numpy(call([conv(pyr[:, c]) for c in cols]))
+            m = to_numpy(call([conv(pyr[:, c]) for c in cols]))
         except Exception:  # noqa: BLE001 - the user's code may raise anything
             return None
         n = len(pyr)
@@ -75,12 +76,12 @@ def as_builder(func, roles=ROLES, units: str = "radians", packed: bool = False):
     def build(pyr_deg):
         return dispatch(np.asarray(pyr_deg, dtype=np.float64).reshape(-1, 3))
 
-    dispatch = _prefer_vectorised(vectorised, per_sample, atol=1e-9, equal_nan=False)
+    dispatch = prefer_vectorised(vectorised, per_sample, atol=1e-9, equal_nan=False)
     build.state = dispatch.state
     return build
 
 
-def _prefer_vectorised(vectorised, per_sample, atol: float, equal_nan: bool):
+def prefer_vectorised(vectorised, per_sample, atol: float, equal_nan: bool):
     """Call user code on whole arrays when it gives the per-sample answers, else row by row.
 
     The first call with more than 3 rows decides: the vectorised result is
@@ -147,9 +148,9 @@ def infer_builder(
     """
     pyr = spread_angles(n, seed)
     M = build(pyr)
-    _check_rotations(M, "returned")
+    check_rotations(M, "returned")
     sc = score(frobenius(candidate_matrices(pyr), M[None]), tol)
-    rep = _result(
+    rep = assemble_report(
         "callable", sc, roles=roles, units=units, source=source, tol=tol, n=n, name=name, frame=frame, storage=storage
     )
     if rep["fit"] != "exact":

@@ -28,7 +28,8 @@ SEARCH_ROWS = 512
 
 SEQUENCES = ("xyz", "xzy", "yxz", "yzx", "zxy", "zyx", "xyx", "xzx", "yxy", "yzy", "zxz", "zyz")
 _AXIS = {"x": 0, "y": 1, "z": 2}
-_ROLE = {r: n for n, r in enumerate(ROLES)}
+#: role name -> its column in role order (pitch 0, yaw 1, roll 2)
+ROLE_INDEX = {r: n for n, r in enumerate(ROLES)}
 
 
 class CallError(ValueError):
@@ -133,13 +134,17 @@ def candidates() -> tuple:
 def _codes() -> np.ndarray:
     """(C, 3 positions, 3) int: role index, axis index, hand (0 right, 1 left)."""
     return np.array(
-        [[[_ROLE[r], _AXIS[a], int(h == "left")] for r, a, h in zip(c.roles, c.axes, c.hands)] for c in candidates()],
+        [
+            [[ROLE_INDEX[r], _AXIS[a], int(h == "left")] for r, a, h in zip(c.roles, c.axes, c.hands)]
+            for c in candidates()
+        ],
         dtype=np.intp,
     )
 
 
 @lru_cache(maxsize=1)
-def _index() -> dict:
+def candidate_index() -> dict:
+    """Candidate key -> its position in :func:`candidates`."""
     return {c.key(): n for n, c in enumerate(candidates())}
 
 
@@ -277,7 +282,9 @@ def builtin_canonical_by_candidate() -> dict:
     return out
 
 
-def _rank_builtins(names, order=None, units=None, selection=None) -> list:
+def rank_builtins(names, order=None, units=None, selection=None) -> list:
+    """Built-in names sharing one function, best first: systems storing angles, then those whose selection,
+    argument order and units match the code's, then :data:`PRIORITY`, then by name."""
     systems = builtin_systems()
 
     def key(n):
@@ -301,7 +308,7 @@ def _rank_builtins(names, order=None, units=None, selection=None) -> list:
 def _entry(cand_index: int, sc: Scores, stored: dict, canonical: dict | None = None) -> dict:
     pos = sc.pos_of(cand_index)
     c = candidates()[cand_index]
-    t_index = _index()[c.transpose().key()]
+    t_index = candidate_index()[c.transpose().key()]
     e = {
         "formula": c.formula(),
         "turns": c.words(),
@@ -349,7 +356,7 @@ def _breaks_summary(rows: list) -> str:
 
 def probe_builder(build, cand: Candidate, tol: float) -> dict:
     """Where a builder departs from candidate ``cand`` (subsets of non-zero angles)."""
-    idx = _index()[cand.key()]
+    idx = candidate_index()[cand.key()]
     rows = []
     for roles, pyr in _probe_subsets():
         err = frobenius(build(pyr), candidate_matrices(pyr, idx)[0])
@@ -359,7 +366,7 @@ def probe_builder(build, cand: Candidate, tol: float) -> dict:
 
 def probe_decoder(decode, cand: Candidate, tol: float) -> dict:
     """Where a decoder departs from candidate ``cand``: rebuild error and which output angles are wrong."""
-    idx = _index()[cand.key()]
+    idx = candidate_index()[cand.key()]
     sysm = cand.system("probe")
     atol = max(1e-6, float(np.rad2deg(tol)) * 10)
     rows = []
@@ -383,7 +390,7 @@ def probe_decoder(decode, cand: Candidate, tol: float) -> dict:
     return {"candidate": cand.formula(), "summary": _breaks_summary(rows), "probes": rows}
 
 
-def _selection_of(cand: Candidate, R, decoded, tol: float):
+def selection_of(cand: Candidate, R, decoded, tol: float):
     """Which solution rule the decoder follows: (selection, fraction of non-lock samples it matches)."""
     atol = max(1e-6, float(np.rad2deg(tol)) * 10)
     rules = ["proper" if cand.proper else "tait_bryan", "whenet"]
@@ -399,7 +406,7 @@ def _selection_of(cand: Candidate, R, decoded, tol: float):
     return best
 
 
-def _result(
+def assemble_report(
     mode: str,
     sc: Scores,
     *,
@@ -414,7 +421,7 @@ def _result(
     selection=None,
     selection_fraction=None,
 ) -> dict:
-    """Assemble the common part of a builder/decoder/table report."""
+    """The common part of a builder/decoder/table report, assembled from the scores ``sc``."""
     stored = builtin_names_by_candidate()
     best_pos = int(sc.order[0])
     best_idx = int(sc.index[best_pos])
@@ -438,7 +445,7 @@ def _result(
             best="none", max_error=entry["max_error"], best_partial=entry, runners_up=_runners_up(sc, stored, best_pos)
         )
         return report
-    names = _rank_builtins(entry["builtins"], order=tuple(roles), units=units_word, selection=selection)
+    names = rank_builtins(entry["builtins"], order=tuple(roles), units=units_word, selection=selection)
     if names:
         base = builtin_systems()[names[0]]
         note = f"inferred from {source}: matches built-in {base.name}"
@@ -495,7 +502,8 @@ def report_json(report: dict) -> dict:
     return {k: v for k, v in report.items() if not k.startswith("_")}
 
 
-def _check_rotations(M, verb: str) -> None:
+def check_rotations(M, verb: str) -> None:
+    """Raise :class:`CallError` (``"{verb} <reason> on sample i"``) unless ``M`` is (N, 3, 3) rotations."""
     from ..check import rotation_reasons
 
     M = np.asarray(M)

@@ -10,13 +10,13 @@ from .core import (
     DATA_TOL,
     MIN_EXPLAINED,
     SEARCH_ROWS,
-    _result,
-    _selection_of,
+    assemble_report,
     builtin_names_by_candidate,
     candidate_locks,
     candidate_matrices,
     candidates,
     score,
+    selection_of,
 )
 
 
@@ -65,9 +65,9 @@ def infer_table(
         sc = score(err, tol, locks=locks, index=lead)
     sel = frac = None
     if sc.exact(int(sc.order[0])):  # labels are usually a decoder's output: which solution do they keep?
-        sel, frac = _selection_of(candidates()[int(sc.index[sc.order[0]])], R, pyr, tol)
+        sel, frac = selection_of(candidates()[int(sc.index[sc.order[0]])], R, pyr, tol)
         sel = sel if frac >= MIN_EXPLAINED else None
-    rep = _result(
+    rep = assemble_report(
         "table",
         sc,
         roles=roles,

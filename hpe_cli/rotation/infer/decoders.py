@@ -6,20 +6,20 @@ import numpy as np
 
 from ..distances import frobenius
 from ..systems import ROLES
-from .code import CallError, _prefer_vectorised, _to_numpy
+from .code import CallError, prefer_vectorised, to_numpy
 from .core import (
-    _ROLE,
     CODE_TOL,
     MIN_EXPLAINED,
-    _index,
-    _result,
-    _selection_of,
+    ROLE_INDEX,
+    assemble_report,
+    candidate_index,
     candidate_locks,
     candidate_matrices,
     candidates,
     probe_decoder,
     random_rotations,
     score,
+    selection_of,
 )
 
 
@@ -28,7 +28,7 @@ def as_decoder(func, roles=ROLES, units: str = "radians"):
 
     ``roles`` names the role of each returned angle, in the order returned.
     """
-    cols = [_ROLE[r] for r in roles]
+    cols = [ROLE_INDEX[r] for r in roles]
     conv = np.rad2deg if units == "radians" else (lambda a: a)
 
     def reorder(vals):
@@ -40,7 +40,7 @@ def as_decoder(func, roles=ROLES, units: str = "radians"):
         vals = np.empty((len(R), 3))
         for n, m in enumerate(R):
             try:
-                v = _to_numpy(func(m.copy()))
+                v = to_numpy(func(m.copy()))
             except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
                 raise CallError(
                     f"raised {type(exc).__name__} on matrix row {n}: {' '.join(str(exc).split())[:200]}"
@@ -52,7 +52,7 @@ def as_decoder(func, roles=ROLES, units: str = "radians"):
 
     def vectorised(R):
         try:
-            v = _to_numpy(func(R.copy()))
+            v = to_numpy(func(R.copy()))
         except Exception:  # noqa: BLE001 - the user's code may raise anything
             return None
         n = len(R)
@@ -63,7 +63,7 @@ def as_decoder(func, roles=ROLES, units: str = "radians"):
     def decode(R):
         return dispatch(np.asarray(R, dtype=np.float64).reshape(-1, 3, 3))
 
-    dispatch = _prefer_vectorised(vectorised, per_sample, atol=1e-7, equal_nan=True)
+    dispatch = prefer_vectorised(vectorised, per_sample, atol=1e-7, equal_nan=True)
     decode.state = dispatch.state
     return decode
 
@@ -97,10 +97,10 @@ def infer_decoder(
     best = candidates()[int(sc.index[sc.order[0]])]
     sel = frac = None
     if sc.exact(int(sc.order[0])):
-        sel, frac = _selection_of(best, R, d, tol)
+        sel, frac = selection_of(best, R, d, tol)
         if frac < MIN_EXPLAINED:
             sel = None
-    rep = _result(
+    rep = assemble_report(
         "decoder",
         sc,
         roles=roles,
@@ -121,7 +121,7 @@ def infer_decoder(
                 "fraction": frac,
                 "note": "the decoder's choice between the two solutions follows no known rule",
             }
-        pos = sc.pos_of(_index()[best.key()])
+        pos = sc.pos_of(candidate_index()[best.key()])
         exc = np.flatnonzero(sc.excused[pos])
         if exc.size:
             rep["near_lock"] = {

@@ -8,11 +8,11 @@ from ..distances import geodesic_deg
 from ..systems import ROLES, builtin_systems
 from .core import (
     SEARCH_ROWS,
-    _rank_builtins,
     builtin_canonical_by_candidate,
     builtin_names_by_candidate,
     candidate_matrices,
     candidates,
+    rank_builtins,
 )
 
 
@@ -108,77 +108,16 @@ def infer_landmarks(
         raise ValueError("no row has finite angles and a fitted rotation")
     if fit_offset is None:
         fit_offset = n >= MIN_FACES_FOR_OFFSET
-    sub = np.arange(n) if n <= SEARCH_ROWS else np.sort(np.random.default_rng(seed).choice(n, SEARCH_ROWS, False))
-    res, _ = _landmark_residuals(candidate_matrices(pyr[sub]), R_obs[sub], fit_offset)
-    canon = builtin_canonical_by_candidate()
-    stored = builtin_names_by_candidate()
-    lead = np.unique(np.concatenate([np.argsort(_rms(res))[:10], list(canon), list(stored)]))
-    res, Q = _landmark_residuals(candidate_matrices(pyr, lead), R_obs, fit_offset)
-    rms, med = _rms(res), np.median(res, axis=1)
-    order = np.argsort(rms, kind="stable")
-
-    def entry(k):
-        ci = int(lead[k])
-        c = candidates()[ci]
-        off = float(np.rad2deg(2 * np.arctan2(np.linalg.norm(Q[k] - np.eye(3)), np.linalg.norm(Q[k] + np.eye(3)))))
-        return {
-            "formula": c.formula(),
-            "turns": c.words(),
-            "builtins": _rank_builtins(canon.get(ci, []), order=tuple(roles)),
-            "stored_matrix_of": stored.get(ci, []),
-            "rms_residual_deg": float(rms[k]),
-            "median_residual_deg": float(med[k]),
-            "max_residual_deg": float(res[k].max()),
-            "template_offset_deg": off,
-        }
-
-    ranking = [entry(k) for k in order[:8]]
-    best_k = int(order[0])
-    second = float(rms[order[1]]) if len(order) > 1 else np.inf
-    ratio = second / max(float(rms[best_k]), 1e-12)
-    fit = "poor" if rms[best_k] > POOR_RESIDUAL_DEG else ("clear" if ratio >= CLEAR_SEPARATION else "ambiguous")
-    warning = None
-    if fit_rmse is not None and fit_rmse_limit is not None:
-        fr = float(np.nanmedian(np.asarray(fit_rmse, dtype=np.float64)[rows])) if n else np.nan
-        if not fr <= fit_rmse_limit:
-            fit = "poor"
-            warning = (
-                f"the template fits the landmarks poorly (median RMSE {fr:.2f}, expected at most "
-                f"{fit_rmse_limit:g}): check the landmark frame"
-            )
+    sc = _Scores(pyr, R_obs, fit_offset, seed)
+    ranking = [sc.entry(k, roles) for k in sc.order[:8]]
+    best_k = int(sc.order[0])
+    second = float(sc.rms[sc.order[1]]) if len(sc.order) > 1 else np.inf
+    ratio = second / max(float(sc.rms[best_k]), 1e-12)
+    fit = "poor" if sc.rms[best_k] > POOR_RESIDUAL_DEG else ("clear" if ratio >= CLEAR_SEPARATION else "ambiguous")
+    warning = _template_warning(fit_rmse, fit_rmse_limit, rows, n)
+    if warning:
+        fit = "poor"
     best = ranking[0]["builtins"][0] if ranking[0]["builtins"] else "custom"
-    # every built-in reading of the labels is one of the candidates already scored
-    readings: dict = {}
-    for ci, names in canon.items():
-        readings.setdefault(ci, []).extend(names)
-    for ci, names in stored.items():
-        readings.setdefault(ci, []).extend(
-            f"{n} (stored matrix read as active)" for n in names if n not in canon.get(ci, [])
-        )
-    pos = {int(ci): k for k, ci in enumerate(lead)}
-    hyps = sorted(
-        (
-            {
-                "readings": r,
-                "formula": candidates()[ci].formula(),
-                "rms_residual_deg": float(rms[pos[ci]]),
-                "median_residual_deg": float(med[pos[ci]]),
-                "max_residual_deg": float(res[pos[ci]].max()),
-            }
-            for ci, r in readings.items()
-        ),
-        key=lambda h: h["rms_residual_deg"],
-    )
-    ids = list(range(len(ok))) if row_ids is None else list(row_ids)
-    per_face = [
-        {
-            "row": int(i),
-            "id": ids[i],
-            "residual_deg": float(v),
-            **({"fit_rmse": float(fit_rmse[i])} if fit_rmse is not None else {}),
-        }
-        for i, v in zip(rows, res[best_k])
-    ]
     rep = {
         "mode": "landmarks",
         "source": source,
@@ -190,17 +129,17 @@ def infer_landmarks(
         "fit": fit,
         "best": best,
         "separation": ratio,
-        "rms_residual_deg": float(rms[best_k]),
-        "median_residual_deg": float(med[best_k]),
+        "rms_residual_deg": float(sc.rms[best_k]),
+        "median_residual_deg": float(sc.med[best_k]),
         "matched": ranking[0],
         "ranking": ranking,
-        "hypotheses": hyps,
-        "per_face": per_face,
+        "hypotheses": sc.hypotheses(),
+        "per_face": _per_face(rows, len(ok), row_ids, sc.res[best_k], fit_rmse),
         "rows_skipped": int((~ok).sum()),
     }
     if warning:
         rep["warning"] = warning
-    c = candidates()[int(lead[best_k])]
+    c = candidates()[int(sc.lead[best_k])]
     system = (
         builtin_systems()[best]
         if best != "custom"
@@ -210,3 +149,87 @@ def infer_landmarks(
     rep["system"] = system.to_dict()
     rep["_system"] = system
     return rep
+
+
+class _Scores:
+    """The residuals of the candidates worth scoring on every face: the 10 best on a subsample, and every
+    built-in's reading of the labels (as the canonical map, and its stored matrix read as active)."""
+
+    def __init__(self, pyr, R_obs, fit_offset: bool, seed: int):
+        n = len(pyr)
+        sub = np.arange(n) if n <= SEARCH_ROWS else np.sort(np.random.default_rng(seed).choice(n, SEARCH_ROWS, False))
+        res, _ = _landmark_residuals(candidate_matrices(pyr[sub]), R_obs[sub], fit_offset)
+        self.canon = builtin_canonical_by_candidate()
+        self.stored = builtin_names_by_candidate()
+        self.lead = np.unique(np.concatenate([np.argsort(_rms(res))[:10], list(self.canon), list(self.stored)]))
+        self.res, self.Q = _landmark_residuals(candidate_matrices(pyr, self.lead), R_obs, fit_offset)
+        self.rms, self.med = _rms(self.res), np.median(self.res, axis=1)
+        self.order = np.argsort(self.rms, kind="stable")
+
+    def entry(self, k, roles) -> dict:
+        """The ranking entry of the ``k``-th scored candidate."""
+        ci = int(self.lead[k])
+        c = candidates()[ci]
+        Q = self.Q[k]
+        off = float(np.rad2deg(2 * np.arctan2(np.linalg.norm(Q - np.eye(3)), np.linalg.norm(Q + np.eye(3)))))
+        return {
+            "formula": c.formula(),
+            "turns": c.words(),
+            "builtins": rank_builtins(self.canon.get(ci, []), order=tuple(roles)),
+            "stored_matrix_of": self.stored.get(ci, []),
+            "rms_residual_deg": float(self.rms[k]),
+            "median_residual_deg": float(self.med[k]),
+            "max_residual_deg": float(self.res[k].max()),
+            "template_offset_deg": off,
+        }
+
+    def hypotheses(self) -> list:
+        """Every built-in reading of the labels (one of the candidates already scored), best first."""
+        readings: dict = {}
+        for ci, names in self.canon.items():
+            readings.setdefault(ci, []).extend(names)
+        for ci, names in self.stored.items():
+            readings.setdefault(ci, []).extend(
+                f"{n} (stored matrix read as active)" for n in names if n not in self.canon.get(ci, [])
+            )
+        pos = {int(ci): k for k, ci in enumerate(self.lead)}
+        return sorted(
+            (
+                {
+                    "readings": r,
+                    "formula": candidates()[ci].formula(),
+                    "rms_residual_deg": float(self.rms[pos[ci]]),
+                    "median_residual_deg": float(self.med[pos[ci]]),
+                    "max_residual_deg": float(self.res[pos[ci]].max()),
+                }
+                for ci, r in readings.items()
+            ),
+            key=lambda h: h["rms_residual_deg"],
+        )
+
+
+def _template_warning(fit_rmse, fit_rmse_limit, rows, n) -> str | None:
+    """Why the verdict is ``poor`` whatever the residuals: the template fits the landmarks poorly (else None)."""
+    if fit_rmse is None or fit_rmse_limit is None:
+        return None
+    fr = float(np.nanmedian(np.asarray(fit_rmse, dtype=np.float64)[rows])) if n else np.nan
+    if fr <= fit_rmse_limit:
+        return None
+    return (
+        f"the template fits the landmarks poorly (median RMSE {fr:.2f}, expected at most "
+        f"{fit_rmse_limit:g}): check the landmark frame"
+    )
+
+
+def _per_face(rows, n_rows, row_ids, residuals, fit_rmse) -> list:
+    """The winner's residual per face (``rows``: the input rows scored, of ``n_rows``)."""
+    ids = list(range(n_rows)) if row_ids is None else list(row_ids)
+    return [
+        {
+            "row": int(i),
+            "id": ids[i],
+            "residual_deg": float(v),
+            **({"fit_rmse": float(fit_rmse[i])} if fit_rmse is not None else {}),
+        }
+        for i, v in zip(rows, residuals)
+    ]

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..distances import frobenius
-from ..systems import builtin_systems
-from .code import CallError, _prefer_vectorised, _to_numpy
+from ..systems import builtin_systems, system_from_dict
+from .code import CallError, prefer_vectorised, to_numpy
 from .core import CODE_TOL, random_rotations
 
 # --------------------------------------------------------------------------- decoders returning stored values
@@ -22,10 +22,10 @@ def as_value_decoder(func):
     """Wrap ``func`` (3x3 matrix -> k numbers, per sample or batched) as ``(N, 3, 3) -> (N, k)``."""
 
     def per_sample(R):
-        return np.stack([_to_numpy(func(m)).reshape(-1) for m in R])
+        return np.stack([to_numpy(func(m)).reshape(-1) for m in R])
 
     def vectorised(R):
-        out = _to_numpy(func(R))
+        out = to_numpy(func(R))
         if out.ndim != 2 or out.shape[0] != len(R):
             raise ValueError("not batched")
         return out
@@ -33,7 +33,7 @@ def as_value_decoder(func):
     def decode(R):
         R = np.asarray(R, dtype=np.float64)
         try:
-            return _prefer_vectorised(vectorised, per_sample, 1e-9, True)(R)
+            return prefer_vectorised(vectorised, per_sample, 1e-9, True)(R)
         except CallError:
             raise
         except Exception:  # noqa: BLE001 - the user's code may raise anything
@@ -86,17 +86,7 @@ def infer_storage_decoder(
     R = random_rotations(n, seed)
     out = np.asarray(decode(R), dtype=np.float64)
     k = out.shape[1] if out.ndim == 2 else 0
-    tried = []
-    for kind, arg, width in STORAGE_FORMS:
-        if width != k:
-            continue
-        with np.errstate(invalid="ignore", divide="ignore"):
-            M = _form_matrices(kind, arg, out)
-        for transposed in (False, True):
-            ref = np.swapaxes(R, -1, -2) if transposed else R
-            err = frobenius(M, ref)
-            err = np.where(np.isfinite(err), err, np.inf)
-            tried.append((float(np.max(err)), float(np.median(err)), int((err <= tol).sum()), kind, arg, transposed))
+    tried = _try_forms(R, out, k, tol)
     report = {
         "mode": "storage_decoder",
         "source": source,
@@ -121,22 +111,13 @@ def infer_storage_decoder(
         return report
     tried.sort(key=lambda t: (t[0], -t[2]))
     best = tried[0]
-    entry = lambda t: {
-        "formula": _form_words(t[3], t[4], t[5]),
-        "max_error": t[0],
-        "median_error": t[1],
-        "explained": t[2],
-        "builtins": [],
-        "turns": f"storage_kind {t[3]}",
-        "transpose_of": [],
-    }
     if best[0] > tol:
         report.update(
             fit="none",
             best="none",
             max_error=best[0],
-            best_partial=entry(best),
-            runners_up=[entry(t) for t in tried[1:4]],
+            best_partial=_form_entry(best),
+            runners_up=[_form_entry(t) for t in tried[1:4]],
         )
         return report
     kind, arg, transposed = best[3], best[4], best[5]
@@ -147,6 +128,61 @@ def infer_storage_decoder(
         and (kind != "quaternion" or s.quaternion_order == arg)
         and (kind != "6d" or tuple(s.sixd_columns) == arg)
     ]
+    system = _form_system(kind, arg, transposed, name=name, source=source, frame=frame)
+    e = _form_entry(best)
+    e["builtins"] = same
+    report.update(
+        fit="exact",
+        best=system.name,
+        max_error=best[0],
+        matched=e,
+        definition=system.describe(),
+        system=system.to_dict(),
+        runners_up=[_form_entry(t) for t in tried[1:4]],
+        reproduced_by=same,
+        storage_form={"kind": kind, "order": arg, "transposed": transposed},
+    )
+    if same:
+        report["also_matches"] = {
+            "names": same,
+            "note": "built-ins storing the same form (their frame and storage may differ: code cannot reveal them)",
+        }
+    report["_system"] = system
+    return report
+
+
+def _try_forms(R, out, k: int, tol: float) -> list:
+    """Every storage form of width ``k``, of the matrix and of its transpose, against the decoder's ``out``:
+    ``(max error, median error, samples within tol, kind, order or columns, transposed)`` each."""
+    tried = []
+    for kind, arg, width in STORAGE_FORMS:
+        if width != k:
+            continue
+        with np.errstate(invalid="ignore", divide="ignore"):
+            M = _form_matrices(kind, arg, out)
+        for transposed in (False, True):
+            ref = np.swapaxes(R, -1, -2) if transposed else R
+            err = frobenius(M, ref)
+            err = np.where(np.isfinite(err), err, np.inf)
+            tried.append((float(np.max(err)), float(np.median(err)), int((err <= tol).sum()), kind, arg, transposed))
+    return tried
+
+
+def _form_entry(t) -> dict:
+    """A report entry of one tried form (a tuple of :func:`_try_forms`)."""
+    return {
+        "formula": _form_words(t[3], t[4], t[5]),
+        "max_error": t[0],
+        "median_error": t[1],
+        "explained": t[2],
+        "builtins": [],
+        "turns": f"storage_kind {t[3]}",
+        "transpose_of": [],
+    }
+
+
+def _form_system(kind, arg, transposed, *, name, source, frame):
+    """The system of the matched form (identity frame unless ``frame``: code cannot reveal its frame)."""
     d = {
         "name": name or "custom",
         "description": f"inferred from {source}: {_form_words(kind, arg, transposed)}",
@@ -160,26 +196,4 @@ def infer_storage_decoder(
         d["quaternion_order"] = arg
     if kind == "6d":
         d["sixd_columns"] = list(arg)
-    from ..systems import system_from_dict
-
-    system = system_from_dict(d, source)
-    e = entry(best)
-    e["builtins"] = same
-    report.update(
-        fit="exact",
-        best=system.name,
-        max_error=best[0],
-        matched=e,
-        definition=system.describe(),
-        system=system.to_dict(),
-        runners_up=[entry(t) for t in tried[1:4]],
-        reproduced_by=same,
-        storage_form={"kind": kind, "order": arg, "transposed": transposed},
-    )
-    if same:
-        report["also_matches"] = {
-            "names": same,
-            "note": "built-ins storing the same form (their frame and storage may differ: code cannot reveal them)",
-        }
-    report["_system"] = system
-    return report
+    return system_from_dict(d, source)

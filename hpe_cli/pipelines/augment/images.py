@@ -3,6 +3,9 @@
 
 Images are written into a staged folder (:func:`hpe_cli.io.transaction.staged_dir`) that the run commits as
 a whole with the table: a failure, also halfway through the commit, leaves none of them in place.
+
+OpenCV and ``scipy.io`` are imported where a picture or a ``.mat`` file is handled: a table-only run never needs
+them, and loading them at import took 0.3 to 1.5 s of its start-up (measured on the 2-core build machine).
 """
 
 from __future__ import annotations
@@ -11,9 +14,12 @@ from pathlib import Path, PurePath
 
 import numpy as np
 
-from ..errors import HpeError
-from ..io.images import IMAGE_SUFFIXES, ImageResolver, image_size, leaves_root
-from ..io.os_errors import write_bytes
+from ...errors import HpeError
+from ...geometry.augment import move_point, move_td
+from ...geometry.image_ops import cv_flags
+from ...io.images import IMAGE_SUFFIXES, ImageResolver, image_size, leaves_root
+from ...io.os_errors import os_reason, write_bytes
+from .options import AugmentOptions
 
 
 class RowImages:
@@ -62,14 +68,19 @@ def output_name(name: str, ref) -> PurePath:
 
 
 class ImageJob:
-    """Warp each picture once into the staged folder; write ``.mat`` files back when the input is a ``.mat`` folder."""
+    """Warp each picture once into the staged folder; write ``.mat`` files back when the input is a ``.mat`` folder.
 
-    def __init__(
-        self, stage: Path, out_dir: Path, interpolation, border, jpeg_quality, overwrite, mat_dir=None, perm_of=None
-    ):
-        self.stage, self.dst = Path(stage), Path(out_dir)
-        self.interp, self.border, self.quality, self.overwrite = interpolation, border, jpeg_quality, overwrite
-        self.mat_dir, self.perm_of = mat_dir, perm_of
+    ``stage``: the staged ``--out-images`` folder; ``opts``: the run's :class:`~.options.AugmentOptions`
+    (``out_images``, ``interpolation``, ``border``, ``jpeg_quality``, ``overwrite``); ``mat_dir``: the input
+    ``.mat`` folder (or file) whose ``.mat`` files are written back, read in ``mat_system`` (their Pose_Para's);
+    ``perm_of(n)``: the left/right permutation of ``n`` landmarks, or None.
+    """
+
+    def __init__(self, stage: Path, opts: AugmentOptions, *, mat_dir=None, mat_system=None, perm_of=None):
+        self.stage, self.dst = Path(stage), Path(opts.out_images)
+        self.interp, self.border = opts.interpolation, opts.border
+        self.quality, self.overwrite = opts.jpeg_quality, opts.overwrite
+        self.mat_dir, self.mat_system, self.perm_of = mat_dir, mat_system, perm_of
         self.done: dict = {}  # output name -> (picture key, where of the first row)
         self.mats = 0
 
@@ -87,12 +98,12 @@ class ImageJob:
                 todo.append(row)
             elif tick is not None:
                 tick(1)
-        cv_flags = None
+        read_flags = None
         if todo:
-            import cv2
+            import cv2  # lazy: see the module docstring
 
-            cv_flags = cv2.IMREAD_UNCHANGED  # keep grey, alpha and 16-bit images as they are
-        for k, img, why in ImageResolver.read([r[2] for r in todo], flags=cv_flags):
+            read_flags = cv2.IMREAD_UNCHANGED  # keep grey, alpha and 16-bit images as they are
+        for k, img, why in ImageResolver.read([r[2] for r in todo], flags=read_flags):
             self._render(todo[k], img, why)
             if tick is not None:
                 tick(1)
@@ -128,7 +139,7 @@ class ImageJob:
 
     def _render(self, row, img, why):
         """Warp one picture into the staged folder."""
-        import cv2
+        import cv2  # lazy: see the module docstring
 
         name, where, ref, P, size_in, size_out, _, _ = row
         if img is None:
@@ -150,10 +161,7 @@ class ImageJob:
     def _write_mat(self, rel, mat, P, size_in, size_out, mirror, where):
         """``<stem>.mat`` beside the output image: Pose_Para (new angles, tdx, tdy), pt2d, pt3d_68 and roi moved;
         every other variable copied."""
-        import scipy.io
-
-        from ..geometry.augment import move_td
-        from ..rotation import get_system
+        import scipy.io  # lazy: see the module docstring
 
         src_mat, A2, roi_fn, zoom = mat
         try:
@@ -161,7 +169,7 @@ class ImageJob:
         except Exception as exc:  # noqa: BLE001 - scipy raises many types for a damaged file
             raise HpeError(f"{src_mat}: not a readable MATLAB .mat file ({' '.join(str(exc).split())[:120]})") from None
         m = {k: v for k, v in m.items() if not k.startswith("__")}
-        s = get_system("300w_lp")
+        s = self.mat_system
         pose = np.asarray(m["Pose_Para"], dtype=np.float64).reshape(-1).copy()
         pose[:3] = np.deg2rad(s.to_angles(s.from_canonical(A2[None]))[0][0])
         tdx, tdy = move_td(pose[3:4], pose[4:5], P, size_in[1], size_out[1], True)
@@ -184,8 +192,6 @@ class ImageJob:
         try:
             scipy.io.savemat(out, m, do_compression=False)
         except OSError as exc:  # a full disk names this file, not the table
-            from ..io.os_errors import os_reason
-
             raise HpeError(f"{self.dst / rel.with_suffix('.mat')}: cannot write: {os_reason(exc)}") from None
         self.mats += 1
 
@@ -197,8 +203,6 @@ class ImageJob:
 
     def _move_cols(self, pts, P, mirror, invisible=None):
         """(2, L) points moved by P, re-indexed after a mirror; ``invisible`` marks points (x = -1) kept as is."""
-        from ..geometry.augment import move_point
-
         hidden = (
             (pts[0] == invisible) | (pts[1] == invisible) if invisible is not None else np.zeros(pts.shape[1], bool)
         )
@@ -217,9 +221,7 @@ def _row_part(where: str) -> str:
 
 def _warp(img, P, size_out, interpolation, border):
     """The picture under the pixel affine ``P`` (2, 3), ``size_out = (W, H)``; flips and integer crops exactly."""
-    import cv2
-
-    from ..geometry.image_ops import _cv_flags
+    import cv2  # lazy: see the module docstring
 
     W, H = (int(x) for x in size_out)
     h, w = img.shape[:2]
@@ -229,7 +231,7 @@ def _warp(img, P, size_out, interpolation, border):
         if t[0] == (0.0 if sx > 0 else w - 1.0) and t[1] == (0.0 if sy > 0 else h - 1.0):
             code = {(-1.0, 1.0): 1, (1.0, -1.0): 0, (-1.0, -1.0): -1}.get((sx, sy))
             return img.copy() if code is None else cv2.flip(img, code)
-    interp, borders = _cv_flags()
+    interp, borders = cv_flags()
     if A[0, 1] == 0 and A[1, 0] == 0 and A[0, 0] == A[1, 1] > 0 and np.allclose(t, 0.5 * A[0, 0] - 0.5):
         # a resize: cv2.resize has the same pixel-centre mapping; area averaging when shrinking
         flag = cv2.INTER_AREA if A[0, 0] < 1 and interpolation == "linear" else interp[interpolation]

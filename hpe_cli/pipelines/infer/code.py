@@ -16,9 +16,18 @@ leaves the group on purpose, ``setsid``, is beyond this.)
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
+import multiprocessing as mp
+import os
+import re
 import signal
+import sys
+import warnings
+from pathlib import Path
 
-from ..errors import HpeError
+from ...errors import HpeError
+from ...rotation import infer as inf
 
 DEFAULT_TIMEOUT = 60.0
 #: exit status of the child when the code closed the pipe it answers on (its file descriptors)
@@ -27,16 +36,10 @@ _NO_CHANNEL = 86
 
 def _child(conn, spec, builder, roles, units, packed, samples, kw):
     """Runs in the child: load, search, send ``("ok", report, toml, name)`` or ``("error", message)``."""
-    import os
-    import sys
-    import warnings
-
     if not os.environ.get("HPE_DEBUG"):
         warnings.simplefilter("ignore")  # as in the parent: no library warnings with internal paths
     if hasattr(os, "setpgid"):
         os.setpgid(0, 0)  # a process group of our own: the parent ends it with everything the code starts
-    from ..rotation import infer as inf
-
     conn.send(("ready",))  # hpe itself is loaded: the time limit starts now
     try:
         func = load_callable(spec, kw.pop("import_path", None))
@@ -104,8 +107,6 @@ def run_code_inference(
         The code could not be loaded, raised, exited, crashed, or ran longer
         than ``timeout`` seconds.
     """
-    import multiprocessing as mp
-
     ctx = mp.get_context("spawn")
     recv, send = ctx.Pipe(duplex=False)
     proc = ctx.Process(
@@ -160,13 +161,19 @@ def run_code_inference(
         _end_group(proc, ready)
 
 
+def code_file(spec: str):
+    """The ``.py`` file of ``FILE.py:FUNC``, or None for ``module.path:FUNC``."""
+    target = spec.rpartition(":")[0]
+    if target and (target.endswith(".py") or Path(target).is_file()):
+        return Path(target)
+    return None
+
+
 def _end_group(proc, grouped: bool) -> None:
     """Kill the child's process group (the child and everything it started), then reap the child.
 
     ``grouped``: the child said "ready", so it had made its own group (its id is the child's pid).
     """
-    import os
-
     if grouped and proc.pid is not None and hasattr(os, "killpg"):
         try:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -185,8 +192,6 @@ def module_name_of(path):
     (3DDFA_V2's ``utils/pose.py`` does ``from .functions import ...`` and
     ``utils/`` has no ``__init__.py``).
     """
-    import re
-
     path = path.resolve()
     parts, folder = [], path.parent
     while (folder / "__init__.py").is_file() and folder.parent != folder:
@@ -212,13 +217,6 @@ def load_callable(spec: str, path=None):
     relative imports work); ``path`` (folders) is put on ``sys.path`` first,
     for ``package.module:func`` specs that live outside the installed packages.
     """
-    import importlib
-    import importlib.util
-    import sys
-    from pathlib import Path
-
-    from ..errors import HpeError
-
     target, sep, attr = spec.rpartition(":")
     if not sep or not target or not attr:
         raise HpeError(f"{spec}: expected FILE.py:FUNC or module.path:FUNC")
