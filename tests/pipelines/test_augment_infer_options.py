@@ -10,11 +10,10 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
 import hpe_cli as hpe
-from hpe_cli.cli.main import cli
+from conftest import hpe as hpe_cmd
 from hpe_cli.errors import HpeError, UsageError
 from hpe_cli.pipelines.augment import AugmentOptions, describe_op
 from hpe_cli.pipelines.infer import InferOptions
@@ -23,9 +22,7 @@ MAT_COLS = [f"r{i}{j}" for i in range(3) for j in range(3)]
 
 
 def run(*args):
-    res = CliRunner().invoke(cli, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
-    return res
+    return hpe_cmd(*args, ok=True)
 
 
 @pytest.mark.parametrize(
