@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .panoptic_plan import SKIPPED, Config, Plan
-from .relabel import summary_tail
+from .core import summary_tail
+from .plan import SKIPPED, Config, Plan
 
 
 class RmseStats:
@@ -60,7 +60,7 @@ def unit_stats(res: dict, cfg: Config) -> dict:
     """The summary counts of one :func:`process_chunk` result, as plain JSON."""
     from collections import Counter
 
-    from ..rotation import get_system
+    from ...rotation import get_system
 
     t = res["table"]
     out_of_range = gimbal = 0

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..datasets import panoptic as pan
-from ..errors import HpeError
-from ..geometry.reference import panoptic_pairs
-from .relabel import DEFAULT_MAX_RMSE, fit_faces, relabel_views, view_label_columns
+from ...datasets import panoptic as pan
+from ...errors import HpeError
+from ...geometry.reference import panoptic_pairs
+from .core import DEFAULT_MAX_RMSE, fit_faces, relabel_views, view_label_columns
 
 CHUNK_FRAMES = 64
 REJECT_COLS = ["sequence", "frame", "person_id", "camera", "reason", "detail", "fit_rmse", "n_pairs", "scale"]
@@ -201,7 +201,7 @@ def process_chunk(
         (list of face-level reasons), ``legacy_considered`` (int).
     """
 
-    from ..io.layout import numpy_to_arrow, string_array
+    from ...io.layout import numpy_to_arrow, string_array
 
     data = pan.read_face_frames(paths)
     n = len(data["frame"])
@@ -260,7 +260,7 @@ def process_chunk(
         "frame": frames,
         "camera": string_array(cams.names).take(numpy_to_arrow(co)),
         "person_id": data["person_id"][fo],
-        "image": _image_paths(cams, co, frames),
+        "image": image_paths(cams, co, frames),
     }
     table.update(view_label_columns(v, fit, fo, cfg.legacy))
     table["image_width"] = cams.width[co]
@@ -342,14 +342,14 @@ def _add_skipped(res: dict, skipped: dict, cams: pan.Cameras, sequence: str, eve
     res["every"] = int(every)
 
 
-def _image_paths(cams: pan.Cameras, ci, frames):
+def image_paths(cams: pan.Cameras, ci, frames):
     """``hdImgs/<cam>/<cam>_<frame>.jpg`` per row (:func:`hpe_cli.datasets.panoptic.image_path`), joined in
     Arrow from the cameras' prefixes and the distinct frames' names (no Python step per row, and no
     ``pa.array``, which imports pandas: 0.3 s in every worker)."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    from ..io.layout import numpy_to_arrow, string_array
+    from ...io.layout import numpy_to_arrow, string_array
 
     ci = np.asarray(ci, dtype=np.int64).reshape(-1)
     tail = len("00000000.jpg")

@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.helmet import helmet_boxes
-from ..geometry.projection import project_points
-from ..geometry.reference import confidence_min, min_pairs, reference_head
-from ..geometry.similarity import fit_similarity
+from ...geometry.helmet import helmet_boxes
+from ...geometry.projection import project_points
+from ...geometry.reference import confidence_min, min_pairs, reference_head
+from ...geometry.similarity import fit_similarity
 
 #: camera frame (OpenCV: x right, y down, z forward) -> canonical 300W-LP frame (y up, z to the camera)
 E = np.diag([1.0, -1.0, -1.0])
@@ -233,7 +233,7 @@ def relabel_views(
         ``bbox`` (V, 4); ``legacy_pyr`` (V, 3) (legacy only, NaN where
         dropped); ``lm2d`` (V, L, 2) when ``landmarks`` is given.
     """
-    from ..rotation import canonical_to_labels, get_system
+    from ...rotation import canonical_to_labels, get_system
 
     face = np.asarray(face, dtype=np.intp)
     Rh = fit["R"][face]
@@ -258,8 +258,8 @@ def relabel_views(
     A = label_matrices(Rh, cam["R"])
     out = {"bbox": box["bbox"], "A": A}
     if frame == "crop":
-        from ..geometry.line_of_sight import camera_to_crop_labels
-        from ..geometry.reference import helmet_preset
+        from ...geometry.line_of_sight import camera_to_crop_labels
+        from ...geometry.reference import helmet_preset
 
         off = np.asarray(helmet_preset(preset).offset, dtype=np.float64)
         world = fit["scale"][face, None] * (Rh @ off) + fit["t"][face]
@@ -314,7 +314,7 @@ def view_label_columns(views: dict, fit: dict, fit_index, legacy: bool) -> dict:
     legacy angles when ``legacy``, and ``lm{i}_x, lm{i}_y`` when ``views``
     holds projected landmarks.
     """
-    from ..io import BBOX_COLS, conversion_columns, landmark_cols
+    from ...io import BBOX_COLS, conversion_columns, landmark_cols
 
     ok = views["ok"]
     bbox = views["bbox"][ok]
