@@ -203,7 +203,9 @@ def write_outputs(plans, output, opts: RelabelPanopticOptions, *, bar=None, per_
     try:
         with ExitStack() as stack:
             # the pool first: its workers start (and import what a unit needs) while the writers are set up
-            pool = stack.enter_context(borrow(pool) if pool is not None else worker_pool(opts.workers, opts.scheduler, opts.resume))
+            pool = stack.enter_context(
+                borrow(pool) if pool is not None else worker_pool(opts.workers, opts.scheduler, opts.resume)
+            )
             meta = relabel_metadata(plans, cfg)
             if opts.fmt == "table":
                 out = stack.enter_context(TableWriter(output, opts.overwrite, meta))
