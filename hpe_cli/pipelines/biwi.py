@@ -42,6 +42,8 @@ class BiwiOptions:
 
     def __post_init__(self):
         object.__setattr__(self, "system", get_system(self.system))
+        # numbers as the command line gives them, so the metadata is the same bytes from the API
+        object.__setattr__(self, "head_size", float(self.head_size))
         if self.camera not in CAMERAS:
             raise ValueError(f"expected camera {' or '.join(CAMERAS)}, got {self.camera!r}")
         if self.protocol not in PROTOCOLS:

@@ -80,8 +80,10 @@ class RelabelPanopticOptions:
         if self.frames is None or isinstance(self.frames, str):
             object.__setattr__(self, "frames", parse_frames(self.frames))
         object.__setattr__(self, "frames", tuple(self.frames))
-        if self.max_rmse is None:
-            object.__setattr__(self, "max_rmse", DEFAULT_MAX_RMSE)
+        # numbers as the command line gives them (floats), so the metadata is the same bytes from the API
+        object.__setattr__(self, "max_rmse", DEFAULT_MAX_RMSE if self.max_rmse is None else float(self.max_rmse))
+        if self.min_change is not None:
+            object.__setattr__(self, "min_change", float(self.min_change))
         _check_choice("preset", self.preset, ("whenet", "directmhp"))
         _check_choice("frame", self.frame, ("camera", "crop"))
         _check_at_least_one("every", self.every)
@@ -131,8 +133,9 @@ class RelabelAgoraOptions:
 
     def __post_init__(self):
         object.__setattr__(self, "system", _label_system(self.fmt, self.system, "DirectMHP/WHENet"))
-        if self.max_rmse is None:
-            object.__setattr__(self, "max_rmse", AGORA_MAX_RMSE)
+        object.__setattr__(self, "max_rmse", AGORA_MAX_RMSE if self.max_rmse is None else float(self.max_rmse))
+        object.__setattr__(self, "max_occlusion", float(self.max_occlusion))
+        object.__setattr__(self, "image_size", tuple(int(v) for v in self.image_size))
         _check_choice("preset", self.preset, ("whenet", "directmhp"))
         _check_choice("frame", self.frame, ("camera", "crop"))
         if len(self.image_size) != 2 or min(self.image_size) <= 0:
