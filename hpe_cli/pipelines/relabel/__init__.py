@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from .agora import run_relabel_agora
 from .options import FORMATS, FormatSystemError, RelabelAgoraOptions, RelabelPanopticOptions
-from .panoptic import PanopticRun, run_relabel_panoptic, worker_pool
+from .panoptic import PanopticRun, run_relabel_panoptic
 
 __all__ = [
     "FORMATS",
@@ -26,5 +26,4 @@ __all__ = [
     "RelabelPanopticOptions",
     "run_relabel_agora",
     "run_relabel_panoptic",
-    "worker_pool",
 ]
