@@ -6,7 +6,7 @@ Replicates the synthetic fixture (``tests/data/agora/validation_0_withjv.pkl``,
 large dataframe (default 1000 copies: 3000 images, 14000 people), pickles it
 to a temporary folder, then in one process times:
 
-1. the whole job, :func:`hpe_cli.pipelines.agora.write_outputs` (unpickle,
+1. the whole job, :func:`hpe_cli.pipelines.relabel.agora.write_outputs` (unpickle,
    flatten, vectorised fit/label/box/landmarks, Parquet), and its two parts;
 2. a per-person loop written the way DirectMHP's ``auto_labels_generating``
    works: one similarity fit, one helmet projection, one box rule and one
@@ -87,7 +87,8 @@ def main(argv=None) -> None:
     from hpe_cli.datasets.agora import read_agora
     from hpe_cli.geometry.helmet import helmet_points
     from hpe_cli.geometry.reference import agora_pairs, reference_head
-    from hpe_cli.pipelines import agora as job
+    from hpe_cli.pipelines.relabel import agora as job
+    from hpe_cli.pipelines.relabel.options import RelabelAgoraOptions
 
     base = pd.read_pickle(FIXTURE)
     big = pd.concat([base] * a.copies, ignore_index=True)
@@ -95,10 +96,11 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         pkl = Path(tmp) / "bench_withjv.pkl"
         big.to_pickle(pkl, protocol=4)
-        cfg = job.Config(system="300w_lp")
+        opts = RelabelAgoraOptions(system="300w_lp")
+        cfg = opts.config()
 
         t0 = time.perf_counter()
-        stats = job.write_outputs([pkl], cfg, Path(tmp) / "out.parquet")
+        stats = job.write_outputs([pkl], Path(tmp) / "out.parquet", opts)
         t_job = time.perf_counter() - t0
 
         t0 = time.perf_counter()

@@ -44,7 +44,8 @@ from pathlib import Path
 sys.path.insert(0, {root!r})
 mode, seq, out, fmt, lm = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5] == "1"
 import numpy as np, pyarrow, pyarrow.parquet
-from hpe_cli.pipelines import panoptic as job
+from hpe_cli.pipelines.relabel import panoptic as job, plan as planning
+from hpe_cli.pipelines.relabel.options import RelabelPanopticOptions
 from hpe_cli.datasets import panoptic as pan
 t0 = time.perf_counter()
 if mode == "floor":
@@ -61,9 +62,9 @@ else:
     elif mode == "dask2":
         kw = dict(workers=2, scheduler="local")
     with job.worker_pool(**kw) as pool:  # as the CLI does: the workers start while the sequence is planned
-        p = job.plan(seq)
-        cfg = job.Config(landmarks=lm, system="whenet" if fmt != "table" else "300w_lp")
-        st = job.write_outputs(p, cfg, Path(out), fmt=fmt, overwrite=True, pool=pool, **kw)
+        p = planning.plan(seq)
+        opts = RelabelPanopticOptions(landmarks=lm, fmt=fmt, overwrite=True, **kw)
+        st = job.write_outputs(p, Path(out), opts, pool=pool)
     views = st.views
 dt = time.perf_counter() - t0
 me, ch = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -5,7 +5,7 @@ Builds a synthetic Panoptic sequence (default 2,000 frames x 5 people x 31 HD
 cameras, with ``scripts/make_sample_data.py``) in a temporary folder, then in
 one process:
 
-1. the vectorised job (:func:`hpe_cli.pipelines.panoptic.write_outputs`,
+1. the vectorised job (:func:`hpe_cli.pipelines.relabel.panoptic.write_outputs`,
    streaming Parquet, 2-D landmarks included) over every frame;
 2. a per-face loop written the way WHENet's ``prepare_images.py`` works
    (``sample_video`` -> ``save_img_head``): cameras outside, frames inside,
@@ -160,7 +160,9 @@ def main(argv=None) -> None:
 
     from hpe_cli.geometry.helmet import helmet_points
     from hpe_cli.geometry.reference import panoptic_pairs, reference_head
-    from hpe_cli.pipelines import panoptic as job
+    from hpe_cli.pipelines.relabel import panoptic as job
+    from hpe_cli.pipelines.relabel import plan as planning
+    from hpe_cli.pipelines.relabel.options import RelabelPanopticOptions
 
     gen = sample_data_script()
     with tempfile.TemporaryDirectory() as tmp:
@@ -173,16 +175,16 @@ def main(argv=None) -> None:
                 f"in {time.perf_counter() - t0:.1f} s",
                 file=sys.stderr,
             )
-        p = job.plan(seq)
+        p = planning.plan(seq)
         views = len(p.frames) * a.people * len(p.cameras)
-        cfg = job.Config(system="300w_lp", preset="whenet")
+        opts = RelabelPanopticOptions(system="300w_lp", preset="whenet", workers=a.workers)
 
         # 1. vectorised, streamed; memory after half and after all of the sequence
-        half = job.plan(seq, frames=(None, min(p.frames) + len(p.frames) // 2))
-        job.write_outputs(half, cfg, Path(tmp) / "half.parquet", workers=a.workers)
+        half = planning.plan(seq, frames=(None, min(p.frames) + len(p.frames) // 2))
+        job.write_outputs(half, Path(tmp) / "half.parquet", opts)
         rss_half = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         t0, c0 = time.perf_counter(), time.process_time()
-        stats = job.write_outputs(p, cfg, Path(tmp) / "all.parquet", workers=a.workers)
+        stats = job.write_outputs(p, Path(tmp) / "all.parquet", opts)
         t_vec, c_vec = time.perf_counter() - t0, time.process_time() - c0
         rss_all = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 

@@ -28,6 +28,9 @@ the 300W-LP active matrix ``A`` (x = subject's left, y = up, z = out of the face
 ``draw_axes``          Hopenet-style pose axes drawn onto an image
 ``geodesic``           the rotation angle between two labels, degrees
 ``landmark_pose``      head rotation fitted to 2-D landmarks alone (``hpe audit --consistency``'s evidence)
+``relabel_panoptic``   ``hpe relabel-panoptic`` on CMU Panoptic sequences (the same pipeline)
+``relabel_agora``      ``hpe relabel-agora`` on AGORA dataframes (the same pipeline)
+``biwi_file``          ``hpe biwi`` on BIWI's files (the same pipeline)
 =====================  ==========================================================
 
 The optional tensor side (``pip install hpe-cli[torch]``) lives in :mod:`hpe_cli.torch`.
@@ -59,6 +62,9 @@ _API = (
     "draw_file",
     "augment_file",
     "infer_system",
+    "relabel_panoptic",
+    "relabel_agora",
+    "biwi_file",
 )
 
 #: names resolved lazily by :func:`__getattr__`: name -> (module, attribute)

@@ -605,3 +605,96 @@ def evaluate(pred, gt, *, pred_system, gt_system, protocols=None, align: str = "
     return _evaluate(
         pred, gt, pred_system=pred_system, gt_system=gt_system, protocols=protocols, align=align, columns=columns
     )
+
+
+def relabel_panoptic(seq_dirs, output, **options):
+    """``hpe relabel-panoptic`` as a function: the same pipeline
+    (:func:`hpe_cli.pipelines.relabel.run_relabel_panoptic`).
+
+    Parameters
+    ----------
+    seq_dirs : path or list of paths
+        CMU Panoptic sequences (``calibration_<seq>.json`` with ``hdFace3d/`` or ``hdFace3d.tar``), or folders
+        of sequences.
+    output : str or path
+        A ``.parquet``/``.csv`` table, or with ``fmt="coco"`` a ``.json``, with ``fmt="whenet"`` a ``.txt``.
+    **options
+        The fields of :class:`hpe_cli.pipelines.relabel.RelabelPanopticOptions` (the command's options:
+        ``system``, ``fmt``, ``cameras``, ``every``, ``frames``, ``max_rmse`` (cm), ``workers``, ``rejects``...).
+
+    Returns
+    -------
+    PanopticRun
+        ``stats`` (``labelled``, ``views``, ``view_reasons``, ...), ``per_sequence`` and ``summary()``, the
+        command's summary lines.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import hpe_cli as hpe
+    >>> seq = pathlib.Path(hpe.__file__).parents[1] / "sample_data" / "panoptic_160906_pizza1"
+    >>> with tempfile.TemporaryDirectory() as out:
+    ...     run = hpe.relabel_panoptic(seq, pathlib.Path(out) / "labels.parquet", landmarks=False,
+    ...                                rejects=pathlib.Path(out) / "rejects.parquet")
+    >>> run.stats.labelled, run.stats.views  # labels + rejects = every view
+    (606, 713)
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.relabel import RelabelPanopticOptions, run_relabel_panoptic
+
+    seq_dirs = [seq_dirs] if isinstance(seq_dirs, str) or hasattr(seq_dirs, "__fspath__") else list(seq_dirs)
+    opts = RelabelPanopticOptions(**options)
+    with ensure_transaction():
+        return run_relabel_panoptic(seq_dirs, output, opts)
+
+
+def relabel_agora(dataframes, output, **options):
+    """``hpe relabel-agora`` as a function: the same pipeline (:func:`hpe_cli.pipelines.relabel.run_relabel_agora`).
+
+    ``dataframes`` are AGORA ground-truth dataframes (``*_withjv.pkl`` or the same as Parquet), a path or a
+    list; ``options`` are the fields of :class:`hpe_cli.pipelines.relabel.RelabelAgoraOptions` (``system``,
+    ``fmt``, ``image_size``, ``max_rmse`` (m), ``max_occlusion``, ``rejects``...). Returns the counts
+    (``people``, ``labelled``, ``reasons``; ``summary(...)``).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import hpe_cli as hpe
+    >>> pkl = pathlib.Path(hpe.__file__).parents[1] / "tests" / "data" / "agora" / "validation_0_withjv.pkl"
+    >>> with tempfile.TemporaryDirectory() as out:
+    ...     s = hpe.relabel_agora(pkl, pathlib.Path(out) / "agora.parquet", rejects=pathlib.Path(out) / "r.csv")
+    >>> s.labelled + sum(s.reasons.values()) == s.people  # every person labelled or a reject
+    True
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.relabel import RelabelAgoraOptions, run_relabel_agora
+
+    dataframes = [dataframes] if isinstance(dataframes, str) or hasattr(dataframes, "__fspath__") else list(dataframes)
+    opts = RelabelAgoraOptions(**options)
+    with ensure_transaction():
+        return run_relabel_agora(dataframes, output, opts)
+
+
+def biwi_file(input, output, **options) -> dict:
+    """``hpe biwi`` as a function: the same pipeline (:func:`hpe_cli.pipelines.biwi.run_biwi`).
+
+    ``input`` is BIWI's ``hpdb/``, ``db_annotations/`` or ``db_annotations.tgz``; ``output`` the label table;
+    ``options`` the fields of :class:`hpe_cli.pipelines.biwi.BiwiOptions` (``camera``, ``calibration``,
+    ``head_size`` (mm), ``system``, ``protocol``, ``split``, ``seed``, ``split_lists``, ``rejects``...),
+    checked before anything is read. Returns the summary dict (``rows``, ``sequences``, ``splits``,
+    ``rejected``...).
+
+    Examples
+    --------
+    >>> import hpe_cli as hpe
+    >>> hpe.biwi_file("hpdb", "biwi.parquet", split=(0.7, 0.4))
+    Traceback (most recent call last):
+    ...
+    ValueError: expected two or three fractions >= 0 summing to 1, got (0.7, 0.4)
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.biwi import BiwiOptions, run_biwi
+
+    opts = BiwiOptions(**options)
+    with ensure_transaction():
+        return run_biwi(input, output, opts)

@@ -109,11 +109,9 @@ def biwi(
       hpe biwi hpdb/ -o biwi.parquet --split 0.7,0.3 --seed 0 --split-lists splits/
       hpe biwi db_annotations/ -o biwi.parquet --rejects biwi_rejects.csv
     """
-    from ..pipelines.biwi import run_biwi
+    from ..pipelines.biwi import BiwiOptions, run_biwi, summary_lines
 
-    s = run_biwi(
-        input,
-        output,
+    opts = BiwiOptions(
         camera=camera,
         calibration=calibration,
         head_size=head_size,
@@ -122,23 +120,8 @@ def biwi(
         split=split,
         seed=seed,
         split_lists=split_lists,
-        overwrite=overwrite,
-        rejects_path=rejects,
+        rejects=rejects,
         strict=strict,
+        overwrite=overwrite,
     )
-    lines = [f"{s['rows']} frames of {s['sequences']} sequences ({camera} camera, {system.name}) -> {output}"]
-    if s["dropped"]:
-        lines.append(f"protocol {protocol}: {s['dropped']} frames left out")
-    if s["splits"]:
-        lines.append(
-            "split (sequences): "
-            + ", ".join(f"{k} {v}" for k, v in s["splits"].items())
-            + (f" -> {', '.join(s['lists'])}" if s["lists"] else "")
-        )
-    if s["rejected"]:
-        lines.append(
-            f"rejected {s['rejected']} frames: "
-            + "; ".join(f"{v} {k}" for k, v in s["rejects_per_reason"].items())
-            + f" -> {rejects}"
-        )
-    echo_summary(lines, quiet)
+    echo_summary(summary_lines(run_biwi(input, output, opts), output, opts), quiet)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import click
 
 from .options import (
-    SYSTEM,
     deprecated_spellings,
     echo_summary,
     format_from_suffix,
@@ -132,40 +131,25 @@ def relabel_agora(
       hpe relabel-agora val_0_withjv.pkl -o labels.csv --system 6drepnet --rejects rejects.csv
       hpe relabel-agora val_0_withjv.pkl -o crops.parquet --frame crop
     """
-    from ..pipelines import agora as job
+    from ..pipelines.relabel import FormatSystemError, RelabelAgoraOptions, run_relabel_agora
 
-    fmt = fmt or format_from_suffix(output)
-    if fmt != "table" and system is not None and system.name != "whenet":
-        raise click.UsageError(
-            f"--format {fmt} stores DirectMHP/WHENet angles, which are in the whenet system; "
-            f"got --system {system.name} (use --format table for other systems)"
-        )
-    system = system or SYSTEM.convert("whenet" if fmt != "table" else "300w_lp", None, None)
-    cfg = job.Config(
-        system=system,
-        image_size=image_size,
-        max_rmse=job.DEFAULT_MAX_RMSE if max_rmse is None else max_rmse,
-        max_occlusion=max_occlusion,
-        legacy=legacy_whenet,
-        preset=preset,
-        frame=label_frame,
-        trust_pickle=trust_pickle,
-    )
-    bar = progress(total=len(dataframes), desc="relabel-agora", quiet=quiet, unit="files")
     try:
-        stats = job.write_outputs(list(dataframes), cfg, output, fmt, rejects, overwrite, bar)
-    finally:
-        bar.close()
-    if strict:  # any face/view not labelled fails the run (nothing is committed)
-        from ..io.rejects import rejects_rule
-
-        first = next(
-            iter(
-                getattr(stats, "reasons", None)
-                or getattr(stats, "face_reasons", None)
-                or getattr(stats, "view_reasons", {})
-            ),
-            None,
+        opts = RelabelAgoraOptions(
+            system=system,
+            fmt=fmt or format_from_suffix(output),
+            image_size=image_size,
+            preset=preset,
+            max_rmse=max_rmse,
+            max_occlusion=max_occlusion,
+            legacy=legacy_whenet,
+            frame=label_frame,
+            trust_pickle=trust_pickle,
+            rejects=rejects,
+            strict=strict,
+            overwrite=overwrite,
         )
-        rejects_rule(sum(stats.reasons.values()), first, has_file=True, strict=True)
-    echo_summary(stats.summary(cfg, output, rejects, verbose), quiet)
+    except FormatSystemError as exc:
+        raise click.UsageError(str(exc)) from None
+    bar = lambda total: progress(total=total, desc="relabel-agora", quiet=quiet, unit="files")  # noqa: E731
+    stats = run_relabel_agora(dataframes, output, opts, progress=bar)
+    echo_summary(stats.summary(opts.config(), output, rejects, verbose), quiet)

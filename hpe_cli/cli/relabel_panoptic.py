@@ -5,7 +5,6 @@ from __future__ import annotations
 import click
 
 from .options import (
-    SYSTEM,
     echo_summary,
     format_from_suffix,
     format_option,
@@ -157,86 +156,37 @@ def relabel_panoptic(
       hpe relabel-panoptic ROOT -o labels.parquet --frame crop --cameras whenet-haggling --min-change 5
       hpe relabel-panoptic ROOT -o labels.parquet --scheduler tcp://head:8786 --resume
     """
-    from ..pipelines import panoptic as job
-    from ..pipelines.relabel import DEFAULT_MAX_RMSE
+    from ..pipelines.relabel import FormatSystemError, RelabelPanopticOptions, run_relabel_panoptic
 
-    fmt = fmt or format_from_suffix(output)
-    if fmt != "table" and system is not None and system.name != "whenet":
-        raise click.UsageError(
-            f"--format {fmt} stores WHENet/DirectMHP angles, which are in the whenet system; "
-            f"got --system {system.name} (use --format table for other systems)"
-        )
-    system = system or SYSTEM.convert("whenet" if fmt != "table" else "300w_lp", None, None)
     try:
-        frames = job.parse_frames(frame_range)
-    except ValueError as exc:
-        raise click.BadParameter(str(exc), param_hint="--frames") from None
-    max_rmse = DEFAULT_MAX_RMSE if max_rmse is None else max_rmse
-    # the workers start (and import what a unit needs) while the sequences are planned
-    with job.worker_pool(workers, scheduler, resume) as pool:
-        plans = job.plan_many(seq_dirs, calibration, cameras, every, frames)
-        from ..io.transaction import note_input
-
-        for p in plans:  # no output may replace a file the run reads
-            for path in {str(p.calibration), *(f.path for f in p.frames.values())}:
-                note_input(path)
-        cfg = job.Config(
+        opts = RelabelPanopticOptions(
             system=system,
+            fmt=fmt or format_from_suffix(output),
             preset=preset,
+            calibration=calibration,
+            cameras=cameras,
+            every=every,
+            frames=frame_range,
+            min_change=min_change,
+            all_views=all_views,
+            frame=label_frame,
+            landmarks=not no_landmarks,
             max_rmse=max_rmse,
             legacy=legacy_whenet,
-            landmarks=not no_landmarks,
-            frame=label_frame,
-            all_views=all_views,
-            min_change=min_change,
+            workers=workers,
+            scheduler=scheduler,
+            resume=resume,
+            rejects=rejects,
+            strict=strict,
+            overwrite=overwrite,
         )
-        if verbose:
-            for plan in plans:
-                echo_summary(
-                    [
-                        (
-                            f"{plan.sequence}: calibration {plan.calibration} ({len(plan.cameras)} cameras: "
-                            f"{', '.join(plan.cameras.names[:6])}{' ...' if len(plan.cameras) > 6 else ''}); "
-                            f"frames: {len(plan.frames)} selected of {plan.available} face files, "
-                            f"{len(plan.chunks)} units"
-                        )
-                    ],
-                    quiet,
-                )
-        bar = progress(
-            total=sum(len(p.frames) + sum(map(len, p.skipped)) for p in plans),
-            desc="relabel-panoptic",
-            quiet=quiet,
-            unit="frames",
-        )
-        per_seq: list = []
-        try:
-            stats = job.write_outputs(
-                plans,
-                cfg,
-                output,
-                fmt,
-                rejects,
-                overwrite,
-                workers,
-                bar,
-                scheduler=scheduler,
-                resume=resume,
-                per_sequence=per_seq,
-                pool=pool,
-            )
-        finally:
-            bar.close()
-    if strict:  # any face/view not labelled fails the run (nothing is committed); sampling asked for does not
-        from ..io.rejects import rejects_rule
-
-        faces = {r: n for r, n in stats.face_reasons.items() if r not in job.SAMPLING_REASONS and n}
-        views = {r: n for r, n in stats.view_reasons.items() if r not in job.SAMPLING_REASONS and n}
-        first = next(iter(faces or views), None)
-        rejects_rule(sum(views.values()) + sum(faces.values()), first, has_file=True, strict=True)
-    lines = []
-    for plan, st in zip(plans, per_seq):
-        lines += st.summary(plan, cfg, output, rejects)
-    if len(plans) > 1:
-        lines += stats.summary(None, cfg, output, rejects, n_cameras="N", title=f"total over {len(plans)} sequences")
-    echo_summary(lines, quiet)
+    except FormatSystemError as exc:
+        raise click.UsageError(str(exc)) from None
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--frames") from None
+    bar = lambda total: progress(total=total, desc="relabel-panoptic", quiet=quiet, unit="frames")  # noqa: E731
+    done = run_relabel_panoptic(seq_dirs, output, opts, progress=bar)
+    if verbose:
+        for line in done.plan_lines():
+            echo_summary([line], quiet)
+    echo_summary(done.summary(), quiet)

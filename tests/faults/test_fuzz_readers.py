@@ -118,7 +118,7 @@ def agora_df():
 )
 def test_agora_fields(agora_df, col, row, person, whole, value):
     from hpe_cli.datasets.agora import read_agora
-    from hpe_cli.pipelines.agora import Config, relabel_people
+    from hpe_cli.pipelines.relabel.agora import Config, relabel_people
 
     df = agora_df.copy()
     cells = df[col].tolist()

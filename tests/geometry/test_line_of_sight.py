@@ -71,13 +71,13 @@ def _axis_errors(t, tpl):
 
 
 def test_crop_labels_agree_better_with_the_image_on_pizza1(realdata):
-    from hpe_cli.pipelines import panoptic as job
+    from hpe_cli.pipelines.relabel import plan as planning
 
     seq = realdata / "panoptic_160906_pizza1"
-    p = job.plan(seq)
+    p = planning.plan(seq)
 
     def run(frame):
-        out = [job.process_chunk(c, p.cameras, p.sequence, job.Config(frame=frame)) for c in p.chunks]
+        out = [planning.process_chunk(c, p.cameras, p.sequence, planning.Config(frame=frame)) for c in p.chunks]
         return {k: np.concatenate([o["table"][k] for o in out]) for k in out[0]["table"]}
 
     cam, crop = run("camera"), run("crop")

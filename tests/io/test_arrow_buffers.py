@@ -10,6 +10,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import textwrap
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -23,7 +24,10 @@ from hypothesis.extra import numpy as hnp
 from conftest import sample_data_script
 from hpe_cli.datasets import panoptic as pan
 from hpe_cli.io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow, string_array
-from hpe_cli.pipelines import panoptic as job
+from hpe_cli.pipelines.parts import parts_dir_for
+from hpe_cli.pipelines.relabel import panoptic as job
+from hpe_cli.pipelines.relabel import plan as planning
+from hpe_cli.pipelines.relabel.options import RelabelPanopticOptions
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -113,7 +117,7 @@ def test_image_paths_are_panoptic_paths(rows):
     )
     ci = np.array([c for c, _ in rows], dtype=np.int64)
     frames = np.array([f for _, f in rows], dtype=np.int64)
-    got = job._image_paths(cams, ci, frames)
+    got = planning.image_paths(cams, ci, frames)
     assert got.type == pa.string()
     assert got.to_pylist() == [pan.image_path(cams.names[c], f, cams.types[c]) for c, f in rows]
 
@@ -128,17 +132,18 @@ def test_a_unit_never_imports_pandas(tmp_path):
         import sys
         sys.path.insert(0, {str(ROOT)!r})
         from pathlib import Path
-        from hpe_cli.pipelines import panoptic as job
-        p = job.plan({str(seq)!r})
+        from hpe_cli.pipelines.relabel import panoptic as job, plan as planning, units
+        from hpe_cli.pipelines.relabel.options import RelabelPanopticOptions
+        p = planning.plan({str(seq)!r})
         for lm in (False, True):
-            cfg = job.Config(landmarks=lm, system="whenet")
-            t = job.unit_task([p], cfg, (0, 0), {str(tmp_path)!r})
-            job.run_unit(t)
+            opts = RelabelPanopticOptions(landmarks=lm, system="whenet")
+            t = units.unit_task([p], opts.config(), (0, 0), {str(tmp_path)!r})
+            units.run_unit(t)
             for fmt in ("coco", "whenet"):
                 n = job.format_unit({{"fmt": fmt, "labels": t["stem"] + ".labels.arrow", "text": t["stem"] + ".t",
                                      "path": "o", "offset": 0, "first_id": 1, "image_ids": list(range(1, 10 ** 4))}})
                 assert n > 0
-            job.write_outputs(p, cfg, Path({str(tmp_path)!r}) / f"one{{lm}}.parquet")
+            job.write_outputs(p, Path({str(tmp_path)!r}) / f"one{{lm}}.parquet", opts)
         print("pandas" in sys.modules)
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
@@ -151,13 +156,13 @@ def test_a_borrowed_pool_gives_the_same_output(tmp_path):
     gen = sample_data_script()
     seq = tmp_path / "seq"
     gen.make_synthetic(seq, n_frames=12, n_people=2, n_cameras=3)
-    cfg = job.Config(landmarks=True, system="whenet")
-    p = job.plan(seq, chunk_frames=3)
+    opts = RelabelPanopticOptions(landmarks=True, system="whenet")
+    p = planning.plan(seq, chunk_frames=3)
     own, lent = tmp_path / "own.json", tmp_path / "lent.json"
-    job.write_outputs(p, cfg, own, fmt="coco", workers=2)
+    job.write_outputs(p, own, replace(opts, fmt="coco", workers=2))
     with job.worker_pool(2) as pool:
-        job.write_outputs(job.plan(seq, chunk_frames=3), cfg, lent, fmt="coco", workers=2, pool=pool)
+        job.write_outputs(planning.plan(seq, chunk_frames=3), lent, replace(opts, fmt="coco", workers=2), pool=pool)
         # the pool outlives the job and takes another
-        job.write_outputs(p, cfg, tmp_path / "again.parquet", workers=2, pool=pool)
+        job.write_outputs(p, tmp_path / "again.parquet", replace(opts, workers=2), pool=pool)
     assert own.read_bytes() == lent.read_bytes()
-    assert not job.parts_dir_for(lent).exists()
+    assert not parts_dir_for(lent).exists()

@@ -7,6 +7,7 @@ Several sequences and many small units (4 frames each) so ids cross unit and seq
 """
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,11 @@ import pytest
 
 from conftest import sample_data_script
 from hpe_cli.errors import HpeError
-from hpe_cli.pipelines import panoptic as job
+from hpe_cli.pipelines import parts as folder
+from hpe_cli.pipelines.relabel import panoptic as job
+from hpe_cli.pipelines.relabel import plan as planning
+from hpe_cli.pipelines.relabel import units
+from hpe_cli.pipelines.relabel.options import RelabelPanopticOptions
 
 
 @pytest.fixture(scope="module")
@@ -25,21 +30,21 @@ def plans(tmp_path_factory):
     gen.make_synthetic(root / "seqA", n_frames=18, n_people=2, n_cameras=3, first_frame=3)
     gen.make_synthetic(root / "seqB", n_frames=10, n_people=2, n_cameras=3, seed=5, special=False)
     gen.pack_tar(root / "seqB")
-    return job.plan_many([root / "seqA", root / "seqB"], chunk_frames=4)
+    return planning.plan_many([root / "seqA", root / "seqB"], chunk_frames=4)
 
 
 @pytest.mark.parametrize("fmt,suffix", [("coco", ".json"), ("whenet", ".txt")])
 @pytest.mark.parametrize("min_change", [None, 30.0])
 def test_worker_text_is_the_one_process_bytes(plans, tmp_path, fmt, suffix, min_change):
-    cfg = job.Config(landmarks=True, min_change=min_change, system="whenet")
+    opts = RelabelPanopticOptions(landmarks=True, min_change=min_change, system="whenet")
     assert sum(len(p.chunks) for p in plans) >= 6
     ref, two = tmp_path / f"ref{suffix}", tmp_path / f"two{suffix}"
-    st1 = job.write_outputs(plans, cfg, ref, fmt=fmt, rejects_path=tmp_path / "r1.parquet")
-    st2 = job.write_outputs(plans, cfg, two, fmt=fmt, workers=2, rejects_path=tmp_path / "r2.parquet")
+    st1 = job.write_outputs(plans, ref, replace(opts, fmt=fmt, rejects=tmp_path / "r1.parquet"))
+    st2 = job.write_outputs(plans, two, replace(opts, fmt=fmt, workers=2, rejects=tmp_path / "r2.parquet"))
     assert st1.views == st2.views and st1.views > 100
     assert ref.read_bytes() == two.read_bytes()
     assert (tmp_path / "r1.parquet").read_bytes() == (tmp_path / "r2.parquet").read_bytes()
-    assert not job.parts_dir_for(two).exists()
+    assert not folder.parts_dir_for(two).exists()
     if min_change:
         rej = pq.read_table(tmp_path / "r2.parquet").to_pandas()
         assert (rej["reason"] == "below --min-change").sum() > 0  # units were formatted from kept rows
@@ -47,11 +52,11 @@ def test_worker_text_is_the_one_process_bytes(plans, tmp_path, fmt, suffix, min_
 
 def test_coco_from_workers_matches_the_labels(plans, tmp_path):
     """Independent check: parse the COCO document and compare it with the Parquet table of the same job."""
-    cfg = job.Config(landmarks=True, system="whenet")
+    opts = RelabelPanopticOptions(landmarks=True, system="whenet")
     tab = tmp_path / "t.parquet"
-    job.write_outputs(plans, cfg, tab)
+    job.write_outputs(plans, tab, opts)
     coco = tmp_path / "c.json"
-    job.write_outputs(plans, cfg, coco, fmt="coco", workers=2)
+    job.write_outputs(plans, coco, replace(opts, fmt="coco", workers=2))
     t = pq.read_table(tab).to_pandas()
     doc = json.loads(coco.read_text())
     anns = doc["annotations"]
@@ -74,32 +79,32 @@ def test_coco_from_workers_matches_the_labels(plans, tmp_path):
 
 @pytest.mark.parametrize("fmt,suffix", [("coco", ".json"), ("whenet", ".txt")])
 def test_resume_formats_the_text_again(plans, tmp_path, fmt, suffix):
-    cfg = job.Config(landmarks=False, system="whenet")
+    opts = RelabelPanopticOptions(landmarks=False, system="whenet")
     ref, res = tmp_path / f"ref{suffix}", tmp_path / f"res{suffix}"
-    job.write_outputs(plans, cfg, ref, fmt=fmt)
-    parts = job._prepare_parts(plans, cfg, fmt, res, resume=False)
-    tasks = [job.unit_task(plans, cfg, u, parts) for u in job.make_units(plans)]
+    job.write_outputs(plans, ref, replace(opts, fmt=fmt))
+    parts = units.prepare_unit_parts(plans, opts.config(), fmt, res, resume=False)
+    tasks = [units.unit_task(plans, opts.config(), u, parts) for u in units.make_units(plans)]
     for t in tasks[:3]:
         job.run_unit(t)
     Path(tasks[0]["stem"] + f".{fmt}.text").write_bytes(b"stale text of an interrupted run")
-    job.write_outputs(plans, cfg, res, fmt=fmt, resume=True)
+    job.write_outputs(plans, res, replace(opts, fmt=fmt, resume=True))
     assert res.read_bytes() == ref.read_bytes()
-    assert not job.parts_dir_for(res).exists()  # a finished run removes its parts
+    assert not folder.parts_dir_for(res).exists()  # a finished run removes its parts
 
 
 def test_text_on_a_local_dask_cluster(plans, tmp_path):
     pytest.importorskip("dask.distributed")
-    cfg = job.Config(landmarks=False, system="whenet")
+    opts = RelabelPanopticOptions(landmarks=False, system="whenet")
     ref, dsk = tmp_path / "ref.json", tmp_path / "dask.json"
-    job.write_outputs(plans, cfg, ref, fmt="coco")
-    job.write_outputs(plans, cfg, dsk, fmt="coco", workers=2, scheduler="local")
+    job.write_outputs(plans, ref, replace(opts, fmt="coco"))
+    job.write_outputs(plans, dsk, replace(opts, fmt="coco", workers=2, scheduler="local"))
     assert ref.read_bytes() == dsk.read_bytes()
 
 
 def test_a_failing_format_task_leaves_no_output(plans, tmp_path, monkeypatch):
     """A unit whose text cannot be made (here: a forced error) ends the run with that error and no output;
     a --resume run keeps its parts (and only them)."""
-    cfg = job.Config(landmarks=False, system="whenet")
+    opts = RelabelPanopticOptions(landmarks=False, system="whenet")
     out = tmp_path / "o.json"
 
     def broken(task):
@@ -107,5 +112,5 @@ def test_a_failing_format_task_leaves_no_output(plans, tmp_path, monkeypatch):
 
     monkeypatch.setattr(job, "format_unit", broken)
     with pytest.raises(HpeError, match="row 0: expected something"):
-        job.write_outputs(plans, cfg, out, fmt="coco", resume=True)  # parts, run in this process
-    assert sorted(p.name for p in tmp_path.iterdir()) == [job.parts_dir_for(out).name]
+        job.write_outputs(plans, out, replace(opts, fmt="coco", resume=True))  # parts, run in this process
+    assert sorted(p.name for p in tmp_path.iterdir()) == [folder.parts_dir_for(out).name]

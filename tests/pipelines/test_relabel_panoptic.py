@@ -10,8 +10,9 @@ from scipy.spatial.transform import Rotation
 
 from conftest import canonical_A, sample_data_script
 from hpe_cli.geometry.reference import panoptic_pairs, reference_head
-from hpe_cli.pipelines import panoptic as job
-from hpe_cli.pipelines.relabel import fit_faces, label_matrices, legacy_whenet_labels
+from hpe_cli.pipelines.relabel import panoptic as job
+from hpe_cli.pipelines.relabel import plan as planning
+from hpe_cli.pipelines.relabel.core import fit_faces, label_matrices, legacy_whenet_labels
 from hpe_cli.rotation import canonical_to_labels
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -29,8 +30,8 @@ def _matrices(table):
 
 
 def _run(seq, **cfg):
-    p = job.plan(seq, **{k: cfg.pop(k) for k in ("cameras", "every", "frames") if k in cfg})
-    out = [job.process_chunk(c, p.cameras, p.sequence, job.Config(**cfg)) for c in p.chunks]
+    p = planning.plan(seq, **{k: cfg.pop(k) for k in ("cameras", "every", "frames") if k in cfg})
+    out = [planning.process_chunk(c, p.cameras, p.sequence, planning.Config(**cfg)) for c in p.chunks]
     cat = lambda key: {k: np.concatenate([o[key][k] for o in out]) for k in out[0][key]}  # noqa: E731
     return p, cat("table"), cat("rejects"), out
 
@@ -206,18 +207,18 @@ def test_frames_every_and_cameras():
     assert set(table["camera"]) == {"00_01", "00_03"}
     assert table["image"][0] == f"hdImgs/{table['camera'][0]}/{table['camera'][0]}_{table['frame'][0]:08d}.jpg"
     with pytest.raises(Exception, match="expected hd cameras"):
-        job.plan(SYNTH, cameras="01_01")
+        planning.plan(SYNTH, cameras="01_01")
     with pytest.raises(Exception, match="no face frame matches"):
-        job.plan(SYNTH, frames=(500, 600))
-    assert job.parse_frames("10:") == (10, None) and job.parse_frames(":5") == (None, 5)
+        planning.plan(SYNTH, frames=(500, 600))
+    assert planning.parse_frames("10:") == (10, None) and planning.parse_frames(":5") == (None, 5)
     for bad in ("5", "a:b", "9:3"):
         with pytest.raises(ValueError):
-            job.parse_frames(bad)
+            planning.parse_frames(bad)
 
 
 def test_workers_give_the_same_rows(tmp_path):
-    p = job.plan(SYNTH, chunk_frames=4)
-    cfg = job.Config()
+    p = planning.plan(SYNTH, chunk_frames=4)
+    cfg = planning.Config()
     one = [o["table"] for o in job.run(p, cfg, workers=1)]
     two = [o["table"] for o in job.run(p, cfg, workers=2)]
     assert len(one) == len(two) == len(p.chunks)

@@ -18,7 +18,7 @@ import pytest
 
 from hpe_cli.datasets.agora import FACE_COUNT, FACE_FIRST, agora_intrinsics, read_agora
 from hpe_cli.errors import HpeError
-from hpe_cli.pipelines.agora import Config, relabel_people
+from hpe_cli.pipelines.relabel.agora import Config, relabel_people
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "agora"
 PKL = DATA / "validation_0_withjv.pkl"

@@ -15,7 +15,7 @@ import pytest
 
 from hpe_cli.datasets.agora import TO_PARQUET, load_dataframe, read_agora
 from hpe_cli.errors import HpeError
-from hpe_cli.pipelines.agora import Config, relabel_people
+from hpe_cli.pipelines.relabel.agora import Config, relabel_people
 
 FIXTURE = Path(__file__).resolve().parents[1] / "data" / "agora" / "validation_0_withjv.pkl"
 

@@ -4,6 +4,7 @@ frames that encode their own number, an uninterrupted single-process run, and ha
 
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,11 @@ from conftest import hpe, sample_data_script
 from hpe_cli.datasets import panoptic as pan
 from hpe_cli.datasets.panoptic_video import VideoFrames
 from hpe_cli.errors import HpeError
-from hpe_cli.pipelines import panoptic as job
+from hpe_cli.pipelines import parts as folder
+from hpe_cli.pipelines.relabel import panoptic as job
+from hpe_cli.pipelines.relabel import plan as planning
+from hpe_cli.pipelines.relabel import units
+from hpe_cli.pipelines.relabel.options import RelabelPanopticOptions
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -117,19 +122,19 @@ def _one(seq, tmp_path):
 
 def test_same_bytes_with_workers_resume_and_dask(seqs, tmp_path):
     seq = seqs / "tar" / "seqA"
-    plans = job.plan_many([seq], chunk_frames=4)
-    cfg = job.Config(landmarks=False)
+    plans = planning.plan_many([seq], chunk_frames=4)
+    opts = RelabelPanopticOptions(landmarks=False)
     ref = tmp_path / "ref.parquet"
-    job.write_outputs(plans, cfg, ref, rejects_path=tmp_path / "ref_rej.parquet")
+    job.write_outputs(plans, ref, replace(opts, rejects=tmp_path / "ref_rej.parquet"))
     two = tmp_path / "two.parquet"
-    job.write_outputs(plans, cfg, two, workers=2, rejects_path=tmp_path / "two_rej.parquet")
+    job.write_outputs(plans, two, replace(opts, workers=2, rejects=tmp_path / "two_rej.parquet"))
     assert ref.read_bytes() == two.read_bytes()
     assert (tmp_path / "ref_rej.parquet").read_bytes() == (tmp_path / "two_rej.parquet").read_bytes()
-    assert not job.parts_dir_for(two).exists()
+    assert not folder.parts_dir_for(two).exists()
     # an interrupted run: some units finished, one half-written, then --resume
     res = tmp_path / "res.parquet"
-    parts = job._prepare_parts(plans, cfg, "table", res, resume=False)
-    tasks = [job.unit_task(plans, cfg, u, parts) for u in job.make_units(plans)]
+    parts = units.prepare_unit_parts(plans, opts.config(), "table", res, resume=False)
+    tasks = [units.unit_task(plans, opts.config(), u, parts) for u in units.make_units(plans)]
     for t in tasks[:2]:
         job.run_unit(t)
     Path(tasks[2]["stem"] + ".labels.arrow.tmp").write_bytes(b"half")
@@ -142,16 +147,18 @@ def test_same_bytes_with_workers_resume_and_dask(seqs, tmp_path):
 
     job.run_unit = counting
     try:
-        job.write_outputs(plans, cfg, res, resume=True)
+        job.write_outputs(plans, res, replace(opts, resume=True))
     finally:
         job.run_unit = real
     assert len(calls) == len(tasks) - 2
     assert res.read_bytes() == ref.read_bytes()
     # resuming with other options is refused
-    job._prepare_parts(plans, cfg, "table", res, resume=False, overwrite=True)  # next to the finished output
+    units.prepare_unit_parts(
+        plans, opts.config(), "table", res, resume=False, overwrite=True
+    )  # next to the finished output
     with pytest.raises(HpeError, match="other inputs or options"):
-        job.write_outputs(plans, job.Config(landmarks=True), res, resume=True, overwrite=True)
-    shutil.rmtree(job.parts_dir_for(res))
+        job.write_outputs(plans, res, replace(RelabelPanopticOptions(landmarks=True), resume=True, overwrite=True))
+    shutil.rmtree(folder.parts_dir_for(res))
 
 
 def test_same_bytes_on_a_local_dask_cluster(seqs, tmp_path):
@@ -313,24 +320,23 @@ def test_a_run_that_ends_between_a_look_and_the_lock_leaves_no_parts_folder(seqs
     """Two runs, one output (seen in CI): run B sees A's parts folder, A places the output and removes its folder,
     then B makes a folder of its own and locks it. B must fail with 'already exists' and remove the folder it
     made, not keep it as if it were an interrupted run's (whether the folder was there is read at the lock)."""
-    from hpe_cli.pipelines import panoptic_parts
 
-    plans = job.plan_many([seqs / "tar" / "seqA"], chunk_frames=4)
-    cfg = job.Config(landmarks=False)
+    plans = planning.plan_many([seqs / "tar" / "seqA"], chunk_frames=4)
+    opts = RelabelPanopticOptions(landmarks=False)
     out = tmp_path / "o.parquet"
-    d = job.parts_dir_for(out)
+    d = folder.parts_dir_for(out)
     d.mkdir()  # run A's parts folder, there when B looks
-    real = panoptic_parts._make
+    real = folder._make
 
     def a_ends_first(folder):
         shutil.rmtree(d)  # A: done, output placed, its parts folder removed
         out.write_bytes(b"A's output")
         return real(folder)  # B makes a new folder
 
-    monkeypatch.setattr(panoptic_parts, "_make", a_ends_first)
+    monkeypatch.setattr(folder, "_make", a_ends_first)
     for resume in (True, False):
         d.mkdir(exist_ok=True)
         out.unlink(missing_ok=True)
         with pytest.raises(HpeError, match="already exists"):
-            job._prepare_parts(plans, cfg, "table", out, resume=resume)
+            units.prepare_unit_parts(plans, opts.config(), "table", out, resume=resume)
         assert not d.exists() and out.read_bytes() == b"A's output"

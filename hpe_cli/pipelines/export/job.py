@@ -9,7 +9,7 @@ import numpy as np
 
 from ...errors import HpeError
 from ...io.export import get_layout
-from ..panoptic_parts import prepare_parts, record_temps, unlock_parts
+from ..parts import prepare_parts, record_temps, unlock_parts
 from . import pixels, write
 from .inputs import load_inputs
 from .options import ExportOptions

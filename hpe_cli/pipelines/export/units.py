@@ -20,7 +20,7 @@ import os
 from pathlib import Path
 
 from ...errors import HpeError
-from ..panoptic_parts import stat_signature
+from ..parts import stat_signature
 
 #: frame numbers per video unit (one seek per unit, then sequential decoding)
 BLOCK_FRAMES = 256

@@ -12,15 +12,23 @@ processed one at a time so memory stays bounded by the largest one.
 
 from __future__ import annotations
 
+import json
+import os
 from collections import Counter
+from contextlib import ExitStack
 from dataclasses import dataclass
 
 import numpy as np
+import pyarrow as pa
 
-from ..datasets import agora as ag
-from ..errors import HpeError
-from ..geometry.reference import agora_pairs
-from .relabel import LEGACY_COLS, fit_faces, relabel_views, summary_tail, view_label_columns
+from ...datasets import agora as ag
+from ...errors import HpeError
+from ...geometry.reference import agora_pairs
+from ...io import TableWriter, arrow_table, system_metadata
+from ...io.coco import CocoWriter
+from ...io.rejects import rejects_rule
+from ...io.whenet_txt import WhenetWriter
+from .core import LEGACY_COLS, fit_faces, relabel_views, summary_tail, view_label_columns
 
 #: default fit-quality gate in the landmarks' unit (metres for AGORA): 2 cm, the Panoptic gate
 DEFAULT_MAX_RMSE = 0.02
@@ -218,8 +226,6 @@ def check_inputs(paths) -> None:
     """Refuse a dataframe given twice (same file by inode, also through another path or a link) and two
     dataframes with the same file name (the ``source`` column holds the name, so their people would have
     the same keys ``source, row, person``): one line naming both."""
-    import os
-
     by_inode: dict = {}
     by_name: dict = {}
     for p in paths:
@@ -258,8 +264,6 @@ def bad_input_rule(people: ag.AgoraPeople) -> None:
 
 
 def _reject_schema():
-    import pyarrow as pa
-
     return pa.schema(
         [
             ("source", pa.string()),
@@ -277,26 +281,25 @@ def _reject_schema():
     )
 
 
-def write_outputs(
-    paths, cfg: Config, output, fmt: str = "table", rejects_path=None, overwrite: bool = False, bar=None
-) -> Stats:
-    """Relabel every dataframe of ``paths`` and write the outputs atomically.
+def run_relabel_agora(paths, output, opts, *, progress=None) -> Stats:
+    """Relabel the AGORA dataframes ``paths`` into ``output`` with the settings ``opts``
+    (:class:`~.options.RelabelAgoraOptions`); ``progress(total=files)``, if given, makes the progress bar.
+    With ``opts.strict`` any person not labelled fails the run (nothing is committed). Returns the counts."""
+    paths = list(paths)
+    bar = progress(total=len(paths)) if progress is not None else None
+    try:
+        stats = write_outputs(paths, output, opts, bar=bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    if opts.strict:  # any person not labelled fails the run (nothing is committed)
+        rejects_rule(sum(stats.reasons.values()), next(iter(stats.reasons), None), has_file=True, strict=True)
+    return stats
 
-    ``fmt`` is ``table`` (Parquet/CSV, streamed one dataframe at a time),
-    ``coco`` (:func:`hpe_cli.io.coco.write_coco`) or ``whenet``
-    (:func:`hpe_cli.io.whenet_txt.write_whenet`). Outputs are checked before
-    any work, and nothing is left behind on failure.
-    """
-    import json
-    from contextlib import ExitStack
 
-    from ..io import TableWriter, arrow_table, system_metadata
-    from ..rotation import get_system
-
-    system = get_system(cfg.system)
-    cfg.system = system
-    stats = Stats()
-    about = {
+def relabel_about(paths, cfg: Config) -> dict:
+    """The ``hpe:relabel`` record of the output: the dataframes and the settings."""
+    return {
         "source": "agora",
         "dataframes": [str(p) for p in paths],
         "preset": cfg.preset,
@@ -308,36 +311,43 @@ def write_outputs(
         if cfg.frame == "camera"
         else "A = E @ Q.T @ camR @ R_head, Q: optical axis -> ray to the head centre (SPEC 10)",
     }
-    meta = {**system_metadata(system), "hpe:relabel": json.dumps(about)}
+
+
+def _label_writer(fmt: str, output, overwrite: bool, system, about: dict):
+    """The streaming writer of the labels: a table, DirectMHP's COCO JSON or WHENet's annotation.txt."""
+    if fmt == "table":
+        return TableWriter(output, overwrite, {**system_metadata(system), "hpe:relabel": json.dumps(about)})
+    if fmt == "coco":  # streamed: memory flat in the number of people
+        info = {
+            "description": "AGORA head-pose labels (hpe relabel-agora)",
+            "hpe:system": system.name,
+            "hpe:relabel": about,
+        }
+        return CocoWriter(output, overwrite, info=info)
+    if fmt == "whenet":
+        return WhenetWriter(output, overwrite)
+    raise HpeError(f"expected --format table, coco or whenet, got {fmt!r}")
+
+
+def write_outputs(paths, output, opts, *, bar=None) -> Stats:
+    """Relabel every dataframe of ``paths`` and write the outputs atomically.
+
+    ``opts.fmt`` is ``table`` (Parquet/CSV), ``coco`` (:class:`hpe_cli.io.coco.CocoWriter`) or ``whenet``
+    (:class:`hpe_cli.io.whenet_txt.WhenetWriter`), each streamed one dataframe at a time. Outputs are checked
+    before any work, and nothing is left behind on failure.
+    """
+    cfg = opts.config()
+    system = cfg.system
+    stats = Stats()
+    about = relabel_about(paths, cfg)
     rschema = _reject_schema()
     check_inputs(paths)
     with ExitStack() as stack:
-        if fmt == "table":
-            out = stack.enter_context(TableWriter(output, overwrite, meta))
-        elif fmt == "coco":  # streamed: memory flat in the number of people
-            from ..io.coco import CocoWriter
-
-            out = stack.enter_context(
-                CocoWriter(
-                    output,
-                    overwrite,
-                    info={
-                        "description": "AGORA head-pose labels (hpe relabel-agora)",
-                        "hpe:system": system.name,
-                        "hpe:relabel": about,
-                    },
-                )
-            )
-        elif fmt == "whenet":
-            from ..io.whenet_txt import WhenetWriter
-
-            out = stack.enter_context(WhenetWriter(output, overwrite))
-        else:
-            raise HpeError(f"expected --format table, coco or whenet, got {fmt!r}")
-        rej = stack.enter_context(TableWriter(rejects_path, overwrite)) if rejects_path else None
+        out = stack.enter_context(_label_writer(opts.fmt, output, opts.overwrite, system, about))
+        rej = stack.enter_context(TableWriter(opts.rejects, opts.overwrite)) if opts.rejects else None
         for path in paths:
             people = ag.read_agora(path, trust=cfg.trust_pickle)
-            if not rejects_path:
+            if not opts.rejects:
                 bad_input_rule(people)
             res = relabel_people(people, cfg)
             del people
@@ -354,6 +364,7 @@ __all__ = [
     "Config",
     "Stats",
     "relabel_people",
+    "run_relabel_agora",
     "write_outputs",
     "check_inputs",
     "bad_input_rule",

@@ -3,10 +3,13 @@ for the end-of-run summary (every face and view accounted for)."""
 
 from __future__ import annotations
 
+from collections import Counter
+
 import numpy as np
 
-from .panoptic_plan import SKIPPED, Config, Plan
-from .relabel import summary_tail
+from ...rotation import get_system
+from .core import summary_tail
+from .plan import SKIPPED, Config, Plan
 
 
 class RmseStats:
@@ -58,10 +61,6 @@ class RmseStats:
 
 def unit_stats(res: dict, cfg: Config) -> dict:
     """The summary counts of one :func:`process_chunk` result, as plain JSON."""
-    from collections import Counter
-
-    from ..rotation import get_system
-
     t = res["table"]
     out_of_range = gimbal = 0
     if len(t["frame"]):
@@ -91,8 +90,6 @@ class Stats:
     """Counts for the end-of-run summary; every face and view is accounted for."""
 
     def __init__(self):
-        from collections import Counter
-
         self.frames = self.faces = self.views = self.labelled = self.unreadable = self.skipped_frames = 0
         self.legacy_considered = self.out_of_range = self.gimbal = 0
         self.view_reasons: Counter = Counter()

@@ -13,11 +13,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
-from ..datasets import panoptic as pan
-from ..errors import HpeError
-from ..geometry.reference import panoptic_pairs
-from .relabel import DEFAULT_MAX_RMSE, fit_faces, relabel_views, view_label_columns
+from ...datasets import panoptic as pan
+from ...errors import HpeError
+from ...geometry.reference import panoptic_pairs
+from ...io.layout import numpy_to_arrow, string_array
+from .core import DEFAULT_MAX_RMSE, fit_faces, relabel_views, view_label_columns
 
 CHUNK_FRAMES = 64
 REJECT_COLS = ["sequence", "frame", "person_id", "camera", "reason", "detail", "fit_rmse", "n_pairs", "scale"]
@@ -201,8 +204,6 @@ def process_chunk(
         (list of face-level reasons), ``legacy_considered`` (int).
     """
 
-    from ..io.layout import numpy_to_arrow, string_array
-
     data = pan.read_face_frames(paths)
     n = len(data["frame"])
     C = len(cams)
@@ -234,25 +235,9 @@ def process_chunk(
         landmarks=data["landmarks"] if cfg.landmarks else None,
         frame=cfg.frame,
     )
-    ok = v["ok"]
     if cfg.all_views and n:
-        seen = ok.reshape(n, C).sum(1)
-        drop = np.repeat((seen > 0) & (seen < C), C) & ok
-        if drop.any():
-            v["reason"][drop] = "not seen by every camera"
-            v["detail"][drop] = np.repeat(
-                np.asarray([f"{k} of {C} cameras label this face" for k in seen], dtype=object), C
-            )[drop]
-            keep = ~drop[ok]
-            conv = v["conversion"]
-            v["conversion"] = type(conv)(
-                *(
-                    getattr(conv, f)[keep]
-                    for f in ("primary", "secondary", "matrix", "gimbal_lock", "roundtrip_err", "canonical")
-                )
-            )
-            ok = ok & ~drop
-            v["ok"] = ok
+        _every_camera_rule(v, n, C)
+    ok = v["ok"]
     fo, co = face[ok], ci[ok]
     frames = data["frame"][fo]
     table = {  # strings taken in Arrow from the few distinct values (no Python object per row)
@@ -260,42 +245,69 @@ def process_chunk(
         "frame": frames,
         "camera": string_array(cams.names).take(numpy_to_arrow(co)),
         "person_id": data["person_id"][fo],
-        "image": _image_paths(cams, co, frames),
+        "image": image_paths(cams, co, frames),
     }
     table.update(view_label_columns(v, fit, fo, cfg.legacy))
     table["image_width"] = cams.width[co]
     table["image_height"] = cams.height[co]
-    bad = ~ok
-    fb = face[bad]
-    unread = data["unreadable"]
-    u = len(unread)
-    rejects = {
-        "sequence": np.full(len(fb) + u, sequence, dtype=object),
-        "frame": np.concatenate([data["frame"][fb], np.asarray([f for f, _, _ in unread], dtype=np.int64)]),
-        "person_id": np.concatenate([data["person_id"][fb], np.full(u, -1, dtype=np.int64)]),
-        "camera": np.concatenate([cams.names[ci[bad]], np.full(u, "", dtype=object)]),
-        "reason": np.concatenate([v["reason"][bad], np.asarray([r for _, r, _ in unread], dtype=object)]),
-        "detail": np.concatenate([v["detail"][bad], np.asarray([d for _, _, d in unread], dtype=object)]),
-        "fit_rmse": np.concatenate([fit["rmse"][fb], np.full(u, np.nan)]),
-        "n_pairs": np.concatenate([fit["n_pairs"][fb], np.full(u, 0, dtype=np.int64)]),
-        "scale": np.concatenate([fit["scale"][fb], np.full(u, np.nan)]),
-    }
     fitted = np.isfinite(fit["rmse"])
     legacy_considered = int(np.isin(v["reason"], ("", "dropped by legacy rule")).sum()) if cfg.legacy else 0
     res = {
         "table": table,
-        "rejects": rejects,
+        "rejects": _view_rejects(data, v, fit, face[~ok], ci[~ok], cams, sequence),
         "faces": n,
         "fit_rmse": fit["rmse"][fitted],
         "face_reasons": fit["reason"],
         "views": n * C,
         "legacy_considered": legacy_considered,
         "frames": len(paths),
-        "unreadable": u,
+        "unreadable": len(data["unreadable"]),
     }
     if skipped:
         _add_skipped(res, skipped, cams, sequence, every)
     return res
+
+
+def _every_camera_rule(v: dict, n: int, C: int) -> None:
+    """``--all-views``: a face that some but not all of the ``C`` cameras label goes to the rejects in every
+    view ("not seen by every camera"); ``v`` (:func:`~.core.relabel_views` of ``n`` faces) is updated."""
+    ok = v["ok"]
+    seen = ok.reshape(n, C).sum(1)
+    drop = np.repeat((seen > 0) & (seen < C), C) & ok
+    if not drop.any():
+        return
+    v["reason"][drop] = "not seen by every camera"
+    v["detail"][drop] = np.repeat(np.asarray([f"{k} of {C} cameras label this face" for k in seen], dtype=object), C)[
+        drop
+    ]
+    keep = ~drop[ok]
+    conv = v["conversion"]
+    v["conversion"] = type(conv)(
+        *(
+            getattr(conv, f)[keep]
+            for f in ("primary", "secondary", "matrix", "gimbal_lock", "roundtrip_err", "canonical")
+        )
+    )
+    v["ok"] = ok & ~drop
+
+
+def _view_rejects(data: dict, v: dict, fit: dict, fb, cb, cams: pan.Cameras, sequence: str) -> dict:
+    """The reject columns (:data:`REJECT_COLS`): the views not labelled (faces ``fb`` seen by cameras ``cb``),
+    then the unreadable face files."""
+    bad = ~v["ok"]
+    unread = data["unreadable"]
+    u = len(unread)
+    return {
+        "sequence": np.full(len(fb) + u, sequence, dtype=object),
+        "frame": np.concatenate([data["frame"][fb], np.asarray([f for f, _, _ in unread], dtype=np.int64)]),
+        "person_id": np.concatenate([data["person_id"][fb], np.full(u, -1, dtype=np.int64)]),
+        "camera": np.concatenate([cams.names[cb], np.full(u, "", dtype=object)]),
+        "reason": np.concatenate([v["reason"][bad], np.asarray([r for _, r, _ in unread], dtype=object)]),
+        "detail": np.concatenate([v["detail"][bad], np.asarray([d for _, _, d in unread], dtype=object)]),
+        "fit_rmse": np.concatenate([fit["rmse"][fb], np.full(u, np.nan)]),
+        "n_pairs": np.concatenate([fit["n_pairs"][fb], np.full(u, 0, dtype=np.int64)]),
+        "scale": np.concatenate([fit["scale"][fb], np.full(u, np.nan)]),
+    }
 
 
 SKIPPED = "skipped by --every"
@@ -342,15 +354,10 @@ def _add_skipped(res: dict, skipped: dict, cams: pan.Cameras, sequence: str, eve
     res["every"] = int(every)
 
 
-def _image_paths(cams: pan.Cameras, ci, frames):
+def image_paths(cams: pan.Cameras, ci, frames):
     """``hdImgs/<cam>/<cam>_<frame>.jpg`` per row (:func:`hpe_cli.datasets.panoptic.image_path`), joined in
     Arrow from the cameras' prefixes and the distinct frames' names (no Python step per row, and no
     ``pa.array``, which imports pandas: 0.3 s in every worker)."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    from ..io.layout import numpy_to_arrow, string_array
-
     ci = np.asarray(ci, dtype=np.int64).reshape(-1)
     tail = len("00000000.jpg")
     prefix = string_array([pan.image_path(c, 0, t)[:-tail] for c, t in zip(cams.names, cams.types)])

@@ -16,10 +16,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.helmet import helmet_boxes
-from ..geometry.projection import project_points
-from ..geometry.reference import confidence_min, min_pairs, reference_head
-from ..geometry.similarity import fit_similarity
+from ...geometry.helmet import helmet_boxes
+from ...geometry.line_of_sight import camera_to_crop_labels
+from ...geometry.projection import project_points
+from ...geometry.reference import confidence_min, helmet_preset, min_pairs, reference_head
+from ...geometry.similarity import fit_similarity
+from ...io import BBOX_COLS, conversion_columns, landmark_cols
+from ...rotation import canonical_to_labels, get_system
 
 #: camera frame (OpenCV: x right, y down, z forward) -> canonical 300W-LP frame (y up, z to the camera)
 E = np.diag([1.0, -1.0, -1.0])
@@ -30,6 +33,9 @@ E = np.diag([1.0, -1.0, -1.0])
 #: person 2: six pairs at score 0, eye line 98 deg from the label; frame 3476
 #: person 4: nose points 15 cm off; frame 6328 person 2: eye line 11 deg off).
 DEFAULT_MAX_RMSE = 2.0
+
+#: the 300W-LP system: WHENet's legacy angles are 300W-LP angles
+W300LP = get_system("300w_lp")
 
 #: views per block when projecting landmarks
 VIEW_BLOCK = 256
@@ -233,8 +239,6 @@ def relabel_views(
         ``bbox`` (V, 4); ``legacy_pyr`` (V, 3) (legacy only, NaN where
         dropped); ``lm2d`` (V, L, 2) when ``landmarks`` is given.
     """
-    from ..rotation import canonical_to_labels, get_system
-
     face = np.asarray(face, dtype=np.intp)
     Rh = fit["R"][face]
     box = helmet_boxes(
@@ -258,15 +262,7 @@ def relabel_views(
     A = label_matrices(Rh, cam["R"])
     out = {"bbox": box["bbox"], "A": A}
     if frame == "crop":
-        from ..geometry.line_of_sight import camera_to_crop_labels
-        from ..geometry.reference import helmet_preset
-
-        off = np.asarray(helmet_preset(preset).offset, dtype=np.float64)
-        world = fit["scale"][face, None] * (Rh @ off) + fit["t"][face]
-        centre = np.einsum("nij,nj->ni", np.broadcast_to(cam["R"], (len(face), 3, 3)), world) + np.broadcast_to(
-            np.asarray(cam["t"], dtype=np.float64).reshape(-1, 3), (len(face), 3)
-        )
-        A, out["ray_angle"] = camera_to_crop_labels(A, centre)
+        A, out["ray_angle"] = _crop_labels(A, fit, face, cam, preset)
         out["A"] = A
     elif frame != "camera":
         raise ValueError(f"expected frame 'camera' or 'crop', got {frame!r}")
@@ -282,24 +278,41 @@ def relabel_views(
     ok = reason == ""
     if legacy:
         # the label is rebuilt from WHENet's own angles (equal to A to ~1e-13)
-        A_ok = get_system("300w_lp").from_angles(out["legacy_pyr"][ok])
+        A_ok = W300LP.from_angles(out["legacy_pyr"][ok])
     else:
         A_ok = A[ok]
     out["conversion"] = canonical_to_labels(A_ok, system)
     if landmarks is not None:
-        landmarks = np.asarray(landmarks, dtype=np.float64)
-        uv = np.empty((len(face), landmarks.shape[1], 2))
-        # blocks of views keep the temporaries small enough to stay in cache
-        for s in range(0, len(face), VIEW_BLOCK):
-            sl = slice(s, s + VIEW_BLOCK)
-            b_uv, z = project_points(
-                landmarks[face[sl]], cam["K"][sl, None], cam["dist"][sl, None], cam["R"][sl, None], cam["t"][sl, None]
-            )
-            b_uv[z <= 0] = np.nan
-            uv[sl] = b_uv
-        out["lm2d"] = uv
+        out["lm2d"] = project_views(landmarks, face, cam)
     out.update(ok=ok, reason=reason, detail=detail)
     return out
+
+
+def _crop_labels(A, fit: dict, face, cam: dict, preset: str):
+    """``--frame crop``: the labels ``A`` relative to the ray through each view's helmet centre, and the ray's
+    angle to the optical axis (:func:`hpe_cli.geometry.line_of_sight.camera_to_crop_labels`)."""
+    off = np.asarray(helmet_preset(preset).offset, dtype=np.float64)
+    world = fit["scale"][face, None] * (fit["R"][face] @ off) + fit["t"][face]
+    centre = np.einsum("nij,nj->ni", np.broadcast_to(cam["R"], (len(face), 3, 3)), world) + np.broadcast_to(
+        np.asarray(cam["t"], dtype=np.float64).reshape(-1, 3), (len(face), 3)
+    )
+    return camera_to_crop_labels(A, centre)
+
+
+def project_views(landmarks, face, cam: dict) -> np.ndarray:
+    """The 3-D ``landmarks`` (N, L, 3) of each view's face projected by its camera: (V, L, 2) pixels, NaN
+    behind the camera (``face`` and ``cam`` as in :func:`relabel_views`)."""
+    landmarks = np.asarray(landmarks, dtype=np.float64)
+    uv = np.empty((len(face), landmarks.shape[1], 2))
+    # blocks of views keep the temporaries small enough to stay in cache
+    for s in range(0, len(face), VIEW_BLOCK):
+        sl = slice(s, s + VIEW_BLOCK)
+        b_uv, z = project_points(
+            landmarks[face[sl]], cam["K"][sl, None], cam["dist"][sl, None], cam["R"][sl, None], cam["t"][sl, None]
+        )
+        b_uv[z <= 0] = np.nan
+        uv[sl] = b_uv
+    return uv
 
 
 LEGACY_COLS = ["legacy_pitch", "legacy_yaw", "legacy_roll"]
@@ -314,8 +327,6 @@ def view_label_columns(views: dict, fit: dict, fit_index, legacy: bool) -> dict:
     legacy angles when ``legacy``, and ``lm{i}_x, lm{i}_y`` when ``views``
     holds projected landmarks.
     """
-    from ..io import BBOX_COLS, conversion_columns, landmark_cols
-
     ok = views["ok"]
     bbox = views["bbox"][ok]
     cols = {col: bbox[:, k] for k, col in enumerate(BBOX_COLS)}
