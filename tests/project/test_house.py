@@ -224,9 +224,8 @@ def lazy_imports() -> set:
 
 #: ``get_system(`` calls of ``hpe_cli/pipelines/`` where a user-given name enters -> why
 GET_SYSTEM_ALLOWED = {
-    "hpe_cli/pipelines/agora.py::write_outputs: get_system(cfg.system)": "relabel-agora --system",
-    "hpe_cli/pipelines/biwi.py::run_biwi: get_system(system)": "biwi --system",
-    "hpe_cli/pipelines/panoptic.py::write_outputs: get_system(cfg.system)": "relabel-panoptic --system",
+    "hpe_cli/pipelines/relabel/options.py::_label_system: get_system(system)": "relabel-panoptic/-agora --system",
+    "hpe_cli/pipelines/biwi.py::BiwiOptions.__post_init__: get_system(self.system)": "biwi --system",
     "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(layout.system or opts.system or '300w_lp')": (
         "export --system, or the system the --layout's trainer expects"
     ),
@@ -331,7 +330,6 @@ KNOWN_MANY_PARAMETERS = {
     "hpe_cli/pipelines/evaluate_join.py::read_side",
 }
 KNOWN_GET_SYSTEM = {
-    "hpe_cli/pipelines/biwi.py::BiwiOptions.__post_init__: get_system(self.system)",
     "hpe_cli/pipelines/draw/errors.py::_load: get_system('300w_lp')",
     "hpe_cli/pipelines/draw/errors.py::_load: get_system(system)",
     "hpe_cli/pipelines/draw/errors.py::run_draw_errors: get_system('300w_lp')",
@@ -340,7 +338,6 @@ KNOWN_GET_SYSTEM = {
     "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(opts.system)",
     "hpe_cli/pipelines/relabel/core.py::<module>: get_system('300w_lp')",
     "hpe_cli/pipelines/relabel/options.py::_label_system: get_system('whenet' if fmt != 'table' else '300w_lp')",
-    "hpe_cli/pipelines/relabel/options.py::_label_system: get_system(system)",
     "hpe_cli/pipelines/relabel/stats.py::unit_stats: get_system(cfg.system)",
 }
 KNOWN_LAZY_IMPORTS = {
@@ -916,7 +913,7 @@ def test_the_walker_sees_the_code():
     assert "hpe_cli/pipelines/export/job.py::_layout_and_system" in {
         f"{_rel(n)}::{q}" for n in MODULES if _in(n, "hpe_cli.pipelines.export") for q, _ in _functions(n)
     }
-    assert any(q.startswith("hpe_cli/pipelines/biwi.py::run_biwi: ") for q in get_system_calls())
+    assert any(q.startswith("hpe_cli/pipelines/biwi.py::BiwiOptions.__post_init__: ") for q in get_system_calls())
 
 
 def _update_known() -> None:

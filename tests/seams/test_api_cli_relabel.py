@@ -6,10 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
 import hpe_cli as hpe
-from hpe_cli.cli.main import cli
+from conftest import hpe as hpe_cmd
 from hpe_cli.pipelines.biwi import BiwiOptions
 from hpe_cli.pipelines.relabel import FormatSystemError, RelabelAgoraOptions, RelabelPanopticOptions
 
@@ -20,9 +19,7 @@ BIWI = ROOT / ".." / "shared" / "realdata" / "biwi" / "hpdb"
 
 
 def run(*args):
-    res = CliRunner().invoke(cli, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
-    return res
+    return hpe_cmd(*args, ok=True)
 
 
 @pytest.mark.parametrize("name, fmt", [("labels.parquet", "table"), ("train.json", "coco")])
