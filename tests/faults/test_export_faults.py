@@ -12,6 +12,8 @@ import shutil
 import pandas as pd
 import pytest
 
+from hpe_cli.io.export import LAYOUTS as EXPORT_LAYOUTS
+
 from .conftest import AFLW, TEMP_MARK, check_failed, run, temp_files, tree
 
 FAULTS = {
@@ -29,7 +31,7 @@ REASON = {
     "truncated-header": "unreadable image",
     "missing": "no image (file not found)",
 }
-LAYOUTS = ["whenet", "6drepnet", "fsanet", "hf", "directmhp"]
+LAYOUTS = list(EXPORT_LAYOUTS)
 
 
 def broken_copy(tmp_path, fault):
