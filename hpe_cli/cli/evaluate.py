@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from .choices import RegistryChoice
 from .options import (
     SYSTEM,
     batch_option,
@@ -18,25 +19,6 @@ from .options import (
     verbosity_options,
 )
 from .table_options import column_options
-
-_PROTOCOL_NAMES = (
-    "hopenet",
-    "fsanet",
-    "6drepnet",
-    "6drepnet360",
-    "6drepnet360-2023",
-    "directmhp",
-    "directmhp-single",
-    "directmhp-v2",
-    "whenet",
-    "opal23",
-    "opal23-align",
-    "headposeplus",
-    "img2pose",
-    "trinet",
-    "opentrack",
-    "dad3dheads",
-)
 
 
 def _protocol_help() -> str:
@@ -57,7 +39,25 @@ def _split_keys(ctx, param, value):
     return tuple(dict.fromkeys(out))
 
 
-@click.command(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110})
+class _EvaluateCommand(click.Command):
+    """``hpe evaluate``: its help lists the protocol table, read when the help is shown (not at import)."""
+
+    @property
+    def help(self):
+        if self._help and "{protocols}" in self._help:
+            self._help = self._help.replace("{protocols}", _protocol_help())
+        return self._help
+
+    @help.setter
+    def help(self, value):
+        self._help = value
+
+    def get_short_help_str(self, limit: int = 45) -> str:
+        """The first sentence, without reading the protocol table (``hpe --help`` stays light)."""
+        return click.utils.make_default_short_help(self._help or "", limit)
+
+
+@click.command(cls=_EvaluateCommand, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110})
 @click.argument("pred", type=click.Path(exists=True))
 @click.argument("gt", type=click.Path(exists=True))
 @output_option(
@@ -99,7 +99,7 @@ def _split_keys(ctx, param, value):
     "--protocol",
     "protocols",
     multiple=True,
-    type=click.Choice(_PROTOCOL_NAMES + ("all",)),
+    type=RegistryChoice("hpe_cli.metrics.protocols:PROTOCOLS", extra=("all",)),
     help="Published protocol to reproduce (repeatable; default: all).",
 )
 @click.option(
@@ -285,9 +285,6 @@ def evaluate(
     outs = [str(p) for p in (report if report != "-" else None, output, rejects, plots, html) if p]
     if outs:
         echo_summary(["wrote " + ", ".join(outs)], quiet)
-
-
-evaluate.help = evaluate.help.replace("{protocols}", _protocol_help())
 
 
 #: --yaw-bins of a --report run that names none (degrees)
