@@ -45,11 +45,10 @@ import numpy as np
 
 from ..datasets.jsonfile import load_json
 from ..errors import HpeError
-from .run_options import INPUT_FORMATS, active_table_options  # noqa: F401
+from .dataset_readers import READERS, input_format_names, register_reader
+from .run_options import active_table_options  # noqa: F401
 
 LINE_COL = "__line__"
-#: rotation system of the angles each named format holds (None: the list does not say)
-FORMAT_SYSTEMS = {"whenet": "whenet", "opal23": None, "img2pose-biwi": "300w_lp", "celeba-pose": None, "coco": None}
 #: OPAL field names -> hpe column names
 _OPAL_NAMES = {"x_min": "bbox_x", "y_min": "bbox_y", "w": "bbox_w", "h": "bbox_h"}
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\- ]*$")
@@ -341,7 +340,7 @@ def _opal23(path, batch_size, with_lines):
         quoting=False,
         string_columns=("image", "identity"),
         with_lines=with_lines,
-        system=FORMAT_SYSTEMS["opal23"],
+        system=None,
     )
 
 
@@ -365,7 +364,7 @@ def _celeba(path, batch_size, with_lines):
         quoting=False,
         string_columns=("image",),
         with_lines=with_lines,
-        system=FORMAT_SYSTEMS["celeba-pose"],
+        system=None,
     )
 
 
@@ -464,27 +463,6 @@ def _frame_source(path, frame, batch_size, with_lines, system=None):
 
 
 # ------------------------------------------------------------------------------------------- dispatch
-def sniff_format(path) -> str | None:
-    """The named format a file unambiguously is, from its name and first line, else None."""
-    path = Path(path)
-    if not path.is_file():
-        return None
-    name = path.name.lower()
-    if name.endswith(".json"):
-        return "coco-or-json"
-    if name == "annotation.txt":
-        return "whenet"
-    if name == "celebamask-hq-pose-anno.txt":
-        return "celeba-pose"
-    if name == "biwi_annotations.txt":
-        return "img2pose-biwi"
-    if name.endswith(".txt"):
-        first = _first_lines(path, 1)
-        if first and first[0].startswith("#;"):
-            return "opal23"
-    return None
-
-
 def open_formatted(
     path,
     batch_size: int = 262_144,
@@ -495,91 +473,152 @@ def open_formatted(
     names=None,
     with_lines: bool = False,
 ):
-    """Open ``path`` as a named input format or delimited text; None when neither applies.
+    """Open ``path`` as the named input format or as delimited text; None when neither is asked for.
 
-    With ``input_format=None`` the format is sniffed (``.json`` with COCO keys,
-    ``annotation.txt``, ``CelebAMask-HQ-pose-anno.txt``, a ``.txt`` whose first
-    line starts with ``#;``); a plain ``.csv``/``.parquet`` without
-    ``delimiter``/``header=False``/``names`` returns None (the core reader
-    handles it).
+    ``input_format`` names a reader of :data:`~hpe_cli.io.dataset_readers.READERS` with ``input_format`` set;
+    ``delimiter``/``header=False``/``names`` read delimited text. Without them this returns None: the readers'
+    own detection (``.json`` with COCO keys, ``annotation.txt``, ``CelebAMask-HQ-pose-anno.txt``, a ``.txt``
+    whose first line starts with ``#;``, the dataset folders) or the core Parquet/CSV reader takes the path.
     """
     path = Path(path)
-    if input_format is not None and input_format not in INPUT_FORMATS:
-        raise HpeError(f"--input-format: expected one of {', '.join(INPUT_FORMATS)}, got {input_format!r}")
+    if input_format is not None and input_format not in input_format_names():
+        raise HpeError(f"--input-format: expected one of {', '.join(input_format_names())}, got {input_format!r}")
     if input_format is not None and (delimiter is not None or not header or names):
         raise HpeError(
             f"--input-format {input_format} fixes the delimiter and the column names; "
             "drop --delimiter/--no-header/--names (use --columns-map to rename)"
         )
-    fmt = input_format
-    if fmt is None and delimiter is None and header and not names:
-        fmt = sniff_format(path)
-        if fmt == "coco-or-json":
-            doc = load_json(path)
-            if is_coco(doc):
-                return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
-            from ..datasets.dad3dheads import is_dad_metadata
-
-            if is_dad_metadata(doc):
-                return None  # a dataset reader takes it
-            raise HpeError(
-                f"{path}: expected COCO JSON (an object with 'images' and 'annotations'), "
-                f"got {type(doc).__name__} with keys "
-                f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}"
-            )
-    if fmt is None:
-        if delimiter is None and header and not names:
-            return None
+    if input_format is not None:
         if not path.is_file():
-            raise HpeError(f"{path}: --delimiter/--no-header/--names apply to a text file, not a folder")
-        if path.suffix.lower() in (".parquet", ".pq"):
-            raise HpeError(f"{path}: --delimiter/--no-header/--names apply to delimited text, not Parquet")
-        if names and header:
-            raise HpeError("--names goes with --no-header (with a header line, use --columns-map to rename)")
-        delim = delimiter if delimiter is not None else ("\t" if path.suffix.lower() == ".tsv" else ",")
-        return open_text(
-            path,
-            batch_size,
-            delimiter=delim,
-            header=header,
-            names=names,
-            string_columns=("image", "file"),
-            with_lines=with_lines,
-        )
+            raise HpeError(f"{path}: --input-format {input_format} reads a file, got a folder")
+        src = READERS[input_format].open(path, batch_size=batch_size, with_lines=with_lines)
+        if src is None:
+            raise HpeError(f"{path}: --input-format {input_format} cannot read this file")
+        return src
+    if delimiter is None and header and not names:
+        return None
     if not path.is_file():
-        raise HpeError(f"{path}: --input-format {fmt} reads a file, got a folder")
-    if fmt == "coco":
-        doc = load_json(path)
+        raise HpeError(f"{path}: --delimiter/--no-header/--names apply to a text file, not a folder")
+    if path.suffix.lower() in (".parquet", ".pq"):
+        raise HpeError(f"{path}: --delimiter/--no-header/--names apply to delimited text, not Parquet")
+    if names and header:
+        raise HpeError("--names goes with --no-header (with a header line, use --columns-map to rename)")
+    delim = delimiter if delimiter is not None else ("\t" if path.suffix.lower() == ".tsv" else ",")
+    return open_text(
+        path,
+        batch_size,
+        delimiter=delim,
+        header=header,
+        names=names,
+        string_columns=("image", "file"),
+        with_lines=with_lines,
+    )
+
+
+# ------------------------------------------------------------------------------- the named label lists
+def _named(file_name: str):
+    """``detect`` of a list known by its file name (case-insensitive)."""
+    return lambda path: path.is_file() and path.name.lower() == file_name
+
+
+#: file names the lists above are known by (a ``.txt`` among them is never sniffed as OPAL's)
+_LIST_NAMES = ("annotation.txt", "celebamask-hq-pose-anno.txt", "biwi_annotations.txt")
+
+
+def _is_opal23(path: Path) -> bool:
+    if not (path.is_file() and path.name.lower().endswith(".txt")) or path.name.lower() in _LIST_NAMES:
+        return False
+    first = _first_lines(path, 1)
+    return bool(first) and first[0].startswith("#;")
+
+
+@register_reader(
+    "whenet",
+    _named("annotation.txt"),
+    system="whenet",
+    key=("image",),
+    doc="WHENet's ``annotation.txt``: ``image,yaw,pitch,roll`` per line, no header",
+    input_format=True,
+)
+def open_whenet_list(path, *, batch_size: int, with_lines: bool = False):
+    return open_text(
+        path,
+        batch_size,
+        delimiter=",",
+        header=False,
+        names=["image", "yaw", "pitch", "roll"],
+        quoting=False,
+        string_columns=("image",),
+        with_lines=with_lines,
+        system="whenet",
+    )
+
+
+@register_reader(
+    "opal23",
+    _is_opal23,
+    key=("image",),
+    doc="OPAL's annotation lists: ``;`` separated, a first line ``#;image;...;yaw;pitch;roll``",
+    input_format=True,
+)
+def open_opal23_list(path, *, batch_size: int, with_lines: bool = False):
+    return _opal23(path, batch_size, with_lines)
+
+
+@register_reader(
+    "img2pose-biwi",
+    _named("biwi_annotations.txt"),
+    system="300w_lp",
+    key=("image",),
+    doc="img2pose's ``BIWI_annotations.txt``: ``path pitch yaw roll``, space separated",
+    input_format=True,
+)
+def open_img2pose_biwi_list(path, *, batch_size: int, with_lines: bool = False):
+    return open_text(
+        path,
+        batch_size,
+        delimiter=" ",
+        header=False,
+        names=["image", "pitch", "yaw", "roll"],
+        quoting=False,
+        string_columns=("image",),
+        with_lines=with_lines,
+        system="300w_lp",
+    )
+
+
+@register_reader(
+    "celeba-pose",
+    _named("celebamask-hq-pose-anno.txt"),
+    key=("image",),
+    doc="CelebAMask-HQ ``CelebAMask-HQ-pose-anno.txt``: count line, ``Yaw Pitch Raw``, then one image a line",
+    input_format=True,
+)
+def open_celeba_list(path, *, batch_size: int, with_lines: bool = False):
+    return _celeba(path, batch_size, with_lines)
+
+
+@register_reader(
+    "coco",
+    lambda path: path.is_file() and path.name.lower().endswith(".json"),
+    key=("image", "annotation_id"),
+    doc="COCO JSON in DirectMHP's schema (``euler_angles``, ``bbox``), one row per annotation",
+    input_format=True,
+)
+def open_coco(path, *, batch_size: int, with_lines: bool = False):
+    """A COCO file; None for DAD-3DHeads metadata (its reader takes it); any other JSON is an error."""
+    doc = load_json(path)
+    if is_coco(doc):
         return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
-    if fmt == "whenet":
-        return open_text(
-            path,
-            batch_size,
-            delimiter=",",
-            header=False,
-            names=["image", "yaw", "pitch", "roll"],
-            quoting=False,
-            string_columns=("image",),
-            with_lines=with_lines,
-            system=FORMAT_SYSTEMS["whenet"],
-        )
-    if fmt == "img2pose-biwi":
-        return open_text(
-            path,
-            batch_size,
-            delimiter=" ",
-            header=False,
-            names=["image", "pitch", "yaw", "roll"],
-            quoting=False,
-            string_columns=("image",),
-            with_lines=with_lines,
-            system=FORMAT_SYSTEMS["img2pose-biwi"],
-        )
-    if fmt == "celeba-pose":
-        return _celeba(path, batch_size, with_lines)
-    if fmt == "opal23":
-        return _opal23(path, batch_size, with_lines)
-    raise AssertionError(fmt)
+    from ..datasets.dad3dheads import is_dad_metadata
+
+    if is_dad_metadata(doc):
+        return None  # a dataset reader takes it
+    raise HpeError(
+        f"{path}: expected COCO JSON (an object with 'images' and 'annotations'), "
+        f"got {type(doc).__name__} with keys "
+        f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}"
+    )
 
 
 def label_system(src, requested):

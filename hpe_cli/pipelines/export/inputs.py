@@ -12,7 +12,9 @@ import numpy as np
 
 from ...errors import HpeError
 from ...geometry.crop import landmark_boxes, sixdrepnet_test_boxes
+from ...io.dataset_readers import find_reader
 from ...io.layout import BBOX_COLS, landmark_count
+from ...registry import Registry
 from .options import A_COLS
 
 
@@ -44,6 +46,13 @@ def _subject_of(stem: str) -> str:
     return re.sub(r"_\d+$", "", stem) if re.search(r"_\d+_\d+$", stem) else stem
 
 
+#: dataset reader name (:data:`hpe_cli.io.dataset_readers.READERS`) -> ``load(path, source, landmarks)``: the
+#: export's own loading of that dataset (boxes from its landmarks...), a frame as :func:`load_table_input`'s, or
+#: None to read the input as a label table after all. Inputs of other readers are read as label tables.
+EXPORT_LOADERS = Registry("export input")
+
+
+@EXPORT_LOADERS.register("mat")
 def load_mat_input(path: Path, source: str, landmarks: bool = True):
     """A 300W-LP/AFLW2000 ``.mat`` folder: box from the visible ``pt2d`` points (else ``pt3d_68``).
 
@@ -93,13 +102,16 @@ def load_mat_input(path: Path, source: str, landmarks: bool = True):
     )
 
 
+@EXPORT_LOADERS.register("300w-lp")
 def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
     """The 300W-LP root folder (``{AFW,HELEN,IBUG,LFPW}[_Flip]/NAME_k``, :func:`hpe_cli.datasets.w300lp.read_w300lp`).
 
     The box is built as for a ``.mat`` folder, from the copy's own ``landmarks/<subset>/NAME_k_pts.mat`` points
     when present (the main file's ``pt2d`` comes from the original image, 3DDFA issue #192), else ``pt2d``.
-    The group column ``subject`` is the identity ``NAME``.
+    The group column ``subject`` is the identity ``NAME``. None for ``300W-LP.zip`` (read as a label table).
     """
+    if not path.is_dir():
+        return None
     from ...datasets.w300lp import read_w300lp
 
     t = read_w300lp(path, landmarks=True, pt2d=True)
@@ -305,15 +317,10 @@ def load_inputs(paths, images=(), input_system=None, landmarks: bool = True, rad
         while name in names:
             name += "_"
         names.add(name)
-        from ...datasets.w300lp import is_w300lp_root
-
-        is_mat = (p.is_dir() and any(p.glob("*.mat"))) or p.suffix.lower() == ".mat"
-        if p.is_dir() and not is_mat and is_w300lp_root(p):
-            f = load_w300lp_input(p, name, landmarks)
-            if root:
-                f["root"] = str(root)
-        elif is_mat:
-            f = load_mat_input(p, name, landmarks)
+        reader = find_reader(p)
+        load = EXPORT_LOADERS.get(reader.name, None) if reader is not None else None
+        f = load(p, name, landmarks) if load is not None else None
+        if f is not None:
             if root:
                 f["root"] = str(root)
         elif p.is_dir():
