@@ -42,9 +42,11 @@ def _split_keys(ctx, param, value):
 class _EvaluateCommand(click.Command):
     """``hpe evaluate``: its help lists the protocol table, read when the help is shown (not at import)."""
 
+    _short = False  # inside get_short_help_str: the first sentence needs no protocol table
+
     @property
     def help(self):
-        if self._help and "{protocols}" in self._help:
+        if not self._short and self._help and "{protocols}" in self._help:
             self._help = self._help.replace("{protocols}", _protocol_help())
         return self._help
 
@@ -54,7 +56,11 @@ class _EvaluateCommand(click.Command):
 
     def get_short_help_str(self, limit: int = 45) -> str:
         """The first sentence, without reading the protocol table (``hpe --help`` stays light)."""
-        return click.utils.make_default_short_help(self._help or "", limit)
+        self._short = True
+        try:
+            return super().get_short_help_str(limit)
+        finally:
+            self._short = False
 
 
 @click.command(cls=_EvaluateCommand, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110})
