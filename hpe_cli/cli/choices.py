@@ -42,23 +42,21 @@ class RegistryChoice(SuggestChoice):
         self.extra = tuple(extra)
         self.keep = keep
         self.attribute = attribute
-        self._names: tuple | None = None
         self.case_sensitive = case_sensitive
 
     @property
     def choices(self) -> tuple:
-        if self._names is None:
-            module, name = self.table.split(":")
-            table = getattr(importlib.import_module(module), name)
-            table = table() if callable(table) and not hasattr(table, "names") else table
-            if self.attribute is not None:
-                names = dict.fromkeys(v for entry in table.values() for v in getattr(entry, self.attribute))
-            elif self.keep is not None:
-                names = table.filter(self.keep)
-            else:
-                names = table.names() if hasattr(table, "names") else tuple(table)
-            self._names = tuple(names) + self.extra
-        return self._names
+        # read on every use (cheap): an entry registered after the option was first shown is accepted too
+        module, name = self.table.split(":")
+        table = getattr(importlib.import_module(module), name)
+        table = table() if callable(table) and not hasattr(table, "names") else table
+        if self.attribute is not None:
+            names = dict.fromkeys(v for entry in table.values() for v in getattr(entry, self.attribute))
+        elif self.keep is not None:
+            names = table.filter(self.keep)
+        else:
+            names = table.names() if hasattr(table, "names") else tuple(table)
+        return tuple(names) + self.extra
 
     @choices.setter
     def choices(self, value) -> None:  # click.Choice.__init__ and copies set it; the registry decides
