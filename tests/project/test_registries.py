@@ -274,3 +274,13 @@ def test_dummy_protocol_through_evaluate(tmp_path):
     dummy = report["protocols"]["dummy"]
     assert dummy["source"] == "tests/project/test_registries.py"
     np.testing.assert_allclose([dummy["pitch"], dummy["yaw"], dummy["roll"]], [0.0, 2.0, 0.0], atol=1e-9)
+
+
+def test_a_broken_plugin_is_one_line(tmp_path):
+    bad = tmp_path / "bad_plugin.py"
+    bad.write_text("raise RuntimeError('boom')\n")
+    res = CliRunner(env={"HPE_PLUGINS": str(bad)}).invoke(cli, ["systems"])
+    assert res.exit_code == 1
+    assert res.output.strip().splitlines() == [f"Error: HPE_PLUGINS: {bad}: cannot load it: RuntimeError: boom"]
+    res = CliRunner(env={"HPE_PLUGINS": str(tmp_path / "missing.py")}).invoke(cli, ["systems"])
+    assert res.exit_code == 1 and "expected a Python file, got no such file" in res.output
