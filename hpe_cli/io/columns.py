@@ -167,6 +167,122 @@ def _line_numbers(first_line: int, start: int, count: int, skipped: list) -> np.
     return k + np.searchsorted(gaps, k, side="right")
 
 
+def _check_text_options(path: Path, delimiter, names):
+    """The file exists and is not empty, the delimiter is one character, ``names`` are distinct; returns
+    ``names`` stripped (or None)."""
+    if not path.is_file():
+        raise HpeError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise HpeError(f"{path}: empty file")
+    if delimiter is None or len(delimiter) != 1 or delimiter in '\r\n"':
+        raise HpeError(f"--delimiter: expected one character such as ',' ';' or '\\t', got {delimiter!r}")
+    if names is not None:
+        names = [str(n).strip() for n in names]
+        if len(set(names)) != len(names) or not all(names):
+            raise HpeError(f"--names: expected distinct non-empty names, got {','.join(names)}")
+    return names
+
+
+class _TextRows:
+    """One delimited text file read by pyarrow's streaming CSV reader, with the lines it skipped (blank,
+    comment and bad lines, for the line numbers) and the bad rows set aside as rejects."""
+
+    def __init__(self, path: Path, delimiter, header, names, skip_lines, comment_prefixes, quoting, string_columns):
+        import pyarrow.csv as pcsv
+
+        self.path, self.delimiter = path, delimiter
+        self.skipped: list = []
+        self.bad: list = []
+        self.prefixes = tuple(comment_prefixes)
+        self.string_columns = list(string_columns)
+        self.read_opts = pcsv.ReadOptions(
+            use_threads=False,
+            block_size=1 << 22,
+            skip_rows=skip_lines,
+            column_names=None if header else names,
+            autogenerate_column_names=(not header and names is None),
+        )
+        self.parse_opts = pcsv.ParseOptions(
+            delimiter=delimiter,
+            ignore_empty_lines=False,
+            invalid_row_handler=self.handler,
+            quote_char='"' if quoting else False,
+            newlines_in_values=False,
+        )
+
+    def handler(self, row):
+        """pyarrow's invalid-row handler: note the line (skipped), and a non-blank, non-comment one as bad."""
+        text = row.text or ""
+        if row.number is not None:
+            if text.strip() == "" or (self.prefixes and text.startswith(self.prefixes)):
+                self.skipped.append(int(row.number))
+            else:
+                self.skipped.append(int(row.number))
+                self.bad.append((int(row.number), row.expected_columns, row.actual_columns, text))
+        return "skip"
+
+    def make_reader(self):
+        """A reader from the file's start, with the string columns declared (a probe finds the columns)."""
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+
+        probe = pcsv.open_csv(self.path, read_options=self.read_opts, parse_options=self.parse_opts)
+        cols = probe.schema.names
+        types = {c: pa.string() for c in self.string_columns if c in cols}
+        self.skipped.clear()  # the probe parsed the first block too
+        self.bad.clear()
+        return pcsv.open_csv(
+            self.path,
+            read_options=self.read_opts,
+            parse_options=self.parse_opts,
+            convert_options=pcsv.ConvertOptions(column_types=types, strings_can_be_null=True),
+        )
+
+    def take_rejects(self) -> list:
+        """The bad rows found since the last call, as rejects."""
+        from .table_source import Reject
+
+        out = [
+            Reject(line, f"expected {want} fields separated by {self.delimiter!r}, got {got}", text[:200])
+            for line, want, got, text in self.bad
+        ]
+        self.bad.clear()
+        return out
+
+    def batches(self, first_reader: list, first_line: int, line_schema):
+        """``(batch with __line__, rejects)``; ``first_reader`` holds the reader already opened, if unused."""
+        import pyarrow as pa
+
+        rdr = first_reader.pop() if first_reader else self.make_reader()
+        start = 0
+        for b in rdr:
+            n = b.num_rows
+            lines = _line_numbers(first_line, start, n, self.skipped)
+            start += n
+            # an empty line parses as a row of nulls: it is not a row of the table
+            empty = None
+            for col in b.columns:
+                v = col.is_null().to_numpy(zero_copy_only=False)
+                empty = v if empty is None else (empty & v)
+            if empty is not None and empty.any():
+                keep = ~empty
+                b = b.filter(pa.array(keep))
+                lines = lines[keep]
+            b = pa.RecordBatch.from_arrays(list(b.columns) + [pa.array(lines, type=pa.int64())], schema=line_schema)
+            yield b, self.take_rejects()
+        if self.bad:
+            yield pa.RecordBatch.from_pylist([], schema=line_schema), self.take_rejects()
+
+
+def _check_header(path: Path, schema, skip_lines: int) -> None:
+    hdr = list(schema.names)
+    if len(set(hdr)) != len(hdr):
+        raise HpeError(
+            f"{path}: line {skip_lines + 1}: the header names a column twice "
+            f"({', '.join(sorted({h for h in hdr if hdr.count(h) > 1}))})"
+        )
+
+
 def open_text(
     path,
     batch_size: int = 262_144,
@@ -200,112 +316,27 @@ def open_text(
         Add ``__line__`` (int64, 1-based file line of each row).
     """
     import pyarrow as pa
-    import pyarrow.csv as pcsv
 
-    from .table_source import Reject, TableSource
+    from .table_source import TableSource
 
     path = Path(path)
-    if not path.is_file():
-        raise HpeError(f"{path}: no such file")
-    if path.stat().st_size == 0:
-        raise HpeError(f"{path}: empty file")
-    if delimiter is None or len(delimiter) != 1 or delimiter in '\r\n"':
-        raise HpeError(f"--delimiter: expected one character such as ',' ';' or '\\t', got {delimiter!r}")
-    if names is not None:
-        names = [str(n).strip() for n in names]
-        if len(set(names)) != len(names) or not all(names):
-            raise HpeError(f"--names: expected distinct non-empty names, got {','.join(names)}")
-    skipped: list = []
-    bad: list = []
-    prefixes = tuple(comment_prefixes)
-
-    def handler(row):
-        text = row.text or ""
-        if row.number is not None:
-            if text.strip() == "" or (prefixes and text.startswith(prefixes)):
-                skipped.append(int(row.number))
-            else:
-                skipped.append(int(row.number))
-                bad.append((int(row.number), row.expected_columns, row.actual_columns, text))
-        return "skip"
-
-    read_opts = pcsv.ReadOptions(
-        use_threads=False,
-        block_size=1 << 22,
-        skip_rows=skip_lines,
-        column_names=None if header else names,
-        autogenerate_column_names=(not header and names is None),
-    )
-    parse_opts = pcsv.ParseOptions(
-        delimiter=delimiter,
-        ignore_empty_lines=False,
-        invalid_row_handler=handler,
-        quote_char='"' if quoting else False,
-        newlines_in_values=False,
-    )
-    string_columns = list(string_columns)
-
-    def make_reader():
-        probe = pcsv.open_csv(path, read_options=read_opts, parse_options=parse_opts)
-        cols = probe.schema.names
-        types = {c: pa.string() for c in string_columns if c in cols}
-        skipped.clear()  # the probe parsed the first block too
-        bad.clear()
-        return pcsv.open_csv(
-            path,
-            read_options=read_opts,
-            parse_options=parse_opts,
-            convert_options=pcsv.ConvertOptions(column_types=types, strings_can_be_null=True),
-        )
-
+    names = _check_text_options(path, delimiter, names)
+    rows = _TextRows(path, delimiter, header, names, skip_lines, comment_prefixes, quoting, string_columns)
     try:
-        reader = make_reader()
+        reader = rows.make_reader()
     except (pa.ArrowInvalid, OSError, UnicodeDecodeError) as exc:
         raise HpeError(f"{path}: cannot read: {' '.join(str(exc).split())[:300]}") from None
     schema = reader.schema
     if header:
-        hdr = list(schema.names)
-        if len(set(hdr)) != len(hdr):
-            raise HpeError(
-                f"{path}: line {skip_lines + 1}: the header names a column twice "
-                f"({', '.join(sorted({h for h in hdr if hdr.count(h) > 1}))})"
-            )
+        _check_header(path, schema, skip_lines)
     first_line = skip_lines + (2 if header else 1)
-    base_schema = schema
-    schema = schema.append(pa.field(LINE_COL, pa.int64())) if with_lines else schema
-    line_schema = base_schema.append(pa.field(LINE_COL, pa.int64()))
+    line_schema = schema.append(pa.field(LINE_COL, pa.int64()))
     first_reader = [reader]
 
-    def take_rejects():
-        out = [
-            Reject(line, f"expected {want} fields separated by {delimiter!r}, got {got}", text[:200])
-            for line, want, got, text in bad
-        ]
-        bad.clear()
-        return out
-
     def batches():
-        rdr = first_reader.pop() if first_reader else make_reader()
-        start = 0
-        for b in rdr:
-            n = b.num_rows
-            lines = _line_numbers(first_line, start, n, skipped)
-            start += n
-            # an empty line parses as a row of nulls: it is not a row of the table
-            empty = None
-            for col in b.columns:
-                v = col.is_null().to_numpy(zero_copy_only=False)
-                empty = v if empty is None else (empty & v)
-            if empty is not None and empty.any():
-                keep = ~empty
-                b = b.filter(pa.array(keep))
-                lines = lines[keep]
-            b = pa.RecordBatch.from_arrays(list(b.columns) + [pa.array(lines, type=pa.int64())], schema=line_schema)
-            yield b, take_rejects()
-        if bad:
-            yield pa.RecordBatch.from_pylist([], schema=line_schema), take_rejects()
+        return rows.batches(first_reader, first_line, line_schema)
 
-    return TableSource(path, schema, None, batches, with_lines, "text", system=system)
+    return TableSource(path, line_schema if with_lines else schema, None, batches, with_lines, "text", system=system)
 
 
 def _opal23(path, batch_size, with_lines):
