@@ -23,6 +23,8 @@ class RegistryChoice(SuggestChoice):
         ``"module:NAME"`` of the :class:`~hpe_cli.registry.Registry` (or of a function returning names).
     extra : tuple of str
         Names accepted besides the table's, after them (``all``).
+    first : tuple of str
+        Names accepted besides the table's, before them (``auto``).
     keep : callable, optional
         ``keep(entry) -> bool``: only the entries it keeps (e.g. decoders of one kind).
     attribute : str, optional
@@ -34,12 +36,14 @@ class RegistryChoice(SuggestChoice):
         table: str,
         extra: tuple = (),
         *,
+        first: tuple = (),
         keep: Callable | None = None,
         attribute: str | None = None,
         case_sensitive: bool = True,
     ):
         self.table = table
         self.extra = tuple(extra)
+        self.first = tuple(first)
         self.keep = keep
         self.attribute = attribute
         self.case_sensitive = case_sensitive
@@ -56,7 +60,7 @@ class RegistryChoice(SuggestChoice):
             names = table.filter(self.keep)
         else:
             names = table.names() if hasattr(table, "names") else tuple(table)
-        return tuple(names) + self.extra
+        return self.first + tuple(names) + self.extra
 
     @choices.setter
     def choices(self, value) -> None:  # click.Choice.__init__ and copies set it; the registry decides

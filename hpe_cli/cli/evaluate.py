@@ -6,6 +6,7 @@ import click
 
 from .choices import RegistryChoice
 from .options import (
+    COLUMN_KINDS,
     SYSTEM,
     batch_option,
     columns_option,
@@ -163,8 +164,8 @@ class _EvaluateCommand(click.Command):
 )
 @rejects_options
 @columns_option("Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).")
-@click.option("--pred-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for PRED.")
-@click.option("--gt-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for GT.")
+@click.option("--pred-columns", type=click.Choice(COLUMN_KINDS), help="Override --columns for PRED.")
+@click.option("--gt-columns", type=click.Choice(COLUMN_KINDS), help="Override --columns for GT.")
 @radians_option()
 @overwrite_option
 @batch_option
