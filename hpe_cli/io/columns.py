@@ -655,8 +655,8 @@ def open_coco(path, *, batch_size: int, with_lines: bool = False):
 def label_system(src, requested):
     """The system to read ``src``'s labels in: the dataset's own for dataset readers, else ``requested``.
 
-    ``.mat`` files always hold ``300w_lp`` angles (``Pose_Para``), BIWI files
-    ``biwi``, DAD-3DHeads ``dad3dheads``; a command's ``--system`` then names
+    A dataset reader's labels are always in its own system (the ``system`` of its entry in
+    :data:`hpe_cli.io.dataset_readers.READERS`); a command's ``--system`` then names
     the system its *output* (or captions) use, and the labels are converted.
     Commands choose systems with :func:`hpe_cli.io.system_meta.resolve_system`.
     """

@@ -1,4 +1,4 @@
-"""Streaming table readers: Parquet, CSV, or a folder of 300W-LP/AFLW2000 ``.mat`` files.
+"""Streaming table readers: Parquet, CSV, and the dataset readers of :data:`~hpe_cli.io.dataset_readers.READERS`.
 
 Memory does not depend on the number of rows: Parquet is read one record
 batch at a time without pre-buffering, CSV in bounded blocks of bytes.
@@ -125,14 +125,11 @@ def open_table(
 def _open_core(
     path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = False, block_size: int = CSV_BLOCK
 ) -> TableSource:
-    """Open a label table for streaming.
+    """Open a plain label table for streaming: Parquet or CSV (recognised by content, not by extension).
 
-    ``path`` may be Parquet, CSV (recognised by content, not by extension), a
-    folder of ``.mat`` files (read from ``Pose_Para``, see
-    :func:`hpe_cli.datasets.mat.read_mat_dir`), or BIWI pose files (a folder,
-    one file, or ``db_annotations.tgz``; angles in the ``biwi`` system).
-    With ``with_lines=True`` every batch carries an int64 ``__line__`` column
-    (see the module docstring).
+    Dataset folders and archives and the named label lists are read by the entries of
+    :data:`hpe_cli.io.dataset_readers.READERS` before this is asked. With ``with_lines=True`` every batch
+    carries an int64 ``__line__`` column (see the module docstring).
     """
     import pyarrow as pa
 
