@@ -284,3 +284,16 @@ def test_a_broken_plugin_is_one_line(tmp_path):
     assert res.output.strip().splitlines() == [f"Error: HPE_PLUGINS: {bad}: cannot load it: RuntimeError: boom"]
     res = CliRunner(env={"HPE_PLUGINS": str(tmp_path / "missing.py")}).invoke(cli, ["systems"])
     assert res.exit_code == 1 and "expected a Python file, got no such file" in res.output
+
+
+def _first_cells(page: str, header: str) -> list:
+    """The first-column names (backquoted, first word) of the Markdown table under the header row ``header``."""
+    text = (ROOT / "docs" / page).read_text(encoding="utf-8")
+    table = text.split(header + "\n")[1].split("\n\n")[0]
+    return list(dict.fromkeys(re.findall(r"^\| `([^` ]+)[^`]*` \|", table, flags=re.M)))
+
+
+def test_docs_tables_list_the_registries():
+    """The docs tables of export layouts and of --input-format lists name exactly the registries' entries."""
+    assert tuple(_first_cells("commands/export.md", "| layout | files | trainer code followed |")) == LAYOUTS.names()
+    assert tuple(_first_cells("commands/columns.md", "| format | file | layout | followed |")) == input_format_names()
