@@ -1,6 +1,6 @@
 """One table per extension point: no name list copied by hand, and a plug-in entry works end to end.
 
-(a) No tuple/list/set literal in ``hpe_cli/``, ``tests/`` or the Python blocks of ``docs/`` copies a registry's
+(a) No tuple/list/set literal (nor dict keys) in ``hpe_cli/``, ``tests/`` or the Python blocks of ``docs/`` copies a registry's
 names. A literal is a copy when it holds at least two names of one registry and at least three quarters of
 them: a selection of two protocols for a test, or a ``(from, to)`` pair of systems that happen to share names with
 layouts and protocols (``whenet``, ``6drepnet``), is not a copy; the old ``LAYOUTS`` tuples and the 16-name
@@ -74,9 +74,13 @@ def copies(source: str, tables: dict) -> list:
         return []
     out = []
     for node in ast.walk(tree):
-        if not isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+            items = node.elts
+        elif isinstance(node, ast.Dict):  # a table keyed by the names (FORMAT_SYSTEMS was one)
+            items = [k for k in node.keys if k is not None]
+        else:
             continue
-        strings = {e.value for e in node.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)}
+        strings = {e.value for e in items if isinstance(e, ast.Constant) and isinstance(e.value, str)}
         for table, names in tables.items():
             common = strings & set(names)
             if len(common) >= 2 and len(common) >= math.ceil(0.75 * len(names)):
@@ -101,6 +105,7 @@ def test_the_scan_finds_a_copy():
     tables = {k: names() for k, names in TABLES.items()}
     assert copies(f"LAYOUTS = {tuple(layouts)!r}", tables)
     assert copies(f"X = {list(PROTOCOLS.names())[:-1]!r}", tables)  # one protocol missing: still a copy
+    assert copies(f"SYSTEMS = {dict.fromkeys(input_format_names())!r}", tables)  # a dict keyed by the names
     assert not copies('PAIR = ("whenet", "6drepnet")', tables)  # a pair of systems
 
 
