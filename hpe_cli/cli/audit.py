@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from .choices import RegistryChoice
 from .options import (
     SYSTEM,
     batch_option,
@@ -85,7 +86,7 @@ from .table_options import column_options
 @rejects_option
 @click.option(
     "--decoder",
-    type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]),
+    type=RegistryChoice("hpe_cli.rotation.decoders:DECODERS"),
     default=None,
     help="Also report how far this published decoder's printed angles are from each rotation "
     "(max/mean geodesic and per-angle, JSON key 'decoder').",

@@ -7,6 +7,7 @@ import os
 import click
 
 from ..io.images import IMAGE_COLUMNS
+from .choices import RegistryChoice
 from .options import (
     batch_option,
     deprecated_spellings,
@@ -73,7 +74,7 @@ from .table_options import column_options
 @click.option(
     "--landmarks",
     "scheme",
-    type=click.Choice(["auto", "ibug68", "face70", "aflw21", "none"]),
+    type=RegistryChoice("hpe_cli.geometry.landmark_schemes:SCHEMES", first=("auto",), extra=("none",)),
     default="auto",
     show_default=True,
     help="Left/right scheme of the lm{i}_x/lm{i}_y columns, re-indexed after a mirror. auto: by count "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from .choices import RegistryChoice
 from .options import SYSTEM, echo_summary, output_option, overwrite_option, rejects_options, verbosity_options
 
 
@@ -46,7 +47,7 @@ def _fractions(ctx, param, value):
 )
 @click.option(
     "--protocol",
-    type=click.Choice(["all", "hopenet-99"]),
+    type=RegistryChoice("hpe_cli.datasets.biwi:PROTOCOLS"),
     default="all",
     show_default=True,
     help="Test subset: every frame, or Hopenet/6DRepNet's |300W-LP angles| <= 99.",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from .choices import RegistryChoice
 from .options import (
     SYSTEM,
     batch_option,
@@ -36,7 +37,7 @@ from .table_options import column_options
 @radians_option()
 @click.option(
     "--decoder",
-    type=click.Choice(["synergynet", "3ddfa_v2", "directmhp"]),
+    type=RegistryChoice("hpe_cli.rotation.decoders:DECODERS"),
     default=None,
     help="Also write what this published decoder prints for each rotation (decoder_pitch, decoder_yaw, "
     "decoder_roll, decoder_ok), beside the exact angles. `hpe audit --decoder` measures the gap.",

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import click
 
+from .choices import RegistryChoice
 from .options import (
+    COLUMN_KINDS,
     SYSTEM,
     batch_option,
     columns_option,
@@ -18,25 +20,6 @@ from .options import (
     verbosity_options,
 )
 from .table_options import column_options
-
-_PROTOCOL_NAMES = (
-    "hopenet",
-    "fsanet",
-    "6drepnet",
-    "6drepnet360",
-    "6drepnet360-2023",
-    "directmhp",
-    "directmhp-single",
-    "directmhp-v2",
-    "whenet",
-    "opal23",
-    "opal23-align",
-    "headposeplus",
-    "img2pose",
-    "trinet",
-    "opentrack",
-    "dad3dheads",
-)
 
 
 def _protocol_help() -> str:
@@ -57,7 +40,31 @@ def _split_keys(ctx, param, value):
     return tuple(dict.fromkeys(out))
 
 
-@click.command(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110})
+class _EvaluateCommand(click.Command):
+    """``hpe evaluate``: its help lists the protocol table, read when the help is shown (not at import)."""
+
+    _short = False  # inside get_short_help_str: the first sentence needs no protocol table
+
+    @property
+    def help(self):
+        if not self._short and self._help and "{protocols}" in self._help:
+            self._help = self._help.replace("{protocols}", _protocol_help())
+        return self._help
+
+    @help.setter
+    def help(self, value):
+        self._help = value
+
+    def get_short_help_str(self, limit: int = 45) -> str:
+        """The first sentence, without reading the protocol table (``hpe --help`` stays light)."""
+        self._short = True
+        try:
+            return super().get_short_help_str(limit)
+        finally:
+            self._short = False
+
+
+@click.command(cls=_EvaluateCommand, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110})
 @click.argument("pred", type=click.Path(exists=True))
 @click.argument("gt", type=click.Path(exists=True))
 @output_option(
@@ -99,7 +106,7 @@ def _split_keys(ctx, param, value):
     "--protocol",
     "protocols",
     multiple=True,
-    type=click.Choice(_PROTOCOL_NAMES + ("all",)),
+    type=RegistryChoice("hpe_cli.metrics.protocols:PROTOCOLS", extra=("all",)),
     help="Published protocol to reproduce (repeatable; default: all).",
 )
 @click.option(
@@ -157,8 +164,8 @@ def _split_keys(ctx, param, value):
 )
 @rejects_options
 @columns_option("Read pitch,yaw,roll or r00..r22 from both tables (auto: angles if present).")
-@click.option("--pred-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for PRED.")
-@click.option("--gt-columns", type=click.Choice(["auto", "angles", "matrix"]), help="Override --columns for GT.")
+@click.option("--pred-columns", type=click.Choice(COLUMN_KINDS), help="Override --columns for PRED.")
+@click.option("--gt-columns", type=click.Choice(COLUMN_KINDS), help="Override --columns for GT.")
 @radians_option()
 @overwrite_option
 @batch_option
@@ -285,9 +292,6 @@ def evaluate(
     outs = [str(p) for p in (report if report != "-" else None, output, rejects, plots, html) if p]
     if outs:
         echo_summary(["wrote " + ", ".join(outs)], quiet)
-
-
-evaluate.help = evaluate.help.replace("{protocols}", _protocol_help())
 
 
 #: --yaw-bins of a --report run that names none (degrees)

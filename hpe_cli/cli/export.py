@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from .choices import RegistryChoice
 from .options import (
     SYSTEM,
     echo_summary,
@@ -18,8 +19,6 @@ from .options import (
 )
 from .table_options import column_options
 
-LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
-
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("labels", nargs=-1, required=True, type=click.Path(exists=True))
@@ -27,14 +26,14 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 @click.option(
     "--layout",
     required=True,
-    type=click.Choice(LAYOUTS),
+    type=RegistryChoice("hpe_cli.io.export:LAYOUTS"),
     help="whenet (crops + annotation.txt), 6drepnet (images + .mat + file list of stems; --form crops: "
     "crops + list), directmhp (frames, COCO JSON, YOLO labels, data.yaml; needs a train and a val "
     "split), fsanet (.npz), hf (Parquet + dataset card).",
 )
 @click.option(
     "--form",
-    type=click.Choice(["mat", "crops"]),
+    type=RegistryChoice("hpe_cli.io.export:LAYOUTS", attribute="forms"),
     default=None,
     help="6drepnet only: mat (default; <split>/<stem>.jpg + <stem>.mat + files.txt of stems, what the "
     "Pose_300W_LP/AFLW2000 classes of 6DRepNet, 6DRepNet360 and Hopenet read), or crops "
@@ -42,7 +41,7 @@ LAYOUTS = ("whenet", "6drepnet", "directmhp", "fsanet", "hf")
 )
 @click.option(
     "--trainer",
-    type=click.Choice(["hopenet", "6drepnet", "6drepnet360"]),
+    type=RegistryChoice("hpe_cli.io.export:LAYOUTS", attribute="trainers"),
     default=None,
     help="6drepnet only: whose range rule applies. hopenet: every angle in [-99, 99) (its 66 bins); "
     "6drepnet: |angle| <= 99 (its create_filename_list.py; its training class itself reads any "
@@ -200,7 +199,7 @@ def export(
       hpe export preds_rad.csv -o out/hf --layout hf --from 6drepnet --radians --rejects rej.csv
       hpe export labels.parquet -o out/whenet --layout whenet --images ROOT --scheduler tcp://head:8786 --resume
     """
-    from ..io.export import get_layout
+    from ..io.export import LAYOUTS, get_layout
     from ..pipelines.export import ExportOptions, run_export
 
     fixed = get_layout(layout, form=form).system
@@ -209,11 +208,12 @@ def export(
             f"--layout {layout} stores labels in the {fixed} system its trainer expects; "
             f"--system {system.name} cannot be used with it"
         )
-    if form is not None and layout != "6drepnet":
-        raise click.UsageError("--form applies to --layout 6drepnet only")
-    if trainer is not None and layout != "6drepnet":
+    if form is not None and form not in LAYOUTS[layout].forms:
+        raise click.UsageError(f"--form applies to --layout {' or '.join(LAYOUTS.filter(lambda c: c.forms))} only")
+    if trainer is not None and trainer not in LAYOUTS[layout].trainers:
         raise click.UsageError(
-            "--trainer applies to --layout 6drepnet only (the layout Hopenet, 6DRepNet and 6DRepNet360 share)"
+            f"--trainer applies to --layout {' or '.join(LAYOUTS.filter(lambda c: c.trainers))} only (the layout "
+            "Hopenet, 6DRepNet and 6DRepNet360 share)"
         )
     opts = ExportOptions(
         layout=layout,

@@ -75,6 +75,7 @@ class HpeGroup(click.Group):
         from ..io.system_meta import end_run, start_run
         from ..io.transaction import OutputTransaction
         from . import signals
+        from .plugins import load_plugins
 
         txn = OutputTransaction()
         run_token = start_run()
@@ -83,6 +84,7 @@ class HpeGroup(click.Group):
                 if not os.environ.get("HPE_DEBUG"):
                     warnings.simplefilter("ignore")  # numpy/pandas warnings name internal paths
                 with txn.activate(run=True):
+                    load_plugins()  # HPE_PLUGINS: user files that register readers, layouts, protocols...
                     return super().invoke(ctx)
         except click.UsageError as exc:  # one line, exit 2 (click's own form is usage + hint + error)
             if signals.fired() is None:

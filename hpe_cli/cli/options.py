@@ -263,15 +263,14 @@ def image_size_option(*names, help="Width and height of the images, in pixels, a
 RADIANS_HELP = "Angle columns of the input are in radians (default: degrees; hpe always writes degrees)."
 
 
+#: ``--columns``: which label columns a command reads
+COLUMN_KINDS = ("auto", "angles", "matrix")
+
+
 def columns_option(help: str):
     """``--columns auto|angles|matrix`` (parameter ``use``): which label columns a command reads."""
     return click.option(
-        "--columns",
-        "use",
-        type=click.Choice(["auto", "angles", "matrix"]),
-        default="auto",
-        show_default=True,
-        help=help,
+        "--columns", "use", type=click.Choice(COLUMN_KINDS), default="auto", show_default=True, help=help
     )
 
 

@@ -7,7 +7,8 @@ import functools
 
 import click
 
-from ..io.run_options import INPUT_FORMATS, active_table_options, reset_table_options, set_table_options
+from ..io.run_options import active_table_options, reset_table_options, set_table_options
+from .choices import RegistryChoice
 
 
 def _split_names(ctx, param, value):
@@ -74,7 +75,7 @@ def column_options(f):
     g = reinterpret_option(wrapper)
     g = click.option(
         "--input-format",
-        type=click.Choice(INPUT_FORMATS),
+        type=RegistryChoice("hpe_cli.io.dataset_readers:input_format_names"),
         default=None,
         help="Read INPUT as a named label list: whenet (annotation.txt), opal23, img2pose-biwi, "
         "celeba-pose (CelebAMask-HQ-pose-anno.txt) or coco (DirectMHP JSON). "

@@ -45,11 +45,10 @@ import numpy as np
 
 from ..datasets.jsonfile import load_json
 from ..errors import HpeError
-from .run_options import INPUT_FORMATS, active_table_options  # noqa: F401
+from .dataset_readers import READERS, input_format_names, register_reader
+from .run_options import active_table_options  # noqa: F401
 
 LINE_COL = "__line__"
-#: rotation system of the angles each named format holds (None: the list does not say)
-FORMAT_SYSTEMS = {"whenet": "whenet", "opal23": None, "img2pose-biwi": "300w_lp", "celeba-pose": None, "coco": None}
 #: OPAL field names -> hpe column names
 _OPAL_NAMES = {"x_min": "bbox_x", "y_min": "bbox_y", "w": "bbox_w", "h": "bbox_h"}
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\- ]*$")
@@ -168,6 +167,122 @@ def _line_numbers(first_line: int, start: int, count: int, skipped: list) -> np.
     return k + np.searchsorted(gaps, k, side="right")
 
 
+def _check_text_options(path: Path, delimiter, names):
+    """The file exists and is not empty, the delimiter is one character, ``names`` are distinct; returns
+    ``names`` stripped (or None)."""
+    if not path.is_file():
+        raise HpeError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise HpeError(f"{path}: empty file")
+    if delimiter is None or len(delimiter) != 1 or delimiter in '\r\n"':
+        raise HpeError(f"--delimiter: expected one character such as ',' ';' or '\\t', got {delimiter!r}")
+    if names is not None:
+        names = [str(n).strip() for n in names]
+        if len(set(names)) != len(names) or not all(names):
+            raise HpeError(f"--names: expected distinct non-empty names, got {','.join(names)}")
+    return names
+
+
+class _TextRows:
+    """One delimited text file read by pyarrow's streaming CSV reader, with the lines it skipped (blank,
+    comment and bad lines, for the line numbers) and the bad rows set aside as rejects."""
+
+    def __init__(self, path: Path, delimiter, header, names, skip_lines, comment_prefixes, quoting, string_columns):
+        import pyarrow.csv as pcsv
+
+        self.path, self.delimiter = path, delimiter
+        self.skipped: list = []
+        self.bad: list = []
+        self.prefixes = tuple(comment_prefixes)
+        self.string_columns = list(string_columns)
+        self.read_opts = pcsv.ReadOptions(
+            use_threads=False,
+            block_size=1 << 22,
+            skip_rows=skip_lines,
+            column_names=None if header else names,
+            autogenerate_column_names=(not header and names is None),
+        )
+        self.parse_opts = pcsv.ParseOptions(
+            delimiter=delimiter,
+            ignore_empty_lines=False,
+            invalid_row_handler=self.handler,
+            quote_char='"' if quoting else False,
+            newlines_in_values=False,
+        )
+
+    def handler(self, row):
+        """pyarrow's invalid-row handler: note the line (skipped), and a non-blank, non-comment one as bad."""
+        text = row.text or ""
+        if row.number is not None:
+            if text.strip() == "" or (self.prefixes and text.startswith(self.prefixes)):
+                self.skipped.append(int(row.number))
+            else:
+                self.skipped.append(int(row.number))
+                self.bad.append((int(row.number), row.expected_columns, row.actual_columns, text))
+        return "skip"
+
+    def make_reader(self):
+        """A reader from the file's start, with the string columns declared (a probe finds the columns)."""
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+
+        probe = pcsv.open_csv(self.path, read_options=self.read_opts, parse_options=self.parse_opts)
+        cols = probe.schema.names
+        types = {c: pa.string() for c in self.string_columns if c in cols}
+        self.skipped.clear()  # the probe parsed the first block too
+        self.bad.clear()
+        return pcsv.open_csv(
+            self.path,
+            read_options=self.read_opts,
+            parse_options=self.parse_opts,
+            convert_options=pcsv.ConvertOptions(column_types=types, strings_can_be_null=True),
+        )
+
+    def take_rejects(self) -> list:
+        """The bad rows found since the last call, as rejects."""
+        from .table_source import Reject
+
+        out = [
+            Reject(line, f"expected {want} fields separated by {self.delimiter!r}, got {got}", text[:200])
+            for line, want, got, text in self.bad
+        ]
+        self.bad.clear()
+        return out
+
+    def batches(self, first_reader: list, first_line: int, line_schema):
+        """``(batch with __line__, rejects)``; ``first_reader`` holds the reader already opened, if unused."""
+        import pyarrow as pa
+
+        rdr = first_reader.pop() if first_reader else self.make_reader()
+        start = 0
+        for b in rdr:
+            n = b.num_rows
+            lines = _line_numbers(first_line, start, n, self.skipped)
+            start += n
+            # an empty line parses as a row of nulls: it is not a row of the table
+            empty = None
+            for col in b.columns:
+                v = col.is_null().to_numpy(zero_copy_only=False)
+                empty = v if empty is None else (empty & v)
+            if empty is not None and empty.any():
+                keep = ~empty
+                b = b.filter(pa.array(keep))
+                lines = lines[keep]
+            b = pa.RecordBatch.from_arrays(list(b.columns) + [pa.array(lines, type=pa.int64())], schema=line_schema)
+            yield b, self.take_rejects()
+        if self.bad:
+            yield pa.RecordBatch.from_pylist([], schema=line_schema), self.take_rejects()
+
+
+def _check_header(path: Path, schema, skip_lines: int) -> None:
+    hdr = list(schema.names)
+    if len(set(hdr)) != len(hdr):
+        raise HpeError(
+            f"{path}: line {skip_lines + 1}: the header names a column twice "
+            f"({', '.join(sorted({h for h in hdr if hdr.count(h) > 1}))})"
+        )
+
+
 def open_text(
     path,
     batch_size: int = 262_144,
@@ -201,112 +316,27 @@ def open_text(
         Add ``__line__`` (int64, 1-based file line of each row).
     """
     import pyarrow as pa
-    import pyarrow.csv as pcsv
 
-    from .table_source import Reject, TableSource
+    from .table_source import TableSource
 
     path = Path(path)
-    if not path.is_file():
-        raise HpeError(f"{path}: no such file")
-    if path.stat().st_size == 0:
-        raise HpeError(f"{path}: empty file")
-    if delimiter is None or len(delimiter) != 1 or delimiter in '\r\n"':
-        raise HpeError(f"--delimiter: expected one character such as ',' ';' or '\\t', got {delimiter!r}")
-    if names is not None:
-        names = [str(n).strip() for n in names]
-        if len(set(names)) != len(names) or not all(names):
-            raise HpeError(f"--names: expected distinct non-empty names, got {','.join(names)}")
-    skipped: list = []
-    bad: list = []
-    prefixes = tuple(comment_prefixes)
-
-    def handler(row):
-        text = row.text or ""
-        if row.number is not None:
-            if text.strip() == "" or (prefixes and text.startswith(prefixes)):
-                skipped.append(int(row.number))
-            else:
-                skipped.append(int(row.number))
-                bad.append((int(row.number), row.expected_columns, row.actual_columns, text))
-        return "skip"
-
-    read_opts = pcsv.ReadOptions(
-        use_threads=False,
-        block_size=1 << 22,
-        skip_rows=skip_lines,
-        column_names=None if header else names,
-        autogenerate_column_names=(not header and names is None),
-    )
-    parse_opts = pcsv.ParseOptions(
-        delimiter=delimiter,
-        ignore_empty_lines=False,
-        invalid_row_handler=handler,
-        quote_char='"' if quoting else False,
-        newlines_in_values=False,
-    )
-    string_columns = list(string_columns)
-
-    def make_reader():
-        probe = pcsv.open_csv(path, read_options=read_opts, parse_options=parse_opts)
-        cols = probe.schema.names
-        types = {c: pa.string() for c in string_columns if c in cols}
-        skipped.clear()  # the probe parsed the first block too
-        bad.clear()
-        return pcsv.open_csv(
-            path,
-            read_options=read_opts,
-            parse_options=parse_opts,
-            convert_options=pcsv.ConvertOptions(column_types=types, strings_can_be_null=True),
-        )
-
+    names = _check_text_options(path, delimiter, names)
+    rows = _TextRows(path, delimiter, header, names, skip_lines, comment_prefixes, quoting, string_columns)
     try:
-        reader = make_reader()
+        reader = rows.make_reader()
     except (pa.ArrowInvalid, OSError, UnicodeDecodeError) as exc:
         raise HpeError(f"{path}: cannot read: {' '.join(str(exc).split())[:300]}") from None
     schema = reader.schema
     if header:
-        hdr = list(schema.names)
-        if len(set(hdr)) != len(hdr):
-            raise HpeError(
-                f"{path}: line {skip_lines + 1}: the header names a column twice "
-                f"({', '.join(sorted({h for h in hdr if hdr.count(h) > 1}))})"
-            )
+        _check_header(path, schema, skip_lines)
     first_line = skip_lines + (2 if header else 1)
-    base_schema = schema
-    schema = schema.append(pa.field(LINE_COL, pa.int64())) if with_lines else schema
-    line_schema = base_schema.append(pa.field(LINE_COL, pa.int64()))
+    line_schema = schema.append(pa.field(LINE_COL, pa.int64()))
     first_reader = [reader]
 
-    def take_rejects():
-        out = [
-            Reject(line, f"expected {want} fields separated by {delimiter!r}, got {got}", text[:200])
-            for line, want, got, text in bad
-        ]
-        bad.clear()
-        return out
-
     def batches():
-        rdr = first_reader.pop() if first_reader else make_reader()
-        start = 0
-        for b in rdr:
-            n = b.num_rows
-            lines = _line_numbers(first_line, start, n, skipped)
-            start += n
-            # an empty line parses as a row of nulls: it is not a row of the table
-            empty = None
-            for col in b.columns:
-                v = col.is_null().to_numpy(zero_copy_only=False)
-                empty = v if empty is None else (empty & v)
-            if empty is not None and empty.any():
-                keep = ~empty
-                b = b.filter(pa.array(keep))
-                lines = lines[keep]
-            b = pa.RecordBatch.from_arrays(list(b.columns) + [pa.array(lines, type=pa.int64())], schema=line_schema)
-            yield b, take_rejects()
-        if bad:
-            yield pa.RecordBatch.from_pylist([], schema=line_schema), take_rejects()
+        return rows.batches(first_reader, first_line, line_schema)
 
-    return TableSource(path, schema, None, batches, with_lines, "text", system=system)
+    return TableSource(path, line_schema if with_lines else schema, None, batches, with_lines, "text", system=system)
 
 
 def _opal23(path, batch_size, with_lines):
@@ -341,7 +371,7 @@ def _opal23(path, batch_size, with_lines):
         quoting=False,
         string_columns=("image", "identity"),
         with_lines=with_lines,
-        system=FORMAT_SYSTEMS["opal23"],
+        system=None,
     )
 
 
@@ -365,7 +395,7 @@ def _celeba(path, batch_size, with_lines):
         quoting=False,
         string_columns=("image",),
         with_lines=with_lines,
-        system=FORMAT_SYSTEMS["celeba-pose"],
+        system=None,
     )
 
 
@@ -464,27 +494,6 @@ def _frame_source(path, frame, batch_size, with_lines, system=None):
 
 
 # ------------------------------------------------------------------------------------------- dispatch
-def sniff_format(path) -> str | None:
-    """The named format a file unambiguously is, from its name and first line, else None."""
-    path = Path(path)
-    if not path.is_file():
-        return None
-    name = path.name.lower()
-    if name.endswith(".json"):
-        return "coco-or-json"
-    if name == "annotation.txt":
-        return "whenet"
-    if name == "celebamask-hq-pose-anno.txt":
-        return "celeba-pose"
-    if name == "biwi_annotations.txt":
-        return "img2pose-biwi"
-    if name.endswith(".txt"):
-        first = _first_lines(path, 1)
-        if first and first[0].startswith("#;"):
-            return "opal23"
-    return None
-
-
 def open_formatted(
     path,
     batch_size: int = 262_144,
@@ -495,98 +504,159 @@ def open_formatted(
     names=None,
     with_lines: bool = False,
 ):
-    """Open ``path`` as a named input format or delimited text; None when neither applies.
+    """Open ``path`` as the named input format or as delimited text; None when neither is asked for.
 
-    With ``input_format=None`` the format is sniffed (``.json`` with COCO keys,
-    ``annotation.txt``, ``CelebAMask-HQ-pose-anno.txt``, a ``.txt`` whose first
-    line starts with ``#;``); a plain ``.csv``/``.parquet`` without
-    ``delimiter``/``header=False``/``names`` returns None (the core reader
-    handles it).
+    ``input_format`` names a reader of :data:`~hpe_cli.io.dataset_readers.READERS` with ``input_format`` set;
+    ``delimiter``/``header=False``/``names`` read delimited text. Without them this returns None: the readers'
+    own detection (``.json`` with COCO keys, ``annotation.txt``, ``CelebAMask-HQ-pose-anno.txt``, a ``.txt``
+    whose first line starts with ``#;``, the dataset folders) or the core Parquet/CSV reader takes the path.
     """
     path = Path(path)
-    if input_format is not None and input_format not in INPUT_FORMATS:
-        raise HpeError(f"--input-format: expected one of {', '.join(INPUT_FORMATS)}, got {input_format!r}")
+    if input_format is not None and input_format not in input_format_names():
+        raise HpeError(f"--input-format: expected one of {', '.join(input_format_names())}, got {input_format!r}")
     if input_format is not None and (delimiter is not None or not header or names):
         raise HpeError(
             f"--input-format {input_format} fixes the delimiter and the column names; "
             "drop --delimiter/--no-header/--names (use --columns-map to rename)"
         )
-    fmt = input_format
-    if fmt is None and delimiter is None and header and not names:
-        fmt = sniff_format(path)
-        if fmt == "coco-or-json":
-            doc = load_json(path)
-            if is_coco(doc):
-                return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
-            from ..datasets.dad3dheads import is_dad_metadata
-
-            if is_dad_metadata(doc):
-                return None  # a dataset reader takes it
-            raise HpeError(
-                f"{path}: expected COCO JSON (an object with 'images' and 'annotations'), "
-                f"got {type(doc).__name__} with keys "
-                f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}"
-            )
-    if fmt is None:
-        if delimiter is None and header and not names:
-            return None
+    if input_format is not None:
         if not path.is_file():
-            raise HpeError(f"{path}: --delimiter/--no-header/--names apply to a text file, not a folder")
-        if path.suffix.lower() in (".parquet", ".pq"):
-            raise HpeError(f"{path}: --delimiter/--no-header/--names apply to delimited text, not Parquet")
-        if names and header:
-            raise HpeError("--names goes with --no-header (with a header line, use --columns-map to rename)")
-        delim = delimiter if delimiter is not None else ("\t" if path.suffix.lower() == ".tsv" else ",")
-        return open_text(
-            path,
-            batch_size,
-            delimiter=delim,
-            header=header,
-            names=names,
-            string_columns=("image", "file"),
-            with_lines=with_lines,
-        )
+            raise HpeError(f"{path}: --input-format {input_format} reads a file, got a folder")
+        src = READERS[input_format].open(path, batch_size=batch_size, with_lines=with_lines)
+        if src is None:
+            raise HpeError(f"{path}: --input-format {input_format} cannot read this file")
+        return src
+    if delimiter is None and header and not names:
+        return None
     if not path.is_file():
-        raise HpeError(f"{path}: --input-format {fmt} reads a file, got a folder")
-    if fmt == "coco":
-        doc = load_json(path)
+        raise HpeError(f"{path}: --delimiter/--no-header/--names apply to a text file, not a folder")
+    if path.suffix.lower() in (".parquet", ".pq"):
+        raise HpeError(f"{path}: --delimiter/--no-header/--names apply to delimited text, not Parquet")
+    if names and header:
+        raise HpeError("--names goes with --no-header (with a header line, use --columns-map to rename)")
+    delim = delimiter if delimiter is not None else ("\t" if path.suffix.lower() == ".tsv" else ",")
+    return open_text(
+        path,
+        batch_size,
+        delimiter=delim,
+        header=header,
+        names=names,
+        string_columns=("image", "file"),
+        with_lines=with_lines,
+    )
+
+
+# ------------------------------------------------------------------------------- the named label lists
+def _named(file_name: str):
+    """``detect`` of a list known by its file name (case-insensitive)."""
+    return lambda path: path.is_file() and path.name.lower() == file_name
+
+
+#: file names the lists above are known by (a ``.txt`` among them is never sniffed as OPAL's)
+_LIST_NAMES = ("annotation.txt", "celebamask-hq-pose-anno.txt", "biwi_annotations.txt")
+
+
+def _is_opal23(path: Path) -> bool:
+    if not (path.is_file() and path.name.lower().endswith(".txt")) or path.name.lower() in _LIST_NAMES:
+        return False
+    first = _first_lines(path, 1)
+    return bool(first) and first[0].startswith("#;")
+
+
+@register_reader(
+    "whenet",
+    _named("annotation.txt"),
+    system="whenet",
+    key=("image",),
+    doc="WHENet's ``annotation.txt``: ``image,yaw,pitch,roll`` per line, no header",
+    input_format=True,
+)
+def open_whenet_list(path, *, batch_size: int, with_lines: bool = False):
+    return open_text(
+        path,
+        batch_size,
+        delimiter=",",
+        header=False,
+        names=["image", "yaw", "pitch", "roll"],
+        quoting=False,
+        string_columns=("image",),
+        with_lines=with_lines,
+        system="whenet",
+    )
+
+
+@register_reader(
+    "opal23",
+    _is_opal23,
+    key=("image",),
+    doc="OPAL's annotation lists: ``;`` separated, a first line ``#;image;...;yaw;pitch;roll``",
+    input_format=True,
+)
+def open_opal23_list(path, *, batch_size: int, with_lines: bool = False):
+    return _opal23(path, batch_size, with_lines)
+
+
+@register_reader(
+    "img2pose-biwi",
+    _named("biwi_annotations.txt"),
+    system="300w_lp",
+    key=("image",),
+    doc="img2pose's ``BIWI_annotations.txt``: ``path pitch yaw roll``, space separated",
+    input_format=True,
+)
+def open_img2pose_biwi_list(path, *, batch_size: int, with_lines: bool = False):
+    return open_text(
+        path,
+        batch_size,
+        delimiter=" ",
+        header=False,
+        names=["image", "pitch", "yaw", "roll"],
+        quoting=False,
+        string_columns=("image",),
+        with_lines=with_lines,
+        system="300w_lp",
+    )
+
+
+@register_reader(
+    "celeba-pose",
+    _named("celebamask-hq-pose-anno.txt"),
+    key=("image",),
+    doc="CelebAMask-HQ ``CelebAMask-HQ-pose-anno.txt``: count line, ``Yaw Pitch Raw``, then one image a line",
+    input_format=True,
+)
+def open_celeba_list(path, *, batch_size: int, with_lines: bool = False):
+    return _celeba(path, batch_size, with_lines)
+
+
+@register_reader(
+    "coco",
+    lambda path: path.is_file() and path.name.lower().endswith(".json"),
+    key=("image", "annotation_id"),
+    doc="COCO JSON in DirectMHP's schema (``euler_angles``, ``bbox``), one row per annotation",
+    input_format=True,
+)
+def open_coco(path, *, batch_size: int, with_lines: bool = False):
+    """A COCO file; None for DAD-3DHeads metadata (its reader takes it); any other JSON is an error."""
+    doc = load_json(path)
+    if is_coco(doc):
         return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
-    if fmt == "whenet":
-        return open_text(
-            path,
-            batch_size,
-            delimiter=",",
-            header=False,
-            names=["image", "yaw", "pitch", "roll"],
-            quoting=False,
-            string_columns=("image",),
-            with_lines=with_lines,
-            system=FORMAT_SYSTEMS["whenet"],
-        )
-    if fmt == "img2pose-biwi":
-        return open_text(
-            path,
-            batch_size,
-            delimiter=" ",
-            header=False,
-            names=["image", "pitch", "yaw", "roll"],
-            quoting=False,
-            string_columns=("image",),
-            with_lines=with_lines,
-            system=FORMAT_SYSTEMS["img2pose-biwi"],
-        )
-    if fmt == "celeba-pose":
-        return _celeba(path, batch_size, with_lines)
-    if fmt == "opal23":
-        return _opal23(path, batch_size, with_lines)
-    raise AssertionError(fmt)
+    from ..datasets.dad3dheads import is_dad_metadata
+
+    if is_dad_metadata(doc):
+        return None  # a dataset reader takes it
+    raise HpeError(
+        f"{path}: expected COCO JSON (an object with 'images' and 'annotations'), "
+        f"got {type(doc).__name__} with keys "
+        f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}"
+    )
 
 
 def label_system(src, requested):
     """The system to read ``src``'s labels in: the dataset's own for dataset readers, else ``requested``.
 
-    ``.mat`` files always hold ``300w_lp`` angles (``Pose_Para``), BIWI files
-    ``biwi``, DAD-3DHeads ``dad3dheads``; a command's ``--system`` then names
+    A dataset reader's labels are always in its own system (the ``system`` of its entry in
+    :data:`hpe_cli.io.dataset_readers.READERS`); a command's ``--system`` then names
     the system its *output* (or captions) use, and the labels are converted.
     Commands choose systems with :func:`hpe_cli.io.system_meta.resolve_system`.
     """

@@ -16,6 +16,9 @@ A table row names its image in one of these ways, all resolved here:
   (``vgaVideos/vga_XX_XX.mp4``, ``kinectVideos/kinect_50_XX.mp4``) read with
   :class:`hpe_cli.datasets.panoptic_video.VideoFrames`.
 
+Each folder layout is an entry of :data:`IMAGE_LAYOUTS` (``names``, ``panoptic``) giving a row's candidate
+files; a new layout is one registered function.
+
 :func:`resolve_image`, :func:`video_path` and :func:`jpeg_size` keep the signatures of
 ``hpe_cli.pipelines.export`` (a superset of what they find), so export can call them from here.
 """
@@ -27,6 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path, PurePath
 
 import numpy as np
+
+from ..registry import Registry
 
 #: suffixes of image files tried for a ``.mat`` name or a name without suffix
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
@@ -119,6 +124,27 @@ def _name_candidates(root: Path, image: str, sequence: str) -> list:
     return [c for c in out if c.suffix.lower() != ".mat"] + more
 
 
+#: name -> ``candidates(root: Path, image: str, sequence, camera, frame) -> list of Path``: the files an image
+#: folder layout puts a row's image at; :func:`resolve_image` tries every layout's candidates, in order
+IMAGE_LAYOUTS = Registry("image layout")
+
+
+@IMAGE_LAYOUTS.register("names")
+def named_candidates(root: Path, image: str, sequence="", camera="", frame=-1) -> list:
+    """The row's image name under the root (and ``<root>/<sequence>/``), absolute names, ``.mat`` stems."""
+    return _name_candidates(root, str(image), sequence) if image else []
+
+
+@IMAGE_LAYOUTS.register("panoptic")
+def panoptic_candidates(root: Path, image: str, sequence="", camera="", frame=-1) -> list:
+    """A CMU Panoptic view's extracted frame files (toolbox and mirror layouts), under the root and sequence."""
+    view = _view_of(image, camera, frame)
+    if view is None:
+        return []
+    kind, cam, fr = view
+    return [c for base in _bases(root, sequence) for c in _panoptic_frames(base, kind, cam, fr)]
+
+
 def resolve_image(root, image, sequence="", camera="", frame=-1):
     """The image file for a row, or None.
 
@@ -138,12 +164,7 @@ def resolve_image(root, image, sequence="", camera="", frame=-1):
         The first existing candidate: see the module docstring for the order.
     """
     root = Path(root)
-    cands = _name_candidates(root, str(image), sequence) if image else []
-    view = _view_of(image, camera, frame)
-    if view is not None:
-        kind, cam, fr = view
-        for base in _bases(root, sequence):
-            cands += _panoptic_frames(base, kind, cam, fr)
+    cands = [c for layout in IMAGE_LAYOUTS.values() for c in layout(root, image, sequence, camera, frame)]
     for c in cands:
         try:
             if c.is_file():

@@ -1,4 +1,4 @@
-"""Streaming table readers: Parquet, CSV, or a folder of 300W-LP/AFLW2000 ``.mat`` files.
+"""Streaming table readers: Parquet, CSV, and the dataset readers of :data:`~hpe_cli.io.dataset_readers.READERS`.
 
 Memory does not depend on the number of rows: Parquet is read one record
 batch at a time without pre-buffering, CSV in bounded blocks of bytes.
@@ -91,6 +91,7 @@ def open_table(
     options apply (:func:`hpe_cli.cli.table_options.column_options`).
     """
     from .columns import active_table_options, apply_columns_map, open_formatted
+    from .dataset_readers import open_dataset
 
     if columns is None and delimiter is None and header and input_format is None and names is None:
         active = active_table_options()
@@ -114,6 +115,8 @@ def open_table(
         names=names,
         with_lines=with_lines,
     )
+    if src is None and Path(path).exists():
+        src = open_dataset(path, batch_size=batch_size, with_lines=with_lines)
     if src is None:
         src = _open_core(path, batch_size, with_lines=with_lines, block_size=block_size or CSV_BLOCK)
     return apply_columns_map(src, columns)
@@ -122,71 +125,22 @@ def open_table(
 def _open_core(
     path, batch_size: int = DEFAULT_BATCH, *, with_lines: bool = False, block_size: int = CSV_BLOCK
 ) -> TableSource:
-    """Open a label table for streaming.
+    """Open a plain label table for streaming: Parquet or CSV (recognised by content, not by extension).
 
-    ``path`` may be Parquet, CSV (recognised by content, not by extension), a
-    folder of ``.mat`` files (read from ``Pose_Para``, see
-    :func:`hpe_cli.datasets.mat.read_mat_dir`), or BIWI pose files (a folder,
-    one file, or ``db_annotations.tgz``; angles in the ``biwi`` system).
-    With ``with_lines=True`` every batch carries an int64 ``__line__`` column
-    (see the module docstring).
+    Dataset folders and archives and the named label lists are read by the entries of
+    :data:`hpe_cli.io.dataset_readers.READERS` before this is asked. With ``with_lines=True`` every batch
+    carries an int64 ``__line__`` column (see the module docstring).
     """
     import pyarrow as pa
 
     path = Path(path)
     if not path.exists():
         raise HpeError(f"{path}: no such file or folder")
-    dataset = _read_dataset(path)
-    if dataset is not None and hasattr(dataset, "iter_batches"):  # a dataset reader that streams
-
-        def gen_stream():
-            line = 1
-            for b in dataset.iter_batches():
-                yield _with_line(b, line), []
-                line += b.num_rows
-
-        return TableSource(
-            path,
-            _schema(dataset.schema, with_lines),
-            dataset.num_rows,
-            gen_stream,
-            with_lines,
-            "dataset",
-            system=dataset.system,
-            dataset=True,
-            unit="row",
-        )
-    if dataset is not None:
-        system = dataset.attrs.get("system")
-        # one record per file (.mat, BIWI pose files): a row is named by its file
-        row_files = [str(f) for f in dataset["file"]] if dataset.attrs.get("one_record_files") else None
-        # one-record files that could not be read (BIWI): named after the rows, set aside with their reason
-        bad_files = dataset.attrs.get("bad_files") or []
-        rejected = [Reject(len(dataset) + 1 + j, reason, str(f)) for j, (f, reason) in enumerate(bad_files)]
-        if row_files is not None:
-            row_files = row_files + [str(f) for f, _ in bad_files]
-        table = pa.Table.from_pandas(dataset, preserve_index=False)
-
-        def gen():
-            for start in range(0, max(table.num_rows, 1), batch_size):
-                b = table.slice(start, batch_size).combine_chunks().to_batches()
-                b = b[0] if b else pa.RecordBatch.from_pylist([], schema=table.schema)
-                yield _with_line(b, start + 1), (rejected if start == 0 else [])
-
-        return TableSource(
-            path,
-            _schema(table.schema, with_lines),
-            table.num_rows,
-            gen,
-            with_lines,
-            "dataset",
-            system=system,
-            dataset=system is not None,
-            unit="file" if row_files else "row",
-            row_files=row_files,
-        )
     if path.is_dir():
-        raise HpeError(f"{path}: expected a table file, got a folder")
+        raise HpeError(
+            f"{path}: no .mat files, 300W-LP subset folders, DAD-3DHeads annotations or BIWI "
+            "frame_XXXXX_pose.txt/.bin files found"
+        )
     if path.stat().st_size == 0:
         raise HpeError(f"{path}: empty file")
     kind = sniff(path)
@@ -238,61 +192,64 @@ def _open_csv(path, batch_size, with_lines, block_size):
 
 
 # ----------------------------------------------------------------------------------------------- datasets
-def _read_dataset(path: Path):
-    """A dataset folder or archive as a pandas label table, or None for plain tables.
+def stream_source(path: Path, dataset, with_lines: bool) -> TableSource:
+    """A dataset reader that streams (``iter_batches()``, ``schema``, ``num_rows``, ``system``) as a table;
+    rows are named by their 1-based position."""
 
-    ``.mat`` files (300W-LP/AFLW2000, angles in degrees in the ``300w_lp``
-    system; the 300W-LP root or ``300W-LP.zip``, see :mod:`hpe_cli.datasets.w300lp`),
-    BIWI pose files / ``db_annotations.tgz`` (angles in the ``biwi`` system,
-    see :mod:`hpe_cli.datasets.biwi`) or DAD-3DHeads (``dad3dheads`` matrices,
-    see :mod:`hpe_cli.datasets.dad3dheads`). The table's ``attrs["system"]``
-    names the system of its labels.
-    """
-    name = path.name.lower()
-    if path.is_file() and name.endswith(".mat"):
-        from ..datasets.mat import read_mat_dir
+    def gen_stream():
+        line = 1
+        for b in dataset.iter_batches():
+            yield _with_line(b, line), []
+            line += b.num_rows
 
-        return read_mat_dir(path)
-    if path.is_file() and name.endswith(".zip"):
-        from ..datasets.w300lp import is_w300lp_zip, open_w300lp
-
-        if is_w300lp_zip(path):
-            return open_w300lp(path)
-        raise HpeError(f"{path}: expected a 300W-LP zip with AFW/HELEN/IBUG/LFPW .mat members")
-    is_biwi_file = path.is_file() and (
-        name.endswith((".tgz", ".tar.gz")) or (name.startswith("frame_") and name.endswith(("_pose.txt", "_pose.bin")))
+    return TableSource(
+        path,
+        _schema(dataset.schema, with_lines),
+        dataset.num_rows,
+        gen_stream,
+        with_lines,
+        "dataset",
+        system=dataset.system,
+        dataset=True,
+        unit="row",
     )
-    if path.is_dir() and any(path.glob("*.mat")):
-        from ..datasets.mat import read_mat_dir
 
-        return read_mat_dir(path)
-    if path.is_dir():
-        from ..datasets.w300lp import is_w300lp_root, open_w300lp
 
-        if is_w300lp_root(path):
-            return open_w300lp(path)
-    from ..datasets.dad3dheads import is_dad3dheads, read_dad3dheads
+def frame_source(path: Path, frame, batch_size: int, with_lines: bool) -> TableSource:
+    """A dataset read whole as a pandas table, as a table source.
 
-    if is_dad3dheads(path):
-        return read_dad3dheads(path)
-    if is_biwi_file or (path.is_dir() and next(path.rglob("frame_*_pose.*"), None) is not None):
-        from ..datasets.biwi import read_biwi
+    ``frame.attrs``: ``system`` (the labels' system), ``one_record_files`` (a row is named by its ``file``, as
+    the ``.mat`` files of a folder and BIWI pose files), ``bad_files`` (``(file, reason)`` of one-record files
+    that could not be read: rejects named after the rows).
+    """
+    import pyarrow as pa
 
-        bad: list = []  # unreadable or invalid pose files: rejects of the commands that read the table
-        table = read_biwi(path, bad=bad)
-        out = table[["file", "sequence", "frame", "pitch", "yaw", "roll", "center_x", "center_y", "center_z"]].copy()
-        # the key of each row: sequence + frame, and the RGB frame they label (BIWI's NN/frame_XXXXX_rgb.png)
-        out.insert(1, "image", [f"{s}/frame_{int(f):05d}_rgb.png" for s, f in zip(out["sequence"], out["frame"])])
-        out.attrs["system"] = "biwi"
-        out.attrs["one_record_files"] = True
-        out.attrs["bad_files"] = [(b["file"], b["reason"]) for b in bad]
-        return out
-    if path.is_dir():
-        raise HpeError(
-            f"{path}: no .mat files, 300W-LP subset folders, DAD-3DHeads annotations or BIWI "
-            "frame_XXXXX_pose.txt/.bin files found"
-        )
-    return None
+    system = frame.attrs.get("system")
+    row_files = [str(f) for f in frame["file"]] if frame.attrs.get("one_record_files") else None
+    bad_files = frame.attrs.get("bad_files") or []
+    rejected = [Reject(len(frame) + 1 + j, reason, str(f)) for j, (f, reason) in enumerate(bad_files)]
+    if row_files is not None:
+        row_files = row_files + [str(f) for f, _ in bad_files]
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+
+    def gen():
+        for start in range(0, max(table.num_rows, 1), batch_size):
+            b = table.slice(start, batch_size).combine_chunks().to_batches()
+            b = b[0] if b else pa.RecordBatch.from_pylist([], schema=table.schema)
+            yield _with_line(b, start + 1), (rejected if start == 0 else [])
+
+    return TableSource(
+        path,
+        _schema(table.schema, with_lines),
+        table.num_rows,
+        gen,
+        with_lines,
+        "dataset",
+        system=system,
+        dataset=system is not None,
+        unit="file" if row_files else "row",
+        row_files=row_files,
+    )
 
 
 def read_table(path):

@@ -10,9 +10,6 @@ from __future__ import annotations
 
 import contextvars
 
-#: the named label-list formats :func:`hpe_cli.io.columns.open_formatted` reads
-INPUT_FORMATS = ("whenet", "opal23", "img2pose-biwi", "celeba-pose", "coco")
-
 _ACTIVE: contextvars.ContextVar = contextvars.ContextVar("hpe_table_options", default=None)
 
 

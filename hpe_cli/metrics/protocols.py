@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..registry import Registry
 from . import peer_angles as pa_
 from . import rotation_errors as re_
 from .pose_pair import _DEG, _SAME, PosePair, _same_angles  # noqa: F401
@@ -73,6 +74,38 @@ class Protocol:
     units: str = "deg"
 
 
+#: name -> :class:`Protocol`, in the order reports list them (``hpe evaluate --protocol NAME``)
+PROTOCOLS = Registry("protocol")
+
+
+def register_protocol(
+    name: str, system: str, formula: str, filter: str, source: str, *, notes: tuple = (), units: str = "deg"
+) -> Callable:
+    """Decorator: register ``func(pair: PosePair) -> ProtocolRows`` as the protocol ``name`` in :data:`PROTOCOLS`.
+
+    Parameters
+    ----------
+    name : str
+        ``hpe evaluate --protocol NAME``.
+    system : str
+        The system whose angles the peer's code reads (words, for the report).
+    formula, filter : str
+        The error formula and the rows the peer keeps, in words (the report and ``--help``).
+    source : str
+        ``repo@commit file:lines`` of the peer code reproduced.
+    notes : tuple of str
+        Caveats printed with the protocol's numbers.
+    units : {"deg", "unitless"}
+        Unit of the errors.
+    """
+
+    def add(func: Callable) -> Callable:
+        PROTOCOLS.register(name, Protocol(name, system, formula, filter, source, func, tuple(notes), units))
+        return func
+
+    return add
+
+
 def _within_99(pyr) -> np.ndarray:
     """All three |angles| <= 99 degrees (FSA-Net, 6DRepNet and img2pose test filters)."""
     return (np.abs(pyr) <= 99.0).all(axis=-1)
@@ -84,7 +117,22 @@ def _written_pair(pair, system):
     return p, g, {"pred": cp, "gt": cg}
 
 
+_FLIPS = "the +-180 terms forgive a prediction whose angle is off by 180 degrees, so flipped answers are hidden"
+_BRANCH = (
+    "plain |d| of Euler angles compares solution branches: a correct rotation stated with the other "
+    "solution (or past the system's range) scores a large error"
+)
+
+
 # ---------------------------------------------------------------------------- protocols
+@register_protocol(
+    "hopenet",
+    "300w_lp",
+    "|d| per angle as written, no wrap",
+    "none",
+    "natanielruiz/deep-head-pose@f7bbb99 code/test_hopenet.py:104-106,124-127,143-145",
+    notes=(_BRANCH,),
+)
 def hopenet(pair: PosePair) -> ProtocolRows:
     """Hopenet: plain |pred - gt| per 300w_lp angle as written, no wrap, no filter.
 
@@ -95,6 +143,14 @@ def hopenet(pair: PosePair) -> ProtocolRows:
     return ProtocolRows(re_.abs_error(p, g), np.ones(pair.n, dtype=bool), reexpressed=rx)
 
 
+@register_protocol(
+    "fsanet",
+    "300w_lp",
+    "|d| per angle as written, no wrap",
+    "GT |pitch|,|yaw|,|roll| <= 99",
+    "shamangary/FSA-Net@4361d0e training_and_testing/FSANET_test.py:88-101,444-448",
+    notes=(_BRANCH,),
+)
 def fsanet(pair: PosePair) -> ProtocolRows:
     """FSA-Net: as hopenet, keeping GT rows whose three written angles are all within [-99, 99].
 
@@ -125,6 +181,14 @@ def _sixd(pair, with_180: bool, filt: bool) -> ProtocolRows:
     return ProtocolRows(err, keep, vectors=vec, reexpressed={"pred": None, "gt": cg})
 
 
+@register_protocol(
+    "6drepnet",
+    "6drepnet",
+    "min(|d|, |d+-360|, |d+-180|); pred Euler from its matrix",
+    "GT |pitch|,|yaw|,|roll| <= 99",
+    "thohemp/6DRepNet@464b2ba sixdrepnet/test.py:113-142,162-164; utils.py:165-184; create_filename_list.py:53",
+    notes=(_FLIPS,),
+)
 def sixdrepnet(pair: PosePair) -> ProtocolRows:
     """6DRepNet: predicted matrix -> Euler, 5-term wrapped minimum against the GT label as written, GT within 99.
 
@@ -135,6 +199,13 @@ def sixdrepnet(pair: PosePair) -> ProtocolRows:
     return _sixd(pair, True, True)
 
 
+@register_protocol(
+    "6drepnet360",
+    "6drepnet",
+    "min(|d|, |d+-360|); vmae = axis angles",
+    "none",
+    "thohemp/6DRepNet360@b06e4fe sixdrepnet360/test.py:164-193 (3 terms since 9c1cfaf)",
+)
 def sixdrepnet360(pair: PosePair) -> ProtocolRows:
     """6DRepNet360 (current): the 3-term minimum over d, d +- 360, no filter, plus VMAE.
 
@@ -145,6 +216,14 @@ def sixdrepnet360(pair: PosePair) -> ProtocolRows:
     return _sixd(pair, False, False)
 
 
+@register_protocol(
+    "6drepnet360-2023",
+    "6drepnet",
+    "SUPERSEDED: min(|d|, |d+-360|, |d+-180|); vmae",
+    "none",
+    "thohemp/6DRepNet360@5b0622d sixdrepnet360/test.py:188-193 (superseded by 9c1cfaf, 2024-05-29)",
+    notes=(_FLIPS, "superseded by the 3-term minimum in 9c1cfaf; kept only to reproduce 2023 numbers"),
+)
 def sixdrepnet360_2023(pair: PosePair) -> ProtocolRows:
     """6DRepNet360 before 9c1cfaf (superseded): the 5-term minimum incl. d +- 180, no filter, VMAE."""
     return _sixd(pair, True, False)
@@ -158,6 +237,24 @@ def _directmhp(pair: PosePair, split: float) -> ProtocolRows:
     return ProtocolRows(e, np.ones(pair.n, dtype=bool), splits={"front": ~back, "back": back}, reexpressed=rx)
 
 
+# stacked decorators apply bottom-up: the lower one registers first
+@register_protocol(
+    "directmhp-v2",
+    "whenet",
+    "|d| as written, yaw wrapped; back |GT yaw| > 90 (v2)",
+    "none",
+    "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-278 mean_absolute_error_calculate_v2 (CMU, AGORA)",
+    notes=("pitch and roll are not wrapped: " + _BRANCH,),
+)
+@register_protocol(
+    "directmhp",
+    "whenet",
+    "single or v2 by the GT dataset; v2 (|GT yaw| > 90) when it is not known",
+    "none",
+    "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-356: directmhp-single for .mat folders, AFLW2000, "
+    "300W-LP, BIWI; directmhp-v2 for CMU Panoptic, AGORA",
+    notes=("pitch and roll are not wrapped: " + _BRANCH,),
+)
 def directmhp(pair: PosePair) -> ProtocolRows:
     """DirectMHP ``mean_absolute_error_calculate_v2`` (CMU Panoptic, AGORA): whenet labels as written.
 
@@ -167,6 +264,14 @@ def directmhp(pair: PosePair) -> ProtocolRows:
     return _directmhp(pair, 90.0)
 
 
+@register_protocol(
+    "directmhp-single",
+    "whenet",
+    "|d| as written, yaw wrapped; back |GT yaw| > 99",
+    "none",
+    "hnuzhy/DirectMHP@a51b06b utils/mae.py:281-356 mean_absolute_error_calculate_single (AFLW2000, 300W-LP, BIWI)",
+    notes=("pitch and roll are not wrapped: " + _BRANCH,),
+)
 def directmhp_single(pair: PosePair) -> ProtocolRows:
     """DirectMHP ``mean_absolute_error_calculate_single`` (AFLW2000, 300W-LP, BIWI): back = ``abs(gt_yaw) > 99``.
 
@@ -175,6 +280,13 @@ def directmhp_single(pair: PosePair) -> ProtocolRows:
     return _directmhp(pair, 99.0)
 
 
+@register_protocol(
+    "whenet",
+    "whenet",
+    "min(e, 360-e) per angle as written; narrow |GT yaw|<=90",
+    "none",
+    "WHENet paper (no script published); pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:56-59",
+)
 def whenet(pair: PosePair) -> ProtocolRows:
     """WHENet: every angle wrapped, min(e, 360 - e), whenet labels as written; also |GT yaw| <= 90.
 
@@ -202,6 +314,13 @@ def _opal23_gt_euler(pair) -> np.ndarray:
     return _cached(pair, ("opal23", "gt_euler"), lambda: pa_.opal23_euler(_opal23_mats(pair)[1]))
 
 
+@register_protocol(
+    "opal23",
+    "300w_lp -> from_euler('XYZ', [p, -y, r])",
+    "better of two solutions, wrapped; geodesic",
+    "none",
+    "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:51-93",
+)
 def opal23(pair: PosePair) -> ProtocolRows:
     """opal23: ``compute_mae`` and ``compute_ge`` on ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])`` matrices.
 
@@ -218,6 +337,13 @@ def opal23(pair: PosePair) -> ProtocolRows:
     )
 
 
+@register_protocol(
+    "opal23-align",
+    "300w_lp -> from_euler('XYZ', [p, -y, r])",
+    "opal23 after its Karcher-mean alignment (rows > 90 deg off left out of the mean)",
+    "none",
+    "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:95-129 align_predictions, then 51-93",
+)
 def opal23_align(pair: PosePair) -> ProtocolRows:
     """opal23 after ``Evaluator.align_predictions`` (test/evaluator.py:95-129): Karcher mean offset removed.
 
@@ -241,6 +367,14 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
     )
 
 
+@register_protocol(
+    "headposeplus",
+    "300w_lp (ypr) + scipy xyz (pyr)",
+    "|d| per angle in pyr and ypr",
+    "none",
+    "kuhnkeF/headposeplus@b94d162 hpp/calc_error.py:14-18,40-70",
+    notes=(_BRANCH,),
+)
 def headposeplus(pair: PosePair) -> ProtocolRows:
     """HeadPose+: |d| in two blocks, ``pyr`` (SciPy ``as_euler('xyz')``) and ``ypr`` (the labels as written).
 
@@ -264,6 +398,15 @@ def headposeplus(pair: PosePair) -> ProtocolRows:
     )
 
 
+@register_protocol(
+    "img2pose",
+    "img2pose -> convert_to_aflw",
+    "|d| of convert_to_aflw Euler angles vs Pose_Para",
+    "GT |pitch|,|yaw|,|roll| <= 99",
+    "vitoralbiero/img2pose@fd5473e evaluation/jupyter_notebooks/aflw_2000_3d_evaluation.ipynb"
+    ":112-118,276,324 (lines of the .ipynb JSON: convert_to_aflw, the 99 skip, pose_mae)",
+    notes=(_BRANCH,),
+)
 def img2pose(pair: PosePair) -> ProtocolRows:
     """img2pose: ``convert_to_aflw`` Euler angles of the prediction vs Pose_Para as written, GT within 99.
 
@@ -277,6 +420,14 @@ def img2pose(pair: PosePair) -> ProtocolRows:
     return ProtocolRows(re_.abs_error(p, g), _within_99(g), reexpressed={"pred": None, "gt": cg})
 
 
+@register_protocol(
+    "trinet",
+    "trinet",
+    "min(|d|, |d+-360|, |d+-180|) of W300_R2EulerAngles; vmae",
+    "none",
+    "chuzcjoe/TriNet@d2689de computeMAE.py:84-89,92-197",
+    notes=(_FLIPS,),
+)
 def trinet(pair: PosePair) -> ProtocolRows:
     """TriNet: Euler angles of the [left|down|front] matrices, 5-term minimum, and vector MAE.
 
@@ -291,6 +442,14 @@ def trinet(pair: PosePair) -> ProtocolRows:
     return ProtocolRows(e, np.ones(pair.n, dtype=bool), vectors={"vmae": (re_.AXES, pa_.column_acos_deg(T, Tg))})
 
 
+@register_protocol(
+    "opentrack",
+    "trinet (XYZ of [p, -y, r])",
+    "arccos(cos a cos b + sin a sin b) per angle; geodesic",
+    "none",
+    "opentrack/neuralnet-tracker-traincode@8d2478c trackertraincode/eval.py:337-354; utils.py:41-62",
+    notes=("the peer's arccos is not clipped (NaN rows, counted in peer_nan_rows); hpe clips it to [-1, 1]",),
+)
 def opentrack(pair: PosePair) -> ProtocolRows:
     """opentrack: wrapped Euler errors ``arccos(cos a cos b + sin a sin b)`` and quaternion geodesic.
 
@@ -307,6 +466,14 @@ def opentrack(pair: PosePair) -> ProtocolRows:
     )
 
 
+@register_protocol(
+    "dad3dheads",
+    "any",
+    "||I - P G^T||_F (unitless)",
+    "none",
+    "PinataFarms/DAD-3DHeads@4fc16a2 dad_3dheads_benchmark/benchmark.py:79-83",
+    units="unitless",
+)
 def dad3dheads(pair: PosePair) -> ProtocolRows:
     """DAD-3DHeads: mean ||I - R_pred R_gt^T||_F (unitless; no angles).
 
@@ -315,162 +482,6 @@ def dad3dheads(pair: PosePair) -> ProtocolRows:
     """
     nan = np.full((pair.n, 3), np.nan)
     return ProtocolRows(nan, np.ones(pair.n, dtype=bool), scalars={"frobenius": re_.frobenius(pair.P, pair.G)})
-
-
-_FLIPS = "the +-180 terms forgive a prediction whose angle is off by 180 degrees, so flipped answers are hidden"
-_BRANCH = (
-    "plain |d| of Euler angles compares solution branches: a correct rotation stated with the other "
-    "solution (or past the system's range) scores a large error"
-)
-
-PROTOCOLS = {
-    p.name: p
-    for p in (
-        Protocol(
-            "hopenet",
-            "300w_lp",
-            "|d| per angle as written, no wrap",
-            "none",
-            "natanielruiz/deep-head-pose@f7bbb99 code/test_hopenet.py:104-106,124-127,143-145",
-            hopenet,
-            (_BRANCH,),
-        ),
-        Protocol(
-            "fsanet",
-            "300w_lp",
-            "|d| per angle as written, no wrap",
-            "GT |pitch|,|yaw|,|roll| <= 99",
-            "shamangary/FSA-Net@4361d0e training_and_testing/FSANET_test.py:88-101,444-448",
-            fsanet,
-            (_BRANCH,),
-        ),
-        Protocol(
-            "6drepnet",
-            "6drepnet",
-            "min(|d|, |d+-360|, |d+-180|); pred Euler from its matrix",
-            "GT |pitch|,|yaw|,|roll| <= 99",
-            "thohemp/6DRepNet@464b2ba sixdrepnet/test.py:113-142,162-164; utils.py:165-184; create_filename_list.py:53",
-            sixdrepnet,
-            (_FLIPS,),
-        ),
-        Protocol(
-            "6drepnet360",
-            "6drepnet",
-            "min(|d|, |d+-360|); vmae = axis angles",
-            "none",
-            "thohemp/6DRepNet360@b06e4fe sixdrepnet360/test.py:164-193 (3 terms since 9c1cfaf)",
-            sixdrepnet360,
-        ),
-        Protocol(
-            "6drepnet360-2023",
-            "6drepnet",
-            "SUPERSEDED: min(|d|, |d+-360|, |d+-180|); vmae",
-            "none",
-            "thohemp/6DRepNet360@5b0622d sixdrepnet360/test.py:188-193 (superseded by 9c1cfaf, 2024-05-29)",
-            sixdrepnet360_2023,
-            (_FLIPS, "superseded by the 3-term minimum in 9c1cfaf; kept only to reproduce 2023 numbers"),
-        ),
-        Protocol(
-            "directmhp",
-            "whenet",
-            "single or v2 by the GT dataset; v2 (|GT yaw| > 90) when it is not known",
-            "none",
-            "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-356: directmhp-single for .mat folders, AFLW2000, "
-            "300W-LP, BIWI; directmhp-v2 for CMU Panoptic, AGORA",
-            directmhp,
-            ("pitch and roll are not wrapped: " + _BRANCH,),
-        ),
-        Protocol(
-            "directmhp-v2",
-            "whenet",
-            "|d| as written, yaw wrapped; back |GT yaw| > 90 (v2)",
-            "none",
-            "hnuzhy/DirectMHP@a51b06b utils/mae.py:162-278 mean_absolute_error_calculate_v2 (CMU, AGORA)",
-            directmhp,
-            ("pitch and roll are not wrapped: " + _BRANCH,),
-        ),
-        Protocol(
-            "directmhp-single",
-            "whenet",
-            "|d| as written, yaw wrapped; back |GT yaw| > 99",
-            "none",
-            "hnuzhy/DirectMHP@a51b06b utils/mae.py:281-356 mean_absolute_error_calculate_single "
-            "(AFLW2000, 300W-LP, BIWI)",
-            directmhp_single,
-            ("pitch and roll are not wrapped: " + _BRANCH,),
-        ),
-        Protocol(
-            "whenet",
-            "whenet",
-            "min(e, 360-e) per angle as written; narrow |GT yaw|<=90",
-            "none",
-            "WHENet paper (no script published); pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:56-59",
-            whenet,
-        ),
-        Protocol(
-            "opal23",
-            "300w_lp -> from_euler('XYZ', [p, -y, r])",
-            "better of two solutions, wrapped; geodesic",
-            "none",
-            "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:51-93",
-            opal23,
-        ),
-        Protocol(
-            "opal23-align",
-            "300w_lp -> from_euler('XYZ', [p, -y, r])",
-            "opal23 after its Karcher-mean alignment (rows > 90 deg off left out of the mean)",
-            "none",
-            "pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:95-129 align_predictions, then 51-93",
-            opal23_align,
-        ),
-        Protocol(
-            "headposeplus",
-            "300w_lp (ypr) + scipy xyz (pyr)",
-            "|d| per angle in pyr and ypr",
-            "none",
-            "kuhnkeF/headposeplus@b94d162 hpp/calc_error.py:14-18,40-70",
-            headposeplus,
-            (_BRANCH,),
-        ),
-        Protocol(
-            "img2pose",
-            "img2pose -> convert_to_aflw",
-            "|d| of convert_to_aflw Euler angles vs Pose_Para",
-            "GT |pitch|,|yaw|,|roll| <= 99",
-            "vitoralbiero/img2pose@fd5473e evaluation/jupyter_notebooks/aflw_2000_3d_evaluation.ipynb"
-            ":112-118,276,324 (lines of the .ipynb JSON: convert_to_aflw, the 99 skip, pose_mae)",
-            img2pose,
-            (_BRANCH,),
-        ),
-        Protocol(
-            "trinet",
-            "trinet",
-            "min(|d|, |d+-360|, |d+-180|) of W300_R2EulerAngles; vmae",
-            "none",
-            "chuzcjoe/TriNet@d2689de computeMAE.py:84-89,92-197",
-            trinet,
-            (_FLIPS,),
-        ),
-        Protocol(
-            "opentrack",
-            "trinet (XYZ of [p, -y, r])",
-            "arccos(cos a cos b + sin a sin b) per angle; geodesic",
-            "none",
-            "opentrack/neuralnet-tracker-traincode@8d2478c trackertraincode/eval.py:337-354; utils.py:41-62",
-            opentrack,
-            ("the peer's arccos is not clipped (NaN rows, counted in peer_nan_rows); hpe clips it to [-1, 1]",),
-        ),
-        Protocol(
-            "dad3dheads",
-            "any",
-            "||I - P G^T||_F (unitless)",
-            "none",
-            "PinataFarms/DAD-3DHeads@4fc16a2 dad_3dheads_benchmark/benchmark.py:79-83",
-            dad3dheads,
-            units="unitless",
-        ),
-    )
-}
 
 
 def protocol_names() -> list:
@@ -520,7 +531,7 @@ def summarize(rows: ProtocolRows, subset=None, name: str = "") -> dict:
         out["re_expressed"] = rx
     if out["mean"] is None and "frobenius" in rows.scalars:
         out["mean"] = out["frobenius"]
-    p = PROTOCOLS.get(name)
+    p = PROTOCOLS.get(name, None)
     if p is not None:
         out["system"] = p.system
         out["source"] = p.source

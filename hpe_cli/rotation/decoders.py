@@ -25,9 +25,12 @@ angles in role order ``(pitch, yaw, roll)``, degrees.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..registry import Registry
 
 _DEG = 180.0 / np.pi
 
@@ -38,8 +41,34 @@ class Decoder:
     source: str
     reference: str  # the exact system whose angles the decoder means to print
     description: str
+    func: Callable = None  # canonical matrices (N, 3, 3) -> (pyr (N, 3) degrees, ok (N,))
 
 
+#: name -> :class:`Decoder` (``hpe convert --decoder NAME``, ``hpe audit --decoder NAME``)
+DECODERS = Registry("decoder")
+
+
+def register_decoder(name: str, source: str, reference: str, description: str) -> Callable:
+    """Decorator: register ``func(A) -> (pyr, ok)`` as the decoder ``name`` in :data:`DECODERS`.
+
+    ``A`` is ``(N, 3, 3)`` canonical 300W-LP matrices; ``pyr`` the ``(N, 3)`` angles the published code prints,
+    role order (pitch, yaw, roll), degrees; ``ok`` the rows it produced numbers for. ``source`` names the code
+    reproduced, ``reference`` the exact system whose angles the decoder means to print.
+    """
+
+    def add(func: Callable) -> Callable:
+        DECODERS.register(name, Decoder(name, source, reference, description, func))
+        return func
+
+    return add
+
+
+@register_decoder(
+    "synergynet",
+    "choyingw/SynergyNet utils/inference.py (matrix2angle_corr)",
+    "300w_lp",
+    "SynergyNet matrix2angle_corr: yaw = asin(R20) with pitch/roll from another system's indices",
+)
 def _synergynet(A):
     r20 = A[:, 2, 0]
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -60,6 +89,12 @@ def _synergynet(A):
     return pyr, np.isfinite(pyr).all(-1)
 
 
+@register_decoder(
+    "3ddfa_v2",
+    "cleardusk/3DDFA_V2 utils/pose.py (matrix2angle)",
+    "3ddfa_v2",
+    "3DDFA_V2 matrix2angle: the 3ddfa_v2 split, roll forced to 0 when |R20| > 0.998",
+)
 def _tddfa_v2(A):
     r20 = A[:, 2, 0]
     hi, lo = r20 > 0.998, r20 < -0.998
@@ -75,6 +110,12 @@ def _tddfa_v2(A):
     return pyr, np.isfinite(pyr).all(-1)
 
 
+@register_decoder(
+    "directmhp",
+    "hnuzhy/DirectMHP exps/CMU/hpe_utils.py (inverse_rotate_zyx, select_euler)",
+    "whenet",
+    "DirectMHP full-range decoder: both solutions, the first with |pitch|, |roll| < 90; lock at |M02| > 0.9999999",
+)
 def _directmhp(M):
     m02 = M[:, 0, 2]
     lock = np.abs(m02) > 0.9999999
@@ -105,33 +146,9 @@ def _directmhp(M):
     return pyr, ok
 
 
-DECODERS = {
-    "synergynet": Decoder(
-        "synergynet",
-        "choyingw/SynergyNet utils/inference.py (matrix2angle_corr)",
-        "300w_lp",
-        "SynergyNet matrix2angle_corr: yaw = asin(R20) with pitch/roll from another system's indices",
-    ),
-    "3ddfa_v2": Decoder(
-        "3ddfa_v2",
-        "cleardusk/3DDFA_V2 utils/pose.py (matrix2angle)",
-        "3ddfa_v2",
-        "3DDFA_V2 matrix2angle: the 3ddfa_v2 split, roll forced to 0 when |R20| > 0.998",
-    ),
-    "directmhp": Decoder(
-        "directmhp",
-        "hnuzhy/DirectMHP exps/CMU/hpe_utils.py (inverse_rotate_zyx, select_euler)",
-        "whenet",
-        "DirectMHP full-range decoder: both solutions, the first with |pitch|, |roll| < 90; lock at |M02| > 0.9999999",
-    ),
-}
-_FUNCS = {"synergynet": _synergynet, "3ddfa_v2": _tddfa_v2, "directmhp": _directmhp}
-
-
 def get_decoder(name: str) -> Decoder:
-    if name not in DECODERS:
-        raise ValueError(f"expected a decoder among {', '.join(DECODERS)}, got {name!r}")
-    return DECODERS[name]
+    """The decoder called ``name``; ``ValueError`` "expected a decoder among ..., got 'x'" otherwise."""
+    return DECODERS.get(name)
 
 
 def decode(name: str, A):
@@ -140,9 +157,9 @@ def decode(name: str, A):
     Returns ``(pyr, ok)``: ``(N, 3)`` angles in role order (pitch, yaw, roll),
     degrees, and a mask of rows the decoder produced numbers for.
     """
-    get_decoder(name)
+    func = get_decoder(name).func
     A = np.asarray(A, dtype=np.float64).reshape(-1, 3, 3)
-    return _FUNCS[name](A)
+    return func(A)
 
 
 def decoder_columns(name: str, A) -> dict:

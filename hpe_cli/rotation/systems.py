@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..registry import Registry
 from .system_def import (  # noqa: F401
     CANONICAL_TURNS,
     GIMBAL_TOL,
@@ -58,19 +59,29 @@ def _builtin_dir():
     return files("hpe_cli.configs") / "systems"
 
 
-_CACHE: dict = {}
+#: name -> built-in :class:`RotationSystem`: the ``configs/systems/*.toml`` files (read on first use, in file
+#: name order) and systems a plug-in adds with :func:`register_system`
+SYSTEMS = Registry("built-in system", loader="hpe_cli.rotation.systems_builtin")
+
+
+def register_system(system: RotationSystem) -> RotationSystem:
+    """Add ``system`` to the built-in systems (``--system NAME`` then finds it); returns it."""
+    SYSTEMS.register(system.name, system)
+    return system
+
+
+def read_builtin_systems() -> None:
+    """Register every ``configs/systems/*.toml`` (the loader of :data:`SYSTEMS`)."""
+    import tomllib
+
+    for entry in sorted(_builtin_dir().iterdir(), key=lambda p: p.name):
+        if entry.name.endswith(".toml"):
+            register_system(system_from_dict(tomllib.loads(entry.read_text(encoding="utf-8")), entry.name))
 
 
 def builtin_systems() -> dict:
-    """All built-in systems, by name (read once from ``configs/systems``)."""
-    if not _CACHE:
-        import tomllib
-
-        for entry in sorted(_builtin_dir().iterdir(), key=lambda p: p.name):
-            if entry.name.endswith(".toml"):
-                sysm = system_from_dict(tomllib.loads(entry.read_text(encoding="utf-8")), entry.name)
-                _CACHE[sysm.name] = sysm
-    return dict(_CACHE)
+    """All built-in systems, by name."""
+    return dict(SYSTEMS)
 
 
 def system_names() -> list:

@@ -14,6 +14,8 @@ import pytest
 
 from conftest import hpe
 
+from hpe_cli.io.export import LAYOUTS as EXPORT_LAYOUTS
+
 from .conftest import AFLW, TEMP_MARK, check_failed, temp_files, tree
 
 FAULTS = {
@@ -31,7 +33,7 @@ REASON = {
     "truncated-header": "unreadable image",
     "missing": "no image (file not found)",
 }
-LAYOUTS = ["whenet", "6drepnet", "fsanet", "hf", "directmhp"]
+LAYOUTS = list(EXPORT_LAYOUTS)
 
 
 def broken_copy(tmp_path, fault):

@@ -93,6 +93,14 @@ class Layout:
     loader = ""
     #: the trainer whose range rule applies (layouts read by several trainers: ``--trainer``)
     trainer = None
+    #: ``--form`` values the layout accepts (empty: the option does not apply)
+    forms: tuple = ()
+    #: ``--trainer`` values the layout accepts (empty: the option does not apply)
+    trainers: tuple = ()
+    #: ``export.json`` ``split`` when neither ``--split`` nor ``--split-file`` is given
+    default_split_note = "none (one split: train)"
+    #: the layout writes a dataset card (:meth:`write_card`) after its index files
+    writes_card = False
 
     def __init__(self, system=None, form=None, trainer=None, **options):
         if trainer is not None:
@@ -106,6 +114,10 @@ class Layout:
         self.root: Path | None = None
 
     # ---------------------------------------------------------------- rules
+    def default_splits(self, rows) -> np.ndarray | None:
+        """The split of each row when neither ``--split`` nor ``--split-file`` is given (None: all ``train``)."""
+        return None
+
     def check_splits(self, splits) -> None:
         """Raise ``ValueError`` (with what to do) when the trainer needs splits the export does not have."""
 
@@ -134,6 +146,10 @@ class Layout:
     def finish(self, exported, final_root: Path) -> list:
         """Write the index files for the exported rows (all splits); returns summary lines."""
         return []
+
+    def write_card(self, exported, system, sampling: list, sources: dict, final_root: Path) -> None:
+        """A description of the export next to its files (layouts with ``writes_card``); ``sources`` maps each
+        source kind to its licence."""
 
     def abort(self) -> None:
         """Release open files after a failure (the staging folder is removed by the job)."""

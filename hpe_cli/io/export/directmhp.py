@@ -34,6 +34,7 @@ import json
 
 import numpy as np
 
+from . import LAYOUTS
 from .base import Layout
 
 SEQ_NAMES = [
@@ -122,8 +123,10 @@ def default_splits(rows) -> np.ndarray:
     return np.where(np.isin(seq, SEQ_VAL), "val", "train").astype(object)
 
 
+@LAYOUTS.register()
 class DirectMHPLayout(Layout):
     name = "directmhp"
+    default_split_note = "DirectMHP's sequence lists"
     system = "whenet"
     loader = (
         "hnuzhy/DirectMHP@a51b06bc train.py:98-99, val.py:86,177, utils/general.py:282-285, "
@@ -131,6 +134,9 @@ class DirectMHPLayout(Layout):
     )
     full_frames = True
     uses_landmarks = True
+
+    def default_splits(self, rows):
+        return default_splits(rows)
 
     def label_reasons(self, angles):
         bad = (np.abs(angles[:, 0]) > 90) | (np.abs(angles[:, 2]) > 90)

@@ -20,11 +20,13 @@ import zipfile
 
 import numpy as np
 
+from . import LAYOUTS
 from .base import Layout, abs_over
 
 RULE_99 = "outside ±99° (FSA-Net's FSANET_fine_train.py keeps [-99, 99])"
 
 
+@LAYOUTS.register()
 class FSANetLayout(Layout):
     name = "fsanet"
     system = "300w_lp"

@@ -21,6 +21,7 @@ import json
 
 import numpy as np
 
+from . import LAYOUTS
 from .base import Layout
 
 SHARD_ROWS = 5000
@@ -64,8 +65,10 @@ def crop_points(rows, n_lm: int):
     return (xs, ys), (cx, cy)
 
 
+@LAYOUTS.register()
 class HFLayout(Layout):
     name = "hf"
+    writes_card = True
     system = None
     loader = LOADER
     pixels = "jpeg"

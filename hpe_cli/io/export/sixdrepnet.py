@@ -50,6 +50,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...geometry.crop import landmark_boxes, points_to_crop
+from . import LAYOUTS
 from .base import Layout, abs_over
 
 TRAINERS = ("hopenet", "6drepnet", "6drepnet360")
@@ -72,9 +73,12 @@ LOADERS = {
 MAT_MARGINS = (0.5, 0.9, 0.65, 0.5)
 
 
+@LAYOUTS.register()
 class SixDRepNetLayout(Layout):
     name = "6drepnet"
     system = "6drepnet"
+    forms = ("mat", "crops")
+    trainers = TRAINERS
 
     def __init__(self, system=None, form=None, trainer=None, **options):
         super().__init__(system, form or "mat", **options)

@@ -15,11 +15,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..whenet_txt import whenet_lines
+from . import LAYOUTS
 from .base import Layout
 
 RULE = "WHENet rule: |pitch| >= 90 or |roll| >= 90 in the whenet primary solution"
 
 
+@LAYOUTS.register()
 class WhenetLayout(Layout):
     name = "whenet"
     system = "whenet"

@@ -12,7 +12,10 @@ import numpy as np
 
 from ...errors import HpeError
 from ...geometry.crop import landmark_boxes, sixdrepnet_test_boxes
+from ...io.dataset_readers import find_reader
+from ...io.label_source import label_source
 from ...io.layout import BBOX_COLS, landmark_count
+from ...registry import Registry
 from .options import A_COLS
 
 
@@ -31,19 +34,18 @@ def _kind_of_table(schema) -> str:
     return "table"
 
 
-def _table_system(src, given):
-    """The table's own system (``hpe:system`` metadata...), else ``--from``, else 300w_lp
-    (:func:`hpe_cli.io.system_meta.resolve_system`, as every command)."""
-    from ...io.system_meta import resolve_system
-
-    return resolve_system(src, given, default="300w_lp", option_name="--from").system
-
-
 def _subject_of(stem: str) -> str:
     """300W-LP identity ``NAME`` of ``NAME_k`` (the k-th synthesized view); other names unchanged."""
     return re.sub(r"_\d+$", "", stem) if re.search(r"_\d+_\d+$", stem) else stem
 
 
+#: dataset reader name (:data:`hpe_cli.io.dataset_readers.READERS`) -> ``load(path, source, landmarks)``: the
+#: export's own loading of that dataset (boxes from its landmarks...), a frame as :func:`load_table_input`'s, or
+#: None to read the input as a label table after all. Inputs of other readers are read as label tables.
+EXPORT_LOADERS = Registry("export input")
+
+
+@EXPORT_LOADERS.register("mat")
 def load_mat_input(path: Path, source: str, landmarks: bool = True):
     """A 300W-LP/AFLW2000 ``.mat`` folder: box from the visible ``pt2d`` points (else ``pt3d_68``).
 
@@ -93,13 +95,16 @@ def load_mat_input(path: Path, source: str, landmarks: bool = True):
     )
 
 
+@EXPORT_LOADERS.register("300w-lp")
 def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
     """The 300W-LP root folder (``{AFW,HELEN,IBUG,LFPW}[_Flip]/NAME_k``, :func:`hpe_cli.datasets.w300lp.read_w300lp`).
 
     The box is built as for a ``.mat`` folder, from the copy's own ``landmarks/<subset>/NAME_k_pts.mat`` points
     when present (the main file's ``pt2d`` comes from the original image, 3DDFA issue #192), else ``pt2d``.
-    The group column ``subject`` is the identity ``NAME``.
+    The group column ``subject`` is the identity ``NAME``. None for ``300W-LP.zip`` (read as a label table).
     """
+    if not path.is_dir():
+        return None
     from ...datasets.w300lp import read_w300lp
 
     t = read_w300lp(path, landmarks=True, pt2d=True)
@@ -172,92 +177,89 @@ def _pose_para_frame(t, box, lm, landmarks: bool, columns: dict):
     return frame.copy()
 
 
-def load_table_input(
-    path: Path, source: str, input_system=None, images_root=None, landmarks: bool = True, radians: bool = False
-):
-    """A label table (relabel-panoptic/agora output or any table with image, box and labels); ``radians``: its
-    angle columns are in radians (``--radians``; matrix columns and ``.mat`` folders are unaffected)."""
-    import pandas as pd
-    import pyarrow as pa
+#: columns of a label table the export keeps besides the box and the landmarks (when present)
+TABLE_COLUMNS = (
+    "image",
+    "sequence",
+    "camera",
+    "frame",
+    "person_id",
+    "person",
+    "subject",
+    "image_width",
+    "image_height",
+)
 
-    from ...io import label_columns_fast, label_mode, open_table
 
-    src = open_table(path, with_lines=True)
-    cols = src.columns
+def _check_crop_columns(path: Path, cols) -> None:
     missing = [c for c in ["image"] + BBOX_COLS if c not in cols]
     if missing:
         raise HpeError(
             f"{path}: expected columns {', '.join(missing)} (an image reference and a head box) "
             f"to export crops, got {', '.join(cols[:12])}{'...' if len(cols) > 12 else ''}"
         )
-    mode = label_mode(cols, path)
-    system = _table_system(src, input_system)
+
+
+def _table_kind(src) -> str:
+    """``cmu_panoptic``, ``agora`` (relabel outputs, by their metadata or relabel-agora's per-row ``source``) or
+    ``table``: the licence of the exported rows."""
     kind = _kind_of_table(src.schema)
-    n_lm = landmark_count(cols) if landmarks else 0
-    keep = [
-        c
-        for c in [
-            "image",
-            "sequence",
-            "camera",
-            "frame",
-            "person_id",
-            "person",
-            "subject",
-            "image_width",
-            "image_height",
-        ]
-        + BBOX_COLS
-        if c in cols
-    ]
-    if kind == "table" and "source" in cols:  # relabel-agora writes its source per row
+    if kind == "table" and "source" in src.columns:  # relabel-agora writes its source per row
         first = next(iter(src.batches_with_rejects()), (None, None))[0]
         if first is not None and first.num_rows and "agora" in str(first.column("source")[0]).lower():
             kind = "agora"
-    keep += [f"lm{i}_{a}" for i in range(n_lm) for a in "xy"]
-    parts = []
-    unreadable = []
-    for batch, bad in src.batches_with_rejects():
-        unreadable += [(r.line, f"unreadable row: {r.reason}") for r in bad]
-        nb = batch.num_rows
-        if nb == 0:
-            continue
-        lab, ok, reasons = label_columns_fast(batch, mode, radians)
-        reasons = np.full(nb, "", dtype=object) if reasons is None else reasons
-        vals = np.stack(lab, -1)
-        vals = np.where(ok[:, None], vals, 0.0)
-        if mode == "angles":
-            R = system.from_angles(vals)
-        else:
-            R = vals.reshape(-1, 3, 3)
-            R = np.where(ok[:, None, None], R, np.eye(3))
-        A = system.to_canonical(R).reshape(nb, 9)
-        df = pa.Table.from_batches([batch.select(keep)]).to_pandas()
-        df.insert(0, "row", batch.column("__line__").to_numpy())
-        box = df[BBOX_COLS].apply(pd.to_numeric, errors="coerce").to_numpy(np.float64)
-        badbox = ~np.isfinite(box).all(1) | (box[:, 2] <= 0) | (box[:, 3] <= 0)
-        reasons[(reasons == "") & badbox] = "missing or empty head box"
-        df["reason"] = reasons
-        for k, c in enumerate(A_COLS):
-            df[c] = A[:, k]
-        parts.append(df)
-    if unreadable:
-        eye = np.eye(3).reshape(9)
-        parts.append(
-            pd.DataFrame(
-                {
-                    "row": [ln for ln, _ in unreadable],
-                    "image": "",
-                    **{c: np.nan for c in BBOX_COLS},
-                    "reason": [r for _, r in unreadable],
-                    **{c: eye[k] for k, c in enumerate(A_COLS)},
-                }
-            )
-        )
-    if not parts:
-        raise HpeError(f"{path}: no rows")
-    frame = pd.concat(parts, ignore_index=True).sort_values("row", kind="stable", ignore_index=True)
-    n = len(frame)
+    return kind
+
+
+def _batch_frame(batch, keep: list, labels, radians: bool):
+    """One batch as the export's rows: kept columns, ``row``, canonical ``a00..a22``, ``reason``."""
+    import pandas as pd
+    import pyarrow as pa
+
+    from ...io import label_columns_fast
+
+    nb = batch.num_rows
+    lab, ok, reasons = label_columns_fast(batch, labels.mode, radians)
+    reasons = np.full(nb, "", dtype=object) if reasons is None else reasons
+    vals = np.stack(lab, -1)
+    vals = np.where(ok[:, None], vals, 0.0)
+    if labels.mode == "angles":
+        R = labels.system.from_angles(vals)
+    else:
+        R = vals.reshape(-1, 3, 3)
+        R = np.where(ok[:, None, None], R, np.eye(3))
+    A = labels.system.to_canonical(R).reshape(nb, 9)
+    df = pa.Table.from_batches([batch.select(keep)]).to_pandas()
+    df.insert(0, "row", batch.column("__line__").to_numpy())
+    box = df[BBOX_COLS].apply(pd.to_numeric, errors="coerce").to_numpy(np.float64)
+    badbox = ~np.isfinite(box).all(1) | (box[:, 2] <= 0) | (box[:, 3] <= 0)
+    reasons[(reasons == "") & badbox] = "missing or empty head box"
+    df["reason"] = reasons
+    for k, c in enumerate(A_COLS):
+        df[c] = A[:, k]
+    return df
+
+
+def _unreadable_frame(unreadable: list):
+    """Rows the reader could not parse, as rejected export rows (identity rotation, no box)."""
+    import pandas as pd
+
+    eye = np.eye(3).reshape(9)
+    return pd.DataFrame(
+        {
+            "row": [ln for ln, _ in unreadable],
+            "image": "",
+            **{c: np.nan for c in BBOX_COLS},
+            "reason": [r for _, r in unreadable],
+            **{c: eye[k] for k, c in enumerate(A_COLS)},
+        }
+    )
+
+
+def _group_columns(frame, path: Path, source: str, kind: str, images_root):
+    """Every column the later stages read, with its default where the table has none."""
+    import pandas as pd
+
     if "person_id" not in frame.columns and "person" in frame.columns:
         frame["person_id"] = frame.pop("person")
     frame["source"], frame["kind"], frame["input"] = source, kind, str(path)
@@ -284,6 +286,44 @@ def load_table_input(
             [_subject_of(Path(s).stem) for s in frame["image"].tolist()],
         )
     frame["subject"] = frame["subject"].astype(str)
+    return frame
+
+
+def load_table_input(
+    path: Path, source: str, input_system=None, images_root=None, landmarks: bool = True, radians: bool = False
+):
+    """A label table (relabel-panoptic/agora output or any table with image, box and labels); ``radians``: its
+    angle columns are in radians (``--radians``; matrix columns and ``.mat`` folders are unaffected).
+
+    The labels are opened once (:func:`hpe_cli.io.label_source.label_source`): the table's own system
+    (``hpe:system`` metadata...), else ``--from``, else ``300w_lp``; angle or ``r00..r22`` columns.
+    """
+    import pandas as pd
+
+    from ...io import label_mode, open_table
+
+    src = open_table(path, with_lines=True)
+    cols = src.columns
+    _check_crop_columns(path, cols)
+    mode = label_mode(cols, path)  # angles or r00..r22: the export reads no system's own value columns
+    labels = label_source(src, input_system, default="300w_lp", option_name="--from", mode=mode)
+    kind = _table_kind(src)
+    n_lm = landmark_count(cols) if landmarks else 0
+    keep = [c for c in list(TABLE_COLUMNS) + BBOX_COLS if c in cols]
+    keep += [f"lm{i}_{a}" for i in range(n_lm) for a in "xy"]
+    parts = []
+    unreadable = []
+    for batch, bad in src.batches_with_rejects():
+        unreadable += [(r.line, f"unreadable row: {r.reason}") for r in bad]
+        if batch.num_rows:
+            parts.append(_batch_frame(batch, keep, labels, radians))
+    if unreadable:
+        parts.append(_unreadable_frame(unreadable))
+    if not parts:
+        raise HpeError(f"{path}: no rows")
+    frame = pd.concat(parts, ignore_index=True).sort_values("row", kind="stable", ignore_index=True)
+    n = len(frame)
+    frame = _group_columns(frame, path, source, kind, images_root)
     assert len(frame) == n
     return frame
 
@@ -305,15 +345,10 @@ def load_inputs(paths, images=(), input_system=None, landmarks: bool = True, rad
         while name in names:
             name += "_"
         names.add(name)
-        from ...datasets.w300lp import is_w300lp_root
-
-        is_mat = (p.is_dir() and any(p.glob("*.mat"))) or p.suffix.lower() == ".mat"
-        if p.is_dir() and not is_mat and is_w300lp_root(p):
-            f = load_w300lp_input(p, name, landmarks)
-            if root:
-                f["root"] = str(root)
-        elif is_mat:
-            f = load_mat_input(p, name, landmarks)
+        reader = find_reader(p)
+        load = EXPORT_LOADERS.get(reader.name, None) if reader is not None else None
+        f = load(p, name, landmarks) if load is not None else None
+        if f is not None:
             if root:
                 f["root"] = str(root)
         elif p.is_dir():

@@ -80,12 +80,10 @@ def split_stage(sel: Selection, layout, opts) -> None:
         if col not in rows.columns:
             raise HpeError(f"--split: column {col!r} is not in the labels (expected one of {GROUP_COLUMNS})")
         split = assign_splits(rows[col].astype(str).to_numpy(), names, fr, opts.seed)
-    elif layout.name == "directmhp":
-        from ...io.export.directmhp import default_splits
-
-        split = default_splits(rows)
     else:
-        split = np.full(sel.n, "train", dtype=object)
+        split = layout.default_splits(rows)
+        if split is None:
+            split = np.full(sel.n, "train", dtype=object)
     sel.rows = rows.copy()
     sel.rows["split"] = split
     sel.split = split

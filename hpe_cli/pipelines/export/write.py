@@ -125,7 +125,7 @@ def write_index(stage, layout, sel, plan, px, todo, system, final_root):
     if not layout.full_frames:
         # every crop's box in the source frame's pixels (exclusive ends) and its written size
         exported[CROP_COLUMNS].to_csv(stage / "crops.csv", index=False)
-    if layout.name == "hf":
+    if layout.writes_card:
         kinds = sorted(set(sel.rows["kind"].iloc[done].tolist()))
         layout.write_card(
             exported, system, sel.notes, {k: LICENCES.get(k, LICENCES["table"]) for k in kinds}, final_root
@@ -162,9 +162,7 @@ def summary_of(layout, system, inputs, sel, plan, exported, notes_extra, opts) -
             "pad_value": int(opts.pad_value),
             "min_inside": opts.min_inside,
         },
-        "split": opts.split
-        or (opts.split_file and f"file {opts.split_file}")
-        or ("DirectMHP's sequence lists" if layout.name == "directmhp" else "none (one split: train)"),
+        "split": opts.split or (opts.split_file and f"file {opts.split_file}") or layout.default_split_note,
         "seed": opts.seed,
         "notes": notes_extra,
     }
