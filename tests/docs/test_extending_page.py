@@ -10,10 +10,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 from scipy.io import loadmat
 
-from hpe_cli.cli.main import cli
+from conftest import hpe as hpe_cmd
 from hpe_cli.io.dataset_readers import READERS
 from hpe_cli.io.export import LAYOUTS
 from hpe_cli.metrics.protocols import PROTOCOLS
@@ -43,7 +42,7 @@ def plugin(tmp_path):
         made.append((table, entry))
 
         def run(*args):
-            res = CliRunner(env={"HPE_PLUGINS": str(path)}).invoke(cli, [str(a) for a in args], catch_exceptions=False)
+            res = hpe_cmd(*args, env={"HPE_PLUGINS": str(path)})
             assert res.exit_code == 0, res.output
             return res
 
@@ -55,7 +54,7 @@ def plugin(tmp_path):
 
 
 def hpe(*args):
-    res = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+    res = hpe_cmd(*args)
     assert res.exit_code == 0, res.output
     return res
 

@@ -13,7 +13,6 @@ import pandas as pd
 import pytest
 
 from conftest import hpe
-
 from hpe_cli.io.export import LAYOUTS as EXPORT_LAYOUTS
 
 from .conftest import AFLW, TEMP_MARK, check_failed, temp_files, tree

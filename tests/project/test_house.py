@@ -894,6 +894,7 @@ OWN_RUNNER_OK = {
     "tests/conftest.py": "the one runner",
     "tests/docs/doc_examples.py": "a script (--update) that runs the docs' shell lines outside pytest",
     "tests/project/test_house.py": "names the patterns it looks for",
+    "tests/project/test_registries.py": "a fresh interpreter that runs --help and lists the modules it loaded",
 }
 
 

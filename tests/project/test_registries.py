@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
+from conftest import hpe as hpe_cmd
 from hpe_cli.cli.main import cli
 from hpe_cli.io.dataset_readers import READERS, input_format_names, register_reader
 from hpe_cli.io.export import LAYOUTS
@@ -52,7 +52,7 @@ TABLES = {
 
 
 def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+    return hpe_cmd(*args)
 
 
 # ---------------------------------------------------------------------------------------------- (a) no copies
@@ -238,7 +238,7 @@ def test_dummy_layout_through_export(tmp_path):
 
 @pytest.mark.skipif(not AFLW.is_dir(), reason="sample_data/aflw2000 not available")
 def test_dummy_layout_unknown_without_registration(tmp_path):
-    res = CliRunner().invoke(cli, ["export", str(AFLW), "-o", str(tmp_path / "o"), "--layout", "dummy"])
+    res = hpe_cmd("export", AFLW, "-o", tmp_path / "o", "--layout", "dummy")
     assert res.exit_code == 2 and "'dummy' is not one of" in res.output
 
 
@@ -284,10 +284,10 @@ def test_dummy_protocol_through_evaluate(tmp_path):
 def test_a_broken_plugin_is_one_line(tmp_path):
     bad = tmp_path / "bad_plugin.py"
     bad.write_text("raise RuntimeError('boom')\n")
-    res = CliRunner(env={"HPE_PLUGINS": str(bad)}).invoke(cli, ["systems"])
+    res = hpe_cmd("systems", env={"HPE_PLUGINS": str(bad)})
     assert res.exit_code == 1
     assert res.output.strip().splitlines() == [f"Error: HPE_PLUGINS: {bad}: cannot load it: RuntimeError: boom"]
-    res = CliRunner(env={"HPE_PLUGINS": str(tmp_path / "missing.py")}).invoke(cli, ["systems"])
+    res = hpe_cmd("systems", env={"HPE_PLUGINS": str(tmp_path / "missing.py")})
     assert res.exit_code == 1 and "expected a Python file, got no such file" in res.output
 
 
