@@ -168,7 +168,7 @@ def _label_cols(batch, mode, radians):
 def _checks(cols, mode, system, near_tol_deg):
     from ..rotation.audit import audit_columns
 
-    return audit_columns(cols, system, mode, near_tol_deg)
+    return audit_columns(cols, system, mode, near_tol_deg, lock_distance=False)
 
 
 def _example(batch, i, line, id_cols, cols, mode) -> dict:
