@@ -322,7 +322,7 @@ def audit_file(
     ``system_origin``, ``rejected``, ``examples``...); ``system`` defaults to
     the file's own, else ``300w_lp``. ``options``: ``near_tol_deg``, ``radians``,
     ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``, ``workers`` (``--threads``); ``consistency``
-    (True or a :class:`hpe_cli.pipelines.consistency.Settings`, as ``--consistency``; report key ``consistency``)
+    (True or a :class:`hpe_cli.pipelines.audit.consistency.Settings`, as ``--consistency``; report key ``consistency``)
     and ``suspects`` (path of the key list, as ``--suspects``).
     """
     from .io.transaction import ensure_transaction

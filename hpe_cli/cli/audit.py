@@ -220,7 +220,7 @@ def audit(
         raise click.UsageError("--calibration and --suspects need --consistency")
     settings = None
     if consistency:
-        from ..pipelines.consistency import Settings
+        from ..pipelines.audit.consistency import Settings
 
         settings = Settings(calibration=calibration, max_jump_deg=max_jump, suspect_score=suspect_score)
 

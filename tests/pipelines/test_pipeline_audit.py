@@ -5,7 +5,7 @@ import pandas as pd
 import pyarrow as pa
 import pytest
 
-from hpe_cli.pipelines.audit import run_audit, string_hashes
+from hpe_cli.pipelines.audit.job import run_audit, string_hashes
 from hpe_cli.rotation import get_system
 from hpe_cli.rotation.audit import CHECKS, audit_angles
 

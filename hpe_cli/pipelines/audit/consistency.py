@@ -32,19 +32,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import HpeError
-from ..geometry.landmark_pose import (
+from ...errors import HpeError
+from ...geometry.landmark_pose import (
     FIT_REASONS,
     MIN_POINTS,
     SCHEME_SIZES,
     fit_landmark_pose,
     fit_landmark_pose_perspective,
 )
-from ..metrics import consistency as mc
-from ..metrics.sketch import EXACT_CAP, StreamQuantiles
-from .consistency_groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
-from .consistency_notes import _codes, _key_batches, _r, canonical_labels, suspects_table  # noqa: F401
-from .consistency_spill import RowSpill
+from ...metrics import consistency as mc
+from ...metrics.sketch import EXACT_CAP, StreamQuantiles
+from .common import _codes, _key_batches, _r, canonical_labels, suspects_table  # noqa: F401
+from .groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
+from .spill import RowSpill
 
 #: a landmark fit whose residual (per inter-ocular distance) is above this does not look like a face
 MAX_RESIDUAL = 0.35
@@ -111,7 +111,7 @@ class ConsistencyAudit:
     """Collects the evidence batch by batch (:meth:`add`), then ranks (:meth:`finish`).
 
     Memory is flat in rows for tables without a ``frame`` column: each row's
-    numbers go to a temporary file (:mod:`hpe_cli.pipelines.consistency_spill`,
+    numbers go to a temporary file (:mod:`hpe_cli.pipelines.audit.spill`,
     61 bytes a row on disk); statistics are exact up to ``exact_cap`` rows
     (``Settings.exact_rows``, :data:`hpe_cli.metrics.sketch.EXACT_CAP`), then histograms (resolution in the
     JSON). Tables with a ``frame`` column also hold each row's label matrix and
@@ -122,12 +122,12 @@ class ConsistencyAudit:
         self.src = src
         self.s = settings if isinstance(settings, Settings) else Settings()  # True: the defaults
         cols = set(src.columns)
-        from ..io.layout import landmark_count
+        from ...io.layout import landmark_count
 
         self.n_lm = landmark_count(src.columns)
         self.mat_landmarks = None
         if self.n_lm == 0 and src.path.is_dir() and any(src.path.glob("*.mat")):
-            from ..datasets.mat import read_mat_dir
+            from ...datasets.mat import read_mat_dir
 
             t = read_mat_dir(src.path, landmarks=True)
             n = sum(1 for c in t.columns if c.startswith("lm") and c.endswith("_x") and not c.startswith("lm3d"))
@@ -157,7 +157,7 @@ class ConsistencyAudit:
         self.expected_sketch = mc.expected_angle_sketch(self.exact_cap)
         self.stream = None
         if self.has_frame and self.s.stream_groups:
-            from .consistency_stream import GroupStream, sorted_by_sequence_frame
+            from .stream import GroupStream, sorted_by_sequence_frame
 
             if sorted_by_sequence_frame(src):
                 self.stream = GroupStream(self)
@@ -179,7 +179,7 @@ class ConsistencyAudit:
             paths = dict(zip(self.meta.get("sequences", []), self.meta["calibrations"]))
         if not paths:
             return "no calibration (give --calibration FILE)"
-        from ..datasets.panoptic_calibration import read_calibration
+        from ...datasets.panoptic_calibration import read_calibration
 
         for seq, p in paths.items():
             try:
@@ -230,7 +230,7 @@ class ConsistencyAudit:
         """The per-row evidence of one batch (thread-safe; None for a .mat folder without ``lines``).
 
         ``A``: the labels as canonical matrices ``(n, 3, 3)``, NaN where unusable.
-        Returns ``{"rec": records}`` (:data:`~hpe_cli.pipelines.consistency_spill.RECORD`,
+        Returns ``{"rec": records}`` (:data:`~hpe_cli.pipelines.audit.spill.RECORD`,
         ``line`` not yet set), plus the labels and keys of a table with a ``frame`` column.
         """
         if self.mat_landmarks is not None and lines is None:
@@ -248,7 +248,7 @@ class ConsistencyAudit:
                 fit = fit_landmark_pose(uv, self.scheme, reasons=False)
             else:  # calibrated cameras: corrected for the head's place in the image
                 fit = fit_landmark_pose_perspective(uv, self.scheme, K, dist, reasons=False)
-            from ..rotation.distances import geodesic_deg
+            from ...rotation.distances import geodesic_deg
 
             lm_angle = geodesic_deg(np.where(finite[:, None, None], A, np.nan), fit["A"])
             lm_res = fit["residual"]
@@ -269,7 +269,7 @@ class ConsistencyAudit:
         rec["lm_code"] = code
         part = {"rec": rec}
         if self.has_frame:
-            from ..io.layout import arrow_to_numpy
+            from ...io.layout import arrow_to_numpy
 
             part["finite"] = finite
             part["A"] = A
@@ -314,7 +314,7 @@ class ConsistencyAudit:
     def _landmarks(self, batch, lines) -> np.ndarray:
         if self.mat_landmarks is not None:
             return self.mat_landmarks[np.asarray(lines, dtype=np.int64) - 1]
-        from ..io.layout import arrow_to_numpy
+        from ...io.layout import arrow_to_numpy
 
         n = batch.num_rows
         cols = [arrow_to_numpy(batch.column(f"lm{i}_{a}"), np.float64) for i in range(self.n_lm) for a in "xy"]
@@ -567,13 +567,13 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None
     top = order[: cons.s.worst]
     report["worst"] = cons.describe_rows(_key_batches(cons, reread, key_cols), top, key_cols)
     if suspects:
-        from ..io import write_table
+        from ...io import write_table
 
         table = suspects_table(cons, _key_batches(cons, reread, key_cols), order, key_cols)
         write_table(table, suspects, overwrite=overwrite)
         report["suspects_file"] = str(suspects)
     if plots:
-        from .draw_consistency import FOLDER, consistency_page
+        from ..draw_consistency import FOLDER, consistency_page
 
         pics = consistency_page(cons, report, reread(), top[: cons.s.drawn], plots, images, overwrite)
         report["page"] = f"{plots}/{FOLDER}/index.html"

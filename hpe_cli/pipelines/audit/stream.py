@@ -7,20 +7,20 @@ and a row is final once a frame more than ``max_gap`` after it was read). The
 results go, in input order, to a temporary file (:class:`GroupSpill`); the
 statistics to :class:`hpe_cli.metrics.sketch.StreamQuantiles`, the cameras'
 median offsets to one per camera and axis. The results are those of
-:mod:`hpe_cli.pipelines.consistency_groups` on the whole table (tested).
+:mod:`hpe_cli.pipelines.audit.groups` on the whole table (tested).
 
 :func:`sorted_by_sequence_frame` tells whether a Parquet table qualifies (one
 pass over its ``sequence`` and ``frame`` columns); other tables use
-:mod:`~hpe_cli.pipelines.consistency_groups` on the held rows.
+:mod:`~hpe_cli.pipelines.audit.groups` on the held rows.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..metrics import consistency as mc
-from ..metrics.sketch import StreamQuantiles
-from .consistency_groups import MIN_VIEWS, camera_rotations, view_groups
+from ...metrics import consistency as mc
+from ...metrics.sketch import StreamQuantiles
+from .groups import MIN_VIEWS, camera_rotations, view_groups
 
 RESULT = np.dtype([("view", "<f8"), ("vcode", "u1"), ("jump", "<f8"), ("tcode", "u1")])
 
@@ -32,14 +32,14 @@ def sorted_by_sequence_frame(src) -> bool:
         return False
     import pyarrow.parquet as pq
 
-    from ..io.layout import arrow_to_numpy
+    from ...io.layout import arrow_to_numpy
 
     cols = ["frame"] + (["sequence"] if "sequence" in src.columns else [])
     pf = pq.ParquetFile(src.path)
     if not set(cols) <= set(pf.schema_arrow.names):
         return False
     table, seen, last = {}, set(), None
-    from .consistency_notes import _codes
+    from .common import _codes
 
     for b in pf.iter_batches(1 << 18, columns=cols):
         f = arrow_to_numpy(b.column("frame")).astype(np.int64)
@@ -195,7 +195,7 @@ class GroupStream:
 
     # ----------------------------------------------------------------- summaries
     def finish(self):
-        """Flush; return ``(views summary, time summary)`` as :mod:`~hpe_cli.pipelines.consistency_groups`."""
+        """Flush; return ``(views summary, time summary)`` as :mod:`~hpe_cli.pipelines.audit.groups`."""
         if self.pend is not None:
             self._step(final=True)
         self.pend = None

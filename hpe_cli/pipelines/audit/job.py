@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import HpeError
-from .inorder import in_order
+from ...errors import HpeError
+from ..inorder import in_order
 
 #: columns that identify a sample, used (when present) in the ``duplicates`` key
 ID_COLUMNS = (
@@ -147,8 +147,8 @@ def key_hashes(label_cols, batch, key_cols) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------- labels
 def _label_cols(batch, mode, radians):
     """Label columns of one batch as float64 arrays; NaN where missing or non-numeric."""
-    from ..io import ANGLE_COLS, MATRIX_COLS
-    from ..io.labels import _numeric
+    from ...io import ANGLE_COLS, MATRIX_COLS
+    from ...io.labels import _numeric
 
     names = ANGLE_COLS if mode == "angles" else MATRIX_COLS
     cols = []
@@ -156,7 +156,7 @@ def _label_cols(batch, mode, radians):
         v, _, _ = _numeric(batch, c)  # NaN where missing or non-numeric, inf kept
         cols.append(np.rad2deg(v) if (radians and mode == "angles") else v)
     if mode == "angles":
-        from ..io.units_watch import observe_degrees, observe_radians  # warn at the end if the unit looks wrong
+        from ...io.units_watch import observe_degrees, observe_radians  # warn at the end if the unit looks wrong
 
         if radians:
             observe_radians([np.deg2rad(c) for c in cols])
@@ -166,7 +166,7 @@ def _label_cols(batch, mode, radians):
 
 
 def _checks(cols, mode, system, near_tol_deg):
-    from ..rotation.audit import audit_columns
+    from ...rotation.audit import audit_columns
 
     return audit_columns(cols, system, mode, near_tol_deg, lock_distance=False)
 
@@ -254,7 +254,7 @@ class _Duplicates:
 
 # ------------------------------------------------------------------------------------------------- job
 def _source(input_path, batch_size):
-    from ..io import open_table
+    from ...io import open_table
 
     return open_table(input_path, batch_size, with_lines=True)
 
@@ -266,8 +266,8 @@ def _batches(src, mode, path, rejects=None):
     counted as ``non_finite``, like today. With a rejects file (``rejects``
     with a path), the rows the reader sets aside go there instead.
     """
-    from ..io import ANGLE_COLS, MATRIX_COLS
-    from ..io.readers import LINE_COL
+    from ...io import ANGLE_COLS, MATRIX_COLS
+    from ...io.readers import LINE_COL
 
     label = {f"non-numeric value in {c}" for c in (ANGLE_COLS if mode == "angles" else MATRIX_COLS)}
     rejects_file = rejects
@@ -320,13 +320,13 @@ def run_audit(
     unless ``rejects_path`` is given: they then go there with their reason, the
     rest is audited, and the report counts them (``rejected``); with
     ``strict_rejects`` any such row is still an error and nothing is written.
-    ``consistency`` (a :class:`hpe_cli.pipelines.consistency.Settings`) adds its checks (JSON, ``output``, ``suspects``).
+    ``consistency`` (a :class:`hpe_cli.pipelines.audit.consistency.Settings`) adds its checks (JSON, ``output``, ``suspects``).
     """
 
-    from ..io import ANGLE_COLS, MATRIX_COLS, check_output, label_mode, write_json
-    from ..io.writers import check_report_outputs
-    from ..report.plots import AngleHistograms, plot_files, write_plots
-    from ..rotation.audit import CHECKS
+    from ...io import ANGLE_COLS, MATRIX_COLS, check_output, label_mode, write_json
+    from ...io.writers import check_report_outputs
+    from ...report.plots import AngleHistograms, plot_files, write_plots
+    from ...rotation.audit import CHECKS
 
     check_report_outputs(report, output, overwrite)
     if plots:
@@ -337,8 +337,8 @@ def run_audit(
                 check_output(p, overwrite)
 
     src = _source(input_path, batch_size)
-    from ..io import Rejects
-    from ..io.system_meta import resolve_system
+    from ...io import Rejects
+    from ...io.system_meta import resolve_system
 
     rejected = Rejects(rejects_path, overwrite, strict=strict_rejects, source=src)
     if suspects:
@@ -358,7 +358,7 @@ def run_audit(
         need = list(system.value_columns)
     tally = None
     if decoder:
-        from ..rotation.decoders import DecoderTally
+        from ...rotation.decoders import DecoderTally
 
         tally = DecoderTally(decoder)
     missing = [c for c in need if c not in columns]
@@ -387,7 +387,7 @@ def run_audit(
     examples = {c: [] for c in CHECKS}
     counts = {c: 0 for c in CHECKS}
     flagged = near_not_locked = 0
-    from .pools import default_threads
+    from ..pools import default_threads
 
     workers = default_threads(workers)  # --threads; one per core by default
     dups = _Duplicates()
@@ -494,7 +494,7 @@ def run_audit(
             cons,
         )
     if plots:
-        from .draw_flagged import flagged_pictures
+        from ..draw_flagged import flagged_pictures
 
         # the first flagged rows of each check, drawn on their images, for the page
         pics = flagged_pictures(src.path, examples, plots, system, images=images, radians=radians, overwrite=overwrite)
@@ -515,7 +515,7 @@ def run_audit(
         )
     rejected.write()
     if report == "-":
-        from ..io.writers import json_text
+        from ...io.writers import json_text
 
         (echo or print)(json_text(result))
     elif report:
@@ -539,7 +539,7 @@ def _system_cols(batch, system, mode, radians, via_system):
     """Label columns to check and their mode: a system's own columns (any storage kind) are read through it."""
     if not via_system:
         return _label_cols(batch, mode, radians), mode
-    from ..io.labels import label_values
+    from ...io.labels import label_values
 
     values = label_values(batch, system, mode, radians)
     return (
@@ -569,8 +569,8 @@ def _write_flagged(
     """Second pass over the input: every column, then one boolean column per check and 'flagged'."""
     import pyarrow as pa
 
-    from ..io import TableWriter, system_metadata
-    from ..rotation.audit import CHECKS
+    from ...io import TableWriter, system_metadata
+    from ...rotation.audit import CHECKS
 
     names = list(CHECKS) + ["flagged"]
     extra = list(cons.output_columns) if cons is not None else []  # --consistency columns

@@ -1,4 +1,5 @@
-"""The notes, statistics and suspects list of ``hpe audit --consistency`` (:mod:`hpe_cli.pipelines.consistency`)."""
+"""The audit package's shared internals: the notes, statistics and suspects list of ``hpe audit --consistency``
+(:mod:`hpe_cli.pipelines.audit.consistency`), shared by its modules."""
 
 from __future__ import annotations
 
@@ -86,7 +87,7 @@ def _codes(col, table: dict) -> np.ndarray:
     import pyarrow.compute as pc
 
     if pa.types.is_integer(col.type):
-        from ..io.layout import arrow_to_numpy
+        from ...io.layout import arrow_to_numpy
 
         return arrow_to_numpy(col).astype(np.int64)
     enc = pc.dictionary_encode(col.cast(pa.string()))
