@@ -127,7 +127,7 @@ def floor_comparison(args) -> int:
 
 def in_process(args) -> bool:
 
-    from hpe_cli.pipelines.audit import run_audit
+    from hpe_cli.pipelines.audit import AuditOptions, run_audit
     from hpe_cli.rotation import get_system
 
     system = get_system("300w_lp")
@@ -140,15 +140,17 @@ def in_process(args) -> bool:
         rep, _ = timed(
             "hpe audit parquet (json report)",
             args.rows,
-            lambda: run_audit(tmp / "big.parquet", system, report=tmp / "r1.json"),
+            lambda: run_audit(tmp / "big.parquet", system, AuditOptions(report=tmp / "r1.json")),
         )
         timed(
-            "hpe audit csv (json report)", args.rows, lambda: run_audit(tmp / "big.csv", system, report=tmp / "r2.json")
+            "hpe audit csv (json report)",
+            args.rows,
+            lambda: run_audit(tmp / "big.csv", system, AuditOptions(report=tmp / "r2.json")),
         )
         timed(
             "hpe audit parquet (+ -o flags.parquet, --plots)",
             args.rows,
-            lambda: run_audit(tmp / "big.parquet", system, output=tmp / "f.parquet", plots=tmp / "plots"),
+            lambda: run_audit(tmp / "big.parquet", system, AuditOptions(output=tmp / "f.parquet", plots=tmp / "plots")),
         )
         print("  counts:", {k: rep[k] for k in keys})
 

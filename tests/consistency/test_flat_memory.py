@@ -105,11 +105,11 @@ def lm68_table(tmp_path_factory):
 
 
 def _run(path, tmp, **kw):
-    from hpe_cli.pipelines.audit import run_audit
+    from hpe_cli.pipelines.audit import AuditOptions, run_audit
     from hpe_cli.pipelines.audit.consistency import Settings
 
     out = tmp / f"o{len(kw)}.parquet"
-    rep = run_audit(path, None, output=out, overwrite=True, consistency=Settings(**kw))
+    rep = run_audit(path, None, AuditOptions(output=out, overwrite=True, consistency=Settings(**kw)))
     return json.loads(json.dumps(rep["consistency"])), pq.read_table(out).to_pandas()
 
 
@@ -168,11 +168,11 @@ def panoptic_tables(tmp_path_factory):
 
 
 def _audit(path, tmp, **kw):
-    from hpe_cli.pipelines.audit import run_audit
+    from hpe_cli.pipelines.audit import AuditOptions, run_audit
     from hpe_cli.pipelines.audit.consistency import Settings
 
     out = tmp / f"o_{path.stem}_{len(kw)}.parquet"
-    rep = run_audit(path, None, output=out, overwrite=True, batch_size=97, consistency=Settings(**kw))
+    rep = run_audit(path, None, AuditOptions(output=out, overwrite=True, batch_size=97, consistency=Settings(**kw)))
     return json.loads(json.dumps(rep["consistency"])), pq.read_table(out).to_pandas()
 
 

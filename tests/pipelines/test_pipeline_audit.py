@@ -5,7 +5,8 @@ import pandas as pd
 import pyarrow as pa
 import pytest
 
-from hpe_cli.pipelines.audit.job import run_audit, string_hashes
+from hpe_cli.pipelines.audit import AuditOptions, run_audit
+from hpe_cli.pipelines.audit.duplicates import string_hashes
 from hpe_cli.rotation import get_system
 from hpe_cli.rotation.audit import CHECKS, audit_angles
 
@@ -37,7 +38,7 @@ def test_counts_and_duplicates_match_oracles(tmp_path, fmt):
     path = tmp_path / f"a.{fmt}"
     df.to_parquet(path) if fmt == "parquet" else df.to_csv(path, index=False)
     system = get_system("300w_lp")
-    rep = run_audit(path, system, batch_size=1000)
+    rep = run_audit(path, system, AuditOptions(batch_size=1000))
     ref = audit_angles(pyr, system)
     for c in CHECKS[:-1]:
         assert rep[c] == int(ref[c].sum()), c
