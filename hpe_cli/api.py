@@ -287,22 +287,19 @@ def convert_file(
         ``source`` and ``source_origin`` ("file metadata", "option" or "default").
     """
     from .io.transaction import ensure_transaction
-    from .pipelines.convert import run_convert
+    from .pipelines.convert import ConvertOptions, run_convert
 
+    options = ConvertOptions(
+        radians=radians,
+        rejects=rejects,
+        strict=strict,
+        overwrite=overwrite,
+        batch_size=batch_size,
+        threads=threads,
+        decoder=decoder,
+    )
     with ensure_transaction():
-        return run_convert(
-            input,
-            output,
-            None if source is None else get_system(source),
-            get_system(target),
-            radians=radians,
-            rejects_path=rejects,
-            overwrite=overwrite,
-            batch_size=batch_size,
-            strict=strict,
-            decoder=decoder,
-            workers=threads,
-        )
+        return run_convert(input, output, None if source is None else get_system(source), get_system(target), options)
 
 
 def audit_file(
