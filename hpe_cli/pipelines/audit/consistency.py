@@ -31,7 +31,11 @@ from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
+from ...datasets.mat import read_mat_dir
+from ...datasets.panoptic_calibration import read_calibration
 from ...errors import HpeError
 from ...geometry.landmark_pose import (
     FIT_REASONS,
@@ -40,11 +44,15 @@ from ...geometry.landmark_pose import (
     fit_landmark_pose,
     fit_landmark_pose_perspective,
 )
+from ...io import write_table
+from ...io.layout import arrow_to_numpy, landmark_count
 from ...metrics import consistency as mc
 from ...metrics.sketch import EXACT_CAP, StreamQuantiles
+from ...rotation.distances import geodesic_deg
 from .common import _codes, _key_batches, _r, canonical_labels, suspects_table  # noqa: F401
 from .groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
 from .spill import RowSpill
+from .stream import GroupStream, sorted_by_sequence_frame
 
 #: a landmark fit whose residual (per inter-ocular distance) is above this does not look like a face
 MAX_RESIDUAL = 0.35
@@ -122,13 +130,10 @@ class ConsistencyAudit:
         self.src = src
         self.s = settings if isinstance(settings, Settings) else Settings()  # True: the defaults
         cols = set(src.columns)
-        from ...io.layout import landmark_count
 
         self.n_lm = landmark_count(src.columns)
         self.mat_landmarks = None
         if self.n_lm == 0 and src.path.is_dir() and any(src.path.glob("*.mat")):
-            from ...datasets.mat import read_mat_dir
-
             t = read_mat_dir(src.path, landmarks=True)
             n = sum(1 for c in t.columns if c.startswith("lm") and c.endswith("_x") and not c.startswith("lm3d"))
             if n:
@@ -157,8 +162,6 @@ class ConsistencyAudit:
         self.expected_sketch = mc.expected_angle_sketch(self.exact_cap)
         self.stream = None
         if self.has_frame and self.s.stream_groups:
-            from .stream import GroupStream, sorted_by_sequence_frame
-
             if sorted_by_sequence_frame(src):
                 self.stream = GroupStream(self)
 
@@ -179,7 +182,6 @@ class ConsistencyAudit:
             paths = dict(zip(self.meta.get("sequences", []), self.meta["calibrations"]))
         if not paths:
             return "no calibration (give --calibration FILE)"
-        from ...datasets.panoptic_calibration import read_calibration
 
         for seq, p in paths.items():
             try:
@@ -198,7 +200,6 @@ class ConsistencyAudit:
 
     @staticmethod
     def output_types() -> dict:
-        import pyarrow as pa
 
         return {
             c: pa.bool_() if c == "suspect" else pa.string() if c == "consistency_note" else pa.float32()
@@ -248,7 +249,6 @@ class ConsistencyAudit:
                 fit = fit_landmark_pose(uv, self.scheme, reasons=False)
             else:  # calibrated cameras: corrected for the head's place in the image
                 fit = fit_landmark_pose_perspective(uv, self.scheme, K, dist, reasons=False)
-            from ...rotation.distances import geodesic_deg
 
             lm_angle = geodesic_deg(np.where(finite[:, None, None], A, np.nan), fit["A"])
             lm_res = fit["residual"]
@@ -269,8 +269,6 @@ class ConsistencyAudit:
         rec["lm_code"] = code
         part = {"rec": rec}
         if self.has_frame:
-            from ...io.layout import arrow_to_numpy
-
             part["finite"] = finite
             part["A"] = A
             part["frame"] = arrow_to_numpy(batch.column("frame")).astype(np.int64)
@@ -286,7 +284,6 @@ class ConsistencyAudit:
         """
         if not self.cams or "camera" not in batch.schema.names:
             return None, None
-        import pyarrow.compute as pc
 
         n = batch.num_rows
         cols = ["camera"] + (["sequence"] if None not in self.cams and "sequence" in batch.schema.names else [])
@@ -314,7 +311,6 @@ class ConsistencyAudit:
     def _landmarks(self, batch, lines) -> np.ndarray:
         if self.mat_landmarks is not None:
             return self.mat_landmarks[np.asarray(lines, dtype=np.int64) - 1]
-        from ...io.layout import arrow_to_numpy
 
         n = batch.num_rows
         cols = [arrow_to_numpy(batch.column(f"lm{i}_{a}"), np.float64) for i in range(self.n_lm) for a in "xy"]
@@ -338,19 +334,7 @@ class ConsistencyAudit:
         self.expected_sketch = None
         N = self.spill.n
         self.N = N
-        out = {}
-        self.group_res = None
-        if self.stream is not None:
-            out["views"], out["time"] = self.stream.finish()
-            self.group_res = self.stream
-        elif self.has_frame and N:
-            # one key at a time, each part's array released once concatenated: the rows are not held twice
-            P = {k: np.concatenate([p.pop(k) for p in self.parts]) for k in ["A", "finite", "frame", *self.track_cols]}
-            self.parts = []
-            view_angle, view_code, out["views"] = views(self, P, P["finite"])
-            jump, time_code, out["time"] = time_check(self, P, P["finite"])
-            del P
-            self.group_res = (view_angle, view_code, jump, time_code)
+        out = self._group_checks()
         lm_stats = StreamQuantiles(180.0, 0.001, self.exact_cap)
         res_stats = StreamQuantiles(MAX_RESIDUAL, 1e-5, self.exact_cap)
         self.sketches = {  # for the page's histograms
@@ -428,6 +412,23 @@ class ConsistencyAudit:
         if "time" not in report:
             report["time"] = {"checked": 0, "reason": "no frame column"}
         return report
+
+    def _group_checks(self) -> dict:
+        """The views and time checks over the whole table (or the streamed groups): their JSON sections."""
+        out = {}
+        self.group_res = None
+        if self.stream is not None:
+            out["views"], out["time"] = self.stream.finish()
+            self.group_res = self.stream
+        elif self.has_frame and self.N:
+            # one key at a time, each part's array released once concatenated: the rows are not held twice
+            P = {k: np.concatenate([p.pop(k) for p in self.parts]) for k in ["A", "finite", "frame", *self.track_cols]}
+            self.parts = []
+            view_angle, view_code, out["views"] = views(self, P, P["finite"])
+            jump, time_code, out["time"] = time_check(self, P, P["finite"])
+            del P
+            self.group_res = (view_angle, view_code, jump, time_code)
+        return out
 
     def _score(self, rec, off: int) -> dict:
         """Scores of the spilled rows ``rec`` (global rows ``off ..``): ratios, score, suspect, codes."""
@@ -567,8 +568,6 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None
     top = order[: cons.s.worst]
     report["worst"] = cons.describe_rows(_key_batches(cons, reread, key_cols), top, key_cols)
     if suspects:
-        from ...io import write_table
-
         table = suspects_table(cons, _key_batches(cons, reread, key_cols), order, key_cols)
         write_table(table, suspects, overwrite=overwrite)
         report["suspects_file"] = str(suspects)

@@ -24,6 +24,7 @@ from ...errors import HpeError
 from ...io import ANGLE_COLS, MATRIX_COLS, Rejects, check_output, open_table, write_json
 from ...io.label_source import AUTO, LabelSource, label_source
 from ...io.writers import check_report_outputs, json_text
+from ...report.plots import AngleHistograms, plot_files, write_plots
 from ...rotation.audit import CHECKS
 from ...rotation.decoders import DecoderTally
 from ..inorder import in_order
@@ -137,8 +138,6 @@ class AuditTally:
         self.decoder = DecoderTally(options.decoder) if options.decoder else None
         self.hist = None
         if options.plots:
-            from ...report.plots import AngleHistograms  # matplotlib: only with --plots
-
             self.hist = AngleHistograms()
         self.examples = {c: [] for c in CHECKS}
         self.counts = {c: 0 for c in CHECKS}
@@ -239,16 +238,13 @@ def check_outputs(options: AuditOptions) -> None:
     """Refuse existing outputs without ``overwrite`` before anything is read."""
     check_report_outputs(options.report, options.output, options.overwrite)
     if options.plots and Path(options.plots).exists():
-        from ...report.plots import plot_files  # matplotlib: only with --plots
-
         for p in plot_files(options.plots).values():
             check_output(p, options.overwrite)
 
 
 def write_plots_page(plan: AuditPlan, options: AuditOptions, tally: AuditTally, result: dict) -> None:
     """``--plots``: histograms, the coverage map and the page with the first flagged rows drawn."""
-    from ...report.plots import write_plots  # matplotlib
-    from ..draw_flagged import flagged_pictures
+    from ..draw_flagged import flagged_pictures  # OpenCV: only with --plots
 
     system = plan.system
     pics = flagged_pictures(

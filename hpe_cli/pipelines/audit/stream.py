@@ -16,10 +16,15 @@ pass over its ``sequence`` and ``frame`` columns); other tables use
 
 from __future__ import annotations
 
-import numpy as np
+import tempfile
 
+import numpy as np
+import pyarrow.parquet as pq
+
+from ...io.layout import arrow_to_numpy
 from ...metrics import consistency as mc
 from ...metrics.sketch import StreamQuantiles
+from .common import _codes
 from .groups import MIN_VIEWS, camera_rotations, view_groups
 
 RESULT = np.dtype([("view", "<f8"), ("vcode", "u1"), ("jump", "<f8"), ("tcode", "u1")])
@@ -30,16 +35,12 @@ def sorted_by_sequence_frame(src) -> bool:
     within a run (the whole table when it has no ``sequence`` column)."""
     if src.kind != "parquet" or "frame" not in src.columns:
         return False
-    import pyarrow.parquet as pq
-
-    from ...io.layout import arrow_to_numpy
 
     cols = ["frame"] + (["sequence"] if "sequence" in src.columns else [])
     pf = pq.ParquetFile(src.path)
     if not set(cols) <= set(pf.schema_arrow.names):
         return False
     table, seen, last = {}, set(), None
-    from .common import _codes
 
     for b in pf.iter_batches(1 << 18, columns=cols):
         f = arrow_to_numpy(b.column("frame")).astype(np.int64)
@@ -64,7 +65,6 @@ class GroupSpill:
     """Per-row results of the streamed checks (:data:`RESULT`), in input order, in an unnamed temporary file."""
 
     def __init__(self):
-        import tempfile
 
         self.f = tempfile.TemporaryFile(prefix="hpe_consistency_groups_")
         self.n = 0
