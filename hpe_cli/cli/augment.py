@@ -16,6 +16,7 @@ from .options import (
     radians_option,
     rejects_options,
     system_option,
+    threads_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -122,6 +123,7 @@ from .table_options import column_options
 @rejects_options
 @overwrite_option
 @batch_option
+@threads_option
 @verbosity_options
 @column_options
 def augment(
@@ -149,6 +151,7 @@ def augment(
     strict,
     overwrite,
     batch_size,
+    threads,
     verbose,
     quiet,
 ):
@@ -274,6 +277,7 @@ def augment(
             description=desc,
             images_optional=images_optional,
             radians=radians,
+            workers=threads,
         )
     finally:
         bar.close()

@@ -393,12 +393,12 @@ def run_augment(
 
     ``image_size`` (``(W, H)`` or None) is checked against the table's ``image_width/image_height`` and the
     images; a row where two of them disagree is rejected. ``op = "crop"`` with ``crop = (x, y, w, h)`` cuts
-    the images to that rectangle. Batches are transformed on ``workers`` threads (default: up to 2) while
-    this thread reads, moves images and writes in order; at most ``workers + 1`` batches are in flight.
+    the images to that rectangle. Batches are transformed on ``workers`` threads (default: one per core, at
+    most 8) while this thread reads, moves images and writes in order; at most ``workers + 1`` batches are in
+    flight.
     ``images_optional``: ``images_dir`` is a ``.mat`` folder's own (not given by the user): an image found there
     gives (and checks) the row's size, a missing one is no reject.
     """
-    import os
 
     from ..geometry.augment import plane_matrix
     from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
@@ -408,6 +408,7 @@ def run_augment(
     from ..io.transaction import ensure_transaction, staged_dir
     from .augment_images import ImageJob, RowImages
     from .inorder import in_order
+    from .pools import default_threads
 
     path = Path(input)
     check_output(output, overwrite)
@@ -467,7 +468,7 @@ def run_augment(
         },
     }
     counts = {"rows": 0, "written": 0, "boxes": 0}
-    workers = workers or min(2, os.cpu_count() or 1)
+    workers = default_threads(workers)  # --threads; one per core (at most 8) by default
     if bar is not None and src.num_rows is not None:
         bar.total = src.num_rows
         getattr(bar, "refresh", lambda: None)()
