@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from .check import ROTATION_TOL, rotation_mask
-from .euler import wrap_180
+from .euler import parse_seq, wrap_180
 from .solutions import middle_role
 from .systems import RotationSystem, get_system
 
@@ -204,6 +204,7 @@ def audit_columns(
     rotation_tol: float = ROTATION_TOL,
     *,
     lock_distance: bool = True,
+    primary: bool = True,
 ) -> dict:
     """The checks of :func:`audit_angles` / :func:`audit_matrices` on label columns (structure of arrays).
 
@@ -219,6 +220,12 @@ def audit_columns(
         Also return ``lock_distance``. With False, angle labels of a Tait-Bryan
         system are screened by :func:`angle_flags_screened` (one cosine a row
         instead of the matrix round trip, the same masks).
+    primary : bool, optional
+        Matrix labels: also return ``primary``. With False (and
+        ``lock_distance=False``), a system whose declared ranges every primary
+        solution meets (:func:`matrix_screen_applies`) is checked without the
+        decomposition: its lock distance is taken from the matrix entries as the
+        decomposition takes it, and no row is out of range.
 
     Returns
     -------
@@ -259,15 +266,21 @@ def audit_columns(
         X = [cols[0:3], cols[3:6], cols[6:9]]
         if not rot.all():
             X = [[np.where(rot, c, float(i == j)) for j, c in enumerate(row)] for i, row in enumerate(X)]
-        p1, _, locked, lock = system.soa_to_angles(X)
-        primary = np.stack(p1, axis=-1)
         out["non_finite"] = ~fin_entries
         out["not_rotation"] = fin_entries & ~rot
+        if not lock_distance and not primary and matrix_screen_applies(system):
+            lock = tait_bryan_lock(X, system)
+            locked = lock < system.gimbal_tol
+            out["gimbal_lock"] = locked & rot
+            out["near_gimbal"] = (locked | (lock < np.sin(np.deg2rad(near_tol_deg)))) & rot
+            return out  # out_of_range stays False: every primary solution is in the declared ranges
+        p1, _, locked, lock = system.soa_to_angles(X)
+        angles = np.stack(p1, axis=-1)
         out["gimbal_lock"] = locked & rot
         out["near_gimbal"] = (locked | (lock < np.sin(np.deg2rad(near_tol_deg)))) & rot
-        out["out_of_range"] = _range_mask(primary, system) & rot
+        out["out_of_range"] = _range_mask(angles, system) & rot
         out["lock_distance"] = np.where(rot, lock, np.nan)
-        out["primary"] = np.where(rot[:, None], primary, np.nan)
+        out["primary"] = np.where(rot[:, None], angles, np.nan)
         return out
 
 
@@ -340,3 +353,33 @@ def angle_flags_screened(cols, finite, system, near_tol_deg=NEAR_GIMBAL_DEG, can
         for name in ("gimbal_lock", "near_gimbal", "non_canonical", "out_of_range"):
             out[name][idx] = exact[name]
     return out
+
+
+def matrix_screen_applies(system) -> bool:
+    """True when every primary solution of ``system`` is inside its declared ranges (and (-180, 180]).
+
+    Tait-Bryan systems with the default primary solution: the middle angle is in
+    [-90, 90] and the others in (-180, 180], so ranges that hold at least that
+    (as ``300w_lp``'s yaw (-90, 90) and ``scipy_zyx``'s pitch) never flag a matrix.
+    """
+    seq = system.intrinsic_axes
+    if system.selection != "tait_bryan" or seq[0] == seq[2]:
+        return False
+    middle = ("pitch", "yaw", "roll")[middle_role(system)]
+    for role in ("pitch", "yaw", "roll"):
+        lo, hi = system.ranges.get(role, (-180.0, 180.0))
+        need = 90.0 if role == middle else 180.0
+        if lo > -need or hi < need:
+            return False
+    return True
+
+
+def tait_bryan_lock(X, system) -> np.ndarray:
+    """The lock distance of stored matrices ``X`` (nested list) as :meth:`RotationSystem.soa_to_angles` computes
+    it (the same arithmetic, so the same bits): ``sqrt(X[i][i]^2 + X[i][j]^2)`` of the system's axes."""
+    if system.angle_frame == "canonical":
+        X = system.soa_to_canonical(X)
+    i, j, _ = parse_seq(system.intrinsic_axes)
+    n = next(np.shape(v)[0] for row in X for v in row if not isinstance(v, float))
+    a, b = (np.broadcast_to(v, (n,)) if isinstance(v, float) else v for v in (X[i][i], X[i][j]))
+    return np.sqrt(a * a + b * b)

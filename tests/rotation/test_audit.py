@@ -221,3 +221,39 @@ def test_screened_angle_flags_equal_round_trip():
         for key in CHECKS:
             assert np.array_equal(ref[key], got[key]), (name, key, np.flatnonzero(ref[key] != got[key])[:5])
     assert screened >= 3
+
+
+def test_screened_matrix_flags_equal_decomposition():
+    """Matrices of systems whose primary solutions always meet their ranges are checked without the
+    decomposition: the same masks bit for bit (lock rows, near-lock rows, non-rotations, NaN)."""
+    from hpe_cli.rotation.audit import audit_columns, matrix_screen_applies
+    from hpe_cli.rotation.systems import system_names
+
+    rng = np.random.default_rng(12)
+    n = 6000
+    tol = 1e-4
+    mids = np.concatenate(
+        [
+            np.rad2deg(np.arccos(tol * (1 + np.linspace(-1e-6, 1e-6, 41)))),
+            90.0 - np.array([0.0, 1e-12, 1e-9, 0.0057, 0.0058, 0.999999, 1.0, 1.000001]),
+        ]
+    )
+    screened = 0
+    for name in system_names():
+        system = get_system(name)
+        pyr = np.c_[rng.uniform(-180, 180, n), rng.uniform(-90, 90, n), rng.uniform(-180, 180, n)]
+        k = len(mids)
+        for m in range(3):
+            pyr[m * k : (m + 1) * k, m] = mids
+            pyr[3 * k + m * k : 3 * k + (m + 1) * k, m] = -mids
+        R = system.from_angles(pyr)
+        R[-3] *= 2.0
+        R[-2, 0, 0] = np.nan
+        R[-1] = R[-1] @ np.diag([1.0, 1, -1])
+        cols = [np.ascontiguousarray(R[:, i, j]) for i in range(3) for j in range(3)]
+        ref = audit_columns(cols, system, "matrix")
+        got = audit_columns(cols, system, "matrix", lock_distance=False, primary=False)
+        screened += matrix_screen_applies(system)
+        for key in CHECKS:
+            assert np.array_equal(ref[key], got[key]), (name, key, np.flatnonzero(ref[key] != got[key])[:5])
+    assert screened >= 3

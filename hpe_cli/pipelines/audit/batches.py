@@ -64,9 +64,10 @@ def system_cols(batch, system, mode, radians, via_system):
     )
 
 
-def check_batch(cols, mode, system, near_tol_deg):
-    """The masks of :func:`hpe_cli.rotation.audit.audit_columns` (no ``lock_distance``: not reported)."""
-    return audit_columns(cols, system, mode, near_tol_deg, lock_distance=False)
+def check_batch(cols, mode, system, near_tol_deg, primary=False):
+    """The masks of :func:`hpe_cli.rotation.audit.audit_columns` (no ``lock_distance``: not reported; matrices'
+    ``primary`` angles only when asked, for the plots)."""
+    return audit_columns(cols, system, mode, near_tol_deg, lock_distance=False, primary=primary)
 
 
 class SkipRejects:

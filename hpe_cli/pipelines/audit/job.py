@@ -150,7 +150,7 @@ class AuditTally:
         """Check and hash one batch: ``(mode, cols, masks, any flag, hashes, consistency evidence)``."""
         plan = self.plan
         cols, eff = system_cols(batch, plan.system, plan.mode, self.options.radians, plan.via_system)
-        res = check_batch(cols, eff, plan.system, self.options.near_tol_deg)
+        res = check_batch(cols, eff, plan.system, self.options.near_tol_deg, primary=self.hist is not None)
         any_flag = np.zeros(batch.num_rows, dtype=bool)
         for c in CHECKS[:-1]:
             any_flag |= res[c]
