@@ -6,8 +6,8 @@ labels read and checked batch by batch), :mod:`.duplicates` (row hashes), :mod:`
 :mod:`.spill` (per-row evidence on disk), :mod:`.common` (the package's shared internals).
 """
 
-from .consistency import Settings as ConsistencySettings
 from .job import run_audit
 from .options import AuditOptions
+from .options import Settings as ConsistencySettings
 
 __all__ = ["run_audit", "AuditOptions", "ConsistencySettings"]

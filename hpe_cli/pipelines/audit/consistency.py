@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import json
 from collections import Counter
-from dataclasses import dataclass
 
 import numpy as np
 import pyarrow as pa
@@ -47,19 +46,16 @@ from ...geometry.landmark_pose import (
 from ...io import write_table
 from ...io.layout import arrow_to_numpy, landmark_count
 from ...metrics import consistency as mc
-from ...metrics.sketch import EXACT_CAP, StreamQuantiles
+from ...metrics.sketch import StreamQuantiles
 from ...rotation.distances import geodesic_deg
 from .common import _codes, _key_batches, _r, canonical_labels, suspects_table  # noqa: F401
 from .groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
+from .options import MAX_GAP_FRAMES, MAX_JUMP_DEG, Settings  # noqa: F401 (re-exported)
 from .spill import RowSpill
 from .stream import GroupStream, sorted_by_sequence_frame
 
 #: a landmark fit whose residual (per inter-ocular distance) is above this does not look like a face
 MAX_RESIDUAL = 0.35
-#: default threshold of the time check, degrees per frame
-MAX_JUMP_DEG = 5.0
-#: neighbours further apart than this many frames are not compared
-MAX_GAP_FRAMES = 10
 #: landmark reason codes after the fit's own (:data:`hpe_cli.geometry.landmark_pose.FIT_REASONS`)
 LM_POOR, LM_NOT_FINITE, LM_NONE = len(FIT_REASONS), len(FIT_REASONS) + 1, len(FIT_REASONS) + 2
 LM_TEXTS = (
@@ -88,22 +84,6 @@ COLUMNS = (
     "suspect",
     "consistency_note",
 )
-
-
-@dataclass
-class Settings:
-    """Thresholds of the checks (see the module constants)."""
-
-    calibration: str | None = None
-    max_jump_deg: float = MAX_JUMP_DEG
-    max_gap: int = MAX_GAP_FRAMES
-    suspect_score: float = mc.SUSPECT_SCORE
-    worst: int = 20
-    drawn: int = 12
-    #: rows whose statistics are kept exactly; beyond, fixed-resolution histograms (flat memory)
-    exact_rows: int = EXACT_CAP
-    #: a Parquet table sorted by (sequence, frame) runs the views and time checks as its rows stream
-    stream_groups: bool = True
 
 
 def _relabel_meta(src) -> dict:

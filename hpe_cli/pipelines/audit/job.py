@@ -30,7 +30,7 @@ from ...rotation.decoders import DecoderTally
 from ..inorder import in_order
 from ..pools import default_threads
 from .batches import SKIP_REJECTS, check_batch, read_batches, system_cols
-from .consistency import ConsistencyAudit, canonical_labels, consistency_outputs
+from .common import canonical_labels
 from .duplicates import ID_COLUMNS, Duplicates, key_hashes, unpack_rows
 from .flagged import write_flagged
 from .options import AuditOptions
@@ -318,7 +318,11 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
     plan = plan_audit(input_path, table, system, o)
     if progress is not None and table.num_rows:
         progress.total = table.num_rows
-    cons = ConsistencyAudit(table, o.consistency) if o.consistency is not None else None
+    cons = None
+    if o.consistency is not None:  # its readers and the landmark fit load only for --consistency (start-up)
+        from .consistency import ConsistencyAudit
+
+        cons = ConsistencyAudit(table, o.consistency)
     tally = AuditTally(plan, o, cons, progress)
     in_order(read_batches(table, plan.read_mode, rejected), tally.work, tally.finish, default_threads(o.threads))
     rejected.check()  # with --strict: any set-aside row is an error and nothing is written
@@ -332,6 +336,8 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
         def reread():
             src = open_table(input_path, o.batch_size, with_lines=True)
             return (b for b, _, _ in read_batches(src, plan.read_mode, SKIP_REJECTS))
+
+        from .consistency import consistency_outputs
 
         result["consistency"] = consistency_outputs(cons, reread, o.suspects, o.overwrite, o.plots, o.images)
     write_outputs(plan, o, tally, result, rejected, echo)

@@ -6,9 +6,32 @@ from dataclasses import dataclass
 
 from ...errors import HpeError
 from ...io.table_source import DEFAULT_BATCH
+from ...metrics import consistency as mc
+from ...metrics.sketch import EXACT_CAP
 from ...rotation.audit import NEAR_GIMBAL_DEG
 from ...rotation.decoders import DECODERS
-from .consistency import Settings
+
+#: default threshold of the time check of ``--consistency``, degrees per frame
+MAX_JUMP_DEG = 5.0
+#: neighbours further apart than this many frames are not compared
+MAX_GAP_FRAMES = 10
+
+
+@dataclass
+class Settings:
+    """Thresholds of the ``--consistency`` checks (:mod:`hpe_cli.pipelines.audit.consistency`)."""
+
+    calibration: str | None = None
+    max_jump_deg: float = MAX_JUMP_DEG
+    max_gap: int = MAX_GAP_FRAMES
+    suspect_score: float = mc.SUSPECT_SCORE
+    worst: int = 20
+    drawn: int = 12
+    #: rows whose statistics are kept exactly; beyond, fixed-resolution histograms (flat memory)
+    exact_rows: int = EXACT_CAP
+    #: a Parquet table sorted by (sequence, frame) runs the views and time checks as its rows stream
+    stream_groups: bool = True
+
 
 #: ``use`` values: the labels' columns (``auto``: the system's own, else angles, else r00..r22)
 USES = ("auto", "angles", "matrix")
