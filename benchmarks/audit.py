@@ -4,6 +4,12 @@ Usage::
 
     python benchmarks/audit.py                 # 1,000,000 rows, Parquet and CSV
     python benchmarks/audit.py --rows 200000 --baseline-rows 5000
+    python benchmarks/audit.py --rows 10000000 --floor-only [--repeat 3] [--threads N] [--data DIR]
+
+``--floor-only`` runs only the comparison with the read floor (issue 33: <= 2x, <= 400 MB at 10M rows):
+``hpe audit FILE --json R`` on ``id, pitch, yaw, roll`` (the table of ``benchmarks/convert.py``) against
+pyarrow reading the same file batch by batch, each its own process under GNU time, medians of alternating
+rounds (``benchmarks/streaming.py``); without it, that comparison ends the run.
 
 Prints rows/s for: the end-to-end job (read, check, hash for duplicates, JSON
 report) on Parquet and CSV, the same with ``-o`` and ``--plots``, and the
@@ -87,9 +93,41 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rows", type=int, default=1_000_000)
     ap.add_argument("--baseline-rows", type=int, default=20_000)
+    ap.add_argument("--repeat", type=int, default=3, help="alternating rounds of hpe and floor (medians)")
+    ap.add_argument("--threads", type=int, default=None, help="hpe audit --threads (default: its own)")
+    ap.add_argument("--data", default=None, help="folder keeping the generated input between runs")
+    ap.add_argument("--floor-only", action="store_true", help="only the comparison with the read floor")
     args = ap.parse_args(argv)
+    if args.floor_only:
+        return floor_comparison(args)
+    same = in_process(args)
+    floor_comparison(args)
+    return 0 if same else 1
 
-    from hpe_cli.pipelines.audit import run_audit
+
+def floor_comparison(args) -> int:
+    """``hpe audit`` against the streaming read floor (medians, ratios, peak RSS)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from streaming import HPE, compare, floor_cmd, make_angles
+
+    n = args.rows
+    with tempfile.TemporaryDirectory(dir=args.data) as tmp:
+        angles = (Path(args.data) if args.data else Path(tmp)) / f"angles_{n}.parquet"
+        if not angles.exists():
+            make_angles(angles, n)
+        threads = ["--threads", str(args.threads)] if args.threads else []
+        print(
+            f"{n:,} rows (id, pitch, yaw, roll), Parquet; medians of {args.repeat} alternating rounds; "
+            "floor = pyarrow reading the file batch by batch"
+        )
+        cmd = HPE + ["audit", angles, "--json", Path(tmp) / "r.json", "-q", "--overwrite"] + threads
+        compare("audit (JSON report)", cmd, floor_cmd(angles, Path(tmp) / "unused", 0), args.repeat)
+    return 0
+
+
+def in_process(args) -> bool:
+
+    from hpe_cli.pipelines.audit import AuditOptions, run_audit
     from hpe_cli.rotation import get_system
 
     system = get_system("300w_lp")
@@ -102,15 +140,17 @@ def main(argv=None) -> int:
         rep, _ = timed(
             "hpe audit parquet (json report)",
             args.rows,
-            lambda: run_audit(tmp / "big.parquet", system, report=tmp / "r1.json"),
+            lambda: run_audit(tmp / "big.parquet", system, AuditOptions(report=tmp / "r1.json")),
         )
         timed(
-            "hpe audit csv (json report)", args.rows, lambda: run_audit(tmp / "big.csv", system, report=tmp / "r2.json")
+            "hpe audit csv (json report)",
+            args.rows,
+            lambda: run_audit(tmp / "big.csv", system, AuditOptions(report=tmp / "r2.json")),
         )
         timed(
             "hpe audit parquet (+ -o flags.parquet, --plots)",
             args.rows,
-            lambda: run_audit(tmp / "big.parquet", system, output=tmp / "f.parquet", plots=tmp / "plots"),
+            lambda: run_audit(tmp / "big.parquet", system, AuditOptions(output=tmp / "f.parquet", plots=tmp / "plots")),
         )
         print("  counts:", {k: rep[k] for k in keys})
 
@@ -120,7 +160,7 @@ def main(argv=None) -> int:
         fast, t_fast = timed("hpe audit on the same subset", len(sub), lambda: run_audit(tmp / "sub.parquet", system))
         same = all(naive[k] == fast[k] for k in keys)
         print(f"  subset counts agree: {same}; speed-up {t_naive / t_fast:,.0f}x")
-        return 0 if same else 1
+        return same
 
 
 if __name__ == "__main__":

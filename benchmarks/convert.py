@@ -1,9 +1,11 @@
-"""Throughput of the rotation kernels and of `hpe convert`, next to SciPy and a plain Parquet copy.
+"""Throughput of the rotation kernels (next to SciPy) and of `hpe convert` next to its streaming I/O floor.
 
-    python benchmarks/convert.py [--rows 1000000]
+    python benchmarks/convert.py [--rows 1000000] [--repeat 3] [--threads N] [--data DIR] [--skip-kernels]
 
-Targets (issue 2): matrix -> both solutions >= 5M rows/s; end to end <= 0.5x
-SciPy's time and <= 1.5x the read+write floor of a table of the same width.
+Kernels (in this process): matrix -> both solutions >= 5M rows/s (issue 2). End to end (each run its own
+process under GNU time, see benchmarks/streaming.py): `hpe convert` on angles and on matrices against
+pyarrow reading the same input and writing a table of the output's width batch by batch; medians of the
+rounds, wall and CPU ratios and peak RSS. Targets (issue 33): <= 1.15x the floor, <= 400 MB at 10M rows.
 """
 
 from __future__ import annotations
@@ -14,12 +16,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.parquet as pq
 from scipy.spatial.transform import Rotation
+from streaming import HPE, compare, floor_cmd, make_angles
 
 from hpe_cli.io import LABEL_COLS
-from hpe_cli.pipelines.convert import run_convert
 from hpe_cli.rotation import get_system
 
 
@@ -40,7 +40,16 @@ def line(name, rows, seconds, ref=None):
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--rows", type=int, default=1_000_000)
-    n = ap.parse_args().rows
+    ap.add_argument("--repeat", type=int, default=3, help="alternating rounds of hpe and floor (medians)")
+    ap.add_argument("--threads", type=int, default=None, help="hpe convert --threads (default: its own)")
+    ap.add_argument("--data", default=None, help="folder keeping the generated inputs between runs")
+    ap.add_argument("--skip-kernels", action="store_true", help="only the end-to-end comparison")
+    args = ap.parse_args()
+    n = args.rows
+    main_end_to_end(args, n)
+
+
+def kernels(n):
     rng = np.random.default_rng(0)
     pyr = np.c_[rng.uniform(-180, 180, n), rng.uniform(-90, 90, n), rng.uniform(-180, 180, n)]
     src, dst = get_system("300w_lp"), get_system("scipy_zyx")
@@ -60,66 +69,26 @@ def main():
     p, y, r = (np.ascontiguousarray(pyr[:, k]) for k in range(3))
     line("hpe angle columns -> matrix columns", n, best_of(lambda: dst.soa_from_angles(p, y, r)), t_sp2)
 
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        inp = tmp / "in.parquet"
-        pq.write_table(pa.table({"id": np.arange(n), "pitch": pyr[:, 0], "yaw": pyr[:, 1], "roll": pyr[:, 2]}), inp)
 
-        # the floor: read the same input and write a table of the same width whose extra
-        # columns hold ready-made values of the same kind (random floats and one bool)
-        extra = {c: rng.standard_normal(n) for c in LABEL_COLS if c not in ("pitch", "yaw", "roll", "gimbal_lock")}
-        extra["gimbal_lock"] = np.zeros(n, bool)
+def main_end_to_end(args, n):
 
-        def floor_table():
-            t = pq.read_table(inp)
-            for c, v in extra.items():
-                t = t.append_column(c, pa.array(v))
-            return t
-
-        def floor_plain():  # pyarrow's defaults: snappy and dictionary pages everywhere
-            pq.write_table(floor_table(), tmp / "floor.parquet")
-
-        def floor():  # the encoding hpe's writer uses: floats plain, the rest snappy + dictionary
-            t = floor_table()
-            floats = {f.name for f in t.schema if pa.types.is_floating(f.type)}
-            pq.write_table(
-                t,
-                tmp / "floor.parquet",
-                use_dictionary=[n for n in t.schema.names if n not in floats],
-                compression={n: ("none" if n in floats else "snappy") for n in t.schema.names},
-            )
-
-        def scipy_job():  # the same job written with SciPy: one solution, no lock flag
-            t = pq.read_table(inp)
-            a = np.c_[t["pitch"].to_numpy(), t["yaw"].to_numpy(), t["roll"].to_numpy()]
-            A = Rotation.from_euler("xyz", -a, degrees=True).as_matrix()  # intrinsic X-Y-Z, left-handed
-            T = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]], float)
-            Rs = T @ A @ T.T
-            rot = Rotation.from_matrix(Rs)
-            e1 = rot.as_euler("ZYX", degrees=True)
-            back = Rotation.from_euler("ZYX", e1, degrees=True).as_matrix()
-            err = np.linalg.norm((back - Rs).reshape(n, 9), axis=1)
-            cols = {"id": t["id"], "yaw": e1[:, 0], "pitch": e1[:, 1], "roll": e1[:, 2]}
-            cols.update({f"r{i}{j}": Rs[:, i, j] for i in range(3) for j in range(3)})
-            cols["roundtrip_err"] = err
-            pq.write_table(pa.table(cols), tmp / "scipy.parquet", compression="snappy")
-
-        def hpe_job():
-            run_convert(inp, tmp / "hpe.parquet", src, dst, overwrite=True)
-
-        print(f"end to end (Parquet in -> Parquet out), {n:,} rows")
-        t_plain = best_of(floor_plain)
-        line("Parquet read + write, same width, defaults", n, t_plain)
-        t_floor = best_of(floor)
-        line("Parquet read + write, same width, hpe encoding", n, t_floor)
-        t_scipy = best_of(scipy_job)
-        line("SciPy job (one solution, no lock flag)", n, t_scipy)
-        t_hpe = best_of(hpe_job)
-        line("hpe convert 300w_lp -> scipy_zyx", n, t_hpe, t_scipy)
+    if not args.skip_kernels:
+        kernels(n)
+    with tempfile.TemporaryDirectory(dir=args.data) as tmp:
+        data = Path(args.data) if args.data else Path(tmp)
+        angles, matrix = data / f"angles_{n}.parquet", data / f"matrix_{n}.parquet"
+        if not (angles.exists() and matrix.exists()):
+            make_angles(angles, n, matrix_path=matrix)
+        out = Path(tmp) / "out.parquet"
+        width = 1 + len(LABEL_COLS)  # id + pitch..roll, pitch_2.., r00..r22, gimbal_lock, roundtrip_err
+        threads = ["--threads", str(args.threads)] if args.threads else []
         print(
-            f"  hpe / SciPy = {t_hpe / t_scipy:.2f} (target <= 0.5);  hpe / floor = {t_hpe / t_floor:.2f} "
-            f"(target <= 1.5; {t_hpe / t_plain:.2f} against the defaults floor)"
+            f"end to end, {n:,} rows, Parquet in -> Parquet out; medians of {args.repeat} alternating rounds; "
+            "floor = pyarrow reading the input and writing the output's width batch by batch (hpe's encoding)"
         )
+        for name, inp in (("convert angles", angles), ("convert matrices", matrix)):
+            cmd = HPE + ["convert", inp, "-o", out, "--from", "300w_lp", "--to", "scipy_zyx", "-q", "--overwrite"]
+            compare(name, cmd + threads, floor_cmd(inp, out, width), args.repeat)
 
 
 if __name__ == "__main__":

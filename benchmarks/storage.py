@@ -19,7 +19,7 @@ import pyarrow.parquet as pq
 from convert import best_of  # benchmarks/convert.py, beside this file
 from scipy.spatial.transform import Rotation
 
-from hpe_cli.pipelines.convert import run_convert
+from hpe_cli.pipelines.convert import ConvertOptions, run_convert
 from hpe_cli.rotation import get_system
 from hpe_cli.rotation import storage as st
 
@@ -51,7 +51,10 @@ def main():
         pq.write_table(pa.table({"rx": rv[:, 0], "ry": rv[:, 1], "rz": rv[:, 2]}), src, compression="none")
         out = Path(tmp) / "out.parquet"
         t = best_of(
-            lambda: run_convert(src, out, get_system("img2pose"), get_system("300w_lp"), overwrite=True), repeat=2
+            lambda: run_convert(
+                src, out, get_system("img2pose"), get_system("300w_lp"), ConvertOptions(overwrite=True)
+            ),
+            repeat=2,
         )
         width = pq.read_table(out)
 

@@ -287,22 +287,19 @@ def convert_file(
         ``source`` and ``source_origin`` ("file metadata", "option" or "default").
     """
     from .io.transaction import ensure_transaction
-    from .pipelines.convert import run_convert
+    from .pipelines.convert import ConvertOptions, run_convert
 
+    options = ConvertOptions(
+        radians=radians,
+        rejects=rejects,
+        strict=strict,
+        overwrite=overwrite,
+        batch_size=batch_size,
+        threads=threads,
+        decoder=decoder,
+    )
     with ensure_transaction():
-        return run_convert(
-            input,
-            output,
-            None if source is None else get_system(source),
-            get_system(target),
-            radians=radians,
-            rejects_path=rejects,
-            overwrite=overwrite,
-            batch_size=batch_size,
-            strict=strict,
-            decoder=decoder,
-            workers=threads,
-        )
+        return run_convert(input, output, None if source is None else get_system(source), get_system(target), options)
 
 
 def audit_file(
@@ -321,24 +318,21 @@ def audit_file(
     Returns the JSON report (``rows``, one count per check, ``system``,
     ``system_origin``, ``rejected``, ``examples``...); ``system`` defaults to
     the file's own, else ``300w_lp``. ``options``: ``near_tol_deg``, ``radians``,
-    ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``, ``workers`` (``--threads``); ``consistency``
-    (True or a :class:`hpe_cli.pipelines.consistency.Settings`, as ``--consistency``; report key ``consistency``)
+    ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``, ``workers`` or ``threads`` (``--threads``),
+    ``plots``, ``only_flagged``, ``images`` (fields of :class:`hpe_cli.pipelines.audit.AuditOptions`); ``consistency``
+    (True or a :class:`hpe_cli.pipelines.audit.consistency.Settings`, as ``--consistency``; report key ``consistency``)
     and ``suspects`` (path of the key list, as ``--suspects``).
     """
     from .io.transaction import ensure_transaction
-    from .pipelines.audit import run_audit
+    from .pipelines.audit import AuditOptions, run_audit
 
+    if "workers" in options:  # the documented spelling of ``threads`` here
+        options["threads"] = options.pop("workers")
+    opts = AuditOptions(
+        report=report, output=output, overwrite=overwrite, rejects=rejects, strict_rejects=strict, **options
+    )
     with ensure_transaction():
-        return run_audit(
-            input,
-            None if system is None else get_system(system),
-            report=report,
-            output=output,
-            overwrite=overwrite,
-            rejects_path=rejects,
-            strict_rejects=strict,
-            **options,
-        )
+        return run_audit(input, None if system is None else get_system(system), opts)
 
 
 def view_file(

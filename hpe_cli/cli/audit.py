@@ -215,42 +215,38 @@ def audit(
       hpe audit AFLW2000/ --consistency --json - --suspects suspects.csv
       hpe audit panoptic_labels.parquet --consistency -o scored.parquet --plots audit/
     """
-    from ..pipelines.audit import run_audit
+    from ..pipelines.audit import AuditOptions, run_audit
 
     if not consistency and (calibration or suspects):
         raise click.UsageError("--calibration and --suspects need --consistency")
     settings = None
     if consistency:
-        from ..pipelines.consistency import Settings
+        from ..pipelines.audit import ConsistencySettings
 
-        settings = Settings(calibration=calibration, max_jump_deg=max_jump, suspect_score=suspect_score)
-
+        settings = ConsistencySettings(calibration=calibration, max_jump_deg=max_jump, suspect_score=suspect_score)
+    options = AuditOptions(
+        report=report,
+        plots=plots,
+        output=output,
+        only_flagged=only_flagged,
+        near_tol_deg=gimbal_tol,
+        radians=radians,
+        use=use,
+        keys=keys,
+        n_examples=examples,
+        overwrite=overwrite,
+        batch_size=batch_size,
+        decoder=decoder,
+        threads=threads,
+        images=images,
+        rejects=rejects,
+        strict_rejects=strict,
+        consistency=settings,
+        suspects=suspects,
+    )
     bar = progress(desc="audit", quiet=quiet)
     try:
-        result = run_audit(
-            input,
-            system,
-            report=report,
-            plots=plots,
-            output=output,
-            only_flagged=only_flagged,
-            near_tol_deg=gimbal_tol,
-            radians=radians,
-            use=use,
-            keys=keys,
-            n_examples=examples,
-            overwrite=overwrite,
-            batch_size=batch_size,
-            progress=bar,
-            echo=click.echo,
-            decoder=decoder,
-            images=images,
-            rejects_path=rejects,
-            strict_rejects=strict,
-            consistency=settings,
-            suspects=suspects,
-            workers=threads,
-        )
+        result = run_audit(input, system, options, progress=bar, echo=click.echo)
     finally:
         bar.close()
     from ..rotation.audit import CHECKS

@@ -19,6 +19,7 @@ from .options import (
     radians_option,
     rejects_options,
     system_option,
+    threads_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -125,6 +126,7 @@ from .table_options import column_options
 @rejects_options
 @overwrite_option
 @batch_option
+@threads_option
 @verbosity_options
 @column_options
 def augment(
@@ -152,6 +154,7 @@ def augment(
     strict,
     overwrite,
     batch_size,
+    threads,
     verbose,
     quiet,
 ):
@@ -266,6 +269,7 @@ def augment(
         overwrite=overwrite,
         batch_size=batch_size,
         verbose=verbose,
+        workers=threads,
     )
     desc = opts.description
     bar = progress(desc="augment", quiet=quiet)

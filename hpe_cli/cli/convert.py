@@ -95,25 +95,21 @@ def convert(
       hpe convert AFLW2000/ -o aflw_q.parquet --from 300w_lp --to my_quaternions.toml
       hpe convert AFLW2000/ -o synergy.csv --from 300w_lp --to 3ddfa_v2 --decoder synergynet
     """
+    from ..pipelines.convert import ConvertOptions, run_convert
+
+    options = ConvertOptions(
+        radians=radians,
+        rejects=rejects,
+        strict=strict,
+        overwrite=overwrite,
+        batch_size=batch_size,
+        threads=threads,
+        decoder=decoder,
+        exclude=exclude,
+    )
     bar = progress(desc="convert", quiet=quiet)
     try:
-        from ..pipelines.convert import run_convert
-
-        s = run_convert(
-            input,
-            output,
-            source,
-            target,
-            radians=radians,
-            rejects_path=rejects,
-            overwrite=overwrite,
-            batch_size=batch_size,
-            progress=bar,
-            strict=strict,
-            decoder=decoder,
-            exclude=exclude,
-            workers=threads,
-        )
+        s = run_convert(input, output, source, target, options, progress=bar)
     finally:
         bar.close()
     lines = [

@@ -18,14 +18,17 @@ MAX_ANGLE = 1e6
 
 def numeric_column(batch, name):
     """Column as float64 plus a per-row reason ('' when usable)."""
-    values, bad, reasons = _numeric(batch, name)
+    values, bad, reasons = numeric_values(batch, name)
     if reasons is None:
         reasons = np.full(len(values), "", dtype=object)
     return values, reasons
 
 
-def _numeric(batch, name):
-    """``(values, bad_mask, reasons_or_None)``; ``reasons`` is built only when a row is bad.
+def numeric_values(batch, name):
+    """Column ``name`` of ``batch`` as float64: ``(values, bad_mask, reasons_or_None)``.
+
+    ``values`` is NaN where missing or non-numeric (infinities kept), ``bad_mask`` marks the rows that are not
+    finite numbers, and ``reasons`` (object array, ``''`` for usable rows) is built only when a row is bad.
 
     Object arrays of reasons are slow to build and compare, and almost every
     row of a real table is fine, so the common path never touches them.
@@ -207,7 +210,7 @@ def _value_columns(batch, names):
     cols, reasons = [], None
     ok = np.ones(batch.num_rows, dtype=bool)
     for name in names:
-        v, bad, r = _numeric(batch, name)
+        v, bad, r = numeric_values(batch, name)
         cols.append(v)
         if r is not None:
             if reasons is None:

@@ -5,21 +5,19 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import pyarrow as pa
 
 from ..errors import HpeError
-from ..io import (
-    LABEL_COLS,
-    Rejects,
-    TableWriter,
-    batch_rotations,
-    label_mode,
-    open_table,
-    rotation_value_columns,
-    system_metadata,
-)
+from ..io import LABEL_COLS, Rejects, TableWriter, batch_rotations, rotation_value_columns, system_metadata
+from ..io.exclude import ExcludeList
+from ..io.label_source import LabelSource, open_labels
 from ..io.readers import LINE_COL
+from ..io.table_source import DEFAULT_BATCH
 from ..rotation import soa
 from ..rotation.convert import soa_labels
+from ..rotation.decoders import DECODERS, decoder_columns
+from .inorder import in_order
+from .pools import default_threads
 
 
 @dataclass
@@ -46,8 +44,6 @@ def convert_batch(batch, mode, source, target, radians=False, decoder=None):
     the per-row reject reason ('' for converted rows; None when every row
     converted) and the label dict of :func:`~hpe_cli.rotation.convert.soa_labels`.
     """
-    import pyarrow as pa
-
     X, ok, reasons = batch_rotations(batch, source, mode, radians)
     if reasons is not None:
         X = [[v[ok] for v in row] for row in X]
@@ -56,8 +52,6 @@ def convert_batch(batch, mode, source, target, radians=False, decoder=None):
     labels = soa_labels(A, target, n)
     extra = rotation_value_columns(target, labels["matrix"], n)
     if decoder is not None:
-        from ..rotation.decoders import decoder_columns
-
         extra.update(decoder_columns(decoder, soa.to_array(A, n)))
     replaced = set(LABEL_COLS) | set(extra) | {LINE_COL}
     keep = [name for name in batch.schema.names if name not in replaced]
@@ -77,54 +71,61 @@ def convert_batch(batch, mode, source, target, radians=False, decoder=None):
     return pa.RecordBatch.from_arrays(arrays, names=names), reasons, labels
 
 
-def run_convert(
-    input_path,
-    output,
-    source,
-    target,
-    *,
-    radians=False,
-    rejects_path=None,
-    overwrite=False,
-    batch_size=65_536,
-    progress=None,
-    workers=None,
-    strict=False,
-    decoder=None,
-    exclude=None,
-) -> ConvertSummary:
-    """Convert every row of ``input_path`` from ``source`` to ``target`` into ``output``.
+@dataclass(frozen=True)
+class ConvertOptions:
+    """The settings of one ``hpe convert`` run, validated once (built by ``cli/convert.py`` and the API alike).
 
-    Bad rows go to ``rejects_path`` when given; otherwise (or with
-    ``strict``) any bad row makes the job fail at the end with an error naming
-    the file, how many rows, the first one and its reason, and nothing is
-    written (see :func:`hpe_cli.io.rejects.rejects_rule`). Batches are converted on ``workers`` threads
-    (numpy and Arrow release the GIL) while this thread reads and writes in
-    order; at most ``workers + 1`` batches are in flight, so memory stays flat. ``exclude`` (a key list
-    file, :mod:`hpe_cli.io.exclude`) drops the rows it names; they go to the rejects file as a choice.
+    Attributes
+    ----------
+    radians : bool
+        Angle labels are in radians (``--radians``).
+    rejects : str or path, optional
+        File for the rows that cannot be converted, with their reason (``--rejects``); without it (or with
+        ``strict``) any such row makes the run fail and nothing is written.
+    strict : bool
+        ``--strict``: a rejected row is an error even with ``rejects``.
+    overwrite : bool
+        Replace an existing output.
+    batch_size : int
+        Rows per record batch, >= 1.
+    threads : int, optional
+        Threads converting batches, >= 1 (``--threads``); None: one per core
+        (:func:`hpe_cli.pipelines.pools.default_threads`). The output does not depend on it.
+    decoder : str, optional
+        Also write what this published decoder prints (``decoder_*`` columns).
+    exclude : str or path, optional
+        A key list file (:mod:`hpe_cli.io.exclude`) whose rows are dropped (to the rejects file, as a choice).
     """
-    from collections import deque
-    from concurrent.futures import ThreadPoolExecutor
 
-    src = open_table(input_path, batch_size, with_lines=True)
-    from ..io.system_meta import resolve_system
+    radians: bool = False
+    rejects: object = None
+    strict: bool = False
+    overwrite: bool = False
+    batch_size: int = DEFAULT_BATCH
+    threads: int | None = None
+    decoder: str | None = None
+    exclude: object = None
 
-    resolved = resolve_system(src, source, default=None, option_name="--from")
-    source = resolved.system
-    mode = label_mode(src.columns, src.path, source)
-    rejects = Rejects(rejects_path, overwrite, strict=strict, source=src)
-    summary = ConvertSummary(source=source.name, source_origin=resolved.origin_text)
-    if progress is not None and src.num_rows:  # Parquet metadata, .mat file counts: the bar has a total
-        progress.total = src.num_rows
-    meta = {**system_metadata(target), "hpe:source_system": source.name, "hpe:input": str(src.path)}
-    if decoder is not None:
-        meta["hpe:decoder"] = decoder
-    from .pools import default_threads
+    def __post_init__(self):
+        checks = [
+            (isinstance(self.batch_size, int) and self.batch_size >= 1, "batch_size >= 1", self.batch_size),
+            (self.threads is None or int(self.threads) >= 1, "threads >= 1", self.threads),
+            (self.decoder is None or self.decoder in DECODERS, f"decoder among {', '.join(DECODERS)}", self.decoder),
+        ]
+        for ok, expected, got in checks:
+            if not ok:
+                raise HpeError(f"convert options: expected {expected}, got {got!r}")
 
-    workers = default_threads(workers)  # --threads; one per core by default
 
-    def finish(batch, read_rejects, future, writer):
+class ConvertedBatches:
+    """Takes each converted batch in input order: writes it, sends its bad rows to the rejects, sums up."""
+
+    def __init__(self, writer, rejects, summary: ConvertSummary, progress=None):
+        self.writer, self.rejects, self.summary, self.progress = writer, rejects, summary, progress
+
+    def finish(self, batch, read_rejects, future) -> None:
         out, reasons, labels = future.result()
+        rejects, summary = self.rejects, self.summary
         bad = np.flatnonzero(reasons != "") if reasons is not None else ()
         lines = batch.column(LINE_COL).to_numpy()
         rejects.add_unreadable(read_rejects)
@@ -141,36 +142,78 @@ def run_convert(
                 )
             rejects.add(cols, reasons[bad], lines=lines[bad])
         summary.rows += batch.num_rows
-        if out.num_rows or writer.rows == 0:
-            writer.write(out)
+        if out.num_rows or self.writer.rows == 0:
+            self.writer.write(out)
         summary.written += out.num_rows
         summary.gimbal_lock += int(labels["gimbal_lock"].sum())
         if labels["roundtrip_err"].size:
             summary.max_roundtrip_err = max(summary.max_roundtrip_err, float(labels["roundtrip_err"].max()))
-        if progress is not None:
-            progress.update(batch.num_rows)
+        if self.progress is not None:
+            self.progress.update(batch.num_rows)
 
-    if exclude is not None:
-        from ..io.exclude import ExcludeList
 
-        exclude = ExcludeList(exclude)
+def output_metadata(labels: LabelSource, target, decoder=None) -> dict:
+    """The output's Parquet metadata: the target system's definition, the source system and the input."""
+    meta = {**system_metadata(target), "hpe:source_system": labels.system.name, "hpe:input": str(labels.path)}
+    if decoder is not None:
+        meta["hpe:decoder"] = decoder
+    return meta
+
+
+def run_convert(input_path, output, source, target, options: ConvertOptions | None = None, *, progress=None):
+    """Convert every row of ``input_path`` from ``source`` to ``target`` into ``output``.
+
+    Parameters
+    ----------
+    input_path : str or path
+        Any label table ``hpe`` reads.
+    output : str or path
+        ``.parquet`` or ``.csv``, written atomically.
+    source : RotationSystem or None
+        ``--from``: the input's system when the file names none (None: the file must name it).
+    target : RotationSystem
+        ``--to``.
+    options : ConvertOptions, optional
+    progress : tqdm-like, optional
+
+    Returns
+    -------
+    ConvertSummary
+
+    Notes
+    -----
+    Bad rows go to ``options.rejects`` when given; otherwise (or with
+    ``strict``) any bad row makes the job fail at the end with an error naming
+    the file, how many rows, the first one and its reason, and nothing is
+    written (see :func:`hpe_cli.io.rejects.rejects_rule`). Batches are converted on ``options.threads``
+    threads (numpy and Arrow release the GIL) while this thread reads and writes in
+    order; at most ``threads + 1`` batches are in flight, so memory stays flat. ``options.exclude`` (a key
+    list file, :mod:`hpe_cli.io.exclude`) drops the rows it names; they go to the rejects file as a choice.
+    """
+    o = options if options is not None else ConvertOptions()
+    labels = open_labels(input_path, source, default=None, option_name="--from", batch_size=o.batch_size)
+    src, source, mode = labels.table, labels.system, labels.mode
+    rejects = Rejects(o.rejects, o.overwrite, strict=o.strict, source=src)
+    summary = ConvertSummary(source=source.name, source_origin=labels.origin)
+    if progress is not None and src.num_rows:  # Parquet metadata, .mat file counts: the bar has a total
+        progress.total = src.num_rows
+    exclude = None
+    if o.exclude is not None:
+        exclude = ExcludeList(o.exclude)
         exclude.check_input(src.columns)  # before anything is written, even for an empty input
-    with TableWriter(output, overwrite, meta) as writer, ThreadPoolExecutor(workers) as pool:
-        pending = deque()
-        try:
-            for batch, read_rejects in src.batches_with_rejects():
-                if exclude is not None:
-                    batch = _exclude(batch, exclude, rejects, summary)
-                pending.append(
-                    (batch, read_rejects, pool.submit(convert_batch, batch, mode, source, target, radians, decoder))
-                )
-                if len(pending) > workers:
-                    finish(*pending.popleft(), writer)
-            while pending:
-                finish(*pending.popleft(), writer)
-        finally:
-            for _, _, fut in pending:
-                fut.cancel()
+
+    def items():
+        for batch, read_rejects in src.batches_with_rejects():
+            if exclude is not None:
+                batch = _exclude(batch, exclude, rejects, summary)
+            yield batch, read_rejects
+
+    def work(batch):
+        return convert_batch(batch, mode, source, target, o.radians, o.decoder)
+
+    with TableWriter(output, o.overwrite, output_metadata(labels, target, o.decoder)) as writer:
+        done = ConvertedBatches(writer, rejects, summary, progress)
+        in_order(items(), work, done.finish, default_threads(o.threads))  # --threads; one per core by default
         if summary.rows == 0:
             raise HpeError(f"{src.path}: empty table (no rows)")
         rejects.finish()
@@ -180,7 +223,6 @@ def run_convert(
 
 def _exclude(batch, exclude, rejects, summary):
     """``batch`` without the rows ``exclude`` names; those go to the rejects file with their reason."""
-    import pyarrow as pa
 
     why = exclude.reasons(batch)
     hit = why != ""

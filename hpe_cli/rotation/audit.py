@@ -44,7 +44,8 @@ from __future__ import annotations
 import numpy as np
 
 from .check import ROTATION_TOL, rotation_mask
-from .euler import wrap_180
+from .euler import parse_seq, wrap_180
+from .solutions import middle_role
 from .systems import RotationSystem, get_system
 
 #: the check names, in report order
@@ -201,6 +202,9 @@ def audit_columns(
     near_tol_deg: float = NEAR_GIMBAL_DEG,
     canonical_tol_deg: float = CANONICAL_TOL_DEG,
     rotation_tol: float = ROTATION_TOL,
+    *,
+    lock_distance: bool = True,
+    primary: bool = True,
 ) -> dict:
     """The checks of :func:`audit_angles` / :func:`audit_matrices` on label columns (structure of arrays).
 
@@ -212,13 +216,23 @@ def audit_columns(
         NaN allowed.
     system : str or RotationSystem
     mode : {"angles", "matrix"}
+    lock_distance : bool, optional
+        Also return ``lock_distance``. With False, angle labels of a Tait-Bryan
+        system are screened by :func:`angle_flags_screened` (one cosine a row
+        instead of the matrix round trip, the same masks).
+    primary : bool, optional
+        Matrix labels: also return ``primary``. With False (and
+        ``lock_distance=False``), a system whose declared ranges every primary
+        solution meets (:func:`matrix_screen_applies`) is checked without the
+        decomposition: its lock distance is taken from the matrix entries as the
+        decomposition takes it, and no row is out of range.
 
     Returns
     -------
     dict
         The same masks as the array functions (identical results, without
-        building ``(N, 3, 3)`` stacks), plus ``lock_distance`` and, for
-        matrices, ``primary`` (N, 3).
+        building ``(N, 3, 3)`` stacks), plus ``lock_distance`` (unless
+        ``lock_distance=False``) and, for matrices, ``primary`` (N, 3).
     """
     from .check import rotation_screen_columns
 
@@ -230,6 +244,8 @@ def audit_columns(
         if mode == "angles":
             finite = np.isfinite(cols[0]) & np.isfinite(cols[1]) & np.isfinite(cols[2])
             safe = cols if finite.all() else [np.where(finite, c, 0.0) for c in cols]
+            if not lock_distance and screen_applies(system, canonical_tol_deg):
+                return angle_flags_screened(safe, finite, system, near_tol_deg, canonical_tol_deg)
             p1, _, locked, lock = system.soa_to_angles(system.soa_from_angles(*safe))
             pyr = np.stack(safe, axis=-1)
             primary = np.stack(p1, axis=-1)
@@ -250,13 +266,120 @@ def audit_columns(
         X = [cols[0:3], cols[3:6], cols[6:9]]
         if not rot.all():
             X = [[np.where(rot, c, float(i == j)) for j, c in enumerate(row)] for i, row in enumerate(X)]
-        p1, _, locked, lock = system.soa_to_angles(X)
-        primary = np.stack(p1, axis=-1)
         out["non_finite"] = ~fin_entries
         out["not_rotation"] = fin_entries & ~rot
+        if not lock_distance and not primary and matrix_screen_applies(system):
+            lock = tait_bryan_lock(X, system)
+            locked = lock < system.gimbal_tol
+            out["gimbal_lock"] = locked & rot
+            out["near_gimbal"] = (locked | (lock < np.sin(np.deg2rad(near_tol_deg)))) & rot
+            return out  # out_of_range stays False: every primary solution is in the declared ranges
+        p1, _, locked, lock = system.soa_to_angles(X)
+        angles = np.stack(p1, axis=-1)
         out["gimbal_lock"] = locked & rot
         out["near_gimbal"] = (locked | (lock < np.sin(np.deg2rad(near_tol_deg)))) & rot
-        out["out_of_range"] = _range_mask(primary, system) & rot
+        out["out_of_range"] = _range_mask(angles, system) & rot
         out["lock_distance"] = np.where(rot, lock, np.nan)
-        out["primary"] = np.where(rot[:, None], primary, np.nan)
+        out["primary"] = np.where(rot[:, None], angles, np.nan)
         return out
+
+
+#: a screened decision closer than this to its threshold (lock distance, a dimensionless |cos|) is
+#: recomputed through the matrix round trip; the round trip's lock distance differs from ``|cos b|`` by a
+#: few 1e-16
+SCREEN_MARGIN = 1e-9
+
+
+def screen_applies(system, canonical_tol_deg: float = CANONICAL_TOL_DEG) -> bool:
+    """True when :func:`angle_flags_screened` gives :func:`audit_columns`' masks for ``system``.
+
+    Tait-Bryan systems with the default primary solution (middle turn in
+    [-90, 90] degrees) and a ``canonical_tol_deg`` between 1e-9 and 1 degree
+    (the round trip of a primary triple moves it by less than 1e-9 degrees away
+    from the lock; the other solution is 180 degrees away).
+    """
+    seq = system.intrinsic_axes
+    return system.selection == "tait_bryan" and seq[0] != seq[2] and 1e-9 <= canonical_tol_deg <= 1.0
+
+
+def angle_flags_screened(cols, finite, system, near_tol_deg=NEAR_GIMBAL_DEG, canonical_tol_deg=CANONICAL_TOL_DEG):
+    """:func:`audit_columns`' masks for angle columns of a Tait-Bryan system, without the matrix round trip.
+
+    For intrinsic Tait-Bryan turns ``a, b, c`` the stored matrix's lock distance
+    is ``|cos b|`` and the primary solution is the triple itself (wrapped to
+    (-180, 180]) when ``|b| <= 90``, else the other one (every angle 180 degrees
+    away), so ``gimbal_lock``, ``near_gimbal`` and ``non_canonical`` follow from
+    the middle angle alone. Rows whose ``|cos b|`` lies within
+    :data:`SCREEN_MARGIN` of a threshold, or with an angle outside [-180, 180],
+    go through the round trip of :func:`audit_columns`, so the masks are the
+    same bits.
+
+    Parameters
+    ----------
+    cols : list of 3 ndarray (N,)
+        ``[pitch, yaw, roll]`` in degrees, finite where ``finite``.
+    finite : ndarray of bool (N,)
+    system : RotationSystem
+        A system :func:`screen_applies` accepts.
+    near_tol_deg, canonical_tol_deg : float
+        As for :func:`audit_columns`.
+
+    Returns
+    -------
+    dict
+        ``name -> bool array (N,)`` for every name in :data:`CHECKS`.
+    """
+    n = len(finite)
+    out = _empty(n)
+    mid = cols[middle_role(system)]
+    lock = np.abs(np.cos(mid * (np.pi / 180.0)))
+    tol, near_sin = system.gimbal_tol, np.sin(np.deg2rad(near_tol_deg))
+    locked = lock < tol
+    inner = (np.abs(cols[0]) <= 180.0) & (np.abs(cols[1]) <= 180.0) & (np.abs(cols[2]) <= 180.0)
+    unsure = ~inner | (np.abs(lock - tol) <= SCREEN_MARGIN) | (np.abs(lock - near_sin) <= SCREEN_MARGIN)
+    unsure &= finite
+    out["non_finite"] = ~finite
+    out["gimbal_lock"] = locked & finite
+    out["near_gimbal"] = (locked | (lock < near_sin)) & finite
+    out["non_canonical"] = ~locked & (np.abs(mid) > 90.0) & finite
+    outside = ~inner
+    for k, role in enumerate(("pitch", "yaw", "roll")):
+        lo, hi = system.ranges.get(role, (-180.0, 180.0))
+        outside |= (cols[k] <= -180.0) | (cols[k] < lo) | (cols[k] > hi)
+    out["out_of_range"] = outside & finite
+    idx = np.flatnonzero(unsure)
+    if idx.size:
+        exact = audit_columns([c[idx] for c in cols], system, "angles", near_tol_deg, canonical_tol_deg)
+        for name in ("gimbal_lock", "near_gimbal", "non_canonical", "out_of_range"):
+            out[name][idx] = exact[name]
+    return out
+
+
+def matrix_screen_applies(system) -> bool:
+    """True when every primary solution of ``system`` is inside its declared ranges (and (-180, 180]).
+
+    Tait-Bryan systems with the default primary solution: the middle angle is in
+    [-90, 90] and the others in (-180, 180], so ranges that hold at least that
+    (as ``300w_lp``'s yaw (-90, 90) and ``scipy_zyx``'s pitch) never flag a matrix.
+    """
+    seq = system.intrinsic_axes
+    if system.selection != "tait_bryan" or seq[0] == seq[2]:
+        return False
+    middle = ("pitch", "yaw", "roll")[middle_role(system)]
+    for role in ("pitch", "yaw", "roll"):
+        lo, hi = system.ranges.get(role, (-180.0, 180.0))
+        need = 90.0 if role == middle else 180.0
+        if lo > -need or hi < need:
+            return False
+    return True
+
+
+def tait_bryan_lock(X, system) -> np.ndarray:
+    """The lock distance of stored matrices ``X`` (nested list) as :meth:`RotationSystem.soa_to_angles` computes
+    it (the same arithmetic, so the same bits): ``sqrt(X[i][i]^2 + X[i][j]^2)`` of the system's axes."""
+    if system.angle_frame == "canonical":
+        X = system.soa_to_canonical(X)
+    i, j, _ = parse_seq(system.intrinsic_axes)
+    n = next(np.shape(v)[0] for row in X for v in row if not isinstance(v, float))
+    a, b = (np.broadcast_to(v, (n,)) if isinstance(v, float) else v for v in (X[i][i], X[i][j]))
+    return np.sqrt(a * a + b * b)

@@ -1,4 +1,4 @@
-"""``--threads N`` on evaluate, convert and audit: the outputs are the same bytes whatever the number.
+"""``--threads N`` on evaluate, convert, audit and augment: the outputs are the same bytes whatever the number.
 
 Tables of several batches (``--batch-size``) so that chunks are really processed side by side, with
 predictions in GT order (streamed) and shuffled (key join), every protocol.
@@ -68,7 +68,7 @@ def test_convert_and_audit_same_bytes_for_1_and_2_threads(tmp_path):
     assert outs[1][2] == outs[2][2]
 
 
-@pytest.mark.parametrize("name", ["evaluate", "convert", "audit"])
+@pytest.mark.parametrize("name", ["evaluate", "convert", "audit", "augment"])
 def test_threads_help_says_the_default(name):
     r = hpe(name, "--help")
     assert "--threads N" in r.output
@@ -81,3 +81,15 @@ def test_threads_must_be_positive(tmp_path):
     gt, pred = _tables(tmp_path, n=10)
     r = hpe("convert", gt, "-o", tmp_path / "c.parquet", "--from", "300w_lp", "--to", "6drepnet", "--threads", "0")  # fmt: skip
     assert r.exit_code == 2 and "--threads" in r.output
+
+
+def test_augment_same_bytes_for_1_and_2_threads(tmp_path):
+    """augment's batch pool (``--threads``): labels, landmarks and boxes moved the same whatever the number."""
+    gt, _ = _tables(tmp_path, n=5000)
+    for t in (1, 2, 3):
+        hpe("augment", gt, "-o", tmp_path / f"g{t}.parquet", "--image-size", "450x450", "--hflip",
+             "--batch-size", "700", "--threads", t, "-q", ok=True)  # fmt: skip
+    first = pq.read_table(tmp_path / "g1.parquet")
+    assert first.num_rows == 5000
+    for t in (2, 3):
+        assert pq.read_table(tmp_path / f"g{t}.parquet").equals(first)

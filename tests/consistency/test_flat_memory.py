@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from hpe_cli.metrics import consistency as mc
 from hpe_cli.metrics.sketch import StreamQuantiles
-from hpe_cli.pipelines.consistency_spill import RECORD, RowSpill
+from hpe_cli.pipelines.audit.spill import RECORD, RowSpill
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)
@@ -105,11 +105,11 @@ def lm68_table(tmp_path_factory):
 
 
 def _run(path, tmp, **kw):
-    from hpe_cli.pipelines.audit import run_audit
-    from hpe_cli.pipelines.consistency import Settings
+    from hpe_cli.pipelines.audit import AuditOptions, run_audit
+    from hpe_cli.pipelines.audit.consistency import Settings
 
     out = tmp / f"o{len(kw)}.parquet"
-    rep = run_audit(path, None, output=out, overwrite=True, consistency=Settings(**kw))
+    rep = run_audit(path, None, AuditOptions(output=out, overwrite=True, consistency=Settings(**kw)))
     return json.loads(json.dumps(rep["consistency"])), pq.read_table(out).to_pandas()
 
 
@@ -168,17 +168,17 @@ def panoptic_tables(tmp_path_factory):
 
 
 def _audit(path, tmp, **kw):
-    from hpe_cli.pipelines.audit import run_audit
-    from hpe_cli.pipelines.consistency import Settings
+    from hpe_cli.pipelines.audit import AuditOptions, run_audit
+    from hpe_cli.pipelines.audit.consistency import Settings
 
     out = tmp / f"o_{path.stem}_{len(kw)}.parquet"
-    rep = run_audit(path, None, output=out, overwrite=True, batch_size=97, consistency=Settings(**kw))
+    rep = run_audit(path, None, AuditOptions(output=out, overwrite=True, batch_size=97, consistency=Settings(**kw)))
     return json.loads(json.dumps(rep["consistency"])), pq.read_table(out).to_pandas()
 
 
 def test_streamed_groups_give_the_held_results(panoptic_tables, tmp_path):
     from hpe_cli.io import open_table
-    from hpe_cli.pipelines.consistency_stream import sorted_by_sequence_frame
+    from hpe_cli.pipelines.audit.stream import sorted_by_sequence_frame
 
     srt, shuf = panoptic_tables
     assert sorted_by_sequence_frame(open_table(srt)) and not sorted_by_sequence_frame(open_table(shuf))

@@ -1,11 +1,14 @@
 """run_audit at scale-ish against independent oracles: pandas' duplicated() and the array checks."""
 
+import re
+
 import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pytest
 
-from hpe_cli.pipelines.audit import run_audit, string_hashes
+from hpe_cli.pipelines.audit import AuditOptions, run_audit
+from hpe_cli.pipelines.audit.duplicates import string_hashes
 from hpe_cli.rotation import get_system
 from hpe_cli.rotation.audit import CHECKS, audit_angles
 
@@ -37,7 +40,7 @@ def test_counts_and_duplicates_match_oracles(tmp_path, fmt):
     path = tmp_path / f"a.{fmt}"
     df.to_parquet(path) if fmt == "parquet" else df.to_csv(path, index=False)
     system = get_system("300w_lp")
-    rep = run_audit(path, system, batch_size=1000)
+    rep = run_audit(path, system, AuditOptions(batch_size=1000))
     ref = audit_angles(pyr, system)
     for c in CHECKS[:-1]:
         assert rep[c] == int(ref[c].sum()), c
@@ -54,3 +57,33 @@ def test_counts_and_duplicates_match_oracles(tmp_path, fmt):
         assert not key.iloc[:j].isin(key.iloc[[i]].to_dict("list")).all(axis=1).any()
     flags = np.stack([ref[c] for c in CHECKS[:-1]] + [dup], axis=1)
     assert rep["details"]["flagged"] == int(flags.any(axis=1).sum())
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"near_tol_deg": -1}, "expected near_tol_deg in [0, 90], got -1"),
+        ({"use": "quaternion"}, "expected use among auto, angles, matrix, got 'quaternion'"),
+        ({"n_examples": -2}, "expected n_examples >= 0, got -2"),
+        ({"threads": 0}, "expected threads >= 1, got 0"),
+        ({"decoder": "nope"}, "expected decoder among synergynet, 3ddfa_v2, directmhp, got 'nope'"),
+    ],
+)
+def test_audit_options_are_validated_once(kwargs, message):
+    from hpe_cli.errors import HpeError
+
+    with pytest.raises(HpeError, match=re.escape(message)):
+        AuditOptions(**kwargs)
+
+
+def test_audit_and_convert_options_normalise_and_validate():
+    from hpe_cli.errors import HpeError
+    from hpe_cli.pipelines.audit import ConsistencySettings
+    from hpe_cli.pipelines.convert import ConvertOptions
+
+    opts = AuditOptions(keys=["image", "id"], consistency=True)
+    assert opts.keys == ("image", "id") and isinstance(opts.consistency, ConsistencySettings)
+    with pytest.raises(HpeError, match=re.escape("convert options: expected batch_size >= 1, got 0")):
+        ConvertOptions(batch_size=0)
+    with pytest.raises(HpeError, match="expected decoder among"):
+        ConvertOptions(decoder="x")

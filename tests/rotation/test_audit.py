@@ -186,3 +186,74 @@ def test_audit_columns_equal_array_functions():
         got = audit_columns([np.ascontiguousarray(R[:, i, j]) for i in range(3) for j in range(3)], name, "matrix")
         for k in ref:
             assert np.array_equal(ref[k], got[k], equal_nan=True), (name, k)
+
+
+def test_screened_angle_flags_equal_round_trip():
+    """The screened angle checks (one cosine a row) give the round trip's masks bit for bit, on every
+    built-in system, with rows at and around the lock and near-gimbal thresholds, the +-90 boundary,
+    +-180, out-of-range and huge angles."""
+    from hpe_cli.rotation.audit import audit_columns, screen_applies
+    from hpe_cli.rotation.systems import system_names
+
+    rng = np.random.default_rng(11)
+    n = 20_000
+    cols = [rng.uniform(-200, 200, n), rng.uniform(-200, 200, n), rng.uniform(-200, 200, n)]
+    tol = 1e-4
+    edge = np.concatenate(
+        [
+            np.rad2deg(np.arccos(tol * (1 + np.linspace(-1e-8, 1e-8, 41)))),  # |cos b| around gimbal_tol
+            90.0 - np.array([0.0, 1e-12, 1e-9, 1e-6, 0.0057, 0.0058, 0.999999, 1.0, 1.000001]),  # near tol 1 deg
+            [90.0, -90.0, 180.0, -180.0, 0.0, -0.0, 270.0, -270.0, 1e20, -1e20, 89.99858, 90.00142],
+        ]
+    )
+    edge = np.concatenate([edge, -edge, 180.0 - edge, edge - 180.0])
+    screened = 0
+    for name in system_names():
+        system = get_system(name)
+        c = [v.copy() for v in cols]
+        k = len(edge)
+        for m in range(3):  # put the edge values on every role, so the middle turn gets them whatever it is
+            c[m][m * k : (m + 1) * k] = edge
+        c[0][-5:] = [np.nan, np.inf, -np.inf, 0.0, 1e300]
+        ref = audit_columns(c, system, "angles")
+        got = audit_columns(c, system, "angles", lock_distance=False)
+        screened += screen_applies(system)
+        for key in CHECKS:
+            assert np.array_equal(ref[key], got[key]), (name, key, np.flatnonzero(ref[key] != got[key])[:5])
+    assert screened >= 3
+
+
+def test_screened_matrix_flags_equal_decomposition():
+    """Matrices of systems whose primary solutions always meet their ranges are checked without the
+    decomposition: the same masks bit for bit (lock rows, near-lock rows, non-rotations, NaN)."""
+    from hpe_cli.rotation.audit import audit_columns, matrix_screen_applies
+    from hpe_cli.rotation.systems import system_names
+
+    rng = np.random.default_rng(12)
+    n = 6000
+    tol = 1e-4
+    mids = np.concatenate(
+        [
+            np.rad2deg(np.arccos(tol * (1 + np.linspace(-1e-6, 1e-6, 41)))),
+            90.0 - np.array([0.0, 1e-12, 1e-9, 0.0057, 0.0058, 0.999999, 1.0, 1.000001]),
+        ]
+    )
+    screened = 0
+    for name in system_names():
+        system = get_system(name)
+        pyr = np.c_[rng.uniform(-180, 180, n), rng.uniform(-90, 90, n), rng.uniform(-180, 180, n)]
+        k = len(mids)
+        for m in range(3):
+            pyr[m * k : (m + 1) * k, m] = mids
+            pyr[3 * k + m * k : 3 * k + (m + 1) * k, m] = -mids
+        R = system.from_angles(pyr)
+        R[-3] *= 2.0
+        R[-2, 0, 0] = np.nan
+        R[-1] = R[-1] @ np.diag([1.0, 1, -1])
+        cols = [np.ascontiguousarray(R[:, i, j]) for i in range(3) for j in range(3)]
+        ref = audit_columns(cols, system, "matrix")
+        got = audit_columns(cols, system, "matrix", lock_distance=False, primary=False)
+        screened += matrix_screen_applies(system)
+        for key in CHECKS:
+            assert np.array_equal(ref[key], got[key]), (name, key, np.flatnonzero(ref[key] != got[key])[:5])
+    assert screened >= 3

@@ -11,6 +11,8 @@ behind, even after a crash) in the system's temporary folder.
 
 from __future__ import annotations
 
+import tempfile
+
 import numpy as np
 
 #: one row's record
@@ -31,7 +33,6 @@ class RowSpill:
     """Append-only file of :data:`RECORD` rows with reads by row range or by a few row indices."""
 
     def __init__(self):
-        import tempfile
 
         self.f = tempfile.TemporaryFile(prefix="hpe_consistency_")
         self.n = 0

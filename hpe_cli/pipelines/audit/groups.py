@@ -1,4 +1,4 @@
-"""The views and time checks of ``hpe audit --consistency`` (:mod:`hpe_cli.pipelines.consistency`).
+"""The views and time checks of ``hpe audit --consistency`` (:mod:`hpe_cli.pipelines.audit.consistency`).
 
 Both need groups of rows (one head at one frame; one track over frames), so they
 run once all rows are read, on the label matrices and keys the audit held for
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..metrics import consistency as mc
-from .consistency_notes import _stats
+from ...metrics import consistency as mc
+from .common import _stats
 
 #: views of one head at one frame needed for a consensus
 MIN_VIEWS = 3

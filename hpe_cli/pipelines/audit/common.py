@@ -1,8 +1,14 @@
-"""The notes, statistics and suspects list of ``hpe audit --consistency`` (:mod:`hpe_cli.pipelines.consistency`)."""
+"""The audit package's shared internals: the notes, statistics and suspects list of ``hpe audit --consistency``
+(:mod:`hpe_cli.pipelines.audit.consistency`), shared by its modules."""
 
 from __future__ import annotations
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from ...io.layout import arrow_to_numpy
 
 
 def _r(v):
@@ -25,7 +31,6 @@ def suspects_table(cons, batches, order, key_cols):
     ``batches``: the input again (at least ``key_cols``), in input order. The key
     columns are taken from each batch as Arrow arrays (no Python object per value).
     """
-    import pyarrow as pa
 
     idx = np.asarray(order, dtype=np.int64)
     by_row = np.argsort(idx, kind="stable")
@@ -62,8 +67,6 @@ def _key_batches(cons, reread, key_cols):
     """
     src = cons.src
     if src.kind == "parquet" and key_cols:
-        import pyarrow.parquet as pq
-
         names = set(pq.ParquetFile(src.path).schema_arrow.names)
         if set(key_cols) <= names and names == set(src.columns) - {"__line__"}:
             return pq.ParquetFile(src.path).iter_batches(65_536, columns=key_cols)
@@ -82,12 +85,8 @@ def canonical_labels(system, cols, eff, res) -> np.ndarray:
 
 def _codes(col, table: dict) -> np.ndarray:
     """Global integer codes of an Arrow column's values (strings or ints), via dictionary encoding."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     if pa.types.is_integer(col.type):
-        from ..io.layout import arrow_to_numpy
-
         return arrow_to_numpy(col).astype(np.int64)
     enc = pc.dictionary_encode(col.cast(pa.string()))
     values = enc.dictionary.to_pylist()

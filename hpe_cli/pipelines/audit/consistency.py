@@ -28,30 +28,34 @@ from __future__ import annotations
 
 import json
 from collections import Counter
-from dataclasses import dataclass
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
-from ..errors import HpeError
-from ..geometry.landmark_pose import (
+from ...datasets.mat import read_mat_dir
+from ...datasets.panoptic_calibration import read_calibration
+from ...errors import HpeError
+from ...geometry.landmark_pose import (
     FIT_REASONS,
     MIN_POINTS,
     SCHEME_SIZES,
     fit_landmark_pose,
     fit_landmark_pose_perspective,
 )
-from ..metrics import consistency as mc
-from ..metrics.sketch import EXACT_CAP, StreamQuantiles
-from .consistency_groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
-from .consistency_notes import _codes, _key_batches, _r, canonical_labels, suspects_table  # noqa: F401
-from .consistency_spill import RowSpill
+from ...io import write_table
+from ...io.layout import arrow_to_numpy, landmark_count
+from ...metrics import consistency as mc
+from ...metrics.sketch import StreamQuantiles
+from ...rotation.distances import geodesic_deg
+from .common import _codes, _key_batches, _r, canonical_labels, suspects_table  # noqa: F401
+from .groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
+from .options import MAX_GAP_FRAMES, MAX_JUMP_DEG, Settings  # noqa: F401 (re-exported)
+from .spill import RowSpill
+from .stream import GroupStream, sorted_by_sequence_frame
 
 #: a landmark fit whose residual (per inter-ocular distance) is above this does not look like a face
 MAX_RESIDUAL = 0.35
-#: default threshold of the time check, degrees per frame
-MAX_JUMP_DEG = 5.0
-#: neighbours further apart than this many frames are not compared
-MAX_GAP_FRAMES = 10
 #: landmark reason codes after the fit's own (:data:`hpe_cli.geometry.landmark_pose.FIT_REASONS`)
 LM_POOR, LM_NOT_FINITE, LM_NONE = len(FIT_REASONS), len(FIT_REASONS) + 1, len(FIT_REASONS) + 2
 LM_TEXTS = (
@@ -82,22 +86,6 @@ COLUMNS = (
 )
 
 
-@dataclass
-class Settings:
-    """Thresholds of the checks (see the module constants)."""
-
-    calibration: str | None = None
-    max_jump_deg: float = MAX_JUMP_DEG
-    max_gap: int = MAX_GAP_FRAMES
-    suspect_score: float = mc.SUSPECT_SCORE
-    worst: int = 20
-    drawn: int = 12
-    #: rows whose statistics are kept exactly; beyond, fixed-resolution histograms (flat memory)
-    exact_rows: int = EXACT_CAP
-    #: a Parquet table sorted by (sequence, frame) runs the views and time checks as its rows stream
-    stream_groups: bool = True
-
-
 def _relabel_meta(src) -> dict:
     md = getattr(src.schema, "metadata", None) or {}
     raw = md.get(b"hpe:relabel")
@@ -111,7 +99,7 @@ class ConsistencyAudit:
     """Collects the evidence batch by batch (:meth:`add`), then ranks (:meth:`finish`).
 
     Memory is flat in rows for tables without a ``frame`` column: each row's
-    numbers go to a temporary file (:mod:`hpe_cli.pipelines.consistency_spill`,
+    numbers go to a temporary file (:mod:`hpe_cli.pipelines.audit.spill`,
     61 bytes a row on disk); statistics are exact up to ``exact_cap`` rows
     (``Settings.exact_rows``, :data:`hpe_cli.metrics.sketch.EXACT_CAP`), then histograms (resolution in the
     JSON). Tables with a ``frame`` column also hold each row's label matrix and
@@ -122,13 +110,10 @@ class ConsistencyAudit:
         self.src = src
         self.s = settings if isinstance(settings, Settings) else Settings()  # True: the defaults
         cols = set(src.columns)
-        from ..io.layout import landmark_count
 
         self.n_lm = landmark_count(src.columns)
         self.mat_landmarks = None
         if self.n_lm == 0 and src.path.is_dir() and any(src.path.glob("*.mat")):
-            from ..datasets.mat import read_mat_dir
-
             t = read_mat_dir(src.path, landmarks=True)
             n = sum(1 for c in t.columns if c.startswith("lm") and c.endswith("_x") and not c.startswith("lm3d"))
             if n:
@@ -157,8 +142,6 @@ class ConsistencyAudit:
         self.expected_sketch = mc.expected_angle_sketch(self.exact_cap)
         self.stream = None
         if self.has_frame and self.s.stream_groups:
-            from .consistency_stream import GroupStream, sorted_by_sequence_frame
-
             if sorted_by_sequence_frame(src):
                 self.stream = GroupStream(self)
 
@@ -179,7 +162,6 @@ class ConsistencyAudit:
             paths = dict(zip(self.meta.get("sequences", []), self.meta["calibrations"]))
         if not paths:
             return "no calibration (give --calibration FILE)"
-        from ..datasets.panoptic_calibration import read_calibration
 
         for seq, p in paths.items():
             try:
@@ -198,7 +180,6 @@ class ConsistencyAudit:
 
     @staticmethod
     def output_types() -> dict:
-        import pyarrow as pa
 
         return {
             c: pa.bool_() if c == "suspect" else pa.string() if c == "consistency_note" else pa.float32()
@@ -230,7 +211,7 @@ class ConsistencyAudit:
         """The per-row evidence of one batch (thread-safe; None for a .mat folder without ``lines``).
 
         ``A``: the labels as canonical matrices ``(n, 3, 3)``, NaN where unusable.
-        Returns ``{"rec": records}`` (:data:`~hpe_cli.pipelines.consistency_spill.RECORD`,
+        Returns ``{"rec": records}`` (:data:`~hpe_cli.pipelines.audit.spill.RECORD`,
         ``line`` not yet set), plus the labels and keys of a table with a ``frame`` column.
         """
         if self.mat_landmarks is not None and lines is None:
@@ -248,7 +229,6 @@ class ConsistencyAudit:
                 fit = fit_landmark_pose(uv, self.scheme, reasons=False)
             else:  # calibrated cameras: corrected for the head's place in the image
                 fit = fit_landmark_pose_perspective(uv, self.scheme, K, dist, reasons=False)
-            from ..rotation.distances import geodesic_deg
 
             lm_angle = geodesic_deg(np.where(finite[:, None, None], A, np.nan), fit["A"])
             lm_res = fit["residual"]
@@ -269,8 +249,6 @@ class ConsistencyAudit:
         rec["lm_code"] = code
         part = {"rec": rec}
         if self.has_frame:
-            from ..io.layout import arrow_to_numpy
-
             part["finite"] = finite
             part["A"] = A
             part["frame"] = arrow_to_numpy(batch.column("frame")).astype(np.int64)
@@ -286,7 +264,6 @@ class ConsistencyAudit:
         """
         if not self.cams or "camera" not in batch.schema.names:
             return None, None
-        import pyarrow.compute as pc
 
         n = batch.num_rows
         cols = ["camera"] + (["sequence"] if None not in self.cams and "sequence" in batch.schema.names else [])
@@ -314,7 +291,6 @@ class ConsistencyAudit:
     def _landmarks(self, batch, lines) -> np.ndarray:
         if self.mat_landmarks is not None:
             return self.mat_landmarks[np.asarray(lines, dtype=np.int64) - 1]
-        from ..io.layout import arrow_to_numpy
 
         n = batch.num_rows
         cols = [arrow_to_numpy(batch.column(f"lm{i}_{a}"), np.float64) for i in range(self.n_lm) for a in "xy"]
@@ -338,19 +314,7 @@ class ConsistencyAudit:
         self.expected_sketch = None
         N = self.spill.n
         self.N = N
-        out = {}
-        self.group_res = None
-        if self.stream is not None:
-            out["views"], out["time"] = self.stream.finish()
-            self.group_res = self.stream
-        elif self.has_frame and N:
-            # one key at a time, each part's array released once concatenated: the rows are not held twice
-            P = {k: np.concatenate([p.pop(k) for p in self.parts]) for k in ["A", "finite", "frame", *self.track_cols]}
-            self.parts = []
-            view_angle, view_code, out["views"] = views(self, P, P["finite"])
-            jump, time_code, out["time"] = time_check(self, P, P["finite"])
-            del P
-            self.group_res = (view_angle, view_code, jump, time_code)
+        out = self._group_checks()
         lm_stats = StreamQuantiles(180.0, 0.001, self.exact_cap)
         res_stats = StreamQuantiles(MAX_RESIDUAL, 1e-5, self.exact_cap)
         self.sketches = {  # for the page's histograms
@@ -428,6 +392,23 @@ class ConsistencyAudit:
         if "time" not in report:
             report["time"] = {"checked": 0, "reason": "no frame column"}
         return report
+
+    def _group_checks(self) -> dict:
+        """The views and time checks over the whole table (or the streamed groups): their JSON sections."""
+        out = {}
+        self.group_res = None
+        if self.stream is not None:
+            out["views"], out["time"] = self.stream.finish()
+            self.group_res = self.stream
+        elif self.has_frame and self.N:
+            # one key at a time, each part's array released once concatenated: the rows are not held twice
+            P = {k: np.concatenate([p.pop(k) for p in self.parts]) for k in ["A", "finite", "frame", *self.track_cols]}
+            self.parts = []
+            view_angle, view_code, out["views"] = views(self, P, P["finite"])
+            jump, time_code, out["time"] = time_check(self, P, P["finite"])
+            del P
+            self.group_res = (view_angle, view_code, jump, time_code)
+        return out
 
     def _score(self, rec, off: int) -> dict:
         """Scores of the spilled rows ``rec`` (global rows ``off ..``): ratios, score, suspect, codes."""
@@ -567,13 +548,11 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None
     top = order[: cons.s.worst]
     report["worst"] = cons.describe_rows(_key_batches(cons, reread, key_cols), top, key_cols)
     if suspects:
-        from ..io import write_table
-
         table = suspects_table(cons, _key_batches(cons, reread, key_cols), order, key_cols)
         write_table(table, suspects, overwrite=overwrite)
         report["suspects_file"] = str(suspects)
     if plots:
-        from .draw.consistency import FOLDER, consistency_page
+        from ..draw.consistency import FOLDER, consistency_page
 
         pics = consistency_page(cons, report, reread(), top[: cons.s.drawn], plots, images, overwrite)
         report["page"] = f"{plots}/{FOLDER}/index.html"

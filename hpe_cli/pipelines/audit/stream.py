@@ -7,20 +7,25 @@ and a row is final once a frame more than ``max_gap`` after it was read). The
 results go, in input order, to a temporary file (:class:`GroupSpill`); the
 statistics to :class:`hpe_cli.metrics.sketch.StreamQuantiles`, the cameras'
 median offsets to one per camera and axis. The results are those of
-:mod:`hpe_cli.pipelines.consistency_groups` on the whole table (tested).
+:mod:`hpe_cli.pipelines.audit.groups` on the whole table (tested).
 
 :func:`sorted_by_sequence_frame` tells whether a Parquet table qualifies (one
 pass over its ``sequence`` and ``frame`` columns); other tables use
-:mod:`~hpe_cli.pipelines.consistency_groups` on the held rows.
+:mod:`~hpe_cli.pipelines.audit.groups` on the held rows.
 """
 
 from __future__ import annotations
 
-import numpy as np
+import tempfile
 
-from ..metrics import consistency as mc
-from ..metrics.sketch import StreamQuantiles
-from .consistency_groups import MIN_VIEWS, camera_rotations, view_groups
+import numpy as np
+import pyarrow.parquet as pq
+
+from ...io.layout import arrow_to_numpy
+from ...metrics import consistency as mc
+from ...metrics.sketch import StreamQuantiles
+from .common import _codes
+from .groups import MIN_VIEWS, camera_rotations, view_groups
 
 RESULT = np.dtype([("view", "<f8"), ("vcode", "u1"), ("jump", "<f8"), ("tcode", "u1")])
 
@@ -30,16 +35,12 @@ def sorted_by_sequence_frame(src) -> bool:
     within a run (the whole table when it has no ``sequence`` column)."""
     if src.kind != "parquet" or "frame" not in src.columns:
         return False
-    import pyarrow.parquet as pq
-
-    from ..io.layout import arrow_to_numpy
 
     cols = ["frame"] + (["sequence"] if "sequence" in src.columns else [])
     pf = pq.ParquetFile(src.path)
     if not set(cols) <= set(pf.schema_arrow.names):
         return False
     table, seen, last = {}, set(), None
-    from .consistency_notes import _codes
 
     for b in pf.iter_batches(1 << 18, columns=cols):
         f = arrow_to_numpy(b.column("frame")).astype(np.int64)
@@ -64,7 +65,6 @@ class GroupSpill:
     """Per-row results of the streamed checks (:data:`RESULT`), in input order, in an unnamed temporary file."""
 
     def __init__(self):
-        import tempfile
 
         self.f = tempfile.TemporaryFile(prefix="hpe_consistency_groups_")
         self.n = 0
@@ -195,7 +195,7 @@ class GroupStream:
 
     # ----------------------------------------------------------------- summaries
     def finish(self):
-        """Flush; return ``(views summary, time summary)`` as :mod:`~hpe_cli.pipelines.consistency_groups`."""
+        """Flush; return ``(views summary, time summary)`` as :mod:`~hpe_cli.pipelines.audit.groups`."""
         if self.pend is not None:
             self._step(final=True)
         self.pend = None

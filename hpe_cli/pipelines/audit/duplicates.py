@@ -1,0 +1,219 @@
+"""Duplicate rows of an audit: one 64-bit hash a row (label bits + key columns), found after the stream.
+
+Equal rows get equal hashes: label values enter as their exact bits (-0.0 = 0.0, every NaN one NaN), text
+columns as a 64-bit hash of their bytes taken from the Arrow buffers (no Python strings). The hashes are the
+audit's only per-row state (8 bytes a row).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+#: columns that identify a sample, used (when present) in the ``duplicates`` key
+ID_COLUMNS = (
+    "file",
+    "image",
+    "image_id",
+    "id",
+    "path",
+    "person_id",
+    "face_id",
+    "frame",
+    "camera",
+    "bbox_x",
+    "bbox_y",
+    "bbox_w",
+    "bbox_h",
+)
+_SEED = 0x9E3779B97F4A7C15
+_STR_MULT = np.uint64(0x100000001B3)  # FNV-style odd multiplier for the polynomial string hash
+_NULL_WORD = np.uint64(0x6A09E667F3BCC909)
+
+
+# ------------------------------------------------------------------------------------------------- hashing
+def fmix(x):
+    """SplitMix64 finaliser: a bijective, well-mixing map of uint64 arrays (wraps on overflow)."""
+    x = x ^ (x >> np.uint64(30))
+    x = x * np.uint64(0xBF58476D1CE4E5B9)
+    x = x ^ (x >> np.uint64(27))
+    x = x * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+def float_words(values):
+    """float64 values as exact uint64 words: -0.0 -> 0.0 and every NaN -> one NaN, so equal values match."""
+    v = np.asarray(values, dtype=np.float64)
+    w = np.ascontiguousarray(v + 0.0)  # a new array: -0.0 + 0.0 is 0.0
+    nan = np.isnan(v)
+    if nan.any():
+        w[nan] = np.nan
+    return w.view(np.uint64)
+
+
+_POW = None
+
+
+def _powers(n):
+    """``_STR_MULT ** k mod 2**64`` for k < n (cached, grown on demand)."""
+    global _POW
+    if _POW is None or len(_POW) < n:
+        m = max(n, 256, 2 * (0 if _POW is None else len(_POW)))
+        p = np.full(m, _STR_MULT, dtype=np.uint64)
+        p[0] = 1
+        with np.errstate(over="ignore"):
+            _POW = np.cumprod(p, dtype=np.uint64)
+    return _POW
+
+
+def string_hashes(col) -> np.ndarray:
+    """One 64-bit hash per value of an Arrow string/binary array, from its buffers (no Python strings).
+
+    A polynomial hash of the bytes modulo 2**64 mixed with the length, then
+    SplitMix64; nulls get a fixed word. Processed in slices of about 4 MB of
+    text so temporaries stay small.
+    """
+    if isinstance(col, pa.ChunkedArray):
+        col = col.combine_chunks()
+    if pa.types.is_string(col.type) or pa.types.is_binary(col.type):
+        off_type = np.int32
+    else:
+        col = col.cast(pa.large_string()) if not pa.types.is_large_binary(col.type) else col
+        off_type = np.int64
+    n = len(col)
+    out = np.empty(n, dtype=np.uint64)
+    if n == 0:
+        return out
+    bufs = col.buffers()
+    offsets = np.frombuffer(bufs[1], dtype=off_type, count=n + 1, offset=col.offset * np.dtype(off_type).itemsize)
+    data = np.frombuffer(bufs[2], dtype=np.uint8) if bufs[2] is not None else np.zeros(0, dtype=np.uint8)
+    lengths = np.diff(offsets).astype(np.int64)
+    step = max(1, int((4 << 20) / max(1.0, float(lengths.mean()))))
+    with np.errstate(over="ignore"):
+        for lo in range(0, n, step):
+            hi = min(n, lo + step)
+            s0, s1 = int(offsets[lo]), int(offsets[hi])
+            ln = lengths[lo:hi]
+            h = fmix(ln.astype(np.uint64) ^ np.uint64(_SEED))
+            if s1 > s0:
+                b = data[s0:s1].astype(np.uint64) + np.uint64(1)
+                rel = np.repeat(offsets[lo:hi].astype(np.int64) - s0, ln)
+                pos = np.arange(s1 - s0, dtype=np.int64) - rel
+                b *= _powers(int(ln.max()))[pos]
+                starts = offsets[lo:hi].astype(np.int64) - s0
+                nz = ln > 0
+                sums = np.zeros(hi - lo, dtype=np.uint64)
+                sums[nz] = np.add.reduceat(b, starts[nz])
+                h = fmix(h ^ sums)
+            out[lo:hi] = h
+    if col.null_count:
+        out[np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)] = _NULL_WORD
+    return out
+
+
+def key_words(batch, name):
+    """Column ``name`` of ``batch`` as one uint64 word a row: numbers as their float64 bits, the rest hashed."""
+
+    col = batch.column(batch.schema.get_field_index(name))
+    t = col.type
+    if pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_boolean(t):
+        return float_words(pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False))
+    if not (
+        pa.types.is_string(t) or pa.types.is_large_string(t) or pa.types.is_binary(t) or pa.types.is_large_binary(t)
+    ):
+        col = pc.cast(col, pa.string())
+    return string_hashes(col)
+
+
+def key_hashes(label_cols, batch, key_cols) -> np.ndarray:
+    """One 64-bit hash per row of (label values, key columns): equal rows get equal hashes.
+
+    Label values enter as their exact bits (-0.0 = 0.0, all NaNs equal); text
+    columns as a 64-bit hash of their bytes.
+    """
+    n = len(label_cols[0])
+    h = np.full(n, _SEED, dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        for w in [float_words(c) for c in label_cols] + [key_words(batch, c) for c in key_cols]:
+            h = fmix(h ^ w)
+    return h
+
+
+class Duplicates:
+    """Duplicates from one 64-bit hash per row (8 bytes a row; the only per-row state of an audit)."""
+
+    def __init__(self):
+        self.parts = []
+        self.batch_sizes = []
+        self.lines = []  # (row index, line) where the line numbering jumps (CSV rejects, blank lines)
+        self.n = 0
+        self._prev_line = None
+
+    def add(self, h, lines):
+        self.parts.append(h)
+        self.batch_sizes.append(len(h))
+        if len(lines):
+            jumps = np.flatnonzero(np.diff(lines) != 1) + 1
+            if self._prev_line is None or lines[0] != self._prev_line + 1:
+                self.lines.append((self.n, int(lines[0])))
+            for j in jumps:
+                self.lines.append((self.n + int(j), int(lines[j])))
+            self._prev_line = int(lines[-1])
+        self.n += len(h)
+
+    def finish(self):
+        """Compute the duplicate rows; returns their count."""
+        H = np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
+        self.parts = []
+        self.H = H
+        self.dup_idx = np.zeros(0, dtype=np.int64)
+        self.first_idx = np.zeros(0, dtype=np.int64)
+        if len(H) < 2:
+            return 0
+        S = np.sort(H)
+        same = S[1:] == S[:-1]
+        if not same.any():
+            return 0
+        dupvals = np.unique(S[1:][same])
+        del S, same
+        idx = []
+        for lo in range(0, len(H), 1 << 20):
+            chunk = H[lo : lo + (1 << 20)]
+            pos = np.minimum(np.searchsorted(dupvals, chunk), len(dupvals) - 1)
+            idx.append(np.flatnonzero(dupvals[pos] == chunk) + lo)
+        idx = np.concatenate(idx)
+        vals = H[idx]
+        uniq, first = np.unique(vals, return_index=True)
+        first_of = idx[first[np.searchsorted(uniq, vals)]]
+        is_dup = first_of != idx
+        self.dup_idx = idx[is_dup]
+        self.first_idx = first_of[is_dup]
+        return int(is_dup.sum())
+
+    def line_of(self, i):
+        i = np.asarray(i, dtype=np.int64)
+        if not self.lines:
+            return i + 2
+        starts = np.array([s for s, _ in self.lines], dtype=np.int64)
+        first = np.array([ln for _, ln in self.lines], dtype=np.int64)
+        k = np.searchsorted(starts, i, side="right") - 1
+        return first[k] + (i - starts[k])
+
+    def mask(self, lo, hi):
+        a, b = np.searchsorted(self.dup_idx, [lo, hi])
+        m = np.zeros(hi - lo, dtype=bool)
+        m[self.dup_idx[a:b] - lo] = True
+        return m
+
+
+def unpack_rows(flag_bits, batch_sizes, idx) -> np.ndarray:
+    """The stored flag bit of every global row index in ``idx`` (sorted)."""
+    out = np.zeros(len(idx), dtype=bool)
+    starts = np.concatenate([[0], np.cumsum(batch_sizes)]).astype(np.int64)
+    k = np.searchsorted(starts, idx, side="right") - 1
+    for b in np.unique(k):
+        sel = k == b
+        bits = np.unpackbits(flag_bits[b], count=int(batch_sizes[b])).astype(bool)
+        out[sel] = bits[idx[sel] - starts[b]]
+    return out
