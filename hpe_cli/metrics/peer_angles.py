@@ -169,8 +169,21 @@ def opal23_near_deltas(ann, pred) -> np.ndarray:
     return opal23_near(ann, pred)[0]
 
 
+#: rows of the Karcher mean's pieces: every piece's sums are taken alone and added in order, so the mean
+#: does not depend on how many threads compute them
+KARCHER_PIECE = 1 << 16
+
+
+def _displacement_sum(q, left) -> np.ndarray:
+    """Sum over the rows of ``log(q_mean^-1 q_i)`` (radians, 3,) for quaternions ``q`` (4, m) (columns x, y, z,
+    w), ``left`` the 4x4 matrix of the left product by ``q_mean^-1``."""
+    r = [((left[i, 0] * q[0] + left[i, 1] * q[1]) + left[i, 2] * q[2]) + left[i, 3] * q[3] for i in range(4)]
+    v = sc.rotvec_from_quat(tuple(r))
+    return np.array([v[:, k].sum() for k in range(3)])
+
+
 def opal23_karcher(
-    deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20, start: int = 0
+    deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20, start: int = 0, mapper=map
 ) -> np.ndarray:
     """opal23's ``_compute_mean_rotation`` (test/evaluator.py:111-126) over ``deltas`` (any array-like, e.g. a memmap).
 
@@ -183,10 +196,10 @@ def opal23_karcher(
     row), ``mean <- mean @ exp(mean displacement)`` until the mean
     displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the sums run
     chunk by chunk, so a spill of any length read piece by piece (anything with
-    ``len``, ``ndim`` and slicing) works.
+    ``len``, ``ndim`` and slicing) works. ``mapper`` (``map`` by default, e.g. a thread pool's ``map``,
+    which must yield in order) computes the quaternion pieces' sums (:data:`KARCHER_PIECE` rows each), added
+    in order: the same mean whatever the pool.
     """
-    from scipy.spatial.transform import Rotation
-
     n = len(deltas)
     if not n:
         return np.eye(3)
@@ -202,18 +215,32 @@ def opal23_karcher(
             x, y, z = -x, -y, -z
             left = np.array([[w, -z, y, x], [z, w, -x, y], [-y, x, w, z], [-x, -y, -z, w]])
         for a in range(0, n, chunk):
-            if quats:
-                for b in range(a, min(a + chunk, n), 1 << 16):  # cache-sized pieces of the chunk
-                    r = np.asarray(deltas[b : min(b + (1 << 16), a + chunk, n)], dtype=np.float64) @ left.T
-                    v = sc.rotvec_from_quat((r[:, 0], r[:, 1], r[:, 2], r[:, 3]))
-                    total += [v[:, k].sum() for k in range(3)]
+            if quats:  # columns x, y, z, w of the chunk, then its cache-sized pieces
+                q = np.ascontiguousarray(np.asarray(deltas[a : min(a + chunk, n)], dtype=np.float64).T)
+                pieces = (q[:, b : b + KARCHER_PIECE] for b in range(0, q.shape[1], KARCHER_PIECE))
+                for part in mapper(lambda piece: _displacement_sum(piece, left), pieces):
+                    total += part
             else:
                 total += _log(np.matmul(mean.T, np.asarray(deltas[a : a + chunk]))).sum(axis=0)
         d = total / n
         if np.linalg.norm(d) < tol:
             break
-        mean = mean @ Rotation.from_rotvec(d).as_matrix()
+        mean = mean @ matrix_from_rotvec(d)
     return mean
+
+
+def matrix_from_rotvec(v) -> np.ndarray:
+    """SciPy ``Rotation.from_rotvec(v).as_matrix()`` of one rotation vector ``v`` (3,), radians: its arithmetic
+    (``_rotation_xp.py`` ``from_rotvec``: the half-angle's Taylor series below 1e-3 rad), no SciPy import."""
+    v = np.asarray(v, dtype=np.float64)
+    angle = float(np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]))
+    if angle <= 1e-3:
+        a2 = angle * angle
+        scale = 0.5 - a2 / 48 + a2 * a2 / 3840
+    else:
+        scale = np.sin(angle / 2) / angle
+    q = tuple(np.array([c]) for c in (v[0] * scale, v[1] * scale, v[2] * scale, np.cos(angle / 2)))
+    return stack3(sc.matrix_from_quat(q))[0]
 
 
 def opal23_align(ann, pred, tol: float = 1e-4, max_iter: int = 100_000, mean=None):
