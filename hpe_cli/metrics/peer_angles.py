@@ -62,12 +62,12 @@ def min_wrapped(pred, gt, with_180: bool) -> np.ndarray:
     (chuzcjoe/TriNet@d2689de computeMAE.py:168-170).
     """
     d = np.asarray(pred, dtype=np.float64) - np.asarray(gt, dtype=np.float64)
-    terms = [np.abs(d), np.abs(d + 360.0), np.abs(d - 360.0)]
-    if with_180:
-        terms += [np.abs(d + 180.0), np.abs(d - 180.0)]
-    out = terms[0]
-    for t in terms[1:]:
-        out = np.minimum(out, t)
+    out = np.abs(d)
+    t = np.empty_like(d)
+    for shift in (360.0, -360.0, 180.0, -180.0) if with_180 else (360.0, -360.0):  # in place: no temporaries
+        np.add(d, shift, out=t)
+        np.abs(t, out=t)
+        np.minimum(out, t, out=out)
     return out
 
 
@@ -112,17 +112,22 @@ def opal23_mae(ann, pred, ann_euler=None, pred_euler=None) -> np.ndarray:
 
     a = opal23_euler(ann) if ann_euler is None else ann_euler
     p = opal23_euler(pred) if pred_euler is None else pred_euler
-    a, p = a[:, [1, 0, 2]], p[:, [1, 0, 2]]
-    sign = np.sign(p)
-    w = np.stack([180 - p[:, 0], p[:, 1] - sign[:, 1] * 180, p[:, 2] - sign[:, 2] * 180], axis=1)
-    w[w > 180] -= 360
-    w[w < -180] += 360
-    e = np.abs(a - p)
-    ew = np.abs(a - w)
-    use = ew.mean(axis=-1) < e.mean(axis=-1)
-    e[use] = ew[use]
-    e = np.minimum(e, 360 - e)
-    return e[:, [1, 0, 2]]
+    # column by column in the peer's (yaw, pitch, roll) order: its row means are ((yaw + pitch) + roll) / 3
+    order = (1, 0, 2)
+    pc = [p[:, k] for k in order]
+    ac = [a[:, k] for k in order]
+    w = [180 - pc[0], pc[1] - np.sign(pc[1]) * 180, pc[2] - np.sign(pc[2]) * 180]
+    for k in range(3):
+        w[k] = np.where(w[k] > 180, w[k] - 360, w[k])
+        w[k] = np.where(w[k] < -180, w[k] + 360, w[k])
+    e = [np.abs(ac[k] - pc[k]) for k in range(3)]
+    ew = [np.abs(ac[k] - w[k]) for k in range(3)]
+    use = ((ew[0] + ew[1]) + ew[2]) / 3 < ((e[0] + e[1]) + e[2]) / 3
+    out = np.empty((len(use), 3))
+    for k, col in enumerate(order):
+        x = np.where(use, ew[k], e[k])
+        np.minimum(x, 360 - x, out=out[:, col])
+    return out
 
 
 def opal23_geodesic(ann, pred) -> np.ndarray:

@@ -142,6 +142,12 @@ class PosePair:
             self._cache["geodesic"] = re_.geodesic_deg(self.P, self.G)
         return self._cache["geodesic"]
 
+    def frobenius(self) -> np.ndarray:
+        """:func:`hpe_cli.metrics.rotation_errors.frobenius` of ``P`` and ``G`` (computed once)."""
+        if "frobenius" not in self._cache:
+            self._cache["frobenius"] = re_.frobenius(self.P, self.G)
+        return self._cache["frobenius"]
+
     def array(self, system, side: str) -> np.ndarray:
         """Stored matrices of ``side`` in ``system`` as ``(N, 3, 3)``."""
         return pa_.stack3(self.stored(system, side))

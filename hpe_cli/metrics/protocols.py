@@ -314,7 +314,7 @@ def dad3dheads(pair: PosePair) -> ProtocolRows:
     (``DADEvaluator.pose_error``). The norm is the same in every frame.
     """
     nan = np.full((pair.n, 3), np.nan)
-    return ProtocolRows(nan, np.ones(pair.n, dtype=bool), scalars={"frobenius": re_.frobenius(pair.P, pair.G)})
+    return ProtocolRows(nan, np.ones(pair.n, dtype=bool), scalars={"frobenius": pair.frobenius()})
 
 
 _FLIPS = "the +-180 terms forgive a prediction whose angle is off by 180 degrees, so flipped answers are hidden"

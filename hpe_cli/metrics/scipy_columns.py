@@ -190,26 +190,32 @@ def euler_from_quat(q, seq: str, degrees: bool = False) -> np.ndarray:
         a, b, c, d = qw - q[j], q[i] + q[k] * sign, q[j] + qw, q[k] * sign - q[i]
     half_sum = np.arctan2(b, a)
     half_diff = np.arctan2(d, c)
-    mid = 2 * np.arctan2(np.hypot(c, d), np.hypot(a, b))
-    lock = (np.abs(mid) <= _EPS) | (np.abs(mid - np.pi) <= _EPS)
+    mid = np.arctan2(np.hypot(c, d), np.hypot(a, b))
+    mid *= 2  # in [0, pi] (or NaN): |mid| is mid, |mid - pi| is pi - mid, and no wrap is needed
+    lock = (mid <= _EPS) | (mid - np.pi >= -_EPS)
     first = half_sum - half_diff
     third = half_sum + half_diff
     if lock.any():  # the angle that is not set is 0; the other takes the whole turn (SciPy's cases 1 and 2)
-        case1 = np.abs(mid) <= _EPS
+        case1 = mid <= _EPS
         turn = np.where(case1, 2 * half_sum, 2 * half_diff * (1 if intrinsic else -1))
         if intrinsic:  # (third, mid, first) in seq order: the first angle of seq takes the turn
             first, third = np.where(lock, 0.0, first), np.where(lock, turn, third)
         else:
             first, third = np.where(lock, turn, first), np.where(lock, 0.0, third)
     if not symmetric:
-        third = third * sign
-        mid = mid - np.pi / 2
+        third *= sign
+        mid -= np.pi / 2
     out = np.empty((len(mid), 3))
     two_pi = 2 * np.pi
     for col, v in zip((2, 0) if intrinsic else (0, 2), (first, third)):  # into [-pi, pi], +pi kept (Cython)
-        out[:, col] = np.where(v < -np.pi, v + two_pi, np.where(v > np.pi, v - two_pi, v))
-    out[:, 1] = np.where(mid < -np.pi, mid + two_pi, np.where(mid > np.pi, mid - two_pi, mid))
-    return out * (180.0 / np.pi) if degrees else out
+        out[:, col] = v
+        low, high = np.flatnonzero(v < -np.pi), np.flatnonzero(v > np.pi)
+        out[low, col] = v[low] + two_pi
+        out[high, col] = v[high] - two_pi
+    out[:, 1] = mid
+    if degrees:
+        out *= 180.0 / np.pi
+    return out
 
 
 def euler_from_matrix(R, seq: str, degrees: bool = False, assume_valid: bool = False) -> np.ndarray:
