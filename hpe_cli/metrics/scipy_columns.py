@@ -42,12 +42,19 @@ def _orthogonal(R):
     ``U V^T`` of their SVD, as SciPy does (``from_matrix``, ``_rotation_xp.py``:48-83)."""
     n = int(np.broadcast(*[x for row in R for x in row]).shape[0])
     R = [[np.broadcast_to(np.asarray(x, dtype=np.float64), (n,)) for x in row] for row in R]
-    off = np.zeros(n, dtype=bool)
+    ok = np.ones(n, dtype=bool)
+    g, t, b = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
     for i in range(3):
-        for j in range(i, 3):
-            g = R[i][0] * R[j][0] + R[i][1] * R[j][1] + R[i][2] * R[j][2]
+        for j in range(i, 3):  # in place: g = R[i][0] R[j][0] + R[i][1] R[j][1] + R[i][2] R[j][2]
+            np.multiply(R[i][0], R[j][0], out=g)
+            g += np.multiply(R[i][1], R[j][1], out=t)
+            g += np.multiply(R[i][2], R[j][2], out=t)
             e = 1.0 if i == j else 0.0
-            off |= ~(np.abs(g - e) <= 1e-12 + 1e-5 * e)  # np.isclose(g, e, atol=1e-12), NaN counts as off
+            if e:
+                g -= e
+            np.abs(g, out=g)
+            ok &= np.less_equal(g, 1e-12 + 1e-5 * e, out=b)  # np.isclose(g, e, atol=1e-12); NaN is not ok
+    off = ~ok
     if not off.any():
         return R
     idx = np.flatnonzero(off)
@@ -90,15 +97,18 @@ def quat_from_matrix(R, assume_valid: bool = False) -> tuple:
     c0 = (r00 >= r11) & (r00 >= r22) & (r00 >= tr)
     c1 = ~c0 & (r11 >= r22) & (r11 >= tr)
     c2 = ~(c0 | c1) & (r22 >= tr)
-    s01, s02, s12 = r10 + r01, r20 + r02, r21 + r12
-    d0, d1, d2 = r21 - r12, r02 - r20, r10 - r01
-    if not (c0.any() or c1.any() or c2.any()):  # every row within 90 degrees of the identity: one case
-        x, y, z, w = d0, d1, d2, 1 + tr
-    else:
-        x = np.where(c0, 1 - tr + 2 * r00, np.where(c1, s01, np.where(c2, s02, d0)))
-        y = np.where(c0, s01, np.where(c1, 1 - tr + 2 * r11, np.where(c2, s12, d1)))
-        z = np.where(c0, s02, np.where(c1, s12, np.where(c2, 1 - tr + 2 * r22, d2)))
-        w = np.where(c0, d0, np.where(c1, d1, np.where(c2, d2, 1 + tr)))
+    x, y, z, w = r21 - r12, r02 - r20, r10 - r01, 1 + tr  # the trace's case, then the rows of the others
+    for case, k in ((c0, 0), (c1, 1), (c2, 2)):
+        idx = np.flatnonzero(case)
+        if not len(idx):
+            continue
+        R_ = [[np.broadcast_to(v, tr.shape)[idx] for v in row] for row in R]
+        t = tr[idx]
+        d = (R_[2][1] - R_[1][2], R_[0][2] - R_[2][0], R_[1][0] - R_[0][1])
+        s = {(0, 1): R_[1][0] + R_[0][1], (0, 2): R_[2][0] + R_[0][2], (1, 2): R_[2][1] + R_[1][2]}
+        for m, col in enumerate((x, y, z)):
+            col[idx] = 1 - t + 2 * R_[k][k] if m == k else s[(min(m, k), max(m, k))]
+        w[idx] = d[k]
     norm = np.sqrt(x * x + y * y + z * z + w * w)
     return x / norm, y / norm, z / norm, w / norm
 
