@@ -1,7 +1,7 @@
 """`hpe evaluate` at scale: time and peak RSS beside DuckDB and the floor, in the same run.
 
     python benchmarks/evaluate.py [--rows 5000000] [--shuffled] [--protocol NAME ...] [--repeat 3]
-        [--threads N] [--with-rows] [--join] [--each-protocol]
+        [--threads N] [--with-rows] [--join] [--each-protocol] [--before DIR]
 
 Two Parquet tables of N pairs (string key 'image', pitch/yaw/roll; GT in
 300w_lp, predictions in 6drepnet, the same rotation turned by about 5 degrees:
@@ -225,6 +225,13 @@ def main():
         help="one hpe job per protocol (every registered one, or those given with --protocol) and one with all "
         "of them: a per-protocol table beside DuckDB",
     )
+    ap.add_argument(
+        "--before",
+        metavar="DIR",
+        default=None,
+        help="also run every hpe job on the hpe_cli package found in DIR (e.g. an earlier commit's `git archive`), "
+        "in the same rounds: before and after side by side",
+    )
     args = ap.parse_args()
     n = args.rows
     protocols = args.protocol or ["hopenet"]
@@ -237,6 +244,7 @@ def main():
     else:
         hpe_jobs = {"hpe": protocols}
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    env_before = {**os.environ, "PYTHONPATH": str(args.before or ROOT)}
     try:
         import duckdb  # noqa: F401
 
@@ -271,11 +279,13 @@ def main():
 
         for k, ps in hpe_jobs.items():
             jobs[k] = (_hpe_cmd(folder, ps, args.threads, args.with_rows), hpe_parse)
+            if args.before:
+                jobs[f"{k} (before)"] = jobs[k]
         times = {k: [] for k in jobs}
         out: dict = {k: [] for k in jobs}
         for _ in range(args.repeat):
             for k, (a, parse) in jobs.items():
-                t, o = _child(a, env, parse)
+                t, o = _child(a, env_before if k.endswith("(before)") else env, parse)
                 times[k].append(t)
                 out[k].append(o)
         rss = {k: [int(o[3]) for o in v] for k, v in out.items()}
@@ -292,6 +302,10 @@ def main():
         for k, ps in hpe_jobs.items():
             label = f"hpe evaluate{' -o' if args.with_rows else ''} --protocol {','.join(ps)}"
             _summary(label, times[k], rss[k], n, ref, geo[k])
+            if args.before:
+                _summary(
+                    "  the same, before", times[f"{k} (before)"], rss[f"{k} (before)"], n, ref, geo[f"{k} (before)"]
+                )
 
 
 if __name__ == "__main__":
