@@ -285,13 +285,19 @@ def column_acos_deg(P, G, float32: bool = False) -> np.ndarray:
     0.02 degrees per row, which moves the mean by 1e-4 degrees).
     """
     dt = np.float32 if float32 else np.float64
-    out = []
+    n = int(np.broadcast(*[x for row in P for x in row], *[x for row in G for x in row]).shape[0])
+    out = np.empty((n, 3))
     for j in range(3):
-        p = [np.asarray(P[i][j], dtype=dt) for i in range(3)]
-        g = [np.asarray(G[i][j], dtype=dt) for i in range(3)]
-        dot = (g[0] * p[0] + g[1] * p[1]) + g[2] * p[2]
-        out.append(np.degrees(np.arccos(np.clip(dot, -1.0, 1.0))).astype(np.float64))
-    return np.stack(np.broadcast_arrays(*out), -1)
+        p = [np.broadcast_to(np.asarray(P[i][j], dtype=dt), (n,)) for i in range(3)]
+        g = [np.broadcast_to(np.asarray(G[i][j], dtype=dt), (n,)) for i in range(3)]
+        dot = g[0] * p[0]
+        t = g[1] * p[1]
+        dot += t
+        dot += np.multiply(g[2], p[2], out=t)  # (g0 p0 + g1 p1) + g2 p2, in place
+        np.clip(dot, -1.0, 1.0, out=dot)
+        np.arccos(dot, out=dot)
+        out[:, j] = np.degrees(dot, out=dot)  # float32 -> float64 on the copy, as astype does
+    return out
 
 
 def opentrack_euler(T) -> np.ndarray:
@@ -312,6 +318,12 @@ def opentrack_errors(e1, e2):
     which is NaN where rounding puts the argument above 1. Returns the clipped
     errors (degrees) and the mask of rows the peer turns into NaN.
     """
-    dot = np.cos(e1) * np.cos(e2) + np.sin(e1) * np.sin(e2)
-    peer_nan = (np.abs(dot) > 1.0).any(axis=-1)
-    return np.degrees(np.arccos(np.clip(dot, -1.0, 1.0))), peer_nan
+    dot = np.cos(e1)
+    dot *= np.cos(e2)
+    t = np.sin(e1)
+    t *= np.sin(e2)
+    dot += t  # cos a cos b + sin a sin b, in place
+    peer_nan = (np.abs(dot, out=t) > 1.0).any(axis=-1)
+    np.clip(dot, -1.0, 1.0, out=dot)
+    np.arccos(dot, out=dot)
+    return np.degrees(dot, out=dot), peer_nan
