@@ -168,7 +168,11 @@ def _child(args, env, parse):
     """``((wall seconds, CPU seconds), parsed output)`` of one child process (CPU: user + system, all threads)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
-    r = subprocess.run([sys.executable, "-c", *args], check=True, capture_output=True, text=True, env=env)
+    # from the temp folder: ``python -c`` puts the working folder first on sys.path, so run from the checkout
+    # every child would import that checkout's hpe_cli whatever PYTHONPATH says (--before)
+    r = subprocess.run(
+        [sys.executable, "-c", *args], check=True, capture_output=True, text=True, env=env, cwd=tempfile.gettempdir()
+    )
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
