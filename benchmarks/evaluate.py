@@ -164,15 +164,13 @@ ACERO = textwrap.dedent("""
 """)
 
 
-def _child(args, env, parse):
+def _child(args, env, parse, cwd):
     """``((wall seconds, CPU seconds), parsed output)`` of one child process (CPU: user + system, all threads)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
-    # from the temp folder: ``python -c`` puts the working folder first on sys.path, so run from the checkout
+    # from the run's temp folder: ``python -c`` puts the working folder first on sys.path, so run from the checkout
     # every child would import that checkout's hpe_cli whatever PYTHONPATH says (--before)
-    r = subprocess.run(
-        [sys.executable, "-c", *args], check=True, capture_output=True, text=True, env=env, cwd=tempfile.gettempdir()
-    )
+    r = subprocess.run([sys.executable, "-c", *args], check=True, capture_output=True, text=True, env=env, cwd=cwd)
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -289,7 +287,7 @@ def main():
         out: dict = {k: [] for k in jobs}
         for _ in range(args.repeat):
             for k, (a, parse) in jobs.items():
-                t, o = _child(a, env_before if k.endswith("(before)") else env, parse)
+                t, o = _child(a, env_before if k.endswith("(before)") else env, parse, folder)
                 times[k].append(t)
                 out[k].append(o)
         rss = {k: [int(o[3]) for o in v] for k, v in out.items()}
