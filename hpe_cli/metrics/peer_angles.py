@@ -169,6 +169,13 @@ def opal23_near_quats(ann, pred):
     return np.stack([c[near] for c in q], -1), near
 
 
+def opal23_near_mask(ann, pred) -> np.ndarray:
+    """The mask of :func:`opal23_near_quats` alone (rows within 90 degrees of the identity), without gathering
+    their quaternions: what a chunk needs once the mean is known."""
+    q = sc.quat_from_matrix(_times_transpose(sc.nested(pred), sc.nested(ann)), assume_valid=True)
+    return sc.quat_angle(q) < np.pi / 2
+
+
 def opal23_near_deltas(ann, pred) -> np.ndarray:
     """``P_i A_i^T`` of the rows within 90 degrees of the identity: what opal23's mean is taken over."""
     return opal23_near(ann, pred)[0]

@@ -238,10 +238,12 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
     pairs first and passes it in ``pair.context["opal23_mean"]``.
     """
     P, G, rx = _opal23_mats(pair)
-    deltas, near = pa_.opal23_near_quats(G, P)
     mean = pair.context.get("opal23_mean")
     if mean is None:
+        deltas, near = pa_.opal23_near_quats(G, P)
         mean = pa_.opal23_karcher(deltas)
+    else:  # the mean of every chunk is known: only the rows left out of it are counted here
+        near = pa_.opal23_near_mask(G, P)
     Pa, _ = pa_.opal23_align(G, P, mean=mean)
     return ProtocolRows(
         pa_.opal23_mae(G, Pa, ann_euler=_opal23_gt_euler(pair)),

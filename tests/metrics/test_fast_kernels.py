@@ -65,3 +65,15 @@ def test_karcher_equals_old_code_whatever_the_threads(seed, n, threads):
         pa_.KARCHER_PIECE = saved
     np.testing.assert_array_equal(a, b)
     np.testing.assert_allclose(a, old, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.booleans())
+def test_opal23_near_mask_is_the_mask_of_near_quats(seed, grid):
+    rng = np.random.default_rng(seed)
+    g = rng.uniform(-180, 180, (500, 3))
+    p = g + rng.normal(0, 60, g.shape)
+    if grid:  # multiples of 45 degrees: rows exactly 90 degrees off, where rounding decides
+        g, p = np.round(g / 45) * 45, np.round(p / 45) * 45
+    A, P = pa_.opal23_matrices(g), pa_.opal23_matrices(p)
+    np.testing.assert_array_equal(pa_.opal23_near_mask(A, P), pa_.opal23_near_quats(A, P)[1])
