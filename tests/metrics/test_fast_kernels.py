@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from hpe_cli.metrics import peer_angles as pa_
+from hpe_cli.metrics import rotation_errors as re_
 from hpe_cli.metrics import scipy_columns as sc
 
 
@@ -163,8 +164,6 @@ def _bits(a, b):
 @settings(max_examples=30, deadline=None)
 @given(st.integers(0, 2**32 - 1))
 def test_rewritten_kernels_give_the_old_bits(seed):
-    from hpe_cli.metrics import rotation_errors as re_
-
     p, g = _hard_angles(seed)
     for with_180 in (False, True):
         _bits(pa_.min_wrapped(p, g, with_180), _old_min_wrapped(p, g, with_180))
