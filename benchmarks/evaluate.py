@@ -1,7 +1,7 @@
 """`hpe evaluate` at scale: time and peak RSS beside DuckDB and the floor, in the same run.
 
     python benchmarks/evaluate.py [--rows 5000000] [--shuffled] [--protocol NAME ...] [--repeat 3]
-        [--threads N] [--with-rows] [--join]
+        [--threads N] [--with-rows] [--join] [--each-protocol] [--before DIR]
 
 Two Parquet tables of N pairs (string key 'image', pitch/yaw/roll; GT in
 300w_lp, predictions in 6drepnet, the same rotation turned by about 5 degrees:
@@ -19,11 +19,13 @@ with --shuffled, in random order.
 * hpe: ``hpe evaluate`` in a child process (imports included) writing the JSON
   report (``--with-rows``: also the per-row Parquet output); ``--protocol all``
   (the command's default) scores every protocol, the default here is hopenet.
+* ``--each-protocol``: one hpe job per protocol and one with all of them, side by side (a per-protocol table).
 * ``--join``: the same minimal job (join on the key, geodesic, per-angle MAE,
   median) done by pyarrow's ``Table.join`` (Acero, in memory), beside hpe's
   join and DuckDB's.
 
-Each child's peak RSS is its VmHWM (/proc/self/status). Each job runs --repeat
+Each child's peak RSS is its VmHWM (/proc/self/status), its CPU time the user + system time of all its threads
+(``getrusage(RUSAGE_CHILDREN)``: on a shared machine the CPU ratio moves less than the wall ratio). Each job runs --repeat
 times, the jobs taking turns; the median is printed with the range in brackets.
 """
 
@@ -32,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -161,11 +164,17 @@ ACERO = textwrap.dedent("""
 """)
 
 
-def _child(args, env, parse):
-    """``(seconds, parsed output)`` of one child process."""
+def _child(args, env, parse, cwd):
+    """``((wall seconds, CPU seconds), parsed output)`` of one child process (CPU: user + system, all threads)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
-    r = subprocess.run([sys.executable, "-c", *args], check=True, capture_output=True, text=True, env=env)
-    return time.perf_counter() - t, parse(r)
+    # from the run's temp folder: ``python -c`` puts the working folder first on sys.path, so run from the checkout
+    # every child would import that checkout's hpe_cli whatever PYTHONPATH says (--before)
+    r = subprocess.run([sys.executable, "-c", *args], check=True, capture_output=True, text=True, env=env, cwd=cwd)
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return (wall, cpu), parse(r)
 
 
 def _last(r) -> str:
@@ -187,14 +196,17 @@ def _hpe_cmd(folder: Path, protocols, threads, with_rows: bool):
 
 
 def _summary(label, times, rss, n, ref=None, extra=""):
-    med = statistics.median(times)
-    rng = f"[{min(times):.2f}-{max(times):.2f}]" if len(times) > 1 else ""
-    ratio = f"{med / ref:5.2f}x DuckDB" if ref else ""
+    """One line: median wall time [range], pairs/s, peak RSS, median CPU time; ratios to ``ref`` = DuckDB's
+    ``(wall, cpu)`` medians. Returns this job's ``(wall, cpu)`` medians."""
+    walls, cpus = [t[0] for t in times], [t[1] for t in times]
+    med, cpu = statistics.median(walls), statistics.median(cpus)
+    rng = f"[{min(walls):.2f}-{max(walls):.2f}]" if len(walls) > 1 else ""
+    ratio = f"{med / ref[0]:5.2f}x DuckDB (CPU {cpu / ref[1]:5.2f}x)" if ref else ""
     print(
-        f"  {label:<46} {med:7.2f} s {rng:<13} {n / med / 1e6:5.2f} M pairs/s  peak RSS {max(rss):>6,} MB  "
-        f"{ratio}  {extra}"
+        f"  {label:<46} {med:7.2f} s {rng:<13} {n / med / 1e6:5.2f} M pairs/s  CPU {cpu:7.2f} s  "
+        f"peak RSS {max(rss):>6,} MB  {ratio}  {extra}"
     )
-    return med
+    return med, cpu
 
 
 def main():
@@ -209,10 +221,32 @@ def main():
     ap.add_argument("--with-rows", action="store_true", help="hpe also writes the per-row Parquet output (-o)")
     ap.add_argument("--join", action="store_true", help="also pyarrow's Table.join (Acero) doing DuckDB's job")
     ap.add_argument("--no-floor", action="store_true", help="skip the pyarrow + numpy floor")
+    ap.add_argument(
+        "--each-protocol",
+        action="store_true",
+        help="one hpe job per protocol (every registered one, or those given with --protocol) and one with all "
+        "of them: a per-protocol table beside DuckDB",
+    )
+    ap.add_argument(
+        "--before",
+        metavar="DIR",
+        default=None,
+        help="also run every hpe job on the hpe_cli package found in DIR (e.g. an earlier commit's `git archive`), "
+        "in the same rounds: before and after side by side",
+    )
     args = ap.parse_args()
     n = args.rows
     protocols = args.protocol or ["hopenet"]
+    if args.each_protocol:
+        sys.path.insert(0, str(ROOT))
+        from hpe_cli.metrics.protocols import PROTOCOLS
+
+        singles = [p for p in (args.protocol or list(PROTOCOLS)) if p != "all"]
+        hpe_jobs = {f"hpe {p}": [p] for p in singles} | {"hpe all": ["all"]}
+    else:
+        hpe_jobs = {"hpe": protocols}
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    env_before = {**os.environ, "PYTHONPATH": str(args.before or ROOT)}
     try:
         import duckdb  # noqa: F401
 
@@ -245,12 +279,15 @@ def main():
             g = rep["metrics"]["geodesic"]
             return [rep["n"]["pairs"], g["mean"], g["median"], int(r.stderr.split("VmHWM_MB")[1].split()[0])]
 
-        jobs["hpe"] = (_hpe_cmd(folder, protocols, args.threads, args.with_rows), hpe_parse)
+        for k, ps in hpe_jobs.items():
+            jobs[k] = (_hpe_cmd(folder, ps, args.threads, args.with_rows), hpe_parse)
+            if args.before:
+                jobs[f"{k} (before)"] = jobs[k]
         times = {k: [] for k in jobs}
         out: dict = {k: [] for k in jobs}
         for _ in range(args.repeat):
             for k, (a, parse) in jobs.items():
-                t, o = _child(a, env, parse)
+                t, o = _child(a, env_before if k.endswith("(before)") else env, parse, folder)
                 times[k].append(t)
                 out[k].append(o)
         rss = {k: [int(o[3]) for o in v] for k, v in out.items()}
@@ -264,8 +301,13 @@ def main():
             _summary("pyarrow Table.join + numpy (in memory)", times["acero"], rss["acero"], n, ref, geo["acero"])
         if not args.no_floor:
             _summary("floor (pyarrow stream + numpy, no join)", times["floor"], rss["floor"], n, ref)
-        label = f"hpe evaluate{' -o' if args.with_rows else ''} --protocol {','.join(protocols)}"
-        _summary(label, times["hpe"], rss["hpe"], n, ref, geo["hpe"])
+        for k, ps in hpe_jobs.items():
+            label = f"hpe evaluate{' -o' if args.with_rows else ''} --protocol {','.join(ps)}"
+            _summary(label, times[k], rss[k], n, ref, geo[k])
+            if args.before:
+                _summary(
+                    "  the same, before", times[f"{k} (before)"], rss[f"{k} (before)"], n, ref, geo[f"{k} (before)"]
+                )
 
 
 if __name__ == "__main__":

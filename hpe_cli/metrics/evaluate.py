@@ -64,14 +64,7 @@ def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None) -> Pai
     best, _ = re_.best_of_two_error(p1, p2, g)
     protos = {name: PROTOCOLS[name].func(pair) for name in check_protocols(protocols)}
     return PairRows(
-        pair.geodesic(),
-        re_.maev_deg(pair.P, pair.G),
-        re_.frobenius(pair.P, pair.G),
-        re_.wrapped_error(p1, g),
-        best,
-        g,
-        p1,
-        protos,
+        pair.geodesic(), re_.maev_deg(pair.P, pair.G), pair.frobenius(), re_.wrapped_error(p1, g), best, g, p1, protos
     )
 
 

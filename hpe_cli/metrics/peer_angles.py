@@ -62,12 +62,12 @@ def min_wrapped(pred, gt, with_180: bool) -> np.ndarray:
     (chuzcjoe/TriNet@d2689de computeMAE.py:168-170).
     """
     d = np.asarray(pred, dtype=np.float64) - np.asarray(gt, dtype=np.float64)
-    terms = [np.abs(d), np.abs(d + 360.0), np.abs(d - 360.0)]
-    if with_180:
-        terms += [np.abs(d + 180.0), np.abs(d - 180.0)]
-    out = terms[0]
-    for t in terms[1:]:
-        out = np.minimum(out, t)
+    out = np.abs(d)
+    t = np.empty_like(d)
+    for shift in (360.0, -360.0, 180.0, -180.0) if with_180 else (360.0, -360.0):  # in place: no temporaries
+        np.add(d, shift, out=t)
+        np.abs(t, out=t)
+        np.minimum(out, t, out=out)
     return out
 
 
@@ -112,17 +112,22 @@ def opal23_mae(ann, pred, ann_euler=None, pred_euler=None) -> np.ndarray:
 
     a = opal23_euler(ann) if ann_euler is None else ann_euler
     p = opal23_euler(pred) if pred_euler is None else pred_euler
-    a, p = a[:, [1, 0, 2]], p[:, [1, 0, 2]]
-    sign = np.sign(p)
-    w = np.stack([180 - p[:, 0], p[:, 1] - sign[:, 1] * 180, p[:, 2] - sign[:, 2] * 180], axis=1)
-    w[w > 180] -= 360
-    w[w < -180] += 360
-    e = np.abs(a - p)
-    ew = np.abs(a - w)
-    use = ew.mean(axis=-1) < e.mean(axis=-1)
-    e[use] = ew[use]
-    e = np.minimum(e, 360 - e)
-    return e[:, [1, 0, 2]]
+    # column by column in the peer's (yaw, pitch, roll) order: its row means are ((yaw + pitch) + roll) / 3
+    order = (1, 0, 2)
+    pc = [p[:, k] for k in order]
+    ac = [a[:, k] for k in order]
+    w = [180 - pc[0], pc[1] - np.sign(pc[1]) * 180, pc[2] - np.sign(pc[2]) * 180]
+    for k in range(3):
+        w[k] = np.where(w[k] > 180, w[k] - 360, w[k])
+        w[k] = np.where(w[k] < -180, w[k] + 360, w[k])
+    e = [np.abs(ac[k] - pc[k]) for k in range(3)]
+    ew = [np.abs(ac[k] - w[k]) for k in range(3)]
+    use = ((ew[0] + ew[1]) + ew[2]) / 3 < ((e[0] + e[1]) + e[2]) / 3
+    out = np.empty((len(use), 3))
+    for k, col in enumerate(order):
+        x = np.where(use, ew[k], e[k])
+        np.minimum(x, 360 - x, out=out[:, col])
+    return out
 
 
 def opal23_geodesic(ann, pred) -> np.ndarray:
@@ -164,13 +169,33 @@ def opal23_near_quats(ann, pred):
     return np.stack([c[near] for c in q], -1), near
 
 
+def opal23_near_mask(ann, pred) -> np.ndarray:
+    """The mask of :func:`opal23_near_quats` alone (rows within 90 degrees of the identity), without gathering
+    their quaternions: what a chunk needs once the mean is known."""
+    q = sc.quat_from_matrix(_times_transpose(sc.nested(pred), sc.nested(ann)), assume_valid=True)
+    return sc.quat_angle(q) < np.pi / 2
+
+
 def opal23_near_deltas(ann, pred) -> np.ndarray:
     """``P_i A_i^T`` of the rows within 90 degrees of the identity: what opal23's mean is taken over."""
     return opal23_near(ann, pred)[0]
 
 
+#: rows of the Karcher mean's pieces: every piece's sums are taken alone and added in order, so the mean
+#: does not depend on how many threads compute them
+KARCHER_PIECE = 1 << 16
+
+
+def _displacement_sum(q, left) -> np.ndarray:
+    """Sum over the rows of ``log(q_mean^-1 q_i)`` (radians, 3,) for quaternions ``q`` (4, m) (columns x, y, z,
+    w), ``left`` the 4x4 matrix of the left product by ``q_mean^-1``."""
+    r = [((left[i, 0] * q[0] + left[i, 1] * q[1]) + left[i, 2] * q[2]) + left[i, 3] * q[3] for i in range(4)]
+    v = sc.rotvec_from_quat(tuple(r))
+    return np.array([v[:, k].sum() for k in range(3)])
+
+
 def opal23_karcher(
-    deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20, start: int = 0
+    deltas, tol: float = 1e-4, max_iter: int = 100_000, chunk: int = 1 << 20, start: int = 0, mapper=map
 ) -> np.ndarray:
     """opal23's ``_compute_mean_rotation`` (test/evaluator.py:111-126) over ``deltas`` (any array-like, e.g. a memmap).
 
@@ -183,10 +208,10 @@ def opal23_karcher(
     row), ``mean <- mean @ exp(mean displacement)`` until the mean
     displacement ``log(mean.T @ M_i)`` is shorter than ``tol``; the sums run
     chunk by chunk, so a spill of any length read piece by piece (anything with
-    ``len``, ``ndim`` and slicing) works.
+    ``len``, ``ndim`` and slicing) works. ``mapper`` (``map`` by default, e.g. a thread pool's ``map``,
+    which must yield in order) computes the quaternion pieces' sums (:data:`KARCHER_PIECE` rows each), added
+    in order: the same mean whatever the pool.
     """
-    from scipy.spatial.transform import Rotation
-
     n = len(deltas)
     if not n:
         return np.eye(3)
@@ -202,18 +227,32 @@ def opal23_karcher(
             x, y, z = -x, -y, -z
             left = np.array([[w, -z, y, x], [z, w, -x, y], [-y, x, w, z], [-x, -y, -z, w]])
         for a in range(0, n, chunk):
-            if quats:
-                for b in range(a, min(a + chunk, n), 1 << 16):  # cache-sized pieces of the chunk
-                    r = np.asarray(deltas[b : min(b + (1 << 16), a + chunk, n)], dtype=np.float64) @ left.T
-                    v = sc.rotvec_from_quat((r[:, 0], r[:, 1], r[:, 2], r[:, 3]))
-                    total += [v[:, k].sum() for k in range(3)]
+            if quats:  # columns x, y, z, w of the chunk, then its cache-sized pieces
+                q = np.ascontiguousarray(np.asarray(deltas[a : min(a + chunk, n)], dtype=np.float64).T)
+                pieces = (q[:, b : b + KARCHER_PIECE] for b in range(0, q.shape[1], KARCHER_PIECE))
+                for part in mapper(lambda piece: _displacement_sum(piece, left), pieces):
+                    total += part
             else:
                 total += _log(np.matmul(mean.T, np.asarray(deltas[a : a + chunk]))).sum(axis=0)
         d = total / n
         if np.linalg.norm(d) < tol:
             break
-        mean = mean @ Rotation.from_rotvec(d).as_matrix()
+        mean = mean @ matrix_from_rotvec(d)
     return mean
+
+
+def matrix_from_rotvec(v) -> np.ndarray:
+    """SciPy ``Rotation.from_rotvec(v).as_matrix()`` of one rotation vector ``v`` (3,), radians: its arithmetic
+    (``_rotation_xp.py`` ``from_rotvec``: the half-angle's Taylor series below 1e-3 rad), no SciPy import."""
+    v = np.asarray(v, dtype=np.float64)
+    angle = float(np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]))
+    if angle <= 1e-3:
+        a2 = angle * angle
+        scale = 0.5 - a2 / 48 + a2 * a2 / 3840
+    else:
+        scale = np.sin(angle / 2) / angle
+    q = tuple(np.array([c]) for c in (v[0] * scale, v[1] * scale, v[2] * scale, np.cos(angle / 2)))
+    return stack3(sc.matrix_from_quat(q))[0]
 
 
 def opal23_align(ann, pred, tol: float = 1e-4, max_iter: int = 100_000, mean=None):
@@ -253,13 +292,19 @@ def column_acos_deg(P, G, float32: bool = False) -> np.ndarray:
     0.02 degrees per row, which moves the mean by 1e-4 degrees).
     """
     dt = np.float32 if float32 else np.float64
-    out = []
+    n = int(np.broadcast(*[x for row in P for x in row], *[x for row in G for x in row]).shape[0])
+    out = np.empty((n, 3))
     for j in range(3):
-        p = [np.asarray(P[i][j], dtype=dt) for i in range(3)]
-        g = [np.asarray(G[i][j], dtype=dt) for i in range(3)]
-        dot = (g[0] * p[0] + g[1] * p[1]) + g[2] * p[2]
-        out.append(np.degrees(np.arccos(np.clip(dot, -1.0, 1.0))).astype(np.float64))
-    return np.stack(np.broadcast_arrays(*out), -1)
+        p = [np.broadcast_to(np.asarray(P[i][j], dtype=dt), (n,)) for i in range(3)]
+        g = [np.broadcast_to(np.asarray(G[i][j], dtype=dt), (n,)) for i in range(3)]
+        dot = g[0] * p[0]
+        t = g[1] * p[1]
+        dot += t
+        dot += np.multiply(g[2], p[2], out=t)  # (g0 p0 + g1 p1) + g2 p2, in place
+        np.clip(dot, -1.0, 1.0, out=dot)
+        np.arccos(dot, out=dot)
+        out[:, j] = np.degrees(dot, out=dot)  # float32 -> float64 on the copy, as astype does
+    return out
 
 
 def opentrack_euler(T) -> np.ndarray:
@@ -280,6 +325,12 @@ def opentrack_errors(e1, e2):
     which is NaN where rounding puts the argument above 1. Returns the clipped
     errors (degrees) and the mask of rows the peer turns into NaN.
     """
-    dot = np.cos(e1) * np.cos(e2) + np.sin(e1) * np.sin(e2)
-    peer_nan = (np.abs(dot) > 1.0).any(axis=-1)
-    return np.degrees(np.arccos(np.clip(dot, -1.0, 1.0))), peer_nan
+    dot = np.cos(e1)
+    dot *= np.cos(e2)
+    t = np.sin(e1)
+    t *= np.sin(e2)
+    dot += t  # cos a cos b + sin a sin b, in place
+    peer_nan = (np.abs(dot, out=t) > 1.0).any(axis=-1)
+    np.clip(dot, -1.0, 1.0, out=dot)
+    np.arccos(dot, out=dot)
+    return np.degrees(dot, out=dot), peer_nan

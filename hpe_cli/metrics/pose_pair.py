@@ -54,7 +54,9 @@ class PosePair:
         if key not in self._cache:
             p1 = self.primary(system, side)
             p2 = self._cache.pop(("second", system.name, side), None)
-            if p2 is None:  # read as written: the other solution from the primary one
+            if p2 is not None:  # kept as columns by primary(): stacked only when asked for
+                p2 = np.stack(np.broadcast_arrays(*p2), -1)
+            else:  # read as written: the other solution from the primary one
                 p2 = np.stack(
                     solutions.second_degrees([p1[:, k] for k in range(3)], solutions.middle_role(system), False), -1
                 )
@@ -82,7 +84,7 @@ class PosePair:
         if fast is None or not fast.any():
             q1, q2, _, _ = system.soa_to_angles(self.stored(system, side))
             p1 = np.stack(np.broadcast_arrays(*q1), -1)
-            self._cache[("second", system.name, side)] = np.stack(np.broadcast_arrays(*q2), -1)
+            self._cache[("second", system.name, side)] = q2
         else:
             p1 = np.array(a, dtype=np.float64)
             if not fast.all():
@@ -141,6 +143,12 @@ class PosePair:
         if "geodesic" not in self._cache:
             self._cache["geodesic"] = re_.geodesic_deg(self.P, self.G)
         return self._cache["geodesic"]
+
+    def frobenius(self) -> np.ndarray:
+        """:func:`hpe_cli.metrics.rotation_errors.frobenius` of ``P`` and ``G`` (computed once)."""
+        if "frobenius" not in self._cache:
+            self._cache["frobenius"] = re_.frobenius(self.P, self.G)
+        return self._cache["frobenius"]
 
     def array(self, system, side: str) -> np.ndarray:
         """Stored matrices of ``side`` in ``system`` as ``(N, 3, 3)``."""

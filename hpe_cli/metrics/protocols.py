@@ -124,6 +124,12 @@ _BRANCH = (
 )
 
 
+def _written_abs_error(pair, system):
+    """``|pred - gt|`` of the angles as written in ``system`` (:func:`_written_pair`), once per chunk: hopenet,
+    fsanet and headposeplus's ``ypr`` block share it (read only: a protocol that changes it takes a copy)."""
+    return _cached(pair, ("abs_error", system), lambda: re_.abs_error(*_written_pair(pair, system)[:2]))
+
+
 # ---------------------------------------------------------------------------- protocols
 @register_protocol(
     "hopenet",
@@ -139,8 +145,8 @@ def hopenet(pair: PosePair) -> ProtocolRows:
     natanielruiz/deep-head-pose@f7bbb99 code/test_hopenet.py:124-127:
     ``yaw_error += sum(abs(yaw_predicted - label_yaw))`` (float32 tensors).
     """
-    p, g, rx = _written_pair(pair, "300w_lp")
-    return ProtocolRows(re_.abs_error(p, g), np.ones(pair.n, dtype=bool), reexpressed=rx)
+    _, _, rx = _written_pair(pair, "300w_lp")
+    return ProtocolRows(_written_abs_error(pair, "300w_lp"), np.ones(pair.n, dtype=bool), reexpressed=rx)
 
 
 @register_protocol(
@@ -158,8 +164,8 @@ def fsanet(pair: PosePair) -> ProtocolRows:
     (``np.max(temp_pose) <= 99.0 and np.min(temp_pose) >= -99.0``) and 444-448
     (``np.mean(np.abs(p_data - y_data), axis=0)``).
     """
-    p, g, rx = _written_pair(pair, "300w_lp")
-    return ProtocolRows(re_.abs_error(p, g), _within_99(g), reexpressed=rx)
+    _, g, rx = _written_pair(pair, "300w_lp")
+    return ProtocolRows(_written_abs_error(pair, "300w_lp"), _within_99(g), reexpressed=rx)
 
 
 def _cached(pair, key, make):
@@ -230,10 +236,15 @@ def sixdrepnet360_2023(pair: PosePair) -> ProtocolRows:
 
 
 def _directmhp(pair: PosePair, split: float) -> ProtocolRows:
-    p, g, rx = _written_pair(pair, "whenet")
-    e = re_.abs_error(p, g)
-    e[:, 1] = np.minimum(e[:, 1], 360.0 - e[:, 1])
+    _, g, rx = _written_pair(pair, "whenet")
+
+    def make():  # the errors do not depend on the split: directmhp, -v2 and -single share them
+        e = _written_abs_error(pair, "whenet").copy()
+        e[:, 1] = np.minimum(e[:, 1], 360.0 - e[:, 1])
+        return e
+
     back = np.abs(g[:, 1]) > split
+    e = _cached(pair, ("directmhp", "err"), make)
     return ProtocolRows(e, np.ones(pair.n, dtype=bool), splits={"front": ~back, "back": back}, reexpressed=rx)
 
 
@@ -353,10 +364,12 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
     pairs first and passes it in ``pair.context["opal23_mean"]``.
     """
     P, G, rx = _opal23_mats(pair)
-    deltas, near = pa_.opal23_near_quats(G, P)
     mean = pair.context.get("opal23_mean")
     if mean is None:
+        deltas, near = pa_.opal23_near_quats(G, P)
         mean = pa_.opal23_karcher(deltas)
+    else:  # the mean of every chunk is known: only the rows left out of it are counted here
+        near = pa_.opal23_near_mask(G, P)
     Pa, _ = pa_.opal23_align(G, P, mean=mean)
     return ProtocolRows(
         pa_.opal23_mae(G, Pa, ann_euler=_opal23_gt_euler(pair)),
@@ -386,13 +399,14 @@ def headposeplus(pair: PosePair) -> ProtocolRows:
     """
     p = pair.primary("biwi", "pred")
     g = pair.primary("biwi", "gt")
-    py, gy, rx = _written_pair(pair, "300w_lp")
+    _, _, rx = _written_pair(pair, "300w_lp")
+    e = re_.abs_error(p, g)
     return ProtocolRows(
-        re_.abs_error(p, g),
+        e,
         np.ones(pair.n, dtype=bool),
         vectors={
-            "pyr": (("pitch", "yaw", "roll"), re_.abs_error(p, g)),
-            "ypr": (("pitch", "yaw", "roll"), re_.abs_error(py, gy)),
+            "pyr": (("pitch", "yaw", "roll"), e),
+            "ypr": (("pitch", "yaw", "roll"), _written_abs_error(pair, "300w_lp")),
         },
         reexpressed=rx,
     )
@@ -481,7 +495,7 @@ def dad3dheads(pair: PosePair) -> ProtocolRows:
     (``DADEvaluator.pose_error``). The norm is the same in every frame.
     """
     nan = np.full((pair.n, 3), np.nan)
-    return ProtocolRows(nan, np.ones(pair.n, dtype=bool), scalars={"frobenius": re_.frobenius(pair.P, pair.G)})
+    return ProtocolRows(nan, np.ones(pair.n, dtype=bool), scalars={"frobenius": pair.frobenius()})
 
 
 def protocol_names() -> list:

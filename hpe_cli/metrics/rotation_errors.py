@@ -92,16 +92,28 @@ def maev_deg(P, G) -> np.ndarray:
         angle between two axes does not depend on the sign chosen for them).
     """
     P, G = as_nested(P), as_nested(G)
-    out = []
-    for j in range(3):
-        p = [P[0][j], P[1][j], P[2][j]]
-        g = [G[0][j], G[1][j], G[2][j]]
-        dot = p[0] * g[0] + p[1] * g[1] + p[2] * g[2]
-        cx = p[1] * g[2] - p[2] * g[1]
-        cy = p[2] * g[0] - p[0] * g[2]
-        cz = p[0] * g[1] - p[1] * g[0]
-        out.append(np.arctan2(np.sqrt(cx * cx + cy * cy + cz * cz), dot) * _DEG)
-    return np.stack(np.broadcast_arrays(*out), axis=-1)
+    n = int(np.broadcast(*[x for row in P for x in row], *[x for row in G for x in row]).shape[0])
+    out = np.empty((n, 3))
+    for j in range(3):  # in place, in the order of ``p0 g0 + p1 g1 + p2 g2`` and ``p1 g2 - p2 g1``...
+        p = [np.broadcast_to(P[i][j], (n,)) for i in range(3)]
+        g = [np.broadcast_to(G[i][j], (n,)) for i in range(3)]
+        t = np.empty(n)
+        dot = p[0] * g[0]
+        dot += np.multiply(p[1], g[1], out=t)
+        dot += np.multiply(p[2], g[2], out=t)
+        norm = None
+        for a, b in ((1, 2), (2, 0), (0, 1)):  # the cross product's x, y, z
+            c = p[a] * g[b]
+            c -= np.multiply(p[b], g[a], out=t)
+            c *= c
+            if norm is None:
+                norm = c
+            else:
+                norm += c
+        np.sqrt(norm, out=norm)
+        np.arctan2(norm, dot, out=out[:, j])
+    out *= _DEG
+    return out
 
 
 def wrap_abs_deg(d) -> np.ndarray:
@@ -143,11 +155,15 @@ def best_of_two_error(pred1, pred2, gt) -> tuple[np.ndarray, np.ndarray]:
     second : ndarray of bool (N,)
         Rows where the second solution was used.
     """
-    e1 = abs_error(pred1, gt)
-    e2 = abs_error(pred2, gt)
-    second = e2.mean(axis=-1) < e1.mean(axis=-1)
-    e = np.where(second[..., None], e2, e1)
-    return np.minimum(e, 360.0 - e), second
+    p1, p2, g = (np.asarray(x, dtype=np.float64) for x in (pred1, pred2, gt))
+    e1 = [np.abs(p1[..., k] - g[..., k]) for k in range(3)]
+    e2 = [np.abs(p2[..., k] - g[..., k]) for k in range(3)]
+    second = ((e2[0] + e2[1]) + e2[2]) / 3 < ((e1[0] + e1[1]) + e1[2]) / 3  # the row means, in mean's order
+    out = np.empty(np.broadcast(p1, p2, g).shape)
+    for k in range(3):
+        e = np.where(second, e2[k], e1[k])
+        np.minimum(e, 360.0 - e, out=out[..., k])
+    return out, second
 
 
 def rotvec_deg(R) -> np.ndarray:

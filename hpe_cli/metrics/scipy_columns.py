@@ -42,12 +42,19 @@ def _orthogonal(R):
     ``U V^T`` of their SVD, as SciPy does (``from_matrix``, ``_rotation_xp.py``:48-83)."""
     n = int(np.broadcast(*[x for row in R for x in row]).shape[0])
     R = [[np.broadcast_to(np.asarray(x, dtype=np.float64), (n,)) for x in row] for row in R]
-    off = np.zeros(n, dtype=bool)
+    ok = np.ones(n, dtype=bool)
+    g, t, b = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
     for i in range(3):
-        for j in range(i, 3):
-            g = R[i][0] * R[j][0] + R[i][1] * R[j][1] + R[i][2] * R[j][2]
+        for j in range(i, 3):  # in place: g = R[i][0] R[j][0] + R[i][1] R[j][1] + R[i][2] R[j][2]
+            np.multiply(R[i][0], R[j][0], out=g)
+            g += np.multiply(R[i][1], R[j][1], out=t)
+            g += np.multiply(R[i][2], R[j][2], out=t)
             e = 1.0 if i == j else 0.0
-            off |= ~(np.abs(g - e) <= 1e-12 + 1e-5 * e)  # np.isclose(g, e, atol=1e-12), NaN counts as off
+            if e:
+                g -= e
+            np.abs(g, out=g)
+            ok &= np.less_equal(g, 1e-12 + 1e-5 * e, out=b)  # np.isclose(g, e, atol=1e-12); NaN is not ok
+    off = ~ok
     if not off.any():
         return R
     idx = np.flatnonzero(off)
@@ -90,15 +97,18 @@ def quat_from_matrix(R, assume_valid: bool = False) -> tuple:
     c0 = (r00 >= r11) & (r00 >= r22) & (r00 >= tr)
     c1 = ~c0 & (r11 >= r22) & (r11 >= tr)
     c2 = ~(c0 | c1) & (r22 >= tr)
-    s01, s02, s12 = r10 + r01, r20 + r02, r21 + r12
-    d0, d1, d2 = r21 - r12, r02 - r20, r10 - r01
-    if not (c0.any() or c1.any() or c2.any()):  # every row within 90 degrees of the identity: one case
-        x, y, z, w = d0, d1, d2, 1 + tr
-    else:
-        x = np.where(c0, 1 - tr + 2 * r00, np.where(c1, s01, np.where(c2, s02, d0)))
-        y = np.where(c0, s01, np.where(c1, 1 - tr + 2 * r11, np.where(c2, s12, d1)))
-        z = np.where(c0, s02, np.where(c1, s12, np.where(c2, 1 - tr + 2 * r22, d2)))
-        w = np.where(c0, d0, np.where(c1, d1, np.where(c2, d2, 1 + tr)))
+    x, y, z, w = r21 - r12, r02 - r20, r10 - r01, 1 + tr  # the trace's case, then the rows of the others
+    for case, k in ((c0, 0), (c1, 1), (c2, 2)):
+        idx = np.flatnonzero(case)
+        if not len(idx):
+            continue
+        R_ = [[np.broadcast_to(v, tr.shape)[idx] for v in row] for row in R]
+        t = tr[idx]
+        d = (R_[2][1] - R_[1][2], R_[0][2] - R_[2][0], R_[1][0] - R_[0][1])
+        s = {(0, 1): R_[1][0] + R_[0][1], (0, 2): R_[2][0] + R_[0][2], (1, 2): R_[2][1] + R_[1][2]}
+        for m, col in enumerate((x, y, z)):
+            col[idx] = 1 - t + 2 * R_[k][k] if m == k else s[(min(m, k), max(m, k))]
+        w[idx] = d[k]
     norm = np.sqrt(x * x + y * y + z * z + w * w)
     return x / norm, y / norm, z / norm, w / norm
 
@@ -190,26 +200,32 @@ def euler_from_quat(q, seq: str, degrees: bool = False) -> np.ndarray:
         a, b, c, d = qw - q[j], q[i] + q[k] * sign, q[j] + qw, q[k] * sign - q[i]
     half_sum = np.arctan2(b, a)
     half_diff = np.arctan2(d, c)
-    mid = 2 * np.arctan2(np.hypot(c, d), np.hypot(a, b))
-    lock = (np.abs(mid) <= _EPS) | (np.abs(mid - np.pi) <= _EPS)
+    mid = np.arctan2(np.hypot(c, d), np.hypot(a, b))
+    mid *= 2  # in [0, pi] (or NaN): |mid| is mid, |mid - pi| is pi - mid, and no wrap is needed
+    lock = (mid <= _EPS) | (mid - np.pi >= -_EPS)
     first = half_sum - half_diff
     third = half_sum + half_diff
     if lock.any():  # the angle that is not set is 0; the other takes the whole turn (SciPy's cases 1 and 2)
-        case1 = np.abs(mid) <= _EPS
+        case1 = mid <= _EPS
         turn = np.where(case1, 2 * half_sum, 2 * half_diff * (1 if intrinsic else -1))
         if intrinsic:  # (third, mid, first) in seq order: the first angle of seq takes the turn
             first, third = np.where(lock, 0.0, first), np.where(lock, turn, third)
         else:
             first, third = np.where(lock, turn, first), np.where(lock, 0.0, third)
     if not symmetric:
-        third = third * sign
-        mid = mid - np.pi / 2
+        third *= sign
+        mid -= np.pi / 2
     out = np.empty((len(mid), 3))
     two_pi = 2 * np.pi
     for col, v in zip((2, 0) if intrinsic else (0, 2), (first, third)):  # into [-pi, pi], +pi kept (Cython)
-        out[:, col] = np.where(v < -np.pi, v + two_pi, np.where(v > np.pi, v - two_pi, v))
-    out[:, 1] = np.where(mid < -np.pi, mid + two_pi, np.where(mid > np.pi, mid - two_pi, mid))
-    return out * (180.0 / np.pi) if degrees else out
+        out[:, col] = v
+        low, high = np.flatnonzero(v < -np.pi), np.flatnonzero(v > np.pi)
+        out[low, col] = v[low] + two_pi
+        out[high, col] = v[high] - two_pi
+    out[:, 1] = mid
+    if degrees:
+        out *= 180.0 / np.pi
+    return out
 
 
 def euler_from_matrix(R, seq: str, degrees: bool = False, assume_valid: bool = False) -> np.ndarray:

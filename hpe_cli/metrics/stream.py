@@ -86,9 +86,18 @@ class _Grouping:
         G = self.n
         single = codes is None  # one group (all rows): plain sums, no bincount
         counts, sums = {}, {}
+        n = len(rows.geodesic)
+        seen: dict = {}  # id(mask) -> (mask, its count); holding the mask keeps its id from being reused
         for path, mask, values in _items(rows):
+            k = n
+            if mask is not None:
+                if id(mask) not in seen:
+                    seen[id(mask)] = (mask, int(np.count_nonzero(mask)))
+                k = seen[id(mask)][1]
+                if k == n:  # a mask that keeps every row is not applied (no copy, the same sums)
+                    mask = None
             if single:
-                counts[path] = np.array([float(len(rows.geodesic) if mask is None else np.count_nonzero(mask))])
+                counts[path] = np.array([float(k)])
             else:
                 c = codes if mask is None else codes[mask]
                 counts[path] = np.bincount(c, minlength=G).astype(np.float64)

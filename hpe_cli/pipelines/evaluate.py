@@ -141,7 +141,7 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
         if need_opal:
             size = os.path.getsize(path)
             with open(path, "rb") as f:  # read piece by piece: a memory map's pages would count in the peak
-                out["opal23_mean"] = pa_.opal23_karcher(_Rows(f, size // 32, 4), start=first[1])
+                out["opal23_mean"] = pa_.opal23_karcher(_Rows(f, size // 32, 4), start=first[1], mapper=pool.map)
         return out
     finally:
         pool.shutdown(wait=True, cancel_futures=True)

@@ -556,7 +556,6 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/metrics/evaluate.py::_to_canonical: hpe_cli.rotation.check",
     "hpe_cli/metrics/evaluate.py::evaluate: hpe_cli.rotation.systems",
     "hpe_cli/metrics/evaluate.py::evaluate_canonical: hpe_cli.rotation.systems",
-    "hpe_cli/metrics/peer_angles.py::opal23_karcher: scipy.spatial.transform",
     "hpe_cli/metrics/pose_pair.py::PosePair.angles: hpe_cli.rotation",
     "hpe_cli/metrics/pose_pair.py::PosePair.angles: hpe_cli.rotation.systems",
     "hpe_cli/metrics/pose_pair.py::PosePair.primary: hpe_cli.rotation",
