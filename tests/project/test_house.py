@@ -8,8 +8,10 @@
   ``*args``/``**kwargs`` count one each);
 - ``get_system(`` in ``hpe_cli/pipelines/`` only where a user-given name enters (``GET_SYSTEM_ALLOWED``, each
   with its reason): pipelines take a ``LabelSource`` or a ``RotationSystem``, never a name to resolve again;
-- function-level imports only of heavy optional modules (``LAZY_OK``), and anything in ``hpe_cli/cli/`` (the
-  click modules load pipelines lazily so that ``hpe --help`` starts fast).
+- function-level imports only of heavy modules (``LAZY_OK``: each costs 0.15 s or more to import, measured in
+  docs/performance.md), inside ``try`` (an optional dependency probed), or marked ``# lazy: REASON`` on the
+  import line (kept off the start-up path of ``hpe --help`` and a small ``hpe convert``); anything in
+  ``hpe_cli/cli/`` (the click modules load pipelines lazily so that ``hpe --help`` starts fast).
 
 Each rule has a ``KNOWN_*`` set of the violations of the day the rule was written (one per line, keyed by
 ``path::qualname`` so that unrelated edits do not move them). A rule fails on any violation not in its set,
@@ -34,8 +36,11 @@ from test_layers import MODULES, ROOT, _is_package  # noqa: E402
 
 MAX_LINES = 100
 MAX_PARAMS = 8
-#: top-level modules a function may import lazily anywhere (heavy optional dependencies)
-LAZY_OK = {"torch", "torchvision", "dask", "distributed", "matplotlib"}
+#: top-level modules a function may import lazily anywhere: the optional extras, and the dependencies that each
+#: take 0.15 s or more to import (scipy.io 0.26 s, pandas 0.39 s, cv2 0.16 s; docs/performance.md, start-up)
+LAZY_OK = {"torch", "torchvision", "dask", "distributed", "matplotlib", "scipy", "pandas", "cv2", "duckdb", "tqdm"}
+#: the comment that keeps a function-level import lazy, with its reason
+LAZY_MARK = "# lazy:"
 
 
 @cache
@@ -200,14 +205,32 @@ def get_system_calls() -> set:
     return out
 
 
+def _guarded_imports(tree) -> set:
+    """ids of the import statements inside a ``try`` block (optional dependencies probed)."""
+    return {
+        id(node)
+        for t in ast.walk(tree)
+        if isinstance(t, ast.Try)
+        for stmt in t.body
+        for node in ast.walk(stmt)
+        if isinstance(node, (ast.Import, ast.ImportFrom))
+    }
+
+
 def lazy_imports() -> set:
-    """``path::qualname: module`` of every function-level import outside ``hpe_cli/cli/`` not in ``LAZY_OK``."""
+    """``path::qualname: module`` of every function-level import outside ``hpe_cli/cli/`` that is not of a
+    ``LAZY_OK`` module, not inside ``try`` and not marked ``# lazy: REASON``."""
     out = set()
     for name in MODULES:
         if _in(name, "hpe_cli.cli"):
             continue
-        for qual, node, func in _walk(_tree(name)):
+        tree = _tree(name)
+        guarded = _guarded_imports(tree)
+        lines = MODULES[name].read_text(encoding="utf-8").splitlines()
+        for qual, node, func in _walk(tree):
             if func is None or not isinstance(node, (ast.Import, ast.ImportFrom)):
+                continue
+            if id(node) in guarded or LAZY_MARK in lines[node.end_lineno - 1]:
                 continue
             if isinstance(node, ast.Import):
                 targets = [alias.name for alias in node.names]
@@ -376,47 +399,24 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/datasets/agora.py::_person_translations: hpe_cli.datasets.fields",
     "hpe_cli/datasets/agora.py::_restricted_unpickler.RestrictedUnpickler.find_class: importlib",
     "hpe_cli/datasets/agora.py::_restricted_unpickler.RestrictedUnpickler.find_class: warnings",
-    "hpe_cli/datasets/agora.py::_restricted_unpickler: pandas.compat.pickle_compat",
     "hpe_cli/datasets/agora.py::_restricted_unpickler: pickle",
     "hpe_cli/datasets/agora.py::_validate: hpe_cli.rotation.check",
-    "hpe_cli/datasets/agora.py::load_dataframe: pandas",
-    "hpe_cli/datasets/agora.py::load_dataframe: pyarrow.parquet",
     "hpe_cli/datasets/agora.py::read_agora.per_person: hpe_cli.datasets.fields",
-    "hpe_cli/datasets/biwi.py::head_boxes: cv2",
     "hpe_cli/datasets/biwi.py::labels_table: hpe_cli.rotation",
     "hpe_cli/datasets/biwi.py::labels_table: hpe_cli.rotation.columns",
-    "hpe_cli/datasets/biwi.py::labels_table: pandas",
     "hpe_cli/datasets/biwi.py::protocol_mask: hpe_cli.rotation",
     "hpe_cli/datasets/biwi.py::read_biwi_camera: hpe_cli.rotation",
     "hpe_cli/datasets/dad3dheads.py::_item_fields: hpe_cli.datasets.fields",
     "hpe_cli/datasets/dad3dheads.py::_model_view: hpe_cli.datasets.fields",
-    "hpe_cli/datasets/dad3dheads.py::read_dad3dheads: pandas",
     "hpe_cli/datasets/jsonfile.py::load_json: orjson",
     "hpe_cli/datasets/mat.py::read_mat: hpe_cli.datasets.mat_fields",
-    "hpe_cli/datasets/mat.py::read_mat: scipy.io",
-    "hpe_cli/datasets/mat.py::read_mat_dir: pandas",
     "hpe_cli/datasets/panoptic_calibration.py::_camera: hpe_cli.datasets.fields",
     "hpe_cli/datasets/panoptic_calibration.py::read_calibration: hpe_cli.datasets.fields",
     "hpe_cli/datasets/panoptic_calibration.py::read_calibration: hpe_cli.datasets.panoptic_json",
-    "hpe_cli/datasets/panoptic_json.py::_parse_json: orjson",
-    "hpe_cli/datasets/panoptic_video.py::VideoFrames._open: cv2",
     "hpe_cli/datasets/panoptic_video.py::VideoFrames._open: os",
-    "hpe_cli/datasets/panoptic_video.py::VideoFrames.frame_count: cv2",
-    "hpe_cli/datasets/panoptic_video.py::_cap_size: cv2",
-    "hpe_cli/datasets/panoptic_video.py::_seek: cv2",
     "hpe_cli/datasets/w300lp.py::W300LPStream.iter_batches: pyarrow",
     "hpe_cli/datasets/w300lp.py::_check_members: hpe_cli.datasets.fields",
-    "hpe_cli/datasets/w300lp.py::_table: pandas",
     "hpe_cli/datasets/w300lp.py::open_w300lp: pyarrow",
-    "hpe_cli/datasets/w300lp.py::read_pts: scipy.io",
-    "hpe_cli/geometry/draw.py::_line: cv2",
-    "hpe_cli/geometry/draw.py::contact_sheet: cv2",
-    "hpe_cli/geometry/draw.py::render_axes_dashed: cv2",
-    "hpe_cli/geometry/draw.py::render_caption: cv2",
-    "hpe_cli/geometry/draw.py::render_legend: cv2",
-    "hpe_cli/geometry/image_ops.py::cv_flags: cv2",
-    "hpe_cli/geometry/image_ops.py::opencv_rotation_matrix: cv2",
-    "hpe_cli/geometry/image_ops.py::warp_image: cv2",
     "hpe_cli/geometry/landmark_pose.py::fit_landmark_pose_perspective: hpe_cli.geometry.line_of_sight",
     "hpe_cli/geometry/landmark_pose.py::scheme_model: hpe_cli.geometry.template",
     "hpe_cli/geometry/landmark_pose.py::template_iod: hpe_cli.geometry.template",
@@ -430,7 +430,6 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/io/background.py::_append_file: shutil",
     "hpe_cli/io/coco.py::CocoWriter.head: orjson",
     "hpe_cli/io/coco.py::CocoWriter.tail: orjson",
-    "hpe_cli/io/coco.py::_image_codes: pandas",
     "hpe_cli/io/coco.py::_image_codes: pyarrow",
     "hpe_cli/io/coco.py::_image_codes: pyarrow.compute",
     "hpe_cli/io/coco.py::annotations_text: gc",
@@ -445,7 +444,6 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/io/columns.py::_frame_source: hpe_cli.io.table_source",
     "hpe_cli/io/columns.py::_frame_source: pyarrow",
     "hpe_cli/io/columns.py::apply_columns_map: pyarrow",
-    "hpe_cli/io/columns.py::coco_frame: pandas",
     "hpe_cli/io/columns.py::label_system: hpe_cli.io.system_meta",
     "hpe_cli/io/columns.py::open_coco: hpe_cli.datasets.dad3dheads",
     "hpe_cli/io/columns.py::open_text: hpe_cli.io.table_source",
@@ -470,7 +468,6 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/io/exclude.py::ExcludeList.reasons_frame: pyarrow",
     "hpe_cli/io/exclude.py::_key_strings: pyarrow",
     "hpe_cli/io/exclude.py::_key_strings: pyarrow.compute",
-    "hpe_cli/io/export/base.py::crop_names: pandas",
     "hpe_cli/io/export/directmhp.py::DirectMHPLayout.finish: hpe_cli.io.layout",
     "hpe_cli/io/export/hf.py::HFLayout._schema: pyarrow",
     "hpe_cli/io/export/hf.py::HFLayout._write: pyarrow.parquet",
@@ -479,16 +476,8 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/io/export/sixdrepnet.py::SixDRepNetLayout.crop_boxes: hpe_cli.errors",
     "hpe_cli/io/export/sixdrepnet.py::SixDRepNetLayout.finish: hpe_cli.io.layout",
     "hpe_cli/io/export/sixdrepnet.py::savemat_pinned: io",
-    "hpe_cli/io/export/sixdrepnet.py::savemat_pinned: scipy.io",
-    "hpe_cli/io/export/whenet.py::WhenetLayout.finish: pandas",
     "hpe_cli/io/images.py::ImageResolver.read: hpe_cli.datasets.panoptic_video",
-    "hpe_cli/io/images.py::image_size: cv2",
     "hpe_cli/io/images.py::leaves_root: posixpath",
-    "hpe_cli/io/images.py::read_image: cv2",
-    "hpe_cli/io/images.py::row_ids: pandas",
-    "hpe_cli/io/jpeg.py::_cv2: cv2",
-    "hpe_cli/io/jpeg.py::_region: _hpe_jpeg",
-    "hpe_cli/io/jpeg.py::_simplejpeg: simplejpeg",
     "hpe_cli/io/key_hash.py::string_hashes: pyarrow",
     "hpe_cli/io/labels.py::batch_rotations: hpe_cli.rotation",
     "hpe_cli/io/labels.py::batch_rotations: hpe_cli.rotation.systems",
@@ -497,7 +486,6 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/io/labels.py::label_mode: hpe_cli.rotation.systems",
     "hpe_cli/io/labels.py::label_values: hpe_cli.io.units_watch",
     "hpe_cli/io/labels.py::label_values: hpe_cli.rotation.systems",
-    "hpe_cli/io/labels.py::numeric_values: pandas",
     "hpe_cli/io/labels.py::numeric_values: pyarrow",
     "hpe_cli/io/labels.py::numeric_values: pyarrow.compute",
     "hpe_cli/io/labels.py::rotation_value_columns: hpe_cli.rotation",
@@ -519,12 +507,9 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/io/readers_datasets.py::open_biwi: hpe_cli.datasets.biwi",
     "hpe_cli/io/readers_datasets.py::open_dad3dheads: hpe_cli.datasets.dad3dheads",
     "hpe_cli/io/readers_datasets.py::open_mat: hpe_cli.datasets.mat",
-    "hpe_cli/io/rejects.py::Rejects.write: pandas",
     "hpe_cli/io/rejects.py::fail_all_rejected: hpe_cli.errors",
     "hpe_cli/io/rejects.py::fail_all_rejected: hpe_cli.io.transaction",
     "hpe_cli/io/rejects.py::fail_all_rejected: os.path",
-    "hpe_cli/io/stale_temps.py::_lock: fcntl",
-    "hpe_cli/io/stale_temps.py::_sweep: fcntl",
     "hpe_cli/io/stale_temps.py::_sweep: time",
     "hpe_cli/io/system_meta.py::_named: hpe_cli.rotation.systems",
     "hpe_cli/io/system_meta.py::file_system: hpe_cli.rotation.systems",
@@ -539,7 +524,6 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/io/table_source.py::is_float_column: re",
     "hpe_cli/io/units_watch.py::UnitsWatch.__init__: threading",
     "hpe_cli/io/units_watch.py::_observe: hpe_cli.io.transaction",
-    "hpe_cli/io/whenet_txt.py::read_whenet: pandas",
     "hpe_cli/io/whenet_txt.py::whenet_lines: hpe_cli.io.coco",
     "hpe_cli/io/whenet_txt.py::write_whenet: hpe_cli.io.coco",
     "hpe_cli/io/writers.py::AtomicFile.__enter__: hpe_cli.io.transaction",
@@ -551,7 +535,6 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/io/writers.py::_json_default: numpy",
     "hpe_cli/io/writers.py::_reason: hpe_cli.io.transaction",
     "hpe_cli/metrics/consistency.py::expected_angle_sketch: hpe_cli.metrics.sketch",
-    "hpe_cli/metrics/evaluate.py::_groups: pandas",
     "hpe_cli/metrics/evaluate.py::_to_canonical: hpe_cli.rotation",
     "hpe_cli/metrics/evaluate.py::_to_canonical: hpe_cli.rotation.check",
     "hpe_cli/metrics/evaluate.py::evaluate: hpe_cli.rotation.systems",
@@ -563,16 +546,10 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/metrics/pose_pair.py::PosePair.stored: hpe_cli.rotation.systems",
     "hpe_cli/metrics/pose_pair.py::PosePair.written: hpe_cli.rotation.systems",
     "hpe_cli/metrics/rotation_errors.py::frobenius: hpe_cli.rotation.soa",
-    "hpe_cli/metrics/stream.py::Accumulator._by_codes: pandas",
     "hpe_cli/metrics/stream.py::Accumulator._protocol: hpe_cli.metrics.protocols",
     "hpe_cli/pipelines/audit/consistency.py::consistency_outputs: hpe_cli.pipelines.draw.consistency",
     "hpe_cli/pipelines/audit/job.py::run_audit: hpe_cli.pipelines.audit.consistency",
     "hpe_cli/pipelines/audit/job.py::write_plots_page: hpe_cli.pipelines.draw",
-    "hpe_cli/pipelines/augment/images.py::ImageJob._render: cv2",
-    "hpe_cli/pipelines/augment/images.py::ImageJob._write_mat: scipy.io",
-    "hpe_cli/pipelines/augment/images.py::ImageJob.add_rows: cv2",
-    "hpe_cli/pipelines/augment/images.py::_warp: cv2",
-    "hpe_cli/pipelines/dask_runner.py::_quiet_resource_tracker: multiprocessing",
     "hpe_cli/pipelines/dask_runner.py::_quiet_resource_tracker: os",
     "hpe_cli/pipelines/dask_runner.py::_quiet_resource_tracker: sys",
     "hpe_cli/pipelines/dask_runner.py::probe: hpe_cli.io.transaction",
@@ -637,7 +614,6 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/pipelines/evaluate_outputs.py::empty_rows: pyarrow",
     "hpe_cli/pipelines/evaluate_outputs.py::row_table: pyarrow",
     "hpe_cli/pipelines/evaluate_outputs.py::worst_pictures: base64",
-    "hpe_cli/pipelines/evaluate_outputs.py::worst_pictures: cv2",
     "hpe_cli/pipelines/evaluate_outputs.py::worst_pictures: hpe_cli.pipelines.draw",
     "hpe_cli/pipelines/evaluate_rejects.py::_align_block: hpe_cli.metrics",
     "hpe_cli/pipelines/evaluate_score.py::_score.flush: pyarrow",
@@ -661,23 +637,16 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/pipelines/evaluate_spill.py::_bools: pyarrow",
     "hpe_cli/pipelines/evaluate_spill.py::key_hashes: hpe_cli.io.key_hash",
     "hpe_cli/pipelines/export/inputs.py::_batch_frame: hpe_cli.io",
-    "hpe_cli/pipelines/export/inputs.py::_batch_frame: pandas",
     "hpe_cli/pipelines/export/inputs.py::_batch_frame: pyarrow",
-    "hpe_cli/pipelines/export/inputs.py::_group_columns: pandas",
     "hpe_cli/pipelines/export/inputs.py::_pose_para_frame: hpe_cli.rotation.systems",
-    "hpe_cli/pipelines/export/inputs.py::_pose_para_frame: pandas",
-    "hpe_cli/pipelines/export/inputs.py::_unreadable_frame: pandas",
-    "hpe_cli/pipelines/export/inputs.py::load_inputs: pandas",
     "hpe_cli/pipelines/export/inputs.py::load_mat_input: hpe_cli.datasets.mat",
     "hpe_cli/pipelines/export/inputs.py::load_table_input: hpe_cli.io",
-    "hpe_cli/pipelines/export/inputs.py::load_table_input: pandas",
     "hpe_cli/pipelines/export/inputs.py::load_w300lp_input: hpe_cli.datasets.w300lp",
     "hpe_cli/pipelines/export/job.py::_drop_parts_after_commit: hpe_cli.io.transaction",
     "hpe_cli/pipelines/export/job.py::_layout_and_system: hpe_cli.rotation.systems",
     "hpe_cli/pipelines/export/job.py::_parts: hpe_cli.io.transaction",
     "hpe_cli/pipelines/export/job.py::_parts: hpe_cli.pipelines.export.units",
     "hpe_cli/pipelines/export/job.py::_run: hpe_cli.io",
-    "hpe_cli/pipelines/export/job.py::_run: hpe_cli.io.transaction",
     "hpe_cli/pipelines/export/job.py::run_export: contextlib",
     "hpe_cli/pipelines/export/job.py::run_export: hpe_cli.pipelines.export.units",
     "hpe_cli/pipelines/export/job.py::run_export: hpe_cli.pipelines.pools",
@@ -687,10 +656,8 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/pipelines/export/pixels.py::run_tasks: pathlib",
     "hpe_cli/pipelines/export/pixels.py::unit_results: hpe_cli.pipelines.export",
     "hpe_cli/pipelines/export/pixels.py::unit_results: hpe_cli.pipelines.pools",
-    "hpe_cli/pipelines/export/sampling.py::read_split_file: pandas",
     "hpe_cli/pipelines/export/select.py::label_stage: hpe_cli.rotation.convert",
     "hpe_cli/pipelines/export/select.py::select: hpe_cli.io.exclude",
-    "hpe_cli/pipelines/export/select.py::split_stage: pandas",
     "hpe_cli/pipelines/export/units.py::fingerprint: hashlib",
     "hpe_cli/pipelines/export/units.py::link_files: shutil",
     "hpe_cli/pipelines/export/units.py::read_unit: json",
@@ -698,28 +665,17 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/pipelines/export/units.py::run_unit: json",
     "hpe_cli/pipelines/export/units.py::run_unit: shutil",
     "hpe_cli/pipelines/export/units.py::run_unit: tempfile",
-    "hpe_cli/pipelines/export/workers.py::_encode: cv2",
-    "hpe_cli/pipelines/export/workers.py::_frame_sized_malloc: ctypes",
     "hpe_cli/pipelines/export/workers.py::_frame_sized_malloc: sys",
-    "hpe_cli/pipelines/export/workers.py::_init_worker: cv2",
-    "hpe_cli/pipelines/export/workers.py::_process_image: cv2",
     "hpe_cli/pipelines/export/workers.py::_process_image: hpe_cli.geometry.crop",
-    "hpe_cli/pipelines/export/workers.py::_work_items: cv2",
-    "hpe_cli/pipelines/export/workers.py::_work_items: hpe_cli.datasets.panoptic_video",
-    "hpe_cli/pipelines/export/write.py::exported_frame: pandas",
     "hpe_cli/pipelines/export/write.py::fail_nothing_left: hpe_cli.io.rejects",
-    "hpe_cli/pipelines/export/write.py::nothing_left: pandas",
     "hpe_cli/pipelines/export/write.py::staged_dir: hpe_cli.io.transaction",
-    "hpe_cli/pipelines/export/write.py::summary_of: pandas",
     "hpe_cli/pipelines/export/write.py::where: hpe_cli.io.table_source",
     "hpe_cli/pipelines/export/write.py::write_rejects: hpe_cli.io.rejects",
-    "hpe_cli/pipelines/infer/job.py::_infer_code: hpe_cli.io.transaction",
     "hpe_cli/pipelines/infer/job.py::run_infer: hpe_cli.pipelines.infer.data",
     "hpe_cli/pipelines/infer/report.py::finish: hpe_cli.io",
     "hpe_cli/pipelines/infer/report.py::finish: hpe_cli.io.transaction",
     "hpe_cli/pipelines/inorder.py::in_order: collections",
     "hpe_cli/pipelines/inorder.py::in_order: concurrent.futures",
-    "hpe_cli/pipelines/parts.py::lock_parts: fcntl",
     "hpe_cli/pipelines/pools.py::_Checked.result: concurrent.futures.process",
     "hpe_cli/pipelines/pools.py::_Inline.submit: concurrent.futures",
     "hpe_cli/pipelines/pools.py::_Local.submit: concurrent.futures.process",
@@ -727,9 +683,7 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/pipelines/pools.py::_import_all: importlib",
     "hpe_cli/pipelines/pools.py::default_threads: os",
     "hpe_cli/pipelines/pools.py::die_with_parent.watch: time",
-    "hpe_cli/pipelines/pools.py::die_with_parent: ctypes",
     "hpe_cli/pipelines/pools.py::die_with_parent: os",
-    "hpe_cli/pipelines/pools.py::die_with_parent: signal",
     "hpe_cli/pipelines/pools.py::die_with_parent: sys",
     "hpe_cli/pipelines/pools.py::die_with_parent: threading",
     "hpe_cli/pipelines/pools.py::in_order: collections",
@@ -752,7 +706,6 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/rotation/infer/core.py::check_rotations: hpe_cli.rotation.check",
     "hpe_cli/rotation/infer/data.py::infer_table: hpe_cli.rotation.check",
     "hpe_cli/rotation/infer/storage.py::_form_matrices: hpe_cli.rotation",
-    "hpe_cli/rotation/system_def.py::RotationSystem.__post_init__: hpe_cli.rotation.storage",
     "hpe_cli/rotation/system_def.py::RotationSystem.matrix_to_values: hpe_cli.rotation",
     "hpe_cli/rotation/system_def.py::RotationSystem.values_to_matrix: hpe_cli.rotation",
     "hpe_cli/rotation/system_def.py::RotationSystem.values_to_matrix: hpe_cli.rotation.check",
@@ -770,18 +723,11 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/torch/dataset_tables.py::_is_image_bytes: pyarrow",
     "hpe_cli/torch/dataset_tables.py::_load_table: hpe_cli",
     "hpe_cli/torch/dataset_tables.py::_load_table: hpe_cli.datasets.mat",
-    "hpe_cli/torch/dataset_tables.py::_load_table: pandas",
     "hpe_cli/torch/dataset_tables.py::_read_list_file: hpe_cli.datasets.mat",
     "hpe_cli/torch/dataset_tables.py::_read_list_file: hpe_cli.geometry.augment",
-    "hpe_cli/torch/dataset_tables.py::_read_list_file: pandas",
     "hpe_cli/torch/dataset_tables.py::_read_parquet: hpe_cli.io.system_meta",
-    "hpe_cli/torch/dataset_tables.py::_read_parquet: pandas",
     "hpe_cli/torch/dataset_tables.py::_read_parquet: pyarrow.parquet",
     "hpe_cli/torch/dataset_tables.py::_read_parquet: re",
-    "hpe_cli/torch/samples.py::_rgb_flag: cv2",
-    "hpe_cli/torch/samples.py::as_rgb: cv2",
-    "hpe_cli/torch/samples.py::hflip_pixels: cv2",
-    "hpe_cli/torch/samples.py::resize: cv2",
     "hpe_cli/torch/transforms.py::_perm_for: hpe_cli.geometry.landmark_schemes",
     "hpe_cli/torch/transforms.py::_perm_for: numpy",
 }
