@@ -2,7 +2,7 @@
 
 Steps: read LABELS (and OTHER) once through the readers, each in its own system as every command resolves it
 (:func:`hpe_cli.io.system_meta.resolve_system`); canonical matrices; angles in LABELS' system; join OTHER by key
-with ``hpe evaluate``'s join (:func:`hpe_cli.pipelines.evaluate_join.join`: same key choice, stems, duplicate
+with ``hpe evaluate``'s join (:func:`hpe_cli.pipelines.evaluate.join.join`: same key choice, stems, duplicate
 checks; no common key is a usage error); the geodesic angle between the two poses with
 :func:`hpe_cli.metrics.rotation_errors.geodesic_deg` (what ``hpe evaluate`` reports per row); one thumbnail per
 row and one reduced full frame per image (:mod:`.view_thumbs`: parallel, cached by content key); then the page
@@ -80,21 +80,21 @@ def _key_table(t: Table, keys):
 
 def default_keys(a: Table, b: Table, keys) -> list:
     """``--key`` as given, else evaluate's choice (image, file) plus a person id both tables have."""
-    from .evaluate_join import _choose_keys
+    from .evaluate.join import choose_keys
 
     cols_a, cols_b = list(a.frame.columns), list(b.frame.columns)
     for t, cols in ((a, cols_a), (b, cols_b)):
         if "file" in cols and "image" not in cols and getattr(t.src, "dataset", False):
             cols.append("image")
-    chosen = _choose_keys(keys, cols_b, cols_a, b.src.path, a.src.path)
+    chosen = choose_keys(keys, cols_b, cols_a, b.src.path, a.src.path)
     if not keys:
         chosen += [k for k in PERSON_KEYS if k in cols_a and k in cols_b][:1]
     return chosen
 
 
 def pair(a: Table, b: Table, keys) -> tuple:
-    """``(b_idx per row of a (-1: none), unmatched rows of b, keys, notes)`` by :func:`evaluate_join.join`."""
-    from .evaluate_join import Side, join
+    """``(b_idx per row of a (-1: none), unmatched rows of b, keys, notes)`` by :func:`hpe_cli.pipelines.evaluate.join.join`."""
+    from .evaluate.join import Side, join
 
     keys = default_keys(a, b, keys)
 

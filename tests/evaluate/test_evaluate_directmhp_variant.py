@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from hpe_cli.cli.main import cli
-from hpe_cli.pipelines.evaluate_dataset import choose_directmhp, gt_dataset
+from hpe_cli.pipelines.evaluate.dataset import choose_directmhp, gt_dataset
 
 AFLW = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "aflw2000_prnet"
 

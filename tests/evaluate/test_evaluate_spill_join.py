@@ -112,7 +112,7 @@ def test_hash_collisions_fall_back_to_the_string_join(tmp_path, monkeypatch):
     partition use the string join, so the report is the same."""
     import numpy as np
 
-    from hpe_cli.pipelines import evaluate_spill as es
+    from hpe_cli.pipelines.evaluate import spill as es
 
     pred = tmp_path / "pred.csv"
     pd.read_csv(GOLD / "syn" / "pred.csv").sample(frac=1.0, random_state=3).to_csv(pred, index=False)

@@ -2,14 +2,14 @@
 
 :func:`lockstep` pairs equal-length chunks of the two sides as they are read, checks the keys chunk by chunk
 (:func:`_same_keys`) and duplicate keys across chunks (:class:`KeysSeen`); :class:`Unaligned` sends the run to
-the key join (:mod:`hpe_cli.pipelines.evaluate_spill`). :func:`prefetch` reads one pair ahead on a thread.
+the key join (:mod:`hpe_cli.pipelines.evaluate.spill`). :func:`prefetch` reads one pair ahead on a thread.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .evaluate_join import Chunk, JoinUsageError, SideReader, _stems, keys_hash
+from .join import Chunk, JoinUsageError, SideReader, file_stems, keys_hash
 
 
 class Unaligned(Exception):
@@ -27,7 +27,7 @@ def _same_keys(g: Chunk, p: Chunk, keys, notes: set, seen=None) -> None:
             a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
         if pc.all(pc.equal(a, b)).as_py() is not False and a.null_count == 0 and b.null_count == 0:
             continue
-        if pa.types.is_string(a.type) and pc.all(pc.equal(_stems(a), _stems(b))).as_py():
+        if pa.types.is_string(a.type) and pc.all(pc.equal(file_stems(a), file_stems(b))).as_py():
             notes.add(f"key {k!r} joined on file stems (the two files spell the names differently)")
             continue
         raise Unaligned(k)

@@ -1,11 +1,11 @@
 """External hash join of ``hpe evaluate``'s two inputs when they do not list the keys in the same order.
 
-Both sides are streamed once (:class:`~hpe_cli.pipelines.evaluate_join.SideReader`) and every row is written
+Both sides are streamed once (:class:`~hpe_cli.pipelines.evaluate.join.SideReader`) and every row is written
 to one of ``K`` partition files (Arrow IPC, in a temporary folder) chosen by a hash of its key, so rows with
-equal keys (also equal file stems, see :func:`~hpe_cli.pipelines.evaluate_join._key_codes`) land in the same
+equal keys (also equal file stems, see :func:`~hpe_cli.pipelines.evaluate.join._key_codes`) land in the same
 partition. ``K`` is chosen from the row count so that one partition of both sides is about
 :data:`PARTITION_ROWS` rows (~100 MB on disk). The partitions are then joined one at a time with the in-memory
-join (:func:`~hpe_cli.pipelines.evaluate_join.join`), so memory is flat in the number of pairs, and a key that
+join (:func:`~hpe_cli.pipelines.evaluate.join.join`), so memory is flat in the number of pairs, and a key that
 appears twice anywhere in a file is found in its partition. Whether text keys are compared as written or on
 their file stems is decided over the whole files first, as the in-memory join decides it.
 """
@@ -20,8 +20,8 @@ from contextlib import closing
 
 import numpy as np
 
-from ..io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
-from .evaluate_join import Side, _stems, combine_key_hash, key_text
+from ...io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
+from .join import Side, combine_key_hash, file_stems, key_text
 
 
 def _bools(col) -> np.ndarray:
@@ -53,7 +53,7 @@ def key_hashes(keys_table, keys):
     the same partition; the per-column hashes let :meth:`Partitions.stem_columns` count matches cheaply.
     Hashed off the Arrow buffers (:func:`hpe_cli.io.key_hash.string_hashes`).
     """
-    from ..io.key_hash import string_hashes
+    from ...io.key_hash import string_hashes
 
     h = np.zeros(keys_table.num_rows, dtype=np.uint64)
     per = {}
@@ -170,7 +170,7 @@ class _SideSpill:
         return pa.ipc.open_file(pa.memory_map(p)).read_all()
 
     def side(self, k, empty_keys):
-        """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate_join.Side` (empty when it holds no row)."""
+        """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate.join.Side` (empty when it holds no row)."""
         import pyarrow as pa
         import pyarrow.compute as pc
 
@@ -271,7 +271,7 @@ class Partitions:
 
     def stem_columns(self) -> set:
         """Key columns compared on file stems, decided over all partitions as the in-memory join decides
-        (:func:`~hpe_cli.pipelines.evaluate_join._key_codes`: stems when they match more GT rows than the
+        (:func:`~hpe_cli.pipelines.evaluate.join._key_codes`: stems when they match more GT rows than the
         text as written), counted on the 64-bit hashes written with each row."""
         import pyarrow as pa
 
@@ -349,7 +349,7 @@ class Partitions:
             )
             a, b = a.take(numpy_to_arrow(gi)), b.take(numpy_to_arrow(pi))
             if k in stems:
-                a, b = _stems(a), _stems(b)
+                a, b = file_stems(a), file_stems(b)
             if len(gi) and not pc.all(pc.equal(a, b)).as_py():
                 return None
         return cg, cp

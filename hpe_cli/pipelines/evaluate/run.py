@@ -2,12 +2,12 @@
 
 Memory is flat in the number of pairs whenever the two files list the same
 keys in the same order (or ``--join order``): chunks are paired as they are
-read (:func:`hpe_cli.pipelines.evaluate_lockstep.lockstep`, keys verified chunk by
+read (:func:`hpe_cli.pipelines.evaluate.lockstep.lockstep`, keys verified chunk by
 chunk), every metric is summed per group (:class:`hpe_cli.metrics.stream.Accumulator`),
 the geodesic errors are spilled as float32 for exact medians and percentiles,
 and the per-row output is written chunk by chunk. Files in different orders
 are hashed by key into partition files and joined one partition at a time
-(:mod:`hpe_cli.pipelines.evaluate_spill`), then scored the same way.
+(:mod:`hpe_cli.pipelines.evaluate.spill`), then scored the same way.
 Global estimates (``--align mean``, opal23's alignment) take one extra pass.
 """
 
@@ -15,24 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import HpeError
-from .evaluate_dataset import choose_directmhp
-from .evaluate_join import (  # noqa: F401
-    DEFAULT_KEYS,
-    LABEL_THREADS,
-    Chunk,
-    JoinUsageError,
-    SideReader,
-    _choose_keys,
-    _reasons,
-    _where,
-    join,
-    read_side,
-)
-from .evaluate_lockstep import Unaligned, lockstep, prefetch  # noqa: F401
-from .evaluate_outputs import Images, empty_rows, worst_pictures
-from .evaluate_rejects import _add_rejects, _align_block, _collect_rejects, _stream_rejects, _unreadable_rejects  # noqa: F401
-from .evaluate_score import PLACEMENT, SCORE_ROWS, SCORE_THREADS, _nested, _raw, _score, _take, with_canonical  # noqa: F401
+from ...errors import HpeError
+from .dataset import choose_directmhp
+from .join import LABEL_THREADS, Chunk, SideReader, choose_keys, join, read_side
+from .lockstep import Unaligned, lockstep, prefetch
+from .outputs import Images, empty_rows, worst_pictures
+from .rejects import align_block, collect_rejects, unreadable_rejects
+from .score import PLACEMENT, nested, raw_angles, score_pairs, take_rows, with_canonical
 
 ANGLES = ("pitch", "yaw", "roll")
 
@@ -80,9 +69,9 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
     import os
     import tempfile
 
-    from ..metrics import peer_angles as pa_
-    from ..metrics.align import project_to_so3
-    from ..metrics.protocols import PosePair, _opal23_mats
+    from ...metrics import peer_angles as pa_
+    from ...metrics.align import project_to_so3
+    from ...metrics.protocols import PosePair, opal23_mats
 
     need_mean = s.align == "mean"
     need_opal = "opal23-align" in s.protocols
@@ -95,8 +84,8 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
         g, p = with_canonical(gp[0], gsys), with_canonical(gp[1], psys)
         ok = g.ok & p.ok
         if not ok.all():
-            g, p = _take(g, ok), _take(p, ok)
-        P, G = _nested(p), _nested(g)
+            g, p = take_rows(g, ok), take_rows(p, ok)
+        P, G = nested(p), nested(g)
         part = None
         if need_mean:
             part = np.array(
@@ -105,14 +94,14 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
             )  # fmt: skip
         deltas = near = None
         if need_opal and g.n:
-            pair = PosePair(P, G, gsys, _raw(g, p, gsys, psys))
-            Po, Go, _ = _opal23_mats(pair)
+            pair = PosePair(P, G, gsys, raw_angles(g, p, gsys, psys))
+            Po, Go, _ = opal23_mats(pair)
             deltas, near = pa_.opal23_near_quats(Go, Po)
         return g.n, part, deltas, near, g.lines
 
     from concurrent.futures import ThreadPoolExecutor
 
-    from .pools import in_order
+    from ..pools import in_order
 
     fd, path = tempfile.mkstemp(prefix="hpe_eval_opal23_", suffix=".bin")
     threads = max(1, int(getattr(s, "threads", None) or 1))
@@ -173,7 +162,7 @@ class _Rows:
 
 
 def default_threads(threads=None) -> int:
-    from .pools import default_threads as d
+    from ..pools import default_threads as d
 
     return d(threads)
 
@@ -219,7 +208,7 @@ def _run_stream(s, rej, writer):
     gr, pr = _readers(s, s.progress)
     s.gside, s.pside = gr, pr
     glob = _globals(s, factory, gr.system, pr.system)
-    out = _score(
+    out = score_pairs(
         s, prefetch(lockstep(gr, pr, s.keys, s.join_mode, notes)), rej, gr.system, pr.system, glob, writer, True
     )
     if s.join_mode == "order" and (gr.unreadable or pr.unreadable):
@@ -229,7 +218,7 @@ def _run_stream(s, rej, writer):
             "rows cannot be paired by position (--join order) once one is skipped"
         )
     for side, name in ((gr, "gt"), (pr, "pred")):
-        _unreadable_rejects(rej, side, name)
+        unreadable_rejects(rej, side, name)
     n = {"gt": gr.n, "pred": pr.n, "missing": 0, "unmatched_pred": 0}
     return out, glob, n, sorted(notes), gr, pr
 
@@ -270,10 +259,12 @@ def _run_memory(s, rej, writer):
             return {k: side.keys.column(k).take(rows).to_numpy(zero_copy_only=False) for k in s.keys}
         return {"row": rows + 1}
 
-    valid, missing, invalid = _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols)
+    valid, missing, invalid = collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols)
     gv, pv = gidx[valid], pidx[valid]
     glob = _globals(s, lambda: _memory_pairs(gt, pred, gv, pv, s.batch_size), gt.system, pred.system)
-    out = _score(s, _memory_pairs(gt, pred, gv, pv, s.batch_size), rej, gt.system, pred.system, glob, writer, False)
+    out = score_pairs(
+        s, _memory_pairs(gt, pred, gv, pv, s.batch_size), rej, gt.system, pred.system, glob, writer, False
+    )
     out[2]["invalid"] = int(invalid.sum())
     n = {"gt": gt.n, "pred": pred.n, "missing": int(missing.sum()), "unmatched_pred": len(unmatched)}
     return out, glob, n, notes, gt, pred
@@ -286,8 +277,8 @@ def _valid(gt, pred, gidx, pidx):
 
 def _run_spill(s, rej, writer):
     """Key join of files in different orders: both sides hashed into partition files, joined one at a time
-    (:mod:`hpe_cli.pipelines.evaluate_spill`); memory flat in the number of pairs."""
-    from .evaluate_spill import Partitions
+    (:mod:`hpe_cli.pipelines.evaluate.spill`); memory flat in the number of pairs."""
+    from .spill import Partitions
 
     gr, pr = _readers(s, s.progress)
     s.gside, s.pside = gr, pr
@@ -296,7 +287,7 @@ def _run_spill(s, rej, writer):
         if pr.n == 0 and not pr.unreadable:
             raise HpeError(f"{pr.path}: no prediction rows (the file has a header only)")
         for side, name in ((gr, "gt"), (pr, "pred")):
-            _unreadable_rejects(rej, side, name)
+            unreadable_rejects(rej, side, name)
         stems = parts.stem_columns()
         tally = {"missing": 0, "unmatched_pred": 0, "invalid": 0}
         notes: set = set()
@@ -312,7 +303,7 @@ def _run_spill(s, rej, writer):
                 gidx, pidx, unmatched, nt = join(pred, gt, s.keys, "key", stems, parts.codes(gt, pred, stems))
                 notes.update(nt)
                 if first:
-                    valid, missing, invalid = _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols)
+                    valid, missing, invalid = collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols)
                     tally["missing"] += int(missing.sum())
                     tally["invalid"] += int(invalid.sum())
                     tally["unmatched_pred"] += len(unmatched)
@@ -322,7 +313,7 @@ def _run_spill(s, rej, writer):
                 del gt, pred, gidx, pidx
 
         glob = _globals(s, lambda: pairs(False), gr.system, pr.system)
-        out = _score(s, pairs(True), rej, gr.system, pr.system, glob, writer, False)
+        out = score_pairs(s, pairs(True), rej, gr.system, pr.system, glob, writer, False)
     finally:
         parts.cleanup()
     out[2]["invalid"] = tally["invalid"]
@@ -332,7 +323,7 @@ def _run_spill(s, rej, writer):
 
 
 def _run(s, writer, stream: bool):
-    from ..io import Rejects
+    from ...io import Rejects
 
     rej = Rejects(s.rejects, s.overwrite, strict=s.strict, source=None)
     run = _run_stream if stream else (_run_memory if getattr(s, "join_engine", "spill") == "memory" else _run_spill)
@@ -347,7 +338,7 @@ def _run(s, writer, stream: bool):
 
 def _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed) -> dict:
     """The report dict of one run."""
-    from ..metrics.protocols import PROTOCOLS
+    from ...metrics.protocols import PROTOCOLS
 
     result = {
         "n": {
@@ -372,7 +363,7 @@ def _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, strea
             if counts.get("pairs") and "dist_sum" in counts
             else None,
         }
-    result["align"] = _align_block(glob, rep_before, gside.system) if s.align == "mean" else {"method": "none"}
+    result["align"] = align_block(glob, rep_before, gside.system) if s.align == "mean" else {"method": "none"}
     result["metrics"], result["protocols"] = rep["metrics"], rep["protocols"]
     if s.by:
         result["by"] = {"column": s.by, "groups": rep["by_groups"]}
@@ -430,15 +421,15 @@ def run_evaluate(
     """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report.
 
     Files in different orders are joined by an external hash join (``join_engine="spill"``, partitions of
-    about ``partition_rows`` rows, :mod:`hpe_cli.pipelines.evaluate_spill`) or, with ``"memory"``, whole in
+    about ``partition_rows`` rows, :mod:`hpe_cli.pipelines.evaluate.spill`) or, with ``"memory"``, whole in
     memory (the reference the partitioned join is tested against). ``threads`` (default: one per core, at
     most 8) score chunks side by side (each side's matrices are built on at most ``LABEL_THREADS`` of them);
     the report and the outputs are the same whatever their number (chunks are summed and written in input
     order).
     """
-    from ..io import TableWriter, open_table, system_metadata, write_json
-    from ..io.writers import check_report_outputs
-    from ..metrics.evaluate import check_protocols
+    from ...io import TableWriter, open_table, system_metadata, write_json
+    from ...io.writers import check_report_outputs
+    from ...metrics.evaluate import check_protocols
 
     try:
         protocols = check_protocols(protocols or None)
@@ -448,10 +439,10 @@ def run_evaluate(
     if html:
         check_report_outputs(html, None, overwrite)
     if plots:
-        from ..report.eval_plots import check_plot_outputs
+        from ...report.eval_plots import check_plot_outputs
 
         check_plot_outputs(plots, overwrite)
-    from ..io.system_meta import output_system, resolve_system
+    from ...io.system_meta import output_system, resolve_system
 
     psrc = open_table(pred_path, batch_size)
     pcols = psrc.columns
@@ -463,8 +454,8 @@ def run_evaluate(
     gt_system, pred_system = output_system(gres), output_system(pres)
     gcols = list(gsrc.columns)
     if "file" in gcols and "image" not in gcols and getattr(gsrc, "dataset", False):
-        gcols.append("image")  # the .mat folder's key: see evaluate_join._stem_key_hook
-    keys = _choose_keys(list(keys or ()), pcols, gcols, pred_path, gt_path, join_mode)
+        gcols.append("image")  # the .mat folder's key: see join._stem_key_hook
+    keys = choose_keys(list(keys or ()), pcols, gcols, pred_path, gt_path, join_mode)
     protocols, choice = choose_directmhp(protocols, gsrc)
     if by and by not in gcols and by not in pcols:
         raise HpeError(f"{gt_path}: --by column {by!r} is in neither table; found: {', '.join(gcols[:20])}")
@@ -526,13 +517,13 @@ def run_evaluate(
         result["notes"].insert(0, choice)
     rej.write()
     if plots:
-        from ..report.eval_plots import write_eval_plots
+        from ...report.eval_plots import write_eval_plots
 
         write_eval_plots(plots, sample.rows(), result, gside.system, overwrite=overwrite)
     if html:
         from pathlib import Path
 
-        from ..report.evaluate_page import write_page
+        from ...report.evaluate_page import write_page
 
         frame = worst_rows.frame.to_pandas() if worst_rows.frame is not None else None
         write_page(
@@ -546,7 +537,7 @@ def run_evaluate(
     if report == "-":
         import sys
 
-        from ..io.writers import json_text
+        from ...io.writers import json_text
 
         sys.stdout.write(json_text(result) + "\n")
         sys.stdout.flush()

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .evaluate_join import Chunk
+from .join import Chunk
 
 ANGLES = ("pitch", "yaw", "roll")
 
@@ -115,11 +115,11 @@ class Images:
         import pyarrow as pa
         import pyarrow.compute as pc
 
-        from .evaluate_join import _stems
+        from .join import file_stems
 
         if isinstance(names, pa.ChunkedArray):
             names = names.combine_chunks()
-        stems = _stems(pc.cast(names, pa.string()))
+        stems = file_stems(pc.cast(names, pa.string()))
         idx = pc.index_in(stems, value_set=pa.array(list(self.by_stem), pa.string()))
         out = (
             pa.array(list(self.by_stem.values()), pa.string()).take(pc.fill_null(idx, 0))
@@ -141,7 +141,7 @@ def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 48
 
     import cv2
 
-    from .draw_errors import render_worst
+    from ..draw_errors import render_worst
 
     if frame is None or not len(frame):
         return None

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .evaluate_join import Chunk, stored_of_angles
-from .evaluate_outputs import Sample, Worst, row_table
-from .evaluate_rejects import _stream_rejects
+from .join import Chunk, stored_of_angles
+from .outputs import Sample, Worst, row_table
+from .rejects import stream_rejects
 
 #: threads that score chunks side by side (the reading runs on one more, see ``prefetch``)
 SCORE_THREADS = 2
@@ -16,7 +16,7 @@ SCORE_ROWS = 65536
 PLACEMENT = ("bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "size")
 
 
-def _take(c: Chunk, idx) -> Chunk:
+def take_rows(c: Chunk, idx) -> Chunk:
     """Rows ``idx`` (int array or bool mask) of a chunk."""
 
     def t(x):
@@ -42,7 +42,7 @@ def with_canonical(c: Chunk, system) -> Chunk:
     files kept only those (the reader's own computation on the same numbers: the same bits)."""
     if c.canonical is not None:
         return c
-    from ..rotation import soa
+    from ...rotation import soa
 
     c.canonical = soa.columns(system.soa_to_canonical(stored_of_angles(system, c.raw)), c.n)
     return c
@@ -53,18 +53,18 @@ def with_written(t, p: Chunk):
     degrees, its own system), for the page's worst rows: beside the angles hpe re-expressed in the GT system."""
     if p.raw is None or "pred_written_pitch" in t.column_names:
         return t
-    from ..io.layout import numpy_to_arrow
+    from ...io.layout import numpy_to_arrow
 
     for k, a in enumerate(("pitch", "yaw", "roll")):
         t = t.append_column(f"pred_written_{a}", numpy_to_arrow(np.ascontiguousarray(p.raw[:, k], dtype=np.float64)))
     return t
 
 
-def _nested(c: Chunk):
+def nested(c: Chunk):
     return [[c.canonical[3 * i + j] for j in range(3)] for i in range(3)]
 
 
-def _raw(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
+def raw_angles(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
     raw = {}
     if g.raw is not None:
         raw["gt"] = (gsys, g.raw)
@@ -73,7 +73,7 @@ def _raw(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
     return raw
 
 
-def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
+def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     """Score every chunk of pairs: accumulate, write rows, keep the worst and a plot sample.
 
     Chunks are scored on ``s.threads`` threads (:data:`SCORE_THREADS` by default; numpy releases the GIL on
@@ -82,11 +82,11 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     """
     from concurrent.futures import ThreadPoolExecutor
 
-    from ..metrics.align import remove_offset
-    from ..metrics.evaluate import compute_rows, yaw_bin_edges
-    from ..metrics.protocols import PROTOCOLS
-    from ..metrics.stream import Accumulator
-    from .pools import in_order
+    from ...metrics.align import remove_offset
+    from ...metrics.evaluate import compute_rows, yaw_bin_edges
+    from ...metrics.protocols import PROTOCOLS
+    from ...metrics.stream import Accumulator
+    from ..pools import in_order
 
     protos = {k: PROTOCOLS[k] for k in s.protocols}
     edges = yaw_bin_edges(gsys, float(s.yaw_bins)) if s.yaw_bins else None
@@ -101,21 +101,21 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             if stream:
                 bad = ~(g.ok & p.ok)
                 if bad.any():
-                    _stream_rejects(rej, s, g, p, bad)
+                    stream_rejects(rej, s, g, p, bad)
                     counts["invalid"] += int(bad.sum())
-                    g, p = _take(g, ~bad), _take(p, ~bad)
+                    g, p = take_rows(g, ~bad), take_rows(p, ~bad)
             for a in range(0, g.n, SCORE_ROWS):  # cache-sized pieces: numpy is faster on them
                 yield g.slice(a, a + SCORE_ROWS), p.slice(a, a + SCORE_ROWS)
 
     def work(gp):  # on a scoring thread: pure numpy and Arrow, no shared state
         g, p = with_canonical(gp[0], gsys), with_canonical(gp[1], psys)
-        P, G = _nested(p), _nested(g)
+        P, G = nested(p), nested(g)
         by_values = (g.by if g.by is not None else p.by) if s.by else None
         rows_before = None
         if before is not None:
-            rows_before = compute_rows(P, G, gsys, s.protocols, _raw(g, p, gsys, psys), ctx)
+            rows_before = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys), ctx)
             P = remove_offset(P, glob["Q"])
-        rows = compute_rows(P, G, gsys, s.protocols, _raw(g, p, gsys, psys, aligned=before is not None), ctx)
+        rows = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys, aligned=before is not None), ctx)
         table = None
         if writer is not None or worst.n:
             table = row_table(rows, g, p, s.keys, s.by, by_values, s.images)

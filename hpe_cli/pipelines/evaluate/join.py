@@ -7,7 +7,7 @@ Pairing is by key columns only: when both files list the same keys in the same
 order the chunks are paired as they stream (memory flat in the number of
 pairs, keys verified chunk by chunk); otherwise both sides are partitioned by
 a hash of the key on disk and each partition joined here with Arrow dictionary
-encoding or verified key hashes (:mod:`hpe_cli.pipelines.evaluate_spill`; :func:`read_side`
+encoding or verified key hashes (:mod:`hpe_cli.pipelines.evaluate.spill`; :func:`read_side`
 + :func:`join` whole in memory is the reference it is tested against). Row order
 is used only with ``--join order`` and equal row counts.
 """
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import HpeError
+from ...errors import HpeError
 
 #: key columns tried in order when --key is not given
 DEFAULT_KEYS = ("image", "file")
@@ -61,14 +61,14 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
     raw output, e.g. TriNet's vectors) is replaced by its nearest rotation
     (SVD, det +1) and ``distance`` is ``||M - R||_F``.
     """
-    from ..io import batch_rotations
-    from ..io.labels import _native, _value_columns, label_columns_fast
+    from ...io import batch_rotations
+    from ...io.labels import is_native, label_columns_fast, value_columns
 
     n = batch.num_rows
-    native = _native(system, batch.schema.names)
+    native = is_native(system, batch.schema.names)
     if mode == "angles":
         if native and system.storage_kind == "angles":
-            cols, ok, reasons = _value_columns(batch, system.value_columns)
+            cols, ok, reasons = value_columns(batch, system.value_columns)
             if system.value_units == "radians":
                 cols = [c * (180.0 / np.pi) for c in cols]
         else:
@@ -76,14 +76,14 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
         raw = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1)
         return stored_of_angles(system, raw), ok, reasons, raw, None
     if orthonormalize and (mode == "matrix" or system.storage_kind == "matrix"):
-        from ..metrics.align import project_to_so3_batch
+        from ...metrics.align import project_to_so3_batch
 
         names = system.value_columns if (native and system.storage_kind == "matrix") else None
         if names is None:
-            from ..io import MATRIX_COLS
+            from ...io import MATRIX_COLS
 
             names = MATRIX_COLS
-        cols, ok, reasons = _value_columns(batch, names)
+        cols, ok, reasons = value_columns(batch, names)
         M = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1).reshape(n, 3, 3)
         R, dist = project_to_so3_batch(M)
         bad = ok & ~np.isfinite(dist)
@@ -176,7 +176,7 @@ def combine_key_hash(h: np.ndarray, column_hash: np.ndarray) -> np.ndarray:
 
 def keys_hash(table, keys) -> np.ndarray:
     """One uint64 per row of the key columns (text as written; see :func:`hpe_cli.io.key_hash.string_hashes`)."""
-    from ..io.key_hash import string_hashes
+    from ...io.key_hash import string_hashes
 
     h = np.zeros(table.num_rows, dtype=np.uint64)
     for k in keys:
@@ -202,8 +202,8 @@ class SideReader:
         role="gt",
         threads=LABEL_THREADS,
     ):
-        from ..io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
-        from ..io.system_meta import resolve_system
+        from ...io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
+        from ...io.system_meta import resolve_system
 
         self.src = src = open_table(path, batch_size, with_lines=True)
         # the file's own system (hpe:system metadata, dataset formats: .mat Pose_Para is 300w_lp), else the option
@@ -248,7 +248,7 @@ class SideReader:
         """
         from concurrent.futures import ThreadPoolExecutor
 
-        from .pools import in_order
+        from ..pools import in_order
 
         def batches():
             for batch, bad_rows in self.src.batches_with_rejects():
@@ -266,9 +266,9 @@ class SideReader:
             pool.shutdown(wait=True, cancel_futures=True)
 
     def _chunk(self, batch) -> Chunk:
-        from ..io.readers import LINE_COL
-        from ..io.table_source import plain_numpy
-        from ..rotation import soa
+        from ...io.readers import LINE_COL
+        from ...io.table_source import plain_numpy
+        from ...rotation import soa
 
         if self.dataset_stem:
             batch = _stem_key_hook(batch)
@@ -364,7 +364,7 @@ class JoinUsageError(HpeError):
     exit_code = 2
 
 
-def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path, join_mode="key"):
+def choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path, join_mode="key"):
     if join_mode == "order":
         return []
     if keys:
@@ -385,7 +385,7 @@ def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path, join_mode="key"):
     )
 
 
-def _stems(arr):
+def file_stems(arr):
     import pyarrow as pa
     import pyarrow.compute as pc
 
@@ -395,7 +395,7 @@ def _stems(arr):
 def _encode(a, b):
     import pyarrow as pa
 
-    from ..io.layout import arrow_to_numpy
+    from ...io.layout import arrow_to_numpy
 
     enc = pa.concat_arrays([a, b]).dictionary_encode(null_encoding="encode")
     return arrow_to_numpy(enc.indices).astype(np.int64), len(enc.dictionary)
@@ -422,12 +422,12 @@ def _key_codes(gt_keys, pred_keys, keys, stems=None):
         c, m = _encode(a, b)
         if stems is not None:
             if k in stems:
-                c, m = _encode(_stems(a), _stems(b))
+                c, m = _encode(file_stems(a), file_stems(b))
                 notes.append(f"key {k!r} joined on file stems (the two files spell the names differently)")
         elif pa.types.is_string(a.type) or pa.types.is_large_string(a.type):
             exact = np.isin(c[:n_g], c[n_g:]).sum()
             if exact < min(n_g, len(c) - n_g):
-                cs, ms = _encode(_stems(a), _stems(b))
+                cs, ms = _encode(file_stems(a), file_stems(b))
                 if np.isin(cs[:n_g], cs[n_g:]).sum() > exact:
                     c, m = cs, ms
                     notes.append(f"key {k!r} joined on file stems (the two files spell the names differently)")
@@ -439,7 +439,7 @@ def _key_codes(gt_keys, pred_keys, keys, stems=None):
     return code[:n_g], code[n_g:], notes
 
 
-def _where(side, row):
+def where(side, row):
     unit = side.unit
     if side.image_dir is not None:
         return f"{side.path}"
@@ -455,7 +455,7 @@ def _check_unique(codes, side, keys):
         what = ", ".join(f"{k}={side.keys.column(k)[first].as_py()!r}" for k in keys)
         unit = side.unit
         raise HpeError(
-            f"{_where(side, first)}: duplicate key {what} (again at {unit} {int(side.lines[again])}); "
+            f"{where(side, first)}: duplicate key {what} (again at {unit} {int(side.lines[again])}); "
             f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id"
         )
 
@@ -492,7 +492,7 @@ def join(pred: Side, gt: Side, keys, join_mode="key", stems=None, codes=None):
     return np.arange(len(cg)), pred_pos[cg], np.flatnonzero(~gt_has[cp]), notes
 
 
-def _reasons(side: Side, idx):
+def row_reasons(side: Side, idx):
     if side.reasons is None:
         return np.full(len(idx), "", dtype=object)
     return side.reasons[idx]
