@@ -8,6 +8,7 @@ the external hash join), :mod:`.score` (chunks scored on threads), :mod:`.reject
 """
 
 from .join import JoinUsageError
+from .options import EvaluateOptions
 from .run import run_evaluate
 
-__all__ = ["JoinUsageError", "run_evaluate"]
+__all__ = ["EvaluateOptions", "JoinUsageError", "run_evaluate"]

@@ -20,6 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import HpeError
+from ...io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
+from ...io.label_source import AUTO, LabelSource
+from ...io.system_meta import resolve_system
 
 #: key columns tried in order when --key is not given
 DEFAULT_KEYS = ("image", "file")
@@ -184,46 +187,53 @@ def keys_hash(table, keys) -> np.ndarray:
     return h
 
 
+def side_columns(table) -> list:
+    """The columns of one side as the join sees them: a ``.mat`` folder's rows also have ``image`` (the file
+    stem, see :func:`_stem_key_hook`)."""
+    columns = list(table.columns)
+    if "file" in columns and "image" not in columns and bool(table.dataset):
+        columns.append("image")
+    return columns
+
+
+def open_side(path, system, use: str, role: str, batch_size: int):
+    """One input of ``hpe evaluate`` opened once: a :class:`~hpe_cli.io.label_source.LabelSource`.
+
+    ``system`` is the ``--{role}-system`` option (the file's own system wins; a dataset format's labels are
+    converted to it), ``use`` the ``--columns`` choice (``"auto"``: the system's own value columns, then
+    angles, then ``r00..r22``).
+    """
+    table = open_table(path, batch_size, with_lines=True)
+    resolved = resolve_system(table, system, default=None, option_name=f"--{role}-system", option_is_output=True)
+    columns = side_columns(table)
+    if use == AUTO:
+        return LabelSource(table, resolved, label_mode(columns, table.path, resolved.system))
+    native = resolved.system.storage_kind == use and all(c in columns for c in resolved.system.value_columns)
+    need = ANGLE_COLS if use == "angles" else MATRIX_COLS
+    missing = [c for c in need if c not in columns]
+    if missing and not native:
+        raise HpeError(f"{table.path}: missing column(s) {', '.join(missing)} for --columns {use}")
+    return LabelSource(table, resolved, use)
+
+
 class SideReader:
-    """One input table: its system, label columns, keys; :meth:`chunks` streams it."""
+    """One input side, opened once (:class:`~hpe_cli.io.label_source.LabelSource`): :meth:`chunks` streams it.
+
+    Each pass (the scoring pass, a global estimate's pass, the spill) makes a reader of the same source: the
+    table is read again, its system and label columns are not decided again.
+    """
 
     def __init__(
-        self,
-        path,
-        system,
-        use: str,
-        keys,
-        by,
-        radians: bool,
-        batch_size: int,
-        progress=None,
-        orthonormalize=False,
-        extra=(),
-        role="gt",
-        threads=LABEL_THREADS,
+        self, source, keys, by, radians: bool, progress=None, orthonormalize=False, extra=(), threads=LABEL_THREADS
     ):
-        from ...io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
-        from ...io.system_meta import resolve_system
-
-        self.src = src = open_table(path, batch_size, with_lines=True)
-        # the file's own system (hpe:system metadata, dataset formats: .mat Pose_Para is 300w_lp), else the option
-        self.resolved = resolve_system(src, system, default=None, option_name=f"--{role}-system", option_is_output=True)
-        self.system = self.resolved.system
+        self.source = source
+        self.src = src = source.table
+        self.resolved = source.resolved
+        self.system = source.system
         self.path = src.path
-        columns = list(src.columns)
-        self.dataset_stem = "file" in columns and "image" not in columns and getattr(src, "dataset", False)
-        if self.dataset_stem:
-            columns.append("image")
-        self.columns = columns
-        if use == "auto":  # the system's own value columns (rotvec, quaternion, 6-D...) first, then angles, matrix
-            self.mode = label_mode(columns, src.path, self.system)
-        else:
-            self.mode = use
-            native = self.system.storage_kind == use and all(c in columns for c in self.system.value_columns)
-            need = ANGLE_COLS if use == "angles" else MATRIX_COLS
-            missing = [c for c in need if c not in columns]
-            if missing and not native:
-                raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {use}")
+        self.columns = columns = side_columns(src)
+        self.dataset_stem = "image" in columns and "image" not in src.columns
+        self.mode = source.mode
         self.keep = [
             c
             for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else []) + list(extra))
@@ -282,19 +292,7 @@ class SideReader:
         return Chunk(soa.columns(X, n), ok, rs, raw, dist, keys, by, lines, kh)
 
 
-def read_side(
-    path,
-    system,
-    use: str,
-    keys,
-    by,
-    radians: bool,
-    batch_size: int,
-    progress=None,
-    role="input",
-    orthonormalize=False,
-    threads=LABEL_THREADS,
-) -> Side:
+def read_side(source, keys, by, radians: bool, progress=None, orthonormalize=False, threads=LABEL_THREADS) -> Side:
     """Read one table whole into a :class:`Side` (for the in-memory key join).
 
     Each field is gathered as a list of chunk arrays and concatenated (and its
@@ -302,19 +300,7 @@ def read_side(
     """
     import pyarrow as pa
 
-    r = SideReader(
-        path,
-        system,
-        use,
-        keys,
-        by,
-        radians,
-        batch_size,
-        progress,
-        orthonormalize,
-        role=role if role in ("gt", "pred") else "gt",
-        threads=threads,
-    )
+    r = SideReader(source, keys, by, radians, progress, orthonormalize, threads=threads)
     parts: dict = {f"c{k}": [] for k in range(9)}
     parts.update(ok=[], reasons=[], raw=[], dist=[], keys=[], by=[], lines=[])
     any_reasons = False

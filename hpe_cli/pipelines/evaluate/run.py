@@ -13,12 +13,22 @@ Global estimates (``--align mean``, opal23's alignment) take one extra pass.
 
 from __future__ import annotations
 
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
 import numpy as np
 
 from ...errors import HpeError
+from ...io import Rejects, TableWriter, system_metadata, write_json
+from ...io.label_source import LabelSource
+from ...io.writers import check_report_outputs, json_text
+from ...metrics.protocols import PROTOCOLS
+from ..pools import default_threads
 from .dataset import choose_directmhp
-from .join import LABEL_THREADS, Chunk, SideReader, choose_keys, join, read_side
+from .join import LABEL_THREADS, Chunk, SideReader, choose_keys, join, open_side, read_side, side_columns
 from .lockstep import Unaligned, lockstep, prefetch
+from .options import EvaluateOptions
 from .outputs import Images, empty_rows, worst_pictures
 from .rejects import align_block, collect_rejects, unreadable_rejects
 from .score import PLACEMENT, nested, raw_angles, score_pairs, take_rows, with_canonical
@@ -57,11 +67,23 @@ def _memory_pairs(gt, pred, gv, pv, batch_size):
         yield g, p
 
 
-class _Settings:
-    """Everything one run needs, so a pass can be repeated (re-read in streaming, replayed in memory)."""
+@dataclass
+class Plan:
+    """One run, decided once before any pass: the options, both sides opened once, the key columns, the protocols
+    (``directmhp`` resolved to the GT dataset's variant), the pictures' folder and the thread count; and the
+    readers of the pass being scored (``gside``, ``pside``: the rows set aside name their files)."""
 
-    def __init__(self, **kw):
-        self.__dict__.update(kw)
+    options: EvaluateOptions
+    gt: LabelSource
+    pred: LabelSource
+    keys: list
+    protocols: list
+    images: Images | None
+    threads: int
+    progress: object = None
+    gside: SideReader | None = None
+    pside: SideReader | None = None
+    partitions: int = 0
 
 
 def _globals(s, pairs_factory, gsys, psys) -> dict:
@@ -73,7 +95,7 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
     from ...metrics.align import project_to_so3
     from ...metrics.protocols import PosePair, opal23_mats
 
-    need_mean = s.align == "mean"
+    need_mean = s.options.align == "mean"
     need_opal = "opal23-align" in s.protocols
     if not (need_mean or need_opal):
         return {}
@@ -104,7 +126,7 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
     from ..pools import in_order
 
     fd, path = tempfile.mkstemp(prefix="hpe_eval_opal23_", suffix=".bin")
-    threads = max(1, int(getattr(s, "threads", None) or 1))
+    threads = max(1, s.threads)
     pool = ThreadPoolExecutor(threads, thread_name_prefix="hpe-evaluate-glob")
     pairs = pairs_factory()
     try:
@@ -161,39 +183,14 @@ class _Rows:
         return out if isinstance(k, slice) else out[0]
 
 
-def default_threads(threads=None) -> int:
-    from ..pools import default_threads as d
-
-    return d(threads)
-
-
-def _readers(s, progress=None):
-    gr = SideReader(
-        s.gt_path,
-        s.gt_system,
-        s.use_gt,
-        s.keys,
-        s.by,
-        s.radians,
-        s.batch_size,
-        progress,
-        extra=PLACEMENT if s.html else (),
-        role="gt",
-        threads=min(s.threads, LABEL_THREADS),
-    )
-    pr = SideReader(
-        s.pred_path,
-        s.pred_system,
-        s.use_pred,
-        s.keys,
-        s.by if s.by not in gr.columns else None,
-        s.radians,
-        s.batch_size,
-        progress,
-        s.orthonormalize,
-        role="pred",
-        threads=min(s.threads, LABEL_THREADS),
-    )
+def _readers(s: Plan, progress=None):
+    """A reader of each side for one pass (the sides were opened once: nothing is resolved again)."""
+    o = s.options
+    labels = min(s.threads, LABEL_THREADS)
+    extra = PLACEMENT if o.html else ()
+    gr = SideReader(s.gt, s.keys, o.by, o.radians, progress, extra=extra, threads=labels)
+    by = o.by if o.by not in gr.columns else None
+    pr = SideReader(s.pred, s.keys, by, o.radians, progress, o.orthonormalize, threads=labels)
     return gr, pr
 
 
@@ -203,15 +200,15 @@ def _run_stream(s, rej, writer):
 
     def factory():
         gr, pr = _readers(s)
-        return lockstep(gr, pr, s.keys, s.join_mode, set())
+        return lockstep(gr, pr, s.keys, s.options.join_mode, set())
 
     gr, pr = _readers(s, s.progress)
     s.gside, s.pside = gr, pr
     glob = _globals(s, factory, gr.system, pr.system)
     out = score_pairs(
-        s, prefetch(lockstep(gr, pr, s.keys, s.join_mode, notes)), rej, gr.system, pr.system, glob, writer, True
+        s, prefetch(lockstep(gr, pr, s.keys, s.options.join_mode, notes)), rej, gr.system, pr.system, glob, writer, True
     )
-    if s.join_mode == "order" and (gr.unreadable or pr.unreadable):
+    if s.options.join_mode == "order" and (gr.unreadable or pr.unreadable):
         side = gr if gr.unreadable else pr
         raise HpeError(
             f"{side.path}: line {side.unreadable[0][0]}: unreadable row ({side.unreadable[0][1]}): "
@@ -225,34 +222,14 @@ def _run_stream(s, rej, writer):
 
 def _run_memory(s, rej, writer):
     """Read both sides whole, join them by key, then score the pairs in chunks."""
-    gt = read_side(
-        s.gt_path,
-        s.gt_system,
-        s.use_gt,
-        s.keys,
-        s.by,
-        s.radians,
-        s.batch_size,
-        s.progress,
-        role="gt",
-        threads=min(s.threads, LABEL_THREADS),
-    )
-    pred = read_side(
-        s.pred_path,
-        s.pred_system,
-        s.use_pred,
-        s.keys,
-        s.by if s.by not in gt.columns else None,
-        s.radians,
-        s.batch_size,
-        s.progress,
-        role="pred",
-        orthonormalize=s.orthonormalize,
-        threads=min(s.threads, LABEL_THREADS),
-    )
+    o = s.options
+    labels = min(s.threads, LABEL_THREADS)
+    gt = read_side(s.gt, s.keys, o.by, o.radians, s.progress, threads=labels)
+    by = o.by if o.by not in gt.columns else None
+    pred = read_side(s.pred, s.keys, by, o.radians, s.progress, o.orthonormalize, threads=labels)
     if pred.n == 0 and not pred.unreadable:
         raise HpeError(f"{pred.path}: no prediction rows (the file has a header only)")
-    gidx, pidx, unmatched, notes = join(pred, gt, s.keys, s.join_mode)
+    gidx, pidx, unmatched, notes = join(pred, gt, s.keys, s.options.join_mode)
 
     def key_cols(side, rows):
         if s.keys:
@@ -261,9 +238,9 @@ def _run_memory(s, rej, writer):
 
     valid, missing, invalid = collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols)
     gv, pv = gidx[valid], pidx[valid]
-    glob = _globals(s, lambda: _memory_pairs(gt, pred, gv, pv, s.batch_size), gt.system, pred.system)
+    glob = _globals(s, lambda: _memory_pairs(gt, pred, gv, pv, s.options.batch_size), gt.system, pred.system)
     out = score_pairs(
-        s, _memory_pairs(gt, pred, gv, pv, s.batch_size), rej, gt.system, pred.system, glob, writer, False
+        s, _memory_pairs(gt, pred, gv, pv, s.options.batch_size), rej, gt.system, pred.system, glob, writer, False
     )
     out[2]["invalid"] = int(invalid.sum())
     n = {"gt": gt.n, "pred": pred.n, "missing": int(missing.sum()), "unmatched_pred": len(unmatched)}
@@ -282,7 +259,7 @@ def _run_spill(s, rej, writer):
 
     gr, pr = _readers(s, s.progress)
     s.gside, s.pside = gr, pr
-    parts = Partitions(gr, pr, s.keys, getattr(s, "partition_rows", None)).fill()
+    parts = Partitions(gr, pr, s.keys, s.options.partition_rows).fill()
     try:
         if pr.n == 0 and not pr.unreadable:
             raise HpeError(f"{pr.path}: no prediction rows (the file has a header only)")
@@ -309,7 +286,7 @@ def _run_spill(s, rej, writer):
                     tally["unmatched_pred"] += len(unmatched)
                 else:
                     valid = _valid(gt, pred, gidx, pidx)
-                yield from _memory_pairs(gt, pred, gidx[valid], pidx[valid], s.batch_size)
+                yield from _memory_pairs(gt, pred, gidx[valid], pidx[valid], s.options.batch_size)
                 del gt, pred, gidx, pidx
 
         glob = _globals(s, lambda: pairs(False), gr.system, pr.system)
@@ -322,174 +299,129 @@ def _run_spill(s, rej, writer):
     return out, glob, n, sorted(notes), gr, pr
 
 
-def _run(s, writer, stream: bool):
-    from ...io import Rejects
+@dataclass
+class Outcome:
+    """What one scoring run gives: the scores, the global estimates, the counts, the notes, the readers of each
+    side, the rows set aside and how the pairs were made."""
 
-    rej = Rejects(s.rejects, s.overwrite, strict=s.strict, source=None)
-    run = _run_stream if stream else (_run_memory if getattr(s, "join_engine", "spill") == "memory" else _run_spill)
+    scores: tuple  # (report, report before --align, counts, worst rows, plot sample) of score_pairs
+    glob: dict
+    n: dict
+    notes: list
+    gside: object
+    pside: object
+    rej: object
+    streamed: bool
+
+
+def _run(s: Plan, writer, stream: bool) -> Outcome:
+    o = s.options
+    rej = Rejects(o.rejects, o.overwrite, strict=o.strict, source=None)
+    run = _run_stream if stream else (_run_memory if o.join_engine == "memory" else _run_spill)
     out, glob, n, notes, gside, pside = run(s, rej, writer)
     rej.check()  # without --rejects (or with --strict) any set-aside row is an error: nothing is written
     if pside.n == 0 and not pside.unreadable:
         raise HpeError(f"{pside.path}: no prediction rows (the file has a header only)")
     if gside.n == 0 and not gside.unreadable:
         raise HpeError(f"{gside.path}: no ground-truth rows")
-    return out, glob, n, notes, gside, pside, rej
+    return Outcome(out, glob, n, notes, gside, pside, rej, stream)
 
 
-def _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed) -> dict:
-    """The report dict of one run."""
-    from ...metrics.protocols import PROTOCOLS
-
-    result = {
-        "n": {
-            "gt": n["gt"],
-            "pred": n["pred"],
-            "pairs": counts["pairs"],
-            "missing": n["missing"],
-            "invalid": counts["invalid"],
-            "unmatched_pred": n["unmatched_pred"],
-        },
-        "systems": {"pred": pside.system.name, "gt": gside.system.name},
-        "system_origin": {"pred": pside.resolved.describe(), "gt": gside.resolved.describe()},
+def _counts(s: Plan, r: Outcome) -> dict:
+    """The report's ``n`` block, and ``orthonormalize`` block when asked."""
+    counts = r.scores[2]
+    n = {
+        "gt": r.n["gt"],
+        "pred": r.n["pred"],
+        "pairs": counts["pairs"],
+        "missing": r.n["missing"],
+        "invalid": counts["invalid"],
+        "unmatched_pred": r.n["unmatched_pred"],
     }
-    if gside.unreadable or pside.unreadable:
-        result["n"]["unreadable"] = len(gside.unreadable) + len(pside.unreadable)
-    if s.orthonormalize:
-        result["n"]["orthonormalized"] = counts.get("orthonormalized", 0)
-        result["orthonormalize"] = {
-            "method": "nearest rotation (SVD, det +1) of each prediction matrix",
-            "max_distance": counts.get("dist_max"),
-            "mean_distance": counts["dist_sum"] / counts["pairs"]
-            if counts.get("pairs") and "dist_sum" in counts
-            else None,
-        }
-    result["align"] = align_block(glob, rep_before, gside.system) if s.align == "mean" else {"method": "none"}
+    if r.gside.unreadable or r.pside.unreadable:
+        n["unreadable"] = len(r.gside.unreadable) + len(r.pside.unreadable)
+    if not s.options.orthonormalize:
+        return {"n": n}
+    n["orthonormalized"] = counts.get("orthonormalized", 0)
+    ortho = {
+        "method": "nearest rotation (SVD, det +1) of each prediction matrix",
+        "max_distance": counts.get("dist_max"),
+        "mean_distance": counts["dist_sum"] / counts["pairs"] if counts.get("pairs") and "dist_sum" in counts else None,
+    }
+    return {"n": n, "orthonormalize": ortho}
+
+
+def _paired(s: Plan, streamed: bool) -> str:
+    if streamed:
+        return "streamed in file order"
+    if s.options.join_engine == "memory":
+        return "joined in memory"
+    return f"joined by key in {s.partitions} partition(s) on disk (external hash join)"
+
+
+def _result(s: Plan, r: Outcome) -> dict:
+    """The report dict of one run."""
+    o = s.options
+    rep, rep_before = r.scores[0], r.scores[1]
+    gside, pside = r.gside, r.pside
+    result = _counts(s, r)
+    result["systems"] = {"pred": pside.system.name, "gt": gside.system.name}
+    result["system_origin"] = {"pred": pside.resolved.describe(), "gt": gside.resolved.describe()}
+    if "orthonormalize" in result:  # the report's keys in their order
+        result["orthonormalize"] = result.pop("orthonormalize")
+    result["align"] = align_block(r.glob, rep_before, gside.system) if o.align == "mean" else {"method": "none"}
     result["metrics"], result["protocols"] = rep["metrics"], rep["protocols"]
-    if s.by:
-        result["by"] = {"column": s.by, "groups": rep["by_groups"]}
-    if s.yaw_bins:
+    if o.by:
+        result["by"] = {"column": o.by, "groups": rep["by_groups"]}
+    if o.yaw_bins:
         result["yaw_bins"] = rep["yaw_bins"]
     result["inputs"] = {
         "pred": str(pside.path),
         "gt": str(gside.path),
         "key": s.keys or "row order",
-        "join": s.join_mode,
-        "paired": "streamed in file order"
-        if streamed
-        else "joined in memory"
-        if getattr(s, "join_engine", "spill") == "memory"
-        else f"joined by key in {s.partitions} partition(s) on disk (external hash join)",
+        "join": o.join_mode,
+        "paired": _paired(s, r.streamed),
         "columns": {"pred": pside.mode, "gt": gside.mode},
     }
-    result["notes"] = list(notes) + [f"{name}: {note}" for name in s.protocols for note in PROTOCOLS[name].notes]
-    if rej.counts:
-        result["rejects"] = dict(rej.counts)
+    result["notes"] = list(r.notes) + [f"{name}: {note}" for name in s.protocols for note in PROTOCOLS[name].notes]
+    if r.rej.counts:
+        result["rejects"] = dict(r.rej.counts)
     return result
 
 
-def run_evaluate(
-    pred_path,
-    gt_path,
-    *,
-    pred_system,
-    gt_system,
-    output=None,
-    keys=(),
-    protocols=None,
-    align="none",
-    by=None,
-    yaw_bins=None,
-    report=None,
-    plots=None,
-    rejects=None,
-    use_pred="auto",
-    use_gt="auto",
-    radians=False,
-    overwrite=False,
-    batch_size=262_144,
-    progress=None,
-    strict=False,
-    join_mode="key",
-    orthonormalize=False,
-    html=None,
-    worst=12,
-    images=None,
-    join_engine="spill",
-    partition_rows=None,
-    threads=None,
-) -> dict:
-    """Evaluate ``pred_path`` against ``gt_path``; write the requested outputs; return the report.
-
-    Files in different orders are joined by an external hash join (``join_engine="spill"``, partitions of
-    about ``partition_rows`` rows, :mod:`hpe_cli.pipelines.evaluate.spill`) or, with ``"memory"``, whole in
-    memory (the reference the partitioned join is tested against). ``threads`` (default: one per core, at
-    most 8) score chunks side by side (each side's matrices are built on at most ``LABEL_THREADS`` of them);
-    the report and the outputs are the same whatever their number (chunks are summed and written in input
-    order).
-    """
-    from ...io import TableWriter, open_table, system_metadata, write_json
-    from ...io.writers import check_report_outputs
-    from ...metrics.evaluate import check_protocols
-
-    try:
-        protocols = check_protocols(protocols or None)
-    except ValueError as exc:
-        raise HpeError(str(exc)) from None
-    check_report_outputs(report, output, overwrite)
-    if html:
-        check_report_outputs(html, None, overwrite)
-    if plots:
+def _check_outputs(o: EvaluateOptions) -> None:
+    """Refuse outputs that exist (without ``overwrite``) or clash, before anything is read."""
+    check_report_outputs(o.report, o.output, o.overwrite)
+    if o.html:
+        check_report_outputs(o.html, None, o.overwrite)
+    if o.plots:
         from ...report.eval_plots import check_plot_outputs
 
-        check_plot_outputs(plots, overwrite)
-    from ...io.system_meta import output_system, resolve_system
+        check_plot_outputs(o.plots, o.overwrite)
 
-    psrc = open_table(pred_path, batch_size)
-    pcols = psrc.columns
-    gsrc = open_table(gt_path, batch_size)
-    # each side's own system (hpe:system metadata, dataset formats), else its option; a disagreeing option is a
-    # usage error unless --reinterpret-as
-    gres = resolve_system(gsrc, gt_system, default=None, option_name="--gt-system", option_is_output=True)
-    pres = resolve_system(psrc, pred_system, default=None, option_name="--pred-system", option_is_output=True)
-    gt_system, pred_system = output_system(gres), output_system(pres)
-    gcols = list(gsrc.columns)
-    if "file" in gcols and "image" not in gcols and getattr(gsrc, "dataset", False):
-        gcols.append("image")  # the .mat folder's key: see join._stem_key_hook
-    keys = choose_keys(list(keys or ()), pcols, gcols, pred_path, gt_path, join_mode)
-    protocols, choice = choose_directmhp(protocols, gsrc)
-    if by and by not in gcols and by not in pcols:
-        raise HpeError(f"{gt_path}: --by column {by!r} is in neither table; found: {', '.join(gcols[:20])}")
-    folder = images or (str(gsrc.path) if getattr(gsrc, "dataset", False) and gsrc.path.is_dir() else None)
-    s = _Settings(
-        pred_path=pred_path,
-        gt_path=gt_path,
-        pred_system=pred_system,
-        gt_system=gt_system,
-        keys=keys,
-        protocols=protocols,
-        align=align,
-        by=by,
-        yaw_bins=yaw_bins,
-        rejects=rejects,
-        use_pred=use_pred,
-        use_gt=use_gt,
-        radians=radians,
-        overwrite=overwrite,
-        batch_size=batch_size,
-        progress=progress,
-        strict=strict,
-        join_mode=join_mode,
-        orthonormalize=orthonormalize,
-        html=html,
-        worst=worst,
-        images=Images(folder) if folder else None,
-        join_engine=join_engine,
-        partition_rows=partition_rows,
-        threads=default_threads(threads),
-    )
+
+def plan(pred_path, gt_path, options: EvaluateOptions, progress=None) -> tuple:
+    """``(Plan, note or None)``: both sides opened once (each side's own system, else its option), the key, the
+    protocols (and the note saying which DirectMHP variant the GT's dataset picked)."""
+    o = options
+    pred = open_side(pred_path, o.pred_system, o.use_pred, "pred", o.batch_size)
+    gt = open_side(gt_path, o.gt_system, o.use_gt, "gt", o.batch_size)
+    pcols, gcols = side_columns(pred.table), side_columns(gt.table)
+    keys = choose_keys(list(o.keys), pcols, gcols, pred_path, gt_path, o.join_mode)
+    protocols, choice = choose_directmhp(list(o.protocols), gt.table)
+    if o.by and o.by not in gcols and o.by not in pcols:
+        raise HpeError(f"{gt_path}: --by column {o.by!r} is in neither table; found: {', '.join(gcols[:20])}")
+    folder = o.images or (str(gt.path) if gt.dataset and gt.path.is_dir() else None)
+    s = Plan(o, gt, pred, keys, protocols, Images(folder) if folder else None, default_threads(o.threads), progress)
+    return s, choice
+
+
+def _scored(s: Plan) -> Outcome:
+    """Stream the two files side by side, or, when their keys are not in the same order, join them by key."""
+    o = s.options
     meta = {
-        **system_metadata(gt_system),
-        "hpe:evaluate_pred_system": pred_system.name,
+        **system_metadata(s.gt.output_system),
+        "hpe:evaluate_pred_system": s.pred.output_system.name,
         "hpe:evaluate_note": "gt_* and pred_* are angles in the GT system (primary solution of each "
         "rotation; pred after --align); err_* "
         "are wrapped |pred - gt| in [0, 180]; geodesic and maev_* in degrees; frobenius "
@@ -497,50 +429,69 @@ def run_evaluate(
     }
 
     def attempt(stream):
-        if output:
-            with TableWriter(output, overwrite, meta) as w:
+        if o.output:
+            with TableWriter(o.output, o.overwrite, meta) as w:
                 res = _run(s, w, stream)
                 if w.rows == 0:
-                    w.write(empty_rows(keys))
+                    w.write(empty_rows(s.keys))
                 return res
         return _run(s, None, stream)
 
     try:
-        out, glob, n, notes, gside, pside, rej = attempt(True)
-        streamed = True
+        return attempt(True)
     except Unaligned:
-        out, glob, n, notes, gside, pside, rej = attempt(False)
-        streamed = False
-    (rep, rep_before, counts, worst_rows, sample) = out
-    result = _result(s, rep, rep_before, counts, n, notes, gside, pside, glob, rej, streamed)
-    if choice:
-        result["notes"].insert(0, choice)
-    rej.write()
-    if plots:
+        return attempt(False)
+
+
+def _write_outputs(s: Plan, r: Outcome, result: dict) -> None:
+    """The rejects, the plots, the page and the JSON report (each side's system as read: nothing resolved again)."""
+    o = s.options
+    r.rej.write()
+    worst_rows, sample = r.scores[3], r.scores[4]
+    if o.plots:
         from ...report.eval_plots import write_eval_plots
 
-        write_eval_plots(plots, sample.rows(), result, gside.system, overwrite=overwrite)
-    if html:
-        from pathlib import Path
-
+        write_eval_plots(o.plots, sample.rows(), result, r.gside.system, overwrite=o.overwrite)
+    if o.html:
         from ...report.evaluate_page import write_page
 
         frame = worst_rows.frame.to_pandas() if worst_rows.frame is not None else None
-        write_page(
-            html,
-            result,
-            frame,
-            overwrite=overwrite,
-            plots=sample.rows(),
-            pictures=worst_pictures(frame, s.images, gside.system, Path(gt_path).parent),
-        )
-    if report == "-":
-        import sys
-
-        from ...io.writers import json_text
-
+        pictures = worst_pictures(frame, s.images, r.gside.system, Path(s.gt.path).parent)
+        write_page(o.html, result, frame, overwrite=o.overwrite, plots=sample.rows(), pictures=pictures)
+    if o.report == "-":
         sys.stdout.write(json_text(result) + "\n")
         sys.stdout.flush()
-    elif report:
-        write_json(result, report, overwrite=overwrite)
+    elif o.report:
+        write_json(result, o.report, overwrite=o.overwrite)
+
+
+def run_evaluate(pred_path, gt_path, options: EvaluateOptions, *, progress=None) -> dict:
+    """Evaluate ``pred_path`` against ``gt_path``; write the outputs ``options`` asks for; return the report.
+
+    Parameters
+    ----------
+    pred_path, gt_path : str or Path
+        Any table hpe reads (Parquet, CSV, JSON, a ``.mat`` folder, BIWI files...), each opened once.
+    options : EvaluateOptions
+        The run's settings (built by ``hpe evaluate`` and :func:`hpe_cli.api.evaluate_files` alike).
+    progress : tqdm-like, optional
+        Updated with the rows read of both sides.
+
+    Returns
+    -------
+    dict
+        The JSON report (``n``, ``systems``, ``metrics``, ``protocols``, ``inputs``, ``notes``...).
+
+    Files in different orders are joined by an external hash join (``join_engine="spill"``,
+    :mod:`hpe_cli.pipelines.evaluate.spill`) or, with ``"memory"``, whole in memory (the reference the
+    partitioned join is tested against). ``threads`` score chunks side by side; the report and the outputs are
+    the same whatever their number (chunks are summed and written in input order).
+    """
+    _check_outputs(options)
+    s, choice = plan(pred_path, gt_path, options, progress)
+    r = _scored(s)
+    result = _result(s, r)
+    if choice:
+        result["notes"].insert(0, choice)
+    _write_outputs(s, r, result)
     return result

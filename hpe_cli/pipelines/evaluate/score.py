@@ -89,10 +89,10 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     from ..pools import in_order
 
     protos = {k: PROTOCOLS[k] for k in s.protocols}
-    edges = yaw_bin_edges(gsys, float(s.yaw_bins)) if s.yaw_bins else None
-    acc = Accumulator(protos, edges, by=bool(s.by))
-    before = Accumulator(protos, None, by=False, percentiles=True) if s.align == "mean" else None
-    worst, sample = Worst(s.worst if s.html else 0), Sample()
+    edges = yaw_bin_edges(gsys, float(s.options.yaw_bins)) if s.options.yaw_bins else None
+    acc = Accumulator(protos, edges, by=bool(s.options.by))
+    before = Accumulator(protos, None, by=False, percentiles=True) if s.options.align == "mean" else None
+    worst, sample = Worst(s.options.worst if s.options.html else 0), Sample()
     ctx = {"opal23_mean": glob["opal23_mean"]} if "opal23_mean" in glob else {}
     counts = {"pairs": 0, "invalid": 0}
 
@@ -110,7 +110,7 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     def work(gp):  # on a scoring thread: pure numpy and Arrow, no shared state
         g, p = with_canonical(gp[0], gsys), with_canonical(gp[1], psys)
         P, G = nested(p), nested(g)
-        by_values = (g.by if g.by is not None else p.by) if s.by else None
+        by_values = (g.by if g.by is not None else p.by) if s.options.by else None
         rows_before = None
         if before is not None:
             rows_before = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys), ctx)
@@ -118,9 +118,11 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
         rows = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys, aligned=before is not None), ctx)
         table = None
         if writer is not None or worst.n:
-            table = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
+            table = row_table(rows, g, p, s.keys, s.options.by, by_values, s.images)
         part, block = acc.partial(rows), Sample.block(rows)
-        if not s.by:  # their sums are in `part`: every protocol's per-row arrays are freed before the chunk's turn
+        if (
+            not s.options.by
+        ):  # their sums are in `part`: every protocol's per-row arrays are freed before the chunk's turn
             rows.protocols = {}
         return g, p, rows, rows_before, by_values, table, part, block
 
@@ -137,7 +139,7 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             writes.append(wpool.submit(writer.write, pending[0] if len(pending) == 1 else pa.concat_tables(pending)))
             pending.clear()
 
-    threads = max(1, int(getattr(s, "threads", None) or SCORE_THREADS))
+    threads = max(1, int(s.threads or SCORE_THREADS))
     pool = ThreadPoolExecutor(threads, thread_name_prefix="hpe-evaluate-score")
     try:
         pieces = usable()
@@ -153,7 +155,7 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             sample.add(rows, block)
             if writer is not None:
                 pending.append(t)
-                flush(s.batch_size)
+                flush(s.options.batch_size)
             if worst.n:  # the face box of each row places its picture (not in the per-row output)
                 for c in PLACEMENT:
                     if g.keys is not None and c in g.keys.column_names and c not in t.column_names:
