@@ -73,6 +73,23 @@ def raw_angles(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
     return raw
 
 
+def count_orthonormalized(counts: dict, p: Chunk) -> None:
+    """Add a chunk's ``--orthonormalize`` distances to the run's counts (rows moved, sum and max distance)."""
+    if p.dist is not None and len(p.dist):
+        counts["orthonormalized"] = counts.get("orthonormalized", 0) + int((p.dist > 1e-6).sum())
+        counts["dist_sum"] = counts.get("dist_sum", 0.0) + float(p.dist.sum())
+        counts["dist_max"] = max(counts.get("dist_max", 0.0), float(p.dist.max()))
+
+
+def with_placement(t, g: Chunk, p: Chunk):
+    """A chunk's per-row table for the page's worst rows: the face box of each row, which places its picture
+    (not in the per-row output), and the prediction's angles as written."""
+    for c in PLACEMENT:
+        if g.keys is not None and c in g.keys.column_names and c not in t.column_names:
+            t = t.append_column(c, g.keys.column(c))
+    return with_written(t, p)
+
+
 def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     """Score every chunk of pairs: accumulate, write rows, keep the worst and a plot sample.
 
@@ -147,21 +164,14 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             if rows_before is not None:
                 before.add(rows_before)
             counts["pairs"] += rows.n
-            if p.dist is not None and len(p.dist):
-                counts["orthonormalized"] = counts.get("orthonormalized", 0) + int((p.dist > 1e-6).sum())
-                counts["dist_sum"] = counts.get("dist_sum", 0.0) + float(p.dist.sum())
-                counts["dist_max"] = max(counts.get("dist_max", 0.0), float(p.dist.max()))
+            count_orthonormalized(counts, p)
             acc.add(rows, by_values, part)
             sample.add(rows, block)
             if writer is not None:
                 pending.append(t)
                 flush(s.options.batch_size)
-            if worst.n:  # the face box of each row places its picture (not in the per-row output)
-                for c in PLACEMENT:
-                    if g.keys is not None and c in g.keys.column_names and c not in t.column_names:
-                        t = t.append_column(c, g.keys.column(c))
-                t = with_written(t, p)
-                worst.add(t)
+            if worst.n:
+                worst.add(with_placement(t, g, p))
         if writer is not None:
             flush(1)
             while writes:  # every piece written, in order; a write's error is raised here
