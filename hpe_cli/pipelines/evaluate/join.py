@@ -14,15 +14,26 @@ is used only with ``--join order`` and equal row counts.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing
 from dataclasses import dataclass
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from ...errors import HpeError
-from ...io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
+from ...io import ANGLE_COLS, MATRIX_COLS, batch_rotations, label_mode, open_table
+from ...io.key_hash import string_hashes
 from ...io.label_source import AUTO, LabelSource
+from ...io.labels import is_native, label_columns_fast, value_columns
+from ...io.layout import arrow_to_numpy
+from ...io.readers import LINE_COL
 from ...io.system_meta import resolve_system
+from ...io.table_source import plain_numpy
+from ...metrics.align import project_to_so3_batch
+from ...rotation import soa
+from ..pools import in_order
 
 #: key columns tried in order when --key is not given
 DEFAULT_KEYS = ("image", "file")
@@ -64,8 +75,6 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
     raw output, e.g. TriNet's vectors) is replaced by its nearest rotation
     (SVD, det +1) and ``distance`` is ``||M - R||_F``.
     """
-    from ...io import batch_rotations
-    from ...io.labels import is_native, label_columns_fast, value_columns
 
     n = batch.num_rows
     native = is_native(system, batch.schema.names)
@@ -79,12 +88,8 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
         raw = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1)
         return stored_of_angles(system, raw), ok, reasons, raw, None
     if orthonormalize and (mode == "matrix" or system.storage_kind == "matrix"):
-        from ...metrics.align import project_to_so3_batch
-
         names = system.value_columns if (native and system.storage_kind == "matrix") else None
         if names is None:
-            from ...io import MATRIX_COLS
-
             names = MATRIX_COLS
         cols, ok, reasons = value_columns(batch, names)
         M = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1).reshape(n, 3, 3)
@@ -113,8 +118,6 @@ def stored_of_angles(system, raw) -> list:
 def _stem_key_hook(batch):
     """HOOK (joins by key): a dataset reader with ``file`` but no ``image`` (the ``.mat`` folder reader) gets
     ``image`` = the file stem, so predictions keyed by image name join. Remove once the reader provides it."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     names = batch.schema.names
     if "image" in names or "file" not in names:
@@ -161,8 +164,6 @@ class Chunk:
 
 def key_text(col):
     """A key column as one Arrow string array (chunks combined, dictionaries decoded, other types cast)."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     if isinstance(col, pa.ChunkedArray):
         col = col.combine_chunks()
@@ -179,7 +180,6 @@ def combine_key_hash(h: np.ndarray, column_hash: np.ndarray) -> np.ndarray:
 
 def keys_hash(table, keys) -> np.ndarray:
     """One uint64 per row of the key columns (text as written; see :func:`hpe_cli.io.key_hash.string_hashes`)."""
-    from ...io.key_hash import string_hashes
 
     h = np.zeros(table.num_rows, dtype=np.uint64)
     for k in keys:
@@ -256,9 +256,6 @@ class SideReader:
         The batches are decoded here, one after the other; their labels (matrices from the angles, checks) are
         computed on ``threads`` threads (:data:`LABEL_THREADS` by default), at most that many batches ahead.
         """
-        from concurrent.futures import ThreadPoolExecutor
-
-        from ..pools import in_order
 
         def batches():
             for batch, bad_rows in self.src.batches_with_rejects():
@@ -276,9 +273,6 @@ class SideReader:
             pool.shutdown(wait=True, cancel_futures=True)
 
     def _chunk(self, batch) -> Chunk:
-        from ...io.readers import LINE_COL
-        from ...io.table_source import plain_numpy
-        from ...rotation import soa
 
         if self.dataset_stem:
             batch = _stem_key_hook(batch)
@@ -298,7 +292,6 @@ def read_side(source, keys, by, radians: bool, progress=None, orthonormalize=Fal
     Each field is gathered as a list of chunk arrays and concatenated (and its
     list freed) one field at a time, so the peak is one field above the data.
     """
-    import pyarrow as pa
 
     r = SideReader(source, keys, by, radians, progress, orthonormalize, threads=threads)
     parts: dict = {f"c{k}": [] for k in range(9)}
@@ -372,16 +365,11 @@ def choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path, join_mode="key"):
 
 
 def file_stems(arr):
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     return pc.replace_substring_regex(pc.cast(arr, pa.string()), r"^.*[\\/]|\.[^.\\/]*$", "")
 
 
 def _encode(a, b):
-    import pyarrow as pa
-
-    from ...io.layout import arrow_to_numpy
 
     enc = pa.concat_arrays([a, b]).dictionary_encode(null_encoding="encode")
     return arrow_to_numpy(enc.indices).astype(np.int64), len(enc.dictionary)
@@ -395,8 +383,6 @@ def _key_codes(gt_keys, pred_keys, keys, stems=None):
     and ``image00050`` are one image), the stems are used and a note says so. ``stems`` (a set of key
     columns), when given, makes that choice instead (the partitioned join decides it over the whole files).
     """
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     n_g = gt_keys.num_rows
     code, notes = None, []

@@ -7,7 +7,14 @@ the key join (:mod:`hpe_cli.pipelines.evaluate.spill`). :func:`prefetch` reads o
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from .join import Chunk, JoinUsageError, SideReader, file_stems, keys_hash
 
@@ -17,8 +24,6 @@ class Unaligned(Exception):
 
 
 def _same_keys(g: Chunk, p: Chunk, keys, notes: set, seen=None) -> None:
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     for k in keys:
         a, b = g.keys.column(k), p.keys.column(k)
@@ -49,8 +54,6 @@ class KeysSeen:
         self.reader = reader  # asked to hash the keys of the chunks it labels from then on
 
     def add(self, g: Chunk) -> None:
-        import pyarrow as pa
-        import pyarrow.compute as pc
 
         if not g.n:
             return
@@ -71,8 +74,6 @@ class KeysSeen:
         self._spill(g)
 
     def _spill(self, g: Chunk) -> None:
-        import os
-        import tempfile
 
         h = g.key_hash if g.key_hash is not None else keys_hash(g.keys, self.keys)
         if self.files is None:
@@ -101,7 +102,6 @@ class KeysSeen:
             self.close()
 
     def close(self) -> None:
-        import shutil
 
         for f in self.files or ():
             f.close()
@@ -175,7 +175,6 @@ def prefetch(gen):
     The worker only ever runs one ``next(gen)`` at a time and is joined before
     this generator returns or raises, so no thread outlives the run.
     """
-    from concurrent.futures import ThreadPoolExecutor
 
     ex = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-read")
     try:

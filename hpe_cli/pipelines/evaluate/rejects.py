@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...metrics import rotation_errors as re_
 from .join import Chunk, row_reasons, where
 
 ANGLES = ("pitch", "yaw", "roll")
@@ -131,7 +132,6 @@ def unreadable_rejects(rej, side, name):
 
 
 def align_block(glob, rep_before, gsys) -> dict:
-    from ...metrics import rotation_errors as re_
 
     Q = glob["Q"]
     qp, _, _, _ = gsys.to_angles(gsys.from_canonical(Q[None]))

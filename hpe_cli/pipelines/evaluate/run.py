@@ -13,7 +13,10 @@ Global estimates (``--align mean``, opal23's alignment) take one extra pass.
 
 from __future__ import annotations
 
+import os
 import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,8 +26,10 @@ from ...errors import HpeError
 from ...io import Rejects, TableWriter, system_metadata, write_json
 from ...io.label_source import LabelSource
 from ...io.writers import check_report_outputs, json_text
-from ...metrics.protocols import PROTOCOLS
-from ..pools import default_threads
+from ...metrics import peer_angles as pa_
+from ...metrics.align import project_to_so3
+from ...metrics.protocols import PROTOCOLS, PosePair, opal23_mats
+from ..pools import default_threads, in_order
 from .dataset import choose_directmhp
 from .join import LABEL_THREADS, Chunk, SideReader, choose_keys, join, open_side, read_side, side_columns
 from .lockstep import Unaligned, lockstep, prefetch
@@ -88,12 +93,6 @@ class Plan:
 
 def _globals(s, pairs_factory, gsys, psys) -> dict:
     """Estimates over all pairs that the per-chunk scores need: --align mean's offset, opal23's mean."""
-    import os
-    import tempfile
-
-    from ...metrics import peer_angles as pa_
-    from ...metrics.align import project_to_so3
-    from ...metrics.protocols import PosePair, opal23_mats
 
     need_mean = s.options.align == "mean"
     need_opal = "opal23-align" in s.protocols
@@ -120,10 +119,6 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
             Po, Go, _ = opal23_mats(pair)
             deltas, near = pa_.opal23_near_quats(Go, Po)
         return g.n, part, deltas, near, g.lines
-
-    from concurrent.futures import ThreadPoolExecutor
-
-    from ..pools import in_order
 
     fd, path = tempfile.mkstemp(prefix="hpe_eval_opal23_", suffix=".bin")
     threads = max(1, s.threads)

@@ -2,8 +2,18 @@
 
 from __future__ import annotations
 
-import numpy as np
+from concurrent.futures import ThreadPoolExecutor
 
+import numpy as np
+import pyarrow as pa
+
+from ...io.layout import numpy_to_arrow
+from ...metrics.align import remove_offset
+from ...metrics.evaluate import compute_rows, yaw_bin_edges
+from ...metrics.protocols import PROTOCOLS
+from ...metrics.stream import Accumulator
+from ...rotation import soa
+from ..pools import in_order
 from .join import Chunk, stored_of_angles
 from .outputs import Sample, Worst, row_table
 from .rejects import stream_rejects
@@ -42,7 +52,6 @@ def with_canonical(c: Chunk, system) -> Chunk:
     files kept only those (the reader's own computation on the same numbers: the same bits)."""
     if c.canonical is not None:
         return c
-    from ...rotation import soa
 
     c.canonical = soa.columns(system.soa_to_canonical(stored_of_angles(system, c.raw)), c.n)
     return c
@@ -53,7 +62,6 @@ def with_written(t, p: Chunk):
     degrees, its own system), for the page's worst rows: beside the angles hpe re-expressed in the GT system."""
     if p.raw is None or "pred_written_pitch" in t.column_names:
         return t
-    from ...io.layout import numpy_to_arrow
 
     for k, a in enumerate(("pitch", "yaw", "roll")):
         t = t.append_column(f"pred_written_{a}", numpy_to_arrow(np.ascontiguousarray(p.raw[:, k], dtype=np.float64)))
@@ -97,13 +105,6 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     whole columns) and consumed in input order, so sums, the spill and the
     per-row output are the same as one thread's.
     """
-    from concurrent.futures import ThreadPoolExecutor
-
-    from ...metrics.align import remove_offset
-    from ...metrics.evaluate import compute_rows, yaw_bin_edges
-    from ...metrics.protocols import PROTOCOLS
-    from ...metrics.stream import Accumulator
-    from ..pools import in_order
 
     protos = {k: PROTOCOLS[k] for k in s.protocols}
     edges = yaw_bin_edges(gsys, float(s.options.yaw_bins)) if s.options.yaw_bins else None
@@ -149,8 +150,6 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
 
     def flush(at_least):
         if pending and sum(t.num_rows for t in pending) >= at_least:
-            import pyarrow as pa
-
             while len(writes) >= 2:  # at most two pieces waiting: memory stays bounded
                 writes.pop(0).result()
             writes.append(wpool.submit(writer.write, pending[0] if len(pending) == 1 else pa.concat_tables(pending)))

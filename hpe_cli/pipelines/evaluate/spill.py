@@ -19,14 +19,16 @@ import tempfile
 from contextlib import closing
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
+from ...io.key_hash import string_hashes
 from ...io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
 from .join import Side, combine_key_hash, file_stems, key_text
 
 
 def _bools(col) -> np.ndarray:
     """A boolean Arrow column (no nulls) as a numpy bool array, from its bit buffers (no pandas)."""
-    import pyarrow as pa
 
     chunks = col.chunks if isinstance(col, pa.ChunkedArray) else [col]
     parts = [
@@ -53,7 +55,6 @@ def key_hashes(keys_table, keys):
     the same partition; the per-column hashes let :meth:`Partitions.stem_columns` count matches cheaply.
     Hashed off the Arrow buffers (:func:`hpe_cli.io.key_hash.string_hashes`).
     """
-    from ...io.key_hash import string_hashes
 
     h = np.zeros(keys_table.num_rows, dtype=np.uint64)
     per = {}
@@ -95,7 +96,6 @@ class _SideSpill:
         self.stem_differs: set = set()  # key columns with a row whose file stem is not its text
 
     def _table(self, c, per):
-        import pyarrow as pa
 
         # angles as written are enough: the matrices are rebuilt from them on the scoring threads (the same
         # function on the same numbers: the same bits), which halves what goes to disk and back
@@ -130,7 +130,6 @@ class _SideSpill:
         return t
 
     def add(self, c, keys):
-        import pyarrow as pa
 
         if not c.n:
             return
@@ -162,7 +161,6 @@ class _SideSpill:
 
     def table(self, k):
         """Partition ``k`` as a pyarrow Table (memory-mapped), or None when it holds no row."""
-        import pyarrow as pa
 
         p = self._path(k)
         if not os.path.exists(p):
@@ -171,8 +169,6 @@ class _SideSpill:
 
     def side(self, k, empty_keys):
         """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate.join.Side` (empty when it holds no row)."""
-        import pyarrow as pa
-        import pyarrow.compute as pc
 
         r = self.reader
         t = self.table(k)
@@ -253,7 +249,6 @@ class Partitions:
         return self
 
     def _empty_keys(self, reader, spill, other):
-        import pyarrow as pa
 
         schema = spill.schema or other.schema
         fields = [
@@ -273,7 +268,6 @@ class Partitions:
         """Key columns compared on file stems, decided over all partitions as the in-memory join decides
         (:func:`~hpe_cli.pipelines.evaluate.join._key_codes`: stems when they match more GT rows than the
         text as written), counted on the 64-bit hashes written with each row."""
-        import pyarrow as pa
 
         def text_key(schema, k):
             t = schema.field(k).type
@@ -314,8 +308,6 @@ class Partitions:
         """``(gt codes, pred codes)`` of one partition from the key hashes, every match verified on the keys
         themselves; None (use the string join) when a key is not text on both sides, when one side has
         equal hashes twice (a duplicate, which the string join names) or when a match is a hash collision."""
-        import pyarrow as pa
-        import pyarrow.compute as pc
 
         def is_text(schema, k):
             return pa.types.is_string(schema.field(k).type)
