@@ -94,7 +94,8 @@ def default_keys(a: Table, b: Table, keys) -> list:
 
 def pair(a: Table, b: Table, keys) -> tuple:
     """``(b_idx per row of a (-1: none), unmatched rows of b, keys, notes)`` by :func:`hpe_cli.pipelines.evaluate.join.join`."""
-    from .evaluate.join import Side, join
+    from .evaluate.join import join
+    from .evaluate.sides import Side
 
     keys = default_keys(a, b, keys)
 

@@ -70,7 +70,7 @@ def test_api_and_cli_give_the_same_report(tmp_path):
 @needs_gold
 @pytest.mark.parametrize("shuffled", [False, True])
 def test_each_side_is_opened_and_resolved_once(tmp_path, monkeypatch, shuffled):
-    import hpe_cli.pipelines.evaluate.join as ej
+    import hpe_cli.pipelines.evaluate.sides as ej
 
     calls = []
     resolve, open_table = ej.resolve_system, ej.open_table

@@ -125,8 +125,8 @@ def test_streamed_run_equals_in_memory_join(tmp_path, align):
 def test_threads_and_piece_sizes_change_nothing(tmp_path, monkeypatch, shuffled):
     """2 scoring and 2 label threads give exactly the numbers and rows of 1; 100-row pieces those of whole batches
     up to the order of the sums."""
-    import hpe_cli.pipelines.evaluate.join as ej
     import hpe_cli.pipelines.evaluate.score as ev
+    import hpe_cli.pipelines.evaluate.sides as ej
 
     p = pd.read_csv(SYN / "pred.csv")
     p["group"] = np.where(np.arange(len(p)) % 4 == 0, "even", "odd")

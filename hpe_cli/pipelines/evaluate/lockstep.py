@@ -16,7 +16,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from .join import Chunk, JoinUsageError, SideReader, file_stems, keys_hash
+from .join import JoinUsageError, file_stems
+from .sides import Chunk, SideReader, keys_hash
 
 
 class Unaligned(Exception):

@@ -11,7 +11,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from .join import Chunk, file_stems
+from .join import file_stems
+from .sides import Chunk
 
 ANGLES = ("pitch", "yaw", "roll")
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...metrics import rotation_errors as re_
-from .join import Chunk, row_reasons, where
+from .join import row_reasons, where
+from .sides import Chunk
 
 ANGLES = ("pitch", "yaw", "roll")
 

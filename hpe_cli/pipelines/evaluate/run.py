@@ -31,12 +31,13 @@ from ...metrics.align import project_to_so3
 from ...metrics.protocols import PROTOCOLS, PosePair, opal23_mats
 from ..pools import default_threads, in_order
 from .dataset import choose_directmhp
-from .join import LABEL_THREADS, Chunk, SideReader, choose_keys, join, open_side, read_side, side_columns
+from .join import choose_keys, join
 from .lockstep import Unaligned, lockstep, prefetch
 from .options import EvaluateOptions
 from .outputs import Images, empty_rows, worst_pictures
 from .rejects import align_block, collect_rejects, unreadable_rejects
 from .score import PLACEMENT, nested, raw_angles, score_pairs, take_rows, with_canonical
+from .sides import LABEL_THREADS, Chunk, SideReader, open_side, read_side, side_columns
 
 ANGLES = ("pitch", "yaw", "roll")
 

@@ -14,9 +14,9 @@ from ...metrics.protocols import PROTOCOLS
 from ...metrics.stream import Accumulator
 from ...rotation import soa
 from ..pools import in_order
-from .join import Chunk, stored_of_angles
 from .outputs import Sample, Worst, row_table
 from .rejects import stream_rejects
+from .sides import Chunk, stored_of_angles
 
 #: threads that score chunks side by side (the reading runs on one more, see ``prefetch``)
 SCORE_THREADS = 2

@@ -1,6 +1,6 @@
 """External hash join of ``hpe evaluate``'s two inputs when they do not list the keys in the same order.
 
-Both sides are streamed once (:class:`~hpe_cli.pipelines.evaluate.join.SideReader`) and every row is written
+Both sides are streamed once (:class:`~hpe_cli.pipelines.evaluate.sides.SideReader`) and every row is written
 to one of ``K`` partition files (Arrow IPC, in a temporary folder) chosen by a hash of its key, so rows with
 equal keys (also equal file stems, see :func:`~hpe_cli.pipelines.evaluate.join._key_codes`) land in the same
 partition. ``K`` is chosen from the row count so that one partition of both sides is about
@@ -24,7 +24,8 @@ import pyarrow.compute as pc
 
 from ...io.key_hash import string_hashes
 from ...io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
-from .join import Side, combine_key_hash, file_stems, key_text
+from .join import file_stems
+from .sides import Side, combine_key_hash, key_text
 
 
 def _bools(col) -> np.ndarray:
@@ -168,7 +169,7 @@ class _SideSpill:
         return pa.ipc.open_file(pa.memory_map(p)).read_all()
 
     def side(self, k, empty_keys):
-        """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate.join.Side` (empty when it holds no row)."""
+        """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate.sides.Side` (empty when it holds no row)."""
 
         r = self.reader
         t = self.table(k)
