@@ -70,12 +70,17 @@ def test_api_and_cli_give_the_same_report(tmp_path):
 @needs_gold
 @pytest.mark.parametrize("shuffled", [False, True])
 def test_each_side_is_opened_and_resolved_once(tmp_path, monkeypatch, shuffled):
-    import hpe_cli.pipelines.evaluate.sides as ej
+    import hpe_cli.io.readers as readers
+    import hpe_cli.io.system_meta as system_meta
+    import hpe_cli.pipelines.evaluate.run as er
+    import hpe_cli.pipelines.evaluate.sides as es
 
     calls = []
-    resolve, open_table = ej.resolve_system, ej.open_table
-    monkeypatch.setattr(ej, "resolve_system", lambda *a, **k: calls.append("resolve") or resolve(*a, **k))
-    monkeypatch.setattr(ej, "open_table", lambda *a, **k: calls.append("open") or open_table(*a, **k))
+    resolve, open_table = system_meta.resolve_system, readers.open_table
+    for mod in (es, system_meta):  # the name evaluate calls, and the owner's (no other path resolves again)
+        monkeypatch.setattr(mod, "resolve_system", lambda *a, **k: calls.append("resolve") or resolve(*a, **k))
+    for mod in (er, readers):
+        monkeypatch.setattr(mod, "open_table", lambda *a, **k: calls.append("open") or open_table(*a, **k))
     pred = tmp_path / "pred.csv"
     p = pd.read_csv(GOLD / "syn" / "pred.csv")
     (p.sample(frac=1.0, random_state=4) if shuffled else p).to_csv(pred, index=False)

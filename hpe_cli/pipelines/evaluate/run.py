@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import HpeError
-from ...io import Rejects, TableWriter, system_metadata, write_json
+from ...io import Rejects, TableWriter, open_table, system_metadata, write_json
 from ...io.label_source import LabelSource
 from ...io.writers import check_report_outputs, json_text
 from ...metrics import peer_angles as pa_
@@ -400,9 +400,11 @@ def plan(pred_path, gt_path, options: EvaluateOptions, progress=None) -> tuple:
     """``(Plan, note or None)``: both sides opened once (each side's own system, else its option), the key, the
     protocols (and the note saying which DirectMHP variant the GT's dataset picked)."""
     o = options
-    pred = open_side(pred_path, o.pred_system, o.use_pred, "pred", o.batch_size)
-    gt = open_side(gt_path, o.gt_system, o.use_gt, "gt", o.batch_size)
-    pcols, gcols = side_columns(pred.table), side_columns(gt.table)
+    ptable = open_table(pred_path, o.batch_size, with_lines=True)
+    gtable = open_table(gt_path, o.batch_size, with_lines=True)
+    gt = open_side(gtable, o.gt_system, o.use_gt, "gt")
+    pred = open_side(ptable, o.pred_system, o.use_pred, "pred")
+    pcols, gcols = list(pred.columns), side_columns(gt.table)  # a .mat folder of GT rows is keyed by image too
     keys = choose_keys(list(o.keys), pcols, gcols, pred_path, gt_path, o.join_mode)
     protocols, choice = choose_directmhp(list(o.protocols), gt.table)
     if o.by and o.by not in gcols and o.by not in pcols:

@@ -19,7 +19,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from ...errors import HpeError
-from ...io import ANGLE_COLS, MATRIX_COLS, batch_rotations, label_mode, open_table
+from ...io import ANGLE_COLS, MATRIX_COLS, batch_rotations, label_mode
 from ...io.key_hash import string_hashes
 from ...io.label_source import AUTO, LabelSource
 from ...io.labels import is_native, label_columns_fast, value_columns
@@ -189,14 +189,14 @@ def side_columns(table) -> list:
     return columns
 
 
-def open_side(path, system, use: str, role: str, batch_size: int):
-    """One input of ``hpe evaluate`` opened once: a :class:`~hpe_cli.io.label_source.LabelSource`.
+def open_side(table, system, use: str, role: str):
+    """One input of ``hpe evaluate``, its table opened once (``open_table(path, batch_size, with_lines=True)``),
+    as a :class:`~hpe_cli.io.label_source.LabelSource`: its system resolved, its label columns found.
 
     ``system`` is the ``--{role}-system`` option (the file's own system wins; a dataset format's labels are
     converted to it), ``use`` the ``--columns`` choice (``"auto"``: the system's own value columns, then
     angles, then ``r00..r22``).
     """
-    table = open_table(path, batch_size, with_lines=True)
     resolved = resolve_system(table, system, default=None, option_name=f"--{role}-system", option_is_output=True)
     columns = side_columns(table)
     if use == AUTO:
