@@ -325,10 +325,13 @@ class Partitions:
         # codes: a prediction's is its row, a GT row's the row of its match (else one past all predictions)
         order = np.argsort(hp)
         sp = hp[order]
-        sg = np.sort(hg)
+        gorder = np.argsort(hg)
+        sg = hg[gorder]
         if (sp[1:] == sp[:-1]).any() or (sg[1:] == sg[:-1]).any():
             return None  # equal hashes on one side: a duplicate key (named by the string join) or a collision
-        at = np.minimum(np.searchsorted(sp, hg), pred.n - 1)
+        at = np.empty(gt.n, dtype=np.intp)
+        at[gorder] = np.searchsorted(sp, sg)  # sorted queries walk the sorted hashes in order: cache-friendly
+        at = np.minimum(at, pred.n - 1)
         gi = np.flatnonzero(sp[at] == hg)
         pi = order[at[gi]]
         cp = np.arange(pred.n, dtype=np.int64)
