@@ -19,6 +19,7 @@ the 300W-LP active matrix ``A`` (x = subject's left, y = up, z = out of the face
 ``write_labels``       a label table written atomically, with its system in the metadata
 ``convert_file``       ``hpe convert`` on a file (the same pipeline; system from the file's metadata)
 ``audit_file``         ``hpe audit`` on a file (the same pipeline), its JSON report
+``evaluate_files``     ``hpe evaluate`` on two files (the same pipeline), its JSON report
 ``audit``              per-row label checks (gimbal lock, non-canonical, out of range...)
 ``evaluate``           the evaluation report of predictions against ground truth
 ``augment_sample``     labels, landmarks and box of one sample after a flip / rotation / mirror
@@ -57,6 +58,7 @@ _API = (
     "STORAGE_KINDS",
     "convert_file",
     "audit_file",
+    "evaluate_files",
     "landmark_pose",
     "view_file",
     "draw_file",

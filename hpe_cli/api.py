@@ -692,3 +692,31 @@ def biwi_file(input, output, **options) -> dict:
     opts = BiwiOptions(**options)
     with ensure_transaction():
         return run_biwi(input, output, opts)
+
+
+def evaluate_files(pred, gt, options=None, **settings) -> dict:
+    """``hpe evaluate`` as a function: the same pipeline (:func:`hpe_cli.pipelines.evaluate.run_evaluate`).
+
+    Parameters
+    ----------
+    pred, gt : str or path
+        Any tables ``hpe`` reads (Parquet, CSV, JSON, a ``.mat`` folder, BIWI files...).
+    options : EvaluateOptions, optional
+        The run's settings (:class:`hpe_cli.pipelines.evaluate.EvaluateOptions`, as the command's options).
+    **settings
+        Fields of :class:`~hpe_cli.pipelines.evaluate.EvaluateOptions` (``pred_system``, ``gt_system``,
+        ``keys``, ``protocols``, ``output``, ``report``, ``rejects``, ``threads``...) when ``options`` is not
+        given.
+
+    Returns
+    -------
+    dict
+        The JSON report of ``hpe evaluate``.
+    """
+    from .io.transaction import ensure_transaction
+    from .pipelines.evaluate import EvaluateOptions, run_evaluate
+
+    if options is not None and settings:
+        raise TypeError(f"expected options or settings, got both (settings: {', '.join(sorted(settings))})")
+    with ensure_transaction():
+        return run_evaluate(pred, gt, options if options is not None else EvaluateOptions(**settings))

@@ -243,43 +243,41 @@ def evaluate(
       hpe evaluate preds.csv AFLW2000/ --pred-system 300w_lp --gt-system 300w_lp --report page.html --worst 20
       hpe evaluate preds_in_gt_order.csv gt.csv --pred-system 300w_lp --gt-system 300w_lp --join order
     """
-    from ..pipelines.evaluate import JoinUsageError, run_evaluate
+    from ..pipelines.evaluate import EvaluateOptions, JoinUsageError, run_evaluate
 
     protos = None if (not protocols or "all" in protocols) else list(protocols)
     from .options import known_rows
 
     if html and yaw_bins is None:  # the page always has its yaw-bin table
         yaw_bins = REPORT_YAW_BINS
+    options = EvaluateOptions(
+        pred_system=pred_system,
+        gt_system=gt_system,
+        output=output,
+        keys=keys,
+        protocols=protos,
+        align=align,
+        by=by,
+        yaw_bins=yaw_bins,
+        report=report,
+        plots=plots,
+        rejects=rejects,
+        html=html,
+        use_pred=pred_columns or use,
+        use_gt=gt_columns or use,
+        radians=radians,
+        overwrite=overwrite,
+        strict=strict,
+        batch_size=batch_size,
+        join_mode=join_mode,
+        orthonormalize=orthonormalize,
+        worst=worst,
+        images=images,
+        threads=threads,
+    )
     bar = progress(total=known_rows(pred, gt), desc="evaluate", quiet=quiet)  # both tables' rows, when known
     try:
-        result = run_evaluate(
-            pred,
-            gt,
-            pred_system=pred_system,
-            gt_system=gt_system,
-            output=output,
-            keys=keys,
-            protocols=protos,
-            align=align,
-            by=by,
-            yaw_bins=yaw_bins,
-            report=report,
-            plots=plots,
-            rejects=rejects,
-            use_pred=pred_columns or use,
-            use_gt=gt_columns or use,
-            radians=radians,
-            overwrite=overwrite,
-            batch_size=batch_size,
-            progress=bar,
-            strict=strict,
-            join_mode=join_mode,
-            orthonormalize=orthonormalize,
-            html=html,
-            worst=worst,
-            images=images,
-            threads=threads,
-        )
+        result = run_evaluate(pred, gt, options, progress=bar)
     except JoinUsageError as exc:
         raise click.UsageError(str(exc)) from None
     finally:

@@ -92,7 +92,7 @@ def label_columns_fast(batch, mode: str, radians: bool = False):
         an object array.
     """
     names = ANGLE_COLS if mode == "angles" else MATRIX_COLS
-    cols, ok, reasons = _value_columns(batch, names)
+    cols, ok, reasons = value_columns(batch, names)
     if radians and mode == "angles":
         from .units_watch import observe_radians  # warns at the end of the run if they look like degrees
 
@@ -147,7 +147,7 @@ def batch_labels(batch, mode: str, radians: bool = False):
 # (kept apart from the numeric extraction above: every storage kind is read here the same way)
 
 
-def _native(system, columns) -> bool:
+def is_native(system, columns) -> bool:
     """True when ``columns`` hold the system's own declared value columns."""
     if system is None or (system.storage_kind == "angles" and not system.columns):
         return False
@@ -168,7 +168,7 @@ def label_mode(columns, path="input", system=None) -> str:
     from ..rotation.systems import get_system
 
     system = get_system(system) if system is not None else None
-    if _native(system, columns):
+    if is_native(system, columns):
         return system.storage_kind
     cols = set(columns)
     if all(c in cols for c in ANGLE_COLS):
@@ -205,7 +205,7 @@ def columns_map_hint(columns) -> str:
     return f"; rename them with --columns-map {pairs}"
 
 
-def _value_columns(batch, names):
+def value_columns(batch, names):
     """``(columns, ok, reasons_or_None)`` for arbitrary numeric columns (first reason per row)."""
     cols, reasons = [], None
     ok = np.ones(batch.num_rows, dtype=bool)
@@ -263,10 +263,10 @@ def batch_rotations(batch, system, mode: str, radians: bool = False):
 
     system = get_system(system)
     n = batch.num_rows
-    native = _native(system, batch.schema.names)
+    native = is_native(system, batch.schema.names)
     if mode == "angles":
         if native and system.storage_kind == "angles":
-            cols, ok, reasons = _value_columns(batch, system.value_columns)
+            cols, ok, reasons = value_columns(batch, system.value_columns)
             if system.value_units == "radians":
                 cols = [c * (180.0 / np.pi) for c in cols]
         else:
@@ -290,7 +290,7 @@ def batch_rotations(batch, system, mode: str, radians: bool = False):
         return [cols[0:3], cols[3:6], cols[6:9]], ok, reasons
     if mode != system.storage_kind or not native:
         raise HpeError(f"{mode} columns {', '.join(system.value_columns)} not found for system {system.name}")
-    cols, ok, reasons = _value_columns(batch, system.value_columns)
+    cols, ok, reasons = value_columns(batch, system.value_columns)
     if system.storage_kind in ("rotvec", "quaternion"):  # column kernels: no (n, 3, 3) stack on the hot path
         from ..rotation import storage as st
 
@@ -353,7 +353,7 @@ def label_values(batch, system, mode: str, radians: bool = False):
     system = get_system(system)
     names = batch.schema.names
     if mode == "angles":
-        native = _native(system, names) and system.storage_kind == "angles"
+        native = is_native(system, names) and system.storage_kind == "angles"
         cols = system.value_columns if native else ANGLE_COLS
         values = np.stack([numeric_column(batch, c)[0] for c in cols], axis=-1)
         rad = (system.value_units == "radians") if native else radians
@@ -364,7 +364,7 @@ def label_values(batch, system, mode: str, radians: bool = False):
         elif not native:  # --radians (a system's own radian columns are its definition, not the user's claim)
             observe_radians([values[:, 0], values[:, 1], values[:, 2]])
         return np.rad2deg(values) if rad else values
-    if mode == "matrix" and not (_native(system, names) and system.storage_kind == "matrix"):
+    if mode == "matrix" and not (is_native(system, names) and system.storage_kind == "matrix"):
         return np.stack([numeric_column(batch, c)[0] for c in MATRIX_COLS], axis=-1).reshape(-1, 3, 3)
     cols = system.value_columns
     values = np.stack([numeric_column(batch, c)[0] for c in cols], axis=-1)

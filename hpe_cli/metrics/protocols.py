@@ -310,7 +310,7 @@ def whenet(pair: PosePair) -> ProtocolRows:
     )
 
 
-def _opal23_mats(pair):
+def opal23_mats(pair):
     """opal23's matrices of both sides (nested) and the re-expressed rows; computed once per pair (cached)."""
 
     def make():
@@ -322,7 +322,7 @@ def _opal23_mats(pair):
 
 def _opal23_gt_euler(pair) -> np.ndarray:
     """``as_euler('XYZ')`` of opal23's GT matrices: shared by opal23 and opal23-align (cached)."""
-    return _cached(pair, ("opal23", "gt_euler"), lambda: pa_.opal23_euler(_opal23_mats(pair)[1]))
+    return _cached(pair, ("opal23", "gt_euler"), lambda: pa_.opal23_euler(opal23_mats(pair)[1]))
 
 
 @register_protocol(
@@ -339,7 +339,7 @@ def opal23(pair: PosePair) -> ProtocolRows:
     built from the annotation angles as the images_framework AFLW2000 reader
     does, whatever the dataset (here: the 300w_lp angles as written).
     """
-    P, G, rx = _opal23_mats(pair)
+    P, G, rx = opal23_mats(pair)
     return ProtocolRows(
         pa_.opal23_mae(G, P, ann_euler=_opal23_gt_euler(pair)),
         np.ones(pair.n, dtype=bool),
@@ -363,7 +363,7 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
     is then turned by its inverse. A streamed run estimates the mean over all
     pairs first and passes it in ``pair.context["opal23_mean"]``.
     """
-    P, G, rx = _opal23_mats(pair)
+    P, G, rx = opal23_mats(pair)
     mean = pair.context.get("opal23_mean")
     if mean is None:
         deltas, near = pa_.opal23_near_quats(G, P)

@@ -2,7 +2,7 @@
 
 Every file is written atomically (:class:`hpe_cli.io.writers.AtomicFile`).
 ``rows`` is what ``hpe evaluate`` keeps for plots: every pair up to 400,000 pairs, beyond that every k-th pair
-(``rows.step``, k a power of two; :class:`hpe_cli.pipelines.evaluate_outputs.Sample`), and the figures say so.
+(``rows.step``, k a power of two; :class:`hpe_cli.pipelines.evaluate.outputs.Sample`), and the figures say so.
 Scatter plots show at most :data:`MAX_POINTS` of those rows (a fixed-seed sample); bin medians, the CDF and
 the histograms use every row handed in. The report's numbers always use all pairs.
 """

@@ -10,7 +10,7 @@ import pyarrow as pa
 import pytest
 
 from conftest import hpe
-from hpe_cli.pipelines.evaluate_dataset import choose_directmhp, gt_dataset
+from hpe_cli.pipelines.evaluate.dataset import choose_directmhp, gt_dataset
 
 AFLW = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "aflw2000_prnet"
 

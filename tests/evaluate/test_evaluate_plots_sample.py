@@ -4,7 +4,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from hpe_cli.pipelines.evaluate_outputs import Sample
+from hpe_cli.pipelines.evaluate.outputs import Sample
 from hpe_cli.report.eval_plots import _drawn
 
 

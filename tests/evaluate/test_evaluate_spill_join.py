@@ -13,7 +13,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from hpe_cli.errors import HpeError
-from hpe_cli.pipelines.evaluate import run_evaluate
+from hpe_cli.pipelines.evaluate import EvaluateOptions, run_evaluate
 from hpe_cli.rotation.systems import get_system
 
 GOLD = Path(__file__).resolve().parents[3] / "shared" / "golden" / "evaluate"
@@ -44,15 +44,17 @@ def _both(tmp_path, pred, gt, **kw):
         rep = run_evaluate(
             pred,
             gt,
-            pred_system=S,
-            gt_system=S,
-            output=o,
-            rejects=rej,
-            batch_size=97,
-            join_engine=engine,
-            partition_rows=7,
-            overwrite=True,
-            **kw,
+            EvaluateOptions(
+                pred_system=S,
+                gt_system=S,
+                output=o,
+                rejects=rej,
+                batch_size=97,
+                join_engine=engine,
+                partition_rows=7,
+                overwrite=True,
+                **kw,
+            ),
         )
         rows = pq.read_table(o).to_pandas().sort_values("image").reset_index(drop=True)
         rj = pd.read_csv(rej) if rej.exists() else None
@@ -103,7 +105,9 @@ def test_duplicate_key_found_across_the_whole_file(tmp_path):
     p = tmp_path / "pred.csv"
     pred.to_csv(p, index=False)
     with pytest.raises(HpeError, match=r"duplicate key image='s\d+' \(again at line 2002\)"):
-        run_evaluate(p, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=50)
+        run_evaluate(
+            p, GOLD / "syn" / "gt.csv", EvaluateOptions(pred_system=S, gt_system=S, batch_size=97, partition_rows=50)
+        )
     assert not list(tmp_path.glob("*.parquet"))
 
 
@@ -112,7 +116,7 @@ def test_hash_collisions_fall_back_to_the_string_join(tmp_path, monkeypatch):
     partition use the string join, so the report is the same."""
     import numpy as np
 
-    from hpe_cli.pipelines import evaluate_spill as es
+    from hpe_cli.pipelines.evaluate import spill as es
 
     pred = tmp_path / "pred.csv"
     pd.read_csv(GOLD / "syn" / "pred.csv").sample(frac=1.0, random_state=3).to_csv(pred, index=False)
@@ -134,16 +138,22 @@ def test_hash_collisions_fall_back_to_the_string_join(tmp_path, monkeypatch):
             out.hashes = {j: (np.roll(hx, 1), np.roll(hs, 1)) for j, (hx, hs) in out.hashes.items()}
         return out
 
-    r = run_evaluate(pred, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
+    r = run_evaluate(
+        pred, GOLD / "syn" / "gt.csv", EvaluateOptions(pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
+    )
     assert calls["hash"] > 0 and calls["none"] == 0  # the hash join is the normal path
     monkeypatch.setattr(es._SideSpill, "side", rolled)
     calls.update(hash=0, none=0)
-    r2 = run_evaluate(pred, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
+    r2 = run_evaluate(
+        pred, GOLD / "syn" / "gt.csv", EvaluateOptions(pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
+    )
     assert calls["none"] > 0 and calls["hash"] == 0
     import hpe_cli.io.key_hash as kh
 
     zeros = lambda arr: (np.zeros(len(arr), dtype=np.uint64),) * 2  # noqa: E731 - every key collides
     monkeypatch.setattr(kh, "string_hashes", zeros)
-    r3 = run_evaluate(pred, GOLD / "syn" / "gt.csv", pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
+    r3 = run_evaluate(
+        pred, GOLD / "syn" / "gt.csv", EvaluateOptions(pred_system=S, gt_system=S, batch_size=97, partition_rows=300)
+    )
     for rep in (r, r2, r3):
         _close({k: want[k] for k in ("metrics", "protocols", "n")}, {k: rep[k] for k in ("metrics", "protocols", "n")})

@@ -120,8 +120,8 @@ def test_streamed_run_equals_in_memory_join(tmp_path, align):
 def test_threads_and_piece_sizes_change_nothing(tmp_path, monkeypatch, shuffled):
     """2 scoring and 2 label threads give exactly the numbers and rows of 1; 100-row pieces those of whole batches
     up to the order of the sums."""
-    import hpe_cli.pipelines.evaluate_join as ej
-    import hpe_cli.pipelines.evaluate_score as ev
+    import hpe_cli.pipelines.evaluate.score as ev
+    import hpe_cli.pipelines.evaluate.sides as ej
 
     p = pd.read_csv(SYN / "pred.csv")
     p["group"] = np.where(np.arange(len(p)) % 4 == 0, "even", "odd")
@@ -198,7 +198,7 @@ def test_a_key_repeated_in_another_chunk_is_named(tmp_path, order):
 
 
 def test_sorted_keys_are_streamed_without_hashing(tmp_path, monkeypatch):
-    import hpe_cli.pipelines.evaluate_lockstep as ls
+    import hpe_cli.pipelines.evaluate.lockstep as ls
 
     spilled = []
     monkeypatch.setattr(ls.KeysSeen, "_spill", lambda self, g: spilled.append(g.n))

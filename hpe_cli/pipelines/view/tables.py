@@ -1,5 +1,5 @@
 """The tables of ``hpe view``: LABELS (and OTHER) read whole, each in its own system, and OTHER's rows paired
-with LABELS' by key as ``hpe evaluate`` pairs them (:func:`hpe_cli.pipelines.evaluate_join.join`: same key
+with LABELS' by key as ``hpe evaluate`` pairs them (:func:`hpe_cli.pipelines.evaluate.join.join`: same key
 choice, stems, duplicate checks; no common key is a usage error)."""
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ import pyarrow as pa
 
 from ...io.label_source import LabelSource, open_labels
 from ..draw.rows import read_rows, row_namer, row_numbers
-from ..evaluate_join import Side, _choose_keys, join
+from ..evaluate.join import choose_keys, join
+from ..evaluate.sides import Side
 
 #: key columns tried together with the image name when no --key is given (one image holds several heads)
 PERSON_KEYS = ("person_id", "face_id", "head_id")
@@ -86,14 +87,14 @@ def default_keys(a: Table, b: Table, keys) -> list:
     for t, cols in ((a, cols_a), (b, cols_b)):
         if "file" in cols and "image" not in cols and t.labels.dataset:
             cols.append("image")
-    chosen = _choose_keys(keys, cols_b, cols_a, b.src.path, a.src.path)
+    chosen = choose_keys(keys, cols_b, cols_a, b.src.path, a.src.path)
     if not keys:
         chosen += [k for k in PERSON_KEYS if k in cols_a and k in cols_b][:1]
     return chosen
 
 
 def pair(a: Table, b: Table, keys) -> tuple:
-    """``(b_idx per row of a (-1: none), unmatched rows of b, keys, notes)`` by :func:`evaluate_join.join`."""
+    """``(b_idx per row of a (-1: none), unmatched rows of b, keys, notes)`` by :func:`hpe_cli.pipelines.evaluate.join.join`."""
     keys = default_keys(a, b, keys)
 
     def side(t: Table):

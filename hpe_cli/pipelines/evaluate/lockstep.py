@@ -2,14 +2,22 @@
 
 :func:`lockstep` pairs equal-length chunks of the two sides as they are read, checks the keys chunk by chunk
 (:func:`_same_keys`) and duplicate keys across chunks (:class:`KeysSeen`); :class:`Unaligned` sends the run to
-the key join (:mod:`hpe_cli.pipelines.evaluate_spill`). :func:`prefetch` reads one pair ahead on a thread.
+the key join (:mod:`hpe_cli.pipelines.evaluate.spill`). :func:`prefetch` reads one pair ahead on a thread.
 """
 
 from __future__ import annotations
 
-import numpy as np
+import os
+import shutil
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
 
-from .evaluate_join import Chunk, JoinUsageError, SideReader, _stems, keys_hash
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from .join import JoinUsageError, file_stems
+from .sides import Chunk, SideReader, keys_hash
 
 
 class Unaligned(Exception):
@@ -17,8 +25,6 @@ class Unaligned(Exception):
 
 
 def _same_keys(g: Chunk, p: Chunk, keys, notes: set, seen=None) -> None:
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     for k in keys:
         a, b = g.keys.column(k), p.keys.column(k)
@@ -27,7 +33,7 @@ def _same_keys(g: Chunk, p: Chunk, keys, notes: set, seen=None) -> None:
             a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
         if pc.all(pc.equal(a, b)).as_py() is not False and a.null_count == 0 and b.null_count == 0:
             continue
-        if pa.types.is_string(a.type) and pc.all(pc.equal(_stems(a), _stems(b))).as_py():
+        if pa.types.is_string(a.type) and pc.all(pc.equal(file_stems(a), file_stems(b))).as_py():
             notes.add(f"key {k!r} joined on file stems (the two files spell the names differently)")
             continue
         raise Unaligned(k)
@@ -49,8 +55,6 @@ class KeysSeen:
         self.reader = reader  # asked to hash the keys of the chunks it labels from then on
 
     def add(self, g: Chunk) -> None:
-        import pyarrow as pa
-        import pyarrow.compute as pc
 
         if not g.n:
             return
@@ -71,8 +75,6 @@ class KeysSeen:
         self._spill(g)
 
     def _spill(self, g: Chunk) -> None:
-        import os
-        import tempfile
 
         h = g.key_hash if g.key_hash is not None else keys_hash(g.keys, self.keys)
         if self.files is None:
@@ -101,7 +103,6 @@ class KeysSeen:
             self.close()
 
     def close(self) -> None:
-        import shutil
 
         for f in self.files or ():
             f.close()
@@ -175,7 +176,6 @@ def prefetch(gen):
     The worker only ever runs one ``next(gen)`` at a time and is joined before
     this generator returns or raises, so no thread outlives the run.
     """
-    from concurrent.futures import ThreadPoolExecutor
 
     ex = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-read")
     try:

@@ -3,9 +3,16 @@ the image files by stem, and the pictures of the worst rows (drawn by ``hpe draw
 
 from __future__ import annotations
 
-import numpy as np
+import base64
+import os
+from types import SimpleNamespace
 
-from .evaluate_join import Chunk
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from .join import file_stems
+from .sides import Chunk
 
 ANGLES = ("pitch", "yaw", "roll")
 
@@ -18,8 +25,6 @@ class Worst:
         self.frame = None
 
     def add(self, table):
-        import pyarrow as pa
-        import pyarrow.compute as pc
 
         if not self.n or not table.num_rows:
             return
@@ -57,7 +62,6 @@ class Sample:
             self.step *= 2
 
     def rows(self):
-        from types import SimpleNamespace
 
         a = np.concatenate(self.parts) if self.parts else np.zeros((0, 5), dtype=np.float32)
         a = a.astype(np.float64)
@@ -68,7 +72,6 @@ class Sample:
 
 def row_table(rows, g: Chunk, p: Chunk, keys, by, by_values, images):
     """The per-row output of one chunk: keys, angles in the GT system, errors, extras."""
-    import pyarrow as pa
 
     cols = {}
     if keys:
@@ -100,7 +103,6 @@ class Images:
     """Image files of one folder by stem (listed once), for the per-row output and the report's pictures."""
 
     def __init__(self, folder):
-        import os
 
         self.folder = folder
         exts = (".jpg", ".jpeg", ".png", ".bmp")
@@ -112,14 +114,10 @@ class Images:
 
     def paths(self, names):
         """The image path of each name (matched on the file stem), '' when the folder has none."""
-        import pyarrow as pa
-        import pyarrow.compute as pc
-
-        from .evaluate_join import _stems
 
         if isinstance(names, pa.ChunkedArray):
             names = names.combine_chunks()
-        stems = _stems(pc.cast(names, pa.string()))
+        stems = file_stems(pc.cast(names, pa.string()))
         idx = pc.index_in(stems, value_set=pa.array(list(self.by_stem), pa.string()))
         out = (
             pa.array(list(self.by_stem.values()), pa.string()).take(pc.fill_null(idx, 0))
@@ -137,11 +135,10 @@ def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 48
     ``images`` (``--images`` or the GT folder), else ``fallback_root``, ``.mat`` + ``.jpg`` folders and
     Panoptic layouts included. ``system`` is the GT system (the angles of ``frame``).
     """
-    import base64
 
     import cv2
 
-    from .draw import render_worst
+    from ..draw import render_worst
 
     if frame is None or not len(frame):
         return None
@@ -185,7 +182,6 @@ def _around_face(img, row):
 
 
 def empty_rows(keys):
-    import pyarrow as pa
 
     cols = {k: pa.array([], pa.string()) for k in keys}
     for pre in ("gt_", "pred_", "err_"):

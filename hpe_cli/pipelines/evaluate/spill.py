@@ -1,11 +1,11 @@
 """External hash join of ``hpe evaluate``'s two inputs when they do not list the keys in the same order.
 
-Both sides are streamed once (:class:`~hpe_cli.pipelines.evaluate_join.SideReader`) and every row is written
+Both sides are streamed once (:class:`~hpe_cli.pipelines.evaluate.sides.SideReader`) and every row is written
 to one of ``K`` partition files (Arrow IPC, in a temporary folder) chosen by a hash of its key, so rows with
-equal keys (also equal file stems, see :func:`~hpe_cli.pipelines.evaluate_join._key_codes`) land in the same
+equal keys (also equal file stems, see :func:`~hpe_cli.pipelines.evaluate.join._key_codes`) land in the same
 partition. ``K`` is chosen from the row count so that one partition of both sides is about
 :data:`PARTITION_ROWS` rows (~100 MB on disk). The partitions are then joined one at a time with the in-memory
-join (:func:`~hpe_cli.pipelines.evaluate_join.join`), so memory is flat in the number of pairs, and a key that
+join (:func:`~hpe_cli.pipelines.evaluate.join.join`), so memory is flat in the number of pairs, and a key that
 appears twice anywhere in a file is found in its partition. Whether text keys are compared as written or on
 their file stems is decided over the whole files first, as the in-memory join decides it.
 """
@@ -19,14 +19,17 @@ import tempfile
 from contextlib import closing
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
-from ..io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
-from .evaluate_join import Side, _stems, combine_key_hash, key_text
+from ...io.key_hash import string_hashes
+from ...io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
+from .join import file_stems
+from .sides import Side, combine_key_hash, key_text
 
 
 def _bools(col) -> np.ndarray:
     """A boolean Arrow column (no nulls) as a numpy bool array, from its bit buffers (no pandas)."""
-    import pyarrow as pa
 
     chunks = col.chunks if isinstance(col, pa.ChunkedArray) else [col]
     parts = [
@@ -53,7 +56,6 @@ def key_hashes(keys_table, keys):
     the same partition; the per-column hashes let :meth:`Partitions.stem_columns` count matches cheaply.
     Hashed off the Arrow buffers (:func:`hpe_cli.io.key_hash.string_hashes`).
     """
-    from ..io.key_hash import string_hashes
 
     h = np.zeros(keys_table.num_rows, dtype=np.uint64)
     per = {}
@@ -95,7 +97,6 @@ class _SideSpill:
         self.stem_differs: set = set()  # key columns with a row whose file stem is not its text
 
     def _table(self, c, per):
-        import pyarrow as pa
 
         # angles as written are enough: the matrices are rebuilt from them on the scoring threads (the same
         # function on the same numbers: the same bits), which halves what goes to disk and back
@@ -130,7 +131,6 @@ class _SideSpill:
         return t
 
     def add(self, c, keys):
-        import pyarrow as pa
 
         if not c.n:
             return
@@ -162,7 +162,6 @@ class _SideSpill:
 
     def table(self, k):
         """Partition ``k`` as a pyarrow Table (memory-mapped), or None when it holds no row."""
-        import pyarrow as pa
 
         p = self._path(k)
         if not os.path.exists(p):
@@ -170,9 +169,7 @@ class _SideSpill:
         return pa.ipc.open_file(pa.memory_map(p)).read_all()
 
     def side(self, k, empty_keys):
-        """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate_join.Side` (empty when it holds no row)."""
-        import pyarrow as pa
-        import pyarrow.compute as pc
+        """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate.sides.Side` (empty when it holds no row)."""
 
         r = self.reader
         t = self.table(k)
@@ -253,7 +250,6 @@ class Partitions:
         return self
 
     def _empty_keys(self, reader, spill, other):
-        import pyarrow as pa
 
         schema = spill.schema or other.schema
         fields = [
@@ -271,9 +267,8 @@ class Partitions:
 
     def stem_columns(self) -> set:
         """Key columns compared on file stems, decided over all partitions as the in-memory join decides
-        (:func:`~hpe_cli.pipelines.evaluate_join._key_codes`: stems when they match more GT rows than the
+        (:func:`~hpe_cli.pipelines.evaluate.join._key_codes`: stems when they match more GT rows than the
         text as written), counted on the 64-bit hashes written with each row."""
-        import pyarrow as pa
 
         def text_key(schema, k):
             t = schema.field(k).type
@@ -314,8 +309,6 @@ class Partitions:
         """``(gt codes, pred codes)`` of one partition from the key hashes, every match verified on the keys
         themselves; None (use the string join) when a key is not text on both sides, when one side has
         equal hashes twice (a duplicate, which the string join names) or when a match is a hash collision."""
-        import pyarrow as pa
-        import pyarrow.compute as pc
 
         def is_text(schema, k):
             return pa.types.is_string(schema.field(k).type)
@@ -332,10 +325,13 @@ class Partitions:
         # codes: a prediction's is its row, a GT row's the row of its match (else one past all predictions)
         order = np.argsort(hp)
         sp = hp[order]
-        sg = np.sort(hg)
+        gorder = np.argsort(hg)
+        sg = hg[gorder]
         if (sp[1:] == sp[:-1]).any() or (sg[1:] == sg[:-1]).any():
             return None  # equal hashes on one side: a duplicate key (named by the string join) or a collision
-        at = np.minimum(np.searchsorted(sp, hg), pred.n - 1)
+        at = np.empty(gt.n, dtype=np.intp)
+        at[gorder] = np.searchsorted(sp, sg)  # sorted queries walk the sorted hashes in order: cache-friendly
+        at = np.minimum(at, pred.n - 1)
         gi = np.flatnonzero(sp[at] == hg)
         pi = order[at[gi]]
         cp = np.arange(pred.n, dtype=np.int64)
@@ -349,7 +345,7 @@ class Partitions:
             )
             a, b = a.take(numpy_to_arrow(gi)), b.take(numpy_to_arrow(pi))
             if k in stems:
-                a, b = _stems(a), _stems(b)
+                a, b = file_stems(a), file_stems(b)
             if len(gi) and not pc.all(pc.equal(a, b)).as_py():
                 return None
         return cg, cp

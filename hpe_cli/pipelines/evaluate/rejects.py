@@ -4,18 +4,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from .evaluate_join import Chunk, _reasons, _where
+from ...metrics import rotation_errors as re_
+from .join import row_reasons, where
+from .sides import Chunk
 
 ANGLES = ("pitch", "yaw", "roll")
 
 
-def _add_rejects(rej, side, name, rows, reasons, keycols):
+def add_rejects(rej, side, name, rows, reasons, keycols):
     """Rejected rows of ``side`` (its own file and line), the first one named in the error message."""
     if not len(rows):
         return
     unit = side.unit
     if rej.first_where is None:
-        rej.first_where = f"{_where(side, rows[0])}: {reasons[0]}".replace(f"{side.path}: ", "", 0)
+        rej.first_where = f"{where(side, rows[0])}: {reasons[0]}".replace(f"{side.path}: ", "", 0)
         rej.source = side.path
     rej.add(
         {
@@ -28,7 +30,7 @@ def _add_rejects(rej, side, name, rows, reasons, keycols):
     )
 
 
-def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
+def collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
     """Send unreadable, missing, invalid and unmatched rows to ``rej``; return the masks over GT rows."""
     missing = pidx < 0
     p_ok = np.where(missing, False, pred.ok[np.maximum(pidx, 0)])
@@ -49,7 +51,7 @@ def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
                 lines=ln,
             )
     rows = gidx[missing]
-    _add_rejects(
+    add_rejects(
         rej,
         gt,
         "gt",
@@ -59,23 +61,23 @@ def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
     )
     rows, prow = gidx[invalid], pidx[invalid]
     gt_bad = ~gt.ok[rows]
-    _add_rejects(
+    add_rejects(
         rej,
         gt,
         "gt",
         rows[gt_bad],
-        ("invalid: gt " + _reasons(gt, rows[gt_bad])).astype(object),
+        ("invalid: gt " + row_reasons(gt, rows[gt_bad])).astype(object),
         key_cols(gt, rows[gt_bad]),
     )
-    _add_rejects(
+    add_rejects(
         rej,
         pred,
         "pred",
         prow[~gt_bad],
-        ("invalid: prediction " + _reasons(pred, prow[~gt_bad])).astype(object),
+        ("invalid: prediction " + row_reasons(pred, prow[~gt_bad])).astype(object),
         key_cols(pred, prow[~gt_bad]),
     )
-    _add_rejects(
+    add_rejects(
         rej,
         pred,
         "pred",
@@ -86,7 +88,7 @@ def _collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
     return valid, missing, invalid
 
 
-def _stream_rejects(rej, s, g: Chunk, p: Chunk, bad):
+def stream_rejects(rej, s, g: Chunk, p: Chunk, bad):
     gt_bad = bad & ~g.ok
     pred_bad = bad & g.ok & ~p.ok
 
@@ -114,7 +116,7 @@ def _stream_rejects(rej, s, g: Chunk, p: Chunk, bad):
             )
 
 
-def _unreadable_rejects(rej, side, name):
+def unreadable_rejects(rej, side, name):
     if side.unreadable:
         ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
         if rej.first_where is None:
@@ -130,8 +132,7 @@ def _unreadable_rejects(rej, side, name):
         )
 
 
-def _align_block(glob, rep_before, gsys) -> dict:
-    from ..metrics import rotation_errors as re_
+def align_block(glob, rep_before, gsys) -> dict:
 
     Q = glob["Q"]
     qp, _, _, _ = gsys.to_angles(gsys.from_canonical(Q[None]))

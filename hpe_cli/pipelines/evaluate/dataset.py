@@ -8,6 +8,8 @@ dataset; ``directmhp-single`` / ``directmhp-v2`` name one explicitly.
 
 from __future__ import annotations
 
+import json
+
 #: dataset -> DirectMHP variant
 _VARIANT = {
     "AFLW2000-3D / 300W-LP (.mat labels)": "directmhp-single",
@@ -25,7 +27,6 @@ def gt_dataset(src) -> tuple:
     ``hpe relabel-panoptic`` / ``relabel-agora`` carry ``hpe:relabel`` metadata (Parquet) or their columns
     (``sequence, camera, frame, person_id``; ``source, person, occlusion``).
     """
-    import json
 
     path = str(getattr(src, "path", ""))
     if getattr(src, "dataset", False):

@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
-import numpy as np
+from concurrent.futures import ThreadPoolExecutor
 
-from .evaluate_join import Chunk, stored_of_angles
-from .evaluate_outputs import Sample, Worst, row_table
-from .evaluate_rejects import _stream_rejects
+import numpy as np
+import pyarrow as pa
+
+from ...io.layout import numpy_to_arrow
+from ...metrics.align import remove_offset
+from ...metrics.evaluate import compute_rows, yaw_bin_edges
+from ...metrics.protocols import PROTOCOLS
+from ...metrics.stream import Accumulator
+from ...rotation import soa
+from ..pools import in_order
+from .outputs import Sample, Worst, row_table
+from .rejects import stream_rejects
+from .sides import Chunk, stored_of_angles
 
 #: threads that score chunks side by side (the reading runs on one more, see ``prefetch``)
 SCORE_THREADS = 2
@@ -16,7 +26,7 @@ SCORE_ROWS = 65536
 PLACEMENT = ("bbox_x", "bbox_y", "bbox_w", "bbox_h", "tdx", "tdy", "size")
 
 
-def _take(c: Chunk, idx) -> Chunk:
+def take_rows(c: Chunk, idx) -> Chunk:
     """Rows ``idx`` (int array or bool mask) of a chunk."""
 
     def t(x):
@@ -42,7 +52,6 @@ def with_canonical(c: Chunk, system) -> Chunk:
     files kept only those (the reader's own computation on the same numbers: the same bits)."""
     if c.canonical is not None:
         return c
-    from ..rotation import soa
 
     c.canonical = soa.columns(system.soa_to_canonical(stored_of_angles(system, c.raw)), c.n)
     return c
@@ -53,18 +62,17 @@ def with_written(t, p: Chunk):
     degrees, its own system), for the page's worst rows: beside the angles hpe re-expressed in the GT system."""
     if p.raw is None or "pred_written_pitch" in t.column_names:
         return t
-    from ..io.layout import numpy_to_arrow
 
     for k, a in enumerate(("pitch", "yaw", "roll")):
         t = t.append_column(f"pred_written_{a}", numpy_to_arrow(np.ascontiguousarray(p.raw[:, k], dtype=np.float64)))
     return t
 
 
-def _nested(c: Chunk):
+def nested(c: Chunk):
     return [[c.canonical[3 * i + j] for j in range(3)] for i in range(3)]
 
 
-def _raw(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
+def raw_angles(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
     raw = {}
     if g.raw is not None:
         raw["gt"] = (gsys, g.raw)
@@ -73,26 +81,36 @@ def _raw(g: Chunk, p: Chunk, gsys, psys, aligned=False) -> dict:
     return raw
 
 
-def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
+def count_orthonormalized(counts: dict, p: Chunk) -> None:
+    """Add a chunk's ``--orthonormalize`` distances to the run's counts (rows moved, sum and max distance)."""
+    if p.dist is not None and len(p.dist):
+        counts["orthonormalized"] = counts.get("orthonormalized", 0) + int((p.dist > 1e-6).sum())
+        counts["dist_sum"] = counts.get("dist_sum", 0.0) + float(p.dist.sum())
+        counts["dist_max"] = max(counts.get("dist_max", 0.0), float(p.dist.max()))
+
+
+def with_placement(t, g: Chunk, p: Chunk):
+    """A chunk's per-row table for the page's worst rows: the face box of each row, which places its picture
+    (not in the per-row output), and the prediction's angles as written."""
+    for c in PLACEMENT:
+        if g.keys is not None and c in g.keys.column_names and c not in t.column_names:
+            t = t.append_column(c, g.keys.column(c))
+    return with_written(t, p)
+
+
+def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     """Score every chunk of pairs: accumulate, write rows, keep the worst and a plot sample.
 
     Chunks are scored on ``s.threads`` threads (:data:`SCORE_THREADS` by default; numpy releases the GIL on
     whole columns) and consumed in input order, so sums, the spill and the
     per-row output are the same as one thread's.
     """
-    from concurrent.futures import ThreadPoolExecutor
-
-    from ..metrics.align import remove_offset
-    from ..metrics.evaluate import compute_rows, yaw_bin_edges
-    from ..metrics.protocols import PROTOCOLS
-    from ..metrics.stream import Accumulator
-    from .pools import in_order
 
     protos = {k: PROTOCOLS[k] for k in s.protocols}
-    edges = yaw_bin_edges(gsys, float(s.yaw_bins)) if s.yaw_bins else None
-    acc = Accumulator(protos, edges, by=bool(s.by))
-    before = Accumulator(protos, None, by=False, percentiles=True) if s.align == "mean" else None
-    worst, sample = Worst(s.worst if s.html else 0), Sample()
+    edges = yaw_bin_edges(gsys, float(s.options.yaw_bins)) if s.options.yaw_bins else None
+    acc = Accumulator(protos, edges, by=bool(s.options.by))
+    before = Accumulator(protos, None, by=False, percentiles=True) if s.options.align == "mean" else None
+    worst, sample = Worst(s.options.worst if s.options.html else 0), Sample()
     ctx = {"opal23_mean": glob["opal23_mean"]} if "opal23_mean" in glob else {}
     counts = {"pairs": 0, "invalid": 0}
 
@@ -101,26 +119,28 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             if stream:
                 bad = ~(g.ok & p.ok)
                 if bad.any():
-                    _stream_rejects(rej, s, g, p, bad)
+                    stream_rejects(rej, s, g, p, bad)
                     counts["invalid"] += int(bad.sum())
-                    g, p = _take(g, ~bad), _take(p, ~bad)
+                    g, p = take_rows(g, ~bad), take_rows(p, ~bad)
             for a in range(0, g.n, SCORE_ROWS):  # cache-sized pieces: numpy is faster on them
                 yield g.slice(a, a + SCORE_ROWS), p.slice(a, a + SCORE_ROWS)
 
     def work(gp):  # on a scoring thread: pure numpy and Arrow, no shared state
         g, p = with_canonical(gp[0], gsys), with_canonical(gp[1], psys)
-        P, G = _nested(p), _nested(g)
-        by_values = (g.by if g.by is not None else p.by) if s.by else None
+        P, G = nested(p), nested(g)
+        by_values = (g.by if g.by is not None else p.by) if s.options.by else None
         rows_before = None
         if before is not None:
-            rows_before = compute_rows(P, G, gsys, s.protocols, _raw(g, p, gsys, psys), ctx)
+            rows_before = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys), ctx)
             P = remove_offset(P, glob["Q"])
-        rows = compute_rows(P, G, gsys, s.protocols, _raw(g, p, gsys, psys, aligned=before is not None), ctx)
+        rows = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys, aligned=before is not None), ctx)
         table = None
         if writer is not None or worst.n:
-            table = row_table(rows, g, p, s.keys, s.by, by_values, s.images)
+            table = row_table(rows, g, p, s.keys, s.options.by, by_values, s.images)
         part, block = acc.partial(rows), Sample.block(rows)
-        if not s.by:  # their sums are in `part`: every protocol's per-row arrays are freed before the chunk's turn
+        if (
+            not s.options.by
+        ):  # their sums are in `part`: every protocol's per-row arrays are freed before the chunk's turn
             rows.protocols = {}
         return g, p, rows, rows_before, by_values, table, part, block
 
@@ -130,14 +150,12 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
 
     def flush(at_least):
         if pending and sum(t.num_rows for t in pending) >= at_least:
-            import pyarrow as pa
-
             while len(writes) >= 2:  # at most two pieces waiting: memory stays bounded
                 writes.pop(0).result()
             writes.append(wpool.submit(writer.write, pending[0] if len(pending) == 1 else pa.concat_tables(pending)))
             pending.clear()
 
-    threads = max(1, int(getattr(s, "threads", None) or SCORE_THREADS))
+    threads = max(1, int(s.threads or SCORE_THREADS))
     pool = ThreadPoolExecutor(threads, thread_name_prefix="hpe-evaluate-score")
     try:
         pieces = usable()
@@ -145,21 +163,14 @@ def _score(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             if rows_before is not None:
                 before.add(rows_before)
             counts["pairs"] += rows.n
-            if p.dist is not None and len(p.dist):
-                counts["orthonormalized"] = counts.get("orthonormalized", 0) + int((p.dist > 1e-6).sum())
-                counts["dist_sum"] = counts.get("dist_sum", 0.0) + float(p.dist.sum())
-                counts["dist_max"] = max(counts.get("dist_max", 0.0), float(p.dist.max()))
+            count_orthonormalized(counts, p)
             acc.add(rows, by_values, part)
             sample.add(rows, block)
             if writer is not None:
                 pending.append(t)
-                flush(s.batch_size)
-            if worst.n:  # the face box of each row places its picture (not in the per-row output)
-                for c in PLACEMENT:
-                    if g.keys is not None and c in g.keys.column_names and c not in t.column_names:
-                        t = t.append_column(c, g.keys.column(c))
-                t = with_written(t, p)
-                worst.add(t)
+                flush(s.options.batch_size)
+            if worst.n:
+                worst.add(with_placement(t, g, p))
         if writer is not None:
             flush(1)
             while writes:  # every piece written, in order; a write's error is raised here

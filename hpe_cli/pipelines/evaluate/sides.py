@@ -1,28 +1,35 @@
-"""``hpe evaluate`` inputs: read each side in chunks, pair the two by key (or by position when asked).
+"""``hpe evaluate``'s inputs: each side opened once and read in chunks.
 
-Each side is read batch by batch (:class:`SideReader`); a batch becomes a
-:class:`Chunk`: canonical matrices (nine float64 columns), usability, the
-angles as written (when the side holds angles), key and ``--by`` columns.
-Pairing is by key columns only: when both files list the same keys in the same
-order the chunks are paired as they stream (memory flat in the number of
-pairs, keys verified chunk by chunk); otherwise both sides are partitioned by
-a hash of the key on disk and each partition joined here with Arrow dictionary
-encoding or verified key hashes (:mod:`hpe_cli.pipelines.evaluate_spill`; :func:`read_side`
-+ :func:`join` whole in memory is the reference it is tested against). Row order
-is used only with ``--join order`` and equal row counts.
+:func:`open_side` opens a table once (a :class:`~hpe_cli.io.label_source.LabelSource`: its system resolved,
+its label columns found); each pass makes a :class:`SideReader` of it, whose :meth:`~SideReader.chunks` are
+:class:`Chunk` s: canonical matrices (nine float64 columns), usability, the angles as written (when the side
+holds angles), key and ``--by`` columns, each row's line. :func:`read_side` reads a side whole into a
+:class:`Side` (the in-memory join's input). The pairing itself is in :mod:`.join`, :mod:`.lockstep` and
+:mod:`.spill`.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing
 from dataclasses import dataclass
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
-from ..errors import HpeError
+from ...errors import HpeError
+from ...io import ANGLE_COLS, MATRIX_COLS, batch_rotations, label_mode
+from ...io.key_hash import string_hashes
+from ...io.label_source import AUTO, LabelSource
+from ...io.labels import is_native, label_columns_fast, value_columns
+from ...io.readers import LINE_COL
+from ...io.system_meta import resolve_system
+from ...io.table_source import plain_numpy
+from ...metrics.align import project_to_so3_batch
+from ...rotation import soa
+from ..pools import in_order
 
-#: key columns tried in order when --key is not given
-DEFAULT_KEYS = ("image", "file")
 #: threads that turn each side's decoded batches into labels
 LABEL_THREADS = 2
 
@@ -61,14 +68,12 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
     raw output, e.g. TriNet's vectors) is replaced by its nearest rotation
     (SVD, det +1) and ``distance`` is ``||M - R||_F``.
     """
-    from ..io import batch_rotations
-    from ..io.labels import _native, _value_columns, label_columns_fast
 
     n = batch.num_rows
-    native = _native(system, batch.schema.names)
+    native = is_native(system, batch.schema.names)
     if mode == "angles":
         if native and system.storage_kind == "angles":
-            cols, ok, reasons = _value_columns(batch, system.value_columns)
+            cols, ok, reasons = value_columns(batch, system.value_columns)
             if system.value_units == "radians":
                 cols = [c * (180.0 / np.pi) for c in cols]
         else:
@@ -76,14 +81,10 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
         raw = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1)
         return stored_of_angles(system, raw), ok, reasons, raw, None
     if orthonormalize and (mode == "matrix" or system.storage_kind == "matrix"):
-        from ..metrics.align import project_to_so3_batch
-
         names = system.value_columns if (native and system.storage_kind == "matrix") else None
         if names is None:
-            from ..io import MATRIX_COLS
-
             names = MATRIX_COLS
-        cols, ok, reasons = _value_columns(batch, names)
+        cols, ok, reasons = value_columns(batch, names)
         M = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1).reshape(n, 3, 3)
         R, dist = project_to_so3_batch(M)
         bad = ok & ~np.isfinite(dist)
@@ -110,8 +111,6 @@ def stored_of_angles(system, raw) -> list:
 def _stem_key_hook(batch):
     """HOOK (joins by key): a dataset reader with ``file`` but no ``image`` (the ``.mat`` folder reader) gets
     ``image`` = the file stem, so predictions keyed by image name join. Remove once the reader provides it."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     names = batch.schema.names
     if "image" in names or "file" not in names:
@@ -158,8 +157,6 @@ class Chunk:
 
 def key_text(col):
     """A key column as one Arrow string array (chunks combined, dictionaries decoded, other types cast)."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     if isinstance(col, pa.ChunkedArray):
         col = col.combine_chunks()
@@ -176,7 +173,6 @@ def combine_key_hash(h: np.ndarray, column_hash: np.ndarray) -> np.ndarray:
 
 def keys_hash(table, keys) -> np.ndarray:
     """One uint64 per row of the key columns (text as written; see :func:`hpe_cli.io.key_hash.string_hashes`)."""
-    from ..io.key_hash import string_hashes
 
     h = np.zeros(table.num_rows, dtype=np.uint64)
     for k in keys:
@@ -184,46 +180,53 @@ def keys_hash(table, keys) -> np.ndarray:
     return h
 
 
+def side_columns(table) -> list:
+    """The columns of one side as the join sees them: a ``.mat`` folder's rows also have ``image`` (the file
+    stem, see :func:`_stem_key_hook`)."""
+    columns = list(table.columns)
+    if "file" in columns and "image" not in columns and bool(table.dataset):
+        columns.append("image")
+    return columns
+
+
+def open_side(table, system, use: str, role: str):
+    """One input of ``hpe evaluate``, its table opened once (``open_table(path, batch_size, with_lines=True)``),
+    as a :class:`~hpe_cli.io.label_source.LabelSource`: its system resolved, its label columns found.
+
+    ``system`` is the ``--{role}-system`` option (the file's own system wins; a dataset format's labels are
+    converted to it), ``use`` the ``--columns`` choice (``"auto"``: the system's own value columns, then
+    angles, then ``r00..r22``).
+    """
+    resolved = resolve_system(table, system, default=None, option_name=f"--{role}-system", option_is_output=True)
+    columns = side_columns(table)
+    if use == AUTO:
+        return LabelSource(table, resolved, label_mode(columns, table.path, resolved.system))
+    native = resolved.system.storage_kind == use and all(c in columns for c in resolved.system.value_columns)
+    need = ANGLE_COLS if use == "angles" else MATRIX_COLS
+    missing = [c for c in need if c not in columns]
+    if missing and not native:
+        raise HpeError(f"{table.path}: missing column(s) {', '.join(missing)} for --columns {use}")
+    return LabelSource(table, resolved, use)
+
+
 class SideReader:
-    """One input table: its system, label columns, keys; :meth:`chunks` streams it."""
+    """One input side, opened once (:class:`~hpe_cli.io.label_source.LabelSource`): :meth:`chunks` streams it.
+
+    Each pass (the scoring pass, a global estimate's pass, the spill) makes a reader of the same source: the
+    table is read again, its system and label columns are not decided again.
+    """
 
     def __init__(
-        self,
-        path,
-        system,
-        use: str,
-        keys,
-        by,
-        radians: bool,
-        batch_size: int,
-        progress=None,
-        orthonormalize=False,
-        extra=(),
-        role="gt",
-        threads=LABEL_THREADS,
+        self, source, keys, by, radians: bool, progress=None, orthonormalize=False, extra=(), threads=LABEL_THREADS
     ):
-        from ..io import ANGLE_COLS, MATRIX_COLS, label_mode, open_table
-        from ..io.system_meta import resolve_system
-
-        self.src = src = open_table(path, batch_size, with_lines=True)
-        # the file's own system (hpe:system metadata, dataset formats: .mat Pose_Para is 300w_lp), else the option
-        self.resolved = resolve_system(src, system, default=None, option_name=f"--{role}-system", option_is_output=True)
-        self.system = self.resolved.system
+        self.source = source
+        self.src = src = source.table
+        self.resolved = source.resolved
+        self.system = source.system
         self.path = src.path
-        columns = list(src.columns)
-        self.dataset_stem = "file" in columns and "image" not in columns and getattr(src, "dataset", False)
-        if self.dataset_stem:
-            columns.append("image")
-        self.columns = columns
-        if use == "auto":  # the system's own value columns (rotvec, quaternion, 6-D...) first, then angles, matrix
-            self.mode = label_mode(columns, src.path, self.system)
-        else:
-            self.mode = use
-            native = self.system.storage_kind == use and all(c in columns for c in self.system.value_columns)
-            need = ANGLE_COLS if use == "angles" else MATRIX_COLS
-            missing = [c for c in need if c not in columns]
-            if missing and not native:
-                raise HpeError(f"{src.path}: missing column(s) {', '.join(missing)} for --columns {use}")
+        self.columns = columns = side_columns(src)
+        self.dataset_stem = "image" in columns and "image" not in src.columns
+        self.mode = source.mode
         self.keep = [
             c
             for c in dict.fromkeys(list(keys or ()) + ([by] if by and by in columns else []) + list(extra))
@@ -246,9 +249,6 @@ class SideReader:
         The batches are decoded here, one after the other; their labels (matrices from the angles, checks) are
         computed on ``threads`` threads (:data:`LABEL_THREADS` by default), at most that many batches ahead.
         """
-        from concurrent.futures import ThreadPoolExecutor
-
-        from .pools import in_order
 
         def batches():
             for batch, bad_rows in self.src.batches_with_rejects():
@@ -266,9 +266,6 @@ class SideReader:
             pool.shutdown(wait=True, cancel_futures=True)
 
     def _chunk(self, batch) -> Chunk:
-        from ..io.readers import LINE_COL
-        from ..io.table_source import plain_numpy
-        from ..rotation import soa
 
         if self.dataset_stem:
             batch = _stem_key_hook(batch)
@@ -282,39 +279,14 @@ class SideReader:
         return Chunk(soa.columns(X, n), ok, rs, raw, dist, keys, by, lines, kh)
 
 
-def read_side(
-    path,
-    system,
-    use: str,
-    keys,
-    by,
-    radians: bool,
-    batch_size: int,
-    progress=None,
-    role="input",
-    orthonormalize=False,
-    threads=LABEL_THREADS,
-) -> Side:
+def read_side(source, keys, by, radians: bool, progress=None, orthonormalize=False, threads=LABEL_THREADS) -> Side:
     """Read one table whole into a :class:`Side` (for the in-memory key join).
 
     Each field is gathered as a list of chunk arrays and concatenated (and its
     list freed) one field at a time, so the peak is one field above the data.
     """
-    import pyarrow as pa
 
-    r = SideReader(
-        path,
-        system,
-        use,
-        keys,
-        by,
-        radians,
-        batch_size,
-        progress,
-        orthonormalize,
-        role=role if role in ("gt", "pred") else "gt",
-        threads=threads,
-    )
+    r = SideReader(source, keys, by, radians, progress, orthonormalize, threads=threads)
     parts: dict = {f"c{k}": [] for k in range(9)}
     parts.update(ok=[], reasons=[], raw=[], dist=[], keys=[], by=[], lines=[])
     any_reasons = False
@@ -356,150 +328,3 @@ def read_side(
     side.unit = r.unit
     side.resolved = r.resolved
     return side
-
-
-class JoinUsageError(HpeError):
-    """A join that cannot be made as asked (the CLI turns it into a usage error, exit 2)."""
-
-    exit_code = 2
-
-
-def _choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path, join_mode="key"):
-    if join_mode == "order":
-        return []
-    if keys:
-        for side_cols, p in ((gt_cols, gt_path), (pred_cols, pred_path)):
-            bad = [k for k in keys if k not in side_cols]
-            if bad:
-                raise HpeError(
-                    f"{p}: --key column(s) {', '.join(bad)} not in the table; found: {', '.join(side_cols[:20])}"
-                )
-        return list(keys)
-    for k in DEFAULT_KEYS:
-        if k in pred_cols and k in gt_cols:
-            return [k]
-    raise JoinUsageError(
-        f"{pred_path}: no key column shared with {gt_path} (looked for {', '.join(DEFAULT_KEYS)}; "
-        f"prediction columns: {', '.join(pred_cols[:12])}); give --key COL[,COL...], or "
-        "--join order to pair rows by position (only with equal row counts)"
-    )
-
-
-def _stems(arr):
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    return pc.replace_substring_regex(pc.cast(arr, pa.string()), r"^.*[\\/]|\.[^.\\/]*$", "")
-
-
-def _encode(a, b):
-    import pyarrow as pa
-
-    from ..io.layout import arrow_to_numpy
-
-    enc = pa.concat_arrays([a, b]).dictionary_encode(null_encoding="encode")
-    return arrow_to_numpy(enc.indices).astype(np.int64), len(enc.dictionary)
-
-
-def _key_codes(gt_keys, pred_keys, keys, stems=None):
-    """One int64 code per row of each side (equal codes iff all key columns are equal) and the notes.
-
-    Text keys that name files are compared as written; when that matches fewer
-    rows than comparing their file stems (``image00050.jpg``, ``AFLW/image00050.mat``
-    and ``image00050`` are one image), the stems are used and a note says so. ``stems`` (a set of key
-    columns), when given, makes that choice instead (the partitioned join decides it over the whole files).
-    """
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    n_g = gt_keys.num_rows
-    code, notes = None, []
-    for k in keys:
-        a = gt_keys.column(k).combine_chunks()
-        b = pred_keys.column(k).combine_chunks()
-        if a.type != b.type:  # a key read as numbers on one side and text on the other: compare as text
-            a, b = pc.cast(a, pa.string()), pc.cast(b, pa.string())
-        c, m = _encode(a, b)
-        if stems is not None:
-            if k in stems:
-                c, m = _encode(_stems(a), _stems(b))
-                notes.append(f"key {k!r} joined on file stems (the two files spell the names differently)")
-        elif pa.types.is_string(a.type) or pa.types.is_large_string(a.type):
-            exact = np.isin(c[:n_g], c[n_g:]).sum()
-            if exact < min(n_g, len(c) - n_g):
-                cs, ms = _encode(_stems(a), _stems(b))
-                if np.isin(cs[:n_g], cs[n_g:]).sum() > exact:
-                    c, m = cs, ms
-                    notes.append(f"key {k!r} joined on file stems (the two files spell the names differently)")
-        if code is None:
-            code = c
-        else:
-            code = code * m + c
-            code = np.unique(code, return_inverse=True)[1].astype(np.int64).reshape(-1)
-    return code[:n_g], code[n_g:], notes
-
-
-def _where(side, row):
-    unit = side.unit
-    if side.image_dir is not None:
-        return f"{side.path}"
-    return f"{side.path}: {unit} {int(side.lines[row])}"
-
-
-def _check_unique(codes, side, keys):
-    counts = np.bincount(codes) if len(codes) else np.zeros(0, dtype=np.int64)
-    dup = counts[codes] > 1
-    if dup.any():
-        first = int(np.flatnonzero(dup)[0])
-        again = int(np.flatnonzero(codes == codes[first])[1])
-        what = ", ".join(f"{k}={side.keys.column(k)[first].as_py()!r}" for k in keys)
-        unit = side.unit
-        raise HpeError(
-            f"{_where(side, first)}: duplicate key {what} (again at {unit} {int(side.lines[again])}); "
-            f"choose --key columns that identify one row, e.g. --key {','.join(keys)},person_id"
-        )
-
-
-def join(pred: Side, gt: Side, keys, join_mode="key", stems=None, codes=None):
-    """``(gt_idx, pred_idx, unmatched prediction rows, notes)``; pred_idx is -1 where a GT row has no prediction.
-
-    ``stems``: see :func:`_key_codes`; ``codes``: the ``(gt, pred)`` key codes when the caller has them
-    (the partitioned join, from verified key hashes)."""
-    if join_mode == "order":
-        if pred.n != gt.n:
-            raise JoinUsageError(
-                f"{pred.path}: --join order pairs rows by position and needs equal row counts; "
-                f"got {pred.n} predictions and {gt.n} ground-truth rows in {gt.path}"
-            )
-        idx = np.arange(gt.n)
-        return idx, idx.copy(), np.zeros(0, dtype=np.int64), ["rows paired by position (--join order)"]
-    if codes is not None:
-        cg, cp = codes
-        notes = [
-            f"key {k!r} joined on file stems (the two files spell the names differently)"
-            for k in keys
-            if k in (stems or ())
-        ]
-    else:
-        cg, cp, notes = _key_codes(gt.keys, pred.keys, keys, stems)
-    _check_unique(cg, gt, keys)
-    _check_unique(cp, pred, keys)
-    m = int(max(cg.max(initial=-1), cp.max(initial=-1))) + 1
-    pred_pos = np.full(m, -1, dtype=np.int64)
-    pred_pos[cp] = np.arange(len(cp))
-    gt_has = np.zeros(m, dtype=bool)
-    gt_has[cg] = True
-    return np.arange(len(cg)), pred_pos[cg], np.flatnonzero(~gt_has[cp]), notes
-
-
-def _reasons(side: Side, idx):
-    if side.reasons is None:
-        return np.full(len(idx), "", dtype=object)
-    return side.reasons[idx]
-
-
-def _gather(side, idx):
-    """Canonical nested matrix of the rows ``idx`` (no copy when every row is used in its own order)."""
-    if len(idx) == side.n and (idx[0] == 0 if len(idx) else True) and np.all(np.diff(idx) == 1):
-        return [[side.canonical[3 * i + j] for j in range(3)] for i in range(3)]
-    return [[side.canonical[3 * i + j][idx] for j in range(3)] for i in range(3)]
