@@ -11,10 +11,9 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from click.testing import CliRunner
 
 import hpe_cli
-from hpe_cli.cli.main import cli
+from conftest import hpe
 from hpe_cli.errors import HpeError
 from hpe_cli.pipelines.evaluate import EvaluateOptions, run_evaluate
 
@@ -56,8 +55,7 @@ def test_api_and_cli_give_the_same_report(tmp_path):
     gt = GOLD / "syn" / "gt.csv"
     report = tmp_path / "cli.json"
     args = ["evaluate", str(pred), str(gt), "--pred-system", "300w_lp", "--gt-system", "300w_lp"]
-    r = CliRunner().invoke(cli, [*args, "--protocol", "hopenet", "--json", str(report), "-q"])
-    assert r.exit_code == 0, r.output
+    hpe(*args, "--protocol", "hopenet", "--json", report, "-q", ok=True)
     api = hpe_cli.evaluate_files(pred, gt, pred_system="300w_lp", gt_system="300w_lp", protocols=["hopenet"])
     same = hpe_cli.evaluate_files(
         pred, gt, EvaluateOptions(pred_system="300w_lp", gt_system="300w_lp", protocols=("hopenet",))

@@ -307,7 +307,7 @@ KNOWN_PRIVATE_IMPORTS = {
     "hpe_cli/torch/dataset.py::hpe_cli.torch.samples._TRUE",
     "hpe_cli/torch/dataset.py::hpe_cli.torch.transforms._perm_for",
 }
-KNOWN_LONG_FUNCTIONS = {"hpe_cli/pipelines/evaluate.py::run_evaluate", "hpe_cli/pipelines/evaluate_score.py::_score"}
+KNOWN_LONG_FUNCTIONS: set = set()
 KNOWN_MANY_PARAMETERS: set = set()
 KNOWN_GET_SYSTEM = {
     "hpe_cli/pipelines/draw/errors.py::_load: get_system('300w_lp')",
