@@ -35,10 +35,11 @@ def _layout_and_system(opts):
         layout = get_layout(opts.layout, system=opts.system, form=opts.form, trainer=opts.trainer)
     except ValueError as exc:
         raise HpeError(str(exc)) from None
-    if layout.system is not None and opts.system is not None and get_system(opts.system).name != layout.system:
+    chosen = None if opts.system is None else get_system(opts.system)
+    if layout.system is not None and chosen is not None and chosen.name != layout.system:
         raise HpeError(
             f"--layout {layout.name} stores labels in the {layout.system} system, which its trainer "
-            f"expects; --system {get_system(opts.system).name} cannot be used with it"
+            f"expects; --system {chosen.name} cannot be used with it"
         )
     return layout, get_system(layout.system or opts.system or "300w_lp")
 
