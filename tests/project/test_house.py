@@ -226,8 +226,8 @@ def lazy_imports() -> set:
 GET_SYSTEM_ALLOWED = {
     "hpe_cli/pipelines/relabel/options.py::_label_system: get_system(system)": "relabel-panoptic/-agora --system",
     "hpe_cli/pipelines/biwi.py::BiwiOptions.__post_init__: get_system(self.system)": "biwi --system",
-    "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(layout.system or opts.system or '300w_lp')": (
-        "export --system, or the system the --layout's trainer expects"
+    "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(layout.system)": (
+        "the system the --layout's trainer expects (the layout names it)"
     ),
     "hpe_cli/pipelines/view/job.py::also_angles: get_system(s)": "view --also-in (names of other systems)",
     "hpe_cli/pipelines/draw/errors.py::_load: get_system(system)": (
