@@ -1,5 +1,5 @@
 """The output transaction's commit of one staged folder of many new files (``hpe view``'s thumbnails,
-``hpe augment --out-images``): placed whole (rename, :func:`hpe_cli.io.placement._rename_dir`) versus file by file
+``hpe augment --out-images``): placed whole (rename, :func:`hpe_cli.io.placement.rename_dir`) versus file by file
 (the path for existing targets and small folders), beside the floor (one ``os.rename`` of a folder, no checks).
 
 Run:  python benchmarks/commit_folder.py [--files 100000] [--size 5000]

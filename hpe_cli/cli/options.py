@@ -22,7 +22,7 @@ class SystemType(click.ParamType):
         except SystemError_ as exc:
             if str(value).endswith(".toml"):
                 self.fail(str(exc), param, ctx)
-            folded = _system_fold(value, system_names())  # names match case-insensitively
+            folded = fold_system_name(value, system_names())  # names match case-insensitively
             if folded is not None:
                 return get_system(folded)
             self.fail(_unknown_system(value, system_names()), param, ctx)
@@ -428,7 +428,7 @@ def deprecated_spellings(*names):
     return deco
 
 
-def _system_fold(value, names):
+def fold_system_name(value, names):
     """The built-in name equal to ``value`` up to case (``300W_LP`` -> ``300w_lp``), or None."""
     low = str(value).lower()
     return next((n for n in names if n.lower() == low), None)

@@ -104,7 +104,7 @@ def _arm_watchdog(signum: int) -> None:
     def force():
         from ..io import transaction
 
-        txn = transaction._run or transaction._current.get()
+        txn = transaction.active_transaction()
         try:
             if txn is not None:
                 txn.abort()

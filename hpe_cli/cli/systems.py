@@ -61,7 +61,7 @@ def _selected(extra, builtins: dict, load_system) -> list:
     from pathlib import Path
 
     from ..io.transaction import note_input
-    from .options import _system_fold
+    from .options import fold_system_name
     from .suggest import did_you_mean
 
     names, files = [], []
@@ -70,7 +70,7 @@ def _selected(extra, builtins: dict, load_system) -> list:
             note_input(item)
             files.append(load_system(item))
             continue
-        name = _system_fold(item, list(builtins))
+        name = fold_system_name(item, list(builtins))
         if name is None:
             kind = "file" if str(item).endswith(".toml") or "/" in str(item) else "built-in system"
             raise click.BadParameter(

@@ -35,7 +35,7 @@ from .panoptic_calibration import (  # noqa: F401
 )
 
 # the calibration reader lives in panoptic_calibration.py; its names are part of this module's API
-from .panoptic_json import _load_json, _parse_json  # noqa: F401
+from .panoptic_json import load_panoptic_json, parse_panoptic_json  # noqa: F401
 
 FACE_DIR = "hdFace3d"
 FACE_RE = re.compile(r"^faceRecon3D_hd(\d+)\.json$")
@@ -416,12 +416,12 @@ def read_face_frame(path) -> dict:
         (NaN when absent).
     """
     if isinstance(path, FaceRef):
-        data = _parse_json(path.read_bytes(), path.name)
+        data = parse_panoptic_json(path.read_bytes(), path.name)
         m = FACE_RE.match((path.member or path.path).replace("\\", "/").rsplit("/", 1)[-1])
         path = path.name
     else:
         path = Path(path)
-        data = _load_json(path)
+        data = load_panoptic_json(path)
         m = FACE_RE.match(path.name)
     if not isinstance(data, dict) or not isinstance(data.get("people"), list):
         raise HpeError(f"{path}: expected an object with a 'people' list")

@@ -117,10 +117,10 @@ def read_calibration(path, cameras="all") -> Cameras:
     -------
     Cameras
     """
-    from .panoptic_json import _load_json
+    from .panoptic_json import load_panoptic_json
 
     path = Path(path)
-    data = _load_json(path)
+    data = load_panoptic_json(path)
     cams = data.get("cameras") if isinstance(data, dict) else None
     if not isinstance(cams, list):
         got = (

@@ -8,7 +8,8 @@ from pathlib import Path
 from ..errors import HpeError
 
 
-def _load_json(path: Path):
+def load_panoptic_json(path: Path):
+    """Read and parse a Panoptic JSON file, errors as one-line HpeError naming the file."""
     try:
         with open(path, "rb") as fh:
             raw = fh.read()
@@ -16,10 +17,10 @@ def _load_json(path: Path):
         raise HpeError(f"{path}: no such file") from None
     except OSError as exc:
         raise HpeError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    return _parse_json(raw, path)
+    return parse_panoptic_json(raw, path)
 
 
-def _parse_json(raw: bytes, path):
+def parse_panoptic_json(raw: bytes, path):
     """orjson (5x faster on face files); the standard library where orjson refuses
     (NaN/Infinity literals) or to phrase the error."""
     try:

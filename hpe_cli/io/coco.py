@@ -36,18 +36,20 @@ def _finite(v, col, path, offset):
     return v
 
 
-def _column(frame, col):
+def column_values(frame, col):
     """A column of a pandas DataFrame, pyarrow Table or RecordBatch as float64 (NaN for nulls)."""
     if hasattr(frame, "schema") and not hasattr(frame, "iloc"):
         return arrow_to_numpy(frame.column(col), np.float64)
     return frame[col].to_numpy(dtype=np.float64, na_value=np.nan)
 
 
-def _names(frame):
+def frame_column_names(frame):
+    """Column names of a pandas frame or an Arrow table/batch."""
     return list(frame.schema.names) if hasattr(frame, "schema") and not hasattr(frame, "iloc") else list(frame.columns)
 
 
-def _strings(frame, col) -> list:
+def string_column(frame, col) -> list:
+    """Column ``col`` of a pandas frame or an Arrow table/batch as a list of ``str``."""
     if hasattr(frame, "schema") and not hasattr(frame, "iloc"):
         return [str(x) for x in frame.column(col).to_pylist()]
     return frame[col].astype(str).tolist()
@@ -113,7 +115,7 @@ def annotations_text(frame, image_ids, first_id: int, *, path="<coco>", offset: 
 
     import orjson
 
-    names = _names(frame)
+    names = frame_column_names(frame)
     missing = [c for c in BBOX_COLS + ANGLE_COLS if c not in names]
     if missing:
         raise HpeError(f"{path}: expected columns {', '.join(missing)} in the label table")
@@ -123,18 +125,18 @@ def annotations_text(frame, image_ids, first_id: int, *, path="<coco>", offset: 
     for lo in range(0, len(frame), CHUNK_ROWS):
         part = frame.iloc[lo : lo + CHUNK_ROWS] if hasattr(frame, "iloc") else frame.slice(lo, CHUNK_ROWS)
         n, off = len(part), offset + lo
-        box = np.stack([_finite(_column(part, c), c, path, off) for c in BBOX_COLS], axis=1)
+        box = np.stack([_finite(column_values(part, c), c, path, off) for c in BBOX_COLS], axis=1)
         if (box[:, 2:] < 0).any():
             bad = int(np.flatnonzero((box[:, 2:] < 0).any(1))[0])
             raise HpeError(
                 f"{path}: row {off + bad}: expected bbox_w, bbox_h >= 0, got {box[bad, 2]:g}, {box[bad, 3]:g}"
             )
-        ang = np.stack([_finite(_column(part, c), c, path, off) for c in ANGLE_COLS], axis=1)
+        ang = np.stack([_finite(column_values(part, c), c, path, off) for c in ANGLE_COLS], axis=1)
         if n_lm:  # (n, 2, n_lm): face2d_pts = [[x0, x1, ...], [y0, y1, ...]]
             pts = np.empty((n, 2, n_lm))
             for i in range(n_lm):
-                pts[:, 0, i] = _column(part, f"lm{i}_x")
-                pts[:, 1, i] = _column(part, f"lm{i}_y")
+                pts[:, 0, i] = column_values(part, f"lm{i}_x")
+                pts[:, 1, i] = column_values(part, f"lm{i}_y")
             gone = ~np.isfinite(pts).all(axis=1)
             pts[np.repeat(gone[:, None, :], 2, axis=1)] = MISSING_POINT
         else:
@@ -219,7 +221,7 @@ class CocoWriter(StreamWriter):
 
     def write(self, frame) -> None:
         """Append one batch (pandas DataFrame, pyarrow Table or RecordBatch) of label rows."""
-        names = _names(frame)
+        names = frame_column_names(frame)
         missing = [c for c in ["image"] + BBOX_COLS + ANGLE_COLS if c not in names]
         if missing:
             raise HpeError(f"{self.path}: expected columns {', '.join(missing)} in the label table")
@@ -233,7 +235,7 @@ class CocoWriter(StreamWriter):
         sizes = []
         for col, given in ((self.size_cols[0], self.width), (self.size_cols[1], self.height)):
             if col in names:
-                v = _column(frame, col)
+                v = column_values(frame, col)
                 ok = np.isfinite(v) & (v > 0)
                 if not ok.all():
                     bad = int(np.flatnonzero(~ok)[0])
@@ -253,7 +255,7 @@ class CocoWriter(StreamWriter):
         of the batch's first row in the whole table (for error messages).
         """
         codes, files = _image_codes(frame, self.path, offset)
-        sizes = self._sizes(frame, _names(frame), len(frame), offset)
+        sizes = self._sizes(frame, frame_column_names(frame), len(frame), offset)
         first = np.unique(codes, return_index=True)[1]  # codes are 0, 1, ... in order of first appearance
         for col, v in zip(self.size_cols, sizes):
             differ = v != v[first][codes]
@@ -344,12 +346,13 @@ def write_coco(
     COCO readers look both up by key, so the order of keys is immaterial.
     """
     with CocoWriter(path, overwrite, width=width, height=height, info=info, image_size_cols=image_size_cols) as w:
-        for part in _parts(frame, batch_size):
+        for part in frame_parts(frame, batch_size):
             w.write(part)
     return Path(path)
 
 
-def _parts(frame, batch_size):
+def frame_parts(frame, batch_size):
+    """A pandas frame or Arrow table/batch in parts of at most ``batch_size`` rows."""
     if hasattr(frame, "iloc"):
         for lo in range(0, len(frame), batch_size):
             yield frame.iloc[lo : lo + batch_size]

@@ -12,10 +12,10 @@ from .table_source import (
     RAW_MAX,
     Reject,
     TableSource,
-    _check_duplicates,
-    _float_columns,
-    _schema,
+    check_duplicates,
+    float_columns,
     is_float_column,
+    table_schema,
 )
 
 
@@ -25,7 +25,7 @@ def open_csv(path, batch_size, with_lines, block_size):
     reader = _CsvBlocks(path, block_size)
     header, header_lines = reader.header()
     names = _parse_header(path, header)
-    _check_duplicates(path, names)
+    check_duplicates(path, names)
     schema = reader.infer_schema(names, header_lines)
 
     def gen():
@@ -39,7 +39,7 @@ def open_csv(path, batch_size, with_lines, block_size):
             for k, b in enumerate(table.to_batches(max_chunksize=batch_size)):
                 yield b, (rejects if k == 0 else [])
 
-    return TableSource(path, _schema(schema, with_lines), None, gen, with_lines, "csv")
+    return TableSource(path, table_schema(schema, with_lines), None, gen, with_lines, "csv")
 
 
 def _parse_header(path, header: bytes) -> list:
@@ -132,7 +132,7 @@ class _CsvBlocks:
         import pyarrow.csv as pcsv
 
         self.ncols = len(names)
-        floats = _float_columns()
+        floats = float_columns()
         for block, line, _ in self.raw_blocks():
             types = {n: pa.string() for n in names if is_float_column(n, floats)}
             t = None

@@ -15,11 +15,13 @@ from ..errors import HpeError
 from .os_errors import TEMP_PREFIX
 
 
-def _temp_in(folder: Path) -> Path:
+def temp_in(folder: Path) -> Path:
+    """A fresh hpe temp path (``.hpe-*.tmp``) inside ``folder``, for staging and backups."""
     return folder / f"{TEMP_PREFIX}{secrets.token_hex(4)}.tmp"
 
 
-def _remove(p: Path) -> None:
+def remove_path(p: Path) -> None:
+    """Remove a file or a folder tree, quietly if it is gone already."""
     try:
         if p.is_dir() and not p.is_symlink():
             shutil.rmtree(p, ignore_errors=True)
@@ -31,7 +33,7 @@ def _remove(p: Path) -> None:
         pass
 
 
-def _count_files(folder, stop: int) -> int:
+def count_files(folder, stop: int) -> int:
     """Files under ``folder``, counted up to ``stop`` (a listing of 100,000 names is not read to the end)."""
     n, todo = 0, [os.fspath(folder)]
     while todo:
@@ -46,7 +48,7 @@ def _count_files(folder, stop: int) -> int:
     return n
 
 
-def _rename_dir(s, make_parents, undo: list) -> bool:
+def rename_dir(s, make_parents, undo: list) -> bool:
     """Place staged folder ``s`` whole at its (new) target: True when placed, False to place its files instead."""
     target = s.target
     make_parents(target, target.parent)
@@ -66,9 +68,9 @@ def _rename_dir(s, make_parents, undo: list) -> bool:
     return True
 
 
-def _unplace(path: Path, undo: list, backups: list) -> None:
+def unplace_file(path: Path, undo: list, backups: list) -> None:
     """Remove ``path`` undoably: renamed to a temp next to it (deleted once the commit is complete)."""
-    bak = _temp_in(path.parent)
+    bak = temp_in(path.parent)
     try:
         os.rename(path, bak)
     except FileNotFoundError:  # gone already
@@ -83,13 +85,13 @@ def _unplace(path: Path, undo: list, backups: list) -> None:
 _NO_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK, errno.ENOSYS, errno.EXDEV}
 
 
-def _place(src: Path, dst: Path, overwrite: bool, undo: list, backups: list) -> None:
+def place_file(src: Path, dst: Path, overwrite: bool, undo: list, backups: list) -> None:
     """Move ``src`` to ``dst``: atomically create it, or replace it keeping its mode."""
     try:
         if overwrite and dst.exists():
             mode = stat.S_IMODE(os.stat(dst).st_mode)
             os.chmod(src, mode)
-            bak = _temp_in(dst.parent)
+            bak = temp_in(dst.parent)
             try:
                 os.link(dst, bak)
                 backups.append(bak)

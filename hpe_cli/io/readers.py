@@ -36,11 +36,11 @@ from .table_source import (  # noqa: F401
     RAW_MAX,
     Reject,
     TableSource,
-    _check_duplicates,
-    _one_line,
-    _schema,
-    _with_line,
+    check_duplicates,
     is_float_column,
+    one_line,
+    table_schema,
+    with_line_numbers,
 )
 
 
@@ -150,7 +150,7 @@ def _open_core(
         if kind == "text":
             return _open_csv(path, batch_size, with_lines, block_size)
     except (pa.ArrowInvalid, OSError) as exc:
-        raise HpeError(f"{path}: cannot read: {_one_line(exc)}") from None
+        raise HpeError(f"{path}: cannot read: {one_line(exc)}") from None
     what = {
         "pickle": "a Python pickle (hpe never loads pickles as tables; AGORA dataframes go to 'hpe relabel-agora')",
         "zip": "a zip archive",
@@ -167,7 +167,7 @@ def _open_parquet(path, batch_size, with_lines):
 
     pf = pq.ParquetFile(path, pre_buffer=False, buffer_size=1 << 20)
     schema = pf.schema_arrow
-    _check_duplicates(path, schema.names, where="")
+    check_duplicates(path, schema.names, where="")
 
     def gen():
         # one row group at a time, one batch at a time: nothing read is kept
@@ -175,13 +175,20 @@ def _open_parquet(path, batch_size, with_lines):
         f = pq.ParquetFile(path, pre_buffer=False, buffer_size=1 << 20)
         for rg in range(f.num_row_groups):
             for b in f.iter_batches(batch_size=batch_size, row_groups=[rg], use_threads=True):
-                yield (_with_line(b, line) if with_lines else b), []
+                yield (with_line_numbers(b, line) if with_lines else b), []
                 line += b.num_rows
 
     meta = schema.metadata or {}
     system = meta[b"hpe:system"].decode("utf-8", "replace") if b"hpe:system" in meta else None
     return TableSource(
-        path, _schema(schema, with_lines), pf.metadata.num_rows, gen, with_lines, "parquet", system=system, unit="row"
+        path,
+        table_schema(schema, with_lines),
+        pf.metadata.num_rows,
+        gen,
+        with_lines,
+        "parquet",
+        system=system,
+        unit="row",
     )
 
 
@@ -199,12 +206,12 @@ def stream_source(path: Path, dataset, with_lines: bool) -> TableSource:
     def gen_stream():
         line = 1
         for b in dataset.iter_batches():
-            yield _with_line(b, line), []
+            yield with_line_numbers(b, line), []
             line += b.num_rows
 
     return TableSource(
         path,
-        _schema(dataset.schema, with_lines),
+        table_schema(dataset.schema, with_lines),
         dataset.num_rows,
         gen_stream,
         with_lines,
@@ -236,11 +243,11 @@ def frame_source(path: Path, frame, batch_size: int, with_lines: bool) -> TableS
         for start in range(0, max(table.num_rows, 1), batch_size):
             b = table.slice(start, batch_size).combine_chunks().to_batches()
             b = b[0] if b else pa.RecordBatch.from_pylist([], schema=table.schema)
-            yield _with_line(b, start + 1), (rejected if start == 0 else [])
+            yield with_line_numbers(b, start + 1), (rejected if start == 0 else [])
 
     return TableSource(
         path,
-        _schema(table.schema, with_lines),
+        table_schema(table.schema, with_lines),
         table.num_rows,
         gen,
         with_lines,

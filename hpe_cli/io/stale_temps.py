@@ -1,6 +1,6 @@
 """Temps of runs that were killed: each run ``flock``s the temps it stages (the kernel drops the lock when
 the process is gone, ``kill -9`` included); a later run staging into the same folder removes the temps that
-are old and unlocked (:func:`_sweep`), so a killed run does not leave its ``.hpe-*.tmp`` files for ever."""
+are old and unlocked (:func:`sweep_stale_temps`), so a killed run does not leave its ``.hpe-*.tmp`` files for ever."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ SWEEP_AGE = 60.0
 _TEMP_NAME = re.compile(r"\.hpe-[0-9a-f]{8}\.tmp")
 
 
-def _lock(fd) -> None:
+def lock_file(fd) -> None:
     """``flock`` the temp a run has just created: held while the run lives (also through ``kill -9``: the
     kernel drops it when the process is gone), so a later run can tell a dead run's temp from a live one's."""
     try:
@@ -27,7 +27,7 @@ def _lock(fd) -> None:
         pass
 
 
-def _sweep(folder: Path, own: set) -> None:
+def sweep_stale_temps(folder: Path, own: set) -> None:
     """Remove the temps (``.hpe-<8 hex>.tmp``) in ``folder`` left by runs that were killed: older than
     :data:`SWEEP_AGE` and not locked by any live process. Best effort: anything unclear is left alone."""
     import time

@@ -21,7 +21,8 @@ LINE_COL = "__line__"
 RAW_MAX = 200
 
 
-def _float_columns() -> frozenset:
+def float_columns() -> frozenset:
+    """Names of the standard columns read as floats (angles, matrix, box, quaternion, ...)."""
     from .layout import ANGLE2_COLS, ANGLE_COLS, BBOX_COLS, MATRIX_COLS
 
     names = set(ANGLE_COLS) | set(ANGLE2_COLS) | set(MATRIX_COLS) | set(BBOX_COLS)
@@ -33,9 +34,7 @@ def is_float_column(name: str, floats=None) -> bool:
     """Columns always read as float64 from CSV: label, box and landmark (``lm{i}_x/y/z``) columns."""
     import re
 
-    return (
-        name in (floats if floats is not None else _float_columns()) or re.fullmatch(r"lm\d+_[xyz]", name) is not None
-    )
+    return name in (floats if floats is not None else float_columns()) or re.fullmatch(r"lm\d+_[xyz]", name) is not None
 
 
 @dataclass
@@ -108,7 +107,7 @@ class TableSource:
                     batch = batch.drop_columns([LINE_COL])
                 yield batch, rejects
         except (pa.ArrowInvalid, OSError, ValueError) as exc:
-            raise HpeError(f"{self.path}: cannot read: {_one_line(exc)}") from None
+            raise HpeError(f"{self.path}: cannot read: {one_line(exc)}") from None
 
     def batches(self) -> Iterator:
         """Yield pyarrow RecordBatches; the first unreadable row becomes an HpeError."""
@@ -119,17 +118,20 @@ class TableSource:
             yield batch
 
 
-def _one_line(exc) -> str:
+def one_line(exc) -> str:
+    """An exception's message on one line (at most 300 characters), for error messages."""
     return " ".join(str(exc).split())[:300]
 
 
-def _schema(schema, with_lines):
+def table_schema(schema, with_lines):
+    """A table's schema, with the line-number column appended when ``with_lines``."""
     import pyarrow as pa
 
     return schema.append(pa.field(LINE_COL, pa.int64())) if with_lines else schema
 
 
-def _with_line(batch, first_line: int):
+def with_line_numbers(batch, first_line: int):
+    """``batch`` with the line-number column appended, numbered from ``first_line``."""
     import pyarrow as pa
 
     n = batch.num_rows  # from_buffers: zero copy, and pa.array's import of pandas (0.4 s) is not needed here
@@ -151,7 +153,8 @@ def plain_numpy(arr) -> np.ndarray:
     return arr.to_numpy(zero_copy_only=False)
 
 
-def _check_duplicates(path, names, where="line 1: "):
+def check_duplicates(path, names, where="line 1: "):
+    """Raise HpeError if a column name repeats or is the reserved line-number column."""
     from collections import Counter
 
     dup = [n for n, c in Counter(names).items() if c > 1]

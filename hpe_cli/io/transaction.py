@@ -55,8 +55,8 @@ from pathlib import Path
 from ..errors import HpeError
 from . import os_errors
 from .os_errors import os_reason, printable
-from .placement import _count_files, _place, _remove, _rename_dir, _temp_in, _unplace
-from .stale_temps import SWEEP_AGE, _lock, _sweep  # noqa: F401 - SWEEP_AGE for tests
+from .placement import count_files, place_file, remove_path, rename_dir, temp_in, unplace_file
+from .stale_temps import SWEEP_AGE, lock_file, sweep_stale_temps  # noqa: F401 - SWEEP_AGE for tests
 
 __all__ = [
     "OutputTransaction",
@@ -194,7 +194,7 @@ class _Staged:
     def __init__(self, target: Path, tmp: Path, overwrite: bool, is_dir: bool, lock=None):
         self.target, self.tmp, self.overwrite, self.is_dir = target, tmp, overwrite, is_dir
         self.item = _Item(target)
-        self.lock = lock  # a descriptor holding flock on the temp while this run lives (see _sweep)
+        self.lock = lock  # a descriptor holding flock on the temp while this run lives (see sweep_stale_temps)
 
     def release(self) -> None:
         if self.lock is not None:
@@ -297,7 +297,7 @@ class OutputTransaction:
         key = _real(parent)
         if key not in self._swept:  # a killed run's temps in this folder go now
             self._swept.add(key)
-            _sweep(parent, {s.tmp for s in self._staged})
+            sweep_stale_temps(parent, {s.tmp for s in self._staged})
         if len(os.fsencode(path.name)) > _name_max(parent):
             raise HpeError(f"{path}: file name too long")
         return path, parent
@@ -327,7 +327,7 @@ class OutputTransaction:
         """Reserve ``path`` as an output; return the temporary file to write instead."""
         path, parent = self._prepare(path, overwrite, is_dir=False)
         for _ in range(16):
-            tmp = _temp_in(parent)
+            tmp = temp_in(parent)
             with _section():
                 try:
                     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
@@ -335,7 +335,7 @@ class OutputTransaction:
                     continue
                 except OSError as exc:
                     raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
-                _lock(fd)
+                lock_file(fd)
                 self._staged.append(_Staged(path, tmp, overwrite, False, fd))
             return tmp
         raise HpeError(f"{path}: cannot create a temporary file in {parent}")
@@ -348,7 +348,7 @@ class OutputTransaction:
         """
         path, parent = self._prepare(path, overwrite, is_dir=True)
         for _ in range(16):
-            tmp = _temp_in(parent)
+            tmp = temp_in(parent)
             with _section():
                 try:
                     os.mkdir(tmp, 0o777)
@@ -358,7 +358,7 @@ class OutputTransaction:
                     raise HpeError(f"{path}: cannot write: {os_reason(exc)}") from None
                 try:
                     fd = os.open(tmp, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
-                    _lock(fd)
+                    lock_file(fd)
                 except OSError:
                     fd = None
                 self._staged.append(_Staged(path, tmp, overwrite, True, fd))
@@ -370,7 +370,7 @@ class OutputTransaction:
         for s in list(self._staged):
             if s.tmp == Path(tmp):
                 self._staged.remove(s)
-                _remove(s.tmp)
+                remove_path(s.tmp)
                 s.release()
 
     def staged_temps(self) -> list:
@@ -402,7 +402,7 @@ class OutputTransaction:
         return pairs
 
     def _can_rename(self, s: _Staged) -> bool:
-        """Whether staged folder ``s`` may be placed whole (:func:`_rename_dir`): its target does not exist, no
+        """Whether staged folder ``s`` may be placed whole (:func:`rename_dir`): its target does not exist, no
         input of the run lies under it, and it holds at least :data:`RENAME_MIN_FILES` files."""
         if os.path.lexists(s.target):
             return False
@@ -410,7 +410,7 @@ class OutputTransaction:
         under = real.rstrip(os.sep) + os.sep
         if any(i.real == real or i.real.startswith(under) for i in self._inputs):
             return False
-        return _count_files(s.tmp, RENAME_MIN_FILES) >= RENAME_MIN_FILES
+        return count_files(s.tmp, RENAME_MIN_FILES) >= RENAME_MIN_FILES
 
     def commit(self) -> None:
         """Move every staged output into place; on any failure undo what was moved and remove the rest."""
@@ -445,7 +445,7 @@ class OutputTransaction:
             for s, pairs in plans:
                 if pairs is None:  # a new folder: placed whole, or (a race) file by file after all
                     with _section():
-                        if _rename_dir(s, self._make_parents, undo):
+                        if rename_dir(s, self._make_parents, undo):
                             continue
                     pairs = self._dir_plan(s)
                 if s.is_dir:
@@ -455,10 +455,10 @@ class OutputTransaction:
                     with _section():
                         if s.is_dir:
                             self._make_parents(dst, dst.parent)
-                        _place(src, dst, s.overwrite, undo, backups)
+                        place_file(src, dst, s.overwrite, undo, backups)
             for p in self._removals:
                 with _section():
-                    _unplace(p, undo, backups)
+                    unplace_file(p, undo, backups)
         except BaseException as exc:
             for action in reversed(undo):
                 try:
@@ -471,10 +471,10 @@ class OutputTransaction:
                 raise HpeError(f"{getattr(exc, 'hpe_target', '')}: cannot write: {os_reason(exc)}") from None
             raise
         for b in backups:
-            _remove(b)
+            remove_path(b)
         for s in self._staged:
             if s.is_dir:
-                _remove(s.tmp)
+                remove_path(s.tmp)
             s.release()
         self._staged.clear()
         self._made_dirs.clear()
@@ -494,7 +494,7 @@ class OutputTransaction:
             except Exception:  # noqa: BLE001 - cleanup is best effort
                 pass
         for s in self._staged:
-            _remove(s.tmp)
+            remove_path(s.tmp)
             s.release()
         self._staged.clear()
         for d in reversed(self._made_dirs):
@@ -535,6 +535,11 @@ def _collision(out: _Item, other: _Item, kind: str) -> str:
         f"{out.shown}: {what} must differ from {against} (the same file after links); "
         "refusing to write it, with or without --overwrite"
     )
+
+
+def active_transaction() -> OutputTransaction | None:
+    """The run's transaction, else the context's, whatever its state (the signal watchdog aborts it)."""
+    return _run or _current.get()
 
 
 def current() -> OutputTransaction | None:

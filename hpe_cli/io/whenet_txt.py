@@ -33,12 +33,12 @@ def whenet_lines(frame, path="<annotation.txt>", offset: int = 0) -> list:
     ``frame`` is a pandas DataFrame, pyarrow Table or RecordBatch; ``offset``
     is the index of its first row in the whole table (for error messages).
     """
-    from .coco import _column, _names, _strings
+    from .coco import column_values, frame_column_names, string_column
 
-    missing = [c for c in WHENET_FIELDS if c not in _names(frame)]
+    missing = [c for c in WHENET_FIELDS if c not in frame_column_names(frame)]
     if missing:
         raise HpeError(f"{path}: expected columns {', '.join(missing)} in the label table")
-    images = _strings(frame, "image")
+    images = string_column(frame, "image")
     for k, im in enumerate(images):
         if "," in im or "\n" in im or "\r" in im:
             raise HpeError(
@@ -46,7 +46,7 @@ def whenet_lines(frame, path="<annotation.txt>", offset: int = 0) -> list:
             )
     cols = []
     for c in WHENET_FIELDS[1:]:
-        v = _column(frame, c)
+        v = column_values(frame, c)
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
             raise HpeError(f"{path}: row {offset + bad[0]}: expected a finite {c}, got {v[bad[0]]}")
@@ -91,10 +91,10 @@ def write_whenet(frame, path, overwrite: bool = False, batch_size: int = 65536) 
     Each line is ``image,yaw,pitch,roll`` -- yaw first, as in WHENet -- with
     degrees printed by Python's ``str(float)`` (shortest round-trip form).
     """
-    from .coco import _parts
+    from .coco import frame_parts
 
     with WhenetWriter(path, overwrite) as w:
-        for part in _parts(frame, batch_size):
+        for part in frame_parts(frame, batch_size):
             w.write(part)
     return Path(path)
 

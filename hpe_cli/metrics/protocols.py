@@ -24,7 +24,7 @@ import numpy as np
 from ..registry import Registry
 from . import peer_angles as pa_
 from . import rotation_errors as re_
-from .pose_pair import _DEG, _SAME, PosePair, _same_angles  # noqa: F401
+from .pose_pair import PosePair
 
 
 @dataclass

@@ -170,7 +170,8 @@ def canonical_quaternion(q, order: str = "wxyz") -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- 6-D
-def _check_pair(columns):
+def check_sixd_pair(columns):
+    """The two matrix columns a 6-D storage keeps, as ints, checked (two different of 0, 1, 2)."""
     cols = tuple(int(c) for c in columns)
     if len(cols) != 2 or cols[0] == cols[1] or not all(0 <= c <= 2 for c in cols):
         raise ValueError(f"expected two different matrix columns out of 0, 1, 2, got {list(columns)}")
@@ -185,7 +186,7 @@ def sixd_to_matrix(d6, columns=(0, 1)) -> np.ndarray:
     normalised); the remaining column completes a right-handed basis.
     Degenerate inputs (a zero first vector, or parallel vectors) give NaN rows.
     """
-    i, j = _check_pair(columns)
+    i, j = check_sixd_pair(columns)
     d6 = _as_batch(d6, 6, "6-D vectors")
     a, b = d6[..., 0:3], d6[..., 3:6]
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -201,7 +202,7 @@ def sixd_to_matrix(d6, columns=(0, 1)) -> np.ndarray:
 
 def matrix_to_sixd(R, columns=(0, 1)) -> np.ndarray:
     """The two matrix columns ``columns`` of ``R`` as ``(..., 6)``."""
-    i, j = _check_pair(columns)
+    i, j = check_sixd_pair(columns)
     R = np.asarray(R, dtype=np.float64)
     return np.concatenate([R[..., :, i], R[..., :, j]], axis=-1)
 

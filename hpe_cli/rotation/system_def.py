@@ -39,7 +39,7 @@ import numpy as np
 from . import euler as _euler
 from . import soa as _soa
 from . import solutions as _solutions
-from .system_text import _CANONICAL_WORDS, _esc, _fmt, _num  # noqa: F401
+from .system_text import CANONICAL_WORDS, format_number, format_value, toml_escape
 
 ROLES = ("pitch", "yaw", "roll")
 SELECTIONS = ("tait_bryan", "proper", "whenet")
@@ -173,7 +173,7 @@ class RotationSystem:
             B = np.asarray(F, dtype=float)
             if B.shape != (3, 3) or not np.isfinite(B).all() or not np.allclose(B @ B.T, np.eye(3), atol=1e-9):
                 raise SystemError_(
-                    f"system {self.name!r}: {key}: expected an orthonormal 3x3 matrix (det +1 or -1), got {_fmt(F)}"
+                    f"system {self.name!r}: {key}: expected an orthonormal 3x3 matrix (det +1 or -1), got {format_value(F)}"
                 )
         if np.linalg.det(self.B) * np.linalg.det(self.M) < 0:
             raise SystemError_(
@@ -219,9 +219,9 @@ class RotationSystem:
                     f"low < high (degrees), got [{lo!r}, {hi!r}]"
                 )
         try:
-            from .storage import _check_pair
+            from .storage import check_sixd_pair
 
-            _check_pair(self.sixd_columns)
+            check_sixd_pair(self.sixd_columns)
         except ValueError as exc:
             raise SystemError_(f"system {self.name!r}: sixd_columns: {exc}") from None
         names = self.value_names
@@ -456,7 +456,7 @@ class RotationSystem:
             row = np.asarray(frame[n], dtype=float)
             m = int(np.argmax(np.abs(row)))
             if np.isclose(abs(row[m]), 1.0):
-                words[axis] = _CANONICAL_WORDS[(m, int(np.sign(row[m])))]
+                words[axis] = CANONICAL_WORDS[(m, int(np.sign(row[m])))]
             else:
                 words[axis] = "canonical " + np.array2string(row, precision=3)
         return words
@@ -541,13 +541,13 @@ class RotationSystem:
 
     def to_toml(self) -> str:
         """Serialise to the TOML layout that :func:`load_system` reads."""
-        lines = [f'name = "{self.name}"', f'description = "{_esc(self.description)}"']
+        lines = [f'name = "{self.name}"', f'description = "{toml_escape(self.description)}"']
         if self.notes:
-            lines.append(f'notes = "{_esc(self.notes)}"')
+            lines.append(f'notes = "{toml_escape(self.notes)}"')
         for key in ("source", "verified"):
             if getattr(self, key):
-                lines.append(f'{key} = "{_esc(getattr(self, key))}"')
-        mat = lambda F: "[" + ", ".join("[" + ", ".join(_num(v) for v in r) + "]" for r in F) + "]"
+                lines.append(f'{key} = "{toml_escape(getattr(self, key))}"')
+        mat = lambda F: "[" + ", ".join("[" + ", ".join(format_number(v) for v in r) + "]" for r in F) + "]"
         lines += ["frame = " + mat(self.frame)]
         if self.model_frame is not None:
             lines += ["model_frame = " + mat(self.model_frame)]
@@ -571,7 +571,9 @@ class RotationSystem:
             for t in self.turns:
                 lines += ["", "[[turns]]", f'angle = "{t.angle}"', f'axis = "{t.axis}"', f'hand = "{t.hand}"']
         if self.ranges:
-            lines += ["", "[ranges]"] + [f"{k} = [{_num(lo)}, {_num(hi)}]" for k, (lo, hi) in self.ranges.items()]
+            lines += ["", "[ranges]"] + [
+                f"{k} = [{format_number(lo)}, {format_number(hi)}]" for k, (lo, hi) in self.ranges.items()
+            ]
         if self.columns:
-            lines += ["", "[columns]"] + [f'{k} = "{_esc(v)}"' for k, v in self.columns.items()]
+            lines += ["", "[columns]"] + [f'{k} = "{toml_escape(v)}"' for k, v in self.columns.items()]
         return "\n".join(lines) + "\n"

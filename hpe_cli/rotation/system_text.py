@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import json
 
-_CANONICAL_WORDS = {
+#: words for each canonical axis direction, keyed by (axis, sign)
+CANONICAL_WORDS = {
     (0, 1): "subject's left (image right)",
     (0, -1): "subject's right (image left)",
     (1, 1): "up (towards the forehead)",
@@ -14,16 +15,19 @@ _CANONICAL_WORDS = {
 }
 
 
-def _esc(s: str) -> str:
+def toml_escape(s: str) -> str:
+    """``s`` escaped for a TOML basic (double-quoted) string."""
     return s.replace("\\", "\\\\").replace('"', '\\"')
 
 
-def _num(v) -> str:
+def format_number(v) -> str:
+    """A number as TOML text: an integer without ``.0``, else its shortest repr."""
     v = float(v)
     return str(int(v)) if v.is_integer() else repr(v)
 
 
-def _fmt(v) -> str:
+def format_value(v) -> str:
+    """A value as JSON text (repr when JSON cannot say it), for error messages."""
     try:
         return json.dumps(v)
     except (TypeError, ValueError):

@@ -25,8 +25,8 @@ from .system_def import (
     RotationSystem,
     SystemError_,
     Turn,
-    _fmt,
 )
+from .system_text import format_value
 
 #: bounds of a system file: bytes, nesting levels, items per array, characters per string
 LIMITS = {"bytes": 1 << 20, "depth": 6, "items": 256, "chars": 20_000}
@@ -69,7 +69,7 @@ def _closest(key, allowed):
 
 def _expect(cond, where, what, got):
     if not cond:
-        raise SystemError_(f"{where}: expected {what}, got {_fmt(got)}")
+        raise SystemError_(f"{where}: expected {what}, got {format_value(got)}")
 
 
 def _number(v):
@@ -347,21 +347,21 @@ def check_example(system: RotationSystem, example: dict, where: str) -> None:
         M = np.array(_matrix3(example["matrix"], f"{where}.matrix"))
         if not np.abs(M - R).max() <= EXAMPLE_TOL:
             raise SystemError_(
-                f"{where}.matrix: expected {_fmt(np.round(R, 6).tolist())} from the angles, got {_fmt(M.tolist())}"
+                f"{where}.matrix: expected {format_value(np.round(R, 6).tolist())} from the angles, got {format_value(M.tolist())}"
             )
     if "values" in example:
         v = example["values"]
         _expect(isinstance(v, list) and all(_number(x) for x in v), f"{where}.values", "a list of numbers", v)
         if system.storage_kind == "angles":
             raise SystemError_(
-                f"{where}.values: expected no values for storage_kind angles (use angles), got {_fmt(v)}"
+                f"{where}.values: expected no values for storage_kind angles (use angles), got {format_value(v)}"
             )
         want = system.matrix_to_values(R[None])[0]
         got = np.asarray(v, dtype=float)
         if got.shape != want.shape or not np.abs(got - want).max() <= EXAMPLE_TOL:
             raise SystemError_(
-                f"{where}.values: expected {_fmt(np.round(want, 6).tolist())} "
-                f"({', '.join(system.value_columns)}) from the angles, got {_fmt(v)}"
+                f"{where}.values: expected {format_value(np.round(want, 6).tolist())} "
+                f"({', '.join(system.value_columns)}) from the angles, got {format_value(v)}"
             )
 
 

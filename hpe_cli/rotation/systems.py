@@ -7,6 +7,7 @@ both are re-exported here, the import path of every public name.
 
 from __future__ import annotations
 
+from functools import cache
 from pathlib import Path
 
 from ..registry import Registry
@@ -86,6 +87,13 @@ def builtin_systems() -> dict:
 
 def system_names() -> list:
     return list(builtin_systems())
+
+
+@cache
+def canonical_system() -> RotationSystem:
+    """The 300W-LP system: hpe's canonical frame (``to_canonical`` is the identity) and the default system of
+    labels that name none (300W-LP/AFLW2000 ``Pose_Para``, tables without ``hpe:system``)."""
+    return get_system("300w_lp")
 
 
 def get_system(spec) -> RotationSystem:

@@ -15,20 +15,16 @@ from .collate import Sample
 from .dataset_tables import (  # noqa: F401
     IMAGE_COLUMNS,
     IMAGE_SUFFIXES,
-    _boxes,
-    _canonical,
-    _floats,
-    _is_image_bytes,
-    _join_paths,
-    _landmarks,
-    _load_table,
-    _read_list_file,
-    _read_parquet,
+    canonical_matrices,
+    join_paths,
+    load_table,
+    table_boxes,
+    table_landmarks,
 )
 from .samples import (
-    _FALSE,
-    _TRUE,
+    FALSE_TENSOR,
     INTERPOLATIONS,
+    TRUE_TENSOR,
     PackedRows,
     PoseOutputs,
     as_rgb,
@@ -40,7 +36,7 @@ from .samples import (
     resize,
     to_tensor,
 )
-from .transforms import HeadPose, _perm_for, aspect_message, check_policy, is_uniform, no_exact_pose
+from .transforms import HeadPose, aspect_message, check_policy, is_uniform, landmark_flip_permutation, no_exact_pose
 
 
 class HeadPoseDataset(torch.utils.data.Dataset):
@@ -187,13 +183,13 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         self.transform = transform
         self._transform, self._draws = transform, False  # what runs after the crop; v2's flip draw kept
         self.dtype = dtype
-        table, found, source, parquet = _load_table(labels, landmarks)
+        table, found, source, parquet = load_table(labels, landmarks)
         src_system = get_system(label_system) if label_system is not None else found
         if src_system is None:
             raise HpeError(f"{source}: the labels name no rotation system: pass label_system=")
         self.label_system = src_system
         self.source = source
-        self.canonical = _canonical(table, src_system, source)
+        self.canonical = canonical_matrices(table, src_system, source)
         n = len(table)
         self.images_root = (
             Path(images) if images is not None else (Path(source) if Path(source).is_dir() else Path(source).parent)
@@ -207,11 +203,11 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             self._image_refs = np.asarray(table[col].astype(str))
         else:
             raise HpeError(f"{source}: no image column: expected one of {', '.join(IMAGE_COLUMNS)}")
-        self.boxes = _boxes(table)
-        self.landmarks = _landmarks(table, landmarks)
+        self.boxes = table_boxes(table)
+        self.landmarks = table_landmarks(table, landmarks)
         self._rects = None
         if self.crop is not None:
-            points = self.landmarks if landmarks is not None else _landmarks(table, "lm")
+            points = self.landmarks if landmarks is not None else table_landmarks(table, "lm")
             if self.boxes is None and points is None:
                 raise HpeError(
                     f"{source}: crop= needs bbox_x, bbox_y, bbox_w, bbox_h or landmark columns, found neither"
@@ -223,8 +219,8 @@ class HeadPoseDataset(torch.utils.data.Dataset):
             self._draws = True
         self._perm = None
         if self.hflip > 0 and self.landmarks is not None:
-            self._perm = _perm_for(flip_scheme, self.landmarks.shape[1])
-        self._paths = None if self._image_refs is None else _join_paths(self.images_root, self._image_refs)
+            self._perm = landmark_flip_permutation(flip_scheme, self.landmarks.shape[1])
+        self._paths = None if self._image_refs is None else join_paths(self.images_root, self._image_refs)
         self._place_all()
         self._poses = PoseOutputs(self.canonical, self.system, dtype)
         flips = [f for f, can in ((False, self.hflip < 1), (True, self.hflip > 0)) if can and self._transform is None]
@@ -414,7 +410,7 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         result = []
         for (out, i, _, undefined, _), pose in zip(prepared, poses):
             out.update(pose)
-            out["pose_undefined"] = (_TRUE if undefined else _FALSE).clone()
+            out["pose_undefined"] = (TRUE_TENSOR if undefined else FALSE_TENSOR).clone()
             out["index"] = i
             result.append(Sample(out))
         return result
@@ -463,7 +459,7 @@ def _leading_flip(transform, hflip: float, landmarks):
         return None
     if landmarks is not None:
         try:
-            _perm_for(first.scheme, landmarks.shape[1])
+            landmark_flip_permutation(first.scheme, landmarks.shape[1])
         except ValueError:
             return None
     return rest, float(first.p), first.scheme

@@ -17,7 +17,7 @@ IMAGE_COLUMNS = ("image", "image_path", "img_path", "file", "path", "filename")
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".webp")
 
 
-def _join_paths(root, refs) -> list:
+def join_paths(root, refs) -> list:
     """Image paths of refs with an image suffix (None: a ``.mat`` or bare name, resolved when read)."""
     base = str(root)
     out = []
@@ -28,7 +28,7 @@ def _join_paths(root, refs) -> list:
 
 
 # ------------------------------------------------------------------------------------ table loading
-def _load_table(labels, landmarks):
+def load_table(labels, landmarks):
     """``(DataFrame, system or None, source name, parquet image info or None)``."""
     import pandas as pd
 
@@ -171,7 +171,8 @@ def _is_image_bytes(t) -> bool:
     return pa.types.is_struct(t) and any(t.field(k).name == "bytes" for k in range(t.num_fields))
 
 
-def _canonical(table, system, source) -> np.ndarray:
+def canonical_matrices(table, system, source) -> np.ndarray:
+    """The table's labels (angles or matrix columns, in ``system``) as canonical rotation matrices, checked."""
     from ..io.layout import ANGLE_COLS, MATRIX_COLS
 
     cols = set(table.columns)
@@ -203,7 +204,8 @@ def _canonical(table, system, source) -> np.ndarray:
     return system.to_canonical(R)
 
 
-def _boxes(table):
+def table_boxes(table):
+    """The table's box columns as a float array, or None without them."""
     from ..io.layout import BBOX_COLS
 
     if not all(c in table.columns for c in BBOX_COLS):
@@ -211,7 +213,8 @@ def _boxes(table):
     return table[BBOX_COLS].to_numpy(dtype=np.float64, na_value=np.nan)
 
 
-def _landmarks(table, prefix):
+def table_landmarks(table, prefix):
+    """The table's ``<prefix><k>_x/_y`` landmark columns as an ``(N, K, 2)`` array, or None without them."""
     if prefix is None:
         return None
     n = 0

@@ -171,7 +171,8 @@ def to_tensor(pix) -> torch.Tensor:
     return torch.from_numpy(np.asarray(pix)).permute(2, 0, 1)
 
 
-_TRUE, _FALSE = torch.tensor(True), torch.tensor(False)
+#: shared boolean scalars, cloned into each sample's flags
+TRUE_TENSOR, FALSE_TENSOR = torch.tensor(True), torch.tensor(False)
 
 
 class PoseOutputs:
@@ -221,7 +222,7 @@ class PoseOutputs:
             "matrix": row[:9].view(3, 3),
             "angles": row[9:12],
             "canonical": row[12:].view(3, 3),
-            "gimbal_lock": (_TRUE if locked[i] else _FALSE).clone(),
+            "gimbal_lock": (TRUE_TENSOR if locked[i] else FALSE_TENSOR).clone(),
         }
 
     def mirrored(self, i: int) -> torch.Tensor:

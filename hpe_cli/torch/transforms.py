@@ -421,7 +421,8 @@ F.register_kernel(F.ten_crop, HeadPose)(_never("ten_crop", "one pose cannot foll
 
 
 # ---------------------------------------------------------------------------- landmark re-indexing
-def _perm_for(scheme, n):
+def landmark_flip_permutation(scheme, n):
+    """The left/right index permutation of ``n`` landmarks for a mirror under ``scheme``."""
     import numpy as np
 
     from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
@@ -460,7 +461,9 @@ class PermuteLandmarks(v2.Transform):
     def transform(self, inpt, params):
         if not isinstance(inpt, tv_tensors.KeyPoints) or inpt.ndim < 2:
             return inpt
-        perm = torch.tensor(_perm_for(self.scheme, inpt.shape[-2]), dtype=torch.long, device=inpt.device)
+        perm = torch.tensor(
+            landmark_flip_permutation(self.scheme, inpt.shape[-2]), dtype=torch.long, device=inpt.device
+        )
         return tv_tensors.wrap(_raw(inpt).index_select(-2, perm), like=inpt)
 
 

@@ -286,18 +286,18 @@ def test_rerun_that_drops_rows_prunes_stale_files(tmp_path, monkeypatch):
     assert {"rows/00000.js", "rows/00001.js"} <= set(before) and len(list((page / "frames").iterdir())) == 2
     _table(src, ROWS[:1])  # only a.png's first row is left
     # a commit that fails after the removals: nothing changes
-    real = tx._unplace
+    real = tx.unplace_file
 
     def unplace(path, undo, backups):
         real(path, undo, backups)
         if path.name.endswith(".js"):
             raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(tx, "_unplace", unplace)
+    monkeypatch.setattr(tx, "unplace_file", unplace)
     r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite", "-q")
     assert r.exit_code == 1 and "no space left" in r.output.lower(), r.output
     assert files() == before and not [p for p in page.rglob(".hpe-*")]
-    monkeypatch.setattr(tx, "_unplace", real)
+    monkeypatch.setattr(tx, "unplace_file", real)
     r = hpe_cmd("view", src, "-o", page, "--images", tmp_path / "img", "--overwrite")
     assert r.exit_code == 0, r.output
     # 2 thumbnails, b.png's frame and rows/00001.js

@@ -1,5 +1,5 @@
 """The commit's fast path: a staged folder whose target does not exist is renamed into place whole
-(:func:`hpe_cli.io.transaction._rename_dir`). Same guarantees as file by file: all outputs or none (a later
+(:func:`hpe_cli.io.transaction.rename_dir`). Same guarantees as file by file: all outputs or none (a later
 placement failing renames it back), a name taken meanwhile or a file put into the claimed folder falls back to
 the per-file path and its checks, the umask's modes, no temps left."""
 
@@ -34,22 +34,22 @@ def _stage(tmp_path, n=N, overwrite=False):
 
 def _spy_rename(monkeypatch):
     calls = []
-    real = tx._rename_dir
+    real = tx.rename_dir
 
     def spy(s, make_parents, undo):
         ok = real(s, make_parents, undo)
         calls.append(ok)
         return ok
 
-    monkeypatch.setattr(tx, "_rename_dir", spy)
+    monkeypatch.setattr(tx, "rename_dir", spy)
     return calls
 
 
 def test_a_new_folder_is_renamed_whole_with_the_umask_modes(tmp_path, monkeypatch):
     calls = _spy_rename(monkeypatch)
     placed = []
-    real = tx._place
-    monkeypatch.setattr(tx, "_place", lambda src, dst, *a: (placed.append(dst), real(src, dst, *a)))
+    real = tx.place_file
+    monkeypatch.setattr(tx, "place_file", lambda src, dst, *a: (placed.append(dst), real(src, dst, *a)))
     _stage(tmp_path).commit()
     assert calls == [True] and sorted(p.name for p in placed) == ["a.csv", "b.json"]  # the folder: one rename
     out = tmp_path / "page" / "imgs"
@@ -73,7 +73,7 @@ def test_a_later_placement_failing_renames_the_folder_back(tmp_path, monkeypatch
     before = tree(tmp_path)
     txn = _stage(tmp_path)
     calls = []
-    real = tx._place
+    real = tx.place_file
 
     def place(src, dst, ow, undo, backups):
         calls.append(dst)
@@ -83,7 +83,7 @@ def test_a_later_placement_failing_renames_the_folder_back(tmp_path, monkeypatch
             raise exc
         real(src, dst, ow, undo, backups)
 
-    monkeypatch.setattr(tx, "_place", place)
+    monkeypatch.setattr(tx, "place_file", place)
     with pytest.raises(HpeError, match="permission denied"):
         txn.commit()
     assert tree(tmp_path) == before and not temp_files(tmp_path) and txn.state == "aborted"
@@ -93,14 +93,14 @@ def test_the_name_taken_after_the_plan_falls_back_and_is_refused(tmp_path, monke
     """Another process creates the folder with one of our names after the plan: the per-file path refuses
     that name, undoes everything, and leaves the other process's file alone."""
     txn = _stage(tmp_path)
-    real = tx._rename_dir
+    real = tx.rename_dir
 
     def racing(s, make_parents, undo):
         s.target.mkdir(parents=True)
         (s.target / "5.jpg").write_bytes(b"theirs")
         return real(s, make_parents, undo)
 
-    monkeypatch.setattr(tx, "_rename_dir", racing)
+    monkeypatch.setattr(tx, "rename_dir", racing)
     with pytest.raises(HpeError, match=r"5\.jpg: already exists"):
         txn.commit()
     assert tree(tmp_path / "page") == {"imgs": "dir", "imgs/5.jpg": tree(tmp_path / "page")["imgs/5.jpg"]}
@@ -149,7 +149,7 @@ def test_removals_are_part_of_the_commit_and_never_an_input(tmp_path, monkeypatc
         txn.remove_at_commit(tmp_path / "in.csv")
     txn.remove_at_commit(tmp_path / "old.jpg")
     txn.remove_at_commit(tmp_path / "gone.jpg")  # not there: nothing to do
-    real = tx._unplace
+    real = tx.unplace_file
 
     def unplace(path, undo, backups):
         real(path, undo, backups)
@@ -158,7 +158,7 @@ def test_removals_are_part_of_the_commit_and_never_an_input(tmp_path, monkeypatc
             exc.hpe_target = path
             raise exc
 
-    monkeypatch.setattr(tx, "_unplace", unplace)
+    monkeypatch.setattr(tx, "unplace_file", unplace)
     with pytest.raises(HpeError, match=r"gone\.jpg: cannot write: input/output error"):
         txn.commit()
     assert tree(tmp_path) == before and not temp_files(tmp_path)  # old.jpg back, nothing placed

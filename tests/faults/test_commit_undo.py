@@ -47,7 +47,7 @@ def test_nth_placement_fails(tmp_path, monkeypatch, fail_at, overwrite):
     modes = {p: os.stat(tmp_path / p).st_mode for p in before if (tmp_path / p).is_file()}
     txn = _stage(tmp_path, overwrite)
     calls = []
-    real = tx._place
+    real = tx.place_file
 
     def place(src, dst, ow, undo, backups):
         calls.append(dst)
@@ -57,7 +57,7 @@ def test_nth_placement_fails(tmp_path, monkeypatch, fail_at, overwrite):
             raise exc
         real(src, dst, ow, undo, backups)
 
-    monkeypatch.setattr(tx, "_place", place)
+    monkeypatch.setattr(tx, "place_file", place)
     with pytest.raises(HpeError, match="permission denied") as err:
         txn.commit()
     assert str(calls[-1]) in str(err.value)
@@ -80,7 +80,7 @@ def test_a_target_that_became_a_folder(tmp_path):
     """Another process makes a folder where a file goes, after the plan was checked: undone, named."""
     before = tree(tmp_path)
     txn = _stage(tmp_path)
-    real = tx._place
+    real = tx.place_file
 
     def place(src, dst, ow, undo, backups):
         if dst.name == "2.jpg":
@@ -89,7 +89,7 @@ def test_a_target_that_became_a_folder(tmp_path):
 
     import unittest.mock
 
-    with unittest.mock.patch.object(tx, "_place", place), pytest.raises(HpeError, match="2.jpg"):
+    with unittest.mock.patch.object(tx, "place_file", place), pytest.raises(HpeError, match="2.jpg"):
         txn.commit()
     assert tree(tmp_path) == {**before, "imgs": "dir", "imgs/2.jpg": "dir"}  # the other process's folder stays
     assert not temp_files(tmp_path)
@@ -205,7 +205,7 @@ def test_augment_out_images_commit_failing_halfway_leaves_nothing(tmp_path):
     t = tmp_path / "t.csv"
     t.write_text("image,pitch,yaw,roll\na.jpg,1,2,3\nb.jpg,4,5,6\nc.jpg,7,8,9\n")
     out = tmp_path / "ai"
-    real = tx._place
+    real = tx.place_file
 
     def place(src, dst, ow, undo, backups):
         if dst.name == "c.jpg":
@@ -214,7 +214,7 @@ def test_augment_out_images_commit_failing_halfway_leaves_nothing(tmp_path):
 
     import unittest.mock
 
-    with unittest.mock.patch.object(tx, "_place", place):
+    with unittest.mock.patch.object(tx, "place_file", place):
         res = hpe(
             "augment",
             t,
@@ -246,7 +246,7 @@ def test_a_signal_during_the_commit_is_held_until_it_is_complete(tmp_path, monke
     monkeypatch.setattr(tx, "_late_signal", late.append)
     txn = _stage(tmp_path)
     monkeypatch.setattr(tx, "_run", txn)  # the run's own transaction: its commit completes the run
-    real, calls = tx._place, []
+    real, calls = tx.place_file, []
 
     def place(src, dst, ow, undo, backups):
         real(src, dst, ow, undo, backups)
@@ -256,7 +256,7 @@ def test_a_signal_during_the_commit_is_held_until_it_is_complete(tmp_path, monke
             tx.request_stop(exc)
             assert tx.in_critical_section(exc)
 
-    monkeypatch.setattr(tx, "_place", place)
+    monkeypatch.setattr(tx, "place_file", place)
     txn.commit()
     assert txn.state == "committed" and tx.run_committed() and len(late) == 1
     assert (tmp_path / "a.csv").read_bytes() == b"new a.csv" and (tmp_path / "imgs" / "sub" / "x.jpg").exists()
@@ -271,7 +271,7 @@ def test_a_signal_held_by_a_failing_commit_is_raised_with_nothing_placed(tmp_pat
     monkeypatch.setattr(tx, "_late_signal", lambda exc: pytest.fail("the commit did not complete"))
     before = tree(tmp_path)
     txn = _stage(tmp_path)
-    real, calls = tx._place, []
+    real, calls = tx.place_file, []
 
     def place(src, dst, ow, undo, backups):
         calls.append(dst)
@@ -282,7 +282,7 @@ def test_a_signal_held_by_a_failing_commit_is_raised_with_nothing_placed(tmp_pat
             raise OSError(errno.EACCES, "Permission denied")
         real(src, dst, ow, undo, backups)
 
-    monkeypatch.setattr(tx, "_place", place)
+    monkeypatch.setattr(tx, "place_file", place)
     with pytest.raises(Interrupted):
         txn.commit()
     assert tree(tmp_path) == before and not temp_files(tmp_path)

@@ -318,17 +318,17 @@ def test_commit_failing_after_some_images_were_placed_undoes_them(tmp_path, monk
     pd.DataFrame({"image": ["a.png", "b.png", "c.png"], "pitch": 0.0, "yaw": 0.0, "roll": 0.0}).to_csv(
         tmp_path / "in.csv", index=False
     )
-    real, calls = transaction._place, []
+    real, calls = transaction.place_file, []
 
     def place(src, dst, *a):
         calls.append(dst.name)
         if dst.name == "c.png":
             exc = OSError(errno.EIO, "injected I/O error")
-            exc.hpe_target = dst  # as transaction._place marks its own errors
+            exc.hpe_target = dst  # as transaction.place_file marks its own errors
             raise exc
         return real(src, dst, *a)
 
-    monkeypatch.setattr(transaction, "_place", place)
+    monkeypatch.setattr(transaction, "place_file", place)
     out = tmp_path / "out"
     res = hpe(
         "augment",

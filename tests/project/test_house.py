@@ -249,77 +249,25 @@ def lazy_imports() -> set:
 GET_SYSTEM_ALLOWED = {
     "hpe_cli/pipelines/relabel/options.py::_label_system: get_system(system)": "relabel-panoptic/-agora --system",
     "hpe_cli/pipelines/biwi.py::BiwiOptions.__post_init__: get_system(self.system)": "biwi --system",
-    "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(layout.system or opts.system or '300w_lp')": (
-        "export --system, or the system the --layout's trainer expects"
+    "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(layout.system)": (
+        "the system the --layout's trainer expects (the layout names it)"
+    ),
+    "hpe_cli/pipelines/draw/errors.py::_load: get_system(system)": (
+        "draw_worst/render_worst system= (a library caller's name, or a DataFrame's attrs['hpe:system'])"
+    ),
+    "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(opts.system)": (
+        "ExportOptions(system=...) built by library code may hold a name (the CLI passes a RotationSystem)"
+    ),
+    "hpe_cli/pipelines/relabel/plan.py::Config.__post_init__: get_system(self.system)": (
+        "relabel Config(system=...) built by library code holds a name; resolved once, before the worker processes"
     ),
     "hpe_cli/pipelines/view/job.py::also_angles: get_system(s)": "view --also-in (names of other systems)",
 }
 
-KNOWN_PRIVATE_IMPORTS = {
-    "hpe_cli/cli/signals.py::hpe_cli.io.transaction._current",
-    "hpe_cli/cli/signals.py::hpe_cli.io.transaction._run",
-    "hpe_cli/cli/systems.py::hpe_cli.cli.options._system_fold",
-    "hpe_cli/datasets/panoptic.py::hpe_cli.datasets.panoptic_json._load_json",
-    "hpe_cli/datasets/panoptic.py::hpe_cli.datasets.panoptic_json._parse_json",
-    "hpe_cli/datasets/panoptic_calibration.py::hpe_cli.datasets.panoptic_json._load_json",
-    "hpe_cli/io/csv_reader.py::hpe_cli.io.table_source._check_duplicates",
-    "hpe_cli/io/csv_reader.py::hpe_cli.io.table_source._float_columns",
-    "hpe_cli/io/csv_reader.py::hpe_cli.io.table_source._schema",
-    "hpe_cli/io/readers.py::hpe_cli.io.table_source._check_duplicates",
-    "hpe_cli/io/readers.py::hpe_cli.io.table_source._one_line",
-    "hpe_cli/io/readers.py::hpe_cli.io.table_source._schema",
-    "hpe_cli/io/readers.py::hpe_cli.io.table_source._with_line",
-    "hpe_cli/io/transaction.py::hpe_cli.io.placement._count_files",
-    "hpe_cli/io/transaction.py::hpe_cli.io.placement._place",
-    "hpe_cli/io/transaction.py::hpe_cli.io.placement._remove",
-    "hpe_cli/io/transaction.py::hpe_cli.io.placement._rename_dir",
-    "hpe_cli/io/transaction.py::hpe_cli.io.placement._temp_in",
-    "hpe_cli/io/transaction.py::hpe_cli.io.placement._unplace",
-    "hpe_cli/io/transaction.py::hpe_cli.io.stale_temps._lock",
-    "hpe_cli/io/transaction.py::hpe_cli.io.stale_temps._sweep",
-    "hpe_cli/io/whenet_txt.py::hpe_cli.io.coco._column",
-    "hpe_cli/io/whenet_txt.py::hpe_cli.io.coco._names",
-    "hpe_cli/io/whenet_txt.py::hpe_cli.io.coco._parts",
-    "hpe_cli/io/whenet_txt.py::hpe_cli.io.coco._strings",
-    "hpe_cli/metrics/protocols.py::hpe_cli.metrics.pose_pair._DEG",
-    "hpe_cli/metrics/protocols.py::hpe_cli.metrics.pose_pair._SAME",
-    "hpe_cli/metrics/protocols.py::hpe_cli.metrics.pose_pair._same_angles",
-    "hpe_cli/pipelines/export/pixels.py::hpe_cli.pipelines.export.workers._unspill",
-    "hpe_cli/pipelines/export/units.py::hpe_cli.pipelines.export.workers._init_worker",
-    "hpe_cli/pipelines/export/units.py::hpe_cli.pipelines.export.workers._work_items",
-    "hpe_cli/pipelines/export/write.py::hpe_cli.pipelines.export.workers._unspill",
-    "hpe_cli/rotation/system_def.py::hpe_cli.rotation.storage._check_pair",
-    "hpe_cli/rotation/system_def.py::hpe_cli.rotation.system_text._CANONICAL_WORDS",
-    "hpe_cli/rotation/system_def.py::hpe_cli.rotation.system_text._esc",
-    "hpe_cli/rotation/system_def.py::hpe_cli.rotation.system_text._fmt",
-    "hpe_cli/rotation/system_def.py::hpe_cli.rotation.system_text._num",
-    "hpe_cli/rotation/system_toml.py::hpe_cli.rotation.system_def._fmt",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.dataset_tables._boxes",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.dataset_tables._canonical",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.dataset_tables._floats",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.dataset_tables._is_image_bytes",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.dataset_tables._join_paths",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.dataset_tables._landmarks",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.dataset_tables._load_table",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.dataset_tables._read_list_file",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.dataset_tables._read_parquet",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.samples._FALSE",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.samples._TRUE",
-    "hpe_cli/torch/dataset.py::hpe_cli.torch.transforms._perm_for",
-}
+KNOWN_PRIVATE_IMPORTS: set = set()
 KNOWN_LONG_FUNCTIONS: set = set()
 KNOWN_MANY_PARAMETERS: set = set()
-KNOWN_GET_SYSTEM = {
-    "hpe_cli/pipelines/draw/errors.py::_load: get_system('300w_lp')",
-    "hpe_cli/pipelines/draw/errors.py::_load: get_system(system)",
-    "hpe_cli/pipelines/draw/errors.py::run_draw_errors: get_system('300w_lp')",
-    "hpe_cli/pipelines/draw/errors.py::table_system: get_system(name.decode('utf-8', 'replace'))",
-    "hpe_cli/pipelines/export/inputs.py::_pose_para_frame: get_system('300w_lp')",
-    "hpe_cli/pipelines/export/job.py::_layout_and_system: get_system(opts.system)",
-    "hpe_cli/pipelines/relabel/core.py::<module>: get_system('300w_lp')",
-    "hpe_cli/pipelines/relabel/options.py::_label_system: get_system('whenet' if fmt != 'table' else '300w_lp')",
-    "hpe_cli/pipelines/relabel/stats.py::unit_stats: get_system(cfg.system)",
-}
+KNOWN_GET_SYSTEM: set = set()
 KNOWN_LAZY_IMPORTS = {
     "hpe_cli/__init__.py::__getattr__: importlib",
     "hpe_cli/api.py::_storage_to_matrix: hpe_cli.rotation",
@@ -485,18 +433,18 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/io/rejects.py::fail_all_rejected: hpe_cli.errors",
     "hpe_cli/io/rejects.py::fail_all_rejected: hpe_cli.io.transaction",
     "hpe_cli/io/rejects.py::fail_all_rejected: os.path",
-    "hpe_cli/io/stale_temps.py::_sweep: time",
+    "hpe_cli/io/stale_temps.py::sweep_stale_temps: time",
     "hpe_cli/io/system_meta.py::_named: hpe_cli.rotation.systems",
     "hpe_cli/io/system_meta.py::file_system: hpe_cli.rotation.systems",
     "hpe_cli/io/system_meta.py::resolve_system: hpe_cli.rotation.systems",
     "hpe_cli/io/system_meta.py::system_from_metadata: hpe_cli.rotation.systems",
     "hpe_cli/io/system_meta.py::system_from_metadata: json",
     "hpe_cli/io/table_source.py::TableSource.batches_with_rejects: pyarrow",
-    "hpe_cli/io/table_source.py::_check_duplicates: collections",
-    "hpe_cli/io/table_source.py::_float_columns: hpe_cli.io.layout",
-    "hpe_cli/io/table_source.py::_schema: pyarrow",
-    "hpe_cli/io/table_source.py::_with_line: pyarrow",
+    "hpe_cli/io/table_source.py::check_duplicates: collections",
+    "hpe_cli/io/table_source.py::float_columns: hpe_cli.io.layout",
     "hpe_cli/io/table_source.py::is_float_column: re",
+    "hpe_cli/io/table_source.py::table_schema: pyarrow",
+    "hpe_cli/io/table_source.py::with_line_numbers: pyarrow",
     "hpe_cli/io/units_watch.py::UnitsWatch.__init__: threading",
     "hpe_cli/io/units_watch.py::_observe: hpe_cli.io.transaction",
     "hpe_cli/io/whenet_txt.py::whenet_lines: hpe_cli.io.coco",
@@ -615,19 +563,19 @@ KNOWN_LAZY_IMPORTS = {
     "hpe_cli/rotation/systems.py::read_builtin_systems: tomllib",
     "hpe_cli/torch/dataset.py::HeadPoseDataset._image_bytes: pyarrow.parquet",
     "hpe_cli/torch/dataset.py::_leading_flip: hpe_cli.torch.transforms",
-    "hpe_cli/torch/dataset_tables.py::_boxes: hpe_cli.io.layout",
-    "hpe_cli/torch/dataset_tables.py::_canonical: hpe_cli.io.layout",
-    "hpe_cli/torch/dataset_tables.py::_canonical: hpe_cli.rotation.check",
     "hpe_cli/torch/dataset_tables.py::_is_image_bytes: pyarrow",
-    "hpe_cli/torch/dataset_tables.py::_load_table: hpe_cli",
-    "hpe_cli/torch/dataset_tables.py::_load_table: hpe_cli.datasets.mat",
     "hpe_cli/torch/dataset_tables.py::_read_list_file: hpe_cli.datasets.mat",
     "hpe_cli/torch/dataset_tables.py::_read_list_file: hpe_cli.geometry.augment",
     "hpe_cli/torch/dataset_tables.py::_read_parquet: hpe_cli.io.system_meta",
     "hpe_cli/torch/dataset_tables.py::_read_parquet: pyarrow.parquet",
     "hpe_cli/torch/dataset_tables.py::_read_parquet: re",
-    "hpe_cli/torch/transforms.py::_perm_for: hpe_cli.geometry.landmark_schemes",
-    "hpe_cli/torch/transforms.py::_perm_for: numpy",
+    "hpe_cli/torch/dataset_tables.py::canonical_matrices: hpe_cli.io.layout",
+    "hpe_cli/torch/dataset_tables.py::canonical_matrices: hpe_cli.rotation.check",
+    "hpe_cli/torch/dataset_tables.py::load_table: hpe_cli",
+    "hpe_cli/torch/dataset_tables.py::load_table: hpe_cli.datasets.mat",
+    "hpe_cli/torch/dataset_tables.py::table_boxes: hpe_cli.io.layout",
+    "hpe_cli/torch/transforms.py::landmark_flip_permutation: hpe_cli.geometry.landmark_schemes",
+    "hpe_cli/torch/transforms.py::landmark_flip_permutation: numpy",
 }
 
 RULES = {

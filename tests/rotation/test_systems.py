@@ -229,3 +229,15 @@ def test_every_builtin_round_trips_through_its_dict_and_json():
         for d in (s.to_dict(), json.loads(s.to_json())):
             t = system_from_dict(d, f"<{name}>")
             assert t.name == s.name and t.definition() == s.definition(), name
+
+
+def test_canonical_system_is_300w_lp_and_the_identity_frame():
+    """hpe's canonical frame is 300W-LP's active matrix: ``to_canonical``/``from_canonical`` are the identity on
+    SciPy's random rotations; one cached object, the built-in itself."""
+    from hpe_cli.rotation.systems import canonical_system
+
+    s = canonical_system()
+    assert s is canonical_system() and s is get_system("300w_lp")
+    R = Rotation.random(200, random_state=7).as_matrix()
+    assert np.allclose(s.to_canonical(R), R, atol=1e-12)
+    assert np.allclose(s.from_canonical(R), R, atol=1e-12)

@@ -31,8 +31,10 @@ from ...io import Rejects, open_table
 from ...io.images import ImageResolver, row_ids
 from ...io.readers import LINE_COL
 from ...io.rejects import fail_all_rejected
+from ...io.system_meta import system_from_metadata
 from ...io.transaction import ensure_transaction, note_input, staged_dir
 from ...rotation import get_system
+from ...rotation.systems import canonical_system
 from .rows import (
     DEFAULT_LENGTH_FRACTION,
     MAT_LENGTH_UNITS,
@@ -118,14 +120,13 @@ def key_columns(columns) -> list:
 
 
 def table_system(schema, default):
-    """The system named by a Parquet file's ``hpe:system`` metadata, else ``default``; and where it came from."""
-    name = (getattr(schema, "metadata", None) or {}).get(b"hpe:system")
-    if name:
-        try:
-            return get_system(name.decode("utf-8", "replace")), "file metadata"
-        except Exception:  # noqa: BLE001 - a custom system whose TOML is not at hand: the given one
-            return default, "option (the file's system is not known here)"
-    return default, "option"
+    """The system a Parquet file's metadata names (:func:`~hpe_cli.io.system_meta.system_from_metadata`), else
+    ``default``; and where it came from."""
+    try:
+        found = system_from_metadata(getattr(schema, "metadata", None))
+    except HpeError:  # a custom system whose TOML is not at hand: the given one
+        return default, "option (the file's system is not known here)"
+    return (found, "file metadata") if found is not None else (default, "option")
 
 
 def _order(frame, sort_by, worst, where):
@@ -292,14 +293,14 @@ def _load(rows, system, where):
         if path.suffix.lower() in (".parquet", ".pq"):
             table = pq.read_table(path)
             if system is None:
-                system, _ = table_system(table.schema, get_system("300w_lp"))
+                system, _ = table_system(table.schema, canonical_system())
             rows = table.to_pandas()
         else:
             rows = pd.read_csv(path)
         where = where or str(path)
     where = where or "evaluate output"
     if system is None:
-        system = rows.attrs.get("hpe:system", "300w_lp")
+        system = rows.attrs.get("hpe:system", canonical_system())
     system = get_system(system) if isinstance(system, str) else system
     missing = [c for c in ANGLE_COLUMNS if c not in rows.columns]
     if missing:
@@ -364,7 +365,7 @@ def run_draw_errors(input_path, outdir, options, *, progress=None) -> dict:
     if input_path.suffix.lower() in (".parquet", ".pq"):
         system, source = table_system(pq.read_schema(input_path), system)
     if system is None:
-        system, source = get_system("300w_lp"), "default"
+        system, source = canonical_system(), "default"
     if len(frame) == 0:
         raise HpeError(f"{input_path}: empty table (no rows)")
     where = row_namer(src, lines)

@@ -155,7 +155,7 @@ def _pose_para_frame(t, box, lm, landmarks: bool, columns: dict):
     box, canonical matrix, ``tdx..scale`` and (with ``landmarks``) the 2-D landmarks ``lm`` (n, L, 2)."""
     import pandas as pd
 
-    from ...rotation.systems import get_system
+    from ...rotation.systems import canonical_system
 
     n = len(t)
     pyr = t[["pitch", "yaw", "roll"]].to_numpy(np.float64)
@@ -163,7 +163,7 @@ def _pose_para_frame(t, box, lm, landmarks: bool, columns: dict):
     bad = ~np.isfinite(pyr).all(1)
     reasons[bad] = "non-finite Pose_Para angle"
     reasons[(reasons == "") & ~np.isfinite(box).all(1)] = "no visible 2-D landmark to box the head"
-    sysm = get_system("300w_lp")
+    sysm = canonical_system()
     A = sysm.to_canonical(sysm.from_angles(np.where(bad[:, None], 0.0, pyr))).reshape(n, 9)
     frame = pd.DataFrame({**columns, "reason": reasons})
     for k, c in enumerate(BBOX_COLS):

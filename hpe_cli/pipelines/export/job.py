@@ -29,18 +29,21 @@ def _check_output(inputs, output: Path, opts) -> None:
 
 
 def _layout_and_system(opts):
-    from ...rotation.systems import get_system
+    from ...rotation.systems import canonical_system, get_system
 
     try:
         layout = get_layout(opts.layout, system=opts.system, form=opts.form, trainer=opts.trainer)
     except ValueError as exc:
         raise HpeError(str(exc)) from None
-    if layout.system is not None and opts.system is not None and get_system(opts.system).name != layout.system:
+    chosen = None if opts.system is None else get_system(opts.system)
+    if layout.system is not None and chosen is not None and chosen.name != layout.system:
         raise HpeError(
             f"--layout {layout.name} stores labels in the {layout.system} system, which its trainer "
-            f"expects; --system {get_system(opts.system).name} cannot be used with it"
+            f"expects; --system {chosen.name} cannot be used with it"
         )
-    return layout, get_system(layout.system or opts.system or "300w_lp")
+    if layout.system is not None:
+        return layout, get_system(layout.system)
+    return layout, chosen or canonical_system()
 
 
 def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:

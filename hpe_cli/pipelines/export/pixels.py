@@ -153,7 +153,7 @@ def run_tasks(results, sel, layout, plan: CropPlan, stage, bar=None, keep_parts:
     from pathlib import Path
 
     from .units import link_files
-    from .workers import _unspill
+    from .workers import unspill
     from .write import add_pixels
 
     n = sel.n
@@ -184,7 +184,7 @@ def run_tasks(results, sel, layout, plan: CropPlan, stage, bar=None, keep_parts:
                     if layout.pixels == "file":
                         continue
                     good.append(idx)
-                    payloads.append(_unspill(payload, spill_fh))
+                    payloads.append(unspill(payload, spill_fh))
                     # slices of FLUSH heads, whatever the units: the layout's row groups and shards are the
                     # same for every runner
                     if len(good) >= FLUSH:

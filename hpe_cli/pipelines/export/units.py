@@ -88,13 +88,13 @@ def run_unit(task: dict):
         os.close(fd)
     else:
         spill = None
-    workers._init_worker(cfg)
+    workers.init_worker(cfg)
     out: list = []
     fh = open(spill + (".tmp" if stem is not None else ""), "wb") if spill and cfg["pixels"] != "file" else None
     try:
         cfg["spill"] = fh
         for t in task["tasks"]:
-            out += workers._work_items(t, task.get("cwd"))
+            out += workers.work_items(t, task.get("cwd"))
     finally:
         cfg["spill"] = None
         if fh is not None:

@@ -17,7 +17,8 @@ _CFG: dict = {}
 _LAST_FRAME: list = [None]
 
 
-def _init_worker(cfg):
+def init_worker(cfg):
+    """Pool initializer: keep the job's config in the worker process."""
     global _CFG
     _CFG = cfg
     import cv2
@@ -158,7 +159,8 @@ def _spill(payload, cfg):
     return ("spill", off, len(data), shape)
 
 
-def _unspill(payload, fh):
+def unspill(payload, fh):
+    """A worker's payload, read back from the spill file ``fh`` when it was spilled there."""
     if isinstance(payload, tuple) and payload and payload[0] == "spill":
         _, off, n, shape = payload
         fh.seek(off)
@@ -167,7 +169,7 @@ def _unspill(payload, fh):
     return payload
 
 
-def _work_items(task, cwd=None):
+def work_items(task, cwd=None):
     """One task: an image file (or a video with its frames) and the heads to crop from it. A relative source
     path is read relative to ``cwd`` (the folder the run was started in: a Dask worker runs elsewhere);
     messages name it as the user gave it."""

@@ -13,7 +13,7 @@ from ...errors import HpeError
 from ...io.layout import BBOX_COLS
 from .options import LICENCES, MATRIX_COLS
 from .sampling import is_choice
-from .workers import _unspill
+from .workers import unspill
 
 
 @contextmanager
@@ -59,7 +59,7 @@ def add_pixels(layout, sel, plan, px, good, payloads, spill_fh) -> None:
     for s in sorted(set(split[g].tolist())):
         sel_k = [k for k, gi in enumerate(good) if split[gi] == s]
         sub = exported_frame(sel, plan, px, g[sel_k])
-        layout.add_pixels(s, sub, [_unspill(payloads[k], spill_fh) for k in sel_k])
+        layout.add_pixels(s, sub, [unspill(payloads[k], spill_fh) for k in sel_k])
 
 
 def exported_frame(sel, plan, px, idx):

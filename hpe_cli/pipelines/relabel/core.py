@@ -22,7 +22,8 @@ from ...geometry.projection import project_points
 from ...geometry.reference import confidence_min, helmet_preset, min_pairs, reference_head
 from ...geometry.similarity import fit_similarity
 from ...io import BBOX_COLS, conversion_columns, landmark_cols
-from ...rotation import canonical_to_labels, get_system
+from ...rotation import canonical_to_labels
+from ...rotation.systems import canonical_system
 
 #: camera frame (OpenCV: x right, y down, z forward) -> canonical 300W-LP frame (y up, z to the camera)
 E = np.diag([1.0, -1.0, -1.0])
@@ -35,7 +36,7 @@ E = np.diag([1.0, -1.0, -1.0])
 DEFAULT_MAX_RMSE = 2.0
 
 #: the 300W-LP system: WHENet's legacy angles are 300W-LP angles
-W300LP = get_system("300w_lp")
+W300LP = canonical_system()
 
 #: views per block when projecting landmarks
 VIEW_BLOCK = 256

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 from ...datasets.agora import AGORA_SIZE
 from ...rotation import get_system
+from ...rotation.systems import canonical_system
 from .agora import DEFAULT_MAX_OCCLUSION
 from .agora import DEFAULT_MAX_RMSE as AGORA_MAX_RMSE
 from .agora import Config as AgoraConfig
@@ -27,13 +28,15 @@ def _label_system(fmt: str, system, who: str):
     (they store whenet angles) and 300w_lp for tables."""
     if fmt not in FORMATS:
         raise ValueError(f"expected --format {', '.join(FORMATS[:-1])} or {FORMATS[-1]}, got {fmt!r}")
-    system = None if system is None else get_system(system)
-    if fmt != "table" and system is not None and system.name != "whenet":
+    if system is None and fmt != "table":
+        system = "whenet"  # the text formats' own system
+    system = canonical_system() if system is None else get_system(system)
+    if fmt != "table" and system.name != "whenet":
         raise FormatSystemError(
             f"--format {fmt} stores {who} angles, which are in the whenet system; "
             f"got --system {system.name} (use --format table for other systems)"
         )
-    return system or get_system("whenet" if fmt != "table" else "300w_lp")
+    return system
 
 
 def _check_choice(name: str, value, choices) -> None:

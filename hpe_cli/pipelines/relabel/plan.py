@@ -20,6 +20,7 @@ from ...datasets import panoptic as pan
 from ...errors import HpeError
 from ...geometry.reference import panoptic_pairs
 from ...io.layout import numpy_to_arrow, string_array
+from ...rotation.systems import get_system
 from .core import DEFAULT_MAX_RMSE, fit_faces, relabel_views, view_label_columns
 
 CHUNK_FRAMES = 64
@@ -48,6 +49,10 @@ class Config:
     frame: str = "camera"  # "camera" or "crop" (line of sight, SPEC §10)
     all_views: bool = False  # keep a face only if every selected camera labels it
     min_change: float | None = None  # degrees, per (sequence, person, camera); applied in order by the writer
+
+    def __post_init__(self):
+        # resolved once here, before the config travels to worker processes (library callers pass a name)
+        self.system = get_system(self.system)
 
 
 @dataclass

@@ -7,7 +7,6 @@ from collections import Counter
 
 import numpy as np
 
-from ...rotation import get_system
 from .core import summary_tail
 from .plan import SKIPPED, Config, Plan
 
@@ -65,7 +64,7 @@ def unit_stats(res: dict, cfg: Config) -> dict:
     out_of_range = gimbal = 0
     if len(t["frame"]):
         pyr = np.stack([t["pitch"], t["yaw"], t["roll"]], axis=1)
-        out_of_range = int((~get_system(cfg.system).in_range(pyr)).sum())
+        out_of_range = int((~cfg.system.in_range(pyr)).sum())
         gimbal = int(np.sum(t["gimbal_lock"]))
     rm = RmseStats()
     rm.add(res["fit_rmse"])
