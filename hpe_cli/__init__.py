@@ -39,6 +39,8 @@ The optional tensor side (``pip install hpe-cli[torch]``) lives in :mod:`hpe_cli
 
 from __future__ import annotations
 
+import importlib
+
 __version__ = "0.1.0"
 
 #: the public API, in :mod:`hpe_cli.api`; resolved lazily by :func:`__getattr__`
@@ -83,8 +85,6 @@ __all__ = [n for n in _LAZY if n != "STORAGE_KINDS"]
 
 def __getattr__(name):
     if name in _LAZY:
-        import importlib
-
         module, attr = _LAZY[name]
         value = getattr(importlib.import_module(module), attr)
         globals()[name] = value

@@ -10,7 +10,32 @@ call the same kernels.
 
 from __future__ import annotations
 
+import importlib.util
+
+import numpy as np
+import pyarrow as pa
+
 from .api_arrays import augment_batch, augment_sample, draw_axes, geodesic, landmark_pose  # noqa: F401
+from .io.layout import arrow_table
+from .io.readers import open_table
+from .io.system_meta import file_system, resolve_system
+from .io.transaction import ensure_transaction
+from .io.writers import system_metadata, write_table
+from .metrics.evaluate import evaluate as _evaluate
+from .pipelines.audit import AuditOptions, run_audit
+from .pipelines.augment import AugmentOptions, run_augment
+from .pipelines.biwi import BiwiOptions, run_biwi
+from .pipelines.convert import ConvertOptions, run_convert
+from .pipelines.draw import DrawOptions, run_draw
+from .pipelines.evaluate import EvaluateOptions, run_evaluate
+from .pipelines.infer import InferOptions, finish, run_infer
+from .pipelines.relabel import RelabelAgoraOptions, RelabelPanopticOptions, run_relabel_agora, run_relabel_panoptic
+from .pipelines.view import ViewOptions, run_view
+from .rotation import storage as st
+from .rotation.audit import audit_angles, audit_matrices
+from .rotation.convert import canonical_to_labels
+from .rotation.systems import builtin_systems
+from .rotation.systems import get_system as _get
 
 STORAGE_KINDS = ("angles", "matrix", "rotvec", "quaternion", "6d")
 
@@ -44,7 +69,6 @@ def get_system(spec):
            [ 0.,  1.,  0.],
            [ 1.,  0.,  0.]])
     """
-    from .rotation.systems import get_system as _get
 
     return _get(spec)
 
@@ -65,7 +89,6 @@ def systems() -> dict:
     >>> hpe.systems()["biwi"].describe()["order"]
     'extrinsic XYZ, active matrix'
     """
-    from .rotation.systems import builtin_systems
 
     return builtin_systems()
 
@@ -73,9 +96,6 @@ def systems() -> dict:
 # -------------------------------------------------------------------------------------------- convert
 def _storage_to_matrix(values, storage: str, quaternion_order: str, sixd_columns=(0, 1)):
     """Rotation vectors (radians), quaternions or 6-D vectors to matrices (N, 3, 3) (:mod:`hpe_cli.rotation.storage`)."""
-    import numpy as np
-
-    from .rotation import storage as st
 
     if storage == "rotvec":
         return st.rotvec_to_matrix(values)
@@ -133,9 +153,6 @@ def convert(values, src, dst, storage: str | None = None, *, quaternion_order: s
     >>> hpe.convert([1.0, 0.0, 0.0, 0.0], "300w_lp", "300w_lp", storage="quaternion").primary + 0.0
     array([[0., 0., 0.]])
     """
-    import numpy as np
-
-    from .rotation.convert import canonical_to_labels
 
     source, target = get_system(src), get_system(dst)
     v = np.asarray(values, dtype=np.float64)
@@ -240,10 +257,6 @@ def read_labels(path, system=None, *, reinterpret_as=None, **reader_options) -> 
     >>> system.name, table["yaw"].tolist()
     ('6drepnet', [2.0])
     """
-    import pyarrow as pa
-
-    from .io.readers import open_table
-    from .io.system_meta import file_system, resolve_system
 
     src = open_table(path, **reader_options)
     found = None
@@ -286,8 +299,6 @@ def convert_file(
         ``rows``, ``written``, ``gimbal_lock``, ``max_roundtrip_err``, ``rejects`` (reason -> count),
         ``source`` and ``source_origin`` ("file metadata", "option" or "default").
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.convert import ConvertOptions, run_convert
 
     options = ConvertOptions(
         radians=radians,
@@ -323,8 +334,6 @@ def audit_file(
     (True or a :class:`hpe_cli.pipelines.audit.consistency.Settings`, as ``--consistency``; report key ``consistency``)
     and ``suspects`` (path of the key list, as ``--suspects``).
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.audit import AuditOptions, run_audit
 
     if "workers" in options:  # the documented spelling of ``threads`` here
         options["threads"] = options.pop("workers")
@@ -367,8 +376,6 @@ def view_file(
     >>> s["rows"], s["shown"], s["whole_frame"]  # .mat rows have no head box: shown whole
     (4, 4, 4)
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.view import ViewOptions, run_view
 
     settings = ViewOptions(
         images=images,
@@ -406,8 +413,6 @@ def draw_file(
     >>> s["faces"], s["images"]
     (4, 4)
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.draw import DrawOptions, run_draw
 
     settings = DrawOptions(
         images=images,
@@ -441,8 +446,6 @@ def augment_file(input, output, op: str, angle=None, **settings) -> dict:
     dict
         ``system``, ``rows``, ``written``, ``landmarks``, ``boxes``, ``images``, ``rejects`` (reason -> count).
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.augment import AugmentOptions, run_augment
 
     opts = AugmentOptions(op=op, angle=angle, **settings)
     with ensure_transaction():
@@ -467,8 +470,6 @@ def infer_system(data=None, *, code=None, output=None, **settings) -> dict:
     HpeError
         Nothing fits (with landmarks: no clear winner), as the command's exit status 1.
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.infer import InferOptions, finish, run_infer
 
     opts = InferOptions(**settings)
     with ensure_transaction():
@@ -504,13 +505,8 @@ def write_labels(table, path, system=None, *, overwrite: bool = False):
     >>> p.name, p.read_text().splitlines()[0]
     ('x.csv', '"pitch"')
     """
-    import pyarrow as pa
-
-    from .io.writers import system_metadata, write_table
 
     if isinstance(table, dict):
-        from .io.layout import arrow_table
-
         table = arrow_table(table)
     elif not isinstance(table, pa.Table):
         table = pa.Table.from_pandas(table, preserve_index=False)
@@ -545,9 +541,6 @@ def audit(values, system, storage: str | None = None, **options) -> dict:
     >>> r["near_gimbal"].tolist(), r["non_canonical"].tolist()
     ([False, True, False, False], [False, False, True, False])
     """
-    import numpy as np
-
-    from .rotation.audit import audit_angles, audit_matrices
 
     v = np.asarray(values, dtype=np.float64)
     if storage is None:
@@ -588,13 +581,11 @@ def evaluate(pred, gt, *, pred_system, gt_system, protocols=None, align: str = "
     >>> report["n"]["pairs"], round(report["metrics"]["mae_wrapped"]["yaw"], 6)
     (2, 2.5)
     """
-    import importlib.util
 
     if importlib.util.find_spec("hpe_cli.metrics.evaluate") is None:
         raise NotImplementedError(
             "hpe.evaluate needs hpe_cli.metrics.evaluate, which this installation does not have; upgrade hpe-cli"
         )
-    from .metrics.evaluate import evaluate as _evaluate
 
     return _evaluate(
         pred, gt, pred_system=pred_system, gt_system=gt_system, protocols=protocols, align=align, columns=columns
@@ -633,8 +624,6 @@ def relabel_panoptic(seq_dirs, output, **options):
     >>> run.stats.labelled, run.stats.views  # labels + rejects = every view
     (606, 713)
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.relabel import RelabelPanopticOptions, run_relabel_panoptic
 
     seq_dirs = [seq_dirs] if isinstance(seq_dirs, str) or hasattr(seq_dirs, "__fspath__") else list(seq_dirs)
     opts = RelabelPanopticOptions(**options)
@@ -660,8 +649,6 @@ def relabel_agora(dataframes, output, **options):
     >>> s.labelled + sum(s.reasons.values()) == s.people  # every person labelled or a reject
     True
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.relabel import RelabelAgoraOptions, run_relabel_agora
 
     dataframes = [dataframes] if isinstance(dataframes, str) or hasattr(dataframes, "__fspath__") else list(dataframes)
     opts = RelabelAgoraOptions(**options)
@@ -686,8 +673,6 @@ def biwi_file(input, output, **options) -> dict:
     ...
     ValueError: expected two or three fractions >= 0 summing to 1, got (0.7, 0.4)
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.biwi import BiwiOptions, run_biwi
 
     opts = BiwiOptions(**options)
     with ensure_transaction():
@@ -713,8 +698,6 @@ def evaluate_files(pred, gt, options=None, **settings) -> dict:
     dict
         The JSON report of ``hpe evaluate``.
     """
-    from .io.transaction import ensure_transaction
-    from .pipelines.evaluate import EvaluateOptions, run_evaluate
 
     if options is not None and settings:
         raise TypeError(f"expected options or settings, got both (settings: {', '.join(sorted(settings))})")

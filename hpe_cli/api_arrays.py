@@ -5,6 +5,13 @@ Each calls the kernels the commands run (``hpe augment``, ``hpe draw``, ``hpe ev
 
 from __future__ import annotations
 
+import numpy as np
+
+from .geometry.augment import augment_batch as _augment_batch
+from .geometry.augment import augment_sample as _a
+from .geometry.draw import render_axes
+from .geometry.landmark_pose import SCHEME_SIZES, fit_landmark_pose
+from .rotation.distances import geodesic_deg
 from .rotation.systems import get_system
 
 
@@ -60,7 +67,6 @@ def augment_sample(
     >>> out.angles.round(6), out.landmarks
     (array([ 10., -30.,  -5.]), array([[99., 50.]]))
     """
-    from .geometry.augment import augment_sample as _a
 
     return _a(
         pose,
@@ -119,9 +125,7 @@ def augment_batch(
     array([[ 43.511, -33.607, -19.343],
            [  0.   ,   0.   , -90.   ]])
     """
-    from .geometry.augment import augment_batch as _a
-
-    return _a(
+    return _augment_batch(
         pose,
         landmarks,
         bbox,
@@ -164,9 +168,6 @@ def draw_axes(image, pose, centre, length=None, *, system="300w_lp", thickness=N
     >>> img[50, 85].argmax(), img[85, 50].argmax()  # red (BGR 2) to the right, green (1) downwards
     (np.int64(2), np.int64(1))
     """
-    import numpy as np
-
-    from .geometry.draw import render_axes
 
     sysm = get_system(system)
     p = np.asarray(pose, dtype=np.float64)
@@ -198,9 +199,6 @@ def geodesic(a, b, system=None):
     >>> float(hpe.geodesic([0.0, 30.0, 0.0], [0.0, -60.0, 0.0], system="300w_lp").round(9))
     90.0
     """
-    import numpy as np
-
-    from .rotation.distances import geodesic_deg
 
     def mat(x):
         x = np.asarray(x, dtype=np.float64)
@@ -252,10 +250,6 @@ def landmark_pose(landmarks, scheme=None, *, system="300w_lp", labels=None):
     >>> out["angles"].round(6).tolist(), bool(out["angle"][0] < 1e-6)
     ([[10.0, -40.0, 5.0]], True)
     """
-    import numpy as np
-
-    from .geometry.landmark_pose import SCHEME_SIZES, fit_landmark_pose
-    from .rotation.distances import geodesic_deg
 
     uv = np.asarray(landmarks, dtype=np.float64)
     if scheme is None:

@@ -45,6 +45,9 @@ relabel-agora`` without ``--rejects`` refuses the file on such a person.
 
 from __future__ import annotations
 
+import importlib
+import pickle
+import warnings
 from dataclasses import dataclass
 from itertools import chain
 from pathlib import Path
@@ -52,6 +55,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from ..rotation.check import rotation_screen_columns
+from .fields import as_bool, as_numbers, describe
 
 #: first SMPL-X joint of the 51 face landmarks (iBUG-68 point 17)
 FACE_FIRST = 76
@@ -198,7 +203,6 @@ def _sniff(path: Path) -> str:
 
 
 def _restricted_unpickler(fh, path):
-    import pickle
 
     try:
         from pandas.compat.pickle_compat import _class_locations_map as renames
@@ -214,8 +218,6 @@ def _restricted_unpickler(fh, path):
                     "part of a pandas DataFrame (a pickle can run code). If you trust the file, "
                     "pass --trust-pickle, or convert it once to Parquet and give the .parquet: " + TO_PARQUET
                 )
-            import importlib
-            import warnings
 
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -333,7 +335,6 @@ def _person_arrays(path, col, flat, rows, persons, shape, want):
     Raises ``FILE: row R, person P: COL: expected WANT, got ...`` for the first entry that is not
     numbers of that shape (a string, None, a nested or ragged list, objects).
     """
-    from .fields import as_numbers
 
     if not flat:
         return np.zeros((0,) + tuple(FACE_FIRST + FACE_COUNT if s == -1 else s for s in shape))
@@ -353,7 +354,6 @@ def _person_arrays(path, col, flat, rows, persons, shape, want):
 
 def _person_translations(path, col, flat, rows, persons):
     """``camT`` entries (3, 1), (1, 3) or (3,) as (N, 3)."""
-    from .fields import as_numbers
 
     out = np.empty((len(flat), 3))
     for n, a in enumerate(flat):
@@ -368,7 +368,6 @@ def _person_translations(path, col, flat, rows, persons):
 
 def _person_flags(path, flat, rows, persons) -> np.ndarray:
     """``isValid`` entries as bools: True/False (numpy bools, 0/1 too); 'no', None, numbers refused."""
-    from .fields import as_bool
 
     if all(isinstance(v, (bool, np.bool_)) for v in flat):
         return np.array(flat, dtype=bool).reshape(-1)
@@ -383,7 +382,6 @@ def _person_flags(path, flat, rows, persons) -> np.ndarray:
 
 def _person_occlusion(path, flat, rows, persons) -> np.ndarray:
     """``occlusion`` entries as floats (None/NaN: unknown); strings, bools and arrays refused."""
-    from .fields import describe
 
     out = np.empty(len(flat))
     for n, v in enumerate(flat):
@@ -401,7 +399,6 @@ def _person_occlusion(path, flat, rows, persons) -> np.ndarray:
 
 def _image_paths(path, values) -> np.ndarray:
     """``imgPath`` per row: a string (checked for traversal later, per person); None, numbers refused."""
-    from .fields import describe
 
     for k, v in enumerate(values):
         if not isinstance(v, str):
@@ -425,7 +422,6 @@ def unsafe_name(name: str) -> str:
 
 def _validate(people) -> np.ndarray:
     """Per-person reasons ('' when usable); unusable geometry is replaced by NaN so nothing downstream fails."""
-    from ..rotation.check import rotation_screen_columns
 
     n = len(people.row)
     reason = np.full(n, "", dtype=object)
@@ -504,7 +500,6 @@ def read_agora(path, df=None, trust: bool = False) -> AgoraPeople:
     raw_valid = df["isValid"].tolist()
 
     def per_person(col):
-        from .fields import describe
 
         raw = df[col].tolist()
         cells = [_as_list(v) for v in raw]

@@ -51,6 +51,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from ..rotation import canonical_to_labels, get_system
+from ..rotation.columns import conversion_columns
 from .fields import distortion_problem, frame_number_problem, intrinsics_problem, member_problem, rotation_problem
 
 #: the rotation system of BIWI's matrices and ``.bin`` angles
@@ -213,9 +215,6 @@ def labels_table(files, sequences, frames, centres, R=None, angles=None, system=
     ``gimbal_lock, roundtrip_err``), then ``center_x, center_y, center_z`` (mm).
     """
     import pandas as pd
-
-    from ..rotation import canonical_to_labels, get_system
-    from ..rotation.columns import conversion_columns
 
     biwi = get_system(BIWI_SYSTEM)
     stored = np.asarray(R, dtype=np.float64) if R is not None else biwi.from_angles(angles)
@@ -490,7 +489,6 @@ def read_biwi_camera(
         ``_depth.bin``), ``center_u, center_v`` and ``bbox_x, bbox_y,
         bbox_w, bbox_h`` (pixels). ``attrs["system"]`` is ``system``'s name.
     """
-    from ..rotation import get_system
 
     if camera not in ("depth", "rgb"):
         raise HpeError(f"--camera: expected depth or rgb, got {camera!r}")
@@ -549,7 +547,6 @@ def protocol_mask(frame, protocol: str = "all"):
     that list depends on the detector run and is not published, so it is
     not offered.
     """
-    from ..rotation import canonical_to_labels, get_system
 
     if protocol not in PROTOCOLS:
         raise HpeError(f"--protocol: expected one of {', '.join(PROTOCOLS)}, got {protocol!r}")

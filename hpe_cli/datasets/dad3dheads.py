@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from .fields import as_numbers, describe, member_problem
 from .jsonfile import load_json
 
 SYSTEM = "dad3dheads"
@@ -81,7 +82,6 @@ def is_dad3dheads(path) -> bool:
 
 def _item_fields(it: dict, where: str, subset: str):
     """``(item_id, image, bbox (4,), attributes)`` of one metadata item, each field's type checked at the door."""
-    from .fields import as_numbers, describe, member_problem
 
     iid = it["item_id"]
     if isinstance(iid, bool) or not isinstance(iid, (str, int)) or str(iid) == "":
@@ -114,7 +114,6 @@ def _item_fields(it: dict, where: str, subset: str):
 
 def _model_view(ann: Path) -> np.ndarray:
     """The 4 x 4 ``model_view_matrix`` of one annotation file (numbers only)."""
-    from .fields import as_numbers
 
     doc = load_json(ann)
     if not isinstance(doc, dict) or doc.get("model_view_matrix") is None:

@@ -13,7 +13,7 @@ def load_json(path: Path):
         data = Path(path).read_bytes()
     except OSError as exc:
         raise HpeError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    import orjson
+    import orjson  # lazy: start-up
 
     try:
         return orjson.loads(data)

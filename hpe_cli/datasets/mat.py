@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from .mat_fields import check_fields
 
 POSE_COLS = ["pitch", "yaw", "roll", "tdx", "tdy", "tdz", "scale"]
 
@@ -33,7 +34,6 @@ def read_mat(path, fileobj=None) -> dict:
         m = scipy.io.loadmat(fileobj if fileobj is not None else path, variable_names=["Pose_Para", "pt2d", "pt3d_68"])
     except Exception as exc:  # scipy raises many types for truncated/corrupt files
         raise HpeError(f"{path}: not a readable MATLAB .mat file ({' '.join(str(exc).split())[:160]})") from None
-    from .mat_fields import check_fields
 
     m = check_fields(m, path)  # field types checked at the door (cell arrays, structs, char arrays)
     if "Pose_Para" not in m:

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from .fields import as_int, describe, distortion_problems, intrinsics_problem, numbers_or_why
+from .panoptic_json import load_panoptic_json
 
 #: camera names become path parts: letters, digits, '_', '-', '.' only (no '..', '/', NUL)
 NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
@@ -117,7 +119,6 @@ def read_calibration(path, cameras="all") -> Cameras:
     -------
     Cameras
     """
-    from .panoptic_json import load_panoptic_json
 
     path = Path(path)
     data = load_panoptic_json(path)
@@ -141,7 +142,6 @@ def read_calibration(path, cameras="all") -> Cameras:
             cols[key].append(value)
     if not cols["names"]:
         raise HpeError(f"{path}: the calibration lists no cameras")
-    from .fields import distortion_problems
 
     bad = distortion_problems(
         np.stack(cols["dist"]), np.stack(cols["K"]), np.asarray(cols["width"]), np.asarray(cols["height"])
@@ -174,7 +174,6 @@ def _camera(cam, i: int, path) -> tuple:
     point inside the image), ``R`` (a rotation), ``t`` (finite, cm), ``distCoef`` (OpenCV's model within
     what a real lens does over this image, :func:`hpe_cli.datasets.fields.distortion_problem`).
     """
-    from .fields import as_int, describe, intrinsics_problem, numbers_or_why
 
     where = f"{path}: camera {i}"
     if not isinstance(cam, dict):

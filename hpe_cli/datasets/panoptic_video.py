@@ -12,6 +12,7 @@ ones asked for.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -104,7 +105,6 @@ class VideoFrames:
             cap.release()
 
     def _open(self):
-        import os
 
         # libav prints its own decoder complaints ("moov atom not found", "Error at MB") on stderr, past
         # hpe's one line; OpenCV reads this when its FFmpeg backend starts (the first capture of a process)

@@ -32,8 +32,10 @@ import zipfile
 from pathlib import Path, PurePosixPath
 
 import numpy as np
+import pyarrow as pa
 
 from ..errors import HpeError
+from .fields import member_problem
 from .mat import POSE_COLS, read_mat
 from .mat_fields import check_fields
 
@@ -107,7 +109,6 @@ def read_pts(path, fileobj=None) -> dict:
 
 def _check_members(path, names) -> None:
     """Refuse members with '..' or absolute names, and a name stored twice (its rows would be duplicated)."""
-    from .fields import member_problem
 
     seen = set()
     for n in names:
@@ -273,7 +274,6 @@ class W300LPStream:
         self.system = SYSTEM
 
     def iter_batches(self):
-        import pyarrow as pa
 
         rows_all = self.src.rows
         for start in range(0, len(rows_all), self.chunk):
@@ -295,7 +295,6 @@ def open_w300lp(path, landmarks: bool = True, chunk: int = 2048) -> W300LPStream
     The columns are those of :func:`read_w300lp` (without ``pt2d``); the
     landmark columns are present when the dataset has any landmark file.
     """
-    import pyarrow as pa
 
     src = _Source(path)
     dims3 = 0

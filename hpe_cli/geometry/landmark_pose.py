@@ -53,6 +53,8 @@ from functools import lru_cache
 import numpy as np
 
 from ..rotation.distances import geodesic_deg
+from .line_of_sight import ray_rotation
+from .template import reference_template
 
 #: fewest visible model points a fit accepts (the affine camera has 8 unknowns)
 MIN_POINTS = 6
@@ -98,7 +100,6 @@ def scheme_model(scheme: str) -> tuple[np.ndarray, np.ndarray]:
     used : ndarray of bool, shape (L,)
         Landmarks that have a model point.
     """
-    from .template import reference_template
 
     if scheme not in SCHEME_POINTS:
         raise ValueError(f"expected a landmark scheme in {', '.join(SCHEME_POINTS)}, got {scheme!r}")
@@ -116,7 +117,6 @@ def scheme_model(scheme: str) -> tuple[np.ndarray, np.ndarray]:
 
 def template_iod() -> float:
     """Inter-ocular distance (outer corners) of the template, in template units (about 0.84)."""
-    from .template import reference_template
 
     return _iod(reference_template())
 
@@ -366,7 +366,6 @@ def fit_landmark_pose_perspective(uv, scheme: str, K, dist=None, *, reasons: boo
         As :func:`fit_landmark_pose`, with ``A`` in the camera frame, ``scale``
         in normalised units (1 / focal length) and ``ray_angle`` (N,) degrees.
     """
-    from .line_of_sight import ray_rotation
 
     uv = np.asarray(uv, dtype=np.float64)
     N = uv.shape[0]

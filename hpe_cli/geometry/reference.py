@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from functools import lru_cache
+from importlib.resources import files
 
 import numpy as np
 
@@ -19,7 +20,6 @@ PRESETS = ("whenet", "directmhp")
 
 @lru_cache(maxsize=1)
 def _data() -> dict:
-    from importlib.resources import files
 
     return json.loads((files("hpe_cli.data") / "whenet_reference_head.json").read_text(encoding="utf-8"))
 

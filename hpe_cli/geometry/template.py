@@ -37,8 +37,11 @@ a left-handed frame. Negating y gives the canonical frame; see
 from __future__ import annotations
 
 from functools import lru_cache
+from importlib.resources import files
 
 import numpy as np
+
+from .similarity import fit_similarity
 
 #: median fit RMSE (template units) above which landmarks do not look like the template: about 0.1 on
 #: AFLW2000-3D, about 0.9 when a wrong landmark frame mirrors the faces
@@ -54,7 +57,6 @@ LANDMARK_FRAMES = {
 
 @lru_cache(maxsize=1)
 def _reference() -> np.ndarray:
-    from importlib.resources import files
 
     with (files("hpe_cli.data") / "reference_3d_68_points_trans.npy").open("rb") as fh:
         return np.load(fh).astype(np.float64)
@@ -92,7 +94,6 @@ def fit_template(points_canonical, template=None) -> dict:
         ``rmse_rel`` (N,) the RMSE in template units (``rmse / scale``;
         about 0.1 on AFLW2000-3D), ``n_pairs`` (N,).
     """
-    from .similarity import fit_similarity
 
     P = np.asarray(points_canonical, dtype=np.float64)
     if P.ndim != 3 or P.shape[1:] != (68, 3):

@@ -8,6 +8,12 @@ and ``max_bytes`` bytes are queued, so memory stays bounded.
 
 from __future__ import annotations
 
+import errno
+import os
+import shutil
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+
 
 class BackgroundFile:
     """Write ``bytes``-like objects to the binary file ``fh`` in order, on one thread.
@@ -34,8 +40,6 @@ class BackgroundFile:
     """
 
     def __init__(self, fh, depth: int = 8, max_bytes: int = 96 << 20):
-        from collections import deque
-        from concurrent.futures import ThreadPoolExecutor
 
         self.fh = fh
         self.depth = max(1, int(depth))
@@ -97,8 +101,6 @@ class BackgroundFile:
 
 
 def _append_file(fh, src) -> None:
-    import os
-    import shutil
 
     with src:
         fh.flush()
@@ -111,8 +113,6 @@ def _append_file(fh, src) -> None:
                         break
                     left -= n
             except OSError as exc:
-                import errno
-
                 if exc.errno not in (errno.EXDEV, errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP):
                     raise
         fh.seek(0, os.SEEK_END)  # the buffered file learns where the kernel left the descriptor

@@ -13,9 +13,14 @@ distinct images, whose ids must be remembered).
 
 from __future__ import annotations
 
+import gc
+import tempfile
 from pathlib import Path
 
 import numpy as np
+import orjson
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from ..errors import HpeError
 from .layout import ANGLE_COLS, BBOX_COLS, arrow_to_numpy, landmark_count
@@ -67,8 +72,6 @@ def _image_codes(frame, path, offset: int):
             raise HpeError(f"{path}: row {offset + bad}: expected an image name, got a missing value")
         codes, names = pd.factorize(col.astype(str), sort=False)
         return np.asarray(codes, dtype=np.int64), [str(x) for x in names]
-    import pyarrow as pa
-    import pyarrow.compute as pc
 
     col = frame.column("image")
     if col.null_count:
@@ -111,9 +114,6 @@ def annotations_text(frame, image_ids, first_id: int, *, path="<coco>", offset: 
     orjson formats the floats (shortest round-trip form) straight into its
     output, one pass over the text.
     """
-    import gc
-
-    import orjson
 
     names = frame_column_names(frame)
     missing = [c for c in BBOX_COLS + ANGLE_COLS if c not in names]
@@ -206,12 +206,10 @@ class CocoWriter(StreamWriter):
         self.images: dict = {}  # name -> [id, width, height]
 
     def head(self) -> bytes:
-        import orjson
 
         return b'{"info":' + orjson.dumps(self.info) + b',"licenses":[],"annotations":['
 
     def tail(self) -> bytes:
-        import orjson
 
         images = [{"file_name": f, "height": h, "width": w, "id": i} for f, (i, w, h) in self.images.items()]
         return b'],"images":' + orjson.dumps(images) + b',"categories":' + orjson.dumps(CATEGORIES) + b"}"
@@ -293,9 +291,6 @@ def coco_dict(
     image_size_cols=("image_width", "image_height"),
 ) -> dict:
     """The COCO dictionary of a label table, as :func:`write_coco` writes it (small tables, tests)."""
-    import tempfile
-
-    import orjson
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "c.json"

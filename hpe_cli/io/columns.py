@@ -42,11 +42,15 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pcsv
 
 from ..datasets.jsonfile import load_json
 from ..errors import HpeError
 from .dataset_readers import READERS, input_format_names, register_reader
 from .run_options import active_table_options  # noqa: F401
+from .system_meta import file_system
+from .table_source import Reject, TableSource
 
 LINE_COL = "__line__"
 #: OPAL field names -> hpe column names
@@ -105,7 +109,6 @@ def apply_columns_map(src, columns):
     mapping = parse_columns_map(columns)
     if not mapping:
         return src
-    import pyarrow as pa
 
     names = list(src.schema.names)
     if LINE_COL in mapping or LINE_COL in mapping.values():
@@ -188,7 +191,6 @@ class _TextRows:
     comment and bad lines, for the line numbers) and the bad rows set aside as rejects."""
 
     def __init__(self, path: Path, delimiter, header, names, skip_lines, comment_prefixes, quoting, string_columns):
-        import pyarrow.csv as pcsv
 
         self.path, self.delimiter = path, delimiter
         self.skipped: list = []
@@ -223,8 +225,6 @@ class _TextRows:
 
     def make_reader(self):
         """A reader from the file's start, with the string columns declared (a probe finds the columns)."""
-        import pyarrow as pa
-        import pyarrow.csv as pcsv
 
         probe = pcsv.open_csv(self.path, read_options=self.read_opts, parse_options=self.parse_opts)
         cols = probe.schema.names
@@ -240,7 +240,6 @@ class _TextRows:
 
     def take_rejects(self) -> list:
         """The bad rows found since the last call, as rejects."""
-        from .table_source import Reject
 
         out = [
             Reject(line, f"expected {want} fields separated by {self.delimiter!r}, got {got}", text[:200])
@@ -251,7 +250,6 @@ class _TextRows:
 
     def batches(self, first_reader: list, first_line: int, line_schema):
         """``(batch with __line__, rejects)``; ``first_reader`` holds the reader already opened, if unused."""
-        import pyarrow as pa
 
         rdr = first_reader.pop() if first_reader else self.make_reader()
         start = 0
@@ -315,9 +313,6 @@ def open_text(
     with_lines : bool
         Add ``__line__`` (int64, 1-based file line of each row).
     """
-    import pyarrow as pa
-
-    from .table_source import TableSource
 
     path = Path(path)
     names = _check_text_options(path, delimiter, names)
@@ -479,9 +474,6 @@ def coco_frame(doc, path="<coco>"):
 
 
 def _frame_source(path, frame, batch_size, with_lines, system=None):
-    import pyarrow as pa
-
-    from .table_source import TableSource
 
     table = pa.Table.from_pandas(frame, preserve_index=False)  # carries __line__
     schema = table.schema if with_lines else table.schema.remove(table.schema.get_field_index(LINE_COL))
@@ -641,7 +633,7 @@ def open_coco(path, *, batch_size: int, with_lines: bool = False):
     doc = load_json(path)
     if is_coco(doc):
         return _frame_source(path, coco_frame(doc, path), batch_size, with_lines, coco_system(doc))
-    from ..datasets.dad3dheads import is_dad_metadata
+    from ..datasets.dad3dheads import is_dad_metadata  # lazy: start-up
 
     if is_dad_metadata(doc):
         return None  # a dataset reader takes it
@@ -661,7 +653,5 @@ def label_system(src, requested):
     Commands choose systems with :func:`hpe_cli.io.system_meta.resolve_system`.
     """
     if getattr(src, "dataset", False) and src.system:
-        from .system_meta import file_system
-
         return file_system(src) or requested  # None: a dataset system not built in yet
     return requested

@@ -4,7 +4,11 @@ See :mod:`hpe_cli.io.readers` for the row numbering and the reject rules."""
 
 from __future__ import annotations
 
+import csv
+
 import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pcsv
 
 from ..errors import HpeError
 from .table_source import (
@@ -20,7 +24,6 @@ from .table_source import (
 
 
 def open_csv(path, batch_size, with_lines, block_size):
-    import pyarrow as pa
 
     reader = _CsvBlocks(path, block_size)
     header, header_lines = reader.header()
@@ -43,7 +46,6 @@ def open_csv(path, batch_size, with_lines, block_size):
 
 
 def _parse_header(path, header: bytes) -> list:
-    import csv
 
     try:
         text = header.decode("utf-8")
@@ -61,8 +63,6 @@ _NULLS = None
 def _null_values():
     global _NULLS
     if _NULLS is None:
-        import pyarrow.csv as pcsv
-
         _NULLS = list(pcsv.ConvertOptions().null_values)
     return _NULLS
 
@@ -128,8 +128,6 @@ class _CsvBlocks:
 
     def infer_schema(self, names, first_line):
         """Column types from the first block: float columns forced to float64, null columns to string."""
-        import pyarrow as pa
-        import pyarrow.csv as pcsv
 
         self.ncols = len(names)
         floats = float_columns()
@@ -247,7 +245,6 @@ def _split_quoted(block: bytes, first_line: int, ncols: int):
     wrong number of fields, is rejected from its first line ("unclosed quote"
     when a quote is open at its end) and reading resumes on the next line.
     """
-    import csv
 
     lines = block.split(b"\n")
     if lines and lines[-1] == b"":
@@ -303,8 +300,6 @@ def _parse_block(path, block: bytes, first_line: int, schema, nnl=None):
     quoted newline, a value that does not convert) sends the block to the
     slow path, which splits records itself and converts column by column.
     """
-    import pyarrow as pa
-    import pyarrow.csv as pcsv
 
     names = schema.names
     nlines = (block.count(b"\n") if nnl is None else nnl) + (0 if block.endswith(b"\n") else 1)
@@ -342,8 +337,6 @@ def _parse_block(path, block: bytes, first_line: int, schema, nnl=None):
 
 def _parse_block_slow(data: bytes, lines, schema, names, quoted):
     """Parse every column as bytes, then convert column by column; rows that do not fit are rejects."""
-    import pyarrow as pa
-    import pyarrow.csv as pcsv
 
     raw = pcsv.read_csv(
         pa.py_buffer(data),
@@ -394,8 +387,7 @@ def _quoted_records(data: bytes):
 
 def _convert_column(col, typ, name):
     """Binary column -> (array of ``typ`` with bad rows null, bad mask, reason)."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
+    import pyarrow.compute as pc  # lazy: start-up
 
     n = len(col)
     bad = np.zeros(n, dtype=bool)
@@ -445,8 +437,7 @@ def _is_utf8(v: bytes) -> bool:
 
 def _failing(s, typ) -> np.ndarray:
     """Rows of string array ``s`` that do not cast to ``typ`` (bisection: a few casts per bad value)."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
+    import pyarrow.compute as pc  # lazy: start-up
 
     out = np.zeros(len(s), dtype=bool)
 

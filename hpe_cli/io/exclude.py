@@ -11,16 +11,17 @@ Arrow on whole columns (one joined key string per row, ``is_in``).
 from __future__ import annotations
 
 import numpy as np
+import pyarrow as pa
 
 from ..errors import HpeError, UsageError
+from .readers import open_table
 
 KEY_COLUMNS = ("file", "image", "image_id", "id", "path", "sequence", "frame", "camera", "person_id")
 SEP = "\x1f"
 
 
 def _key_strings(table, keys):
-    import pyarrow as pa
-    import pyarrow.compute as pc
+    import pyarrow.compute as pc  # lazy: start-up
 
     cols = []
     for k in keys:
@@ -44,11 +45,9 @@ class ExcludeList:
     """The key list of ``path``; :meth:`reasons` names the excluded rows of a table."""
 
     def __init__(self, path):
-        from .readers import open_table
 
         src = open_table(path)
         self.path = src.path
-        import pyarrow as pa
 
         batches = list(src.batches())
         table = pa.Table.from_batches(batches, schema=src.schema) if batches else src.schema.empty_table()
@@ -76,7 +75,7 @@ class ExcludeList:
 
     def reasons(self, table) -> np.ndarray:
         """``"excluded: <reason>"`` for each listed row of ``table`` (Arrow table/batch), ``""`` for the others."""
-        import pyarrow.compute as pc
+        import pyarrow.compute as pc  # lazy: start-up
 
         keys = self.check_input(table.schema.names)
         listed = _key_strings(self.table, keys)
@@ -87,7 +86,6 @@ class ExcludeList:
 
     def reasons_frame(self, frame) -> np.ndarray:
         """:meth:`reasons` of a pandas DataFrame."""
-        import pyarrow as pa
 
         # a key column holding only the readers' placeholders ("" or -1: the input has no such column) is absent
         have = [k for k in KEY_COLUMNS if k in frame.columns and (len(frame) == 0 or _filled(frame[k]))]

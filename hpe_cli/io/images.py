@@ -25,6 +25,7 @@ files; a new layout is one registered function.
 
 from __future__ import annotations
 
+import posixpath
 import re
 from dataclasses import dataclass
 from pathlib import Path, PurePath
@@ -99,7 +100,6 @@ def leaves_root(image) -> bool:
     export or a drawing) files outside the folder given with ``--images``. Absolute names are the user's
     own choice and are not affected.
     """
-    import posixpath
 
     name = str(image).replace("\\", "/")
     if not name or PurePath(name).is_absolute():
@@ -305,7 +305,7 @@ class ImageResolver:
             else:
                 videos.setdefault(ref.video, {}).setdefault(ref.frame, []).append(i)
         for video, frames in videos.items():
-            from ..datasets.panoptic_video import VideoFrames
+            from ..datasets.panoptic_video import VideoFrames  # lazy: start-up
 
             for fr, img, reason in VideoFrames(video).read(sorted(frames)):
                 for i in frames.get(fr, []):

@@ -14,6 +14,7 @@ partition) are well spread. Any substring costs the same, which gives the stem (
 from __future__ import annotations
 
 import numpy as np
+import pyarrow as pa
 
 _P = np.uint64(0x100000001B3)  # FNV's 64-bit prime (odd)
 _P_INV = np.uint64(pow(int(_P), -1, 1 << 64))
@@ -51,7 +52,6 @@ def string_hashes(arr, stems: bool = True) -> tuple[np.ndarray, np.ndarray | Non
     equal hashes; a string that is its own stem (no folder, no suffix) gets the same hash for both.
     ``stems=False`` skips the stems (the second item is None).
     """
-    import pyarrow as pa
 
     if isinstance(arr, pa.ChunkedArray):
         arr = arr.combine_chunks()

@@ -9,6 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import HpeError
+from ..rotation import soa
+from ..rotation.check import rotation_screen_columns
+from ..rotation.systems import get_system
 from .layout import ANGLE_COLS, MATRIX_COLS
 from .table_source import plain_numpy
 
@@ -33,8 +36,8 @@ def numeric_values(batch, name):
     Object arrays of reasons are slow to build and compare, and almost every
     row of a real table is fine, so the common path never touches them.
     """
-    import pyarrow as pa
-    import pyarrow.compute as pc
+    import pyarrow as pa  # lazy: start-up
+    import pyarrow.compute as pc  # lazy: start-up
 
     col = batch.column(batch.schema.get_field_index(name))
     numeric = (
@@ -94,17 +97,17 @@ def label_columns_fast(batch, mode: str, radians: bool = False):
     names = ANGLE_COLS if mode == "angles" else MATRIX_COLS
     cols, ok, reasons = value_columns(batch, names)
     if radians and mode == "angles":
-        from .units_watch import observe_radians  # warns at the end of the run if they look like degrees
+        # warns at the end of the run if they look like degrees
+        from .units_watch import observe_radians  # lazy: start-up
 
         observe_radians(cols, ok)
         cols = [v * (180.0 / np.pi) for v in cols]
     elif mode == "angles":
-        from .units_watch import observe_degrees  # warns at the end of the run if they look like radians
+        # warns at the end of the run if they look like radians
+        from .units_watch import observe_degrees  # lazy: start-up
 
         observe_degrees(cols, ok)
     if mode == "matrix":
-        from ..rotation.check import rotation_screen_columns
-
         finite, ortho, proper = rotation_screen_columns(cols)
         not_rot = ok & ~(ortho & proper)
         if not_rot.any():
@@ -165,7 +168,6 @@ def label_mode(columns, path="input", system=None) -> str:
     (degrees) are present, else ``"matrix"`` if ``r00..r22`` (the system's
     stored matrix) are, else an error naming what was expected.
     """
-    from ..rotation.systems import get_system
 
     system = get_system(system) if system is not None else None
     if is_native(system, columns):
@@ -258,8 +260,6 @@ def batch_rotations(batch, system, mode: str, radians: bool = False):
     reasons : ndarray of object (n,) or None
         ``''`` for usable rows, else the first reason; None when all rows are usable.
     """
-    from ..rotation import soa
-    from ..rotation.systems import get_system
 
     system = get_system(system)
     n = batch.num_rows
@@ -292,7 +292,7 @@ def batch_rotations(batch, system, mode: str, radians: bool = False):
         raise HpeError(f"{mode} columns {', '.join(system.value_columns)} not found for system {system.name}")
     cols, ok, reasons = value_columns(batch, system.value_columns)
     if system.storage_kind in ("rotvec", "quaternion"):  # column kernels: no (n, 3, 3) stack on the hot path
-        from ..rotation import storage as st
+        from ..rotation import storage as st  # lazy: start-up
 
         if system.storage_kind == "quaternion":
             c = cols if system.quaternion_order == "wxyz" else [cols[3], cols[0], cols[1], cols[2]]
@@ -328,7 +328,6 @@ def rotation_value_columns(system, X, n: int) -> dict:
     already hold them). Angle systems with declared columns get their angles
     in the system's units, the others their stored values.
     """
-    from ..rotation import soa
 
     if system.storage_kind == "angles":
         if not system.columns:
@@ -348,7 +347,6 @@ def label_values(batch, system, mode: str, radians: bool = False):
     ``(n, 3, 3)`` stored matrices (any other storage kind is turned into its
     matrix). Unusable entries are NaN (for stored values: the whole row).
     """
-    from ..rotation.systems import get_system
 
     system = get_system(system)
     names = batch.schema.names
@@ -357,7 +355,7 @@ def label_values(batch, system, mode: str, radians: bool = False):
         cols = system.value_columns if native else ANGLE_COLS
         values = np.stack([numeric_column(batch, c)[0] for c in cols], axis=-1)
         rad = (system.value_units == "radians") if native else radians
-        from .units_watch import observe_degrees, observe_radians
+        from .units_watch import observe_degrees, observe_radians  # lazy: start-up
 
         if not rad:
             observe_degrees([values[:, 0], values[:, 1], values[:, 2]])

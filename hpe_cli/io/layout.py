@@ -30,7 +30,7 @@ def string_array(values):
     process); this does not. Anything but ``str``/``None`` is left to
     ``pa.array`` (same result and errors as before).
     """
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up
 
     values = list(values)
     n = len(values)
@@ -66,7 +66,7 @@ def numpy_to_arrow(v):
     """A pyarrow array of a 1-D numpy array (or list): numbers and booleans from their buffers, object
     arrays as strings (:func:`string_array`); anything else through ``pa.array``. Values are those
     ``pa.array`` gives (NaN stays NaN, not null)."""
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up
 
     if isinstance(v, (pa.Array, pa.ChunkedArray)):
         return v
@@ -92,7 +92,7 @@ def arrow_to_numpy(col, dtype=None) -> np.ndarray:
     result) as with ``to_numpy(zero_copy_only=False)``; types that are not
     fixed-width numbers go through ``to_numpy``.
     """
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up
 
     chunks = col.chunks if isinstance(col, pa.ChunkedArray) else [col]
     target = pa.from_numpy_dtype(np.dtype(dtype)) if dtype is not None else col.type
@@ -126,7 +126,7 @@ def arrow_table(cols: dict, schema=None):
     Built from the arrays' buffers (:func:`numpy_to_arrow`), so making a table
     does not import pandas (a worker process would spend 0.3 s on it).
     """
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up
 
     t = pa.Table.from_arrays([numpy_to_arrow(v) for v in cols.values()], names=list(cols))
     return t.cast(schema) if schema is not None else t

@@ -6,6 +6,8 @@ import errno
 import os
 import re
 
+from ..errors import HpeError
+
 TEMP_PREFIX = ".hpe-"
 
 _REASONS = {
@@ -60,7 +62,6 @@ def printable(text) -> str:
 def write_bytes(staged, data, shown) -> None:
     """Write ``data`` to the staged file ``staged``; an OS error (a full disk, a quota) is one line naming ``shown``,
     the path the user will see (not the temporary name), with the reason."""
-    from ..errors import HpeError
 
     try:
         with open(staged, "wb") as fh:

@@ -90,8 +90,8 @@ def open_table(
     these arguments, the running command's ``--columns-map``/``--delimiter``/...
     options apply (:func:`hpe_cli.cli.table_options.column_options`).
     """
-    from .columns import active_table_options, apply_columns_map, open_formatted
-    from .dataset_readers import open_dataset
+    from .columns import active_table_options, apply_columns_map, open_formatted  # lazy: start-up
+    from .dataset_readers import open_dataset  # lazy: start-up
 
     if columns is None and delimiter is None and header and input_format is None and names is None:
         active = active_table_options()
@@ -103,7 +103,7 @@ def open_table(
                 # a command with several inputs (evaluate PRED GT): text options apply to its text inputs
                 delimiter, header, input_format, names = None, True, None, None
             if columns:
-                from .columns import LenientMap
+                from .columns import LenientMap  # lazy: start-up
 
                 columns = LenientMap(columns)
     src = open_formatted(
@@ -131,7 +131,7 @@ def _open_core(
     :data:`hpe_cli.io.dataset_readers.READERS` before this is asked. With ``with_lines=True`` every batch
     carries an int64 ``__line__`` column (see the module docstring).
     """
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up
 
     path = Path(path)
     if not path.exists():
@@ -163,7 +163,7 @@ def _open_core(
 
 
 def _open_parquet(path, batch_size, with_lines):
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # lazy: start-up
 
     pf = pq.ParquetFile(path, pre_buffer=False, buffer_size=1 << 20)
     schema = pf.schema_arrow
@@ -193,7 +193,7 @@ def _open_parquet(path, batch_size, with_lines):
 
 
 def _open_csv(path, batch_size, with_lines, block_size):
-    from .csv_reader import open_csv
+    from .csv_reader import open_csv  # lazy: start-up
 
     return open_csv(path, batch_size, with_lines, block_size)
 
@@ -229,7 +229,7 @@ def frame_source(path: Path, frame, batch_size: int, with_lines: bool) -> TableS
     the ``.mat`` files of a folder and BIWI pose files), ``bad_files`` (``(file, reason)`` of one-record files
     that could not be read: rejects named after the rows).
     """
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up
 
     system = frame.attrs.get("system")
     row_files = [str(f) for f in frame["file"]] if frame.attrs.get("one_record_files") else None
@@ -261,7 +261,7 @@ def frame_source(path: Path, frame, batch_size: int, with_lines: bool) -> TableS
 
 def read_table(path):
     """Read a whole label table into a pandas DataFrame (small inputs, tests)."""
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up
 
     src = open_table(path)
     batches = list(src.batches())

@@ -30,7 +30,7 @@ def _is_mat(path: Path) -> bool:
     "file or a folder of them; a row is named by its file",
 )
 def open_mat(path: Path, *, batch_size: int, with_lines: bool = False):
-    from ..datasets.mat import read_mat_dir
+    from ..datasets.mat import read_mat_dir  # lazy: start-up
 
     return frame_source(path, read_mat_dir(path), batch_size, with_lines)
 
@@ -40,7 +40,7 @@ def _is_w300lp(path: Path) -> bool:
         return path.name.lower().endswith(".zip")
     if not path.is_dir():
         return False
-    from ..datasets.w300lp import is_w300lp_root
+    from ..datasets.w300lp import is_w300lp_root  # lazy: start-up
 
     return is_w300lp_root(path)
 
@@ -54,7 +54,7 @@ def _is_w300lp(path: Path) -> bool:
     doc="the 300W-LP root (its AFW/HELEN/IBUG/LFPW folders and ``landmarks/``) or ``300W-LP.zip``, streamed",
 )
 def open_300w_lp(path: Path, *, batch_size: int, with_lines: bool = False):
-    from ..datasets.w300lp import is_w300lp_zip, open_w300lp
+    from ..datasets.w300lp import is_w300lp_zip, open_w300lp  # lazy: start-up
 
     if path.is_file() and not is_w300lp_zip(path):
         raise HpeError(f"{path}: expected a 300W-LP zip with AFW/HELEN/IBUG/LFPW .mat members")
@@ -64,7 +64,7 @@ def open_300w_lp(path: Path, *, batch_size: int, with_lines: bool = False):
 def _is_dad3dheads(path: Path) -> bool:
     if not (path.is_dir() or path.suffix.lower() == ".json"):
         return False
-    from ..datasets.dad3dheads import is_dad3dheads
+    from ..datasets.dad3dheads import is_dad3dheads  # lazy: start-up
 
     return is_dad3dheads(path)
 
@@ -77,7 +77,7 @@ def _is_dad3dheads(path: Path) -> bool:
     doc="DAD-3DHeads: the root, a subset folder or a ``<subset>.json`` metadata file (model-view matrices)",
 )
 def open_dad3dheads(path: Path, *, batch_size: int, with_lines: bool = False):
-    from ..datasets.dad3dheads import read_dad3dheads
+    from ..datasets.dad3dheads import read_dad3dheads  # lazy: start-up
 
     return frame_source(path, read_dad3dheads(path), batch_size, with_lines)
 
@@ -100,7 +100,7 @@ def _is_biwi(path: Path) -> bool:
     "is named by its file",
 )
 def open_biwi(path: Path, *, batch_size: int, with_lines: bool = False):
-    from ..datasets.biwi import read_biwi
+    from ..datasets.biwi import read_biwi  # lazy: start-up
 
     bad: list = []  # unreadable or invalid pose files: rejects of the commands that read the table
     table = read_biwi(path, bad=bad)

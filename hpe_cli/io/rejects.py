@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from collections import Counter
+from os.path import realpath
 
 import numpy as np
 
-from ..errors import HpeError
+from ..errors import HpeError, RejectedAllError
 from .writers import check_output, write_table
 
 
@@ -151,13 +152,11 @@ def fail_all_rejected(rejects: "Rejects", message: str):
     """Every row was rejected: raise. With a rejects file (and no ``--strict``) the error is a
     :class:`~hpe_cli.errors.RejectedAllError` that still commits that file, the one output that says why; the
     main outputs are not written. Without one, a plain :class:`~hpe_cli.errors.HpeError`."""
-    from ..errors import RejectedAllError
 
     if rejects.path is None or rejects.strict:
         raise HpeError(message)
-    from os.path import realpath
 
-    from .transaction import current
+    from .transaction import current  # lazy: start-up
 
     rejects.write()
     txn = current()

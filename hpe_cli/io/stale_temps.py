@@ -8,6 +8,7 @@ import os
 import re
 import shutil
 import stat
+import time
 from pathlib import Path
 
 #: a temp of a run that is gone (killed) is removed by a later run staging into the same folder once it is
@@ -30,7 +31,6 @@ def lock_file(fd) -> None:
 def sweep_stale_temps(folder: Path, own: set) -> None:
     """Remove the temps (``.hpe-<8 hex>.tmp``) in ``folder`` left by runs that were killed: older than
     :data:`SWEEP_AGE` and not locked by any live process. Best effort: anything unclear is left alone."""
-    import time
 
     try:
         import fcntl

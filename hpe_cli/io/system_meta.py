@@ -24,9 +24,11 @@ command run is kept (:func:`resolutions`) so the command's summary can say it.
 from __future__ import annotations
 
 import contextvars
+import json
 from dataclasses import dataclass
 
 from ..errors import HpeError, UsageError
+from ..rotation.systems import SystemError_, get_system, system_from_dict
 
 FILE, OPTION, DEFAULT = "file metadata", "option", "default"
 
@@ -99,15 +101,12 @@ def summary_lines() -> list:
 # ------------------------------------------------------------------------------------------------ the file's own
 def system_from_metadata(metadata, path="input"):
     """The RotationSystem a schema's metadata names (``hpe:system_definition``, else ``hpe:system``), or None."""
-    from ..rotation.systems import SystemError_, system_from_dict
 
     meta = {
         (k.decode() if isinstance(k, bytes) else k): (v.decode("utf-8", "replace") if isinstance(v, bytes) else v)
         for k, v in (metadata or {}).items()
     }
     if "hpe:system_definition" in meta:
-        import json
-
         try:
             d = json.loads(meta["hpe:system_definition"])
         except ValueError:
@@ -129,7 +128,6 @@ def system_from_metadata(metadata, path="input"):
 
 
 def _named(name, path, what):
-    from ..rotation.systems import SystemError_, get_system
 
     try:
         return get_system(name)
@@ -148,8 +146,6 @@ def file_system(src):
     if getattr(src, "system", None):
         what = "format" if getattr(src, "dataset", False) else "metadata"
         if getattr(src, "dataset", False):
-            from ..rotation.systems import SystemError_, get_system
-
             try:
                 return get_system(src.system)
             except SystemError_:  # a dataset system not built in (yet)
@@ -204,7 +200,6 @@ def resolve_system(
         The option disagrees with the file's own system (exit 2), or neither
         the file nor an option names a system and there is no default.
     """
-    from ..rotation.systems import get_system
 
     path = str(src.path)
     opt = get_system(option) if option is not None else None

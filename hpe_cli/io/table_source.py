@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -9,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from .layout import ANGLE2_COLS, ANGLE_COLS, BBOX_COLS, MATRIX_COLS
 
 #: rows per batch: large enough to amortise per-batch costs, small enough that the few batches in flight
 #: (read, converted on two threads, written) keep a 10M-row job under 300 MB
@@ -23,7 +26,6 @@ RAW_MAX = 200
 
 def float_columns() -> frozenset:
     """Names of the standard columns read as floats (angles, matrix, box, quaternion, ...)."""
-    from .layout import ANGLE2_COLS, ANGLE_COLS, BBOX_COLS, MATRIX_COLS
 
     names = set(ANGLE_COLS) | set(ANGLE2_COLS) | set(MATRIX_COLS) | set(BBOX_COLS)
     names |= {"roundtrip_err", "lock_dist", "rx", "ry", "rz", "qw", "qx", "qy", "qz"}
@@ -32,7 +34,6 @@ def float_columns() -> frozenset:
 
 def is_float_column(name: str, floats=None) -> bool:
     """Columns always read as float64 from CSV: label, box and landmark (``lm{i}_x/y/z``) columns."""
-    import re
 
     return name in (floats if floats is not None else float_columns()) or re.fullmatch(r"lm\d+_[xyz]", name) is not None
 
@@ -97,7 +98,7 @@ class TableSource:
         return f"{self.path}: {self.unit} {n}"
 
     def batches_with_rejects(self) -> Iterator:
-        import pyarrow as pa
+        import pyarrow as pa  # lazy: start-up
 
         try:
             for item in self._batches():
@@ -125,14 +126,14 @@ def one_line(exc) -> str:
 
 def table_schema(schema, with_lines):
     """A table's schema, with the line-number column appended when ``with_lines``."""
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up
 
     return schema.append(pa.field(LINE_COL, pa.int64())) if with_lines else schema
 
 
 def with_line_numbers(batch, first_line: int):
     """``batch`` with the line-number column appended, numbered from ``first_line``."""
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up
 
     n = batch.num_rows  # from_buffers: zero copy, and pa.array's import of pandas (0.4 s) is not needed here
     lines = pa.Array.from_buffers(
@@ -155,7 +156,6 @@ def plain_numpy(arr) -> np.ndarray:
 
 def check_duplicates(path, names, where="line 1: "):
     """Raise HpeError if a column name repeats or is the reserved line-number column."""
-    from collections import Counter
 
     dup = [n for n, c in Counter(names).items() if c > 1]
     if dup:

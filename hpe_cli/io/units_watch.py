@@ -11,8 +11,11 @@ angle in radians never exceeds 2*pi in magnitude, so a single such value is wort
 from __future__ import annotations
 
 import sys
+import threading
 
 import numpy as np
+
+from .transaction import current
 
 #: more rows than this, all within +-pi, are worth a warning
 MIN_ROWS = 5
@@ -24,7 +27,6 @@ class UnitsWatch:
     """Running count and largest |value| of the usable angle rows read as degrees in one run."""
 
     def __init__(self, inputs, unit: str = "degrees"):
-        import threading
 
         self.inputs, self.unit, self.rows, self.largest = inputs, unit, 0, 0.0
         self._lock = threading.Lock()  # readers may feed it from several threads
@@ -80,7 +82,6 @@ def observe_radians(cols, ok=None) -> None:
 
 
 def _observe(cols, ok, unit: str) -> None:
-    from .transaction import current
 
     txn = current()
     if txn is None:

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HpeError
+from .coco import column_values, frame_column_names, frame_parts, string_column
 from .writers import StreamWriter
 
 #: column order of one line, as WHENet writes it
@@ -33,7 +34,6 @@ def whenet_lines(frame, path="<annotation.txt>", offset: int = 0) -> list:
     ``frame`` is a pandas DataFrame, pyarrow Table or RecordBatch; ``offset``
     is the index of its first row in the whole table (for error messages).
     """
-    from .coco import column_values, frame_column_names, string_column
 
     missing = [c for c in WHENET_FIELDS if c not in frame_column_names(frame)]
     if missing:
@@ -91,7 +91,6 @@ def write_whenet(frame, path, overwrite: bool = False, batch_size: int = 65536) 
     Each line is ``image,yaw,pitch,roll`` -- yaw first, as in WHENet -- with
     degrees printed by Python's ``str(float)`` (shortest round-trip form).
     """
-    from .coco import frame_parts
 
     with WhenetWriter(path, overwrite) as w:
         for part in frame_parts(frame, batch_size):

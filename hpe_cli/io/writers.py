@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import HpeError
 
 TABLE_SUFFIXES = (".parquet", ".pq", ".csv")
@@ -55,7 +57,7 @@ class AtomicFile:
         self.tmp = None
 
     def __enter__(self) -> Path:
-        from .transaction import OutputTransaction, current
+        from .transaction import OutputTransaction, current  # lazy: start-up
 
         txn = current()
         self._own = txn is None
@@ -83,7 +85,7 @@ def _mentions(exc, tmp) -> bool:
 
 
 def _reason(exc) -> str:
-    from .transaction import os_reason
+    from .transaction import os_reason  # lazy: start-up
 
     return os_reason(exc)
 
@@ -110,7 +112,7 @@ class TableWriter:
         return self
 
     def write(self, batch) -> None:
-        import pyarrow as pa
+        import pyarrow as pa  # lazy: start-up
 
         if isinstance(batch, dict):
             batch = pa.RecordBatch.from_pydict(batch)
@@ -139,8 +141,8 @@ class TableWriter:
 
     def _open(self, schema):
         if self.fmt == "parquet":
-            import pyarrow as pa
-            import pyarrow.parquet as pq
+            import pyarrow as pa  # lazy: start-up
+            import pyarrow.parquet as pq  # lazy: start-up
 
             # continuous floats neither repeat (dictionary pages) nor compress (snappy finds
             # nothing in float64 mantissas): both cost write time for no gain
@@ -151,7 +153,7 @@ class TableWriter:
                 use_dictionary=[n for n in schema.names if n not in floats],
                 compression={n: ("none" if n in floats else "snappy") for n in schema.names},
             )
-        import pyarrow.csv as pcsv
+        import pyarrow.csv as pcsv  # lazy: start-up
 
         return pcsv.CSVWriter(self._where(), schema)
 
@@ -212,7 +214,7 @@ class StreamWriter:
         return b""
 
     def __enter__(self):
-        from .background import BackgroundFile
+        from .background import BackgroundFile  # lazy: start-up
 
         self._tmp = self._atomic.__enter__()
         try:
@@ -284,7 +286,6 @@ def check_report_outputs(report, output, overwrite: bool) -> None:
 
 
 def _json_default(o):
-    import numpy as np
 
     if isinstance(o, np.generic):
         return o.item()

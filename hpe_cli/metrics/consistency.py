@@ -36,6 +36,7 @@ import numpy as np
 
 from ..rotation.distances import geodesic_deg
 from ..rotation.storage import matrix_to_rotvec, rotvec_to_matrix
+from .sketch import EXACT_CAP, BinnedMedians
 
 #: Weiszfeld iterations of the chordal L1 mean (each a projection onto SO(3))
 L1_ITERATIONS = 20
@@ -324,7 +325,6 @@ FIT_RESOLUTION_DEG = 0.01
 
 def expected_angle_sketch(exact_cap=None):
     """The bounded-memory collector of ``(|yaw|, landmark angle)`` pairs :func:`fit_expected_streamed` fits."""
-    from .sketch import EXACT_CAP, BinnedMedians
 
     cap = EXACT_CAP if exact_cap is None else exact_cap
     return BinnedMedians(FIT_EDGES, 90.0, 180.0, FIT_RESOLUTION_DEG, FIT_RESOLUTION_DEG, cap)

@@ -12,6 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..rotation import soa
+from ..rotation.check import rotation_reasons
+from ..rotation.systems import get_system
 from . import rotation_errors as re_
 from .align import mean_offset, remove_offset
 from .protocols import PROTOCOLS, PosePair, summarize
@@ -161,7 +164,6 @@ def evaluate_canonical(
     asked, ``by`` and ``yaw_bins``; ``rows`` is the :class:`PairRows` after
     alignment (for per-row output and plots).
     """
-    from ..rotation.systems import get_system
 
     gt_system = get_system(gt_system)
     protocols = check_protocols(protocols)
@@ -210,8 +212,6 @@ def evaluate_canonical(
 
 def _to_canonical(values, system, columns, side):
     """``(canonical nested list, invalid mask, reasons)`` from angles (N, 3) or matrices (N, 3, 3)."""
-    from ..rotation import soa
-    from ..rotation.check import rotation_reasons
 
     a = np.asarray(values, dtype=np.float64)
     if columns is None:
@@ -267,7 +267,6 @@ def evaluate(pred, gt, *, pred_system, gt_system, protocols=None, align: str = "
     ValueError
         Mismatched row counts, bad shapes, unknown protocol or system.
     """
-    from ..rotation.systems import get_system
 
     ps, gs = get_system(pred_system), get_system(gt_system)
     cp, cg = columns if isinstance(columns, (tuple, list)) else (columns, columns)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..rotation import solutions
+from ..rotation.systems import get_system
 from . import peer_angles as pa_
 from . import rotation_errors as re_
 
@@ -36,7 +38,6 @@ class PosePair:
 
     def stored(self, system, side: str):
         """Nested stored matrix of ``side`` ('pred' or 'gt') in ``system``."""
-        from ..rotation.systems import get_system
 
         system = get_system(system)
         key = ("stored", system.name, side)
@@ -46,8 +47,6 @@ class PosePair:
 
     def angles(self, system, side: str):
         """``(primary, secondary)`` angles ``(N, 3)`` (pitch, yaw, roll; degrees) of ``side`` in ``system``."""
-        from ..rotation import solutions
-        from ..rotation.systems import get_system
 
         system = get_system(system)
         key = ("angles", system.name, side)
@@ -67,8 +66,6 @@ class PosePair:
         """The primary angles ``(N, 3)`` of ``side`` in ``system`` (degrees): rows written as angles in ``system``
         that are its primary triple are read as written (:func:`hpe_cli.rotation.solutions.primary_from_written`),
         the rest come from the matrix."""
-        from ..rotation import solutions
-        from ..rotation.systems import get_system
 
         system = get_system(system)
         key = ("primary", system.name, side)
@@ -113,7 +110,6 @@ class PosePair:
             Rows given as angles whose numbers were changed by the conversion;
             None when the side was not given as angles (all from the matrix).
         """
-        from ..rotation.systems import get_system
 
         system = get_system(system)
         key = ("written", system.name, side)

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..rotation.soa import frobenius as soa_frobenius
+
 _DEG = 180.0 / np.pi
 
 #: names of the three axes (columns of the canonical matrix) as the report spells them
@@ -76,7 +78,6 @@ def frobenius(P, G) -> np.ndarray:
     Computed as ``||P - G||_F``, which is the same number (multiply by the
     orthogonal ``G``) without the cancellation of ``I - P G^T`` for small errors.
     """
-    from ..rotation.soa import frobenius as soa_frobenius
 
     return soa_frobenius(as_nested(P), as_nested(G))
 

@@ -16,6 +16,7 @@ import tempfile
 
 import numpy as np
 
+from .protocols import PROTOCOLS
 from .rotation_errors import AXES
 
 ANGLES = ("pitch", "yaw", "roll")
@@ -278,7 +279,6 @@ class Accumulator:
         return {"n": n, "metrics": metrics, "protocols": {name: self._protocol(G, g, name) for name in self.protocols}}
 
     def _protocol(self, G: _Grouping, g: int, name: str) -> dict:
-        from .protocols import PROTOCOLS
 
         p = PROTOCOLS[name]
         labels = ("pitch", "yaw", "roll")

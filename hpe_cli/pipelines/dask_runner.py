@@ -12,9 +12,13 @@ processes (for testing and single machines). Dask is imported lazily.
 
 from __future__ import annotations
 
+import os
+import socket
+import sys
 from contextlib import contextmanager
 
 from ..errors import HpeError
+from ..io.transaction import os_reason
 
 #: seconds to connect to a ``--scheduler`` address and to get its first bytes (a Dask scheduler speaks first)
 CONNECT_SECONDS = 10.0
@@ -28,9 +32,6 @@ def probe(address: str, seconds: float | None = None) -> None:
     A Dask scheduler sends its handshake as soon as a connection is accepted
     (``distributed.comm.tcp``), so one byte within ``seconds`` shows something answers; ``tls://``
     addresses are only connected to (the client speaks first in TLS)."""
-    import socket
-
-    from ..io.transaction import os_reason
 
     seconds = CONNECT_SECONDS if seconds is None else seconds
     scheme, sep, rest = address.partition("://")
@@ -74,8 +75,6 @@ def _quiet_resource_tracker() -> None:
     the run) it prints a ``KeyError`` traceback for every semaphore unregistered twice (CPython's
     ``resource_tracker.main``), on the stderr it inherited when it started. Started here first, it inherits
     ``/dev/null`` instead; the run's own messages still go to the real stderr."""
-    import os
-    import sys
 
     try:
         from multiprocessing import resource_tracker

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+from collections import deque
+
 
 def in_order(items, work, finish, workers):
     """``finish(*item, future)`` in input order while ``work(item[0])`` runs on ``workers`` threads.
 
     At most ``workers + 1`` items are in flight, so memory stays flat.
     """
-    from collections import deque
-    from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
 
     with ThreadPoolExecutor(workers) as pool:
         pending = deque()

@@ -12,7 +12,16 @@ output in order. No scheduling of our own: the engines schedule.
 
 from __future__ import annotations
 
+import importlib
+import multiprocessing as mp
+import os
+import sys
+import threading
+import time
+from collections import deque
 from contextlib import contextmanager
+
+from ..errors import HpeError
 
 
 class _Inline:
@@ -21,7 +30,7 @@ class _Inline:
     workers = 1
 
     def submit(self, fn, arg):
-        from concurrent.futures import Future
+        from concurrent.futures import Future  # lazy: start-up
 
         fut = Future()
         try:
@@ -66,7 +75,6 @@ class _DaskPool(_Tracking):
 
 
 def _import_all(names) -> None:
-    import importlib
 
     for name in names:
         importlib.import_module(name)
@@ -79,9 +87,6 @@ def die_with_parent(parent: int) -> None:
     started it exits); everywhere, also a daemon thread that polls ``os.getppid()`` once a second and ends the
     process when the parent is gone (re-parented). A parent already gone when this runs ends it at once.
     """
-    import os
-    import sys
-    import threading
 
     if sys.platform.startswith("linux"):
         try:
@@ -96,7 +101,6 @@ def die_with_parent(parent: int) -> None:
         os._exit(1)
 
     def watch():
-        import time
 
         while True:
             time.sleep(1.0)
@@ -114,7 +118,6 @@ def _worker_init(names, parent: int) -> None:
 
 def mp_context():
     """``fork`` where the platform's default allows it (fast start, no re-import), else ``spawn``."""
-    import multiprocessing as mp
 
     return mp.get_context("spawn" if mp.get_start_method(allow_none=True) == "spawn" else "fork")
 
@@ -143,7 +146,7 @@ def unit_pool(workers: int = 1, scheduler: str | None = None, warm=()):
     job after those few.
     """
     if scheduler is not None:
-        from .dask_runner import dask_client
+        from .dask_runner import dask_client  # lazy: start-up
 
         with dask_client(scheduler, workers) as client:
             pool = _DaskPool(client, workers)
@@ -152,8 +155,7 @@ def unit_pool(workers: int = 1, scheduler: str | None = None, warm=()):
             finally:
                 pool.cancel()
     elif workers > 1:
-        import os
-        from concurrent.futures import ProcessPoolExecutor
+        from concurrent.futures import ProcessPoolExecutor  # lazy: start-up
 
         with ProcessPoolExecutor(
             max_workers=workers, mp_context=mp_context(), initializer=_worker_init, initargs=(tuple(warm), os.getpid())
@@ -174,7 +176,7 @@ class _Local:
         self.workers = workers
 
     def submit(self, fn, arg):
-        from concurrent.futures.process import BrokenProcessPool
+        from concurrent.futures.process import BrokenProcessPool  # lazy: start-up
 
         try:
             return _Checked(self.ex.submit(fn, arg))
@@ -192,7 +194,7 @@ class _Checked:
         self.fut = fut
 
     def result(self, timeout=None):
-        from concurrent.futures.process import BrokenProcessPool
+        from concurrent.futures.process import BrokenProcessPool  # lazy: start-up
 
         try:
             return self.fut.result(timeout)
@@ -210,7 +212,6 @@ class _Checked:
 
 
 def _died():
-    from ..errors import HpeError
 
     return HpeError(
         "a worker process died while computing a unit (killed, out of memory or crashed); "
@@ -256,7 +257,6 @@ def in_order(pool, fn, items, ahead: int | None = None):
     beyond the one being waited for, so memory and the work lost to an error
     stay bounded.
     """
-    from collections import deque
 
     ahead = max(1, int(ahead if ahead is not None else 2 * getattr(pool, "workers", 1)))
     pending: deque = deque()
@@ -280,7 +280,6 @@ MAX_DEFAULT_THREADS = 8
 def default_threads(threads=None) -> int:
     """``threads`` when given (``--threads``), else one per core (``os.cpu_count()``), between 1 and
     :data:`MAX_DEFAULT_THREADS`."""
-    import os
 
     return max(1, int(threads)) if threads else max(1, min(MAX_DEFAULT_THREADS, os.cpu_count() or 1))
 

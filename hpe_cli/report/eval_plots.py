@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.writers import AtomicFile
+from ..errors import HpeError
+from ..io.writers import AtomicFile, check_output
 
 MAX_POINTS = 20_000
 EVAL_PLOT_FILES = {
@@ -32,8 +33,6 @@ def eval_plot_files(folder) -> dict:
 
 def check_plot_outputs(folder, overwrite: bool) -> None:
     """Fail early (before any work) if the plots folder cannot be written."""
-    from ..errors import HpeError
-    from ..io.writers import check_output
 
     folder = Path(folder)
     if not folder.parent.exists():

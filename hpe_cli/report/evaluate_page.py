@@ -13,8 +13,12 @@ from __future__ import annotations
 import base64
 import html
 import io
+from pathlib import Path
 
 import numpy as np
+
+from ..io.writers import AtomicFile
+from .evaluate_text import same_rotation_notes
 
 UNITS = {"geodesic": "deg", "maev": "deg", "frobenius": "unitless", "mae_wrapped": "deg", "mae_best_of_two": "deg"}
 ANGLES = ("pitch", "yaw", "roll")
@@ -379,7 +383,6 @@ def page_html(result: dict, worst=None, pictures=None, sample=None) -> str:
             + "</p>",
             _worst(worst, pictures, result.get("systems")),
         ]
-    from .evaluate_text import same_rotation_notes
 
     notes = same_rotation_notes(result) + list(result.get("notes", []))
     if notes or result.get("rejects"):
@@ -397,7 +400,6 @@ def page_html(result: dict, worst=None, pictures=None, sample=None) -> str:
 
 def write_page(path, result: dict, worst=None, *, overwrite: bool = False, plots=None, pictures=None) -> None:
     """Write the page atomically; ``worst`` is a pandas DataFrame or pyarrow Table of the worst rows."""
-    from ..io.writers import AtomicFile
 
     if worst is not None and not hasattr(worst, "iloc"):
         worst = worst.to_pandas()
@@ -408,7 +410,6 @@ def write_page(path, result: dict, worst=None, *, overwrite: bool = False, plots
 
 def data_uri(path) -> str:
     """A picture file as a data URI (for :func:`write_page`'s ``pictures``)."""
-    from pathlib import Path
 
     p = Path(path)
     kind = "png" if p.suffix.lower() == ".png" else "jpeg"

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.writers import AtomicFile
+from ..errors import HpeError
+from ..io.writers import AtomicFile, check_output
 
 #: histogram bin edges, degrees: 1-degree bins over [-180, 180]
 EDGES_1D = np.linspace(-180.0, 180.0, 361)
@@ -95,9 +96,6 @@ def write_plots(
     """
     from matplotlib.colors import LogNorm
     from matplotlib.figure import Figure
-
-    from ..errors import HpeError
-    from ..io.writers import check_output
 
     folder = Path(folder)
     if not folder.parent.exists():

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .check import ROTATION_TOL, rotation_mask
+from .check import ROTATION_TOL, rotation_mask, rotation_screen_columns
 from .euler import parse_seq, wrap_180
 from .solutions import middle_role
 from .systems import RotationSystem, get_system
@@ -234,7 +234,6 @@ def audit_columns(
         building ``(N, 3, 3)`` stacks), plus ``lock_distance`` (unless
         ``lock_distance=False``) and, for matrices, ``primary`` (N, 3).
     """
-    from .check import rotation_screen_columns
 
     system = get_system(system)
     cols = [np.asarray(c, dtype=np.float64) for c in cols]

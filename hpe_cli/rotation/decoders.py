@@ -31,6 +31,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..registry import Registry
+from .convert import canonical_to_labels
+from .distances import geodesic_deg
+from .euler import wrap_180
+from .systems import get_system
 
 _DEG = 180.0 / np.pi
 
@@ -181,10 +185,6 @@ def decoder_errors(name: str, A):
     ``d_pitch, d_yaw, d_roll`` (wrapped differences from the reference system's
     exact primary angles, degrees) and ``ok``.
     """
-    from .convert import canonical_to_labels
-    from .distances import geodesic_deg
-    from .euler import wrap_180
-    from .systems import get_system
 
     A = np.asarray(A, dtype=np.float64).reshape(-1, 3, 3)
     dec = get_decoder(name)

@@ -39,6 +39,7 @@ import numpy as np
 from . import euler as _euler
 from . import soa as _soa
 from . import solutions as _solutions
+from .check import rotation_reasons
 from .system_text import CANONICAL_WORDS, format_number, format_value, toml_escape
 
 ROLES = ("pitch", "yaw", "roll")
@@ -288,7 +289,7 @@ class RotationSystem:
         degenerate; matrices must be rotations (:func:`~hpe_cli.rotation.check.rotation_reasons`).
         Angles are not handled here (see :meth:`from_angles`).
         """
-        from . import storage as st
+        from . import storage as st  # lazy: start-up
 
         v = np.asarray(values, dtype=np.float64)
         n = v.shape[0]
@@ -322,8 +323,6 @@ class RotationSystem:
         else:
             raise SystemError_(f"system {self.name!r}: values_to_matrix: no stored values for storage_kind angles")
         if kind == "matrix":
-            from .check import rotation_reasons
-
             rr = rotation_reasons(R)
             flag(rr != "", "")
             if reasons is not None:
@@ -332,7 +331,7 @@ class RotationSystem:
 
     def matrix_to_values(self, R) -> np.ndarray:
         """Stored values ``(N, k)`` (``value_names`` order) of stored matrices ``(N, 3, 3)``."""
-        from . import storage as st
+        from . import storage as st  # lazy: start-up
 
         R = np.asarray(R, dtype=np.float64).reshape(-1, 3, 3)
         kind = self.storage_kind

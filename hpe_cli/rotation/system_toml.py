@@ -10,6 +10,7 @@ internal error.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -61,7 +62,7 @@ _EXAMPLE_KEYS = {"angles", "canonical_angles", "matrix", "values", "note"}
 
 
 def _closest(key, allowed):
-    import difflib
+    import difflib  # lazy: start-up
 
     m = difflib.get_close_matches(str(key), sorted(allowed), n=1)
     return f" (did you mean {m[0]!r}?)" if m else ""
@@ -392,7 +393,6 @@ def _check_limits(data, path) -> None:
 
 def _line_key(line: str, table: str):
     """``(key, table)`` after a top-level line: ``key = ...`` names ``table.key``, ``[table]`` starts a table."""
-    import re
 
     m = re.match(r"\s*\[+\s*([A-Za-z0-9_.\-]+)\s*\]+", line)
     if m:
@@ -435,8 +435,7 @@ def _deepest_key(text: str) -> str:
 
 def read_system_file(path) -> RotationSystem:
     """A system from a TOML file, bounded (:data:`LIMITS`) and validated (:func:`system_from_dict`)."""
-    import re
-    import tomllib
+    import tomllib  # lazy: start-up
 
     path = Path(path)
     if path.is_dir():

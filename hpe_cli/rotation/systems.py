@@ -52,7 +52,7 @@ def load_system(path) -> RotationSystem:
 
 def _builtin_dir():
     """``configs/systems``: package data when installed, the repository folder in a source tree."""
-    from importlib.resources import files
+    from importlib.resources import files  # lazy: start-up
 
     source_tree = Path(__file__).resolve().parents[2] / "configs" / "systems"
     if source_tree.is_dir():  # hpe_cli imported from a checkout: its own configs, not an installed copy's
@@ -73,7 +73,7 @@ def register_system(system: RotationSystem) -> RotationSystem:
 
 def read_builtin_systems() -> None:
     """Register every ``configs/systems/*.toml`` (the loader of :data:`SYSTEMS`)."""
-    import tomllib
+    import tomllib  # lazy: start-up
 
     for entry in sorted(_builtin_dir().iterdir(), key=lambda p: p.name):
         if entry.name.endswith(".toml"):

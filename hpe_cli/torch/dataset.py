@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 import torch
 from torchvision import tv_tensors
 from torchvision.transforms import v2
@@ -36,7 +37,15 @@ from .samples import (
     resize,
     to_tensor,
 )
-from .transforms import HeadPose, aspect_message, check_policy, is_uniform, landmark_flip_permutation, no_exact_pose
+from .transforms import (
+    HeadPose,
+    RandomHorizontalFlip,
+    aspect_message,
+    check_policy,
+    is_uniform,
+    landmark_flip_permutation,
+    no_exact_pose,
+)
 
 
 class HeadPoseDataset(torch.utils.data.Dataset):
@@ -286,7 +295,6 @@ class HeadPoseDataset(torch.utils.data.Dataset):
         return path
 
     def _image_bytes(self, i):
-        import pyarrow.parquet as pq
 
         files, column, offsets, groups = self._parquet
         if self._pf is None:  # opened lazily, once per worker process
@@ -445,7 +453,6 @@ def _leading_flip(transform, hflip: float, landmarks):
     the same pixels, poses to float rounding, the same random draws, without torchvision's dispatch per sample.
     Not when the landmarks fit no permutation of its ``scheme`` (the flip then raises as it would in v2).
     """
-    from .transforms import RandomHorizontalFlip
 
     if hflip or transform is None:
         return None

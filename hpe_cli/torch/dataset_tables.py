@@ -3,11 +3,20 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 
+from .. import read_labels
+from ..datasets.mat import read_mat, read_mat_dir
 from ..errors import HpeError
+from ..geometry.augment import box_of_points
+from ..io.layout import ANGLE_COLS, BBOX_COLS, MATRIX_COLS
+from ..io.system_meta import system_from_metadata
+from ..rotation.check import rotation_mask
 from ..rotation.systems import get_system
 
 #: columns naming the image of a row, in order of preference
@@ -47,13 +56,10 @@ def load_table(labels, landmarks):
     ):
         return _read_parquet(sorted((path / "data").glob("*.parquet")), path)
     if (path.is_dir() and any(path.glob("*.mat"))) or path.suffix.lower() == ".mat":
-        from ..datasets.mat import read_mat_dir
-
         table = read_mat_dir(path, landmarks=True)
         return table, get_system("300w_lp"), str(path), None
     if path.suffix.lower() in (".parquet", ".pq"):
         return _read_parquet([path], path)
-    from .. import read_labels
 
     table, found = read_labels(path)
     return table, found, str(path), None
@@ -61,12 +67,8 @@ def load_table(labels, landmarks):
 
 def _read_parquet(files, source):
     """Parquet shard(s) with labels; an image column of encoded bytes is read lazily per row."""
-    import re
 
     import pandas as pd
-    import pyarrow.parquet as pq
-
-    from ..io.system_meta import system_from_metadata
 
     tables, offsets, groups, found, col, binary = [], [0], [], None, None, False
     for f, path in enumerate(files):
@@ -110,8 +112,6 @@ def _read_list_file(path):
     """
     import pandas as pd
 
-    from ..datasets.mat import read_mat
-
     path = path.resolve()
     lines = [ln.split() for ln in path.read_text(encoding="utf-8").splitlines()]
     rows = [(n + 1, ln) for n, ln in enumerate(lines) if ln]
@@ -145,7 +145,6 @@ def _read_list_file(path):
         names.append(str(path.parent / ln[0]))
     table = pd.DataFrame(np.stack([r["pose"][:3] for r in recs]), columns=["pitch", "yaw", "roll"])
     table.insert(0, "file", names)
-    from ..geometry.augment import box_of_points
 
     boxes = np.full((len(recs), 4), np.nan)
     for k, r in enumerate(recs):  # visible points only, so their number varies: a box per file
@@ -164,7 +163,6 @@ def _floats(tokens) -> bool:
 
 
 def _is_image_bytes(t) -> bool:
-    import pyarrow as pa
 
     if pa.types.is_binary(t) or pa.types.is_large_binary(t):
         return True
@@ -173,7 +171,6 @@ def _is_image_bytes(t) -> bool:
 
 def canonical_matrices(table, system, source) -> np.ndarray:
     """The table's labels (angles or matrix columns, in ``system``) as canonical rotation matrices, checked."""
-    from ..io.layout import ANGLE_COLS, MATRIX_COLS
 
     cols = set(table.columns)
     if all(c in cols for c in ANGLE_COLS):
@@ -195,8 +192,6 @@ def canonical_matrices(table, system, source) -> np.ndarray:
     if R is None:
         R = system.from_angles(values)
     else:
-        from ..rotation.check import rotation_mask
-
         ok = rotation_mask(R)
         if not ok.all():
             row = int(np.flatnonzero(~ok)[0])
@@ -206,7 +201,6 @@ def canonical_matrices(table, system, source) -> np.ndarray:
 
 def table_boxes(table):
     """The table's box columns as a float array, or None without them."""
-    from ..io.layout import BBOX_COLS
 
     if not all(c in table.columns for c in BBOX_COLS):
         return None

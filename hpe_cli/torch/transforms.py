@@ -69,10 +69,13 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
 import torch
 from torchvision import tv_tensors
 from torchvision.transforms import v2
 from torchvision.transforms.v2 import functional as F
+
+from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
 
 __all__ = [
     "ON_UNDEFINED",
@@ -423,9 +426,6 @@ F.register_kernel(F.ten_crop, HeadPose)(_never("ten_crop", "one pose cannot foll
 # ---------------------------------------------------------------------------- landmark re-indexing
 def landmark_flip_permutation(scheme, n):
     """The left/right index permutation of ``n`` landmarks for a mirror under ``scheme``."""
-    import numpy as np
-
-    from ..geometry.landmark_schemes import flip_permutation, scheme_for_count
 
     if isinstance(scheme, str) and scheme == "auto":
         name = scheme_for_count(n)

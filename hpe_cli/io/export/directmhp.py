@@ -34,6 +34,7 @@ import json
 
 import numpy as np
 
+from ...io.layout import landmark_count
 from . import LAYOUTS
 from .base import Layout
 
@@ -161,7 +162,6 @@ class DirectMHPLayout(Layout):
             )
 
     def finish(self, exported, final_root):
-        from ...io.layout import landmark_count
 
         root = self.root
         (root / "annotations").mkdir(exist_ok=True)

@@ -20,7 +20,10 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 
+from ...io.layout import landmark_count
 from . import LAYOUTS
 from .base import Layout
 
@@ -83,7 +86,6 @@ class HFLayout(Layout):
         self._n_lm = None
 
     def _schema(self):
-        import pyarrow as pa
 
         fields = [pa.field("image", pa.struct([pa.field("bytes", pa.binary()), pa.field("path", pa.string())]))]
         fields += [pa.field(c, pa.string()) for c in META_STR]
@@ -96,9 +98,6 @@ class HFLayout(Layout):
         return pa.schema(fields, metadata=meta)
 
     def add_pixels(self, split, rows, payloads):
-        import pyarrow as pa
-
-        from ...io.layout import landmark_count
 
         if self._n_lm is None:
             self._n_lm = landmark_count(rows.columns)
@@ -125,7 +124,6 @@ class HFLayout(Layout):
         self._write(split, pa.Table.from_pydict(cols, schema=self._schema()))
 
     def _write(self, split, table):
-        import pyarrow.parquet as pq
 
         w = self._writers.get(split)
         if w is None or self._rows[split] >= SHARD_ROWS:

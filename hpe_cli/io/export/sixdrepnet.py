@@ -47,9 +47,13 @@ angle) unless ``--trainer`` names one. hpe writes the angles with full precision
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
 
+from ...errors import HpeError
 from ...geometry.crop import landmark_boxes, points_to_crop
+from ...io.layout import landmark_count
 from . import LAYOUTS
 from .base import Layout, abs_over
 
@@ -112,8 +116,6 @@ class SixDRepNetLayout(Layout):
         if self.form != "mat":
             return boxes
         if landmarks is None or np.asarray(landmarks).ndim != 3 or np.asarray(landmarks).shape[1] == 0:
-            from ...errors import HpeError
-
             raise HpeError(
                 "--layout 6drepnet --form mat needs 2-D landmarks (lm0_x, lm0_y, ... or pt2d): 6DRepNet's and "
                 "Hopenet's loaders crop each face from pt2d; the input has none: use --form crops"
@@ -133,7 +135,6 @@ class SixDRepNetLayout(Layout):
                 with open(self.root / f"files_{split}.txt", "w", encoding="utf-8", newline="") as fh:
                     fh.writelines(lines)
             return notes
-        from ...io.layout import landmark_count
 
         n_lm = landmark_count(exported.columns)
         for split, part in exported.groupby("split", sort=True):
@@ -182,7 +183,6 @@ def savemat_pinned(path, mdict) -> None:
     :data:`MAT_DESCRIPTION` (null-padded, as scipy pads) instead, so the same export gives the same bytes on any
     machine and day. The readers (``scipy.io.loadmat``, MATLAB) do not interpret the text.
     """
-    import io
 
     import scipy.io
 

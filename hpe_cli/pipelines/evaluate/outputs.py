@@ -11,6 +11,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from ..draw import render_worst
 from .join import file_stems
 from .sides import Chunk
 
@@ -137,8 +138,6 @@ def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 48
     """
 
     import cv2
-
-    from ..draw import render_worst
 
     if frame is None or not len(frame):
         return None

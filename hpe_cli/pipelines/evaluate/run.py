@@ -29,6 +29,8 @@ from ...io.writers import check_report_outputs, json_text
 from ...metrics import peer_angles as pa_
 from ...metrics.align import project_to_so3
 from ...metrics.protocols import PROTOCOLS, PosePair, opal23_mats
+from ...report.eval_plots import check_plot_outputs, write_eval_plots
+from ...report.evaluate_page import write_page
 from ..pools import default_threads, in_order
 from .dataset import choose_directmhp
 from .join import choose_keys, join
@@ -38,6 +40,7 @@ from .outputs import Images, empty_rows, worst_pictures
 from .rejects import align_block, collect_rejects, unreadable_rejects
 from .score import PLACEMENT, nested, raw_angles, score_pairs, take_rows, with_canonical
 from .sides import LABEL_THREADS, Chunk, SideReader, open_side, read_side, side_columns
+from .spill import Partitions
 
 ANGLES = ("pitch", "yaw", "roll")
 
@@ -251,7 +254,6 @@ def _valid(gt, pred, gidx, pidx):
 def _run_spill(s, rej, writer):
     """Key join of files in different orders: both sides hashed into partition files, joined one at a time
     (:mod:`hpe_cli.pipelines.evaluate.spill`); memory flat in the number of pairs."""
-    from .spill import Partitions
 
     gr, pr = _readers(s, s.progress)
     s.gside, s.pside = gr, pr
@@ -391,8 +393,6 @@ def _check_outputs(o: EvaluateOptions) -> None:
     if o.html:
         check_report_outputs(o.html, None, o.overwrite)
     if o.plots:
-        from ...report.eval_plots import check_plot_outputs
-
         check_plot_outputs(o.plots, o.overwrite)
 
 
@@ -447,12 +447,8 @@ def _write_outputs(s: Plan, r: Outcome, result: dict) -> None:
     r.rej.write()
     worst_rows, sample = r.scores[3], r.scores[4]
     if o.plots:
-        from ...report.eval_plots import write_eval_plots
-
         write_eval_plots(o.plots, sample.rows(), result, r.gside.system, overwrite=o.overwrite)
     if o.html:
-        from ...report.evaluate_page import write_page
-
         frame = worst_rows.frame.to_pandas() if worst_rows.frame is not None else None
         pictures = worst_pictures(frame, s.images, r.gside.system, Path(s.gt.path).parent)
         write_page(o.html, result, frame, overwrite=o.overwrite, plots=sample.rows(), pictures=pictures)

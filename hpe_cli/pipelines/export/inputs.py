@@ -9,13 +9,18 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 
+from ...datasets.mat import read_mat_dir
+from ...datasets.w300lp import read_w300lp
 from ...errors import HpeError
 from ...geometry.crop import landmark_boxes, sixdrepnet_test_boxes
+from ...io import label_columns_fast, label_mode, open_table
 from ...io.dataset_readers import find_reader
 from ...io.label_source import label_source
 from ...io.layout import BBOX_COLS, landmark_count
 from ...registry import Registry
+from ...rotation.systems import canonical_system
 from .options import A_COLS
 
 
@@ -52,7 +57,6 @@ def load_mat_input(path: Path, source: str, landmarks: bool = True):
     The box is 6DRepNet's loose AFLW2000 test crop of the tight landmark box (``k = 0.2``:
     :func:`hpe_cli.geometry.crop.sixdrepnet_test_boxes`), the margin its loader uses to show the whole head.
     """
-    from ...datasets.mat import read_mat_dir
 
     t = read_mat_dir(path, landmarks=True)
     n = len(t)
@@ -105,7 +109,6 @@ def load_w300lp_input(path: Path, source: str, landmarks: bool = True):
     """
     if not path.is_dir():
         return None
-    from ...datasets.w300lp import read_w300lp
 
     t = read_w300lp(path, landmarks=True, pt2d=True)
     n = len(t)
@@ -154,8 +157,6 @@ def _pose_para_frame(t, box, lm, landmarks: bool, columns: dict):
     """Export rows of 300W-LP-style labels (``Pose_Para`` angles in ``300w_lp``): ``columns``, then the reason,
     box, canonical matrix, ``tdx..scale`` and (with ``landmarks``) the 2-D landmarks ``lm`` (n, L, 2)."""
     import pandas as pd
-
-    from ...rotation.systems import canonical_system
 
     n = len(t)
     pyr = t[["pitch", "yaw", "roll"]].to_numpy(np.float64)
@@ -214,9 +215,6 @@ def _table_kind(src) -> str:
 def _batch_frame(batch, keep: list, labels, radians: bool):
     """One batch as the export's rows: kept columns, ``row``, canonical ``a00..a22``, ``reason``."""
     import pandas as pd
-    import pyarrow as pa
-
-    from ...io import label_columns_fast
 
     nb = batch.num_rows
     lab, ok, reasons = label_columns_fast(batch, labels.mode, radians)
@@ -299,8 +297,6 @@ def load_table_input(
     (``hpe:system`` metadata...), else ``--from``, else ``300w_lp``; angle or ``r00..r22`` columns.
     """
     import pandas as pd
-
-    from ...io import label_mode, open_table
 
     src = open_table(path, with_lines=True)
     cols = src.columns

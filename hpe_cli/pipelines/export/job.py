@@ -3,18 +3,23 @@
 from __future__ import annotations
 
 import shutil
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
 from ...errors import HpeError
+from ...io import Rejects
 from ...io.export import get_layout
+from ...io.transaction import critical, current
+from ...rotation.systems import canonical_system, get_system
 from ..parts import prepare_parts, record_temps, unlock_parts
+from ..pools import unit_pool
 from . import pixels, write
 from .inputs import load_inputs
 from .options import ExportOptions
 from .select import select
-from .units import make_units
+from .units import HOW_COMPARED, WORKER_IMPORTS, fingerprint, make_units
 
 
 def _check_output(inputs, output: Path, opts) -> None:
@@ -29,7 +34,6 @@ def _check_output(inputs, output: Path, opts) -> None:
 
 
 def _layout_and_system(opts):
-    from ...rotation.systems import canonical_system, get_system
 
     try:
         layout = get_layout(opts.layout, system=opts.system, form=opts.form, trainer=opts.trainer)
@@ -55,10 +59,6 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
     (``.OUT.hpe-parts/``) until the run commits, and ``opts.resume`` continues an interrupted run. Every
     runner gives the same bytes.
     """
-    from contextlib import ExitStack
-
-    from ..pools import unit_pool
-    from .units import WORKER_IMPORTS
 
     output = Path(output)
     _check_output(inputs, output, opts)
@@ -72,7 +72,6 @@ def run_export(inputs, output, opts: ExportOptions, progress=None) -> dict:
 
 
 def _run(inputs, output: Path, opts, progress, pool, use_parts: bool) -> dict:
-    from ...io import Rejects
 
     rejects = Rejects(opts.rejects, opts.overwrite)
     layout, system = _layout_and_system(opts)
@@ -144,8 +143,6 @@ def _run(inputs, output: Path, opts, progress, pool, use_parts: bool) -> dict:
 
 def _parts(output, opts, units, cfg, inputs):
     """The locked parts folder of this run, checked against an interrupted run's with ``--resume``."""
-    from ...io.transaction import critical, current
-    from .units import HOW_COMPARED, fingerprint
 
     fp = fingerprint(cfg, units, opts, inputs)
     with critical():  # a signal waits until the folder is known and registered for cleanup
@@ -159,7 +156,6 @@ def _parts(output, opts, units, cfg, inputs):
 
 def _drop_parts_after_commit(parts) -> None:
     """The parts go once the output is committed (they hold the only copy of finished units until then)."""
-    from ...io.transaction import current
 
     def drop():
         shutil.rmtree(parts, ignore_errors=True)

@@ -6,12 +6,18 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from ...geometry.crop import expand_boxes, pixel_boxes
 from ...io.images import leaves_root, resolve_image, video_path
 from ...io.layout import BBOX_COLS
+from ..pools import in_order
+from . import units as U
+from .units import link_files
+from .workers import unspill
+from .write import add_pixels
 
 
 @dataclass
@@ -112,9 +118,6 @@ def unit_results(units, cfg, pool, parts=None, resume: bool = False):
     folder and hand back their results; with a parts folder they write parts (:mod:`.units`), and with
     ``resume`` the units already done there are not computed again."""
 
-    from ..pools import in_order
-    from . import units as U
-
     if parts is None:
         tasks = [U.unit_task(cfg, u, None) for u in units]
         for res, spill in in_order(pool, U.run_unit, tasks):
@@ -150,11 +153,6 @@ def run_tasks(results, sel, layout, plan: CropPlan, stage, bar=None, keep_parts:
     """Take every unit's results (:func:`unit_results`), in order: link the files units wrote in their parts
     into the staging folder ``stage`` and pass finished heads (with their pixels) to the layout in small
     slices. ``keep_parts``: leave the spill files (parts of a resumable run)."""
-    from pathlib import Path
-
-    from .units import link_files
-    from .workers import unspill
-    from .write import add_pixels
 
     n = sel.n
     res_all = PixelResult(

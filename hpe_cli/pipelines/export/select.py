@@ -9,7 +9,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...errors import HpeError
+from ...io.exclude import ExcludeList
 from ...io.layout import landmark_count
+from ...rotation.convert import canonical_to_labels
 from .options import A_COLS
 from .sampling import assign_splits, balance_keep, min_change_keep, parse_balance, parse_split, read_split_file
 
@@ -36,7 +38,6 @@ class Selection:
 
 def label_stage(rows, layout, system) -> Selection:
     """Labels in ``system`` (through the matrices) and the layout's own label rules."""
-    from ...rotation.convert import canonical_to_labels
 
     n = len(rows)
     reasons = rows["reason"].to_numpy(dtype=object).copy()
@@ -136,8 +137,6 @@ def select(rows, layout, system, opts) -> Selection:
     """Stage 2 as a whole: labels and layout rules, split, sampling."""
     sel = label_stage(rows, layout, system)
     if opts.exclude:  # --exclude: a key list (hpe audit --suspects); a choice, like the split file
-        from ...io.exclude import ExcludeList
-
         why = ExcludeList(opts.exclude).reasons_frame(rows)
         hit = (why != "") & (sel.reasons == "")
         sel.reasons[hit] = why[hit]

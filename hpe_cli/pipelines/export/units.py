@@ -16,11 +16,16 @@ commits, so an interrupted run loses nothing.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 from ...errors import HpeError
 from ..parts import stat_signature
+from . import workers
 
 #: frame numbers per video unit (one seek per unit, then sequential decoding)
 BLOCK_FRAMES = 256
@@ -69,21 +74,14 @@ def unit_task(cfg: dict, unit: list, stem) -> dict:
 def run_unit(task: dict):
     """Run one unit. Without a stem: returns ``(results, spill file or None)`` (files written into the stage).
     With a stem: writes the unit's parts (files, spill, then its JSON) and returns the number of heads."""
-    import json
-
-    from . import workers
 
     cfg = dict(task["cfg"], made=set())
     stem = task["stem"]
     if stem is not None:
-        import shutil
-
         cfg["root"] = stem + ".files"
         shutil.rmtree(cfg["root"], ignore_errors=True)  # what a killed run of this unit left
         spill = stem + ".spill"
     elif cfg["pixels"] != "file":
-        import tempfile
-
         fd, spill = tempfile.mkstemp(prefix=".spill-", suffix=".bin", dir=cfg["root"])
         os.close(fd)
     else:
@@ -121,7 +119,6 @@ def _payload(p):
 
 def read_unit(stem: str):
     """A finished unit's ``(results, spill file or None, files folder)``, as :func:`run_unit` returns them."""
-    import json
 
     d = json.loads(Path(stem + ".json").read_text())
     res = [
@@ -161,7 +158,6 @@ def _short(exc) -> str:
 def link_files(src_dir: str, stage: Path, made: set) -> None:
     """Hard-link (else copy) every file of a unit's ``<k>.files/`` into the staging folder, same relative
     paths; the part stays (``--resume`` may need it again)."""
-    import shutil
 
     for root, _dirs, files in os.walk(src_dir):
         rel = os.path.relpath(root, src_dir)
@@ -183,7 +179,6 @@ def link_files(src_dir: str, stage: Path, made: set) -> None:
 def fingerprint(cfg: dict, units: list, opts, inputs) -> dict:
     """What a run's parts depend on: the pixel options, every unit's heads (crop boxes, sizes, file names,
     sources) and the inputs' signatures (:func:`input_signatures`)."""
-    import hashlib
 
     h = hashlib.sha256()
     for u in units:

@@ -4,10 +4,12 @@ it with padding, resize, encode, write or hand back the pixels)."""
 from __future__ import annotations
 
 import os
+import sys
 
 import numpy as np
 
 from ...errors import HpeError
+from ...geometry.crop import crop_padded
 from ...io.images import jpeg_size
 from ...io.jpeg import crop_band, decode_band
 from ...io.os_errors import write_bytes
@@ -39,7 +41,6 @@ def _frame_sized_malloc() -> None:
     every multi-MB frame is mapped and unmapped and each decode faults in fresh pages: measured here, 1.7x the
     CPU per export unit. Large thresholds (frames are at most 8K x 4K x 3 bytes) restore the default behaviour.
     """
-    import sys
 
     if _MALLOC_DONE[0] or "MALLOC_TRIM_THRESHOLD_" not in os.environ or not sys.platform.startswith("linux"):
         return
@@ -86,8 +87,6 @@ def _process_image(image, data, items, cfg, out):
     """Crop/encode every item of one decoded image, or of the part of it they need (a :class:`_Band`), or copy
     the file for full frames."""
     import cv2
-
-    from ...geometry.crop import crop_padded
 
     H, W = image.shape[:2]
     wrote_full = False

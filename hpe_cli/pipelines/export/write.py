@@ -11,6 +11,10 @@ import numpy as np
 
 from ...errors import HpeError
 from ...io.layout import BBOX_COLS
+from ...io.rejects import fail_all_rejected, rejects_rule
+from ...io.table_source import row_name
+from ...io.transaction import current
+from ...io.transaction import staged_dir as shared
 from .options import LICENCES, MATRIX_COLS
 from .sampling import is_choice
 from .workers import unspill
@@ -24,8 +28,6 @@ def staged_dir(path, overwrite: bool):
     write are removed after the commit (a stale shard or split folder would otherwise be read with the new
     ones).
     """
-    from ...io.transaction import current
-    from ...io.transaction import staged_dir as shared
 
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -171,7 +173,6 @@ def summary_of(layout, system, inputs, sel, plan, exported, notes_extra, opts) -
 def where(rows, k: int, reason: str) -> str:
     """``FILE: row N: reason`` for a table row, ``FOLDER/NAME.mat: reason`` for a one-record ``.mat`` label; an
     image fault also names the image."""
-    from ...io.table_source import row_name
 
     inp, row = str(rows["input"].iat[k]), str(rows["row"].iat[k])
     head = f"{Path(inp) / row}" if row.lower().endswith(".mat") else row_name(inp, row)  # line N / row N
@@ -192,8 +193,6 @@ def write_rejects(rejects, sel, opts) -> None:
     rows, reasons = sel.rows, sel.reasons
     bad = np.flatnonzero((reasons != "") & ~np.array([is_choice(r) for r in reasons], dtype=bool))
     if bad.size:
-        from ...io.rejects import rejects_rule
-
         k = int(bad[0])
         rejects_rule(
             int(bad.size), where(rows, k, str(reasons[k])), has_file=rejects.path is not None, strict=opts.strict
@@ -253,7 +252,6 @@ def nothing_left(layout, reasons, idx, what: str) -> HpeError:
 def fail_nothing_left(rejects, sel, err: HpeError, strict: bool):
     """Raise ``err`` (every label rejected). With ``--rejects`` and no ``--strict`` the rejects file is still
     written, every label with its reason (the one output that says why); the export itself is not."""
-    from ...io.rejects import fail_all_rejected
 
     if rejects.path is None or strict:
         raise err

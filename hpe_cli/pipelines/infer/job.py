@@ -5,6 +5,7 @@ from __future__ import annotations
 from ...errors import HpeError, UsageError
 from ...rotation import infer as inf
 from .code import DEFAULT_TIMEOUT, code_file, run_code_inference
+from .data import infer_data, read_data_table, set_aside_unusable
 from .options import InferOptions
 
 
@@ -30,7 +31,6 @@ def run_infer(data, spec, opts: InferOptions) -> dict:
         raise UsageError("returns and builder apply to code only, not to DATA")
     # lazy: the table side (pyarrow, the .mat reader, the template fit) is no part of a --callable/--decoder run,
     # whose parent and child both load this package (measured: +0.5 to 3 s and +27 MB per run when eager)
-    from .data import infer_data, read_data_table, set_aside_unusable
 
     table = set_aside_unusable(read_data_table(data, opts), opts)
     try:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from ...errors import HpeError
+from ...io import AtomicFile, write_json
+from ...io.transaction import current
 from ...rotation import infer as inf
 
 
@@ -81,8 +83,6 @@ def finish(rep: dict, what: str, *, json_path=None, output=None, overwrite=False
         written to ``output``).
     """
     # lazy: the spawned child of --callable/--decoder loads this package, and needs no I/O layer
-    from ...io import AtomicFile, write_json
-    from ...io.transaction import current
 
     report = inf.report_json(rep)
     if json_path is not None:

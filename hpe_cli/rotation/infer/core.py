@@ -8,6 +8,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..check import rotation_reasons
 from ..distances import angle_diff_deg, frobenius
 from ..elemental import axis_rotation
 from ..euler import lock_distance
@@ -504,7 +505,6 @@ def report_json(report: dict) -> dict:
 
 def check_rotations(M, verb: str) -> None:
     """Raise :class:`CallError` (``"{verb} <reason> on sample i"``) unless ``M`` is (N, 3, 3) rotations."""
-    from ..check import rotation_reasons
 
     M = np.asarray(M)
     if M.ndim != 3 or M.shape[1:] != (3, 3):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..check import rotation_mask
 from ..distances import frobenius
 from ..systems import ROLES
 from .core import (
@@ -39,7 +40,6 @@ def infer_table(
     decoded imprecisely). At most :data:`SEARCH_ROWS` rows enter the search;
     the leaders are then checked on every row.
     """
-    from ..check import rotation_mask
 
     pyr = np.asarray(pyr_deg, dtype=np.float64).reshape(-1, 3)
     R = np.asarray(R, dtype=np.float64).reshape(-1, 3, 3)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import storage as st
 from ..distances import frobenius
 from ..systems import builtin_systems, system_from_dict
 from .code import CallError, prefer_vectorised, to_numpy
@@ -43,7 +44,6 @@ def as_value_decoder(func):
 
 
 def _form_matrices(kind, arg, values):
-    from .. import storage as st
 
     if kind == "rotvec":
         return st.rotvec_to_matrix(values)
