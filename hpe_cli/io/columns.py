@@ -49,7 +49,6 @@ from ..datasets.jsonfile import load_json
 from ..errors import HpeError
 from .dataset_readers import READERS, input_format_names, register_reader
 from .run_options import active_table_options  # noqa: F401
-from .system_meta import file_system
 from .table_source import Reject, TableSource
 
 LINE_COL = "__line__"
@@ -642,16 +641,3 @@ def open_coco(path, *, batch_size: int, with_lines: bool = False):
         f"got {type(doc).__name__} with keys "
         f"{', '.join(list(doc)[:8]) if isinstance(doc, dict) else '-'}"
     )
-
-
-def label_system(src, requested):
-    """The system to read ``src``'s labels in: the dataset's own for dataset readers, else ``requested``.
-
-    A dataset reader's labels are always in its own system (the ``system`` of its entry in
-    :data:`hpe_cli.io.dataset_readers.READERS`); a command's ``--system`` then names
-    the system its *output* (or captions) use, and the labels are converted.
-    Commands choose systems with :func:`hpe_cli.io.system_meta.resolve_system`.
-    """
-    if getattr(src, "dataset", False) and src.system:
-        return file_system(src) or requested  # None: a dataset system not built in yet
-    return requested

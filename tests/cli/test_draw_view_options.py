@@ -67,9 +67,8 @@ def test_options_are_frozen_and_normalised():
 
 
 def test_flagged_pictures_read_the_audits_label_source(tmp_path, monkeypatch):
-    """The pictures come from the LabelSource the audit opened: resolving the system again (or the old second
-    rule, io.columns.label_system) would fail here."""
-    import hpe_cli.io.columns as columns
+    """The pictures come from the LabelSource the audit opened: resolving the system again would fail here (the
+    old second rule, io.columns.label_system, is gone)."""
     import hpe_cli.io.system_meta as system_meta
     from hpe_cli.io.label_source import open_labels
 
@@ -79,7 +78,6 @@ def test_flagged_pictures_read_the_audits_label_source(tmp_path, monkeypatch):
         raise AssertionError("the system was resolved a second time")
 
     monkeypatch.setattr(system_meta, "resolve_system", again)
-    monkeypatch.setattr(columns, "label_system", again)
     examples = {"near_gimbal": [{"row": 2}, {"row": 4}], "out_of_range": [{"row": 1}]}
     out = flagged_pictures(labels, examples, tmp_path / "plots")
     assert [p["path"] for p in out["pictures"]] == [
