@@ -64,7 +64,7 @@ FAILS_ON_PURPOSE = {"hpe audit labels.csv --system whenet --gimbal-tol 2 --stric
 NEEDS = {
     "agora": "AGORA's dataframes are not shipped (tests/readers and the realdata tests run relabel-agora)",
     "biwi": "BIWI is not shipped (the realdata tests run hpe biwi on hpdb/ and db_annotations.tgz)",
-    "dask": "needs a running Dask scheduler (tests/pipelines test --scheduler with a local cluster)",
+    "dask": "needs a running Dask scheduler (tests/relabel test --scheduler with a local cluster)",
     "images": "the Panoptic sample ships no frames or videos (the realdata tests export with --images)",
     "user code": "names user code that is not shipped (tests/fixtures/conventions has the shipped ones)",
 }

@@ -138,8 +138,8 @@ def panoptic_tables(tmp_path_factory):
     """The synthetic Panoptic labels with one camera turned 4 deg and a glitch frame, sorted and shuffled."""
     import pyarrow as pa
 
+    from tests.audit.test_consistency_audit import _angles_of, _turn
     from tests.conftest import canonical_A, hpe, sample_data_script
-    from tests.consistency.test_consistency_audit import _angles_of, _turn
 
     root = tmp_path_factory.mktemp("stream") / "synthseq"
     gen = sample_data_script()

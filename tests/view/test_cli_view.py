@@ -5,9 +5,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pandas as pd
-from view.conftest import page_data
 
 from conftest import hpe as hpe_cmd
+
+from .conftest import page_data
 
 
 def _images(folder, names, size=(320, 240)):
