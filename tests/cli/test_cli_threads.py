@@ -267,3 +267,21 @@ def test_library_threads_restores_the_pools():
     with pytest.raises(RuntimeError), library_threads(3):
         raise RuntimeError("boom")
     assert (cv2.getNumThreads(), pa.cpu_count(), pa.io_thread_count()) == before
+
+
+def test_api_takes_threads_as_the_cli(tmp_path):
+    """``threads`` reaches the same options objects from the Python API: the same bytes as the CLI."""
+    import hpe_cli as api
+
+    hpe("draw", ROOT / "sample_data/aflw2000", "-o", tmp_path / "cli", "--threads", 1, "-q", ok=True)
+    api.draw_file(ROOT / "sample_data/aflw2000", tmp_path / "api", threads=2)
+    assert _tree_bytes(tmp_path / "api") == _tree_bytes(tmp_path / "cli")
+    pkl = ROOT / "tests/data/agora/validation_0_withjv.pkl"
+    hpe("relabel-agora", pkl, "-o", tmp_path / "c.parquet", "--rejects", tmp_path / "c.csv", "--threads", 1, ok=True)
+    api.relabel_agora(pkl, tmp_path / "a.parquet", rejects=tmp_path / "a.csv", threads=2)
+    assert (tmp_path / "a.parquet").read_bytes() == (tmp_path / "c.parquet").read_bytes()
+    rep = api.infer_system(code=f"{ROOT}/tests/fixtures/conventions/sixdrepnet.py:get_R", builder=True, threads=2)
+    assert rep["fit"] == "exact"
+    if BIWI.is_dir():
+        api.biwi_file(BIWI, tmp_path / "b.parquet", threads=2)
+        assert pq.read_table(tmp_path / "b.parquet").num_rows > 0
