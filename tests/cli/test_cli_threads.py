@@ -285,3 +285,12 @@ def test_api_takes_threads_as_the_cli(tmp_path):
     if BIWI.is_dir():
         api.biwi_file(BIWI, tmp_path / "b.parquet", threads=2)
         assert pq.read_table(tmp_path / "b.parquet").num_rows > 0
+
+
+def test_view_same_bytes_for_1_2_3_workers(tmp_path):
+    """view's ``--workers`` (thumbnail threads): the same page whatever the number."""
+    pages = []
+    for w in (1, 2, 3):
+        hpe("view", ROOT / "sample_data/aflw2000", "-o", tmp_path / f"v{w}/page.html", "--workers", w, "-q", ok=True)
+        pages.append(_tree_bytes(tmp_path / f"v{w}"))
+    assert pages[0] and pages[1] == pages[0] and pages[2] == pages[0]
