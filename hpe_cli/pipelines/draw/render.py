@@ -44,12 +44,8 @@ class Output:
     tiles: list = field(default_factory=list)
     captions: list = field(default_factory=list)
 
-    def add(self, img, rel):
-        """The drawn picture ``img`` of output name ``rel``: written, or kept (shrunk) as a tile."""
-        self.keep(self.prepare(img, rel), rel)
-
     def prepare(self, img, rel):
-        """The part of :meth:`add` that may run on any thread: write ``img`` (returns None), or shrink it to
+        """The drawn picture ``img`` of output name ``rel``, on any thread: written (returns None), or shrunk to
         its tile (returned, for :meth:`keep` in input order)."""
         if not self.grid:
             write_image(img, self.stage / rel, self.outdir / rel)
