@@ -401,7 +401,7 @@ def draw_file(
     (``faces``, ``images``, ``sheets``, ``rejects``, ``system``). ``options``: the other
     :class:`~hpe_cli.pipelines.draw.DrawOptions` fields (``style``, ``canvas``, ``radians``, ``use``,
     ``length``, ``thickness``, ``tdy_origin``, ``annotate``, ``grid``, ``grid_cols``, ``tile``, ``limit``,
-    ``worst``, ``sort_by``).
+    ``worst``, ``sort_by``, ``threads``).
 
     Examples
     --------
@@ -458,7 +458,7 @@ def infer_system(data=None, *, code=None, output=None, **settings) -> dict:
     Give ``data`` (a label table or ``.mat`` folder) or ``code`` (``FILE.py:FUNC`` or ``module:FUNC``, a decoder
     unless ``builder=True``). ``output``: write the matched system as TOML. ``settings``: the fields of
     :class:`hpe_cli.pipelines.infer.InferOptions` (``roles``, ``units``, ``angle_columns``, ``tol``, ``seed``,
-    ``rejects``, ``overwrite``...), checked once.
+    ``rejects``, ``overwrite``, ``threads``...), checked once.
 
     Returns
     -------
@@ -636,7 +636,7 @@ def relabel_agora(dataframes, output, **options):
 
     ``dataframes`` are AGORA ground-truth dataframes (``*_withjv.pkl`` or the same as Parquet), a path or a
     list; ``options`` are the fields of :class:`hpe_cli.pipelines.relabel.RelabelAgoraOptions` (``system``,
-    ``fmt``, ``image_size``, ``max_rmse`` (m), ``max_occlusion``, ``rejects``...). Returns the counts
+    ``fmt``, ``image_size``, ``max_rmse`` (m), ``max_occlusion``, ``rejects``, ``threads``...). Returns the counts
     (``people``, ``labelled``, ``reasons``; ``summary(...)``).
 
     Examples
@@ -661,7 +661,7 @@ def biwi_file(input, output, **options) -> dict:
 
     ``input`` is BIWI's ``hpdb/``, ``db_annotations/`` or ``db_annotations.tgz``; ``output`` the label table;
     ``options`` the fields of :class:`hpe_cli.pipelines.biwi.BiwiOptions` (``camera``, ``calibration``,
-    ``head_size`` (mm), ``system``, ``protocol``, ``split``, ``seed``, ``split_lists``, ``rejects``...),
+    ``head_size`` (mm), ``system``, ``protocol``, ``split``, ``seed``, ``split_lists``, ``rejects``, ``threads``...),
     checked before anything is read. Returns the summary dict (``rows``, ``sequences``, ``splits``,
     ``rejected``...).
 

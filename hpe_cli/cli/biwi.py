@@ -5,7 +5,15 @@ from __future__ import annotations
 import click
 
 from .choices import RegistryChoice
-from .options import SYSTEM, echo_summary, output_option, overwrite_option, rejects_options, verbosity_options
+from .options import (
+    SYSTEM,
+    echo_summary,
+    output_option,
+    overwrite_option,
+    rejects_options,
+    threads_option,
+    verbosity_options,
+)
 
 
 def _fractions(ctx, param, value):
@@ -67,6 +75,7 @@ def _fractions(ctx, param, value):
 )
 @rejects_options
 @overwrite_option
+@threads_option
 @verbosity_options
 def biwi(
     input,
@@ -82,6 +91,7 @@ def biwi(
     rejects,
     strict,
     overwrite,
+    threads,
     verbose,
     quiet,
 ):
@@ -124,5 +134,6 @@ def biwi(
         rejects=rejects,
         strict=strict,
         overwrite=overwrite,
+        threads=threads,
     )
     echo_summary(summary_lines(run_biwi(input, output, opts), output, opts), quiet)

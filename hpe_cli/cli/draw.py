@@ -14,6 +14,7 @@ from .options import (
     progress,
     radians_option,  # the one spelling of input angle units
     rejects_options,
+    threads_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -96,6 +97,7 @@ from .table_options import column_options
 )
 @rejects_options
 @overwrite_option
+@threads_option
 @verbosity_options
 @column_options
 def draw(
@@ -120,6 +122,7 @@ def draw(
     rejects,
     strict,
     overwrite,
+    threads,
     verbose,
     quiet,
 ):
@@ -189,6 +192,7 @@ def draw(
         rejects_path=rejects,
         strict=strict,
         overwrite=overwrite,
+        threads=threads,
     )
     bar = progress(desc="draw", quiet=quiet, unit="images")
     try:

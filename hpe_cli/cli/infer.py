@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from .options import SYSTEM, deprecated_spellings, overwrite_option, rejects_options, verbosity_options
+from .options import SYSTEM, deprecated_spellings, overwrite_option, rejects_options, threads_option, verbosity_options
 from .table_options import column_options
 
 
@@ -204,6 +204,7 @@ def _positive_seconds(ctx, param, value):
 )
 @rejects_options
 @overwrite_option
+@threads_option
 @verbosity_options
 @column_options
 def infer(
@@ -230,6 +231,7 @@ def infer(
     rejects,
     strict,
     overwrite,
+    threads,
     verbose,
     quiet,
     timeout,
@@ -310,6 +312,7 @@ def infer(
         rejects=rejects,
         strict=strict,
         overwrite=overwrite,
+        threads=threads,
     )
     rep = run_infer(data, spec, opts)
     _, written = finish(

@@ -19,6 +19,7 @@ from .options import (
     preset_option,
     progress,
     rejects_options,
+    threads_option,
     verbosity_options,
 )
 
@@ -62,6 +63,7 @@ from .options import (
 )
 @rejects_options
 @overwrite_option
+@threads_option
 @verbosity_options
 def relabel_agora(
     dataframes,
@@ -78,6 +80,7 @@ def relabel_agora(
     rejects,
     strict,
     overwrite,
+    threads,
     verbose,
     quiet,
 ):
@@ -147,6 +150,7 @@ def relabel_agora(
             rejects=rejects,
             strict=strict,
             overwrite=overwrite,
+            threads=threads,
         )
     except FormatSystemError as exc:
         raise click.UsageError(str(exc)) from None

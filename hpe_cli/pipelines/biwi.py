@@ -14,6 +14,7 @@ from ..io import check_output, system_metadata, write_table
 from ..io.rejects import Rejects
 from ..io.writers import AtomicFile
 from ..rotation import get_system
+from .pools import library_threads
 
 #: the cameras BIWI labels can be expressed in
 CAMERAS = ("depth", "rgb")
@@ -25,7 +26,9 @@ class BiwiOptions:
 
     ``system`` is a :class:`~hpe_cli.rotation.RotationSystem` or a name, resolved once; ``head_size`` the
     diameter (mm, 1-1000) of the sphere projected for the boxes; ``split`` two or three fractions >= 0 summing
-    to 1 (or None); ``split_lists`` a folder for ``<split>_sequences.txt``.
+    to 1 (or None); ``split_lists`` a folder for ``<split>_sequences.txt``; ``threads`` (>= 1, None: one per
+    core, at most 8) the size of OpenCV's and pyarrow's thread pools for the run (the frames are read on one
+    Python thread; the output is the same whatever the number).
     """
 
     camera: str = "depth"
@@ -39,9 +42,13 @@ class BiwiOptions:
     rejects: object = None
     strict: bool = False
     overwrite: bool = False
+    threads: int | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "system", get_system(self.system))
+        t = self.threads
+        if t is not None and (not isinstance(t, int) or isinstance(t, bool) or t < 1):
+            raise ValueError(f"expected threads an integer >= 1 (or None: one per core), got {t!r}")
         # numbers as the command line gives them, so the metadata is the same bytes from the API
         object.__setattr__(self, "head_size", float(self.head_size))
         if self.camera not in CAMERAS:
@@ -64,8 +71,15 @@ def run_biwi(input_path, output, opts: BiwiOptions) -> dict:
     (``file, sequence, frame, reason``); without it, or with ``opts.strict``, any
     such frame is an error naming its file and nothing is written (the
     rejects rule, :func:`hpe_cli.io.rejects.rejects_rule`). With the default
-    protocol, labels + rejects = the frames found.
+    protocol, labels + rejects = the frames found. OpenCV's and pyarrow's pools are limited to
+    ``opts.threads`` for the run (:func:`~hpe_cli.pipelines.pools.library_threads`).
     """
+    with library_threads(opts.threads):
+        return _run_biwi(input_path, output, opts)
+
+
+def _run_biwi(input_path, output, opts: BiwiOptions) -> dict:
+    """:func:`run_biwi` once the libraries' pools are limited."""
     check_output(output, opts.overwrite)
     rejects = Rejects(opts.rejects, opts.overwrite, strict=opts.strict)
     frame = _read_frames(input_path, opts, rejects)

@@ -284,4 +284,29 @@ def default_threads(threads=None) -> int:
     return max(1, int(threads)) if threads else max(1, min(MAX_DEFAULT_THREADS, os.cpu_count() or 1))
 
 
-__all__ = ["unit_pool", "borrow", "in_order", "mp_context", "default_threads"]
+@contextmanager
+def library_threads(threads=None):
+    """Limit the thread pools of OpenCV (``cv2.setNumThreads``) and pyarrow (``set_cpu_count``,
+    ``set_io_thread_count``) to :func:`default_threads` ``(threads)`` for the run; yield that number.
+
+    The previous settings are restored on exit, also on an error. For the commands whose row work runs on
+    one Python thread (``--threads`` of biwi, infer) or on a few (draw, relabel-agora), so that ``--threads
+    N`` bounds what the libraries start as well.
+    """
+    n = default_threads(threads)
+    import cv2  # lazy: start-up (OpenCV is heavy; `hpe --help` and a small convert must not load it)
+    import pyarrow as pa  # lazy: start-up (an `hpe infer --callable` child needs no pyarrow)
+
+    before = (cv2.getNumThreads(), pa.cpu_count(), pa.io_thread_count())
+    cv2.setNumThreads(n)
+    pa.set_cpu_count(n)
+    pa.set_io_thread_count(n)
+    try:
+        yield n
+    finally:
+        cv2.setNumThreads(before[0])
+        pa.set_cpu_count(before[1])
+        pa.set_io_thread_count(before[2])
+
+
+__all__ = ["unit_pool", "borrow", "in_order", "mp_context", "default_threads", "library_threads"]

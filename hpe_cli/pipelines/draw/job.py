@@ -19,6 +19,7 @@ from ...io import Rejects, open_table
 from ...io.label_source import label_source
 from ...io.rejects import fail_all_rejected
 from ...io.transaction import ensure_transaction, staged_dir
+from ..pools import library_threads
 from .errors import is_errors_table, run_draw_errors
 from .options import DrawOptions
 from .plan import RejectBook, check_output_exists, group_rows, plan_images
@@ -32,8 +33,15 @@ def run_draw(input_path, outdir, options: DrawOptions, *, progress=None) -> dict
 
     A table written by ``hpe evaluate -o`` (``gt_*`` and ``pred_*`` columns) is drawn by
     :func:`hpe_cli.pipelines.draw.errors.run_draw_errors` instead. ``progress``: a tqdm bar whose total is set.
+    The pictures are drawn on ``options.threads`` threads, with OpenCV's and pyarrow's pools limited to as
+    many (:func:`~hpe_cli.pipelines.pools.library_threads`).
     """
-    input_path = Path(input_path)
+    with library_threads(options.threads):
+        return _run_draw(Path(input_path), outdir, options, progress)
+
+
+def _run_draw(input_path: Path, outdir, options: DrawOptions, progress) -> dict:
+    """:func:`run_draw` once the libraries' pools are limited."""
     src = open_table(input_path, with_lines=True)
     if is_errors_table(src.columns):
         return run_draw_errors(input_path, outdir, options, progress=progress)

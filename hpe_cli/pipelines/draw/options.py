@@ -74,6 +74,9 @@ class DrawOptions:
         Any rejected row is an error even with ``rejects_path``.
     overwrite : bool
         Replace existing outputs.
+    threads : int, optional
+        Threads that draw and write the pictures, >= 1; OpenCV's and pyarrow's pools are limited to the same
+        number for the run (default: one per core, at most 8). The output is the same whatever the number.
 
     Raises
     ------
@@ -100,6 +103,7 @@ class DrawOptions:
     rejects_path: str | Path | None = None
     strict: bool = False
     overwrite: bool = False
+    threads: int | None = None
 
     def __post_init__(self):
         _check_choice("style", self.style, STYLES)
@@ -110,6 +114,7 @@ class DrawOptions:
         _check_int("tile", self.tile, 32, 2048, optional=False)
         _check_int("limit", self.limit, 1)
         _check_int("worst", self.worst, 1)
+        _check_int("threads", self.threads, 1)
         if self.length is not None and not (isinstance(self.length, (int, float)) and self.length > 0):
             raise HpeError(f"length: expected a number of pixels > 0, got {self.length!r}")
         if self.canvas is not None:

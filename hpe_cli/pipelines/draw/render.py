@@ -11,6 +11,8 @@ import numpy as np
 
 from ...geometry import draw as g
 from ...io.images import ImageResolver
+from ..inorder import in_order
+from ..pools import default_threads
 from .rows import DEFAULT_LENGTH_FRACTION, write_image
 
 
@@ -42,16 +44,22 @@ class Output:
     tiles: list = field(default_factory=list)
     captions: list = field(default_factory=list)
 
-    def add(self, img, rel):
-        """The drawn picture ``img`` of output name ``rel``: written, or kept (shrunk) as a tile."""
+    def prepare(self, img, rel):
+        """The drawn picture ``img`` of output name ``rel``, on any thread: written (returns None), or shrunk to
+        its tile (returned, for :meth:`keep` in input order)."""
         if not self.grid:
             write_image(img, self.stage / rel, self.outdir / rel)
-            return
+            return None
         H, W = img.shape[:2]
         s = self.tile / max(H, W)
         small = cv2.resize(img, (max(1, int(W * s)), max(1, int(H * s))), interpolation=cv2.INTER_AREA)
-        self.tiles.append(small if s < 1 else img)
-        self.captions.append(str(rel))
+        return small if s < 1 else img
+
+    def keep(self, tile, rel):
+        """Keep the ``tile`` that :meth:`prepare` made of ``rel`` (nothing without ``grid``); in input order."""
+        if self.grid:
+            self.tiles.append(tile)
+            self.captions.append(str(rel))
 
     def finish(self) -> int:
         """Write the contact sheets; their number (0 without tiles)."""
@@ -112,17 +120,34 @@ def _captions(img, angles, c, Lr, style, on_canvas):
 
 def draw_all(plan, faces: Faces, out: Output, options, book, progress=None) -> dict:
     """Draw every planned picture; an unreadable one sets its rows aside in ``book``. Returns ``faces``,
-    ``images``, ``sheets`` and ``rejects`` (reason -> rows)."""
-    n_faces = drawn = 0
-    for (_, rel, ref, rows), img, why in pictures(plan, options.canvas):
+    ``images``, ``sheets`` and ``rejects`` (reason -> rows).
+
+    The pictures are drawn (and written, or shrunk to tiles) on ``options.threads`` threads
+    (:func:`~hpe_cli.pipelines.pools.default_threads`) and taken in input order, so the output is the same
+    whatever the number.
+    """
+    n = {"faces": 0, "images": 0}
+
+    def work(picture):
+        (_, rel, ref, rows), img, _why = picture
+        if img is None:
+            return None
+        draw_faces(img, rows, faces, options, on_canvas=ref is None)
+        return out.prepare(img, rel)
+
+    def finish(picture, fut):
+        (_, rel, _ref, rows), img, why = picture
+        tile = fut.result()
         if img is None:
             book.add([(int(i), why) for i in rows])
-            continue
-        draw_faces(img, rows, faces, options, on_canvas=ref is None)
-        n_faces += len(rows)
-        drawn += 1
-        out.add(img, rel)
+            return
+        n["faces"] += len(rows)
+        n["images"] += 1
+        out.keep(tile, rel)
         if progress is not None:
             progress.update(1)
+
+    threads = default_threads(options.threads)
+    in_order(((p,) for p in pictures(plan, options.canvas)), work, finish, threads)
     sheets = out.finish()
-    return {"faces": n_faces, "images": drawn, "sheets": sheets, "rejects": book.counts()}
+    return {"faces": n["faces"], "images": n["images"], "sheets": sheets, "rejects": book.counts()}

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from ...errors import HpeError
 from ...rotation import infer as inf
+from ..pools import default_threads
 
 DEFAULT_TIMEOUT = 60.0
 #: exit status of the child when the code closed the pipe it answers on (its file descriptors)
@@ -41,6 +42,7 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
     if hasattr(os, "setpgid"):
         os.setpgid(0, 0)  # a process group of our own: the parent ends it with everything the code starts
     conn.send(("ready",))  # hpe itself is loaded: the time limit starts now
+    code_threads(kw.pop("threads", None))
     try:
         func = load_callable(spec, kw.pop("import_path", None))
         returns = kw.pop("returns", "angles")
@@ -81,6 +83,21 @@ def _child(conn, spec, builder, roles, units, packed, samples, kw):
     except BaseException:  # noqa: BLE001, S110 - stdout closed by the code
         pass
     os._exit(status)  # skip the user's atexit handlers and non-daemon threads
+
+
+#: the variables the thread pools of torch, MKL, OpenBLAS and OpenMP code read when they start
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+def code_threads(threads=None) -> None:
+    """Set :data:`THREAD_VARIABLES` in this (child) process before the user's code is imported: to ``threads``
+    when given (``--threads``), else to :func:`~hpe_cli.pipelines.pools.default_threads` where not already set."""
+    n = str(default_threads(threads))
+    for var in THREAD_VARIABLES:
+        if threads is not None:
+            os.environ[var] = n
+        else:
+            os.environ.setdefault(var, n)
 
 
 def run_code_inference(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from ...errors import HpeError, UsageError
 from ...rotation import infer as inf
+from ..pools import library_threads
 from .code import DEFAULT_TIMEOUT, code_file, run_code_inference
 from .data import infer_data, read_data_table, set_aside_unusable
 from .options import InferOptions
@@ -32,11 +33,12 @@ def run_infer(data, spec, opts: InferOptions) -> dict:
     # lazy: the table side (pyarrow, the .mat reader, the template fit) is no part of a --callable/--decoder run,
     # whose parent and child both load this package (measured: +0.5 to 3 s and +27 MB per run when eager)
 
-    table = set_aside_unusable(read_data_table(data, opts), opts)
-    try:
-        rep = infer_data(table, opts)
-    except ValueError as exc:
-        raise HpeError(f"{data}: {exc}") from None
+    with library_threads(opts.threads):
+        table = set_aside_unusable(read_data_table(data, opts), opts)
+        try:
+            rep = infer_data(table, opts)
+        except ValueError as exc:
+            raise HpeError(f"{data}: {exc}") from None
     system = rep.get("_system")
     rep["_system_toml"] = system.to_toml() if system is not None else None
     rep["_system_name"] = system.name if system is not None else None
@@ -66,6 +68,7 @@ def _infer_code(spec: str, opts: InferOptions) -> dict:
         storage=opts.storage,
         import_path=list(opts.import_path),
         returns=opts.returns,
+        threads=opts.threads,
     )
     if rep["fit"] != "exact" and opts.units is None and opts.returns == "angles":
         rep["hint"] = "no fit with the default --radians; try --degrees"

@@ -65,6 +65,12 @@ class InferOptions:
         Folders to import ``module:FUNC`` from.
     rejects, strict, overwrite
         ``--rejects FILE``, ``--strict``, ``--overwrite``.
+    threads : int, optional
+        >= 1 (None: one per core, at most 8). A data table: the size of OpenCV's and pyarrow's thread pools for
+        the run. Code: ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` and ``OPENBLAS_NUM_THREADS`` of the child process
+        before the code is imported (so torch and BLAS libraries it loads start that many threads); without
+        ``threads`` a value already in the environment is kept. The search itself runs on one Python thread,
+        and the report is the same whatever the number.
     """
 
     builder: bool = False
@@ -88,6 +94,7 @@ class InferOptions:
     rejects: object = None
     strict: bool = False
     overwrite: bool = False
+    threads: int | None = None
 
     def __post_init__(self):
         for what, value, allowed in (
@@ -118,5 +125,8 @@ class InferOptions:
             raise UsageError(f"samples: expected {SAMPLES_RANGE[0]}..{SAMPLES_RANGE[1]}, got {self.samples}")
         if self.timeout is not None and not (math.isfinite(self.timeout) and self.timeout > 0):
             raise UsageError(f"timeout: expected a positive finite number of seconds, got {self.timeout!r}")
+        t = self.threads
+        if t is not None and (not isinstance(t, int) or isinstance(t, bool) or t < 1):
+            raise UsageError(f"threads: expected an integer >= 1 (or None: one per core), got {t!r}")
         if self.packed and not self.builder:
             raise UsageError("packed: applies to a callable (builder=True) only")

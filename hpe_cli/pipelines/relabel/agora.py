@@ -28,6 +28,8 @@ from ...io import TableWriter, arrow_table, system_metadata
 from ...io.coco import CocoWriter
 from ...io.rejects import rejects_rule
 from ...io.whenet_txt import WhenetWriter
+from ..inorder import in_order
+from ..pools import library_threads
 from .core import LEGACY_COLS, fit_faces, relabel_views, summary_tail, view_label_columns
 
 #: default fit-quality gate in the landmarks' unit (metres for AGORA): 2 cm, the Panoptic gate
@@ -334,7 +336,9 @@ def write_outputs(paths, output, opts, *, bar=None) -> Stats:
 
     ``opts.fmt`` is ``table`` (Parquet/CSV), ``coco`` (:class:`hpe_cli.io.coco.CocoWriter`) or ``whenet``
     (:class:`hpe_cli.io.whenet_txt.WhenetWriter`), each streamed one dataframe at a time. Outputs are checked
-    before any work, and nothing is left behind on failure.
+    before any work, and nothing is left behind on failure. The dataframes are read and fitted on
+    ``opts.threads`` threads (at most one more than that in memory) and written in input order, with OpenCV's
+    and pyarrow's pools limited to as many (:func:`~hpe_cli.pipelines.pools.library_threads`).
     """
     cfg = opts.config()
     system = cfg.system
@@ -342,21 +346,28 @@ def write_outputs(paths, output, opts, *, bar=None) -> Stats:
     about = relabel_about(paths, cfg)
     rschema = _reject_schema()
     check_inputs(paths)
+
+    def work(path):
+        people = ag.read_agora(path, trust=cfg.trust_pickle)
+        if not opts.rejects:
+            bad_input_rule(people)
+        return relabel_people(people, cfg)
+
     with ExitStack() as stack:
+        threads = stack.enter_context(library_threads(opts.threads))
         out = stack.enter_context(_label_writer(opts.fmt, output, opts.overwrite, system, about))
         rej = stack.enter_context(TableWriter(opts.rejects, opts.overwrite)) if opts.rejects else None
-        for path in paths:
-            people = ag.read_agora(path, trust=cfg.trust_pickle)
-            if not opts.rejects:
-                bad_input_rule(people)
-            res = relabel_people(people, cfg)
-            del people
+
+        def finish(path, fut):
+            res = fut.result()
             stats.add(path, res, system)
             out.write(arrow_table(res["table"]))
             if rej is not None:
                 rej.write(arrow_table(res["rejects"], rschema))
             if bar is not None:
                 bar.update(1)
+
+        in_order(((p,) for p in paths), work, finish, threads)
     return stats
 
 

@@ -118,7 +118,9 @@ class RelabelAgoraOptions:
     """The settings of ``hpe relabel-agora`` (see its ``--help``; names as the options').
 
     ``system`` as for :class:`RelabelPanopticOptions`; ``image_size`` ``(W, H)`` pixels; ``max_rmse`` in
-    metres (None: :data:`~.agora.DEFAULT_MAX_RMSE`); ``max_occlusion`` in percent.
+    metres (None: :data:`~.agora.DEFAULT_MAX_RMSE`); ``max_occlusion`` in percent; ``threads`` (>= 1, None:
+    one per core, at most 8) the dataframes read and fitted side by side, and the size of OpenCV's and pyarrow's
+    pools for the run (the output is the same whatever the number).
     """
 
     system: object = None
@@ -133,9 +135,13 @@ class RelabelAgoraOptions:
     rejects: object = None
     strict: bool = False
     overwrite: bool = False
+    threads: int | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "system", _label_system(self.fmt, self.system, "DirectMHP/WHENet"))
+        t = self.threads
+        if t is not None and (not isinstance(t, int) or isinstance(t, bool) or t < 1):
+            raise ValueError(f"expected threads an integer >= 1 (or None: one per core), got {t!r}")
         object.__setattr__(self, "max_rmse", AGORA_MAX_RMSE if self.max_rmse is None else float(self.max_rmse))
         object.__setattr__(self, "max_occlusion", float(self.max_occlusion))
         object.__setattr__(self, "image_size", tuple(int(v) for v in self.image_size))
