@@ -48,7 +48,6 @@ from ...io.layout import arrow_to_numpy, landmark_count
 from ...metrics import consistency as mc
 from ...metrics.sketch import StreamQuantiles
 from ...rotation.distances import geodesic_deg
-from ..draw.consistency import FOLDER, consistency_page
 from .common import _codes, _key_batches, _r, canonical_labels, suspects_table  # noqa: F401
 from .groups import MIN_VIEWS, time_check, time_texts, view_texts, views  # noqa: F401 (re-exported)
 from .options import MAX_GAP_FRAMES, MAX_JUMP_DEG, Settings  # noqa: F401 (re-exported)
@@ -553,6 +552,8 @@ def consistency_outputs(cons, reread, suspects=None, overwrite=False, plots=None
         write_table(table, suspects, overwrite=overwrite)
         report["suspects_file"] = str(suspects)
     if plots:
+        from ..draw.consistency import FOLDER, consistency_page  # lazy: pandas and OpenCV, only with --plots
+
         pics = consistency_page(cons, report, reread(), top[: cons.s.drawn], plots, images, overwrite)
         report["page"] = f"{plots}/{FOLDER}/index.html"
         report["not_drawn"] = [f"{w}: {r}" for w, r in pics["missing"]]

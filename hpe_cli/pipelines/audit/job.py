@@ -31,7 +31,6 @@ from ..inorder import in_order
 from ..pools import default_threads
 from .batches import SKIP_REJECTS, check_batch, read_batches, system_cols
 from .common import canonical_labels
-from .consistency import ConsistencyAudit, consistency_outputs
 from .duplicates import ID_COLUMNS, Duplicates, key_hashes, unpack_rows
 from .flagged import write_flagged
 from .options import AuditOptions
@@ -320,6 +319,8 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
         progress.total = table.num_rows
     cons = None
     if o.consistency is not None:  # its readers and the landmark fit load only for --consistency (start-up)
+        from .consistency import ConsistencyAudit  # lazy: the landmark fits load only with --consistency
+
         cons = ConsistencyAudit(table, o.consistency)
     tally = AuditTally(plan, o, cons, progress)
     in_order(read_batches(table, plan.read_mode, rejected), tally.work, tally.finish, default_threads(o.threads))
@@ -334,6 +335,8 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
         def reread():
             src = open_table(input_path, o.batch_size, with_lines=True)
             return (b for b, _, _ in read_batches(src, plan.read_mode, SKIP_REJECTS))
+
+        from .consistency import consistency_outputs  # lazy: only with --consistency
 
         result["consistency"] = consistency_outputs(cons, reread, o.suspects, o.overwrite, o.plots, o.images)
     write_outputs(plan, o, tally, result, rejected, echo)

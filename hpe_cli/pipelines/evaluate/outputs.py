@@ -11,7 +11,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from ..draw import render_worst
 from .join import file_stems
 from .sides import Chunk
 
@@ -136,8 +135,9 @@ def worst_pictures(frame, images, system, fallback_root=None, max_side: int = 48
     ``images`` (``--images`` or the GT folder), else ``fallback_root``, ``.mat`` + ``.jpg`` folders and
     Panoptic layouts included. ``system`` is the GT system (the angles of ``frame``).
     """
-
     import cv2
+
+    from ..draw import render_worst  # lazy: pandas and OpenCV, only for the page's worst-row pictures
 
     if frame is None or not len(frame):
         return None
