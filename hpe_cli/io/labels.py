@@ -237,6 +237,18 @@ def _merge(ok, reasons, sub_ok_idx, sub_reasons):
     return ok, reasons
 
 
+def angle_columns(batch, system, radians: bool = False):
+    """The three angle columns of ``batch`` in degrees, role order: the system's own named angle columns when the
+    table has them (converted from the system's declared units), else ``pitch, yaw, roll`` (``radians``: the
+    user's claim that they are in radians). Returns ``(cols, ok, reasons)`` as :func:`value_columns`."""
+    if is_native(system, batch.schema.names) and system.storage_kind == "angles":
+        cols, ok, reasons = value_columns(batch, system.value_columns)
+        if system.value_units == "radians":
+            cols = [c * (180.0 / np.pi) for c in cols]
+        return cols, ok, reasons
+    return label_columns_fast(batch, "angles", radians)
+
+
 def batch_rotations(batch, system, mode: str, radians: bool = False):
     """The stored matrices of one record batch, whatever the storage kind.
 
@@ -265,12 +277,7 @@ def batch_rotations(batch, system, mode: str, radians: bool = False):
     n = batch.num_rows
     native = is_native(system, batch.schema.names)
     if mode == "angles":
-        if native and system.storage_kind == "angles":
-            cols, ok, reasons = value_columns(batch, system.value_columns)
-            if system.value_units == "radians":
-                cols = [c * (180.0 / np.pi) for c in cols]
-        else:
-            cols, ok, reasons = label_columns_fast(batch, "angles", radians)
+        cols, ok, reasons = angle_columns(batch, system, radians)
         if not ok.all():
             cols = [np.where(ok, c, 0.0) for c in cols]
         X = system.soa_from_angles(*cols)

@@ -22,7 +22,7 @@ from ...errors import HpeError
 from ...io import ANGLE_COLS, MATRIX_COLS, batch_rotations, label_mode
 from ...io.key_hash import string_hashes
 from ...io.label_source import AUTO, LabelSource
-from ...io.labels import is_native, label_columns_fast, value_columns
+from ...io.labels import angle_columns, is_native, value_columns
 from ...io.readers import LINE_COL
 from ...io.system_meta import resolve_system
 from ...io.table_source import plain_numpy
@@ -72,12 +72,7 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
     n = batch.num_rows
     native = is_native(system, batch.schema.names)
     if mode == "angles":
-        if native and system.storage_kind == "angles":
-            cols, ok, reasons = value_columns(batch, system.value_columns)
-            if system.value_units == "radians":
-                cols = [c * (180.0 / np.pi) for c in cols]
-        else:
-            cols, ok, reasons = label_columns_fast(batch, "angles", radians)
+        cols, ok, reasons = angle_columns(batch, system, radians)
         raw = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1)
         return stored_of_angles(system, raw), ok, reasons, raw, None
     if orthonormalize and (mode == "matrix" or system.storage_kind == "matrix"):
