@@ -107,7 +107,7 @@ def check_mode(columns: Sequence, path, system, mode: str) -> str:
     need = ANGLE_COLS if mode == "angles" else MATRIX_COLS if mode == "matrix" else tuple(system.value_columns)
     missing = [c for c in need if c not in cols]
     if missing:
-        raise HpeError(f"{path}: missing column(s) {', '.join(missing)}: expected {mode} columns {','.join(need)}")
+        raise HpeError(f"{path}: missing column(s) {', '.join(missing)} for --columns {mode}")
     return mode
 
 

@@ -104,6 +104,6 @@ def test_columns_angles_without_angle_columns_is_an_error(tmp_path, command):
     res = hpe_cmd(command, tmp_path / "m.csv", "-o", tmp_path / "out", "--images", SAMPLE, "--columns", "angles")
     assert res.exit_code == 1, res.output
     assert res.output.strip() == (
-        f"Error: {tmp_path / 'm.csv'}: missing column(s) pitch, yaw, roll: expected angles columns pitch,yaw,roll"
+        f"Error: {tmp_path / 'm.csv'}: missing column(s) pitch, yaw, roll for --columns angles"
     )
     assert not (tmp_path / "out").exists()

@@ -23,6 +23,7 @@ import numpy as np
 from ...errors import HpeError
 from ...io import ANGLE_COLS, MATRIX_COLS, Rejects, check_output, open_table, write_json
 from ...io.label_source import AUTO, LabelSource, label_source
+from ...io.labels import is_native
 from ...io.writers import check_report_outputs, json_text
 from ...report.plots import AngleHistograms, plot_files, write_plots
 from ...rotation.audit import CHECKS
@@ -85,18 +86,11 @@ def plan_audit(input_path, table, system, options: AuditOptions) -> AuditPlan:
         missing = [c for c in (ANGLE_COLS if use == "angles" else MATRIX_COLS) if c not in table.columns]
         if missing:
             raise HpeError(f"{table.path}: missing column(s) {', '.join(missing)} for --columns {use}")
-    labels = label_source(table, system, default="300w_lp", mode=use)
+    labels = label_source(table, system, default="300w_lp", mode=use)  # checks the label columns are there
     system, columns, mode = labels.system, labels.columns, labels.mode
     # the system's own columns (rotvec, quaternion, 6-D, 4x4, named angles): read through the system
-    via_system = (
-        use == AUTO
-        and (system.storage_kind != "angles" or bool(system.columns))
-        and all(c in columns for c in system.value_columns)
-    )
+    via_system = use == AUTO and is_native(system, columns)
     need = tuple(system.value_columns) if via_system else (ANGLE_COLS if mode == "angles" else MATRIX_COLS)
-    missing = [c for c in need if c not in columns]
-    if missing:
-        raise HpeError(f"{table.path}: missing column(s) {', '.join(missing)} for --columns {mode}")
     if options.keys:
         bad = [k for k in options.keys if k not in columns]
         if bad:

@@ -18,10 +18,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from ...errors import HpeError
-from ...io import ANGLE_COLS, MATRIX_COLS, batch_rotations, label_mode
+from ...io import MATRIX_COLS, batch_rotations
 from ...io.key_hash import string_hashes
-from ...io.label_source import AUTO, LabelSource
+from ...io.label_source import LabelSource, check_mode
 from ...io.labels import angle_columns, is_native, value_columns
 from ...io.readers import LINE_COL
 from ...io.system_meta import resolve_system
@@ -193,15 +192,8 @@ def open_side(table, system, use: str, role: str):
     angles, then ``r00..r22``).
     """
     resolved = resolve_system(table, system, default=None, option_name=f"--{role}-system", option_is_output=True)
-    columns = side_columns(table)
-    if use == AUTO:
-        return LabelSource(table, resolved, label_mode(columns, table.path, resolved.system))
-    native = resolved.system.storage_kind == use and all(c in columns for c in resolved.system.value_columns)
-    need = ANGLE_COLS if use == "angles" else MATRIX_COLS
-    missing = [c for c in need if c not in columns]
-    if missing and not native:
-        raise HpeError(f"{table.path}: missing column(s) {', '.join(missing)} for --columns {use}")
-    return LabelSource(table, resolved, use)
+    # the columns as evaluate reads them (a dataset's file stems count as its image key)
+    return LabelSource(table, resolved, check_mode(side_columns(table), table.path, resolved.system, use))
 
 
 class SideReader:
