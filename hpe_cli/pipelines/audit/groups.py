@@ -115,8 +115,10 @@ def views(cons, P, finite):
     return angle, code, summary
 
 
-def time_check(cons, P, finite):
-    """``(rate, code, summary)`` of the time check (:func:`hpe_cli.metrics.consistency.temporal_jumps`)."""
+def time_rates(cons, P, finite):
+    """``(rate, code)`` of every row of ``P``: its turn rate (deg/frame) against its track's neighbouring frames
+    (:func:`hpe_cli.metrics.consistency.temporal_jumps`), and the reason code of the rows without one (1: no
+    neighbour within ``max_gap``, 2: no finite label). Shared by the whole-table and the streamed checks."""
     N = len(P["frame"])
     keys = [P[c] for c in cons.track_cols] + [P["frame"]]
     idx = np.flatnonzero(finite)
@@ -129,6 +131,12 @@ def time_check(cons, P, finite):
     code = np.zeros(N, dtype=np.uint8)
     code[~np.isfinite(rate)] = 1
     code[~finite] = 2
+    return rate, code
+
+
+def time_check(cons, P, finite):
+    """``(rate, code, summary)`` of the time check (:func:`time_rates` and its summary)."""
+    rate, code = time_rates(cons, P, finite)
     ok = np.isfinite(rate)
     flagged = ok & (rate > cons.s.max_jump_deg)
     summary = {

@@ -25,7 +25,7 @@ from ...io.layout import arrow_to_numpy
 from ...metrics import consistency as mc
 from ...metrics.sketch import StreamQuantiles
 from .common import _codes
-from .groups import MIN_VIEWS, camera_rotations, view_groups
+from .groups import MIN_VIEWS, camera_rotations, time_rates, view_groups
 
 RESULT = np.dtype([("view", "<f8"), ("vcode", "u1"), ("jump", "<f8"), ("tcode", "u1")])
 
@@ -148,21 +148,7 @@ class GroupStream:
 
     def _time(self, P):
         """Rates and reason codes of every held row (:func:`hpe_cli.metrics.consistency.temporal_jumps`)."""
-        cons = self.cons
-        N = len(P["frame"])
-        finite = P["finite"]
-        keys = [P[c] for c in cons.track_cols] + [P["frame"]]
-        idx = np.flatnonzero(finite)
-        order = idx[np.lexsort([k[idx] for k in reversed(keys)])]
-        tracks = np.stack([k[order] for k in keys[:-1]], 1) if cons.track_cols else np.zeros((len(order), 1))
-        starts = mc.group_starts(tracks)
-        res = mc.temporal_jumps(P["A"][order], P["frame"][order], starts, cons.s.max_gap)
-        rate = np.full(N, np.nan)
-        rate[order] = res["rate"]
-        code = np.zeros(N, dtype=np.uint8)
-        code[~np.isfinite(rate)] = 1
-        code[~finite] = 2
-        return rate, code
+        return time_rates(self.cons, P, P["finite"])
 
     def _cam_R(self, part) -> np.ndarray:
         if self.cons.view_reason:
