@@ -348,7 +348,9 @@ def _update_known() -> None:
         name = next(k for k, v in globals().items() if k.startswith("KNOWN_") and v is known)
         body = "".join(f"    {json.dumps(v)},\n" for v in sorted(find()))
         new = f"{name} = {{\n{body}}}" if body else f"{name}: set = set()"
-        text = re.sub(rf"(?ms)^{name}(: set)? = (\{{\n.*?^\}}|set\(\))", lambda _: new, text, count=1)
+        # a set over several lines, the one line ruff makes of a short one, or an empty set
+        pattern = rf"(?ms)^{name}(: set)? = (\{{\n.*?^\}}|\{{[^\n]*\}}|set\(\))"
+        text = re.sub(pattern, lambda _: new, text, count=1)
     path.write_text(text, encoding="utf-8")
 
 
