@@ -52,23 +52,49 @@ def canonical_to_labels(A, target) -> Conversion:
     )
 
 
-def soa_labels(A, target: RotationSystem, n: int) -> dict:
+#: rows per block of :func:`soa_labels`: its few dozen temporaries (32 KB each) stay in the core's cache and
+#: are reused by malloc, where whole-batch ones (512 KB at 65,536 rows) are mapped and unmapped each time
+#: (page faults and TLB shootdowns that cost more than the arithmetic: measured in docs/performance.md)
+BLOCK = 16384
+
+
+def soa_labels(A, target: RotationSystem, n: int, empty=np.empty) -> dict:
     """Labels of a nested-list canonical matrix ``A``: the columns behind :class:`Conversion`.
 
-    Returns a dict with ``primary``/``secondary`` (lists of 3 arrays, degrees),
-    ``matrix`` (nested list, target's stored matrix), ``gimbal_lock`` and
-    ``roundtrip_err`` (1-D arrays).
+    Parameters
+    ----------
+    A : nested list (3x3) of 1-D float64 arrays of length ``n`` (or floats)
+        Canonical 300W-LP matrices (:mod:`hpe_cli.rotation.soa`).
+    target : RotationSystem
+    n : int
+        Rows, >= 0.
+    empty : callable, optional
+        ``empty(n)`` returns a writable float64 array of length ``n``: where the float output columns are
+        allocated (a caller may hand out memory that outlives this call in its own pool).
+
+    Returns
+    -------
+    dict
+        ``primary``/``secondary`` (lists of 3 arrays, degrees), ``matrix`` (nested list, target's stored
+        matrix), ``gimbal_lock`` and ``roundtrip_err`` (1-D arrays).
+
+    Notes
+    -----
+    Computed :data:`BLOCK` rows at a time; every row's numbers are those of the whole-column computation
+    (element-wise operations in the same order; tested bit for bit).
     """
     R = target.soa_from_canonical(A)
-    p1, p2, locked, _ = target.soa_to_angles(R)
-    rebuilt = target.soa_to_canonical(target.soa_from_angles(*p1))
-    return {
-        "primary": p1,
-        "secondary": p2,
-        "matrix": R,
-        "gimbal_lock": locked,
-        "roundtrip_err": soa.frobenius(A, rebuilt) * np.ones(n),
-    }
+    p1, p2 = [empty(n) for _ in range(3)], [empty(n) for _ in range(3)]
+    locked, err = np.empty(n, dtype=bool), empty(n)
+    for lo in range(0, n, BLOCK):
+        hi = min(n, lo + BLOCK)
+        q1, q2, lk, _ = target.soa_to_angles(soa.rows(R, lo, hi))
+        rebuilt = target.soa_to_canonical(target.soa_from_angles(*q1))
+        err[lo:hi] = soa.frobenius(soa.rows(A, lo, hi), rebuilt)
+        for out, block in zip(p1 + p2, q1 + q2):
+            out[lo:hi] = block
+        locked[lo:hi] = lk
+    return {"primary": p1, "secondary": p2, "matrix": R, "gimbal_lock": locked, "roundtrip_err": err}
 
 
 def convert_matrices(R, source, target) -> Conversion:

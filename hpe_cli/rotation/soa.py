@@ -71,6 +71,11 @@ def from_array(R):
     return [[R[..., m, n] for n in range(3)] for m in range(3)]
 
 
+def rows(X, lo: int, hi: int):
+    """Rows ``lo:hi`` of a nested-list matrix (views; constant entries stay floats)."""
+    return [[v if isinstance(v, float) else v[lo:hi] for v in row] for row in X]
+
+
 def to_array(X, n: int) -> np.ndarray:
     """Assemble a nested list into an ``(n, 3, 3)`` array."""
     out = np.empty((n, 3, 3))
@@ -91,10 +96,13 @@ def columns(X, n: int) -> list:
 
 
 def frobenius(X, Y) -> np.ndarray:
-    """``||X - Y||_F`` per row."""
+    """``||X - Y||_F`` per row (squares summed in row-major order)."""
     acc = 0.0
     for m in range(3):
         for k in range(3):
             d = X[m][k] - Y[m][k]
-            acc = acc + d * d
+            if isinstance(acc, np.ndarray) and isinstance(d, np.ndarray) and d.shape == acc.shape:
+                acc += np.multiply(d, d, out=d)  # the same sums as ``acc = acc + d * d``, without temporaries
+            else:
+                acc = acc + d * d
     return np.sqrt(acc)

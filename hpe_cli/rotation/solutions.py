@@ -19,6 +19,13 @@ import numpy as np
 LOCK_MARGIN_DEG = 3.0
 
 
+def lift_low(d) -> None:
+    """``d[d <= -180] += 360`` in place (degrees to (-180, ...]); the mask is built only when some row needs it."""
+    low = d <= -180.0
+    if low.any():
+        d[low] += 360.0
+
+
 def second_degrees(p1, middle: int, proper: bool) -> list:
     """The other solution of primary angles ``p1`` ([pitch, yaw, roll] arrays, degrees in (-180, 180]).
 
@@ -28,15 +35,17 @@ def second_degrees(p1, middle: int, proper: bool) -> list:
     """
     p2 = []
     for role, d in enumerate(p1):
+        # ``d2 - where(mask, 360, 0)`` is ``d2[mask] -= 360`` bit for bit (``x - 0.0`` is ``x``, -0.0 and NaN
+        # included) without the gather and scatter of a boolean index
         if role != middle:
             d2 = d + 180.0
-            d2[d > 0] -= 360.0
+            np.subtract(d2, np.where(d > 0, 360.0, 0.0), out=d2)
         elif proper:
             d2 = -d
         else:
             d2 = 180.0 - d
-            d2[d < 0] -= 360.0
-        d2[d2 <= -180.0] += 360.0  # tiny |d| rounds d - 180 to exactly -180
+            np.subtract(d2, np.where(d < 0, 360.0, 0.0), out=d2)
+        lift_low(d2)  # tiny |d| rounds d - 180 to exactly -180
         p2.append(d2)
     return p2
 

@@ -414,7 +414,7 @@ class RotationSystem:
         first = {}
         for t, v in zip(turns, (a, b, c)):
             d = v * (_DEG if t.hand == "right" else -_DEG)
-            d[d <= -180.0] += 360.0  # atan2(-0.0, -1) and left hands give -180; keep (-180, 180]
+            _solutions.lift_low(d)  # atan2(-0.0, -1) and left hands give -180; keep (-180, 180]
             first[t.angle] = d
         p1 = [first[role] for role in ROLES]
         p2 = _solutions.second_degrees(p1, _solutions.middle_role(self), proper)
