@@ -52,12 +52,6 @@ def canonical_to_labels(A, target) -> Conversion:
     )
 
 
-#: rows per block of :func:`soa_labels`: its few dozen temporaries (32 KB each) stay in the core's cache and
-#: are reused by malloc, where whole-batch ones (512 KB at 65,536 rows) are mapped and unmapped each time
-#: (page faults and TLB shootdowns that cost more than the arithmetic: measured in docs/performance.md)
-BLOCK = 16384
-
-
 def soa_labels(A, target: RotationSystem, n: int, empty=np.empty) -> dict:
     """Labels of a nested-list canonical matrix ``A``: the columns behind :class:`Conversion`.
 
@@ -80,14 +74,13 @@ def soa_labels(A, target: RotationSystem, n: int, empty=np.empty) -> dict:
 
     Notes
     -----
-    Computed :data:`BLOCK` rows at a time; every row's numbers are those of the whole-column computation
+    Computed :data:`~hpe_cli.rotation.soa.BLOCK` rows at a time; every row's numbers are those of the whole-column computation
     (element-wise operations in the same order; tested bit for bit).
     """
     R = target.soa_from_canonical(A)
     p1, p2 = [empty(n) for _ in range(3)], [empty(n) for _ in range(3)]
     locked, err = np.empty(n, dtype=bool), empty(n)
-    for lo in range(0, n, BLOCK):
-        hi = min(n, lo + BLOCK)
+    for lo, hi in soa.blocks(n):
         q1, q2, lk, _ = target.soa_to_angles(soa.rows(R, lo, hi))
         rebuilt = target.soa_to_canonical(target.soa_from_angles(*q1))
         err[lo:hi] = soa.frobenius(soa.rows(A, lo, hi), rebuilt)

@@ -12,6 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 
+#: rows per block of the column kernels (:func:`hpe_cli.rotation.convert.soa_labels`, the rotation screen): their
+#: few dozen temporaries (128 KB each) stay in the core's cache and in malloc's reused chunks, where
+#: whole-batch ones (512 KB at 65,536 rows) are mapped and unmapped each time (page faults and TLB shootdowns
+#: that cost more than the arithmetic, docs/performance.md); large enough that numpy's per-call cost is small
+BLOCK = 16_384
+
 
 def _prod(x, y):
     if isinstance(x, float):
@@ -69,6 +75,11 @@ def from_array(R):
     """Views of an ``(N, 3, 3)`` array as a nested list."""
     R = np.asarray(R, dtype=np.float64)
     return [[R[..., m, n] for n in range(3)] for m in range(3)]
+
+
+def blocks(n: int):
+    """``(lo, hi)`` row ranges of :data:`BLOCK` rows covering ``0..n``."""
+    return [(lo, min(n, lo + BLOCK)) for lo in range(0, n, BLOCK)]
 
 
 def rows(X, lo: int, hi: int):
