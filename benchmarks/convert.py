@@ -11,13 +11,16 @@ rounds, wall and CPU ratios and peak RSS. Targets (issue 33): <= 1.15x the floor
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from streaming import HPE, compare, floor_cmd, make_angles
+from streaming import HPE, ROOT, compare, floor_cmd, make_angles
 
 from hpe_cli.io import LABEL_COLS
 from hpe_cli.rotation import get_system
@@ -70,6 +73,14 @@ def kernels(n):
     line("hpe angle columns -> matrix columns", n, best_of(lambda: dst.soa_from_angles(p, y, r)), t_sp2)
 
 
+def hpe_source() -> str:
+    """The ``hpe_cli`` the timed commands import: ``-c`` puts the current folder first on ``sys.path``, so run from
+    a checkout's root it is that checkout's, whatever ``PYTHONPATH`` says."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    cmd = [sys.executable, "-c", "import hpe_cli; print(hpe_cli.__file__)"]
+    return subprocess.run(cmd, env=env, capture_output=True, text=True).stdout.strip()
+
+
 def main_end_to_end(args, n):
 
     if not args.skip_kernels:
@@ -86,6 +97,7 @@ def main_end_to_end(args, n):
             f"end to end, {n:,} rows, Parquet in -> Parquet out; medians of {args.repeat} alternating rounds; "
             "floor = pyarrow reading the input and writing the output's width batch by batch (hpe's encoding)"
         )
+        print(f"  hpe: {hpe_source()}")
         for name, inp in (("convert angles", angles), ("convert matrices", matrix)):
             cmd = HPE + ["convert", inp, "-o", out, "--from", "300w_lp", "--to", "scipy_zyx", "-q", "--overwrite"]
             compare(name, cmd + threads, floor_cmd(inp, out, width), args.repeat)
