@@ -14,6 +14,7 @@ from ...metrics.protocols import PROTOCOLS
 from ...metrics.stream import Accumulator
 from ...rotation import soa
 from ..pools import in_order
+from .opal23 import DeferredRows, deferred_protocols, opal23_chunk, score_deferred
 from .outputs import Sample, Worst, row_table
 from .rejects import stream_rejects
 from .sides import Chunk, stored_of_angles
@@ -113,6 +114,10 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     worst, sample = Worst(s.options.worst if s.options.html else 0), Sample()
     ctx = {"opal23_mean": glob["opal23_mean"]} if "opal23_mean" in glob else {}
     counts = {"pairs": 0, "invalid": 0}
+    later = deferred_protocols(s.protocols, s.options.align)  # scored once the pass is over (opal23's mean)
+    now = [k for k in s.protocols if k not in later]
+    hook = opal23_chunk if later else None
+    deferred = DeferredRows() if later else None
 
     def usable():  # in order, on this thread: the rejects file is written as the rows come
         for g, p in pairs:
@@ -133,7 +138,7 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
         if before is not None:
             rows_before = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys), ctx)
             P = remove_offset(P, glob["Q"])
-        rows = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys, aligned=before is not None), ctx)
+        rows = compute_rows(P, G, gsys, now, raw_angles(g, p, gsys, psys, aligned=before is not None), ctx, hook)
         table = None
         if writer is not None or worst.n:
             table = row_table(rows, g, p, s.keys, s.options.by, by_values, s.images)
@@ -164,7 +169,9 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 before.add(rows_before)
             counts["pairs"] += rows.n
             count_orthonormalized(counts, p)
-            acc.add(rows, by_values, part)
+            codes = acc.add(rows, by_values, part)
+            if deferred is not None:
+                deferred.add(rows.extra, g.lines, codes)
             sample.add(rows, block)
             if writer is not None:
                 pending.append(t)
@@ -175,6 +182,8 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             flush(1)
             while writes:  # every piece written, in order; a write's error is raised here
                 writes.pop(0).result()
+        if deferred is not None:
+            score_deferred(deferred, acc, pool, threads)
         rep = acc.report()
         rep_before = before.report() if before is not None else None
     finally:
@@ -185,6 +194,8 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             if hasattr(it, "close"):
                 it.close()
         acc.close()
+        if deferred is not None:
+            deferred.close()
         if before is not None:
             before.close()
     return rep, rep_before, counts, worst, sample
