@@ -42,3 +42,18 @@ def test_spread_over_partitions():
     assert len(np.unique(hx)) == 200_000 and (hx == hs).all()
     counts = np.bincount((hx % np.uint64(64)).astype(np.int64), minlength=64)
     assert counts.min() > 0.9 * 200_000 / 64
+
+
+def test_powers_by_doubling_are_the_powers_mod_2_64():
+    """The hash's power table (built by doubling, then grown) against Python's exact ``pow(base, k, 2**64)``."""
+    import numpy as np
+
+    from hpe_cli.io import key_hash as kh
+
+    for base in (kh._P, kh._P_INV):
+        kh._CACHE.pop(int(base), None)
+        for n in (1, 5, 70_001, 200_003):  # the first call and each growth (doubling past the cache)
+            got = kh._powers(base, n)
+            assert got.dtype == np.uint64 and len(got) == n
+            for k in sorted({0, 1, 2, n // 3, n // 2, n - 1}):
+                assert int(got[k]) == pow(int(base), k, 1 << 64), (n, k)
