@@ -55,5 +55,5 @@ def test_powers_by_doubling_are_the_powers_mod_2_64():
         for n in (1, 5, 70_001, 200_003):  # the first call and each growth (doubling past the cache)
             got = kh._powers(base, n)
             assert got.dtype == np.uint64 and len(got) == n
-            for k in sorted({0, 1, 2, n // 3, n // 2, n - 1}):
+            for k in sorted({0, 1, 2, n // 3, n // 2, n - 1} & set(range(n))):
                 assert int(got[k]) == pow(int(base), k, 1 << 64), (n, k)
