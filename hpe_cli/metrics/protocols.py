@@ -374,34 +374,41 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
 
 
 #: the per-row arrays of :func:`opal23_align_inputs`, in the order a spill writes them
-OPAL23_ALIGN_INPUTS = ("pred", "gt", "gt_euler", "near", "rx_pred", "rx_gt")
+OPAL23_ALIGN_INPUTS = ("P", "G", "gt_euler", "near", "rx_pred", "rx_gt")
+
+
+def _rows9(M) -> np.ndarray:
+    """A nested 3x3 matrix of columns as one ``(9, N)`` array (row-major entries)."""
+    n = int(np.broadcast(*[x for row in M for x in row]).shape[0])
+    out = np.empty((9, n))
+    for i in range(3):
+        for j in range(3):
+            out[3 * i + j] = M[i][j]
+    return out
 
 
 def opal23_align_inputs(pair: PosePair, near=None) -> dict:
-    """What opal23-align reads of a chunk, before the Karcher mean is known: the angles opal23's matrices are
-    built from (``pred``, ``gt``: (N, 3) degrees, 300w_lp as written), the GT's ``as_euler('XYZ')``
-    (``gt_euler``), the rows within 90 degrees of the identity (``near``) and the re-expressed rows
-    (``rx_pred``, ``rx_gt``: masks, or None for a side given as matrices). Arrays only, so a run can spill them
-    and score them after one pass over every pair (:func:`opal23_align_rows`)."""
+    """What opal23-align reads of a chunk before the Karcher mean is known: opal23's matrices of both sides
+    (``P``, ``G``: ``(9, N)``, row-major entries), the GT's ``as_euler('XYZ')`` (``gt_euler``), the rows within
+    90 degrees of the identity (``near``) and the re-expressed rows (``rx_pred``, ``rx_gt``: masks, or None for a
+    side given as matrices). Arrays only, so a run can spill them and score them once its pass over every pair
+    is over (:func:`opal23_align_rows`)."""
     P, G, rx = opal23_mats(pair)
     if near is None:
         near = pa_.opal23_near_mask(G, P)
-    p, g, _ = _written_pair(pair, "300w_lp")
     return {
-        "pred": p,
-        "gt": g,
+        "P": _rows9(P),
+        "G": _rows9(G),
         "gt_euler": _opal23_gt_euler(pair),
         "near": near,
         "rx_pred": rx["pred"],
         "rx_gt": rx["gt"],
-        "_mats": (P, G),  # the chunk's own matrices (not spilled: rebuilt from the angles, the same bits)
     }
 
 
 def opal23_align_rows(inputs: dict, mean) -> ProtocolRows:
     """opal23-align's rows of one chunk's :func:`opal23_align_inputs` for the Karcher ``mean`` (3, 3)."""
-    mats = inputs.get("_mats")
-    P, G = mats if mats is not None else (pa_.opal23_matrices(inputs["pred"]), pa_.opal23_matrices(inputs["gt"]))
+    P, G = ([[M[3 * i + j] for j in range(3)] for i in range(3)] for M in (inputs["P"], inputs["G"]))
     Pa, _ = pa_.opal23_align(G, P, mean=mean)
     n = len(inputs["near"])
     return ProtocolRows(

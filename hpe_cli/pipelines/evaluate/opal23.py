@@ -5,7 +5,7 @@ by the inverse of one Karcher mean over the whole test set, so no chunk can be s
 has been seen. The scoring pass therefore spills, chunk by chunk and in scoring order, the unit quaternions of
 ``P_i G_i^T`` within 90 degrees of the identity (:class:`KarcherSpill`, what the mean is taken over) and what
 opal23-align reads of each chunk (:class:`DeferredRows`, :func:`hpe_cli.metrics.protocols.opal23_align_inputs`:
-the angles its matrices are built from, the GT's Euler angles, two masks). Once the pass is over, the mean is
+opal23's matrices of both sides, the GT's Euler angles, two masks). Once the pass is over, the mean is
 estimated and the spilled chunks are scored with it, in the same chunks and order as the other protocols: the
 same per-row numbers and the same sums as scoring them inline with the mean known in advance, without reading
 and decoding both input files a second time.
@@ -38,9 +38,7 @@ def opal23_chunk(pair) -> tuple:
     hook: opal23's matrices and the GT's Euler angles are shared with the opal23 protocol's)."""
     P, G, _ = opal23_mats(pair)
     deltas, near = pa_.opal23_near_quats(G, P)
-    inputs = opal23_align_inputs(pair, near)
-    inputs.pop("_mats")
-    return deltas, inputs
+    return deltas, opal23_align_inputs(pair, near)
 
 
 class _Rows:
