@@ -8,7 +8,8 @@ the geodesic errors are spilled as float32 for exact medians and percentiles,
 and the per-row output is written chunk by chunk. Files in different orders
 are hashed by key into partition files and joined one partition at a time
 (:mod:`hpe_cli.pipelines.evaluate.spill`), then scored the same way.
-Global estimates (``--align mean``, opal23's alignment) take one extra pass.
+``--align mean``'s offset, needed by every chunk, takes one extra pass; opal23-align, whose Karcher mean needs
+every pair too, is scored after the pass from what each chunk spilled (:mod:`hpe_cli.pipelines.evaluate.opal23`).
 """
 
 from __future__ import annotations
