@@ -18,9 +18,14 @@ import numpy as np
 
 from .protocols import PROTOCOLS
 from .rotation_errors import AXES
+from .select import percentiles_of_pieces
 
 ANGLES = ("pitch", "yaw", "roll")
 WITHIN = (5, 10, 15, 30)
+#: the percentiles of the geodesic error in the report (median, p90, p95)
+QUANTILES = (50, 90, 95)
+#: values of a spill read back at once
+SPILL_PIECE = 1 << 20
 
 
 def _items(rows):
@@ -267,14 +272,27 @@ class Accumulator:
             return np.zeros(0, dtype=f[2])
         return np.memmap(f[1], dtype=f[2], mode="r")
 
+    def _pieces(self, name, rows: int = SPILL_PIECE):
+        """The spill ``name`` read back ``rows`` values at a time (no memory map: its pages would count in the
+        process's peak)."""
+        _, path, dtype = self._files[name]
+        with open(path, "rb") as f:
+            while True:
+                v = np.fromfile(f, dtype=dtype, count=rows)
+                if not len(v):
+                    return
+                yield v
+
     def _quantiles(self, codes, n_groups):
         """``{group: (median, p90, p95)}`` exact over the spilled float32 errors."""
         geo = self._load("geo")
         out = {}
         if geo is None or not len(geo):
             return out
-        if codes is None:
-            q = np.percentile(np.asarray(geo, dtype=np.float32), [50, 90, 95])
+        if codes is None:  # read piece by piece (flat memory), np.percentile's numbers to the bit
+            q = percentiles_of_pieces(lambda: self._pieces("geo"), len(geo), QUANTILES)
+            if q is None:
+                q = np.percentile(np.asarray(geo, dtype=np.float32), QUANTILES)
             return {0: tuple(float(x) for x in q)}
         c = np.asarray(codes)
         order = np.argsort(c, kind="stable")
@@ -282,7 +300,7 @@ class Accumulator:
         for g in range(n_groups):
             sel = order[bounds[g] : bounds[g + 1]]
             if len(sel):
-                q = np.percentile(np.asarray(geo[np.sort(sel)], dtype=np.float32), [50, 90, 95])
+                q = np.percentile(np.asarray(geo[np.sort(sel)], dtype=np.float32), QUANTILES)
                 out[g] = tuple(float(x) for x in q)
         return out
 
