@@ -24,6 +24,7 @@ import numpy as np
 from ..registry import Registry
 from . import peer_angles as pa_
 from . import rotation_errors as re_
+from . import scipy_columns as sc
 from .pose_pair import PosePair
 
 
@@ -378,7 +379,8 @@ OPAL23_ALIGN_INPUTS = ("P", "G", "gt_euler", "near", "rx_pred", "rx_gt")
 
 
 def _rows9(M) -> np.ndarray:
-    """A nested 3x3 matrix of columns as one ``(9, N)`` array (row-major entries)."""
+    """A nested 3x3 matrix of columns (or an ``(N, 3, 3)`` array) as one ``(9, N)`` array (row-major entries)."""
+    M = sc.nested(M)
     n = int(np.broadcast(*[x for row in M for x in row]).shape[0])
     out = np.empty((9, n))
     for i in range(3):
