@@ -112,6 +112,7 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     acc = Accumulator(protos, edges, by=bool(s.options.by))
     before = Accumulator(protos, None, by=False, percentiles=True) if s.options.align == "mean" else None
     worst, sample = Worst(s.options.worst if s.options.html else 0), Sample()
+    plotted = bool(s.options.plots or s.options.html)  # the plot sample is drawn by --plots and --report only
     ctx = {"opal23_mean": glob["opal23_mean"]} if "opal23_mean" in glob else {}
     counts = {"pairs": 0, "invalid": 0}
     later = deferred_protocols(s.protocols, s.options.align)  # scored once the pass is over (opal23's mean)
@@ -142,7 +143,7 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
         table = None
         if writer is not None or worst.n:
             table = row_table(rows, g, p, s.keys, s.options.by, by_values, s.images)
-        part, block = acc.partial(rows), Sample.block(rows)
+        part, block = acc.partial(rows), (Sample.block(rows) if plotted else None)
         if (
             not s.options.by
         ):  # their sums are in `part`: every protocol's per-row arrays are freed before the chunk's turn
@@ -172,7 +173,8 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             codes = acc.add(rows, by_values, part)
             if deferred is not None:
                 deferred.add(rows.extra, g.lines, codes)
-            sample.add(rows, block)
+            if plotted:
+                sample.add(rows, block)
             if writer is not None:
                 pending.append(t)
                 flush(s.options.batch_size)
