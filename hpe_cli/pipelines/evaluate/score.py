@@ -99,6 +99,38 @@ def with_placement(t, g: Chunk, p: Chunk):
     return with_written(t, p)
 
 
+class RowWriter:
+    """The per-row output, written on its own thread (Parquet encoding releases the GIL) in pieces of about
+    ``batch_size`` rows, in the order the tables are added; at most two pieces wait, so memory stays bounded."""
+
+    def __init__(self, writer, batch_size: int):
+        self.writer, self.batch_size = writer, batch_size
+        self.pending: list = []
+        self.writes: list = []
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-write")
+
+    def add(self, table) -> None:
+        self.pending.append(table)
+        self._flush(self.batch_size)
+
+    def _flush(self, at_least: int) -> None:
+        if self.pending and sum(t.num_rows for t in self.pending) >= at_least:
+            while len(self.writes) >= 2:
+                self.writes.pop(0).result()
+            piece = self.pending[0] if len(self.pending) == 1 else pa.concat_tables(self.pending)
+            self.writes.append(self.pool.submit(self.writer.write, piece))
+            self.pending.clear()
+
+    def finish(self) -> None:
+        """Write what is left and wait for every piece (a write's error is raised here)."""
+        self._flush(1)
+        while self.writes:
+            self.writes.pop(0).result()
+
+    def close(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
 def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     """Score every chunk of pairs: accumulate, write rows, keep the worst and a plot sample.
 
@@ -150,16 +182,7 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
             rows.protocols = {}
         return g, p, rows, rows_before, by_values, table, part, block
 
-    pending: list = []  # per-row tables, written in pieces of about one batch
-    writes: list = []  # the per-row file is written on its own thread (Parquet encoding releases the GIL)
-    wpool = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-write") if writer is not None else None
-
-    def flush(at_least):
-        if pending and sum(t.num_rows for t in pending) >= at_least:
-            while len(writes) >= 2:  # at most two pieces waiting: memory stays bounded
-                writes.pop(0).result()
-            writes.append(wpool.submit(writer.write, pending[0] if len(pending) == 1 else pa.concat_tables(pending)))
-            pending.clear()
+    rows_out = RowWriter(writer, s.options.batch_size) if writer is not None else None
 
     threads = max(1, int(s.threads or SCORE_THREADS))
     pool = ThreadPoolExecutor(threads, thread_name_prefix="hpe-evaluate-score")
@@ -175,23 +198,20 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 deferred.add(rows.extra, g.lines, codes)
             if plotted:
                 sample.add(rows, block)
-            if writer is not None:
-                pending.append(t)
-                flush(s.options.batch_size)
+            if rows_out is not None:
+                rows_out.add(t)
             if worst.n:
                 worst.add(with_placement(t, g, p))
-        if writer is not None:
-            flush(1)
-            while writes:  # every piece written, in order; a write's error is raised here
-                writes.pop(0).result()
+        if rows_out is not None:
+            rows_out.finish()
         if deferred is not None:
             score_deferred(deferred, acc, pool, threads)
         rep = acc.report()
         rep_before = before.report() if before is not None else None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-        if wpool is not None:
-            wpool.shutdown(wait=True, cancel_futures=True)
+        if rows_out is not None:
+            rows_out.close()
         for it in (locals().get("pieces"), pairs):  # a signal or an error: the readers' threads and temp files go now
             if hasattr(it, "close"):
                 it.close()
