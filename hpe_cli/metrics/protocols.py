@@ -24,7 +24,6 @@ import numpy as np
 from ..registry import Registry
 from . import peer_angles as pa_
 from . import rotation_errors as re_
-from . import scipy_columns as sc
 from .pose_pair import PosePair
 
 
@@ -312,13 +311,22 @@ def whenet(pair: PosePair) -> ProtocolRows:
 
 
 def opal23_mats(pair):
-    """opal23's matrices of both sides (nested) and the re-expressed rows; computed once per pair (cached)."""
+    """opal23's matrices of both sides (nested) and the re-expressed rows; computed once per pair (cached), with
+    the quaternions they are built from (:func:`_opal23_quats`)."""
 
     def make():
         p, g, rx = _written_pair(pair, "300w_lp")
-        return pa_.opal23_matrices(p), pa_.opal23_matrices(g), rx
+        q = (pa_.opal23_quats(p), pa_.opal23_quats(g))
+        pair._cache[("opal23", "quats")] = q
+        return pa_.opal23_matrix_of_quats(q[0]), pa_.opal23_matrix_of_quats(q[1]), rx
 
     return _cached(pair, ("opal23", "mats"), make)
+
+
+def _opal23_quats(pair) -> tuple:
+    """The quaternions (x, y, z, w columns) of :func:`opal23_mats`'s prediction and GT matrices."""
+    opal23_mats(pair)
+    return pair._cache[("opal23", "quats")]
 
 
 def _opal23_gt_euler(pair) -> np.ndarray:
@@ -375,32 +383,23 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
 
 
 #: the per-row arrays of :func:`opal23_align_inputs`, in the order a spill writes them
-OPAL23_ALIGN_INPUTS = ("P", "G", "gt_euler", "near", "rx_pred", "rx_gt")
-
-
-def _rows9(M) -> np.ndarray:
-    """A nested 3x3 matrix of columns (or an ``(N, 3, 3)`` array) as one ``(9, N)`` array (row-major entries)."""
-    M = sc.nested(M)
-    n = int(np.broadcast(*[x for row in M for x in row]).shape[0])
-    out = np.empty((9, n))
-    for i in range(3):
-        for j in range(3):
-            out[3 * i + j] = M[i][j]
-    return out
+OPAL23_ALIGN_INPUTS = ("qP", "qG", "gt_euler", "near", "rx_pred", "rx_gt")
 
 
 def opal23_align_inputs(pair: PosePair, near=None) -> dict:
-    """What opal23-align reads of a chunk before the Karcher mean is known: opal23's matrices of both sides
-    (``P``, ``G``: ``(9, N)``, row-major entries), the GT's ``as_euler('XYZ')`` (``gt_euler``), the rows within
-    90 degrees of the identity (``near``) and the re-expressed rows (``rx_pred``, ``rx_gt``: masks, or None for a
-    side given as matrices). Arrays only, so a run can spill them and score them once its pass over every pair
-    is over (:func:`opal23_align_rows`)."""
+    """What opal23-align reads of a chunk before the Karcher mean is known: the quaternions of opal23's rotations
+    of both sides (``qP``, ``qG``: ``(4, N)``, x, y, z, w; their matrices are rebuilt from them bit for bit), the
+    GT's ``as_euler('XYZ')`` (``gt_euler``), the rows within 90 degrees of the identity (``near``) and the
+    re-expressed rows (``rx_pred``, ``rx_gt``: masks, or None for a side given as matrices). Arrays only, so a
+    run can spill them (91 bytes a pair) and score them once its pass over every pair is over
+    (:func:`opal23_align_rows`)."""
     P, G, rx = opal23_mats(pair)
     if near is None:
         near = pa_.opal23_near_mask(G, P)
+    qp, qg = _opal23_quats(pair)
     return {
-        "P": _rows9(P),
-        "G": _rows9(G),
+        "qP": np.stack(np.broadcast_arrays(*qp)),
+        "qG": np.stack(np.broadcast_arrays(*qg)),
         "gt_euler": _opal23_gt_euler(pair),
         "near": near,
         "rx_pred": rx["pred"],
@@ -410,7 +409,7 @@ def opal23_align_inputs(pair: PosePair, near=None) -> dict:
 
 def opal23_align_rows(inputs: dict, mean) -> ProtocolRows:
     """opal23-align's rows of one chunk's :func:`opal23_align_inputs` for the Karcher ``mean`` (3, 3)."""
-    P, G = ([[M[3 * i + j] for j in range(3)] for i in range(3)] for M in (inputs["P"], inputs["G"]))
+    P, G = (pa_.opal23_matrix_of_quats(tuple(inputs[k])) for k in ("qP", "qG"))
     Pa, _ = pa_.opal23_align(G, P, mean=mean)
     n = len(inputs["near"])
     return ProtocolRows(

@@ -5,7 +5,7 @@ by the inverse of one Karcher mean over the whole test set, so no chunk can be s
 has been seen. The scoring pass therefore spills, chunk by chunk and in scoring order, the unit quaternions of
 ``P_i G_i^T`` within 90 degrees of the identity (:class:`KarcherSpill`, what the mean is taken over) and what
 opal23-align reads of each chunk (:class:`DeferredRows`, :func:`hpe_cli.metrics.protocols.opal23_align_inputs`:
-opal23's matrices of both sides, the GT's Euler angles, two masks). Once the pass is over, the mean is
+the quaternions of opal23's rotations of both sides, the GT's Euler angles, two masks). Once the pass is over, the mean is
 estimated and the spilled chunks are scored with it, in the same chunks and order as the other protocols: the
 same per-row numbers and the same sums as scoring them inline with the mean known in advance, without reading
 and decoding both input files a second time.
