@@ -1,14 +1,14 @@
 """opal23-align's Karcher mean over every pair of a run, estimated from a spill (memory flat in the pairs).
 
-opal23's ``align_predictions`` (pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:95-129) turns every prediction
-by the inverse of one Karcher mean over the whole test set, so no chunk can be scored by it before every pair
-has been seen. The scoring pass therefore spills, chunk by chunk and in scoring order, the unit quaternions of
-``P_i G_i^T`` within 90 degrees of the identity (:class:`KarcherSpill`, what the mean is taken over) and what
-opal23-align reads of each chunk (:class:`DeferredRows`, :func:`hpe_cli.metrics.protocols.opal23_align_inputs`:
-the quaternions of opal23's rotations of both sides, the GT's Euler angles, two masks). Once the pass is over, the mean is
-estimated and the spilled chunks are scored with it, in the same chunks and order as the other protocols: the
-same per-row numbers and the same sums as scoring them inline with the mean known in advance, without reading
-and decoding both input files a second time.
+opal23's ``align_predictions`` (pcr-upm/opal23_headpose@78c0c45 test/evaluator.py:95-129) turns every prediction by
+the inverse of one Karcher mean over the whole test set, so no chunk can be scored by it before every pair has been
+seen. The scoring pass therefore spills, chunk by chunk and in scoring order, the unit quaternions of ``P_i G_i^T``
+within 90 degrees of the identity (:class:`KarcherSpill`, what the mean is taken over) and what opal23-align reads
+of each chunk (:class:`DeferredRows`, :func:`hpe_cli.metrics.protocols.opal23_align_inputs`: the quaternions of
+opal23's rotations of both sides, the GT's Euler angles, two masks). Once the pass is over, the mean is estimated
+and the spilled chunks are scored with it, in the same chunks and order as the other protocols: the same per-row
+numbers and the same sums as scoring them inline with the mean known in advance, without reading and decoding both
+input files a second time.
 """
 
 from __future__ import annotations
