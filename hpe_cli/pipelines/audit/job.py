@@ -192,7 +192,7 @@ class AuditTally:
     def close(self) -> None:
         """Find the duplicates; count those with no other flag as flagged; finish the examples."""
         dups, n_examples = self.dups, self.options.n_examples
-        self.counts["duplicates"] = dups.finish()
+        self.counts["duplicates"] = dups.finish(default_threads(self.options.threads))
         if self.counts["duplicates"]:
             bits = unpack_rows(self.flag_bits, dups.batch_sizes, dups.dup_idx)
             self.flagged += int(np.count_nonzero(~bits))
