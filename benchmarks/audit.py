@@ -21,6 +21,7 @@ the subset.
 from __future__ import annotations
 
 import argparse
+import compileall
 import sys
 import tempfile
 import time
@@ -111,6 +112,9 @@ def floor_comparison(args) -> int:
     from streaming import HPE, compare, floor_cmd, make_angles
 
     n = args.rows
+    # hpe's bytecode, as an installed package has it (PYTHONDONTWRITEBYTECODE would leave every run compiling
+    # hpe_cli from source, 0.25 s that the floor, reading pyarrow's compiled modules, does not pay)
+    compileall.compile_dir(Path(__file__).resolve().parents[1] / "hpe_cli", quiet=1)
     with tempfile.TemporaryDirectory(dir=args.data) as tmp:
         angles = (Path(args.data) if args.data else Path(tmp)) / f"angles_{n}.parquet"
         if not angles.exists():

@@ -141,3 +141,16 @@ def test_plain_audit_does_not_import_pandas_or_arrow_compute(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "LOADED []" in r.stdout, r.stdout
     assert json.loads((tmp_path / "r.json").read_text())["duplicates"] == 10
+
+
+@pytest.mark.parametrize("announced", [None, 0, 5, 12, 20])
+def test_duplicates_with_or_without_the_row_count(announced):
+    from hpe_cli.pipelines.audit.duplicates import Duplicates
+
+    H = np.array([5, 9, 5, 1, 9, 9, 3, 7, 1, 2, 2, 8], dtype=np.uint64)
+    d = Duplicates(announced)
+    for lo in range(0, len(H), 5):
+        d.add(H[lo : lo + 5], np.arange(lo, min(lo + 5, len(H))) + 2)
+    assert d.finish(threads=2) == 5  # rows 2, 4, 5, 8, 10 repeat rows 0, 1, 1, 3, 9
+    assert d.dup_idx.tolist() == [2, 4, 5, 8, 10]
+    assert d.first_idx.tolist() == [0, 1, 1, 3, 9]

@@ -164,7 +164,10 @@ def key_hashes(label_cols, batch, key_cols) -> np.ndarray:
 class Duplicates:
     """Duplicates from one 64-bit hash per row (8 bytes a row; the only per-row state of an audit)."""
 
-    def __init__(self):
+    def __init__(self, rows: int | None = None):
+        # with the row count known (Parquet), the hashes are copied into one array as batches come in, so
+        # the end of the run does not concatenate them (80 MB at 10M rows)
+        self.buf = np.empty(rows, dtype=np.uint64) if rows else None
         self.parts = []
         self.batch_sizes = []
         self.lines = []  # (row index, line) where the line numbering jumps (CSV rejects, blank lines)
@@ -172,7 +175,13 @@ class Duplicates:
         self._prev_line = None
 
     def add(self, h, lines):
-        self.parts.append(h)
+        if self.buf is not None and self.n + len(h) <= len(self.buf) and not self.parts:
+            self.buf[self.n : self.n + len(h)] = h
+        else:
+            if self.buf is not None:  # more rows than announced: keep what was copied as the first part
+                self.parts.append(self.buf[: self.n])
+                self.buf = None
+            self.parts.append(h)
         self.batch_sizes.append(len(h))
         if len(lines):
             jumps = np.flatnonzero(np.diff(lines) != 1) + 1
@@ -190,8 +199,11 @@ class Duplicates:
         each sorts the hashes of its own range of values (numpy releases the GIL),
         so the result does not depend on ``threads``.
         """
-        H = np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
-        self.parts = []
+        if self.buf is not None:
+            H = self.buf[: self.n]
+        else:
+            H = np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
+        self.parts, self.buf = [], None
         self.H = H
         self.dup_idx = np.zeros(0, dtype=np.int64)
         self.first_idx = np.zeros(0, dtype=np.int64)

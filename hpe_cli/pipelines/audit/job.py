@@ -136,7 +136,7 @@ class AuditTally:
         self.examples = {c: [] for c in CHECKS}
         self.counts = {c: 0 for c in CHECKS}
         self.flagged = self.near_not_locked = self.rows = 0
-        self.dups = Duplicates()
+        self.dups = Duplicates(plan.labels.table.num_rows)
         self.flag_bits = []  # one bit a row: flagged by a check other than duplicates
         self.unread_examples = []
 
