@@ -30,7 +30,7 @@ from ...rotation.audit import CHECKS
 from ...rotation.decoders import DecoderTally
 from ..inorder import in_order
 from ..pools import default_threads
-from .batches import SKIP_REJECTS, check_batch, read_batches, system_cols
+from .batches import SKIP_REJECTS, check_batch, keep_batch_memory, read_batches, system_cols
 from .common import canonical_labels
 from .duplicates import ID_COLUMNS, Duplicates, key_hashes, unpack_rows
 from .flagged import write_flagged
@@ -317,6 +317,7 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
 
         cons = ConsistencyAudit(table, o.consistency)
     tally = AuditTally(plan, o, cons, progress)
+    keep_batch_memory()
     in_order(read_batches(table, plan.read_mode, rejected), tally.work, tally.finish, default_threads(o.threads))
     rejected.check()  # with --strict: any set-aside row is an error and nothing is written
     tally.close()
