@@ -125,7 +125,7 @@ def key_words(batch, name):
         if v.dtype.kind == "f":
             return float_words(v)
         if not len(v) or (v.min() >= -_EXACT_INT and v.max() <= _EXACT_INT):  # what Arrow's cast accepts
-            return float_words(v.astype(np.float64))  # the same rounding as Arrow's cast (exact here)
+            return v.astype(np.float64).view(np.uint64)  # Arrow's cast, exact here (never -0.0 or NaN)
     is_text = pa.types.is_string(t) or pa.types.is_large_string(t) or pa.types.is_binary(t)
     if is_text or pa.types.is_large_binary(t):
         return string_hashes(col)
