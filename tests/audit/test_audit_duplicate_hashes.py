@@ -154,3 +154,25 @@ def test_duplicates_with_or_without_the_row_count(announced):
     assert d.finish(threads=2) == 5  # rows 2, 4, 5, 8, 10 repeat rows 0, 1, 1, 3, 9
     assert d.dup_idx.tolist() == [2, 4, 5, 8, 10]
     assert d.first_idx.tolist() == [0, 1, 1, 3, 9]
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("announced", [None, 400_000, 300_000])
+def test_duplicate_rows_from_either_store_match_numpy(threads, announced):
+    from hpe_cli.pipelines.audit.duplicates import Duplicates
+
+    rng = np.random.default_rng(11)
+    H = rng.integers(0, 2**63, 400_000, dtype=np.int64).view(np.uint64) * np.uint64(2)
+    H[rng.choice(len(H), 900)] = H[rng.choice(len(H), 900)]  # repeats in both halves
+    d = Duplicates(announced)  # 300,000 announced: more rows than that come, the store falls back
+    for lo in range(0, len(H), 65536):
+        d.add(H[lo : lo + 65536], np.arange(lo, min(lo + 65536, len(H))) + 1)
+    _, first = np.unique(H, return_index=True)
+    dup = np.ones(len(H), bool)
+    dup[first] = False
+    assert d.finish(threads) == int(dup.sum()) > 0
+    assert np.array_equal(d.dup_idx, np.flatnonzero(dup))
+    firsts = {}
+    for i, v in enumerate(H.tolist()):
+        firsts.setdefault(v, i)
+    assert d.first_idx.tolist() == [firsts[v] for v in H[dup].tolist()]

@@ -32,7 +32,7 @@ from ..inorder import in_order
 from ..pools import default_threads
 from .batches import SKIP_REJECTS, check_batch, keep_batch_memory, read_batches, system_cols
 from .common import canonical_labels
-from .duplicates import ID_COLUMNS, Duplicates, key_hashes, unpack_rows
+from .duplicates import ID_COLUMNS, Duplicates, key_hashes, split_halves, unpack_rows
 from .flagged import write_flagged
 from .options import AuditOptions
 
@@ -141,7 +141,7 @@ class AuditTally:
         self.unread_examples = []
 
     def work(self, batch):
-        """Check and hash one batch: ``(mode, cols, masks, any flag, hashes, consistency evidence)``."""
+        """Check and hash one batch: ``(mode, cols, masks, any flag, (hashes, their halves), consistency evidence)``."""
         plan = self.plan
         cols, eff = system_cols(batch, plan.system, plan.mode, self.options.radians, plan.via_system)
         res = check_batch(cols, eff, plan.system, self.options.near_tol_deg, primary=self.hist is not None)
@@ -152,7 +152,8 @@ class AuditTally:
         if self.cons is not None:
             A = canonical_labels(plan.system, cols, eff, res)
             cons_in = (A, self.cons.measure(batch, A))
-        return eff, cols, res, any_flag, key_hashes(cols, batch, plan.key_cols), cons_in
+        hashes = key_hashes(cols, batch, plan.key_cols)
+        return eff, cols, res, any_flag, (hashes, split_halves(hashes)), cons_in
 
     def finish(self, batch, lines, unread, future) -> None:
         """Add one batch's result (in input order)."""
@@ -161,7 +162,7 @@ class AuditTally:
             self.counts["non_finite"] += len(unread)
             self.flagged += len(unread)
             self.unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[: self.options.n_examples]]
-        eff, cols, res, any_flag, hashes, cons_in = future.result()
+        eff, cols, res, any_flag, (hashes, halves), cons_in = future.result()
         if self.cons is not None:
             self.cons.add(batch, lines, *cons_in, unread=len(unread))
         if self.decoder is not None:
@@ -172,7 +173,7 @@ class AuditTally:
         self.flagged += int(np.count_nonzero(any_flag))
         self.flag_bits.append(np.packbits(any_flag))
         self.near_not_locked += int(np.count_nonzero(res["near_gimbal"] & ~res["gimbal_lock"]))
-        self.dups.add(hashes, lines)
+        self.dups.add(hashes, lines, halves)
         if self.hist is not None:
             self.hist.add(np.stack(cols, axis=-1) if eff == "angles" else res["primary"])
         self.rows += batch.num_rows
