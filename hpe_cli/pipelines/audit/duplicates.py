@@ -161,14 +161,10 @@ def key_hashes(label_cols, batch, key_cols) -> np.ndarray:
     return h
 
 
-#: hashes below this go to the lower half (:func:`split_halves`)
-_HALF = np.uint64(1 << 63)
-
-
 def split_halves(h):
     """``(h[h < 2**63], h[h >= 2**63])``: a batch's hashes by value half, in input order (for :class:`Duplicates`)."""
-    low = h < _HALF
-    return h[low], h[~low]
+    low = h.view(np.int64) >= 0  # top bit clear; np.compress is about twice as fast as a boolean index here
+    return np.compress(low, h), np.compress(~low, h)
 
 
 class Duplicates:
