@@ -108,7 +108,7 @@ def keep_batch_memory() -> None:
     ``MALLOC_MMAP_THRESHOLD_=32 MiB MALLOC_TRIM_THRESHOLD_=128 MiB`` would, :manpage:`mallopt(3)`) keeps them;
     peak memory is the same (each arena keeps at most what it held at once). Only inside a command (a library
     caller's process is left alone) and once a process; export's workers do the same for frames
-    (:func:`hpe_cli.pipelines.export.workers` ``_frame_sized_malloc``).
+    (:mod:`hpe_cli.pipelines.export.workers`).
     """
     if _HEAP_DONE[0] or current() is None or not sys.platform.startswith("linux"):
         return

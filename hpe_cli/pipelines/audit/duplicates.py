@@ -2,7 +2,8 @@
 
 Equal rows get equal hashes: label values enter as their exact bits (-0.0 = 0.0, every NaN one NaN), text
 columns as a 64-bit hash of their bytes taken from the Arrow buffers (no Python strings). The hashes are the
-audit's only per-row state (8 bytes a row).
+audit's only per-row state: 16 bytes a row (kept in input order and split by value half, :class:`Duplicates`;
+the sort at the end of the run needs no other copy).
 """
 
 from __future__ import annotations
@@ -168,7 +169,7 @@ def split_halves(h):
 
 
 class Duplicates:
-    """Duplicates from one 64-bit hash per row (8 bytes a row; the only per-row state of an audit).
+    """Duplicates from one 64-bit hash per row (16 bytes a row; the only per-row state of an audit).
 
     With the row count known (Parquet), the hashes are copied as batches come in into one array in input
     order and, split by value half (:func:`split_halves`), into a second one filled from both ends; the

@@ -1,7 +1,7 @@
 """``hpe audit`` as a streaming job: per-row checks, duplicates, report, plots and a flagged table.
 
-Memory is flat in the number of rows apart from one 64-bit hash per row
-(duplicates): the checks are counted batch by batch, the label columns are
+Memory is flat in the number of rows apart from one 64-bit hash per row, kept
+twice (duplicates, 16 bytes a row): the checks are counted batch by batch, the label columns are
 checked as columns (no ``(N, 3, 3)`` stacks), and the optional ``-o`` table is
 written in a second pass that recomputes each batch's flags.
 
