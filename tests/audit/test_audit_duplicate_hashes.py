@@ -176,3 +176,11 @@ def test_duplicate_rows_from_either_store_match_numpy(threads, announced):
     for i, v in enumerate(H.tolist()):
         firsts.setdefault(v, i)
     assert d.first_idx.tolist() == [firsts[v] for v in H[dup].tolist()]
+
+
+def test_malloc_thresholds_are_left_alone_outside_a_command(monkeypatch):
+    from hpe_cli.pipelines.audit import batches
+
+    monkeypatch.setattr(batches, "_HEAP_DONE", [False])
+    batches.keep_batch_memory()  # library use: no command's transaction is open
+    assert batches._HEAP_DONE == [False]
