@@ -14,6 +14,8 @@ from __future__ import annotations
 import os
 import sys
 
+from ..io.transaction import current
+
 _DONE: set = set()
 
 #: ``mallopt`` parameters (glibc's malloc.h)
@@ -47,8 +49,9 @@ def raise_malloc_thresholds(mmap_threshold: int = 32 << 20, trim_threshold: int 
 
 
 def keep_freed_memory() -> bool:
-    """:func:`raise_malloc_thresholds` with its defaults, unless the user set ``MALLOC_TRIM_THRESHOLD_`` or
-    ``MALLOC_MMAP_THRESHOLD_`` (their settings win). For a command's own process, not a library caller's."""
-    if "MALLOC_TRIM_THRESHOLD_" in os.environ or "MALLOC_MMAP_THRESHOLD_" in os.environ:
+    """:func:`raise_malloc_thresholds` with its defaults, inside an ``hpe`` command only (a command's output
+    transaction is open: a library caller's process is left alone), and unless the user set
+    ``MALLOC_TRIM_THRESHOLD_`` or ``MALLOC_MMAP_THRESHOLD_`` (their settings win). True when set by this call."""
+    if current() is None or "MALLOC_TRIM_THRESHOLD_" in os.environ or "MALLOC_MMAP_THRESHOLD_" in os.environ:
         return False
     return raise_malloc_thresholds()

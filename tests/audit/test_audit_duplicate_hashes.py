@@ -179,8 +179,9 @@ def test_duplicate_rows_from_either_store_match_numpy(threads, announced):
 
 
 def test_malloc_thresholds_are_left_alone_outside_a_command(monkeypatch):
-    from hpe_cli.pipelines.audit import batches
+    from hpe_cli.pipelines import heap
 
-    monkeypatch.setattr(batches, "_HEAP_DONE", [False])
-    batches.keep_batch_memory()  # library use: no command's transaction is open
-    assert batches._HEAP_DONE == [False]
+    calls = []
+    monkeypatch.setattr(heap, "raise_malloc_thresholds", lambda *a: calls.append(a) or True)
+    assert heap.keep_freed_memory() is False  # library use: no command's transaction is open
+    assert calls == []

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 
 from ...errors import HpeError
@@ -12,7 +9,6 @@ from ...io import ANGLE_COLS, MATRIX_COLS
 from ...io.labels import label_values, numeric_values
 from ...io.readers import LINE_COL
 from ...io.table_source import plain_numpy
-from ...io.transaction import current
 from ...io.units_watch import observe_degrees, observe_radians
 from ...rotation.audit import audit_columns
 
@@ -93,33 +89,3 @@ class SkipRejects:
 
 #: the rejects stand-in of every second pass
 SKIP_REJECTS = SkipRejects()
-
-
-_HEAP_DONE: list = [False]
-
-
-def keep_batch_memory() -> None:
-    """In the ``hpe`` command's process (Linux, glibc): keep freed batch temporaries for the next batch.
-
-    glibc gives the top of a heap back to the system once more than ``M_TRIM_THRESHOLD`` of it is free (about
-    1 MB after its dynamic adjustment), so each batch's temporaries (the checks' half-MB columns, on each
-    worker thread's arena) are faulted in afresh: about 100,000 page faults and 0.2-0.3 s of system CPU at
-    10M rows (``/usr/bin/time``), against a read floor of 0.4 s. Raising the thresholds (as
-    ``MALLOC_MMAP_THRESHOLD_=32 MiB MALLOC_TRIM_THRESHOLD_=128 MiB`` would, :manpage:`mallopt(3)`) keeps them;
-    peak memory is the same (each arena keeps at most what it held at once). Only inside a command (a library
-    caller's process is left alone) and once a process; export's workers do the same for frames
-    (:mod:`hpe_cli.pipelines.export.workers`).
-    """
-    if _HEAP_DONE[0] or current() is None or not sys.platform.startswith("linux"):
-        return
-    _HEAP_DONE[0] = True
-    if "MALLOC_TRIM_THRESHOLD_" in os.environ or "MALLOC_MMAP_THRESHOLD_" in os.environ:
-        return  # the user's own settings win
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL(None)
-        libc.mallopt(-3, 32 << 20)  # M_MMAP_THRESHOLD: blocks below 32 MiB come from the heap
-        libc.mallopt(-1, 128 << 20)  # M_TRIM_THRESHOLD
-    except (OSError, AttributeError):
-        pass

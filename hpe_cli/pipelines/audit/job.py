@@ -28,9 +28,10 @@ from ...io.writers import check_report_outputs, json_text
 from ...report.plots import AngleHistograms, plot_files, write_plots
 from ...rotation.audit import CHECKS
 from ...rotation.decoders import DecoderTally
+from ..heap import keep_freed_memory
 from ..inorder import in_order
 from ..pools import default_threads
-from .batches import SKIP_REJECTS, check_batch, keep_batch_memory, read_batches, system_cols
+from .batches import SKIP_REJECTS, check_batch, read_batches, system_cols
 from .common import canonical_labels
 from .duplicates import ID_COLUMNS, Duplicates, key_hashes, split_halves, unpack_rows
 from .flagged import write_flagged
@@ -318,7 +319,7 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
 
         cons = ConsistencyAudit(table, o.consistency)
     tally = AuditTally(plan, o, cons, progress)
-    keep_batch_memory()
+    keep_freed_memory()  # the batches' freed temporaries reused, not faulted in again (pipelines.heap)
     in_order(read_batches(table, plan.read_mode, rejected), tally.work, tally.finish, default_threads(o.threads))
     rejected.check()  # with --strict: any set-aside row is an error and nothing is written
     tally.close()
