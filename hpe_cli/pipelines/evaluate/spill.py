@@ -73,6 +73,45 @@ def _count_in(a, b) -> int:
     return int(np.count_nonzero(bs[i] == a))
 
 
+def _sorted_rows(h, bits):
+    """``(the top 64 - bits of each hash, sorted; the row of each)``: one ``np.sort`` of the hashes with the row
+    number in their low ``bits`` (numpy sorts uint64 with SIMD; ``argsort`` is about 15x slower)."""
+    low = np.uint64((1 << bits) - 1)
+    packed = h & ~low
+    packed |= np.arange(len(h), dtype=np.uint64)
+    packed.sort()
+    return packed >> np.uint64(bits), (packed & low).astype(np.intp)
+
+
+def hash_matches(hg, hp):
+    """``(gt rows, their prediction rows)`` with equal 64-bit hashes (``hg``, ``hp``: uint64, one per row), the GT
+    rows ascending; None when one side holds a hash twice (a duplicate key, or a collision for the caller to settle).
+
+    Both sides are sorted on their top bits with the row number packed below (:func:`_sorted_rows`) and the sorted
+    GT hashes looked up in the sorted predictions' in order (cache-friendly); a match on the top bits is kept when
+    the whole hashes are equal. Top bits that repeat on one side (rare) take the exact path: ``argsort`` of the
+    whole hashes."""
+
+    bits = max(1, int(max(len(hg), len(hp))).bit_length())
+    tp, op = _sorted_rows(hp, bits)
+    tg, og = _sorted_rows(hg, bits)
+    if (tp[1:] == tp[:-1]).any() or (tg[1:] == tg[:-1]).any():
+        op = np.argsort(hp)
+        tp = hp[op]
+        og = np.argsort(hg)
+        tg = hg[og]
+        if (tp[1:] == tp[:-1]).any() or (tg[1:] == tg[:-1]).any():
+            return None
+    at = np.minimum(np.searchsorted(tp, tg), len(tp) - 1)  # sorted queries: the lookups walk tp in order
+    pi = op[at]
+    gi = og
+    hit = hg[gi] == hp[pi]  # the whole hashes (a top-bits match of another key is no match)
+    pos = np.full(len(hg), -1, dtype=np.intp)
+    pos[gi[hit]] = pi[hit]  # in GT order
+    gi = np.flatnonzero(pos >= 0)
+    return gi, pos[gi]
+
+
 def partitions_for(n_rows: int, partition_rows: int) -> int:
     return int(min(MAX_PARTITIONS, max(1, math.ceil(n_rows / max(1, partition_rows)))))
 
@@ -96,7 +135,8 @@ class _SideSpill:
         self.schema = None
         self.stem_differs: set = set()  # key columns with a row whose file stem is not its text
 
-    def _table(self, c, per):
+    @staticmethod
+    def _table(c, per):
 
         # angles as written are enough: the matrices are rebuilt from them on the scoring threads (the same
         # function on the same numbers: the same bits), which halves what goes to disk and back
@@ -123,26 +163,35 @@ class _SideSpill:
                 col = c.keys.column(name)
                 col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
                 cols[name] = col.cast(col.type.value_type) if pa.types.is_dictionary(col.type) else col
-        t = arrow_table(cols)  # from the buffers: pa.table would import pandas (0.3 s) for numpy columns
+        return arrow_table(cols)  # from the buffers: pa.table would import pandas (0.3 s) for numpy columns
+
+    def prepare(self, c, keys):
+        """``(table of the chunk's rows sorted by partition, partition bounds, key columns whose stems differ)``:
+        the work of :meth:`add` that needs no shared state (the reader runs it on its label threads)."""
+
+        if not c.n:
+            return None
+        h, per = key_hashes(c.keys, keys)
+        # a key whose stems are its texts everywhere needs no count
+        differs = {j for j, (hx, hs) in enumerate(per.values()) if hx is not hs and bool((hx != hs).any())}
+        t = self._table(c, per)
+        # partition numbers < MAX_PARTITIONS fit int16, whose stable sort is a radix sort
+        part = (h % np.uint64(self.K)).astype(np.int16) if self.K > 1 else np.zeros(c.n, dtype=np.int16)
+        order = np.argsort(part, kind="stable")
+        bounds = np.searchsorted(part[order], np.arange(self.K + 1))
+        return t.take(numpy_to_arrow(order)), bounds, differs  # one gather; each partition a zero-copy slice
+
+    def add(self, c, keys):
+
+        prepared = c.prepared if c.prepared is not None else self.prepare(c, keys)
+        if prepared is None:
+            return
+        t, bounds, differs = prepared
+        self.stem_differs |= differs
         if self.schema is None:
             self.schema = t.schema
         elif t.schema != self.schema:
             t = t.cast(self.schema)
-        return t
-
-    def add(self, c, keys):
-
-        if not c.n:
-            return
-        h, per = key_hashes(c.keys, keys)
-        for j, (hx, hs) in enumerate(per.values()):  # a key whose stems are its texts everywhere needs no count
-            if j not in self.stem_differs and bool((hx != hs).any()):
-                self.stem_differs.add(j)
-        t = self._table(c, per)
-        part = (h % np.uint64(self.K)).astype(np.int64) if self.K > 1 else np.zeros(c.n, dtype=np.int64)
-        order = np.argsort(part, kind="stable")
-        bounds = np.searchsorted(part[order], np.arange(self.K + 1))
-        t = t.take(numpy_to_arrow(order))  # one gather; each partition is then a zero-copy slice
         for k in range(self.K):
             a, b = int(bounds[k]), int(bounds[k + 1])
             if a == b:
@@ -240,6 +289,8 @@ class Partitions:
     def fill(self):
         try:
             for spill, reader in ((self.g, self.gr), (self.p, self.pr)):
+                reader.matrices = False  # angles are kept as written: their matrices are built when scored
+                reader.prepare = lambda c, spill=spill: spill.prepare(c, self.keys)  # on the label threads
                 with closing(reader.chunks()) as chunks:  # an error stops the label threads at once
                     for c in chunks:
                         spill.add(c, self.keys)
@@ -323,17 +374,10 @@ class Partitions:
             hg = combine_key_hash(hg, gt.hashes[j][w])
             hp = combine_key_hash(hp, pred.hashes[j][w])
         # codes: a prediction's is its row, a GT row's the row of its match (else one past all predictions)
-        order = np.argsort(hp)
-        sp = hp[order]
-        gorder = np.argsort(hg)
-        sg = hg[gorder]
-        if (sp[1:] == sp[:-1]).any() or (sg[1:] == sg[:-1]).any():
+        matched = hash_matches(hg, hp)
+        if matched is None:
             return None  # equal hashes on one side: a duplicate key (named by the string join) or a collision
-        at = np.empty(gt.n, dtype=np.intp)
-        at[gorder] = np.searchsorted(sp, sg)  # sorted queries walk the sorted hashes in order: cache-friendly
-        at = np.minimum(at, pred.n - 1)
-        gi = np.flatnonzero(sp[at] == hg)
-        pi = order[at[gi]]
+        gi, pi = matched
         cp = np.arange(pred.n, dtype=np.int64)
         cg = np.arange(pred.n, pred.n + gt.n, dtype=np.int64)
         cg[gi] = pi
