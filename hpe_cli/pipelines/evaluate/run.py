@@ -288,7 +288,8 @@ def _run_spill(s, rej, writer):
                 del gt, pred, gidx, pidx
 
         glob = _globals(s, lambda: pairs(False), gr.system, pr.system)
-        out = score_pairs(s, pairs(True), rej, gr.system, pr.system, glob, writer, False)
+        # the next partition is read and joined on a thread while this one is scored
+        out = score_pairs(s, prefetch(pairs(True)), rej, gr.system, pr.system, glob, writer, False)
     finally:
         parts.cleanup()
     out[2]["invalid"] = tally["invalid"]

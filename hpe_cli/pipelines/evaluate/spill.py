@@ -73,41 +73,52 @@ def _count_in(a, b) -> int:
     return int(np.count_nonzero(bs[i] == a))
 
 
-def _sorted_rows(h, bits):
-    """``(the top 64 - bits of each hash, sorted; the row of each)``: one ``np.sort`` of the hashes with the row
-    number in their low ``bits`` (numpy sorts uint64 with SIMD; ``argsort`` is about 15x slower)."""
-    low = np.uint64((1 << bits) - 1)
-    packed = h & ~low
-    packed |= np.arange(len(h), dtype=np.uint64)
-    packed.sort()
-    return packed >> np.uint64(bits), (packed & low).astype(np.intp)
-
-
 def hash_matches(hg, hp):
     """``(gt rows, their prediction rows)`` with equal 64-bit hashes (``hg``, ``hp``: uint64, one per row), the GT
     rows ascending; None when one side holds a hash twice (a duplicate key, or a collision for the caller to settle).
 
-    Both sides are sorted on their top bits with the row number packed below (:func:`_sorted_rows`) and the sorted
-    GT hashes looked up in the sorted predictions' in order (cache-friendly); a match on the top bits is kept when
-    the whole hashes are equal. Top bits that repeat on one side (rare) take the exact path: ``argsort`` of the
-    whole hashes."""
+    One ``np.sort`` of both sides (numpy sorts uint64 with SIMD; ``argsort`` is about 15x slower): each hash keeps
+    its top bits, then a side bit (GT 0, prediction 1), then its row, so a GT row and its prediction end up side by
+    side. A match on the top bits is kept when the whole hashes are equal; top bits that repeat on one side (rare)
+    take the exact path (``argsort`` of the whole hashes).
+    """
 
-    bits = max(1, int(max(len(hg), len(hp))).bit_length())
-    tp, op = _sorted_rows(hp, bits)
-    tg, og = _sorted_rows(hg, bits)
-    if (tp[1:] == tp[:-1]).any() or (tg[1:] == tg[:-1]).any():
-        op = np.argsort(hp)
-        tp = hp[op]
-        og = np.argsort(hg)
-        tg = hg[og]
-        if (tp[1:] == tp[:-1]).any() or (tg[1:] == tg[:-1]).any():
-            return None
-    at = np.minimum(np.searchsorted(tp, tg), len(tp) - 1)  # sorted queries: the lookups walk tp in order
-    pi = op[at]
-    gi = og
+    ng = len(hg)
+    bits = max(1, int(max(ng, len(hp))).bit_length())
+    low = np.uint64((1 << bits) - 1)
+    top = ~np.uint64((1 << (bits + 1)) - 1)
+    packed = np.empty(ng + len(hp), dtype=np.uint64)
+    np.bitwise_and(hg, top, out=packed[:ng])
+    np.bitwise_and(hp, top, out=packed[ng:])
+    packed[:ng] |= np.arange(ng, dtype=np.uint64)
+    packed[ng:] |= np.arange(len(hp), dtype=np.uint64) | np.uint64(1 << bits)
+    packed.sort()
+    t = packed >> np.uint64(bits)  # top bits and side bit
+    same_top = (t[1:] >> np.uint64(1)) == (t[:-1] >> np.uint64(1))
+    if (same_top & (t[1:] == t[:-1])).any():  # top bits twice on one side: the whole hashes decide
+        return _exact_matches(hg, hp)
+    i = np.flatnonzero(same_top)  # a GT row (side bit 0 sorts first) next to a prediction
+    gi = (packed[i] & low).astype(np.intp)
+    pi = (packed[i + 1] & low).astype(np.intp)
     hit = hg[gi] == hp[pi]  # the whole hashes (a top-bits match of another key is no match)
-    pos = np.full(len(hg), -1, dtype=np.intp)
+    pos = np.full(ng, -1, dtype=np.intp)
     pos[gi[hit]] = pi[hit]  # in GT order
+    gi = np.flatnonzero(pos >= 0)
+    return gi, pos[gi]
+
+
+def _exact_matches(hg, hp):
+    """:func:`hash_matches` on the whole hashes (``argsort``)."""
+    op = np.argsort(hp)
+    sp = hp[op]
+    og = np.argsort(hg)
+    sg = hg[og]
+    if (sp[1:] == sp[:-1]).any() or (sg[1:] == sg[:-1]).any():
+        return None
+    at = np.minimum(np.searchsorted(sp, sg), len(sp) - 1)
+    hit = sp[at] == sg
+    pos = np.full(len(hg), -1, dtype=np.intp)
+    pos[og[hit]] = op[at[hit]]
     gi = np.flatnonzero(pos >= 0)
     return gi, pos[gi]
 
@@ -152,9 +163,9 @@ class _SideSpill:
             if c.reasons is None  # every row usable: n empty strings, built from their (all-zero) offsets
             else pa.array(c.reasons.astype(str), pa.string())
         )
-        if c.raw is not None:
-            for k in range(3):
-                cols[f"{_PFX}raw{k}"] = c.raw[:, k]
+        if c.raw is not None:  # one (n, 3) block: read back as a view, no column_stack
+            raw = numpy_to_arrow(np.ascontiguousarray(c.raw, dtype=np.float64).reshape(-1))
+            cols[f"{_PFX}raw"] = pa.FixedSizeListArray.from_arrays(raw, 3)
         if c.dist is not None:
             cols[f"{_PFX}dist"] = c.dist
         cols[f"{_PFX}line"] = c.lines
@@ -263,8 +274,9 @@ class _SideSpill:
                 col(f"{_PFX}line"),
                 [],
             )
-            if f"{_PFX}raw0" in t.column_names:
-                side.raw = np.column_stack([col(f"{_PFX}raw{i}") for i in range(3)])
+            if f"{_PFX}raw" in t.column_names:
+                raw = t.column(f"{_PFX}raw").combine_chunks()
+                side.raw = arrow_to_numpy(raw.values if raw.offset == 0 else raw.flatten()).reshape(-1, 3)
             if f"{_PFX}dist" in t.column_names:
                 side.dist = col(f"{_PFX}dist")
             side.hashes = {
@@ -368,11 +380,14 @@ class Partitions:
             return None
         if len(getattr(gt, "hashes", {})) < len(self.keys) or len(getattr(pred, "hashes", {})) < len(self.keys):
             return None
-        hg, hp = np.zeros(gt.n, dtype=np.uint64), np.zeros(pred.n, dtype=np.uint64)
-        for j, k in enumerate(self.keys):
-            w = 1 if k in stems else 0
-            hg = combine_key_hash(hg, gt.hashes[j][w])
-            hp = combine_key_hash(hp, pred.hashes[j][w])
+        w = [1 if k in stems else 0 for k in self.keys]
+        if len(self.keys) == 1:  # combine_key_hash(0, h) is h
+            hg, hp = gt.hashes[0][w[0]], pred.hashes[0][w[0]]
+        else:
+            hg, hp = np.zeros(gt.n, dtype=np.uint64), np.zeros(pred.n, dtype=np.uint64)
+            for j in range(len(self.keys)):
+                hg = combine_key_hash(hg, gt.hashes[j][w[j]])
+                hp = combine_key_hash(hp, pred.hashes[j][w[j]])
         # codes: a prediction's is its row, a GT row's the row of its match (else one past all predictions)
         matched = hash_matches(hg, hp)
         if matched is None:
