@@ -187,7 +187,9 @@ class _SideSpill:
         differs = {j for j, (hx, hs) in enumerate(per.values()) if hx is not hs and bool((hx != hs).any())}
         t = self._table(c, per)
         # partition numbers < MAX_PARTITIONS fit int16, whose stable sort is a radix sort
-        part = (h % np.uint64(self.K)).astype(np.int16) if self.K > 1 else np.zeros(c.n, dtype=np.int16)
+        K = np.uint64(self.K)
+        # h % K, written with // (numpy divides by a scalar with libdivide: 10x faster than its %)
+        part = (h - (h // K) * K).astype(np.int16) if self.K > 1 else np.zeros(c.n, dtype=np.int16)
         order = np.argsort(part, kind="stable")
         bounds = np.searchsorted(part[order], np.arange(self.K + 1))
         return t.take(numpy_to_arrow(order)), bounds, differs  # one gather; each partition a zero-copy slice
