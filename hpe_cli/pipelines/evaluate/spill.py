@@ -404,7 +404,9 @@ class Partitions:
                 a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
                 b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b,
             )
-            a, b = a.take(numpy_to_arrow(gi)), b.take(numpy_to_arrow(pi))
+            # every GT row matched (the usual case): gi is 0..n-1, the column itself
+            a = a if len(gi) == gt.n else a.take(numpy_to_arrow(gi))
+            b = b.take(numpy_to_arrow(pi))
             if k in stems:
                 a, b = file_stems(a), file_stems(b)
             if len(gi) and not pc.all(pc.equal(a, b)).as_py():
