@@ -252,8 +252,9 @@ def _run_spill(s, rej, writer):
                 yield from _memory_pairs(gt, pred, gidx[valid], pidx[valid], s.options.batch_size)
                 del gt, pred, gidx, pidx
 
-        glob = _globals(s, lambda: pairs(False), gr.system, pr.system)
-        out = score_pairs(s, pairs(True), rej, gr.system, pr.system, glob, writer, False)
+        glob = _globals(s, lambda: prefetch(pairs(False)), gr.system, pr.system)
+        # the next partition is read and joined on a thread while this one is scored
+        out = score_pairs(s, prefetch(pairs(True)), rej, gr.system, pr.system, glob, writer, False)
     finally:
         parts.cleanup()
     out[2]["invalid"] = tally["invalid"]
