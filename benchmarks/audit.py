@@ -21,6 +21,8 @@ the subset.
 from __future__ import annotations
 
 import argparse
+import compileall
+import os
 import sys
 import tempfile
 import time
@@ -111,8 +113,15 @@ def floor_comparison(args) -> int:
     from streaming import HPE, compare, floor_cmd, make_angles
 
     n = args.rows
-    with tempfile.TemporaryDirectory(dir=args.data) as tmp:
-        angles = (Path(args.data) if args.data else Path(tmp)) / f"angles_{n}.parquet"
+    # run from this checkout: ``python -c`` puts the working folder first on sys.path, so a run started in
+    # another checkout would time that checkout's hpe_cli whatever PYTHONPATH says
+    data = str(Path(args.data).resolve()) if args.data else None
+    os.chdir(Path(__file__).resolve().parents[1])
+    # hpe's bytecode, as an installed package has it (PYTHONDONTWRITEBYTECODE would leave every run compiling
+    # hpe_cli from source, 0.25 s that the floor, reading pyarrow's compiled modules, does not pay)
+    compileall.compile_dir(Path(__file__).resolve().parents[1] / "hpe_cli", quiet=1)
+    with tempfile.TemporaryDirectory(dir=data) as tmp:
+        angles = (Path(data) if data else Path(tmp)) / f"angles_{n}.parquet"
         if not angles.exists():
             make_angles(angles, n)
         threads = ["--threads", str(args.threads)] if args.threads else []

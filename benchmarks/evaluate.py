@@ -1,7 +1,7 @@
 """`hpe evaluate` at scale: time and peak RSS beside DuckDB and the floor, in the same run.
 
     python benchmarks/evaluate.py [--rows 5000000] [--shuffled] [--protocol NAME ...] [--repeat 3]
-        [--threads N] [--with-rows] [--join] [--each-protocol] [--before DIR]
+        [--threads N] [--with-rows] [--join] [--each-protocol] [--before DIR] [--data DIR]
 
 Two Parquet tables of N pairs (string key 'image', pitch/yaw/roll; GT in
 300w_lp, predictions in 6drepnet, the same rotation turned by about 5 degrees:
@@ -234,6 +234,13 @@ def main():
         help="also run every hpe job on the hpe_cli package found in DIR (e.g. an earlier commit's `git archive`), "
         "in the same rounds: before and after side by side",
     )
+    ap.add_argument(
+        "--data",
+        metavar="DIR",
+        default=None,
+        help="keep the generated files in DIR/<rows>-<order>/ and reuse them in later runs (default: a temporary "
+        "folder, removed at the end)",
+    )
     args = ap.parse_args()
     n = args.rows
     protocols = args.protocol or ["hopenet"]
@@ -259,7 +266,12 @@ def main():
     subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "hpe_cli")], check=True)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        make_tables(n, folder, args.shuffled)
+        if args.data:
+            folder = Path(args.data) / f"{n}-{'shuffled' if args.shuffled else 'ordered'}"
+            folder.mkdir(parents=True, exist_ok=True)
+        if not (folder / "complete").is_file():  # a run stopped while writing them writes them again
+            make_tables(n, folder, args.shuffled)
+            (folder / "complete").write_text("")
         gt, pred = str(folder / "gt.parquet"), str(folder / "pred.parquet")
         print(
             f"{n:,} pairs, predictions {'shuffled' if args.shuffled else 'in GT order'}, hpe protocols {protocols}, "

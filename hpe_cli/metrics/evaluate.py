@@ -36,6 +36,8 @@ class PairRows:
     gt_angles: np.ndarray
     pred_angles: np.ndarray
     protocols: dict
+    #: what ``compute_rows(..., hook=f)`` returned of ``f(pair)`` (None without a hook)
+    extra: object = None
 
     @property
     def n(self) -> int:
@@ -55,11 +57,12 @@ def check_protocols(protocols) -> list:
     return names
 
 
-def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None) -> PairRows:
+def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None, hook=None) -> PairRows:
     """Every per-row error for canonical rotations ``P`` (predicted) and ``G`` (true).
 
     ``raw`` (``{"pred" | "gt": (system, angles (N, 3))}``) holds the angles as
-    written for sides given as angles (see :class:`PosePair`).
+    written for sides given as angles (see :class:`PosePair`). ``hook(pair)``, when given, runs on the same
+    :class:`PosePair` after the protocols (sharing their cached decompositions); its result is ``extra``.
     """
     pair = PosePair(P, G, gt_system, raw, context)
     g = pair.primary(gt_system, "gt")  # hpe's own metrics: primary solutions (of the matrices)
@@ -67,7 +70,15 @@ def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None) -> Pai
     best, _ = re_.best_of_two_error(p1, p2, g)
     protos = {name: PROTOCOLS[name].func(pair) for name in check_protocols(protocols)}
     return PairRows(
-        pair.geodesic(), re_.maev_deg(pair.P, pair.G), pair.frobenius(), re_.wrapped_error(p1, g), best, g, p1, protos
+        pair.geodesic(),
+        re_.maev_deg(pair.P, pair.G),
+        pair.frobenius(),
+        re_.wrapped_error(p1, g),
+        best,
+        g,
+        p1,
+        protos,
+        None if hook is None else hook(pair),
     )
 
 

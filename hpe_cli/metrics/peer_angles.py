@@ -83,13 +83,24 @@ def img2pose_euler(R_img2pose) -> np.ndarray:
     return a * np.array([1.0, -1.0, -1.0])
 
 
+def opal23_quats(pyr) -> tuple:
+    """opal23's rotations of (pitch, yaw, roll) degrees as SciPy's quaternions (x, y, z, w columns):
+    ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])`` (SciPy's arithmetic, :mod:`.scipy_columns`)."""
+    a = np.asarray(pyr, dtype=np.float64) * np.array([1.0, -1.0, 1.0])
+    return sc.quat_from_euler("XYZ", a, degrees=True)
+
+
+def opal23_matrix_of_quats(q) -> list:
+    """``.as_matrix()`` of :func:`opal23_quats` (the nested 3x3 list of columns)."""
+    return sc.matrix_from_quat(q)
+
+
 def opal23_matrices(pyr) -> list:
     """opal23's matrices of (pitch, yaw, roll) degrees: ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])``.
 
     Returns the nested 3x3 list of columns of ``.as_matrix()`` (SciPy's arithmetic, :mod:`.scipy_columns`).
     """
-    a = np.asarray(pyr, dtype=np.float64) * np.array([1.0, -1.0, 1.0])
-    return sc.matrix_from_quat(sc.quat_from_euler("XYZ", a, degrees=True))
+    return opal23_matrix_of_quats(opal23_quats(pyr))
 
 
 def opal23_euler(M) -> np.ndarray:

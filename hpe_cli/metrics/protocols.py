@@ -311,13 +311,22 @@ def whenet(pair: PosePair) -> ProtocolRows:
 
 
 def opal23_mats(pair):
-    """opal23's matrices of both sides (nested) and the re-expressed rows; computed once per pair (cached)."""
+    """opal23's matrices of both sides (nested) and the re-expressed rows; computed once per pair (cached), with
+    the quaternions they are built from (:func:`_opal23_quats`)."""
 
     def make():
         p, g, rx = _written_pair(pair, "300w_lp")
-        return pa_.opal23_matrices(p), pa_.opal23_matrices(g), rx
+        q = (pa_.opal23_quats(p), pa_.opal23_quats(g))
+        pair._cache[("opal23", "quats")] = q
+        return pa_.opal23_matrix_of_quats(q[0]), pa_.opal23_matrix_of_quats(q[1]), rx
 
     return _cached(pair, ("opal23", "mats"), make)
+
+
+def _opal23_quats(pair) -> tuple:
+    """The quaternions (x, y, z, w columns) of :func:`opal23_mats`'s prediction and GT matrices."""
+    opal23_mats(pair)
+    return pair._cache[("opal23", "quats")]
 
 
 def _opal23_gt_euler(pair) -> np.ndarray:
@@ -361,22 +370,54 @@ def opal23_align(pair: PosePair) -> ProtocolRows:
     The mean of ``P G^T`` is taken over the rows within 90 degrees of the
     identity only (``left_out_of_mean`` counts the others); every prediction
     is then turned by its inverse. A streamed run estimates the mean over all
-    pairs first and passes it in ``pair.context["opal23_mean"]``.
+    pairs first and passes it in ``pair.context["opal23_mean"]``, or scores
+    the chunk's :func:`opal23_align_inputs` once the mean is known
+    (:func:`opal23_align_rows`).
     """
-    P, G, rx = opal23_mats(pair)
     mean = pair.context.get("opal23_mean")
     if mean is None:
+        P, G, _ = opal23_mats(pair)
         deltas, near = pa_.opal23_near_quats(G, P)
-        mean = pa_.opal23_karcher(deltas)
-    else:  # the mean of every chunk is known: only the rows left out of it are counted here
+        return opal23_align_rows(opal23_align_inputs(pair, near), pa_.opal23_karcher(deltas))
+    return opal23_align_rows(opal23_align_inputs(pair), mean)
+
+
+#: the per-row arrays of :func:`opal23_align_inputs`, in the order a spill writes them
+OPAL23_ALIGN_INPUTS = ("qP", "qG", "gt_euler", "near", "rx_pred", "rx_gt")
+
+
+def opal23_align_inputs(pair: PosePair, near=None) -> dict:
+    """What opal23-align reads of a chunk before the Karcher mean is known: the quaternions of opal23's rotations
+    of both sides (``qP``, ``qG``: ``(4, N)``, x, y, z, w; their matrices are rebuilt from them bit for bit), the
+    GT's ``as_euler('XYZ')`` (``gt_euler``), the rows within 90 degrees of the identity (``near``) and the
+    re-expressed rows (``rx_pred``, ``rx_gt``: masks, or None for a side given as matrices). Arrays only, so a
+    run can spill them (91 bytes a pair) and score them once its pass over every pair is over
+    (:func:`opal23_align_rows`)."""
+    P, G, rx = opal23_mats(pair)
+    if near is None:
         near = pa_.opal23_near_mask(G, P)
+    qp, qg = _opal23_quats(pair)
+    return {
+        "qP": np.stack(np.broadcast_arrays(*qp)),
+        "qG": np.stack(np.broadcast_arrays(*qg)),
+        "gt_euler": _opal23_gt_euler(pair),
+        "near": near,
+        "rx_pred": rx["pred"],
+        "rx_gt": rx["gt"],
+    }
+
+
+def opal23_align_rows(inputs: dict, mean) -> ProtocolRows:
+    """opal23-align's rows of one chunk's :func:`opal23_align_inputs` for the Karcher ``mean`` (3, 3)."""
+    P, G = (pa_.opal23_matrix_of_quats(tuple(inputs[k])) for k in ("qP", "qG"))
     Pa, _ = pa_.opal23_align(G, P, mean=mean)
+    n = len(inputs["near"])
     return ProtocolRows(
-        pa_.opal23_mae(G, Pa, ann_euler=_opal23_gt_euler(pair)),
-        np.ones(pair.n, dtype=bool),
+        pa_.opal23_mae(G, Pa, ann_euler=inputs["gt_euler"]),
+        np.ones(n, dtype=bool),
         scalars={"geodesic": pa_.opal23_geodesic(G, Pa)},
-        counts={"left_out_of_mean": ~near},
-        reexpressed=rx,
+        counts={"left_out_of_mean": ~inputs["near"]},
+        reexpressed={"pred": inputs["rx_pred"], "gt": inputs["rx_gt"]},
     )
 
 

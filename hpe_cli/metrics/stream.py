@@ -18,9 +18,14 @@ import numpy as np
 
 from .protocols import PROTOCOLS
 from .rotation_errors import AXES
+from .select import percentiles_of_pieces
 
 ANGLES = ("pitch", "yaw", "roll")
 WITHIN = (5, 10, 15, 30)
+#: the percentiles of the geodesic error in the report (median, p90, p95)
+QUANTILES = (50, 90, 95)
+#: values of a spill read back at once
+SPILL_PIECE = 1 << 20
 
 
 def _items(rows):
@@ -38,25 +43,30 @@ def _items(rows):
         for k, a in enumerate(ANGLES):
             yield (blk, a), None, e[:, k]
     for name, pr in rows.protocols.items():
-        keep = pr.keep
-        yield ("p", name, "n"), keep, None
-        yield ("p", name, "dropped"), ~keep, None
+        yield from _protocol_items(name, pr)
+
+
+def _protocol_items(name, pr):
+    """The :func:`_items` of one protocol's rows (``ProtocolRows``)."""
+    keep = pr.keep
+    yield ("p", name, "n"), keep, None
+    yield ("p", name, "dropped"), ~keep, None
+    for k, lab in enumerate(pr.angle_labels):
+        yield ("p", name, "err", lab), keep, pr.err[:, k]
+    for s, m in pr.splits.items():
+        yield ("p", name, "split", s, "n"), keep & m, None
         for k, lab in enumerate(pr.angle_labels):
-            yield ("p", name, "err", lab), keep, pr.err[:, k]
-        for s, m in pr.splits.items():
-            yield ("p", name, "split", s, "n"), keep & m, None
-            for k, lab in enumerate(pr.angle_labels):
-                yield ("p", name, "split", s, lab), keep & m, pr.err[:, k]
-        for s, v in pr.scalars.items():
-            yield ("p", name, "scalar", s), keep, v
-        for s, (labels, v) in pr.vectors.items():
-            for j, lab in enumerate(labels):
-                yield ("p", name, "vector", s, lab), keep, v[:, j]
-        for s, m in pr.counts.items():
-            yield ("p", name, "count", s), keep & m, None
-        for side, m in pr.reexpressed.items():
-            if m is not None:
-                yield ("p", name, "rx", side), m, None
+            yield ("p", name, "split", s, lab), keep & m, pr.err[:, k]
+    for s, v in pr.scalars.items():
+        yield ("p", name, "scalar", s), keep, v
+    for s, (labels, v) in pr.vectors.items():
+        for j, lab in enumerate(labels):
+            yield ("p", name, "vector", s, lab), keep, v[:, j]
+    for s, m in pr.counts.items():
+        yield ("p", name, "count", s), keep & m, None
+    for side, m in pr.reexpressed.items():
+        if m is not None:
+            yield ("p", name, "rx", side), m, None
 
 
 class _Grouping:
@@ -84,12 +94,16 @@ class _Grouping:
 
     def partial(self, rows, codes) -> tuple:
         """The sums and counts of one chunk (no state read or written: any thread may compute it)."""
+        return self.partial_of(_items(rows), rows.protocols, len(rows.geodesic), codes, rows.geodesic)
+
+    def partial_of(self, items, protocols: dict, n: int, codes, geodesic=None) -> tuple:
+        """:meth:`partial` of ``items`` (:func:`_items`) of ``n`` rows, ``protocols`` (name -> ``ProtocolRows``)
+        their protocols, ``geodesic`` their errors (for the maximum; None: no maximum)."""
         G = self.n
         single = codes is None  # one group (all rows): plain sums, no bincount
         counts, sums = {}, {}
-        n = len(rows.geodesic)
         seen: dict = {}  # id(mask) -> (mask, its count); holding the mask keeps its id from being reused
-        for path, mask, values in _items(rows):
+        for path, mask, values in items:
             k = n
             if mask is not None:
                 if id(mask) not in seen:
@@ -110,16 +124,16 @@ class _Grouping:
                     sums[path] = np.bincount(c, weights=v, minlength=G) if len(c) else np.zeros(G)
         static = {
             ("p", name, "rx", side): "from matrix"
-            for name, pr in rows.protocols.items()
+            for name, pr in protocols.items()
             for side, m in pr.reexpressed.items()
             if m is None
         }
-        if single:
-            mx = np.array([float(rows.geodesic.max()) if len(rows.geodesic) else -np.inf])
-        else:
-            mx = np.full(G, -np.inf)
-            if len(codes):
-                np.maximum.at(mx, codes, rows.geodesic)
+        mx = np.full(1 if single else G, -np.inf)
+        if geodesic is not None and len(geodesic):
+            if single:
+                mx[0] = float(geodesic.max())
+            else:
+                np.maximum.at(mx, codes, geodesic)
         return counts, sums, static, mx
 
     def merge(self, part) -> None:
@@ -207,15 +221,17 @@ class Accumulator:
             out["bins"], out["bin_codes"] = self.bins.partial(rows, c), c.astype(np.int32)
         return out
 
-    def add(self, rows, by_values=None, partial=None):
+    def add(self, rows, by_values=None, partial=None) -> dict:
         """Add one chunk of per-row results (``PairRows``) and its ``--by`` values (``partial``: :meth:`partial`
-        of the same rows, computed ahead on another thread)."""
+        of the same rows, computed ahead on another thread). Returns the chunk's group codes (``by``, ``bins``:
+        int arrays, or None), what :meth:`protocol_partial` takes for a protocol of the same rows scored later."""
         part = self.partial(rows) if partial is None else partial
         n = rows.n
         self.n += n
         self.all.merge(part["all"])
         if self.percentiles:
             self._spill("geo", part["geo"])
+        c = None
         if self.by is not None:
             c = self._by_codes(by_values)
             self.by.add(rows, c)
@@ -225,6 +241,25 @@ class Accumulator:
             self.bins.merge(part["bins"])
             if self.percentiles:
                 self._spill("bin", part["bin_codes"])
+        return {"by": c, "bins": None if self.bins is None else part["bin_codes"]}
+
+    def protocol_partial(self, name: str, pr, codes: dict) -> dict:
+        """The sums of one protocol's rows (``ProtocolRows``) of a chunk already added, scored after the others
+        (opal23-align, once its mean is known); ``codes`` is what :meth:`add` returned for that chunk. Any
+        thread may compute it; :meth:`merge_protocol` adds it, in chunk order."""
+        n, protocols = len(pr.keep), {name: pr}
+        out = {"all": self.all.partial_of(_protocol_items(name, pr), protocols, n, None)}
+        if self.by is not None:
+            out["by"] = self.by.partial_of(_protocol_items(name, pr), protocols, n, codes["by"])
+        if self.bins is not None:
+            out["bins"] = self.bins.partial_of(_protocol_items(name, pr), protocols, n, codes["bins"])
+        return out
+
+    def merge_protocol(self, part: dict) -> None:
+        """Add a :meth:`protocol_partial` (in chunk order, as :meth:`add` adds the chunks)."""
+        for key, grouping in (("all", self.all), ("by", self.by), ("bins", self.bins)):
+            if key in part:
+                grouping.merge(part[key])
 
     # ------------------------------------------------------------------ report
     def _load(self, name):
@@ -237,14 +272,27 @@ class Accumulator:
             return np.zeros(0, dtype=f[2])
         return np.memmap(f[1], dtype=f[2], mode="r")
 
+    def _pieces(self, name, rows: int = SPILL_PIECE):
+        """The spill ``name`` read back ``rows`` values at a time (no memory map: its pages would count in the
+        process's peak)."""
+        _, path, dtype = self._files[name]
+        with open(path, "rb") as f:
+            while True:
+                v = np.fromfile(f, dtype=dtype, count=rows)
+                if not len(v):
+                    return
+                yield v
+
     def _quantiles(self, codes, n_groups):
         """``{group: (median, p90, p95)}`` exact over the spilled float32 errors."""
         geo = self._load("geo")
         out = {}
         if geo is None or not len(geo):
             return out
-        if codes is None:
-            q = np.percentile(np.asarray(geo, dtype=np.float32), [50, 90, 95])
+        if codes is None:  # read piece by piece (flat memory), np.percentile's numbers to the bit
+            q = percentiles_of_pieces(lambda: self._pieces("geo"), len(geo), QUANTILES)
+            if q is None:
+                q = np.percentile(np.asarray(geo, dtype=np.float32), QUANTILES)
             return {0: tuple(float(x) for x in q)}
         c = np.asarray(codes)
         order = np.argsort(c, kind="stable")
@@ -252,7 +300,7 @@ class Accumulator:
         for g in range(n_groups):
             sel = order[bounds[g] : bounds[g + 1]]
             if len(sel):
-                q = np.percentile(np.asarray(geo[np.sort(sel)], dtype=np.float32), [50, 90, 95])
+                q = np.percentile(np.asarray(geo[np.sort(sel)], dtype=np.float32), QUANTILES)
                 out[g] = tuple(float(x) for x in q)
         return out
 

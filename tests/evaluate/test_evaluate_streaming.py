@@ -209,3 +209,33 @@ def test_sorted_keys_are_streamed_without_hashing(tmp_path, monkeypatch):
     assert (pd.read_csv(SYN / "gt.csv")["image"].is_monotonic_increasing) and p["image"].is_unique
     rep = _run(tmp_path, pred)
     assert rep["inputs"]["paired"] == "streamed in file order" and not spilled
+
+
+@pytest.mark.parametrize("shuffled", [False, True])
+def test_opal23_align_scored_after_the_pass_equals_scored_inline(tmp_path, monkeypatch, shuffled):
+    """opal23-align's chunks, spilled and scored once the Karcher mean is known, give exactly (equal, not close)
+    the report of scoring every chunk inline with that mean known in advance (the former extra pass), with
+    --by groups and yaw bins, on 1 and 2 threads."""
+    import hpe_cli.pipelines.evaluate.opal23 as op
+    import hpe_cli.pipelines.evaluate.run as run
+    import hpe_cli.pipelines.evaluate.score as ev
+
+    p = pd.read_csv(SYN / "pred.csv")
+    p["group"] = np.where(np.arange(len(p)) % 4 == 0, "even", "odd")
+    pred = tmp_path / "pred.csv"
+    (p.sample(frac=1.0, random_state=3) if shuffled else p).to_csv(pred, index=False)
+    means = []
+    real_mean = op.KarcherSpill.mean
+    monkeypatch.setattr(op.KarcherSpill, "mean", lambda self, **k: means.append(real_mean(self, **k)) or means[-1])
+    monkeypatch.setattr(ev, "SCORE_ROWS", 100)
+    later = _run(tmp_path, pred, "--protocol", "opal23-align", "--protocol", "opal23")
+    assert len(means) == 1
+    monkeypatch.setattr(ev, "deferred_protocols", lambda protocols, align: ())
+    monkeypatch.setattr(run, "_globals", lambda *a: {"opal23_mean": means[0]})
+    for threads in ("1", "2"):
+        inline = _run(
+            tmp_path, pred, "--protocol", "opal23-align", "--protocol", "opal23", "--threads", threads, "--overwrite"
+        )
+        for k in ("metrics", "protocols", "by_groups", "yaw_bins", "n"):
+            assert later.get(k) == inline.get(k), k
+    assert later["protocols"]["opal23-align"]["n"] == len(p)

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
-import pyarrow.parquet as pq
 
 from ...io.layout import arrow_to_numpy
 
@@ -65,6 +63,8 @@ def _key_batches(cons, reread, key_cols):
     columns only (Parquet rows are never set aside, so the row indices agree);
     anything else is read again whole with ``reread()``.
     """
+    import pyarrow.parquet as pq  # lazy: only --consistency reads the keys again
+
     src = cons.src
     if src.kind == "parquet" and key_cols:
         names = set(pq.ParquetFile(src.path).schema_arrow.names)
@@ -85,6 +85,8 @@ def canonical_labels(system, cols, eff, res) -> np.ndarray:
 
 def _codes(col, table: dict) -> np.ndarray:
     """Global integer codes of an Arrow column's values (strings or ints), via dictionary encoding."""
+
+    import pyarrow.compute as pc  # lazy: 0.1-0.2 s to import, only --consistency needs it
 
     if pa.types.is_integer(col.type):
         return arrow_to_numpy(col).astype(np.int64)

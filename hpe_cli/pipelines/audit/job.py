@@ -1,7 +1,7 @@
 """``hpe audit`` as a streaming job: per-row checks, duplicates, report, plots and a flagged table.
 
-Memory is flat in the number of rows apart from one 64-bit hash per row
-(duplicates): the checks are counted batch by batch, the label columns are
+Memory is flat in the number of rows apart from one 64-bit hash per row, kept
+twice (duplicates, 16 bytes a row): the checks are counted batch by batch, the label columns are
 checked as columns (no ``(N, 3, 3)`` stacks), and the optional ``-o`` table is
 written in a second pass that recomputes each batch's flags.
 
@@ -28,11 +28,12 @@ from ...io.writers import check_report_outputs, json_text
 from ...report.plots import AngleHistograms, plot_files, write_plots
 from ...rotation.audit import CHECKS
 from ...rotation.decoders import DecoderTally
+from ..heap import keep_freed_memory
 from ..inorder import in_order
 from ..pools import default_threads
 from .batches import SKIP_REJECTS, check_batch, read_batches, system_cols
 from .common import canonical_labels
-from .duplicates import ID_COLUMNS, Duplicates, key_hashes, unpack_rows
+from .duplicates import ID_COLUMNS, Duplicates, key_hashes, split_halves, unpack_rows
 from .flagged import write_flagged
 from .options import AuditOptions
 
@@ -136,12 +137,12 @@ class AuditTally:
         self.examples = {c: [] for c in CHECKS}
         self.counts = {c: 0 for c in CHECKS}
         self.flagged = self.near_not_locked = self.rows = 0
-        self.dups = Duplicates()
+        self.dups = Duplicates(plan.labels.table.num_rows)
         self.flag_bits = []  # one bit a row: flagged by a check other than duplicates
         self.unread_examples = []
 
     def work(self, batch):
-        """Check and hash one batch: ``(mode, cols, masks, any flag, hashes, consistency evidence)``."""
+        """Check and hash one batch: ``(mode, cols, masks, any flag, (hashes, their halves), consistency evidence)``."""
         plan = self.plan
         cols, eff = system_cols(batch, plan.system, plan.mode, self.options.radians, plan.via_system)
         res = check_batch(cols, eff, plan.system, self.options.near_tol_deg, primary=self.hist is not None)
@@ -152,7 +153,8 @@ class AuditTally:
         if self.cons is not None:
             A = canonical_labels(plan.system, cols, eff, res)
             cons_in = (A, self.cons.measure(batch, A))
-        return eff, cols, res, any_flag, key_hashes(cols, batch, plan.key_cols), cons_in
+        hashes = key_hashes(cols, batch, plan.key_cols)
+        return eff, cols, res, any_flag, (hashes, split_halves(hashes)), cons_in
 
     def finish(self, batch, lines, unread, future) -> None:
         """Add one batch's result (in input order)."""
@@ -161,7 +163,7 @@ class AuditTally:
             self.counts["non_finite"] += len(unread)
             self.flagged += len(unread)
             self.unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[: self.options.n_examples]]
-        eff, cols, res, any_flag, hashes, cons_in = future.result()
+        eff, cols, res, any_flag, (hashes, halves), cons_in = future.result()
         if self.cons is not None:
             self.cons.add(batch, lines, *cons_in, unread=len(unread))
         if self.decoder is not None:
@@ -172,7 +174,7 @@ class AuditTally:
         self.flagged += int(np.count_nonzero(any_flag))
         self.flag_bits.append(np.packbits(any_flag))
         self.near_not_locked += int(np.count_nonzero(res["near_gimbal"] & ~res["gimbal_lock"]))
-        self.dups.add(hashes, lines)
+        self.dups.add(hashes, lines, halves)
         if self.hist is not None:
             self.hist.add(np.stack(cols, axis=-1) if eff == "angles" else res["primary"])
         self.rows += batch.num_rows
@@ -192,7 +194,7 @@ class AuditTally:
     def close(self) -> None:
         """Find the duplicates; count those with no other flag as flagged; finish the examples."""
         dups, n_examples = self.dups, self.options.n_examples
-        self.counts["duplicates"] = dups.finish()
+        self.counts["duplicates"] = dups.finish(default_threads(self.options.threads))
         if self.counts["duplicates"]:
             bits = unpack_rows(self.flag_bits, dups.batch_sizes, dups.dup_idx)
             self.flagged += int(np.count_nonzero(~bits))
@@ -317,6 +319,7 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
 
         cons = ConsistencyAudit(table, o.consistency)
     tally = AuditTally(plan, o, cons, progress)
+    keep_freed_memory()  # the batches' freed temporaries reused, not faulted in again (pipelines.heap)
     in_order(read_batches(table, plan.read_mode, rejected), tally.work, tally.finish, default_threads(o.threads))
     rejected.check()  # with --strict: any set-aside row is an error and nothing is written
     tally.close()

@@ -138,8 +138,8 @@ def join(pred: Side, gt: Side, keys, join_mode="key", stems=None, codes=None):
         ]
     else:
         cg, cp, notes = _key_codes(gt.keys, pred.keys, keys, stems)
-    _check_unique(cg, gt, keys)
-    _check_unique(cp, pred, keys)
+        _check_unique(cg, gt, keys)  # codes from the key hashes are unique on each side (see Partitions.codes)
+        _check_unique(cp, pred, keys)
     m = int(max(cg.max(initial=-1), cp.max(initial=-1))) + 1
     pred_pos = np.full(m, -1, dtype=np.int64)
     pred_pos[cp] = np.arange(len(cp))

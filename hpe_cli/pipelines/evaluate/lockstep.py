@@ -11,6 +11,7 @@ import os
 import shutil
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
+from types import SimpleNamespace
 
 import numpy as np
 import pyarrow as pa
@@ -111,12 +112,41 @@ class KeysSeen:
         self.files = self.folder = None
 
 
+def first_keys_differ(gr: SideReader, pr: SideReader, keys) -> bool:
+    """Whether the first batches of two Parquet files already pair different keys, the check :func:`lockstep`
+    makes on its first pair of chunks, on the key columns alone: files in different orders go to the key join
+    without labelling (and throwing away) their first batches. False when it cannot tell cheaply (not Parquet,
+    an empty first batch, a ``.mat`` folder's stems)."""
+
+    if not keys or gr.dataset_stem or pr.dataset_stem or not (gr.src.kind == pr.src.kind == "parquet"):
+        return False
+    firsts = []
+    for r in (gr, pr):
+        batches = r.src.batches_with_rejects()
+        try:
+            batch, _ = next(batches, (None, None))
+        finally:
+            batches.close()
+        if batch is None or batch.num_rows == 0 or any(k not in batch.schema.names for k in keys):
+            return False
+        firsts.append(batch.select(keys))
+    m = min(t.num_rows for t in firsts)
+    g, p = (SimpleNamespace(keys=t.slice(0, m)) for t in firsts)
+    try:
+        _same_keys(g, p, keys, set())
+    except Unaligned:
+        return True
+    return False
+
+
 def lockstep(gr: SideReader, pr: SideReader, keys, join_mode: str, notes: set):
     """Pairs of equal-length chunks of the two sides, in file order; keys verified chunk by chunk.
 
     Raises :class:`Unaligned` (key join) when the keys differ or one side has
     rows left over, :class:`JoinUsageError` (``--join order``) on unequal counts.
     """
+    if join_mode != "order" and first_keys_differ(gr, pr, keys):
+        raise Unaligned("first keys")
     gi, pi = gr.chunks(), pr.chunks()
     seen = KeysSeen(keys, gr) if keys else None
     try:

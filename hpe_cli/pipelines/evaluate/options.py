@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ...errors import HpeError
+from ...io.table_source import DEFAULT_BATCH
 from ...metrics.evaluate import check_protocols
 
 #: ``align`` values: no alignment, or the chordal mean offset removed from every prediction
@@ -52,7 +53,7 @@ class EvaluateOptions:
     radians, overwrite, strict, orthonormalize : bool
         As the options of those names.
     batch_size : int
-        Rows per record batch, >= 1.
+        Rows per record batch, >= 1 (default: the CLI's ``--batch-size``, :data:`hpe_cli.io.table_source.DEFAULT_BATCH`).
     join_mode : {"key", "order"}
         ``--join``.
     worst : int
@@ -86,7 +87,7 @@ class EvaluateOptions:
     radians: bool = False
     overwrite: bool = False
     strict: bool = False
-    batch_size: int = 262_144
+    batch_size: int = DEFAULT_BATCH
     join_mode: str = "key"
     orthonormalize: bool = False
     worst: int = 12

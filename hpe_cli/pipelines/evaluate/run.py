@@ -8,14 +8,13 @@ the geodesic errors are spilled as float32 for exact medians and percentiles,
 and the per-row output is written chunk by chunk. Files in different orders
 are hashed by key into partition files and joined one partition at a time
 (:mod:`hpe_cli.pipelines.evaluate.spill`), then scored the same way.
-Global estimates (``--align mean``, opal23's alignment) take one extra pass.
+``--align mean``'s offset, needed by every chunk, takes one extra pass; opal23-align, whose Karcher mean needs
+every pair too, is scored after the pass from what each chunk spilled (:mod:`hpe_cli.pipelines.evaluate.opal23`).
 """
 
 from __future__ import annotations
 
-import os
 import sys
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +34,7 @@ from ..pools import default_threads, in_order
 from .dataset import choose_directmhp
 from .join import choose_keys, join
 from .lockstep import Unaligned, lockstep, prefetch
+from .opal23 import KarcherSpill
 from .options import EvaluateOptions
 from .outputs import Images, empty_rows, worst_pictures
 from .rejects import align_block, collect_rejects, unreadable_rejects
@@ -96,14 +96,15 @@ class Plan:
 
 
 def _globals(s, pairs_factory, gsys, psys) -> dict:
-    """Estimates over all pairs that the per-chunk scores need: --align mean's offset, opal23's mean."""
+    """Estimates over all pairs that every chunk's scores need: --align mean's offset (and then opal23's mean,
+    over the predictions before that offset; without --align mean opal23-align is scored after the pass,
+    :mod:`.opal23`)."""
 
     need_mean = s.options.align == "mean"
-    need_opal = "opal23-align" in s.protocols
+    need_opal = "opal23-align" in s.protocols and need_mean
     if not (need_mean or need_opal):
         return {}
     M, n = np.zeros((3, 3)), 0
-    first, written = (np.iinfo(np.int64).max, 0), 0
 
     def work(gp):  # on a pool thread: pure numpy, no shared state
         g, p = with_canonical(gp[0], gsys), with_canonical(gp[1], psys)
@@ -111,12 +112,10 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
         if not ok.all():
             g, p = take_rows(g, ok), take_rows(p, ok)
         P, G = nested(p), nested(g)
-        part = None
-        if need_mean:
-            part = np.array(
-                [[float(np.sum(P[k][0] * G[m][0] + P[k][1] * G[m][1] + P[k][2] * G[m][2])) for m in range(3)]
-                 for k in range(3)]
-            )  # fmt: skip
+        part = np.array(
+            [[float(np.sum(P[k][0] * G[m][0] + P[k][1] * G[m][1] + P[k][2] * G[m][2])) for m in range(3)]
+             for k in range(3)]
+        )  # fmt: skip
         deltas = near = None
         if need_opal and g.n:
             pair = PosePair(P, G, gsys, raw_angles(g, p, gsys, psys))
@@ -124,62 +123,28 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
             deltas, near = pa_.opal23_near_quats(Go, Po)
         return g.n, part, deltas, near, g.lines
 
-    fd, path = tempfile.mkstemp(prefix="hpe_eval_opal23_", suffix=".bin")
+    karcher = KarcherSpill()
     threads = max(1, s.threads)
     pool = ThreadPoolExecutor(threads, thread_name_prefix="hpe-evaluate-glob")
     pairs = pairs_factory()
     try:
-        with os.fdopen(fd, "wb") as f:
-            # chunks in input order whatever the threads: the same sums, the same spill
-            for rows, part, deltas, near, lines in in_order(pool, work, pairs, ahead=threads):
-                if part is not None:
-                    for k in range(3):
-                        for m in range(3):
-                            M[k, m] += part[k, m]
-                    n += rows
-                if deltas is not None:
-                    if near.any():  # the peer starts at its file's first row: the smallest GT line
-                        ln = lines[near]
-                        j = int(np.argmin(ln))
-                        if ln[j] < first[0]:
-                            first = (int(ln[j]), written + j)
-                    written += len(deltas)
-                    np.ascontiguousarray(deltas).tofile(f)
-        out = {}
-        if need_mean:
-            out["Q"] = project_to_so3(M / n) if n else np.eye(3)
+        # chunks in input order whatever the threads: the same sums, the same spill
+        for rows, part, deltas, near, lines in in_order(pool, work, pairs, ahead=threads):
+            for k in range(3):
+                for m in range(3):
+                    M[k, m] += part[k, m]
+            n += rows
+            if deltas is not None:
+                karcher.add(deltas, near, lines)
+        out = {"Q": project_to_so3(M / n) if n else np.eye(3)}
         if need_opal:
-            size = os.path.getsize(path)
-            with open(path, "rb") as f:  # read piece by piece: a memory map's pages would count in the peak
-                out["opal23_mean"] = pa_.opal23_karcher(_Rows(f, size // 32, 4), start=first[1], mapper=pool.map)
+            out["opal23_mean"] = karcher.mean(mapper=pool.map)
         return out
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         if hasattr(pairs, "close"):  # an error or a signal: the readers' threads and temp files go now
             pairs.close()
-        os.unlink(path)
-
-
-class _Rows:
-    """Rows of ``width`` float64 in an open binary file, read on indexing (``rows[a:b]``, ``rows[i]``): a spill
-    as an array-like whose pages do not stay mapped (a ``np.memmap`` would add them to the process's peak)."""
-
-    def __init__(self, f, n: int, width: int):
-        self.f, self.n, self.width = f, int(n), int(width)
-        self.ndim = 2
-
-    def __len__(self) -> int:
-        return self.n
-
-    def __getitem__(self, k):
-        if isinstance(k, slice):
-            a, b, _ = k.indices(self.n)
-            b = max(a, b)
-        else:
-            a, b = int(k), int(k) + 1
-        self.f.seek(a * self.width * 8)
-        out = np.fromfile(self.f, dtype=np.float64, count=(b - a) * self.width).reshape(-1, self.width)
-        return out if isinstance(k, slice) else out[0]
+        karcher.close()
 
 
 def _readers(s: Plan, progress=None):
@@ -287,8 +252,9 @@ def _run_spill(s, rej, writer):
                 yield from _memory_pairs(gt, pred, gidx[valid], pidx[valid], s.options.batch_size)
                 del gt, pred, gidx, pidx
 
-        glob = _globals(s, lambda: pairs(False), gr.system, pr.system)
-        out = score_pairs(s, pairs(True), rej, gr.system, pr.system, glob, writer, False)
+        glob = _globals(s, lambda: prefetch(pairs(False)), gr.system, pr.system)
+        # the next partition is read and joined on a thread while this one is scored
+        out = score_pairs(s, prefetch(pairs(True)), rej, gr.system, pr.system, glob, writer, False)
     finally:
         parts.cleanup()
     out[2]["invalid"] = tally["invalid"]

@@ -14,6 +14,7 @@ from ...metrics.protocols import PROTOCOLS
 from ...metrics.stream import Accumulator
 from ...rotation import soa
 from ..pools import in_order
+from .opal23 import DeferredRows, deferred_protocols, opal23_chunk, score_deferred
 from .outputs import Sample, Worst, row_table
 from .rejects import stream_rejects
 from .sides import Chunk, stored_of_angles
@@ -98,6 +99,38 @@ def with_placement(t, g: Chunk, p: Chunk):
     return with_written(t, p)
 
 
+class RowWriter:
+    """The per-row output, written on its own thread (Parquet encoding releases the GIL) in pieces of about
+    ``batch_size`` rows, in the order the tables are added; at most two pieces wait, so memory stays bounded."""
+
+    def __init__(self, writer, batch_size: int):
+        self.writer, self.batch_size = writer, batch_size
+        self.pending: list = []
+        self.writes: list = []
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-write")
+
+    def add(self, table) -> None:
+        self.pending.append(table)
+        self._flush(self.batch_size)
+
+    def _flush(self, at_least: int) -> None:
+        if self.pending and sum(t.num_rows for t in self.pending) >= at_least:
+            while len(self.writes) >= 2:
+                self.writes.pop(0).result()
+            piece = self.pending[0] if len(self.pending) == 1 else pa.concat_tables(self.pending)
+            self.writes.append(self.pool.submit(self.writer.write, piece))
+            self.pending.clear()
+
+    def finish(self) -> None:
+        """Write what is left and wait for every piece (a write's error is raised here)."""
+        self._flush(1)
+        while self.writes:
+            self.writes.pop(0).result()
+
+    def close(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
 def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     """Score every chunk of pairs: accumulate, write rows, keep the worst and a plot sample.
 
@@ -111,8 +144,13 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     acc = Accumulator(protos, edges, by=bool(s.options.by))
     before = Accumulator(protos, None, by=False, percentiles=True) if s.options.align == "mean" else None
     worst, sample = Worst(s.options.worst if s.options.html else 0), Sample()
+    plotted = bool(s.options.plots or s.options.html)  # the plot sample is drawn by --plots and --report only
     ctx = {"opal23_mean": glob["opal23_mean"]} if "opal23_mean" in glob else {}
     counts = {"pairs": 0, "invalid": 0}
+    later = deferred_protocols(s.protocols, s.options.align)  # scored once the pass is over (opal23's mean)
+    now = [k for k in s.protocols if k not in later]
+    hook = opal23_chunk if later else None
+    deferred = DeferredRows() if later else None
 
     def usable():  # in order, on this thread: the rejects file is written as the rows come
         for g, p in pairs:
@@ -133,27 +171,18 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
         if before is not None:
             rows_before = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys), ctx)
             P = remove_offset(P, glob["Q"])
-        rows = compute_rows(P, G, gsys, s.protocols, raw_angles(g, p, gsys, psys, aligned=before is not None), ctx)
+        rows = compute_rows(P, G, gsys, now, raw_angles(g, p, gsys, psys, aligned=before is not None), ctx, hook)
         table = None
         if writer is not None or worst.n:
             table = row_table(rows, g, p, s.keys, s.options.by, by_values, s.images)
-        part, block = acc.partial(rows), Sample.block(rows)
+        part, block = acc.partial(rows), (Sample.block(rows) if plotted else None)
         if (
             not s.options.by
         ):  # their sums are in `part`: every protocol's per-row arrays are freed before the chunk's turn
             rows.protocols = {}
         return g, p, rows, rows_before, by_values, table, part, block
 
-    pending: list = []  # per-row tables, written in pieces of about one batch
-    writes: list = []  # the per-row file is written on its own thread (Parquet encoding releases the GIL)
-    wpool = ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-write") if writer is not None else None
-
-    def flush(at_least):
-        if pending and sum(t.num_rows for t in pending) >= at_least:
-            while len(writes) >= 2:  # at most two pieces waiting: memory stays bounded
-                writes.pop(0).result()
-            writes.append(wpool.submit(writer.write, pending[0] if len(pending) == 1 else pa.concat_tables(pending)))
-            pending.clear()
+    rows_out = RowWriter(writer, s.options.batch_size) if writer is not None else None
 
     threads = max(1, int(s.threads or SCORE_THREADS))
     pool = ThreadPoolExecutor(threads, thread_name_prefix="hpe-evaluate-score")
@@ -164,27 +193,31 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
                 before.add(rows_before)
             counts["pairs"] += rows.n
             count_orthonormalized(counts, p)
-            acc.add(rows, by_values, part)
-            sample.add(rows, block)
-            if writer is not None:
-                pending.append(t)
-                flush(s.options.batch_size)
+            codes = acc.add(rows, by_values, part)
+            if deferred is not None:
+                deferred.add(rows.extra, g.lines, codes)
+            if plotted:
+                sample.add(rows, block)
+            if rows_out is not None:
+                rows_out.add(t)
             if worst.n:
                 worst.add(with_placement(t, g, p))
-        if writer is not None:
-            flush(1)
-            while writes:  # every piece written, in order; a write's error is raised here
-                writes.pop(0).result()
+        if rows_out is not None:
+            rows_out.finish()
+        if deferred is not None:
+            score_deferred(deferred, acc, pool, threads)
         rep = acc.report()
         rep_before = before.report() if before is not None else None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-        if wpool is not None:
-            wpool.shutdown(wait=True, cancel_futures=True)
+        if rows_out is not None:
+            rows_out.close()
         for it in (locals().get("pieces"), pairs):  # a signal or an error: the readers' threads and temp files go now
             if hasattr(it, "close"):
                 it.close()
         acc.close()
+        if deferred is not None:
+            deferred.close()
         if before is not None:
             before.close()
     return rep, rep_before, counts, worst, sample

@@ -59,7 +59,7 @@ class Side:
         return len(self.ok)
 
 
-def _batch_labels(batch, system, mode, radians, orthonormalize):
+def _batch_labels(batch, system, mode, radians, orthonormalize, matrices=True):
     """``(stored soa, ok, reasons, raw angles (n, 3) or None, distance (n,) or None)`` of one batch.
 
     Angle columns are kept as written (``raw``): the raw-angle protocols compare
@@ -73,7 +73,7 @@ def _batch_labels(batch, system, mode, radians, orthonormalize):
     if mode == "angles":
         cols, ok, reasons = angle_columns(batch, system, radians)
         raw = np.stack([np.where(ok, c, 0.0) for c in cols], axis=-1)
-        return stored_of_angles(system, raw), ok, reasons, raw, None
+        return (stored_of_angles(system, raw) if matrices else None), ok, reasons, raw, None
     if orthonormalize and (mode == "matrix" or system.storage_kind == "matrix"):
         names = system.value_columns if (native and system.storage_kind == "matrix") else None
         if names is None:
@@ -127,6 +127,7 @@ class Chunk:
     by: np.ndarray | None
     lines: np.ndarray
     key_hash: np.ndarray | None = None  # (n,) uint64 of the key columns, when the reader was asked for them
+    prepared: object = None  # what the reader's ``prepare`` made of the chunk on the label threads
 
     @property
     def n(self) -> int:
@@ -226,6 +227,11 @@ class SideReader:
         self.n = 0
         #: key columns whose hash each chunk carries (set while streaming unsorted keys: hashed on the label threads)
         self.hash_keys: list | None = None
+        #: False: a side that holds angles hands them over without their matrices (``canonical`` None: the key
+        #: join keeps the angles and the scoring threads rebuild the matrices from them, the same bits)
+        self.matrices = True
+        #: a function of each :class:`Chunk` run on the label threads (its result in ``Chunk.prepared``)
+        self.prepare = None
         self.image_dir = src.path if self.dataset_stem else None
         #: how a row is named in messages: Parquet "row N" (1-based), text "line N" (header = line 1)
         self.unit = "row" if src.kind == "parquet" else "line"
@@ -257,13 +263,18 @@ class SideReader:
         if self.dataset_stem:
             batch = _stem_key_hook(batch)
         lines = plain_numpy(batch.column(LINE_COL)).astype(np.int64)
-        X, ok, rs, raw, dist = _batch_labels(batch, self.system, self.mode, self.radians, self.orthonormalize)
+        X, ok, rs, raw, dist = _batch_labels(
+            batch, self.system, self.mode, self.radians, self.orthonormalize, self.matrices
+        )
         n = batch.num_rows
-        X = self.system.soa_to_canonical(X)
+        canonical = None if X is None else soa.columns(self.system.soa_to_canonical(X), n)
         keys = batch.select(self.keep) if self.keep else None
         by = keys.column(self.by).to_numpy(zero_copy_only=False) if self.by else None
         kh = keys_hash(keys, self.hash_keys) if self.hash_keys and keys is not None else None
-        return Chunk(soa.columns(X, n), ok, rs, raw, dist, keys, by, lines, kh)
+        c = Chunk(canonical, ok, rs, raw, dist, keys, by, lines, kh)
+        if self.prepare is not None:
+            c.prepared = self.prepare(c)
+        return c
 
 
 def read_side(source, keys, by, radians: bool, progress=None, orthonormalize=False, threads=LABEL_THREADS) -> Side:

@@ -73,6 +73,56 @@ def _count_in(a, b) -> int:
     return int(np.count_nonzero(bs[i] == a))
 
 
+def hash_matches(hg, hp):
+    """``(gt rows, their prediction rows)`` with equal 64-bit hashes (``hg``, ``hp``: uint64, one per row), the GT
+    rows ascending; None when one side holds a hash twice (a duplicate key, or a collision for the caller to settle).
+
+    One ``np.sort`` of both sides (numpy sorts uint64 with SIMD; ``argsort`` is about 15x slower): each hash keeps
+    its top bits, then a side bit (GT 0, prediction 1), then its row, so a GT row and its prediction end up side by
+    side. A match on the top bits is kept when the whole hashes are equal; top bits that repeat on one side (rare)
+    take the exact path (``argsort`` of the whole hashes).
+    """
+
+    ng = len(hg)
+    bits = max(1, int(max(ng, len(hp))).bit_length())
+    low = np.uint64((1 << bits) - 1)
+    top = ~np.uint64((1 << (bits + 1)) - 1)
+    packed = np.empty(ng + len(hp), dtype=np.uint64)
+    np.bitwise_and(hg, top, out=packed[:ng])
+    np.bitwise_and(hp, top, out=packed[ng:])
+    packed[:ng] |= np.arange(ng, dtype=np.uint64)
+    packed[ng:] |= np.arange(len(hp), dtype=np.uint64) | np.uint64(1 << bits)
+    packed.sort()
+    t = packed >> np.uint64(bits)  # top bits and side bit
+    same_top = (t[1:] >> np.uint64(1)) == (t[:-1] >> np.uint64(1))
+    if (same_top & (t[1:] == t[:-1])).any():  # top bits twice on one side: the whole hashes decide
+        return _exact_matches(hg, hp)
+    i = np.flatnonzero(same_top)  # a GT row (side bit 0 sorts first) next to a prediction
+    gi = (packed[i] & low).astype(np.intp)
+    pi = (packed[i + 1] & low).astype(np.intp)
+    hit = hg[gi] == hp[pi]  # the whole hashes (a top-bits match of another key is no match)
+    pos = np.full(ng, -1, dtype=np.intp)
+    pos[gi[hit]] = pi[hit]  # in GT order
+    gi = np.flatnonzero(pos >= 0)
+    return gi, pos[gi]
+
+
+def _exact_matches(hg, hp):
+    """:func:`hash_matches` on the whole hashes (``argsort``)."""
+    op = np.argsort(hp)
+    sp = hp[op]
+    og = np.argsort(hg)
+    sg = hg[og]
+    if (sp[1:] == sp[:-1]).any() or (sg[1:] == sg[:-1]).any():
+        return None
+    at = np.minimum(np.searchsorted(sp, sg), len(sp) - 1)
+    hit = sp[at] == sg
+    pos = np.full(len(hg), -1, dtype=np.intp)
+    pos[og[hit]] = op[at[hit]]
+    gi = np.flatnonzero(pos >= 0)
+    return gi, pos[gi]
+
+
 def partitions_for(n_rows: int, partition_rows: int) -> int:
     return int(min(MAX_PARTITIONS, max(1, math.ceil(n_rows / max(1, partition_rows)))))
 
@@ -96,7 +146,8 @@ class _SideSpill:
         self.schema = None
         self.stem_differs: set = set()  # key columns with a row whose file stem is not its text
 
-    def _table(self, c, per):
+    @staticmethod
+    def _table(c, per):
 
         # angles as written are enough: the matrices are rebuilt from them on the scoring threads (the same
         # function on the same numbers: the same bits), which halves what goes to disk and back
@@ -112,9 +163,9 @@ class _SideSpill:
             if c.reasons is None  # every row usable: n empty strings, built from their (all-zero) offsets
             else pa.array(c.reasons.astype(str), pa.string())
         )
-        if c.raw is not None:
-            for k in range(3):
-                cols[f"{_PFX}raw{k}"] = c.raw[:, k]
+        if c.raw is not None:  # one (n, 3) block: read back as a view, no column_stack
+            raw = numpy_to_arrow(np.ascontiguousarray(c.raw, dtype=np.float64).reshape(-1))
+            cols[f"{_PFX}raw"] = pa.FixedSizeListArray.from_arrays(raw, 3)
         if c.dist is not None:
             cols[f"{_PFX}dist"] = c.dist
         cols[f"{_PFX}line"] = c.lines
@@ -123,26 +174,37 @@ class _SideSpill:
                 col = c.keys.column(name)
                 col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
                 cols[name] = col.cast(col.type.value_type) if pa.types.is_dictionary(col.type) else col
-        t = arrow_table(cols)  # from the buffers: pa.table would import pandas (0.3 s) for numpy columns
+        return arrow_table(cols)  # from the buffers: pa.table would import pandas (0.3 s) for numpy columns
+
+    def prepare(self, c, keys):
+        """``(table of the chunk's rows sorted by partition, partition bounds, key columns whose stems differ)``:
+        the work of :meth:`add` that needs no shared state (the reader runs it on its label threads)."""
+
+        if not c.n:
+            return None
+        h, per = key_hashes(c.keys, keys)
+        # a key whose stems are its texts everywhere needs no count
+        differs = {j for j, (hx, hs) in enumerate(per.values()) if hx is not hs and bool((hx != hs).any())}
+        t = self._table(c, per)
+        # partition numbers < MAX_PARTITIONS fit int16, whose stable sort is a radix sort
+        K = np.uint64(self.K)
+        # h % K, written with // (numpy divides by a scalar with libdivide: 10x faster than its %)
+        part = (h - (h // K) * K).astype(np.int16) if self.K > 1 else np.zeros(c.n, dtype=np.int16)
+        order = np.argsort(part, kind="stable")
+        bounds = np.searchsorted(part[order], np.arange(self.K + 1))
+        return t.take(numpy_to_arrow(order)), bounds, differs  # one gather; each partition a zero-copy slice
+
+    def add(self, c, keys):
+
+        prepared = c.prepared if c.prepared is not None else self.prepare(c, keys)
+        if prepared is None:
+            return
+        t, bounds, differs = prepared
+        self.stem_differs |= differs
         if self.schema is None:
             self.schema = t.schema
         elif t.schema != self.schema:
             t = t.cast(self.schema)
-        return t
-
-    def add(self, c, keys):
-
-        if not c.n:
-            return
-        h, per = key_hashes(c.keys, keys)
-        for j, (hx, hs) in enumerate(per.values()):  # a key whose stems are its texts everywhere needs no count
-            if j not in self.stem_differs and bool((hx != hs).any()):
-                self.stem_differs.add(j)
-        t = self._table(c, per)
-        part = (h % np.uint64(self.K)).astype(np.int64) if self.K > 1 else np.zeros(c.n, dtype=np.int64)
-        order = np.argsort(part, kind="stable")
-        bounds = np.searchsorted(part[order], np.arange(self.K + 1))
-        t = t.take(numpy_to_arrow(order))  # one gather; each partition is then a zero-copy slice
         for k in range(self.K):
             a, b = int(bounds[k]), int(bounds[k + 1])
             if a == b:
@@ -214,8 +276,9 @@ class _SideSpill:
                 col(f"{_PFX}line"),
                 [],
             )
-            if f"{_PFX}raw0" in t.column_names:
-                side.raw = np.column_stack([col(f"{_PFX}raw{i}") for i in range(3)])
+            if f"{_PFX}raw" in t.column_names:
+                raw = t.column(f"{_PFX}raw").combine_chunks()
+                side.raw = arrow_to_numpy(raw.values if raw.offset == 0 else raw.flatten()).reshape(-1, 3)
             if f"{_PFX}dist" in t.column_names:
                 side.dist = col(f"{_PFX}dist")
             side.hashes = {
@@ -240,6 +303,8 @@ class Partitions:
     def fill(self):
         try:
             for spill, reader in ((self.g, self.gr), (self.p, self.pr)):
+                reader.matrices = False  # angles are kept as written: their matrices are built when scored
+                reader.prepare = lambda c, spill=spill: spill.prepare(c, self.keys)  # on the label threads
                 with closing(reader.chunks()) as chunks:  # an error stops the label threads at once
                     for c in chunks:
                         spill.add(c, self.keys)
@@ -317,23 +382,19 @@ class Partitions:
             return None
         if len(getattr(gt, "hashes", {})) < len(self.keys) or len(getattr(pred, "hashes", {})) < len(self.keys):
             return None
-        hg, hp = np.zeros(gt.n, dtype=np.uint64), np.zeros(pred.n, dtype=np.uint64)
-        for j, k in enumerate(self.keys):
-            w = 1 if k in stems else 0
-            hg = combine_key_hash(hg, gt.hashes[j][w])
-            hp = combine_key_hash(hp, pred.hashes[j][w])
+        w = [1 if k in stems else 0 for k in self.keys]
+        if len(self.keys) == 1:  # combine_key_hash(0, h) is h
+            hg, hp = gt.hashes[0][w[0]], pred.hashes[0][w[0]]
+        else:
+            hg, hp = np.zeros(gt.n, dtype=np.uint64), np.zeros(pred.n, dtype=np.uint64)
+            for j in range(len(self.keys)):
+                hg = combine_key_hash(hg, gt.hashes[j][w[j]])
+                hp = combine_key_hash(hp, pred.hashes[j][w[j]])
         # codes: a prediction's is its row, a GT row's the row of its match (else one past all predictions)
-        order = np.argsort(hp)
-        sp = hp[order]
-        gorder = np.argsort(hg)
-        sg = hg[gorder]
-        if (sp[1:] == sp[:-1]).any() or (sg[1:] == sg[:-1]).any():
+        matched = hash_matches(hg, hp)
+        if matched is None:
             return None  # equal hashes on one side: a duplicate key (named by the string join) or a collision
-        at = np.empty(gt.n, dtype=np.intp)
-        at[gorder] = np.searchsorted(sp, sg)  # sorted queries walk the sorted hashes in order: cache-friendly
-        at = np.minimum(at, pred.n - 1)
-        gi = np.flatnonzero(sp[at] == hg)
-        pi = order[at[gi]]
+        gi, pi = matched
         cp = np.arange(pred.n, dtype=np.int64)
         cg = np.arange(pred.n, pred.n + gt.n, dtype=np.int64)
         cg[gi] = pi
@@ -343,7 +404,9 @@ class Partitions:
                 a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
                 b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b,
             )
-            a, b = a.take(numpy_to_arrow(gi)), b.take(numpy_to_arrow(pi))
+            # every GT row matched (the usual case): gi is 0..n-1, the column itself
+            a = a if len(gi) == gt.n else a.take(numpy_to_arrow(gi))
+            b = b.take(numpy_to_arrow(pi))
             if k in stems:
                 a, b = file_stems(a), file_stems(b)
             if len(gi) and not pc.all(pc.equal(a, b)).as_py():

@@ -4,7 +4,6 @@ it with padding, resize, encode, write or hand back the pixels)."""
 from __future__ import annotations
 
 import os
-import sys
 
 import numpy as np
 
@@ -13,6 +12,7 @@ from ...geometry.crop import crop_padded
 from ...io.images import jpeg_size
 from ...io.jpeg import crop_band, decode_band
 from ...io.os_errors import write_bytes
+from ..heap import raise_malloc_thresholds
 from .options import NO_FILES, NO_VIDEO
 
 _CFG: dict = {}
@@ -29,9 +29,6 @@ def init_worker(cfg):
     _frame_sized_malloc()
 
 
-_MALLOC_DONE: list = [False]
-
-
 def _frame_sized_malloc() -> None:
     """Undo, in this process, what ``MALLOC_TRIM_THRESHOLD_`` does to decoding frames.
 
@@ -39,20 +36,11 @@ def _frame_sized_malloc() -> None:
     (dask/distributed@2026.8.0 ``distributed/distributed.yaml:195-197``, ``nanny.pre-spawn-environ``). Setting
     it also fixes glibc's mmap threshold (``mallopt(3)``: an explicit threshold turns off the dynamic one), so
     every multi-MB frame is mapped and unmapped and each decode faults in fresh pages: measured here, 1.7x the
-    CPU per export unit. Large thresholds (frames are at most 8K x 4K x 3 bytes) restore the default behaviour.
+    CPU per export unit. Large thresholds (frames are at most 8K x 4K x 3 bytes) restore the default behaviour
+    (:func:`hpe_cli.pipelines.heap.raise_malloc_thresholds`).
     """
-
-    if _MALLOC_DONE[0] or "MALLOC_TRIM_THRESHOLD_" not in os.environ or not sys.platform.startswith("linux"):
-        return
-    _MALLOC_DONE[0] = True
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL(None)
-        libc.mallopt(-3, 128 << 20)  # M_MMAP_THRESHOLD: blocks below 128 MiB come from the heap
-        libc.mallopt(-1, 256 << 20)  # M_TRIM_THRESHOLD
-    except (OSError, AttributeError):
-        pass
+    if "MALLOC_TRIM_THRESHOLD_" in os.environ:
+        raise_malloc_thresholds(128 << 20, 256 << 20)
 
 
 def _encode(crop, cfg):
