@@ -16,6 +16,7 @@ from ..io.table_source import DEFAULT_BATCH
 from ..rotation import soa
 from ..rotation.convert import soa_labels
 from ..rotation.decoders import DECODERS, decoder_columns
+from .heap import keep_freed_memory
 from .inorder import in_order
 from .pools import default_threads
 
@@ -191,7 +192,6 @@ def run_convert(input_path, output, source, target, options: ConvertOptions | No
     list file, :mod:`hpe_cli.io.exclude`) drops the rows it names; they go to the rejects file as a choice.
     """
     o = options if options is not None else ConvertOptions()
-    keep_freed_memory()
     labels = open_labels(input_path, source, default=None, option_name="--from", batch_size=o.batch_size)
     src, source, mode = labels.table, labels.system, labels.mode
     rejects = Rejects(o.rejects, o.overwrite, strict=o.strict, source=src)
@@ -213,6 +213,7 @@ def run_convert(input_path, output, source, target, options: ConvertOptions | No
         return convert_batch(batch, mode, source, target, o.radians, o.decoder)
 
     with TableWriter(output, o.overwrite, output_metadata(labels, target, o.decoder)) as writer:
+        keep_freed_memory()  # the batches' freed temporaries reused, not faulted in again (pipelines.heap)
         done = ConvertedBatches(writer, rejects, summary, progress)
         in_order(items(), work, done.finish, default_threads(o.threads))  # --threads; one per core by default
         if summary.rows == 0:
@@ -220,20 +221,6 @@ def run_convert(input_path, output, source, target, options: ConvertOptions | No
         rejects.finish()
     summary.rejects = dict(rejects.counts)
     return summary
-
-
-def keep_freed_memory(size: int = 16 << 20) -> None:
-    """Let malloc keep up to ``2 * size`` bytes of freed memory for reuse instead of handing it back at once.
-
-    glibc's malloc returns the free top of a heap to the kernel as soon as it exceeds its trim threshold, 1 MB
-    after numpy's first 512 KB array; the column kernels free more than that after each block, so every block's
-    pages were faulted in again (300,000 page faults and 1 s of system time at 10M rows, with TLB shootdowns
-    that also slow the reading and writing thread). Freeing one ``size``-byte mapped block raises the threshold
-    to ``2 * size`` (glibc's documented dynamic ``M_TRIM_THRESHOLD``, ``mallopt(3)``), as any larger numpy
-    array freed earlier in the process would have. Other allocators ignore it; it changes no result.
-    """
-    block = np.empty(size, dtype=np.uint8)  # > the mmap threshold: mapped, and unmapped by the del
-    del block
 
 
 def _exclude(batch, exclude, rejects, summary):
