@@ -85,6 +85,20 @@ def unit_stats(res: dict, cfg: Config) -> dict:
     }
 
 
+#: the counters of :class:`Stats` that a unit's stats and another run's stats add to
+COUNTED = (
+    "frames",
+    "faces",
+    "views",
+    "labelled",
+    "legacy_considered",
+    "out_of_range",
+    "gimbal",
+    "unreadable",
+    "skipped_frames",
+)
+
+
 class Stats:
     """Counts for the end-of-run summary; every face and view is accounted for."""
 
@@ -102,17 +116,7 @@ class Stats:
 
     def add_unit(self, u: dict) -> None:
         """Add a :func:`unit_stats` dict."""
-        for k in (
-            "frames",
-            "faces",
-            "views",
-            "labelled",
-            "legacy_considered",
-            "out_of_range",
-            "gimbal",
-            "unreadable",
-            "skipped_frames",
-        ):
+        for k in COUNTED:
             setattr(self, k, getattr(self, k) + int(u.get(k, 0)))
         self.view_reasons.update(u["view_reasons"])
         self.face_reasons.update(u["face_reasons"])
@@ -126,17 +130,7 @@ class Stats:
             self.view_reasons[reason] += n
 
     def merge(self, other: Stats) -> None:
-        for k in (
-            "frames",
-            "faces",
-            "views",
-            "labelled",
-            "legacy_considered",
-            "out_of_range",
-            "gimbal",
-            "unreadable",
-            "skipped_frames",
-        ):
+        for k in COUNTED:
             setattr(self, k, getattr(self, k) + getattr(other, k))
         self.view_reasons.update(other.view_reasons)
         self.face_reasons.update(other.face_reasons)
