@@ -55,7 +55,8 @@ def _powers(base: np.uint64, n: int) -> np.ndarray:
 
 
 def string_hashes(arr, stems: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-    """``(hash of each string, hash of its file stem)``, uint64, of a pyarrow ``string``/``large_string`` array.
+    """``(hash of each string, hash of its file stem)``, uint64, of a pyarrow ``string``/``large_string`` array
+    (or ``binary``/``large_binary``: the same bytes, the same hash).
 
     A null gets a hash of its own (its stem too). Equal strings, wherever they sit in whichever array, get
     equal hashes; a string that is its own stem (no folder, no suffix) gets the same hash for both.
@@ -64,13 +65,14 @@ def string_hashes(arr, stems: bool = True) -> tuple[np.ndarray, np.ndarray | Non
 
     if isinstance(arr, pa.ChunkedArray):
         arr = arr.combine_chunks()
-    if not (pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type)):
-        raise TypeError(f"expected a string array, got {arr.type}")
+    large = pa.types.is_large_string(arr.type) or pa.types.is_large_binary(arr.type)
+    if not (large or pa.types.is_string(arr.type) or pa.types.is_binary(arr.type)):
+        raise TypeError(f"expected a string or binary array, got {arr.type}")
     n = len(arr)
     if n == 0:
         z = np.zeros(0, dtype=np.uint64)
         return z, z
-    width = np.int64 if pa.types.is_large_string(arr.type) else np.int32
+    width = np.int64 if large else np.int32
     bufs = arr.buffers()
     off = np.frombuffer(bufs[1], dtype=width, count=n + 1, offset=arr.offset * np.dtype(width).itemsize)
     off = off.astype(np.int64)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
+from ...io import key_hash
 from ...io.table_source import plain_numpy
 
 #: columns that identify a sample, used (when present) in the ``duplicates`` key
@@ -30,23 +31,12 @@ ID_COLUMNS = (
     "bbox_h",
 )
 _SEED = 0x9E3779B97F4A7C15
-_STR_MULT = np.uint64(0x100000001B3)  # FNV-style odd multiplier for the polynomial string hash
-_NULL_WORD = np.uint64(0x6A09E667F3BCC909)
 _ROW_MULT = np.uint64(0x9FB21C651E98DF25)  # odd multiplier of the per-word step of the row hash
 #: integers cast to float64 exactly (Arrow's safe cast refuses the others; :func:`key_words` lets it)
 _EXACT_INT = 2**53
 
 
 # ------------------------------------------------------------------------------------------------- hashing
-def fmix(x):
-    """SplitMix64 finaliser: a bijective, well-mixing map of uint64 arrays (wraps on overflow)."""
-    x = x ^ (x >> np.uint64(30))
-    x = x * np.uint64(0xBF58476D1CE4E5B9)
-    x = x ^ (x >> np.uint64(27))
-    x = x * np.uint64(0x94D049BB133111EB)
-    return x ^ (x >> np.uint64(31))
-
-
 def float_words(values):
     """float64 values as exact uint64 words: -0.0 -> 0.0 and every NaN -> one NaN, so equal values match."""
     v = np.asarray(values, dtype=np.float64)
@@ -56,64 +46,10 @@ def float_words(values):
     return w.view(np.uint64)
 
 
-_POW = None
-
-
-def _powers(n):
-    """``_STR_MULT ** k mod 2**64`` for k < n (cached, grown on demand)."""
-    global _POW
-    if _POW is None or len(_POW) < n:
-        m = max(n, 256, 2 * (0 if _POW is None else len(_POW)))
-        p = np.full(m, _STR_MULT, dtype=np.uint64)
-        p[0] = 1
-        with np.errstate(over="ignore"):
-            _POW = np.cumprod(p, dtype=np.uint64)
-    return _POW
-
-
 def string_hashes(col) -> np.ndarray:
-    """One 64-bit hash per value of an Arrow string/binary array, from its buffers (no Python strings).
-
-    A polynomial hash of the bytes modulo 2**64 mixed with the length, then
-    SplitMix64; nulls get a fixed word. Processed in slices of about 4 MB of
-    text so temporaries stay small.
-    """
-    if isinstance(col, pa.ChunkedArray):
-        col = col.combine_chunks()
-    if pa.types.is_string(col.type) or pa.types.is_binary(col.type):
-        off_type = np.int32
-    else:
-        col = col.cast(pa.large_string()) if not pa.types.is_large_binary(col.type) else col
-        off_type = np.int64
-    n = len(col)
-    out = np.empty(n, dtype=np.uint64)
-    if n == 0:
-        return out
-    bufs = col.buffers()
-    offsets = np.frombuffer(bufs[1], dtype=off_type, count=n + 1, offset=col.offset * np.dtype(off_type).itemsize)
-    data = np.frombuffer(bufs[2], dtype=np.uint8) if bufs[2] is not None else np.zeros(0, dtype=np.uint8)
-    lengths = np.diff(offsets).astype(np.int64)
-    step = max(1, int((4 << 20) / max(1.0, float(lengths.mean()))))
-    with np.errstate(over="ignore"):
-        for lo in range(0, n, step):
-            hi = min(n, lo + step)
-            s0, s1 = int(offsets[lo]), int(offsets[hi])
-            ln = lengths[lo:hi]
-            h = fmix(ln.astype(np.uint64) ^ np.uint64(_SEED))
-            if s1 > s0:
-                b = data[s0:s1].astype(np.uint64) + np.uint64(1)
-                rel = np.repeat(offsets[lo:hi].astype(np.int64) - s0, ln)
-                pos = np.arange(s1 - s0, dtype=np.int64) - rel
-                b *= _powers(int(ln.max()))[pos]
-                starts = offsets[lo:hi].astype(np.int64) - s0
-                nz = ln > 0
-                sums = np.zeros(hi - lo, dtype=np.uint64)
-                sums[nz] = np.add.reduceat(b, starts[nz])
-                h = fmix(h ^ sums)
-            out[lo:hi] = h
-    if col.null_count:
-        out[np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)] = _NULL_WORD
-    return out
+    """One 64-bit hash per value of an Arrow string or binary array, off its buffers (no Python strings; nulls
+    share one word): :func:`hpe_cli.io.key_hash.string_hashes`, the hash evaluate's key join uses."""
+    return key_hash.string_hashes(col, stems=False)[0]
 
 
 def key_words(batch, name):
@@ -154,7 +90,7 @@ def key_hashes(label_cols, batch, key_cols) -> np.ndarray:
             np.multiply(h, _ROW_MULT, out=h)
             np.right_shift(h, np.uint64(32), out=t)
             np.bitwise_xor(h, t, out=h)
-        for shift, mult in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB), (31, None)):  # fmix, in place
+        for shift, mult in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB), (31, None)):  # SplitMix64 finaliser
             np.right_shift(h, np.uint64(shift), out=t)
             np.bitwise_xor(h, t, out=h)
             if mult is not None:
