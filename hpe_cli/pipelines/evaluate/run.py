@@ -34,7 +34,7 @@ from ..pools import default_threads, in_order
 from .dataset import choose_directmhp
 from .join import choose_keys, join
 from .lockstep import Unaligned, lockstep, prefetch
-from .opal23 import KarcherSpill
+from .opal23 import OPAL23_ALIGN, KarcherSpill
 from .options import EvaluateOptions
 from .outputs import Images, empty_rows, worst_pictures
 from .rejects import align_block, collect_rejects, unreadable_rejects
@@ -100,10 +100,9 @@ def _globals(s, pairs_factory, gsys, psys) -> dict:
     over the predictions before that offset; without --align mean opal23-align is scored after the pass,
     :mod:`.opal23`)."""
 
-    need_mean = s.options.align == "mean"
-    need_opal = "opal23-align" in s.protocols and need_mean
-    if not (need_mean or need_opal):
+    if s.options.align != "mean":
         return {}
+    need_opal = OPAL23_ALIGN in s.protocols
     M, n = np.zeros((3, 3)), 0
 
     def work(gp):  # on a pool thread: pure numpy, no shared state
