@@ -218,7 +218,7 @@ def audit_columns(
     mode : {"angles", "matrix"}
     lock_distance : bool, optional
         Also return ``lock_distance``. With False, angle labels of a Tait-Bryan
-        system are screened by :func:`angle_flags_screened` (one cosine a row
+        system are screened by :func:`angle_flags_screened` (the middle angle's distance from the lock
         instead of the matrix round trip, the same masks).
     primary : bool, optional
         Matrix labels: also return ``primary``. With False (and
@@ -283,10 +283,17 @@ def audit_columns(
         return out
 
 
-#: a screened decision closer than this to its threshold (lock distance, a dimensionless |cos|) is
-#: recomputed through the matrix round trip; the round trip's lock distance differs from ``|cos b|`` by a
-#: few 1e-16
-SCREEN_MARGIN = 1e-9
+#: a screened decision whose middle angle's distance from the lock (degrees) is closer than this to the
+#: threshold's is recomputed through the matrix round trip: the thresholds are under 89.9 degrees from the
+#: lock, where this margin is at least 3e-11 of lock distance, and the round trip's lock distance differs from
+#: ``|cos b|`` by a few 1e-16
+SCREEN_MARGIN_DEG = 1e-6
+
+
+def _screen_bound(t: float) -> float:
+    """The distance ``d`` (degrees) of the middle angle from the lock below which ``|cos b| = sin d < t``, for
+    ``d`` in [0, 90]: ``asin(t)`` (+inf above 1, never reached below 0)."""
+    return float(np.degrees(np.arcsin(t))) if -1.0 <= t <= 1.0 else (np.inf if t > 1.0 else -1.0)
 
 
 def screen_applies(system, canonical_tol_deg: float = CANONICAL_TOL_DEG) -> bool:
@@ -305,13 +312,13 @@ def angle_flags_screened(cols, finite, system, near_tol_deg=NEAR_GIMBAL_DEG, can
     """:func:`audit_columns`' masks for angle columns of a Tait-Bryan system, without the matrix round trip.
 
     For intrinsic Tait-Bryan turns ``a, b, c`` the stored matrix's lock distance
-    is ``|cos b|`` and the primary solution is the triple itself (wrapped to
-    (-180, 180]) when ``|b| <= 90``, else the other one (every angle 180 degrees
-    away), so ``gimbal_lock``, ``near_gimbal`` and ``non_canonical`` follow from
-    the middle angle alone. Rows whose ``|cos b|`` lies within
-    :data:`SCREEN_MARGIN` of a threshold, or with an angle outside [-180, 180],
-    go through the round trip of :func:`audit_columns`, so the masks are the
-    same bits.
+    is ``|cos b| = sin d`` with ``d = ||b| - 90|`` degrees (for ``|b| <= 180``), and the primary solution is
+    the triple itself (wrapped to (-180, 180]) when ``|b| <= 90``, else the other one (every angle 180 degrees
+    away), so ``gimbal_lock``, ``near_gimbal`` and ``non_canonical`` follow from ``d`` alone, compared with
+    the thresholds' own distances (:func:`_screen_bound`): no cosine. Rows whose ``d`` lies within
+    :data:`SCREEN_MARGIN_DEG` of a threshold's, with an angle outside [-180, 180], or every row when a
+    threshold is within 0.1 degree of 90, go through the round trip of :func:`audit_columns`, so the masks
+    are the same bits.
 
     Parameters
     ----------
@@ -330,21 +337,30 @@ def angle_flags_screened(cols, finite, system, near_tol_deg=NEAR_GIMBAL_DEG, can
     """
     n = len(finite)
     out = _empty(n)
-    mid = cols[middle_role(system)]
-    lock = np.abs(np.cos(mid * (np.pi / 180.0)))
-    tol, near_sin = system.gimbal_tol, np.sin(np.deg2rad(near_tol_deg))
-    locked = lock < tol
-    inner = (np.abs(cols[0]) <= 180.0) & (np.abs(cols[1]) <= 180.0) & (np.abs(cols[2]) <= 180.0)
-    unsure = ~inner | (np.abs(lock - tol) <= SCREEN_MARGIN) | (np.abs(lock - near_sin) <= SCREEN_MARGIN)
+    mid = middle_role(system)
+    a = np.abs(cols[mid])
+    d = np.abs(a - 90.0)
+    d_lock, d_near = _screen_bound(system.gimbal_tol), _screen_bound(float(np.sin(np.deg2rad(near_tol_deg))))
+    locked = d < d_lock
+    inner = a <= 180.0
+    for k in range(3):
+        if k != mid:
+            inner &= np.abs(cols[k]) <= 180.0
+    unsure = ~inner
+    for bound in (d_lock, d_near):
+        if bound > 89.9:
+            unsure[:] = True
+        elif bound >= 0.0:
+            unsure |= np.abs(d - bound) <= SCREEN_MARGIN_DEG
     unsure &= finite
     out["non_finite"] = ~finite
     out["gimbal_lock"] = locked & finite
-    out["near_gimbal"] = (locked | (lock < near_sin)) & finite
-    out["non_canonical"] = ~locked & (np.abs(mid) > 90.0) & finite
+    out["near_gimbal"] = (locked | (d < d_near)) & finite
+    out["non_canonical"] = ~locked & (a > 90.0) & finite
     outside = ~inner
     for k, role in enumerate(("pitch", "yaw", "roll")):
-        lo, hi = system.ranges.get(role, (-180.0, 180.0))
-        outside |= (cols[k] <= -180.0) | (cols[k] < lo) | (cols[k] > hi)
+        lo, hi = system.ranges.get(role, (-180.0, 180.0))  # (c <= -180) | (c < lo) | (c > hi), two comparisons
+        outside |= ((cols[k] < lo) if lo > -180.0 else (cols[k] <= -180.0)) | (cols[k] > hi)
     out["out_of_range"] = outside & finite
     idx = np.flatnonzero(unsure)
     if idx.size:

@@ -166,7 +166,12 @@ def test_duplicate_rows_from_either_store_match_numpy(threads, announced):
     H[rng.choice(len(H), 900)] = H[rng.choice(len(H), 900)]  # repeats in both halves
     d = Duplicates(announced)  # 300,000 announced: more rows than that come, the store falls back
     for lo in range(0, len(H), 65536):
-        d.add(H[lo : lo + 65536], np.arange(lo, min(lo + 65536, len(H))) + 1)
+        h = H[lo : lo + 65536]
+        slot = d.slot(lo, len(h))  # where a worker writes a batch's hashes when the in-order array has room
+        if slot is not None:
+            slot[:] = h
+            h = slot
+        d.add(h, np.arange(lo, min(lo + 65536, len(H))) + 1)
     _, first = np.unique(H, return_index=True)
     dup = np.ones(len(H), bool)
     dup[first] = False

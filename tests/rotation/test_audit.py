@@ -188,10 +188,12 @@ def test_audit_columns_equal_array_functions():
             assert np.array_equal(ref[k], got[k], equal_nan=True), (name, k)
 
 
-def test_screened_angle_flags_equal_round_trip():
-    """The screened angle checks (one cosine a row) give the round trip's masks bit for bit, on every
-    built-in system, with rows at and around the lock and near-gimbal thresholds, the +-90 boundary,
-    +-180, out-of-range and huge angles."""
+@pytest.mark.parametrize("near", [1.0, 0.0, 45.0, 89.95, 90.0, 120.0, -3.0])
+def test_screened_angle_flags_equal_round_trip(near):
+    """The screened angle checks (the middle angle's distance from the lock, no cosine) give the round trip's
+    masks bit for bit, on every built-in system, with rows at and around the lock and near-gimbal thresholds
+    (for several near-gimbal tolerances, some past 90 degrees), the +-90 boundary, +-180, out-of-range and
+    huge angles."""
     from hpe_cli.rotation.audit import audit_columns, screen_applies
     from hpe_cli.rotation.systems import system_names
 
@@ -203,6 +205,8 @@ def test_screened_angle_flags_equal_round_trip():
         [
             np.rad2deg(np.arccos(tol * (1 + np.linspace(-1e-8, 1e-8, 41)))),  # |cos b| around gimbal_tol
             90.0 - np.array([0.0, 1e-12, 1e-9, 1e-6, 0.0057, 0.0058, 0.999999, 1.0, 1.000001]),  # near tol 1 deg
+            90.0 - near + np.linspace(-2e-6, 2e-6, 41),  # around this test's near-gimbal tolerance
+            90.0 - np.rad2deg(np.arcsin(np.sin(np.deg2rad(near)))) + np.linspace(-2e-6, 2e-6, 41),
             [90.0, -90.0, 180.0, -180.0, 0.0, -0.0, 270.0, -270.0, 1e20, -1e20, 89.99858, 90.00142],
         ]
     )
@@ -215,8 +219,8 @@ def test_screened_angle_flags_equal_round_trip():
         for m in range(3):  # put the edge values on every role, so the middle turn gets them whatever it is
             c[m][m * k : (m + 1) * k] = edge
         c[0][-5:] = [np.nan, np.inf, -np.inf, 0.0, 1e300]
-        ref = audit_columns(c, system, "angles")
-        got = audit_columns(c, system, "angles", lock_distance=False)
+        ref = audit_columns(c, system, "angles", near)
+        got = audit_columns(c, system, "angles", near, lock_distance=False)
         screened += screen_applies(system)
         for key in CHECKS:
             assert np.array_equal(ref[key], got[key]), (name, key, np.flatnonzero(ref[key] != got[key])[:5])

@@ -2,8 +2,8 @@
 
 Equal rows get equal hashes: label values enter as their exact bits (-0.0 = 0.0, every NaN one NaN), text
 columns as a 64-bit hash of their bytes taken from the Arrow buffers (no Python strings). The hashes are the
-audit's only per-row state: 16 bytes a row (kept in input order and split by value half, :class:`Duplicates`;
-the sort at the end of the run needs no other copy).
+audit's only per-row state: 8 bytes a row while the batches stream (written in input order by the threads
+that check them, :class:`Duplicates`), 16 at the end, when each value half is selected and sorted.
 """
 
 from __future__ import annotations
@@ -74,14 +74,15 @@ def key_words(batch, name):
     return string_hashes(col)
 
 
-def key_hashes(label_cols, batch, key_cols) -> np.ndarray:
+def key_hashes(label_cols, batch, key_cols, out=None) -> np.ndarray:
     """One 64-bit hash per row of (label values, key columns): equal rows get equal hashes.
 
     Label values enter as their exact bits (-0.0 = 0.0, all NaNs equal); text
-    columns as a 64-bit hash of their bytes.
+    columns as a 64-bit hash of their bytes. ``out``: a uint64 array of the rows' length to write them to.
     """
     n = len(label_cols[0])
-    h = np.full(n, _SEED, dtype=np.uint64)
+    h = np.empty(n, dtype=np.uint64) if out is None else out
+    h.fill(_SEED)
     t = np.empty(n, dtype=np.uint64)
     with np.errstate(over="ignore"):
         for k in range(len(label_cols) + len(key_cols)):
@@ -98,79 +99,66 @@ def key_hashes(label_cols, batch, key_cols) -> np.ndarray:
     return h
 
 
-def split_halves(h):
-    """``(h[h < 2**63], h[h >= 2**63])``: a batch's hashes by value half, in input order (for :class:`Duplicates`)."""
-    low = h.view(np.int64) >= 0  # top bit clear; np.compress is about twice as fast as a boolean index here
-    return np.compress(low, h), np.compress(~low, h)
-
-
 class Duplicates:
-    """Duplicates from one 64-bit hash per row (16 bytes a row; the only per-row state of an audit).
+    """Duplicates from one 64-bit hash per row (16 bytes a row at the end of the run; the only per-row state of an
+    audit).
 
-    With the row count known (Parquet), the hashes are copied as batches come in into one array in input
-    order and, split by value half (:func:`split_halves`), into a second one filled from both ends; the
-    end of the run then sorts the two halves in place, on two threads, with no copy and no scan.
+    With the row count known (Parquet), each batch's hashes are written by the thread that checks it straight
+    into one array in input order (:meth:`slot`: the batch's rows by their offset); otherwise they are kept
+    batch by batch and put end to end at the end. The end of the run splits the hashes by value half, each half
+    selected and sorted on a thread of its own: nothing is copied while the batches stream.
     """
 
     def __init__(self, rows: int | None = None):
         self.buf = np.empty(rows, dtype=np.uint64) if rows else None
-        self.halves = np.empty(rows, dtype=np.uint64) if rows else None
-        self.n_low = self.n_high = 0
-        self.parts = []
+        self.parts = []  # every batch's hashes, in input order (views of buf where they were written there)
         self.batch_sizes = []
         self.lines = []  # (row index, line) where the line numbering jumps (CSV rejects, blank lines)
         self.n = 0
         self._prev_line = None
 
-    def add(self, h, lines, halves=None):
-        """Add one batch's hashes ``h`` (and their :func:`split_halves`, if computed) and file lines."""
-        if self.buf is not None and self.n + len(h) <= len(self.buf) and not self.parts:
-            self.buf[self.n : self.n + len(h)] = h
-            self._add_halves(h, halves)
-        else:
-            if self.buf is not None:  # more rows than announced: keep what was copied as the first part
-                self.parts.append(self.buf[: self.n])
-                self.buf = self.halves = None
-            self.parts.append(h)
+    def slot(self, offset: int, n: int):
+        """Where the hashes of the ``n`` rows starting at row ``offset`` go: a view of the in-order array, or None
+        (no row count, or more rows than announced). Any thread may call it."""
+        if self.buf is None or offset + n > len(self.buf):
+            return None
+        return self.buf[offset : offset + n]
+
+    def add(self, h, lines):
+        """Add one batch's hashes ``h`` (its :meth:`slot` once filled, or an array of its own) and file lines
+        (increasing), in input order."""
+        self.parts.append(h)
         self.batch_sizes.append(len(h))
         if len(lines):
-            jumps = np.flatnonzero(np.diff(lines) != 1) + 1
             if self._prev_line is None or lines[0] != self._prev_line + 1:
                 self.lines.append((self.n, int(lines[0])))
-            for j in jumps:
-                self.lines.append((self.n + int(j), int(lines[j])))
+            if lines[-1] - lines[0] != len(lines) - 1:  # increasing lines with that span are consecutive
+                for j in np.flatnonzero(np.diff(lines) != 1) + 1:
+                    self.lines.append((self.n + int(j), int(lines[j])))
             self._prev_line = int(lines[-1])
         self.n += len(h)
 
-    def _add_halves(self, h, halves) -> None:
-        low, high = split_halves(h) if halves is None else halves
-        end = len(self.halves) - self.n_high
-        self.halves[self.n_low : self.n_low + len(low)] = low
-        self.halves[end - len(high) : end] = high
-        self.n_low += len(low)
-        self.n_high += len(high)
+    def _hashes(self) -> np.ndarray:
+        """Every row's hash in input order, as one array."""
+        buf, n = self.buf, self.n
+        if buf is not None and n <= len(buf) and all(np.shares_memory(p, buf) for p in self.parts if len(p)):
+            return buf[:n]
+        return np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
 
     def finish(self, threads: int = 1):
         """Compute the duplicate rows; returns their count.
 
-        The hashes equal to another are found by sorting, each value range on a
+        The hashes equal to another are found by sorting, each value half on a
         thread of its own (numpy releases the GIL), so the result does not
         depend on ``threads``.
         """
-        halves = None
-        if self.buf is not None:
-            H = self.buf[: self.n]
-            end = len(self.halves)
-            halves = (self.halves[: self.n_low], self.halves[end - self.n_high : end])
-        else:
-            H = np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
-        self.parts, self.buf, self.halves = [], None, None
-        self.H = H
+        H = self._hashes()
+        self.parts, self.buf = [], None
         self.dup_idx = np.zeros(0, dtype=np.int64)
         self.first_idx = np.zeros(0, dtype=np.int64)
         if len(H) < 2:
             return 0
-        dupvals = repeated_values(H, threads) if halves is None else repeated_in_halves(halves, threads)
+        dupvals = repeated_values(H, threads)
         if not len(dupvals):
             return 0
         idx = []
@@ -209,45 +197,39 @@ def _repeats(S) -> np.ndarray:
     return np.unique(S[1:][same]) if same.any() else S[:0]
 
 
-def repeated_in_halves(halves, threads: int = 1) -> np.ndarray:
-    """:func:`repeated_values` of the union of ``halves`` (the values below 2**63, then the others), sorting
-    each in place (on two threads when ``threads > 1``)."""
-
-    def one(S):
-        S.sort()
-        return _repeats(S)
-
-    if threads > 1 and min(len(x) for x in halves) >= 1 << 16:
-        from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
-
-        with ThreadPoolExecutor(2) as pool:
-            return np.concatenate(list(pool.map(one, halves)))
-    return np.concatenate([one(x) for x in halves])
+def _half(H, low: bool, size: int) -> np.ndarray:
+    """The ``size`` values of ``H`` below 2**63 (``low``) or the others, in order, selected 1M values at a time
+    (``np.compress`` of the whole would hold an index array of the selected values beside them)."""
+    S = np.empty(size, dtype=np.uint64)
+    k = 0
+    for lo in range(0, len(H), 1 << 20):
+        chunk = H[lo : lo + (1 << 20)]
+        m = chunk.view(np.int64) >= 0 if low else chunk.view(np.int64) < 0
+        c = int(np.count_nonzero(m))
+        np.compress(m, chunk, out=S[k : k + c])
+        k += c
+    return S
 
 
 def repeated_values(H, threads: int = 1) -> np.ndarray:
     """The values that occur more than once in the uint64 array ``H``, sorted (whatever ``threads``).
 
-    With ``threads > 1`` the values are split by their top bits into ``threads`` ranges, each selected
-    and sorted on its own thread (the hashes are uniform, so the ranges hold about as many).
+    The values below 2**63 and the others are each selected into an array of their own and sorted in place, on
+    two threads when ``threads > 1`` (the hashes are uniform, so the halves hold about as many).
     """
-    parts = max(1, min(int(threads), 16)) if len(H) >= 1 << 20 else 1
+    n_low = int(np.count_nonzero(H.view(np.int64) >= 0))
 
-    def one(k):
-        if parts == 1:
-            S = np.sort(H)
-        else:
-            lo, hi = np.uint64((k << 64) // parts), np.uint64(((k + 1) << 64) // parts - 1)
-            S = H[H <= hi] if k == 0 else (H[H >= lo] if k == parts - 1 else H[(H >= lo) & (H <= hi)])
-            S.sort()
+    def one(low: bool):
+        S = _half(H, low, n_low if low else len(H) - n_low)
+        S.sort()
         return _repeats(S)
 
-    if parts == 1:
-        return one(0)
-    from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
+    if threads > 1 and len(H) >= 1 << 17:
+        from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
 
-    with ThreadPoolExecutor(parts) as pool:
-        return np.concatenate(list(pool.map(one, range(parts))))
+        with ThreadPoolExecutor(2) as pool:
+            return np.concatenate(list(pool.map(one, (True, False))))
+    return np.concatenate([one(True), one(False)])
 
 
 def unpack_rows(flag_bits, batch_sizes, idx) -> np.ndarray:

@@ -33,7 +33,7 @@ from ..inorder import in_order
 from ..pools import default_threads
 from .batches import SKIP_REJECTS, check_batch, read_batches, system_cols
 from .common import canonical_labels
-from .duplicates import ID_COLUMNS, Duplicates, key_hashes, split_halves, unpack_rows
+from .duplicates import ID_COLUMNS, Duplicates, key_hashes, unpack_rows
 from .flagged import write_flagged
 from .options import AuditOptions
 
@@ -120,6 +120,29 @@ def example_row(batch, i, line, id_cols, cols, mode) -> dict:
     return ex
 
 
+def batch_tally(res, n_examples: int) -> tuple:
+    """What the in-order tally adds of one batch's check masks ``res``, computed where the batch was checked:
+    ``(count per check, its first n_examples row indices, packed bits of the rows any check but duplicates
+    flags, their count, the near_gimbal rows not locked)``."""
+    any_flag = np.zeros(len(res[CHECKS[0]]), dtype=bool)
+    counts, firsts = {}, {}
+    for c in CHECKS[:-1]:
+        m = res[c]
+        any_flag |= m
+        counts[c] = int(np.count_nonzero(m))
+        firsts[c] = np.flatnonzero(m)[:n_examples].copy() if counts[c] and n_examples else ()
+    near_not_locked = int(np.count_nonzero(res["near_gimbal"] & ~res["gimbal_lock"]))
+    return counts, firsts, np.packbits(any_flag), int(np.count_nonzero(any_flag)), near_not_locked
+
+
+def numbered(batches):
+    """``((batch, offset of its first row), lines, unread)`` of :func:`read_batches`' items."""
+    offset = 0
+    for batch, lines, unread in batches:
+        yield (batch, offset), lines, unread
+        offset += batch.num_rows
+
+
 class AuditTally:
     """The counts, examples, flags and duplicate hashes of one audit.
 
@@ -141,55 +164,55 @@ class AuditTally:
         self.flag_bits = []  # one bit a row: flagged by a check other than duplicates
         self.unread_examples = []
 
-    def work(self, batch):
-        """Check and hash one batch: ``(mode, cols, masks, any flag, (hashes, their halves), consistency evidence)``."""
+    def work(self, item):
+        """Check, tally and hash one batch ``(batch, its first row's offset)`` on a worker thread: ``(mode, cols,
+        masks, tally, hashes, consistency evidence)``; ``tally`` is :func:`batch_tally`'s, the hashes are written
+        to :meth:`Duplicates.slot` when it has room."""
+        batch, offset = item
         plan = self.plan
         cols, eff = system_cols(batch, plan.system, plan.mode, self.options.radians, plan.via_system)
         res = check_batch(cols, eff, plan.system, self.options.near_tol_deg, primary=self.hist is not None)
-        any_flag = np.zeros(batch.num_rows, dtype=bool)
-        for c in CHECKS[:-1]:
-            any_flag |= res[c]
         cons_in = None
         if self.cons is not None:
             A = canonical_labels(plan.system, cols, eff, res)
             cons_in = (A, self.cons.measure(batch, A))
-        hashes = key_hashes(cols, batch, plan.key_cols)
-        return eff, cols, res, any_flag, (hashes, split_halves(hashes)), cons_in
+        hashes = key_hashes(cols, batch, plan.key_cols, out=self.dups.slot(offset, batch.num_rows))
+        return eff, cols, res, batch_tally(res, self.options.n_examples), hashes, cons_in
 
-    def finish(self, batch, lines, unread, future) -> None:
+    def finish(self, item, lines, unread, future) -> None:
         """Add one batch's result (in input order)."""
+        batch, _ = item
         if unread:  # rows with a non-numeric label value: non_finite, as when read from a text column
             self.rows += len(unread)
             self.counts["non_finite"] += len(unread)
             self.flagged += len(unread)
             self.unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[: self.options.n_examples]]
-        eff, cols, res, any_flag, (hashes, halves), cons_in = future.result()
+        eff, cols, res, tally, hashes, cons_in = future.result()
         if self.cons is not None:
             self.cons.add(batch, lines, *cons_in, unread=len(unread))
         if self.decoder is not None:
             system, values = self.plan.system, np.stack(cols, axis=-1)
             stored = system.from_angles(values) if eff == "angles" else values.reshape(-1, 3, 3)
             self.decoder.add(system.to_canonical(stored))
-        self._count(batch, lines, cols, eff, res)
-        self.flagged += int(np.count_nonzero(any_flag))
-        self.flag_bits.append(np.packbits(any_flag))
-        self.near_not_locked += int(np.count_nonzero(res["near_gimbal"] & ~res["gimbal_lock"]))
-        self.dups.add(hashes, lines, halves)
+        self._count(batch, lines, cols, eff, tally)
+        self.dups.add(hashes, lines)
         if self.hist is not None:
             self.hist.add(np.stack(cols, axis=-1) if eff == "angles" else res["primary"])
         self.rows += batch.num_rows
         if self.progress is not None:
             self.progress.update(batch.num_rows)
 
-    def _count(self, batch, lines, cols, eff, res) -> None:
+    def _count(self, batch, lines, cols, eff, tally) -> None:
+        counts, firsts, flag_bits, flagged, near_not_locked = tally
         n_examples = self.options.n_examples
-        for c in CHECKS[:-1]:
-            m = res[c]
-            self.counts[c] += int(np.count_nonzero(m))
+        for c, k in counts.items():
+            self.counts[c] += k
             want = n_examples - len(self.examples[c])
-            if want > 0 and m.any():
-                for i in np.flatnonzero(m)[:want]:
-                    self.examples[c].append(example_row(batch, int(i), lines[i], self.plan.id_cols, cols, eff))
+            for i in firsts[c][: max(want, 0)]:
+                self.examples[c].append(example_row(batch, int(i), lines[i], self.plan.id_cols, cols, eff))
+        self.flagged += flagged
+        self.flag_bits.append(flag_bits)
+        self.near_not_locked += near_not_locked
 
     def close(self) -> None:
         """Find the duplicates; count those with no other flag as flagged; finish the examples."""
@@ -320,7 +343,9 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
         cons = ConsistencyAudit(table, o.consistency)
     tally = AuditTally(plan, o, cons, progress)
     keep_freed_memory()  # the batches' freed temporaries reused, not faulted in again (pipelines.heap)
-    in_order(read_batches(table, plan.read_mode, rejected), tally.work, tally.finish, default_threads(o.threads))
+    in_order(
+        numbered(read_batches(table, plan.read_mode, rejected)), tally.work, tally.finish, default_threads(o.threads)
+    )
     rejected.check()  # with --strict: any set-aside row is an error and nothing is written
     tally.close()
 
