@@ -1,46 +1,60 @@
-"""The one compiled piece: ``_hpe_jpeg``, a JPEG rectangle decoder over the system's libjpeg-turbo.
+"""The compiled pieces, both optional: without them ``hpe`` gives the same results, more slowly.
 
-It is optional: without a C compiler or libjpeg-turbo's headers (Debian/Ubuntu ``libjpeg-dev``, Fedora
-``libjpeg-turbo-devel``, conda ``libjpeg-turbo``) the build skips it and ``hpe_cli.io.jpeg`` decodes whole frames
-(the same pixels, slower on large frames). Either way the build says so in one line starting ``hpe:`` (pip shows
-it with ``pip install -v .``); ``hpe --version`` tells afterwards. Everything else is in ``pyproject.toml``.
+- ``_hpe_jpeg``, a JPEG rectangle decoder over the system's libjpeg-turbo. Without a C compiler or libjpeg-turbo's
+  headers (Debian/Ubuntu ``libjpeg-dev``, Fedora ``libjpeg-turbo-devel``, conda ``libjpeg-turbo``) the build skips it
+  and ``hpe_cli.io.jpeg`` decodes whole frames (the same pixels, slower on large frames).
+- ``_hpe_kernels``, column kernels in plain C (no library): key and row hashes, the audit's angle screen. Without a
+  C compiler their numpy twins run (``hpe_cli.native``; the same bits).
+
+Either way the build says so in one line per module starting ``hpe:`` (pip shows it with ``pip install -v .``);
+``hpe --version`` tells afterwards. Everything else is in ``pyproject.toml``.
 """
 
+import os
 import sys
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
+#: what each optional module does, and what its absence costs (the build's one-line messages)
+WHAT = {
+    "_hpe_jpeg": (
+        "the region JPEG decoder",
+        "whole frames will be decoded. For it, install a C compiler and libjpeg-turbo's headers (Debian/Ubuntu "
+        "libjpeg-dev, Fedora libjpeg-turbo-devel) and reinstall",
+    ),
+    "_hpe_kernels": (
+        "the compiled column kernels",
+        "their numpy twins will run (the same results, slower). For them, install a C compiler and reinstall",
+    ),
+}
+
 
 class BuildExt(build_ext):
-    """``build_ext`` that reports, in one line, whether the optional decoder was built and why not."""
+    """``build_ext`` that reports, in one line per module, whether an optional module was built and why not."""
 
     def build_extension(self, ext):
+        what, without = WHAT[ext.name]
         try:
             super().build_extension(ext)
         except Exception as exc:  # optional=True swallows errors in setuptools; say what happened
-            print(
-                f"hpe: the region JPEG decoder {ext.name} was NOT built ({type(exc).__name__}: "
-                f"{' '.join(str(exc).split())[:200]}); whole frames will be decoded. For it, install a C compiler "
-                "and libjpeg-turbo's headers (Debian/Ubuntu libjpeg-dev, Fedora libjpeg-turbo-devel) and reinstall",
-                file=sys.stderr,
-            )
+            why = f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}"
+            print(f"hpe: {what} {ext.name} was NOT built ({why}); {without}", file=sys.stderr)
             return
         built = self.get_ext_fullpath(ext.name)
-        import os
-
         if os.path.exists(built):
-            print(f"hpe: built the region JPEG decoder {ext.name} ({built})", file=sys.stderr)
+            print(f"hpe: built {what} {ext.name} ({built})", file=sys.stderr)
         else:
-            print(
-                f"hpe: the region JPEG decoder {ext.name} was NOT built (no C compiler or no jpeglib.h); whole "
-                "frames will be decoded. For it, install a C compiler and libjpeg-turbo's headers (Debian/Ubuntu "
-                "libjpeg-dev, Fedora libjpeg-turbo-devel) and reinstall",
-                file=sys.stderr,
-            )
+            print(f"hpe: {what} {ext.name} was NOT built (no C compiler or headers); {without}", file=sys.stderr)
 
 
 setup(
-    ext_modules=[Extension("_hpe_jpeg", ["csrc/_hpe_jpeg.c"], libraries=["jpeg"], optional=True)],
+    ext_modules=[
+        Extension("_hpe_jpeg", ["csrc/_hpe_jpeg.c"], libraries=["jpeg"], optional=True),
+        # IEEE arithmetic as numpy does it: no fused multiply-adds (the kernels' twins are numpy passes)
+        Extension(
+            "_hpe_kernels", ["csrc/_hpe_kernels.c"], extra_compile_args=["-O3", "-ffp-contract=off"], optional=True
+        ),
+    ],
     cmdclass={"build_ext": BuildExt},
 )

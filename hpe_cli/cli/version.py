@@ -45,6 +45,15 @@ def optional_parts() -> list[tuple[str, str]]:
                 "e.g. Debian/Ubuntu libjpeg-dev)",
             )
         )
+    try:
+        import _hpe_kernels
+
+        parts.append(("column kernels", f"built ({_hpe_kernels.__file__}): key and row hashes in C"))
+    except ImportError as exc:
+        why = "not built" if isinstance(exc, ModuleNotFoundError) else f"built but cannot load ({exc})"
+        parts.append(
+            ("column kernels", f"{why}: their numpy twins run, the same results, slower (reinstall with a C compiler)")
+        )
     sj = _dist_version("simplejpeg") if _found("simplejpeg") else None
     parts.append(
         (

@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
+from ..native import kernels
+
 _P = np.uint64(0x100000001B3)  # FNV's 64-bit prime (odd)
 _P_INV = np.uint64(pow(int(_P), -1, 1 << 64))
 _LEN = np.uint64(0x9E3779B97F4A7C15)
@@ -71,7 +73,7 @@ def string_hashes(arr, stems: bool = True) -> tuple[np.ndarray, np.ndarray | Non
     n = len(arr)
     if n == 0:
         z = np.zeros(0, dtype=np.uint64)
-        return z, z
+        return z, (z if stems else None)
     width = np.int64 if large else np.int32
     bufs = arr.buffers()
     off = np.frombuffer(bufs[1], dtype=width, count=n + 1, offset=arr.offset * np.dtype(width).itemsize)
@@ -82,6 +84,13 @@ def string_hashes(arr, stems: bool = True) -> tuple[np.ndarray, np.ndarray | Non
         if bufs[2] is not None and top > base
         else np.zeros(0, np.uint8)
     )
+    k = kernels()
+    if k is not None:  # the same hashes in one C loop (csrc/_hpe_kernels.c); the numpy twin below
+        off -= base
+        valid = np.asarray(arr.is_valid().to_numpy(zero_copy_only=False), dtype=np.uint8) if arr.null_count else None
+        hx, hs = np.empty(n, dtype=np.uint64), (np.empty(n, dtype=np.uint64) if stems else None)
+        k.string_hashes(off, data, valid, hx, hs)
+        return hx, hs
     start, end = off[:-1] - base, off[1:] - base
     L = len(data)
     # S[j] = sum_{i<j} b[i] P**i ;  hash(s, e) = (S[e] - S[s]) * P**-s, then the length mixed in

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..native import kernels
 from .check import ROTATION_TOL, rotation_mask, rotation_screen_columns
 from .euler import parse_seq, wrap_180
 from .solutions import middle_role
@@ -338,9 +339,28 @@ def angle_flags_screened(cols, finite, system, near_tol_deg=NEAR_GIMBAL_DEG, can
     n = len(finite)
     out = _empty(n)
     mid = middle_role(system)
+    d_lock, d_near = _screen_bound(system.gimbal_tol), _screen_bound(float(np.sin(np.deg2rad(near_tol_deg))))
+    k = kernels()
+    if k is not None:  # the same masks in one C loop (csrc/_hpe_kernels.c); the numpy twin below
+        ranges = [system.ranges.get(role, (-180.0, 180.0)) for role in ("pitch", "yaw", "roll")]
+        unsure = np.empty(n, dtype=bool)
+        out["non_finite"] = ~finite
+        k.angle_screen(
+            *(np.ascontiguousarray(c, dtype=np.float64) for c in cols),
+            np.ascontiguousarray(finite, dtype=bool),
+            mid,
+            d_lock,
+            d_near,
+            SCREEN_MARGIN_DEG,
+            d_lock > 89.9 or d_near > 89.9,
+            tuple(float(lo) for lo, _ in ranges),
+            tuple(float(hi) for _, hi in ranges),
+            *(out[name] for name in ("gimbal_lock", "near_gimbal", "non_canonical", "out_of_range")),
+            unsure,
+        )
+        return _exact_unsure(out, unsure, cols, system, near_tol_deg, canonical_tol_deg)
     a = np.abs(cols[mid])
     d = np.abs(a - 90.0)
-    d_lock, d_near = _screen_bound(system.gimbal_tol), _screen_bound(float(np.sin(np.deg2rad(near_tol_deg))))
     locked = d < d_lock
     inner = a <= 180.0
     for k in range(3):
@@ -362,6 +382,11 @@ def angle_flags_screened(cols, finite, system, near_tol_deg=NEAR_GIMBAL_DEG, can
         lo, hi = system.ranges.get(role, (-180.0, 180.0))  # (c <= -180) | (c < lo) | (c > hi), two comparisons
         outside |= ((cols[k] < lo) if lo > -180.0 else (cols[k] <= -180.0)) | (cols[k] > hi)
     out["out_of_range"] = outside & finite
+    return _exact_unsure(out, unsure, cols, system, near_tol_deg, canonical_tol_deg)
+
+
+def _exact_unsure(out, unsure, cols, system, near_tol_deg, canonical_tol_deg) -> dict:
+    """``out`` with the screen's unsure rows decided by the round trip of :func:`audit_columns`."""
     idx = np.flatnonzero(unsure)
     if idx.size:
         exact = audit_columns([c[idx] for c in cols], system, "angles", near_tol_deg, canonical_tol_deg)

@@ -171,6 +171,7 @@ def test_duplicate_rows_from_either_store_match_numpy(threads, announced):
         if slot is not None:
             slot[:] = h
             h = slot
+            d.file(slot)  # and files them into the value halves (any order: they are sorted)
         d.add(h, np.arange(lo, min(lo + 65536, len(H))) + 1)
     _, first = np.unique(H, return_index=True)
     dup = np.ones(len(H), bool)

@@ -18,7 +18,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2] / "hpe_cli"
 
-FLOOR = {"errors", "data", "registry"}
+FLOOR = {"errors", "data", "registry", "native"}
 #: layer -> the hpe_cli layers it may import (besides itself and FLOOR); "api" is hpe_cli/__init__.py and api.py
 MAY_IMPORT = {
     "rotation": set(),

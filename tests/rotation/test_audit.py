@@ -188,14 +188,21 @@ def test_audit_columns_equal_array_functions():
             assert np.array_equal(ref[k], got[k], equal_nan=True), (name, k)
 
 
+@pytest.mark.parametrize("kernel", ["numpy", "C"])
 @pytest.mark.parametrize("near", [1.0, 0.0, 45.0, 89.95, 90.0, 120.0, -3.0])
-def test_screened_angle_flags_equal_round_trip(near):
-    """The screened angle checks (the middle angle's distance from the lock, no cosine) give the round trip's
-    masks bit for bit, on every built-in system, with rows at and around the lock and near-gimbal thresholds
-    (for several near-gimbal tolerances, some past 90 degrees), the +-90 boundary, +-180, out-of-range and
-    huge angles."""
+def test_screened_angle_flags_equal_round_trip(near, kernel, monkeypatch):
+    """The screened angle checks (the middle angle's distance from the lock, no cosine; numpy's passes or the
+    compiled kernel) give the round trip's masks bit for bit, on every built-in system, with rows at and around
+    the lock and near-gimbal thresholds (for several near-gimbal tolerances, some past 90 degrees), the +-90
+    boundary, +-180, out-of-range and huge angles."""
+    from hpe_cli.native import kernels
     from hpe_cli.rotation.audit import audit_columns, screen_applies
     from hpe_cli.rotation.systems import system_names
+
+    if kernel == "numpy":
+        monkeypatch.setenv("HPE_KERNELS", "numpy")
+    elif kernels() is None:
+        pytest.skip("_hpe_kernels not built")
 
     rng = np.random.default_rng(11)
     n = 20_000

@@ -8,11 +8,15 @@ that check them, :class:`Duplicates`), 16 at the end, when each value half is se
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pyarrow as pa
 
 from ...io import key_hash
 from ...io.table_source import plain_numpy
+from ...native import kernels
+from ..heap import small_page_array
 
 #: columns that identify a sample, used (when present) in the ``duplicates`` key
 ID_COLUMNS = (
@@ -83,6 +87,15 @@ def key_hashes(label_cols, batch, key_cols, out=None) -> np.ndarray:
     n = len(label_cols[0])
     h = np.empty(n, dtype=np.uint64) if out is None else out
     h.fill(_SEED)
+    k = kernels()
+    if k is not None:  # the same hashes, one C loop a column (csrc/_hpe_kernels.c); the numpy twin below
+        for c in range(len(label_cols) + len(key_cols)):
+            if c < len(label_cols):
+                k.row_hash_add(h, np.ascontiguousarray(label_cols[c], dtype=np.float64), True)
+            else:
+                k.row_hash_add(h, np.ascontiguousarray(key_words(batch, key_cols[c - len(label_cols)])), False)
+        k.mix(h)
+        return h
     t = np.empty(n, dtype=np.uint64)
     with np.errstate(over="ignore"):
         for k in range(len(label_cols) + len(key_cols)):
@@ -100,17 +113,20 @@ def key_hashes(label_cols, batch, key_cols, out=None) -> np.ndarray:
 
 
 class Duplicates:
-    """Duplicates from one 64-bit hash per row (16 bytes a row at the end of the run; the only per-row state of an
-    audit).
+    """Duplicates from one 64-bit hash per row (16 bytes a row; the only per-row state of an audit).
 
-    With the row count known (Parquet), each batch's hashes are written by the thread that checks it straight
-    into one array in input order (:meth:`slot`: the batch's rows by their offset); otherwise they are kept
-    batch by batch and put end to end at the end. The end of the run splits the hashes by value half, each half
-    selected and sorted on a thread of its own: nothing is copied while the batches stream.
+    With the row count known (Parquet), the thread that checks a batch writes its hashes straight into one
+    array in input order (:meth:`slot`: the batch's rows by their offset) and copies them, split by value
+    half, into a second array filled from both ends (:meth:`file`); the end of the run sorts the two halves in
+    place, on two threads, with no copy. Without the row count the hashes are kept batch by batch and put end to
+    end at the end, each value half then selected and sorted on a thread of its own.
     """
 
     def __init__(self, rows: int | None = None):
-        self.buf = np.empty(rows, dtype=np.uint64) if rows else None
+        self.buf = small_page_array(rows, np.uint64) if rows else None  # 4 KB pages: pipelines.heap
+        self.halves = small_page_array(rows, np.uint64) if rows else None
+        self.n_low = self.n_high = 0  # values below 2**63 at the front of halves, the others at its back
+        self._lock = threading.Lock()
         self.parts = []  # every batch's hashes, in input order (views of buf where they were written there)
         self.batch_sizes = []
         self.lines = []  # (row index, line) where the line numbering jumps (CSV rejects, blank lines)
@@ -123,6 +139,23 @@ class Duplicates:
         if self.buf is None or offset + n > len(self.buf):
             return None
         return self.buf[offset : offset + n]
+
+    def file(self, h) -> None:
+        """Copy a batch's hashes (its filled :meth:`slot`) into the value halves. Any thread may call it: the order
+        of the batches in a half does not matter, it is sorted."""
+        k = kernels()
+        if k is not None:  # one C loop (csrc/_hpe_kernels.c); the numpy twin below
+            low, high = np.empty(len(h), dtype=np.uint64), np.empty(len(h), dtype=np.uint64)
+            n_low = k.split_top_bit(h, low, high)
+            low, high = low[:n_low], high[: len(h) - n_low]
+        else:
+            top = h.view(np.int64) < 0
+            low, high = h[~top], h[top]
+        with self._lock:
+            at, self.n_low = self.n_low, self.n_low + len(low)
+            end, self.n_high = len(self.halves) - self.n_high, self.n_high + len(high)
+        self.halves[at : at + len(low)] = low
+        self.halves[end - len(high) : end] = high
 
     def add(self, h, lines):
         """Add one batch's hashes ``h`` (its :meth:`slot` once filled, or an array of its own) and file lines
@@ -141,9 +174,14 @@ class Duplicates:
     def _hashes(self) -> np.ndarray:
         """Every row's hash in input order, as one array."""
         buf, n = self.buf, self.n
-        if buf is not None and n <= len(buf) and all(np.shares_memory(p, buf) for p in self.parts if len(p)):
+        if self._in_buf():
             return buf[:n]
         return np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
+
+    def _in_buf(self) -> bool:
+        """Every batch was written to its :meth:`slot` and filed (the value halves hold every hash)."""
+        buf = self.buf
+        return buf is not None and self.n_low + self.n_high == self.n and self.n <= len(buf)
 
     def finish(self, threads: int = 1):
         """Compute the duplicate rows; returns their count.
@@ -153,12 +191,16 @@ class Duplicates:
         depend on ``threads``.
         """
         H = self._hashes()
-        self.parts, self.buf = [], None
+        halves = None
+        if self._in_buf():
+            end = len(self.halves)
+            halves = (self.halves[: self.n_low], self.halves[end - self.n_high : end])
+        self.parts, self.buf, self.halves = [], None, None
         self.dup_idx = np.zeros(0, dtype=np.int64)
         self.first_idx = np.zeros(0, dtype=np.int64)
         if len(H) < 2:
             return 0
-        dupvals = repeated_values(H, threads)
+        dupvals = repeated_values(H, threads) if halves is None else repeated_in_halves(halves, threads)
         if not len(dupvals):
             return 0
         idx = []
@@ -209,6 +251,22 @@ def _half(H, low: bool, size: int) -> np.ndarray:
         np.compress(m, chunk, out=S[k : k + c])
         k += c
     return S
+
+
+def repeated_in_halves(halves, threads: int = 1) -> np.ndarray:
+    """:func:`repeated_values` of the union of ``halves`` (the values below 2**63, then the others), sorting
+    each in place (on two threads when ``threads > 1``)."""
+
+    def one(S):
+        S.sort()
+        return _repeats(S)
+
+    if threads > 1 and min(len(x) for x in halves) >= 1 << 16:
+        from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
+
+        with ThreadPoolExecutor(2) as pool:
+            return np.concatenate(list(pool.map(one, halves)))
+    return np.concatenate([one(x) for x in halves])
 
 
 def repeated_values(H, threads: int = 1) -> np.ndarray:

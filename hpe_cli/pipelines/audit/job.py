@@ -120,17 +120,29 @@ def example_row(batch, i, line, id_cols, cols, mode) -> dict:
     return ex
 
 
-def batch_tally(res, n_examples: int) -> tuple:
+def first_true(m, k: int) -> np.ndarray:
+    """The indices of the first ``k`` True values of the boolean array ``m`` (all of them if fewer), reading
+    only as far as needed (windows doubling from 4,096 values)."""
+    w = 4096
+    while True:
+        got = np.flatnonzero(m[:w])
+        if len(got) >= k or w >= len(m):
+            return got[:k]
+        w *= 4
+
+
+def batch_tally(res, n_examples: int, full=frozenset()) -> tuple:
     """What the in-order tally adds of one batch's check masks ``res``, computed where the batch was checked:
-    ``(count per check, its first n_examples row indices, packed bits of the rows any check but duplicates
-    flags, their count, the near_gimbal rows not locked)``."""
+    ``(count per check, its first n_examples row indices (none for the checks in full: they have all their
+    examples already), packed bits of the rows any check but duplicates flags, their count, the near_gimbal rows
+    not locked)``."""
     any_flag = np.zeros(len(res[CHECKS[0]]), dtype=bool)
     counts, firsts = {}, {}
     for c in CHECKS[:-1]:
         m = res[c]
         any_flag |= m
         counts[c] = int(np.count_nonzero(m))
-        firsts[c] = np.flatnonzero(m)[:n_examples].copy() if counts[c] and n_examples else ()
+        firsts[c] = first_true(m, n_examples) if counts[c] and n_examples and c not in full else ()
     near_not_locked = int(np.count_nonzero(res["near_gimbal"] & ~res["gimbal_lock"]))
     return counts, firsts, np.packbits(any_flag), int(np.count_nonzero(any_flag)), near_not_locked
 
@@ -176,8 +188,13 @@ class AuditTally:
         if self.cons is not None:
             A = canonical_labels(plan.system, cols, eff, res)
             cons_in = (A, self.cons.measure(batch, A))
-        hashes = key_hashes(cols, batch, plan.key_cols, out=self.dups.slot(offset, batch.num_rows))
-        return eff, cols, res, batch_tally(res, self.options.n_examples), hashes, cons_in
+        slot = self.dups.slot(offset, batch.num_rows)
+        hashes = key_hashes(cols, batch, plan.key_cols, out=slot)
+        if slot is not None:
+            self.dups.file(hashes)
+        # checks whose examples are all in need none from this batch (examples only grow: a safe hint)
+        full = frozenset(c for c, ex in self.examples.items() if len(ex) >= self.options.n_examples)
+        return eff, cols, res, batch_tally(res, self.options.n_examples, full), hashes, cons_in
 
     def finish(self, item, lines, unread, future) -> None:
         """Add one batch's result (in input order)."""

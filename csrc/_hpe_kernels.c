@@ -1,0 +1,329 @@
+/* _hpe_kernels: hpe's optional compiled column kernels (integer arithmetic only).
+ *
+ * Each function is one loop over a column where numpy takes a dozen passes or more, or a data-dependent loop
+ * numpy cannot express (a hash over each string's bytes); each has a numpy twin in hpe_cli (named in its
+ * docstring) that gives the same bits, and tests/native/ compares the two. The only floating-point operations
+ * are the x + 0.0 that maps -0.0 to 0.0, fabs, differences and comparisons, all exact or IEEE-rounded the same
+ * way as numpy's (the build also passes -ffp-contract=off: no fused multiply-adds). The arguments are buffers (numpy
+ * arrays), checked for size; the GIL is released in the loops, so the threads that call them run in parallel.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+/* constants shared with hpe_cli/io/key_hash.py and hpe_cli/pipelines/audit/duplicates.py */
+#define P_FNV 0x100000001B3ULL
+#define LEN_MULT 0x9E3779B97F4A7C15ULL
+#define NULL_HASH 0xD6E8FEB86659FD93ULL
+#define ROW_MULT 0x9FB21C651E98DF25ULL
+#define NAN_BITS 0x7FF8000000000000ULL
+
+static inline uint64_t mix64(uint64_t h) {
+    h ^= h >> 30;
+    h *= 0xBF58476D1CE4E5B9ULL;
+    h ^= h >> 27;
+    h *= 0x94D049BB133111EBULL;
+    h ^= h >> 31;
+    return h;
+}
+
+static int need(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const char *name) {
+    if (b->len != items * itemsize) {
+        PyErr_Format(PyExc_ValueError, "%s: expected %zd bytes, got %zd", name, items * itemsize, b->len);
+        return 0;
+    }
+    return 1;
+}
+
+/* string_hashes(offsets int64[n+1], data uint8[], valid uint8[n] or None, out uint64[n], stems uint64[n] or None)
+ * twin: hpe_cli.io.key_hash.string_hashes (numpy) */
+static inline uint64_t span_hash(const uint8_t *d, int64_t s, int64_t e) {
+    uint64_t h = 0;
+    for (int64_t k = e - 1; k >= s; k--) h = h * P_FNV + d[k];
+    h ^= (uint64_t)(e - s) * LEN_MULT;
+    return mix64(h);
+}
+
+static PyObject *k_string_hashes(PyObject *self, PyObject *args) {
+    Py_buffer off, data, out, valid = {0}, stems = {0};
+    PyObject *valid_o, *stems_o;
+    if (!PyArg_ParseTuple(args, "y*y*Ow*O", &off, &data, &valid_o, &out, &stems_o)) return NULL;
+    PyObject *ret = NULL;
+    int have_valid = 0, have_stems = 0;
+    Py_ssize_t n = out.len / 8;
+    if (valid_o != Py_None) {
+        if (PyObject_GetBuffer(valid_o, &valid, PyBUF_SIMPLE) < 0) goto done;
+        have_valid = 1;
+    }
+    if (stems_o != Py_None) {
+        if (PyObject_GetBuffer(stems_o, &stems, PyBUF_WRITABLE) < 0) goto done;
+        have_stems = 1;
+    }
+    if (!need(&off, n + 1, 8, "offsets") || (have_valid && !need(&valid, n, 1, "valid")) ||
+        (have_stems && !need(&stems, n, 8, "stems")))
+        goto done;
+    const int64_t *o = (const int64_t *)off.buf;
+    const uint8_t *d = (const uint8_t *)data.buf;
+    for (Py_ssize_t i = 0; i <= n; i++) {
+        if (o[i] < 0 || o[i] > data.len || (i && o[i] < o[i - 1])) {
+            PyErr_SetString(PyExc_ValueError, "offsets: expected increasing offsets within the data");
+            goto done;
+        }
+    }
+    uint64_t *h = (uint64_t *)out.buf, *hs = have_stems ? (uint64_t *)stems.buf : NULL;
+    const uint8_t *v = have_valid ? (const uint8_t *)valid.buf : NULL;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int64_t s = o[i], e = o[i + 1];
+        if (v && !v[i]) {
+            h[i] = NULL_HASH;
+            if (hs) hs[i] = NULL_HASH;
+            continue;
+        }
+        h[i] = span_hash(d, s, e);
+        if (hs) {
+            int64_t s0 = s, e0 = e;
+            for (int64_t k = e - 1; k >= s; k--)
+                if (d[k] == '/' || d[k] == '\\') {
+                    s0 = k + 1;
+                    break;
+                }
+            for (int64_t k = e - 1; k >= s0; k--)
+                if (d[k] == '.') {
+                    e0 = k;
+                    break;
+                }
+            hs[i] = (s0 == s && e0 == e) ? h[i] : span_hash(d, s0, e0);
+        }
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&off);
+    PyBuffer_Release(&data);
+    PyBuffer_Release(&out);
+    if (have_valid) PyBuffer_Release(&valid);
+    if (have_stems) PyBuffer_Release(&stems);
+    return ret;
+}
+
+/* row_hash_add(h uint64[n] in place, words uint64[n] or float64[n], is_float)
+ * h = ((h ^ w) * ROW_MULT) ^ (that >> 32); float64 values enter as their bits with -0.0 as 0.0 and every NaN as
+ * one NaN.  twin: hpe_cli.pipelines.audit.duplicates.key_hashes (its loop over the columns) */
+static PyObject *k_row_hash_add(PyObject *self, PyObject *args) {
+    Py_buffer h, w;
+    int is_float;
+    if (!PyArg_ParseTuple(args, "w*y*p", &h, &w, &is_float)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = h.len / 8;
+    if (!need(&h, n, 8, "h") || !need(&w, n, 8, "words")) goto done;
+    uint64_t *hp = (uint64_t *)h.buf;
+    Py_BEGIN_ALLOW_THREADS
+    if (is_float) {
+        const double *x = (const double *)w.buf;
+        for (Py_ssize_t i = 0; i < n; i++) {
+            double y = x[i] + 0.0;
+            uint64_t b;
+            if (y != y)
+                b = NAN_BITS;
+            else
+                memcpy(&b, &y, 8);
+            uint64_t t = (hp[i] ^ b) * ROW_MULT;
+            hp[i] = t ^ (t >> 32);
+        }
+    } else {
+        const uint64_t *x = (const uint64_t *)w.buf;
+        for (Py_ssize_t i = 0; i < n; i++) {
+            uint64_t t = (hp[i] ^ x[i]) * ROW_MULT;
+            hp[i] = t ^ (t >> 32);
+        }
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&h);
+    PyBuffer_Release(&w);
+    return ret;
+}
+
+/* mix(h uint64[n] in place): SplitMix64's finaliser.  twin: hpe_cli.io.key_hash._mix */
+static PyObject *k_mix(PyObject *self, PyObject *args) {
+    Py_buffer h;
+    if (!PyArg_ParseTuple(args, "w*", &h)) return NULL;
+    Py_ssize_t n = h.len / 8;
+    if (!need(&h, n, 8, "h")) {
+        PyBuffer_Release(&h);
+        return NULL;
+    }
+    uint64_t *hp = (uint64_t *)h.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) hp[i] = mix64(hp[i]);
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&h);
+    Py_RETURN_NONE;
+}
+
+/* angle_screen(c0, c1, c2 float64[n], finite bool[n], mid, d_lock, d_near, margin, all_unsure,
+ *              lo (3 floats), hi (3 floats), gimbal_lock, near_gimbal, non_canonical, out_of_range, unsure bool[n])
+ * The audit's screened angle masks before the unsure rows' round trip; comparisons and fabs only (fabs, < and <=
+ * are exact in C as in numpy).  twin: hpe_cli.rotation.audit.angle_flags_screened
+ * Two rows at a time in GCC/Clang vector types (SSE2 on x86-64; comparisons give -1/0 lanes), the last one
+ * alone with the same formulas. */
+typedef double v2d __attribute__((vector_size(16)));
+typedef int64_t v2i __attribute__((vector_size(16)));
+
+typedef struct {
+    double l[3], h[3], e[3]; /* below: c < l, or c == e (e = -180 where lo <= -180, else -inf) */
+    double dl, dn, mg, lm, nm; /* lm, nm: 1 where the lock / near threshold has a margin, else 0 */
+    int every;
+} screen_t;
+
+static inline uint8_t screen_row(const screen_t *S, double v0, double v1, double v2, double m, uint8_t fi,
+                                 uint8_t *gl, uint8_t *ng, uint8_t *nc, uint8_t *un) {
+    double a = fabs(m), d = fabs(a - 90.0);
+    int locked = d < S->dl;
+    int inner = (fabs(v0) <= 180.0) & (fabs(v1) <= 180.0) & (fabs(v2) <= 180.0);
+    int below = (v0 < S->l[0]) | (v0 == S->e[0]) | (v1 < S->l[1]) | (v1 == S->e[1]) | (v2 < S->l[2]) | (v2 == S->e[2]);
+    int above = (v0 > S->h[0]) | (v1 > S->h[1]) | (v2 > S->h[2]);
+    int unsure = (!inner) | S->every | ((S->lm > 0.0) & (fabs(d - S->dl) <= S->mg)) |
+                 ((S->nm > 0.0) & (fabs(d - S->dn) <= S->mg));
+    *gl = (uint8_t)(locked & fi);
+    *ng = (uint8_t)((locked | (d < S->dn)) & fi);
+    *nc = (uint8_t)((!locked) & (a > 90.0) & fi);
+    *un = (uint8_t)(unsure & fi);
+    return (uint8_t)(((!inner) | below | above) & fi);
+}
+
+static inline v2d vabs(v2d x) {
+    v2i m = {INT64_MAX, INT64_MAX};
+    return (v2d)((v2i)x & m);
+}
+
+static inline v2d vset(double x) { return (v2d){x, x}; }
+
+static inline void screen_pair(const screen_t *S, const double *x0, const double *x1, const double *x2, const double *xm,
+                          const uint8_t *F, uint8_t *GL, uint8_t *NG, uint8_t *NC, uint8_t *OR, uint8_t *UN) {
+    v2d v0, v1, v2, m;
+    memcpy(&v0, x0, 16);
+    memcpy(&v1, x1, 16);
+    memcpy(&v2, x2, 16);
+    memcpy(&m, xm, 16);
+    v2d a = vabs(m), d = vabs(a - vset(90.0)), c180 = vset(180.0);
+    v2i locked = d < vset(S->dl);
+    v2i inner = (vabs(v0) <= c180) & (vabs(v1) <= c180) & (vabs(v2) <= c180);
+    v2i below = (v0 < vset(S->l[0])) | (v0 == vset(S->e[0])) | (v1 < vset(S->l[1])) | (v1 == vset(S->e[1])) |
+                (v2 < vset(S->l[2])) | (v2 == vset(S->e[2]));
+    v2i above = (v0 > vset(S->h[0])) | (v1 > vset(S->h[1])) | (v2 > vset(S->h[2]));
+    v2i all = {-S->every, -S->every};
+    v2i unsure = ~inner | all | ((vset(S->lm) > vset(0.0)) & (vabs(d - vset(S->dl)) <= vset(S->mg))) |
+                 ((vset(S->nm) > vset(0.0)) & (vabs(d - vset(S->dn)) <= vset(S->mg)));
+    v2i near = locked | (d < vset(S->dn));
+    v2i canon = ~locked & (a > vset(90.0));
+    v2i out = ~inner | below | above;
+    for (int k = 0; k < 2; k++) {
+        uint8_t fi = F[k] != 0;
+        GL[k] = (uint8_t)(locked[k] & 1) & fi;
+        NG[k] = (uint8_t)(near[k] & 1) & fi;
+        NC[k] = (uint8_t)(canon[k] & 1) & fi;
+        OR[k] = (uint8_t)(out[k] & 1) & fi;
+        UN[k] = (uint8_t)(unsure[k] & 1) & fi;
+    }
+}
+
+static PyObject *k_angle_screen(PyObject *self, PyObject *args) {
+    Py_buffer c[3], fin, o[5];
+    int mid, all_unsure;
+    double d_lock, d_near, margin, lo[3], hi[3];
+    if (!PyArg_ParseTuple(args, "y*y*y*y*idddp(ddd)(ddd)w*w*w*w*w*", &c[0], &c[1], &c[2], &fin, &mid, &d_lock,
+                          &d_near, &margin, &all_unsure, &lo[0], &lo[1], &lo[2], &hi[0], &hi[1], &hi[2], &o[0], &o[1],
+                          &o[2], &o[3], &o[4]))
+        return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = fin.len;
+    int ok = 1;
+    for (int k = 0; k < 3 && ok; k++) ok = need(&c[k], n, 8, "angles");
+    for (int k = 0; k < 5 && ok; k++) ok = need(&o[k], n, 1, "masks");
+    if (ok && (mid < 0 || mid > 2)) {
+        PyErr_SetString(PyExc_ValueError, "mid: expected 0, 1 or 2");
+        ok = 0;
+    }
+    if (!ok) goto done;
+    screen_t S;
+    for (int k = 0; k < 3; k++) {
+        S.l[k] = lo[k] > -180.0 ? lo[k] : -180.0; /* (c <= -180) | (c < lo) is c < lo above -180, else c <= -180 */
+        S.e[k] = lo[k] > -180.0 ? -INFINITY : -180.0;
+        S.h[k] = hi[k];
+    }
+    S.dl = d_lock, S.dn = d_near, S.mg = margin, S.lm = d_lock >= 0.0, S.nm = d_near >= 0.0, S.every = all_unsure != 0;
+    const double *x[3] = {(const double *)c[0].buf, (const double *)c[1].buf, (const double *)c[2].buf};
+    const uint8_t *F = (const uint8_t *)fin.buf;
+    uint8_t *GL = (uint8_t *)o[0].buf, *NG = (uint8_t *)o[1].buf, *NC = (uint8_t *)o[2].buf;
+    uint8_t *OR = (uint8_t *)o[3].buf, *UN = (uint8_t *)o[4].buf;
+    Py_BEGIN_ALLOW_THREADS
+    Py_ssize_t i = 0;
+    for (; i + 2 <= n; i += 2)
+        screen_pair(&S, x[0] + i, x[1] + i, x[2] + i, x[mid] + i, F + i, GL + i, NG + i, NC + i, OR + i, UN + i);
+    for (; i < n; i++)
+        OR[i] = screen_row(&S, x[0][i], x[1][i], x[2][i], x[mid][i], F[i] != 0, GL + i, NG + i, NC + i, UN + i);
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    for (int k = 0; k < 3; k++) PyBuffer_Release(&c[k]);
+    PyBuffer_Release(&fin);
+    for (int k = 0; k < 5; k++) PyBuffer_Release(&o[k]);
+    return ret;
+}
+
+/* split_top_bit(h uint64[n], low uint64[n], high uint64[n]) -> number of values below 2**63: the values below
+ * 2**63 to the front of low, the others to the front of high, each in order (branch-free: both slots written,
+ * one cursor moved; at step i the cursors sum to i, so neither passes n).
+ * twin: (h[h < 2**63], h[h >= 2**63]) */
+static PyObject *k_split_top_bit(PyObject *self, PyObject *args) {
+    Py_buffer h, lo, hi;
+    if (!PyArg_ParseTuple(args, "y*w*w*", &h, &lo, &hi)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = h.len / 8, j = 0, k = 0;
+    if (!need(&h, n, 8, "h") || !need(&lo, n, 8, "low") || !need(&hi, n, 8, "high")) goto done;
+    const uint64_t *x = (const uint64_t *)h.buf;
+    uint64_t *L = (uint64_t *)lo.buf, *H = (uint64_t *)hi.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        uint64_t v = x[i], top = v >> 63;
+        L[j] = v;
+        H[k] = v;
+        j += (Py_ssize_t)(1 - top);
+        k += (Py_ssize_t)top;
+    }
+    Py_END_ALLOW_THREADS
+    ret = PyLong_FromSsize_t(j);
+done:
+    PyBuffer_Release(&h);
+    PyBuffer_Release(&lo);
+    PyBuffer_Release(&hi);
+    return ret;
+}
+
+static PyMethodDef methods[] = {
+    {"split_top_bit", k_split_top_bit, METH_VARARGS,
+     "split_top_bit(h, low, high) -> n_low: the hashes by value half, in order (twin: a boolean index)."},
+    {"string_hashes", k_string_hashes, METH_VARARGS,
+     "string_hashes(offsets, data, valid, out, stems): 64-bit hashes of Arrow strings (twin: "
+     "hpe_cli.io.key_hash.string_hashes)."},
+    {"row_hash_add", k_row_hash_add, METH_VARARGS,
+     "row_hash_add(h, words, is_float): one column into the audit's row hashes (twin: "
+     "hpe_cli.pipelines.audit.duplicates.key_hashes)."},
+    {"mix", k_mix, METH_VARARGS, "mix(h): SplitMix64's finaliser in place (twin: hpe_cli.io.key_hash._mix)."},
+    {"angle_screen", k_angle_screen, METH_VARARGS,
+     "angle_screen(...): the audit's screened angle masks (twin: hpe_cli.rotation.audit.angle_flags_screened)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_hpe_kernels",
+                                    "hpe's optional compiled column kernels (csrc/_hpe_kernels.c).", -1, methods};
+
+PyMODINIT_FUNC PyInit__hpe_kernels(void) { return PyModule_Create(&module); }

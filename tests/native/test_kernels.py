@@ -1,0 +1,164 @@
+"""The compiled column kernels (``_hpe_kernels``) give the bits of their numpy twins, and both those of a plain
+Python reference written from the definitions (not from either implementation).
+
+Each test runs the code path twice, with the kernels and with ``HPE_KERNELS=numpy``; where the module is not
+built, the kernel half is skipped and the numpy twin is still checked against the reference.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hpe_cli.native import kernels
+
+MASK = (1 << 64) - 1
+built = kernels() is not None
+needs_kernels = pytest.mark.skipif(not built, reason="_hpe_kernels not built (no C compiler at install)")
+
+
+def both(monkeypatch, fn):
+    """``fn()`` with the numpy twins, and with the kernels where built: ``[numpy result, kernel result?]``."""
+    monkeypatch.setenv("HPE_KERNELS", "numpy")
+    out = [fn()]
+    monkeypatch.delenv("HPE_KERNELS")
+    if built:
+        out.append(fn())
+    return out
+
+
+def mix_ref(h: int) -> int:
+    h ^= h >> 30
+    h = (h * 0xBF58476D1CE4E5B9) & MASK
+    h ^= h >> 27
+    h = (h * 0x94D049BB133111EB) & MASK
+    return h ^ (h >> 31)
+
+
+def string_hash_ref(b: bytes) -> int:
+    """``sum b[i] P**i`` mod 2**64, the length times 0x9E3779B97F4A7C15 xor-ed in, SplitMix64's finaliser."""
+    h = sum(c * pow(0x100000001B3, i, 1 << 64) for i, c in enumerate(b)) & MASK
+    return mix_ref(h ^ ((len(b) * 0x9E3779B97F4A7C15) & MASK))
+
+
+def stem_ref(b: bytes) -> bytes:
+    """The text after the last / or \\ and before the last . after it."""
+    cut = max(b.rfind(b"/"), b.rfind(b"\\"))
+    b = b[cut + 1 :]
+    dot = b.rfind(b".")
+    return b[:dot] if dot >= 0 else b
+
+
+texts = st.lists(
+    st.one_of(st.none(), st.binary(max_size=12), st.sampled_from([b"", b".", b"/", b"a/b.c", b"\\x.y.z", b"d/.e"])),
+    max_size=40,
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(values=texts, large=st.booleans(), start=st.integers(0, 3))
+def test_string_hashes_equal_the_reference_both_ways(values, large, start):
+    from hpe_cli.io.key_hash import string_hashes
+
+    arr = pa.array(values, type=pa.large_binary() if large else pa.binary()).slice(min(start, len(values)))
+    kept = values[min(start, len(values)) :]
+    want_x = [0xD6E8FEB86659FD93 if v is None else string_hash_ref(v) for v in kept]
+    want_s = [0xD6E8FEB86659FD93 if v is None else string_hash_ref(stem_ref(v)) for v in kept]
+    mp = pytest.MonkeyPatch()
+    try:
+        for hx, hs in both(mp, lambda: string_hashes(arr)):
+            assert hx.tolist() == want_x and hs.tolist() == want_s
+        for hx, hs in both(mp, lambda: string_hashes(arr, stems=False)):
+            assert hx.tolist() == want_x and hs is None
+    finally:
+        mp.undo()
+
+
+def float_word_ref(x: float) -> int:
+    if x != x:
+        return 0x7FF8000000000000
+    return struct.unpack("<Q", struct.pack("<d", x + 0.0))[0]
+
+
+def row_hash_ref(words) -> int:
+    h = 0x9E3779B97F4A7C15
+    for w in words:
+        h = ((h ^ w) * 0x9FB21C651E98DF25) & MASK
+        h ^= h >> 32
+    return mix_ref(h)
+
+
+nan_payloads = [struct.unpack("<d", struct.pack("<Q", b))[0] for b in (0x7FF8000000000001, 0xFFF8000000000000)]
+floats = st.one_of(st.floats(allow_nan=True), st.sampled_from([0.0, -0.0, *nan_payloads, 90.0, -180.0]))
+
+
+@settings(max_examples=100, deadline=None)
+@given(rows=st.lists(st.tuples(floats, floats, floats, st.integers(-(2**53), 2**53), st.text(max_size=6)), max_size=30))
+def test_row_hashes_equal_the_reference_both_ways(rows):
+    from hpe_cli.pipelines.audit.duplicates import key_hashes
+
+    cols = [np.array([r[k] for r in rows], dtype=np.float64) for k in range(3)]
+    batch = pa.RecordBatch.from_arrays(
+        [pa.array([r[3] for r in rows], type=pa.int64()), pa.array([r[4] for r in rows], type=pa.string())],
+        names=["id", "image"],
+    )
+    want = [
+        row_hash_ref(
+            [float_word_ref(r[0]), float_word_ref(r[1]), float_word_ref(r[2]), float_word_ref(float(r[3]))]
+            + [string_hash_ref(r[4].encode())]
+        )
+        for r in rows
+    ]
+    mp = pytest.MonkeyPatch()
+    try:
+        for h in both(mp, lambda: key_hashes(cols, batch, ("id", "image"))):
+            assert h.tolist() == want
+    finally:
+        mp.undo()
+
+
+@needs_kernels
+@settings(max_examples=100, deadline=None)
+@given(values=st.lists(st.integers(0, MASK), max_size=200))
+def test_split_top_bit_is_the_boolean_split(values):
+    h = np.array(values, dtype=np.uint64)
+    low, high = np.empty(len(h), dtype=np.uint64), np.empty(len(h), dtype=np.uint64)
+    n_low = kernels().split_top_bit(h, low, high)
+    assert low[:n_low].tolist() == [v for v in values if v < 2**63]
+    assert high[: len(h) - n_low].tolist() == [v for v in values if v >= 2**63]
+
+
+@needs_kernels
+def test_kernels_refuse_wrong_sizes_with_a_message():
+    k = kernels()
+    with pytest.raises(ValueError, match="expected 16 bytes, got 8"):
+        k.row_hash_add(np.zeros(2, np.uint64), np.zeros(1, np.float64), True)
+    with pytest.raises(ValueError, match="offsets"):
+        k.string_hashes(np.array([0, 5], np.int64), np.zeros(3, np.uint8), None, np.zeros(1, np.uint64), None)
+
+
+def test_hpe_kernels_numpy_turns_them_off(monkeypatch):
+    monkeypatch.setenv("HPE_KERNELS", "numpy")
+    assert kernels() is None
+    monkeypatch.delenv("HPE_KERNELS")
+    assert (kernels() is not None) == built
+
+
+def test_the_module_is_built_where_it_can_be():
+    """CI installs with a C compiler: a silently skipped build would leave every test here on the numpy twins."""
+    import importlib
+    import shutil
+    import sysconfig
+    from pathlib import Path
+
+    if (
+        not (shutil.which("cc") or shutil.which("gcc"))
+        or not (Path(sysconfig.get_paths()["include"]) / "Python.h").exists()
+    ):
+        pytest.skip("no C compiler or no Python headers: the optional build skips _hpe_kernels")
+    importlib.import_module("_hpe_kernels")  # run `pip install .` or `python setup.py build_ext --inplace`
