@@ -1,12 +1,14 @@
-/* _hpe_kernels: hpe's optional compiled column kernels (integer arithmetic only).
+/* _hpe_kernels: hpe's optional compiled column kernels.
  *
  * Each function is one loop over a column where numpy takes a dozen passes or more, or a data-dependent loop
  * numpy cannot express (a hash over each string's bytes); each has a numpy twin in hpe_cli (named in its
- * docstring) that gives the same bits, and tests/native/ compares the two. The only floating-point operations
- * are the x + 0.0 that maps -0.0 to 0.0, fabs, differences and comparisons, all exact or IEEE-rounded the same
- * way as numpy's (the build also passes -ffp-contract=off: no fused multiply-adds). The arguments are buffers (numpy
+ * docstring) that gives the same bits, and tests/native/ compares the two. The floating-point operations are the
+ * x + 0.0 that maps -0.0 to 0.0, fabs, differences and comparisons, all exact or IEEE-rounded the same way as
+ * numpy's (the build also passes -ffp-contract=off: no fused multiply-adds), and the C library's sine and cosine,
+ * which hpe uses only where they give numpy's bits (hpe_cli.native.sin_cos checks a probe first). The arguments are buffers (numpy
  * arrays), checked for size; the GIL is released in the loops, so the threads that call them run in parallel.
  */
+#define _GNU_SOURCE /* sincos */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
@@ -279,6 +281,37 @@ done:
     return ret;
 }
 
+/* sin_cos(x float64[n], s float64[n], c float64[n]): s = sin(x), c = cos(x) by the C library's one call for both
+ * (glibc's sincos: the same reduction and polynomials as its sin and cos, so the same bits; elsewhere sin and cos).
+ * Transcendental: hpe_cli.native.sin_cos uses it only where it gives numpy's bits on a probe of values.
+ * twin: np.sin(x), np.cos(x) */
+static PyObject *k_sin_cos(PyObject *self, PyObject *args) {
+    Py_buffer x, s, c;
+    if (!PyArg_ParseTuple(args, "y*w*w*", &x, &s, &c)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = x.len / 8;
+    if (!need(&x, n, 8, "x") || !need(&s, n, 8, "sin") || !need(&c, n, 8, "cos")) goto done;
+    const double *X = (const double *)x.buf;
+    double *S = (double *)s.buf, *C = (double *)c.buf;
+    Py_BEGIN_ALLOW_THREADS
+#if defined(__GLIBC__)
+    for (Py_ssize_t i = 0; i < n; i++) sincos(X[i], S + i, C + i);
+#else
+    for (Py_ssize_t i = 0; i < n; i++) {
+        S[i] = sin(X[i]);
+        C[i] = cos(X[i]);
+    }
+#endif
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&x);
+    PyBuffer_Release(&s);
+    PyBuffer_Release(&c);
+    return ret;
+}
+
 /* split_top_bit(h uint64[n], low uint64[n], high uint64[n]) -> number of values below 2**63: the values below
  * 2**63 to the front of low, the others to the front of high, each in order (branch-free: both slots written,
  * one cursor moved; at step i the cursors sum to i, so neither passes n).
@@ -320,6 +353,7 @@ static PyMethodDef methods[] = {
     {"mix", k_mix, METH_VARARGS, "mix(h): SplitMix64's finaliser in place (twin: hpe_cli.io.key_hash._mix)."},
     {"angle_screen", k_angle_screen, METH_VARARGS,
      "angle_screen(...): the audit's screened angle masks (twin: hpe_cli.rotation.audit.angle_flags_screened)."},
+    {"sin_cos", k_sin_cos, METH_VARARGS, "sin_cos(x, s, c): sine and cosine in one call (twin: np.sin, np.cos)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..native import sin_cos
+
 #: SciPy's gimbal-lock threshold on the middle angle (radians), ``_get_angles``
 _EPS = 1e-7
 _AXIS = {"x": 0, "y": 1, "z": 2}
@@ -150,8 +152,9 @@ def quat_from_euler(seq: str, angles, degrees: bool = False) -> tuple:
     q = None
     for k, ax in enumerate(seq.lower()):
         h = a[..., k] / 2.0
-        e = [zero, zero, zero, np.cos(h)]
-        e[_AXIS[ax]] = np.sin(h)
+        sin_h, cos_h = sin_cos(h)  # np.sin, np.cos (hpe_cli.native: one C call where it gives their bits)
+        e = [zero, zero, zero, cos_h]
+        e[_AXIS[ax]] = sin_h
         q = tuple(e) if q is None else (compose(q, e) if intrinsic else compose(e, q))
     return q
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..native import sin_cos
+
 #: rows per block of the column kernels (:func:`hpe_cli.rotation.convert.soa_labels`, the rotation screen): their
 #: few dozen temporaries (128 KB each) stay in the core's cache and in malloc's reused chunks, where
 #: whole-batch ones (512 KB at 65,536 rows) are mapped and unmapped each time (page faults and TLB shootdowns
@@ -60,7 +62,7 @@ def constant(B):
 
 def elemental(axis: int, angle):
     """Right-handed rotation about ``axis`` by ``angle`` (radians, 1-D array)."""
-    c, s = np.cos(angle), np.sin(angle)
+    s, c = sin_cos(angle)  # np.sin, np.cos: one C library call for both where that gives their bits
     M = [[0.0] * 3 for _ in range(3)]
     j, k = (axis + 1) % 3, (axis + 2) % 3
     M[axis][axis] = 1.0

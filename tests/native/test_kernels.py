@@ -162,3 +162,41 @@ def test_the_module_is_built_where_it_can_be():
     ):
         pytest.skip("no C compiler or no Python headers: the optional build skips _hpe_kernels")
     importlib.import_module("_hpe_kernels")  # run `pip install .` or `python setup.py build_ext --inplace`
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    values=st.lists(
+        st.one_of(st.floats(allow_nan=False, allow_infinity=False), st.floats(-10.0, 10.0), st.integers(-720, 720)),
+        min_size=64,
+        max_size=300,
+    )
+)
+def test_sin_cos_gives_numpys_bits(values):
+    from hpe_cli.native import sin_cos
+
+    x = np.deg2rad(np.array(values, dtype=np.float64))
+    s, c = sin_cos(x)
+    assert np.array_equal(s.view(np.int64), np.sin(x).view(np.int64))
+    assert np.array_equal(c.view(np.int64), np.cos(x).view(np.int64))
+    s2, c2 = sin_cos(x.reshape(-1, 1)[::-1])  # any shape and stride
+    assert np.array_equal(s2.ravel()[::-1], s) and np.array_equal(c2.ravel()[::-1], c)
+
+
+def test_sin_cos_kernel_used_only_where_the_probe_agrees(monkeypatch):
+    import hpe_cli.native as native
+
+    if built:  # the kernel is used exactly where it gives numpy's bits on the probe (here: glibc's sincos does)
+        x = native._probe_angles()
+        s, c = np.empty_like(x), np.empty_like(x)
+        kernels().sin_cos(x, s, c)
+        with np.errstate(invalid="ignore"):
+            agree = np.array_equal(s.view(np.int64), np.sin(x).view(np.int64)) and np.array_equal(
+                c.view(np.int64), np.cos(x).view(np.int64)
+            )
+        assert (native._sin_cos_kernel() is not None) == agree
+    monkeypatch.setitem(native._STATE, "sin_cos", False)  # as on a machine where numpy's SIMD sine differs
+    assert native._sin_cos_kernel() is None
+    x = np.linspace(-7, 7, 200)
+    s, c = native.sin_cos(x)
+    assert np.array_equal(s, np.sin(x)) and np.array_equal(c, np.cos(x))
