@@ -21,6 +21,8 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import hpe_cli
 from conftest import hpe
@@ -191,3 +193,12 @@ def test_malloc_thresholds_are_left_alone_outside_a_command(monkeypatch):
     monkeypatch.setattr(heap, "raise_malloc_thresholds", lambda *a: calls.append(a) or True)
     assert heap.keep_freed_memory() is False  # library use: no command's transaction is open
     assert calls == []
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.booleans(), max_size=20_000), st.integers(0, 12))
+def test_first_true_is_the_head_of_flatnonzero(bits, k):
+    from hpe_cli.pipelines.audit.job import first_true
+
+    m = np.array(bits, dtype=bool)
+    assert first_true(m, k).tolist() == np.flatnonzero(m)[:k].tolist()
