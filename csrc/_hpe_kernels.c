@@ -312,6 +312,108 @@ done:
     return ret;
 }
 
+/* core_errors(P (9 float64[n] columns, row-major), G (9 columns), geo float64[n], maev float64[n*3], fro float64[n])
+ * The geodesic angle of P G^T (atan2 of half its skew norm and half of trace - 1), the angle between each column of
+ * P and of G (atan2 of the cross product's norm and the dot product) and ||P - G||_F, in degrees, in the order of
+ * the numpy twins' operations (left to right; no fused multiply-adds). Uses the C library's atan2: hpe_cli.native
+ * calls it only where atan2 gives numpy's bits on a probe.
+ * twins: hpe_cli.metrics.rotation_errors.geodesic_deg, maev_deg, frobenius */
+static int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name) {
+    PyObject *fast = PySequence_Fast(seq, "expected a sequence of 9 columns");
+    if (!fast) return 0;
+    if (PySequence_Fast_GET_SIZE(fast) != 9) {
+        PyErr_Format(PyExc_ValueError, "%s: expected 9 columns, got %zd", name, PySequence_Fast_GET_SIZE(fast));
+        Py_DECREF(fast);
+        return 0;
+    }
+    int k = 0;
+    for (; k < 9; k++) {
+        if (PyObject_GetBuffer(PySequence_Fast_GET_ITEM(fast, k), &b[k], PyBUF_C_CONTIGUOUS) < 0) break;
+        if (!need(&b[k], n, 8, name)) {
+            k++;
+            break;
+        }
+    }
+    Py_DECREF(fast);
+    if (k == 9 && !PyErr_Occurred()) return 1;
+    for (int j = 0; j < k; j++) PyBuffer_Release(&b[j]);
+    return 0;
+}
+
+static PyObject *k_core_errors(PyObject *self, PyObject *args) {
+    PyObject *Po, *Go;
+    Py_buffer geo, maev, fro, P[9], G[9];
+    if (!PyArg_ParseTuple(args, "OOw*w*w*", &Po, &Go, &geo, &maev, &fro)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = geo.len / 8;
+    int have_p = 0, have_g = 0;
+    if (!need(&geo, n, 8, "geo") || !need(&maev, 3 * n, 8, "maev") || !need(&fro, n, 8, "fro")) goto done;
+    if (!(have_p = nine(Po, P, n, "P")) || !(have_g = nine(Go, G, n, "G"))) goto done;
+    const double *p[9], *g[9];
+    for (int k = 0; k < 9; k++) p[k] = (const double *)P[k].buf, g[k] = (const double *)G[k].buf;
+    double *GEO = (double *)geo.buf, *MA = (double *)maev.buf, *FR = (double *)fro.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double a[9], b[9];
+        for (int k = 0; k < 9; k++) a[k] = p[k][i], b[k] = g[k][i];
+#define M(k, l) (a[3 * (k)] * b[3 * (l)] + a[3 * (k) + 1] * b[3 * (l) + 1] + a[3 * (k) + 2] * b[3 * (l) + 2])
+        double tr = M(0, 0) + M(1, 1) + M(2, 2);
+        double sx = M(2, 1) - M(1, 2), sy = M(0, 2) - M(2, 0), sz = M(1, 0) - M(0, 1);
+#undef M
+        double two_sin = sqrt(sx * sx + sy * sy + sz * sz);
+        GEO[i] = atan2(0.5 * two_sin, 0.5 * (tr - 1.0)) * DEG;
+        for (int j = 0; j < 3; j++) { /* column j of P and of G */
+            double p0 = a[j], p1 = a[3 + j], p2 = a[6 + j], g0 = b[j], g1 = b[3 + j], g2 = b[6 + j];
+            double dot = p0 * g0;
+            dot += p1 * g1;
+            dot += p2 * g2;
+            double cx = p1 * g2 - p2 * g1, cy = p2 * g0 - p0 * g2, cz = p0 * g1 - p1 * g0;
+            double norm = cx * cx;
+            norm += cy * cy;
+            norm += cz * cz;
+            MA[3 * i + j] = atan2(sqrt(norm), dot) * DEG;
+        }
+        double acc = 0.0;
+        for (int k = 0; k < 9; k++) {
+            double d = a[k] - b[k];
+            acc = k ? acc + d * d : 0.0 + d * d;
+        }
+        FR[i] = sqrt(acc);
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_p)
+        for (int k = 0; k < 9; k++) PyBuffer_Release(&P[k]);
+    if (have_g)
+        for (int k = 0; k < 9; k++) PyBuffer_Release(&G[k]);
+    PyBuffer_Release(&geo);
+    PyBuffer_Release(&maev);
+    PyBuffer_Release(&fro);
+    return ret;
+}
+
+/* atan2(y float64[n], x float64[n], out float64[n]): the C library's, for hpe_cli.native's probe */
+static PyObject *k_atan2(PyObject *self, PyObject *args) {
+    Py_buffer y, x, o;
+    if (!PyArg_ParseTuple(args, "y*y*w*", &y, &x, &o)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = o.len / 8;
+    if (!need(&y, n, 8, "y") || !need(&x, n, 8, "x") || !need(&o, n, 8, "out")) goto done;
+    const double *Y = (const double *)y.buf, *X = (const double *)x.buf;
+    double *O = (double *)o.buf;
+    for (Py_ssize_t i = 0; i < n; i++) O[i] = atan2(Y[i], X[i]);
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&y);
+    PyBuffer_Release(&x);
+    PyBuffer_Release(&o);
+    return ret;
+}
+
 /* split_top_bit(h uint64[n], low uint64[n], high uint64[n]) -> number of values below 2**63: the values below
  * 2**63 to the front of low, the others to the front of high, each in order (branch-free: both slots written,
  * one cursor moved; at step i the cursors sum to i, so neither passes n).
@@ -354,6 +456,10 @@ static PyMethodDef methods[] = {
     {"angle_screen", k_angle_screen, METH_VARARGS,
      "angle_screen(...): the audit's screened angle masks (twin: hpe_cli.rotation.audit.angle_flags_screened)."},
     {"sin_cos", k_sin_cos, METH_VARARGS, "sin_cos(x, s, c): sine and cosine in one call (twin: np.sin, np.cos)."},
+    {"core_errors", k_core_errors, METH_VARARGS,
+     "core_errors(P, G, geo, maev, fro): geodesic, column angles and Frobenius distance (twins: "
+     "hpe_cli.metrics.rotation_errors)."},
+    {"atan2", k_atan2, METH_VARARGS, "atan2(y, x, out): the C library's atan2 (for the probe)."},
     {NULL, NULL, 0, NULL},
 };
 

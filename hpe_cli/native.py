@@ -4,8 +4,10 @@ Each kernel is one C loop over a column where numpy takes a dozen passes or more
 ``hpe evaluate``'s join and duplicate-key check (:func:`hpe_cli.io.key_hash.string_hashes`), the row hashes of
 ``hpe audit``'s duplicate check and their split by value half (:func:`hpe_cli.pipelines.audit.duplicates.key_hashes`,
 :meth:`~hpe_cli.pipelines.audit.duplicates.Duplicates.file`), the audit's angle screen, and the sine and cosine
-of the matrices built from angles (:func:`sin_cos`). All but the last compute integers and comparisons only, so
-each gives the bits of its numpy twin; :func:`sin_cos` is used only where it gives numpy's bits on a probe. The
+of the matrices built from angles (:func:`sin_cos`), and the geodesic, column-angle and Frobenius errors of
+``hpe evaluate``'s core metrics (:func:`core_errors`). The hashes and the screen compute integers and comparisons
+only, so each gives the bits of its numpy twin; the others use the C library's sine, cosine and ``atan2`` (besides
+IEEE arithmetic in numpy's order), each only where it gives numpy's bits on a probe of values. The
 numpy twins run where the module was not built (no C compiler at install time) or when ``HPE_KERNELS=numpy`` is
 set; ``tests/native/`` compares the two.
 """
@@ -13,6 +15,8 @@ set; ``tests/native/`` compares the two.
 from __future__ import annotations
 
 import os
+
+import numpy as np
 
 _STATE: dict = {}
 
@@ -39,8 +43,6 @@ def _probe_angles():
     """Angles whose sine and cosine the kernel must give with numpy's bits before it is used: whole and half
     degrees (what labels hold), multiples of pi/4, random radians near and far from 0, tiny, huge and special
     values."""
-    import numpy as np
-
     rng = np.random.default_rng(20261128)
     return np.concatenate(
         [
@@ -60,8 +62,6 @@ def _sin_cos_kernel():
     if k is None:
         return None
     if "sin_cos" not in _STATE:
-        import numpy as np
-
         x = _probe_angles()
         s, c = np.empty_like(x), np.empty_like(x)
         k.sin_cos(x, s, c)
@@ -77,8 +77,6 @@ def sin_cos(x):
     """``(np.sin(x), np.cos(x))`` of a float64 array, in one C library call per value where the kernel is built and
     gives numpy's bits on this machine (:func:`_sin_cos_kernel`), else numpy's two calls: the same arrays either
     way, new ones (about 0.7x the time of numpy's two calls)."""
-    import numpy as np
-
     x = np.asarray(x, dtype=np.float64)
     k = _sin_cos_kernel() if x.ndim >= 1 and x.size >= _SIN_COS_MIN else None
     if k is None:
@@ -87,3 +85,51 @@ def sin_cos(x):
     s, c = np.empty(x.shape), np.empty(x.shape)
     k.sin_cos(x.reshape(-1), s.reshape(-1), c.reshape(-1))
     return s, c
+
+
+def _atan2_probe():
+    """``(y, x)`` pairs whose ``atan2`` the kernels must give with numpy's bits before they use it: every sign and
+    quadrant, the axes, zeros of both signs, tiny, huge and special values, and the (sin, cos) pairs of whole and
+    half degrees."""
+    rng = np.random.default_rng(20261129)
+    a = np.deg2rad(np.arange(-720.0, 720.5, 0.5))
+    special = np.array([0.0, -0.0, 1.0, -1.0, 5e-324, -5e-324, 1e-300, 1e300, -1e300, np.inf, -np.inf, np.nan])
+    sy, sx = (g.ravel() for g in np.meshgrid(special, special))
+    return (
+        np.concatenate([np.sin(a), rng.standard_normal(4096) * 10.0 ** rng.uniform(-20, 20, 4096), sy]),
+        np.concatenate([np.cos(a), rng.standard_normal(4096) * 10.0 ** rng.uniform(-20, 20, 4096), sx]),
+    )
+
+
+def _atan2_kernels():
+    """The kernels, if the C library's ``atan2`` gives numpy's bits on :func:`_atan2_probe` (checked once a
+    process), else None."""
+    k = kernels()
+    if k is None:
+        return None
+    if "atan2" not in _STATE:
+        y, x = _atan2_probe()
+        out = np.empty_like(y)
+        k.atan2(y, x, out)
+        with np.errstate(invalid="ignore"):
+            _STATE["atan2"] = np.array_equal(out.view(np.int64), np.arctan2(y, x).view(np.int64))
+    return k if _STATE["atan2"] else None
+
+
+def core_errors(P, G):
+    """``(geodesic (N,), column angles (N, 3), Frobenius distance (N,))`` of nested 3x3 lists of columns (arrays or
+    floats) in one C loop, or None where the kernels are not built or the C library's ``atan2`` does not give
+    numpy's bits (then :mod:`hpe_cli.metrics.rotation_errors` computes them: the same numbers)."""
+    k = _atan2_kernels()
+    if k is None:
+        return None
+    n = int(np.broadcast(*[x for row in P for x in row], *[x for row in G for x in row]).shape[0])
+    if n < _SIN_COS_MIN:
+        return None
+
+    def cols(X):
+        return [np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (n,))) for row in X for v in row]
+
+    geo, maev, fro = np.empty(n), np.empty((n, 3)), np.empty(n)
+    k.core_errors(cols(P), cols(G), geo, maev, fro)
+    return geo, maev, fro

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..native import core_errors
 from ..rotation import solutions
 from ..rotation.systems import get_system
 from . import peer_angles as pa_
@@ -134,11 +135,25 @@ class PosePair:
         self._cache[key] = out
         return out
 
+    def core_errors(self) -> None:
+        """The geodesic, column-angle and Frobenius errors at once where the compiled kernel gives their bits
+        (:func:`hpe_cli.native.core_errors`; else each is computed when first asked for)."""
+        if "geodesic" not in self._cache:
+            got = core_errors(self.P, self.G)
+            if got is not None:
+                self._cache["geodesic"], self._cache["maev"], self._cache["frobenius"] = got
+
     def geodesic(self) -> np.ndarray:
         """:func:`hpe_cli.metrics.rotation_errors.geodesic_deg` of ``P`` and ``G`` (computed once)."""
         if "geodesic" not in self._cache:
             self._cache["geodesic"] = re_.geodesic_deg(self.P, self.G)
         return self._cache["geodesic"]
+
+    def maev(self) -> np.ndarray:
+        """:func:`hpe_cli.metrics.rotation_errors.maev_deg` of ``P`` and ``G`` (computed once)."""
+        if "maev" not in self._cache:
+            self._cache["maev"] = re_.maev_deg(self.P, self.G)
+        return self._cache["maev"]
 
     def frobenius(self) -> np.ndarray:
         """:func:`hpe_cli.metrics.rotation_errors.frobenius` of ``P`` and ``G`` (computed once)."""

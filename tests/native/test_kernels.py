@@ -200,3 +200,41 @@ def test_sin_cos_kernel_used_only_where_the_probe_agrees(monkeypatch):
     x = np.linspace(-7, 7, 200)
     s, c = native.sin_cos(x)
     assert np.array_equal(s, np.sin(x)) and np.array_equal(c, np.cos(x))
+
+
+def _rotations(rng, n):
+    """Random rotations, and the hard rows: identical pairs, 180 degrees apart, a hair apart, gimbal lock."""
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.random(n, random_state=rng).as_matrix()
+    G = Rotation.random(n, random_state=rng).as_matrix()
+    G[: n // 8] = R[: n // 8]  # 0 degrees
+    G[n // 8 : n // 4] = R[n // 8 : n // 4] @ np.diag([1.0, -1.0, -1.0])  # 180 degrees
+    tiny = Rotation.from_rotvec(rng.standard_normal((n // 8, 3)) * 1e-9).as_matrix()
+    G[n // 4 : 3 * n // 8] = R[n // 4 : 3 * n // 8] @ tiny
+    R[3 * n // 8 : n // 2] = Rotation.from_euler("xyz", [[10.0, 90.0, 30.0]] * (n // 8), degrees=True).as_matrix()
+    return R, G
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_core_errors_give_the_numpy_functions_bits(seed):
+    from hpe_cli.metrics import rotation_errors as re_
+    from hpe_cli.native import core_errors
+
+    R, G = _rotations(np.random.default_rng(seed), 4096)
+    P, Q = re_.as_nested(R), re_.as_nested(G)
+    P[0][1] = 0.0  # a constant entry (a float), as products of elemental rotations have
+    Q[2][2] = np.broadcast_to(np.float64(0.5), (4096,))  # and a broadcast one
+    got = core_errors(P, Q)
+    if got is None:
+        pytest.skip("no kernels, or the C library's atan2 differs from numpy's here")
+    for a, b in zip(got, (re_.geodesic_deg(P, Q), re_.maev_deg(P, Q), re_.frobenius(P, Q))):
+        assert a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def test_core_errors_used_only_where_atan2_agrees(monkeypatch):
+    import hpe_cli.native as native
+
+    monkeypatch.setitem(native._STATE, "atan2", False)  # as on a machine where numpy's SIMD atan2 differs
+    R, G = _rotations(np.random.default_rng(4), 256)
+    assert native.core_errors(R.transpose(1, 2, 0).tolist(), G.transpose(1, 2, 0).tolist()) is None
