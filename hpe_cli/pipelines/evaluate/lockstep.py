@@ -47,13 +47,18 @@ class KeysSeen:
 
     Keys that increase strictly through the whole file cannot repeat: only the last key of each chunk is kept.
     Otherwise, from the first chunk on, each row's 64-bit key hash is spilled into one of 16 files by its top
-    bits, and :meth:`check` sorts one file at a time (memory flat in the rows). A file whose keys increase for
+    bits, and :meth:`check` sorts each file (``threads`` at a time; memory flat in the rows). A file whose keys increase for
     a while and then do not goes to the key join (its first rows were not hashed).
+
+    Each chunk's hashes are sorted (:func:`sorted_hashes`) on the reader's label threads, beside the labels, so
+    the thread that pairs the chunks only writes 16 slices of a sorted array (one :func:`numpy.searchsorted`);
+    the files then hold sorted runs.
     """
 
-    def __init__(self, keys, reader=None):
+    def __init__(self, keys, reader=None, threads: int = 1):
         self.keys, self.last, self.sorted, self.files, self.folder = list(keys), None, True, None, None
         self.reader = reader  # asked to hash the keys of the chunks it labels from then on
+        self.threads = max(1, int(threads))
 
     def add(self, g: Chunk) -> None:
 
@@ -71,23 +76,28 @@ class KeysSeen:
             if self.last is not None:  # sorted so far, not from here on: the earlier rows were not hashed
                 raise Unaligned("keys not in order after a sorted start")
         if self.sorted and self.reader is not None:
-            self.reader.hash_keys = self.keys  # the chunks labelled from now on come hashed
+            self.reader.hash_keys = self.keys  # the chunks labelled from now on come hashed, their hashes sorted
+            self.reader.prepare = sorted_hashes
         self.sorted = False
         self._spill(g)
 
     def _spill(self, g: Chunk) -> None:
 
-        h = g.key_hash if g.key_hash is not None else keys_hash(g.keys, self.keys)
+        h = g.prepared if isinstance(g.prepared, SortedHashes) else None
+        if h is None:  # labelled before the reader was asked, or cut by the pairing: sorted here
+            h = np.sort(g.key_hash if g.key_hash is not None else keys_hash(g.keys, self.keys))
+        else:
+            h = h.hashes
         if self.files is None:
             self.folder = tempfile.mkdtemp(prefix="hpe_eval_keys_")
-            self.files = [open(os.path.join(self.folder, f"{b:02d}.bin"), "wb") for b in range(16)]  # noqa: SIM115
-        part = (h >> np.uint64(60)).astype(np.uint8)
-        order = np.argsort(part, kind="stable")  # a radix sort on 8 bits
-        bounds = np.searchsorted(part[order], np.arange(17))
-        h = h[order]
+            self.files = [  # a chunk writes about 1/16 of 512 kB to each: buffered, about one write in 8 is made
+                open(os.path.join(self.folder, f"{b:02d}.bin"), "wb", buffering=WRITE_BUFFER)  # noqa: SIM115
+                for b in range(16)
+            ]
+        bounds = np.searchsorted(h, PART_STARTS).tolist() + [len(h)]  # partition b: top 4 bits equal to b
         for b in range(16):
             if bounds[b + 1] > bounds[b]:
-                h[bounds[b] : bounds[b + 1]].tofile(self.files[b])
+                self.files[b].write(h[bounds[b] : bounds[b + 1]])
 
     def check(self) -> None:
         """Raise :class:`Unaligned` when a key hash repeats (a duplicate key, or a collision the join settles)."""
@@ -96,10 +106,14 @@ class KeysSeen:
         try:
             for f in self.files:
                 f.close()
-            for f in self.files:
-                h = np.sort(np.fromfile(f.name, dtype=np.uint64))
-                if len(h) > 1 and (h[1:] == h[:-1]).any():
-                    raise Unaligned("duplicate")
+            names = [f.name for f in self.files]
+            if self.threads > 1:  # np.sort and the reads release the GIL; any repeat, whichever file: one verdict
+                with ThreadPoolExecutor(self.threads, thread_name_prefix="hpe-evaluate-keys") as ex:
+                    repeats = list(ex.map(_repeats, names))
+            else:
+                repeats = [_repeats(name) for name in names]
+            if any(repeats):
+                raise Unaligned("duplicate")
         finally:
             self.close()
 
@@ -110,6 +124,34 @@ class KeysSeen:
         if self.folder:
             shutil.rmtree(self.folder, ignore_errors=True)
         self.files = self.folder = None
+
+
+#: bytes each of :class:`KeysSeen`'s 16 files gathers before a write (16 of them: 4 MB at most)
+WRITE_BUFFER = 1 << 18
+#: the first hash of each of :class:`KeysSeen`'s 16 partitions (its top 4 bits)
+PART_STARTS = np.arange(16, dtype=np.uint64) << np.uint64(60)
+
+
+class SortedHashes:
+    """A chunk's key hashes (uint64), sorted: what :func:`sorted_hashes` prepares on a label thread."""
+
+    __slots__ = ("hashes",)
+
+    def __init__(self, hashes: np.ndarray):
+        self.hashes = hashes
+
+
+def sorted_hashes(c: Chunk):
+    """The chunk's key hashes sorted (:class:`SortedHashes`), or None when it carries none (a reader's
+    ``prepare``: run on its label threads)."""
+    return None if c.key_hash is None else SortedHashes(np.sort(c.key_hash))
+
+
+def _repeats(name: str) -> bool:
+    """Whether a file of uint64 hashes holds one twice."""
+    h = np.fromfile(name, dtype=np.uint64)
+    h.sort()
+    return bool(len(h) > 1 and (h[1:] == h[:-1]).any())
 
 
 def first_keys_differ(gr: SideReader, pr: SideReader, keys) -> bool:
@@ -148,7 +190,7 @@ def lockstep(gr: SideReader, pr: SideReader, keys, join_mode: str, notes: set):
     if join_mode != "order" and first_keys_differ(gr, pr, keys):
         raise Unaligned("first keys")
     gi, pi = gr.chunks(), pr.chunks()
-    seen = KeysSeen(keys, gr) if keys else None
+    seen = KeysSeen(keys, gr, gr.threads) if keys else None
     try:
         yield from _lockstep(gr, pr, gi, pi, keys, join_mode, notes, seen)
         if seen is not None:
@@ -174,7 +216,7 @@ def _lockstep(gr, pr, gi, pi, keys, join_mode, notes, seen):
         if gbuf is None or pbuf is None:
             break
         m = min(gbuf.n, pbuf.n)
-        g, p = gbuf.slice(0, m), pbuf.slice(0, m)
+        g, p = _head(gbuf, m), _head(pbuf, m)  # a whole chunk as it is: it keeps what its reader prepared
         gbuf, pbuf = gbuf.slice(m, gbuf.n), pbuf.slice(m, pbuf.n)
         if keys:
             _same_keys(g, p, keys, notes, seen)
@@ -195,6 +237,10 @@ def _lockstep(gr, pr, gi, pi, keys, join_mode, notes, seen):
                 f"got {pr.n} predictions and {gr.n} ground-truth rows in {gr.path}"
             )
         raise Unaligned("row counts")
+
+
+def _head(c: Chunk, m: int) -> Chunk:
+    return c if m == c.n else c.slice(0, m)
 
 
 _END = object()
