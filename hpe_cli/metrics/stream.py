@@ -178,6 +178,10 @@ class Accumulator:
         Folder for the float32 spill (the system temp folder by default).
     """
 
+    #: threads that read the spill back for the percentiles' second pass (integer counts: the same whatever the
+    #: number)
+    threads = 1
+
     def __init__(self, protocols, yaw_edges=None, by=False, spill_dir=None, percentiles=True):
         self.protocols = protocols
         self.edges = yaw_edges
@@ -191,8 +195,6 @@ class Accumulator:
         self.n = 0
         #: :func:`hpe_cli.metrics.select.top_counts` of every spilled error (the percentiles' first pass)
         self.top = np.zeros(1 << 16, dtype=np.int64)
-        #: threads that read the spill back for the percentiles' second pass (integer counts: any number)
-        self.threads = 1
 
     def _spill(self, name, arr):
         f = self._files.get(name)
