@@ -92,7 +92,7 @@ class KeysSeen:
             h = h.hashes
         if self.files is None:
             self.folder = tempfile.mkdtemp(prefix="hpe_eval_keys_")
-            self.files = [  # a chunk writes about 1/16 of 512 kB to each: buffered, about one write in 8 is made
+            self.files = [  # a chunk writes about 32 kB to each: buffered, one write for about two chunks
                 open(os.path.join(self.folder, f"{b:02d}.bin"), "wb", buffering=WRITE_BUFFER)  # noqa: SIM115
                 for b in range(16)
             ]
@@ -128,8 +128,8 @@ class KeysSeen:
         self.files = self.folder = None
 
 
-#: bytes each of :class:`KeysSeen`'s 16 files gathers before a write (16 of them: 4 MB at most)
-WRITE_BUFFER = 1 << 18
+#: bytes each of :class:`KeysSeen`'s 16 files gathers before a write (16 of them: 1 MB at most)
+WRITE_BUFFER = 1 << 16
 #: the first hash of each of :class:`KeysSeen`'s 16 partitions (its top 4 bits)
 PART_STARTS = np.arange(16, dtype=np.uint64) << np.uint64(60)
 
