@@ -75,7 +75,9 @@ def test_many_keys_in_many_chunks(threads):
     ordered = pa.table({"image": pa.array([f"img{i:06d}" for i in range(50_000)])})
     reader = SimpleNamespace(hash_keys=None, prepare=None)
     seen = KeysSeen(["image"], reader, threads)
+    hashed = 0
     for c in _chunks(ordered, sizes, reader, [True]):
+        hashed += c.key_hash is not None
         seen.add(c)
-    seen.check()
-    assert seen.files is None and reader.hash_keys is None
+    seen.check()  # the reader hashed the first chunk only (asked up front, told to stop once its keys increase)
+    assert seen.files is None and reader.hash_keys is None and reader.prepare is None and hashed == 1

@@ -200,8 +200,10 @@ def test_a_key_repeated_in_another_chunk_is_named(tmp_path, order):
 def test_sorted_keys_are_streamed_without_hashing(tmp_path, monkeypatch):
     import hpe_cli.pipelines.evaluate.lockstep as ls
 
-    spilled = []
+    spilled, hashed = [], []
     monkeypatch.setattr(ls.KeysSeen, "_spill", lambda self, g: spilled.append(g.n))
+    real = ls.sorted_hashes
+    monkeypatch.setattr(ls, "sorted_hashes", lambda c: hashed.append(c.n) or real(c))
     p = pd.read_csv(SYN / "pred.csv")
     p["group"] = "all"
     pred = tmp_path / "pred.csv"
@@ -209,6 +211,7 @@ def test_sorted_keys_are_streamed_without_hashing(tmp_path, monkeypatch):
     assert (pd.read_csv(SYN / "gt.csv")["image"].is_monotonic_increasing) and p["image"].is_unique
     rep = _run(tmp_path, pred)
     assert rep["inputs"]["paired"] == "streamed in file order" and not spilled
+    assert 1 <= len(hashed) <= 4 < len(p) // 256  # the first chunks, labelled before the pairing saw sorted keys
 
 
 @pytest.mark.parametrize("shuffled", [False, True])

@@ -49,18 +49,23 @@ class KeysSeen:
 
     Keys that increase strictly through the whole file cannot repeat: only the last key of each chunk is kept.
     Otherwise, from the first chunk on, each row's 64-bit key hash is spilled into one of 16 files by its top
-    bits, and :meth:`check` sorts each file (``threads`` at a time; memory flat in the rows). A file whose keys increase for
-    a while and then do not goes to the key join (its first rows were not hashed).
+    bits, and :meth:`check` sorts each file (``threads`` at a time; memory flat in the rows). A file whose keys
+    increase for a while and then do not goes to the key join (its first rows were not hashed).
 
-    Each chunk's hashes are sorted (:func:`sorted_hashes`) on the reader's label threads, beside the labels, so
-    the thread that pairs the chunks only writes 16 slices of a sorted array (one :func:`numpy.searchsorted`);
-    the files then hold sorted runs.
+    Each chunk's hashes are computed and sorted (:func:`sorted_hashes`) on the reader's label threads, beside the
+    labels, so the thread that pairs the chunks only writes 16 slices of a sorted array (one
+    :func:`numpy.searchsorted`); the files then hold sorted runs. The reader is asked for them from the first
+    chunk on, and told to stop when that chunk's keys increase (the few chunks labelled ahead by then are hashed
+    for nothing).
     """
 
     def __init__(self, keys, reader=None, threads: int = 1):
         self.keys, self.last, self.sorted, self.files, self.folder = list(keys), None, True, None, None
-        self.reader = reader  # asked to hash the keys of the chunks it labels from then on
+        self.reader = reader  # asked to hash (and sort) the keys of the chunks it labels
         self.threads = max(1, int(threads))
+        self.asked = reader is not None and reader.prepare is None
+        if self.asked:  # from the first chunk on (the few labelled ahead of the pairing too)
+            reader.hash_keys, reader.prepare = self.keys, sorted_hashes
 
     def add(self, g: Chunk) -> None:
 
@@ -73,20 +78,20 @@ class KeysSeen:
             if ok and self.last is not None:
                 ok = pc.greater(col[0], self.last).as_py()
             if ok:
+                if self.asked:  # increasing keys: the chunks labelled from now on are not hashed
+                    self.reader.hash_keys = self.reader.prepare = None
+                    self.asked = False
                 self.last = col[g.n - 1]
                 return
             if self.last is not None:  # sorted so far, not from here on: the earlier rows were not hashed
                 raise Unaligned("keys not in order after a sorted start")
-        if self.sorted and self.reader is not None:
-            self.reader.hash_keys = self.keys  # the chunks labelled from now on come hashed, their hashes sorted
-            self.reader.prepare = sorted_hashes
         self.sorted = False
         self._spill(g)
 
     def _spill(self, g: Chunk) -> None:
 
         h = g.prepared if isinstance(g.prepared, SortedHashes) else None
-        if h is None:  # labelled before the reader was asked, or cut by the pairing: sorted here
+        if h is None:  # a chunk cut by the pairing (or a reader not asked): hashed and sorted here
             h = np.sort(g.key_hash if g.key_hash is not None else keys_hash(g.keys, self.keys))
         else:
             h = h.hashes
