@@ -223,7 +223,9 @@ class Accumulator:
         """What :meth:`add` needs of a chunk that does not depend on earlier chunks (any thread may compute it)."""
         out = {"all": self.all.partial(rows, None), "geo": rows.geodesic.astype(np.float32)}
         if self.percentiles:  # the first pass of the exact percentiles, on the thread that scored the chunk
-            out["top"] = top_counts(out["geo"])
+            top = top_counts(out["geo"])
+            nz = np.flatnonzero(top)  # a few hundred of the 65,536 counts: kept sparse while the chunk waits
+            out["top"] = (nz, top[nz])
         if self.bins is not None:
             c = self.bin_codes(rows.gt_angles[:, 1])
             out["bins"], out["bin_codes"] = self.bins.partial(rows, c), c.astype(np.int32)
@@ -239,7 +241,8 @@ class Accumulator:
         self.all.merge(part["all"])
         if self.percentiles:
             self._spill("geo", part["geo"])
-            self.top += part["top"]
+            nz, counts = part["top"]
+            self.top[nz] += counts
         c = None
         if self.by is not None:
             c = self._by_codes(by_values)

@@ -11,25 +11,24 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hpe_cli.pipelines.evaluate.lockstep import KeysSeen, Unaligned
-from hpe_cli.pipelines.evaluate.sides import Chunk, keys_hash
+from hpe_cli.pipelines.evaluate.sides import Chunk
 
 
 def _chunks(table, sizes, reader, prepared):
-    """The table in chunks of ``sizes`` as a reader hands them over: hashed (and prepared) once asked."""
+    """The table in chunks of ``sizes`` as a reader hands them over: prepared on its label threads while asked
+    (``prepared[k]`` False: this one not, as if it had been labelled before)."""
     a = 0
     for k, n in enumerate(sizes):
         t = table.slice(a, n)
         a += n
         c = Chunk(None, np.ones(n, dtype=bool), None, None, None, t, None, np.arange(n) + a + 2)
-        if reader.hash_keys:
-            c.key_hash = keys_hash(t, reader.hash_keys)
-            if prepared[k % len(prepared)]:  # a chunk cut by the pairing loses what was prepared
-                c.prepared = reader.prepare(c)
+        if reader.prepare is not None and prepared[k % len(prepared)]:
+            c.prepared = reader.prepare(c)
         yield c
 
 
 def _verdict(table, keys, sizes, threads, prepared) -> bool:
-    reader = SimpleNamespace(hash_keys=None, prepare=None)
+    reader = SimpleNamespace(prepare=None)
     seen = KeysSeen(keys, reader, threads)
     try:
         for c in _chunks(table, sizes, reader, prepared):
@@ -73,11 +72,11 @@ def test_many_keys_in_many_chunks(threads):
     cols = {"image": pa.array([f"img{i}" for i in twice]), "cam": pa.array((twice % 7).astype(np.int64))}
     assert _verdict(pa.table(cols), ["image", "cam"], sizes, threads, [True, False, True])
     ordered = pa.table({"image": pa.array([f"img{i:06d}" for i in range(50_000)])})
-    reader = SimpleNamespace(hash_keys=None, prepare=None)
+    reader = SimpleNamespace(prepare=None)
     seen = KeysSeen(["image"], reader, threads)
     hashed = 0
     for c in _chunks(ordered, sizes, reader, [True]):
-        hashed += c.key_hash is not None
+        hashed += c.prepared is not None
         seen.add(c)
     seen.check()  # the reader hashed the first chunk only (asked up front, told to stop once its keys increase)
-    assert seen.files is None and reader.hash_keys is None and reader.prepare is None and hashed == 1
+    assert seen.files is None and reader.prepare is None and hashed == 1

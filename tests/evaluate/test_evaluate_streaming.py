@@ -203,7 +203,7 @@ def test_sorted_keys_are_streamed_without_hashing(tmp_path, monkeypatch):
     spilled, hashed = [], []
     monkeypatch.setattr(ls.KeysSeen, "_spill", lambda self, g: spilled.append(g.n))
     real = ls.sorted_hashes
-    monkeypatch.setattr(ls, "sorted_hashes", lambda c: hashed.append(c.n) or real(c))
+    monkeypatch.setattr(ls, "sorted_hashes", lambda t, keys: hashed.append(t.num_rows) or real(t, keys))
     p = pd.read_csv(SYN / "pred.csv")
     p["group"] = "all"
     pred = tmp_path / "pred.csv"

@@ -25,7 +25,7 @@ class Unaligned(Exception):
     """The two files do not list the same keys in the same order: pair them with the in-memory join."""
 
 
-def _same_keys(g: Chunk, p: Chunk, keys, notes: set, seen=None) -> None:
+def _same_keys(g: Chunk, p: Chunk, keys, notes: set) -> None:
 
     for k in keys:
         a, b = g.keys.column(k), p.keys.column(k)
@@ -40,8 +40,6 @@ def _same_keys(g: Chunk, p: Chunk, keys, notes: set, seen=None) -> None:
             notes.add(f"key {k!r} joined on file stems (the two files spell the names differently)")
             continue
         raise Unaligned(k)
-    if seen is not None:
-        seen.add(g)
 
 
 class KeysSeen:
@@ -52,11 +50,11 @@ class KeysSeen:
     bits, and :meth:`check` sorts each file (``threads`` at a time; memory flat in the rows). A file whose keys
     increase for a while and then do not goes to the key join (its first rows were not hashed).
 
-    Each chunk's hashes are computed and sorted (:func:`sorted_hashes`) on the reader's label threads, beside the
-    labels, so the thread that pairs the chunks only writes 16 slices of a sorted array (one
-    :func:`numpy.searchsorted`); the files then hold sorted runs. The reader is asked for them from the first
-    chunk on, and told to stop when that chunk's keys increase (the few chunks labelled ahead by then are hashed
-    for nothing).
+    Each GT chunk is added whole, as read (a run that ends has paired every GT row). Its hashes are computed and
+    sorted (:meth:`prepare`) on the reader's label threads, beside the labels, so the thread that pairs the
+    chunks only writes 16 slices of a sorted array (one :func:`numpy.searchsorted`); the files then hold sorted
+    runs. The reader is asked for them from the first chunk on, and told to stop when that chunk's keys
+    increase (the few chunks labelled ahead by then are hashed for nothing).
     """
 
     def __init__(self, keys, reader=None, threads: int = 1):
@@ -65,7 +63,7 @@ class KeysSeen:
         self.threads = max(1, int(threads))
         self.asked = reader is not None and reader.prepare is None
         if self.asked:  # from the first chunk on (the few labelled ahead of the pairing too)
-            reader.hash_keys, reader.prepare = self.keys, sorted_hashes
+            reader.prepare = self.prepare
 
     def add(self, g: Chunk) -> None:
 
@@ -79,7 +77,7 @@ class KeysSeen:
                 ok = pc.greater(col[0], self.last).as_py()
             if ok:
                 if self.asked:  # increasing keys: the chunks labelled from now on are not hashed
-                    self.reader.hash_keys = self.reader.prepare = None
+                    self.reader.prepare = None
                     self.asked = False
                 self.last = col[g.n - 1]
                 return
@@ -88,13 +86,15 @@ class KeysSeen:
         self.sorted = False
         self._spill(g)
 
+    def prepare(self, c: Chunk):
+        """The reader's ``prepare`` (on its label threads): the chunk's key hashes, sorted."""
+        return None if c.keys is None else SortedHashes(sorted_hashes(c.keys, self.keys))
+
     def _spill(self, g: Chunk) -> None:
 
-        h = g.prepared if isinstance(g.prepared, SortedHashes) else None
-        if h is None:  # a chunk cut by the pairing (or a reader not asked): hashed and sorted here
-            h = np.sort(g.key_hash if g.key_hash is not None else keys_hash(g.keys, self.keys))
-        else:
-            h = h.hashes
+        h = g.prepared.hashes if isinstance(g.prepared, SortedHashes) else None
+        if h is None:  # a reader not asked (its chunks came before, or it prepares something else): here
+            h = sorted_hashes(g.keys, self.keys)
         if self.files is None:
             self.folder = tempfile.mkdtemp(prefix="hpe_eval_keys_")
             self.files = [  # a chunk writes about 32 kB to each: buffered, one write for about two chunks
@@ -140,7 +140,7 @@ PART_STARTS = np.arange(16, dtype=np.uint64) << np.uint64(60)
 
 
 class SortedHashes:
-    """A chunk's key hashes (uint64), sorted: what :func:`sorted_hashes` prepares on a label thread."""
+    """A chunk's key hashes (uint64), sorted: what :meth:`KeysSeen.prepare` makes of it on a label thread."""
 
     __slots__ = ("hashes",)
 
@@ -148,10 +148,11 @@ class SortedHashes:
         self.hashes = hashes
 
 
-def sorted_hashes(c: Chunk):
-    """The chunk's key hashes sorted (:class:`SortedHashes`), or None when it carries none (a reader's
-    ``prepare``: run on its label threads)."""
-    return None if c.key_hash is None else SortedHashes(np.sort(c.key_hash))
+def sorted_hashes(table, keys) -> np.ndarray:
+    """The 64-bit hashes of the ``keys`` columns of ``table`` (:func:`~.sides.keys_hash`), sorted (in place)."""
+    h = keys_hash(table, keys)
+    h.sort()
+    return h
 
 
 def _repeats(name: str) -> bool:
@@ -216,6 +217,8 @@ def _lockstep(gr, pr, gi, pi, keys, join_mode, notes, seen):
             gbuf = next(gi, None)
             if gbuf is None:
                 break
+            if seen is not None:  # each GT chunk whole, as read (a run ends with every GT row paired, or stops)
+                seen.add(gbuf)
         while pbuf is None or pbuf.n == 0:
             pbuf = next(pi, None)
             if pbuf is None:
@@ -223,10 +226,10 @@ def _lockstep(gr, pr, gi, pi, keys, join_mode, notes, seen):
         if gbuf is None or pbuf is None:
             break
         m = min(gbuf.n, pbuf.n)
-        g, p = _head(gbuf, m), _head(pbuf, m)  # a whole chunk as it is: it keeps what its reader prepared
+        g, p = gbuf.slice(0, m), pbuf.slice(0, m)
         gbuf, pbuf = gbuf.slice(m, gbuf.n), pbuf.slice(m, pbuf.n)
         if keys:
-            _same_keys(g, p, keys, notes, seen)
+            _same_keys(g, p, keys, notes)
         yield g, p
     if (
         (gbuf is not None and gbuf.n)
@@ -244,10 +247,6 @@ def _lockstep(gr, pr, gi, pi, keys, join_mode, notes, seen):
                 f"got {pr.n} predictions and {gr.n} ground-truth rows in {gr.path}"
             )
         raise Unaligned("row counts")
-
-
-def _head(c: Chunk, m: int) -> Chunk:
-    return c if m == c.n else c.slice(0, m)
 
 
 _END = object()
