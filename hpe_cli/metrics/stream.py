@@ -18,7 +18,7 @@ import numpy as np
 
 from .protocols import PROTOCOLS
 from .rotation_errors import AXES
-from .select import percentiles_of_pieces
+from .select import percentiles_of_pieces, top_counts
 
 ANGLES = ("pitch", "yaw", "roll")
 WITHIN = (5, 10, 15, 30)
@@ -178,6 +178,10 @@ class Accumulator:
         Folder for the float32 spill (the system temp folder by default).
     """
 
+    #: threads that read the spill back for the percentiles' second pass (integer counts: the same whatever the
+    #: number)
+    threads = 1
+
     def __init__(self, protocols, yaw_edges=None, by=False, spill_dir=None, percentiles=True):
         self.protocols = protocols
         self.edges = yaw_edges
@@ -189,6 +193,8 @@ class Accumulator:
         self._files = {}
         self._dir = spill_dir
         self.n = 0
+        #: :func:`hpe_cli.metrics.select.top_counts` of every spilled error (the percentiles' first pass)
+        self.top = np.zeros(1 << 16, dtype=np.int64)
 
     def _spill(self, name, arr):
         f = self._files.get(name)
@@ -216,6 +222,10 @@ class Accumulator:
     def partial(self, rows) -> dict:
         """What :meth:`add` needs of a chunk that does not depend on earlier chunks (any thread may compute it)."""
         out = {"all": self.all.partial(rows, None), "geo": rows.geodesic.astype(np.float32)}
+        if self.percentiles:  # the first pass of the exact percentiles, on the thread that scored the chunk
+            top = top_counts(out["geo"])
+            nz = np.flatnonzero(top)  # a few hundred of the 65,536 counts: kept sparse while the chunk waits
+            out["top"] = (nz, top[nz])
         if self.bins is not None:
             c = self.bin_codes(rows.gt_angles[:, 1])
             out["bins"], out["bin_codes"] = self.bins.partial(rows, c), c.astype(np.int32)
@@ -231,6 +241,8 @@ class Accumulator:
         self.all.merge(part["all"])
         if self.percentiles:
             self._spill("geo", part["geo"])
+            nz, counts = part["top"]
+            self.top[nz] += counts
         c = None
         if self.by is not None:
             c = self._by_codes(by_values)
@@ -272,16 +284,26 @@ class Accumulator:
             return np.zeros(0, dtype=f[2])
         return np.memmap(f[1], dtype=f[2], mode="r")
 
-    def _pieces(self, name, rows: int = SPILL_PIECE):
+    def _pieces(self, name, rows: int = SPILL_PIECE, start: int = 0, stop: int | None = None):
         """The spill ``name`` read back ``rows`` values at a time (no memory map: its pages would count in the
-        process's peak)."""
+        process's peak), from value ``start`` to ``stop`` (None: the end)."""
         _, path, dtype = self._files[name]
+        size = np.dtype(dtype).itemsize
         with open(path, "rb") as f:
-            while True:
-                v = np.fromfile(f, dtype=dtype, count=rows)
+            f.seek(start * size)
+            left = -1 if stop is None else stop - start
+            while left:
+                v = np.fromfile(f, dtype=dtype, count=rows if left < 0 else min(rows, left))
                 if not len(v):
                     return
+                left -= len(v) if left > 0 else 0
                 yield v
+
+    def _parts(self, name, n: int) -> list:
+        """The spill ``name`` of ``n`` values as :attr:`threads` readers of consecutive parts (callables)."""
+        k = max(1, min(self.threads, n // SPILL_PIECE))
+        cuts = [n * j // k for j in range(k + 1)]
+        return [lambda a=a, b=b: self._pieces(name, start=a, stop=b) for a, b in zip(cuts[:-1], cuts[1:])]
 
     def _quantiles(self, codes, n_groups):
         """``{group: (median, p90, p95)}`` exact over the spilled float32 errors."""
@@ -290,7 +312,8 @@ class Accumulator:
         if geo is None or not len(geo):
             return out
         if codes is None:  # read piece by piece (flat memory), np.percentile's numbers to the bit
-            q = percentiles_of_pieces(lambda: self._pieces("geo"), len(geo), QUANTILES)
+            parts = self._parts("geo", len(geo))
+            q = percentiles_of_pieces(parts, len(geo), QUANTILES, top=self.top, threads=self.threads)
             if q is None:
                 q = np.percentile(np.asarray(geo, dtype=np.float32), QUANTILES)
             return {0: tuple(float(x) for x in q)}

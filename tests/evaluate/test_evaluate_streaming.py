@@ -200,8 +200,10 @@ def test_a_key_repeated_in_another_chunk_is_named(tmp_path, order):
 def test_sorted_keys_are_streamed_without_hashing(tmp_path, monkeypatch):
     import hpe_cli.pipelines.evaluate.lockstep as ls
 
-    spilled = []
+    spilled, hashed = [], []
     monkeypatch.setattr(ls.KeysSeen, "_spill", lambda self, g: spilled.append(g.n))
+    real = ls.sorted_hashes
+    monkeypatch.setattr(ls, "sorted_hashes", lambda t, keys: hashed.append(t.num_rows) or real(t, keys))
     p = pd.read_csv(SYN / "pred.csv")
     p["group"] = "all"
     pred = tmp_path / "pred.csv"
@@ -209,6 +211,7 @@ def test_sorted_keys_are_streamed_without_hashing(tmp_path, monkeypatch):
     assert (pd.read_csv(SYN / "gt.csv")["image"].is_monotonic_increasing) and p["image"].is_unique
     rep = _run(tmp_path, pred)
     assert rep["inputs"]["paired"] == "streamed in file order" and not spilled
+    assert 1 <= len(hashed) <= 4 < len(p) // 256  # the first chunks, labelled before the pairing saw sorted keys
 
 
 @pytest.mark.parametrize("shuffled", [False, True])
@@ -239,3 +242,48 @@ def test_opal23_align_scored_after_the_pass_equals_scored_inline(tmp_path, monke
         for k in ("metrics", "protocols", "by_groups", "yaw_bins", "n"):
             assert later.get(k) == inline.get(k), k
     assert later["protocols"]["opal23-align"]["n"] == len(p)
+
+
+@pytest.mark.parametrize("grouped", [False, True])
+def test_streamed_percentiles_are_numpys_of_the_rows(tmp_path, monkeypatch, grouped):
+    """The report's median, p90 and p95 (the first pass of the radix select counted on the scoring threads as the
+    chunks stream, the second over the spill read back in two parts on two threads) are np.percentile's of the
+    per-row geodesic errors as float32, to the bit: all pairs, and each --by group and yaw bin when asked."""
+    import hpe_cli.metrics.stream as stream
+
+    calls = []
+    real = stream.percentiles_of_pieces
+    monkeypatch.setattr(
+        stream,
+        "percentiles_of_pieces",
+        lambda *a, **k: calls.append((len(a[0]), k["top"] is not None)) or real(*a, **k),
+    )
+    monkeypatch.setattr(stream, "SPILL_PIECE", 300)
+    monkeypatch.setattr(stream.Accumulator, "threads", 2)
+    p = pd.read_csv(SYN / "pred.csv")
+    p["group"] = np.where(np.arange(len(p)) % 3 == 0, "a", "b")
+    pred, rows, rep = tmp_path / "pred.csv", tmp_path / "rows.parquet", tmp_path / "rep.json"
+    p.to_csv(pred, index=False)
+    args = ["--pred-system", "300w_lp", "--gt-system", "300w_lp", "--batch-size", "256", "-q", "--protocol", "hopenet"]
+    args += ["--by", "group", "--yaw-bins", "45"] if grouped else []
+    r = hpe("evaluate", pred, SYN / "gt.csv", *args, "--json", rep, "-o", rows)
+    assert r.exit_code == 0, r.output
+    report, t = json.loads(rep.read_text()), pd.read_parquet(rows)
+    assert calls == [(2, True)]  # the whole set: streamed first pass, two parts
+
+    def check(block, geo):
+        want = np.percentile(np.asarray(geo, dtype=np.float32), [50, 90, 95])
+        got = [block["metrics"]["geodesic"][k] for k in ("median", "p90", "p95")]
+        assert got == [float(x) for x in want]
+
+    assert report["n"]["pairs"] == len(t) == len(p)
+    check(report, t["geodesic"])
+    if grouped:
+        for g in ("a", "b"):
+            check(report["by"]["groups"][g], t["geodesic"][p["group"].to_numpy() == g])
+        yaw = t["gt_yaw"].to_numpy()
+        for k, b in enumerate(report["yaw_bins"]):
+            last = k == len(report["yaw_bins"]) - 1
+            inside = (yaw >= b["lo"]) & ((yaw <= b["hi"]) if last else (yaw < b["hi"]))
+            if inside.any():
+                check(b, t["geodesic"][inside])
