@@ -2,11 +2,12 @@
  *
  * Each function is one loop over a column where numpy takes a dozen passes or more, or a data-dependent loop
  * numpy cannot express (a hash over each string's bytes); each has a numpy twin in hpe_cli (named in its
- * docstring) that gives the same bits, and tests/native/ compares the two. The floating-point operations are the
- * x + 0.0 that maps -0.0 to 0.0, fabs, differences and comparisons, all exact or IEEE-rounded the same way as
- * numpy's (the build also passes -ffp-contract=off: no fused multiply-adds), and the C library's sine and cosine,
- * which hpe uses only where they give numpy's bits (hpe_cli.native.sin_cos checks a probe first). The arguments are buffers (numpy
- * arrays), checked for size; the GIL is released in the loops, so the threads that call them run in parallel.
+ * docstring) that gives the same bits, and tests/native/ compares the two. The hashes and the screens compute
+ * integers, fabs, differences and comparisons only. The error kernels add IEEE sums, products and square roots in
+ * the order of their twins' numpy operations (the build passes -ffp-contract=off: no fused multiply-adds) and call
+ * the C library's sincos and atan2, which hpe_cli.native uses only where they give numpy's bits on a probe of
+ * values. The arguments are buffers (numpy arrays), checked for size; the GIL is released in the loops, so the
+ * threads that call them run in parallel.
  */
 #define _GNU_SOURCE /* sincos */
 #define PY_SSIZE_T_CLEAN
