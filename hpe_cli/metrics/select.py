@@ -8,7 +8,8 @@ a wanted rank, which gives each wanted value exactly. The first pass can be take
 (:func:`top_counts` of each piece, summed: the counts of the float32 bit patterns' top halves, which the keys only
 reorder), so that only the second remains at the end. The interpolation is then numpy's own (its private
 ``_lerp`` and index helpers, so the numbers are ``np.percentile``'s to the bit; tested against it), with
-``np.percentile`` on the whole array as the fallback where those helpers are missing or a NaN is present.
+``np.percentile`` on the whole array as the fallback where those helpers are missing or a NaN or an infinity is
+present.
 """
 
 from __future__ import annotations
