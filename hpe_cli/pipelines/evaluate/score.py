@@ -142,6 +142,8 @@ def score_pairs(s, pairs, rej, gsys, psys, glob, writer, stream: bool):
     protos = {k: PROTOCOLS[k] for k in s.protocols}
     edges = yaw_bin_edges(gsys, float(s.options.yaw_bins)) if s.options.yaw_bins else None
     acc = Accumulator(protos, edges, by=bool(s.options.by))
+    # the percentiles' second pass reads the spill in parts on these threads (integer counts: any number of them)
+    acc.threads = max(1, int(s.threads or SCORE_THREADS))
     before = Accumulator(protos, None, by=False, percentiles=True) if s.options.align == "mean" else None
     worst, sample = Worst(s.options.worst if s.options.html else 0), Sample()
     plotted = bool(s.options.plots or s.options.html)  # the plot sample is drawn by --plots and --report only

@@ -126,7 +126,6 @@ class Chunk:
     keys: object  # pyarrow Table of the key (and --by) columns, or None
     by: np.ndarray | None
     lines: np.ndarray
-    key_hash: np.ndarray | None = None  # (n,) uint64 of the key columns, when the reader was asked for them
     prepared: object = None  # what the reader's ``prepare`` made of the chunk on the label threads
 
     @property
@@ -146,7 +145,6 @@ class Chunk:
             None if self.keys is None else self.keys.slice(a, b - a),
             cut(self.by),
             self.lines[a:b],
-            cut(self.key_hash),
         )
 
 
@@ -225,8 +223,6 @@ class SideReader:
         self.threads = max(1, int(threads))
         self.unreadable: list = []
         self.n = 0
-        #: key columns whose hash each chunk carries (set while streaming unsorted keys: hashed on the label threads)
-        self.hash_keys: list | None = None
         #: False: a side that holds angles hands them over without their matrices (``canonical`` None: the key
         #: join keeps the angles and the scoring threads rebuild the matrices from them, the same bits)
         self.matrices = True
@@ -270,8 +266,7 @@ class SideReader:
         canonical = None if X is None else soa.columns(self.system.soa_to_canonical(X), n)
         keys = batch.select(self.keep) if self.keep else None
         by = keys.column(self.by).to_numpy(zero_copy_only=False) if self.by else None
-        kh = keys_hash(keys, self.hash_keys) if self.hash_keys and keys is not None else None
-        c = Chunk(canonical, ok, rs, raw, dist, keys, by, lines, kh)
+        c = Chunk(canonical, ok, rs, raw, dist, keys, by, lines)
         if self.prepare is not None:
             c.prepared = self.prepare(c)
         return c
