@@ -37,7 +37,6 @@ def numeric_values(batch, name):
     row of a real table is fine, so the common path never touches them.
     """
     import pyarrow as pa  # lazy: start-up
-    import pyarrow.compute as pc  # lazy: start-up
 
     col = batch.column(batch.schema.get_field_index(name))
     numeric = (
@@ -49,8 +48,10 @@ def numeric_values(batch, name):
     )
     if numeric:
         if col.null_count == 0 and pa.types.is_float64(col.type):
-            values = plain_numpy(col)
+            values = plain_numpy(col)  # float64 without nulls (the usual label column): no pyarrow.compute
         else:
+            import pyarrow.compute as pc  # lazy: start-up (0.06 s)
+
             values = np.asarray(pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False), dtype=np.float64)
         bad = ~np.isfinite(values)
         if not bad.any():

@@ -9,7 +9,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 
 from .join import file_stems
 from .sides import Chunk
@@ -28,6 +27,8 @@ class Worst:
 
         if not self.n or not table.num_rows:
             return
+        import pyarrow.compute as pc  # lazy: start-up (0.06 s; only --report keeps the worst pairs)
+
         if table.num_rows > self.n:
             geo = table.column("geodesic").to_numpy()
             table = table.take(pa.array(np.argpartition(-geo, self.n - 1)[: self.n]))
@@ -114,6 +115,7 @@ class Images:
 
     def paths(self, names):
         """The image path of each name (matched on the file stem), '' when the folder has none."""
+        import pyarrow.compute as pc  # lazy: start-up (0.06 s; the streamed run with equal keys needs none)
 
         if isinstance(names, pa.ChunkedArray):
             names = names.combine_chunks()

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 
 from ...io import MATRIX_COLS, batch_rotations
 from ...io.key_hash import string_hashes
@@ -105,6 +104,7 @@ def stored_of_angles(system, raw) -> list:
 def _stem_key_hook(batch):
     """HOOK (joins by key): a dataset reader with ``file`` but no ``image`` (the ``.mat`` folder reader) gets
     ``image`` = the file stem, so predictions keyed by image name join. Remove once the reader provides it."""
+    import pyarrow.compute as pc  # lazy: start-up (0.06 s; the streamed run with equal keys needs none)
 
     names = batch.schema.names
     if "image" in names or "file" not in names:
@@ -150,12 +150,15 @@ class Chunk:
 
 def key_text(col):
     """A key column as one Arrow string array (chunks combined, dictionaries decoded, other types cast)."""
-
     if isinstance(col, pa.ChunkedArray):
         col = col.combine_chunks()
     if pa.types.is_dictionary(col.type):
         col = col.cast(col.type.value_type)
-    return col if pa.types.is_string(col.type) else pc.cast(col, pa.string())
+    if pa.types.is_string(col.type):
+        return col
+    import pyarrow.compute as pc  # lazy: start-up (0.06 s; text keys need none)
+
+    return pc.cast(col, pa.string())
 
 
 def combine_key_hash(h: np.ndarray, column_hash: np.ndarray) -> np.ndarray:
