@@ -160,8 +160,33 @@ def verbosity_options(f):
     return f
 
 
+class QuietProgress:
+    """What ``--quiet`` gets instead of a tqdm bar: the calls the commands make, doing nothing (and tqdm, with its
+    imports and monitor thread, is not loaded)."""
+
+    disable = True
+
+    def __init__(self, total=None):
+        self.total, self.n = total, 0
+
+    def update(self, n=1) -> None:
+        self.n += n
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        return False
+
+    def __getattr__(self, name):  # close, refresh, set_postfix, set_description, ...: nothing to do
+        return lambda *args, **kwargs: None
+
+
 def progress(total=None, desc: str = "", quiet: bool = False, unit: str = "rows"):
-    """A tqdm bar on stderr; off with ``--quiet``, and when stderr is not a terminal (logs, CI)."""
+    """A tqdm bar on stderr; off with ``--quiet`` (:class:`QuietProgress`), and when stderr is not a terminal
+    (logs, CI)."""
+    if quiet:
+        return QuietProgress(total)
     from tqdm import tqdm
 
     return tqdm(
@@ -169,7 +194,7 @@ def progress(total=None, desc: str = "", quiet: bool = False, unit: str = "rows"
         desc=desc,
         unit=unit,
         unit_scale=True,
-        disable=True if quiet else None,
+        disable=None,  # off when stderr is not a terminal
         file=sys.stderr,
         dynamic_ncols=True,
         leave=False,
