@@ -20,6 +20,9 @@ import numpy as np
 
 _STATE: dict = {}
 
+#: the functions this version calls: a module that lacks one is treated as not built
+KERNELS = ("string_hashes", "row_hash_add", "mix", "split_top_bit", "angle_screen", "sin_cos", "core_errors", "atan2")
+
 
 def kernels():
     """The ``_hpe_kernels`` module, or None when it is not built or ``HPE_KERNELS=numpy`` asks for the numpy twins
@@ -31,6 +34,8 @@ def kernels():
             import _hpe_kernels
         except ImportError:
             _hpe_kernels = None
+        if _hpe_kernels is not None and not all(hasattr(_hpe_kernels, f) for f in KERNELS):
+            _hpe_kernels = None  # a build from older sources (a checkout's stale .so): the numpy twins run
         _STATE["module"] = _hpe_kernels
     return _STATE["module"]
 

@@ -238,3 +238,17 @@ def test_core_errors_used_only_where_atan2_agrees(monkeypatch):
     monkeypatch.setitem(native._STATE, "atan2", False)  # as on a machine where numpy's SIMD atan2 differs
     R, G = _rotations(np.random.default_rng(4), 256)
     assert native.core_errors(R.transpose(1, 2, 0).tolist(), G.transpose(1, 2, 0).tolist()) is None
+
+
+def test_a_module_from_older_sources_counts_as_not_built(monkeypatch):
+    import types
+
+    import hpe_cli.native as native
+
+    monkeypatch.setitem(native._STATE, "module", None)
+    monkeypatch.delitem(native._STATE, "module")
+    stale = types.ModuleType("_hpe_kernels")
+    stale.string_hashes = lambda *a: None  # only some of the functions this version calls
+    monkeypatch.setitem(__import__("sys").modules, "_hpe_kernels", stale)
+    assert native.kernels() is None
+    monkeypatch.delitem(native._STATE, "module")  # the real module again for the other tests
