@@ -40,8 +40,20 @@ def kernels():
     return _STATE["module"]
 
 
-#: below this many values numpy's two calls cost less than the kernel's buffer handling
-_SIN_COS_MIN = 64
+#: below this many rows numpy's calls cost less than a kernel's buffer handling
+_MIN_ROWS = 64
+
+
+def _agreeing(name: str, compare):
+    """The kernels, if the C library function ``name`` gives numpy's bits on its probe, else None. ``compare(k)``
+    runs the probe and returns ``[(kernel result, numpy result), ...]``; it runs once a process."""
+    k = kernels()
+    if k is None:
+        return None
+    if name not in _STATE:
+        with np.errstate(invalid="ignore"):
+            _STATE[name] = all(np.array_equal(a.view(np.int64), b.view(np.int64)) for a, b in compare(k))
+    return k if _STATE[name] else None
 
 
 def _probe_angles():
@@ -63,19 +75,14 @@ def _probe_angles():
 
 def _sin_cos_kernel():
     """The kernel, if it gives numpy's bits on :func:`_probe_angles` (checked once a process), else None."""
-    k = kernels()
-    if k is None:
-        return None
-    if "sin_cos" not in _STATE:
+
+    def compare(k):
         x = _probe_angles()
         s, c = np.empty_like(x), np.empty_like(x)
         k.sin_cos(x, s, c)
-        with np.errstate(invalid="ignore"):
-            same = np.array_equal(s.view(np.int64), np.sin(x).view(np.int64)) and np.array_equal(
-                c.view(np.int64), np.cos(x).view(np.int64)
-            )
-        _STATE["sin_cos"] = same
-    return k if _STATE["sin_cos"] else None
+        return [(s, np.sin(x)), (c, np.cos(x))]
+
+    return _agreeing("sin_cos", compare)
 
 
 def sin_cos(x):
@@ -83,7 +90,7 @@ def sin_cos(x):
     gives numpy's bits on this machine (:func:`_sin_cos_kernel`), else numpy's two calls: the same arrays either
     way, new ones (about 0.7x the time of numpy's two calls)."""
     x = np.asarray(x, dtype=np.float64)
-    k = _sin_cos_kernel() if x.ndim >= 1 and x.size >= _SIN_COS_MIN else None
+    k = _sin_cos_kernel() if x.ndim >= 1 and x.size >= _MIN_ROWS else None
     if k is None:
         return np.sin(x), np.cos(x)
     x = np.ascontiguousarray(x)
@@ -109,16 +116,14 @@ def _atan2_probe():
 def _atan2_kernels():
     """The kernels, if the C library's ``atan2`` gives numpy's bits on :func:`_atan2_probe` (checked once a
     process), else None."""
-    k = kernels()
-    if k is None:
-        return None
-    if "atan2" not in _STATE:
+
+    def compare(k):
         y, x = _atan2_probe()
         out = np.empty_like(y)
         k.atan2(y, x, out)
-        with np.errstate(invalid="ignore"):
-            _STATE["atan2"] = np.array_equal(out.view(np.int64), np.arctan2(y, x).view(np.int64))
-    return k if _STATE["atan2"] else None
+        return [(out, np.arctan2(y, x))]
+
+    return _agreeing("atan2", compare)
 
 
 def core_errors(P, G):
@@ -129,7 +134,7 @@ def core_errors(P, G):
     if k is None:
         return None
     n = int(np.broadcast(*[x for row in P for x in row], *[x for row in G for x in row]).shape[0])
-    if n < _SIN_COS_MIN:
+    if n < _MIN_ROWS:
         return None
 
     def cols(X):
