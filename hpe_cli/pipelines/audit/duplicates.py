@@ -171,13 +171,6 @@ class Duplicates:
             self._prev_line = int(lines[-1])
         self.n += len(h)
 
-    def _hashes(self) -> np.ndarray:
-        """Every row's hash in input order, as one array."""
-        buf, n = self.buf, self.n
-        if self._in_buf():
-            return buf[:n]
-        return np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
-
     def _in_buf(self) -> bool:
         """Every batch was written to its :meth:`slot` and filed (the value halves hold every hash)."""
         buf = self.buf
@@ -190,11 +183,12 @@ class Duplicates:
         thread of its own (numpy releases the GIL), so the result does not
         depend on ``threads``.
         """
-        H = self._hashes()
         halves = None
-        if self._in_buf():
-            end = len(self.halves)
+        if self._in_buf():  # every hash in input order in buf, and split by value in halves
+            H, end = self.buf[: self.n], len(self.halves)
             halves = (self.halves[: self.n_low], self.halves[end - self.n_high : end])
+        else:
+            H = np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
         self.parts, self.buf, self.halves = [], None, None
         self.dup_idx = np.zeros(0, dtype=np.int64)
         self.first_idx = np.zeros(0, dtype=np.int64)
@@ -253,20 +247,28 @@ def _half(H, low: bool, size: int) -> np.ndarray:
     return S
 
 
-def repeated_in_halves(halves, threads: int = 1) -> np.ndarray:
-    """:func:`repeated_values` of the union of ``halves`` (the values below 2**63, then the others), sorting
-    each in place (on two threads when ``threads > 1``)."""
+def _repeats_of_halves(half, parallel: bool) -> np.ndarray:
+    """The repeated values of the two value halves ``half(True)`` (below 2**63) and ``half(False)``, each made and
+    sorted in place on a thread of its own when ``parallel``, sorted (the same whatever the threads)."""
 
-    def one(S):
+    def one(low: bool):
+        S = half(low)
         S.sort()
         return _repeats(S)
 
-    if threads > 1 and min(len(x) for x in halves) >= 1 << 16:
+    if parallel:
         from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
 
         with ThreadPoolExecutor(2) as pool:
-            return np.concatenate(list(pool.map(one, halves)))
-    return np.concatenate([one(x) for x in halves])
+            return np.concatenate(list(pool.map(one, (True, False))))
+    return np.concatenate([one(True), one(False)])
+
+
+def repeated_in_halves(halves, threads: int = 1) -> np.ndarray:
+    """:func:`repeated_values` of the union of ``halves`` (the values below 2**63, then the others), sorting
+    each in place (on two threads when ``threads > 1``)."""
+    parallel = threads > 1 and min(len(x) for x in halves) >= 1 << 16
+    return _repeats_of_halves(lambda low: halves[0 if low else 1], parallel)
 
 
 def repeated_values(H, threads: int = 1) -> np.ndarray:
@@ -276,18 +278,9 @@ def repeated_values(H, threads: int = 1) -> np.ndarray:
     two threads when ``threads > 1`` (the hashes are uniform, so the halves hold about as many).
     """
     n_low = int(np.count_nonzero(H.view(np.int64) >= 0))
-
-    def one(low: bool):
-        S = _half(H, low, n_low if low else len(H) - n_low)
-        S.sort()
-        return _repeats(S)
-
-    if threads > 1 and len(H) >= 1 << 17:
-        from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
-
-        with ThreadPoolExecutor(2) as pool:
-            return np.concatenate(list(pool.map(one, (True, False))))
-    return np.concatenate([one(True), one(False)])
+    return _repeats_of_halves(
+        lambda low: _half(H, low, n_low if low else len(H) - n_low), threads > 1 and len(H) >= 1 << 17
+    )
 
 
 def unpack_rows(flag_bits, batch_sizes, idx) -> np.ndarray:
