@@ -14,7 +14,7 @@ import pyarrow as pa
 
 from ...errors import HpeError
 from ...io.layout import arrow_to_numpy
-from .sides import Side
+from .sides import Side, file_stems
 
 #: key columns tried in order when --key is not given
 DEFAULT_KEYS = ("image", "file")
@@ -45,13 +45,6 @@ def choose_keys(keys, pred_cols, gt_cols, pred_path, gt_path, join_mode="key"):
         f"prediction columns: {', '.join(pred_cols[:12])}); give --key COL[,COL...], or "
         "--join order to pair rows by position (only with equal row counts)"
     )
-
-
-def file_stems(arr):
-
-    import pyarrow.compute as pc  # lazy: start-up (0.06 s; the streamed run with equal keys needs none)
-
-    return pc.replace_substring_regex(pc.cast(arr, pa.string()), r"^.*[\\/]|\.[^.\\/]*$", "")
 
 
 def _encode(a, b):

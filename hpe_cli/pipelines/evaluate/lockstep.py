@@ -16,8 +16,8 @@ from types import SimpleNamespace
 import numpy as np
 import pyarrow as pa
 
-from .join import JoinUsageError, file_stems
-from .sides import Chunk, SideReader, keys_hash
+from .join import JoinUsageError
+from .sides import Chunk, SideReader, file_stems, keys_hash
 
 
 class Unaligned(Exception):

@@ -10,8 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pyarrow as pa
 
-from .join import file_stems
-from .sides import Chunk
+from .sides import Chunk, file_stems
 
 ANGLES = ("pitch", "yaw", "roll")
 

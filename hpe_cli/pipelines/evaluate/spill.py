@@ -23,8 +23,7 @@ import pyarrow as pa
 
 from ...io.key_hash import string_hashes
 from ...io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
-from .join import file_stems
-from .sides import Side, combine_key_hash, key_text
+from .sides import Side, combine_key_hash, file_stems, key_text
 
 
 def _bools(col) -> np.ndarray:
