@@ -153,7 +153,7 @@ done:
     return ret;
 }
 
-/* mix(h uint64[n] in place): SplitMix64's finaliser.  twin: hpe_cli.io.key_hash._mix */
+/* mix(h uint64[n] in place): SplitMix64's finaliser.  twin: hpe_cli.io.key_hash.mix */
 static PyObject *k_mix(PyObject *self, PyObject *args) {
     Py_buffer h;
     if (!PyArg_ParseTuple(args, "w*", &h)) return NULL;
@@ -453,7 +453,7 @@ static PyMethodDef methods[] = {
     {"row_hash_add", k_row_hash_add, METH_VARARGS,
      "row_hash_add(h, words, is_float): one column into the audit's row hashes (twin: "
      "hpe_cli.pipelines.audit.duplicates.key_hashes)."},
-    {"mix", k_mix, METH_VARARGS, "mix(h): SplitMix64's finaliser in place (twin: hpe_cli.io.key_hash._mix)."},
+    {"mix", k_mix, METH_VARARGS, "mix(h): SplitMix64's finaliser in place (twin: hpe_cli.io.key_hash.mix)."},
     {"angle_screen", k_angle_screen, METH_VARARGS,
      "angle_screen(...): the audit's screened angle masks (twin: hpe_cli.rotation.audit.angle_flags_screened)."},
     {"sin_cos", k_sin_cos, METH_VARARGS, "sin_cos(x, s, c): sine and cosine in one call (twin: np.sin, np.cos)."},

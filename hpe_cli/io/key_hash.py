@@ -24,13 +24,18 @@ _LEN = np.uint64(0x9E3779B97F4A7C15)
 _NULL = np.uint64(0xD6E8FEB86659FD93)
 
 
-def _mix(h: np.ndarray) -> np.ndarray:
-    """SplitMix64's finaliser, vectorised (uint64 arithmetic wraps), in place on ``h`` (a fresh array)."""
-    h ^= h >> np.uint64(30)
-    h *= np.uint64(0xBF58476D1CE4E5B9)
-    h ^= h >> np.uint64(27)
-    h *= np.uint64(0x94D049BB133111EB)
-    h ^= h >> np.uint64(31)
+def mix(h: np.ndarray, scratch: np.ndarray | None = None) -> np.ndarray:
+    """SplitMix64's finaliser, in place on the uint64 array ``h`` (uint64 arithmetic wraps); returns ``h``.
+
+    ``scratch``: a uint64 array of ``h``'s length for the shifted copies (one is made when None). Also the
+    finaliser of the audit's row hashes (:func:`hpe_cli.pipelines.audit.duplicates.key_hashes`).
+    """
+    t = np.empty_like(h) if scratch is None else scratch
+    for shift, mult in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB), (31, None)):
+        np.right_shift(h, np.uint64(shift), out=t)
+        np.bitwise_xor(h, t, out=h)
+        if mult is not None:
+            np.multiply(h, np.uint64(mult), out=h)
     return h
 
 
@@ -108,7 +113,7 @@ def string_hashes(arr, stems: bool = True) -> tuple[np.ndarray, np.ndarray | Non
         ln = (e - s).astype(np.uint64)
         ln *= _LEN
         h ^= ln
-        return _mix(h)
+        return mix(h)
 
     hx = sub(start, end)
     if not stems:

@@ -104,12 +104,7 @@ def key_hashes(label_cols, batch, key_cols, out=None) -> np.ndarray:
             np.multiply(h, _ROW_MULT, out=h)
             np.right_shift(h, np.uint64(32), out=t)
             np.bitwise_xor(h, t, out=h)
-        for shift, mult in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB), (31, None)):  # SplitMix64 finaliser
-            np.right_shift(h, np.uint64(shift), out=t)
-            np.bitwise_xor(h, t, out=h)
-            if mult is not None:
-                np.multiply(h, np.uint64(mult), out=h)
-    return h
+    return key_hash.mix(h, t)  # SplitMix64's finaliser
 
 
 class Duplicates:
