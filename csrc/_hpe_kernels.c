@@ -444,6 +444,197 @@ done:
     return ret;
 }
 
+/* ---- evaluate's key join (pipelines/evaluate/spill.py): pairing by 64-bit key hash, verification on the bytes ---- */
+
+/* hash_pairs(hg uint64[ng], hp uint64[np], pos int64[ng]) -> bool: pos[i] = the row of hp whose value equals
+ * hg[i], else -1; False (pos unspecified) when a value repeats on one side. Radix-partitioned by the top bits
+ * (buckets of about 2,048 rows of both sides), then one open-addressing table per bucket, which stays in the
+ * caches: no random access over the whole arrays but the writes to pos.
+ * twin: hpe_cli.pipelines.evaluate.spill.hash_matches (numpy: one sort of both sides) */
+static int pair_buckets(const uint64_t *hg, Py_ssize_t ng, const uint64_t *hp, Py_ssize_t np_, int64_t *pos) {
+    Py_ssize_t total = ng + np_;
+    int bits = 0;
+    while (bits < 24 && (total >> bits) > 4096) bits++;
+    Py_ssize_t nb = (Py_ssize_t)1 << bits;
+    int shift = 64 - bits;
+    Py_ssize_t *start = calloc((size_t)(2 * nb + 2), sizeof(Py_ssize_t));
+    uint64_t *sh = malloc((size_t)(total ? total : 1) * sizeof(uint64_t));
+    int64_t *sr = malloc((size_t)(total ? total : 1) * sizeof(int64_t));
+    int status = 1;
+    if (!start || !sh || !sr) {
+        status = -1;
+        goto out;
+    }
+    /* bucket b of side s (0 GT, 1 prediction) at [start[2b+s], start[2b+s+1]): a bucket's GT rows, then its
+     * predictions, each in row order */
+    for (Py_ssize_t i = 0; i < ng; i++) start[2 * (bits ? hg[i] >> shift : 0) + 1]++;
+    for (Py_ssize_t i = 0; i < np_; i++) start[2 * (bits ? hp[i] >> shift : 0) + 2]++;
+    for (Py_ssize_t b = 1; b <= 2 * nb; b++) start[b] += start[b - 1];
+    Py_ssize_t *cur = malloc((size_t)(2 * nb) * sizeof(Py_ssize_t));
+    if (!cur) {
+        status = -1;
+        goto out;
+    }
+    memcpy(cur, start, (size_t)(2 * nb) * sizeof(Py_ssize_t));
+    for (Py_ssize_t i = 0; i < ng; i++) {
+        Py_ssize_t at = cur[2 * (bits ? hg[i] >> shift : 0)]++;
+        sh[at] = hg[i];
+        sr[at] = i;
+    }
+    for (Py_ssize_t i = 0; i < np_; i++) {
+        Py_ssize_t at = cur[2 * (bits ? hp[i] >> shift : 0) + 1]++;
+        sh[at] = hp[i];
+        sr[at] = i;
+    }
+    free(cur);
+    Py_ssize_t biggest = 0;
+    for (Py_ssize_t b = 0; b < nb; b++)
+        if (start[2 * b + 2] - start[2 * b] > biggest) biggest = start[2 * b + 2] - start[2 * b];
+    size_t cap = 16;
+    while (cap < (size_t)(2 * biggest)) cap <<= 1;
+    int32_t *table = malloc(cap * sizeof(int32_t)); /* slot: 1 + the bucket-local index of a GT row, 0 empty */
+    if (!table) {
+        status = -1;
+        goto out;
+    }
+    for (Py_ssize_t b = 0; b < nb && status == 1; b++) {
+        Py_ssize_t g0 = start[2 * b], p0 = start[2 * b + 1], p1 = start[2 * b + 2];
+        size_t m = 16;
+        while (m < (size_t)(2 * (p1 - g0))) m <<= 1;
+        memset(table, 0, m * sizeof(int32_t));
+        for (Py_ssize_t j = g0; j < p0; j++) {
+            size_t s = (size_t)sh[j] & (m - 1);
+            while (table[s]) {
+                if (sh[g0 + table[s] - 1] == sh[j]) {
+                    status = 0; /* twice among the GT rows */
+                    break;
+                }
+                s = (s + 1) & (m - 1);
+            }
+            if (!status) break;
+            table[s] = (int32_t)(j - g0 + 1);
+            pos[sr[j]] = -1;
+        }
+        for (Py_ssize_t j = p0; j < p1 && status == 1; j++) {
+            size_t s = (size_t)sh[j] & (m - 1);
+            while (table[s]) {
+                Py_ssize_t k = g0 + table[s] - 1;
+                if (sh[k] == sh[j]) {
+                    if (k >= p0) { /* an earlier prediction with this hash */
+                        status = 0;
+                        break;
+                    }
+                    if (pos[sr[k]] >= 0) { /* the GT row already has a prediction: this one repeats it */
+                        status = 0;
+                        break;
+                    }
+                    pos[sr[k]] = sr[j];
+                    goto next_pred;
+                }
+                s = (s + 1) & (m - 1);
+            }
+            if (status != 1) break;
+            table[s] = (int32_t)(j - g0 + 1); /* a prediction with no GT row: kept to find its repeats */
+        next_pred:;
+        }
+    }
+    free(table);
+out:
+    free(start);
+    free(sh);
+    free(sr);
+    return status;
+}
+
+static PyObject *k_hash_pairs(PyObject *self, PyObject *args) {
+    Py_buffer g, p, o;
+    if (!PyArg_ParseTuple(args, "y*y*w*", &g, &p, &o)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t ng = g.len / 8, np_ = p.len / 8;
+    if (!need(&g, ng, 8, "hg") || !need(&p, np_, 8, "hp") || !need(&o, ng, 8, "pos")) goto done;
+    if (ng + np_ > INT32_MAX) {
+        PyErr_SetString(PyExc_ValueError, "hash_pairs: expected at most 2**31 - 1 rows");
+        goto done;
+    }
+    int status;
+    Py_BEGIN_ALLOW_THREADS
+    status = pair_buckets((const uint64_t *)g.buf, ng, (const uint64_t *)p.buf, np_, (int64_t *)o.buf);
+    Py_END_ALLOW_THREADS
+    if (status < 0) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    ret = PyBool_FromLong(status);
+done:
+    PyBuffer_Release(&g);
+    PyBuffer_Release(&p);
+    PyBuffer_Release(&o);
+    return ret;
+}
+
+/* first_unequal(off_a int32|int64[], data_a, rows_a int64[m] or None, off_b, data_b, rows_b int64[m], wide_a,
+ * wide_b) -> int: the first pair j whose strings a[rows_a[j]] (a[j] without rows_a) and b[rows_b[j]] differ in
+ * bytes, or -1. Offsets are Arrow's (the array's own offset applied by the caller: a view of its buffer).
+ * twin: pyarrow.compute.equal over a.take(rows_a), b.take(rows_b) (spill.Partitions.codes) */
+static PyObject *k_first_unequal(PyObject *self, PyObject *args) {
+    Py_buffer oa, da, ob, db, rb, ra = {0};
+    PyObject *ra_o;
+    int wa, wb;
+    if (!PyArg_ParseTuple(args, "y*y*Oy*y*y*pp", &oa, &da, &ra_o, &ob, &db, &rb, &wa, &wb)) return NULL;
+    PyObject *ret = NULL;
+    int have_ra = 0;
+    Py_ssize_t m = rb.len / 8, j, bad = -1;
+    Py_ssize_t na = oa.len / (wa ? 8 : 4) - 1, nb = ob.len / (wb ? 8 : 4) - 1;
+    if (ra_o != Py_None) {
+        if (PyObject_GetBuffer(ra_o, &ra, PyBUF_SIMPLE) < 0) goto done;
+        have_ra = 1;
+    }
+    if (!need(&rb, m, 8, "rows_b") || (have_ra && !need(&ra, m, 8, "rows_a"))) goto done;
+    if (na < (have_ra ? 0 : m) || nb < 0) {
+        PyErr_SetString(PyExc_ValueError, "first_unequal: expected offsets of at least one more than the rows");
+        goto done;
+    }
+    const int64_t *RA = have_ra ? (const int64_t *)ra.buf : NULL, *RB = (const int64_t *)rb.buf;
+    for (j = 0; j < m; j++)
+        if ((RA && (RA[j] < 0 || RA[j] >= na)) || RB[j] < 0 || RB[j] >= nb) {
+            PyErr_SetString(PyExc_ValueError, "first_unequal: expected rows within the arrays");
+            goto done;
+        }
+    const uint8_t *A = (const uint8_t *)da.buf, *B = (const uint8_t *)db.buf;
+    int ok = 1;
+    Py_BEGIN_ALLOW_THREADS
+    for (j = 0; j < m; j++) {
+        int64_t i = RA ? RA[j] : j, k = RB[j];
+        int64_t s0 = wa ? ((const int64_t *)oa.buf)[i] : ((const int32_t *)oa.buf)[i];
+        int64_t e0 = wa ? ((const int64_t *)oa.buf)[i + 1] : ((const int32_t *)oa.buf)[i + 1];
+        int64_t s1 = wb ? ((const int64_t *)ob.buf)[k] : ((const int32_t *)ob.buf)[k];
+        int64_t e1 = wb ? ((const int64_t *)ob.buf)[k + 1] : ((const int32_t *)ob.buf)[k + 1];
+        if (s0 < 0 || e0 < s0 || e0 > da.len || s1 < 0 || e1 < s1 || e1 > db.len) {
+            ok = 0;
+            break;
+        }
+        if (e0 - s0 != e1 - s1 || memcmp(A + s0, B + s1, (size_t)(e0 - s0))) {
+            bad = j;
+            break;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    if (!ok) {
+        PyErr_SetString(PyExc_ValueError, "first_unequal: expected increasing offsets within the data");
+        goto done;
+    }
+    ret = PyLong_FromSsize_t(bad);
+done:
+    PyBuffer_Release(&oa);
+    PyBuffer_Release(&da);
+    PyBuffer_Release(&ob);
+    PyBuffer_Release(&db);
+    PyBuffer_Release(&rb);
+    if (have_ra) PyBuffer_Release(&ra);
+    return ret;
+}
+/* ---- end of evaluate's key join ---- */
+
 static PyMethodDef methods[] = {
     {"split_top_bit", k_split_top_bit, METH_VARARGS,
      "split_top_bit(h, low, high) -> n_low: the hashes by value half, in order (twin: a boolean index)."},
@@ -461,6 +652,12 @@ static PyMethodDef methods[] = {
      "core_errors(P, G, geo, maev, fro): geodesic, column angles and Frobenius distance (twins: "
      "hpe_cli.metrics.rotation_errors)."},
     {"atan2", k_atan2, METH_VARARGS, "atan2(y, x, out): the C library's atan2 (for the probe)."},
+    {"hash_pairs", k_hash_pairs, METH_VARARGS,
+     "hash_pairs(hg, hp, pos) -> bool: each GT hash's prediction row, or -1; False when a hash repeats on a side "
+     "(twin: hpe_cli.pipelines.evaluate.spill.hash_matches)."},
+    {"first_unequal", k_first_unequal, METH_VARARGS,
+     "first_unequal(off_a, data_a, rows_a, off_b, data_b, rows_b, wide_a, wide_b) -> int: the first pair of "
+     "strings that differ, or -1 (twin: pyarrow.compute.equal on the taken strings)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -21,7 +21,18 @@ import numpy as np
 _STATE: dict = {}
 
 #: the functions this version calls: a module that lacks one is treated as not built
-KERNELS = ("string_hashes", "row_hash_add", "mix", "split_top_bit", "angle_screen", "sin_cos", "core_errors", "atan2")
+KERNELS = (
+    "string_hashes",
+    "row_hash_add",
+    "mix",
+    "split_top_bit",
+    "angle_screen",
+    "sin_cos",
+    "core_errors",
+    "atan2",
+    "hash_pairs",
+    "first_unequal",
+)
 
 
 def kernels():
@@ -143,3 +154,45 @@ def core_errors(P, G):
     geo, maev, fro = np.empty(n), np.empty((n, 3)), np.empty(n)
     k.core_errors(cols(P), cols(G), geo, maev, fro)
     return geo, maev, fro
+
+
+def hash_pairs(hg, hp):
+    """``(rows of hg with a match, their rows in hp)``, the first ascending, of two uint64 arrays by equal values, in
+    one cache-sized pass per bucket of the top bits; False when a value repeats on one side; None where the kernels
+    are not built (then :func:`hpe_cli.pipelines.evaluate.spill.hash_matches` sorts: the same pairs)."""
+    k = kernels()
+    if k is None or len(hg) + len(hp) < _MIN_ROWS:
+        return None
+    pos = np.empty(len(hg), dtype=np.int64)
+    if not k.hash_pairs(np.ascontiguousarray(hg, np.uint64), np.ascontiguousarray(hp, np.uint64), pos):
+        return False
+    gi = np.flatnonzero(pos >= 0)
+    return gi, pos[gi]
+
+
+def _string_buffers(arr):
+    """``(offsets view, data, wide)`` of a pyarrow ``string``/``large_string`` array without nulls (its own offset
+    applied): the buffers as they are, no copy."""
+    wide = str(arr.type) in ("large_string", "large_utf8")
+    width = 8 if wide else 4
+    bufs = arr.buffers()
+    off = np.frombuffer(bufs[1], dtype=np.uint8, count=(len(arr) + 1) * width, offset=arr.offset * width)
+    data = bufs[2] if bufs[2] is not None else b""
+    return off, data, wide
+
+
+def first_unequal(a, rows_a, b, rows_b):
+    """The first ``j`` where the strings ``a[rows_a[j]]`` (``a[j]`` when ``rows_a`` is None) and ``b[rows_b[j]]``
+    differ, -1 when none does, in one C loop over the Arrow buffers (no gather); None where the kernels are not
+    built or an array is not text without nulls (then the caller compares taken arrays with pyarrow: the same
+    answer). ``a``, ``b``: pyarrow string or large_string arrays; rows: int64 arrays."""
+    k = kernels()
+    if k is None:
+        return None
+    text = ("string", "utf8", "large_string", "large_utf8")
+    if str(a.type) not in text or str(b.type) not in text or a.null_count or b.null_count:
+        return None
+    oa, da, wa = _string_buffers(a)
+    ob, db, wb = _string_buffers(b)
+    ra = None if rows_a is None else np.ascontiguousarray(rows_a, np.int64)
+    return k.first_unequal(oa, da, ra, ob, db, np.ascontiguousarray(rows_b, np.int64), wa, wb)

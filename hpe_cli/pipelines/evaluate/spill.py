@@ -23,6 +23,7 @@ import pyarrow as pa
 
 from ...io.key_hash import string_hashes
 from ...io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
+from ...native import first_unequal, hash_pairs
 from .sides import Side, combine_key_hash, file_stems, key_text
 
 
@@ -78,9 +79,13 @@ def hash_matches(hg, hp):
     One ``np.sort`` of both sides (numpy sorts uint64 with SIMD; ``argsort`` is about 15x slower): each hash keeps
     its top bits, then a side bit (GT 0, prediction 1), then its row, so a GT row and its prediction end up side by
     side. A match on the top bits is kept when the whole hashes are equal; top bits that repeat on one side (rare)
-    take the exact path (``argsort`` of the whole hashes).
+    take the exact path (``argsort`` of the whole hashes). Where the compiled kernels are built,
+    :func:`hpe_cli.native.hash_pairs` finds the same pairs (one table per cache-sized bucket, no sort).
     """
 
+    fast = hash_pairs(hg, hp)
+    if fast is not None:
+        return fast if fast is not False else None
     ng = len(hg)
     bits = max(1, int(max(ng, len(hp))).bit_length())
     low = np.uint64((1 << bits) - 1)
@@ -404,6 +409,12 @@ class Partitions:
                 a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
                 b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b,
             )
+            if k not in stems:  # the bytes compared at the pairs straight off the Arrow buffers (no gather)
+                bad = first_unequal(a, None if len(gi) == gt.n else gi, b, pi)
+                if bad is not None:
+                    if bad >= 0:
+                        return None
+                    continue
             # every GT row matched (the usual case): gi is 0..n-1, the column itself
             a = a if len(gi) == gt.n else a.take(numpy_to_arrow(gi))
             b = b.take(numpy_to_arrow(pi))
