@@ -633,6 +633,192 @@ done:
     if (have_ra) PyBuffer_Release(&ra);
     return ret;
 }
+
+/* partition_scatter(part int16[n], K, bounds int64[K+1], srcs tuple, dsts tuple, widths tuple): a stable counting
+ * sort of the rows by partition: row i of each source (width bytes a row) goes to its destination at
+ * bounds[part[i]] + the rows of that partition before it; bounds[k] = the rows of the partitions before k.
+ * twin: order = np.argsort(part, kind="stable"); dst = src[order] (spill._SideSpill.prepare) */
+static int count_parts(const int16_t *part, Py_ssize_t n, Py_ssize_t K, int64_t *bounds) {
+    memset(bounds, 0, (size_t)(K + 1) * sizeof(int64_t));
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (part[i] < 0 || part[i] >= K) return 0;
+        bounds[part[i] + 1]++;
+    }
+    for (Py_ssize_t k = 1; k <= K; k++) bounds[k] += bounds[k - 1];
+    return 1;
+}
+
+static void scatter_rows(const int16_t *part, Py_ssize_t n, const int64_t *bounds, int64_t *cur, Py_ssize_t K,
+                         const uint8_t *src, uint8_t *dst, Py_ssize_t w) {
+    memcpy(cur, bounds, (size_t)K * sizeof(int64_t));
+    if (w == 8) {
+        const uint64_t *a = (const uint64_t *)src;
+        uint64_t *b = (uint64_t *)dst;
+        for (Py_ssize_t i = 0; i < n; i++) b[cur[part[i]]++] = a[i];
+    } else if (w == 1) {
+        for (Py_ssize_t i = 0; i < n; i++) dst[cur[part[i]]++] = src[i];
+    } else if (w == 24) {
+        for (Py_ssize_t i = 0; i < n; i++) memcpy(dst + 24 * cur[part[i]]++, src + 24 * i, 24);
+    } else {
+        for (Py_ssize_t i = 0; i < n; i++) memcpy(dst + w * cur[part[i]]++, src + w * i, (size_t)w);
+    }
+}
+
+static PyObject *k_partition_scatter(PyObject *self, PyObject *args) {
+    Py_buffer pt, bd;
+    Py_ssize_t K;
+    PyObject *srcs, *dsts, *widths;
+    if (!PyArg_ParseTuple(args, "y*nw*O!O!O!", &pt, &K, &bd, &PyTuple_Type, &srcs, &PyTuple_Type, &dsts,
+                          &PyTuple_Type, &widths))
+        return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = pt.len / 2, m = PyTuple_GET_SIZE(srcs), j, got = 0;
+    Py_buffer *sb = calloc((size_t)(2 * m + 1), sizeof(Py_buffer));
+    Py_ssize_t *w = calloc((size_t)(m + 1), sizeof(Py_ssize_t));
+    int64_t *cur = malloc((size_t)(K > 0 ? K : 1) * sizeof(int64_t));
+    if (!sb || !w || !cur) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    if (K < 1 || K > 32767 || !need(&pt, n, 2, "part") || !need(&bd, K + 1, 8, "bounds")) {
+        if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "partition_scatter: expected 1 <= K <= 32767");
+        goto done;
+    }
+    if (PyTuple_GET_SIZE(dsts) != m || PyTuple_GET_SIZE(widths) != m) {
+        PyErr_SetString(PyExc_ValueError, "partition_scatter: expected as many destinations and widths as sources");
+        goto done;
+    }
+    for (j = 0; j < m; j++, got++) {
+        w[j] = PyLong_AsSsize_t(PyTuple_GET_ITEM(widths, j));
+        if (w[j] < 1 && !PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "partition_scatter: expected widths >= 1");
+        if (PyErr_Occurred()) goto done;
+        if (PyObject_GetBuffer(PyTuple_GET_ITEM(srcs, j), &sb[2 * j], PyBUF_SIMPLE) < 0) goto done;
+        if (PyObject_GetBuffer(PyTuple_GET_ITEM(dsts, j), &sb[2 * j + 1], PyBUF_WRITABLE) < 0) {
+            PyBuffer_Release(&sb[2 * j]);
+            goto done;
+        }
+        if (!need(&sb[2 * j], n, w[j], "source") || !need(&sb[2 * j + 1], n, w[j], "destination")) {
+            got++;
+            goto done;
+        }
+    }
+    const int16_t *P = (const int16_t *)pt.buf;
+    int64_t *B = (int64_t *)bd.buf;
+    int ok;
+    Py_BEGIN_ALLOW_THREADS
+    ok = count_parts(P, n, K, B);
+    if (ok)
+        for (j = 0; j < m; j++)
+            scatter_rows(P, n, B, cur, K, (const uint8_t *)sb[2 * j].buf, (uint8_t *)sb[2 * j + 1].buf, w[j]);
+    Py_END_ALLOW_THREADS
+    if (!ok) {
+        PyErr_SetString(PyExc_ValueError, "partition_scatter: expected partitions in [0, K)");
+        goto done;
+    }
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (sb)
+        for (j = 0; j < got; j++) {
+            PyBuffer_Release(&sb[2 * j]);
+            PyBuffer_Release(&sb[2 * j + 1]);
+        }
+    free(sb);
+    free(w);
+    free(cur);
+    PyBuffer_Release(&pt);
+    PyBuffer_Release(&bd);
+    return ret;
+}
+
+/* partition_strings(part int16[n], K, offsets int32|int64[n+1], data, out_offsets (same width)[n+1], out_data,
+ * wide): the strings of an Arrow array (its own offset applied by the caller) in the order partition_scatter gives
+ * the rows; out_offsets start at 0, out_data holds offsets[n] - offsets[0] bytes.
+ * twin: arr.take(np.argsort(part, kind="stable")) */
+static PyObject *k_partition_strings(PyObject *self, PyObject *args) {
+    Py_buffer pt, of, da, oo, od;
+    Py_ssize_t K;
+    int wide;
+    if (!PyArg_ParseTuple(args, "y*ny*y*w*w*p", &pt, &K, &of, &da, &oo, &od, &wide)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = pt.len / 2, ow = wide ? 8 : 4;
+    int64_t *rows = NULL, *bytes = NULL;
+    if (K < 1 || K > 32767) {
+        PyErr_SetString(PyExc_ValueError, "partition_strings: expected 1 <= K <= 32767");
+        goto done;
+    }
+    if (!need(&pt, n, 2, "part") || !need(&of, n + 1, ow, "offsets") || !need(&oo, n + 1, ow, "out_offsets"))
+        goto done;
+    rows = calloc((size_t)(K + 1), sizeof(int64_t));
+    bytes = calloc((size_t)(K + 1), sizeof(int64_t));
+    if (!rows || !bytes) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const int16_t *P = (const int16_t *)pt.buf;
+    const int32_t *O4 = (const int32_t *)of.buf;
+    const int64_t *O8 = (const int64_t *)of.buf;
+#define OFF(i) (wide ? O8[i] : (int64_t)O4[i])
+    int64_t base = OFF(0);
+    for (Py_ssize_t i = 0; i < n; i++)
+        if (OFF(i + 1) < OFF(i) || OFF(i) < 0) {
+            PyErr_SetString(PyExc_ValueError, "partition_strings: expected increasing offsets");
+            goto done;
+        }
+    if (OFF(n) > da.len || OFF(n) - base != od.len) {
+        PyErr_Format(PyExc_ValueError, "partition_strings: expected %lld data bytes, got %zd", (long long)(OFF(n) - base),
+                     od.len);
+        goto done;
+    }
+    int ok = 1;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n && ok; i++) {
+        if (P[i] < 0 || P[i] >= K) {
+            ok = 0;
+            break;
+        }
+        rows[P[i] + 1]++;
+        bytes[P[i] + 1] += OFF(i + 1) - OFF(i);
+    }
+    if (ok) {
+        for (Py_ssize_t k = 1; k <= K; k++) {
+            rows[k] += rows[k - 1];
+            bytes[k] += bytes[k - 1];
+        }
+        const uint8_t *D = (const uint8_t *)da.buf;
+        uint8_t *E = (uint8_t *)od.buf;
+        for (Py_ssize_t i = 0; i < n; i++) {
+            int64_t r = rows[P[i]]++, b = bytes[P[i]], len = OFF(i + 1) - OFF(i);
+            if (wide)
+                ((int64_t *)oo.buf)[r] = b;
+            else
+                ((int32_t *)oo.buf)[r] = (int32_t)b;
+            memcpy(E + b, D + OFF(i), (size_t)len);
+            bytes[P[i]] = b + len;
+        }
+        if (wide)
+            ((int64_t *)oo.buf)[n] = OFF(n) - base;
+        else
+            ((int32_t *)oo.buf)[n] = (int32_t)(OFF(n) - base);
+    }
+    Py_END_ALLOW_THREADS
+#undef OFF
+    if (!ok) {
+        PyErr_SetString(PyExc_ValueError, "partition_strings: expected partitions in [0, K)");
+        goto done;
+    }
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    free(rows);
+    free(bytes);
+    PyBuffer_Release(&pt);
+    PyBuffer_Release(&of);
+    PyBuffer_Release(&da);
+    PyBuffer_Release(&oo);
+    PyBuffer_Release(&od);
+    return ret;
+}
 /* ---- end of evaluate's key join ---- */
 
 static PyMethodDef methods[] = {
@@ -658,6 +844,12 @@ static PyMethodDef methods[] = {
     {"first_unequal", k_first_unequal, METH_VARARGS,
      "first_unequal(off_a, data_a, rows_a, off_b, data_b, rows_b, wide_a, wide_b) -> int: the first pair of "
      "strings that differ, or -1 (twin: pyarrow.compute.equal on the taken strings)."},
+    {"partition_scatter", k_partition_scatter, METH_VARARGS,
+     "partition_scatter(part, K, bounds, srcs, dsts, widths): rows in stable partition order (twin: a stable "
+     "argsort of part and a take)."},
+    {"partition_strings", k_partition_strings, METH_VARARGS,
+     "partition_strings(part, K, offsets, data, out_offsets, out_data, wide): Arrow strings in stable partition "
+     "order (twin: a stable argsort of part and a take)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -32,6 +32,8 @@ KERNELS = (
     "atan2",
     "hash_pairs",
     "first_unequal",
+    "partition_scatter",
+    "partition_strings",
 )
 
 
@@ -196,3 +198,39 @@ def first_unequal(a, rows_a, b, rows_b):
     ob, db, wb = _string_buffers(b)
     ra = None if rows_a is None else np.ascontiguousarray(rows_a, np.int64)
     return k.first_unequal(oa, da, ra, ob, db, np.ascontiguousarray(rows_b, np.int64), wa, wb)
+
+
+def partition_rows(part, K: int, arrays):
+    """``(bounds int64[K+1], arrays with their rows in stable partition order)``: ``part`` (int16, each in
+    ``[0, K)``) the partition of each row, ``arrays`` numpy arrays of ``len(part)`` rows (any fixed-width dtype, any
+    trailing shape), in one C counting sort; None where the kernels are not built (then the caller takes
+    ``np.argsort(part, kind="stable")``: the same rows)."""
+    k = kernels()
+    if k is None:
+        return None
+    part = np.ascontiguousarray(part, dtype=np.int16)
+    n = len(part)
+    srcs = tuple(np.ascontiguousarray(a) for a in arrays)
+    dsts = tuple(np.empty_like(a) for a in srcs)
+    widths = tuple(a.dtype.itemsize * (a.size // n if n else 1) for a in srcs)
+    bounds = np.empty(K + 1, dtype=np.int64)
+    k.partition_scatter(part, K, bounds, srcs, dsts, widths)
+    return bounds, list(dsts)
+
+
+def partition_strings(part, K: int, arr):
+    """A pyarrow ``string``/``large_string`` array without nulls, its rows in the stable partition order of
+    :func:`partition_rows`, in one C pass over its buffers; None where the kernels are not built or the array is not
+    text without nulls (then the caller takes it with pyarrow: the same strings)."""
+    import pyarrow as pa  # lazy: start-up (the kernels' other callers need none)
+
+    k = kernels()
+    if k is None or arr.null_count or str(arr.type) not in ("string", "utf8", "large_string", "large_utf8"):
+        return None
+    off, data, wide = _string_buffers(arr)
+    width = np.int64 if wide else np.int32
+    first, last = (int(x) for x in np.frombuffer(off, dtype=width)[[0, -1]])
+    out_off = np.empty(len(arr) + 1, dtype=width)
+    out_data = np.empty(last - first, dtype=np.uint8)
+    k.partition_strings(np.ascontiguousarray(part, dtype=np.int16), K, off, data, out_off, out_data, wide)
+    return pa.Array.from_buffers(arr.type, len(arr), [None, pa.py_buffer(out_off), pa.py_buffer(out_data)])

@@ -113,3 +113,33 @@ def test_join_kernels_refuse_wrong_sizes_with_a_message():
     off, data = np.array([0, 1], np.int32), b"a"
     with pytest.raises(ValueError, match="rows within"):
         k.first_unequal(off, data, None, off, data, np.array([1], np.int64), False, False)
+
+
+@needs_kernels
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.integers(0, 6), max_size=200), st.integers(7, 9), st.data())
+def test_partition_rows_and_strings_are_a_stable_sort(parts, K, data):
+    n = len(parts)
+    part = np.array(parts, dtype=np.int16)
+    rng = np.random.default_rng(n)
+    cols = [rng.integers(0, 2**63, n, dtype=np.uint64), rng.random(n) < 0.5, rng.random((n, 3)), rng.random((n, 2, 5))]
+    order = sorted(range(n), key=lambda i: parts[i])  # Python's sort is stable
+    bounds, moved = native.partition_rows(part, K, cols)
+    assert bounds.tolist() == [sum(p < k for p in parts) for k in range(K + 1)]
+    for a, b in zip(cols, moved):
+        assert b.shape == a.shape and b.dtype == a.dtype and b.tolist() == a[order].tolist()
+    texts = data.draw(st.lists(TEXT, min_size=n + 1, max_size=n + 1))
+    arr = pa.array(texts, data.draw(st.sampled_from([pa.string(), pa.large_string()]))).slice(1)
+    got = native.partition_strings(part, K, arr)
+    assert got.type == arr.type and got.to_pylist() == [texts[1 + i] for i in order]
+
+
+@needs_kernels
+def test_partition_kernels_refuse_bad_partitions():
+    k = native.kernels()
+    with pytest.raises(ValueError, match=r"partitions in \[0, K\)"):
+        native.partition_rows(np.array([0, 3], np.int16), 3, [np.zeros(2)])
+    with pytest.raises(ValueError, match=r"partitions in \[0, K\)"):
+        native.partition_strings(np.array([0, -1], np.int16), 3, pa.array(["a", "b"]))
+    with pytest.raises(ValueError, match="expected 16 bytes"):
+        k.partition_scatter(np.zeros(2, np.int16), 2, np.zeros(3, np.int64), (np.zeros(2),), (np.zeros(1),), (8,))

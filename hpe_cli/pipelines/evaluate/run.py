@@ -30,6 +30,7 @@ from ...metrics.align import project_to_so3
 from ...metrics.protocols import PROTOCOLS, PosePair, opal23_mats
 from ...report.eval_plots import check_plot_outputs, write_eval_plots
 from ...report.evaluate_page import write_page
+from ..heap import keep_freed_memory
 from ..pools import default_threads, in_order
 from .dataset import choose_directmhp
 from .join import choose_keys, join
@@ -447,6 +448,7 @@ def run_evaluate(pred_path, gt_path, options: EvaluateOptions, *, progress=None)
     the same whatever their number (chunks are summed and written in input order).
     """
     _check_outputs(options)
+    keep_freed_memory()  # the chunks' freed temporaries reused, not faulted in again (pipelines.heap)
     s, choice = plan(pred_path, gt_path, options, progress)
     r = _scored(s)
     result = _result(s, r)

@@ -23,7 +23,7 @@ import pyarrow as pa
 
 from ...io.key_hash import string_hashes
 from ...io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
-from ...native import first_unequal, hash_pairs
+from ...native import first_unequal, hash_pairs, partition_rows, partition_strings
 from .sides import Side, combine_key_hash, file_stems, key_text
 
 
@@ -150,34 +150,62 @@ class _SideSpill:
         self.stem_differs: set = set()  # key columns with a row whose file stem is not its text
 
     @staticmethod
-    def _table(c, per):
+    def _partitioned(c, per, part, K):
+        """``(table of the chunk's rows in stable partition order, partition bounds)``: each column moved once, by
+        the compiled counting sort where it is built (:func:`hpe_cli.native.partition_rows`,
+        :func:`~hpe_cli.native.partition_strings`), else by a stable ``argsort`` of ``part`` and a take (the
+        same rows)."""
 
         # angles as written are enough: the matrices are rebuilt from them on the scoring threads (the same
         # function on the same numbers: the same bits), which halves what goes to disk and back
         lean = c.raw is not None and c.dist is None
-        cols = {} if lean else {f"{_PFX}c{k}": c.canonical[k] for k in range(9)}
+        fixed = {} if lean else {f"{_PFX}c{k}": np.asarray(c.canonical[k], dtype=np.float64) for k in range(9)}
         for j, (hx, hs) in enumerate(per.values()):
-            cols[f"{_PFX}hx{j}"], cols[f"{_PFX}hs{j}"] = hx, hs
-        cols[f"{_PFX}ok"] = c.ok
-        cols[f"{_PFX}reason"] = (
-            pa.Array.from_buffers(
+            fixed[f"{_PFX}hx{j}"], fixed[f"{_PFX}hs{j}"] = hx, hs
+        fixed[f"{_PFX}ok"] = c.ok
+        if c.raw is not None:  # one (n, 3) block: read back as a view, no column_stack
+            fixed[f"{_PFX}raw"] = np.ascontiguousarray(c.raw, dtype=np.float64)
+        if c.dist is not None:
+            fixed[f"{_PFX}dist"] = c.dist
+        fixed[f"{_PFX}line"] = c.lines
+        unique = list({id(v): v for v in fixed.values()}.values())  # a text key that is its own stem: hx is hs
+        moved = partition_rows(part, K, unique)
+        order = None
+        if moved is None:
+            order = np.argsort(part, kind="stable")
+            bounds = np.searchsorted(part[order], np.arange(K + 1))
+            moved = (bounds, [v[order] for v in unique])
+        bounds, arrays = moved
+        by_id = {id(v): a for v, a in zip(unique, arrays)}
+        cols = {name: by_id[id(v)] for name, v in fixed.items()}
+        if f"{_PFX}raw" in cols:
+            raw = numpy_to_arrow(cols[f"{_PFX}raw"].reshape(-1))
+            cols[f"{_PFX}raw"] = pa.FixedSizeListArray.from_arrays(raw, 3)
+        if c.reasons is None:  # every row usable: n empty strings, built from their (all-zero) offsets
+            reason = pa.Array.from_buffers(
                 pa.string(), c.n, [None, pa.py_buffer(np.zeros(c.n + 1, np.int32)), pa.py_buffer(b"")]
             )
-            if c.reasons is None  # every row usable: n empty strings, built from their (all-zero) offsets
-            else pa.array(c.reasons.astype(str), pa.string())
-        )
-        if c.raw is not None:  # one (n, 3) block: read back as a view, no column_stack
-            raw = numpy_to_arrow(np.ascontiguousarray(c.raw, dtype=np.float64).reshape(-1))
-            cols[f"{_PFX}raw"] = pa.FixedSizeListArray.from_arrays(raw, 3)
-        if c.dist is not None:
-            cols[f"{_PFX}dist"] = c.dist
-        cols[f"{_PFX}line"] = c.lines
+        else:
+            order = np.argsort(part, kind="stable") if order is None else order
+            reason = pa.array(c.reasons[order].astype(str), pa.string())
+        names = list(cols)
+        cols = (
+            {n: cols[n] for n in names[: names.index(f"{_PFX}ok") + 1]}
+            | {f"{_PFX}reason": reason}
+            | {n: cols[n] for n in names[names.index(f"{_PFX}ok") + 1 :]}
+        )  # the columns in their order of before (the schema of the files)
         if c.keys is not None:
             for name in c.keys.column_names:
                 col = c.keys.column(name)
                 col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
-                cols[name] = col.cast(col.type.value_type) if pa.types.is_dictionary(col.type) else col
-        return arrow_table(cols)  # from the buffers: pa.table would import pandas (0.3 s) for numpy columns
+                col = col.cast(col.type.value_type) if pa.types.is_dictionary(col.type) else col
+                moved_col = partition_strings(part, K, col)
+                if moved_col is None:
+                    order = np.argsort(part, kind="stable") if order is None else order
+                    moved_col = col.take(numpy_to_arrow(order))
+                cols[name] = moved_col
+        # from the buffers: pa.table would import pandas (0.3 s) for numpy columns
+        return arrow_table(cols), bounds
 
     def prepare(self, c, keys):
         """``(table of the chunk's rows sorted by partition, partition bounds, key columns whose stems differ)``:
@@ -188,14 +216,12 @@ class _SideSpill:
         h, per = key_hashes(c.keys, keys)
         # a key whose stems are its texts everywhere needs no count
         differs = {j for j, (hx, hs) in enumerate(per.values()) if hx is not hs and bool((hx != hs).any())}
-        t = self._table(c, per)
         # partition numbers < MAX_PARTITIONS fit int16, whose stable sort is a radix sort
         K = np.uint64(self.K)
         # h % K, written with // (numpy divides by a scalar with libdivide: 10x faster than its %)
         part = (h - (h // K) * K).astype(np.int16) if self.K > 1 else np.zeros(c.n, dtype=np.int16)
-        order = np.argsort(part, kind="stable")
-        bounds = np.searchsorted(part[order], np.arange(self.K + 1))
-        return t.take(numpy_to_arrow(order)), bounds, differs  # one gather; each partition a zero-copy slice
+        t, bounds = self._partitioned(c, per, part, self.K)
+        return t, bounds, differs  # each partition a zero-copy slice
 
     def add(self, c, keys):
 
