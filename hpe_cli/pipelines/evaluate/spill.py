@@ -311,11 +311,11 @@ class _SideSpill:
                 side.raw = arrow_to_numpy(raw.values if raw.offset == 0 else raw.flatten()).reshape(-1, 3)
             if f"{_PFX}dist" in t.column_names:
                 side.dist = col(f"{_PFX}dist")
-            side.hashes = {
-                j: (col(f"{_PFX}hx{j}"), col(f"{_PFX}hs{j}"))
-                for j in range(len(r.keep))
-                if f"{_PFX}hx{j}" in t.column_names
-            }
+            side.hashes = {}
+            for j in range(len(r.keep)):
+                if f"{_PFX}hx{j}" in t.column_names:
+                    hx = col(f"{_PFX}hx{j}")  # a column whose stems are its texts in every row: hs is hx
+                    side.hashes[j] = (hx, col(f"{_PFX}hs{j}") if j in self.stem_differs else hx)
         side.image_dir, side.unit = r.image_dir, r.unit
         return side
 
