@@ -16,6 +16,8 @@ import math
 import os
 import shutil
 import tempfile
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing
 
 import numpy as np
@@ -290,7 +292,8 @@ class _SideSpill:
             has_reasons = bool(pc.max(pc.utf8_length(rc)).as_py() or 0) if len(rc) else False
             reasons = rc.to_numpy(zero_copy_only=False).astype(object) if has_reasons else None
             keys = t.select([n for n in t.column_names if not n.startswith(_PFX)])
-            keys = keys.select(r.keep) if r.keep else None
+            # one chunk, copied off the memory map: the mapped file leaves memory once the side is built
+            keys = keys.select(r.keep).combine_chunks() if r.keep else None
             by = keys.column(r.by).to_numpy(zero_copy_only=False) if r.by else None
             lean = f"{_PFX}c0" not in t.column_names
             side = Side(
@@ -320,6 +323,17 @@ class _SideSpill:
         return side
 
 
+class _LockedProgress:
+    """A progress bar updated from two threads (one lock: no count lost)."""
+
+    def __init__(self, bar):
+        self.bar, self.lock = bar, threading.Lock()
+
+    def update(self, n):
+        with self.lock:
+            self.bar.update(n)
+
+
 class Partitions:
     """Both sides written to ``K`` partition files each; :meth:`sides` gives one partition at a time."""
 
@@ -331,18 +345,44 @@ class Partitions:
         self.g, self.p = _SideSpill(self.folder, "gt", gr, self.K), _SideSpill(self.folder, "pred", pr, self.K)
 
     def fill(self):
+        """Write both sides' partition files: side by side (the predictions on a thread of their own) when the
+        readers have more than one thread, else one after the other. The files are the same either way (each
+        side's chunks are written in file order), and so is the error raised: the ground truth's if it has one
+        (it is read to its end, as when read first), else the predictions'."""
         try:
-            for spill, reader in ((self.g, self.gr), (self.p, self.pr)):
-                reader.matrices = False  # angles are kept as written: their matrices are built when scored
-                reader.prepare = lambda c, spill=spill: spill.prepare(c, self.keys)  # on the label threads
-                with closing(reader.chunks()) as chunks:  # an error stops the label threads at once
-                    for c in chunks:
-                        spill.add(c, self.keys)
-                spill.close()
+            if min(self.gr.threads, self.pr.threads) < 2:
+                self._fill_side(self.g, self.gr, None)
+                self._fill_side(self.p, self.pr, None)
+                return self
+            stop = threading.Event()
+            bars = [r.progress for r in (self.gr, self.pr)]
+            for r in (self.gr, self.pr):  # both threads count rows on the one bar
+                r.progress = _LockedProgress(r.progress) if r.progress is not None else None
+            with ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-spill") as ex:
+                pred = ex.submit(self._fill_side, self.p, self.pr, stop)
+                try:
+                    self._fill_side(self.g, self.gr, None)
+                except BaseException:
+                    stop.set()  # the predictions' thread stops at its next chunk (the pool waits for it)
+                    raise
+                finally:
+                    ex.shutdown(wait=True)
+                    self.gr.progress, self.pr.progress = bars
+            pred.result()
         except BaseException:
             self.cleanup()
             raise
         return self
+
+    def _fill_side(self, spill, reader, stop):
+        reader.matrices = False  # angles are kept as written: their matrices are built when scored
+        reader.prepare = lambda c: spill.prepare(c, self.keys)  # on the label threads
+        with closing(reader.chunks()) as chunks:  # an error stops the label threads at once
+            for c in chunks:
+                if stop is not None and stop.is_set():
+                    return
+                spill.add(c, self.keys)
+        spill.close()
 
     def _empty_keys(self, reader, spill, other):
 
