@@ -24,7 +24,7 @@ import numpy as np
 import pyarrow as pa
 
 from ...io.key_hash import string_hashes
-from ...io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
+from ...io.layout import arrow_to_numpy, numpy_to_arrow
 from ...native import first_unequal, hash_pairs, partition_rows, partition_strings
 from .sides import Side, combine_key_hash, file_stems, key_text
 
@@ -65,6 +65,12 @@ def key_hashes(keys_table, keys):
         per[k] = (hx, hs)
         h = combine_key_hash(h, hs)
     return h, per
+
+
+def stem_hashes(col) -> np.ndarray:
+    """The hashes of the file stems of a key column (:func:`key_hashes`' second hash), computed again from the key
+    where a side's stems differ from its texts (the partition files keep the hashes of the texts only)."""
+    return string_hashes(key_text(col))[1]
 
 
 def _count_in(a, b) -> int:
@@ -143,7 +149,8 @@ def estimate_rows(src) -> int:
 
 
 class _SideSpill:
-    """The partition files of one side."""
+    """The partition files of one side (one Arrow IPC file a partition: a partition is read back whole, and
+    only its own pages are mapped while it is)."""
 
     def __init__(self, folder, name, reader, K):
         self.folder, self.name, self.reader, self.K = folder, name, reader, K
@@ -153,7 +160,7 @@ class _SideSpill:
 
     @staticmethod
     def _partitioned(c, per, part, K):
-        """``(table of the chunk's rows in stable partition order, partition bounds)``: each column moved once, by
+        """``(record batch of the chunk's rows in stable partition order, partition bounds)``: each column moved once, by
         the compiled counting sort where it is built (:func:`hpe_cli.native.partition_rows`,
         :func:`~hpe_cli.native.partition_strings`), else by a stable ``argsort`` of ``part`` and a take (the
         same rows)."""
@@ -162,24 +169,22 @@ class _SideSpill:
         # function on the same numbers: the same bits), which halves what goes to disk and back
         lean = c.raw is not None and c.dist is None
         fixed = {} if lean else {f"{_PFX}c{k}": np.asarray(c.canonical[k], dtype=np.float64) for k in range(9)}
-        for j, (hx, hs) in enumerate(per.values()):
-            fixed[f"{_PFX}hx{j}"], fixed[f"{_PFX}hs{j}"] = hx, hs
+        for j, (hx, _) in enumerate(per.values()):  # the stem hashes are computed again where needed (rare)
+            fixed[f"{_PFX}hx{j}"] = hx
         fixed[f"{_PFX}ok"] = c.ok
         if c.raw is not None:  # one (n, 3) block: read back as a view, no column_stack
             fixed[f"{_PFX}raw"] = np.ascontiguousarray(c.raw, dtype=np.float64)
         if c.dist is not None:
             fixed[f"{_PFX}dist"] = c.dist
         fixed[f"{_PFX}line"] = c.lines
-        unique = list({id(v): v for v in fixed.values()}.values())  # a text key that is its own stem: hx is hs
-        moved = partition_rows(part, K, unique)
+        moved = partition_rows(part, K, list(fixed.values()))
         order = None
         if moved is None:
             order = np.argsort(part, kind="stable")
             bounds = np.searchsorted(part[order], np.arange(K + 1))
-            moved = (bounds, [v[order] for v in unique])
+            moved = (bounds, [v[order] for v in fixed.values()])
         bounds, arrays = moved
-        by_id = {id(v): a for v, a in zip(unique, arrays)}
-        cols = {name: by_id[id(v)] for name, v in fixed.items()}
+        cols = dict(zip(fixed, arrays))
         if f"{_PFX}raw" in cols:
             raw = numpy_to_arrow(cols[f"{_PFX}raw"].reshape(-1))
             cols[f"{_PFX}raw"] = pa.FixedSizeListArray.from_arrays(raw, 3)
@@ -206,11 +211,11 @@ class _SideSpill:
                     order = np.argsort(part, kind="stable") if order is None else order
                     moved_col = col.take(numpy_to_arrow(order))
                 cols[name] = moved_col
-        # from the buffers: pa.table would import pandas (0.3 s) for numpy columns
-        return arrow_table(cols), bounds
+        # one record batch from the buffers: pa.table would import pandas (0.3 s) for numpy columns
+        return pa.RecordBatch.from_arrays([numpy_to_arrow(v) for v in cols.values()], names=list(cols)), bounds
 
     def prepare(self, c, keys):
-        """``(table of the chunk's rows sorted by partition, partition bounds, key columns whose stems differ)``:
+        """``(record batch of the chunk's rows sorted by partition, partition bounds, key columns whose stems differ)``:
         the work of :meth:`add` that needs no shared state (the reader runs it on its label threads)."""
 
         if not c.n:
@@ -242,7 +247,7 @@ class _SideSpill:
                 continue
             if self.writers[k] is None:
                 self.writers[k] = pa.ipc.new_file(self._path(k), self.schema)
-            self.writers[k].write_table(t.slice(a, b - a))
+            self.writers[k].write_batch(t.slice(a, b - a))
 
     def _path(self, k):
         return os.path.join(self.folder, f"{self.name}_{k:04d}.arrow")
@@ -318,7 +323,7 @@ class _SideSpill:
             for j in range(len(r.keep)):
                 if f"{_PFX}hx{j}" in t.column_names:
                     hx = col(f"{_PFX}hx{j}")  # a column whose stems are its texts in every row: hs is hx
-                    side.hashes[j] = (hx, col(f"{_PFX}hs{j}") if j in self.stem_differs else hx)
+                    side.hashes[j] = (hx, stem_hashes(keys.column(r.keep[j])) if j in self.stem_differs else hx)
         side.image_dir, side.unit = r.image_dir, r.unit
         return side
 
@@ -436,7 +441,7 @@ class Partitions:
                 t[1] += (
                     exact
                     if exact == min(n_g, n_p)
-                    else _count_in(arrow_to_numpy(tg.column(f"{_PFX}hs{j}")), arrow_to_numpy(tp.column(f"{_PFX}hs{j}")))
+                    else _count_in(stem_hashes(tg.column(self.keys[j])), stem_hashes(tp.column(self.keys[j])))
                 )
         return {k for k, (ex, st, ng, npr) in tally.items() if ex < min(ng, npr) and st > ex}
 
