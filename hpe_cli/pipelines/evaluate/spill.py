@@ -26,6 +26,7 @@ import pyarrow as pa
 from ...io.key_hash import string_hashes
 from ...io.layout import arrow_to_numpy, numpy_to_arrow
 from ...native import first_unequal, hash_pairs, partition_rows, partition_strings
+from .join import Matched
 from .sides import Side, combine_key_hash, file_stems, key_text
 
 
@@ -446,8 +447,8 @@ class Partitions:
         return {k for k, (ex, st, ng, npr) in tally.items() if ex < min(ng, npr) and st > ex}
 
     def codes(self, gt, pred, stems):
-        """``(gt codes, pred codes)`` of one partition from the key hashes, every match verified on the keys
-        themselves; None (use the string join) when a key is not text on both sides, when one side has
+        """The pairs of one partition (:class:`~hpe_cli.pipelines.evaluate.join.Matched`) from the key hashes, every
+        match verified on the keys themselves; None (use the string join) when a key is not text on both sides, when one side has
         equal hashes twice (a duplicate, which the string join names) or when a match is a hash collision."""
         import pyarrow.compute as pc  # lazy: start-up (0.06 s; the streamed run with equal keys needs none)
 
@@ -466,14 +467,11 @@ class Partitions:
             for j in range(len(self.keys)):
                 hg = combine_key_hash(hg, gt.hashes[j][w[j]])
                 hp = combine_key_hash(hp, pred.hashes[j][w[j]])
-        # codes: a prediction's is its row, a GT row's the row of its match (else one past all predictions)
+        # the pairs proposed by equal hashes (GT rows ascending), then verified on the keys below
         matched = hash_matches(hg, hp)
         if matched is None:
             return None  # equal hashes on one side: a duplicate key (named by the string join) or a collision
         gi, pi = matched
-        cp = np.arange(pred.n, dtype=np.int64)
-        cg = np.arange(pred.n, pred.n + gt.n, dtype=np.int64)
-        cg[gi] = pi
         for k in self.keys:
             a, b = gt.keys.column(k), pred.keys.column(k)
             a, b = (
@@ -493,7 +491,7 @@ class Partitions:
                 a, b = file_stems(a), file_stems(b)
             if len(gi) and not pc.all(pc.equal(a, b)).as_py():
                 return None
-        return cg, cp
+        return Matched(gi, pi)
 
     def cleanup(self):
         for s in (self.g, self.p):
