@@ -295,7 +295,9 @@ class _SideSpill:
                 return _bools(c) if pa.types.is_boolean(c.type) else arrow_to_numpy(c)
 
             rc = t.column(f"{_PFX}reason")
-            has_reasons = bool(pc.max(pc.utf8_length(rc)).as_py() or 0) if len(rc) else False
+            # a reason written in any row: its chunk holds text bytes (every row usable: none, no scan)
+            text = any(ch.buffers()[2] is not None and ch.buffers()[2].size for ch in rc.chunks)
+            has_reasons = bool(pc.max(pc.utf8_length(rc)).as_py() or 0) if len(rc) and text else False
             reasons = rc.to_numpy(zero_copy_only=False).astype(object) if has_reasons else None
             keys = t.select([n for n in t.column_names if not n.startswith(_PFX)])
             # one chunk, copied off the memory map: the mapped file leaves memory once the side is built
