@@ -5,8 +5,8 @@
  * docstring) that gives the same bits, and tests/native/ compares the two. The hashes and the screens compute
  * integers, fabs, differences and comparisons only. The error kernels add IEEE sums, products and square roots in
  * the order of their twins' numpy operations (the build passes -ffp-contract=off: no fused multiply-adds) and call
- * the C library's sincos and atan2, which hpe_cli.native uses only where they give numpy's bits on a probe of
- * values. The arguments are buffers (numpy arrays), checked for size; the GIL is released in the loops, so the
+ * the C library's sincos, atan2, hypot, acos and asin, which hpe_cli.native uses only where they give numpy's bits
+ * on a probe of values. The arguments are buffers (numpy arrays), checked for size; the GIL is released in the loops, so the
  * threads that call them run in parallel.
  */
 #define _GNU_SOURCE /* sincos */
@@ -396,20 +396,261 @@ done:
     return ret;
 }
 
-/* atan2(y float64[n], x float64[n], out float64[n]): the C library's, for hpe_cli.native's probe */
-static PyObject *k_atan2(PyObject *self, PyObject *args) {
-    Py_buffer y, x, o;
-    if (!PyArg_ParseTuple(args, "y*y*w*", &y, &x, &o)) return NULL;
+/* euler_from_matrix(R (9 float64[n] columns, row-major), out float64[n*3], i, j, k, sign, symmetric, intrinsic,
+ * degrees, check) -> rows off orthonormal (then nothing is to be used: the twin projects them by SVD first)
+ * SciPy's Rotation.from_matrix(R).as_euler(seq): Markley's matrix-to-quaternion (the case of the largest of the
+ * diagonal and the trace, first on ties), then Bernardes and Viollet's angles (atan2 and hypot), the lock and the
+ * wrap into [-pi, pi] as the twin does them, in its order. i, j, k, sign come from the twin's reading of seq.
+ * twin: hpe_cli.metrics.scipy_columns.euler_from_matrix */
+static inline void quat_of_matrix(const double *r, double q[4]) {
+    double tr = r[0] + r[4] + r[8];
+    int c0 = (r[0] >= r[4]) & (r[0] >= r[8]) & (r[0] >= tr);
+    int c1 = !c0 & (r[4] >= r[8]) & (r[4] >= tr);
+    int c2 = !(c0 | c1) & (r[8] >= tr);
+    double d0 = r[7] - r[5], d1 = r[2] - r[6], d2 = r[3] - r[1];
+    if (c0) q[0] = 1 - tr + 2 * r[0], q[1] = r[3] + r[1], q[2] = r[6] + r[2], q[3] = d0;
+    else if (c1) q[0] = r[3] + r[1], q[1] = 1 - tr + 2 * r[4], q[2] = r[7] + r[5], q[3] = d1;
+    else if (c2) q[0] = r[6] + r[2], q[1] = r[7] + r[5], q[2] = 1 - tr + 2 * r[8], q[3] = d2;
+    else q[0] = d0, q[1] = d1, q[2] = d2, q[3] = 1 + tr;
+    double norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int m = 0; m < 4; m++) q[m] = q[m] / norm;
+}
+
+static int orthonormal(const double *r) {
+    for (int a = 0; a < 3; a++)
+        for (int b = a; b < 3; b++) {
+            double g = r[3 * a] * r[3 * b];
+            g += r[3 * a + 1] * r[3 * b + 1];
+            g += r[3 * a + 2] * r[3 * b + 2];
+            if (a == b) g -= 1.0;
+            if (!(fabs(g) <= (a == b ? 1e-12 + 1e-5 : 1e-12))) return 0;
+        }
+    return 1;
+}
+
+typedef struct {
+    int i, j, k, symmetric, intrinsic;
+    double sign;
+} eseq_t;
+
+static inline void euler_of_quat(const eseq_t *S, const double *q, double *o) {
+    const double PI = 3.141592653589793, EPS = 1e-7;
+    double qw = q[3], a, b, c, d;
+    if (S->symmetric) a = qw, b = q[S->i], c = q[S->j], d = q[S->k] * S->sign;
+    else a = qw - q[S->j], b = q[S->i] + q[S->k] * S->sign, c = q[S->j] + qw, d = q[S->k] * S->sign - q[S->i];
+    double half_sum = atan2(b, a), half_diff = atan2(d, c);
+    double mid = atan2(hypot(c, d), hypot(a, b));
+    mid *= 2;
+    int case1 = mid <= EPS, lock = case1 | (mid - PI >= -EPS);
+    double first = half_sum - half_diff, third = half_sum + half_diff;
+    if (lock) {
+        double turn = case1 ? 2 * half_sum : 2 * half_diff * (S->intrinsic ? 1 : -1);
+        if (S->intrinsic) first = 0.0, third = turn;
+        else first = turn, third = 0.0;
+    }
+    if (!S->symmetric) {
+        third *= S->sign;
+        mid -= PI / 2;
+    }
+    double v[2] = {first, third};
+    int col[2] = {S->intrinsic ? 2 : 0, S->intrinsic ? 0 : 2};
+    for (int m = 0; m < 2; m++) {
+        double x = v[m];
+        if (x < -PI) x = x + 2 * PI;
+        else if (x > PI) x = x - 2 * PI;
+        o[col[m]] = x;
+    }
+    o[1] = mid;
+}
+
+static PyObject *k_euler_from_matrix(PyObject *self, PyObject *args) {
+    PyObject *Ro;
+    Py_buffer out, R[9];
+    eseq_t S;
+    int degrees, check;
+    if (!PyArg_ParseTuple(args, "Ow*iiidpppp", &Ro, &out, &S.i, &S.j, &S.k, &S.sign, &S.symmetric, &S.intrinsic,
+                          &degrees, &check))
+        return NULL;
     PyObject *ret = NULL;
-    Py_ssize_t n = o.len / 8;
-    if (!need(&y, n, 8, "y") || !need(&x, n, 8, "x") || !need(&o, n, 8, "out")) goto done;
-    const double *Y = (const double *)y.buf, *X = (const double *)x.buf;
-    double *O = (double *)o.buf;
-    for (Py_ssize_t i = 0; i < n; i++) O[i] = atan2(Y[i], X[i]);
+    Py_ssize_t n = out.len / 24, off = 0;
+    int have_r = 0;
+    if (!need(&out, 3 * n, 8, "out")) goto done;
+    if (S.i < 0 || S.i > 2 || S.j < 0 || S.j > 2 || S.k < 0 || S.k > 2) {
+        PyErr_SetString(PyExc_ValueError, "axes: expected 0, 1 or 2");
+        goto done;
+    }
+    if (!(have_r = nine(Ro, R, n, "R"))) goto done;
+    const double *r[9];
+    for (int m = 0; m < 9; m++) r[m] = (const double *)R[m].buf;
+    double *O = (double *)out.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double a[9], q[4];
+        for (int m = 0; m < 9; m++) a[m] = r[m][i];
+        if (check && !orthonormal(a)) {
+            off++;
+            continue;
+        }
+        quat_of_matrix(a, q);
+        euler_of_quat(&S, q, O + 3 * i);
+        if (degrees)
+            for (int m = 0; m < 3; m++) O[3 * i + m] *= DEG;
+    }
+    Py_END_ALLOW_THREADS
+    ret = PyLong_FromSsize_t(off);
+done:
+    if (have_r)
+        for (int m = 0; m < 9; m++) PyBuffer_Release(&R[m]);
+    PyBuffer_Release(&out);
+    return ret;
+}
+
+/* quat_matrix_from_euler(angles float64[n*3], scale float64[3], sx, sy, sz (axes 0-2), intrinsic, q float64[4*n],
+ * M float64[9*n]): SciPy's Rotation.from_euler(seq, angles * scale).as_quat() (each axis's elementary quaternion
+ * of the half angle, composed in seq's order) and .as_matrix() of it, rows of q and M as columns (q[m*n + i]).
+ * The degrees' factor is in scale (one product, as the twin's). Uses the C library's sincos.
+ * twins: hpe_cli.metrics.scipy_columns.quat_from_euler, matrix_from_quat */
+static inline void compose_q(const double *p, const double *q, double *o) {
+    double cx = p[1] * q[2] - p[2] * q[1], cy = p[2] * q[0] - p[0] * q[2], cz = p[0] * q[1] - p[1] * q[0];
+    o[0] = p[3] * q[0] + q[3] * p[0] + cx;
+    o[1] = p[3] * q[1] + q[3] * p[1] + cy;
+    o[2] = p[3] * q[2] + q[3] * p[2] + cz;
+    o[3] = p[3] * q[3] - p[0] * q[0] - p[1] * q[1] - p[2] * q[2];
+}
+
+static PyObject *k_quat_matrix_from_euler(PyObject *self, PyObject *args) {
+    Py_buffer ang, qo, mo;
+    double sc[3];
+    int ax[3], intrinsic;
+    if (!PyArg_ParseTuple(args, "y*(ddd)(iii)pw*w*", &ang, &sc[0], &sc[1], &sc[2], &ax[0], &ax[1], &ax[2],
+                          &intrinsic, &qo, &mo))
+        return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ang.len / 24;
+    if (!need(&ang, 3 * n, 8, "angles") || !need(&qo, 4 * n, 8, "q") || !need(&mo, 9 * n, 8, "M")) goto done;
+    for (int m = 0; m < 3; m++)
+        if (ax[m] < 0 || ax[m] > 2) {
+            PyErr_SetString(PyExc_ValueError, "axes: expected 0, 1 or 2");
+            goto done;
+        }
+    const double *A = (const double *)ang.buf;
+    double *Q = (double *)qo.buf, *M = (double *)mo.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double q[4], t[4];
+        for (int m = 0; m < 3; m++) {
+            double h = A[3 * i + m] * sc[m] / 2.0, s, c;
+#if defined(__GLIBC__)
+            sincos(h, &s, &c);
+#else
+            s = sin(h), c = cos(h);
+#endif
+            double e[4] = {0.0, 0.0, 0.0, c};
+            e[ax[m]] = s;
+            if (!m) memcpy(q, e, sizeof q);
+            else {
+                if (intrinsic) compose_q(q, e, t);
+                else compose_q(e, q, t);
+                memcpy(q, t, sizeof q);
+            }
+        }
+        double x = q[0], y = q[1], z = q[2], w = q[3];
+        double x2 = x * x, y2 = y * y, z2 = z * z, w2 = w * w;
+        double xy = x * y, zw = z * w, xz = x * z, yw = y * w, yz = y * z, xw = x * w;
+        double m9[9] = {x2 - y2 - z2 + w2, 2 * (xy - zw),      2 * (xz + yw),
+                        2 * (xy + zw),      -x2 + y2 - z2 + w2, 2 * (yz - xw),
+                        2 * (xz - yw),      2 * (yz + xw),      -x2 - y2 + z2 + w2};
+        for (int m = 0; m < 4; m++) Q[m * n + i] = q[m];
+        for (int m = 0; m < 9; m++) M[m * n + i] = m9[m];
+    }
+    Py_END_ALLOW_THREADS
     ret = Py_None;
     Py_INCREF(ret);
 done:
-    PyBuffer_Release(&y);
+    PyBuffer_Release(&ang);
+    PyBuffer_Release(&qo);
+    PyBuffer_Release(&mo);
+    return ret;
+}
+
+/* wrapped_cos_errors(e1 float64[n*3], e2 float64[n*3], out float64[n*3], nan uint8[n]): opentrack's
+ * arccos(cos a cos b + sin a sin b) per angle, the argument clipped to [-1, 1], in degrees; nan marks the rows
+ * where one argument is past +-1 (NaN in the peer's unclipped code). Uses the C library's sincos and acos.
+ * twin: hpe_cli.metrics.peer_angles.opentrack_errors */
+static PyObject *k_wrapped_cos_errors(PyObject *self, PyObject *args) {
+    Py_buffer e1, e2, out, nan;
+    if (!PyArg_ParseTuple(args, "y*y*w*w*", &e1, &e2, &out, &nan)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = nan.len;
+    if (!need(&e1, 3 * n, 8, "e1") || !need(&e2, 3 * n, 8, "e2") || !need(&out, 3 * n, 8, "out")) goto done;
+    const double *a = (const double *)e1.buf, *b = (const double *)e2.buf;
+    double *O = (double *)out.buf;
+    uint8_t *NN = (uint8_t *)nan.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int past = 0;
+        for (int m = 0; m < 3; m++) {
+            double s1, c1, s2, c2;
+#if defined(__GLIBC__)
+            sincos(a[3 * i + m], &s1, &c1);
+            sincos(b[3 * i + m], &s2, &c2);
+#else
+            s1 = sin(a[3 * i + m]), c1 = cos(a[3 * i + m]), s2 = sin(b[3 * i + m]), c2 = cos(b[3 * i + m]);
+#endif
+            double dot = c1 * c2;
+            dot += s1 * s2;
+            past |= fabs(dot) > 1.0;
+            dot = dot < -1.0 ? -1.0 : (dot > 1.0 ? 1.0 : dot);
+            O[3 * i + m] = acos(dot) * DEG;
+        }
+        NN[i] = (uint8_t)past;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&e1);
+    PyBuffer_Release(&e2);
+    PyBuffer_Release(&out);
+    PyBuffer_Release(&nan);
+    return ret;
+}
+
+/* libm(name, x float64[n], y float64[n] or None, out float64[n]): the C library's atan2, hypot, acos or asin, for
+ * hpe_cli.native's probes */
+static PyObject *k_libm(PyObject *self, PyObject *args) {
+    const char *name;
+    PyObject *yo;
+    Py_buffer x, y = {0}, o;
+    if (!PyArg_ParseTuple(args, "sy*Ow*", &name, &x, &yo, &o)) return NULL;
+    PyObject *ret = NULL;
+    int have_y = 0;
+    Py_ssize_t n = o.len / 8;
+    if (yo != Py_None) {
+        if (PyObject_GetBuffer(yo, &y, PyBUF_SIMPLE) < 0) goto done;
+        have_y = 1;
+    }
+    if (!need(&x, n, 8, "x") || (have_y && !need(&y, n, 8, "y"))) goto done;
+    const double *X = (const double *)x.buf, *Y = have_y ? (const double *)y.buf : NULL;
+    double *O = (double *)o.buf;
+    if (!strcmp(name, "atan2") && have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = atan2(X[i], Y[i]);
+    else if (!strcmp(name, "hypot") && have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = hypot(X[i], Y[i]);
+    else if (!strcmp(name, "acos") && !have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = acos(X[i]);
+    else if (!strcmp(name, "asin") && !have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = asin(X[i]);
+    else {
+        PyErr_Format(PyExc_ValueError, "libm: expected atan2(x, y), hypot(x, y), acos(x) or asin(x), got %s", name);
+        goto done;
+    }
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_y) PyBuffer_Release(&y);
     PyBuffer_Release(&x);
     PyBuffer_Release(&o);
     return ret;
@@ -460,7 +701,16 @@ static PyMethodDef methods[] = {
     {"core_errors", k_core_errors, METH_VARARGS,
      "core_errors(P, G, geo, maev, fro): geodesic, column angles and Frobenius distance (twins: "
      "hpe_cli.metrics.rotation_errors)."},
-    {"atan2", k_atan2, METH_VARARGS, "atan2(y, x, out): the C library's atan2 (for the probe)."},
+    {"euler_from_matrix", k_euler_from_matrix, METH_VARARGS,
+     "euler_from_matrix(R, out, i, j, k, sign, symmetric, intrinsic, degrees, check) -> rows off orthonormal: "
+     "SciPy's as_euler of from_matrix (twin: hpe_cli.metrics.scipy_columns.euler_from_matrix)."},
+    {"quat_matrix_from_euler", k_quat_matrix_from_euler, METH_VARARGS,
+     "quat_matrix_from_euler(angles, scale, axes, intrinsic, q, M): SciPy's from_euler quaternions and their "
+     "matrices (twins: hpe_cli.metrics.scipy_columns.quat_from_euler, matrix_from_quat)."},
+    {"wrapped_cos_errors", k_wrapped_cos_errors, METH_VARARGS,
+     "wrapped_cos_errors(e1, e2, out, nan): opentrack's angle errors (twin: "
+     "hpe_cli.metrics.peer_angles.opentrack_errors)."},
+    {"libm", k_libm, METH_VARARGS, "libm(name, x, y, out): the C library's atan2, hypot, acos, asin (probes)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import native
 from ..native import sin_cos
 from . import scipy_columns as sc
 
@@ -89,6 +90,15 @@ def opal23_quats(pyr) -> tuple:
     ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])`` (SciPy's arithmetic, :mod:`.scipy_columns`)."""
     a = np.asarray(pyr, dtype=np.float64) * np.array([1.0, -1.0, 1.0])
     return sc.quat_from_euler("XYZ", a, degrees=True)
+
+
+#: opal23's angles to SciPy's: [pitch, -yaw, roll] in radians, one product a column
+_OPAL23_SCALE = np.array([1.0, -1.0, 1.0]) * (np.pi / 180.0)
+
+
+def opal23_quats_and_matrices(pyr) -> tuple:
+    """``(opal23_quats(pyr), opal23_matrices(pyr))`` in one pass: the quaternions and their matrices."""
+    return sc.quat_and_matrix_from_euler("XYZ", pyr, _OPAL23_SCALE)
 
 
 def opal23_matrix_of_quats(q) -> list:
@@ -337,6 +347,9 @@ def opentrack_errors(e1, e2):
     which is NaN where rounding puts the argument above 1. Returns the clipped
     errors (degrees) and the mask of rows the peer turns into NaN.
     """
+    got = native.wrapped_cos_errors(e1, e2)
+    if got is not None:
+        return got
     t, dot = sin_cos(e1)  # np.sin, np.cos (hpe_cli.native: one C call where it gives their bits)
     s2, c2 = sin_cos(e2)
     dot *= c2

@@ -8,6 +8,7 @@ built, the kernel half is skipped and the numpy twin is still checked against th
 from __future__ import annotations
 
 import struct
+import warnings
 
 import numpy as np
 import pyarrow as pa
@@ -252,3 +253,127 @@ def test_a_module_from_older_sources_counts_as_not_built(monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "_hpe_kernels", stale)
     assert native.kernels() is None
     monkeypatch.delitem(native._STATE, "module")  # the real module again for the other tests
+
+
+def _same_bits(a, b) -> bool:
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    return a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def _hard_matrices(rng, n):
+    """Random rotations with the rows an Euler split finds hard: the identity, 180-degree turns about each axis,
+    every sequence's gimbal lock (middle angle 0, +-90 and 180 degrees, and 1e-8 rad off), a NaN row, and rows
+    off orthonormal (which SciPy projects first)."""
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.random(n, random_state=rng).as_matrix()
+    hard = [np.eye(3), np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]), np.diag([-1.0, -1.0, 1.0])]
+    for seq in ("xyz", "XYZ", "zyx", "ZXZ", "zxz"):
+        for mid in (0.0, 90.0, -90.0, 180.0, 89.9999995, 1e-6):
+            hard.append(Rotation.from_euler(seq, [[33.0, mid, -71.0]], degrees=True).as_matrix()[0])
+    k = len(hard)
+    R[:k] = np.array(hard)
+    R[k] = np.nan
+    return R
+
+
+@pytest.mark.parametrize("seq", ["XYZ", "xyz", "ZYX", "zyx", "ZXZ", "xzx", "YXY"])
+@pytest.mark.parametrize("assume_valid", [True, False])
+def test_euler_from_matrix_gives_the_numpy_twins_bits_and_scipys_angles(monkeypatch, seq, assume_valid):
+    from scipy.spatial.transform import Rotation
+
+    from hpe_cli.metrics import scipy_columns as sc
+
+    R = _hard_matrices(np.random.default_rng(len(seq) + assume_valid), 2048)
+    N = sc.nested(R)
+    for degrees in (True, False):
+        got = both(monkeypatch, lambda: sc.euler_from_matrix(N, seq, degrees, assume_valid))
+        assert all(_same_bits(g, got[0]) for g in got)
+    ok = np.isfinite(R).all(axis=(1, 2))
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # SciPy warns at gimbal lock
+        ref = Rotation.from_matrix(R[ok]).as_euler(seq, degrees=False)
+    assert np.allclose(
+        got[-1][ok], ref, atol=1e-12, rtol=0
+    )  # the oracle: SciPy itself (its bits: scipy_columns' tests)
+    if built:
+        off = R.copy()
+        off[5] *= 1.001  # one row SciPy would project first: the kernel declines, the twin runs (same numbers)
+        with monkeypatch.context() as m:
+            m.setenv("HPE_KERNELS", "numpy")
+            twin = sc.euler_from_matrix(sc.nested(off), seq, True, assume_valid)
+        assert _same_bits(sc.euler_from_matrix(sc.nested(off), seq, True, assume_valid), twin)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    st.lists(
+        st.tuples(*[st.one_of(st.floats(-720, 720), st.sampled_from([0.0, -0.0, 90.0, -90.0, 180.0, -180.0]))] * 3),
+        min_size=64,
+        max_size=200,
+    )
+)
+def test_quats_and_matrices_from_euler_give_the_numpy_twins_bits(angles):
+    import os
+
+    from scipy.spatial.transform import Rotation
+
+    from hpe_cli.metrics import peer_angles as pa
+
+    a = np.array(angles, dtype=np.float64)
+    old = os.environ.pop("HPE_KERNELS", None)
+    try:
+        os.environ["HPE_KERNELS"] = "numpy"
+        q0, M0 = pa.opal23_quats_and_matrices(a)
+        del os.environ["HPE_KERNELS"]
+        q1, M1 = pa.opal23_quats_and_matrices(a)
+    finally:
+        os.environ.pop("HPE_KERNELS", None)
+        if old is not None:
+            os.environ["HPE_KERNELS"] = old
+    assert all(_same_bits(x, y) for x, y in zip(q0, q1))
+    assert all(_same_bits(M0[i][j], M1[i][j]) for i in range(3) for j in range(3))
+    assert all(_same_bits(x, y) for x, y in zip(q1, pa.opal23_quats(a)))  # the twin of the quaternions alone
+    r = Rotation.from_euler("XYZ", a * [1.0, -1.0, 1.0], degrees=True)  # the oracle: SciPy itself
+    assert np.allclose(np.stack(q1, -1), r.as_quat(canonical=False), atol=1e-15, rtol=0)
+    assert np.allclose(pa.stack3(M1), r.as_matrix(), atol=1e-15, rtol=0)
+
+
+def test_opentrack_errors_give_the_numpy_twins_bits(monkeypatch):
+    from hpe_cli.metrics import peer_angles as pa
+
+    rng = np.random.default_rng(7)
+    a = rng.uniform(-np.pi, np.pi, (4096, 3))
+    b = a + rng.standard_normal((4096, 3)) * 0.1
+    b[:512] = a[:512]  # equal angles: the argument rounds past 1 on some rows (the peer's NaN)
+    b[512:600] = a[512:600] + np.pi  # opposite ones
+    b[600] = np.nan
+    got = both(monkeypatch, lambda: pa.opentrack_errors(a, b))
+    assert all(_same_bits(g[0], got[0][0]) and np.array_equal(g[1], got[0][1]) for g in got)
+    e, peer_nan = got[-1]
+    d = np.abs(np.angle(np.exp(1j * (a - b))))  # the oracle: the wrapped difference, from complex numbers
+    assert np.allclose(e[601:], np.degrees(d[601:]), atol=1e-6) and peer_nan[:512].any()
+
+
+def test_libm_kernels_used_only_where_each_function_agrees(monkeypatch):
+    import hpe_cli.native as native
+    from hpe_cli.metrics import scipy_columns as sc
+
+    R = sc.nested(_hard_matrices(np.random.default_rng(3), 256))
+    if built:  # each probe says whether the C library's function gives numpy's bits on its values
+        for name, (twin, probe) in native._LIBM.items():
+            args = probe()
+            args = args if isinstance(args, tuple) else (args,)
+            out = np.empty_like(args[0])
+            kernels().libm(name, args[0], args[1] if len(args) > 1 else None, out)
+            with np.errstate(invalid="ignore"):
+                assert (native._libm_kernels(name) is not None) == _same_bits(out, twin(*args))
+    monkeypatch.setitem(native._STATE, "hypot", False)  # as on a machine where numpy's SIMD hypot differs
+    assert native.euler_from_matrix(R, sc._seq_axes("XYZ"), True, False) is None
+    monkeypatch.setitem(native._STATE, "acos", False)
+    assert native.wrapped_cos_errors(np.zeros((100, 3)), np.ones((100, 3))) is None
+    monkeypatch.setitem(native._STATE, "sin_cos", False)
+    assert native.quat_matrix_from_euler(np.zeros((100, 3)), (1.0, 1.0, 1.0), (0, 1, 2), True) is None
+    if built:
+        with pytest.raises(ValueError, match="expected atan2"):
+            kernels().libm("exp", np.zeros(3), None, np.zeros(3))
