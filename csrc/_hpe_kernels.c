@@ -319,16 +319,16 @@ done:
  * the numpy twins' operations (left to right; no fused multiply-adds). Uses the C library's atan2: hpe_cli.native
  * calls it only where atan2 gives numpy's bits on a probe.
  * twins: hpe_cli.metrics.rotation_errors.geodesic_deg, maev_deg, frobenius */
-static int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name) {
-    PyObject *fast = PySequence_Fast(seq, "expected a sequence of 9 columns");
+static int columns(PyObject *seq, Py_buffer *b, int count, Py_ssize_t n, const char *name) {
+    PyObject *fast = PySequence_Fast(seq, "expected a sequence of columns");
     if (!fast) return 0;
-    if (PySequence_Fast_GET_SIZE(fast) != 9) {
-        PyErr_Format(PyExc_ValueError, "%s: expected 9 columns, got %zd", name, PySequence_Fast_GET_SIZE(fast));
+    if (PySequence_Fast_GET_SIZE(fast) != count) {
+        PyErr_Format(PyExc_ValueError, "%s: expected %d columns, got %zd", name, count, PySequence_Fast_GET_SIZE(fast));
         Py_DECREF(fast);
         return 0;
     }
     int k = 0;
-    for (; k < 9; k++) {
+    for (; k < count; k++) {
         if (PyObject_GetBuffer(PySequence_Fast_GET_ITEM(fast, k), &b[k], PyBUF_C_CONTIGUOUS) < 0) break;
         if (!need(&b[k], n, 8, name)) {
             k++;
@@ -336,9 +336,15 @@ static int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name) {
         }
     }
     Py_DECREF(fast);
-    if (k == 9 && !PyErr_Occurred()) return 1;
+    if (k == count && !PyErr_Occurred()) return 1;
     for (int j = 0; j < k; j++) PyBuffer_Release(&b[j]);
     return 0;
+}
+
+static int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name) { return columns(seq, b, 9, n, name); }
+
+static void release(Py_buffer *b, int count) {
+    for (int k = 0; k < count; k++) PyBuffer_Release(&b[k]);
 }
 
 static PyObject *k_core_errors(PyObject *self, PyObject *args) {
@@ -618,6 +624,167 @@ done:
     return ret;
 }
 
+/* opal23_mae(a float64[n*3], p float64[n*3], out float64[n*3]): opal23's compute_mae of the annotation's and the
+ * prediction's as_euler('XYZ') angles: the better (by mean) of the prediction and its other solution, each error
+ * wrapped min(e, 360 - e); numpy's sign, where and minimum (NaN kept), in the twin's order.
+ * twin: hpe_cli.metrics.peer_angles.opal23_mae */
+static inline double np_sign(double x) { return x > 0 ? 1.0 : (x < 0 ? -1.0 : (x == 0 ? 0.0 : x)); }
+
+static inline double np_minimum(double x, double y) { return (isnan(x) || x <= y) ? x : (isnan(y) ? y : y); }
+
+static PyObject *k_opal23_mae(PyObject *self, PyObject *args) {
+    Py_buffer ab, pb, ob;
+    if (!PyArg_ParseTuple(args, "y*y*w*", &ab, &pb, &ob)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ob.len / 24;
+    if (!need(&ab, 3 * n, 8, "a") || !need(&pb, 3 * n, 8, "p") || !need(&ob, 3 * n, 8, "out")) goto done;
+    const double *A = (const double *)ab.buf, *P = (const double *)pb.buf;
+    double *O = (double *)ob.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        static const int order[3] = {1, 0, 2}; /* the peer's (yaw, pitch, roll) */
+        double pc[3], ac[3], w[3], e[3], ew[3];
+        for (int k = 0; k < 3; k++) pc[k] = P[3 * i + order[k]], ac[k] = A[3 * i + order[k]];
+        w[0] = 180 - pc[0];
+        w[1] = pc[1] - np_sign(pc[1]) * 180;
+        w[2] = pc[2] - np_sign(pc[2]) * 180;
+        for (int k = 0; k < 3; k++) {
+            if (w[k] > 180) w[k] = w[k] - 360;
+            if (w[k] < -180) w[k] = w[k] + 360;
+            e[k] = fabs(ac[k] - pc[k]);
+            ew[k] = fabs(ac[k] - w[k]);
+        }
+        int use = (ew[0] + ew[1] + ew[2]) / 3 < (e[0] + e[1] + e[2]) / 3;
+        for (int k = 0; k < 3; k++) {
+            double x = use ? ew[k] : e[k];
+            O[3 * i + order[k]] = np_minimum(x, 360 - x);
+        }
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&ab);
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&ob);
+    return ret;
+}
+
+/* trace_acos_deg(A (9 columns), P (9 columns), out float64[n]): opal23's compute_ge,
+ * degrees(arccos(clip((trace(A P^T) - 1) / 2, -1, 1))), the trace summed row by row as einsum does. Uses the C
+ * library's acos. twin: hpe_cli.metrics.peer_angles.opal23_geodesic */
+static PyObject *k_trace_acos_deg(PyObject *self, PyObject *args) {
+    PyObject *Ao, *Po;
+    Py_buffer ob, A[9], P[9];
+    if (!PyArg_ParseTuple(args, "OOw*", &Ao, &Po, &ob)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ob.len / 8;
+    int have_a = 0, have_p = 0;
+    if (!(have_a = nine(Ao, A, n, "A")) || !(have_p = nine(Po, P, n, "P"))) goto done;
+    const double *a[9], *p[9];
+    for (int k = 0; k < 9; k++) a[k] = (const double *)A[k].buf, p[k] = (const double *)P[k].buf;
+    double *O = (double *)ob.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double t = a[0][i] * p[0][i];
+        for (int k = 1; k < 9; k++) t = t + a[k][i] * p[k][i];
+        double c = (t - 1) / 2;
+        c = c < -1.0 ? -1.0 : (c > 1.0 ? 1.0 : c);
+        O[i] = acos(c) * DEG;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_a) release(A, 9);
+    if (have_p) release(P, 9);
+    PyBuffer_Release(&ob);
+    return ret;
+}
+
+/* near_quats(P (9 columns), A (9 columns), q float64[n*4], near uint8[n]): the unit quaternions (x, y, z, w; rows)
+ * of P A^T (SciPy's from_matrix, assume_valid) and whether each is within 90 degrees of the identity
+ * (2 atan2(|(x, y, z)|, |w|) < pi / 2). Uses the C library's atan2.
+ * twins: hpe_cli.metrics.peer_angles.opal23_near_quats (before its gather), opal23_near_mask */
+static PyObject *k_near_quats(PyObject *self, PyObject *args) {
+    PyObject *Po, *Ao;
+    Py_buffer qb, nb, P[9], A[9];
+    if (!PyArg_ParseTuple(args, "OOw*w*", &Po, &Ao, &qb, &nb)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = nb.len;
+    int have_p = 0, have_a = 0;
+    if (!need(&qb, 4 * n, 8, "q")) goto done;
+    if (!(have_p = nine(Po, P, n, "P")) || !(have_a = nine(Ao, A, n, "A"))) goto done;
+    const double *p[9], *a[9];
+    for (int k = 0; k < 9; k++) p[k] = (const double *)P[k].buf, a[k] = (const double *)A[k].buf;
+    double *Q = (double *)qb.buf;
+    uint8_t *NR = (uint8_t *)nb.buf;
+    const double HALF_PI = 3.141592653589793 / 2;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double m[9], *q = Q + 4 * i;
+        for (int r = 0; r < 3; r++)
+            for (int c = 0; c < 3; c++)
+                m[3 * r + c] = p[3 * r][i] * a[3 * c][i] + p[3 * r + 1][i] * a[3 * c + 1][i] +
+                               p[3 * r + 2][i] * a[3 * c + 2][i];
+        quat_of_matrix(m, q);
+        NR[i] = 2 * atan2(sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), fabs(q[3])) < HALF_PI;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_p) release(P, 9);
+    if (have_a) release(A, 9);
+    PyBuffer_Release(&qb);
+    PyBuffer_Release(&nb);
+    return ret;
+}
+
+/* quat_rotvecs(q (4 columns x, y, z, w of m rows), left float64[16], out float64[m*3]): SciPy's as_rotvec of
+ * left @ q (each row's quaternion turned by a 4x4 matrix, the products summed left to right): the canonical sign
+ * (w < 0, ties by x, y, z), the angle 2 atan2(|v|, |w|), the scale angle / sin(angle / 2) (its Taylor series at
+ * or below 1e-3 rad). Uses the C library's atan2 and sin.
+ * twin: hpe_cli.metrics.peer_angles' Karcher displacement (scipy_columns.rotvec_from_quat of the product) */
+static PyObject *k_quat_rotvecs(PyObject *self, PyObject *args) {
+    PyObject *qo;
+    Py_buffer lb, ob, Qb[4];
+    if (!PyArg_ParseTuple(args, "Oy*w*", &qo, &lb, &ob)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ob.len / 24;
+    int have_q = 0;
+    if (!need(&ob, 3 * n, 8, "out") || !need(&lb, 16, 8, "left")) goto done;
+    if (!(have_q = columns(qo, Qb, 4, n, "q"))) goto done;
+    const double *q[4], *L = (const double *)lb.buf;
+    for (int k = 0; k < 4; k++) q[k] = (const double *)Qb[k].buf;
+    double *O = (double *)ob.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double r[4];
+        for (int k = 0; k < 4; k++)
+            r[k] = L[4 * k] * q[0][i] + L[4 * k + 1] * q[1][i] + L[4 * k + 2] * q[2][i] + L[4 * k + 3] * q[3][i];
+        double x = r[0], y = r[1], z = r[2], w = r[3];
+        int flip = w < 0;
+        if (w == 0) flip |= (x < 0) | ((x == 0) & ((y < 0) | ((y == 0) & (z < 0))));
+        double s = flip ? -1.0 : 1.0;
+        double angle = 2 * atan2(sqrt(x * x + y * y + z * z), w * s);
+        double a2 = angle * angle, scale;
+        if (angle <= 1e-3) scale = 2 + a2 / 12 + 7 * a2 * a2 / 2880;
+        else scale = angle / sin(angle / 2.0);
+        scale = scale * s;
+        O[3 * i] = scale * x, O[3 * i + 1] = scale * y, O[3 * i + 2] = scale * z;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_q) release(Qb, 4);
+    PyBuffer_Release(&lb);
+    PyBuffer_Release(&ob);
+    return ret;
+}
+
 /* libm(name, x float64[n], y float64[n] or None, out float64[n]): the C library's atan2, hypot, acos or asin, for
  * hpe_cli.native's probes */
 static PyObject *k_libm(PyObject *self, PyObject *args) {
@@ -643,8 +810,10 @@ static PyObject *k_libm(PyObject *self, PyObject *args) {
         for (Py_ssize_t i = 0; i < n; i++) O[i] = acos(X[i]);
     else if (!strcmp(name, "asin") && !have_y)
         for (Py_ssize_t i = 0; i < n; i++) O[i] = asin(X[i]);
+    else if (!strcmp(name, "sin") && !have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = sin(X[i]);
     else {
-        PyErr_Format(PyExc_ValueError, "libm: expected atan2(x, y), hypot(x, y), acos(x) or asin(x), got %s", name);
+        PyErr_Format(PyExc_ValueError, "libm: expected atan2(x, y), hypot(x, y), acos(x), asin(x) or sin(x), got %s", name);
         goto done;
     }
     ret = Py_None;
@@ -710,7 +879,16 @@ static PyMethodDef methods[] = {
     {"wrapped_cos_errors", k_wrapped_cos_errors, METH_VARARGS,
      "wrapped_cos_errors(e1, e2, out, nan): opentrack's angle errors (twin: "
      "hpe_cli.metrics.peer_angles.opentrack_errors)."},
-    {"libm", k_libm, METH_VARARGS, "libm(name, x, y, out): the C library's atan2, hypot, acos, asin (probes)."},
+    {"opal23_mae", k_opal23_mae, METH_VARARGS,
+     "opal23_mae(a, p, out): opal23's compute_mae (twin: hpe_cli.metrics.peer_angles.opal23_mae)."},
+    {"trace_acos_deg", k_trace_acos_deg, METH_VARARGS,
+     "trace_acos_deg(A, P, out): opal23's compute_ge (twin: hpe_cli.metrics.peer_angles.opal23_geodesic)."},
+    {"near_quats", k_near_quats, METH_VARARGS,
+     "near_quats(P, A, q, near): quaternions of P A^T and their nearness (twin: "
+     "hpe_cli.metrics.peer_angles.opal23_near_quats)."},
+    {"quat_rotvecs", k_quat_rotvecs, METH_VARARGS,
+     "quat_rotvecs(q, left, out): rotation vectors of left @ q (twin: hpe_cli.metrics.scipy_columns.rotvec_from_quat)."},
+    {"libm", k_libm, METH_VARARGS, "libm(name, x, y, out): the C library's atan2, hypot, acos, asin, sin (probes)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -32,6 +32,10 @@ KERNELS = (
     "euler_from_matrix",
     "quat_matrix_from_euler",
     "wrapped_cos_errors",
+    "opal23_mae",
+    "trace_acos_deg",
+    "near_quats",
+    "quat_rotvecs",
     "libm",
 )
 
@@ -145,11 +149,12 @@ _LIBM = {
     "hypot": (np.hypot, _two_argument_probe),
     "acos": (np.arccos, _one_argument_probe),
     "asin": (np.arcsin, _one_argument_probe),
+    "sin": (np.sin, _probe_angles),
 }
 
 
 def _libm_kernels(*names):
-    """The kernels, if each of the C library's functions ``names`` (``atan2``, ``hypot``, ``acos``, ``asin``) gives
+    """The kernels, if each of the C library's functions ``names`` (``atan2``, ``hypot``, ``acos``, ``asin``, ``sin``) gives
     numpy's bits on its probe (each checked once a process), else None."""
 
     def check(name):
@@ -249,3 +254,56 @@ def core_errors(P, G):
     geo, maev, fro = np.empty(n), np.empty((n, 3)), np.empty(n)
     k.core_errors(_columns(P, n), _columns(G, n), geo, maev, fro)
     return geo, maev, fro
+
+
+def opal23_mae(a, p):
+    """opal23's ``compute_mae`` of two ``(N, 3)`` ``as_euler('XYZ')`` angle arrays (degrees) in one C loop, or None
+    (kernels not built or too few rows: then :func:`hpe_cli.metrics.peer_angles.opal23_mae` computes it, the same
+    numbers). No C library function is called: the bits are numpy's by construction."""
+    a, p = (np.ascontiguousarray(x, dtype=np.float64) for x in (a, p))
+    k = kernels() if a.ndim == 2 and a.shape == p.shape and a.shape[1] == 3 and len(a) >= _MIN_ROWS else None
+    if k is None:
+        return None
+    out = np.empty(a.shape)
+    k.opal23_mae(a, p, out)
+    return out
+
+
+def trace_acos_deg(A, P):
+    """``degrees(arccos(clip((trace(A P^T) - 1) / 2, -1, 1)))`` of nested 3x3 lists of columns in one C loop, or None
+    (kernels not built, the C library's ``acos`` not numpy's here, or too few rows: then
+    :func:`hpe_cli.metrics.peer_angles.opal23_geodesic` computes it, the same numbers)."""
+    n = _rows([*A, *P])
+    k = _libm_kernels("acos") if n >= _MIN_ROWS else None
+    if k is None:
+        return None
+    out = np.empty(n)
+    k.trace_acos_deg(_columns(A, n), _columns(P, n), out)
+    return out
+
+
+def near_quats(P, A):
+    """``(unit quaternions (N, 4) of P A^T (x, y, z, w), rows within 90 degrees of the identity (N,))`` of nested
+    3x3 lists of columns in one C loop, or None (kernels not built, the C library's ``atan2`` not numpy's here, or
+    too few rows: then :func:`hpe_cli.metrics.peer_angles.opal23_near_quats` computes them, the same numbers)."""
+    n = _rows([*P, *A])
+    k = _libm_kernels("atan2") if n >= _MIN_ROWS else None
+    if k is None:
+        return None
+    q, near = np.empty((n, 4)), np.empty(n, dtype=bool)
+    k.near_quats(_columns(P, n), _columns(A, n), q, near.view(np.uint8))
+    return q, near
+
+
+def quat_rotvecs(q, left):
+    """SciPy's ``as_rotvec`` ``(m, 3)`` (radians) of ``left @ q`` for quaternion columns ``q`` (4 arrays of m rows:
+    x, y, z, w) and a 4x4 ``left``, in one C loop, or None (kernels not built, the C library's ``atan2`` or ``sin``
+    not numpy's here, or too few rows: then :mod:`hpe_cli.metrics.scipy_columns` computes them, the same
+    numbers)."""
+    m = len(q[0])
+    k = _libm_kernels("atan2", "sin") if m >= _MIN_ROWS else None
+    if k is None:
+        return None
+    out = np.empty((m, 3))
+    k.quat_rotvecs([np.ascontiguousarray(c, dtype=np.float64) for c in q], np.ascontiguousarray(left, np.float64), out)
+    return out

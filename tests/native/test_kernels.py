@@ -377,3 +377,66 @@ def test_libm_kernels_used_only_where_each_function_agrees(monkeypatch):
     if built:
         with pytest.raises(ValueError, match="expected atan2"):
             kernels().libm("exp", np.zeros(3), None, np.zeros(3))
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(
+        st.tuples(*[st.one_of(st.floats(-180, 180), st.sampled_from([0.0, -0.0, 180.0, -180.0, 90.0, np.nan]))] * 6),
+        min_size=1,
+        max_size=100,
+    )
+)
+def test_opal23_mae_gives_the_numpy_twins_bits(rows):
+    import os
+
+    from hpe_cli.metrics import peer_angles as pa
+
+    special = np.array([0.0, -0.0, 180.0, -180.0, 90.0, -90.0, 179.9, np.nan])  # and every pair of them: 64 rows
+    grid = np.stack(np.meshgrid(special, special), -1).reshape(-1, 2)[:, [0, 0, 1, 1, 1, 0]]
+    x = np.concatenate([np.array(rows, dtype=np.float64).reshape(-1, 6), grid])
+    a, p = x[:, :3], x[:, 3:]
+    old = os.environ.pop("HPE_KERNELS", None)
+    try:
+        os.environ["HPE_KERNELS"] = "numpy"
+        twin = pa.opal23_mae(None, None, ann_euler=a, pred_euler=p)
+        del os.environ["HPE_KERNELS"]
+        got = pa.opal23_mae(None, None, ann_euler=a, pred_euler=p)
+    finally:
+        os.environ.pop("HPE_KERNELS", None)
+        if old is not None:
+            os.environ["HPE_KERNELS"] = old
+    assert _same_bits(got, twin)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_opal23_geodesic_and_near_quaternions_give_the_numpy_twins_bits(monkeypatch, seed):
+    from hpe_cli.metrics import peer_angles as pa
+
+    R, G = _rotations(np.random.default_rng(seed), 4096)
+    R[7] = np.nan
+    geo = both(monkeypatch, lambda: pa.opal23_geodesic(G, R))
+    near = both(monkeypatch, lambda: pa.opal23_near_quats(G, R))
+    mask = both(monkeypatch, lambda: pa.opal23_near_mask(G, R))
+    assert all(_same_bits(g, geo[0]) for g in geo)
+    assert all(_same_bits(q, near[0][0]) and np.array_equal(m, near[0][1]) for q, m in near)
+    assert all(np.array_equal(m, near[0][1]) for m in mask)
+    d = np.degrees(np.arccos(np.clip((np.einsum("nij,nij->n", G, R) - 1) / 2, -1, 1)))  # the oracle: the formula
+    assert np.allclose(geo[-1], d, atol=1e-5, equal_nan=True)  # acos near 0 degrees: ~1e-6 degrees of rounding
+    assert np.array_equal(near[-1][1], np.nan_to_num(d, nan=180.0) < 90.0)
+
+
+def test_karcher_mean_gives_the_numpy_twins_bits(monkeypatch):
+    from scipy.spatial.transform import Rotation
+
+    from hpe_cli.metrics import peer_angles as pa
+
+    rng = np.random.default_rng(11)
+    base = Rotation.from_euler("xyz", [5.0, -8.0, 3.0], degrees=True)
+    deltas = (base * Rotation.from_rotvec(rng.standard_normal((5000, 3)) * 0.2)).as_matrix()
+    deltas[:40] = base.as_matrix()  # rotation vectors of 0 (the Taylor branch) after the first step
+    q, near = pa.opal23_near_quats(np.broadcast_to(np.eye(3), deltas.shape), deltas)
+    means = both(monkeypatch, lambda: pa.opal23_karcher(q, chunk=1 << 11))
+    assert all(_same_bits(m, means[0]) for m in means)
+    ref = Rotation.from_matrix(deltas[near]).mean().as_matrix()  # the oracle: SciPy's (chordal) mean, close by
+    assert np.allclose(means[-1], ref, atol=1e-3)
