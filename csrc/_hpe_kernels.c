@@ -624,13 +624,23 @@ done:
     return ret;
 }
 
+/* c ? a : b without a branch (the data's signs are random: a branch would be mispredicted half the time) */
+static inline double sel(int c, double a, double b) {
+    uint64_t ua, ub, m = (uint64_t)0 - (uint64_t)(c != 0);
+    memcpy(&ua, &a, 8);
+    memcpy(&ub, &b, 8);
+    ua = (ua & m) | (ub & ~m);
+    memcpy(&a, &ua, 8);
+    return a;
+}
+
 /* opal23_mae(a float64[n*3], p float64[n*3], out float64[n*3]): opal23's compute_mae of the annotation's and the
  * prediction's as_euler('XYZ') angles: the better (by mean) of the prediction and its other solution, each error
  * wrapped min(e, 360 - e); numpy's sign, where and minimum (NaN kept), in the twin's order.
  * twin: hpe_cli.metrics.peer_angles.opal23_mae */
-static inline double np_sign(double x) { return x > 0 ? 1.0 : (x < 0 ? -1.0 : (x == 0 ? 0.0 : x)); }
+static inline double np_sign(double x) { return sel(x > 0, 1.0, sel(x < 0, -1.0, sel(x == 0, 0.0, x))); }
 
-static inline double np_minimum(double x, double y) { return (isnan(x) || x <= y) ? x : (isnan(y) ? y : y); }
+static inline double np_minimum(double x, double y) { return sel(isnan(x) || x <= y, x, y); }
 
 static PyObject *k_opal23_mae(PyObject *self, PyObject *args) {
     Py_buffer ab, pb, ob;
@@ -649,14 +659,14 @@ static PyObject *k_opal23_mae(PyObject *self, PyObject *args) {
         w[1] = pc[1] - np_sign(pc[1]) * 180;
         w[2] = pc[2] - np_sign(pc[2]) * 180;
         for (int k = 0; k < 3; k++) {
-            if (w[k] > 180) w[k] = w[k] - 360;
-            if (w[k] < -180) w[k] = w[k] + 360;
+            w[k] = sel(w[k] > 180, w[k] - 360, w[k]);
+            w[k] = sel(w[k] < -180, w[k] + 360, w[k]);
             e[k] = fabs(ac[k] - pc[k]);
             ew[k] = fabs(ac[k] - w[k]);
         }
         int use = (ew[0] + ew[1] + ew[2]) / 3 < (e[0] + e[1] + e[2]) / 3;
         for (int k = 0; k < 3; k++) {
-            double x = use ? ew[k] : e[k];
+            double x = sel(use, ew[k], e[k]);
             O[3 * i + order[k]] = np_minimum(x, 360 - x);
         }
     }
@@ -785,6 +795,85 @@ done:
     return ret;
 }
 
+/* system_angles(X (9 columns), p1 float64[3*n], p2 float64[3*n], lock float64[n], near uint8[n], i, j, k, proper,
+ * e, scale (3), role (3), middle, refine_below) -> rows near the lock
+ * A rotation system's two Euler solutions in degrees: solution 1 by the textbook atan2 formulas of the intrinsic
+ * sequence (i, j, k; k is the third axis of a proper sequence's plane), each turn times its scale (+-180/pi by its
+ * hand) and lifted from -180 to 180, placed at its role (p1's rows are pitch, yaw, roll); solution 2 from it (the
+ * outer turns by 180 degrees, the middle one to 180 - b, or -b for a proper sequence, each into (-180, 180]). Rows
+ * with lock below refine_below are marked in near: the twin solves their first angle from the residual, so the
+ * caller recomputes them. Uses the C library's atan2.
+ * twins: hpe_cli.rotation.euler.soa_to_euler, hpe_cli.rotation.system_def.RotationSystem.soa_to_angles */
+static inline double lift(double d) { return sel(d <= -180.0, d + 360.0, d); }
+
+static PyObject *k_system_angles(PyObject *self, PyObject *args) {
+    PyObject *Xo;
+    Py_buffer b1, b2, bl, bn, X[9];
+    int i, j, k, proper, role[3], middle;
+    double e, scale[3], refine;
+    if (!PyArg_ParseTuple(args, "Ow*w*w*w*iiipd(ddd)(iii)id", &Xo, &b1, &b2, &bl, &bn, &i, &j, &k, &proper, &e,
+                          &scale[0], &scale[1], &scale[2], &role[0], &role[1], &role[2], &middle, &refine))
+        return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = bn.len, near = 0;
+    int have_x = 0, ok = 1;
+    if (!need(&b1, 3 * n, 8, "p1") || !need(&b2, 3 * n, 8, "p2") || !need(&bl, n, 8, "lock")) goto done;
+    int idx[7] = {i, j, k, role[0], role[1], role[2], middle};
+    for (int m = 0; m < 7; m++) ok &= idx[m] >= 0 && idx[m] <= 2;
+    if (!ok || role[0] + role[1] + role[2] != 3 || role[0] == role[1]) {
+        PyErr_SetString(PyExc_ValueError, "axes and roles: expected 0, 1 or 2, the roles each once");
+        goto done;
+    }
+    if (!(have_x = nine(Xo, X, n, "X"))) goto done;
+    const double *x[9];
+    for (int m = 0; m < 9; m++) x[m] = (const double *)X[m].buf;
+    double *P1 = (double *)b1.buf, *P2 = (double *)b2.buf, *L = (double *)bl.buf;
+    uint8_t *NR = (uint8_t *)bn.buf;
+#define E(r, c) x[3 * (r) + (c)][t]
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t t = 0; t < n; t++) {
+        double v[3], lk;
+        if (proper) { /* k is the plane's third axis m */
+            lk = sqrt(E(i, j) * E(i, j) + E(i, k) * E(i, k));
+            v[1] = atan2(lk, E(i, i));
+            v[0] = atan2(E(j, i), -e * E(k, i));
+            v[2] = atan2(E(i, j), e * E(i, k));
+        } else {
+            lk = sqrt(E(i, i) * E(i, i) + E(i, j) * E(i, j));
+            if (e > 0) {
+                v[1] = atan2(E(i, k), lk);
+                v[0] = atan2(-E(j, k), E(k, k));
+                v[2] = atan2(-E(i, j), E(i, i));
+            } else {
+                v[1] = atan2(-E(i, k), lk);
+                v[0] = atan2(E(j, k), E(k, k));
+                v[2] = atan2(E(i, j), E(i, i));
+            }
+        }
+        L[t] = lk;
+        NR[t] = lk < refine;
+        near += lk < refine;
+        for (int m = 0; m < 3; m++) P1[role[m] * n + t] = lift(v[m] * scale[m]);
+        for (int r = 0; r < 3; r++) {
+            double d = P1[r * n + t], d2;
+            if (r != middle) d2 = (d + 180.0) - sel(d > 0, 360.0, 0.0);
+            else if (proper) d2 = -d;
+            else d2 = (180.0 - d) - sel(d < 0, 360.0, 0.0);
+            P2[r * n + t] = lift(d2);
+        }
+    }
+    Py_END_ALLOW_THREADS
+#undef E
+    ret = PyLong_FromSsize_t(near);
+done:
+    if (have_x) release(X, 9);
+    PyBuffer_Release(&b1);
+    PyBuffer_Release(&b2);
+    PyBuffer_Release(&bl);
+    PyBuffer_Release(&bn);
+    return ret;
+}
+
 /* libm(name, x float64[n], y float64[n] or None, out float64[n]): the C library's atan2, hypot, acos or asin, for
  * hpe_cli.native's probes */
 static PyObject *k_libm(PyObject *self, PyObject *args) {
@@ -888,6 +977,9 @@ static PyMethodDef methods[] = {
      "hpe_cli.metrics.peer_angles.opal23_near_quats)."},
     {"quat_rotvecs", k_quat_rotvecs, METH_VARARGS,
      "quat_rotvecs(q, left, out): rotation vectors of left @ q (twin: hpe_cli.metrics.scipy_columns.rotvec_from_quat)."},
+    {"system_angles", k_system_angles, METH_VARARGS,
+     "system_angles(X, p1, p2, lock, near, i, j, k, proper, e, scale, role, middle, refine_below) -> rows near the "
+     "lock: a system's two Euler solutions (twin: hpe_cli.rotation.system_def.RotationSystem.soa_to_angles)."},
     {"libm", k_libm, METH_VARARGS, "libm(name, x, y, out): the C library's atan2, hypot, acos, asin, sin (probes)."},
     {NULL, NULL, 0, NULL},
 };

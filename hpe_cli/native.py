@@ -36,6 +36,7 @@ KERNELS = (
     "trace_acos_deg",
     "near_quats",
     "quat_rotvecs",
+    "system_angles",
     "libm",
 )
 
@@ -307,3 +308,38 @@ def quat_rotvecs(q, left):
     out = np.empty((m, 3))
     k.quat_rotvecs([np.ascontiguousarray(c, dtype=np.float64) for c in q], np.ascontiguousarray(left, np.float64), out)
     return out
+
+
+def system_angles(X, spec, scale, roles, middle: int, refine_below: float):
+    """A rotation system's two Euler solutions of a nested 3x3 list of columns in one C loop, or None (kernels not
+    built, the C library's ``atan2`` not numpy's here, or too few rows: then
+    :meth:`hpe_cli.rotation.system_def.RotationSystem.soa_to_angles` computes them, the same numbers).
+
+    ``spec`` is ``(i, j, k, proper, parity)`` of the intrinsic sequence (``k`` the plane's third axis when proper),
+    ``scale`` each turn's degrees factor (its hand's sign), ``roles`` each turn's place in (pitch, yaw, roll),
+    ``middle`` the middle turn's. Returns ``(p1 (3, N), p2 (3, N), lock (N,), near (N,))``: the rows of ``near``
+    (lock below ``refine_below``) are the caller's to recompute.
+    """
+    n = _rows(X)
+    k = _atan2_kernels() if n >= _MIN_ROWS else None
+    if k is None:
+        return None
+    p1, p2, lock, near = np.empty((3, n)), np.empty((3, n)), np.empty(n), np.empty(n, dtype=bool)
+    i, j, m, proper, e = spec
+    k.system_angles(
+        _columns(X, n),
+        p1,
+        p2,
+        lock,
+        near.view(np.uint8),
+        i,
+        j,
+        m,
+        proper,
+        float(e),
+        tuple(scale),
+        tuple(roles),
+        middle,
+        refine_below,
+    )
+    return p1, p2, lock, near

@@ -440,3 +440,23 @@ def test_karcher_mean_gives_the_numpy_twins_bits(monkeypatch):
     assert all(_same_bits(m, means[0]) for m in means)
     ref = Rotation.from_matrix(deltas[near]).mean().as_matrix()  # the oracle: SciPy's (chordal) mean, close by
     assert np.allclose(means[-1], ref, atol=1e-3)
+
+
+def test_system_angles_give_the_numpy_twins_bits_in_every_system(monkeypatch):
+    from scipy.spatial.transform import Rotation
+
+    from hpe_cli.rotation.systems import get_system, system_names
+
+    rng = np.random.default_rng(5)
+    mid = 90 - 10.0 ** rng.uniform(-9, 1, 200)  # up to 10 degrees from the lock: refined rows and plain ones
+    near = Rotation.from_euler(
+        "zyx", np.c_[rng.uniform(-180, 180, 200), mid, rng.uniform(-180, 180, 200)], degrees=True
+    )
+    R = np.concatenate([_hard_matrices(rng, 3000), near.as_matrix(), near.as_matrix().transpose(0, 2, 1)])
+    for name in system_names():
+        system = get_system(name)
+        X = system.soa_from_canonical([[R[:, i, j] for j in range(3)] for i in range(3)])
+        got = both(monkeypatch, lambda: system.soa_to_angles(X))
+        for g in got:
+            assert all(_same_bits(a, b) for a, b in zip(g[0] + g[1] + [g[3]], got[0][0] + got[0][1] + [got[0][3]]))
+            assert np.array_equal(g[2], got[0][2])
