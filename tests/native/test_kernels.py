@@ -7,6 +7,7 @@ built, the kernel half is skipped and the numpy twin is still checked against th
 
 from __future__ import annotations
 
+import os
 import struct
 import warnings
 
@@ -31,6 +32,21 @@ def both(monkeypatch, fn):
     if built:
         out.append(fn())
     return out
+
+
+def twin_and_kernel(fn):
+    """``[fn() with HPE_KERNELS=numpy, fn() as the environment has it]`` without pytest's monkeypatch (which a
+    Hypothesis test cannot use per example)."""
+    old = os.environ.pop("HPE_KERNELS", None)
+    try:
+        os.environ["HPE_KERNELS"] = "numpy"
+        twin = fn()
+        del os.environ["HPE_KERNELS"]
+        return [twin, fn()]
+    finally:
+        os.environ.pop("HPE_KERNELS", None)
+        if old is not None:
+            os.environ["HPE_KERNELS"] = old
 
 
 def mix_ref(h: int) -> int:
@@ -314,23 +330,12 @@ def test_euler_from_matrix_gives_the_numpy_twins_bits_and_scipys_angles(monkeypa
     )
 )
 def test_quats_and_matrices_from_euler_give_the_numpy_twins_bits(angles):
-    import os
-
     from scipy.spatial.transform import Rotation
 
     from hpe_cli.metrics import peer_angles as pa
 
     a = np.array(angles, dtype=np.float64)
-    old = os.environ.pop("HPE_KERNELS", None)
-    try:
-        os.environ["HPE_KERNELS"] = "numpy"
-        q0, M0 = pa.opal23_quats_and_matrices(a)
-        del os.environ["HPE_KERNELS"]
-        q1, M1 = pa.opal23_quats_and_matrices(a)
-    finally:
-        os.environ.pop("HPE_KERNELS", None)
-        if old is not None:
-            os.environ["HPE_KERNELS"] = old
+    (q0, M0), (q1, M1) = twin_and_kernel(lambda: pa.opal23_quats_and_matrices(a))
     assert all(_same_bits(x, y) for x, y in zip(q0, q1))
     assert all(_same_bits(M0[i][j], M1[i][j]) for i in range(3) for j in range(3))
     assert all(_same_bits(x, y) for x, y in zip(q1, pa.opal23_quats(a)))  # the twin of the quaternions alone
@@ -388,24 +393,13 @@ def test_libm_kernels_used_only_where_each_function_agrees(monkeypatch):
     )
 )
 def test_opal23_mae_gives_the_numpy_twins_bits(rows):
-    import os
-
     from hpe_cli.metrics import peer_angles as pa
 
     special = np.array([0.0, -0.0, 180.0, -180.0, 90.0, -90.0, 179.9, np.nan])  # and every pair of them: 64 rows
     grid = np.stack(np.meshgrid(special, special), -1).reshape(-1, 2)[:, [0, 0, 1, 1, 1, 0]]
     x = np.concatenate([np.array(rows, dtype=np.float64).reshape(-1, 6), grid])
     a, p = x[:, :3], x[:, 3:]
-    old = os.environ.pop("HPE_KERNELS", None)
-    try:
-        os.environ["HPE_KERNELS"] = "numpy"
-        twin = pa.opal23_mae(None, None, ann_euler=a, pred_euler=p)
-        del os.environ["HPE_KERNELS"]
-        got = pa.opal23_mae(None, None, ann_euler=a, pred_euler=p)
-    finally:
-        os.environ.pop("HPE_KERNELS", None)
-        if old is not None:
-            os.environ["HPE_KERNELS"] = old
+    twin, got = twin_and_kernel(lambda: pa.opal23_mae(None, None, ann_euler=a, pred_euler=p))
     assert _same_bits(got, twin)
 
 
