@@ -5,8 +5,8 @@
  * docstring) that gives the same bits, and tests/native/ compares the two. The hashes and the screens compute
  * integers, fabs, differences and comparisons only. The error kernels add IEEE sums, products and square roots in
  * the order of their twins' numpy operations (the build passes -ffp-contract=off: no fused multiply-adds) and call
- * the C library's sincos and atan2, which hpe_cli.native uses only where they give numpy's bits on a probe of
- * values. The arguments are buffers (numpy arrays), checked for size; the GIL is released in the loops, so the
+ * the C library's sincos, atan2, hypot, acos and asin, which hpe_cli.native uses only where they give numpy's bits
+ * on a probe of values. The arguments are buffers (numpy arrays), checked for size; the GIL is released in the loops, so the
  * threads that call them run in parallel.
  */
 #define _GNU_SOURCE /* sincos */
@@ -319,16 +319,16 @@ done:
  * the numpy twins' operations (left to right; no fused multiply-adds). Uses the C library's atan2: hpe_cli.native
  * calls it only where atan2 gives numpy's bits on a probe.
  * twins: hpe_cli.metrics.rotation_errors.geodesic_deg, maev_deg, frobenius */
-static int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name) {
-    PyObject *fast = PySequence_Fast(seq, "expected a sequence of 9 columns");
+static int columns(PyObject *seq, Py_buffer *b, int count, Py_ssize_t n, const char *name) {
+    PyObject *fast = PySequence_Fast(seq, "expected a sequence of columns");
     if (!fast) return 0;
-    if (PySequence_Fast_GET_SIZE(fast) != 9) {
-        PyErr_Format(PyExc_ValueError, "%s: expected 9 columns, got %zd", name, PySequence_Fast_GET_SIZE(fast));
+    if (PySequence_Fast_GET_SIZE(fast) != count) {
+        PyErr_Format(PyExc_ValueError, "%s: expected %d columns, got %zd", name, count, PySequence_Fast_GET_SIZE(fast));
         Py_DECREF(fast);
         return 0;
     }
     int k = 0;
-    for (; k < 9; k++) {
+    for (; k < count; k++) {
         if (PyObject_GetBuffer(PySequence_Fast_GET_ITEM(fast, k), &b[k], PyBUF_C_CONTIGUOUS) < 0) break;
         if (!need(&b[k], n, 8, name)) {
             k++;
@@ -336,9 +336,15 @@ static int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name) {
         }
     }
     Py_DECREF(fast);
-    if (k == 9 && !PyErr_Occurred()) return 1;
+    if (k == count && !PyErr_Occurred()) return 1;
     for (int j = 0; j < k; j++) PyBuffer_Release(&b[j]);
     return 0;
+}
+
+static int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name) { return columns(seq, b, 9, n, name); }
+
+static void release(Py_buffer *b, int count) {
+    for (int k = 0; k < count; k++) PyBuffer_Release(&b[k]);
 }
 
 static PyObject *k_core_errors(PyObject *self, PyObject *args) {
@@ -396,20 +402,513 @@ done:
     return ret;
 }
 
-/* atan2(y float64[n], x float64[n], out float64[n]): the C library's, for hpe_cli.native's probe */
-static PyObject *k_atan2(PyObject *self, PyObject *args) {
-    Py_buffer y, x, o;
-    if (!PyArg_ParseTuple(args, "y*y*w*", &y, &x, &o)) return NULL;
+/* euler_from_matrix(R (9 float64[n] columns, row-major), out float64[n*3], i, j, k, sign, symmetric, intrinsic,
+ * degrees, check) -> rows off orthonormal (then nothing is to be used: the twin projects them by SVD first)
+ * SciPy's Rotation.from_matrix(R).as_euler(seq): Markley's matrix-to-quaternion (the case of the largest of the
+ * diagonal and the trace, first on ties), then Bernardes and Viollet's angles (atan2 and hypot), the lock and the
+ * wrap into [-pi, pi] as the twin does them, in its order. i, j, k, sign come from the twin's reading of seq.
+ * twin: hpe_cli.metrics.scipy_columns.euler_from_matrix */
+static inline void quat_of_matrix(const double *r, double q[4]) {
+    double tr = r[0] + r[4] + r[8];
+    int c0 = (r[0] >= r[4]) & (r[0] >= r[8]) & (r[0] >= tr);
+    int c1 = !c0 & (r[4] >= r[8]) & (r[4] >= tr);
+    int c2 = !(c0 | c1) & (r[8] >= tr);
+    double d0 = r[7] - r[5], d1 = r[2] - r[6], d2 = r[3] - r[1];
+    if (c0) q[0] = 1 - tr + 2 * r[0], q[1] = r[3] + r[1], q[2] = r[6] + r[2], q[3] = d0;
+    else if (c1) q[0] = r[3] + r[1], q[1] = 1 - tr + 2 * r[4], q[2] = r[7] + r[5], q[3] = d1;
+    else if (c2) q[0] = r[6] + r[2], q[1] = r[7] + r[5], q[2] = 1 - tr + 2 * r[8], q[3] = d2;
+    else q[0] = d0, q[1] = d1, q[2] = d2, q[3] = 1 + tr;
+    double norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int m = 0; m < 4; m++) q[m] = q[m] / norm;
+}
+
+static int orthonormal(const double *r) {
+    for (int a = 0; a < 3; a++)
+        for (int b = a; b < 3; b++) {
+            double g = r[3 * a] * r[3 * b];
+            g += r[3 * a + 1] * r[3 * b + 1];
+            g += r[3 * a + 2] * r[3 * b + 2];
+            if (a == b) g -= 1.0;
+            if (!(fabs(g) <= (a == b ? 1e-12 + 1e-5 : 1e-12))) return 0;
+        }
+    return 1;
+}
+
+typedef struct {
+    int i, j, k, symmetric, intrinsic;
+    double sign;
+} eseq_t;
+
+static inline void euler_of_quat(const eseq_t *S, const double *q, double *o) {
+    const double PI = 3.141592653589793, EPS = 1e-7;
+    double qw = q[3], a, b, c, d;
+    if (S->symmetric) a = qw, b = q[S->i], c = q[S->j], d = q[S->k] * S->sign;
+    else a = qw - q[S->j], b = q[S->i] + q[S->k] * S->sign, c = q[S->j] + qw, d = q[S->k] * S->sign - q[S->i];
+    double half_sum = atan2(b, a), half_diff = atan2(d, c);
+    double mid = atan2(hypot(c, d), hypot(a, b));
+    mid *= 2;
+    int case1 = mid <= EPS, lock = case1 | (mid - PI >= -EPS);
+    double first = half_sum - half_diff, third = half_sum + half_diff;
+    if (lock) {
+        double turn = case1 ? 2 * half_sum : 2 * half_diff * (S->intrinsic ? 1 : -1);
+        if (S->intrinsic) first = 0.0, third = turn;
+        else first = turn, third = 0.0;
+    }
+    if (!S->symmetric) {
+        third *= S->sign;
+        mid -= PI / 2;
+    }
+    double v[2] = {first, third};
+    int col[2] = {S->intrinsic ? 2 : 0, S->intrinsic ? 0 : 2};
+    for (int m = 0; m < 2; m++) {
+        double x = v[m];
+        if (x < -PI) x = x + 2 * PI;
+        else if (x > PI) x = x - 2 * PI;
+        o[col[m]] = x;
+    }
+    o[1] = mid;
+}
+
+static PyObject *k_euler_from_matrix(PyObject *self, PyObject *args) {
+    PyObject *Ro;
+    Py_buffer out, R[9];
+    eseq_t S;
+    int degrees, check;
+    if (!PyArg_ParseTuple(args, "Ow*iiidpppp", &Ro, &out, &S.i, &S.j, &S.k, &S.sign, &S.symmetric, &S.intrinsic,
+                          &degrees, &check))
+        return NULL;
     PyObject *ret = NULL;
-    Py_ssize_t n = o.len / 8;
-    if (!need(&y, n, 8, "y") || !need(&x, n, 8, "x") || !need(&o, n, 8, "out")) goto done;
-    const double *Y = (const double *)y.buf, *X = (const double *)x.buf;
-    double *O = (double *)o.buf;
-    for (Py_ssize_t i = 0; i < n; i++) O[i] = atan2(Y[i], X[i]);
+    Py_ssize_t n = out.len / 24, off = 0;
+    int have_r = 0;
+    if (!need(&out, 3 * n, 8, "out")) goto done;
+    if (S.i < 0 || S.i > 2 || S.j < 0 || S.j > 2 || S.k < 0 || S.k > 2) {
+        PyErr_SetString(PyExc_ValueError, "axes: expected 0, 1 or 2");
+        goto done;
+    }
+    if (!(have_r = nine(Ro, R, n, "R"))) goto done;
+    const double *r[9];
+    for (int m = 0; m < 9; m++) r[m] = (const double *)R[m].buf;
+    double *O = (double *)out.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double a[9], q[4];
+        for (int m = 0; m < 9; m++) a[m] = r[m][i];
+        if (check && !orthonormal(a)) {
+            off++;
+            continue;
+        }
+        quat_of_matrix(a, q);
+        euler_of_quat(&S, q, O + 3 * i);
+        if (degrees)
+            for (int m = 0; m < 3; m++) O[3 * i + m] *= DEG;
+    }
+    Py_END_ALLOW_THREADS
+    ret = PyLong_FromSsize_t(off);
+done:
+    if (have_r)
+        for (int m = 0; m < 9; m++) PyBuffer_Release(&R[m]);
+    PyBuffer_Release(&out);
+    return ret;
+}
+
+/* quat_matrix_from_euler(angles float64[n*3], scale float64[3], sx, sy, sz (axes 0-2), intrinsic, q float64[4*n],
+ * M float64[9*n]): SciPy's Rotation.from_euler(seq, angles * scale).as_quat() (each axis's elementary quaternion
+ * of the half angle, composed in seq's order) and .as_matrix() of it, rows of q and M as columns (q[m*n + i]).
+ * The degrees' factor is in scale (one product, as the twin's). Uses the C library's sincos.
+ * twins: hpe_cli.metrics.scipy_columns.quat_from_euler, matrix_from_quat */
+static inline void compose_q(const double *p, const double *q, double *o) {
+    double cx = p[1] * q[2] - p[2] * q[1], cy = p[2] * q[0] - p[0] * q[2], cz = p[0] * q[1] - p[1] * q[0];
+    o[0] = p[3] * q[0] + q[3] * p[0] + cx;
+    o[1] = p[3] * q[1] + q[3] * p[1] + cy;
+    o[2] = p[3] * q[2] + q[3] * p[2] + cz;
+    o[3] = p[3] * q[3] - p[0] * q[0] - p[1] * q[1] - p[2] * q[2];
+}
+
+static PyObject *k_quat_matrix_from_euler(PyObject *self, PyObject *args) {
+    Py_buffer ang, qo, mo;
+    double sc[3];
+    int ax[3], intrinsic;
+    if (!PyArg_ParseTuple(args, "y*(ddd)(iii)pw*w*", &ang, &sc[0], &sc[1], &sc[2], &ax[0], &ax[1], &ax[2],
+                          &intrinsic, &qo, &mo))
+        return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ang.len / 24;
+    if (!need(&ang, 3 * n, 8, "angles") || !need(&qo, 4 * n, 8, "q") || !need(&mo, 9 * n, 8, "M")) goto done;
+    for (int m = 0; m < 3; m++)
+        if (ax[m] < 0 || ax[m] > 2) {
+            PyErr_SetString(PyExc_ValueError, "axes: expected 0, 1 or 2");
+            goto done;
+        }
+    const double *A = (const double *)ang.buf;
+    double *Q = (double *)qo.buf, *M = (double *)mo.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double q[4], t[4];
+        for (int m = 0; m < 3; m++) {
+            double h = A[3 * i + m] * sc[m] / 2.0, s, c;
+#if defined(__GLIBC__)
+            sincos(h, &s, &c);
+#else
+            s = sin(h), c = cos(h);
+#endif
+            double e[4] = {0.0, 0.0, 0.0, c};
+            e[ax[m]] = s;
+            if (!m) memcpy(q, e, sizeof q);
+            else {
+                if (intrinsic) compose_q(q, e, t);
+                else compose_q(e, q, t);
+                memcpy(q, t, sizeof q);
+            }
+        }
+        double x = q[0], y = q[1], z = q[2], w = q[3];
+        double x2 = x * x, y2 = y * y, z2 = z * z, w2 = w * w;
+        double xy = x * y, zw = z * w, xz = x * z, yw = y * w, yz = y * z, xw = x * w;
+        double m9[9] = {x2 - y2 - z2 + w2, 2 * (xy - zw),      2 * (xz + yw),
+                        2 * (xy + zw),      -x2 + y2 - z2 + w2, 2 * (yz - xw),
+                        2 * (xz - yw),      2 * (yz + xw),      -x2 - y2 + z2 + w2};
+        for (int m = 0; m < 4; m++) Q[m * n + i] = q[m];
+        for (int m = 0; m < 9; m++) M[m * n + i] = m9[m];
+    }
+    Py_END_ALLOW_THREADS
     ret = Py_None;
     Py_INCREF(ret);
 done:
-    PyBuffer_Release(&y);
+    PyBuffer_Release(&ang);
+    PyBuffer_Release(&qo);
+    PyBuffer_Release(&mo);
+    return ret;
+}
+
+/* wrapped_cos_errors(e1 float64[n*3], e2 float64[n*3], out float64[n*3], nan uint8[n]): opentrack's
+ * arccos(cos a cos b + sin a sin b) per angle, the argument clipped to [-1, 1], in degrees; nan marks the rows
+ * where one argument is past +-1 (NaN in the peer's unclipped code). Uses the C library's sincos and acos.
+ * twin: hpe_cli.metrics.peer_angles.opentrack_errors */
+static PyObject *k_wrapped_cos_errors(PyObject *self, PyObject *args) {
+    Py_buffer e1, e2, out, nan;
+    if (!PyArg_ParseTuple(args, "y*y*w*w*", &e1, &e2, &out, &nan)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = nan.len;
+    if (!need(&e1, 3 * n, 8, "e1") || !need(&e2, 3 * n, 8, "e2") || !need(&out, 3 * n, 8, "out")) goto done;
+    const double *a = (const double *)e1.buf, *b = (const double *)e2.buf;
+    double *O = (double *)out.buf;
+    uint8_t *NN = (uint8_t *)nan.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int past = 0;
+        for (int m = 0; m < 3; m++) {
+            double s1, c1, s2, c2;
+#if defined(__GLIBC__)
+            sincos(a[3 * i + m], &s1, &c1);
+            sincos(b[3 * i + m], &s2, &c2);
+#else
+            s1 = sin(a[3 * i + m]), c1 = cos(a[3 * i + m]), s2 = sin(b[3 * i + m]), c2 = cos(b[3 * i + m]);
+#endif
+            double dot = c1 * c2;
+            dot += s1 * s2;
+            past |= fabs(dot) > 1.0;
+            dot = dot < -1.0 ? -1.0 : (dot > 1.0 ? 1.0 : dot);
+            O[3 * i + m] = acos(dot) * DEG;
+        }
+        NN[i] = (uint8_t)past;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&e1);
+    PyBuffer_Release(&e2);
+    PyBuffer_Release(&out);
+    PyBuffer_Release(&nan);
+    return ret;
+}
+
+/* c ? a : b without a branch (the data's signs are random: a branch would be mispredicted half the time) */
+static inline double sel(int c, double a, double b) {
+    uint64_t ua, ub, m = (uint64_t)0 - (uint64_t)(c != 0);
+    memcpy(&ua, &a, 8);
+    memcpy(&ub, &b, 8);
+    ua = (ua & m) | (ub & ~m);
+    memcpy(&a, &ua, 8);
+    return a;
+}
+
+/* opal23_mae(a float64[n*3], p float64[n*3], out float64[n*3]): opal23's compute_mae of the annotation's and the
+ * prediction's as_euler('XYZ') angles: the better (by mean) of the prediction and its other solution, each error
+ * wrapped min(e, 360 - e); numpy's sign, where and minimum (NaN kept), in the twin's order.
+ * twin: hpe_cli.metrics.peer_angles.opal23_mae */
+static inline double np_sign(double x) { return sel(x > 0, 1.0, sel(x < 0, -1.0, sel(x == 0, 0.0, x))); }
+
+static inline double np_minimum(double x, double y) { return sel(isnan(x) || x <= y, x, y); }
+
+static PyObject *k_opal23_mae(PyObject *self, PyObject *args) {
+    Py_buffer ab, pb, ob;
+    if (!PyArg_ParseTuple(args, "y*y*w*", &ab, &pb, &ob)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ob.len / 24;
+    if (!need(&ab, 3 * n, 8, "a") || !need(&pb, 3 * n, 8, "p") || !need(&ob, 3 * n, 8, "out")) goto done;
+    const double *A = (const double *)ab.buf, *P = (const double *)pb.buf;
+    double *O = (double *)ob.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        static const int order[3] = {1, 0, 2}; /* the peer's (yaw, pitch, roll) */
+        double pc[3], ac[3], w[3], e[3], ew[3];
+        for (int k = 0; k < 3; k++) pc[k] = P[3 * i + order[k]], ac[k] = A[3 * i + order[k]];
+        w[0] = 180 - pc[0];
+        w[1] = pc[1] - np_sign(pc[1]) * 180;
+        w[2] = pc[2] - np_sign(pc[2]) * 180;
+        for (int k = 0; k < 3; k++) {
+            w[k] = sel(w[k] > 180, w[k] - 360, w[k]);
+            w[k] = sel(w[k] < -180, w[k] + 360, w[k]);
+            e[k] = fabs(ac[k] - pc[k]);
+            ew[k] = fabs(ac[k] - w[k]);
+        }
+        int use = (ew[0] + ew[1] + ew[2]) / 3 < (e[0] + e[1] + e[2]) / 3;
+        for (int k = 0; k < 3; k++) {
+            double x = sel(use, ew[k], e[k]);
+            O[3 * i + order[k]] = np_minimum(x, 360 - x);
+        }
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&ab);
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&ob);
+    return ret;
+}
+
+/* trace_acos_deg(A (9 columns), P (9 columns), out float64[n]): opal23's compute_ge,
+ * degrees(arccos(clip((trace(A P^T) - 1) / 2, -1, 1))), the trace summed row by row as einsum does. Uses the C
+ * library's acos. twin: hpe_cli.metrics.peer_angles.opal23_geodesic */
+static PyObject *k_trace_acos_deg(PyObject *self, PyObject *args) {
+    PyObject *Ao, *Po;
+    Py_buffer ob, A[9], P[9];
+    if (!PyArg_ParseTuple(args, "OOw*", &Ao, &Po, &ob)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ob.len / 8;
+    int have_a = 0, have_p = 0;
+    if (!(have_a = nine(Ao, A, n, "A")) || !(have_p = nine(Po, P, n, "P"))) goto done;
+    const double *a[9], *p[9];
+    for (int k = 0; k < 9; k++) a[k] = (const double *)A[k].buf, p[k] = (const double *)P[k].buf;
+    double *O = (double *)ob.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double t = a[0][i] * p[0][i];
+        for (int k = 1; k < 9; k++) t = t + a[k][i] * p[k][i];
+        double c = (t - 1) / 2;
+        c = c < -1.0 ? -1.0 : (c > 1.0 ? 1.0 : c);
+        O[i] = acos(c) * DEG;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_a) release(A, 9);
+    if (have_p) release(P, 9);
+    PyBuffer_Release(&ob);
+    return ret;
+}
+
+/* near_quats(P (9 columns), A (9 columns), q float64[n*4], near uint8[n]): the unit quaternions (x, y, z, w; rows)
+ * of P A^T (SciPy's from_matrix, assume_valid) and whether each is within 90 degrees of the identity
+ * (2 atan2(|(x, y, z)|, |w|) < pi / 2). Uses the C library's atan2.
+ * twins: hpe_cli.metrics.peer_angles.opal23_near_quats (before its gather), opal23_near_mask */
+static PyObject *k_near_quats(PyObject *self, PyObject *args) {
+    PyObject *Po, *Ao;
+    Py_buffer qb, nb, P[9], A[9];
+    if (!PyArg_ParseTuple(args, "OOw*w*", &Po, &Ao, &qb, &nb)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = nb.len;
+    int have_p = 0, have_a = 0;
+    if (!need(&qb, 4 * n, 8, "q")) goto done;
+    if (!(have_p = nine(Po, P, n, "P")) || !(have_a = nine(Ao, A, n, "A"))) goto done;
+    const double *p[9], *a[9];
+    for (int k = 0; k < 9; k++) p[k] = (const double *)P[k].buf, a[k] = (const double *)A[k].buf;
+    double *Q = (double *)qb.buf;
+    uint8_t *NR = (uint8_t *)nb.buf;
+    const double HALF_PI = 3.141592653589793 / 2;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double m[9], *q = Q + 4 * i;
+        for (int r = 0; r < 3; r++)
+            for (int c = 0; c < 3; c++)
+                m[3 * r + c] = p[3 * r][i] * a[3 * c][i] + p[3 * r + 1][i] * a[3 * c + 1][i] +
+                               p[3 * r + 2][i] * a[3 * c + 2][i];
+        quat_of_matrix(m, q);
+        NR[i] = 2 * atan2(sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), fabs(q[3])) < HALF_PI;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_p) release(P, 9);
+    if (have_a) release(A, 9);
+    PyBuffer_Release(&qb);
+    PyBuffer_Release(&nb);
+    return ret;
+}
+
+/* quat_rotvecs(q (4 columns x, y, z, w of m rows), left float64[16], out float64[m*3]): SciPy's as_rotvec of
+ * left @ q (each row's quaternion turned by a 4x4 matrix, the products summed left to right): the canonical sign
+ * (w < 0, ties by x, y, z), the angle 2 atan2(|v|, |w|), the scale angle / sin(angle / 2) (its Taylor series at
+ * or below 1e-3 rad). Uses the C library's atan2 and sin.
+ * twin: hpe_cli.metrics.peer_angles' Karcher displacement (scipy_columns.rotvec_from_quat of the product) */
+static PyObject *k_quat_rotvecs(PyObject *self, PyObject *args) {
+    PyObject *qo;
+    Py_buffer lb, ob, Qb[4];
+    if (!PyArg_ParseTuple(args, "Oy*w*", &qo, &lb, &ob)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ob.len / 24;
+    int have_q = 0;
+    if (!need(&ob, 3 * n, 8, "out") || !need(&lb, 16, 8, "left")) goto done;
+    if (!(have_q = columns(qo, Qb, 4, n, "q"))) goto done;
+    const double *q[4], *L = (const double *)lb.buf;
+    for (int k = 0; k < 4; k++) q[k] = (const double *)Qb[k].buf;
+    double *O = (double *)ob.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double r[4];
+        for (int k = 0; k < 4; k++)
+            r[k] = L[4 * k] * q[0][i] + L[4 * k + 1] * q[1][i] + L[4 * k + 2] * q[2][i] + L[4 * k + 3] * q[3][i];
+        double x = r[0], y = r[1], z = r[2], w = r[3];
+        int flip = w < 0;
+        if (w == 0) flip |= (x < 0) | ((x == 0) & ((y < 0) | ((y == 0) & (z < 0))));
+        double s = flip ? -1.0 : 1.0;
+        double angle = 2 * atan2(sqrt(x * x + y * y + z * z), w * s);
+        double a2 = angle * angle, scale;
+        if (angle <= 1e-3) scale = 2 + a2 / 12 + 7 * a2 * a2 / 2880;
+        else scale = angle / sin(angle / 2.0);
+        scale = scale * s;
+        O[3 * i] = scale * x, O[3 * i + 1] = scale * y, O[3 * i + 2] = scale * z;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_q) release(Qb, 4);
+    PyBuffer_Release(&lb);
+    PyBuffer_Release(&ob);
+    return ret;
+}
+
+/* system_angles(X (9 columns), p1 float64[3*n], p2 float64[3*n], lock float64[n], near uint8[n], i, j, k, proper,
+ * e, scale (3), role (3), middle, refine_below) -> rows near the lock
+ * A rotation system's two Euler solutions in degrees: solution 1 by the textbook atan2 formulas of the intrinsic
+ * sequence (i, j, k; k is the third axis of a proper sequence's plane), each turn times its scale (+-180/pi by its
+ * hand) and lifted from -180 to 180, placed at its role (p1's rows are pitch, yaw, roll); solution 2 from it (the
+ * outer turns by 180 degrees, the middle one to 180 - b, or -b for a proper sequence, each into (-180, 180]). Rows
+ * with lock below refine_below are marked in near: the twin solves their first angle from the residual, so the
+ * caller recomputes them. Uses the C library's atan2.
+ * twins: hpe_cli.rotation.euler.soa_to_euler, hpe_cli.rotation.system_def.RotationSystem.soa_to_angles */
+static inline double lift(double d) { return sel(d <= -180.0, d + 360.0, d); }
+
+static PyObject *k_system_angles(PyObject *self, PyObject *args) {
+    PyObject *Xo;
+    Py_buffer b1, b2, bl, bn, X[9];
+    int i, j, k, proper, role[3], middle;
+    double e, scale[3], refine;
+    if (!PyArg_ParseTuple(args, "Ow*w*w*w*iiipd(ddd)(iii)id", &Xo, &b1, &b2, &bl, &bn, &i, &j, &k, &proper, &e,
+                          &scale[0], &scale[1], &scale[2], &role[0], &role[1], &role[2], &middle, &refine))
+        return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = bn.len, near = 0;
+    int have_x = 0, ok = 1;
+    if (!need(&b1, 3 * n, 8, "p1") || !need(&b2, 3 * n, 8, "p2") || !need(&bl, n, 8, "lock")) goto done;
+    int idx[7] = {i, j, k, role[0], role[1], role[2], middle};
+    for (int m = 0; m < 7; m++) ok &= idx[m] >= 0 && idx[m] <= 2;
+    if (!ok || role[0] + role[1] + role[2] != 3 || role[0] == role[1]) {
+        PyErr_SetString(PyExc_ValueError, "axes and roles: expected 0, 1 or 2, the roles each once");
+        goto done;
+    }
+    if (!(have_x = nine(Xo, X, n, "X"))) goto done;
+    const double *x[9];
+    for (int m = 0; m < 9; m++) x[m] = (const double *)X[m].buf;
+    double *P1 = (double *)b1.buf, *P2 = (double *)b2.buf, *L = (double *)bl.buf;
+    uint8_t *NR = (uint8_t *)bn.buf;
+#define E(r, c) x[3 * (r) + (c)][t]
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t t = 0; t < n; t++) {
+        double v[3], lk;
+        if (proper) { /* k is the plane's third axis m */
+            lk = sqrt(E(i, j) * E(i, j) + E(i, k) * E(i, k));
+            v[1] = atan2(lk, E(i, i));
+            v[0] = atan2(E(j, i), -e * E(k, i));
+            v[2] = atan2(E(i, j), e * E(i, k));
+        } else {
+            lk = sqrt(E(i, i) * E(i, i) + E(i, j) * E(i, j));
+            if (e > 0) {
+                v[1] = atan2(E(i, k), lk);
+                v[0] = atan2(-E(j, k), E(k, k));
+                v[2] = atan2(-E(i, j), E(i, i));
+            } else {
+                v[1] = atan2(-E(i, k), lk);
+                v[0] = atan2(E(j, k), E(k, k));
+                v[2] = atan2(E(i, j), E(i, i));
+            }
+        }
+        L[t] = lk;
+        NR[t] = lk < refine;
+        near += lk < refine;
+        for (int m = 0; m < 3; m++) P1[role[m] * n + t] = lift(v[m] * scale[m]);
+        for (int r = 0; r < 3; r++) {
+            double d = P1[r * n + t], d2;
+            if (r != middle) d2 = (d + 180.0) - sel(d > 0, 360.0, 0.0);
+            else if (proper) d2 = -d;
+            else d2 = (180.0 - d) - sel(d < 0, 360.0, 0.0);
+            P2[r * n + t] = lift(d2);
+        }
+    }
+    Py_END_ALLOW_THREADS
+#undef E
+    ret = PyLong_FromSsize_t(near);
+done:
+    if (have_x) release(X, 9);
+    PyBuffer_Release(&b1);
+    PyBuffer_Release(&b2);
+    PyBuffer_Release(&bl);
+    PyBuffer_Release(&bn);
+    return ret;
+}
+
+/* libm(name, x float64[n], y float64[n] or None, out float64[n]): the C library's atan2, hypot, acos or asin, for
+ * hpe_cli.native's probes */
+static PyObject *k_libm(PyObject *self, PyObject *args) {
+    const char *name;
+    PyObject *yo;
+    Py_buffer x, y = {0}, o;
+    if (!PyArg_ParseTuple(args, "sy*Ow*", &name, &x, &yo, &o)) return NULL;
+    PyObject *ret = NULL;
+    int have_y = 0;
+    Py_ssize_t n = o.len / 8;
+    if (yo != Py_None) {
+        if (PyObject_GetBuffer(yo, &y, PyBUF_SIMPLE) < 0) goto done;
+        have_y = 1;
+    }
+    if (!need(&x, n, 8, "x") || (have_y && !need(&y, n, 8, "y"))) goto done;
+    const double *X = (const double *)x.buf, *Y = have_y ? (const double *)y.buf : NULL;
+    double *O = (double *)o.buf;
+    if (!strcmp(name, "atan2") && have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = atan2(X[i], Y[i]);
+    else if (!strcmp(name, "hypot") && have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = hypot(X[i], Y[i]);
+    else if (!strcmp(name, "acos") && !have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = acos(X[i]);
+    else if (!strcmp(name, "asin") && !have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = asin(X[i]);
+    else if (!strcmp(name, "sin") && !have_y)
+        for (Py_ssize_t i = 0; i < n; i++) O[i] = sin(X[i]);
+    else {
+        PyErr_Format(PyExc_ValueError, "libm: expected atan2(x, y), hypot(x, y), acos(x), asin(x) or sin(x), got %s", name);
+        goto done;
+    }
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_y) PyBuffer_Release(&y);
     PyBuffer_Release(&x);
     PyBuffer_Release(&o);
     return ret;
@@ -837,7 +1336,28 @@ static PyMethodDef methods[] = {
     {"core_errors", k_core_errors, METH_VARARGS,
      "core_errors(P, G, geo, maev, fro): geodesic, column angles and Frobenius distance (twins: "
      "hpe_cli.metrics.rotation_errors)."},
-    {"atan2", k_atan2, METH_VARARGS, "atan2(y, x, out): the C library's atan2 (for the probe)."},
+    {"euler_from_matrix", k_euler_from_matrix, METH_VARARGS,
+     "euler_from_matrix(R, out, i, j, k, sign, symmetric, intrinsic, degrees, check) -> rows off orthonormal: "
+     "SciPy's as_euler of from_matrix (twin: hpe_cli.metrics.scipy_columns.euler_from_matrix)."},
+    {"quat_matrix_from_euler", k_quat_matrix_from_euler, METH_VARARGS,
+     "quat_matrix_from_euler(angles, scale, axes, intrinsic, q, M): SciPy's from_euler quaternions and their "
+     "matrices (twins: hpe_cli.metrics.scipy_columns.quat_from_euler, matrix_from_quat)."},
+    {"wrapped_cos_errors", k_wrapped_cos_errors, METH_VARARGS,
+     "wrapped_cos_errors(e1, e2, out, nan): opentrack's angle errors (twin: "
+     "hpe_cli.metrics.peer_angles.opentrack_errors)."},
+    {"opal23_mae", k_opal23_mae, METH_VARARGS,
+     "opal23_mae(a, p, out): opal23's compute_mae (twin: hpe_cli.metrics.peer_angles.opal23_mae)."},
+    {"trace_acos_deg", k_trace_acos_deg, METH_VARARGS,
+     "trace_acos_deg(A, P, out): opal23's compute_ge (twin: hpe_cli.metrics.peer_angles.opal23_geodesic)."},
+    {"near_quats", k_near_quats, METH_VARARGS,
+     "near_quats(P, A, q, near): quaternions of P A^T and their nearness (twin: "
+     "hpe_cli.metrics.peer_angles.opal23_near_quats)."},
+    {"quat_rotvecs", k_quat_rotvecs, METH_VARARGS,
+     "quat_rotvecs(q, left, out): rotation vectors of left @ q (twin: hpe_cli.metrics.scipy_columns.rotvec_from_quat)."},
+    {"system_angles", k_system_angles, METH_VARARGS,
+     "system_angles(X, p1, p2, lock, near, i, j, k, proper, e, scale, role, middle, refine_below) -> rows near the "
+     "lock: a system's two Euler solutions (twin: hpe_cli.rotation.system_def.RotationSystem.soa_to_angles)."},
+    {"libm", k_libm, METH_VARARGS, "libm(name, x, y, out): the C library's atan2, hypot, acos, asin, sin (probes)."},
     {"hash_pairs", k_hash_pairs, METH_VARARGS,
      "hash_pairs(hg, hp, pos) -> bool: each GT hash's prediction row, or -1; False when a hash repeats on a side "
      "(twin: hpe_cli.pipelines.evaluate.spill.hash_matches)."},
