@@ -269,7 +269,6 @@ class _SideSpill:
 
     def side(self, k, empty_keys):
         """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate.sides.Side` (empty when it holds no row)."""
-        import pyarrow.compute as pc  # lazy: start-up (0.06 s; the streamed run with equal keys needs none)
 
         r = self.reader
         t = self.table(k)
@@ -297,7 +296,11 @@ class _SideSpill:
             rc = t.column(f"{_PFX}reason")
             # a reason written in any row: its chunk holds text bytes (every row usable: none, no scan)
             text = any(ch.buffers()[2] is not None and ch.buffers()[2].size for ch in rc.chunks)
-            has_reasons = bool(pc.max(pc.utf8_length(rc)).as_py() or 0) if len(rc) and text else False
+            has_reasons = False
+            if len(rc) and text:
+                import pyarrow.compute as pc  # lazy: start-up (0.06 s; only sides with rows set aside get here)
+
+                has_reasons = bool(pc.max(pc.utf8_length(rc)).as_py() or 0)
             reasons = rc.to_numpy(zero_copy_only=False).astype(object) if has_reasons else None
             keys = t.select([n for n in t.column_names if not n.startswith(_PFX)])
             # one chunk, copied off the memory map: the mapped file leaves memory once the side is built
@@ -450,9 +453,9 @@ class Partitions:
 
     def codes(self, gt, pred, stems):
         """The pairs of one partition (:class:`~hpe_cli.pipelines.evaluate.join.Matched`) from the key hashes, every
-        match verified on the keys themselves; None (use the string join) when a key is not text on both sides, when one side has
-        equal hashes twice (a duplicate, which the string join names) or when a match is a hash collision."""
-        import pyarrow.compute as pc  # lazy: start-up (0.06 s; the streamed run with equal keys needs none)
+        match verified on the keys themselves; None (use the string join) when a key is not text on both sides,
+        when one side has equal hashes twice (a duplicate, which the string join names) or when a match is a hash
+        collision."""
 
         def is_text(schema, k):
             return pa.types.is_string(schema.field(k).type)
@@ -486,6 +489,8 @@ class Partitions:
                     if bad >= 0:
                         return None
                     continue
+            import pyarrow.compute as pc  # lazy: start-up (0.06 s; keys compared by the kernels need none)
+
             # every GT row matched (the usual case): gi is 0..n-1, the column itself
             a = a if len(gi) == gt.n else a.take(numpy_to_arrow(gi))
             b = b.take(numpy_to_arrow(pi))
