@@ -68,6 +68,13 @@ def key_hashes(keys_table, keys):
     return h, per
 
 
+def _one_array(col):
+    """A column as one Arrow array (its one chunk as it is: ``combine_chunks`` would copy it)."""
+    if isinstance(col, pa.ChunkedArray):
+        return col.chunk(0) if col.num_chunks == 1 else col.combine_chunks()
+    return col
+
+
 def stem_hashes(col) -> np.ndarray:
     """The hashes of the file stems of a key column (:func:`key_hashes`' second hash), computed again from the key
     where a side's stems differ from its texts (the partition files keep the hashes of the texts only)."""
@@ -479,10 +486,7 @@ class Partitions:
         gi, pi = matched
         for k in self.keys:
             a, b = gt.keys.column(k), pred.keys.column(k)
-            a, b = (
-                a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
-                b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b,
-            )
+            a, b = (_one_array(a), _one_array(b))
             if k not in stems:  # the bytes compared at the pairs straight off the Arrow buffers (no gather)
                 bad = first_unequal(a, None if len(gi) == gt.n else gi, b, pi)
                 if bad is not None:
