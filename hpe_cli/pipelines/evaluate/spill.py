@@ -8,6 +8,11 @@ partition. ``K`` is chosen from the row count so that one partition of both side
 join (:func:`~hpe_cli.pipelines.evaluate.join.join`), so memory is flat in the number of pairs, and a key that
 appears twice anywhere in a file is found in its partition. Whether text keys are compared as written or on
 their file stems is decided over the whole files first, as the in-memory join decides it.
+
+Where the compiled kernels are built (:mod:`hpe_cli.native`), a chunk's rows are put in partition order by one
+counting sort (``partition_rows``, ``partition_strings``), a partition's rows are paired by their key hashes in
+cache-sized buckets (``hash_pairs``) and every pair is verified on the key bytes (``first_unequal``); their numpy
+and pyarrow twins give the same rows and pairs.
 """
 
 from __future__ import annotations
