@@ -91,3 +91,39 @@ def test_the_ground_truths_error_first_and_no_temp_files(two_key_files, monkeypa
     with pytest.raises(HpeError, match=f"^{failing[0]} failed$"):
         _run(two_key_files, "x", threads=2)
     assert folders and not any(os.path.exists(f) for f in folders)
+
+
+@pytest.mark.parametrize("dictionary", [False, True])
+def test_grouped_chunks_hold_the_rows_of_the_batches(tmp_path, dictionary):
+    """The spill's reader puts consecutive batches together (``SideReader.group_rows``): the same rows, lines, keys
+    and angles in the same order as batch by batch; batches with dictionary columns are kept as read."""
+    import pyarrow as pa
+
+    from hpe_cli.io import open_table
+    from hpe_cli.pipelines.evaluate.sides import SideReader, open_side
+
+    n = 1000
+    rng = np.random.default_rng(4)
+    keys = pa.array([f"k{i}" for i in range(n)])
+    t = pa.table(
+        {
+            "image": keys.dictionary_encode() if dictionary else keys,
+            "pitch": rng.uniform(-50, 50, n),
+            "yaw": rng.uniform(-50, 50, n),
+            "roll": rng.uniform(-50, 50, n),
+        }
+    )
+    pq.write_table(t, tmp_path / "t.parquet", row_group_size=170)
+
+    def read(group_rows):
+        r = SideReader(open_side(open_table(tmp_path / "t.parquet", 64, with_lines=True), S, "auto", "gt"), ["image"],
+                       None, False)  # fmt: skip
+        r.group_rows = group_rows
+        chunks = list(r.chunks())
+        keys = [k for c in chunks for k in c.keys.column("image").to_pylist()]
+        return len(chunks), keys, np.concatenate([c.lines for c in chunks]), np.concatenate([c.raw for c in chunks])
+
+    n1, k1, l1, r1 = read(0)
+    n2, k2, l2, r2 = read(300)
+    assert k1 == k2 == [f"k{i}" for i in range(n)] and (l1 == l2).all() and (r1 == r2).all()
+    assert n1 > n2 if not dictionary else n1 == n2

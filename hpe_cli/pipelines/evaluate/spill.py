@@ -51,6 +51,8 @@ def _bools(col) -> np.ndarray:
 
 #: rows of one side per partition (about 130 bytes each on disk, ~550 bytes each while a partition is joined)
 PARTITION_ROWS = 400_000
+#: rows of one side labelled and written at once while the partition files are filled
+GROUP_ROWS = 1 << 17
 #: at most this many partition files per side open at once
 MAX_PARTITIONS = 400
 _PFX = "__hpe_"
@@ -399,6 +401,7 @@ class Partitions:
 
     def _fill_side(self, spill, reader, stop):
         reader.matrices = False  # angles are kept as written: their matrices are built when scored
+        reader.group_rows = GROUP_ROWS  # fewer, larger chunks: less per-chunk work and fewer record batches
         reader.prepare = lambda c: spill.prepare(c, self.keys)  # on the label threads
         with closing(reader.chunks()) as chunks:  # an error stops the label threads at once
             for c in chunks:
