@@ -21,7 +21,17 @@ import numpy as np
 _STATE: dict = {}
 
 #: the functions this version calls: a module that lacks one is treated as not built
-KERNELS = ("string_hashes", "row_hash_add", "mix", "split_top_bit", "angle_screen", "sin_cos", "core_errors", "atan2")
+KERNELS = (
+    "string_hashes",
+    "row_hash_add",
+    "mix",
+    "split_top_bit",
+    "angle_screen",
+    "sin_cos",
+    "core_errors",
+    "atan2",
+    "repeated_values",
+)
 
 
 def kernels():

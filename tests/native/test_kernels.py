@@ -252,3 +252,57 @@ def test_a_module_from_older_sources_counts_as_not_built(monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "_hpe_kernels", stale)
     assert native.kernels() is None
     monkeypatch.delitem(native._STATE, "module")  # the real module again for the other tests
+
+
+def repeated_ref(values) -> list:
+    """The values occurring more than once, once each, in increasing order (a Counter of Python ints)."""
+    from collections import Counter
+
+    return sorted(v for v, c in Counter(int(v) for v in values).items() if c > 1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    values=st.lists(
+        st.one_of(st.integers(0, MASK), st.sampled_from([0, 1, 2**63 - 1, 2**63, MASK]), st.integers(0, 40)),
+        max_size=300,
+    )
+)
+def test_repeated_values_are_a_counters_both_ways(values):
+    from hpe_cli.pipelines.audit.duplicates import repeated_in_place
+
+    mp = pytest.MonkeyPatch()
+    try:
+        for got in both(mp, lambda: repeated_in_place(np.array(values, dtype=np.uint64)).tolist()):
+            assert got == repeated_ref(values)
+    finally:
+        mp.undo()
+
+
+def _large(kind: str, rng) -> np.ndarray:
+    """Arrays past the kernel's leaf size, so it partitions (once or at every digit, down to equal values)."""
+    n = 70_000
+    if kind == "distinct":
+        return rng.integers(0, MASK, n, dtype=np.uint64, endpoint=True)
+    if kind == "pairs":  # every value twice or more, shuffled
+        v = rng.integers(0, MASK, n // 2, dtype=np.uint64, endpoint=True)
+        a = np.concatenate([v, v, v[:500]])
+        rng.shuffle(a)
+        return a
+    if kind == "equal":  # one value: every digit partitions them into one bucket
+        return np.full(n, 0x8000_0000_0000_0001, dtype=np.uint64)
+    if kind == "shared_top_bits":  # top 40 bits shared: buckets too big for a leaf at several levels
+        return (np.uint64(0xABCDEF1234) << np.uint64(24)) | rng.integers(0, 1 << 18, n).astype(np.uint64)
+    if kind == "small_ints":  # 0 among them (an empty slot's mark in the kernel's hash sets)
+        return rng.integers(0, 1000, n).astype(np.uint64)
+    raise ValueError(kind)
+
+
+@pytest.mark.parametrize("kind", ["distinct", "pairs", "equal", "shared_top_bits", "small_ints"])
+def test_repeated_values_of_large_arrays_both_ways(monkeypatch, kind):
+    from hpe_cli.pipelines.audit.duplicates import repeated_in_place
+
+    a = _large(kind, np.random.default_rng(len(kind)))
+    want = repeated_ref(a.tolist())
+    for got in both(monkeypatch, lambda: repeated_in_place(a.copy())):
+        assert got.tolist() == want
