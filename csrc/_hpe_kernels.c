@@ -519,7 +519,10 @@ static void bucket_repeats(repeats_t *R, Py_ssize_t lo, Py_ssize_t hi, int shift
         leaf_repeats(R, lo, hi);
         return;
     }
-    int bits = shift < RADIX_BITS ? shift : RADIX_BITS, sh = shift - bits;
+    int bits = 1; /* enough digits for leaves of about LEAF / 2 values, at most RADIX_BITS */
+    while (bits < RADIX_BITS && ((Py_ssize_t)LEAF << bits) < 2 * n) bits++;
+    if (bits > shift) bits = shift;
+    int sh = shift - bits;
     Py_ssize_t nb = (Py_ssize_t)1 << bits;
     uint64_t mask = (uint64_t)nb - 1, *h = R->h;
     Py_ssize_t *start = calloc((size_t)(2 * nb + 1), sizeof(Py_ssize_t)), *head = start + nb + 1;
@@ -594,6 +597,125 @@ static PyObject *k_repeated_values(PyObject *self, PyObject *args) {
     return PyLong_FromSsize_t(R.k);
 }
 
+/* The audit's hashes by bucket as they stream, so that the end of the run finds the repeats bucket by bucket in cache:
+ * with B = len(cursors) buckets (a power of two, 2**bits), bucket b (the top bits of a value) owns
+ * arr[b * cap, (b + 1) * cap); cursors[b] counts the values it was given. Both are shared by the threads that check the batches (the cursors move by atomic additions, each batch
+ * reserving its run in every bucket), so the values of a bucket are in some order that does not matter.
+ * bucket_file(h uint64[n], arr uint64[B * cap], cursors int64[B], cap) -> True, or False
+ * when a bucket is full (its values beyond cap are dropped: the caller then finds the repeats another way).
+ * bucket_repeats(arr, cursors, cap, b_lo, b_hi) -> bytes: the repeated values of buckets b_lo .. b_hi - 1, once
+ * each, in increasing order (as repeated_values; the buckets' regions are scratch).
+ * twin: hpe_cli.pipelines.audit.duplicates.repeated_in_place of the values (numpy's sort) */
+
+/* the bits of the bucket count, from the cursors' buffer (a power of two from 2 to 2**16), or -1 */
+static int bucket_bits(Py_buffer *c) {
+    Py_ssize_t nb = c->len / 8;
+    int bits = 1;
+    while (bits <= 16 && ((Py_ssize_t)1 << bits) != nb) bits++;
+    if (bits > 16 || c->len != nb * 8) {
+        PyErr_Format(PyExc_ValueError, "cursors: expected 2**k int64 values (k = 1 .. 16), got %zd bytes", c->len);
+        return -1;
+    }
+    return bits;
+}
+
+static PyObject *k_bucket_file(PyObject *self, PyObject *args) {
+    Py_buffer h, a, c;
+    Py_ssize_t cap;
+    if (!PyArg_ParseTuple(args, "y*w*w*n", &h, &a, &c, &cap)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = h.len / 8;
+    int bits = bucket_bits(&c);
+    if (bits < 0) goto done;
+    const int nb = 1 << bits;
+    if (cap < 1 || !need(&h, n, 8, "h") || !need(&a, nb * cap, 8, "arr")) goto done;
+    const uint64_t *x = (const uint64_t *)h.buf;
+    uint64_t *arr = (uint64_t *)a.buf;
+    int64_t *cur = (int64_t *)c.buf;
+    int full = 0;
+    Py_BEGIN_ALLOW_THREADS
+    int64_t *at = calloc(2 * nb, sizeof(int64_t)), *end = at ? at + nb : NULL;
+    if (at == NULL) {
+        full = 2;
+    } else {
+        for (Py_ssize_t i = 0; i < n; i++) at[x[i] >> (64 - bits)]++;
+        for (int b = 0; b < nb; b++) {
+            int64_t k = at[b], s = k ? __atomic_fetch_add(&cur[b], k, __ATOMIC_RELAXED) : 0;
+            if (s + k > cap) full = 1;
+            at[b] = s < cap ? (int64_t)b * cap + s : (int64_t)(b + 1) * cap;
+            end[b] = (int64_t)(b + 1) * cap;
+        }
+        for (Py_ssize_t i = 0; i < n; i++) {
+            uint64_t v = x[i];
+            int b = (int)(v >> (64 - bits));
+            if (at[b] < end[b]) arr[at[b]++] = v;
+        }
+        free(at);
+    }
+    Py_END_ALLOW_THREADS
+    if (full == 2)
+        PyErr_NoMemory();
+    else
+        ret = PyBool_FromLong(!full);
+done:
+    PyBuffer_Release(&h);
+    PyBuffer_Release(&a);
+    PyBuffer_Release(&c);
+    return ret;
+}
+
+static PyObject *k_bucket_repeats(PyObject *self, PyObject *args) {
+    Py_buffer a, c;
+    Py_ssize_t cap, lo, hi;
+    if (!PyArg_ParseTuple(args, "w*y*nnn", &a, &c, &cap, &lo, &hi)) return NULL;
+    PyObject *ret = NULL;
+    int bits = bucket_bits(&c);
+    if (bits < 0) goto done;
+    const Py_ssize_t nb = (Py_ssize_t)1 << bits;
+    if (cap < 1 || lo < 0 || hi > nb || lo > hi) {
+        PyErr_Format(PyExc_ValueError, "expected 0 <= lo <= hi <= %zd buckets and cap >= 1, got %zd, %zd, %zd", nb,
+                     lo, hi, cap);
+        goto done;
+    }
+    if (!need(&a, nb * cap, 8, "arr")) goto done;
+    uint64_t *arr = (uint64_t *)a.buf, *out = NULL;
+    const int64_t *cur = (const int64_t *)c.buf;
+    Py_ssize_t k = 0, size = 0;
+    int failed = 0;
+    repeats_t R = {malloc(4 * LEAF * sizeof(uint64_t)), NULL, 0, 0};
+    Py_BEGIN_ALLOW_THREADS
+    failed = R.keys == NULL;
+    for (Py_ssize_t b = lo; b < hi && !failed; b++) {
+        Py_ssize_t m = cur[b] < cap ? (Py_ssize_t)cur[b] : cap;
+        R.h = arr + b * cap;
+        R.k = 0;
+        bucket_repeats(&R, 0, m, 64 - bits); /* the repeats to the front of the bucket's region */
+        if (R.failed) failed = 1;
+        if (k + R.k > size) {
+            Py_ssize_t want = 2 * (k + R.k) + 64;
+            uint64_t *grown = realloc(out, (size_t)want * sizeof(uint64_t));
+            if (grown == NULL) {
+                failed = 1;
+                break;
+            }
+            out = grown, size = want;
+        }
+        memcpy(out + k, R.h, (size_t)R.k * sizeof(uint64_t));
+        k += R.k;
+    }
+    Py_END_ALLOW_THREADS
+    free(R.keys);
+    if (failed)
+        PyErr_NoMemory();
+    else
+        ret = PyBytes_FromStringAndSize(k ? (const char *)out : "", k * (Py_ssize_t)sizeof(uint64_t));
+    free(out);
+done:
+    PyBuffer_Release(&a);
+    PyBuffer_Release(&c);
+    return ret;
+}
+
 static PyMethodDef methods[] = {
     {"split_top_bit", k_split_top_bit, METH_VARARGS,
      "split_top_bit(h, low, high) -> n_low: the hashes by value half, in order (twin: a boolean index)."},
@@ -614,6 +736,11 @@ static PyMethodDef methods[] = {
     {"repeated_values", k_repeated_values, METH_VARARGS,
      "repeated_values(h) -> k: the repeated values of h, once each and sorted, to h[:k] (h is scratch; twin: "
      "hpe_cli.pipelines.audit.duplicates.repeated_in_place)."},
+    {"bucket_file", k_bucket_file, METH_VARARGS,
+     "bucket_file(h, arr, cursors, cap) -> bool: a batch's hashes to their buckets (False: a bucket is full)."},
+    {"bucket_repeats", k_bucket_repeats, METH_VARARGS,
+     "bucket_repeats(arr, cursors, cap, lo, hi) -> bytes: the repeated values of buckets lo .. hi - 1, sorted "
+     "(twin: hpe_cli.pipelines.audit.duplicates.repeated_in_place)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -31,6 +31,8 @@ KERNELS = (
     "core_errors",
     "atan2",
     "repeated_values",
+    "bucket_file",
+    "bucket_repeats",
 )
 
 

@@ -306,3 +306,37 @@ def test_repeated_values_of_large_arrays_both_ways(monkeypatch, kind):
     want = repeated_ref(a.tolist())
     for got in both(monkeypatch, lambda: repeated_in_place(a.copy())):
         assert got.tolist() == want
+
+
+@needs_kernels
+@settings(max_examples=150, deadline=None)
+@given(
+    batches=st.lists(
+        st.lists(st.one_of(st.integers(0, MASK), st.sampled_from([0, 5, 2**63, MASK])), max_size=60), max_size=5
+    ),
+    bits=st.integers(1, 4),
+    cap=st.integers(1, 40),
+)
+def test_hash_buckets_give_a_counters_repeats_or_say_they_are_full(batches, bits, cap):
+    k = kernels()
+    arr, cursors = np.zeros(cap << bits, np.uint64), np.zeros(1 << bits, np.int64)
+    ok = all([k.bucket_file(np.array(b, dtype=np.uint64), arr, cursors, cap) for b in batches])
+    values = [v for b in batches for v in b]
+    counts = [sum(1 for v in values if v >> (64 - bits) == b) for b in range(1 << bits)]
+    assert cursors.tolist() == counts
+    assert ok == (max(counts) <= cap)
+    if ok:  # the two bucket ranges a thread each, as the audit splits them
+        half = 1 << (bits - 1)
+        got = [np.frombuffer(k.bucket_repeats(arr, cursors, cap, lo, lo + half), np.uint64) for lo in (0, half)]
+        assert np.concatenate(got).tolist() == repeated_ref(values)
+
+
+@needs_kernels
+def test_hash_buckets_refuse_wrong_sizes_with_a_message():
+    k = kernels()
+    with pytest.raises(ValueError, match="cursors: expected 2\\*\\*k int64 values"):
+        k.bucket_file(np.zeros(3, np.uint64), np.zeros(12, np.uint64), np.zeros(3, np.int64), 4)
+    with pytest.raises(ValueError, match="arr: expected 128 bytes, got 96"):
+        k.bucket_file(np.zeros(3, np.uint64), np.zeros(12, np.uint64), np.zeros(4, np.int64), 4)
+    with pytest.raises(ValueError, match="expected 0 <= lo <= hi <= 4 buckets"):
+        k.bucket_repeats(np.zeros(16, np.uint64), np.zeros(4, np.int64), 4, 0, 5)
