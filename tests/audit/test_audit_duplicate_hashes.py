@@ -205,6 +205,22 @@ def test_malloc_thresholds_are_left_alone_outside_a_command(monkeypatch):
     assert calls == []
 
 
+def test_prefault_maps_the_pages_and_changes_no_value():
+    import threading
+
+    from hpe_cli.pipelines.heap import prefault, small_page_array
+
+    a, b = small_page_array(3 << 20, np.uint64), small_page_array(5, np.float64)
+    a[:4] = [1, 2, 3, 4]  # values written before, during and after the pages are faulted in stay as written
+    prefault(a, b, np.zeros(7))  # an ordinary numpy array is left alone
+    a[-1] = 9
+    for t in threading.enumerate():
+        if t.name == "hpe-prefault":
+            t.join()
+    b[:] = 0.5
+    assert a[:4].tolist() == [1, 2, 3, 4] and a[-1] == 9 and not a[4:-1].any() and b.tolist() == [0.5] * 5
+
+
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.booleans(), max_size=20_000), st.integers(0, 12))
 def test_first_true_is_the_head_of_flatnonzero(bits, k):

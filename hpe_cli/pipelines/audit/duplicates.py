@@ -16,7 +16,7 @@ import pyarrow as pa
 from ...io import key_hash
 from ...io.table_source import plain_numpy
 from ...native import kernels
-from ..heap import small_page_array
+from ..heap import prefault, small_page_array
 
 #: columns that identify a sample, used (when present) in the ``duplicates`` key
 ID_COLUMNS = (
@@ -175,6 +175,7 @@ class Duplicates:
         self.buf = small_page_array(rows, np.uint64) if rows else None  # 4 KB pages: pipelines.heap
         self.buckets = HashBuckets(rows) if rows and rows >= HashBuckets.MIN_ROWS and kernels() else None
         self.halves = small_page_array(rows, np.uint64) if rows and self.buckets is None else None
+        prefault(*(a for a in (self.buf, self.halves, self.buckets and self.buckets.arr) if a is not None))
         self.n_low = self.n_high = 0  # values below 2**63 at the front of halves, the others at its back
         self._lock = threading.Lock()
         self.parts = []  # every batch's hashes, in input order (views of buf where they were written there)
