@@ -128,10 +128,11 @@ class HashBuckets:
         self.arr = small_page_array(self.cap << self.BITS, np.uint64)
         self.cursors = np.zeros(1 << self.BITS, dtype=np.int64)
         self.full = False
+        self._k = kernels()  # the module the run started with (HPE_KERNELS is read on each kernels() call)
 
     def file(self, h) -> None:
         """Add a batch's hashes (any thread, any order)."""
-        if not kernels().bucket_file(h, self.arr, self.cursors, self.cap):
+        if not self._k.bucket_file(h, self.arr, self.cursors, self.cap):
             self.full = True
 
     def filed(self) -> int:
@@ -141,8 +142,8 @@ class HashBuckets:
     def repeated(self, H, threads: int = 1) -> np.ndarray:
         """The repeated values of the filed hashes ``H`` (all of them, in input order), sorted; the buckets are
         scratch."""
-        k = kernels()
-        if self.full or k is None:  # a bucket overflowed (or the kernels were turned off since): from H
+        k = self._k
+        if self.full:  # a bucket overflowed: from H
             S = self.arr[: len(H)]
             S[:] = H
             return repeated_in_place(S).copy()
