@@ -2,8 +2,9 @@
 
 Equal rows get equal hashes: label values enter as their exact bits (-0.0 = 0.0, every NaN one NaN), text
 columns as a 64-bit hash of their bytes taken from the Arrow buffers (no Python strings). The hashes are the
-audit's only per-row state: 8 bytes a row while the batches stream (written in input order by the threads
-that check them, :class:`Duplicates`), 16 at the end, when each value half is selected and sorted.
+audit's only per-row state, about 16 bytes a row: written in input order by the threads that check the batches,
+and filed by value (:class:`HashBuckets` or two value halves, :class:`Duplicates`); the repeated values are found
+at the end of the stream, by bucket or by value half on two threads.
 """
 
 from __future__ import annotations
