@@ -340,3 +340,18 @@ def test_hash_buckets_refuse_wrong_sizes_with_a_message():
         k.bucket_file(np.zeros(3, np.uint64), np.zeros(12, np.uint64), np.zeros(4, np.int64), 4)
     with pytest.raises(ValueError, match="expected 0 <= lo <= hi <= 4 buckets"):
         k.bucket_repeats(np.zeros(16, np.uint64), np.zeros(4, np.int64), 4, 0, 5)
+
+
+@needs_kernels
+@pytest.mark.parametrize("kind", ["distinct", "pairs", "shared_top_bits", "small_ints"])
+def test_hash_buckets_larger_than_a_leaf(kind):
+    """Buckets of 35,000 values (a 30M-row audit has about 29,000 a bucket): partitioned again before the hash sets."""
+    k = kernels()
+    values = _large(kind, np.random.default_rng(7))
+    cap = len(values)  # room for every value in either bucket
+    arr, cursors = np.zeros(2 * cap, np.uint64), np.zeros(2, np.int64)
+    for lo in range(0, len(values), 65536):
+        assert k.bucket_file(values[lo : lo + 65536], arr, cursors, cap)
+    assert cursors.sum() == len(values) and cursors.max() > 16384
+    got = [np.frombuffer(k.bucket_repeats(arr, cursors, cap, b, b + 1), np.uint64) for b in (0, 1)]
+    assert np.concatenate(got).tolist() == repeated_ref(values.tolist())
