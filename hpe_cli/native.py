@@ -1,4 +1,4 @@
-"""hpe's optional compiled column kernels (``_hpe_kernels``, ``csrc/_hpe_kernels.c``), or None.
+"""hpe's optional compiled column kernels (``_hpe_kernels``, ``csrc/kernels/``), or None.
 
 Each kernel is one C loop over a column where numpy takes a dozen passes or more: the key hashes of
 ``hpe evaluate``'s join and duplicate-key check (:func:`hpe_cli.io.key_hash.string_hashes`), the row hashes of

@@ -88,7 +88,7 @@ def key_hashes(label_cols, batch, key_cols, out=None) -> np.ndarray:
     h = np.empty(n, dtype=np.uint64) if out is None else out
     h.fill(_SEED)
     k = kernels()
-    if k is not None:  # the same hashes, one C loop a column (csrc/_hpe_kernels.c); the numpy twin below
+    if k is not None:  # the same hashes, one C loop a column (csrc/kernels/hashes.c); the numpy twin below
         for c in range(len(label_cols) + len(key_cols)):
             if c < len(label_cols):
                 k.row_hash_add(h, np.ascontiguousarray(label_cols[c], dtype=np.float64), True)
@@ -139,7 +139,7 @@ class Duplicates:
         """Copy a batch's hashes (its filled :meth:`slot`) into the value halves. Any thread may call it: the order
         of the batches in a half does not matter, it is sorted."""
         k = kernels()
-        if k is not None:  # one C loop (csrc/_hpe_kernels.c); the numpy twin below
+        if k is not None:  # one C loop (csrc/kernels/hashes.c); the numpy twin below
             low, high = np.empty(len(h), dtype=np.uint64), np.empty(len(h), dtype=np.uint64)
             n_low = k.split_top_bit(h, low, high)
             low, high = low[:n_low], high[: len(h) - n_low]
