@@ -1,15 +1,25 @@
-"""hpe's optional compiled column kernels (``_hpe_kernels``, ``csrc/_hpe_kernels.c``), or None.
+"""hpe's optional compiled column kernels (``_hpe_kernels``, ``csrc/kernels/``), or None.
 
-Each kernel is one C loop over a column where numpy takes a dozen passes or more: the key hashes of
-``hpe evaluate``'s join and duplicate-key check (:func:`hpe_cli.io.key_hash.string_hashes`), the row hashes of
-``hpe audit``'s duplicate check and their split by value half (:func:`hpe_cli.pipelines.audit.duplicates.key_hashes`,
-:meth:`~hpe_cli.pipelines.audit.duplicates.Duplicates.file`), the audit's angle screen, and the sine and cosine
-of the matrices built from angles (:func:`sin_cos`), and the geodesic, column-angle and Frobenius errors of
-``hpe evaluate``'s core metrics (:func:`core_errors`). The hashes and the screen compute integers and comparisons
-only, so each gives the bits of its numpy twin; the others use the C library's sine, cosine and ``atan2`` (besides
-IEEE arithmetic in numpy's order), each only where it gives numpy's bits on a probe of values. The
-numpy twins run where the module was not built (no C compiler at install time) or when ``HPE_KERNELS=numpy`` is
-set; ``tests/native/`` compares the two.
+Each kernel is one C loop over a column where numpy takes a dozen passes or more:
+
+- hashes: the key hashes of ``hpe evaluate``'s join and duplicate-key check
+  (:func:`hpe_cli.io.key_hash.string_hashes`), the row hashes of ``hpe audit``'s duplicate check and their split
+  by value half (:func:`hpe_cli.pipelines.audit.duplicates.key_hashes`,
+  :meth:`~hpe_cli.pipelines.audit.duplicates.Duplicates.file`);
+- the audit's angle screen;
+- rotations: the sine and cosine of the matrices built from angles (:func:`sin_cos`), a rotation system's two Euler
+  solutions (:func:`system_angles`), SciPy's Euler split of a matrix (:func:`euler_from_matrix`) and its
+  ``from_euler`` quaternions with their matrices (:func:`quat_matrix_from_euler`);
+- evaluate's error formulas: the core metrics (:func:`core_errors`), opentrack's wrapped cosines
+  (:func:`wrapped_cos_errors`), opal23's ``compute_mae`` and ``compute_ge`` (:func:`opal23_mae`,
+  :func:`trace_acos_deg`), the near quaternions and the Karcher step of opal23's alignment (:func:`near_quats`,
+  :func:`quat_rotvecs`).
+
+The hashes and the screen compute integers and comparisons only, so each gives the bits of its numpy twin; the
+others add IEEE arithmetic in numpy's order and call the C library's ``sincos``, ``atan2``, ``hypot``, ``acos``,
+``asin`` or ``sin``, each only where that function gives numpy's bits on a probe of values (checked once a
+process). The numpy twins run where the module was not built (no C compiler at install time) or when
+``HPE_KERNELS=numpy`` is set; ``tests/native/`` compares the two.
 """
 
 from __future__ import annotations
@@ -29,7 +39,15 @@ KERNELS = (
     "angle_screen",
     "sin_cos",
     "core_errors",
-    "atan2",
+    "euler_from_matrix",
+    "quat_matrix_from_euler",
+    "wrapped_cos_errors",
+    "opal23_mae",
+    "trace_acos_deg",
+    "near_quats",
+    "quat_rotvecs",
+    "system_angles",
+    "libm",
     "repeated_values",
     "bucket_file",
     "bucket_repeats",
@@ -111,10 +129,10 @@ def sin_cos(x):
     return s, c
 
 
-def _atan2_probe():
-    """``(y, x)`` pairs whose ``atan2`` the kernels must give with numpy's bits before they use it: every sign and
-    quadrant, the axes, zeros of both signs, tiny, huge and special values, and the (sin, cos) pairs of whole and
-    half degrees."""
+def _two_argument_probe():
+    """``(y, x)`` pairs whose ``atan2`` and ``hypot`` the kernels must give with numpy's bits before they use them:
+    every sign and quadrant, the axes, zeros of both signs, tiny, huge and special values, and the (sin, cos) pairs
+    of whole and half degrees."""
     rng = np.random.default_rng(20261129)
     a = np.deg2rad(np.arange(-720.0, 720.5, 0.5))
     special = np.array([0.0, -0.0, 1.0, -1.0, 5e-324, -5e-324, 1e-300, 1e300, -1e300, np.inf, -np.inf, np.nan])
@@ -125,17 +143,116 @@ def _atan2_probe():
     )
 
 
+def _one_argument_probe():
+    """Values whose ``acos`` and ``asin`` the kernels must give with numpy's bits: the cosines and sines of whole
+    and half degrees, random values in [-1, 1] (dense near the ends), both zeros, the ends, just past them and
+    special values."""
+    rng = np.random.default_rng(20261130)
+    a = np.deg2rad(np.arange(-180.0, 180.5, 0.5))
+    u = rng.uniform(-1.0, 1.0, 4096)
+    edge = 1.0 - 10.0 ** rng.uniform(-16, -1, 512)
+    return np.concatenate(
+        [np.cos(a), np.sin(a), u, edge, -edge, [0.0, -0.0, 1.0, -1.0, np.nextafter(1, 2), -np.nextafter(1, 2)]]
+        + [[5e-324, 2.0, -2.0, np.inf, -np.inf, np.nan]]
+    )
+
+
+#: numpy's function of each C library function the kernels call, and the probe it is checked on
+_LIBM = {
+    "atan2": (np.arctan2, _two_argument_probe),
+    "hypot": (np.hypot, _two_argument_probe),
+    "acos": (np.arccos, _one_argument_probe),
+    "asin": (np.arcsin, _one_argument_probe),
+    "sin": (np.sin, _probe_angles),
+}
+
+
+def _libm_kernels(*names):
+    """The kernels, if each of the C library's functions ``names`` (``atan2``, ``hypot``, ``acos``, ``asin``, ``sin``) gives
+    numpy's bits on its probe (each checked once a process), else None."""
+
+    def check(name):
+        def compare(k):
+            twin, probe = _LIBM[name]
+            args = probe()
+            args = args if isinstance(args, tuple) else (args,)
+            out = np.empty_like(args[0])
+            k.libm(name, args[0], args[1] if len(args) > 1 else None, out)
+            return [(out, twin(*args))]
+
+        return _agreeing(name, compare)
+
+    k = None
+    for name in names:
+        k = check(name)
+        if k is None:
+            return None
+    return k
+
+
 def _atan2_kernels():
-    """The kernels, if the C library's ``atan2`` gives numpy's bits on :func:`_atan2_probe` (checked once a
-    process), else None."""
+    """:func:`_libm_kernels` for ``atan2`` alone."""
+    return _libm_kernels("atan2")
 
-    def compare(k):
-        y, x = _atan2_probe()
-        out = np.empty_like(y)
-        k.atan2(y, x, out)
-        return [(out, np.arctan2(y, x))]
 
-    return _agreeing("atan2", compare)
+def _columns(X, n: int) -> list:
+    """The 9 entries of a nested 3x3 list (arrays or floats) as contiguous float64 columns of ``n`` rows."""
+    return [np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (n,))) for row in X for v in row]
+
+
+def _rows(X) -> int:
+    return int(np.broadcast(*[x for row in X for x in row]).shape[0])
+
+
+def euler_from_matrix(R, axes, degrees: bool, check: bool):
+    """SciPy's ``Rotation.from_matrix(R).as_euler(seq)`` of a nested 3x3 list of columns in one C loop, or None
+    (kernels not built, the C library's ``atan2`` or ``hypot`` not numpy's here, too few rows, or with ``check`` a
+    row that SciPy would first project onto the rotations: then
+    :func:`hpe_cli.metrics.scipy_columns.euler_from_matrix` computes them, the same numbers).
+
+    ``axes`` is ``(i, j, k, sign, symmetric, intrinsic)`` as that function reads ``seq``. Returns ``(N, 3)``.
+    """
+    n = _rows(R)
+    k = _libm_kernels("atan2", "hypot") if n >= _MIN_ROWS else None
+    if k is None:
+        return None
+    out = np.empty((n, 3))
+    i, j, m, sign, symmetric, intrinsic = axes
+    if k.euler_from_matrix(_columns(R, n), out, i, j, m, float(sign), symmetric, intrinsic, degrees, check):
+        return None
+    return out
+
+
+def quat_matrix_from_euler(angles, scale, axes, intrinsic: bool):
+    """SciPy's ``Rotation.from_euler(seq, angles * scale)``'s quaternions ``(x, y, z, w)`` and matrices (nested 3x3
+    list of columns) in one C loop, or None (kernels not built, the C library's ``sincos`` not numpy's ``sin`` and
+    ``cos`` here, or too few rows: then :mod:`hpe_cli.metrics.scipy_columns` computes them, the same numbers).
+
+    ``angles`` is ``(N, 3)``, ``scale`` the 3 factors each column is multiplied by first (one product: e.g. the
+    degrees' ``pi / 180`` with a sign), ``axes`` the 3 axes (0, 1, 2 for x, y, z) in seq's order.
+    """
+    a = np.ascontiguousarray(angles, dtype=np.float64)
+    k = _sin_cos_kernel() if a.ndim == 2 and a.shape[1] == 3 and len(a) >= _MIN_ROWS else None
+    if k is None:
+        return None
+    n = len(a)
+    q, M = np.empty((4, n)), np.empty((9, n))
+    k.quat_matrix_from_euler(a, tuple(float(v) for v in scale), tuple(int(v) for v in axes), intrinsic, q, M)
+    return tuple(q), [[M[3 * r + c] for c in range(3)] for r in range(3)]
+
+
+def wrapped_cos_errors(e1, e2):
+    """``(degrees(arccos(clip(cos a cos b + sin a sin b, -1, 1))) (N, 3), rows with an argument past +-1 (N,))``
+    of two ``(N, 3)`` angle arrays (radians) in one C loop, or None (kernels not built, or the C library's
+    ``sincos`` or ``acos`` not numpy's here: then :func:`hpe_cli.metrics.peer_angles.opentrack_errors` computes
+    them, the same numbers)."""
+    a, b = (np.ascontiguousarray(e, dtype=np.float64) for e in (e1, e2))
+    ok = a.ndim == 2 and a.shape == b.shape and a.shape[1] == 3 and len(a) >= _MIN_ROWS
+    if not ok or _sin_cos_kernel() is None or _libm_kernels("acos") is None:
+        return None
+    out, nan = np.empty(a.shape), np.empty(len(a), dtype=bool)
+    kernels().wrapped_cos_errors(a, b, out, nan.view(np.uint8))
+    return out, nan
 
 
 def core_errors(P, G):
@@ -148,10 +265,94 @@ def core_errors(P, G):
     n = int(np.broadcast(*[x for row in P for x in row], *[x for row in G for x in row]).shape[0])
     if n < _MIN_ROWS:
         return None
-
-    def cols(X):
-        return [np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (n,))) for row in X for v in row]
-
     geo, maev, fro = np.empty(n), np.empty((n, 3)), np.empty(n)
-    k.core_errors(cols(P), cols(G), geo, maev, fro)
+    k.core_errors(_columns(P, n), _columns(G, n), geo, maev, fro)
     return geo, maev, fro
+
+
+def opal23_mae(a, p):
+    """opal23's ``compute_mae`` of two ``(N, 3)`` ``as_euler('XYZ')`` angle arrays (degrees) in one C loop, or None
+    (kernels not built or too few rows: then :func:`hpe_cli.metrics.peer_angles.opal23_mae` computes it, the same
+    numbers). No C library function is called: the bits are numpy's by construction."""
+    a, p = (np.ascontiguousarray(x, dtype=np.float64) for x in (a, p))
+    k = kernels() if a.ndim == 2 and a.shape == p.shape and a.shape[1] == 3 and len(a) >= _MIN_ROWS else None
+    if k is None:
+        return None
+    out = np.empty(a.shape)
+    k.opal23_mae(a, p, out)
+    return out
+
+
+def trace_acos_deg(A, P):
+    """``degrees(arccos(clip((trace(A P^T) - 1) / 2, -1, 1)))`` of nested 3x3 lists of columns in one C loop, or None
+    (kernels not built, the C library's ``acos`` not numpy's here, or too few rows: then
+    :func:`hpe_cli.metrics.peer_angles.opal23_geodesic` computes it, the same numbers)."""
+    n = _rows([*A, *P])
+    k = _libm_kernels("acos") if n >= _MIN_ROWS else None
+    if k is None:
+        return None
+    out = np.empty(n)
+    k.trace_acos_deg(_columns(A, n), _columns(P, n), out)
+    return out
+
+
+def near_quats(P, A):
+    """``(unit quaternions (N, 4) of P A^T (x, y, z, w), rows within 90 degrees of the identity (N,))`` of nested
+    3x3 lists of columns in one C loop, or None (kernels not built, the C library's ``atan2`` not numpy's here, or
+    too few rows: then :func:`hpe_cli.metrics.peer_angles.opal23_near_quats` computes them, the same numbers)."""
+    n = _rows([*P, *A])
+    k = _libm_kernels("atan2") if n >= _MIN_ROWS else None
+    if k is None:
+        return None
+    q, near = np.empty((n, 4)), np.empty(n, dtype=bool)
+    k.near_quats(_columns(P, n), _columns(A, n), q, near.view(np.uint8))
+    return q, near
+
+
+def quat_rotvecs(q, left):
+    """SciPy's ``as_rotvec`` ``(m, 3)`` (radians) of ``left @ q`` for quaternion columns ``q`` (4 arrays of m rows:
+    x, y, z, w) and a 4x4 ``left``, in one C loop, or None (kernels not built, the C library's ``atan2`` or ``sin``
+    not numpy's here, or too few rows: then :mod:`hpe_cli.metrics.scipy_columns` computes them, the same
+    numbers)."""
+    m = len(q[0])
+    k = _libm_kernels("atan2", "sin") if m >= _MIN_ROWS else None
+    if k is None:
+        return None
+    out = np.empty((m, 3))
+    k.quat_rotvecs([np.ascontiguousarray(c, dtype=np.float64) for c in q], np.ascontiguousarray(left, np.float64), out)
+    return out
+
+
+def system_angles(X, spec, scale, roles, middle: int, refine_below: float):
+    """A rotation system's two Euler solutions of a nested 3x3 list of columns in one C loop, or None (kernels not
+    built, the C library's ``atan2`` not numpy's here, or too few rows: then
+    :meth:`hpe_cli.rotation.system_def.RotationSystem.soa_to_angles` computes them, the same numbers).
+
+    ``spec`` is ``(i, j, k, proper, parity)`` of the intrinsic sequence (``k`` the plane's third axis when proper),
+    ``scale`` each turn's degrees factor (its hand's sign), ``roles`` each turn's place in (pitch, yaw, roll),
+    ``middle`` the middle turn's. Returns ``(p1 (3, N), p2 (3, N), lock (N,), near (N,))``: the rows of ``near``
+    (lock below ``refine_below``) are the caller's to recompute.
+    """
+    n = _rows(X)
+    k = _atan2_kernels() if n >= _MIN_ROWS else None
+    if k is None:
+        return None
+    p1, p2, lock, near = np.empty((3, n)), np.empty((3, n)), np.empty(n), np.empty(n, dtype=bool)
+    i, j, m, proper, e = spec
+    k.system_angles(
+        _columns(X, n),
+        p1,
+        p2,
+        lock,
+        near.view(np.uint8),
+        i,
+        j,
+        m,
+        proper,
+        float(e),
+        tuple(scale),
+        tuple(roles),
+        middle,
+        refine_below,
+    )
+    return p1, p2, lock, near

@@ -6,11 +6,12 @@ import click
 
 from .choices import RegistryChoice
 from .options import (
-    SYSTEM,
     batch_option,
     columns_option,
     echo_summary,
+    file_system_option,
     fmt_small,
+    images_option,
     output_option,
     overwrite_option,
     progress,
@@ -24,14 +25,7 @@ from .table_options import column_options
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
-@click.option(
-    "--system",
-    "system",
-    type=SYSTEM,
-    default=None,
-    help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
-    "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].",
-)
+@file_system_option()
 @click.option(
     "--json",
     "report",
@@ -43,11 +37,9 @@ from .table_options import column_options
     type=click.Path(file_okay=False),
     help="Folder for yaw/pitch/roll histograms, a yaw-pitch coverage map (PNG) and index.html.",
 )
-@click.option(
-    "--images",
-    type=click.Path(exists=True, file_okay=False),
-    help="With --plots: folder of the images, to draw the first flagged rows of each check on the page "
-    "(default: INPUT's folder; a .mat folder holds its images).",
+@images_option(
+    "With --plots: folder of the images, to draw the first flagged rows of each check on the page "
+    "(default: INPUT's folder; a .mat folder holds its images)."
 )
 @output_option(
     required=False, help="Write the table with one boolean column per check plus 'flagged' (.parquet or .csv)."

@@ -12,13 +12,13 @@ from .options import (
     batch_option,
     deprecated_spellings,
     echo_summary,
+    file_system_option,
     image_size_option,
     output_option,
     overwrite_option,
     progress,
     radians_option,
     rejects_options,
-    system_option,
     threads_option,
     verbosity_options,
 )
@@ -29,11 +29,7 @@ from .table_options import column_options
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
 @output_option()
-@system_option(
-    default=None,
-    help="Rotation system of the labels and of OUTPUT: a built-in name or a .toml "
-    "file [default: the file's own (hpe:system metadata, dataset format), else 300w_lp].",
-)
+@file_system_option("Rotation system of the labels and of OUTPUT: a built-in name or a .toml file")
 @image_size_option(
     help="Width and height of the images, in pixels, as WxH. Optional when the table has "
     "image_width/image_height or --images is given; a row where these disagree is rejected."

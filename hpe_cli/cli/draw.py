@@ -5,11 +5,13 @@ from __future__ import annotations
 import click
 
 from .options import (
-    SYSTEM,
     columns_option,
     deprecated_spellings,
     echo_summary,
+    file_system_option,
     image_size_option,
+    images_option,
+    output_folder_option,
     overwrite_option,
     progress,
     radians_option,  # the one spelling of input angle units
@@ -23,27 +25,9 @@ from .table_options import column_options
 @deprecated_spellings("canvas", "image-size")
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("input", type=click.Path(exists=True))
-@click.option(
-    "-o",
-    "--output",
-    "outdir",
-    type=click.Path(file_okay=False),
-    required=True,
-    help="Output folder (created if missing); images keep their relative names.",
-)
-@click.option(
-    "--images",
-    type=click.Path(exists=True, file_okay=False),
-    help="Folder the `image` column is relative to (default: INPUT's folder).",
-)
-@click.option(
-    "--system",
-    "system",
-    type=SYSTEM,
-    default=None,
-    help="Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file "
-    "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].",
-)
+@output_folder_option("Output folder (created if missing); images keep their relative names.")
+@images_option("Folder the `image` column is relative to (default: INPUT's folder).")
+@file_system_option()
 @click.option(
     "--style",
     type=click.Choice(["axes", "cube"]),

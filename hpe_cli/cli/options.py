@@ -119,6 +119,27 @@ def system_option(
     return click.option("--system", "system", type=SYSTEM, default=default, show_default=True, help=help)
 
 
+#: the default of ``--system`` for commands that read a labels file that may name its own system
+FILE_SYSTEM_DEFAULT = "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp]."
+
+
+def file_system_option(
+    what: str = "Rotation system of the labels: a built-in name (see `hpe systems`) or a .toml file",
+):
+    """``--system`` of the commands that read one labels file: ``what`` it is, then :data:`FILE_SYSTEM_DEFAULT`."""
+    return click.option("--system", "system", type=SYSTEM, default=None, help=f"{what} {FILE_SYSTEM_DEFAULT}")
+
+
+def output_folder_option(help: str):
+    """``-o/--output DIR``: the folder a command writes (created if missing), as the ``outdir`` argument."""
+    return click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), required=True, help=help)
+
+
+def images_option(help: str):
+    """``--images DIR``: the folder a table's image paths are relative to, as the ``images`` argument."""
+    return click.option("--images", type=click.Path(exists=True, file_okay=False), help=help)
+
+
 def reinterpret_option(f):
     """``--reinterpret-as SYSTEM``: read the labels in SYSTEM although the file's own metadata names another."""
     return click.option(

@@ -9,6 +9,9 @@ from .options import (
     SYSTEMS,
     columns_option,
     echo_summary,
+    file_system_option,
+    images_option,
+    output_folder_option,
     overwrite_option,
     progress,
     radians_option,
@@ -21,27 +24,11 @@ from .table_options import column_options
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("labels", type=click.Path(exists=True))
 @click.argument("other", type=click.Path(exists=True), required=False)
-@click.option(
-    "-o",
-    "--output",
-    "outdir",
-    type=click.Path(file_okay=False),
-    required=True,
-    help="Page folder (created if missing): index.html, rows.js, thumbs/, frames/; open index.html in a browser.",
+@output_folder_option(
+    "Page folder (created if missing): index.html, rows.js, thumbs/, frames/; open index.html in a browser."
 )
-@click.option(
-    "--images",
-    type=click.Path(exists=True, file_okay=False),
-    help="Folder the `image` column is relative to (default: LABELS' folder).",
-)
-@click.option(
-    "--system",
-    "system",
-    type=SYSTEM,
-    default=None,
-    help="Rotation system of LABELS, and of the angles the page shows and filters "
-    "[default: the file's own (hpe:system metadata, dataset format), else 300w_lp].",
-)
+@images_option("Folder the `image` column is relative to (default: LABELS' folder).")
+@file_system_option("Rotation system of LABELS, and of the angles the page shows and filters")
 @click.option(
     "--other-system",
     "other_system",

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import native
 from ..native import sin_cos
 from . import scipy_columns as sc
 
@@ -91,6 +92,15 @@ def opal23_quats(pyr) -> tuple:
     return sc.quat_from_euler("XYZ", a, degrees=True)
 
 
+#: opal23's angles to SciPy's: [pitch, -yaw, roll] in radians, one product a column
+_OPAL23_SCALE = np.array([1.0, -1.0, 1.0]) * (np.pi / 180.0)
+
+
+def opal23_quats_and_matrices(pyr) -> tuple:
+    """``(opal23_quats(pyr), opal23_matrices(pyr))`` in one pass: the quaternions and their matrices."""
+    return sc.quat_and_matrix_from_euler("XYZ", pyr, _OPAL23_SCALE)
+
+
 def opal23_matrix_of_quats(q) -> list:
     """``.as_matrix()`` of :func:`opal23_quats` (the nested 3x3 list of columns)."""
     return sc.matrix_from_quat(q)
@@ -124,6 +134,9 @@ def opal23_mae(ann, pred, ann_euler=None, pred_euler=None) -> np.ndarray:
 
     a = opal23_euler(ann) if ann_euler is None else ann_euler
     p = opal23_euler(pred) if pred_euler is None else pred_euler
+    got = native.opal23_mae(a, p)  # one C loop where built (no C library function: the same bits)
+    if got is not None:
+        return got
     # column by column in the peer's (yaw, pitch, roll) order: its row means are ((yaw + pitch) + roll) / 3
     order = (1, 0, 2)
     pc = [p[:, k] for k in order]
@@ -145,6 +158,9 @@ def opal23_mae(ann, pred, ann_euler=None, pred_euler=None) -> np.ndarray:
 def opal23_geodesic(ann, pred) -> np.ndarray:
     """``Evaluator.compute_ge`` (test/evaluator.py:77-93): ``arccos(clip((trace(A P^T) - 1) / 2))`` degrees."""
     A, P = sc.nested(ann), sc.nested(pred)
+    got = native.trace_acos_deg(A, P)
+    if got is not None:
+        return got
     t = A[0][0] * P[0][0]
     for i, j in ((0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)):
         t = t + A[i][j] * P[i][j]  # einsum's order: row by row
@@ -176,6 +192,9 @@ def opal23_near(ann, pred):
 def opal23_near_quats(ann, pred):
     """:func:`opal23_near` with the deltas as SciPy's unit quaternions ``(M, 4)`` (x, y, z, w): what the
     Karcher mean needs, in 4 numbers a row instead of 9."""
+    got = native.near_quats(sc.nested(pred), sc.nested(ann))
+    if got is not None:
+        return got[0][got[1]], got[1]
     q = sc.quat_from_matrix(_times_transpose(sc.nested(pred), sc.nested(ann)), assume_valid=True)
     near = sc.quat_angle(q) < np.pi / 2
     return np.stack([c[near] for c in q], -1), near
@@ -184,6 +203,9 @@ def opal23_near_quats(ann, pred):
 def opal23_near_mask(ann, pred) -> np.ndarray:
     """The mask of :func:`opal23_near_quats` alone (rows within 90 degrees of the identity), without gathering
     their quaternions: what a chunk needs once the mean is known."""
+    got = native.near_quats(sc.nested(pred), sc.nested(ann))
+    if got is not None:
+        return got[1]
     q = sc.quat_from_matrix(_times_transpose(sc.nested(pred), sc.nested(ann)), assume_valid=True)
     return sc.quat_angle(q) < np.pi / 2
 
@@ -201,8 +223,10 @@ KARCHER_PIECE = 1 << 16
 def _displacement_sum(q, left) -> np.ndarray:
     """Sum over the rows of ``log(q_mean^-1 q_i)`` (radians, 3,) for quaternions ``q`` (4, m) (columns x, y, z,
     w), ``left`` the 4x4 matrix of the left product by ``q_mean^-1``."""
-    r = [((left[i, 0] * q[0] + left[i, 1] * q[1]) + left[i, 2] * q[2]) + left[i, 3] * q[3] for i in range(4)]
-    v = sc.rotvec_from_quat(tuple(r))
+    v = native.quat_rotvecs(q, left)  # one C loop where built (the same bits)
+    if v is None:
+        r = [((left[i, 0] * q[0] + left[i, 1] * q[1]) + left[i, 2] * q[2]) + left[i, 3] * q[3] for i in range(4)]
+        v = sc.rotvec_from_quat(tuple(r))
     return np.array([v[:, k].sum() for k in range(3)])
 
 
@@ -337,6 +361,9 @@ def opentrack_errors(e1, e2):
     which is NaN where rounding puts the argument above 1. Returns the clipped
     errors (degrees) and the mask of rows the peer turns into NaN.
     """
+    got = native.wrapped_cos_errors(e1, e2)
+    if got is not None:
+        return got
     t, dot = sin_cos(e1)  # np.sin, np.cos (hpe_cli.native: one C call where it gives their bits)
     s2, c2 = sin_cos(e2)
     dot *= c2

@@ -316,9 +316,9 @@ def opal23_mats(pair):
 
     def make():
         p, g, rx = _written_pair(pair, "300w_lp")
-        q = (pa_.opal23_quats(p), pa_.opal23_quats(g))
-        pair._cache[("opal23", "quats")] = q
-        return pa_.opal23_matrix_of_quats(q[0]), pa_.opal23_matrix_of_quats(q[1]), rx
+        (qp, P), (qg, G) = pa_.opal23_quats_and_matrices(p), pa_.opal23_quats_and_matrices(g)
+        pair._cache[("opal23", "quats")] = (qp, qg)
+        return P, G, rx
 
     return _cached(pair, ("opal23", "mats"), make)
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import native
 from ..native import sin_cos
 
 #: SciPy's gimbal-lock threshold on the middle angle (radians), ``_get_angles``
@@ -159,6 +160,18 @@ def quat_from_euler(seq: str, angles, degrees: bool = False) -> tuple:
     return q
 
 
+def quat_and_matrix_from_euler(seq: str, angles, scale) -> tuple:
+    """``(quat_from_euler(seq, angles * scale), matrix_from_quat of it)``: SciPy's ``Rotation.from_euler`` and its
+    ``as_quat()`` and ``as_matrix()``, with each column of ``angles`` (N, 3) first multiplied by its ``scale`` (e.g.
+    the degrees' ``pi / 180`` with a sign); in one compiled loop where :func:`hpe_cli.native.quat_matrix_from_euler`
+    gives these numbers (the same bits)."""
+    got = native.quat_matrix_from_euler(angles, scale, [_AXIS[c] for c in seq.lower()], seq.isupper())
+    if got is not None:
+        return got
+    q = quat_from_euler(seq, np.asarray(angles, dtype=np.float64) * np.asarray(scale, dtype=np.float64))
+    return q, matrix_from_quat(q)
+
+
 def matrix_from_quat(q) -> list:
     """SciPy ``Rotation.from_quat(q).as_matrix()`` for unit ``q`` as a nested 3x3 list of columns."""
     x, y, z, w = q
@@ -169,6 +182,17 @@ def matrix_from_quat(q) -> list:
         [2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw)],
         [2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2],
     ]
+
+
+def _seq_axes(seq: str) -> tuple:
+    """``(i, j, k, sign, symmetric, intrinsic)`` of an Euler sequence, as SciPy's ``_get_angles`` reads it."""
+    intrinsic = seq.isupper()
+    axes = [_AXIS[c] for c in seq.lower()]
+    i, j, k = axes[::-1] if intrinsic else axes
+    symmetric = i == k
+    if symmetric:
+        k = 3 - i - j
+    return i, j, k, float((i - j) * (j - k) * (k - i) // 2), symmetric, intrinsic
 
 
 def euler_from_quat(q, seq: str, degrees: bool = False) -> np.ndarray:
@@ -189,13 +213,7 @@ def euler_from_quat(q, seq: str, degrees: bool = False) -> np.ndarray:
     ndarray (N, 3)
         Angles in seq's order, in [-pi, pi] (degrees with ``degrees=True``).
     """
-    intrinsic = seq.isupper()
-    axes = [_AXIS[c] for c in seq.lower()]
-    i, j, k = axes[::-1] if intrinsic else axes
-    symmetric = i == k
-    if symmetric:
-        k = 3 - i - j
-    sign = float((i - j) * (j - k) * (k - i) // 2)
+    i, j, k, sign, symmetric, intrinsic = _seq_axes(seq)
     qw = q[3]
     if symmetric:
         a, b, c, d = qw, q[i], q[j], q[k] * sign
@@ -232,7 +250,13 @@ def euler_from_quat(q, seq: str, degrees: bool = False) -> np.ndarray:
 
 
 def euler_from_matrix(R, seq: str, degrees: bool = False, assume_valid: bool = False) -> np.ndarray:
-    """SciPy ``Rotation.from_matrix(R).as_euler(seq)`` column-wise (see :func:`euler_from_quat`)."""
+    """SciPy ``Rotation.from_matrix(R).as_euler(seq)`` column-wise (see :func:`quat_from_matrix` and
+    :func:`euler_from_quat`), in one compiled loop where :func:`hpe_cli.native.euler_from_matrix` gives these
+    numbers (the same bits)."""
+    R = nested(R)
+    out = native.euler_from_matrix(R, _seq_axes(seq), degrees, not assume_valid)
+    if out is not None:
+        return out
     return euler_from_quat(quat_from_matrix(R, assume_valid), seq, degrees)
 
 

@@ -94,7 +94,8 @@ def euler_to_soa(a, b, c, seq: str):
     return soa.mul(soa.mul(soa.elemental(i, a), soa.elemental(j, b)), soa.elemental(k, c))
 
 
-def _parity(i: int, j: int, k: int) -> float:
+def parity(i: int, j: int, k: int) -> float:
+    """+1 for a cyclic sequence of axes (x, y, z order), -1 otherwise."""
     return 1.0 if (j - i) % 3 == 1 else -1.0
 
 
@@ -156,13 +157,13 @@ def soa_to_euler(X, seq: str):
     X = [[np.broadcast_to(v, (n,)) if isinstance(v, float) else v for v in row] for row in X]
     if i == k:
         m = 3 - i - j
-        e = _parity(i, j, m)
+        e = parity(i, j, m)
         lock = np.sqrt(X[i][j] * X[i][j] + X[i][m] * X[i][m])  # entries <= 1: no overflow, unlike hypot's cost
         b = np.arctan2(lock, X[i][i])
         a = np.arctan2(X[j][i], -e * X[m][i])
         c = np.arctan2(X[i][j], e * X[i][m])
     else:
-        e = _parity(i, j, k)
+        e = parity(i, j, k)
         lock = np.sqrt(X[i][i] * X[i][i] + X[i][j] * X[i][j])
         if e > 0:
             b = np.arctan2(X[i][k], lock)

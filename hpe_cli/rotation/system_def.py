@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import native as _native
 from . import euler as _euler
 from . import soa as _soa
 from . import solutions as _solutions
@@ -404,9 +405,21 @@ class RotationSystem:
         return self.soa_from_canonical(X) if self.angle_frame == "canonical" else X
 
     def soa_to_angles(self, X):
-        """``(primary, secondary, locked, lock)`` with the angle triples as lists ``[pitch, yaw, roll]``."""
+        """``(primary, secondary, locked, lock)`` with the angle triples as lists ``[pitch, yaw, roll]``.
+
+        In one compiled loop where :func:`hpe_cli.native.system_angles` gives these numbers (the same bits; the
+        rows within about 2.9 degrees of the lock, whose first angle is solved from the residual, are recomputed
+        here)."""
         if self.angle_frame == "canonical":
             X = self.soa_to_canonical(X)
+        got = self._compiled_angles(X)
+        p1, p2, lock = got if got is not None else self._numpy_angles(X)
+        if self.selection == "whenet":
+            p1, p2 = _solutions.whenet_select(p1, p2)
+        return p1, p2, lock < self.gimbal_tol, lock
+
+    def _numpy_angles(self, X):
+        """``(primary, secondary, lock)`` of :meth:`soa_to_angles` before the selection, in numpy."""
         seq = self.intrinsic_axes
         a, b, c, lock = _euler.soa_to_euler(X, seq)
         turns = self._intrinsic_turns()
@@ -417,10 +430,31 @@ class RotationSystem:
             _solutions.lift_low(d)  # atan2(-0.0, -1) and left hands give -180; keep (-180, 180]
             first[t.angle] = d
         p1 = [first[role] for role in ROLES]
-        p2 = _solutions.second_degrees(p1, _solutions.middle_role(self), proper)
-        if self.selection == "whenet":
-            p1, p2 = _solutions.whenet_select(p1, p2)
-        return p1, p2, lock < self.gimbal_tol, lock
+        return p1, _solutions.second_degrees(p1, _solutions.middle_role(self), proper), lock
+
+    def _compiled_angles(self, X):
+        """:meth:`_numpy_angles` by :func:`hpe_cli.native.system_angles`, its near-lock rows by :meth:`_numpy_angles`;
+        None where the kernel is not used."""
+        seq = self.intrinsic_axes
+        i, j, k = _euler.parse_seq(seq)
+        proper = i == k
+        if proper:
+            k = 3 - i - j
+        turns = self._intrinsic_turns()
+        spec = (i, j, k, proper, _euler.parity(i, j, k))
+        scale = tuple(_DEG if t.hand == "right" else -_DEG for t in turns)
+        roles = tuple(ROLES.index(t.angle) for t in turns)
+        got = _native.system_angles(X, spec, scale, roles, _solutions.middle_role(self), _euler.REFINE_BELOW)
+        if got is None:
+            return None
+        p1, p2, lock, near = got
+        if near.any():  # few rows: the twin on them alone (element-wise, so the same bits as on every row)
+            idx = np.flatnonzero(near)
+            q1, q2, lk = self._numpy_angles([[np.broadcast_to(v, (len(lock),))[idx] for v in row] for row in X])
+            for r in range(3):
+                p1[r][idx], p2[r][idx] = q1[r], q2[r]
+            lock[idx] = lk
+        return list(p1), list(p2), lock
 
     def soa_to_canonical(self, X):
         """``A = B.T @ R_active @ M`` (``R_active`` is the stored matrix, transposed if stored so)."""

@@ -7,7 +7,9 @@ built, the kernel half is skipped and the numpy twin is still checked against th
 
 from __future__ import annotations
 
+import os
 import struct
+import warnings
 
 import numpy as np
 import pyarrow as pa
@@ -30,6 +32,21 @@ def both(monkeypatch, fn):
     if built:
         out.append(fn())
     return out
+
+
+def twin_and_kernel(fn):
+    """``[fn() with HPE_KERNELS=numpy, fn() as the environment has it]`` without pytest's monkeypatch (which a
+    Hypothesis test cannot use per example)."""
+    old = os.environ.pop("HPE_KERNELS", None)
+    try:
+        os.environ["HPE_KERNELS"] = "numpy"
+        twin = fn()
+        del os.environ["HPE_KERNELS"]
+        return [twin, fn()]
+    finally:
+        os.environ.pop("HPE_KERNELS", None)
+        if old is not None:
+            os.environ["HPE_KERNELS"] = old
 
 
 def mix_ref(h: int) -> int:
@@ -252,6 +269,191 @@ def test_a_module_from_older_sources_counts_as_not_built(monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "_hpe_kernels", stale)
     assert native.kernels() is None
     monkeypatch.delitem(native._STATE, "module")  # the real module again for the other tests
+
+
+def _same_bits(a, b) -> bool:
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    return a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def _hard_matrices(rng, n):
+    """Random rotations with the rows an Euler split finds hard: the identity, 180-degree turns about each axis,
+    every sequence's gimbal lock (middle angle 0, +-90 and 180 degrees, and 1e-8 rad off), a NaN row, and rows
+    off orthonormal (which SciPy projects first)."""
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.random(n, random_state=rng).as_matrix()
+    hard = [np.eye(3), np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]), np.diag([-1.0, -1.0, 1.0])]
+    for seq in ("xyz", "XYZ", "zyx", "ZXZ", "zxz"):
+        for mid in (0.0, 90.0, -90.0, 180.0, 89.9999995, 1e-6):
+            hard.append(Rotation.from_euler(seq, [[33.0, mid, -71.0]], degrees=True).as_matrix()[0])
+    k = len(hard)
+    R[:k] = np.array(hard)
+    R[k] = np.nan
+    return R
+
+
+@pytest.mark.parametrize("seq", ["XYZ", "xyz", "ZYX", "zyx", "ZXZ", "xzx", "YXY"])
+@pytest.mark.parametrize("assume_valid", [True, False])
+def test_euler_from_matrix_gives_the_numpy_twins_bits_and_scipys_angles(monkeypatch, seq, assume_valid):
+    from scipy.spatial.transform import Rotation
+
+    from hpe_cli.metrics import scipy_columns as sc
+
+    R = _hard_matrices(np.random.default_rng(len(seq) + assume_valid), 2048)
+    N = sc.nested(R)
+    for degrees in (True, False):
+        got = both(monkeypatch, lambda: sc.euler_from_matrix(N, seq, degrees, assume_valid))
+        assert all(_same_bits(g, got[0]) for g in got)
+    ok = np.isfinite(R).all(axis=(1, 2))
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # SciPy warns at gimbal lock
+        ref = Rotation.from_matrix(R[ok]).as_euler(seq, degrees=False)
+    assert np.allclose(
+        got[-1][ok], ref, atol=1e-12, rtol=0
+    )  # the oracle: SciPy itself (its bits: scipy_columns' tests)
+    if built:
+        off = R.copy()
+        off[5] *= 1.001  # one row SciPy would project first: the kernel declines, the twin runs (same numbers)
+        with monkeypatch.context() as m:
+            m.setenv("HPE_KERNELS", "numpy")
+            twin = sc.euler_from_matrix(sc.nested(off), seq, True, assume_valid)
+        assert _same_bits(sc.euler_from_matrix(sc.nested(off), seq, True, assume_valid), twin)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    st.lists(
+        st.tuples(*[st.one_of(st.floats(-720, 720), st.sampled_from([0.0, -0.0, 90.0, -90.0, 180.0, -180.0]))] * 3),
+        min_size=64,
+        max_size=200,
+    )
+)
+def test_quats_and_matrices_from_euler_give_the_numpy_twins_bits(angles):
+    from scipy.spatial.transform import Rotation
+
+    from hpe_cli.metrics import peer_angles as pa
+
+    a = np.array(angles, dtype=np.float64)
+    (q0, M0), (q1, M1) = twin_and_kernel(lambda: pa.opal23_quats_and_matrices(a))
+    assert all(_same_bits(x, y) for x, y in zip(q0, q1))
+    assert all(_same_bits(M0[i][j], M1[i][j]) for i in range(3) for j in range(3))
+    assert all(_same_bits(x, y) for x, y in zip(q1, pa.opal23_quats(a)))  # the twin of the quaternions alone
+    r = Rotation.from_euler("XYZ", a * [1.0, -1.0, 1.0], degrees=True)  # the oracle: SciPy itself
+    assert np.allclose(np.stack(q1, -1), r.as_quat(canonical=False), atol=1e-15, rtol=0)
+    assert np.allclose(pa.stack3(M1), r.as_matrix(), atol=1e-15, rtol=0)
+
+
+def test_opentrack_errors_give_the_numpy_twins_bits(monkeypatch):
+    from hpe_cli.metrics import peer_angles as pa
+
+    rng = np.random.default_rng(7)
+    a = rng.uniform(-np.pi, np.pi, (4096, 3))
+    b = a + rng.standard_normal((4096, 3)) * 0.1
+    b[:512] = a[:512]  # equal angles: the argument rounds past 1 on some rows (the peer's NaN)
+    b[512:600] = a[512:600] + np.pi  # opposite ones
+    b[600] = np.nan
+    got = both(monkeypatch, lambda: pa.opentrack_errors(a, b))
+    assert all(_same_bits(g[0], got[0][0]) and np.array_equal(g[1], got[0][1]) for g in got)
+    e, peer_nan = got[-1]
+    d = np.abs(np.angle(np.exp(1j * (a - b))))  # the oracle: the wrapped difference, from complex numbers
+    assert np.allclose(e[601:], np.degrees(d[601:]), atol=1e-6) and peer_nan[:512].any()
+
+
+def test_libm_kernels_used_only_where_each_function_agrees(monkeypatch):
+    import hpe_cli.native as native
+    from hpe_cli.metrics import scipy_columns as sc
+
+    R = sc.nested(_hard_matrices(np.random.default_rng(3), 256))
+    if built:  # each probe says whether the C library's function gives numpy's bits on its values
+        for name, (twin, probe) in native._LIBM.items():
+            args = probe()
+            args = args if isinstance(args, tuple) else (args,)
+            out = np.empty_like(args[0])
+            kernels().libm(name, args[0], args[1] if len(args) > 1 else None, out)
+            with np.errstate(invalid="ignore"):
+                assert (native._libm_kernels(name) is not None) == _same_bits(out, twin(*args))
+    monkeypatch.setitem(native._STATE, "hypot", False)  # as on a machine where numpy's SIMD hypot differs
+    assert native.euler_from_matrix(R, sc._seq_axes("XYZ"), True, False) is None
+    monkeypatch.setitem(native._STATE, "acos", False)
+    assert native.wrapped_cos_errors(np.zeros((100, 3)), np.ones((100, 3))) is None
+    monkeypatch.setitem(native._STATE, "sin_cos", False)
+    assert native.quat_matrix_from_euler(np.zeros((100, 3)), (1.0, 1.0, 1.0), (0, 1, 2), True) is None
+    if built:
+        with pytest.raises(ValueError, match="expected atan2"):
+            kernels().libm("exp", np.zeros(3), None, np.zeros(3))
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(
+        st.tuples(*[st.one_of(st.floats(-180, 180), st.sampled_from([0.0, -0.0, 180.0, -180.0, 90.0, np.nan]))] * 6),
+        min_size=1,
+        max_size=100,
+    )
+)
+def test_opal23_mae_gives_the_numpy_twins_bits(rows):
+    from hpe_cli.metrics import peer_angles as pa
+
+    special = np.array([0.0, -0.0, 180.0, -180.0, 90.0, -90.0, 179.9, np.nan])  # and every pair of them: 64 rows
+    grid = np.stack(np.meshgrid(special, special), -1).reshape(-1, 2)[:, [0, 0, 1, 1, 1, 0]]
+    x = np.concatenate([np.array(rows, dtype=np.float64).reshape(-1, 6), grid])
+    a, p = x[:, :3], x[:, 3:]
+    twin, got = twin_and_kernel(lambda: pa.opal23_mae(None, None, ann_euler=a, pred_euler=p))
+    assert _same_bits(got, twin)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_opal23_geodesic_and_near_quaternions_give_the_numpy_twins_bits(monkeypatch, seed):
+    from hpe_cli.metrics import peer_angles as pa
+
+    R, G = _rotations(np.random.default_rng(seed), 4096)
+    R[7] = np.nan
+    geo = both(monkeypatch, lambda: pa.opal23_geodesic(G, R))
+    near = both(monkeypatch, lambda: pa.opal23_near_quats(G, R))
+    mask = both(monkeypatch, lambda: pa.opal23_near_mask(G, R))
+    assert all(_same_bits(g, geo[0]) for g in geo)
+    assert all(_same_bits(q, near[0][0]) and np.array_equal(m, near[0][1]) for q, m in near)
+    assert all(np.array_equal(m, near[0][1]) for m in mask)
+    d = np.degrees(np.arccos(np.clip((np.einsum("nij,nij->n", G, R) - 1) / 2, -1, 1)))  # the oracle: the formula
+    assert np.allclose(geo[-1], d, atol=1e-5, equal_nan=True)  # acos near 0 degrees: ~1e-6 degrees of rounding
+    assert np.array_equal(near[-1][1], np.nan_to_num(d, nan=180.0) < 90.0)
+
+
+def test_karcher_mean_gives_the_numpy_twins_bits(monkeypatch):
+    from scipy.spatial.transform import Rotation
+
+    from hpe_cli.metrics import peer_angles as pa
+
+    rng = np.random.default_rng(11)
+    base = Rotation.from_euler("xyz", [5.0, -8.0, 3.0], degrees=True)
+    deltas = (base * Rotation.from_rotvec(rng.standard_normal((5000, 3)) * 0.2)).as_matrix()
+    deltas[:40] = base.as_matrix()  # rotation vectors of 0 (the Taylor branch) after the first step
+    q, near = pa.opal23_near_quats(np.broadcast_to(np.eye(3), deltas.shape), deltas)
+    means = both(monkeypatch, lambda: pa.opal23_karcher(q, chunk=1 << 11))
+    assert all(_same_bits(m, means[0]) for m in means)
+    ref = Rotation.from_matrix(deltas[near]).mean().as_matrix()  # the oracle: SciPy's (chordal) mean, close by
+    assert np.allclose(means[-1], ref, atol=1e-3)
+
+
+def test_system_angles_give_the_numpy_twins_bits_in_every_system(monkeypatch):
+    from scipy.spatial.transform import Rotation
+
+    from hpe_cli.rotation.systems import get_system, system_names
+
+    rng = np.random.default_rng(5)
+    mid = 90 - 10.0 ** rng.uniform(-9, 1, 200)  # up to 10 degrees from the lock: refined rows and plain ones
+    near = Rotation.from_euler(
+        "zyx", np.c_[rng.uniform(-180, 180, 200), mid, rng.uniform(-180, 180, 200)], degrees=True
+    )
+    R = np.concatenate([_hard_matrices(rng, 3000), near.as_matrix(), near.as_matrix().transpose(0, 2, 1)])
+    for name in system_names():
+        system = get_system(name)
+        X = system.soa_from_canonical([[R[:, i, j] for j in range(3)] for i in range(3)])
+        got = both(monkeypatch, lambda: system.soa_to_angles(X))
+        for g in got:
+            assert all(_same_bits(a, b) for a, b in zip(g[0] + g[1] + [g[3]], got[0][0] + got[0][1] + [got[0][3]]))
+            assert np.array_equal(g[2], got[0][2])
 
 
 def repeated_ref(values) -> list:

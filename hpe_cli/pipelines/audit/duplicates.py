@@ -89,7 +89,7 @@ def key_hashes(label_cols, batch, key_cols, out=None) -> np.ndarray:
     h = np.empty(n, dtype=np.uint64) if out is None else out
     h.fill(_SEED)
     k = kernels()
-    if k is not None:  # the same hashes, one C loop a column (csrc/_hpe_kernels.c); the numpy twin below
+    if k is not None:  # the same hashes, one C loop a column (csrc/kernels/hashes.c); the numpy twin below
         for c in range(len(label_cols) + len(key_cols)):
             if c < len(label_cols):
                 k.row_hash_add(h, np.ascontiguousarray(label_cols[c], dtype=np.float64), True)
@@ -113,7 +113,7 @@ class HashBuckets:
 
     Bucket ``b`` owns ``cap`` slots of one array, about 1.1 times the rows at 10M (the expected count and ten
     standard deviations more); the threads that file batches reserve their runs with atomic additions
-    (``bucket_file``, csrc/_hpe_kernels.c). :meth:`repeated` finds the repeated values of the two value halves
+    (``bucket_file``, csrc/kernels/repeats.c). :meth:`repeated` finds the repeated values of the two value halves
     (512 buckets each, a thread each when ``threads > 1``) bucket by bucket in cache (``bucket_repeats``), or,
     when a bucket was full (many equal rows), with :func:`repeated_in_place` of a copy of the hashes in input
     order: the same values either way, sorted.
@@ -200,7 +200,7 @@ class Duplicates:
             self.buckets.file(h)
             return
         k = kernels()
-        if k is not None:  # one C loop (csrc/_hpe_kernels.c); the numpy twin below
+        if k is not None:  # one C loop (csrc/kernels/hashes.c); the numpy twin below
             low, high = np.empty(len(h), dtype=np.uint64), np.empty(len(h), dtype=np.uint64)
             n_low = k.split_top_bit(h, low, high)
             low, high = low[:n_low], high[: len(h) - n_low]
@@ -312,7 +312,7 @@ def repeated_in_place(S) -> np.ndarray:
     """The values that occur more than once in the uint64 array ``S``, once each, sorted; ``S`` is scratch (left
     reordered) and the result may be a view of it.
 
-    The kernel (``repeated_values``, csrc/_hpe_kernels.c: a radix partition in place, then a hash set per
+    The kernel (``repeated_values``, csrc/kernels/repeats.c: a radix partition in place, then a hash set per
     cache-sized bucket; 0.75x the CPU of the sort at 5M values) where built, else its numpy twin: sort in place and
     take the values equal to their successor. The same values either way.
     """
