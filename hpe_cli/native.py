@@ -48,6 +48,9 @@ KERNELS = (
     "quat_rotvecs",
     "system_angles",
     "libm",
+    "repeated_values",
+    "bucket_file",
+    "bucket_repeats",
 )
 
 

@@ -11,7 +11,7 @@
  *
  * Files, by concept: buffers.c (argument checks), hashes.c (key and row hashes), screen.c (the audit's angle
  * screen), rotations.c (sines and cosines, Euler splits, quaternions, the probes' C library calls), errors.c
- * (evaluate's error formulas), module.c (the method table).
+ * (evaluate's error formulas), repeats.c (the audit's repeated hashes), module.c (the method table).
  */
 #ifndef HPE_KERNELS_H
 #define HPE_KERNELS_H
@@ -81,5 +81,8 @@ HPE_INTERNAL PyObject *k_quat_rotvecs(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_system_angles(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_libm(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_split_top_bit(PyObject *self, PyObject *args);
+HPE_INTERNAL PyObject *k_repeated_values(PyObject *self, PyObject *args);
+HPE_INTERNAL PyObject *k_bucket_file(PyObject *self, PyObject *args);
+HPE_INTERNAL PyObject *k_bucket_repeats(PyObject *self, PyObject *args);
 
 #endif

@@ -39,6 +39,14 @@ static PyMethodDef methods[] = {
      "system_angles(X, p1, p2, lock, near, i, j, k, proper, e, scale, role, middle, refine_below) -> rows near the "
      "lock: a system's two Euler solutions (twin: hpe_cli.rotation.system_def.RotationSystem.soa_to_angles)."},
     {"libm", k_libm, METH_VARARGS, "libm(name, x, y, out): the C library's atan2, hypot, acos, asin, sin (probes)."},
+    {"repeated_values", k_repeated_values, METH_VARARGS,
+     "repeated_values(h) -> k: the repeated values of h, once each and sorted, to h[:k] (h is scratch; twin: "
+     "hpe_cli.pipelines.audit.duplicates.repeated_in_place)."},
+    {"bucket_file", k_bucket_file, METH_VARARGS,
+     "bucket_file(h, arr, cursors, cap) -> bool: a batch's hashes to their buckets (False: a bucket is full)."},
+    {"bucket_repeats", k_bucket_repeats, METH_VARARGS,
+     "bucket_repeats(arr, cursors, cap, lo, hi) -> bytes: the repeated values of buckets lo .. hi - 1, sorted "
+     "(twin: hpe_cli.pipelines.audit.duplicates.repeated_in_place)."},
     {NULL, NULL, 0, NULL},
 };
 

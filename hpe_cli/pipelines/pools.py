@@ -14,7 +14,6 @@ row jobs that write each result as it comes. No scheduling of our own: the engin
 from __future__ import annotations
 
 import importlib
-import multiprocessing as mp
 import os
 import sys
 import threading
@@ -119,6 +118,7 @@ def _worker_init(names, parent: int) -> None:
 
 def mp_context():
     """``fork`` where the platform's default allows it (fast start, no re-import), else ``spawn``."""
+    import multiprocessing as mp  # lazy: start-up (4 ms), only process pools need it
 
     return mp.get_context("spawn" if mp.get_start_method(allow_none=True) == "spawn" else "fork")
 

@@ -359,8 +359,11 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
         cons = ConsistencyAudit(table, o.consistency)
     tally = AuditTally(plan, o, cons, progress)
     keep_freed_memory()  # the batches' freed temporaries reused, not faulted in again (pipelines.heap)
+    stream = table
+    if table.kind == "parquet" and cons is None:  # its rows' numbers are their offsets: no column of them to make
+        stream = open_table(input_path, o.batch_size, with_lines=False)
     run_in_order(
-        numbered(read_batches(table, plan.read_mode, rejected)), tally.work, tally.finish, default_threads(o.threads)
+        numbered(read_batches(stream, plan.read_mode, rejected)), tally.work, tally.finish, default_threads(o.threads)
     )
     rejected.check()  # with --strict: any set-aside row is an error and nothing is written
     tally.close()
