@@ -3,8 +3,9 @@
 - ``_hpe_jpeg``, a JPEG rectangle decoder over the system's libjpeg-turbo. Without a C compiler or libjpeg-turbo's
   headers (Debian/Ubuntu ``libjpeg-dev``, Fedora ``libjpeg-turbo-devel``, conda ``libjpeg-turbo``) the build skips it
   and ``hpe_cli.io.jpeg`` decodes whole frames (the same pixels, slower on large frames).
-- ``_hpe_kernels``, column kernels in plain C (no library): key and row hashes, the audit's angle screen. Without a
-  C compiler their numpy twins run (``hpe_cli.native``; the same bits).
+- ``_hpe_kernels``, column kernels in plain C (no library; ``csrc/kernels/``, one file per concept): key and row
+  hashes, the audit's angle screen, the rotation conversions and evaluate's error formulas. Without a C compiler
+  their numpy twins run (``hpe_cli.native``; the same bits).
 
 Either way the build says so in one line per module starting ``hpe:`` (pip shows it with ``pip install -v .``);
 ``hpe --version`` tells afterwards. Everything else is in ``pyproject.toml``.
@@ -12,6 +13,7 @@ Either way the build says so in one line per module starting ``hpe:`` (pip shows
 
 import os
 import sys
+from pathlib import Path
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
@@ -53,7 +55,11 @@ setup(
         Extension("_hpe_jpeg", ["csrc/_hpe_jpeg.c"], libraries=["jpeg"], optional=True),
         # IEEE arithmetic as numpy does it: no fused multiply-adds (the kernels' twins are numpy passes)
         Extension(
-            "_hpe_kernels", ["csrc/_hpe_kernels.c"], extra_compile_args=["-O3", "-ffp-contract=off"], optional=True
+            "_hpe_kernels",
+            sorted(str(p) for p in Path("csrc/kernels").glob("*.c")),
+            depends=["csrc/kernels/kernels.h"],
+            extra_compile_args=["-O3", "-ffp-contract=off"],
+            optional=True,
         ),
     ],
     cmdclass={"build_ext": BuildExt},

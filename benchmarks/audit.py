@@ -4,12 +4,15 @@ Usage::
 
     python benchmarks/audit.py                 # 1,000,000 rows, Parquet and CSV
     python benchmarks/audit.py --rows 200000 --baseline-rows 5000
-    python benchmarks/audit.py --rows 10000000 --floor-only [--repeat 3] [--threads N] [--data DIR]
+    python benchmarks/audit.py --rows 10000000 --floor-only [--repeat 3] [--threads N] [--data DIR] [--before DIR]
 
 ``--floor-only`` runs only the comparison with the read floor (issue 33: <= 2x, <= 400 MB at 10M rows):
 ``hpe audit FILE --json R`` on ``id, pitch, yaw, roll`` (the table of ``benchmarks/convert.py``) against
 pyarrow reading the same file batch by batch, each its own process under GNU time, medians of alternating
-rounds (``benchmarks/streaming.py``); without it, that comparison ends the run.
+rounds (``benchmarks/streaming.py``); without it, that comparison ends the run. ``--before DIR`` (a checkout or
+``git archive`` of another version, with its ``_hpe_kernels`` built there: ``python setup.py build_ext
+--inplace``) adds rounds alternating this checkout's audit with that one's, the medians side by side and
+whether their JSON reports are the same bytes.
 
 Prints rows/s for: the end-to-end job (read, check, hash for duplicates, JSON
 report) on Parquet and CSV, the same with ``-o`` and ``--plots``, and the
@@ -99,6 +102,7 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=None, help="hpe audit --threads (default: its own)")
     ap.add_argument("--data", default=None, help="folder keeping the generated input between runs")
     ap.add_argument("--floor-only", action="store_true", help="only the comparison with the read floor")
+    ap.add_argument("--before", default=None, help="another checkout's folder: its audit in the same rounds")
     args = ap.parse_args(argv)
     if args.floor_only:
         return floor_comparison(args)
@@ -131,7 +135,47 @@ def floor_comparison(args) -> int:
         )
         cmd = HPE + ["audit", angles, "--json", Path(tmp) / "r.json", "-q", "--overwrite"] + threads
         compare("audit (JSON report)", cmd, floor_cmd(angles, Path(tmp) / "unused", 0), args.repeat)
+        if args.before:
+            before = HPE + ["audit", angles, "--json", Path(tmp) / "b.json", "-q", "--overwrite"] + threads
+            before_comparison(cmd, before, Path(args.before).resolve(), args.repeat)
+            same = (Path(tmp) / "r.json").read_bytes() == (Path(tmp) / "b.json").read_bytes()
+            print(f"  JSON reports of this checkout and --before: {'the same bytes' if same else 'DIFFERENT'}")
     return 0
+
+
+def before_comparison(cmd, before_cmd, before: Path, repeat: int) -> None:
+    """This checkout's ``cmd`` and ``before_cmd`` run from the folder ``before`` (its ``hpe_cli`` first on the path)
+    in alternating rounds under GNU time: medians of wall, CPU and peak RSS side by side."""
+    import statistics
+    import subprocess
+
+    def one(c, folder: Path):
+        env = {**os.environ, "PYTHONPATH": str(folder)}
+        res = subprocess.run(
+            ["/usr/bin/time", "-f", "@@%e %U %S %M"] + [str(x) for x in c],
+            cwd=folder,
+            env=env,
+            text=True,
+            capture_output=True,
+        )
+        if res.returncode != 0:
+            raise SystemExit(f"failed in {folder} ({res.returncode}):\n{res.stderr[-2000:]}")
+        wall, user, system, kb = [ln for ln in res.stderr.splitlines() if ln.startswith("@@")][-1][2:].split()
+        return float(wall), float(user) + float(system), int(kb) / 1024
+
+    root = Path(__file__).resolve().parents[1]
+    compileall.compile_dir(before / "hpe_cli", quiet=1)  # bytecode, as for this checkout
+    runs = {"now": [], "before": []}
+    for _ in range(repeat):
+        runs["now"].append(one(cmd, root))
+        runs["before"].append(one(before_cmd, before))
+    med = {k: [statistics.median(r[i] for r in v) for i in range(3)] for k, v in runs.items()}
+    (nw, nc, nm), (bw, bc, bm) = med["now"], med["before"]
+    print(
+        f"  {'audit, this checkout / before':<30} {nw:6.2f} / {bw:6.2f} s wall, cpu {nc:6.2f} / {bc:6.2f} s, "
+        f"{nm:4.0f} / {bm:4.0f} MB   ratio {nw / bw:4.2f} (cpu {nc / bc:4.2f})   load {os.getloadavg()[0]:.1f}",
+        flush=True,
+    )
 
 
 def in_process(args) -> bool:

@@ -1,15 +1,28 @@
-"""hpe's optional compiled column kernels (``_hpe_kernels``, ``csrc/_hpe_kernels.c``), or None.
+"""hpe's optional compiled column kernels (``_hpe_kernels``, ``csrc/kernels/``), or None.
 
-Each kernel is one C loop over a column where numpy takes a dozen passes or more: the key hashes of
-``hpe evaluate``'s join and duplicate-key check (:func:`hpe_cli.io.key_hash.string_hashes`), the row hashes of
-``hpe audit``'s duplicate check and their split by value half (:func:`hpe_cli.pipelines.audit.duplicates.key_hashes`,
-:meth:`~hpe_cli.pipelines.audit.duplicates.Duplicates.file`), the audit's angle screen, and the sine and cosine
-of the matrices built from angles (:func:`sin_cos`), and the geodesic, column-angle and Frobenius errors of
-``hpe evaluate``'s core metrics (:func:`core_errors`). The hashes and the screen compute integers and comparisons
-only, so each gives the bits of its numpy twin; the others use the C library's sine, cosine and ``atan2`` (besides
-IEEE arithmetic in numpy's order), each only where it gives numpy's bits on a probe of values. The
-numpy twins run where the module was not built (no C compiler at install time) or when ``HPE_KERNELS=numpy`` is
-set; ``tests/native/`` compares the two.
+Each kernel is one C loop over a column where numpy takes a dozen passes or more:
+
+- hashes: the key hashes of ``hpe evaluate``'s join and duplicate-key check
+  (:func:`hpe_cli.io.key_hash.string_hashes`), the row hashes of ``hpe audit``'s duplicate check and their split
+  by value half (:func:`hpe_cli.pipelines.audit.duplicates.key_hashes`,
+  :meth:`~hpe_cli.pipelines.audit.duplicates.Duplicates.file`);
+- the audit's angle screen;
+- rotations: the sine and cosine of the matrices built from angles (:func:`sin_cos`), a rotation system's two Euler
+  solutions (:func:`system_angles`), SciPy's Euler split of a matrix (:func:`euler_from_matrix`) and its
+  ``from_euler`` quaternions with their matrices (:func:`quat_matrix_from_euler`);
+- evaluate's error formulas: the core metrics (:func:`core_errors`), opentrack's wrapped cosines
+  (:func:`wrapped_cos_errors`), opal23's ``compute_mae`` and ``compute_ge`` (:func:`opal23_mae`,
+  :func:`trace_acos_deg`), the near quaternions and the Karcher step of opal23's alignment (:func:`near_quats`,
+  :func:`quat_rotvecs`);
+- evaluate's key join: a chunk's rows put in partition order (:func:`partition_rows`, :func:`partition_strings`),
+  a partition's rows paired by their key hashes (:func:`hash_pairs`) and verified on the key bytes
+  (:func:`first_unequal`).
+
+The hashes, the screen and the join compute integers and comparisons only, so each gives the bits of its numpy twin; the
+others add IEEE arithmetic in numpy's order and call the C library's ``sincos``, ``atan2``, ``hypot``, ``acos``,
+``asin`` or ``sin``, each only where that function gives numpy's bits on a probe of values (checked once a
+process). The numpy twins run where the module was not built (no C compiler at install time) or when
+``HPE_KERNELS=numpy`` is set; ``tests/native/`` compares the two.
 """
 
 from __future__ import annotations
@@ -38,6 +51,9 @@ KERNELS = (
     "quat_rotvecs",
     "system_angles",
     "libm",
+    "repeated_values",
+    "bucket_file",
+    "bucket_repeats",
     "hash_pairs",
     "first_unequal",
     "partition_scatter",

@@ -90,7 +90,7 @@ def string_hashes(arr, stems: bool = True) -> tuple[np.ndarray, np.ndarray | Non
         else np.zeros(0, np.uint8)
     )
     k = kernels()
-    if k is not None:  # the same hashes in one C loop (csrc/_hpe_kernels.c); the numpy twin below
+    if k is not None:  # the same hashes in one C loop (csrc/kernels/hashes.c); the numpy twin below
         off -= base
         valid = np.asarray(arr.is_valid().to_numpy(zero_copy_only=False), dtype=np.uint8) if arr.null_count else None
         hx, hs = np.empty(n, dtype=np.uint64), (np.empty(n, dtype=np.uint64) if stems else None)

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import errno
 import os
-import secrets
 import shutil
 import stat
 from pathlib import Path
@@ -17,7 +16,7 @@ from .os_errors import TEMP_PREFIX
 
 def temp_in(folder: Path) -> Path:
     """A fresh hpe temp path (``.hpe-*.tmp``) inside ``folder``, for staging and backups."""
-    return folder / f"{TEMP_PREFIX}{secrets.token_hex(4)}.tmp"
+    return folder / f"{TEMP_PREFIX}{os.urandom(4).hex()}.tmp"  # secrets.token_hex, without importing hashlib
 
 
 def remove_path(p: Path) -> None:

@@ -32,6 +32,8 @@ class UnitsWatch:
         self._lock = threading.Lock()  # readers may feed it from several threads
 
     def observe(self, cols, ok=None) -> None:
+        if self.unit == "degrees" and self.largest > np.pi:  # the warning can no longer fire: nothing to scan
+            return
         cols = [np.asarray(c, dtype=np.float64) for c in cols]
         n = len(cols[0]) if cols and np.ndim(cols[0]) else 0
         if n and (ok is None or bool(np.all(ok))):  # the usual batch: min and max only, no temporaries

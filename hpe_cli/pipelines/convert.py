@@ -17,8 +17,7 @@ from ..rotation import soa
 from ..rotation.convert import soa_labels
 from ..rotation.decoders import DECODERS, decoder_columns
 from .heap import keep_freed_memory
-from .inorder import in_order
-from .pools import default_threads
+from .pools import default_threads, run_in_order
 
 
 @dataclass
@@ -124,8 +123,8 @@ class ConvertedBatches:
     def __init__(self, writer, rejects, summary: ConvertSummary, progress=None):
         self.writer, self.rejects, self.summary, self.progress = writer, rejects, summary, progress
 
-    def finish(self, batch, read_rejects, future) -> None:
-        out, reasons, labels = future.result()
+    def finish(self, batch, read_rejects, result) -> None:
+        out, reasons, labels = result
         rejects, summary = self.rejects, self.summary
         bad = np.flatnonzero(reasons != "") if reasons is not None else ()
         lines = batch.column(LINE_COL).to_numpy()
@@ -215,7 +214,7 @@ def run_convert(input_path, output, source, target, options: ConvertOptions | No
     with TableWriter(output, o.overwrite, output_metadata(labels, target, o.decoder)) as writer:
         keep_freed_memory()  # the batches' freed temporaries reused, not faulted in again (pipelines.heap)
         done = ConvertedBatches(writer, rejects, summary, progress)
-        in_order(items(), work, done.finish, default_threads(o.threads))  # --threads; one per core by default
+        run_in_order(items(), work, done.finish, default_threads(o.threads))  # --threads; one per core by default
         if summary.rows == 0:
             raise HpeError(f"{src.path}: empty table (no rows)")
         rejects.finish()

@@ -7,13 +7,13 @@ for ``workers > 1`` (the default engine), a Dask ``Client`` for a
 :func:`in_order` maps a function over items on such a pool with a bounded
 number in flight and yields the results in input order, so a job can chain
 stages (compute a unit, then format it) on one pool and still write its
-output in order. No scheduling of our own: the engines schedule.
+output in order; :func:`run_in_order` does it on threads of its own for the
+row jobs that write each result as it comes. No scheduling of our own: the engines schedule.
 """
 
 from __future__ import annotations
 
 import importlib
-import multiprocessing as mp
 import os
 import sys
 import threading
@@ -118,6 +118,7 @@ def _worker_init(names, parent: int) -> None:
 
 def mp_context():
     """``fork`` where the platform's default allows it (fast start, no re-import), else ``spawn``."""
+    import multiprocessing as mp  # lazy: start-up (4 ms), only process pools need it
 
     return mp.get_context("spawn" if mp.get_start_method(allow_none=True) == "spawn" else "fork")
 
@@ -261,16 +262,39 @@ def in_order(pool, fn, items, ahead: int | None = None):
     ahead = max(1, int(ahead if ahead is not None else 2 * getattr(pool, "workers", 1)))
     pending: deque = deque()
     it = iter(items)
-    for item in it:
-        pending.append(pool.submit(fn, item))
-        if len(pending) >= ahead:
-            break
-    while pending:
-        res = pending.popleft().result()
-        nxt = next(it, None)
-        if nxt is not None:
-            pending.append(pool.submit(fn, nxt))
-        yield res
+    try:
+        for item in it:
+            pending.append(pool.submit(fn, item))
+            if len(pending) >= ahead:
+                break
+        while pending:
+            res = pending.popleft().result()
+            nxt = next(it, None)
+            if nxt is not None:
+                pending.append(pool.submit(fn, nxt))
+            yield res
+    finally:  # an error or an early close: the items not started yet are not run
+        for fut in pending:
+            fut.cancel()
+
+
+def run_in_order(items, work, finish, workers: int) -> None:
+    """``finish(*item, work(item[0]))`` for every tuple ``item``, in input order, while ``work`` runs on
+    ``workers`` threads (:func:`in_order` on a thread pool of its own).
+
+    At most ``workers + 1`` items are in flight, so memory stays flat: the pattern of the row jobs that read
+    batches on this thread (``item[1:]`` rides along: line numbers, the reader's rejects), compute on the threads
+    and write on this thread in input order.
+    """
+    from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
+
+    with ThreadPoolExecutor(workers) as pool:
+        done = in_order(pool, lambda item: (item, work(item[0])), items, ahead=workers + 1)
+        try:
+            for item, result in done:
+                finish(*item, result)
+        finally:
+            done.close()
 
 
 #: the default thread count's cap: each thread keeps a chunk in flight, so memory grows with the count
@@ -309,4 +333,4 @@ def library_threads(threads=None):
         pa.set_io_thread_count(before[2])
 
 
-__all__ = ["unit_pool", "borrow", "in_order", "mp_context", "default_threads", "library_threads"]
+__all__ = ["unit_pool", "borrow", "in_order", "run_in_order", "mp_context", "default_threads", "library_threads"]

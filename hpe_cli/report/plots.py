@@ -8,7 +8,6 @@ alone when there is none).
 
 from __future__ import annotations
 
-import html
 from pathlib import Path
 
 import numpy as np
@@ -146,6 +145,8 @@ def _gallery(pictures) -> str:
     """The page's section of drawn flagged rows, by check; each picture links to its PNG."""
     if not pictures or not (pictures.get("pictures") or pictures.get("missing")):
         return ""
+    import html  # lazy: start-up (html.entities), only a page needs it
+
     e = html.escape
     parts = [
         "<h2>Flagged rows, drawn</h2>",
@@ -172,6 +173,8 @@ def _gallery(pictures) -> str:
 
 
 def _page(title, summary, paths, pictures=None) -> str:
+    import html  # lazy: start-up (html.entities), only a page needs it
+
     drawn = {p["check"] for p in (pictures or {}).get("pictures", [])}
 
     def cell(k, v):  # a check with pictures links to them

@@ -341,7 +341,7 @@ def angle_flags_screened(cols, finite, system, near_tol_deg=NEAR_GIMBAL_DEG, can
     mid = middle_role(system)
     d_lock, d_near = _screen_bound(system.gimbal_tol), _screen_bound(float(np.sin(np.deg2rad(near_tol_deg))))
     k = kernels()
-    if k is not None:  # the same masks in one C loop (csrc/_hpe_kernels.c); the numpy twin below
+    if k is not None:  # the same masks in one C loop (csrc/kernels/screen.c); the numpy twin below
         ranges = [system.ranges.get(role, (-180.0, 180.0)) for role in ("pitch", "yaw", "roll")]
         unsure = np.empty(n, dtype=bool)
         out["non_finite"] = ~finite

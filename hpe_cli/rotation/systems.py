@@ -7,6 +7,7 @@ both are re-exported here, the import path of every public name.
 
 from __future__ import annotations
 
+import threading
 from functools import cache
 from pathlib import Path
 
@@ -40,7 +41,7 @@ def load_system(path) -> RotationSystem:
     """
     path = Path(path)
     system = read_system_file(path)
-    builtin = builtin_systems().get(system.name)
+    builtin = SYSTEMS.get(system.name, None)
     if builtin is not None and builtin.definition() != system.definition():
         diff = [k for k, v in system.definition().items() if builtin.definition().get(k) != v]
         raise SystemError_(
@@ -52,17 +53,57 @@ def load_system(path) -> RotationSystem:
 
 def _builtin_dir():
     """``configs/systems``: package data when installed, the repository folder in a source tree."""
-    from importlib.resources import files  # lazy: start-up
-
     source_tree = Path(__file__).resolve().parents[2] / "configs" / "systems"
     if source_tree.is_dir():  # hpe_cli imported from a checkout: its own configs, not an installed copy's
         return source_tree
+    from importlib.resources import files  # lazy: start-up (5 ms), and a source tree does not need it
+
     return files("hpe_cli.configs") / "systems"
 
 
-#: name -> built-in :class:`RotationSystem`: the ``configs/systems/*.toml`` files (read on first use, in file
-#: name order) and systems a plug-in adds with :func:`register_system`
-SYSTEMS = Registry("built-in system", loader="hpe_cli.rotation.systems_builtin")
+class _Unread:
+    """A built-in system file registered by its name and not read yet (:class:`SystemTable`)."""
+
+    __slots__ = ("entry",)
+
+    def __init__(self, entry):
+        self.entry = entry
+
+
+class SystemTable(Registry):
+    """:class:`~hpe_cli.registry.Registry` of the built-in systems whose files are read on first use, one by one.
+
+    The loader registers each ``configs/systems/NAME.toml`` under ``NAME`` without reading it; looking a name up
+    reads, validates and checks the examples of that file only (0.7 ms, against 13 ms for all 16), and anything
+    that lists the systems themselves (``dict``, ``items``, ``values``) reads them all. Names, their order and every
+    message are those of a table filled at once.
+    """
+
+    _lock = threading.Lock()
+
+    def _read(self, name, entry):
+        if not isinstance(entry, _Unread):
+            return entry
+        with self._lock:  # one reading, one object, whatever the threads
+            entry = self._entries.get(name, entry)
+            if isinstance(entry, _Unread):
+                entry = self._entries[name] = read_builtin_file(entry.entry)
+        return entry
+
+    def __getitem__(self, name):
+        return self._read(name, super().__getitem__(name))
+
+    def get(self, name, *default):
+        return self._read(name, super().get(name, *default))
+
+    def register_file(self, entry) -> None:
+        """Register the system file ``entry`` (a path, ``NAME.toml``) under ``NAME``, to be read on first use."""
+        self.register(entry.name.removesuffix(".toml"), _Unread(entry))
+
+
+#: name -> built-in :class:`RotationSystem`: the ``configs/systems/*.toml`` files (registered on first use, in
+#: file name order, each read when first looked up) and systems a plug-in adds with :func:`register_system`
+SYSTEMS = SystemTable("built-in system", loader="hpe_cli.rotation.systems_builtin")
 
 
 def register_system(system: RotationSystem) -> RotationSystem:
@@ -71,22 +112,34 @@ def register_system(system: RotationSystem) -> RotationSystem:
     return system
 
 
-def read_builtin_systems() -> None:
-    """Register every ``configs/systems/*.toml`` (the loader of :data:`SYSTEMS`)."""
+def read_builtin_file(entry) -> RotationSystem:
+    """The system of the built-in file ``entry`` (``configs/systems/NAME.toml``), which must be called ``NAME``."""
     import tomllib  # lazy: start-up
 
+    system = system_from_dict(tomllib.loads(entry.read_text(encoding="utf-8")), entry.name)
+    stem = entry.name.removesuffix(".toml")
+    if system.name != stem:
+        raise SystemError_(
+            f"{entry.name}: name: expected {stem!r} (a built-in system's file is named after it), got {system.name!r}"
+        )
+    return system
+
+
+def read_builtin_systems() -> None:
+    """Register every ``configs/systems/*.toml`` by its name, unread (the loader of :data:`SYSTEMS`)."""
     for entry in sorted(_builtin_dir().iterdir(), key=lambda p: p.name):
         if entry.name.endswith(".toml"):
-            register_system(system_from_dict(tomllib.loads(entry.read_text(encoding="utf-8")), entry.name))
+            SYSTEMS.register_file(entry)
 
 
 def builtin_systems() -> dict:
-    """All built-in systems, by name."""
+    """All built-in systems, by name (every file read)."""
     return dict(SYSTEMS)
 
 
 def system_names() -> list:
-    return list(builtin_systems())
+    """The built-in systems' names (no file read)."""
+    return list(SYSTEMS)
 
 
 @cache
@@ -101,9 +154,8 @@ def get_system(spec) -> RotationSystem:
     if isinstance(spec, RotationSystem):
         return spec
     spec = str(spec)
-    systems = builtin_systems()
-    if spec in systems:
-        return systems[spec]
+    if spec in SYSTEMS:
+        return SYSTEMS[spec]
     if spec.endswith(".toml") or Path(spec).is_file():
         return load_system(spec)
-    raise SystemError_(f"expected a system name ({', '.join(systems)}) or a .toml file, got {spec!r}")
+    raise SystemError_(f"expected a system name ({', '.join(SYSTEMS)}) or a .toml file, got {spec!r}")

@@ -160,13 +160,22 @@ def test_duplicates_with_or_without_the_row_count(announced):
 
 @pytest.mark.parametrize("threads", [1, 2])
 @pytest.mark.parametrize("announced", [None, 400_000, 300_000])
-def test_duplicate_rows_from_either_store_match_numpy(threads, announced):
+@pytest.mark.parametrize("store", ["kernels", "numpy", "one_value_often"])
+def test_duplicate_rows_from_either_store_match_numpy(threads, announced, store, monkeypatch):
+    from hpe_cli.native import kernels
     from hpe_cli.pipelines.audit.duplicates import Duplicates
 
+    if store == "numpy":  # the value halves sorted by numpy (with the kernels: the hash buckets)
+        monkeypatch.setenv("HPE_KERNELS", "numpy")
     rng = np.random.default_rng(11)
     H = rng.integers(0, 2**63, 400_000, dtype=np.int64).view(np.uint64) * np.uint64(2)
     H[rng.choice(len(H), 900)] = H[rng.choice(len(H), 900)]  # repeats in both halves
+    if store == "one_value_often":  # 20,000 equal rows: their hash bucket overflows, the buckets fall back
+        H[rng.choice(len(H), 20_000, replace=False)] = H[7]
     d = Duplicates(announced)  # 300,000 announced: more rows than that come, the store falls back
+    full = store == "one_value_often" and d.buckets is not None
+    if store != "numpy" and announced and kernels() is not None:
+        assert d.buckets is not None  # the buckets are what runs with the kernels
     for lo in range(0, len(H), 65536):
         h = H[lo : lo + 65536]
         slot = d.slot(lo, len(h))  # where a worker writes a batch's hashes when the in-order array has room
@@ -178,6 +187,7 @@ def test_duplicate_rows_from_either_store_match_numpy(threads, announced):
     _, first = np.unique(H, return_index=True)
     dup = np.ones(len(H), bool)
     dup[first] = False
+    assert full == (d.buckets is not None and d.buckets.full)
     assert d.finish(threads) == int(dup.sum()) > 0
     assert np.array_equal(d.dup_idx, np.flatnonzero(dup))
     firsts = {}
@@ -193,6 +203,22 @@ def test_malloc_thresholds_are_left_alone_outside_a_command(monkeypatch):
     monkeypatch.setattr(heap, "raise_malloc_thresholds", lambda *a: calls.append(a) or True)
     assert heap.keep_freed_memory() is False  # library use: no command's transaction is open
     assert calls == []
+
+
+def test_prefault_maps_the_pages_and_changes_no_value():
+    import threading
+
+    from hpe_cli.pipelines.heap import prefault, small_page_array
+
+    a, b = small_page_array(3 << 20, np.uint64), small_page_array(5, np.float64)
+    a[:4] = [1, 2, 3, 4]  # values written before, during and after the pages are faulted in stay as written
+    prefault(a, b, np.zeros(7))  # an ordinary numpy array is left alone
+    a[-1] = 9
+    for t in threading.enumerate():
+        if t.name == "hpe-prefault":
+            t.join()
+    b[:] = 0.5
+    assert a[:4].tolist() == [1, 2, 3, 4] and a[-1] == 9 and not a[4:-1].any() and b.tolist() == [0.5] * 5
 
 
 @settings(max_examples=200, deadline=None)

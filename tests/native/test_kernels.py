@@ -454,3 +454,106 @@ def test_system_angles_give_the_numpy_twins_bits_in_every_system(monkeypatch):
         for g in got:
             assert all(_same_bits(a, b) for a, b in zip(g[0] + g[1] + [g[3]], got[0][0] + got[0][1] + [got[0][3]]))
             assert np.array_equal(g[2], got[0][2])
+
+
+def repeated_ref(values) -> list:
+    """The values occurring more than once, once each, in increasing order (a Counter of Python ints)."""
+    from collections import Counter
+
+    return sorted(v for v, c in Counter(int(v) for v in values).items() if c > 1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    values=st.lists(
+        st.one_of(st.integers(0, MASK), st.sampled_from([0, 1, 2**63 - 1, 2**63, MASK]), st.integers(0, 40)),
+        max_size=300,
+    )
+)
+def test_repeated_values_are_a_counters_both_ways(values):
+    from hpe_cli.pipelines.audit.duplicates import repeated_in_place
+
+    mp = pytest.MonkeyPatch()
+    try:
+        for got in both(mp, lambda: repeated_in_place(np.array(values, dtype=np.uint64)).tolist()):
+            assert got == repeated_ref(values)
+    finally:
+        mp.undo()
+
+
+def _large(kind: str, rng) -> np.ndarray:
+    """Arrays past the kernel's leaf size, so it partitions (once or at every digit, down to equal values)."""
+    n = 70_000
+    if kind == "distinct":
+        return rng.integers(0, MASK, n, dtype=np.uint64, endpoint=True)
+    if kind == "pairs":  # every value twice or more, shuffled
+        v = rng.integers(0, MASK, n // 2, dtype=np.uint64, endpoint=True)
+        a = np.concatenate([v, v, v[:500]])
+        rng.shuffle(a)
+        return a
+    if kind == "equal":  # one value: every digit partitions them into one bucket
+        return np.full(n, 0x8000_0000_0000_0001, dtype=np.uint64)
+    if kind == "shared_top_bits":  # top 40 bits shared: buckets too big for a leaf at several levels
+        return (np.uint64(0xABCDEF1234) << np.uint64(24)) | rng.integers(0, 1 << 18, n).astype(np.uint64)
+    if kind == "small_ints":  # 0 among them (an empty slot's mark in the kernel's hash sets)
+        return rng.integers(0, 1000, n).astype(np.uint64)
+    raise ValueError(kind)
+
+
+@pytest.mark.parametrize("kind", ["distinct", "pairs", "equal", "shared_top_bits", "small_ints"])
+def test_repeated_values_of_large_arrays_both_ways(monkeypatch, kind):
+    from hpe_cli.pipelines.audit.duplicates import repeated_in_place
+
+    a = _large(kind, np.random.default_rng(len(kind)))
+    want = repeated_ref(a.tolist())
+    for got in both(monkeypatch, lambda: repeated_in_place(a.copy())):
+        assert got.tolist() == want
+
+
+@needs_kernels
+@settings(max_examples=150, deadline=None)
+@given(
+    batches=st.lists(
+        st.lists(st.one_of(st.integers(0, MASK), st.sampled_from([0, 5, 2**63, MASK])), max_size=60), max_size=5
+    ),
+    bits=st.integers(1, 4),
+    cap=st.integers(1, 40),
+)
+def test_hash_buckets_give_a_counters_repeats_or_say_they_are_full(batches, bits, cap):
+    k = kernels()
+    arr, cursors = np.zeros(cap << bits, np.uint64), np.zeros(1 << bits, np.int64)
+    ok = all([k.bucket_file(np.array(b, dtype=np.uint64), arr, cursors, cap) for b in batches])
+    values = [v for b in batches for v in b]
+    counts = [sum(1 for v in values if v >> (64 - bits) == b) for b in range(1 << bits)]
+    assert cursors.tolist() == counts
+    assert ok == (max(counts) <= cap)
+    if ok:  # the two bucket ranges a thread each, as the audit splits them
+        half = 1 << (bits - 1)
+        got = [np.frombuffer(k.bucket_repeats(arr, cursors, cap, lo, lo + half), np.uint64) for lo in (0, half)]
+        assert np.concatenate(got).tolist() == repeated_ref(values)
+
+
+@needs_kernels
+def test_hash_buckets_refuse_wrong_sizes_with_a_message():
+    k = kernels()
+    with pytest.raises(ValueError, match="cursors: expected 2\\*\\*k int64 values"):
+        k.bucket_file(np.zeros(3, np.uint64), np.zeros(12, np.uint64), np.zeros(3, np.int64), 4)
+    with pytest.raises(ValueError, match="arr: expected 128 bytes, got 96"):
+        k.bucket_file(np.zeros(3, np.uint64), np.zeros(12, np.uint64), np.zeros(4, np.int64), 4)
+    with pytest.raises(ValueError, match="expected 0 <= lo <= hi <= 4 buckets"):
+        k.bucket_repeats(np.zeros(16, np.uint64), np.zeros(4, np.int64), 4, 0, 5)
+
+
+@needs_kernels
+@pytest.mark.parametrize("kind", ["distinct", "pairs", "shared_top_bits", "small_ints"])
+def test_hash_buckets_larger_than_a_leaf(kind):
+    """Buckets of 35,000 values (a 30M-row audit has about 29,000 a bucket): partitioned again before the hash sets."""
+    k = kernels()
+    values = _large(kind, np.random.default_rng(7))
+    cap = len(values)  # room for every value in either bucket
+    arr, cursors = np.zeros(2 * cap, np.uint64), np.zeros(2, np.int64)
+    for lo in range(0, len(values), 65536):
+        assert k.bucket_file(values[lo : lo + 65536], arr, cursors, cap)
+    assert cursors.sum() == len(values) and cursors.max() > 16384
+    got = [np.frombuffer(k.bucket_repeats(arr, cursors, cap, b, b + 1), np.uint64) for b in (0, 1)]
+    assert np.concatenate(got).tolist() == repeated_ref(values.tolist())

@@ -16,6 +16,9 @@ from ...rotation.audit import audit_columns
 def read_batches(src, mode, rejects=None):
     """``(batch, lines, unread)`` of ``src``; a row the reader sets aside fails the audit, naming its line.
 
+    ``lines`` are the rows' file lines: the reader's line-number column, or for a source opened without it (a
+    Parquet table, whose reader numbers its rows from 1) a ``range`` of the same numbers.
+
     A non-numeric label value is not such a row: it is read as NaN and
     counted as ``non_finite`` (``unread``: the reader's rows with such a value).
     With a rejects file (``rejects`` with a path), the other rows the reader
@@ -23,6 +26,7 @@ def read_batches(src, mode, rejects=None):
     """
     label = {f"non-numeric value in {c}" for c in (ANGLE_COLS if mode == "angles" else MATRIX_COLS)}
     rejects_file = rejects
+    first = 1  # a Parquet table read without line numbers: its rows are numbered from 1, as its reader does
     for batch, rejects in src.batches_with_rejects():
         unread = [r for r in rejects if r.reason in label]
         other = [r for r in rejects if r.reason not in label]
@@ -35,8 +39,13 @@ def read_batches(src, mode, rejects=None):
                 f"{src.where(r.line)}: {r.reason} ({len(rejects) - len(unread)} unreadable rows in "
                 "this block; use --rejects FILE to set them aside and audit the rest)"
             )
-        lines = plain_numpy(batch.column(LINE_COL))  # Arrow's to_numpy imports pandas (0.2-0.4 s)
-        yield batch.drop_columns([LINE_COL]), lines, unread
+        if LINE_COL in batch.schema.names:
+            lines = plain_numpy(batch.column(LINE_COL))  # Arrow's to_numpy imports pandas (0.2-0.4 s)
+            batch = batch.drop_columns([LINE_COL])
+        else:  # no column of numbers to make and read back (a range indexes, slices and measures alike)
+            lines = range(first, first + batch.num_rows)
+        first += batch.num_rows
+        yield batch, lines, unread
 
 
 def label_cols(batch, mode, radians):

@@ -2,8 +2,9 @@
 
 Equal rows get equal hashes: label values enter as their exact bits (-0.0 = 0.0, every NaN one NaN), text
 columns as a 64-bit hash of their bytes taken from the Arrow buffers (no Python strings). The hashes are the
-audit's only per-row state: 8 bytes a row while the batches stream (written in input order by the threads
-that check them, :class:`Duplicates`), 16 at the end, when each value half is selected and sorted.
+audit's only per-row state, about 16 bytes a row: written in input order by the threads that check the batches,
+and filed by value (:class:`HashBuckets` or two value halves, :class:`Duplicates`); the repeated values are found
+at the end of the stream, by bucket or by value half on two threads.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import pyarrow as pa
 from ...io import key_hash
 from ...io.table_source import plain_numpy
 from ...native import kernels
-from ..heap import small_page_array
+from ..heap import prefault, small_page_array
 
 #: columns that identify a sample, used (when present) in the ``duplicates`` key
 ID_COLUMNS = (
@@ -88,7 +89,7 @@ def key_hashes(label_cols, batch, key_cols, out=None) -> np.ndarray:
     h = np.empty(n, dtype=np.uint64) if out is None else out
     h.fill(_SEED)
     k = kernels()
-    if k is not None:  # the same hashes, one C loop a column (csrc/_hpe_kernels.c); the numpy twin below
+    if k is not None:  # the same hashes, one C loop a column (csrc/kernels/hashes.c); the numpy twin below
         for c in range(len(label_cols) + len(key_cols)):
             if c < len(label_cols):
                 k.row_hash_add(h, np.ascontiguousarray(label_cols[c], dtype=np.float64), True)
@@ -107,19 +108,76 @@ def key_hashes(label_cols, batch, key_cols, out=None) -> np.ndarray:
     return key_hash.mix(h, t)  # SplitMix64's finaliser
 
 
+class HashBuckets:
+    """The hashes of a run by their top 10 bits, as the batches are checked (the compiled kernels only).
+
+    Bucket ``b`` owns ``cap`` slots of one array, about 1.1 times the rows at 10M (the expected count and ten
+    standard deviations more); the threads that file batches reserve their runs with atomic additions
+    (``bucket_file``, csrc/kernels/repeats.c). :meth:`repeated` finds the repeated values of the two value halves
+    (512 buckets each, a thread each when ``threads > 1``) bucket by bucket in cache (``bucket_repeats``), or,
+    when a bucket was full (many equal rows), with :func:`repeated_in_place` of a copy of the hashes in input
+    order: the same values either way, sorted.
+    """
+
+    BITS = 10
+    #: below this many rows the value halves (one array, two sorts) cost less than the buckets' slack
+    MIN_ROWS = 1 << 17
+
+    def __init__(self, rows: int):
+        per = rows / (1 << self.BITS)
+        self.cap = int(np.ceil(per + 10.0 * np.sqrt(per))) + 64
+        self.arr = small_page_array(self.cap << self.BITS, np.uint64)
+        self.cursors = np.zeros(1 << self.BITS, dtype=np.int64)
+        self.full = False
+        self._k = kernels()  # the module the run started with (HPE_KERNELS is read on each kernels() call)
+
+    def file(self, h) -> None:
+        """Add a batch's hashes (any thread, any order)."""
+        if not self._k.bucket_file(h, self.arr, self.cursors, self.cap):
+            self.full = True
+
+    def filed(self) -> int:
+        """How many hashes were filed."""
+        return int(self.cursors.sum())
+
+    def repeated(self, H, threads: int = 1) -> np.ndarray:
+        """The repeated values of the filed hashes ``H`` (all of them, in input order), sorted; the buckets are
+        scratch."""
+        k = self._k
+        if self.full:  # a bucket overflowed: from H
+            S = self.arr[: len(H)]
+            S[:] = H
+            return repeated_in_place(S).copy()
+        half = 1 << (self.BITS - 1)
+
+        def one(lo: int):
+            return np.frombuffer(k.bucket_repeats(self.arr, self.cursors, self.cap, lo, lo + half), dtype=np.uint64)
+
+        if threads > 1:
+            from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
+
+            with ThreadPoolExecutor(2) as pool:
+                return np.concatenate(list(pool.map(one, (0, half))))
+        return np.concatenate([one(0), one(half)])
+
+
 class Duplicates:
     """Duplicates from one 64-bit hash per row (16 bytes a row; the only per-row state of an audit).
 
     With the row count known (Parquet), the thread that checks a batch writes its hashes straight into one
-    array in input order (:meth:`slot`: the batch's rows by their offset) and copies them, split by value
-    half, into a second array filled from both ends (:meth:`file`); the end of the run sorts the two halves in
-    place, on two threads, with no copy. Without the row count the hashes are kept batch by batch and put end to
-    end at the end, each value half then selected and sorted on a thread of its own.
+    array in input order (:meth:`slot`: the batch's rows by their offset) and copies them (:meth:`file`) into
+    a second array: with the compiled kernels, into 1024 buckets by their top 10 bits (:class:`HashBuckets`),
+    whose repeats the end of the run finds bucket by bucket in cache on two threads; else split by value half,
+    filled from both ends, each half sorted in place at the end on a thread of its own. Without the row count
+    the hashes are kept batch by batch and put end to end at the end, each value half then selected and searched
+    on a thread of its own.
     """
 
     def __init__(self, rows: int | None = None):
         self.buf = small_page_array(rows, np.uint64) if rows else None  # 4 KB pages: pipelines.heap
-        self.halves = small_page_array(rows, np.uint64) if rows else None
+        self.buckets = HashBuckets(rows) if rows and rows >= HashBuckets.MIN_ROWS and kernels() else None
+        self.halves = small_page_array(rows, np.uint64) if rows and self.buckets is None else None
+        prefault(*(a for a in (self.buf, self.halves, self.buckets and self.buckets.arr) if a is not None))
         self.n_low = self.n_high = 0  # values below 2**63 at the front of halves, the others at its back
         self._lock = threading.Lock()
         self.parts = []  # every batch's hashes, in input order (views of buf where they were written there)
@@ -136,10 +194,13 @@ class Duplicates:
         return self.buf[offset : offset + n]
 
     def file(self, h) -> None:
-        """Copy a batch's hashes (its filled :meth:`slot`) into the value halves. Any thread may call it: the order
-        of the batches in a half does not matter, it is sorted."""
+        """Copy a batch's hashes (its filled :meth:`slot`) into the buckets or the value halves. Any thread may call
+        it: the order of the batches in a bucket or a half does not matter."""
+        if self.buckets is not None:
+            self.buckets.file(h)
+            return
         k = kernels()
-        if k is not None:  # one C loop (csrc/_hpe_kernels.c); the numpy twin below
+        if k is not None:  # one C loop (csrc/kernels/hashes.c); the numpy twin below
             low, high = np.empty(len(h), dtype=np.uint64), np.empty(len(h), dtype=np.uint64)
             n_low = k.split_top_bit(h, low, high)
             low, high = low[:n_low], high[: len(h) - n_low]
@@ -167,29 +228,34 @@ class Duplicates:
         self.n += len(h)
 
     def _in_buf(self) -> bool:
-        """Every batch was written to its :meth:`slot` and filed (the value halves hold every hash)."""
+        """Every batch was written to its :meth:`slot` and filed (the buckets or value halves hold every hash)."""
         buf = self.buf
-        return buf is not None and self.n_low + self.n_high == self.n and self.n <= len(buf)
+        filed = self.buckets.filed() if self.buckets is not None else self.n_low + self.n_high
+        return buf is not None and filed == self.n and self.n <= len(buf)
+
+    def _repeated(self, threads: int) -> np.ndarray:
+        """The repeated hashes, once every batch is in :attr:`buf` and filed (:meth:`_in_buf`)."""
+        if self.buckets is not None:
+            return self.buckets.repeated(self.buf[: self.n], threads)
+        end = len(self.halves)
+        return repeated_in_halves((self.halves[: self.n_low], self.halves[end - self.n_high : end]), threads)
 
     def finish(self, threads: int = 1):
         """Compute the duplicate rows; returns their count.
 
-        The hashes equal to another are found by sorting, each value half on a
-        thread of its own (numpy releases the GIL), so the result does not
-        depend on ``threads``.
+        The hashes equal to another are found by value half or bucket range, each on a thread of its own (numpy
+        and the kernels release the GIL), and put in increasing order, so the result does not depend on
+        ``threads``.
         """
-        halves = None
-        if self._in_buf():  # every hash in input order in buf, and split by value in halves
-            H, end = self.buf[: self.n], len(self.halves)
-            halves = (self.halves[: self.n_low], self.halves[end - self.n_high : end])
-        else:
-            H = np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
-        self.parts, self.buf, self.halves = [], None, None
         self.dup_idx = np.zeros(0, dtype=np.int64)
         self.first_idx = np.zeros(0, dtype=np.int64)
-        if len(H) < 2:
-            return 0
-        dupvals = repeated_values(H, threads) if halves is None else repeated_in_halves(halves, threads)
+        if self._in_buf():  # every hash in input order in buf, and filed by value
+            H = self.buf[: self.n]
+            dupvals = self._repeated(threads) if len(H) >= 2 else H[:0]
+        else:
+            H = np.concatenate(self.parts) if self.parts else np.zeros(0, dtype=np.uint64)
+            dupvals = repeated_values(H, threads) if len(H) >= 2 else H[:0]
+        self.parts, self.buf, self.halves, self.buckets = [], None, None, None
         if not len(dupvals):
             return 0
         idx = []
@@ -242,14 +308,28 @@ def _half(H, low: bool, size: int) -> np.ndarray:
     return S
 
 
+def repeated_in_place(S) -> np.ndarray:
+    """The values that occur more than once in the uint64 array ``S``, once each, sorted; ``S`` is scratch (left
+    reordered) and the result may be a view of it.
+
+    The kernel (``repeated_values``, csrc/kernels/repeats.c: a radix partition in place, then a hash set per
+    cache-sized bucket; 0.75x the CPU of the sort at 5M values) where built, else its numpy twin: sort in place and
+    take the values equal to their successor. The same values either way.
+    """
+    k = kernels()
+    if k is not None:
+        return S[: k.repeated_values(S)]
+    S.sort()
+    return _repeats(S)
+
+
 def _repeats_of_halves(half, parallel: bool) -> np.ndarray:
     """The repeated values of the two value halves ``half(True)`` (below 2**63) and ``half(False)``, each made and
-    sorted in place on a thread of its own when ``parallel``, sorted (the same whatever the threads)."""
+    searched in place (:func:`repeated_in_place`) on a thread of its own when ``parallel``, sorted (the same
+    whatever the threads)."""
 
     def one(low: bool):
-        S = half(low)
-        S.sort()
-        return _repeats(S)
+        return repeated_in_place(half(low))
 
     if parallel:
         from concurrent.futures import ThreadPoolExecutor  # lazy: start-up

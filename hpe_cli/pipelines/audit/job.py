@@ -29,8 +29,7 @@ from ...report.plots import AngleHistograms, plot_files, write_plots
 from ...rotation.audit import CHECKS
 from ...rotation.decoders import DecoderTally
 from ..heap import keep_freed_memory
-from ..inorder import in_order
-from ..pools import default_threads
+from ..pools import default_threads, run_in_order
 from .batches import SKIP_REJECTS, check_batch, read_batches, system_cols
 from .common import canonical_labels
 from .duplicates import ID_COLUMNS, Duplicates, key_hashes, unpack_rows
@@ -196,7 +195,7 @@ class AuditTally:
         full = frozenset(c for c, ex in self.examples.items() if len(ex) >= self.options.n_examples)
         return eff, cols, res, batch_tally(res, self.options.n_examples, full), hashes, cons_in
 
-    def finish(self, item, lines, unread, future) -> None:
+    def finish(self, item, lines, unread, result) -> None:
         """Add one batch's result (in input order)."""
         batch, _ = item
         if unread:  # rows with a non-numeric label value: non_finite, as when read from a text column
@@ -204,7 +203,7 @@ class AuditTally:
             self.counts["non_finite"] += len(unread)
             self.flagged += len(unread)
             self.unread_examples += [{"row": r.line, "raw": r.raw} for r in unread[: self.options.n_examples]]
-        eff, cols, res, tally, hashes, cons_in = future.result()
+        eff, cols, res, tally, hashes, cons_in = result
         if self.cons is not None:
             self.cons.add(batch, lines, *cons_in, unread=len(unread))
         if self.decoder is not None:
@@ -360,8 +359,11 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
         cons = ConsistencyAudit(table, o.consistency)
     tally = AuditTally(plan, o, cons, progress)
     keep_freed_memory()  # the batches' freed temporaries reused, not faulted in again (pipelines.heap)
-    in_order(
-        numbered(read_batches(table, plan.read_mode, rejected)), tally.work, tally.finish, default_threads(o.threads)
+    stream = table
+    if table.kind == "parquet" and cons is None:  # its rows' numbers are their offsets: no column of them to make
+        stream = open_table(input_path, o.batch_size, with_lines=False)
+    run_in_order(
+        numbered(read_batches(stream, plan.read_mode, rejected)), tally.work, tally.finish, default_threads(o.threads)
     )
     rejected.check()  # with --strict: any set-aside row is an error and nothing is written
     tally.close()

@@ -12,8 +12,7 @@ from ...io import Rejects, TableWriter, check_output, system_metadata
 from ...io.label_source import open_labels
 from ...io.rejects import fail_all_rejected
 from ...io.transaction import ensure_transaction, staged_dir
-from ..inorder import in_order
-from ..pools import default_threads
+from ..pools import default_threads, run_in_order
 from .batches import BatchPlan, batches_or_empty
 from .images import ImageJob
 from .options import AugmentOptions, for_input
@@ -47,7 +46,7 @@ def run_augment(input, output, opts: AugmentOptions, *, bar=None) -> dict:
         if opts.out_images is not None:
             sink.job = _image_job(stack.enter_context(staged_dir(opts.out_images, opts.overwrite)), path, plan, opts)
         sink.writer = stack.enter_context(TableWriter(output, opts.overwrite, _metadata(plan, opts)))
-        in_order(batches_or_empty(labels.table), plan.work, sink.finish, default_threads(opts.workers))
+        run_in_order(batches_or_empty(labels.table), plan.work, sink.finish, default_threads(opts.workers))
         rejects.check()  # without --rejects (or with --strict) any bad row fails the run: nothing is written
         if sink.rows and not sink.written:  # the rejects file is still written: it says why
             fail_all_rejected(
@@ -119,9 +118,9 @@ class _Sink:
         self.writer: TableWriter | None = None
         self.rows = self.written = self.boxes = 0
 
-    def finish(self, _, read_rejects, future):
-        """One batch done (``in_order``'s ``finish``): its rejects, its pictures, its rows."""
-        batch, lines, reasons, keep, out, boxes, extra = future.result()
+    def finish(self, _, read_rejects, result):
+        """One batch done (``run_in_order``'s ``finish``): its rejects, its pictures, its rows."""
+        batch, lines, reasons, keep, out, boxes, extra = result
         self.rejects.add_unreadable(read_rejects)
         self.rows += len(read_rejects)
         if not keep.all():

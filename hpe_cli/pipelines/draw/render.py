@@ -11,8 +11,7 @@ import numpy as np
 
 from ...geometry import draw as g
 from ...io.images import ImageResolver
-from ..inorder import in_order
-from ..pools import default_threads
+from ..pools import default_threads, run_in_order
 from .rows import DEFAULT_LENGTH_FRACTION, write_image
 
 
@@ -135,9 +134,8 @@ def draw_all(plan, faces: Faces, out: Output, options, book, progress=None) -> d
         draw_faces(img, rows, faces, options, on_canvas=ref is None)
         return out.prepare(img, rel)
 
-    def finish(picture, fut):
+    def finish(picture, tile):
         (_, rel, _ref, rows), img, why = picture
-        tile = fut.result()
         if img is None:
             book.add([(int(i), why) for i in rows])
             return
@@ -148,6 +146,6 @@ def draw_all(plan, faces: Faces, out: Output, options, book, progress=None) -> d
             progress.update(1)
 
     threads = default_threads(options.threads)
-    in_order(((p,) for p in pictures(plan, options.canvas)), work, finish, threads)
+    run_in_order(((p,) for p in pictures(plan, options.canvas)), work, finish, threads)
     sheets = out.finish()
     return {"faces": n["faces"], "images": n["images"], "sheets": sheets, "rejects": book.counts()}

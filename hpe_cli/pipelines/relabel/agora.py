@@ -28,8 +28,7 @@ from ...io import TableWriter, arrow_table, system_metadata
 from ...io.coco import CocoWriter
 from ...io.rejects import rejects_rule
 from ...io.whenet_txt import WhenetWriter
-from ..inorder import in_order
-from ..pools import library_threads
+from ..pools import library_threads, run_in_order
 from .core import LEGACY_COLS, fit_faces, relabel_views, summary_tail, view_label_columns
 
 #: default fit-quality gate in the landmarks' unit (metres for AGORA): 2 cm, the Panoptic gate
@@ -358,8 +357,7 @@ def write_outputs(paths, output, opts, *, bar=None) -> Stats:
         out = stack.enter_context(_label_writer(opts.fmt, output, opts.overwrite, system, about))
         rej = stack.enter_context(TableWriter(opts.rejects, opts.overwrite)) if opts.rejects else None
 
-        def finish(path, fut):
-            res = fut.result()
+        def finish(path, res):
             stats.add(path, res, system)
             out.write(arrow_table(res["table"]))
             if rej is not None:
@@ -367,7 +365,7 @@ def write_outputs(paths, output, opts, *, bar=None) -> Stats:
             if bar is not None:
                 bar.update(1)
 
-        in_order(((p,) for p in paths), work, finish, threads)
+        run_in_order(((p,) for p in paths), work, finish, threads)
     return stats
 
 

@@ -1,0 +1,268 @@
+/* Evaluate's error formulas: the core metrics and the peers' own (opentrack, opal23). */
+#include "kernels.h"
+
+/* core_errors(P (9 float64[n] columns, row-major), G (9 columns), geo float64[n], maev float64[n*3], fro float64[n])
+ * The geodesic angle of P G^T (atan2 of half its skew norm and half of trace - 1), the angle between each column of
+ * P and of G (atan2 of the cross product's norm and the dot product) and ||P - G||_F, in degrees, in the order of
+ * the numpy twins' operations (left to right; no fused multiply-adds). Uses the C library's atan2: hpe_cli.native
+ * calls it only where atan2 gives numpy's bits on a probe.
+ * twins: hpe_cli.metrics.rotation_errors.geodesic_deg, maev_deg, frobenius */
+PyObject *k_core_errors(PyObject *self, PyObject *args) {
+    PyObject *Po, *Go;
+    Py_buffer geo, maev, fro, P[9], G[9];
+    if (!PyArg_ParseTuple(args, "OOw*w*w*", &Po, &Go, &geo, &maev, &fro)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = geo.len / 8;
+    int have_p = 0, have_g = 0;
+    if (!need(&geo, n, 8, "geo") || !need(&maev, 3 * n, 8, "maev") || !need(&fro, n, 8, "fro")) goto done;
+    if (!(have_p = nine(Po, P, n, "P")) || !(have_g = nine(Go, G, n, "G"))) goto done;
+    const double *p[9], *g[9];
+    for (int k = 0; k < 9; k++) p[k] = (const double *)P[k].buf, g[k] = (const double *)G[k].buf;
+    double *GEO = (double *)geo.buf, *MA = (double *)maev.buf, *FR = (double *)fro.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double a[9], b[9];
+        for (int k = 0; k < 9; k++) a[k] = p[k][i], b[k] = g[k][i];
+#define M(k, l) (a[3 * (k)] * b[3 * (l)] + a[3 * (k) + 1] * b[3 * (l) + 1] + a[3 * (k) + 2] * b[3 * (l) + 2])
+        double tr = M(0, 0) + M(1, 1) + M(2, 2);
+        double sx = M(2, 1) - M(1, 2), sy = M(0, 2) - M(2, 0), sz = M(1, 0) - M(0, 1);
+#undef M
+        double two_sin = sqrt(sx * sx + sy * sy + sz * sz);
+        GEO[i] = atan2(0.5 * two_sin, 0.5 * (tr - 1.0)) * DEG;
+        for (int j = 0; j < 3; j++) { /* column j of P and of G */
+            double p0 = a[j], p1 = a[3 + j], p2 = a[6 + j], g0 = b[j], g1 = b[3 + j], g2 = b[6 + j];
+            double dot = p0 * g0;
+            dot += p1 * g1;
+            dot += p2 * g2;
+            double cx = p1 * g2 - p2 * g1, cy = p2 * g0 - p0 * g2, cz = p0 * g1 - p1 * g0;
+            double norm = cx * cx;
+            norm += cy * cy;
+            norm += cz * cz;
+            MA[3 * i + j] = atan2(sqrt(norm), dot) * DEG;
+        }
+        double acc = 0.0;
+        for (int k = 0; k < 9; k++) {
+            double d = a[k] - b[k];
+            acc = k ? acc + d * d : 0.0 + d * d;
+        }
+        FR[i] = sqrt(acc);
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_p)
+        for (int k = 0; k < 9; k++) PyBuffer_Release(&P[k]);
+    if (have_g)
+        for (int k = 0; k < 9; k++) PyBuffer_Release(&G[k]);
+    PyBuffer_Release(&geo);
+    PyBuffer_Release(&maev);
+    PyBuffer_Release(&fro);
+    return ret;
+}
+
+/* wrapped_cos_errors(e1 float64[n*3], e2 float64[n*3], out float64[n*3], nan uint8[n]): opentrack's
+ * arccos(cos a cos b + sin a sin b) per angle, the argument clipped to [-1, 1], in degrees; nan marks the rows
+ * where one argument is past +-1 (NaN in the peer's unclipped code). Uses the C library's sincos and acos.
+ * twin: hpe_cli.metrics.peer_angles.opentrack_errors */
+PyObject *k_wrapped_cos_errors(PyObject *self, PyObject *args) {
+    Py_buffer e1, e2, out, nan;
+    if (!PyArg_ParseTuple(args, "y*y*w*w*", &e1, &e2, &out, &nan)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = nan.len;
+    if (!need(&e1, 3 * n, 8, "e1") || !need(&e2, 3 * n, 8, "e2") || !need(&out, 3 * n, 8, "out")) goto done;
+    const double *a = (const double *)e1.buf, *b = (const double *)e2.buf;
+    double *O = (double *)out.buf;
+    uint8_t *NN = (uint8_t *)nan.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int past = 0;
+        for (int m = 0; m < 3; m++) {
+            double s1, c1, s2, c2;
+#if defined(__GLIBC__)
+            sincos(a[3 * i + m], &s1, &c1);
+            sincos(b[3 * i + m], &s2, &c2);
+#else
+            s1 = sin(a[3 * i + m]), c1 = cos(a[3 * i + m]), s2 = sin(b[3 * i + m]), c2 = cos(b[3 * i + m]);
+#endif
+            double dot = c1 * c2;
+            dot += s1 * s2;
+            past |= fabs(dot) > 1.0;
+            dot = dot < -1.0 ? -1.0 : (dot > 1.0 ? 1.0 : dot);
+            O[3 * i + m] = acos(dot) * DEG;
+        }
+        NN[i] = (uint8_t)past;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&e1);
+    PyBuffer_Release(&e2);
+    PyBuffer_Release(&out);
+    PyBuffer_Release(&nan);
+    return ret;
+}
+
+/* opal23_mae(a float64[n*3], p float64[n*3], out float64[n*3]): opal23's compute_mae of the annotation's and the
+ * prediction's as_euler('XYZ') angles: the better (by mean) of the prediction and its other solution, each error
+ * wrapped min(e, 360 - e); numpy's sign, where and minimum (NaN kept), in the twin's order.
+ * twin: hpe_cli.metrics.peer_angles.opal23_mae */
+static inline double np_sign(double x) { return sel(x > 0, 1.0, sel(x < 0, -1.0, sel(x == 0, 0.0, x))); }
+
+static inline double np_minimum(double x, double y) { return sel(isnan(x) || x <= y, x, y); }
+
+PyObject *k_opal23_mae(PyObject *self, PyObject *args) {
+    Py_buffer ab, pb, ob;
+    if (!PyArg_ParseTuple(args, "y*y*w*", &ab, &pb, &ob)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ob.len / 24;
+    if (!need(&ab, 3 * n, 8, "a") || !need(&pb, 3 * n, 8, "p") || !need(&ob, 3 * n, 8, "out")) goto done;
+    const double *A = (const double *)ab.buf, *P = (const double *)pb.buf;
+    double *O = (double *)ob.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        static const int order[3] = {1, 0, 2}; /* the peer's (yaw, pitch, roll) */
+        double pc[3], ac[3], w[3], e[3], ew[3];
+        for (int k = 0; k < 3; k++) pc[k] = P[3 * i + order[k]], ac[k] = A[3 * i + order[k]];
+        w[0] = 180 - pc[0];
+        w[1] = pc[1] - np_sign(pc[1]) * 180;
+        w[2] = pc[2] - np_sign(pc[2]) * 180;
+        for (int k = 0; k < 3; k++) {
+            w[k] = sel(w[k] > 180, w[k] - 360, w[k]);
+            w[k] = sel(w[k] < -180, w[k] + 360, w[k]);
+            e[k] = fabs(ac[k] - pc[k]);
+            ew[k] = fabs(ac[k] - w[k]);
+        }
+        int use = (ew[0] + ew[1] + ew[2]) / 3 < (e[0] + e[1] + e[2]) / 3;
+        for (int k = 0; k < 3; k++) {
+            double x = sel(use, ew[k], e[k]);
+            O[3 * i + order[k]] = np_minimum(x, 360 - x);
+        }
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&ab);
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&ob);
+    return ret;
+}
+
+/* trace_acos_deg(A (9 columns), P (9 columns), out float64[n]): opal23's compute_ge,
+ * degrees(arccos(clip((trace(A P^T) - 1) / 2, -1, 1))), the trace summed row by row as einsum does. Uses the C
+ * library's acos. twin: hpe_cli.metrics.peer_angles.opal23_geodesic */
+PyObject *k_trace_acos_deg(PyObject *self, PyObject *args) {
+    PyObject *Ao, *Po;
+    Py_buffer ob, A[9], P[9];
+    if (!PyArg_ParseTuple(args, "OOw*", &Ao, &Po, &ob)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ob.len / 8;
+    int have_a = 0, have_p = 0;
+    if (!(have_a = nine(Ao, A, n, "A")) || !(have_p = nine(Po, P, n, "P"))) goto done;
+    const double *a[9], *p[9];
+    for (int k = 0; k < 9; k++) a[k] = (const double *)A[k].buf, p[k] = (const double *)P[k].buf;
+    double *O = (double *)ob.buf;
+    const double DEG = 180.0 / 3.141592653589793;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double t = a[0][i] * p[0][i];
+        for (int k = 1; k < 9; k++) t = t + a[k][i] * p[k][i];
+        double c = (t - 1) / 2;
+        c = c < -1.0 ? -1.0 : (c > 1.0 ? 1.0 : c);
+        O[i] = acos(c) * DEG;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_a) release(A, 9);
+    if (have_p) release(P, 9);
+    PyBuffer_Release(&ob);
+    return ret;
+}
+
+/* near_quats(P (9 columns), A (9 columns), q float64[n*4], near uint8[n]): the unit quaternions (x, y, z, w; rows)
+ * of P A^T (SciPy's from_matrix, assume_valid) and whether each is within 90 degrees of the identity
+ * (2 atan2(|(x, y, z)|, |w|) < pi / 2). Uses the C library's atan2.
+ * twins: hpe_cli.metrics.peer_angles.opal23_near_quats (before its gather), opal23_near_mask */
+PyObject *k_near_quats(PyObject *self, PyObject *args) {
+    PyObject *Po, *Ao;
+    Py_buffer qb, nb, P[9], A[9];
+    if (!PyArg_ParseTuple(args, "OOw*w*", &Po, &Ao, &qb, &nb)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = nb.len;
+    int have_p = 0, have_a = 0;
+    if (!need(&qb, 4 * n, 8, "q")) goto done;
+    if (!(have_p = nine(Po, P, n, "P")) || !(have_a = nine(Ao, A, n, "A"))) goto done;
+    const double *p[9], *a[9];
+    for (int k = 0; k < 9; k++) p[k] = (const double *)P[k].buf, a[k] = (const double *)A[k].buf;
+    double *Q = (double *)qb.buf;
+    uint8_t *NR = (uint8_t *)nb.buf;
+    const double HALF_PI = 3.141592653589793 / 2;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double m[9], *q = Q + 4 * i;
+        for (int r = 0; r < 3; r++)
+            for (int c = 0; c < 3; c++)
+                m[3 * r + c] = p[3 * r][i] * a[3 * c][i] + p[3 * r + 1][i] * a[3 * c + 1][i] +
+                               p[3 * r + 2][i] * a[3 * c + 2][i];
+        quat_of_matrix(m, q);
+        NR[i] = 2 * atan2(sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), fabs(q[3])) < HALF_PI;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_p) release(P, 9);
+    if (have_a) release(A, 9);
+    PyBuffer_Release(&qb);
+    PyBuffer_Release(&nb);
+    return ret;
+}
+
+/* quat_rotvecs(q (4 columns x, y, z, w of m rows), left float64[16], out float64[m*3]): SciPy's as_rotvec of
+ * left @ q (each row's quaternion turned by a 4x4 matrix, the products summed left to right): the canonical sign
+ * (w < 0, ties by x, y, z), the angle 2 atan2(|v|, |w|), the scale angle / sin(angle / 2) (its Taylor series at
+ * or below 1e-3 rad). Uses the C library's atan2 and sin.
+ * twin: hpe_cli.metrics.peer_angles' Karcher displacement (scipy_columns.rotvec_from_quat of the product) */
+PyObject *k_quat_rotvecs(PyObject *self, PyObject *args) {
+    PyObject *qo;
+    Py_buffer lb, ob, Qb[4];
+    if (!PyArg_ParseTuple(args, "Oy*w*", &qo, &lb, &ob)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = ob.len / 24;
+    int have_q = 0;
+    if (!need(&ob, 3 * n, 8, "out") || !need(&lb, 16, 8, "left")) goto done;
+    if (!(have_q = columns(qo, Qb, 4, n, "q"))) goto done;
+    const double *q[4], *L = (const double *)lb.buf;
+    for (int k = 0; k < 4; k++) q[k] = (const double *)Qb[k].buf;
+    double *O = (double *)ob.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double r[4];
+        for (int k = 0; k < 4; k++)
+            r[k] = L[4 * k] * q[0][i] + L[4 * k + 1] * q[1][i] + L[4 * k + 2] * q[2][i] + L[4 * k + 3] * q[3][i];
+        double x = r[0], y = r[1], z = r[2], w = r[3];
+        int flip = w < 0;
+        if (w == 0) flip |= (x < 0) | ((x == 0) & ((y < 0) | ((y == 0) & (z < 0))));
+        double s = flip ? -1.0 : 1.0;
+        double angle = 2 * atan2(sqrt(x * x + y * y + z * z), w * s);
+        double a2 = angle * angle, scale;
+        if (angle <= 1e-3) scale = 2 + a2 / 12 + 7 * a2 * a2 / 2880;
+        else scale = angle / sin(angle / 2.0);
+        scale = scale * s;
+        O[3 * i] = scale * x, O[3 * i + 1] = scale * y, O[3 * i + 2] = scale * z;
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_q) release(Qb, 4);
+    PyBuffer_Release(&lb);
+    PyBuffer_Release(&ob);
+    return ret;
+}
