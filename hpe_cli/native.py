@@ -13,9 +13,12 @@ Each kernel is one C loop over a column where numpy takes a dozen passes or more
 - evaluate's error formulas: the core metrics (:func:`core_errors`), opentrack's wrapped cosines
   (:func:`wrapped_cos_errors`), opal23's ``compute_mae`` and ``compute_ge`` (:func:`opal23_mae`,
   :func:`trace_acos_deg`), the near quaternions and the Karcher step of opal23's alignment (:func:`near_quats`,
-  :func:`quat_rotvecs`).
+  :func:`quat_rotvecs`);
+- evaluate's key join: a chunk's rows put in partition order (:func:`partition_rows`, :func:`partition_strings`),
+  a partition's rows paired by their key hashes (:func:`hash_pairs`) and verified on the key bytes
+  (:func:`first_unequal`).
 
-The hashes and the screen compute integers and comparisons only, so each gives the bits of its numpy twin; the
+The hashes, the screen and the join compute integers and comparisons only, so each gives the bits of its numpy twin; the
 others add IEEE arithmetic in numpy's order and call the C library's ``sincos``, ``atan2``, ``hypot``, ``acos``,
 ``asin`` or ``sin``, each only where that function gives numpy's bits on a probe of values (checked once a
 process). The numpy twins run where the module was not built (no C compiler at install time) or when
@@ -51,6 +54,10 @@ KERNELS = (
     "repeated_values",
     "bucket_file",
     "bucket_repeats",
+    "hash_pairs",
+    "first_unequal",
+    "partition_scatter",
+    "partition_strings",
 )
 
 
@@ -356,3 +363,81 @@ def system_angles(X, spec, scale, roles, middle: int, refine_below: float):
         refine_below,
     )
     return p1, p2, lock, near
+
+
+def hash_pairs(hg, hp):
+    """``(rows of hg with a match, their rows in hp)``, the first ascending, of two uint64 arrays by equal values, in
+    one cache-sized pass per bucket of the top bits; False when a value repeats on one side; None where the kernels
+    are not built (then :func:`hpe_cli.pipelines.evaluate.spill.hash_matches` sorts: the same pairs)."""
+    k = kernels()
+    if k is None or len(hg) + len(hp) < _MIN_ROWS:
+        return None
+    pos = np.empty(len(hg), dtype=np.int64)
+    if not k.hash_pairs(np.ascontiguousarray(hg, np.uint64), np.ascontiguousarray(hp, np.uint64), pos):
+        return False
+    gi = np.flatnonzero(pos >= 0)
+    return gi, pos[gi]
+
+
+def _string_buffers(arr):
+    """``(offsets view, data, wide)`` of a pyarrow ``string``/``large_string`` array without nulls (its own offset
+    applied): the buffers as they are, no copy."""
+    wide = str(arr.type) in ("large_string", "large_utf8")
+    width = 8 if wide else 4
+    bufs = arr.buffers()
+    off = np.frombuffer(bufs[1], dtype=np.uint8, count=(len(arr) + 1) * width, offset=arr.offset * width)
+    data = bufs[2] if bufs[2] is not None else b""
+    return off, data, wide
+
+
+def first_unequal(a, rows_a, b, rows_b):
+    """The first ``j`` where the strings ``a[rows_a[j]]`` (``a[j]`` when ``rows_a`` is None) and ``b[rows_b[j]]``
+    differ, -1 when none does, in one C loop over the Arrow buffers (no gather); None where the kernels are not
+    built or an array is not text without nulls (then the caller compares taken arrays with pyarrow: the same
+    answer). ``a``, ``b``: pyarrow string or large_string arrays; rows: int64 arrays."""
+    k = kernels()
+    if k is None:
+        return None
+    text = ("string", "utf8", "large_string", "large_utf8")
+    if str(a.type) not in text or str(b.type) not in text or a.null_count or b.null_count:
+        return None
+    oa, da, wa = _string_buffers(a)
+    ob, db, wb = _string_buffers(b)
+    ra = None if rows_a is None else np.ascontiguousarray(rows_a, np.int64)
+    return k.first_unequal(oa, da, ra, ob, db, np.ascontiguousarray(rows_b, np.int64), wa, wb)
+
+
+def partition_rows(part, K: int, arrays):
+    """``(bounds int64[K+1], arrays with their rows in stable partition order)``: ``part`` (int16, each in
+    ``[0, K)``) the partition of each row, ``arrays`` numpy arrays of ``len(part)`` rows (any fixed-width dtype, any
+    trailing shape), in one C counting sort; None where the kernels are not built (then the caller takes
+    ``np.argsort(part, kind="stable")``: the same rows)."""
+    k = kernels()
+    if k is None:
+        return None
+    part = np.ascontiguousarray(part, dtype=np.int16)
+    n = len(part)
+    srcs = tuple(np.ascontiguousarray(a) for a in arrays)
+    dsts = tuple(np.empty_like(a) for a in srcs)
+    widths = tuple(a.dtype.itemsize * (a.size // n if n else 1) for a in srcs)
+    bounds = np.empty(K + 1, dtype=np.int64)
+    k.partition_scatter(part, K, bounds, srcs, dsts, widths)
+    return bounds, list(dsts)
+
+
+def partition_strings(part, K: int, arr):
+    """A pyarrow ``string``/``large_string`` array without nulls, its rows in the stable partition order of
+    :func:`partition_rows`, in one C pass over its buffers; None where the kernels are not built or the array is not
+    text without nulls (then the caller takes it with pyarrow: the same strings)."""
+    import pyarrow as pa  # lazy: start-up (the kernels' other callers need none)
+
+    k = kernels()
+    if k is None or arr.null_count or str(arr.type) not in ("string", "utf8", "large_string", "large_utf8"):
+        return None
+    off, data, wide = _string_buffers(arr)
+    width = np.int64 if wide else np.int32
+    first, last = (int(x) for x in np.frombuffer(off, dtype=width)[[0, -1]])
+    out_off = np.empty(len(arr) + 1, dtype=width)
+    out_data = np.empty(last - first, dtype=np.uint8)
+    k.partition_strings(np.ascontiguousarray(part, dtype=np.int16), K, off, data, out_off, out_data, wide)
+    return pa.Array.from_buffers(arr.type, len(arr), [None, pa.py_buffer(out_off), pa.py_buffer(out_data)])

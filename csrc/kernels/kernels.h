@@ -11,7 +11,8 @@
  *
  * Files, by concept: buffers.c (argument checks), hashes.c (key and row hashes), screen.c (the audit's angle
  * screen), rotations.c (sines and cosines, Euler splits, quaternions, the probes' C library calls), errors.c
- * (evaluate's error formulas), repeats.c (the audit's repeated hashes), module.c (the method table).
+ * (evaluate's error formulas), repeats.c (the audit's repeated hashes), join.c (evaluate's key join), module.c (the
+ * method table).
  */
 #ifndef HPE_KERNELS_H
 #define HPE_KERNELS_H
@@ -84,5 +85,10 @@ HPE_INTERNAL PyObject *k_split_top_bit(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_repeated_values(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_bucket_file(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_bucket_repeats(PyObject *self, PyObject *args);
+/* join.c: evaluate's key join */
+HPE_INTERNAL PyObject *k_hash_pairs(PyObject *self, PyObject *args);
+HPE_INTERNAL PyObject *k_first_unequal(PyObject *self, PyObject *args);
+HPE_INTERNAL PyObject *k_partition_scatter(PyObject *self, PyObject *args);
+HPE_INTERNAL PyObject *k_partition_strings(PyObject *self, PyObject *args);
 
 #endif

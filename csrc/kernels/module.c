@@ -47,6 +47,18 @@ static PyMethodDef methods[] = {
     {"bucket_repeats", k_bucket_repeats, METH_VARARGS,
      "bucket_repeats(arr, cursors, cap, lo, hi) -> bytes: the repeated values of buckets lo .. hi - 1, sorted "
      "(twin: hpe_cli.pipelines.audit.duplicates.repeated_in_place)."},
+    {"hash_pairs", k_hash_pairs, METH_VARARGS,
+     "hash_pairs(hg, hp, pos) -> bool: each GT hash's prediction row, or -1; False when a hash repeats on a side "
+     "(twin: hpe_cli.pipelines.evaluate.spill.hash_matches)."},
+    {"first_unequal", k_first_unequal, METH_VARARGS,
+     "first_unequal(off_a, data_a, rows_a, off_b, data_b, rows_b, wide_a, wide_b) -> int: the first pair of "
+     "strings that differ, or -1 (twin: pyarrow.compute.equal on the taken strings)."},
+    {"partition_scatter", k_partition_scatter, METH_VARARGS,
+     "partition_scatter(part, K, bounds, srcs, dsts, widths): rows in stable partition order (twin: a stable "
+     "argsort of part and a take)."},
+    {"partition_strings", k_partition_strings, METH_VARARGS,
+     "partition_strings(part, K, offsets, data, out_offsets, out_data, wide): Arrow strings in stable partition "
+     "order (twin: a stable argsort of part and a take)."},
     {NULL, NULL, 0, NULL},
 };
 

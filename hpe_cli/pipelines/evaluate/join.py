@@ -111,11 +111,21 @@ def _check_unique(codes, side, keys):
         )
 
 
+class Matched:
+    """The verified pairs of a partition (:meth:`hpe_cli.pipelines.evaluate.spill.Partitions.codes`): each side's
+    rows are unique; ``gt_rows`` ascending, ``pred_rows[i]`` the prediction row of ``gt_rows[i]``."""
+
+    __slots__ = ("gt_rows", "pred_rows")
+
+    def __init__(self, gt_rows, pred_rows):
+        self.gt_rows, self.pred_rows = gt_rows, pred_rows
+
+
 def join(pred: Side, gt: Side, keys, join_mode="key", stems=None, codes=None):
     """``(gt_idx, pred_idx, unmatched prediction rows, notes)``; pred_idx is -1 where a GT row has no prediction.
 
-    ``stems``: see :func:`_key_codes`; ``codes``: the ``(gt, pred)`` key codes when the caller has them
-    (the partitioned join, from verified key hashes)."""
+    ``stems``: see :func:`_key_codes`; ``codes``: the ``(gt, pred)`` key codes when the caller has them, or the
+    pairs themselves (a :class:`Matched`; the partitioned join, from verified key hashes)."""
     if join_mode == "order":
         if pred.n != gt.n:
             raise JoinUsageError(
@@ -125,12 +135,18 @@ def join(pred: Side, gt: Side, keys, join_mode="key", stems=None, codes=None):
         idx = np.arange(gt.n)
         return idx, idx.copy(), np.zeros(0, dtype=np.int64), ["rows paired by position (--join order)"]
     if codes is not None:
-        cg, cp = codes
         notes = [
             f"key {k!r} joined on file stems (the two files spell the names differently)"
             for k in keys
             if k in (stems or ())
         ]
+        if isinstance(codes, Matched):  # the pairs themselves: no codes to build
+            pidx = np.full(gt.n, -1, dtype=np.int64)
+            pidx[codes.gt_rows] = codes.pred_rows
+            paired = np.zeros(pred.n, dtype=bool)
+            paired[codes.pred_rows] = True
+            return np.arange(gt.n), pidx, np.flatnonzero(~paired), notes
+        cg, cp = codes
     else:
         cg, cp, notes = _key_codes(gt.keys, pred.keys, keys, stems)
         _check_unique(cg, gt, keys)  # codes from the key hashes are unique on each side (see Partitions.codes)

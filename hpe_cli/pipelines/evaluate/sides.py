@@ -235,6 +235,9 @@ class SideReader:
         self.matrices = True
         #: a function of each :class:`Chunk` run on the label threads (its result in ``Chunk.prepared``)
         self.prepare = None
+        #: > 0: consecutive batches put together into chunks of at least this many rows (the key join's spill, whose
+        #: per-chunk work is the same whatever the rows; the streamed pairing keeps the batches as read)
+        self.group_rows = 0
         self.image_dir = src.path if self.dataset_stem else None
         #: how a row is named in messages: Parquet "row N" (1-based), text "line N" (header = line 1)
         self.unit = "row" if src.kind == "parquet" else "line"
@@ -247,9 +250,21 @@ class SideReader:
         """
 
         def batches():
+            pending: list = []  # batches put together up to group_rows (one labelling, one spill write)
             for batch, bad_rows in self.src.batches_with_rejects():
                 self.unreadable += [(r.line, r.reason) for r in bad_rows]
-                yield batch
+                if not self.group_rows:
+                    yield batch
+                    continue
+                if pending and (batch.schema != pending[0].schema or _has_dictionary(batch)):
+                    yield _joined(pending)
+                    pending = []
+                pending.append(batch)
+                if _has_dictionary(batch) or sum(b.num_rows for b in pending) >= self.group_rows:
+                    yield _joined(pending)
+                    pending = []
+            if pending:
+                yield _joined(pending)
 
         pool = ThreadPoolExecutor(self.threads, thread_name_prefix="hpe-evaluate-labels")
         try:
@@ -277,6 +292,18 @@ class SideReader:
         if self.prepare is not None:
             c.prepared = self.prepare(c)
         return c
+
+
+def _has_dictionary(batch) -> bool:
+    return any(pa.types.is_dictionary(f.type) for f in batch.schema)
+
+
+def _joined(batches):
+    """One record batch of consecutive batches with one schema (their rows in order)."""
+    if len(batches) == 1:
+        return batches[0]
+    (batch,) = pa.Table.from_batches(batches).combine_chunks().to_batches() or [batches[0].slice(0, 0)]
+    return batch
 
 
 def read_side(source, keys, by, radians: bool, progress=None, orthonormalize=False, threads=LABEL_THREADS) -> Side:

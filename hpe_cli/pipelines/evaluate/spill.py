@@ -8,6 +8,11 @@ partition. ``K`` is chosen from the row count so that one partition of both side
 join (:func:`~hpe_cli.pipelines.evaluate.join.join`), so memory is flat in the number of pairs, and a key that
 appears twice anywhere in a file is found in its partition. Whether text keys are compared as written or on
 their file stems is decided over the whole files first, as the in-memory join decides it.
+
+Where the compiled kernels are built (:mod:`hpe_cli.native`), a chunk's rows are put in partition order by one
+counting sort (``partition_rows``, ``partition_strings``), a partition's rows are paired by their key hashes in
+cache-sized buckets (``hash_pairs``) and every pair is verified on the key bytes (``first_unequal``); their numpy
+and pyarrow twins give the same rows and pairs.
 """
 
 from __future__ import annotations
@@ -16,13 +21,17 @@ import math
 import os
 import shutil
 import tempfile
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing
 
 import numpy as np
 import pyarrow as pa
 
 from ...io.key_hash import string_hashes
-from ...io.layout import arrow_table, arrow_to_numpy, numpy_to_arrow
+from ...io.layout import arrow_to_numpy, numpy_to_arrow
+from ...native import first_unequal, hash_pairs, partition_rows, partition_strings
+from .join import Matched
 from .sides import Side, combine_key_hash, file_stems, key_text
 
 
@@ -42,6 +51,8 @@ def _bools(col) -> np.ndarray:
 
 #: rows of one side per partition (about 130 bytes each on disk, ~550 bytes each while a partition is joined)
 PARTITION_ROWS = 400_000
+#: rows of one side labelled and written at once while the partition files are filled
+GROUP_ROWS = 1 << 17
 #: at most this many partition files per side open at once
 MAX_PARTITIONS = 400
 _PFX = "__hpe_"
@@ -64,6 +75,19 @@ def key_hashes(keys_table, keys):
     return h, per
 
 
+def _one_array(col):
+    """A column as one Arrow array (its one chunk as it is: ``combine_chunks`` would copy it)."""
+    if isinstance(col, pa.ChunkedArray):
+        return col.chunk(0) if col.num_chunks == 1 else col.combine_chunks()
+    return col
+
+
+def stem_hashes(col) -> np.ndarray:
+    """The hashes of the file stems of a key column (:func:`key_hashes`' second hash), computed again from the key
+    where a side's stems differ from its texts (the partition files keep the hashes of the texts only)."""
+    return string_hashes(key_text(col))[1]
+
+
 def _count_in(a, b) -> int:
     """How many values of ``a`` occur in ``b`` (sorted search: numpy's hash-based isin is slow on uint64)."""
     bs = np.sort(b)
@@ -78,9 +102,13 @@ def hash_matches(hg, hp):
     One ``np.sort`` of both sides (numpy sorts uint64 with SIMD; ``argsort`` is about 15x slower): each hash keeps
     its top bits, then a side bit (GT 0, prediction 1), then its row, so a GT row and its prediction end up side by
     side. A match on the top bits is kept when the whole hashes are equal; top bits that repeat on one side (rare)
-    take the exact path (``argsort`` of the whole hashes).
+    take the exact path (``argsort`` of the whole hashes). Where the compiled kernels are built,
+    :func:`hpe_cli.native.hash_pairs` finds the same pairs (one table per cache-sized bucket, no sort).
     """
 
+    fast = hash_pairs(hg, hp)
+    if fast is not None:
+        return fast if fast is not False else None
     ng = len(hg)
     bits = max(1, int(max(ng, len(hp))).bit_length())
     low = np.uint64((1 << bits) - 1)
@@ -136,7 +164,8 @@ def estimate_rows(src) -> int:
 
 
 class _SideSpill:
-    """The partition files of one side."""
+    """The partition files of one side (one Arrow IPC file a partition: a partition is read back whole, and
+    only its own pages are mapped while it is)."""
 
     def __init__(self, folder, name, reader, K):
         self.folder, self.name, self.reader, self.K = folder, name, reader, K
@@ -145,37 +174,63 @@ class _SideSpill:
         self.stem_differs: set = set()  # key columns with a row whose file stem is not its text
 
     @staticmethod
-    def _table(c, per):
+    def _partitioned(c, per, part, K):
+        """``(record batch of the chunk's rows in stable partition order, partition bounds)``: each column moved once, by
+        the compiled counting sort where it is built (:func:`hpe_cli.native.partition_rows`,
+        :func:`~hpe_cli.native.partition_strings`), else by a stable ``argsort`` of ``part`` and a take (the
+        same rows)."""
 
         # angles as written are enough: the matrices are rebuilt from them on the scoring threads (the same
         # function on the same numbers: the same bits), which halves what goes to disk and back
         lean = c.raw is not None and c.dist is None
-        cols = {} if lean else {f"{_PFX}c{k}": c.canonical[k] for k in range(9)}
-        for j, (hx, hs) in enumerate(per.values()):
-            cols[f"{_PFX}hx{j}"], cols[f"{_PFX}hs{j}"] = hx, hs
-        cols[f"{_PFX}ok"] = c.ok
-        cols[f"{_PFX}reason"] = (
-            pa.Array.from_buffers(
+        fixed = {} if lean else {f"{_PFX}c{k}": np.asarray(c.canonical[k], dtype=np.float64) for k in range(9)}
+        for j, (hx, _) in enumerate(per.values()):  # the stem hashes are computed again where needed (rare)
+            fixed[f"{_PFX}hx{j}"] = hx
+        fixed[f"{_PFX}ok"] = c.ok
+        if c.raw is not None:  # one (n, 3) block: read back as a view, no column_stack
+            fixed[f"{_PFX}raw"] = np.ascontiguousarray(c.raw, dtype=np.float64)
+        if c.dist is not None:
+            fixed[f"{_PFX}dist"] = c.dist
+        fixed[f"{_PFX}line"] = c.lines
+        moved = partition_rows(part, K, list(fixed.values()))
+        order = None
+        if moved is None:
+            order = np.argsort(part, kind="stable")
+            bounds = np.searchsorted(part[order], np.arange(K + 1))
+            moved = (bounds, [v[order] for v in fixed.values()])
+        bounds, arrays = moved
+        cols = dict(zip(fixed, arrays))
+        if f"{_PFX}raw" in cols:
+            raw = numpy_to_arrow(cols[f"{_PFX}raw"].reshape(-1))
+            cols[f"{_PFX}raw"] = pa.FixedSizeListArray.from_arrays(raw, 3)
+        if c.reasons is None:  # every row usable: n empty strings, built from their (all-zero) offsets
+            reason = pa.Array.from_buffers(
                 pa.string(), c.n, [None, pa.py_buffer(np.zeros(c.n + 1, np.int32)), pa.py_buffer(b"")]
             )
-            if c.reasons is None  # every row usable: n empty strings, built from their (all-zero) offsets
-            else pa.array(c.reasons.astype(str), pa.string())
-        )
-        if c.raw is not None:  # one (n, 3) block: read back as a view, no column_stack
-            raw = numpy_to_arrow(np.ascontiguousarray(c.raw, dtype=np.float64).reshape(-1))
-            cols[f"{_PFX}raw"] = pa.FixedSizeListArray.from_arrays(raw, 3)
-        if c.dist is not None:
-            cols[f"{_PFX}dist"] = c.dist
-        cols[f"{_PFX}line"] = c.lines
+        else:
+            order = np.argsort(part, kind="stable") if order is None else order
+            reason = pa.array(c.reasons[order].astype(str), pa.string())
+        names = list(cols)
+        cols = (
+            {n: cols[n] for n in names[: names.index(f"{_PFX}ok") + 1]}
+            | {f"{_PFX}reason": reason}
+            | {n: cols[n] for n in names[names.index(f"{_PFX}ok") + 1 :]}
+        )  # the columns in their order of before (the schema of the files)
         if c.keys is not None:
             for name in c.keys.column_names:
                 col = c.keys.column(name)
                 col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
-                cols[name] = col.cast(col.type.value_type) if pa.types.is_dictionary(col.type) else col
-        return arrow_table(cols)  # from the buffers: pa.table would import pandas (0.3 s) for numpy columns
+                col = col.cast(col.type.value_type) if pa.types.is_dictionary(col.type) else col
+                moved_col = partition_strings(part, K, col)
+                if moved_col is None:
+                    order = np.argsort(part, kind="stable") if order is None else order
+                    moved_col = col.take(numpy_to_arrow(order))
+                cols[name] = moved_col
+        # one record batch from the buffers: pa.table would import pandas (0.3 s) for numpy columns
+        return pa.RecordBatch.from_arrays([numpy_to_arrow(v) for v in cols.values()], names=list(cols)), bounds
 
     def prepare(self, c, keys):
-        """``(table of the chunk's rows sorted by partition, partition bounds, key columns whose stems differ)``:
+        """``(record batch of the chunk's rows sorted by partition, partition bounds, key columns whose stems differ)``:
         the work of :meth:`add` that needs no shared state (the reader runs it on its label threads)."""
 
         if not c.n:
@@ -183,14 +238,12 @@ class _SideSpill:
         h, per = key_hashes(c.keys, keys)
         # a key whose stems are its texts everywhere needs no count
         differs = {j for j, (hx, hs) in enumerate(per.values()) if hx is not hs and bool((hx != hs).any())}
-        t = self._table(c, per)
         # partition numbers < MAX_PARTITIONS fit int16, whose stable sort is a radix sort
         K = np.uint64(self.K)
         # h % K, written with // (numpy divides by a scalar with libdivide: 10x faster than its %)
         part = (h - (h // K) * K).astype(np.int16) if self.K > 1 else np.zeros(c.n, dtype=np.int16)
-        order = np.argsort(part, kind="stable")
-        bounds = np.searchsorted(part[order], np.arange(self.K + 1))
-        return t.take(numpy_to_arrow(order)), bounds, differs  # one gather; each partition a zero-copy slice
+        t, bounds = self._partitioned(c, per, part, self.K)
+        return t, bounds, differs  # each partition a zero-copy slice
 
     def add(self, c, keys):
 
@@ -209,7 +262,7 @@ class _SideSpill:
                 continue
             if self.writers[k] is None:
                 self.writers[k] = pa.ipc.new_file(self._path(k), self.schema)
-            self.writers[k].write_table(t.slice(a, b - a))
+            self.writers[k].write_batch(t.slice(a, b - a))
 
     def _path(self, k):
         return os.path.join(self.folder, f"{self.name}_{k:04d}.arrow")
@@ -230,7 +283,6 @@ class _SideSpill:
 
     def side(self, k, empty_keys):
         """Partition ``k`` as a :class:`~hpe_cli.pipelines.evaluate.sides.Side` (empty when it holds no row)."""
-        import pyarrow.compute as pc  # lazy: start-up (0.06 s; the streamed run with equal keys needs none)
 
         r = self.reader
         t = self.table(k)
@@ -256,10 +308,17 @@ class _SideSpill:
                 return _bools(c) if pa.types.is_boolean(c.type) else arrow_to_numpy(c)
 
             rc = t.column(f"{_PFX}reason")
-            has_reasons = bool(pc.max(pc.utf8_length(rc)).as_py() or 0) if len(rc) else False
+            # a reason written in any row: its chunk holds text bytes (every row usable: none, no scan)
+            text = any(ch.buffers()[2] is not None and ch.buffers()[2].size for ch in rc.chunks)
+            has_reasons = False
+            if len(rc) and text:
+                import pyarrow.compute as pc  # lazy: start-up (0.06 s; only sides with rows set aside get here)
+
+                has_reasons = bool(pc.max(pc.utf8_length(rc)).as_py() or 0)
             reasons = rc.to_numpy(zero_copy_only=False).astype(object) if has_reasons else None
             keys = t.select([n for n in t.column_names if not n.startswith(_PFX)])
-            keys = keys.select(r.keep) if r.keep else None
+            # one chunk, copied off the memory map: the mapped file leaves memory once the side is built
+            keys = keys.select(r.keep).combine_chunks() if r.keep else None
             by = keys.column(r.by).to_numpy(zero_copy_only=False) if r.by else None
             lean = f"{_PFX}c0" not in t.column_names
             side = Side(
@@ -280,13 +339,24 @@ class _SideSpill:
                 side.raw = arrow_to_numpy(raw.values if raw.offset == 0 else raw.flatten()).reshape(-1, 3)
             if f"{_PFX}dist" in t.column_names:
                 side.dist = col(f"{_PFX}dist")
-            side.hashes = {
-                j: (col(f"{_PFX}hx{j}"), col(f"{_PFX}hs{j}"))
-                for j in range(len(r.keep))
-                if f"{_PFX}hx{j}" in t.column_names
-            }
+            side.hashes = {}
+            for j in range(len(r.keep)):
+                if f"{_PFX}hx{j}" in t.column_names:
+                    hx = col(f"{_PFX}hx{j}")  # a column whose stems are its texts in every row: hs is hx
+                    side.hashes[j] = (hx, stem_hashes(keys.column(r.keep[j])) if j in self.stem_differs else hx)
         side.image_dir, side.unit = r.image_dir, r.unit
         return side
+
+
+class _LockedProgress:
+    """A progress bar updated from two threads (one lock: no count lost)."""
+
+    def __init__(self, bar):
+        self.bar, self.lock = bar, threading.Lock()
+
+    def update(self, n):
+        with self.lock:
+            self.bar.update(n)
 
 
 class Partitions:
@@ -300,18 +370,45 @@ class Partitions:
         self.g, self.p = _SideSpill(self.folder, "gt", gr, self.K), _SideSpill(self.folder, "pred", pr, self.K)
 
     def fill(self):
+        """Write both sides' partition files: side by side (the predictions on a thread of their own) when the
+        readers have more than one thread, else one after the other. The files are the same either way (each
+        side's chunks are written in file order), and so is the error raised: the ground truth's if it has one
+        (it is read to its end, as when read first), else the predictions'."""
         try:
-            for spill, reader in ((self.g, self.gr), (self.p, self.pr)):
-                reader.matrices = False  # angles are kept as written: their matrices are built when scored
-                reader.prepare = lambda c, spill=spill: spill.prepare(c, self.keys)  # on the label threads
-                with closing(reader.chunks()) as chunks:  # an error stops the label threads at once
-                    for c in chunks:
-                        spill.add(c, self.keys)
-                spill.close()
+            if min(self.gr.threads, self.pr.threads) < 2:
+                self._fill_side(self.g, self.gr, None)
+                self._fill_side(self.p, self.pr, None)
+                return self
+            stop = threading.Event()
+            bars = [r.progress for r in (self.gr, self.pr)]
+            for r in (self.gr, self.pr):  # both threads count rows on the one bar
+                r.progress = _LockedProgress(r.progress) if r.progress is not None else None
+            with ThreadPoolExecutor(1, thread_name_prefix="hpe-evaluate-spill") as ex:
+                pred = ex.submit(self._fill_side, self.p, self.pr, stop)
+                try:
+                    self._fill_side(self.g, self.gr, None)
+                except BaseException:
+                    stop.set()  # the predictions' thread stops at its next chunk (the pool waits for it)
+                    raise
+                finally:
+                    ex.shutdown(wait=True)
+                    self.gr.progress, self.pr.progress = bars
+            pred.result()
         except BaseException:
             self.cleanup()
             raise
         return self
+
+    def _fill_side(self, spill, reader, stop):
+        reader.matrices = False  # angles are kept as written: their matrices are built when scored
+        reader.group_rows = GROUP_ROWS  # fewer, larger chunks: less per-chunk work and fewer record batches
+        reader.prepare = lambda c: spill.prepare(c, self.keys)  # on the label threads
+        with closing(reader.chunks()) as chunks:  # an error stops the label threads at once
+            for c in chunks:
+                if stop is not None and stop.is_set():
+                    return
+                spill.add(c, self.keys)
+        spill.close()
 
     def _empty_keys(self, reader, spill, other):
 
@@ -365,15 +462,15 @@ class Partitions:
                 t[1] += (
                     exact
                     if exact == min(n_g, n_p)
-                    else _count_in(arrow_to_numpy(tg.column(f"{_PFX}hs{j}")), arrow_to_numpy(tp.column(f"{_PFX}hs{j}")))
+                    else _count_in(stem_hashes(tg.column(self.keys[j])), stem_hashes(tp.column(self.keys[j])))
                 )
         return {k for k, (ex, st, ng, npr) in tally.items() if ex < min(ng, npr) and st > ex}
 
     def codes(self, gt, pred, stems):
-        """``(gt codes, pred codes)`` of one partition from the key hashes, every match verified on the keys
-        themselves; None (use the string join) when a key is not text on both sides, when one side has
-        equal hashes twice (a duplicate, which the string join names) or when a match is a hash collision."""
-        import pyarrow.compute as pc  # lazy: start-up (0.06 s; the streamed run with equal keys needs none)
+        """The pairs of one partition (:class:`~hpe_cli.pipelines.evaluate.join.Matched`) from the key hashes, every
+        match verified on the keys themselves; None (use the string join) when a key is not text on both sides,
+        when one side has equal hashes twice (a duplicate, which the string join names) or when a match is a hash
+        collision."""
 
         def is_text(schema, k):
             return pa.types.is_string(schema.field(k).type)
@@ -390,20 +487,22 @@ class Partitions:
             for j in range(len(self.keys)):
                 hg = combine_key_hash(hg, gt.hashes[j][w[j]])
                 hp = combine_key_hash(hp, pred.hashes[j][w[j]])
-        # codes: a prediction's is its row, a GT row's the row of its match (else one past all predictions)
+        # the pairs proposed by equal hashes (GT rows ascending), then verified on the keys below
         matched = hash_matches(hg, hp)
         if matched is None:
             return None  # equal hashes on one side: a duplicate key (named by the string join) or a collision
         gi, pi = matched
-        cp = np.arange(pred.n, dtype=np.int64)
-        cg = np.arange(pred.n, pred.n + gt.n, dtype=np.int64)
-        cg[gi] = pi
         for k in self.keys:
             a, b = gt.keys.column(k), pred.keys.column(k)
-            a, b = (
-                a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a,
-                b.combine_chunks() if isinstance(b, pa.ChunkedArray) else b,
-            )
+            a, b = (_one_array(a), _one_array(b))
+            if k not in stems:  # the bytes compared at the pairs straight off the Arrow buffers (no gather)
+                bad = first_unequal(a, None if len(gi) == gt.n else gi, b, pi)
+                if bad is not None:
+                    if bad >= 0:
+                        return None
+                    continue
+            import pyarrow.compute as pc  # lazy: start-up (0.06 s; keys compared by the kernels need none)
+
             # every GT row matched (the usual case): gi is 0..n-1, the column itself
             a = a if len(gi) == gt.n else a.take(numpy_to_arrow(gi))
             b = b.take(numpy_to_arrow(pi))
@@ -411,7 +510,7 @@ class Partitions:
                 a, b = file_stems(a), file_stems(b)
             if len(gi) and not pc.all(pc.equal(a, b)).as_py():
                 return None
-        return cg, cp
+        return Matched(gi, pi)
 
     def cleanup(self):
         for s in (self.g, self.p):
