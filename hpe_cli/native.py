@@ -50,6 +50,8 @@ KERNELS = (
     "near_quats",
     "quat_rotvecs",
     "system_angles",
+    "best_of_two",
+    "second_solution",
     "libm",
     "repeated_values",
     "bucket_file",
@@ -441,3 +443,32 @@ def partition_strings(part, K: int, arr):
     out_data = np.empty(last - first, dtype=np.uint8)
     k.partition_strings(np.ascontiguousarray(part, dtype=np.int16), K, off, data, out_off, out_data, wide)
     return pa.Array.from_buffers(arr.type, len(arr), [None, pa.py_buffer(out_off), pa.py_buffer(out_data)])
+
+
+def best_of_two(p1, p2, g, wrapped: bool):
+    """``(best (N, 3), second (N,), wrapped (N, 3) or None)``: hpe's best-of-two and wrapped angle errors of three
+    ``(N, 3)`` angle arrays (degrees) in one C loop, or None (kernels not built or too few rows: then
+    :mod:`hpe_cli.metrics.rotation_errors` computes them, the same numbers; no C library function but ``fmod``)."""
+    a, b, c = (np.ascontiguousarray(x, dtype=np.float64) for x in (p1, p2, g))
+    ok = a.ndim == 2 and a.shape == b.shape == c.shape and a.shape[1] == 3 and len(a) >= _MIN_ROWS
+    k = kernels() if ok else None
+    if k is None:
+        return None
+    best, second = np.empty(a.shape), np.empty(len(a), dtype=bool)
+    w = np.empty(a.shape) if wrapped else None
+    k.best_of_two(a, b, c, best, second.view(np.uint8), w)
+    return best, second, w
+
+
+def second_solution(p1, middle: int, proper: bool):
+    """The other Euler solution ``(3, N)`` (degrees) of the primary angles ``p1`` (3 columns), in one C loop, or
+    None (kernels not built or too few rows: then :func:`hpe_cli.rotation.solutions.second_degrees` computes it,
+    the same numbers)."""
+    cols = [np.asarray(c, dtype=np.float64) for c in p1]
+    n = len(cols[0]) if cols and cols[0].ndim == 1 else 0
+    k = kernels() if n >= _MIN_ROWS and all(c.shape == (n,) for c in cols) else None
+    if k is None:
+        return None
+    out = np.empty((3, n))
+    k.second_solution([np.ascontiguousarray(c) for c in cols], middle, proper, out)
+    return out

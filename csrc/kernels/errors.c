@@ -266,3 +266,60 @@ done:
     PyBuffer_Release(&ob);
     return ret;
 }
+
+/* best_of_two(p1 float64[n*3], p2 float64[n*3], g float64[n*3], best float64[n*3], second uint8[n], wrapped
+ * float64[n*3] or None): hpe's core angle errors of the prediction's two solutions against the ground truth: the
+ * solution whose mean |difference| is smaller (the first on ties), each kept error e as min(e, 360 - e); and, when
+ * wrapped is given, min(e, 360 - e) of e = |p1 - g| mod 360 (the wrapped error). numpy's abs, where, remainder and
+ * minimum (NaN kept), in the twins' order; no C library function but fmod (exact).
+ * twins: hpe_cli.metrics.rotation_errors.best_of_two_error, wrapped_error */
+PyObject *k_best_of_two(PyObject *self, PyObject *args) {
+    Py_buffer b1, b2, bg, bb, bs, bw = {0};
+    PyObject *wo;
+    if (!PyArg_ParseTuple(args, "y*y*y*w*w*O", &b1, &b2, &bg, &bb, &bs, &wo)) return NULL;
+    PyObject *ret = NULL;
+    int have_w = 0;
+    Py_ssize_t n = bs.len;
+    if (wo != Py_None) {
+        if (PyObject_GetBuffer(wo, &bw, PyBUF_WRITABLE) < 0) goto done;
+        have_w = 1;
+    }
+    if (!need(&b1, 3 * n, 8, "p1") || !need(&b2, 3 * n, 8, "p2") || !need(&bg, 3 * n, 8, "g") ||
+        !need(&bb, 3 * n, 8, "best") || (have_w && !need(&bw, 3 * n, 8, "wrapped")))
+        goto done;
+    const double *P1 = (const double *)b1.buf, *P2 = (const double *)b2.buf, *G = (const double *)bg.buf;
+    double *B = (double *)bb.buf, *W = have_w ? (double *)bw.buf : NULL;
+    uint8_t *S = (uint8_t *)bs.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double e1[3], e2[3];
+        for (int k = 0; k < 3; k++) e1[k] = fabs(P1[3 * i + k] - G[3 * i + k]), e2[k] = fabs(P2[3 * i + k] - G[3 * i + k]);
+        int second = (e2[0] + e2[1] + e2[2]) / 3 < (e1[0] + e1[1] + e1[2]) / 3;
+        S[i] = (uint8_t)second;
+        for (int k = 0; k < 3; k++) {
+            double e = sel(second, e2[k], e1[k]);
+            B[3 * i + k] = np_minimum(e, 360.0 - e);
+        }
+        if (W)
+            for (int k = 0; k < 3; k++) {
+                double e = e1[k]; /* |p1 - g|, as wrap_abs_deg takes it */
+                if (!(e < 360.0)) { /* numpy's remainder by 360 (only needed from 360 up, or NaN) */
+                    double m = fmod(e, 360.0);
+                    e = m == 0.0 ? 0.0 : m;
+                }
+                W[3 * i + k] = np_minimum(e, 360.0 - e);
+            }
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_w) PyBuffer_Release(&bw);
+    PyBuffer_Release(&b1);
+    PyBuffer_Release(&b2);
+    PyBuffer_Release(&bg);
+    PyBuffer_Release(&bb);
+    PyBuffer_Release(&bs);
+    return ret;
+}
+

@@ -81,6 +81,8 @@ HPE_INTERNAL PyObject *k_near_quats(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_quat_rotvecs(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_system_angles(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_libm(PyObject *self, PyObject *args);
+HPE_INTERNAL PyObject *k_best_of_two(PyObject *self, PyObject *args);
+HPE_INTERNAL PyObject *k_second_solution(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_split_top_bit(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_repeated_values(PyObject *self, PyObject *args);
 HPE_INTERNAL PyObject *k_bucket_file(PyObject *self, PyObject *args);

@@ -38,6 +38,12 @@ static PyMethodDef methods[] = {
     {"system_angles", k_system_angles, METH_VARARGS,
      "system_angles(X, p1, p2, lock, near, i, j, k, proper, e, scale, role, middle, refine_below) -> rows near the "
      "lock: a system's two Euler solutions (twin: hpe_cli.rotation.system_def.RotationSystem.soa_to_angles)."},
+    {"best_of_two", k_best_of_two, METH_VARARGS,
+     "best_of_two(p1, p2, g, best, second, wrapped): the core angle errors (twins: "
+     "hpe_cli.metrics.rotation_errors.best_of_two_error, wrapped_error)."},
+    {"second_solution", k_second_solution, METH_VARARGS,
+     "second_solution(p1, middle, proper, p2): the other Euler solution in degrees (twin: "
+     "hpe_cli.rotation.solutions.second_degrees)."},
     {"libm", k_libm, METH_VARARGS, "libm(name, x, y, out): the C library's atan2, hypot, acos, asin, sin (probes)."},
     {"repeated_values", k_repeated_values, METH_VARARGS,
      "repeated_values(h) -> k: the repeated values of h, once each and sorted, to h[:k] (h is scratch; twin: "
@@ -63,6 +69,6 @@ static PyMethodDef methods[] = {
 };
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_hpe_kernels",
-                                    "hpe's optional compiled column kernels (csrc/_hpe_kernels.c).", -1, methods};
+                                    "hpe's optional compiled column kernels (csrc/kernels/).", -1, methods};
 
 PyMODINIT_FUNC PyInit__hpe_kernels(void) { return PyModule_Create(&module); }

@@ -329,3 +329,43 @@ done:
     PyBuffer_Release(&o);
     return ret;
 }
+
+/* second_solution(p1 (3 columns of n), middle, proper, p2 float64[3*n]): the other Euler solution of primary
+ * angles in degrees: the outer turns by 180 degrees, the middle one to 180 - b (-b for a proper sequence), each
+ * lifted into (-180, 180], as system_angles computes it.  twin: hpe_cli.rotation.solutions.second_degrees */
+PyObject *k_second_solution(PyObject *self, PyObject *args) {
+    PyObject *po;
+    Py_buffer b2, P[3];
+    int middle, proper;
+    if (!PyArg_ParseTuple(args, "Oipw*", &po, &middle, &proper, &b2)) return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = b2.len / 24;
+    int have_p = 0;
+    if (!need(&b2, 3 * n, 8, "p2")) goto done;
+    if (middle < 0 || middle > 2) {
+        PyErr_SetString(PyExc_ValueError, "middle: expected 0, 1 or 2");
+        goto done;
+    }
+    if (!(have_p = columns(po, P, 3, n, "p1"))) goto done;
+    const double *p[3] = {(const double *)P[0].buf, (const double *)P[1].buf, (const double *)P[2].buf};
+    double *P2 = (double *)b2.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (int r = 0; r < 3; r++) {
+        const double *x = p[r];
+        double *o = P2 + r * n;
+        if (r != middle)
+            for (Py_ssize_t t = 0; t < n; t++) o[t] = lift((x[t] + 180.0) - sel(x[t] > 0, 360.0, 0.0));
+        else if (proper)
+            for (Py_ssize_t t = 0; t < n; t++) o[t] = lift(-x[t]);
+        else
+            for (Py_ssize_t t = 0; t < n; t++) o[t] = lift((180.0 - x[t]) - sel(x[t] < 0, 360.0, 0.0));
+    }
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    if (have_p) release(P, 3);
+    PyBuffer_Release(&b2);
+    return ret;
+}
+

@@ -68,13 +68,13 @@ def compute_rows(P, G, gt_system, protocols=None, raw=None, context=None, hook=N
     pair.core_errors()  # geodesic, maev and Frobenius in one compiled pass where it gives their bits
     g = pair.primary(gt_system, "gt")  # hpe's own metrics: primary solutions (of the matrices)
     p1, p2 = pair.angles(gt_system, "pred")
-    best, _ = re_.best_of_two_error(p1, p2, g)
+    best, _, wrapped = re_.best_and_wrapped(p1, p2, g)
     protos = {name: PROTOCOLS[name].func(pair) for name in check_protocols(protocols)}
     return PairRows(
         pair.geodesic(),
         pair.maev(),
         pair.frobenius(),
-        re_.wrapped_error(p1, g),
+        wrapped,
         best,
         g,
         p1,

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..native import best_of_two as native_best_of_two
 from ..rotation.soa import frobenius as soa_frobenius
 
 _DEG = 180.0 / np.pi
@@ -165,6 +166,16 @@ def best_of_two_error(pred1, pred2, gt) -> tuple[np.ndarray, np.ndarray]:
         e = np.where(second, e2[k], e1[k])
         np.minimum(e, 360.0 - e, out=out[..., k])
     return out, second
+
+
+def best_and_wrapped(pred1, pred2, gt) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(best_of_two_error(pred1, pred2, gt)[0], its second-solution mask, wrapped_error(pred1, gt))`` in one
+    compiled pass where :func:`hpe_cli.native.best_of_two` is built (the same numbers)."""
+    got = native_best_of_two(pred1, pred2, gt, True)
+    if got is not None:
+        return got
+    best, second = best_of_two_error(pred1, pred2, gt)
+    return best, second, wrapped_error(pred1, gt)
 
 
 def rotvec_deg(R) -> np.ndarray:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import native as _native
+
 #: rows whose middle Tait-Bryan turn is within this many degrees of 90 go through the matrix
 #: (their lock distance cos(b) is then below euler.REFINE_BELOW = 0.05, the refined branch)
 LOCK_MARGIN_DEG = 3.0
@@ -33,6 +35,9 @@ def second_degrees(p1, middle: int, proper: bool) -> list:
     The first and last turns move by 180 degrees; the middle Tait-Bryan turn
     goes to ``180 - b`` (proper Euler: ``-b``). Every angle stays in (-180, 180].
     """
+    got = _native.second_solution(p1, middle, proper)  # one C loop where built (the same bits)
+    if got is not None:
+        return list(got)
     p2 = []
     for role, d in enumerate(p1):
         # ``d2 - where(mask, 360, 0)`` is ``d2[mask] -= 360`` bit for bit (``x - 0.0`` is ``x``, -0.0 and NaN

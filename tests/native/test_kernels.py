@@ -557,3 +557,44 @@ def test_hash_buckets_larger_than_a_leaf(kind):
     assert cursors.sum() == len(values) and cursors.max() > 16384
     got = [np.frombuffer(k.bucket_repeats(arr, cursors, cap, b, b + 1), np.uint64) for b in (0, 1)]
     assert np.concatenate(got).tolist() == repeated_ref(values.tolist())
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            *[st.one_of(st.floats(-720, 720), st.sampled_from([0.0, -0.0, 180.0, -180.0, 360.0, 1e300, np.nan]))] * 9
+        ),
+        min_size=1,
+        max_size=100,
+    )
+)
+def test_best_of_two_and_wrapped_errors_give_the_numpy_twins_bits(rows):
+    from hpe_cli.metrics import rotation_errors as re_
+
+    x = np.concatenate([np.array(rows, dtype=np.float64).reshape(-1, 9), np.zeros((64, 9))])
+    x[-64:] = np.random.default_rng(len(rows)).uniform(-200, 200, (64, 9))
+    p1, p2, g = x[:, :3], x[:, 3:6], x[:, 6:]
+    twin, got = twin_and_kernel(lambda: re_.best_and_wrapped(p1, p2, g))
+    assert _same_bits(got[0], twin[0]) and np.array_equal(got[1], twin[1]) and _same_bits(got[2], twin[2])
+    with np.errstate(invalid="ignore"):  # the oracle: the definitions, row by row in Python
+        for i in range(0, len(x), 7):
+            e1, e2 = np.abs(p1[i] - g[i]), np.abs(p2[i] - g[i])
+            use = e2 if e2.mean() < e1.mean() else e1
+            assert np.allclose(got[0][i], np.minimum(use, 360 - use), equal_nan=True, rtol=0, atol=1e-9)
+            w = np.abs(p1[i] - g[i]) % 360
+            assert np.allclose(got[2][i], np.minimum(w, 360 - w), equal_nan=True, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("middle", [0, 1, 2])
+@pytest.mark.parametrize("proper", [False, True])
+def test_second_solution_gives_the_numpy_twins_bits(middle, proper):
+    from hpe_cli.rotation.solutions import second_degrees
+
+    rng = np.random.default_rng(middle + 3 * proper)
+    p1 = [rng.uniform(-180, 180, 500) for _ in range(3)]
+    for c in p1:
+        c[:12] = [0.0, -0.0, 180.0, -180.0, 1e-300, -1e-300, 5e-324, -5e-324, 90.0, -90.0, np.nan, 179.99999999999997]
+    twin, got = twin_and_kernel(lambda: second_degrees(p1, middle, proper))
+    assert all(_same_bits(a, b) for a, b in zip(got, twin))
+    assert all(((c > -180) & (c <= 180)).sum() == len(c) - 1 for c in got)  # every angle in (-180, 180], NaN aside
