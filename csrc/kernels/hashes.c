@@ -3,9 +3,17 @@
 
 /* string_hashes(offsets int64[n+1], data uint8[], valid uint8[n] or None, out uint64[n], stems uint64[n] or None)
  * twin: hpe_cli.io.key_hash.string_hashes (numpy) */
+#define P2 (P_FNV * P_FNV)
+#define P3 (P2 * P_FNV)
+#define P4 (P2 * P2)
+
 static inline uint64_t span_hash(const uint8_t *d, int64_t s, int64_t e) {
+    /* h = h * P + d[k] from the last byte to the first, four bytes a step: h * P^4 + d[k] P^3 + d[k-1] P^2 +
+     * d[k-2] P + d[k-3] is the same value modulo 2^64, with one multiplication in the chain instead of four */
     uint64_t h = 0;
-    for (int64_t k = e - 1; k >= s; k--) h = h * P_FNV + d[k];
+    int64_t k = e - 1;
+    for (; k - 3 >= s; k -= 4) h = h * P4 + (d[k] * P3 + d[k - 1] * P2 + d[k - 2] * P_FNV + d[k - 3]);
+    for (; k >= s; k--) h = h * P_FNV + d[k];
     h ^= (uint64_t)(e - s) * LEN_MULT;
     return mix64(h);
 }
