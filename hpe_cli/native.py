@@ -5,12 +5,14 @@ Each kernel is one C loop over a column where numpy takes a dozen passes or more
 - hashes: the key hashes of ``hpe evaluate``'s join and duplicate-key check
   (:func:`hpe_cli.io.key_hash.string_hashes`), the row hashes of ``hpe audit``'s duplicate check and their split
   by value half (:func:`hpe_cli.pipelines.audit.duplicates.key_hashes`,
-  :meth:`~hpe_cli.pipelines.audit.duplicates.Duplicates.file`);
+  :meth:`~hpe_cli.pipelines.audit.duplicates.Duplicates.file`), and the audit's repeated hashes found bucket by
+  bucket instead of by a sort (``repeated_values``, ``bucket_file``, ``bucket_repeats``, called from
+  :mod:`hpe_cli.pipelines.audit.duplicates`);
 - the audit's angle screen;
 - rotations: the sine and cosine of the matrices built from angles (:func:`sin_cos`), a rotation system's two Euler
-  solutions (:func:`system_angles`), SciPy's Euler split of a matrix (:func:`euler_from_matrix`) and its
+  solutions (:func:`system_angles`, :func:`second_solution`), SciPy's Euler split of a matrix (:func:`euler_from_matrix`) and its
   ``from_euler`` quaternions with their matrices (:func:`quat_matrix_from_euler`);
-- evaluate's error formulas: the core metrics (:func:`core_errors`), opentrack's wrapped cosines
+- evaluate's error formulas: the core metrics (:func:`core_errors`, :func:`best_of_two`), opentrack's wrapped cosines
   (:func:`wrapped_cos_errors`), opal23's ``compute_mae`` and ``compute_ge`` (:func:`opal23_mae`,
   :func:`trace_acos_deg`), the near quaternions and the Karcher step of opal23's alignment (:func:`near_quats`,
   :func:`quat_rotvecs`);
@@ -18,8 +20,8 @@ Each kernel is one C loop over a column where numpy takes a dozen passes or more
   a partition's rows paired by their key hashes (:func:`hash_pairs`) and verified on the key bytes
   (:func:`first_unequal`).
 
-The hashes, the screen and the join compute integers and comparisons only, so each gives the bits of its numpy twin; the
-others add IEEE arithmetic in numpy's order and call the C library's ``sincos``, ``atan2``, ``hypot``, ``acos``,
+The hashes, the screen and the join compute integers and comparisons only, so each gives the bits of its numpy
+twin; the others add IEEE arithmetic in numpy's order and call the C library's ``sincos``, ``atan2``, ``hypot``, ``acos``,
 ``asin`` or ``sin``, each only where that function gives numpy's bits on a probe of values (checked once a
 process). The numpy twins run where the module was not built (no C compiler at install time) or when
 ``HPE_KERNELS=numpy`` is set; ``tests/native/`` compares the two.
