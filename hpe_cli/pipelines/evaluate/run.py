@@ -238,13 +238,13 @@ def _run_spill(s, rej, writer):
                 return {k: np.zeros(0, dtype=object) for k in s.keys}
             return {k: side.keys.column(k).take(rows).to_numpy(zero_copy_only=False) for k in s.keys}
 
-        def joined():  # run a partition ahead (see below): read and joined while the one before is paired
+        def joined(last: bool):  # run a partition ahead (see below): read and joined while the one before is paired
             for k in range(parts.K):
-                gt, pred = parts.sides(k)
+                gt, pred = parts.sides(k, last)  # the scoring pass is the last to read them
                 yield gt, pred, join(pred, gt, s.keys, "key", stems, parts.codes(gt, pred, stems))
 
         def pairs(first: bool):
-            with closing(prefetch(joined())) as ahead:
+            with closing(prefetch(joined(first))) as ahead:
                 yield from _partition_pairs(ahead, first)
 
         def _partition_pairs(ahead, first: bool):

@@ -273,6 +273,16 @@ class _SideSpill:
                 w.close()
         self.writers = [None] * self.K
 
+    def release(self, k) -> None:
+        """Remove partition ``k``'s file once it is read for the last time: its memory map keeps the data for the
+        arrays that view it, and the disk's space and dirty pages go now, while the run goes on, not all at its end
+        (at 30M pairs the folder's removal took 1.9 s of wall time). Where an open file cannot be removed
+        (Windows), :meth:`Partitions.cleanup` does it."""
+        try:
+            os.unlink(self._path(k))
+        except OSError:
+            pass
+
     def table(self, k):
         """Partition ``k`` as a pyarrow Table (memory-mapped), or None when it holds no row."""
 
@@ -420,11 +430,17 @@ class Partitions:
         schema = pa.schema(fields)
         return pa.Table.from_arrays([pa.nulls(0, f.type) for f in schema], schema=schema)  # empty_table imports pandas
 
-    def sides(self, k):
-        return (
+    def sides(self, k, last: bool = False):
+        """Partition ``k`` of both sides; ``last``: no pass reads it again, so its files are removed as soon as
+        they are mapped (:meth:`_SideSpill.release`)."""
+        out = (
             self.g.side(k, self._empty_keys(self.gr, self.g, self.p)),
             self.p.side(k, self._empty_keys(self.pr, self.p, self.g)),
         )
+        if last:
+            self.g.release(k)
+            self.p.release(k)
+        return out
 
     def stem_columns(self) -> set:
         """Key columns compared on file stems, decided over all partitions as the in-memory join decides
