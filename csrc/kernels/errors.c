@@ -114,6 +114,18 @@ static inline double np_sign(double x) { return sel(x > 0, 1.0, sel(x < 0, -1.0,
 
 static inline double np_minimum(double x, double y) { return sel(isnan(x) || x <= y, x, y); }
 
+/* of two rows of absolute angle errors, the one with the smaller mean (the first on ties; the means summed left to
+ * right, as numpy's), each kept error e as min(e, 360 - e); returns whether the second was kept. opal23's
+ * compute_mae and hpe's best-of-two error both choose this way */
+static inline int better_of_two(const double e1[3], const double e2[3], double out[3]) {
+    int second = (e2[0] + e2[1] + e2[2]) / 3 < (e1[0] + e1[1] + e1[2]) / 3;
+    for (int k = 0; k < 3; k++) {
+        double e = sel(second, e2[k], e1[k]);
+        out[k] = np_minimum(e, 360.0 - e);
+    }
+    return second;
+}
+
 PyObject *k_opal23_mae(PyObject *self, PyObject *args) {
     Py_buffer ab, pb, ob;
     if (!PyArg_ParseTuple(args, "y*y*w*", &ab, &pb, &ob)) return NULL;
@@ -125,7 +137,7 @@ PyObject *k_opal23_mae(PyObject *self, PyObject *args) {
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t i = 0; i < n; i++) {
         static const int order[3] = {1, 0, 2}; /* the peer's (yaw, pitch, roll) */
-        double pc[3], ac[3], w[3], e[3], ew[3];
+        double pc[3], ac[3], w[3], e[3], ew[3], kept[3];
         for (int k = 0; k < 3; k++) pc[k] = P[3 * i + order[k]], ac[k] = A[3 * i + order[k]];
         w[0] = 180 - pc[0];
         w[1] = pc[1] - np_sign(pc[1]) * 180;
@@ -136,11 +148,8 @@ PyObject *k_opal23_mae(PyObject *self, PyObject *args) {
             e[k] = fabs(ac[k] - pc[k]);
             ew[k] = fabs(ac[k] - w[k]);
         }
-        int use = (ew[0] + ew[1] + ew[2]) / 3 < (e[0] + e[1] + e[2]) / 3;
-        for (int k = 0; k < 3; k++) {
-            double x = sel(use, ew[k], e[k]);
-            O[3 * i + order[k]] = np_minimum(x, 360 - x);
-        }
+        better_of_two(e, ew, kept);
+        for (int k = 0; k < 3; k++) O[3 * i + order[k]] = kept[k];
     }
     Py_END_ALLOW_THREADS
     ret = Py_None;
@@ -294,12 +303,7 @@ PyObject *k_best_of_two(PyObject *self, PyObject *args) {
     for (Py_ssize_t i = 0; i < n; i++) {
         double e1[3], e2[3];
         for (int k = 0; k < 3; k++) e1[k] = fabs(P1[3 * i + k] - G[3 * i + k]), e2[k] = fabs(P2[3 * i + k] - G[3 * i + k]);
-        int second = (e2[0] + e2[1] + e2[2]) / 3 < (e1[0] + e1[1] + e1[2]) / 3;
-        S[i] = (uint8_t)second;
-        for (int k = 0; k < 3; k++) {
-            double e = sel(second, e2[k], e1[k]);
-            B[3 * i + k] = np_minimum(e, 360.0 - e);
-        }
+        S[i] = (uint8_t)better_of_two(e1, e2, B + 3 * i);
         if (W)
             for (int k = 0; k < 3; k++) {
                 double e = e1[k]; /* |p1 - g|, as wrap_abs_deg takes it */

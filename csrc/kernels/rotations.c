@@ -222,6 +222,13 @@ done:
  * twins: hpe_cli.rotation.euler.soa_to_euler, hpe_cli.rotation.system_def.RotationSystem.soa_to_angles */
 static inline double lift(double d) { return sel(d <= -180.0, d + 360.0, d); }
 
+/* the angle d of a primary solution in the other solution: an outer turn by 180 degrees, the middle one to
+ * 180 - d (-d for a proper sequence), lifted into (-180, 180]; numpy's where as a branch-free select */
+static inline double other_angle(double d, int middle, int proper) {
+    if (!middle) return lift((d + 180.0) - sel(d > 0, 360.0, 0.0));
+    return proper ? lift(-d) : lift((180.0 - d) - sel(d < 0, 360.0, 0.0));
+}
+
 PyObject *k_system_angles(PyObject *self, PyObject *args) {
     PyObject *Xo;
     Py_buffer b1, b2, bl, bn, X[9];
@@ -270,13 +277,7 @@ PyObject *k_system_angles(PyObject *self, PyObject *args) {
         NR[t] = lk < refine;
         near += lk < refine;
         for (int m = 0; m < 3; m++) P1[role[m] * n + t] = lift(v[m] * scale[m]);
-        for (int r = 0; r < 3; r++) {
-            double d = P1[r * n + t], d2;
-            if (r != middle) d2 = (d + 180.0) - sel(d > 0, 360.0, 0.0);
-            else if (proper) d2 = -d;
-            else d2 = (180.0 - d) - sel(d < 0, 360.0, 0.0);
-            P2[r * n + t] = lift(d2);
-        }
+        for (int r = 0; r < 3; r++) P2[r * n + t] = other_angle(P1[r * n + t], r == middle, proper);
     }
     Py_END_ALLOW_THREADS
 #undef E
@@ -332,7 +333,7 @@ done:
 
 /* second_solution(p1 (3 columns of n), middle, proper, p2 float64[3*n]): the other Euler solution of primary
  * angles in degrees: the outer turns by 180 degrees, the middle one to 180 - b (-b for a proper sequence), each
- * lifted into (-180, 180], as system_angles computes it.  twin: hpe_cli.rotation.solutions.second_degrees */
+ * lifted into (-180, 180] (other_angle, as system_angles computes it).  twin: hpe_cli.rotation.solutions.second_degrees */
 PyObject *k_second_solution(PyObject *self, PyObject *args) {
     PyObject *po;
     Py_buffer b2, P[3];
@@ -353,12 +354,7 @@ PyObject *k_second_solution(PyObject *self, PyObject *args) {
     for (int r = 0; r < 3; r++) {
         const double *x = p[r];
         double *o = P2 + r * n;
-        if (r != middle)
-            for (Py_ssize_t t = 0; t < n; t++) o[t] = lift((x[t] + 180.0) - sel(x[t] > 0, 360.0, 0.0));
-        else if (proper)
-            for (Py_ssize_t t = 0; t < n; t++) o[t] = lift(-x[t]);
-        else
-            for (Py_ssize_t t = 0; t < n; t++) o[t] = lift((180.0 - x[t]) - sel(x[t] < 0, 360.0, 0.0));
+        for (Py_ssize_t t = 0; t < n; t++) o[t] = other_angle(x[t], r == middle, proper);
     }
     Py_END_ALLOW_THREADS
     ret = Py_None;
