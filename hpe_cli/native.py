@@ -201,11 +201,6 @@ def _libm_kernels(*names):
     return k
 
 
-def _atan2_kernels():
-    """:func:`_libm_kernels` for ``atan2`` alone."""
-    return _libm_kernels("atan2")
-
-
 def _columns(X, n: int) -> list:
     """The 9 entries of a nested 3x3 list (arrays or floats) as contiguous float64 columns of ``n`` rows."""
     return [np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (n,))) for row in X for v in row]
@@ -213,6 +208,15 @@ def _columns(X, n: int) -> list:
 
 def _rows(X) -> int:
     return int(np.broadcast(*[x for row in X for x in row]).shape[0])
+
+
+def _angle_rows(*arrays):
+    """The arrays as contiguous float64 ``(N, 3)`` arrays of one shape, or None when they are not that or have
+    fewer than :data:`_MIN_ROWS` rows (the kernels over angle triples take them so)."""
+    out = [np.ascontiguousarray(x, dtype=np.float64) for x in arrays]
+    a = out[0]
+    ok = a.ndim == 2 and a.shape[1] == 3 and len(a) >= _MIN_ROWS and all(x.shape == a.shape for x in out)
+    return out if ok else None
 
 
 def euler_from_matrix(R, axes, degrees: bool, check: bool):
@@ -242,11 +246,11 @@ def quat_matrix_from_euler(angles, scale, axes, intrinsic: bool):
     ``angles`` is ``(N, 3)``, ``scale`` the 3 factors each column is multiplied by first (one product: e.g. the
     degrees' ``pi / 180`` with a sign), ``axes`` the 3 axes (0, 1, 2 for x, y, z) in seq's order.
     """
-    a = np.ascontiguousarray(angles, dtype=np.float64)
-    k = _sin_cos_kernel() if a.ndim == 2 and a.shape[1] == 3 and len(a) >= _MIN_ROWS else None
+    got = _angle_rows(angles)
+    k = _sin_cos_kernel() if got is not None else None
     if k is None:
         return None
-    n = len(a)
+    a, n = got[0], len(got[0])
     q, M = np.empty((4, n)), np.empty((9, n))
     k.quat_matrix_from_euler(a, tuple(float(v) for v in scale), tuple(int(v) for v in axes), intrinsic, q, M)
     return tuple(q), [[M[3 * r + c] for c in range(3)] for r in range(3)]
@@ -257,10 +261,10 @@ def wrapped_cos_errors(e1, e2):
     of two ``(N, 3)`` angle arrays (radians) in one C loop, or None (kernels not built, or the C library's
     ``sincos`` or ``acos`` not numpy's here: then :func:`hpe_cli.metrics.peer_angles.opentrack_errors` computes
     them, the same numbers)."""
-    a, b = (np.ascontiguousarray(e, dtype=np.float64) for e in (e1, e2))
-    ok = a.ndim == 2 and a.shape == b.shape and a.shape[1] == 3 and len(a) >= _MIN_ROWS
-    if not ok or _sin_cos_kernel() is None or _libm_kernels("acos") is None:
+    got = _angle_rows(e1, e2)
+    if got is None or _sin_cos_kernel() is None or _libm_kernels("acos") is None:
         return None
+    a, b = got
     out, nan = np.empty(a.shape), np.empty(len(a), dtype=bool)
     kernels().wrapped_cos_errors(a, b, out, nan.view(np.uint8))
     return out, nan
@@ -270,11 +274,9 @@ def core_errors(P, G):
     """``(geodesic (N,), column angles (N, 3), Frobenius distance (N,))`` of nested 3x3 lists of columns (arrays or
     floats) in one C loop, or None where the kernels are not built or the C library's ``atan2`` does not give
     numpy's bits (then :mod:`hpe_cli.metrics.rotation_errors` computes them: the same numbers)."""
-    k = _atan2_kernels()
+    n = _rows([*P, *G])
+    k = _libm_kernels("atan2") if n >= _MIN_ROWS else None
     if k is None:
-        return None
-    n = int(np.broadcast(*[x for row in P for x in row], *[x for row in G for x in row]).shape[0])
-    if n < _MIN_ROWS:
         return None
     geo, maev, fro = np.empty(n), np.empty((n, 3)), np.empty(n)
     k.core_errors(_columns(P, n), _columns(G, n), geo, maev, fro)
@@ -285,10 +287,11 @@ def opal23_mae(a, p):
     """opal23's ``compute_mae`` of two ``(N, 3)`` ``as_euler('XYZ')`` angle arrays (degrees) in one C loop, or None
     (kernels not built or too few rows: then :func:`hpe_cli.metrics.peer_angles.opal23_mae` computes it, the same
     numbers). No C library function is called: the bits are numpy's by construction."""
-    a, p = (np.ascontiguousarray(x, dtype=np.float64) for x in (a, p))
-    k = kernels() if a.ndim == 2 and a.shape == p.shape and a.shape[1] == 3 and len(a) >= _MIN_ROWS else None
+    got = _angle_rows(a, p)
+    k = kernels() if got is not None else None
     if k is None:
         return None
+    a, p = got
     out = np.empty(a.shape)
     k.opal23_mae(a, p, out)
     return out
@@ -345,7 +348,7 @@ def system_angles(X, spec, scale, roles, middle: int, refine_below: float):
     (lock below ``refine_below``) are the caller's to recompute.
     """
     n = _rows(X)
-    k = _atan2_kernels() if n >= _MIN_ROWS else None
+    k = _libm_kernels("atan2") if n >= _MIN_ROWS else None
     if k is None:
         return None
     p1, p2, lock, near = np.empty((3, n)), np.empty((3, n)), np.empty(n), np.empty(n, dtype=bool)
@@ -451,11 +454,11 @@ def best_of_two(p1, p2, g, wrapped: bool):
     """``(best (N, 3), second (N,), wrapped (N, 3) or None)``: hpe's best-of-two and wrapped angle errors of three
     ``(N, 3)`` angle arrays (degrees) in one C loop, or None (kernels not built or too few rows: then
     :mod:`hpe_cli.metrics.rotation_errors` computes them, the same numbers; no C library function but ``fmod``)."""
-    a, b, c = (np.ascontiguousarray(x, dtype=np.float64) for x in (p1, p2, g))
-    ok = a.ndim == 2 and a.shape == b.shape == c.shape and a.shape[1] == 3 and len(a) >= _MIN_ROWS
-    k = kernels() if ok else None
+    got = _angle_rows(p1, p2, g)
+    k = kernels() if got is not None else None
     if k is None:
         return None
+    a, b, c = got
     best, second = np.empty(a.shape), np.empty(len(a), dtype=bool)
     w = np.empty(a.shape) if wrapped else None
     k.best_of_two(a, b, c, best, second.view(np.uint8), w)
