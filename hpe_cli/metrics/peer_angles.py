@@ -85,33 +85,25 @@ def img2pose_euler(R_img2pose) -> np.ndarray:
     return a * np.array([1.0, -1.0, -1.0])
 
 
-def opal23_quats(pyr) -> tuple:
-    """opal23's rotations of (pitch, yaw, roll) degrees as SciPy's quaternions (x, y, z, w columns):
-    ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])`` (SciPy's arithmetic, :mod:`.scipy_columns`)."""
-    a = np.asarray(pyr, dtype=np.float64) * np.array([1.0, -1.0, 1.0])
-    return sc.quat_from_euler("XYZ", a, degrees=True)
-
-
-#: opal23's angles to SciPy's: [pitch, -yaw, roll] in radians, one product a column
+#: opal23's angles to SciPy's: [pitch, -yaw, roll] in radians, one product a column ((x * -1) * d is x * -d)
 _OPAL23_SCALE = np.array([1.0, -1.0, 1.0]) * (np.pi / 180.0)
 
 
 def opal23_quats_and_matrices(pyr) -> tuple:
-    """``(opal23_quats(pyr), opal23_matrices(pyr))`` in one pass: the quaternions and their matrices."""
+    """opal23's rotations of (pitch, yaw, roll) degrees, ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])``, as
+    SciPy's quaternions (x, y, z, w columns) and their ``.as_matrix()`` (the nested 3x3 list of columns), in one
+    pass (SciPy's arithmetic, :func:`.scipy_columns.quat_and_matrix_from_euler`)."""
     return sc.quat_and_matrix_from_euler("XYZ", pyr, _OPAL23_SCALE)
 
 
 def opal23_matrix_of_quats(q) -> list:
-    """``.as_matrix()`` of :func:`opal23_quats` (the nested 3x3 list of columns)."""
+    """``.as_matrix()`` of :func:`opal23_quats_and_matrices`' quaternions (the nested 3x3 list of columns)."""
     return sc.matrix_from_quat(q)
 
 
 def opal23_matrices(pyr) -> list:
-    """opal23's matrices of (pitch, yaw, roll) degrees: ``Rotation.from_euler('XYZ', [pitch, -yaw, roll])``.
-
-    Returns the nested 3x3 list of columns of ``.as_matrix()`` (SciPy's arithmetic, :mod:`.scipy_columns`).
-    """
-    return opal23_matrix_of_quats(opal23_quats(pyr))
+    """The matrices of :func:`opal23_quats_and_matrices`."""
+    return opal23_quats_and_matrices(pyr)[1]
 
 
 def opal23_euler(M) -> np.ndarray:

@@ -194,14 +194,16 @@ def test_every_protocol_equals_the_scipy_path_on_a_chunk():
     raw = {"gt": (s300, g), "pred": (s6, p)}
     new = compute_rows(P, G, s300, list(PROTOCOLS), raw)
     saved = {
-        k: getattr(pa_, k) for k in ("opal23_matrices", "opal23_quats", "opal23_matrix_of_quats", "_euler", "_log")
+        k: getattr(pa_, k)
+        for k in ("opal23_matrices", "opal23_quats_and_matrices", "opal23_matrix_of_quats", "_euler", "_log")
     }
     try:  # the same protocol code on the old SciPy calls
         pa_.opal23_matrices = _old_opal23_matrices
-        pa_.opal23_quats = lambda pyr: tuple(
-            Rotation.from_euler("XYZ", np.asarray(pyr, float) * [1.0, -1.0, 1.0], degrees=True).as_quat().T
-        )
         pa_.opal23_matrix_of_quats = lambda q: Rotation.from_quat(np.stack(q, -1)).as_matrix()
+        pa_.opal23_quats_and_matrices = lambda pyr: (
+            tuple(Rotation.from_euler("XYZ", np.asarray(pyr, float) * [1.0, -1.0, 1.0], degrees=True).as_quat().T),
+            _old_opal23_matrices(pyr),
+        )
         pa_._euler = lambda R, seq, degrees=False: _old_euler(_arr(R) if isinstance(R, list) else R, seq, degrees)
         pa_._log = lambda M: Rotation.from_matrix(_arr(M) if isinstance(M, list) else M).as_rotvec()
         old = compute_rows(P, G, s300, list(PROTOCOLS), raw)
