@@ -107,8 +107,14 @@ def register_protocol(
 
 
 def _within_99(pyr) -> np.ndarray:
-    """All three |angles| <= 99 degrees (FSA-Net, 6DRepNet and img2pose test filters)."""
-    return (np.abs(pyr) <= 99.0).all(axis=-1)
+    """All three |angles| <= 99 degrees (FSA-Net, 6DRepNet and img2pose test filters); NaN is outside.
+
+    Column by column: numpy's ``all(axis=-1)`` over three booleans a row is 8x slower."""
+    a = np.abs(pyr)
+    keep = a[:, 0] <= 99.0
+    keep &= a[:, 1] <= 99.0
+    keep &= a[:, 2] <= 99.0
+    return keep
 
 
 def _written_pair(pair, system):
