@@ -26,6 +26,11 @@ from ..pools import in_order
 #: the protocol whose score waits for the mean
 OPAL23_ALIGN = "opal23-align"
 
+#: rows of the spill read at a time by the mean's passes (8 MB, a multiple of
+#: :data:`~hpe_cli.metrics.peer_angles.KARCHER_PIECE`, so the same pieces and the same mean as any other multiple):
+#: the passes run after the scoring pass, whose freed memory malloc keeps, so what they read adds to the peak
+KARCHER_CHUNK = 1 << 18
+
 
 def deferred_protocols(protocols, align: str) -> tuple:
     """The protocols of a run scored after its pass (:data:`OPAL23_ALIGN` when asked; with ``--align mean``
@@ -90,7 +95,7 @@ class KarcherSpill:
         self.f.close()
         size = os.path.getsize(self.path)
         with open(self.path, "rb") as f:  # read piece by piece: a memory map's pages would count in the peak
-            return pa_.opal23_karcher(_Rows(f, size // 32, 4), start=self.first[1], mapper=mapper)
+            return pa_.opal23_karcher(_Rows(f, size // 32, 4), chunk=KARCHER_CHUNK, start=self.first[1], mapper=mapper)
 
     def close(self) -> None:
         self.f.close()
