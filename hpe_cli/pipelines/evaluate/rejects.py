@@ -37,19 +37,7 @@ def collect_rejects(rej, gt, pred, gidx, pidx, unmatched, key_cols):
     valid = ~missing & gt.ok[gidx] & p_ok
     invalid = ~missing & ~valid
     for side, name in ((gt, "gt"), (pred, "pred")):
-        if side.unreadable:
-            ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
-            if rej.first_where is None:
-                rej.first_where, rej.source = f"line {ln[0]}: unreadable {name} row: {side.unreadable[0][1]}", side.path
-            rej.add(
-                {
-                    "side": np.full(len(ln), name, dtype=object),
-                    "input": np.full(len(ln), str(side.path), dtype=object),
-                    "line": ln,
-                },
-                np.array([f"unreadable {name} row: {u[1]}" for u in side.unreadable], dtype=object),
-                lines=ln,
-            )
+        unreadable_rejects(rej, side, name)
     rows = gidx[missing]
     add_rejects(
         rej,
@@ -117,6 +105,7 @@ def stream_rejects(rej, s, g: Chunk, p: Chunk, bad):
 
 
 def unreadable_rejects(rej, side, name):
+    """Send ``side``'s unreadable rows (``name``: "gt" or "pred") to ``rej``, each with its line and reason."""
     if side.unreadable:
         ln = np.array([u[0] for u in side.unreadable], dtype=np.int64)
         if rej.first_where is None:
