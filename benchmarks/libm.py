@@ -1,0 +1,195 @@
+"""What the C library's math functions cost ``hpe evaluate``'s default run, and what faster ones would change.
+
+    python benchmarks/libm.py [--rows 65536] [--seed 0]
+
+Two measurements, each in a child process built here with the system's C compiler (Linux with glibc; a part
+that cannot be built says so and is skipped):
+
+* calls per pair: a shim preloaded with ``LD_PRELOAD`` counts every call to ``atan2``, ``hypot``, ``acos``,
+  ``asin``, ``sin``, ``cos``, ``sincos`` and ``acosf`` (numpy's, SciPy's and hpe's kernels' alike) while
+  :func:`hpe_cli.metrics.evaluate.compute_rows` scores one chunk of ``--rows`` pairs with every protocol but
+  ``opal23-align`` (whose rows are scored after the pass), as ``hpe evaluate`` does: 300w_lp ground truth and
+  6drepnet predictions turned by about 5 degrees.
+* cost per call: a bare C loop over 4M random arguments calls glibc's scalar functions (the ones numpy and
+  SciPy call, whose results the peers' evaluation code prints) and glibc's AVX2 vector versions (``libmvec``,
+  ``_ZGVdN4...``); it prints both times, the share of results that differ and the largest difference in units
+  in the last place.
+
+hpe reproduces each peer's numbers to the last bit, so it calls the scalar functions; the second table says
+what the vector ones would save and what they would change.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import textwrap
+from pathlib import Path
+
+FUNCS = ("atan2", "hypot", "acos", "asin", "sin", "cos", "sincos", "acosf")
+
+# the counting shim: each wrapper counts, then calls the next definition (glibc's)
+SHIM = (
+    "#define _GNU_SOURCE\n#include <dlfcn.h>\n#include <stdatomic.h>\n"
+    "static atomic_long n_[8];\n"
+    "#define W1(f,i) static double (*r_##f)(double); double f(double x)"
+    "{ if(!r_##f) r_##f=dlsym(RTLD_NEXT,#f); atomic_fetch_add(&n_[i],1); return r_##f(x);}\n"
+    "#define W2(f,i) static double (*r_##f)(double,double); double f(double x,double y)"
+    "{ if(!r_##f) r_##f=dlsym(RTLD_NEXT,#f); atomic_fetch_add(&n_[i],1); return r_##f(x,y);}\n"
+    "W2(atan2,0) W2(hypot,1) W1(acos,2) W1(asin,3) W1(sin,4) W1(cos,5)\n"
+    "static void (*r_sc)(double,double*,double*);\n"
+    'void sincos(double x,double*s,double*c){ if(!r_sc) r_sc=dlsym(RTLD_NEXT,"sincos");'
+    " atomic_fetch_add(&n_[6],1); r_sc(x,s,c);}\n"
+    "static float (*r_af)(float);\n"
+    'float acosf(float x){ if(!r_af) r_af=dlsym(RTLD_NEXT,"acosf"); atomic_fetch_add(&n_[7],1); return r_af(x);}\n'
+    "void hpe_count_reset(void){ for(int i=0;i<8;i++) n_[i]=0; }\n"
+    "long hpe_count(int i){ return n_[i]; }\n"
+)
+
+# scalar against vector, the same arguments
+LOOPS = textwrap.dedent(
+    """
+    #define _GNU_SOURCE
+    #include <stdio.h>
+    #include <stdlib.h>
+    #include <math.h>
+    #include <time.h>
+    #include <immintrin.h>
+    __m256d _ZGVdN4vv_atan2(__m256d, __m256d);
+    __m256d _ZGVdN4vv_hypot(__m256d, __m256d);
+    __m256d _ZGVdN4v_acos(__m256d);
+    __m256d _ZGVdN4v_sin(__m256d);
+    static double now(void) { struct timespec a; clock_gettime(CLOCK_MONOTONIC, &a); return a.tv_sec * 1e9 + a.tv_nsec; }
+    static void report(const char *name, const double *s, const double *v, int n, double ts, double tv) {
+        long diff = 0; double worst = 0;
+        for (int i = 0; i < n; i++) if (s[i] != v[i]) {
+            diff++;
+            double u = fabs(s[i] - v[i]) / (nextafter(fabs(s[i]), INFINITY) - fabs(s[i]));
+            if (u > worst) worst = u;
+        }
+        printf("%s %.2f %.2f %.2f %.1f\\n", name, ts, tv, 100.0 * diff / n, worst);
+    }
+    int main(void) {
+        int n = 1 << 22;
+        double *x = aligned_alloc(32, 8 * n), *y = aligned_alloc(32, 8 * n);
+        double *s = aligned_alloc(32, 8 * n), *v = aligned_alloc(32, 8 * n);
+        srand(1);
+        for (int i = 0; i < n; i++) { x[i] = rand() / (double)RAND_MAX * 2 - 1; y[i] = rand() / (double)RAND_MAX * 2 - 1; }
+        for (int i = 0; i < n; i++) s[i] = v[i] = 0;  /* pages faulted before timing */
+        double t, ts, tv;
+    #define RUN(NAME, SCALAR, VECTOR) \\
+        t = now(); for (int i = 0; i < n; i++) s[i] = SCALAR; ts = (now() - t) / n; \\
+        t = now(); for (int i = 0; i < n; i += 4) { __m256d X = _mm256_load_pd(x + i), Y = _mm256_load_pd(y + i); \\
+                                                    _mm256_store_pd(v + i, VECTOR); } tv = (now() - t) / n; \\
+        report(NAME, s, v, n, ts, tv);
+        RUN("atan2", atan2(y[i], x[i]), _ZGVdN4vv_atan2(Y, X))
+        RUN("hypot", hypot(y[i], x[i]), _ZGVdN4vv_hypot(Y, X))
+        RUN("acos", acos(x[i]), _ZGVdN4v_acos(X))
+        RUN("sin", sin(3 * x[i]), _ZGVdN4v_sin(_mm256_mul_pd(X, _mm256_set1_pd(3.0))))
+        return 0;
+    }
+    """
+)
+
+# the child that scores one chunk under the shim
+CHILD = textwrap.dedent(
+    """
+    import ctypes, sys
+    import numpy as np
+    from hpe_cli.metrics.evaluate import compute_rows
+    from hpe_cli.metrics.protocols import PROTOCOLS
+    from hpe_cli.pipelines.evaluate.opal23 import opal23_chunk
+    from hpe_cli.rotation.systems import get_system
+
+    n, seed, shim = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+    lib = ctypes.CDLL(shim)
+    lib.hpe_count.restype = ctypes.c_long
+    rng = np.random.default_rng(seed)
+    gt = np.column_stack([rng.uniform(-60, 60, n), rng.uniform(-85, 85, n), rng.uniform(-45, 45, n)])
+    pred = gt + rng.normal(0, 3, (n, 3))
+    ps, gs = get_system("6drepnet"), get_system("300w_lp")
+    P = ps.soa_to_canonical(ps.soa_from_angles(*pred.T))
+    G = gs.soa_to_canonical(gs.soa_from_angles(*gt.T))
+    raw = {"pred": ("6drepnet", pred), "gt": ("300w_lp", gt)}
+    names = [p for p in PROTOCOLS if p != "opal23-align"]
+    compute_rows(P, G, gs, names, raw, {}, opal23_chunk)  # warm: probes, caches
+    lib.hpe_count_reset()
+    compute_rows(P, G, gs, names, raw, {}, opal23_chunk)
+    print(" ".join(str(lib.hpe_count(i) / n) for i in range(8)))
+    """
+)
+
+
+def _compile(cc: str, src: str, out: Path, *flags: str) -> str | None:
+    """Compile ``src`` to ``out``; None when it built, else the compiler's first error line."""
+    c = out.with_suffix(".c")
+    c.write_text(src)
+    r = subprocess.run([cc, "-O2", *flags, "-o", str(out), str(c), "-lm"], capture_output=True, text=True)
+    if r.returncode:
+        lines = [ln for ln in r.stderr.splitlines() if "error" in ln] or r.stderr.splitlines() or ["failed"]
+        return lines[0]
+    return None
+
+
+def count_calls(cc: str, tmp: Path, rows: int, seed: int = 0):
+    """``{function: calls per pair}`` of one chunk scored with every protocol but opal23-align, or the reason it
+    could not be counted (a string)."""
+    shim = tmp / "libcount.so"
+    err = _compile(cc, SHIM, shim, "-shared", "-fPIC", "-ldl")
+    if err:
+        return f"the counting shim did not build: {err}"
+    env = dict(os.environ, LD_PRELOAD=str(shim))
+    r = subprocess.run(
+        [sys.executable, "-c", CHILD, str(rows), str(seed), str(shim)], env=env, capture_output=True, text=True
+    )
+    if r.returncode:
+        return f"the child failed: {(r.stderr.strip().splitlines() or ['no message'])[-1]}"
+    return dict(zip(FUNCS, (float(v) for v in r.stdout.split())))
+
+
+def calls_per_pair(cc: str, tmp: Path, rows: int, seed: int) -> None:
+    counts = count_calls(cc, tmp, rows, seed)
+    if isinstance(counts, str):
+        print(f"calls per pair: skipped ({counts})")
+        return
+    print(f"C library calls per pair, every protocol but opal23-align, one chunk of {rows:,} pairs:")
+    print("  " + "  ".join(f"{f} {c:.2f}" for f, c in counts.items() if c >= 0.005))
+
+
+def scalar_against_vector(cc: str, tmp: Path) -> None:
+    exe = tmp / "loops"
+    err = _compile(cc, LOOPS, exe, "-mavx2", "-mfma", "-lmvec")
+    if err:
+        print(f"scalar against vector: skipped (no AVX2 libmvec here: {err})")
+        return
+    r = subprocess.run([str(exe)], capture_output=True, text=True)
+    if r.returncode:
+        print("scalar against vector: skipped (the loops did not run on this CPU)")
+        return
+    print("glibc's scalar functions (numpy's, SciPy's) against its AVX2 vector ones, 4M random arguments:")
+    print(f"  {'function':10s} {'scalar':>9s} {'vector':>9s}  {'results differing':>18s}  {'largest':>8s}")
+    for line in r.stdout.split("\n"):
+        if line.strip():
+            name, ts, tv, pct, ulp = line.split()
+            print(f"  {name:10s} {float(ts):6.1f} ns {float(tv):6.1f} ns  {float(pct):17.1f}%  {float(ulp):4.0f} ulp")
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rows", type=int, default=65536, help="pairs in the counted chunk (default 65536)")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    if cc is None:
+        sys.exit("benchmarks/libm.py: no C compiler (set CC)")
+    with tempfile.TemporaryDirectory(prefix="hpe_libm_") as tmp:
+        calls_per_pair(cc, Path(tmp), a.rows, a.seed)
+        scalar_against_vector(cc, Path(tmp))
+
+
+if __name__ == "__main__":
+    main()
