@@ -1,6 +1,6 @@
 """``hpe view`` on a large synthetic table: build time, rebuild time (thumbnails cached) and page-open time.
 
-Run:  python benchmarks/view.py [--rows 100000] [--images 5] [--workers 2] [--repeat 3]
+Run:  python benchmarks/view.py [--rows 100000] [--images 5] [--threads 2] [--repeat 3]
 
 The table has ``--rows`` faces cut from a handful of 1280x720 JPEGs (random boxes, random poses, camera /
 person / split columns and a flag column). Printed, each beside its floor measured in the same run:
@@ -118,7 +118,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rows", type=int, default=100_000)
     ap.add_argument("--images", type=int, default=5)
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)
     browser = find_chromium()
@@ -127,15 +127,15 @@ def main(argv=None):
         labels, table = make_data(tmp, args.rows, args.images)
         page = tmp / "page"
         build, out = run_hpe(
-            ["view", labels, "-o", page, "--images", tmp / "imgs", "--workers", args.workers, "--title", "bench"]
+            ["view", labels, "-o", page, "--images", tmp / "imgs", "--threads", args.threads, "--title", "bench"]
         )
         rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
         rebuild, out2 = run_hpe(
-            ["view", labels, "-o", page, "--images", tmp / "imgs", "--workers", args.workers, "--overwrite", "-q"]
+            ["view", labels, "-o", page, "--images", tmp / "imgs", "--threads", args.threads, "--overwrite", "-q"]
         )
         floor = floor_thumbnails(tmp, table, tmp / "floor")
         size = (page / "rows.js").stat().st_size / 1e6
-        print(f"hpe view, {args.rows:,} rows from {args.images} images, {args.workers} worker threads")
+        print(f"hpe view, {args.rows:,} rows from {args.images} images, {args.threads} threads")
         print("  " + next((x for x in out.splitlines() if "rows shown" in x), out.strip()[-300:]))
         print(f"  build        {build:7.1f} s   floor (bare OpenCV loop, 1 thread) {floor:6.1f} s   "
               f"ratio {build / floor:4.2f}   hpe peak RSS {rss:.0f} MB")  # fmt: skip

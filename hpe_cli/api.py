@@ -363,7 +363,7 @@ def view_file(
     Writes a browsable offline page of every row of ``labels`` (and of ``other`` joined by ``keys`` beside it)
     into folder ``output``; open ``output/index.html``. Returns the counts (``rows``, ``shown``,
     ``whole_frame``, ``made``, ``reused``, ``images``, ``matched``, ``rejects``, ``system``). ``options``:
-    the other :class:`~hpe_cli.pipelines.view.ViewOptions` fields (``radians``, ``use``, ``workers``,
+    the other :class:`~hpe_cli.pipelines.view.ViewOptions` fields (``radians``, ``use``, ``threads``,
     ``title``, ``frames``, ``also_in``: system names or ``.toml`` files whose angles the page can filter by).
 
     Examples

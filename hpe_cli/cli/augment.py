@@ -265,7 +265,7 @@ def augment(
         overwrite=overwrite,
         batch_size=batch_size,
         verbose=verbose,
-        workers=threads,
+        threads=threads,
     )
     desc = opts.description
     bar = progress(desc="augment", quiet=quiet)

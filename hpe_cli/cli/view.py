@@ -16,6 +16,7 @@ from .options import (
     progress,
     radians_option,
     rejects_options,
+    threads_option,
     verbosity_options,
 )
 from .table_options import column_options
@@ -56,7 +57,7 @@ from .table_options import column_options
     "tables have it].",
 )
 @click.option("--title", help="Page title [default: LABELS' file name].")
-@click.option("--workers", type=click.IntRange(1), default=2, show_default=True, help="Threads making thumbnails.")
+@threads_option
 @click.option(
     "--frames/--no-frames",
     default=True,
@@ -80,7 +81,7 @@ def view(
     use,
     keys,
     title,
-    workers,
+    threads,
     frames,
     rejects,
     strict,
@@ -130,7 +131,7 @@ def view(
         radians=radians,
         use=use,
         keys=keys,
-        workers=workers,
+        threads=threads,
         title=title,
         frames=frames,
         rejects_path=rejects,

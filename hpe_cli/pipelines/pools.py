@@ -278,18 +278,18 @@ def in_order(pool, fn, items, ahead: int | None = None):
             fut.cancel()
 
 
-def run_in_order(items, work, finish, workers: int) -> None:
+def run_in_order(items, work, finish, threads: int) -> None:
     """``finish(*item, work(item[0]))`` for every tuple ``item``, in input order, while ``work`` runs on
-    ``workers`` threads (:func:`in_order` on a thread pool of its own).
+    ``threads`` threads (:func:`in_order` on a thread pool of its own).
 
-    At most ``workers + 1`` items are in flight, so memory stays flat: the pattern of the row jobs that read
+    At most ``threads + 1`` items are in flight, so memory stays flat: the pattern of the row jobs that read
     batches on this thread (``item[1:]`` rides along: line numbers, the reader's rejects), compute on the threads
     and write on this thread in input order.
     """
     from concurrent.futures import ThreadPoolExecutor  # lazy: start-up
 
-    with ThreadPoolExecutor(workers) as pool:
-        done = in_order(pool, lambda item: (item, work(item[0])), items, ahead=workers + 1)
+    with ThreadPoolExecutor(threads) as pool:
+        done = in_order(pool, lambda item: (item, work(item[0])), items, ahead=threads + 1)
         try:
             for item, result in done:
                 finish(*item, result)

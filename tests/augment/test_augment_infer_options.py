@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import shutil
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -53,6 +54,20 @@ def test_augment_options_are_frozen_and_describe_the_op():
     assert opts.description == "rotate 30 deg counter-clockwise"
     assert describe_op("crop", crop=(1, 2, 30, 40)) == "crop 30x40 at (1, 2)"
     assert AugmentOptions("hvflip").description == "hflip+vflip (rotation by 180)"
+
+
+def test_augment_options_threads_and_the_deprecated_workers():
+    """``threads`` is the spelling (as ``--threads`` and every other command's options); ``workers=`` still works,
+    with a DeprecationWarning, once."""
+    assert AugmentOptions("hflip", threads=3).threads == 3
+    with pytest.warns(DeprecationWarning, match="use threads="):
+        opts = AugmentOptions("hflip", workers=2)
+    assert opts.threads == 2 and opts.workers is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert dataclasses.replace(opts, batch_size=7).threads == 2
+    with pytest.raises(UsageError, match="threads: expected an integer >= 1"):
+        AugmentOptions("hflip", threads=0)
 
 
 @pytest.mark.parametrize(

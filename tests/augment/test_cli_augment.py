@@ -510,7 +510,7 @@ def test_threaded_pipeline_same_output_and_rejects(tmp_path):
     for workers, bs in ((1, 1000), (2, 7)):
         out, rej = tmp_path / f"o{workers}.parquet", tmp_path / f"r{workers}.csv"
         opts = AugmentOptions(
-            "rotate", 20.0, system=get_system("300w_lp"), image_size=(W, H), rejects=rej, batch_size=bs, workers=workers
+            "rotate", 20.0, system=get_system("300w_lp"), image_size=(W, H), rejects=rej, batch_size=bs, threads=workers
         )
         s = run_augment(src, out, opts)
         assert s["rows"] == 50 and s["written"] == 47

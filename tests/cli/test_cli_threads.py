@@ -113,7 +113,7 @@ CORES_OPTION = {
     "relabel-agora": ("--threads", "thread"),
     "biwi": ("--threads", "thread"),
     "infer": ("--threads", "thread"),
-    "view": ("--workers", "thread"),
+    "view": ("--threads", "thread"),
     "export": ("--workers", "process"),
     "relabel-panoptic": ("--workers", "process"),
 }
@@ -287,10 +287,10 @@ def test_api_takes_threads_as_the_cli(tmp_path):
         assert pq.read_table(tmp_path / "b.parquet").num_rows > 0
 
 
-def test_view_same_bytes_for_1_2_3_workers(tmp_path):
-    """view's ``--workers`` (thumbnail threads): the same page whatever the number."""
+def test_view_same_bytes_for_1_2_3_threads(tmp_path):
+    """view's ``--threads`` (thumbnail threads): the same page whatever the number."""
     pages = []
     for w in (1, 2, 3):
-        hpe("view", ROOT / "sample_data/aflw2000", "-o", tmp_path / f"v{w}/page.html", "--workers", w, "-q", ok=True)
+        hpe("view", ROOT / "sample_data/aflw2000", "-o", tmp_path / f"v{w}/page.html", "--threads", w, "-q", ok=True)
         pages.append(_tree_bytes(tmp_path / f"v{w}"))
     assert pages[0] and pages[1] == pages[0] and pages[2] == pages[0]

@@ -47,7 +47,7 @@ def test_api_draw_file_writes_the_cli_bytes(tmp_path, args, options):
         (lambda: DrawOptions(canvas=(640,)), "canvas: expected (width, height), got (640,)"),
         (lambda: DrawOptions(tdy_origin="middle"), "tdy_origin: expected one of auto, top, bottom, got 'middle'"),
         (lambda: WorstOptions(on_missing="ignore"), "on_missing: expected one of canvas, error, skip, got 'ignore'"),
-        (lambda: ViewOptions(workers=0), "workers: expected an integer >= 1, got 0"),
+        (lambda: ViewOptions(threads=0), "threads: expected an integer >= 1 or None, got 0"),
         (lambda: ViewOptions(use="rotvec"), "use: expected one of auto, angles, matrix, got 'rotvec'"),
         (lambda: ViewOptions(keys="image"), "keys: expected a list of column names, got 'image'"),
     ],

@@ -85,7 +85,7 @@ def test_thumbnails_are_the_video_frames_pixels_each_video_decoded_once(tmp_path
 
     monkeypatch.setattr(panoptic_video.VideoFrames, "read", spy)
     page = tmp_path / "page"
-    r = hpe("view", labels, "-o", page, "--images", root, "--rejects", tmp_path / "rej.csv", "--workers", "2")
+    r = hpe("view", labels, "-o", page, "--images", root, "--rejects", tmp_path / "rej.csv", "--threads", "2")
     assert r.exit_code == 0, r.output
     assert "40 of 41 rows shown" in r.output, r.output
 

@@ -23,9 +23,9 @@ def run_augment(input, output, opts: AugmentOptions, *, bar=None) -> dict:
 
     ``opts.image_size`` (``(W, H)`` or None) is checked against the table's ``image_width/image_height`` and the
     images; a row where two of them disagree is rejected. ``opts.op = "crop"`` with ``opts.crop = (x, y, w, h)``
-    cuts the images to that rectangle. Batches are transformed on ``opts.workers`` threads (default: one per core,
-    at most 8)
-    while this thread reads, moves images and writes in order; at most ``workers + 1`` batches are in flight.
+    cuts the images to that rectangle. Batches are transformed on ``opts.threads`` threads (default: one per core,
+    at most 8) while this thread reads, moves images and writes in order; at most ``threads + 1`` batches are in
+    flight.
     A ``.mat`` folder without ``opts.images_dir`` uses its own images (:func:`~.options.for_input`): an image
     found there gives (and checks) the row's size, a missing one is no reject. ``bar``: a tqdm-like progress bar.
     """
@@ -46,7 +46,7 @@ def run_augment(input, output, opts: AugmentOptions, *, bar=None) -> dict:
         if opts.out_images is not None:
             sink.job = _image_job(stack.enter_context(staged_dir(opts.out_images, opts.overwrite)), path, plan, opts)
         sink.writer = stack.enter_context(TableWriter(output, opts.overwrite, _metadata(plan, opts)))
-        run_in_order(batches_or_empty(labels.table), plan.work, sink.finish, default_threads(opts.workers))
+        run_in_order(batches_or_empty(labels.table), plan.work, sink.finish, default_threads(opts.threads))
         rejects.check()  # without --rejects (or with --strict) any bad row fails the run: nothing is written
         if sink.rows and not sink.written:  # the rejects file is still written: it says why
             fail_all_rejected(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -71,10 +72,13 @@ class AugmentOptions:
         ``--rejects FILE``, ``--strict``, ``--overwrite``.
     batch_size : int
         Rows per batch (>= 1).
-    workers : int, optional
-        Threads transforming batches (None: up to 2).
+    threads : int, optional
+        Threads transforming batches, >= 1 (``--threads``); None: one per core, at most 8
+        (:func:`hpe_cli.pipelines.pools.default_threads`). The output does not depend on it.
     verbose : int
         ``-v`` count.
+    workers : int, optional
+        Deprecated spelling of ``threads`` (a ``DeprecationWarning``; ``--workers`` is for processes).
     """
 
     op: str
@@ -98,10 +102,20 @@ class AugmentOptions:
     strict: bool = False
     overwrite: bool = False
     batch_size: int = DEFAULT_BATCH
-    workers: int | None = None
+    threads: int | None = None
     verbose: int = 0
+    workers: int | None = None
 
     def __post_init__(self):
+        if self.workers is not None:
+            warnings.warn("AugmentOptions: workers= is deprecated, use threads=", DeprecationWarning, stacklevel=3)
+            if self.threads is None:
+                object.__setattr__(self, "threads", self.workers)
+            object.__setattr__(self, "workers", None)  # said once: dataclasses.replace does not warn again
+        if self.threads is not None and not (
+            isinstance(self.threads, int) and not isinstance(self.threads, bool) and self.threads >= 1
+        ):
+            raise UsageError(f"threads: expected an integer >= 1 or None, got {self.threads!r}")
         for name, value, allowed in (
             ("op", self.op, OPS),
             ("scheme", self.scheme, SCHEMES),

@@ -27,6 +27,7 @@ from ...metrics.rotation_errors import geodesic_deg
 from ...report import view_page
 from ...rotation.systems import get_system
 from ..draw.rows import DEFAULT_LENGTH_FRACTION, face_placement, image_names
+from ..pools import library_threads
 from . import thumbs as vt
 from .options import ViewOptions
 from .tables import Table, pair, read_table
@@ -70,7 +71,7 @@ def run_view(labels, outdir, other=None, options: ViewOptions = ViewOptions(), *
     outdir : str or Path
         Page folder; ``index.html`` opens from ``file://``. An earlier page there is the thumbnail cache.
     options : ViewOptions
-        The command's settings (images, systems, ``also_in``, keys, workers, title, frames, rejects...).
+        The command's settings (images, systems, ``also_in``, keys, threads, title, frames, rejects...).
     progress : tqdm, optional
         A bar whose total is set to the number of thumbnails made.
 
@@ -82,7 +83,15 @@ def run_view(labels, outdir, other=None, options: ViewOptions = ViewOptions(), *
         earlier page in ``outdir`` this one no longer uses, removed with the commit), ``images``, ``matched``
         (rows of ``labels`` with a row of ``other``), ``keys``, ``rejects`` (reason -> count), ``system``,
         ``notes``.
+
+    The pictures are made on ``options.threads`` threads, with OpenCV's and pyarrow's pools limited to as many
+    (:func:`~hpe_cli.pipelines.pools.library_threads`); the page is the same bytes whatever the number.
     """
+    with library_threads(options.threads) as threads:
+        return _run_view(labels, outdir, other, options, threads, progress)
+
+
+def _run_view(labels, outdir, other, options: ViewOptions, threads: int, progress) -> dict:
     outdir = Path(outdir)
     if (outdir / "index.html").exists() and not options.overwrite:
         raise HpeError(f"{outdir / 'index.html'}: exists (use --overwrite; thumbnails already made are reused)")
@@ -108,9 +117,7 @@ def run_view(labels, outdir, other=None, options: ViewOptions = ViewOptions(), *
         rejects.check()  # fail before making any picture
     with ensure_transaction() as txn, staged_dir(outdir, options.overwrite) as stage:
         stage = Path(stage)
-        failed, made = _make_pictures(
-            a, pics, np.flatnonzero(shown), joined, (stage, outdir), options.workers, progress
-        )
+        failed, made = _make_pictures(a, pics, np.flatnonzero(shown), joined, (stage, outdir), threads, progress)
         for rows, reason in _failed_rows(pics, failed):  # unreadable after all: its rows become rejects
             _reject(rejects, a, rows, np.full(len(rows), reason, dtype=object))
             why[rows] = reason
@@ -199,7 +206,7 @@ def _plan_pictures(a: Table, root, A_other, frames: bool) -> Pictures:
     return Pictures(refs, sizes, img_code, missing, centre, L, crops, frame_names, thumb)
 
 
-def _make_pictures(a: Table, pics: Pictures, idx, joined: Other, folders, workers, progress) -> tuple:
+def _make_pictures(a: Table, pics: Pictures, idx, joined: Other, folders, threads: int, progress) -> tuple:
     """Make the pictures of rows ``idx`` that the earlier page in ``outdir`` does not have, into ``stage``
     (``folders = (stage, outdir)``). Returns ``(failed, made)``: ``[(ref, reason, thumbnails not made)]`` of the
     pictures that could not be read, and the number of thumbnails made."""
@@ -223,7 +230,7 @@ def _make_pictures(a: Table, pics: Pictures, idx, joined: Other, folders, worker
     if progress is not None:
         progress.total = sum(t.n for t in tasks)
         progress.refresh()
-    failed = vt.run_tasks(tasks, workers, progress)
+    failed = vt.run_tasks(tasks, threads, progress)
     return failed, sum(t.n for t in tasks) - sum(n for _, _, n in failed)
 
 

@@ -32,8 +32,9 @@ class ViewOptions:
     keys : sequence of str, optional
         Columns pairing OTHER's rows with LABELS' (default: ``image`` or ``file``, plus ``person_id`` when both
         tables have it).
-    workers : int, >= 1
-        Threads making the pictures.
+    threads : int, optional
+        Threads making the pictures (default: one per core, at most 8); OpenCV's own pool is limited to as
+        many. The page is the same whatever the number.
     title : str, optional
         Page title (default: LABELS' file name).
     frames : bool
@@ -59,7 +60,7 @@ class ViewOptions:
     radians: bool = False
     use: str = "auto"
     keys: tuple | None = None
-    workers: int = 1
+    threads: int | None = None
     title: str | None = None
     frames: bool = True
     rejects_path: str | Path | None = None
@@ -69,9 +70,9 @@ class ViewOptions:
     def __post_init__(self):
         if self.use not in USES:
             raise HpeError(f"use: expected one of {', '.join(USES)}, got {self.use!r}")
-        w = self.workers
-        if not (isinstance(w, int) and not isinstance(w, bool) and w >= 1):
-            raise HpeError(f"workers: expected an integer >= 1, got {w!r}")
+        w = self.threads
+        if w is not None and not (isinstance(w, int) and not isinstance(w, bool) and w >= 1):
+            raise HpeError(f"threads: expected an integer >= 1 or None, got {w!r}")
         if isinstance(self.keys, str) or (self.keys is not None and not all(isinstance(k, str) for k in self.keys)):
             raise HpeError(f"keys: expected a list of column names, got {self.keys!r}")
         if isinstance(self.also_in, str):

@@ -258,8 +258,8 @@ def make_tasks(groups, stage, thumbs_needed, frames_needed) -> list:
     return tasks
 
 
-def run_tasks(tasks, workers: int, progress=None) -> list:
-    """Run the tasks (on ``workers`` threads when more than one: OpenCV's decode, resize, drawing and encode
+def run_tasks(tasks, threads: int, progress=None) -> list:
+    """Run the tasks (on ``threads`` threads when more than one: OpenCV's decode, resize, drawing and encode
     release the GIL); ``[(ref, reason, thumbnails not made)]`` of the pictures that could not be read."""
     failed = []
 
@@ -268,12 +268,12 @@ def run_tasks(tasks, workers: int, progress=None) -> list:
         if progress is not None:
             progress.update(task.n)
 
-    if workers <= 1 or len(tasks) <= 1:
+    if threads <= 1 or len(tasks) <= 1:
         for t in tasks:
             done(t, run_task(t))
         return failed
-    with ThreadPoolExecutor(workers, thread_name_prefix="hpe-view") as pool:
-        for t, res in zip(tasks, in_order(pool, run_task, tasks, ahead=4 * workers)):
+    with ThreadPoolExecutor(threads, thread_name_prefix="hpe-view") as pool:
+        for t, res in zip(tasks, in_order(pool, run_task, tasks, ahead=4 * threads)):
             done(t, res)
     return failed
 
