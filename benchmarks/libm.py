@@ -1,6 +1,6 @@
 """What the C library's math functions cost ``hpe evaluate``'s default run, and what faster ones would change.
 
-    python benchmarks/libm.py [--rows 65536] [--seed 0]
+    python benchmarks/libm.py [--rows 65536] [--seed 0] [--run PRED GT]
 
 Two measurements, each in a child process built here with the system's C compiler (Linux with glibc; a part
 that cannot be built says so and is skipped):
@@ -14,6 +14,12 @@ that cannot be built says so and is skipped):
   SciPy call, whose results the peers' evaluation code prints) and glibc's AVX2 vector versions (``libmvec``,
   ``_ZGVdN4...``); it prints both times, the share of results that differ and the largest difference in units
   in the last place.
+
+* ``--run PRED GT``: a whole ``hpe evaluate PRED GT`` run (every protocol; 6drepnet predictions, 300w_lp ground
+  truth, as ``benchmarks/evaluate.py`` writes them) under the shim: its calls per pair, labels and opal23-align's
+  second pass included, times each function's scalar cost measured here: the C library's floor for that run,
+  in CPU seconds and in wall seconds on this machine's cores, beside the run's own time (the shim's counting
+  adds a little to it).
 
 hpe reproduces each peer's numbers to the last bit, so it calls the scalar functions; the second table says
 what the vector ones would save and what they would change.
@@ -95,6 +101,52 @@ LOOPS = textwrap.dedent(
     """
 )
 
+# each function's scalar cost, the arguments in its usual range (no vector unit needed)
+COSTS = textwrap.dedent(
+    """
+    #define _GNU_SOURCE
+    #include <stdio.h>
+    #include <stdlib.h>
+    #include <math.h>
+    #include <time.h>
+    static double now(void) { struct timespec a; clock_gettime(CLOCK_MONOTONIC, &a); return a.tv_sec * 1e9 + a.tv_nsec; }
+    int main(void) {
+        int n = 1 << 21;
+        double *x = malloc(8 * n), *y = malloc(8 * n), *o = malloc(8 * n), *p = malloc(8 * n), acc = 0, t;
+        float *f = malloc(4 * n), *g = malloc(4 * n);
+        srand(1);
+        for (int i = 0; i < n; i++) {
+            x[i] = rand() / (double)RAND_MAX * 2 - 1; y[i] = rand() / (double)RAND_MAX * 2 - 1;
+            f[i] = (float)x[i]; o[i] = p[i] = g[i] = 0;
+        }
+    #define COST(NAME, BODY) t = now(); for (int i = 0; i < n; i++) { BODY; } \
+        printf("%s %.3f\\n", NAME, (now() - t) / n); acc += o[n / 2] + p[n / 3] + g[n / 5];
+        COST("atan2", o[i] = atan2(y[i], x[i]))
+        COST("hypot", o[i] = hypot(y[i], x[i]))
+        COST("acos", o[i] = acos(x[i]))
+        COST("asin", o[i] = asin(x[i]))
+        COST("sin", o[i] = sin(3 * x[i]))
+        COST("cos", o[i] = cos(3 * x[i]))
+        COST("sincos", sincos(3 * x[i], o + i, p + i))
+        COST("acosf", g[i] = acosf(f[i]))
+        return acc > 1e300;
+    }
+    """
+)
+
+# the child that runs one command under the shim, in process (the CLI leaves with os._exit), then writes the counts
+RUN_CHILD = textwrap.dedent(
+    """
+    import ctypes, sys
+    from hpe_cli.cli.main import cli
+    lib = ctypes.CDLL(sys.argv[1])
+    lib.hpe_count.restype = ctypes.c_long
+    cli(args=sys.argv[3:], standalone_mode=False)
+    with open(sys.argv[2], "w") as f:
+        f.write(" ".join(str(lib.hpe_count(i)) for i in range(8)))
+    """
+)
+
 # the child that scores one chunk under the shim
 CHILD = textwrap.dedent(
     """
@@ -103,6 +155,7 @@ CHILD = textwrap.dedent(
     from hpe_cli.metrics.evaluate import compute_rows
     from hpe_cli.metrics.protocols import PROTOCOLS
     from hpe_cli.pipelines.evaluate.opal23 import opal23_chunk
+    from hpe_cli.pipelines.evaluate.sides import stored_of_angles
     from hpe_cli.rotation.systems import get_system
 
     n, seed, shim = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
@@ -112,14 +165,19 @@ CHILD = textwrap.dedent(
     gt = np.column_stack([rng.uniform(-60, 60, n), rng.uniform(-85, 85, n), rng.uniform(-45, 45, n)])
     pred = gt + rng.normal(0, 3, (n, 3))
     ps, gs = get_system("6drepnet"), get_system("300w_lp")
-    P = ps.soa_to_canonical(ps.soa_from_angles(*pred.T))
-    G = gs.soa_to_canonical(gs.soa_from_angles(*gt.T))
+    def labels():  # as evaluate's readers build both sides' matrices from their angles
+        return ps.soa_to_canonical(stored_of_angles(ps, pred)), gs.soa_to_canonical(stored_of_angles(gs, gt))
+    def counted(job):
+        job()  # warm: probes, caches
+        lib.hpe_count_reset()
+        out = job()
+        return out, " ".join(str(lib.hpe_count(i) / n) for i in range(8))
+    (P, G), label_calls = counted(labels)
     raw = {"pred": ("6drepnet", pred), "gt": ("300w_lp", gt)}
     names = [p for p in PROTOCOLS if p != "opal23-align"]
-    compute_rows(P, G, gs, names, raw, {}, opal23_chunk)  # warm: probes, caches
-    lib.hpe_count_reset()
-    compute_rows(P, G, gs, names, raw, {}, opal23_chunk)
-    print(" ".join(str(lib.hpe_count(i) / n) for i in range(8)))
+    _, scoring_calls = counted(lambda: compute_rows(P, G, gs, names, raw, {}, opal23_chunk))
+    print(scoring_calls)
+    print(label_calls)
     """
 )
 
@@ -136,8 +194,9 @@ def _compile(cc: str, src: str, out: Path, *flags: str) -> str | None:
 
 
 def count_calls(cc: str, tmp: Path, rows: int, seed: int = 0):
-    """``{function: calls per pair}`` of one chunk scored with every protocol but opal23-align, or the reason it
-    could not be counted (a string)."""
+    """``{"scoring": {function: calls per pair}, "labels": {...}}``: one chunk scored with every protocol but
+    opal23-align, and both sides' matrices built from their angles; or the reason they could not be counted (a
+    string)."""
     shim = tmp / "libcount.so"
     err = _compile(cc, SHIM, shim, "-shared", "-fPIC", "-ldl")
     if err:
@@ -148,7 +207,10 @@ def count_calls(cc: str, tmp: Path, rows: int, seed: int = 0):
     )
     if r.returncode:
         return f"the child failed: {(r.stderr.strip().splitlines() or ['no message'])[-1]}"
-    return dict(zip(FUNCS, (float(v) for v in r.stdout.split())))
+    scoring, labels = r.stdout.strip().splitlines()[-2:]
+    return {
+        k: dict(zip(FUNCS, (float(v) for v in line.split()))) for k, line in (("scoring", scoring), ("labels", labels))
+    }
 
 
 def calls_per_pair(cc: str, tmp: Path, rows: int, seed: int) -> None:
@@ -156,8 +218,12 @@ def calls_per_pair(cc: str, tmp: Path, rows: int, seed: int) -> None:
     if isinstance(counts, str):
         print(f"calls per pair: skipped ({counts})")
         return
-    print(f"C library calls per pair, every protocol but opal23-align, one chunk of {rows:,} pairs:")
-    print("  " + "  ".join(f"{f} {c:.2f}" for f, c in counts.items() if c >= 0.005))
+    print(f"C library calls per pair, one chunk of {rows:,} pairs:")
+    for what, label in (
+        ("labels", "both sides' matrices from their angles"),
+        ("scoring", "every protocol but opal23-align"),
+    ):
+        print(f"  {label}: " + "  ".join(f"{f} {c:.2f}" for f, c in counts[what].items() if c >= 0.005))
 
 
 def scalar_against_vector(cc: str, tmp: Path) -> None:
@@ -178,10 +244,59 @@ def scalar_against_vector(cc: str, tmp: Path) -> None:
             print(f"  {name:10s} {float(ts):6.1f} ns {float(tv):6.1f} ns  {float(pct):17.1f}%  {float(ulp):4.0f} ulp")
 
 
+def scalar_costs(cc: str, tmp: Path):
+    """``{function: ns a call}`` of glibc's scalar functions on this machine, or the reason (a string)."""
+    exe = tmp / "costs"
+    err = _compile(cc, COSTS, exe)
+    if err:
+        return f"the cost loops did not build: {err}"
+    r = subprocess.run([str(exe)], capture_output=True, text=True)
+    if r.returncode:
+        return "the cost loops did not run"
+    return {ln.split()[0]: float(ln.split()[1]) for ln in r.stdout.splitlines() if ln.strip()}
+
+
+def whole_run(cc: str, tmp: Path, pred: str, gt: str) -> None:
+    """A default ``hpe evaluate`` run under the shim: its calls per pair times their scalar costs."""
+    import json
+    import resource
+    import time
+
+    shim = tmp / "libcount.so"
+    err = _compile(cc, SHIM, shim, "-shared", "-fPIC", "-ldl")
+    costs = scalar_costs(cc, tmp)
+    if err or isinstance(costs, str):
+        print(f"whole run: skipped ({err or costs})")
+        return
+    out, counts = tmp / "report.json", tmp / "counts.txt"
+    env = dict(os.environ, LD_PRELOAD=str(shim))
+    args = ["evaluate", pred, gt, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "--json", str(out), "-q"]
+    cmd = [sys.executable, "-c", RUN_CHILD, str(shim), str(counts), *args]
+    before, t = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    wall, after = time.perf_counter() - t, resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode or not counts.exists():
+        print(f"whole run: skipped (hpe evaluate failed: {(r.stderr.strip().splitlines() or ['no message'])[-1]})")
+        return
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    pairs = json.loads(out.read_text())["n"]["pairs"]
+    calls = dict(zip(FUNCS, (int(v) for v in counts.read_text().split())))
+    floor = sum(calls[f] * costs[f] for f in FUNCS) * 1e-9
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    print(f"hpe evaluate {pred} {gt}, every protocol, {pairs:,} pairs, under the counting shim:")
+    print("  calls per pair: " + "  ".join(f"{f} {calls[f] / pairs:.2f}" for f in FUNCS if calls[f] >= 0.005 * pairs))
+    print("  scalar cost per call here: " + "  ".join(f"{f} {costs[f]:.1f} ns" for f in FUNCS))
+    print(
+        f"  the C library's floor: {floor:.2f} s of CPU, {floor / cores:.2f} s of wall time on {cores} cores; "
+        f"the run: {cpu:.2f} s of CPU in {wall:.2f} s ({100 * floor / cpu:.0f}% of its CPU in these calls)"
+    )
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rows", type=int, default=65536, help="pairs in the counted chunk (default 65536)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--run", nargs=2, metavar=("PRED", "GT"), help="also a whole default hpe evaluate run")
     a = ap.parse_args(argv)
     cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
     if cc is None:
@@ -189,6 +304,8 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory(prefix="hpe_libm_") as tmp:
         calls_per_pair(cc, Path(tmp), a.rows, a.seed)
         scalar_against_vector(cc, Path(tmp))
+        if a.run:
+            whole_run(cc, Path(tmp), *a.run)
 
 
 if __name__ == "__main__":
