@@ -88,14 +88,20 @@ def hpe_popen(*args, env=None, **kw) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "hpe_cli", *map(_arg, args)], env=hpe_env(**(env or {})), **kw)
 
 
-def sample_data_script():
-    """``scripts/make_sample_data.py`` as a module (synthetic Panoptic sequences, tars, videos, templates)."""
+def repo_module(path: str):
+    """A file of the repository that is not a package module (``benchmarks/``, ``scripts/``, ``tests/export/``),
+    loaded as a module: ``repo_module("benchmarks/libm.py")``."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
+    spec = importlib.util.spec_from_file_location(Path(path).stem, ROOT / path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
+
+
+def sample_data_script():
+    """``scripts/make_sample_data.py`` as a module (synthetic Panoptic sequences, tars, videos, templates)."""
+    return repo_module("scripts/make_sample_data.py")
 
 
 @pytest.fixture

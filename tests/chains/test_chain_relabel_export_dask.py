@@ -7,21 +7,17 @@ exported ``annotation.txt`` lines each name a crop that exists (as ``test_chain_
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import pytest
 
-from conftest import hpe
+from conftest import hpe, repo_module
 
 from .conftest import PIZZA
 
-ROOT = Path(__file__).resolve().parents[2]
 CAMS = "00_00,00_08,00_15,00_23"  # the pizza1 cameras with JPEGs in the sample
 
-_spec = importlib.util.spec_from_file_location("export_release", ROOT / "tests" / "export" / "release.py")
-R = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(R)
+R = repo_module("tests/export/release.py")
 
 
 def _chain(seq_root, tmp_path, monkeypatch, relabel_extra=(), dask: bool = False):

@@ -17,16 +17,15 @@ from pathlib import Path
 
 import pytest
 
+from conftest import repo_module
+
 ROOT = Path(__file__).resolve().parents[2]
 
 pytestmark = pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="mkdocs is not installed")
 
 
 def _atlas_module():
-    spec = importlib.util.spec_from_file_location("make_atlas", ROOT / "scripts" / "make_atlas.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return repo_module("scripts/make_atlas.py")
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ worker killed with ``kill -9`` in the middle of a ``--workers 2`` run (one line;
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import signal
 import time
@@ -16,13 +15,11 @@ from pathlib import Path
 
 import pytest
 
-from conftest import hpe, hpe_popen
+from conftest import hpe, hpe_popen, repo_module
 
-from .conftest import ROOT, alive, children, temp_files
+from .conftest import alive, children, temp_files
 
-_spec = importlib.util.spec_from_file_location("export_release", ROOT / "tests" / "export" / "release.py")
-R = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(R)
+R = repo_module("tests/export/release.py")
 
 
 @pytest.fixture(scope="module")

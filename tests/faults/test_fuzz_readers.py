@@ -24,6 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from conftest import sample_data_script
 from hpe_cli.errors import HpeError
 
 from .conftest import AFLW, AGORA_PKL, ROOT, SYNTH
@@ -493,11 +494,7 @@ def test_dad3dheads_fields(field, value, element):
 # ------------------------------------------------------------------ Panoptic HD video
 @pytest.fixture(scope="module")
 def video_bytes(tmp_path_factory):
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
-    gen = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gen)
+    gen = sample_data_script()
     root = tmp_path_factory.mktemp("video") / "seqV"
     gen.make_synthetic(root, n_frames=4, n_people=1, n_cameras=1, first_frame=0, special=False)
     return gen.write_videos(root, last_frame=5, size=(192, 108), cameras=1)[0].read_bytes()

@@ -9,17 +9,15 @@ time, or goes through an extra round trip, shows up here as more calls per pair.
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import platform
 import shutil
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from conftest import repo_module
 
 #: calls per pair of every protocol but opal23-align on one chunk (the fraction: near-lock rows solved again)
 BOUNDS = {"atan2": 33.1, "hypot": 10.0, "acos": 7.0, "asin": 2.0, "acosf": 3.0, "sine and cosine": 12.05}
@@ -31,10 +29,7 @@ pytestmark = pytest.mark.skipif(
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("hpe_bench_libm", ROOT / "benchmarks" / "libm.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return repo_module("benchmarks/libm.py")
 
 
 def test_calls_per_pair_within_bounds(tmp_path):

@@ -10,17 +10,11 @@ an active exception`` (exit 134).
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[2]
+from conftest import repo_module
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("hpe_early_errors", ROOT / "benchmarks" / "early_errors.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return repo_module("benchmarks/early_errors.py")
 
 
 def test_every_early_error_exits_1_or_2_under_load(tmp_path):
