@@ -337,9 +337,7 @@ def audit_file(
 
     if "workers" in options:  # the documented spelling of ``threads`` here
         options["threads"] = options.pop("workers")
-    opts = AuditOptions(
-        report=report, output=output, overwrite=overwrite, rejects=rejects, strict_rejects=strict, **options
-    )
+    opts = AuditOptions(report=report, output=output, overwrite=overwrite, rejects=rejects, strict=strict, **options)
     with ensure_transaction():
         return run_audit(input, None if system is None else get_system(system), opts)
 
@@ -382,7 +380,7 @@ def view_file(
         system=None if system is None else get_system(system),
         other_system=None if other_system is None else get_system(other_system),
         keys=keys,
-        rejects_path=rejects,
+        rejects=rejects,
         strict=strict,
         overwrite=overwrite,
         **options,
@@ -417,7 +415,7 @@ def draw_file(
     settings = DrawOptions(
         images=images,
         system=None if system is None else get_system(system),
-        rejects_path=rejects,
+        rejects=rejects,
         strict=strict,
         overwrite=overwrite,
         **options,

@@ -232,7 +232,7 @@ def audit(
         threads=threads,
         images=images,
         rejects=rejects,
-        strict_rejects=strict,
+        strict=strict,
         consistency=settings,
         suspects=suspects,
     )

@@ -173,7 +173,7 @@ def draw(
         limit=limit,
         worst=worst,
         sort_by=sort_by,
-        rejects_path=rejects,
+        rejects=rejects,
         strict=strict,
         overwrite=overwrite,
         threads=threads,

@@ -134,7 +134,7 @@ def view(
         threads=threads,
         title=title,
         frames=frames,
-        rejects_path=rejects,
+        rejects=rejects,
         strict=strict,
         overwrite=overwrite,
     )

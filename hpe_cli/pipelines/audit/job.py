@@ -339,14 +339,14 @@ def run_audit(input_path, system=None, options: AuditOptions | None = None, *, p
     parse (wrong field count, bad quoting) fail the audit naming the first,
     unless ``options.rejects`` is given: they then go there with their reason, the
     rest is audited, and the report counts them (``rejected``); with
-    ``strict_rejects`` any such row is still an error and nothing is written.
+    ``strict`` any such row is still an error and nothing is written.
     ``options.consistency`` (a :class:`hpe_cli.pipelines.audit.consistency.Settings`) adds its checks (JSON,
     ``output``, ``suspects``).
     """
     o = options if options is not None else AuditOptions()
     check_outputs(o)
     table = open_table(input_path, o.batch_size, with_lines=True)
-    rejected = Rejects(o.rejects, o.overwrite, strict=o.strict_rejects, source=table)
+    rejected = Rejects(o.rejects, o.overwrite, strict=o.strict, source=table)
     if o.suspects:
         check_output(o.suspects, o.overwrite)
     plan = plan_audit(input_path, table, system, o)

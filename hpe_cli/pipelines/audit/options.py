@@ -10,6 +10,7 @@ from ...metrics import consistency as mc
 from ...metrics.sketch import EXACT_CAP
 from ...rotation.audit import NEAR_GIMBAL_DEG
 from ...rotation.decoders import DECODERS
+from ..renamed import take_renamed
 
 #: default threshold of the time check of ``--consistency``, degrees per frame
 MAX_JUMP_DEG = 5.0
@@ -75,12 +76,14 @@ class AuditOptions:
         Folder of the images for the pictures of ``plots``.
     rejects : str or path, optional
         File for the rows the reader cannot parse (``--rejects``); without it such a row is an error.
-    strict_rejects : bool
+    strict : bool
         With ``rejects``: any such row is still an error and nothing is written.
     consistency : Settings, optional
         ``--consistency`` and its thresholds (True: the defaults).
     suspects : str or path, optional
         With ``consistency``: the suspects' key list (``--suspects``).
+    strict_rejects : bool, optional
+        Deprecated spelling of ``strict`` (a ``DeprecationWarning``).
     """
 
     report: object = None
@@ -98,11 +101,13 @@ class AuditOptions:
     threads: int | None = None
     images: object = None
     rejects: object = None
-    strict_rejects: bool = False
+    strict: bool = False
     consistency: Settings | None = None
     suspects: object = None
+    strict_rejects: bool | None = None
 
     def __post_init__(self):
+        take_renamed(self, "strict_rejects", "strict")
         object.__setattr__(self, "keys", tuple(self.keys or ()))
         if self.consistency is True:
             object.__setattr__(self, "consistency", Settings())

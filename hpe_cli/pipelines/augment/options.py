@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -11,6 +10,7 @@ from ...errors import UsageError
 from ...geometry.image_ops import BORDERS, INTERPOLATIONS
 from ...io.images import IMAGE_COLUMNS  # noqa: F401  (the columns tried for the image name, as draw's)
 from ...io.table_source import DEFAULT_BATCH
+from ..renamed import take_renamed
 
 #: rows whose angles and r00..r22 disagree by more than this (Frobenius) are rejected
 AGREE_TOL = 1e-3
@@ -107,11 +107,7 @@ class AugmentOptions:
     workers: int | None = None
 
     def __post_init__(self):
-        if self.workers is not None:
-            warnings.warn("AugmentOptions: workers= is deprecated, use threads=", DeprecationWarning, stacklevel=3)
-            if self.threads is None:
-                object.__setattr__(self, "threads", self.workers)
-            object.__setattr__(self, "workers", None)  # said once: dataclasses.replace does not warn again
+        take_renamed(self, "workers", "threads")
         if self.threads is not None and not (
             isinstance(self.threads, int) and not isinstance(self.threads, bool) and self.threads >= 1
         ):

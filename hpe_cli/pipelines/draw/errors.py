@@ -369,8 +369,8 @@ def run_draw_errors(input_path, outdir, options, *, progress=None) -> dict:
     if len(frame) == 0:
         raise HpeError(f"{input_path}: empty table (no rows)")
     where = row_namer(src, lines)
-    rejects = Rejects(options.rejects_path, options.overwrite, strict=options.strict, source=input_path)
-    skip = options.rejects_path is not None and not options.strict
+    rejects = Rejects(options.rejects, options.overwrite, strict=options.strict, source=input_path)
+    skip = options.rejects is not None and not options.strict
     worst = WorstOptions(
         worst=options.worst,
         sort_by=options.sort_by or "geodesic",

@@ -97,13 +97,13 @@ def _read(labels, options: DrawOptions):
     src = labels.table
     read_rejects: list = []  # rows the reader cannot parse: with --rejects they are rejects, not the run's end
     batches = None
-    if options.rejects_path is not None:
+    if options.rejects is not None:
         batches = []
         for b, rr in src.batches_with_rejects():
             batches.append(b)
             read_rejects += rr
     rows = read_rows(labels, options.radians, batches=batches)
-    rejects = Rejects(options.rejects_path, options.overwrite, strict=options.strict, source=src.path)
+    rejects = Rejects(options.rejects, options.overwrite, strict=options.strict, source=src.path)
     rejects.add_unreadable(read_rejects)
     if len(rows.frame) == 0 and read_rejects:
         rejects.check()  # --strict: nothing written

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ...errors import HpeError
+from ..renamed import take_renamed
 
 #: ``--style``: three axis lines (Hopenet's ``draw_axis``) or the pose cube
 STYLES = ("axes", "cube")
@@ -68,15 +69,17 @@ class DrawOptions:
         With ``hpe evaluate -o`` output: draw only the ``worst`` rows (>= 1) with the largest ``sort_by``.
     sort_by : str, optional
         With ``hpe evaluate -o`` output: the error column to rank rows by (default ``geodesic``).
-    rejects_path : str or Path, optional
+    rejects : str or Path, optional
         Rejects file; without it any rejected row is an error.
     strict : bool
-        Any rejected row is an error even with ``rejects_path``.
+        Any rejected row is an error even with ``rejects``.
     overwrite : bool
         Replace existing outputs.
     threads : int, optional
         Threads that draw and write the pictures, >= 1; OpenCV's and pyarrow's pools are limited to the same
         number for the run (default: one per core, at most 8). The output is the same whatever the number.
+    rejects_path : str or Path, optional
+        Deprecated spelling of ``rejects`` (a ``DeprecationWarning``).
 
     Raises
     ------
@@ -100,12 +103,14 @@ class DrawOptions:
     limit: int | None = None
     worst: int | None = None
     sort_by: str | None = None
-    rejects_path: str | Path | None = None
+    rejects: str | Path | None = None
     strict: bool = False
     overwrite: bool = False
     threads: int | None = None
+    rejects_path: str | Path | None = None
 
     def __post_init__(self):
+        take_renamed(self, "rejects_path", "rejects")
         _check_choice("style", self.style, STYLES)
         _check_choice("use", self.use, USES)
         _check_choice("tdy_origin", self.tdy_origin, TDY_ORIGINS)

@@ -101,7 +101,7 @@ def _run_view(labels, outdir, other, options: ViewOptions, threads: int, progres
     b = None
     if other is not None:
         b = read_table(other, options.other_system or options.system, options.use, options.radians, "--other-system")
-    rejects = Rejects(options.rejects_path, options.overwrite, strict=options.strict, source=a.src)
+    rejects = Rejects(options.rejects, options.overwrite, strict=options.strict, source=a.src)
     counts: dict = {"rows": a.n}
     joined = _join(a, b, options.keys, rejects, counts)
     alt = also_angles(options.also_in, a.system, a.A, joined.A)

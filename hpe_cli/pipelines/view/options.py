@@ -40,10 +40,10 @@ class ViewOptions:
     frames : bool
         Make each image once at most :data:`~hpe_cli.pipelines.view.thumbs.FRAME_SIDE` (960) pixels long for
         the detail view; ``False`` shows the thumbnail there (for datasets of many distinct images).
-    rejects_path : str or Path, optional
+    rejects : str or Path, optional
         Rejects file; without it any rejected row is an error.
     strict : bool
-        Any rejected row is an error even with ``rejects_path``.
+        Any rejected row is an error even with ``rejects``.
     overwrite : bool
         Replace an earlier page in the folder (its thumbnails are reused).
 
@@ -63,7 +63,7 @@ class ViewOptions:
     threads: int | None = None
     title: str | None = None
     frames: bool = True
-    rejects_path: str | Path | None = None
+    rejects: str | Path | None = None
     strict: bool = False
     overwrite: bool = False
 
