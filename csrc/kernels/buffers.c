@@ -33,6 +33,14 @@ int columns(PyObject *seq, Py_buffer *b, int count, Py_ssize_t n, const char *na
 
 int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name) { return columns(seq, b, 9, n, name); }
 
+int optional_buffer(PyObject *o, Py_buffer *b, int flags, int *have) {
+    *have = 0;
+    if (o == Py_None) return 1;
+    if (PyObject_GetBuffer(o, b, flags) < 0) return 0;
+    *have = 1;
+    return 1;
+}
+
 void release(Py_buffer *b, int count) {
     for (int k = 0; k < count; k++) PyBuffer_Release(&b[k]);
 }

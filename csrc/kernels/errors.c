@@ -289,10 +289,7 @@ PyObject *k_best_of_two(PyObject *self, PyObject *args) {
     PyObject *ret = NULL;
     int have_w = 0;
     Py_ssize_t n = bs.len;
-    if (wo != Py_None) {
-        if (PyObject_GetBuffer(wo, &bw, PyBUF_WRITABLE) < 0) goto done;
-        have_w = 1;
-    }
+    if (!optional_buffer(wo, &bw, PyBUF_WRITABLE, &have_w)) goto done;
     if (!need(&b1, 3 * n, 8, "p1") || !need(&b2, 3 * n, 8, "p2") || !need(&bg, 3 * n, 8, "g") ||
         !need(&bb, 3 * n, 8, "best") || (have_w && !need(&bw, 3 * n, 8, "wrapped")))
         goto done;

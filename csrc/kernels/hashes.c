@@ -25,14 +25,9 @@ PyObject *k_string_hashes(PyObject *self, PyObject *args) {
     PyObject *ret = NULL;
     int have_valid = 0, have_stems = 0;
     Py_ssize_t n = out.len / 8;
-    if (valid_o != Py_None) {
-        if (PyObject_GetBuffer(valid_o, &valid, PyBUF_SIMPLE) < 0) goto done;
-        have_valid = 1;
-    }
-    if (stems_o != Py_None) {
-        if (PyObject_GetBuffer(stems_o, &stems, PyBUF_WRITABLE) < 0) goto done;
-        have_stems = 1;
-    }
+    if (!optional_buffer(valid_o, &valid, PyBUF_SIMPLE, &have_valid) ||
+        !optional_buffer(stems_o, &stems, PyBUF_WRITABLE, &have_stems))
+        goto done;
     if (!need(&off, n + 1, 8, "offsets") || (have_valid && !need(&valid, n, 1, "valid")) ||
         (have_stems && !need(&stems, n, 8, "stems")))
         goto done;

@@ -143,10 +143,7 @@ PyObject *k_first_unequal(PyObject *self, PyObject *args) {
     int have_ra = 0;
     Py_ssize_t m = rb.len / 8, j, bad = -1;
     Py_ssize_t na = oa.len / (wa ? 8 : 4) - 1, nb = ob.len / (wb ? 8 : 4) - 1;
-    if (ra_o != Py_None) {
-        if (PyObject_GetBuffer(ra_o, &ra, PyBUF_SIMPLE) < 0) goto done;
-        have_ra = 1;
-    }
+    if (!optional_buffer(ra_o, &ra, PyBUF_SIMPLE, &have_ra)) goto done;
     if (!need(&rb, m, 8, "rows_b") || (have_ra && !need(&ra, m, 8, "rows_a"))) goto done;
     if (na < (have_ra ? 0 : m) || nb < 0) {
         PyErr_SetString(PyExc_ValueError, "first_unequal: expected offsets of at least one more than the rows");

@@ -60,6 +60,8 @@ HPE_INTERNAL int need(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const
 /* `count` C-contiguous float64 columns of n rows from a sequence (released on failure) */
 HPE_INTERNAL int columns(PyObject *seq, Py_buffer *b, int count, Py_ssize_t n, const char *name);
 HPE_INTERNAL int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name);
+/* an argument that is None or a buffer: 1 with *have = 0 or 1 (the buffer got with `flags`), 0 on an error */
+HPE_INTERNAL int optional_buffer(PyObject *o, Py_buffer *b, int flags, int *have);
 HPE_INTERNAL void release(Py_buffer *b, int count);
 
 /* rotations.c: SciPy's from_matrix quaternion (Markley's method, normalised) of a row-major 3x3 matrix */

@@ -307,10 +307,7 @@ PyObject *k_libm(PyObject *self, PyObject *args) {
     PyObject *ret = NULL;
     int have_y = 0;
     Py_ssize_t n = o.len / 8;
-    if (yo != Py_None) {
-        if (PyObject_GetBuffer(yo, &y, PyBUF_SIMPLE) < 0) goto done;
-        have_y = 1;
-    }
+    if (!optional_buffer(yo, &y, PyBUF_SIMPLE, &have_y)) goto done;
     if (!need(&x, n, 8, "x") || (have_y && !need(&y, n, 8, "y"))) goto done;
     const double *X = (const double *)x.buf, *Y = have_y ? (const double *)y.buf : NULL;
     double *O = (double *)o.buf;
