@@ -193,12 +193,17 @@ def _compile(cc: str, src: str, out: Path, *flags: str) -> str | None:
     return None
 
 
+def _shim(cc: str, tmp: Path):
+    """``(path of the counting shim, None)``, built once in ``tmp``, or ``(path, the compiler's error)``."""
+    shim = tmp / "libcount.so"
+    return shim, (None if shim.exists() else _compile(cc, SHIM, shim, "-shared", "-fPIC", "-ldl"))
+
+
 def count_calls(cc: str, tmp: Path, rows: int, seed: int = 0):
     """``{"scoring": {function: calls per pair}, "labels": {...}}``: one chunk scored with every protocol but
     opal23-align, and both sides' matrices built from their angles; or the reason they could not be counted (a
     string)."""
-    shim = tmp / "libcount.so"
-    err = _compile(cc, SHIM, shim, "-shared", "-fPIC", "-ldl")
+    shim, err = _shim(cc, tmp)
     if err:
         return f"the counting shim did not build: {err}"
     env = dict(os.environ, LD_PRELOAD=str(shim))
@@ -262,8 +267,7 @@ def whole_run(cc: str, tmp: Path, pred: str, gt: str) -> None:
     import resource
     import time
 
-    shim = tmp / "libcount.so"
-    err = _compile(cc, SHIM, shim, "-shared", "-fPIC", "-ldl")
+    shim, err = _shim(cc, tmp)
     costs = scalar_costs(cc, tmp)
     if err or isinstance(costs, str):
         print(f"whole run: skipped ({err or costs})")
