@@ -1,6 +1,6 @@
 """What the C library's math functions cost ``hpe evaluate``'s default run, and what faster ones would change.
 
-    python benchmarks/libm.py [--rows 65536] [--seed 0] [--run PRED GT]
+    python benchmarks/libm.py [--rows 65536] [--seed 0] [--run PRED GT [--drop-in]]
 
 Two measurements, each in a child process built here with the system's C compiler (Linux with glibc; a part
 that cannot be built says so and is skipped):
@@ -15,14 +15,23 @@ that cannot be built says so and is skipped):
   ``_ZGVdN4...``); it prints both times, the share of results that differ and the largest difference in units
   in the last place.
 
+* rounding: how often numpy's ``arctan2``, ``hypot``, ``arccos`` and ``sin`` here (glibc's, unless numpy was
+  built for and runs on an AVX512_SKX CPU, where it calls Intel's SVML instead) differ from the correctly rounded
+  result (mpmath at 200 bits, skipped without mpmath), and by how much: no other implementation gives their bits
+  in every row unless it copies their code.
+
 * ``--run PRED GT``: a whole ``hpe evaluate PRED GT`` run (every protocol; 6drepnet predictions, 300w_lp ground
   truth, as ``benchmarks/evaluate.py`` writes them) under the shim: its calls per pair, labels and opal23-align's
   second pass included, times each function's scalar cost measured here: the C library's floor for that run,
   in CPU seconds and in wall seconds on this machine's cores, beside the run's own time (the shim's counting
   adds a little to it).
 
-hpe reproduces each peer's numbers to the last bit, so it calls the scalar functions; the second table says
-what the vector ones would save and what they would change.
+  With ``--drop-in``, the same run (no shim) is also timed with a preloaded ``atan2`` about twice as fast as
+  glibc's (a 65-entry table and a short series; within a few units in the last place) and ``hypot`` as
+  ``sqrt(x * x + y * y)``: what faster scalar functions, called where hpe calls them, would save.
+
+hpe reproduces each peer's numbers to the last bit, so it calls the scalar functions; the tables say what the
+vector ones would save and what they would change.
 """
 
 from __future__ import annotations
@@ -131,6 +140,62 @@ COSTS = textwrap.dedent(
         COST("acosf", g[i] = acosf(f[i]))
         return acc > 1e300;
     }
+    """
+)
+
+# faster scalar atan2 and hypot, preloaded in place of glibc's for --drop-in (not exact: a timing experiment)
+DROP_IN = textwrap.dedent(
+    """
+    #define _GNU_SOURCE
+    #include <dlfcn.h>
+    #include <math.h>
+    static double T[65];
+    static double (*r_atan2)(double, double);
+    __attribute__((constructor)) static void setup(void) {
+        double (*ra)(double) = dlsym(RTLD_NEXT, "atan");
+        r_atan2 = dlsym(RTLD_NEXT, "atan2");
+        for (int j = 0; j < 65; j++) T[j] = ra(j / 64.0);
+    }
+    double atan2(double y, double x) {
+        double ax = fabs(x), ay = fabs(y);
+        if (!(ax > 0x1p-500 && ay > 0x1p-500 && ax < 0x1p500 && ay < 0x1p500)) return r_atan2(y, x);
+        int sw = ay > ax;
+        double a = sw ? ax / ay : ay / ax;
+        int j = (int)(a * 64 + 0.5);
+        double c = j / 64.0, u = (a - c) / (1 + a * c), u2 = u * u;
+        double r = T[j] + (u - u * u2 * (1.0 / 3 - u2 * (1.0 / 5 - u2 / 7)));
+        if (sw) r = 1.5707963267948966 - r;
+        if (x < 0) r = 3.141592653589793 - r;
+        return copysign(r, y);
+    }
+    double hypot(double x, double y) { return sqrt(x * x + y * y); }
+    """
+)
+
+# the child that measures numpy's functions against mpmath's correctly rounded results
+ROUNDING_CHILD = textwrap.dedent(
+    """
+    import sys
+    import mpmath
+    import numpy as np
+    mpmath.mp.prec = 200
+    n = int(sys.argv[1])
+    rng = np.random.default_rng(1)
+    y, x = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
+    cases = {
+        "atan2": (np.arctan2(y, x), lambda i: mpmath.atan2(y[i], x[i])),
+        "hypot": (np.hypot(y, x), lambda i: mpmath.hypot(y[i], x[i])),
+        "acos": (np.arccos(x), lambda i: mpmath.acos(x[i])),
+        "sin": (np.sin(3 * x), lambda i: mpmath.sin(3 * x[i])),
+    }
+    for name, (got, exact) in cases.items():
+        off, worst = 0, 0.0
+        for i in range(n):
+            g = float(got[i])
+            err = abs(float((mpmath.mpf(g) - exact(i)) / np.spacing(abs(g))))
+            off += err > 0.5
+            worst = max(worst, err)
+        print(name, 100.0 * off / n, worst)
     """
 )
 
@@ -261,6 +326,61 @@ def scalar_costs(cc: str, tmp: Path):
     return {ln.split()[0]: float(ln.split()[1]) for ln in r.stdout.splitlines() if ln.strip()}
 
 
+def rounding(samples: int) -> None:
+    import numpy as np
+
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # numpy 1.x
+        from numpy.core._multiarray_umath import __cpu_features__ as features
+    svml = features.get("AVX512_SKX", False)
+    r = subprocess.run([sys.executable, "-c", ROUNDING_CHILD, str(samples)], capture_output=True, text=True)
+    if r.returncode:
+        print(f"rounding: skipped ({(r.stderr.strip().splitlines() or ['no message'])[-1]})")
+        return
+    where = "Intel's SVML (this CPU has AVX512_SKX)" if svml else "glibc's (this CPU has no AVX512_SKX)"
+    print(f"numpy {np.__version__}'s functions here are {where}; against mpmath, {samples:,} random arguments:")
+    print(f"  {'function':10s} {'not correctly rounded':>22s}  {'largest error':>14s}")
+    for line in r.stdout.splitlines():
+        name, pct, worst = line.split()
+        print(f"  {name:10s} {float(pct):21.3f}%  {float(worst):10.3f} ulp")
+
+
+def _timed(cmd: list, env: dict) -> float | None:
+    import time
+
+    t = time.perf_counter()
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    return None if r.returncode else time.perf_counter() - t
+
+
+def drop_in(cc: str, tmp: Path, pred: str, gt: str, rounds: int = 3) -> None:
+    """The default run's time with glibc's atan2 and hypot and with the faster drop-ins, alternately."""
+    import statistics
+
+    lib = tmp / "libdropin.so"
+    err = _compile(cc, DROP_IN, lib, "-shared", "-fPIC", "-ldl")
+    if err:
+        print(f"drop-in: skipped (it did not build: {err})")
+        return
+    hpe = shutil.which("hpe") or "hpe"
+    cmd = [hpe, "evaluate", pred, gt, "--pred-system", "6drepnet", "--gt-system", "300w_lp"]
+    cmd += ["--json", str(tmp / "dropin.json"), "-q", "--overwrite"]
+    times: dict = {"glibc": [], "drop-in": []}
+    for _ in range(rounds):
+        for k, pre in (("glibc", None), ("drop-in", str(lib))):
+            env = dict(os.environ, **({"LD_PRELOAD": pre} if pre else {}))
+            env.pop("PYTHONDONTWRITEBYTECODE", None)
+            t = _timed(cmd, env)
+            if t is None:
+                print(f"drop-in: skipped (hpe evaluate failed with {k})")
+                return
+            times[k].append(t)
+    g, d = statistics.median(times["glibc"]), statistics.median(times["drop-in"])
+    print(f"the default run, median of {rounds}: glibc's atan2 and hypot {g:.2f} s; the drop-ins {d:.2f} s "
+          f"({100 * (g - d) / g:.0f}% less)")
+
+
 def whole_run(cc: str, tmp: Path, pred: str, gt: str) -> None:
     """A default ``hpe evaluate`` run under the shim: its calls per pair times their scalar costs."""
     import json
@@ -301,6 +421,8 @@ def main(argv=None) -> None:
     ap.add_argument("--rows", type=int, default=65536, help="pairs in the counted chunk (default 65536)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--run", nargs=2, metavar=("PRED", "GT"), help="also a whole default hpe evaluate run")
+    ap.add_argument("--drop-in", action="store_true", help="with --run: also time it with faster atan2 and hypot")
+    ap.add_argument("--samples", type=int, default=20000, help="random arguments of the rounding table")
     a = ap.parse_args(argv)
     cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
     if cc is None:
@@ -308,8 +430,11 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory(prefix="hpe_libm_") as tmp:
         calls_per_pair(cc, Path(tmp), a.rows, a.seed)
         scalar_against_vector(cc, Path(tmp))
+        rounding(a.samples)
         if a.run:
             whole_run(cc, Path(tmp), *a.run)
+            if a.drop_in:
+                drop_in(cc, Path(tmp), *a.run)
 
 
 if __name__ == "__main__":

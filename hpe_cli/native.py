@@ -87,7 +87,8 @@ _MIN_ROWS = 64
 
 def _agreeing(name: str, compare):
     """The kernels, if the C library function ``name`` gives numpy's bits on its probe, else None. ``compare(k)``
-    runs the probe and returns ``[(kernel result, numpy result), ...]``; it runs once a process."""
+    runs the probe and returns ``[(kernel result, reference result), ...]`` (the reference: numpy's, or SciPy's for
+    :func:`_scipy_kernels`); it runs once a process."""
     k = kernels()
     if k is None:
         return None
@@ -201,6 +202,88 @@ def _libm_kernels(*names):
     return k
 
 
+def _probe_rotations() -> np.ndarray:
+    """Rotations ``(N, 3, 3)`` on which the SciPy kernels must give SciPy's own bits: random ones, the identity,
+    the half turns about each axis, and the gimbal locks of ``xyz`` and ``ZXZ`` (middle angle 0, +-90 and 180
+    degrees, and just off 90)."""
+    from scipy.spatial.transform import Rotation  # lazy: only where numpy's functions are not the C library's
+
+    rng = np.random.default_rng(20261201)
+    hard = [np.eye(3), np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]), np.diag([-1.0, -1.0, 1.0])]
+    for seq in _SCIPY_SEQS:
+        for mid in (0.0, 90.0, -90.0, 180.0, 90.0 - 1e-6):
+            hard.append(Rotation.from_euler(seq, [33.0, mid, -71.0], degrees=True).as_matrix())
+    return np.concatenate([Rotation.random(1024, random_state=rng).as_matrix(), np.array(hard)])
+
+
+#: two sequences SciPy's kernels are probed on, with their ``(i, j, k, sign, symmetric, intrinsic)`` as
+#: hpe_cli.metrics.scipy_columns reads them (an extrinsic Tait-Bryan one and an intrinsic proper one)
+_SCIPY_SEQS = {"xyz": (0, 1, 2, 1.0, False, False), "ZXZ": (2, 0, 1, 1.0, True, True)}
+_SEQ_AXES = {"xyz": (0, 1, 2), "ZXZ": (2, 0, 2)}
+
+
+def _scipy_euler_probe(k):
+    import warnings
+
+    from scipy.spatial.transform import Rotation
+
+    R = _probe_rotations()
+    cols = [np.ascontiguousarray(R[:, r, c]) for r in range(3) for c in range(3)]
+    pairs = []
+    for seq, (i, j, m, sign, symmetric, intrinsic) in _SCIPY_SEQS.items():
+        got = np.full((len(R), 3), np.nan)
+        k.euler_from_matrix(cols, got, i, j, m, sign, symmetric, intrinsic, False, True)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # SciPy warns at gimbal lock
+            pairs.append((got, Rotation.from_matrix(R).as_euler(seq)))
+    return pairs
+
+
+def _scipy_from_euler_probe(k):
+    from scipy.spatial.transform import Rotation
+
+    a = _probe_angles()
+    a = np.ascontiguousarray(np.resize(a[np.isfinite(a) & (np.abs(a) < 1e6)], (2048, 3)))
+    pairs = []
+    for seq, axes in _SEQ_AXES.items():
+        q, M = np.empty((4, len(a))), np.empty((9, len(a)))
+        k.quat_matrix_from_euler(a, (1.0, 1.0, 1.0), axes, seq.isupper(), q, M)
+        r = Rotation.from_euler(seq, a)
+        pairs += [(q.T.copy(), r.as_quat()), (M.T.reshape(-1, 3, 3).copy(), r.as_matrix())]
+    return pairs
+
+
+#: each kernel that repeats SciPy's ``Rotation`` arithmetic: the C library functions whose agreement with numpy's
+#: makes it the numpy twin's bits, and its probe against SciPy itself
+_SCIPY = {
+    "euler_from_matrix": (lambda: _libm_kernels("atan2", "hypot"), _scipy_euler_probe),
+    "quat_matrix_from_euler": (lambda: _sin_cos_kernel(), _scipy_from_euler_probe),
+}
+
+
+def _scipy_kernels(name: str):
+    """The kernels, if kernel ``name`` (one of :data:`_SCIPY`) gives SciPy's bits here, else None.
+
+    SciPy's Cython backend, which NumPy arrays go through, calls the C library's ``atan2``, ``hypot``, ``sin`` and
+    ``cos`` row by row, as the kernels do. Where numpy's functions are the C library's too (the probes of
+    :data:`_LIBM`), the kernel, its numpy twin and SciPy give the same bits. Where they are not (numpy calls Intel's
+    SVML on AVX512_SKX CPUs), the twin cannot give SciPy's bits and the kernel still can: it is checked against
+    SciPy itself on :func:`_probe_rotations` or :func:`_probe_angles` (once a process) and used where it agrees.
+    """
+    same_as_numpy, probe = _SCIPY[name]
+    k = same_as_numpy()
+    if k is not None or kernels() is None:
+        return k
+
+    def compare(k):
+        try:
+            return probe(k)
+        except Exception:  # noqa: BLE001 - a SciPy that cannot run the probe: the twin runs, never an error
+            return [(np.zeros(1), np.ones(1))]
+
+    return _agreeing(f"scipy {name}", compare)
+
+
 def _columns(X, n: int) -> list:
     """The 9 entries of a nested 3x3 list (arrays or floats) as contiguous float64 columns of ``n`` rows."""
     return [np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (n,))) for row in X for v in row]
@@ -221,14 +304,14 @@ def _angle_rows(*arrays):
 
 def euler_from_matrix(R, axes, degrees: bool, check: bool):
     """SciPy's ``Rotation.from_matrix(R).as_euler(seq)`` of a nested 3x3 list of columns in one C loop, or None
-    (kernels not built, the C library's ``atan2`` or ``hypot`` not numpy's here, too few rows, or with ``check`` a
-    row that SciPy would first project onto the rotations: then
+    (kernels not built, the kernel not giving SciPy's bits here (:func:`_scipy_kernels`), too few rows, or with
+    ``check`` a row that SciPy would first project onto the rotations: then
     :func:`hpe_cli.metrics.scipy_columns.euler_from_matrix` computes them, the same numbers).
 
     ``axes`` is ``(i, j, k, sign, symmetric, intrinsic)`` as that function reads ``seq``. Returns ``(N, 3)``.
     """
     n = _rows(R)
-    k = _libm_kernels("atan2", "hypot") if n >= _MIN_ROWS else None
+    k = _scipy_kernels("euler_from_matrix") if n >= _MIN_ROWS else None
     if k is None:
         return None
     out = np.empty((n, 3))
@@ -240,14 +323,15 @@ def euler_from_matrix(R, axes, degrees: bool, check: bool):
 
 def quat_matrix_from_euler(angles, scale, axes, intrinsic: bool):
     """SciPy's ``Rotation.from_euler(seq, angles * scale)``'s quaternions ``(x, y, z, w)`` and matrices (nested 3x3
-    list of columns) in one C loop, or None (kernels not built, the C library's ``sincos`` not numpy's ``sin`` and
-    ``cos`` here, or too few rows: then :mod:`hpe_cli.metrics.scipy_columns` computes them, the same numbers).
+    list of columns) in one C loop, or None (kernels not built, the kernel not giving SciPy's bits here
+    (:func:`_scipy_kernels`), or too few rows: then :mod:`hpe_cli.metrics.scipy_columns` computes them, the same
+    numbers).
 
     ``angles`` is ``(N, 3)``, ``scale`` the 3 factors each column is multiplied by first (one product: e.g. the
     degrees' ``pi / 180`` with a sign), ``axes`` the 3 axes (0, 1, 2 for x, y, z) in seq's order.
     """
     got = _angle_rows(angles)
-    k = _sin_cos_kernel() if got is not None else None
+    k = _scipy_kernels("quat_matrix_from_euler") if got is not None else None
     if k is None:
         return None
     a, n = got[0], len(got[0])

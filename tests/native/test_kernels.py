@@ -376,14 +376,76 @@ def test_libm_kernels_used_only_where_each_function_agrees(monkeypatch):
             with np.errstate(invalid="ignore"):
                 assert (native._libm_kernels(name) is not None) == _same_bits(out, twin(*args))
     monkeypatch.setitem(native._STATE, "hypot", False)  # as on a machine where numpy's SIMD hypot differs
+    monkeypatch.setitem(native._STATE, "scipy euler_from_matrix", False)  # and the kernel not SciPy's either
     assert native.euler_from_matrix(R, sc._seq_axes("XYZ"), True, False) is None
     monkeypatch.setitem(native._STATE, "acos", False)
     assert native.wrapped_cos_errors(np.zeros((100, 3)), np.ones((100, 3))) is None
     monkeypatch.setitem(native._STATE, "sin_cos", False)
+    monkeypatch.setitem(native._STATE, "scipy quat_matrix_from_euler", False)
     assert native.quat_matrix_from_euler(np.zeros((100, 3)), (1.0, 1.0, 1.0), (0, 1, 2), True) is None
     if built:
         with pytest.raises(ValueError, match="expected atan2"):
             kernels().libm("exp", np.zeros(3), None, np.zeros(3))
+
+
+def test_scipy_kernels_give_scipys_own_bits(monkeypatch):
+    """SciPy's Cython backend calls the C library row by row, as the kernels do: each SciPy kernel gives SciPy's
+    own bits (not only its numpy twin's) on hard rotations and on angles over the whole range."""
+    from scipy.spatial.transform import Rotation
+
+    import hpe_cli.native as native
+    from hpe_cli.metrics import scipy_columns as sc
+
+    if not built:
+        pytest.skip("_hpe_kernels not built")
+    R = _hard_matrices(np.random.default_rng(11), 2048)
+    R = R[np.isfinite(R).all(axis=(1, 2))]  # not the NaN row
+    for seq in ("xyz", "XYZ", "ZXZ", "zyx"):
+        got = native.euler_from_matrix(sc.nested(R), sc._seq_axes(seq), False, False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # SciPy warns at gimbal lock
+            assert _same_bits(got, Rotation.from_matrix(R).as_euler(seq)), seq
+    a = np.random.default_rng(12).uniform(-7.0, 7.0, (2048, 3))
+    a[:8] = [[0.0, np.pi / 2, 0.0], [np.pi, 0.0, -np.pi], [-0.0, 0.0, 0.0], [1e-300, -1e-9, 3.0]] * 2
+    for seq in ("xyz", "ZXZ", "YXZ"):
+        q, M = native.quat_matrix_from_euler(a, (1.0, 1.0, 1.0), [sc._AXIS[c] for c in seq.lower()], seq.isupper())
+        r = Rotation.from_euler(seq, a)
+        assert _same_bits(np.stack(q, -1), r.as_quat()) and _same_bits(np.array(M).transpose(2, 0, 1), r.as_matrix())
+
+
+def test_scipy_kernels_run_where_numpys_functions_are_not_the_c_librarys(monkeypatch):
+    """On a CPU where numpy calls its own SIMD functions (Intel's SVML on AVX512_SKX), the numpy twins cannot give
+    SciPy's bits; the SciPy kernels are then checked against SciPy itself and still used, the others not."""
+    from scipy.spatial.transform import Rotation
+
+    import hpe_cli.native as native
+    from hpe_cli.metrics import scipy_columns as sc
+
+    if not built:
+        pytest.skip("_hpe_kernels not built")
+    for name in ("atan2", "hypot", "sin_cos"):
+        monkeypatch.setitem(native._STATE, name, False)  # numpy's functions differ from the C library's
+    for name in ("scipy euler_from_matrix", "scipy quat_matrix_from_euler"):
+        monkeypatch.delitem(native._STATE, name, raising=False)  # probed afresh
+    R = _hard_matrices(np.random.default_rng(13), 512)
+    R = R[np.isfinite(R).all(axis=(1, 2))]
+    got = native.euler_from_matrix(sc.nested(R), sc._seq_axes("XYZ"), False, False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert got is not None and _same_bits(got, Rotation.from_matrix(R).as_euler("XYZ"))
+    assert native._STATE["scipy euler_from_matrix"] is True
+    a = np.random.default_rng(14).uniform(-3.0, 3.0, (512, 3))
+    q, _ = native.quat_matrix_from_euler(a, (1.0, 1.0, 1.0), (2, 0, 2), True)
+    assert _same_bits(np.stack(q, -1), Rotation.from_euler("ZXZ", a).as_quat())
+    assert native.core_errors(sc.nested(R), sc.nested(R)) is None  # hpe's own metrics: numpy's twin, numpy's bits
+    assert native.system_angles(sc.nested(R), (0, 1, 2, False, 1), (1.0, 1.0, 1.0), (0, 1, 2), 1, 1e-6) is None
+
+    def broken(k):
+        raise RuntimeError("no SciPy here")
+
+    monkeypatch.setitem(native._SCIPY, "euler_from_matrix", (lambda: None, broken))
+    monkeypatch.delitem(native._STATE, "scipy euler_from_matrix")
+    assert native.euler_from_matrix(sc.nested(R), sc._seq_axes("XYZ"), False, False) is None  # the twin, no error
 
 
 @settings(max_examples=40, deadline=None)
