@@ -18,7 +18,9 @@ that cannot be built says so and is skipped):
 * rounding: how often numpy's ``arctan2``, ``hypot``, ``arccos`` and ``sin`` here (glibc's, unless numpy was
   built for and runs on an AVX512_SKX CPU, where it calls Intel's SVML instead) differ from the correctly rounded
   result (mpmath at 200 bits, skipped without mpmath), and by how much: no other implementation gives their bits
-  in every row unless it copies their code.
+  in every row unless it copies their code. Then a correctly rounded AVX2 ``atan2`` written here, against
+  glibc's: alone (its time, and the results that differ from glibc's), and behind a rounding test that keeps
+  glibc's bits by calling glibc wherever the result is within glibc's own error of a rounding boundary.
 
 * ``--run PRED GT``: a whole ``hpe evaluate PRED GT`` run (every protocol; 6drepnet predictions, 300w_lp ground
   truth, as ``benchmarks/evaluate.py`` writes them) under the shim: its calls per pair, labels and opal23-align's
@@ -199,6 +201,93 @@ ROUNDING_CHILD = textwrap.dedent(
     """
 )
 
+# a correctly rounded AVX2 atan2 (double-double from a 65-entry table; the table is filled in by vector_atan2),
+# timed against glibc's, alone and behind a rounding test that falls back to glibc where the result is within
+# MARGIN units in the last place of a rounding boundary (the only way to keep glibc's bits: its own error)
+VECTOR_ATAN2 = textwrap.dedent(
+    """
+    #include <immintrin.h>
+    #include <math.h>
+    #include <stdint.h>
+    #include <stdio.h>
+    #include <stdlib.h>
+    #include <string.h>
+    #include <time.h>
+    static const double T_HI[65] = {TABLE_HI}, T_LO[65] = {TABLE_LO};
+    #define V __m256d
+    #define TWO_SUM(a, b, s, e) do { s = _mm256_add_pd(a, b); V bb_ = _mm256_sub_pd(s, a); \\
+        e = _mm256_add_pd(_mm256_sub_pd(a, _mm256_sub_pd(s, bb_)), _mm256_sub_pd(b, bb_)); } while (0)
+    static V C(double x) { return _mm256_set1_pd(x); }
+    /* atan2(y, x) as S + L, |error| about 2^-64 |S|; good: the lanes computed (both in [2^-500, 2^500]) */
+    static V atan2_dd(V y, V x, V *L_out, V *good) {
+        V sign = _mm256_castsi256_pd(_mm256_set1_epi64x(0x8000000000000000LL));
+        V ax = _mm256_andnot_pd(sign, x), ay = _mm256_andnot_pd(sign, y);
+        V swap = _mm256_cmp_pd(ay, ax, _CMP_GT_OQ), a = _mm256_min_pd(ax, ay), b = _mm256_max_pd(ax, ay);
+        *good = _mm256_and_pd(_mm256_cmp_pd(a, C(0x1p-500), _CMP_GE_OQ), _mm256_cmp_pd(b, C(0x1p500), _CMP_LE_OQ));
+        a = _mm256_blendv_pd(C(0.5), a, *good); b = _mm256_blendv_pd(C(1.0), b, *good);
+        V ib = _mm256_div_pd(C(1.0), b), th = _mm256_mul_pd(a, ib);
+        V tl = _mm256_mul_pd(_mm256_fnmadd_pd(th, b, a), ib);
+        V jd = _mm256_round_pd(_mm256_mul_pd(th, C(64.0)), _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+        __m128i j = _mm256_cvtpd_epi32(jd);
+        V c = _mm256_mul_pd(jd, C(1.0 / 64)), num = _mm256_sub_pd(th, c);  /* exact */
+        V p = _mm256_mul_pd(th, c), pe = _mm256_fmsub_pd(th, c, p), s = _mm256_add_pd(C(1.0), p);
+        V dl = _mm256_fmadd_pd(tl, c, _mm256_add_pd(_mm256_add_pd(_mm256_sub_pd(C(1.0), s), p), pe));
+        V is = _mm256_div_pd(C(1.0), s), uh = _mm256_mul_pd(num, is);
+        V ul = _mm256_mul_pd(_mm256_fnmadd_pd(uh, dl, _mm256_add_pd(_mm256_fnmadd_pd(uh, s, num), tl)), is);
+        V u2 = _mm256_mul_pd(uh, uh), P = _mm256_fmadd_pd(u2, C(-1.0 / 11), C(1.0 / 9));
+        P = _mm256_fmadd_pd(u2, P, C(-1.0 / 7)); P = _mm256_fmadd_pd(u2, P, C(1.0 / 5));
+        P = _mm256_fmadd_pd(u2, P, C(-1.0 / 3)); P = _mm256_mul_pd(_mm256_mul_pd(u2, P), uh);
+        V S, E, S2, E2;
+        TWO_SUM(_mm256_i32gather_pd(T_HI, j, 8), uh, S, E);
+        V L = _mm256_add_pd(_mm256_add_pd(E, _mm256_i32gather_pd(T_LO, j, 8)), _mm256_add_pd(ul, P));
+        TWO_SUM(C(0x1.921fb54442d18p+0), _mm256_xor_pd(S, sign), S2, E2);  /* pi/2 - (S + L) */
+        V L2 = _mm256_sub_pd(_mm256_add_pd(E2, C(0x1.1a62633145c07p-54)), L);
+        S = _mm256_blendv_pd(S, S2, swap); L = _mm256_blendv_pd(L, L2, swap);
+        V neg = _mm256_cmp_pd(x, _mm256_setzero_pd(), _CMP_LT_OQ);
+        TWO_SUM(C(0x1.921fb54442d18p+1), _mm256_xor_pd(S, sign), S2, E2);  /* pi - (S + L) */
+        L2 = _mm256_sub_pd(_mm256_add_pd(E2, C(0x1.1a62633145c07p-53)), L);
+        S = _mm256_blendv_pd(S, S2, neg); L = _mm256_blendv_pd(L, L2, neg);
+        V ys = _mm256_and_pd(y, sign);
+        *L_out = _mm256_xor_pd(L, ys);
+        return _mm256_xor_pd(S, ys);
+    }
+    static long fallbacks;
+    static void run(const double *Y, const double *X, double *O, long n, double margin) {
+        V expo = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7ff0000000000000LL));
+        for (long i = 0; i < n; i += 4) {
+            V L, good, S = atan2_dd(_mm256_loadu_pd(Y + i), _mm256_loadu_pd(X + i), &L, &good);
+            _mm256_storeu_pd(O + i, _mm256_add_pd(S, L));
+            if (margin <= 0) continue;
+            V e = _mm256_mul_pd(_mm256_and_pd(S, expo), C(margin * 0x1p-52));
+            V ok = _mm256_and_pd(good, _mm256_cmp_pd(_mm256_add_pd(S, _mm256_add_pd(L, e)),
+                                                    _mm256_add_pd(S, _mm256_sub_pd(L, e)), _CMP_EQ_OQ));
+            int m = _mm256_movemask_pd(ok);
+            if (m != 15)
+                for (int l = 0; l < 4; l++)
+                    if (!(m >> l & 1)) { O[i + l] = atan2(Y[i + l], X[i + l]); fallbacks++; }
+        }
+    }
+    static double now(void) { struct timespec a; clock_gettime(CLOCK_MONOTONIC, &a); return a.tv_sec * 1e9 + a.tv_nsec; }
+    int main(void) {
+        long n = 1 << 22;
+        double *y = aligned_alloc(32, 8 * n), *x = aligned_alloc(32, 8 * n), *g = aligned_alloc(32, 8 * n);
+        double *o = aligned_alloc(32, 8 * n);
+        srand(1);
+        for (long i = 0; i < n; i++) { x[i] = rand() / (double)RAND_MAX * 2 - 1; y[i] = rand() / (double)RAND_MAX * 2 - 1; }
+        memset(g, 0, 8 * n); memset(o, 0, 8 * n);
+        double t = now(); for (long i = 0; i < n; i++) g[i] = atan2(y[i], x[i]); double tg = (now() - t) / n;
+        for (int k = 0; k < 2; k++) {
+            double margin = k ? 0.0625 : 0.0;
+            fallbacks = 0; t = now(); run(y, x, o, n, margin); double tv = (now() - t) / n;
+            long diff = 0; for (long i = 0; i < n; i++) diff += memcmp(o + i, g + i, 8) != 0;
+            printf("%g %.2f %.2f %.4f %.2f\\n", margin, tg, tv, 100.0 * diff / n, 100.0 * fallbacks / n);
+        }
+        return 0;
+    }
+    """
+)
+
+
 # the child that runs one command under the shim, in process (the CLI leaves with os._exit), then writes the counts
 RUN_CHILD = textwrap.dedent(
     """
@@ -346,6 +435,39 @@ def rounding(samples: int) -> None:
         print(f"  {name:10s} {float(pct):21.3f}%  {float(worst):10.3f} ulp")
 
 
+def vector_atan2(cc: str, tmp: Path) -> None:
+    """A correctly rounded AVX2 ``atan2`` against glibc's: its time, the share of results that are not glibc's
+    bits, and the same behind a rounding test that keeps glibc's bits (falling back to glibc near a boundary)."""
+    try:
+        import mpmath
+    except ImportError:
+        print("correctly rounded vector atan2: skipped (no mpmath for its table)")
+        return
+    mpmath.mp.prec = 200
+    hi, lo = [], []
+    for j in range(65):
+        v = mpmath.atan(mpmath.mpf(j) / 64)
+        hi.append(float(v))
+        lo.append(float(v - mpmath.mpf(hi[-1])))
+    src = VECTOR_ATAN2.replace("{TABLE_HI}", "{" + ", ".join(h.hex() for h in hi) + "}")
+    src = src.replace("{TABLE_LO}", "{" + ", ".join(v.hex() for v in lo) + "}")
+    exe = tmp / "vatan2"
+    err = _compile(cc, src, exe, "-mavx2", "-mfma", "-ffp-contract=off")
+    r = None if err else subprocess.run([str(exe)], capture_output=True, text=True)
+    if err or r.returncode:
+        print(f"correctly rounded vector atan2: skipped ({err or 'it did not run on this CPU'})")
+        return
+    print("a correctly rounded AVX2 atan2 (double-double, 65-entry table) against glibc's, 4M random arguments:")
+    for line in r.stdout.splitlines():
+        margin, tg, tv, diff, fb = (float(v) for v in line.split())
+        how = (
+            f"behind a rounding test ({margin:g} ulp margin, glibc as the fallback for {fb:.1f}% of values)"
+            if margin
+            else "alone"
+        )
+        print(f"  {how}: {tv:.1f} ns (glibc {tg:.1f} ns); results not glibc's bits: {diff:.3f}%")
+
+
 def _timed(cmd: list, env: dict) -> float | None:
     import time
 
@@ -431,6 +553,7 @@ def main(argv=None) -> None:
         calls_per_pair(cc, Path(tmp), a.rows, a.seed)
         scalar_against_vector(cc, Path(tmp))
         rounding(a.samples)
+        vector_atan2(cc, Path(tmp))
         if a.run:
             whole_run(cc, Path(tmp), *a.run)
             if a.drop_in:
