@@ -18,7 +18,7 @@ that cannot be built says so and is skipped):
 * rounding: how often numpy's ``arctan2``, ``hypot``, ``arccos`` and ``sin`` here (glibc's, unless numpy was
   built for and runs on an AVX512_SKX CPU, where it calls Intel's SVML instead) differ from the correctly rounded
   result (mpmath at 200 bits, skipped without mpmath), and by how much: no other implementation gives their bits
-  in every row unless it copies their code. Then a correctly rounded AVX2 ``atan2`` written here, against
+  in every row unless it copies their code. Then a nearly correctly rounded AVX2 ``atan2`` written here, against
   glibc's: alone (its time, and the results that differ from glibc's), and behind a rounding test that keeps
   glibc's bits by calling glibc wherever the result is within glibc's own error of a rounding boundary.
 
@@ -201,7 +201,7 @@ ROUNDING_CHILD = textwrap.dedent(
     """
 )
 
-# a correctly rounded AVX2 atan2 (double-double from a 65-entry table; the table is filled in by vector_atan2),
+# a nearly correctly rounded AVX2 atan2 (double-double from a 65-entry table; the table is filled in by vector_atan2),
 # timed against glibc's, alone and behind a rounding test that falls back to glibc where the result is within
 # MARGIN units in the last place of a rounding boundary (the only way to keep glibc's bits: its own error)
 VECTOR_ATAN2 = textwrap.dedent(
@@ -436,7 +436,7 @@ def rounding(samples: int) -> None:
 
 
 def vector_atan2(cc: str, tmp: Path) -> None:
-    """A correctly rounded AVX2 ``atan2`` against glibc's: its time, the share of results that are not glibc's
+    """A nearly correctly rounded AVX2 ``atan2`` against glibc's: its time, the share of results that are not glibc's
     bits, and the same behind a rounding test that keeps glibc's bits (falling back to glibc near a boundary)."""
     try:
         import mpmath
@@ -457,7 +457,7 @@ def vector_atan2(cc: str, tmp: Path) -> None:
     if err or r.returncode:
         print(f"correctly rounded vector atan2: skipped ({err or 'it did not run on this CPU'})")
         return
-    print("a correctly rounded AVX2 atan2 (double-double, 65-entry table) against glibc's, 4M random arguments:")
+    print("a nearly correctly rounded AVX2 atan2 (double-double, 65-entry table) against glibc's, 4M random arguments:")
     for line in r.stdout.splitlines():
         margin, tg, tv, diff, fb = (float(v) for v in line.split())
         how = (
