@@ -499,8 +499,10 @@ def drop_in(cc: str, tmp: Path, pred: str, gt: str, rounds: int = 3) -> None:
                 return
             times[k].append(t)
     g, d = statistics.median(times["glibc"]), statistics.median(times["drop-in"])
-    print(f"the default run, median of {rounds}: glibc's atan2 and hypot {g:.2f} s; the drop-ins {d:.2f} s "
-          f"({100 * (g - d) / g:.0f}% less)")
+    print(
+        f"the default run, median of {rounds}: glibc's atan2 and hypot {g:.2f} s; the drop-ins {d:.2f} s "
+        f"({100 * (g - d) / g:.0f}% less)"
+    )
 
 
 def whole_run(cc: str, tmp: Path, pred: str, gt: str) -> None:
