@@ -329,14 +329,25 @@ def audit_file(
     Returns the JSON report (``rows``, one count per check, ``system``,
     ``system_origin``, ``rejected``, ``examples``...); ``system`` defaults to
     the file's own, else ``300w_lp``. ``options``: ``near_tol_deg``, ``radians``,
-    ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``, ``workers`` or ``threads`` (``--threads``),
-    ``plots``, ``only_flagged``, ``images`` (fields of :class:`hpe_cli.pipelines.audit.AuditOptions`); ``consistency``
-    (True or a :class:`hpe_cli.pipelines.audit.consistency.Settings`, as ``--consistency``; report key ``consistency``)
-    and ``suspects`` (path of the key list, as ``--suspects``).
+    ``use``, ``keys``, ``n_examples``, ``batch_size``, ``decoder``, ``threads`` (``--threads``; ``workers`` is a
+    deprecated spelling, with a ``DeprecationWarning``), ``plots``, ``only_flagged``, ``images`` (fields of
+    :class:`hpe_cli.pipelines.audit.AuditOptions`); ``consistency`` (True or a
+    :class:`hpe_cli.pipelines.audit.consistency.Settings`, as ``--consistency``; report key ``consistency``) and
+    ``suspects`` (path of the key list, as ``--suspects``).
     """
 
-    if "workers" in options:  # the documented spelling of ``threads`` here
-        options["threads"] = options.pop("workers")
+    if "workers" in options:  # released as a spelling of ``threads`` here: still taken, with a warning
+        import warnings
+
+        from .errors import UsageError
+
+        workers = options.pop("workers")
+        warnings.warn("audit_file: workers= is deprecated, use threads=", DeprecationWarning, stacklevel=2)
+        if options.get("threads") not in (None, workers):
+            raise UsageError(
+                f"workers, threads: expected one of them, got both ({workers!r} and {options['threads']!r})"
+            )
+        options["threads"] = workers
     opts = AuditOptions(report=report, output=output, overwrite=overwrite, rejects=rejects, strict=strict, **options)
     with ensure_transaction():
         return run_audit(input, None if system is None else get_system(system), opts)

@@ -31,3 +31,18 @@ def test_old_keyword_works_once_with_a_warning(make, old, new, value, other):
     if other is not None:
         with pytest.warns(DeprecationWarning), pytest.raises(UsageError, match=f"{old}, {new}: expected one"):
             make(**{old: value, new: other})
+
+
+def test_audit_file_takes_workers_as_threads_with_a_warning(tmp_path):
+    """``audit_file(workers=)`` was released as a spelling of ``threads``: it still works, and warns."""
+    from hpe_cli.api import audit_file
+
+    src = tmp_path / "labels.csv"
+    src.write_text("image,yaw,pitch,roll\na.jpg,10,20,30\nb.jpg,-5,0,5\n")
+    with pytest.warns(DeprecationWarning, match="workers= is deprecated, use threads="):
+        old = audit_file(src, "300w_lp", workers=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert audit_file(src, "300w_lp", threads=2)["rows"] == old["rows"] == 2
+    with pytest.warns(DeprecationWarning), pytest.raises(UsageError, match="workers, threads: expected one"):
+        audit_file(src, "300w_lp", workers=2, threads=3)
