@@ -1,7 +1,7 @@
 """`hpe evaluate` at scale: time and peak RSS beside DuckDB and the floor, in the same run.
 
     python benchmarks/evaluate.py [--rows 5000000] [--shuffled] [--protocol NAME ...] [--repeat 3]
-        [--threads N] [--with-rows] [--join] [--each-protocol] [--before DIR] [--data DIR]
+        [--threads N] [--with-rows] [--join] [--each-protocol] [--exact-floor] [--before DIR] [--data DIR]
 
 Two Parquet tables of N pairs (string key 'image', pitch/yaw/roll; GT in
 300w_lp, predictions in 6drepnet, the same rotation turned by about 5 degrees:
@@ -20,6 +20,11 @@ with --shuffled, in random order.
   report (``--with-rows``: also the per-row Parquet output); ``--protocol all``
   (the command's default) scores every protocol, the default here is hopenet.
 * ``--each-protocol``: one hpe job per protocol and one with all of them, side by side (a per-protocol table).
+* ``--exact-floor`` (with ``--protocol all``): what every protocol costs at least while each keeps its peer's
+  arithmetic: the ``--protocol hopenet`` run (timed in the same rounds) plus the C library calls
+  (``atan2``, ``hypot``, ``acos``, ``asin``, ``sincos``...) that the other protocols add, counted by
+  ``benchmarks/libm.py``'s shim in one run of each outside the timed rounds, at this machine's scalar cost per
+  call, spread over its cores. The default run is printed as a multiple of that floor.
 * ``--join``: the same minimal job (join on the key, geodesic, per-angle MAE,
   median) done by pyarrow's ``Table.join`` (Acero, in memory), beside hpe's
   join and DuckDB's.
@@ -222,6 +227,12 @@ def main():
     ap.add_argument("--join", action="store_true", help="also pyarrow's Table.join (Acero) doing DuckDB's job")
     ap.add_argument("--no-floor", action="store_true", help="skip the pyarrow + numpy floor")
     ap.add_argument(
+        "--exact-floor",
+        action="store_true",
+        help="with --protocol all: also the floor of exact arithmetic (the hopenet run plus the other protocols' "
+        "C library calls, counted with benchmarks/libm.py)",
+    )
+    ap.add_argument(
         "--each-protocol",
         action="store_true",
         help="one hpe job per protocol (every registered one, or those given with --protocol) and one with all "
@@ -252,6 +263,8 @@ def main():
         hpe_jobs = {f"hpe {p}": [p] for p in singles} | {"hpe all": ["all"]}
     else:
         hpe_jobs = {"hpe": protocols}
+    if args.exact_floor and "all" in protocols and "hpe hopenet" not in hpe_jobs:
+        hpe_jobs["hpe hopenet"] = ["hopenet"]
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     env_before = {**os.environ, "PYTHONPATH": str(args.before or ROOT)}
     try:
@@ -320,6 +333,47 @@ def main():
                 _summary(
                     "  the same, before", times[f"{k} (before)"], rss[f"{k} (before)"], n, ref, geo[f"{k} (before)"]
                 )
+        if args.exact_floor and "all" in protocols:
+            every = "hpe all" if "hpe all" in times else "hpe"
+            _exact_floor(
+                gt,
+                pred,
+                statistics.median(t[0] for t in times["hpe hopenet"]),
+                statistics.median(t[0] for t in times[every]),
+                ref,
+            )
+
+
+def _exact_floor(gt: str, pred: str, hopenet_wall: float, every_wall: float, ref) -> None:
+    """Print the floor of exact arithmetic for every protocol and the default run as a multiple of it."""
+    import shutil
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import libm
+
+    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    if cc is None:
+        print("  exact-arithmetic floor: skipped (no C compiler for benchmarks/libm.py's shim)")
+        return
+    with tempfile.TemporaryDirectory(prefix="hpe_floor_") as tmp:
+        costs = libm.scalar_costs(cc, Path(tmp))
+        runs = (
+            [libm.count_run(cc, Path(tmp), pred, gt, p) for p in ((), ("hopenet",))]
+            if isinstance(costs, dict)
+            else [costs]
+        )
+    bad = next((r for r in runs if isinstance(r, str)), None)
+    if bad:
+        print(f"  exact-arithmetic floor: skipped ({bad})")
+        return
+    extra = libm.libm_seconds(runs[0]["calls"], costs) - libm.libm_seconds(runs[1]["calls"], costs)
+    floor = hopenet_wall + extra / libm.cores()
+    versus = f", {floor / ref[0]:.2f}x DuckDB" if ref else ""
+    print(
+        f"  exact-arithmetic floor of every protocol: the hopenet run {hopenet_wall:.2f} s + the other protocols' "
+        f"C library calls, {extra:.2f} s of CPU on {libm.cores()} cores = {floor:.2f} s{versus}; "
+        f"hpe, every protocol: {every_wall:.2f} s, {every_wall / floor:.2f}x that floor"
+    )
 
 
 if __name__ == "__main__":

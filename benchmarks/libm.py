@@ -505,37 +505,58 @@ def drop_in(cc: str, tmp: Path, pred: str, gt: str, rounds: int = 3) -> None:
     )
 
 
-def whole_run(cc: str, tmp: Path, pred: str, gt: str) -> None:
-    """A default ``hpe evaluate`` run under the shim: its calls per pair times their scalar costs."""
+def count_run(cc: str, tmp: Path, pred: str, gt: str, protocols=()) -> dict | str:
+    """One ``hpe evaluate PRED GT`` (every protocol, or ``protocols``) under the counting shim: ``{"pairs",
+    "calls": {function: calls}, "cpu", "wall"}``, or the reason it could not be counted (a string)."""
     import json
     import resource
     import time
 
     shim, err = _shim(cc, tmp)
-    costs = scalar_costs(cc, tmp)
-    if err or isinstance(costs, str):
-        print(f"whole run: skipped ({err or costs})")
-        return
+    if err:
+        return f"the counting shim did not build: {err}"
     out, counts = tmp / "report.json", tmp / "counts.txt"
+    counts.unlink(missing_ok=True)
     env = dict(os.environ, LD_PRELOAD=str(shim))
     args = ["evaluate", pred, gt, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "--json", str(out), "-q"]
+    args += ["--overwrite", *(a for p in protocols for a in ("--protocol", p))]
     cmd = [sys.executable, "-c", RUN_CHILD, str(shim), str(counts), *args]
     before, t = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
     r = subprocess.run(cmd, env=env, capture_output=True, text=True)
     wall, after = time.perf_counter() - t, resource.getrusage(resource.RUSAGE_CHILDREN)
     if r.returncode or not counts.exists():
-        print(f"whole run: skipped (hpe evaluate failed: {(r.stderr.strip().splitlines() or ['no message'])[-1]})")
+        return f"hpe evaluate failed: {(r.stderr.strip().splitlines() or ['no message'])[-1]}"
+    return {
+        "pairs": json.loads(out.read_text())["n"]["pairs"],
+        "calls": dict(zip(FUNCS, (int(v) for v in counts.read_text().split()))),
+        "cpu": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
+        "wall": wall,
+    }
+
+
+def cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def libm_seconds(calls: dict, costs: dict) -> float:
+    """CPU seconds of ``calls`` at the scalar ``costs`` (ns a call)."""
+    return sum(calls[f] * costs[f] for f in FUNCS) * 1e-9
+
+
+def whole_run(cc: str, tmp: Path, pred: str, gt: str) -> None:
+    """A default ``hpe evaluate`` run under the shim: its calls per pair times their scalar costs."""
+    costs = scalar_costs(cc, tmp)
+    run = count_run(cc, tmp, pred, gt) if not isinstance(costs, str) else costs
+    if isinstance(run, str):
+        print(f"whole run: skipped ({run})")
         return
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    pairs = json.loads(out.read_text())["n"]["pairs"]
-    calls = dict(zip(FUNCS, (int(v) for v in counts.read_text().split())))
-    floor = sum(calls[f] * costs[f] for f in FUNCS) * 1e-9
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    pairs, calls, cpu, wall = run["pairs"], run["calls"], run["cpu"], run["wall"]
+    floor = libm_seconds(calls, costs)
     print(f"hpe evaluate {pred} {gt}, every protocol, {pairs:,} pairs, under the counting shim:")
     print("  calls per pair: " + "  ".join(f"{f} {calls[f] / pairs:.2f}" for f in FUNCS if calls[f] >= 0.005 * pairs))
     print("  scalar cost per call here: " + "  ".join(f"{f} {costs[f]:.1f} ns" for f in FUNCS))
     print(
-        f"  the C library's floor: {floor:.2f} s of CPU, {floor / cores:.2f} s of wall time on {cores} cores; "
+        f"  the C library's floor: {floor:.2f} s of CPU, {floor / cores():.2f} s of wall time on {cores()} cores; "
         f"the run: {cpu:.2f} s of CPU in {wall:.2f} s ({100 * floor / cpu:.0f}% of its CPU in these calls)"
     )
 

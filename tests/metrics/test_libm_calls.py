@@ -59,3 +59,22 @@ def test_label_sines_and_cosines_are_one_call(tmp_path):
     if native._sin_cos_kernel() is None or platform.libc_ver()[0] != "glibc":
         pytest.skip("the kernel's sincos is glibc's, used where it gives numpy's bits")
     assert labels["sincos"] == 6 and labels["sin"] == 0 and labels["cos"] == 0, labels
+
+
+def test_a_whole_run_is_counted_and_one_protocol_calls_fewer(tmp_path):
+    """``count_run`` (what ``benchmarks/evaluate.py --exact-floor`` and ``libm.py --run`` use) counts a whole
+    ``hpe evaluate``: every protocol calls the C library more often than hopenet alone, which computes its angle
+    errors without it."""
+    make_tables = repo_module("benchmarks/evaluate.py").make_tables
+    make_tables(2000, tmp_path, False)
+    bench, cc = _bench(), shutil.which(os.environ.get("CC", "cc"))
+    pred, gt = str(tmp_path / "pred.parquet"), str(tmp_path / "gt.parquet")
+    every, one = (bench.count_run(cc, tmp_path, pred, gt, p) for p in ((), ("hopenet",)))
+    if isinstance(every, str) or isinstance(one, str):
+        pytest.skip(every if isinstance(every, str) else one)
+    assert every["pairs"] == one["pairs"] == 2000
+    if every["calls"]["atan2"] < 10 * 2000:
+        pytest.skip(f"the C library is not called for most values here: {every['calls']}")
+    assert one["calls"]["atan2"] < every["calls"]["atan2"] and one["calls"]["acos"] < every["calls"]["acos"]
+    costs = {f: 1.0 for f in bench.FUNCS}
+    assert bench.libm_seconds(every["calls"], costs) == pytest.approx(sum(every["calls"].values()) * 1e-9)
