@@ -23,7 +23,8 @@ Each kernel is one C loop over a column where numpy takes a dozen passes or more
 The hashes, the screen and the join compute integers and comparisons only, so each gives the bits of its numpy
 twin; the others add IEEE arithmetic in numpy's order and call the C library's ``sincos``, ``atan2``, ``hypot``, ``acos``,
 ``asin`` or ``sin``, each only where that function gives numpy's bits on a probe of values (checked once a
-process). The numpy twins run where the module was not built (no C compiler at install time) or when
+process; the two that repeat SciPy's ``Rotation``, where numpy's functions are not the C library's, only where
+they give SciPy's own bits: :func:`_scipy_kernels`). The numpy twins run where the module was not built (no C compiler at install time) or when
 ``HPE_KERNELS=numpy`` is set; ``tests/native/`` compares the two.
 """
 

@@ -9,7 +9,7 @@ int need(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const char *name) 
     return 1;
 }
 
-int columns(PyObject *seq, Py_buffer *b, int count, Py_ssize_t n, const char *name) {
+int columns(PyObject *seq, Py_buffer *b, const double **p, int count, Py_ssize_t n, const char *name) {
     PyObject *fast = PySequence_Fast(seq, "expected a sequence of columns");
     if (!fast) return 0;
     if (PySequence_Fast_GET_SIZE(fast) != count) {
@@ -26,12 +26,18 @@ int columns(PyObject *seq, Py_buffer *b, int count, Py_ssize_t n, const char *na
         }
     }
     Py_DECREF(fast);
-    if (k == count && !PyErr_Occurred()) return 1;
+    if (k == count && !PyErr_Occurred()) {
+        if (p)
+            for (int j = 0; j < count; j++) p[j] = (const double *)b[j].buf;
+        return 1;
+    }
     for (int j = 0; j < k; j++) PyBuffer_Release(&b[j]);
     return 0;
 }
 
-int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name) { return columns(seq, b, 9, n, name); }
+int nine(PyObject *seq, Py_buffer *b, const double **p, Py_ssize_t n, const char *name) {
+    return columns(seq, b, p, 9, n, name);
+}
 
 int optional_buffer(PyObject *o, Py_buffer *b, int flags, int *have) {
     *have = 0;

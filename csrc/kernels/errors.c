@@ -15,9 +15,8 @@ PyObject *k_core_errors(PyObject *self, PyObject *args) {
     Py_ssize_t n = geo.len / 8;
     int have_p = 0, have_g = 0;
     if (!need(&geo, n, 8, "geo") || !need(&maev, 3 * n, 8, "maev") || !need(&fro, n, 8, "fro")) goto done;
-    if (!(have_p = nine(Po, P, n, "P")) || !(have_g = nine(Go, G, n, "G"))) goto done;
     const double *p[9], *g[9];
-    for (int k = 0; k < 9; k++) p[k] = (const double *)P[k].buf, g[k] = (const double *)G[k].buf;
+    if (!(have_p = nine(Po, P, p, n, "P")) || !(have_g = nine(Go, G, g, n, "G"))) goto done;
     double *GEO = (double *)geo.buf, *MA = (double *)maev.buf, *FR = (double *)fro.buf;
     const double DEG = 180.0 / 3.141592653589793;
     Py_BEGIN_ALLOW_THREADS
@@ -52,10 +51,8 @@ PyObject *k_core_errors(PyObject *self, PyObject *args) {
     ret = Py_None;
     Py_INCREF(ret);
 done:
-    if (have_p)
-        for (int k = 0; k < 9; k++) PyBuffer_Release(&P[k]);
-    if (have_g)
-        for (int k = 0; k < 9; k++) PyBuffer_Release(&G[k]);
+    if (have_p) release(P, 9);
+    if (have_g) release(G, 9);
     PyBuffer_Release(&geo);
     PyBuffer_Release(&maev);
     PyBuffer_Release(&fro);
@@ -171,9 +168,8 @@ PyObject *k_trace_acos_deg(PyObject *self, PyObject *args) {
     PyObject *ret = NULL;
     Py_ssize_t n = ob.len / 8;
     int have_a = 0, have_p = 0;
-    if (!(have_a = nine(Ao, A, n, "A")) || !(have_p = nine(Po, P, n, "P"))) goto done;
     const double *a[9], *p[9];
-    for (int k = 0; k < 9; k++) a[k] = (const double *)A[k].buf, p[k] = (const double *)P[k].buf;
+    if (!(have_a = nine(Ao, A, a, n, "A")) || !(have_p = nine(Po, P, p, n, "P"))) goto done;
     double *O = (double *)ob.buf;
     const double DEG = 180.0 / 3.141592653589793;
     Py_BEGIN_ALLOW_THREADS
@@ -206,9 +202,8 @@ PyObject *k_near_quats(PyObject *self, PyObject *args) {
     Py_ssize_t n = nb.len;
     int have_p = 0, have_a = 0;
     if (!need(&qb, 4 * n, 8, "q")) goto done;
-    if (!(have_p = nine(Po, P, n, "P")) || !(have_a = nine(Ao, A, n, "A"))) goto done;
     const double *p[9], *a[9];
-    for (int k = 0; k < 9; k++) p[k] = (const double *)P[k].buf, a[k] = (const double *)A[k].buf;
+    if (!(have_p = nine(Po, P, p, n, "P")) || !(have_a = nine(Ao, A, a, n, "A"))) goto done;
     double *Q = (double *)qb.buf;
     uint8_t *NR = (uint8_t *)nb.buf;
     const double HALF_PI = 3.141592653589793 / 2;
@@ -246,9 +241,8 @@ PyObject *k_quat_rotvecs(PyObject *self, PyObject *args) {
     Py_ssize_t n = ob.len / 24;
     int have_q = 0;
     if (!need(&ob, 3 * n, 8, "out") || !need(&lb, 16, 8, "left")) goto done;
-    if (!(have_q = columns(qo, Qb, 4, n, "q"))) goto done;
     const double *q[4], *L = (const double *)lb.buf;
-    for (int k = 0; k < 4; k++) q[k] = (const double *)Qb[k].buf;
+    if (!(have_q = columns(qo, Qb, q, 4, n, "q"))) goto done;
     double *O = (double *)ob.buf;
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t i = 0; i < n; i++) {

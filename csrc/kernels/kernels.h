@@ -6,7 +6,8 @@
  * differences and comparisons only. The rotation and error kernels add IEEE sums, products and square roots in the
  * order of their twins' numpy operations (the build passes -ffp-contract=off: no fused multiply-adds) and call the
  * C library's sincos, atan2, hypot, acos, asin and sin, which hpe_cli.native uses only where they give numpy's
- * bits on a probe of values. The arguments are buffers (numpy arrays), checked for size; the GIL is released in
+ * bits on a probe of values (the two that repeat SciPy's Rotation, which calls the C library itself: where they
+ * give SciPy's bits on a probe). The arguments are buffers (numpy arrays), checked for size; the GIL is released in
  * the loops, so the threads that call them run in parallel.
  *
  * Files, by concept: buffers.c (argument checks), hashes.c (key and row hashes), screen.c (the audit's angle
@@ -57,9 +58,10 @@ static inline double sel(int c, double a, double b) {
 
 /* buffers.c: a buffer of `items` items of `itemsize` bytes, else ValueError "name: expected N bytes, got M" */
 HPE_INTERNAL int need(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const char *name);
-/* `count` C-contiguous float64 columns of n rows from a sequence (released on failure) */
-HPE_INTERNAL int columns(PyObject *seq, Py_buffer *b, int count, Py_ssize_t n, const char *name);
-HPE_INTERNAL int nine(PyObject *seq, Py_buffer *b, Py_ssize_t n, const char *name);
+/* `count` C-contiguous float64 columns of n rows from a sequence, their data pointers in p (unless NULL); released
+ * on failure */
+HPE_INTERNAL int columns(PyObject *seq, Py_buffer *b, const double **p, int count, Py_ssize_t n, const char *name);
+HPE_INTERNAL int nine(PyObject *seq, Py_buffer *b, const double **p, Py_ssize_t n, const char *name);
 /* an argument that is None or a buffer: 1 with *have = 0 or 1 (the buffer got with `flags`), 0 on an error */
 HPE_INTERNAL int optional_buffer(PyObject *o, Py_buffer *b, int flags, int *have);
 HPE_INTERNAL void release(Py_buffer *b, int count);

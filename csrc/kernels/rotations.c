@@ -122,9 +122,8 @@ PyObject *k_euler_from_matrix(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "axes: expected 0, 1 or 2");
         goto done;
     }
-    if (!(have_r = nine(Ro, R, n, "R"))) goto done;
     const double *r[9];
-    for (int m = 0; m < 9; m++) r[m] = (const double *)R[m].buf;
+    if (!(have_r = nine(Ro, R, r, n, "R"))) goto done;
     double *O = (double *)out.buf;
     const double DEG = 180.0 / 3.141592653589793;
     Py_BEGIN_ALLOW_THREADS
@@ -143,8 +142,7 @@ PyObject *k_euler_from_matrix(PyObject *self, PyObject *args) {
     Py_END_ALLOW_THREADS
     ret = PyLong_FromSsize_t(off);
 done:
-    if (have_r)
-        for (int m = 0; m < 9; m++) PyBuffer_Release(&R[m]);
+    if (have_r) release(R, 9);
     PyBuffer_Release(&out);
     return ret;
 }
@@ -253,9 +251,8 @@ PyObject *k_system_angles(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "axes and roles: expected 0, 1 or 2, the roles each once");
         goto done;
     }
-    if (!(have_x = nine(Xo, X, n, "X"))) goto done;
     const double *x[9];
-    for (int m = 0; m < 9; m++) x[m] = (const double *)X[m].buf;
+    if (!(have_x = nine(Xo, X, x, n, "X"))) goto done;
     double *P1 = (double *)b1.buf, *P2 = (double *)b2.buf, *L = (double *)bl.buf;
     uint8_t *NR = (uint8_t *)bn.buf;
 #define E(r, c) x[3 * (r) + (c)][t]
@@ -350,8 +347,8 @@ PyObject *k_second_solution(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "middle: expected 0, 1 or 2");
         goto done;
     }
-    if (!(have_p = columns(po, P, 3, n, "p1"))) goto done;
-    const double *p[3] = {(const double *)P[0].buf, (const double *)P[1].buf, (const double *)P[2].buf};
+    const double *p[3];
+    if (!(have_p = columns(po, P, p, 3, n, "p1"))) goto done;
     double *P2 = (double *)b2.buf;
     Py_BEGIN_ALLOW_THREADS
     for (int r = 0; r < 3; r++) {

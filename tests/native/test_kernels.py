@@ -448,6 +448,34 @@ def test_scipy_kernels_run_where_numpys_functions_are_not_the_c_librarys(monkeyp
     assert native.euler_from_matrix(sc.nested(R), sc._seq_axes("XYZ"), False, False) is None  # the twin, no error
 
 
+def test_evaluate_is_the_same_bytes_with_the_scipy_kernels_alone(monkeypatch, tmp_path):
+    """Where numpy's functions are not the C library's, only the SciPy kernels run and the numpy twins do the rest:
+    on a CPU where both give the same bits (this one, when its probes agree) every protocol's report and rows are
+    the same bytes as with every kernel."""
+    import filecmp
+
+    import hpe_cli.native as native
+    from conftest import repo_module
+    from hpe_cli.api import evaluate_files
+
+    if not built or native._libm_kernels("atan2", "hypot", "acos", "asin", "sin") is None:
+        pytest.skip("no kernels, or numpy's functions are not the C library's here")
+    repo_module("benchmarks/evaluate.py").make_tables(3000, tmp_path, False)
+    args = dict(pred_system="6drepnet", gt_system="300w_lp", overwrite=True)
+    runs = []
+    for mixed in (False, True):
+        with monkeypatch.context() as m:
+            if mixed:
+                for name in ("atan2", "hypot", "acos", "asin", "sin", "sin_cos"):
+                    m.setitem(native._STATE, name, False)
+            out, rep = tmp_path / f"rows{mixed:d}.parquet", tmp_path / f"report{mixed:d}.json"
+            evaluate_files(tmp_path / "pred.parquet", tmp_path / "gt.parquet", output=out, report=rep, **args)
+            if mixed:
+                assert native._STATE["scipy euler_from_matrix"] and native._STATE["scipy quat_matrix_from_euler"]
+        runs.append((out, rep))
+    assert filecmp.cmp(runs[0][0], runs[1][0], shallow=False) and filecmp.cmp(runs[0][1], runs[1][1], shallow=False)
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     st.lists(
