@@ -1,6 +1,6 @@
 """What the C library's math functions cost ``hpe evaluate``'s default run, and what faster ones would change.
 
-    python benchmarks/libm.py [--rows 65536] [--seed 0] [--run PRED GT [--drop-in]]
+    python benchmarks/libm.py [--rows 65536] [--seed 0] [--run PRED GT [--sites] [--drop-in]]
 
 Two measurements, each in a child process built here with the system's C compiler (Linux with glibc; a part
 that cannot be built says so and is skipped):
@@ -28,6 +28,9 @@ that cannot be built says so and is skipped):
   in CPU seconds and in wall seconds on this machine's cores, beside the run's own time (the shim's counting
   adds a little to it).
 
+  With ``--sites``, the same run's calls per pair by the function that made them (a kernel by name, or numpy):
+  which of them are SciPy's own (the kernels that repeat SciPy's ``Rotation``: ``euler_of_quat``,
+  ``k_quat_matrix_from_euler``), which a numpy-based peer's or hpe's own.
   With ``--drop-in``, the same run (no shim) is also timed with a preloaded ``atan2`` about twice as fast as
   glibc's (a 65-entry table and a short series; within a few units in the last place) and ``hypot`` as
   ``sqrt(x * x + y * y)``: what faster scalar functions, called where hpe calls them, would save.
@@ -301,6 +304,64 @@ RUN_CHILD = textwrap.dedent(
     """
 )
 
+# the shim of --sites: each call counted by its return address (the calling function, resolved with addr2line)
+SITES_SHIM = textwrap.dedent(
+    """
+    #define _GNU_SOURCE
+    #include <dlfcn.h>
+    #include <pthread.h>
+    #include <stdint.h>
+    #include <stdio.h>
+    #define NS 4096
+    static void *ra_[NS];
+    static long long n_[NS][5];
+    static pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
+    static void add(void *ra, int f) {
+        uintptr_t h = ((uintptr_t)ra * 0x9E3779B97F4A7C15ULL) >> 52;
+        pthread_mutex_lock(&mu);
+        for (;; h = (h + 1) & (NS - 1)) {
+            if (!ra_[h]) ra_[h] = ra;
+            if (ra_[h] == ra) { n_[h][f]++; break; }
+        }
+        pthread_mutex_unlock(&mu);
+    }
+    #define W1(f, i) static double (*r_##f)(double); \\
+        double f(double x) { if (!r_##f) r_##f = dlsym(RTLD_NEXT, #f); add(__builtin_return_address(0), i); return r_##f(x); }
+    #define W2(f, i) static double (*r_##f)(double, double); \\
+        double f(double x, double y) { if (!r_##f) r_##f = dlsym(RTLD_NEXT, #f); add(__builtin_return_address(0), i); \\
+                                       return r_##f(x, y); }
+    W2(atan2, 0) W2(hypot, 1) W1(acos, 2) W1(asin, 3)
+    static void (*r_sc)(double, double *, double *);
+    void sincos(double x, double *s, double *c) {
+        if (!r_sc) r_sc = dlsym(RTLD_NEXT, "sincos");
+        add(__builtin_return_address(0), 4);
+        r_sc(x, s, c);
+    }
+    void hpe_sites_write(const char *path) {
+        FILE *f = fopen(path, "w");
+        for (int i = 0; f && i < NS; i++) {
+            Dl_info d;
+            if (!ra_[i] || !dladdr(ra_[i], &d)) continue;
+            fprintf(f, "%s 0x%lx %lld %lld %lld %lld %lld\\n", d.dli_fname ? d.dli_fname : "?",
+                    (unsigned long)((char *)ra_[i] - (char *)d.dli_fbase), n_[i][0], n_[i][1], n_[i][2], n_[i][3], n_[i][4]);
+        }
+        if (f) fclose(f);
+    }
+    """
+)
+SITE_FUNCS = ("atan2", "hypot", "acos", "asin", "sincos")
+
+# the child of --sites: one command under the sites shim, then the table written
+SITES_CHILD = textwrap.dedent(
+    """
+    import ctypes, sys
+    from hpe_cli.cli.main import cli
+    lib = ctypes.CDLL(sys.argv[1])
+    cli(args=sys.argv[3:], standalone_mode=False)
+    lib.hpe_sites_write(sys.argv[2].encode())
+    """
+)
+
 # the child that scores one chunk under the shim
 CHILD = textwrap.dedent(
     """
@@ -543,6 +604,44 @@ def libm_seconds(calls: dict, costs: dict) -> float:
     return sum(calls[f] * costs[f] for f in FUNCS) * 1e-9
 
 
+def sites(cc: str, tmp: Path, pred: str, gt: str) -> None:
+    """A default ``hpe evaluate`` run with each C library call counted by the function that made it: a kernel of
+    ``_hpe_kernels`` by name, numpy's loops as numpy."""
+    import json
+
+    lib, out, table = tmp / "libsites.so", tmp / "report.json", tmp / "sites.txt"
+    err = _compile(cc, SITES_SHIM, lib, "-shared", "-fPIC", "-ldl", "-lpthread")
+    addr2line = shutil.which("addr2line")
+    if err or addr2line is None:
+        print(f"call sites: skipped ({err or 'no addr2line'})")
+        return
+    args = ["evaluate", pred, gt, "--pred-system", "6drepnet", "--gt-system", "300w_lp", "--json", str(out), "-q"]
+    r = subprocess.run(
+        [sys.executable, "-c", SITES_CHILD, str(lib), str(table), *args, "--overwrite"],
+        env=dict(os.environ, LD_PRELOAD=str(lib)),
+        capture_output=True,
+        text=True,
+    )
+    if r.returncode or not table.exists():
+        print(f"call sites: skipped (hpe evaluate failed: {(r.stderr.strip().splitlines() or ['no message'])[-1]})")
+        return
+    pairs = json.loads(out.read_text())["n"]["pairs"]
+    by: dict = {}
+    for line in table.read_text().splitlines():
+        path, offset, *counts = line.split()
+        if "_hpe_kernels" in path:
+            name = subprocess.run([addr2line, "-f", "-e", path, offset], capture_output=True, text=True).stdout
+            where = f"kernel {name.split()[0] if name.strip() else offset}"
+        else:
+            where = "numpy" if "_multiarray_umath" in path else Path(path).name
+        by[where] = [a + int(b) for a, b in zip(by.get(where, [0] * 5), counts)]
+    print(f"C library calls per pair by the function that made them, {pairs:,} pairs, every protocol:")
+    print(f"  {'caller':34s}" + "".join(f"{f:>8s}" for f in SITE_FUNCS))
+    for where, counts in sorted(by.items(), key=lambda kv: -sum(kv[1])):
+        if sum(counts) >= 0.005 * pairs:
+            print(f"  {where:34s}" + "".join(f"{c / pairs:8.2f}" for c in counts))
+
+
 def whole_run(cc: str, tmp: Path, pred: str, gt: str) -> None:
     """A default ``hpe evaluate`` run under the shim: its calls per pair times their scalar costs."""
     costs = scalar_costs(cc, tmp)
@@ -567,6 +666,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--run", nargs=2, metavar=("PRED", "GT"), help="also a whole default hpe evaluate run")
     ap.add_argument("--drop-in", action="store_true", help="with --run: also time it with faster atan2 and hypot")
+    ap.add_argument("--sites", action="store_true", help="with --run: also its calls by the function that made them")
     ap.add_argument("--samples", type=int, default=20000, help="random arguments of the rounding table")
     a = ap.parse_args(argv)
     cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
@@ -579,6 +679,8 @@ def main(argv=None) -> None:
         vector_atan2(cc, Path(tmp))
         if a.run:
             whole_run(cc, Path(tmp), *a.run)
+            if a.sites:
+                sites(cc, Path(tmp), *a.run)
             if a.drop_in:
                 drop_in(cc, Path(tmp), *a.run)
 
