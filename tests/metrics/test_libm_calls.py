@@ -78,3 +78,21 @@ def test_a_whole_run_is_counted_and_one_protocol_calls_fewer(tmp_path):
     assert one["calls"]["atan2"] < every["calls"]["atan2"] and one["calls"]["acos"] < every["calls"]["acos"]
     costs = {f: 1.0 for f in bench.FUNCS}
     assert bench.libm_seconds(every["calls"], costs) == pytest.approx(sum(every["calls"].values()) * 1e-9)
+
+
+def test_sites_name_the_kernels_that_call(tmp_path, capsys):
+    """``libm.py --sites`` counts a whole run's calls by the function that made them: the kernels by name."""
+    from hpe_cli import native
+
+    if native.kernels() is None or shutil.which("addr2line") is None:
+        pytest.skip("no compiled kernels or no addr2line")
+    repo_module("benchmarks/evaluate.py").make_tables(2000, tmp_path, False)
+    _bench().sites(
+        shutil.which(os.environ.get("CC", "cc")), tmp_path, str(tmp_path / "pred.parquet"), str(tmp_path / "gt.parquet")
+    )
+    out = capsys.readouterr().out
+    if "skipped" in out:
+        pytest.skip(out.strip())
+    rows = {line.split()[1]: line.split()[2:] for line in out.splitlines() if line.strip().startswith("kernel ")}
+    assert any("core_errors" in name for name in rows), out  # 4 atan2 a pair: hpe's own geodesic and column angles
+    assert all(len(counts) == 5 for counts in rows.values())
