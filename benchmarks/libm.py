@@ -1,9 +1,9 @@
 """What the C library's math functions cost ``hpe evaluate``'s default run, and what faster ones would change.
 
-    python benchmarks/libm.py [--rows 65536] [--seed 0] [--run PRED GT [--sites] [--drop-in]]
+    python benchmarks/libm.py [--rows 65536] [--seed 0] [--samples 20000] [--run PRED GT [--sites] [--drop-in]]
 
-Two measurements, each in a child process built here with the system's C compiler (Linux with glibc; a part
-that cannot be built says so and is skipped):
+Each measurement runs in a child process, built here with the system's C compiler where it needs one (Linux with
+glibc; a part that cannot be built or run says so and is skipped):
 
 * calls per pair: a shim preloaded with ``LD_PRELOAD`` counts every call to ``atan2``, ``hypot``, ``acos``,
   ``asin``, ``sin``, ``cos``, ``sincos`` and ``acosf`` (numpy's, SciPy's and hpe's kernels' alike) while
@@ -14,14 +14,12 @@ that cannot be built says so and is skipped):
   SciPy call, whose results the peers' evaluation code prints) and glibc's AVX2 vector versions (``libmvec``,
   ``_ZGVdN4...``); it prints both times, the share of results that differ and the largest difference in units
   in the last place.
-
 * rounding: how often numpy's ``arctan2``, ``hypot``, ``arccos`` and ``sin`` here (glibc's, unless numpy was
   built for and runs on an AVX512_SKX CPU, where it calls Intel's SVML instead) differ from the correctly rounded
   result (mpmath at 200 bits, skipped without mpmath), and by how much: no other implementation gives their bits
   in every row unless it copies their code. Then a nearly correctly rounded AVX2 ``atan2`` written here, against
   glibc's: alone (its time, and the results that differ from glibc's), and behind a rounding test that keeps
   glibc's bits by calling glibc wherever the result is within glibc's own error of a rounding boundary.
-
 * ``--run PRED GT``: a whole ``hpe evaluate PRED GT`` run (every protocol; 6drepnet predictions, 300w_lp ground
   truth, as ``benchmarks/evaluate.py`` writes them) under the shim: its calls per pair, labels and opal23-align's
   second pass included, times each function's scalar cost measured here: the C library's floor for that run,

@@ -24,8 +24,8 @@ The hashes, the screen and the join compute integers and comparisons only, so ea
 twin; the others add IEEE arithmetic in numpy's order and call the C library's ``sincos``, ``atan2``, ``hypot``, ``acos``,
 ``asin`` or ``sin``, each only where that function gives numpy's bits on a probe of values (checked once a
 process; the two that repeat SciPy's ``Rotation``, where numpy's functions are not the C library's, only where
-they give SciPy's own bits: :func:`_scipy_kernels`). The numpy twins run where the module was not built (no C compiler at install time) or when
-``HPE_KERNELS=numpy`` is set; ``tests/native/`` compares the two.
+they give SciPy's own bits: :func:`_scipy_kernels`). The numpy twins run where the module was not built (no C
+compiler at install time) or when ``HPE_KERNELS=numpy`` is set; ``tests/native/`` compares the two.
 """
 
 from __future__ import annotations
