@@ -11,11 +11,13 @@ call the same kernels.
 from __future__ import annotations
 
 import importlib.util
+import warnings
 
 import numpy as np
 import pyarrow as pa
 
 from .api_arrays import augment_batch, augment_sample, draw_axes, geodesic, landmark_pose  # noqa: F401
+from .errors import UsageError
 from .io.layout import arrow_table
 from .io.readers import open_table
 from .io.system_meta import file_system, resolve_system
@@ -337,10 +339,6 @@ def audit_file(
     """
 
     if "workers" in options:  # released as a spelling of ``threads`` here: still taken, with a warning
-        import warnings
-
-        from .errors import UsageError
-
         workers = options.pop("workers")
         warnings.warn("audit_file: workers= is deprecated, use threads=", DeprecationWarning, stacklevel=2)
         if options.get("threads") not in (None, workers):

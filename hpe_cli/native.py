@@ -31,6 +31,7 @@ compiler at install time) or when ``HPE_KERNELS=numpy`` is set; ``tests/native/`
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 
@@ -224,8 +225,6 @@ _SEQ_AXES = {"xyz": (0, 1, 2), "ZXZ": (2, 0, 2)}
 
 
 def _scipy_euler_probe(k):
-    import warnings
-
     from scipy.spatial.transform import Rotation
 
     R = _probe_rotations()
