@@ -11,13 +11,11 @@ call the same kernels.
 from __future__ import annotations
 
 import importlib.util
-import warnings
 
 import numpy as np
 import pyarrow as pa
 
 from .api_arrays import augment_batch, augment_sample, draw_axes, geodesic, landmark_pose  # noqa: F401
-from .errors import UsageError
 from .io.layout import arrow_table
 from .io.readers import open_table
 from .io.system_meta import file_system, resolve_system
@@ -338,14 +336,6 @@ def audit_file(
     ``suspects`` (path of the key list, as ``--suspects``).
     """
 
-    if "workers" in options:  # released as a spelling of ``threads`` here: still taken, with a warning
-        workers = options.pop("workers")
-        warnings.warn("audit_file: workers= is deprecated, use threads=", DeprecationWarning, stacklevel=2)
-        if options.get("threads") not in (None, workers):
-            raise UsageError(
-                f"workers, threads: expected one of them, got both ({workers!r} and {options['threads']!r})"
-            )
-        options["threads"] = workers
     opts = AuditOptions(report=report, output=output, overwrite=overwrite, rejects=rejects, strict=strict, **options)
     with ensure_transaction():
         return run_audit(input, None if system is None else get_system(system), opts)

@@ -16,6 +16,7 @@ CASES = [
     (lambda **kw: AugmentOptions("hflip", **kw), "workers", "threads", 2, 3),
     (DrawOptions, "rejects_path", "rejects", "old.csv", "new.csv"),
     (AuditOptions, "strict_rejects", "strict", True, None),
+    (AuditOptions, "workers", "threads", 2, 3),
 ]
 
 

@@ -84,6 +84,8 @@ class AuditOptions:
         With ``consistency``: the suspects' key list (``--suspects``).
     strict_rejects : bool, optional
         Deprecated spelling of ``strict`` (a ``DeprecationWarning``).
+    workers : int, optional
+        Deprecated spelling of ``threads`` (a ``DeprecationWarning``; ``audit_file(workers=)`` was released).
     """
 
     report: object = None
@@ -105,9 +107,11 @@ class AuditOptions:
     consistency: Settings | None = None
     suspects: object = None
     strict_rejects: bool | None = None
+    workers: int | None = None
 
     def __post_init__(self):
         take_renamed(self, "strict_rejects", "strict")
+        take_renamed(self, "workers", "threads")
         object.__setattr__(self, "keys", tuple(self.keys or ()))
         if self.consistency is True:
             object.__setattr__(self, "consistency", Settings())
