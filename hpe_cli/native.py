@@ -221,7 +221,6 @@ def _probe_rotations() -> np.ndarray:
 #: two sequences SciPy's kernels are probed on, with their ``(i, j, k, sign, symmetric, intrinsic)`` as
 #: hpe_cli.metrics.scipy_columns reads them (an extrinsic Tait-Bryan one and an intrinsic proper one)
 _SCIPY_SEQS = {"xyz": (0, 1, 2, 1.0, False, False), "ZXZ": (2, 0, 1, 1.0, True, True)}
-_SEQ_AXES = {"xyz": (0, 1, 2), "ZXZ": (2, 0, 2)}
 
 
 def _scipy_euler_probe(k):
@@ -245,8 +244,9 @@ def _scipy_from_euler_probe(k):
     a = _probe_angles()
     a = np.ascontiguousarray(np.resize(a[np.isfinite(a) & (np.abs(a) < 1e6)], (2048, 3)))
     pairs = []
-    for seq, axes in _SEQ_AXES.items():
+    for seq in _SCIPY_SEQS:
         q, M = np.empty((4, len(a))), np.empty((9, len(a)))
+        axes = tuple("xyz".index(c) for c in seq.lower())  # each turn's axis, in seq's order
         k.quat_matrix_from_euler(a, (1.0, 1.0, 1.0), axes, seq.isupper(), q, M)
         r = Rotation.from_euler(seq, a)
         pairs += [(q.T.copy(), r.as_quat()), (M.T.reshape(-1, 3, 3).copy(), r.as_matrix())]

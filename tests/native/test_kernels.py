@@ -413,6 +413,14 @@ def test_scipy_kernels_give_scipys_own_bits(monkeypatch):
         assert _same_bits(np.stack(q, -1), r.as_quat()) and _same_bits(np.array(M).transpose(2, 0, 1), r.as_matrix())
 
 
+def test_scipy_probe_sequences_are_read_as_scipy_columns_reads_them():
+    """The probe's two sequences are spelled out in hpe_cli.native (below the metrics layer): as _seq_axes reads them."""
+    import hpe_cli.native as native
+    from hpe_cli.metrics import scipy_columns as sc
+
+    assert all(native._SCIPY_SEQS[seq] == sc._seq_axes(seq) for seq in native._SCIPY_SEQS)
+
+
 def test_scipy_kernels_run_where_numpys_functions_are_not_the_c_librarys(monkeypatch):
     """On a CPU where numpy calls its own SIMD functions (Intel's SVML on AVX512_SKX), the numpy twins cannot give
     SciPy's bits; the SciPy kernels are then checked against SciPy itself and still used, the others not."""
