@@ -346,12 +346,10 @@ def main():
 
 def _exact_floor(gt: str, pred: str, hopenet_wall: float, every_wall: float, ref) -> None:
     """Print the floor of exact arithmetic for every protocol and the default run as a multiple of it."""
-    import shutil
-
     sys.path.insert(0, str(ROOT / "benchmarks"))
     import libm
 
-    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    cc = libm.compiler()
     if cc is None:
         print("  exact-arithmetic floor: skipped (no C compiler for benchmarks/libm.py's shim)")
         return

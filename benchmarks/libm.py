@@ -658,6 +658,11 @@ def whole_run(cc: str, tmp: Path, pred: str, gt: str) -> None:
     )
 
 
+def compiler() -> str | None:
+    """The C compiler the shims and loops are built with: ``$CC`` (default ``cc``), else ``gcc``, else None."""
+    return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rows", type=int, default=65536, help="pairs in the counted chunk (default 65536)")
@@ -667,7 +672,7 @@ def main(argv=None) -> None:
     ap.add_argument("--sites", action="store_true", help="with --run: also its calls by the function that made them")
     ap.add_argument("--samples", type=int, default=20000, help="random arguments of the rounding table")
     a = ap.parse_args(argv)
-    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    cc = compiler()
     if cc is None:
         sys.exit("benchmarks/libm.py: no C compiler (set CC)")
     with tempfile.TemporaryDirectory(prefix="hpe_libm_") as tmp:
